@@ -1,0 +1,412 @@
+"""Scenario and dataset files (SPEC §3): reading, validation, writing.
+
+Every problem is reported as a :class:`rideid.DataError` whose message names
+the file and the key or column at fault. Unknown keys are errors.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import csv
+import math
+import os
+import shutil
+import tempfile
+import tomllib
+import warnings
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+import tomli_w
+
+from .errors import DataError, DataWarning
+from .model import CHANNELS
+from .params import EXTRA_KNOWN, INDEX, NAMES, Geometry, check_parameters
+from .tracks import Track
+
+TOP_KEYS_DATASET = ("name", "vehicle", "known", "bounds", "tracks", "runs")
+TOP_KEYS_SCENARIO = TOP_KEYS_DATASET + ("truth",)
+RUN_KEYS_DATASET = ("id", "track", "speed", "file")
+RUN_KEYS_SCENARIO = ("id", "track", "speed", "fs", "duration")
+
+
+def read_toml(path: Path) -> dict:
+    path = Path(path)
+    if not path.is_file():
+        raise DataError(f"{path}: file not found")
+    try:
+        with open(path, "rb") as f:
+            return tomllib.load(f)
+    except tomllib.TOMLDecodeError as e:
+        raise DataError(f"{path}: invalid TOML: {e}") from None
+    except (OSError, UnicodeDecodeError) as e:
+        raise DataError(f"{path}: cannot read: {e}") from None
+
+
+def _number(v, where, positive=False):
+    if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
+        raise DataError(f"{where}: expected a finite number, got {v!r}")
+    if positive and v <= 0:
+        raise DataError(f"{where}: must be positive, got {v!r}")
+    return float(v)
+
+
+def _table(doc, key, where, required=True):
+    if key not in doc:
+        if required:
+            raise DataError(f"{where}: missing table [{key}]")
+        return {}
+    v = doc[key]
+    if not isinstance(v, dict):
+        raise DataError(f"{where}: [{key}] must be a table")
+    return v
+
+
+@dataclass
+class RunSpec:
+    """One run of a manifest: its track, speed and file (dataset) or rate and duration (scenario)."""
+
+    id: str
+    track: str
+    speed: float
+    file: str | None = None
+    fs: float | None = None
+    duration: float | None = None
+
+    def to_table(self) -> dict:
+        d = {"id": self.id, "track": self.track, "speed": self.speed}
+        if self.file is not None:
+            d["file"] = self.file
+        else:
+            d["fs"] = self.fs
+            d["duration"] = self.duration
+        return d
+
+
+@dataclass
+class Manifest:
+    """A parsed, validated ``dataset.toml`` or scenario file."""
+
+    path: Path
+    name: str
+    geometry: Geometry
+    known: dict[str, float]
+    bounds: dict[str, tuple[float, float]]
+    tracks: dict[str, Track]
+    runs: list[RunSpec]
+    truth: dict[str, float] | None = None
+    extra: dict = field(default_factory=dict)
+
+    @property
+    def base_dir(self) -> Path:
+        return self.path.parent
+
+    def run(self, run_id: str) -> RunSpec:
+        for r in self.runs:
+            if r.id == run_id:
+                return r
+        raise KeyError(run_id)
+
+    def to_dataset_doc(self) -> dict:
+        doc = {"name": self.name,
+               "vehicle": {k: getattr(self.geometry, k) for k in Geometry.KEYS}}
+        if self.known:
+            doc["known"] = dict(self.known)
+        if self.bounds:
+            doc["bounds"] = {k: list(v) for k, v in self.bounds.items()}
+        doc["tracks"] = [t.to_table() for t in self.tracks.values()]
+        doc["runs"] = [r.to_table() for r in self.runs]
+        return doc
+
+
+def parse_manifest(doc: dict, path: Path, scenario: bool) -> Manifest:
+    """Validate a manifest document (already parsed TOML)."""
+    path = Path(path)
+    where = str(path)
+    allowed = TOP_KEYS_SCENARIO if scenario else TOP_KEYS_DATASET
+    for k in doc:
+        if k not in allowed:
+            hint = ""
+            if not scenario and k == "truth":
+                hint = " (a [truth] table belongs in a scenario or in truth.toml)"
+            raise DataError(f"{where}: unknown key '{k}'{hint}; allowed: {', '.join(allowed)}")
+    name = doc.get("name", path.parent.name if not scenario else path.stem)
+    if not isinstance(name, str):
+        raise DataError(f"{where}: key 'name' must be a string")
+
+    veh = _table(doc, "vehicle", where)
+    for k in veh:
+        if k not in Geometry.KEYS:
+            raise DataError(f"{where}: [vehicle]: unknown key '{k}'; allowed: {', '.join(Geometry.KEYS)}")
+    for k in Geometry.KEYS:
+        if k not in veh:
+            raise DataError(f"{where}: [vehicle]: missing key '{k}'")
+    geom = Geometry(**{k: _number(veh[k], f"{where}: [vehicle] {k}", positive=True) for k in Geometry.KEYS})
+
+    known = {}
+    for k, v in _table(doc, "known", where, required=False).items():
+        if k not in NAMES and k not in EXTRA_KNOWN:
+            raise DataError(f"{where}: [known]: unknown key '{k}'; allowed: total_mass or one of {', '.join(NAMES)}")
+        known[k] = _number(v, f"{where}: [known] {k}", positive=True)
+        if k == "a" and not known[k] < geom.wheelbase:
+            raise DataError(f"{where}: [known] a = {known[k]} must be less than the wheelbase {geom.wheelbase}")
+    if "total_mass" in known and "m_s" in known:
+        pass  # both fine: the unsprung masses are then tied by total_mass
+
+    bounds = {}
+    for k, v in _table(doc, "bounds", where, required=False).items():
+        w = f"{where}: [bounds] {k}"
+        if k not in NAMES:
+            raise DataError(f"{w}: unknown parameter; allowed: {', '.join(NAMES)}")
+        if not isinstance(v, list) or len(v) != 2:
+            raise DataError(f"{w}: expected [lower, upper]")
+        lo, hi = _number(v[0], w), _number(v[1], w)
+        if not lo < hi:
+            raise DataError(f"{w}: lower bound {lo} must be less than upper bound {hi}")
+        if k != "a" and lo <= 0:
+            raise DataError(f"{w}: lower bound must be positive, got {lo}")
+        if k == "a" and not (0 < lo and hi < geom.wheelbase):
+            raise DataError(f"{w}: must lie within (0, wheelbase = {geom.wheelbase})")
+        if k in known:
+            raise DataError(f"{w}: parameter is known (fixed) in [known]; remove one of the two")
+        bounds[k] = (lo, hi)
+
+    raw_tracks = doc.get("tracks", [])
+    if not isinstance(raw_tracks, list) or not raw_tracks:
+        raise DataError(f"{where}: needs at least one [[tracks]] table")
+    tracks: dict[str, Track] = {}
+    for i, t in enumerate(raw_tracks):
+        if not isinstance(t, dict):
+            raise DataError(f"{where}: tracks[{i}] must be a table")
+        tr = Track.from_table(t, f"{where}: tracks[{i}]", base_dir=path.parent)
+        if tr.id in tracks:
+            raise DataError(f"{where}: tracks[{i}]: duplicate track id '{tr.id}'")
+        tracks[tr.id] = tr
+
+    raw_runs = doc.get("runs", [])
+    if not isinstance(raw_runs, list) or not raw_runs:
+        raise DataError(f"{where}: needs at least one [[runs]] table")
+    run_keys = RUN_KEYS_SCENARIO if scenario else RUN_KEYS_DATASET
+    runs: list[RunSpec] = []
+    seen = set()
+    for i, r in enumerate(raw_runs):
+        w = f"{where}: runs[{i}]"
+        if not isinstance(r, dict):
+            raise DataError(f"{w} must be a table")
+        rid = r.get("id")
+        if not isinstance(rid, str) or not rid:
+            raise DataError(f"{w}: missing key 'id' (a non-empty string)")
+        w = f"{w} (id '{rid}')"
+        for k in r:
+            if k not in run_keys:
+                hint = ""
+                if k in ("fs", "duration") and not scenario:
+                    hint = " (fs and duration belong to scenarios; a dataset run names its 'file')"
+                if k == "file" and scenario:
+                    hint = " (a scenario run gives 'fs' and 'duration' instead of a file)"
+                raise DataError(f"{w}: unknown key '{k}'{hint}; allowed: {', '.join(run_keys)}")
+        for k in run_keys:
+            if k not in r:
+                raise DataError(f"{w}: missing key '{k}'")
+        if rid in seen:
+            raise DataError(f"{w}: duplicate run id '{rid}'")
+        seen.add(rid)
+        if r["track"] not in tracks:
+            raise DataError(f"{w}: unknown track '{r['track']}'; tracks are: {', '.join(tracks)}")
+        speed = _number(r["speed"], f"{w}: speed", positive=True)
+        if scenario:
+            fs = _number(r["fs"], f"{w}: fs", positive=True)
+            dur = _number(r["duration"], f"{w}: duration", positive=True)
+            if round(dur * fs) < 2:
+                raise DataError(f"{w}: duration * fs gives fewer than 3 samples")
+            runs.append(RunSpec(rid, r["track"], speed, fs=fs, duration=dur))
+        else:
+            if not isinstance(r["file"], str):
+                raise DataError(f"{w}: key 'file' must be a path string")
+            runs.append(RunSpec(rid, r["track"], speed, file=r["file"]))
+
+    truth = None
+    if scenario:
+        truth = parse_truth(_table(doc, "truth", where), f"{where}: [truth]", geom)
+        if "total_mass" in known:
+            tm = truth["m_s"] + 2 * truth["m_uf"] + 2 * truth["m_ur"]
+            if abs(tm - known["total_mass"]) > 1e-6 * tm:
+                raise DataError(f"{where}: [known] total_mass = {known['total_mass']} disagrees with [truth] "
+                                f"(m_s + 2 m_uf + 2 m_ur = {tm:.6g})")
+        for k, v in known.items():
+            if k in truth and abs(truth[k] - v) > 1e-9 * abs(v):
+                raise DataError(f"{where}: [known] {k} = {v} disagrees with [truth] {k} = {truth[k]}")
+    return Manifest(path, name, geom, known, bounds, tracks, runs, truth)
+
+
+def parse_truth(tab: dict, where: str, geom: Geometry) -> dict[str, float]:
+    for k in tab:
+        if k not in NAMES:
+            raise DataError(f"{where}: unknown parameter '{k}'; expected the twelve: {', '.join(NAMES)}")
+    missing = [k for k in NAMES if k not in tab]
+    if missing:
+        raise DataError(f"{where}: missing {', '.join(missing)} (all twelve parameters are needed)")
+    vals = {k: _number(tab[k], f"{where} {k}", positive=True) for k in NAMES}
+    check_parameters([vals[n] for n in NAMES], geom, where)
+    return vals
+
+
+def load_scenario(path) -> Manifest:
+    path = Path(path)
+    return parse_manifest(read_toml(path), path, scenario=True)
+
+
+def load_manifest(path) -> Manifest:
+    """``dataset.toml`` of a dataset folder (or the file itself)."""
+    path = Path(path)
+    if path.is_dir():
+        path = path / "dataset.toml"
+    return parse_manifest(read_toml(path), path, scenario=False)
+
+
+def load_truth(path, geom: Geometry) -> dict[str, float]:
+    path = Path(path)
+    doc = read_toml(path)
+    for k in doc:
+        if k != "truth":
+            raise DataError(f"{path}: unknown key '{k}'; expected a [truth] table")
+    return parse_truth(_table(doc, "truth", str(path)), f"{path}: [truth]", geom)
+
+
+# ---------------------------------------------------------------------------
+# Run files
+
+@dataclass
+class RunData:
+    """Measured data of one run: uniform time and the channels present."""
+
+    time: np.ndarray
+    channels: dict[str, np.ndarray]
+
+    @property
+    def fs(self) -> float:
+        return 1.0 / float(self.time[1] - self.time[0])
+
+    def matrix(self) -> np.ndarray:
+        """(n, 10) in CHANNELS order, NaN where a channel is missing."""
+        Y = np.full((self.time.size, len(CHANNELS)), np.nan)
+        for i, c in enumerate(CHANNELS):
+            if c in self.channels:
+                Y[:, i] = self.channels[c]
+        return Y
+
+
+def read_run_csv(path: Path) -> RunData:
+    """Read and validate a run CSV (SPEC §3)."""
+    path = Path(path)
+    if not path.is_file():
+        raise DataError(f"{path}: run file not found")
+    try:
+        with open(path, newline="") as f:
+            rows = list(csv.reader(f))
+    except (OSError, UnicodeDecodeError) as e:
+        raise DataError(f"{path}: cannot read: {e}") from None
+    if not rows:
+        raise DataError(f"{path}: empty file (expected a header row)")
+    header = [c.strip() for c in rows[0]]
+    if "time" not in header:
+        raise DataError(f"{path}: missing column 'time'")
+    dup = {c for c in header if header.count(c) > 1}
+    if dup:
+        raise DataError(f"{path}: duplicate column '{sorted(dup)[0]}'")
+    data_rows = [r for r in rows[1:] if r and any(x.strip() for x in r)]
+    if not data_rows:
+        raise DataError(f"{path}: header only, no data rows")
+    if len(data_rows) < 3:
+        raise DataError(f"{path}: only {len(data_rows)} data rows; at least 3 are needed")
+    used = [c for c in header if c == "time" or c in CHANNELS]
+    extra = [c for c in header if c not in used]
+    if extra:
+        warnings.warn(f"{path}: ignoring column(s) not in the SPEC channels: {', '.join(extra)}",
+                      DataWarning, stacklevel=2)
+    idx = {c: header.index(c) for c in used}
+    arr = np.empty((len(data_rows), len(used)))
+    for ln, row in enumerate(data_rows, start=2):
+        if len(row) != len(header):
+            raise DataError(f"{path}: line {ln}: {len(row)} fields, header has {len(header)}")
+        for j, c in enumerate(used):
+            try:
+                arr[ln - 2, j] = float(row[idx[c]])
+            except ValueError:
+                raise DataError(f"{path}: line {ln}, column '{c}': not a number: {row[idx[c]]!r}") from None
+    for j, c in enumerate(used):
+        bad = ~np.isfinite(arr[:, j])
+        if bad.any():
+            ln = int(np.argmax(bad)) + 2
+            raise DataError(f"{path}: column '{c}' has a NaN or infinite value (line {ln})")
+    t = arr[:, used.index("time")]
+    dt = np.diff(t)
+    if np.any(dt <= 0):
+        ln = int(np.argmax(dt <= 0)) + 3
+        raise DataError(f"{path}: column 'time' is not strictly increasing (line {ln})")
+    h = (t[-1] - t[0]) / (t.size - 1)
+    if np.max(np.abs(dt - h)) > 1e-6 * h + 1e-9:
+        ln = int(np.argmax(np.abs(dt - h))) + 3
+        raise DataError(f"{path}: column 'time' is not uniform (step {dt[ln - 3]:.6g} s at line {ln}, "
+                        f"mean step {h:.6g} s)")
+    # rebuild an exactly uniform time base
+    t = t[0] + h * np.arange(t.size)
+    channels = {c: arr[:, j] for j, c in enumerate(used) if c != "time"}
+    if not channels:
+        raise DataError(f"{path}: no measured channel; expected some of {', '.join(CHANNELS)}")
+    return RunData(t, channels)
+
+
+def write_run_csv(path: Path, time, Y, channels=CHANNELS):
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    M = np.column_stack([time, Y])
+    np.savetxt(path, M, delimiter=",", header=",".join(("time",) + tuple(channels)), comments="", fmt="%.12g")
+
+
+def write_toml(path: Path, doc: dict, comment: str | None = None):
+    path = Path(path)
+    text = tomli_w.dumps(doc)
+    if comment:
+        text = "".join(f"# {ln}\n" for ln in comment.splitlines()) + text
+    path.write_text(text)
+
+
+# ---------------------------------------------------------------------------
+# Output folders: all or nothing
+
+@contextlib.contextmanager
+def atomic_output(out_dir):
+    """Write into a temporary folder beside ``out_dir``; move into place on success.
+
+    On any exception nothing is left in ``out_dir`` (files already there are
+    kept; new files replace old ones only on success).
+    """
+    out_dir = Path(out_dir)
+    parent = out_dir.resolve().parent
+    try:
+        parent.mkdir(parents=True, exist_ok=True)
+    except OSError as e:
+        raise DataError(f"{out_dir}: cannot create output folder: {e}") from None
+    if out_dir.exists() and not out_dir.is_dir():
+        raise DataError(f"{out_dir}: exists and is not a folder")
+    tmp = Path(tempfile.mkdtemp(prefix=f".{out_dir.name}.tmp-", dir=parent))
+    try:
+        yield tmp
+    except BaseException:
+        shutil.rmtree(tmp, ignore_errors=True)
+        raise
+    if not out_dir.exists():
+        os.replace(tmp, out_dir)
+        return
+    for root, _dirs, files in os.walk(tmp):
+        rel = Path(root).relative_to(tmp)
+        (out_dir / rel).mkdir(parents=True, exist_ok=True)
+        for f in files:
+            os.replace(Path(root) / f, out_dir / rel / f)
+    shutil.rmtree(tmp, ignore_errors=True)
+
+
+__all__ = ["Manifest", "RunSpec", "RunData", "load_manifest", "load_scenario", "load_truth", "read_run_csv",
+           "write_run_csv", "atomic_output", "INDEX"]

@@ -1,0 +1,184 @@
+"""The twelve ride parameters, the known geometry and the built-in car.
+
+Parameter vectors are always in :data:`NAMES` order; a batch of candidates is
+an array of shape ``(n_pop, 12)``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from .errors import DataError
+
+#: The twelve parameter names of SPEC §1, in canonical column order.
+NAMES: tuple[str, ...] = (
+    "m_s", "I_xx", "I_yy", "a",
+    "m_uf", "m_ur",
+    "k_sf", "k_sr",
+    "c_sf", "c_sr",
+    "k_tf", "k_tr",
+)
+INDEX = {n: i for i, n in enumerate(NAMES)}
+
+UNITS = {
+    "m_s": "kg", "I_xx": "kg m^2", "I_yy": "kg m^2", "a": "m",
+    "m_uf": "kg", "m_ur": "kg",
+    "k_sf": "N/m", "k_sr": "N/m",
+    "c_sf": "N s/m", "c_sr": "N s/m",
+    "k_tf": "N/m", "k_tr": "N/m",
+}
+
+DESCRIPTIONS = {
+    "m_s": "sprung mass",
+    "I_xx": "sprung-mass roll inertia about its CG",
+    "I_yy": "sprung-mass pitch inertia about its CG",
+    "a": "CG distance behind the front axle",
+    "m_uf": "unsprung mass, one front corner",
+    "m_ur": "unsprung mass, one rear corner",
+    "k_sf": "suspension wheel rate, one front corner",
+    "k_sr": "suspension wheel rate, one rear corner",
+    "c_sf": "suspension damping at the wheel, one front corner",
+    "c_sr": "suspension damping at the wheel, one rear corner",
+    "k_tf": "tire vertical stiffness, one front tire",
+    "k_tr": "tire vertical stiffness, one rear tire",
+}
+
+#: How each parameter scales under the identifiability transformation
+#: (every mass, inertia, stiffness and damping times s): exponent of s.
+SCALE_EXPONENT = {n: (0 if n == "a" else 1) for n in NAMES}
+
+#: Anchors accepted in ``[known]`` besides the twelve names.
+EXTRA_KNOWN = {"total_mass": "kg"}
+
+#: Default search bounds: wide physical ranges for passenger cars and light
+#: trucks (small city cars to 3.5 t vans). ``a`` is given as a fraction of
+#: the wheelbase. Sources: typical ride frequencies 0.9–2.2 Hz, wheel hop
+#: 9–16 Hz, damping ratios 0.1–0.6 (Gillespie, *Fundamentals of Vehicle
+#: Dynamics*, ch. 5; Milliken & Milliken, *Race Car Vehicle Dynamics*, ch. 16).
+DEFAULT_BOUNDS = {
+    "m_s": (300.0, 4000.0),
+    "I_xx": (50.0, 2500.0),
+    "I_yy": (300.0, 8000.0),
+    "a": (0.25, 0.75),  # fraction of wheelbase
+    "m_uf": (15.0, 120.0),
+    "m_ur": (15.0, 120.0),
+    "k_sf": (8.0e3, 1.5e5),
+    "k_sr": (8.0e3, 1.5e5),
+    "c_sf": (300.0, 8.0e3),
+    "c_sr": (300.0, 8.0e3),
+    "k_tf": (8.0e4, 6.0e5),
+    "k_tr": (8.0e4, 6.0e5),
+}
+
+GRAVITY = 9.81
+
+
+@dataclass(frozen=True)
+class Geometry:
+    """Known geometry measured with a tape (m)."""
+
+    wheelbase: float
+    track_front: float
+    track_rear: float
+    tire_radius: float
+
+    KEYS = ("wheelbase", "track_front", "track_rear", "tire_radius")
+
+    def __post_init__(self):
+        for k in self.KEYS:
+            v = getattr(self, k)
+            if not (np.isfinite(v) and v > 0):
+                raise DataError(f"vehicle.{k} must be a positive number of metres, got {v!r}")
+
+    def corner_xy(self, a):
+        """Corner coordinates relative to the CG.
+
+        Parameters
+        ----------
+        a : array_like, shape (n,)
+            CG distance behind the front axle (m).
+
+        Returns
+        -------
+        x, y : ndarray, shape (n, 4)
+            Longitudinal and lateral corner positions in corner order
+            fl, fr, rl, rr (x forward, y left, m).
+        """
+        a = np.asarray(a, dtype=float)
+        b = self.wheelbase - a
+        x = np.stack([a, a, -b, -b], axis=-1)
+        hf, hr = self.track_front / 2, self.track_rear / 2
+        y = np.broadcast_to(np.array([hf, -hf, hr, -hr]), x.shape).copy()
+        return x, y
+
+
+CORNERS = ("fl", "fr", "rl", "rr")
+
+
+def default_bounds(geometry: Geometry) -> dict[str, tuple[float, float]]:
+    """Default search bounds with ``a`` converted to metres."""
+    out = dict(DEFAULT_BOUNDS)
+    lo, hi = DEFAULT_BOUNDS["a"]
+    out["a"] = (lo * geometry.wheelbase, hi * geometry.wheelbase)
+    return out
+
+
+def as_vector(values: dict[str, float]) -> np.ndarray:
+    """Dict of the twelve parameters -> vector in :data:`NAMES` order."""
+    missing = [n for n in NAMES if n not in values]
+    if missing:
+        raise DataError(f"parameters missing: {', '.join(missing)}")
+    return np.array([float(values[n]) for n in NAMES])
+
+
+def as_dict(vector) -> dict[str, float]:
+    """Vector in :data:`NAMES` order -> dict."""
+    v = np.asarray(vector, dtype=float).reshape(-1)
+    return {n: float(v[i]) for i, n in enumerate(NAMES)}
+
+
+def total_mass(P) -> np.ndarray:
+    """``m_s + 2 m_uf + 2 m_ur`` for a batch ``(n, 12)`` (or one vector)."""
+    P = np.asarray(P, dtype=float)
+    return P[..., 0] + 2 * P[..., INDEX["m_uf"]] + 2 * P[..., INDEX["m_ur"]]
+
+
+def check_parameters(P, geometry: Geometry, where: str = "parameters") -> np.ndarray:
+    """Validate a batch of parameter rows; returns it as ``(n, 12)`` float array."""
+    P = np.atleast_2d(np.asarray(P, dtype=float))
+    if P.shape[-1] != len(NAMES):
+        raise DataError(f"{where}: expected 12 parameters in order {', '.join(NAMES)}, got {P.shape[-1]}")
+    for i, n in enumerate(NAMES):
+        col = P[:, i]
+        if not np.all(np.isfinite(col)):
+            raise DataError(f"{where}: {n} is not finite")
+        if n == "a":
+            if np.any(col <= 0) or np.any(col >= geometry.wheelbase):
+                raise DataError(
+                    f"{where}: a must satisfy 0 < a < wheelbase ({geometry.wheelbase} m), got {col.min():g}..{col.max():g}")
+        elif np.any(col <= 0):
+            raise DataError(f"{where}: {n} must be positive, got {col.min():g}")
+    return P
+
+
+# ---------------------------------------------------------------------------
+# The built-in default car: CommonRoad vehicle model 2 (BMW 320i), ride
+# parameters converted to SI (CommonRoad "Vehicle Models" documentation,
+# parameters_vehicle2). Tire radius 0.30 m as the paper's test vehicle.
+DEFAULT_GEOMETRY = Geometry(wheelbase=1.156 + 1.423, track_front=1.387, track_rear=1.364, tire_radius=0.30)
+DEFAULT_CAR = {
+    "m_s": 965.7,
+    "I_xx": 207.3,
+    "I_yy": 1565.8,
+    "a": 1.156,
+    "m_uf": 31.9,
+    "m_ur": 31.9,
+    "k_sf": 24445.0,
+    "k_sr": 19629.0,
+    "c_sf": 1786.0,
+    "c_sr": 1649.0,
+    "k_tf": 158240.0,
+    "k_tr": 158240.0,
+}

@@ -1,0 +1,104 @@
+"""Scenarios: the built-in car and tracks, and scenario -> dataset simulation."""
+
+from __future__ import annotations
+
+import warnings
+from dataclasses import dataclass
+from importlib import resources
+from pathlib import Path
+
+import numpy as np
+
+from .errors import ArgumentError, ModelValidityWarning
+from .files import Manifest, RunSpec, atomic_output, load_scenario, write_run_csv, write_toml
+from .model import CHANNELS, static_corner_loads
+from .params import CORNERS, NAMES, as_vector
+from .simulate import prepare_run, simulate_reference, wheel_displacements
+
+
+def default_scenario_path() -> Path:
+    """Path of the built-in scenario TOML (the BMW 320i on the paper's ten runs)."""
+    return Path(str(resources.files("rideid") / "data" / "default_scenario.toml"))
+
+
+def default_scenario() -> Manifest:
+    return load_scenario(default_scenario_path())
+
+
+def run_times(run: RunSpec) -> np.ndarray:
+    """``t = k / fs`` for ``k = 0 .. round(duration fs)`` (SPEC §3)."""
+    n = int(round(run.duration * run.fs))
+    return np.arange(n + 1) / run.fs
+
+
+@dataclass
+class LiftOff:
+    run: str
+    wheel: str
+    time: float
+    force: float  # most negative total tire force, N
+
+    def message(self) -> str:
+        return (f"run '{self.run}': wheel {self.wheel} lifts off (tire force would reach {self.force:.0f} N "
+                f"at t = {self.time:.3f} s); the linear model assumes every tire stays on the road")
+
+
+def lift_offs(P, geom, run_id, run_input, states) -> list[LiftOff]:
+    """Wheels whose total tire load (static + k_t (r - z)) goes negative."""
+    P = np.asarray(P, dtype=float).reshape(-1)
+    static = static_corner_loads(P[None], geom)[0]
+    kt = np.array([P[NAMES.index("k_tf")]] * 2 + [P[NAMES.index("k_tr")]] * 2)
+    zw = wheel_displacements(states)
+    force = static[None, :] + kt[None, :] * (run_input.u - zw)
+    out = []
+    for i, w in enumerate(CORNERS):
+        j = int(np.argmin(force[:, i]))
+        if force[j, i] < 0:
+            out.append(LiftOff(run_id, w, float(run_input.t[j]), float(force[j, i])))
+    return out
+
+
+def simulate_manifest(sc: Manifest, noise: float = 0.0, seed: int | None = None, progress=None):
+    """Simulate every run of a scenario with its ``[truth]`` parameters.
+
+    Returns
+    -------
+    dict run id -> (t, Y) with ``Y`` (n, 10) in CHANNELS order, and the list
+    of :class:`LiftOff` found (also issued as :class:`ModelValidityWarning`).
+    """
+    if noise < 0 or not np.isfinite(noise):
+        raise ArgumentError(f"--noise must be a non-negative fraction, got {noise}")
+    rng = np.random.default_rng(seed)
+    P = as_vector(sc.truth)[None]
+    out, lifts = {}, []
+    for i, run in enumerate(sc.runs):
+        t = run_times(run)
+        ri = prepare_run(sc.tracks[run.track], sc.geometry, run.speed, t)
+        y, states = simulate_reference(P, sc.geometry, ri, return_states=True)
+        y = y[0]
+        lifts += lift_offs(P[0], sc.geometry, run.id, ri, states[0])
+        if noise > 0:
+            rms = np.sqrt(np.mean(y * y, axis=0))
+            y = y + rng.standard_normal(y.shape) * (noise * rms)[None, :]
+        out[run.id] = (t, y)
+        if progress is not None:
+            progress(i + 1, len(sc.runs), run.id)
+    for lo in lifts:
+        warnings.warn(lo.message(), ModelValidityWarning, stacklevel=2)
+    return out, lifts
+
+
+def write_dataset(sc: Manifest, data: dict, out_dir, comment: str | None = None):
+    """Write ``dataset.toml``, ``runs/<id>.csv`` and ``truth.toml`` (atomically)."""
+    with atomic_output(out_dir) as tmp:
+        runs = []
+        for run in sc.runs:
+            t, Y = data[run.id]
+            write_run_csv(tmp / "runs" / f"{run.id}.csv", t, Y, CHANNELS)
+            runs.append(RunSpec(run.id, run.track, run.speed, file=f"runs/{run.id}.csv"))
+        doc = Manifest(sc.path, sc.name, sc.geometry, sc.known, sc.bounds, sc.tracks, runs).to_dataset_doc()
+        write_toml(tmp / "dataset.toml", doc, comment)
+        if sc.truth is not None:
+            write_toml(tmp / "truth.toml", {"truth": {n: sc.truth[n] for n in NAMES}},
+                       "true parameters of the simulated car (rideid simulate)")
+    return Path(out_dir)

@@ -1,0 +1,204 @@
+"""Wheel inputs of a run and the model's time response.
+
+Driving (SPEC §2): at ``t = 0`` the front axle is at ``x = 0``, the rear at
+``-wheelbase``, the car at rest in static equilibrium, moving at the run's
+constant speed. Wheel paths: fl at ``y = +track_front/2``, fr at
+``-track_front/2``, rl/rr likewise with ``track_rear``.
+
+:class:`RunInput` holds everything parameter-independent about a run: the
+corner inputs at the samples and the input moments of every sample interval
+(:mod:`rideid.discretize`). :func:`simulate_reference` is the plain NumPy
+implementation of the exact discretisation (the compiled kernel in
+:mod:`rideid.kernel` is tested against it); :func:`simulate_lsim` is an
+independent fine-step check with ``scipy.signal.lsim``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from .contact import wheel_input
+from .discretize import N_MAX, Discretized, gauss_nodes, moment_weights
+from .model import CHANNELS, CORNER_TO_DECOMPOSED, state_space, static_state
+from .params import Geometry
+from .tracks import Track
+
+#: Spacing (m) of the tabulated envelope.
+ENVELOPE_DX = 5e-4
+
+
+def corner_positions(geom: Geometry, distance):
+    """Wheel-centre positions ``(n, 4)`` for front-axle distances ``(n,)``."""
+    d = np.asarray(distance, dtype=float)
+    return np.stack([d, d, d - geom.wheelbase, d - geom.wheelbase], axis=-1)
+
+
+def corner_ys(geom: Geometry):
+    hf, hr = geom.track_front / 2, geom.track_rear / 2
+    return (hf, -hf, hr, -hr)
+
+
+def corner_inputs(track: Track, geom: Geometry, distance):
+    """Road inputs ``(n, 4)`` (envelope, m) at front-axle distances ``(n,)``."""
+    xs = corner_positions(geom, distance)
+    return np.stack([wheel_input(track.path(y), xs[:, i], geom.tire_radius, ENVELOPE_DX)
+                     for i, y in enumerate(corner_ys(geom))], axis=-1)
+
+
+@dataclass
+class RunInput:
+    """Parameter-independent data of one run.
+
+    Attributes
+    ----------
+    t : (n,) sample times, s (uniform, ``t[0] = 0`` relative to the drive start)
+    h : sample interval, s
+    u : (n, 4) corner inputs fl, fr, rl, rr at the samples, m
+    ud : (n, 4) decomposed inputs ``[rf_s, rr_s, rf_a, rr_a]``
+    mu : (n-1, 4, N_MAX) decomposed input moments per interval
+    """
+
+    t: np.ndarray
+    h: float
+    u: np.ndarray
+    ud: np.ndarray
+    mu: np.ndarray
+
+    @property
+    def n(self) -> int:
+        return self.t.size
+
+
+def prepare_run(track: Track, geom: Geometry, speed: float, t, quad_order: int = 2) -> RunInput:
+    """Tabulate inputs and moments for a run at constant ``speed`` sampled at ``t``."""
+    t = np.asarray(t, dtype=float)
+    h = float(t[1] - t[0])
+    u = corner_inputs(track, geom, speed * t)
+    # quadrature panels no longer than the envelope grid spacing
+    n_panels = max(8, int(np.ceil(speed * h / ENVELOPE_DX)))
+    nodes, weights = gauss_nodes(n_panels, quad_order)
+    W = moment_weights(nodes, weights, N_MAX)  # (q, N)
+    n_int = t.size - 1
+    mu = np.empty((n_int, 4, N_MAX))
+    block = max(1, 2_000_000 // nodes.size)
+    for lo in range(0, n_int, block):
+        hi = min(n_int, lo + block)
+        tq = (t[lo:hi, None] + h * nodes[None, :]).ravel()
+        uq = corner_inputs(track, geom, speed * tq).reshape(hi - lo, nodes.size, 4)
+        mc = np.einsum("kqc,qn->kcn", uq, W)
+        mu[lo:hi] = np.einsum("dc,kcn->kdn", CORNER_TO_DECOMPOSED, mc)
+    ud = u @ CORNER_TO_DECOMPOSED.T
+    return RunInput(t=t, h=h, u=u, ud=ud, mu=mu)
+
+
+def initial_states(disc: Discretized, ud0):
+    """Static-equilibrium states of both blocks for the input at ``t = 0``."""
+    xs = static_state(disc.As, disc.Bs, ud0[:2])
+    xa = static_state(disc.Aa, disc.Ba, ud0[2:])
+    return xs, xa
+
+
+def assemble_channels(gs, ga, xs_rate, xa_rate, a, b, geom: Geometry):
+    """Ten SPEC channels from generalised accelerations and rates.
+
+    gs : (..., 4) ``[z'', theta'', zf_s'', zr_s'']``, ga : (..., 3)
+    ``[phi'', zf_a'', zr_a'']``, rates ``theta'``, ``phi'``; ``a, b`` broadcast
+    against the leading axes. Returns (..., 10).
+    """
+    hf, hr = geom.track_front / 2, geom.track_rear / 2
+    z, th, zfs, zrs = gs[..., 0], gs[..., 1], gs[..., 2], gs[..., 3]
+    ph, zfa, zra = ga[..., 0], ga[..., 1], ga[..., 2]
+    return np.stack([
+        z - a * th + hf * ph, z - a * th - hf * ph,
+        z + b * th + hr * ph, z + b * th - hr * ph,
+        zfs + zfa, zfs - zfa, zrs + zra, zrs - zra,
+        xs_rate, xa_rate,
+    ], axis=-1)
+
+
+def simulate_reference(P, geom: Geometry, run: RunInput, disc: Discretized | None = None,
+                       return_states: bool = False):
+    """Outputs of the exact discretisation, plain NumPy (loop over samples).
+
+    Parameters
+    ----------
+    P : (n_pop, 12)
+    geom : Geometry
+    run : RunInput
+
+    Returns
+    -------
+    y : (n_pop, n_time, 10) in :data:`rideid.model.CHANNELS` order.
+    states : (n_pop, n_time, 14) in decomposed order
+        ``[z, theta, zf_s, zr_s, rates(4), phi, zf_a, zr_a, rates(3)]``,
+        only with ``return_states``.
+    """
+    P = np.atleast_2d(np.asarray(P, dtype=float))
+    if disc is None:
+        disc = Discretized(P, geom, run.h)
+    N = disc.N
+    xs, xa = initial_states(disc, run.ud[0])
+    n = run.n
+    gs = np.empty((P.shape[0], n, 4))
+    ga = np.empty((P.shape[0], n, 3))
+    Xs = np.empty((P.shape[0], n, 8))
+    Xa = np.empty((P.shape[0], n, 6))
+    for k in range(n):
+        Xs[:, k], Xa[:, k] = xs, xa
+        gs[:, k] = np.einsum("pij,pj->pi", disc.Ca_s, xs) + disc.Da_s @ run.ud[k, :2]
+        ga[:, k] = np.einsum("pij,pj->pi", disc.Ca_a, xa) + disc.Da_a @ run.ud[k, 2:]
+        if k + 1 < n:
+            mus, mua = run.mu[k, :2, :N], run.mu[k, 2:, :N]
+            xs = np.einsum("pij,pj->pi", disc.Phi_s, xs) + np.einsum("npij,jn->pi", disc.G_s, mus)
+            xa = np.einsum("pij,pj->pi", disc.Phi_a, xa) + np.einsum("npij,jn->pi", disc.G_a, mua)
+    a = P[:, 3][:, None]
+    b = geom.wheelbase - a
+    y = assemble_channels(gs, ga, Xs[:, :, 5], Xa[:, :, 3], a, b, geom)
+    if return_states:
+        return y, np.concatenate([Xs, Xa], axis=-1)
+    return y
+
+
+def wheel_displacements(states):
+    """Corner wheel heaves ``(…, 4)`` from decomposed states."""
+    zfs, zrs = states[..., 2], states[..., 3]
+    zfa, zra = states[..., 9], states[..., 10]
+    return np.stack([zfs + zfa, zfs - zfa, zrs + zra, zrs - zra], axis=-1)
+
+
+def simulate_lsim(P, geom: Geometry, track: Track, speed: float, t, upsample: int = 100,
+                  exact_envelope: bool = True):
+    """Independent fine-step reference with ``scipy.signal.lsim``.
+
+    The full 14-state model is driven by the envelope evaluated directly
+    (not tabulated) on a grid ``upsample`` times finer than ``t`` with
+    first-order hold; outputs are taken at ``t``. One candidate.
+
+    Returns
+    -------
+    y : (n_time, 10)
+    """
+    import scipy.signal
+
+    from .contact import envelope
+
+    t = np.asarray(t, dtype=float)
+    h = t[1] - t[0]
+    tf = t[0] + h / upsample * np.arange((t.size - 1) * upsample + 1)
+    xs = corner_positions(geom, speed * tf)
+    if exact_envelope:
+        u = np.stack([envelope(track.path(y).h, xs[:, i], geom.tire_radius)
+                      for i, y in enumerate(corner_ys(geom))], -1)
+    else:
+        u = corner_inputs(track, geom, speed * tf)
+    A, B, Cy, Dy = state_space(np.atleast_2d(P), geom)
+    x0 = static_state(A, B, u[0])[0]
+    sys = scipy.signal.StateSpace(A[0], B[0], Cy[0], Dy[0])
+    _, y, _ = scipy.signal.lsim(sys, u, tf, X0=x0, interp=True)
+    return y[::upsample]
+
+
+__all__ = ["RunInput", "prepare_run", "simulate_reference", "simulate_lsim", "CHANNELS",
+           "corner_inputs", "corner_positions"]
