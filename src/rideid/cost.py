@@ -1,0 +1,212 @@
+"""The identification cost.
+
+For a candidate ``p`` and run ``r`` with the set ``C_r`` of measured channels,
+
+    E_r(p) = (1/|C_r|) sum_{c in C_r} sum_k (yhat_{c,k}(p) - y_{c,k})^2 / D_{r,c}
+    D_{r,c} = max( sum_k y_{c,k}^2 , 0.01 max_{c' in C_r, kind(c') = kind(c)} sum_k y_{c',k}^2 )
+
+i.e. each channel's squared error normalised by its measured energy (so
+accelerations in m/s^2 and rates in rad/s are comparable), floored at 1 % of
+the largest energy among channels of the same kind (body, axle, rate) in that
+run, so that a channel the run barely excites (roll rate on a washboard) is
+not blown up to full weight. The total cost is
+
+    J(p) = sum_r w_r E_r(p),   sum_r w_r = 1,
+
+with equal weights by default; identification adapts them (paper eq. 13).
+``E_r`` is a normalised mean squared error: 1 is as bad as predicting zero.
+
+Free parameters: the twelve less those in ``[known]``; with ``total_mass``
+known, ``m_s = total_mass - 2 m_uf - 2 m_ur`` is derived (if ``m_s`` itself
+is known, ``m_ur`` is derived instead).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .dataset import Dataset, check_known_consistent, scale_anchor
+from .engine import BatchSimulator
+from .errors import ArgumentError, DataError
+from .model import CHANNEL_KIND, CHANNELS
+from .params import DEFAULT_CAR, INDEX, NAMES, default_bounds
+from .simulate import prepare_run
+
+ENERGY_FLOOR = 0.01
+
+
+def channel_weights(Y: np.ndarray) -> np.ndarray:
+    """Per-channel weights ``1 / (|C| D_c)`` of one run; 0 for missing (NaN) channels."""
+    present = ~np.all(np.isnan(Y), axis=0)
+    E = np.where(present, np.nansum(Y * Y, axis=0), 0.0)
+    D = np.zeros(len(CHANNELS))
+    for i, c in enumerate(CHANNELS):
+        if not present[i]:
+            continue
+        same = [j for j, c2 in enumerate(CHANNELS) if CHANNEL_KIND[c2] == CHANNEL_KIND[c] and present[j]]
+        D[i] = max(E[i], ENERGY_FLOOR * max(E[j] for j in same))
+    W = np.zeros(len(CHANNELS))
+    n = int(present.sum())
+    ok = present & (D > 0)
+    W[ok] = 1.0 / (n * D[ok])
+    return W
+
+
+class ParameterSpace:
+    """Free, fixed and derived parameters of a dataset, and their bounds."""
+
+    def __init__(self, known: dict[str, float], geometry, bounds: dict | None = None):
+        scale_anchor(known)
+        check_known_consistent(known)
+        self.known = dict(known)
+        self.geometry = geometry
+        self.derived = None
+        if "total_mass" in known:
+            for cand in ("m_s", "m_ur", "m_uf"):
+                if cand not in known:
+                    self.derived = cand
+                    break
+        self.fixed = {n: v for n, v in known.items() if n in NAMES}
+        self.names = [n for n in NAMES if n not in self.fixed and n != self.derived]
+        db = default_bounds(geometry)
+        bounds = dict(bounds or {})
+        for k in bounds:
+            if k not in NAMES:
+                raise DataError(f"[bounds]: unknown parameter '{k}'")
+        self.bounds = np.array([bounds.get(n, db[n]) for n in self.names], dtype=float)
+
+    def full(self, X) -> np.ndarray:
+        """Free-parameter rows ``(n, d)`` -> all twelve ``(n, 12)``."""
+        X = np.atleast_2d(np.asarray(X, dtype=float))
+        if X.shape[1] != len(self.names):
+            raise ArgumentError(f"expected {len(self.names)} columns ({', '.join(self.names)}), got {X.shape[1]}")
+        P = np.empty((X.shape[0], 12))
+        for j, n in enumerate(self.names):
+            P[:, INDEX[n]] = X[:, j]
+        for n, v in self.fixed.items():
+            P[:, INDEX[n]] = v
+        if self.derived is not None:
+            tm = self.known["total_mass"]
+            i = INDEX[self.derived]
+            if self.derived == "m_s":
+                P[:, i] = tm - 2 * P[:, INDEX["m_uf"]] - 2 * P[:, INDEX["m_ur"]]
+            elif self.derived == "m_ur":
+                P[:, i] = (tm - P[:, INDEX["m_s"]] - 2 * P[:, INDEX["m_uf"]]) / 2
+            else:
+                P[:, i] = (tm - P[:, INDEX["m_s"]] - 2 * P[:, INDEX["m_ur"]]) / 2
+        return P
+
+    def free(self, P) -> np.ndarray:
+        P = np.atleast_2d(P)
+        return P[:, [INDEX[n] for n in self.names]]
+
+    def valid(self, P) -> np.ndarray:
+        """Rows that are physical: positive masses etc., 0 < a < wheelbase."""
+        ok = np.all(np.isfinite(P), axis=1)
+        for n in NAMES:
+            col = P[:, INDEX[n]]
+            ok &= (col > 0) & ((col < self.geometry.wheelbase) if n == "a" else True)
+        return ok
+
+    def nominal(self) -> np.ndarray:
+        """A physically consistent nominal car: the built-in car scaled to the
+        anchor, clipped into the bounds (used for sensitivity maps and as a
+        reference point, never as a starting guess)."""
+        base = np.array([DEFAULT_CAR[n] for n in NAMES])
+        base[INDEX["a"]] = DEFAULT_CAR["a"] / 2.579 * self.geometry.wheelbase
+        anchor = scale_anchor(self.known)
+        if anchor == "total_mass":
+            s = self.known["total_mass"] / (base[0] + 2 * base[INDEX["m_uf"]] + 2 * base[INDEX["m_ur"]])
+        else:
+            s = self.known[anchor] / base[INDEX[anchor]]
+        P = base * np.where(np.array(NAMES) == "a", 1.0, s)
+        x = np.clip(P[[INDEX[n] for n in self.names]], self.bounds[:, 0], self.bounds[:, 1])
+        return self.full(x)[0]
+
+
+class CostFunction:
+    """``J(X)`` for a batch of free-parameter rows (see module docstring).
+
+    Parameters
+    ----------
+    ds : Dataset
+    weights : array_like, shape (n_runs,), optional
+        Run weights (normalised to sum 1); equal by default.
+    use_kernel : bool
+        Compiled kernel (default) or the plain NumPy reference.
+
+    Attributes
+    ----------
+    names : list of str
+        The free parameter names, in column order.
+    bounds : ndarray, shape (d, 2)
+    run_ids : list of str
+    """
+
+    def __init__(self, ds: Dataset, weights=None, use_kernel: bool = True, space: ParameterSpace | None = None):
+        self.ds = ds
+        self.space = space or ParameterSpace(ds.known, ds.geometry, ds.manifest.bounds)
+        self.names = list(self.space.names)
+        self.bounds = self.space.bounds
+        self.run_ids = [r.id for r in ds.runs]
+        runs, Ys, Ws = [], [], []
+        for r in ds.runs:
+            rd = ds.data[r.id]
+            runs.append(prepare_run(ds.manifest.tracks[r.track], ds.geometry, r.speed, rd.time))
+            Y = rd.matrix()
+            Ws.append(channel_weights(Y))
+            Ys.append(np.nan_to_num(Y, nan=0.0))
+        self.sim = BatchSimulator(ds.geometry, runs)
+        self.Y = np.ascontiguousarray(np.concatenate(Ys))
+        self.W = np.array(Ws)
+        self.use_kernel = use_kernel
+        self.weights = np.full(len(runs), 1.0 / len(runs))
+        if weights is not None:
+            self.set_weights(weights)
+        self.nfev = 0
+
+    def set_weights(self, w):
+        w = np.asarray(w, dtype=float)
+        if w.shape != (len(self.run_ids),) or np.any(w < 0) or not np.isfinite(w).all() or w.sum() <= 0:
+            raise ArgumentError(f"weights must be {len(self.run_ids)} non-negative numbers, not all zero")
+        self.weights = w / w.sum()
+
+    def run_errors(self, X) -> np.ndarray:
+        """Normalised errors ``E_r`` per run, shape ``(n_runs, n)``; inf for unphysical rows."""
+        P = self.space.full(X)
+        ok = self.space.valid(P)
+        E = np.full((len(self.run_ids), P.shape[0]), np.inf)
+        if ok.any():
+            fn = self.sim.errors if self.use_kernel else self.sim.errors_reference
+            E[:, ok] = fn(P[ok], self.Y, self.W)
+        self.nfev += P.shape[0]
+        return E
+
+    def combine(self, E, weights=None) -> np.ndarray:
+        w = self.weights if weights is None else np.asarray(weights, dtype=float)
+        with np.errstate(invalid="ignore"):
+            return w @ E
+
+    def __call__(self, X) -> np.ndarray:
+        """Costs ``(n,)`` for free-parameter rows ``X`` of shape ``(n, d)``."""
+        return self.combine(self.run_errors(X))
+
+    def residuals(self, X, weights=None) -> np.ndarray:
+        """Stacked weighted residuals ``(n, m)`` whose squared sum is ``J``."""
+        P = self.space.full(X)
+        outs = self.sim.outputs(P)
+        w = self.weights if weights is None else np.asarray(weights, dtype=float)
+        parts = []
+        for ri, (s, e) in enumerate(zip(self.sim.run_start[:-1], self.sim.run_start[1:])):
+            cols = np.nonzero(self.W[ri] > 0)[0]
+            sc = np.sqrt(w[ri] * self.W[ri, cols])
+            d = (outs[ri][:, :, cols] - self.Y[None, s:e, cols]) * sc
+            parts.append(d.reshape(P.shape[0], -1))
+        self.nfev += P.shape[0]
+        return np.concatenate(parts, axis=1)
+
+    def simulate(self, params) -> dict[str, np.ndarray]:
+        """Simulated channels ``(n_time, 10)`` per run for one full parameter vector (12)."""
+        P = np.asarray(params, dtype=float).reshape(1, 12)
+        outs = self.sim.outputs(P)
+        return {rid: o[0] for rid, o in zip(self.run_ids, outs)}

@@ -1,0 +1,277 @@
+"""Identification: JADE with adaptive track weights, then a least-squares polish.
+
+1. The free parameters and bounds come from the dataset (``[known]``,
+   ``[bounds]``, defaults in :data:`rideid.params.DEFAULT_BOUNDS`).
+2. The parameter -> track map ``M`` (:mod:`rideid.sensitivity`) is computed
+   around a nominal car (the built-in car scaled to the anchor).
+3. JADE evolves the population on ``J = sum_r w_r E_r``. After every
+   generation (``weights="adaptive"``) the normalised spread of each free
+   parameter (eq. 12) gives new weights ``w ∝ spread @ M`` (eq. 13) and the
+   population is re-scored with them before the next generation (no new
+   simulation: the per-run errors of every individual are kept).
+4. JADE stops after ``generations``, or earlier once every free parameter's
+   coefficient of variation in the population is below ``spread_tol``.
+5. The polish (SciPy ``least_squares``, trust-region reflective, in
+   bound-normalised coordinates, forward-difference Jacobian evaluated as
+   one batch) minimises the **equal-weight** cost from the best individual.
+   The adaptive weights steer the search; the estimate is defined by the
+   equal-weight objective so that adaptive and fixed runs are comparable.
+6. Standard errors: ``cov = s^2 (J^T J)^-1`` at the optimum with
+   ``s^2 = RSS / (m - d)``, assuming white residuals (an optimistic lower
+   bound when residuals are correlated or the model is wrong).
+"""
+
+from __future__ import annotations
+
+import json
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+from scipy.optimize import least_squares
+
+from .cost import CostFunction
+from .dataset import Dataset
+from .errors import ArgumentError
+from .jade import JadeSolver
+from .model import modal_summary
+from .params import INDEX, NAMES, UNITS, default_bounds
+from .sensitivity import SensitivityMaps, adaptive_weights, coefficient_of_variation, compute_maps, normalised_spread
+
+DEFAULT_POPULATION = 60
+DEFAULT_GENERATIONS = 400
+DEFAULT_SPREAD_TOL = 5e-3
+
+
+@dataclass
+class IdentificationResult:
+    """What :func:`identify` returns.
+
+    ``parameters`` maps all twelve names to values; ``details`` adds unit,
+    bounds, fixed/derived flags and standard error; ``history`` has one dict
+    per generation.
+    """
+
+    parameters: dict[str, float]
+    details: dict[str, dict]
+    known: dict[str, float]
+    cost: float
+    generations: int
+    evaluations: int
+    wall_time_s: float
+    seed: int | None
+    track_weights: dict[str, float]
+    weights_mode: str
+    polish: dict | None
+    stop: str
+    history: list[dict] = field(default_factory=list)
+    modal: dict | None = None
+    dataset: str = ""
+    maps: SensitivityMaps | None = None
+
+    def to_dict(self) -> dict:
+        return {
+            "parameters": self.details,
+            "known": self.known,
+            "cost": self.cost,
+            "cost_definition": "equal-weight sum over runs of the per-channel energy-normalised squared error "
+                               "(see rideid.cost)",
+            "generations": self.generations,
+            "evaluations": self.evaluations,
+            "wall_time_s": self.wall_time_s,
+            "seed": self.seed,
+            "track_weights": self.track_weights,
+            "weights": self.weights_mode,
+            "stop": self.stop,
+            "polish": self.polish,
+            "modal": self.modal,
+            "dataset": self.dataset,
+            "history_file": "history.csv",
+        }
+
+    def save(self, out_dir):
+        out_dir = Path(out_dir)
+        (out_dir / "result.json").write_text(json.dumps(self.to_dict(), indent=2) + "\n")
+        write_history(self.history, out_dir / "history.csv")
+
+
+def write_history(history, path):
+    if not history:
+        Path(path).write_text("")
+        return
+    keys = list(history[0].keys())
+    lines = [",".join(keys)]
+    for h in history:
+        lines.append(",".join(f"{h[k]:.10g}" if isinstance(h[k], float) else str(h[k]) for k in keys))
+    Path(path).write_text("\n".join(lines) + "\n")
+
+
+def identify(ds: Dataset, *, seed: int | None = None, population: int = DEFAULT_POPULATION,
+             generations: int = DEFAULT_GENERATIONS, weights: str = "adaptive", polish: bool = True,
+             spread_tol: float = DEFAULT_SPREAD_TOL, progress=None, cost: CostFunction | None = None,
+             maps: SensitivityMaps | None = None) -> IdentificationResult:
+    """Estimate the ride parameters of a dataset.
+
+    Parameters
+    ----------
+    ds : Dataset
+    seed : int, optional
+        Seed of the ``numpy.random.Generator`` (same seed, same result).
+    population, generations : int
+        JADE's NP and generation limit.
+    weights : {"adaptive", "fixed"}
+        Adaptive track weights (paper eq. 12-13) or equal weights.
+    polish : bool
+        Refine with ``scipy.optimize.least_squares`` after JADE.
+    spread_tol : float
+        Stop JADE once every free parameter's coefficient of variation in the
+        population is below this (0 disables the early stop).
+    progress : callable, optional
+        ``progress(info)`` each generation with a dict (generation, best,
+        spread, evaluations, elapsed).
+
+    Returns
+    -------
+    IdentificationResult
+    """
+    if weights not in ("adaptive", "fixed"):
+        raise ArgumentError(f"weights must be 'adaptive' or 'fixed', got {weights!r}")
+    if not isinstance(generations, int) or generations < 1:
+        raise ArgumentError(f"generations must be a positive integer, got {generations!r}")
+    t0 = time.perf_counter()
+    cf = cost or CostFunction(ds)
+    cf.set_weights(np.ones(len(cf.run_ids)))
+    space = cf.space
+    if maps is None:
+        mask = cf.W > 0
+        maps = compute_maps(cf.sim, ds.geometry, space.nominal(), cf.run_ids, mask)
+    M_free = maps.submap(cf.names)
+    rng = np.random.default_rng(seed)
+    solver = JadeSolver(cf.bounds, population, rng)
+    n_runs = len(cf.run_ids)
+    w = np.full(n_runs, 1.0 / n_runs)
+    history: list[dict] = []
+
+    X = solver.ask()
+    E = cf.run_errors(X)
+    solver.tell(cf.combine(E, w))
+    E_pop = E
+    stop = "generations"
+    for g in range(1, generations + 1):
+        X = solver.ask()
+        E_trial = cf.run_errors(X)
+        better = solver.tell(cf.combine(E_trial, w))
+        E_pop = np.where(better[None, :], E_trial, E_pop)
+        spread = normalised_spread(solver.pop)
+        if weights == "adaptive":
+            w = adaptive_weights(M_free, spread)
+            solver.rescore(cf.combine(E_pop, w))
+        cv = coefficient_of_variation(solver.pop)
+        finite = np.isfinite(solver.costs)
+        rec = {"generation": g, "evaluations": solver.nfev, "best_cost": float(solver.fun),
+               "mean_cost": float(np.mean(solver.costs[finite])) if finite.any() else float("inf"),
+               "best_cost_equal": float(np.mean(E_pop[:, solver.best_index])),
+               "mu_f": solver.mu_f, "mu_cr": solver.mu_cr}
+        mean = solver.pop.mean(axis=0)
+        for j, n in enumerate(cf.names):
+            rec[f"mean_{n}"] = float(mean[j])
+        for j, n in enumerate(cf.names):
+            rec[f"spread_{n}"] = float(spread[j])
+        for j, n in enumerate(cf.names):
+            rec[f"cv_{n}"] = float(cv[j])
+        for r, rid in enumerate(cf.run_ids):
+            rec[f"weight_{rid}"] = float(w[r])
+        history.append(rec)
+        if progress is not None:
+            progress({"generation": g, "generations": generations, "best": float(solver.fun),
+                      "spread": float(cv.max()), "evaluations": solver.nfev,
+                      "elapsed": time.perf_counter() - t0})
+        if spread_tol > 0 and cv.max() < spread_tol:
+            stop = "spread"
+            break
+
+    x_best = solver.x
+    equal = np.full(n_runs, 1.0 / n_runs)
+    polish_info = None
+    std = np.full(len(cf.names), np.nan)
+    if polish:
+        x_best, polish_info, std = _polish(cf, x_best, equal)
+    final_E = cf.run_errors(x_best[None])[:, 0]
+    P = space.full(x_best[None])[0]
+    wall = time.perf_counter() - t0
+
+    details = {}
+    db = default_bounds(ds.geometry)
+    for n in NAMES:
+        d = {"value": float(P[INDEX[n]]), "unit": UNITS[n], "fixed": n in space.fixed,
+             "derived": n == space.derived}
+        if n in cf.names:
+            j = cf.names.index(n)
+            d["lower"], d["upper"] = float(cf.bounds[j, 0]), float(cf.bounds[j, 1])
+            d["std"] = None if not np.isfinite(std[j]) else float(std[j])
+        elif n == space.derived:
+            d["std"] = _derived_std(space, cf.names, polish_info)
+            d["lower"], d["upper"] = db[n]
+        else:
+            d["std"] = 0.0
+        details[n] = d
+    return IdentificationResult(
+        parameters={n: float(P[INDEX[n]]) for n in NAMES}, details=details, known=dict(ds.known),
+        cost=float(equal @ final_E), generations=solver.nit, evaluations=cf.nfev, wall_time_s=wall,
+        seed=seed, track_weights={rid: float(w[r]) for r, rid in enumerate(cf.run_ids)},
+        weights_mode=weights, polish=polish_info, stop=stop, history=history,
+        modal=modal_summary(P, ds.geometry), dataset=str(ds.path), maps=maps)
+
+
+def _polish(cf: CostFunction, x0, weights):
+    lo, hi = cf.bounds[:, 0], cf.bounds[:, 1]
+    span = hi - lo
+
+    def to_x(z):
+        return lo + span * z
+
+    def fun(z):
+        return cf.residuals(to_x(z)[None], weights)[0]
+
+    def jac(z):
+        h = 1e-7
+        Z = np.tile(z, (z.size + 1, 1))
+        steps = np.where(z + h <= 1, h, -h)
+        Z[1:][np.arange(z.size), np.arange(z.size)] += steps
+        R = cf.residuals(to_x(Z), weights)
+        return ((R[1:] - R[0]) / steps[:, None]).T
+
+    z0 = np.clip((x0 - lo) / span, 0, 1)
+    sol = least_squares(fun, z0, jac=jac, bounds=(0, 1), method="trf", x_scale="jac",
+                        ftol=1e-15, xtol=1e-12, gtol=1e-15, max_nfev=100)
+    J = sol.jac
+    m, d = J.shape
+    rss = float(sol.fun @ sol.fun)
+    s2 = rss / max(m - d, 1)
+    try:
+        cov_z = s2 * np.linalg.inv(J.T @ J)
+        cov = cov_z * np.outer(span, span)
+        std = np.sqrt(np.clip(np.diag(cov), 0, None))
+    except np.linalg.LinAlgError:
+        cov = np.full((d, d), np.nan)
+        std = np.full(d, np.nan)
+    x = to_x(sol.x)
+    info = {"success": bool(sol.success), "message": sol.message, "nfev": int(sol.nfev),
+            "cost_before": float(np.sum(fun(z0) ** 2)), "cost_after": 2 * float(sol.cost),
+            "covariance": cov.tolist(), "names": list(cf.names)}
+    return x, info, std
+
+
+def _derived_std(space, names, polish_info):
+    if polish_info is None or space.derived is None:
+        return None
+    cov = np.array(polish_info["covariance"])
+    if not np.all(np.isfinite(cov)):
+        return None
+    g = np.zeros(len(names))
+    coeffs = {"m_s": {"m_uf": -2, "m_ur": -2}, "m_ur": {"m_s": -0.5, "m_uf": -1}, "m_uf": {"m_s": -0.5, "m_ur": -1}}
+    for n, cval in coeffs[space.derived].items():
+        if n in names:
+            g[names.index(n)] = cval
+    return float(np.sqrt(max(g @ cov @ g, 0.0)))

@@ -1,0 +1,216 @@
+"""Response and track prioritisation maps (paper §4.3).
+
+* **Parameter -> response** ``S[p, c, r]``: each parameter raised by 25 %
+  one at a time (``a`` too, capped at 95 % of the wheelbase), the percentage
+  change of the peak ``max_k |y_c|`` of channel ``c`` on run ``r``. A channel
+  a run does not excite (peak below 0.1 % of the largest peak of its kind on
+  that run) gives no value (the paper's ⌀). Averaged over runs (mean of the
+  absolute values) it is the paper's Table 5, ``S_bar[p, c]``.
+* **Response -> track** ``R[c, r]``: how strongly run ``r`` excites channel
+  ``c``: its RMS on the run divided by the largest RMS of that channel over
+  all runs (0..1).
+* **Parameter -> track** ``M[p, r] = sum_c S_bar[p, c] R[c, r]``, each row
+  normalised to sum 1: the share of parameter ``p``'s information carried by
+  each run. The adaptive weights use it (paper eq. 13).
+
+Star ratings (documented thresholds):
+
+* parameter -> response, ``|% change|``: ⌀ < 1, ★ 1-5, ★★ 5-15, ★★★ >= 15;
+* response -> track, ``R``: ⌀ < 0.05, ★ 0.05-0.25, ★★ 0.25-0.6, ★★★ >= 0.6;
+* parameter -> track, ``M * n_runs`` (1 = an equal share): ⌀ < 0.25,
+  ★ 0.25-0.75, ★★ 0.75-1.5, ★★★ >= 1.5.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from .engine import BatchSimulator
+from .model import CHANNEL_KIND, CHANNELS
+from .params import INDEX, NAMES, Geometry
+
+STEP = 0.25
+P2R_STARS = (1.0, 5.0, 15.0)
+R2T_STARS = (0.05, 0.25, 0.6)
+P2T_STARS = (0.25, 0.75, 1.5)
+
+
+def stars(value, thresholds) -> str:
+    if value is None or not np.isfinite(value):
+        return "⌀"
+    n = sum(value >= t for t in thresholds)
+    return "★" * n if n else "⌀"
+
+
+@dataclass
+class SensitivityMaps:
+    params: list[str]
+    channels: list[str]
+    runs: list[str]
+    S: np.ndarray        # (p, c, r) % change of peak, NaN where not excited
+    S_bar: np.ndarray    # (p, c)
+    R: np.ndarray        # (c, r)
+    M: np.ndarray        # (p, r), rows sum to 1
+    baseline: np.ndarray  # (12,)
+
+    def submap(self, names) -> np.ndarray:
+        """Rows of ``M`` for the given parameter names."""
+        return self.M[[self.params.index(n) for n in names]]
+
+
+def compute_maps(sim: BatchSimulator, geom: Geometry, baseline, run_ids, channel_mask=None) -> SensitivityMaps:
+    """Compute the three maps around ``baseline`` (12 parameters).
+
+    ``channel_mask`` (n_runs, 10) bool marks the channels measured per run
+    (default: all).
+    """
+    base = np.asarray(baseline, dtype=float).reshape(12)
+    P = np.tile(base, (13, 1))
+    for i, n in enumerate(NAMES):
+        v = base[i] * (1 + STEP)
+        if n == "a":
+            v = min(v, 0.95 * geom.wheelbase)
+        P[1 + i, i] = v
+    outs = sim.outputs(P)
+    n_runs = len(outs)
+    if channel_mask is None:
+        channel_mask = np.ones((n_runs, len(CHANNELS)), bool)
+    peaks = np.stack([np.abs(o).max(axis=1) for o in outs], axis=-1)  # (13, c, r)
+    rms = np.stack([np.sqrt(np.mean(o[0] ** 2, axis=0)) for o in outs], axis=-1)  # (c, r)
+    excited = np.zeros((len(CHANNELS), n_runs), bool)
+    for ci, c in enumerate(CHANNELS):
+        same = [j for j, c2 in enumerate(CHANNELS) if CHANNEL_KIND[c2] == CHANNEL_KIND[c]]
+        excited[ci] = peaks[0, ci] > 1e-3 * peaks[0, same].max(axis=0)
+    excited &= channel_mask.T
+    with np.errstate(divide="ignore", invalid="ignore"):
+        S = 100.0 * (peaks[1:] - peaks[0][None]) / peaks[0][None]
+    S = np.where(excited[None], S, np.nan)
+    with np.errstate(invalid="ignore"):
+        S_bar = np.nanmean(np.abs(S), axis=2)
+    S_bar = np.nan_to_num(S_bar, nan=0.0)
+    rms = np.where(excited, rms, 0.0)
+    mx = rms.max(axis=1, keepdims=True)
+    R = np.divide(rms, mx, out=np.zeros_like(rms), where=mx > 0)
+    M = S_bar @ R
+    rs = M.sum(axis=1, keepdims=True)
+    M = np.divide(M, rs, out=np.full_like(M, 1.0 / n_runs), where=rs > 0)
+    return SensitivityMaps(list(NAMES), list(CHANNELS), list(run_ids), S, S_bar, R, M, base)
+
+
+def normalised_spread(X) -> np.ndarray:
+    """Paper eq. 12: each parameter's population variance normalised by its
+    mean, then over all parameters (sums to 1).
+
+    ``var / mean`` has the parameter's unit, so N/m parameters would swamp
+    kg m^2 ones; we use the dimensionless ``var / mean^2`` (the squared
+    coefficient of variation) as the per-parameter spread.
+    """
+    X = np.asarray(X, dtype=float)
+    mean = X.mean(axis=0)
+    v = X.var(axis=0) / np.maximum(mean * mean, 1e-300)
+    s = v.sum()
+    return v / s if s > 0 else np.full(v.shape, 1.0 / v.size)
+
+
+def coefficient_of_variation(X) -> np.ndarray:
+    X = np.asarray(X, dtype=float)
+    return X.std(axis=0) / np.maximum(np.abs(X.mean(axis=0)), 1e-300)
+
+
+def adaptive_weights(M_free: np.ndarray, spread: np.ndarray) -> np.ndarray:
+    """Paper eq. 13: ``w_r ∝ sum_p spread_p M[p, r]``, normalised to sum 1."""
+    w = spread @ M_free
+    s = w.sum()
+    return w / s if s > 0 else np.full(M_free.shape[1], 1.0 / M_free.shape[1])
+
+
+def tables_markdown(m: SensitivityMaps) -> str:
+    """The paper's Tables 4-7 as Markdown."""
+    out = []
+    short = [c.replace("body_az_", "b_").replace("axle_az_", "a_") for c in m.channels]
+    out.append("## Parameter → response (mean |% change of peak| over runs, +25 % step)\n")
+    out.append("| parameter | " + " | ".join(short) + " |")
+    out.append("|---" * (len(short) + 1) + "|")
+    for i, p in enumerate(m.params):
+        out.append(f"| {p} | " + " | ".join(f"{m.S_bar[i, c]:.1f} {stars(m.S_bar[i, c], P2R_STARS)}"
+                                             for c in range(len(short))) + " |")
+    out.append("\n## Response → track (RMS relative to the best-exciting run)\n")
+    out.append("| response | " + " | ".join(m.runs) + " |")
+    out.append("|---" * (len(m.runs) + 1) + "|")
+    for c, name in enumerate(m.channels):
+        out.append(f"| {name} | " + " | ".join(f"{m.R[c, r]:.2f} {stars(m.R[c, r], R2T_STARS)}"
+                                                for r in range(len(m.runs))) + " |")
+    out.append("\n## Parameter → track (share of each parameter's sensitivity per run, rows sum to 1)\n")
+    out.append("| parameter | " + " | ".join(m.runs) + " |")
+    out.append("|---" * (len(m.runs) + 1) + "|")
+    n = len(m.runs)
+    for i, p in enumerate(m.params):
+        out.append(f"| {p} | " + " | ".join(f"{m.M[i, r]:.3f} {stars(m.M[i, r] * n, P2T_STARS)}"
+                                             for r in range(n)) + " |")
+    out.append("\nStars: parameter→response |%|: ⌀ <1, ★ 1–5, ★★ 5–15, ★★★ ≥15; response→track: ⌀ <0.05, "
+               "★ <0.25, ★★ <0.6, ★★★ ≥0.6; parameter→track (share × number of runs): ⌀ <0.25, ★ <0.75, "
+               "★★ <1.5, ★★★ ≥1.5.")
+    return "\n".join(out) + "\n"
+
+
+def write_csvs(m: SensitivityMaps, out_dir):
+    import csv
+    from pathlib import Path
+    out_dir = Path(out_dir)
+    with open(out_dir / "param_response.csv", "w", newline="") as f:
+        w = csv.writer(f)
+        w.writerow(["parameter", "run"] + m.channels)
+        for i, p in enumerate(m.params):
+            for r, rid in enumerate(m.runs):
+                w.writerow([p, rid] + [("" if not np.isfinite(v) else f"{v:.6g}") for v in m.S[i, :, r]])
+        for i, p in enumerate(m.params):
+            w.writerow([p, "mean_abs"] + [f"{v:.6g}" for v in m.S_bar[i]])
+    with open(out_dir / "response_track.csv", "w", newline="") as f:
+        w = csv.writer(f)
+        w.writerow(["response"] + m.runs)
+        for c, name in enumerate(m.channels):
+            w.writerow([name] + [f"{v:.6g}" for v in m.R[c]])
+    with open(out_dir / "param_track.csv", "w", newline="") as f:
+        w = csv.writer(f)
+        w.writerow(["parameter"] + m.runs)
+        for i, p in enumerate(m.params):
+            w.writerow([p] + [f"{v:.6g}" for v in m.M[i]])
+
+
+def heatmaps(m: SensitivityMaps, out_dir) -> list:
+    """Three heatmap PNGs; returns their paths."""
+    from pathlib import Path
+
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    out_dir = Path(out_dir)
+    files = []
+    specs = [
+        ("param_response.png", m.S_bar, m.params, m.channels, "Parameter → response: mean |% change of peak|",
+         P2R_STARS, 1.0),
+        ("response_track.png", m.R, m.channels, m.runs, "Response → track: relative RMS", R2T_STARS, 1.0),
+        ("param_track.png", m.M, m.params, m.runs, "Parameter → track: share per run", P2T_STARS, len(m.runs)),
+    ]
+    for name, data, rows, cols, title, th, scale in specs:
+        fig, ax = plt.subplots(figsize=(1.0 + 0.75 * len(cols), 1.2 + 0.38 * len(rows)))
+        im = ax.imshow(data, aspect="auto", cmap="viridis")
+        ax.set_xticks(range(len(cols)), cols, rotation=45, ha="right", fontsize=8)
+        ax.set_yticks(range(len(rows)), rows, fontsize=8)
+        for i in range(data.shape[0]):
+            for j in range(data.shape[1]):
+                ax.text(j, i, stars(data[i, j] * scale, th).replace("⌀", "-"), ha="center", va="center",
+                        fontsize=7, color="white" if data[i, j] < 0.6 * np.nanmax(data) else "black")
+        ax.set_title(title, fontsize=10)
+        fig.colorbar(im, ax=ax, fraction=0.04)
+        fig.tight_layout()
+        fig.savefig(out_dir / name, dpi=110)
+        plt.close(fig)
+        files.append(out_dir / name)
+    return files
+
+
+__all__ = ["compute_maps", "SensitivityMaps", "adaptive_weights", "normalised_spread", "INDEX"]
