@@ -1,1 +1,38 @@
+"""rideid: estimate a car's ride parameters from accelerometer and gyro
+signals recorded on proving-ground tracks.
 
+Public API (SPEC §5)::
+
+    import rideid
+    ds = rideid.load_dataset(path)            # validated Dataset
+    res = rideid.identify(ds, seed=1)         # .parameters: name -> value
+    cost = rideid.CostFunction(ds)            # cost(P): (n, d) -> (n,)
+    cost.names                                # free parameter names
+    rideid.jade(fun, bounds, population=..., generations=..., seed=...)
+"""
+
+from importlib.metadata import PackageNotFoundError, version
+
+from .cost import CostFunction, ParameterSpace
+from .dataset import Dataset, load_dataset
+from .errors import ArgumentError, DataError, DataWarning, ModelValidityWarning, RideidError, ScaleError
+from .files import Manifest, load_scenario, load_truth
+from .identify import IdentificationResult, identify
+from .jade import JadeSolver, jade
+from .model import CHANNELS, modal_summary
+from .params import DEFAULT_CAR, DEFAULT_GEOMETRY, NAMES, UNITS, Geometry
+from .scenario import default_scenario, default_scenario_path, simulate_manifest, write_dataset
+from .tracks import Track
+
+try:
+    __version__ = version("rideid")
+except PackageNotFoundError:  # pragma: no cover
+    __version__ = "0+unknown"
+
+__all__ = [
+    "CHANNELS", "NAMES", "UNITS", "DEFAULT_CAR", "DEFAULT_GEOMETRY",
+    "ArgumentError", "DataError", "DataWarning", "ModelValidityWarning", "RideidError", "ScaleError",
+    "CostFunction", "ParameterSpace", "Dataset", "Geometry", "IdentificationResult", "JadeSolver", "Manifest",
+    "Track", "default_scenario", "default_scenario_path", "identify", "jade", "load_dataset", "load_scenario",
+    "load_truth", "modal_summary", "simulate_manifest", "write_dataset", "__version__",
+]

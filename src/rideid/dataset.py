@@ -87,4 +87,4 @@ def check_known_consistent(known: dict[str, float]):
                                 f"2 m_ur = {tm}")
 
 
-__all__ = ["Dataset", "load_dataset", "scale_anchor", "np"]
+__all__ = ["Dataset", "load_dataset", "scale_anchor"]

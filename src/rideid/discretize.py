@@ -22,7 +22,6 @@ length for a relative truncation error below ``tol``.
 
 from __future__ import annotations
 
-import math
 
 import numpy as np
 import scipy.linalg
@@ -121,4 +120,4 @@ def moment_weights(nodes, weights, nmom: int = N_MAX):
     return weights[:, None] * tau[:, None] ** np.arange(nmom)[None, :]
 
 
-__all__ = ["Discretized", "N_MAX", "n_terms", "gauss_nodes", "moment_weights", "math"]
+__all__ = ["Discretized", "N_MAX", "n_terms", "gauss_nodes", "moment_weights"]

@@ -240,7 +240,7 @@ def parse_manifest(doc: dict, path: Path, scenario: bool) -> Manifest:
     return Manifest(path, name, geom, known, bounds, tracks, runs, truth)
 
 
-def parse_truth(tab: dict, where: str, geom: Geometry) -> dict[str, float]:
+def parse_truth(tab: dict, where: str, geom: Geometry | None) -> dict[str, float]:
     for k in tab:
         if k not in NAMES:
             raise DataError(f"{where}: unknown parameter '{k}'; expected the twelve: {', '.join(NAMES)}")
@@ -248,7 +248,8 @@ def parse_truth(tab: dict, where: str, geom: Geometry) -> dict[str, float]:
     if missing:
         raise DataError(f"{where}: missing {', '.join(missing)} (all twelve parameters are needed)")
     vals = {k: _number(tab[k], f"{where} {k}", positive=True) for k in NAMES}
-    check_parameters([vals[n] for n in NAMES], geom, where)
+    if geom is not None:
+        check_parameters([vals[n] for n in NAMES], geom, where)
     return vals
 
 
@@ -262,10 +263,12 @@ def load_manifest(path) -> Manifest:
     path = Path(path)
     if path.is_dir():
         path = path / "dataset.toml"
+    elif not path.exists():
+        raise DataError(f"{path}: no such dataset folder")
     return parse_manifest(read_toml(path), path, scenario=False)
 
 
-def load_truth(path, geom: Geometry) -> dict[str, float]:
+def load_truth(path, geom: Geometry | None = None) -> dict[str, float]:
     path = Path(path)
     doc = read_toml(path)
     for k in doc:

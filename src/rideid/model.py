@@ -38,7 +38,7 @@ CHANNELS: tuple[str, ...] = (
 )
 CHANNEL_UNITS = {c: ("rad/s" if c.endswith("rate") else "m/s^2") for c in CHANNELS}
 #: Channel kinds used for normalisation floors: body, axle, rate.
-CHANNEL_KIND = {c: c.split("_")[0] for c in CHANNELS}
+CHANNEL_KIND = {c: ("rate" if c.endswith("rate") else c.split("_")[0]) for c in CHANNELS}
 
 COORDS = ("z", "theta", "phi", "z_fl", "z_fr", "z_rl", "z_rr")
 #: Coordinates of the symmetric / antisymmetric decomposition:

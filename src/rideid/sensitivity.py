@@ -29,7 +29,7 @@ import numpy as np
 
 from .engine import BatchSimulator
 from .model import CHANNEL_KIND, CHANNELS
-from .params import INDEX, NAMES, Geometry
+from .params import NAMES, Geometry
 
 STEP = 0.25
 P2R_STARS = (1.0, 5.0, 15.0)
@@ -213,4 +213,4 @@ def heatmaps(m: SensitivityMaps, out_dir) -> list:
     return files
 
 
-__all__ = ["compute_maps", "SensitivityMaps", "adaptive_weights", "normalised_spread", "INDEX"]
+__all__ = ["compute_maps", "SensitivityMaps", "adaptive_weights", "normalised_spread"]

@@ -1,0 +1,33 @@
+# rideid: `make demo` runs the whole job on the built-in car, `make test` the test suite.
+# Both create ./.venv and install the package with its dependencies first.
+PYTHON ?= python3
+VENV := .venv
+PY := $(VENV)/bin/python
+STAMP := $(VENV)/.installed
+
+.PHONY: demo test test-slow bench venv clean
+
+$(STAMP): pyproject.toml
+	$(PYTHON) -m venv $(VENV)
+	$(PY) -m pip install --quiet --upgrade pip
+	$(PY) -m pip install --quiet -e '.[test]'
+	touch $(STAMP)
+
+venv: $(STAMP)
+
+demo: $(STAMP)
+	$(VENV)/bin/rideid demo --out demo-out
+
+test: $(STAMP)
+	$(PY) -m pytest -q
+
+# the slow studies as well (JADE benchmark tables at full length, seeds sweeps)
+test-slow: $(STAMP)
+	RIDEID_SLOW=1 $(PY) -m pytest -q
+
+bench: $(STAMP)
+	$(PY) -m pip install --quiet -e '.[bench]'
+	$(PY) benchmarks/run_all.py
+
+clean:
+	rm -rf $(VENV) demo-out bench-out .pytest_cache

@@ -1,0 +1,337 @@
+"""The ``rideid`` command line (SPEC §4). Only calls the public library API.
+
+Exit codes: 0 success, 2 bad input (one line on stderr naming the file, key
+or column), 1 internal error (a bug: set ``RIDEID_DEBUG=1`` for the traceback).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import sys
+import time
+import traceback
+import warnings
+from pathlib import Path
+
+import numpy as np
+
+from . import __version__
+from .errors import ArgumentError, DataError, RideidError
+
+EXAMPLES = {
+    "simulate": "example:\n  rideid simulate scenario.toml --out sim --noise 0.02 --seed 1",
+    "identify": "example:\n  rideid identify sim --out fit --seed 1\n  rideid identify sim --out fit-fixed "
+                "--weights fixed --no-polish",
+    "sensitivity": "example:\n  rideid sensitivity sim --out maps\n  rideid sensitivity scenario.toml --out maps",
+    "score": "example:\n  rideid score fit/result.json sim/truth.toml",
+    "demo": "example:\n  rideid demo --out rideid-demo",
+}
+
+
+class Progress:
+    """A live progress line on stderr (only on a terminal, unless quiet)."""
+
+    def __init__(self, quiet: bool = False, stream=None):
+        self.stream = stream or sys.stderr
+        self.enabled = not quiet and hasattr(self.stream, "isatty") and self.stream.isatty()
+        self._last = 0.0
+        self._width = 0
+
+    def line(self, text: str, force: bool = False):
+        if not self.enabled:
+            return
+        now = time.monotonic()
+        if not force and now - self._last < 0.1:
+            return
+        self._last = now
+        pad = max(0, self._width - len(text))
+        self.stream.write("\r" + text + " " * pad)
+        self.stream.flush()
+        self._width = len(text)
+
+    def done(self):
+        if self.enabled and self._width:
+            self.stream.write("\r" + " " * self._width + "\r")
+            self.stream.flush()
+            self._width = 0
+
+    def identify(self, info):
+        g, G = info["generation"], info["generations"]
+        el = info["elapsed"]
+        rate = info["evaluations"] / el if el > 0 else 0.0
+        left = el / g * (G - g) if g else 0.0
+        self.line(f"generation {g}/{G}  best {info['best']:.3e}  largest spread {info['spread']:.2e}  "
+                  f"{rate:,.0f} eval/s  at most {left:.0f} s left")
+
+    def steps(self, i, n, label):
+        self.line(f"{label} {i}/{n}", force=i == n)
+
+
+def _warning_line(message, category, filename, lineno, file=None, line=None):
+    sys.stderr.write(f"rideid: warning: {message}\n")
+
+
+def _parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(
+        prog="rideid",
+        description="Estimate a car's ride parameters (sprung mass, inertias, CG, unsprung masses, "
+                    "suspension and tire rates, damping) from accelerometer and gyro signals on test tracks.",
+        epilog="exit codes: 0 ok, 2 bad input, 1 internal error\n"
+               "example:\n  rideid demo\n  rideid simulate scenario.toml --out sim && rideid identify sim --out fit",
+        formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("--version", action="version", version=f"rideid {__version__}")
+    sub = p.add_subparsers(dest="command", metavar="COMMAND")
+
+    def add(name, help_):
+        return sub.add_parser(name, help=help_, description=help_, epilog=EXAMPLES[name],
+                              formatter_class=argparse.RawDescriptionHelpFormatter)
+
+    s = add("simulate", "simulate a scenario (truth + tracks + runs) into a dataset folder")
+    s.add_argument("scenario", metavar="SCENARIO.toml")
+    s.add_argument("--out", required=True, metavar="DIR")
+    s.add_argument("--noise", type=float, default=0.0, metavar="FRACTION",
+                   help="white Gaussian noise, standard deviation as a fraction of each channel's RMS")
+    s.add_argument("--seed", type=int, default=None, metavar="N")
+    s.add_argument("--quiet", action="store_true", help="no progress line")
+
+    s = add("identify", "estimate the twelve ride parameters of a dataset")
+    s.add_argument("dataset", metavar="DATASET_DIR")
+    s.add_argument("--out", required=True, metavar="DIR")
+    s.add_argument("--seed", type=int, default=None, metavar="N")
+    s.add_argument("--population", type=int, default=None, metavar="NP", help="JADE population (default 60)")
+    s.add_argument("--generations", type=int, default=None, metavar="G",
+                   help="largest number of JADE generations (default 400)")
+    s.add_argument("--weights", choices=("adaptive", "fixed"), default="adaptive",
+                   help="adaptive track weights (paper eq. 12-13) or equal weights")
+    s.add_argument("--no-polish", action="store_true", help="skip the least-squares polish after JADE")
+    s.add_argument("--quiet", action="store_true", help="no progress line")
+
+    s = add("sensitivity", "parameter/response/track sensitivity maps (paper Tables 4-7) as CSV, Markdown, PNG")
+    s.add_argument("source", metavar="DATASET_OR_SCENARIO")
+    s.add_argument("--out", required=True, metavar="DIR")
+    s.add_argument("--quiet", action="store_true", help="no progress line")
+
+    s = add("score", "compare an identification result with the truth")
+    s.add_argument("result", metavar="RESULT.json")
+    s.add_argument("truth", metavar="TRUTH.toml")
+
+    s = add("demo", "the whole job on the built-in car and tracks: simulate (1 % noise), identify, score")
+    s.add_argument("--out", default="rideid-demo", metavar="DIR")
+    s.add_argument("--seed", type=int, default=1, metavar="N")
+    s.add_argument("--quiet", action="store_true", help="no progress line")
+    return p
+
+
+# ---------------------------------------------------------------------------
+
+def cmd_simulate(args, out=None):
+    out = out or sys.stdout
+    from .files import load_scenario
+    from .model import format_modal_summary, modal_summary
+    from .scenario import simulate_manifest, write_dataset
+
+    sc = load_scenario(args.scenario)
+    prog = Progress(args.quiet)
+    data, lifts = simulate_manifest(sc, noise=args.noise, seed=args.seed,
+                                    progress=lambda i, n, rid: prog.steps(i, n, "simulating run"))
+    prog.done()
+    write_dataset(sc, data, args.out,
+                  comment=f"simulated by rideid {__version__} from {Path(args.scenario).name}"
+                          f" (noise {args.noise}, seed {args.seed})")
+    print(f"dataset written to {args.out} ({len(sc.runs)} runs)", file=out)
+    print(format_modal_summary(modal_summary(sc.truth, sc.geometry)), file=out)
+    return 0
+
+
+def _summary_table(res) -> str:
+    lines = [f"{'parameter':<10} {'estimate':>14} {'± std':>11}  {'unit':<8} note"]
+    for n, d in res.details.items():
+        note = "known" if d["fixed"] else ("derived" if d["derived"] else "")
+        std = "" if d.get("std") in (None, 0.0) else f"{d['std']:.3g}"
+        lines.append(f"{n:<10} {d['value']:>14.6g} {std:>11}  {d['unit']:<8} {note}")
+    return "\n".join(lines)
+
+
+def run_identify(ds_path, out_dir, *, seed, population=None, generations=None, weights="adaptive",
+                 polish=True, quiet=False, out=None):
+    out = out or sys.stdout
+    from .dataset import load_dataset
+    from .files import atomic_output
+    from .identify import DEFAULT_GENERATIONS, DEFAULT_POPULATION, identify
+
+    ds = load_dataset(ds_path)
+    prog = Progress(quiet)
+    kw = {"population": population or DEFAULT_POPULATION, "generations": generations or DEFAULT_GENERATIONS}
+    if kw["population"] < 4:
+        raise ArgumentError(f"--population must be at least 4, got {kw['population']}")
+    if kw["generations"] < 1:
+        raise ArgumentError(f"--generations must be at least 1, got {kw['generations']}")
+    res = identify(ds, seed=seed, weights=weights, polish=polish, progress=prog.identify, **kw)
+    prog.done()
+    with atomic_output(out_dir) as tmp:
+        res.save(tmp)
+        try:
+            from .report import write_report
+        except ImportError:  # pragma: no cover - report module added later
+            write_report = None
+        if write_report is not None:
+            write_report(res, ds, tmp)
+    print(_summary_table(res), file=out)
+    print(f"cost {res.cost:.4g}, {res.generations} generations, {res.evaluations} evaluations, "
+          f"{res.wall_time_s:.1f} s; written to {out_dir}", file=out)
+    return res
+
+
+def cmd_identify(args, out=None):
+    out = out or sys.stdout
+    run_identify(args.dataset, args.out, seed=args.seed, population=args.population,
+                 generations=args.generations, weights=args.weights, polish=not args.no_polish,
+                 quiet=args.quiet, out=out)
+    return 0
+
+
+def cmd_sensitivity(args, out=None):
+    out = out or sys.stdout
+    from .cost import ParameterSpace
+    from .dataset import load_dataset
+    from .engine import BatchSimulator
+    from .files import atomic_output, read_toml
+    from .scenario import run_times
+    from .sensitivity import compute_maps, heatmaps, tables_markdown, write_csvs
+    from .simulate import prepare_run
+
+    src = Path(args.source)
+    is_scenario = src.is_file() and "truth" in read_toml(src)
+    if is_scenario:
+        from .files import load_scenario
+        from .params import as_vector
+        sc = load_scenario(src)
+        geom, man = sc.geometry, sc
+        times = {r.id: run_times(r) for r in sc.runs}
+        baseline = as_vector(sc.truth)
+        mask = None
+    else:
+        ds = load_dataset(src)
+        man, geom = ds.manifest, ds.geometry
+        times = {r.id: ds.data[r.id].time for r in ds.runs}
+        baseline = ParameterSpace(ds.known, geom, man.bounds).nominal()
+        from .model import CHANNELS
+        mask = np.array([[c in ds.data[r.id].channels for c in CHANNELS] for r in ds.runs])
+    runs = [prepare_run(man.tracks[r.track], geom, r.speed, times[r.id]) for r in man.runs]
+    sim = BatchSimulator(geom, runs)
+    maps = compute_maps(sim, geom, baseline, [r.id for r in man.runs], mask)
+    with atomic_output(args.out) as tmp:
+        write_csvs(maps, tmp)
+        (tmp / "tables.md").write_text(tables_markdown(maps))
+        heatmaps(maps, tmp)
+    print(f"sensitivity maps written to {args.out} (tables.md, 3 CSV, 3 PNG)", file=out)
+    return 0
+
+
+def score_table(result: dict, truth: dict) -> tuple[str, float]:
+    from .params import NAMES
+    lines = [f"{'parameter':<10} {'estimate':>14} {'truth':>14} {'error %':>9}"]
+    worst = 0.0
+    for n in NAMES:
+        est = result["parameters"][n]["value"]
+        tr = truth[n]
+        err = 100.0 * (est - tr) / tr
+        flag = result["parameters"][n]
+        note = " known" if flag.get("fixed") else (" derived" if flag.get("derived") else "")
+        if not flag.get("fixed"):
+            worst = max(worst, abs(err))
+        lines.append(f"{n:<10} {est:>14.6g} {tr:>14.6g} {err:>9.4f}{note}")
+    lines.append(f"largest error of the estimated parameters: {worst:.4f} %")
+    return "\n".join(lines), worst
+
+
+def load_result(path) -> dict:
+    from .params import NAMES
+    path = Path(path)
+    if not path.is_file():
+        raise DataError(f"{path}: file not found")
+    try:
+        res = json.loads(path.read_text())
+    except (json.JSONDecodeError, UnicodeDecodeError) as e:
+        raise DataError(f"{path}: not valid JSON: {e}") from None
+    pars = res.get("parameters") if isinstance(res, dict) else None
+    if not isinstance(pars, dict):
+        raise DataError(f"{path}: missing key 'parameters'")
+    for n in NAMES:
+        if n not in pars or not isinstance(pars[n], dict) or "value" not in pars[n]:
+            raise DataError(f"{path}: parameters.{n}.value missing")
+    return res
+
+
+def cmd_score(args, out=None):
+    out = out or sys.stdout
+    from .files import load_truth
+
+    res = load_result(args.result)
+    truth = load_truth(args.truth)
+    text, _ = score_table(res, truth)
+    print(text, file=out)
+    return 0
+
+
+def cmd_demo(args, out=None):
+    out = out or sys.stdout
+    from .files import load_truth
+    from .model import format_modal_summary, modal_summary
+    from .scenario import default_scenario, simulate_manifest, write_dataset
+
+    root = Path(args.out)
+    sc = default_scenario()
+    print("rideid demo: the built-in car (CommonRoad BMW 320i) on the paper's ten runs", file=out)
+    print(format_modal_summary(modal_summary(sc.truth, sc.geometry)), file=out)
+    prog = Progress(args.quiet)
+    data, _ = simulate_manifest(sc, noise=0.01, seed=args.seed,
+                                progress=lambda i, n, rid: prog.steps(i, n, "simulating run"))
+    prog.done()
+    write_dataset(sc, data, root / "dataset", comment="rideid demo: built-in scenario, 1 % noise")
+    print(f"\n1. simulated {len(sc.runs)} runs with 1 % noise -> {root / 'dataset'}", file=out)
+    print(f"2. identifying (total mass {sc.known['total_mass']} kg known) ...", file=out)
+    run_identify(root / "dataset", root / "identify", seed=args.seed, quiet=args.quiet, out=out)
+    res = load_result(root / "identify" / "result.json")
+    truth = load_truth(root / "dataset" / "truth.toml", sc.geometry)
+    text, worst = score_table(res, truth)
+    print("\n3. score against the truth", file=out)
+    print(text, file=out)
+    report = root / "identify" / "report.html"
+    if report.is_file():
+        print(f"\nreport: {report}", file=out)
+    return 0
+
+
+COMMANDS = {"simulate": cmd_simulate, "identify": cmd_identify, "sensitivity": cmd_sensitivity,
+            "score": cmd_score, "demo": cmd_demo}
+
+
+def main(argv=None) -> int:
+    parser = _parser()
+    args = parser.parse_args(argv)
+    if args.command is None:
+        parser.print_help()
+        return 2
+    warnings.showwarning = _warning_line
+    try:
+        return COMMANDS[args.command](args)
+    except RideidError as e:
+        msg = str(e).replace("\n", " ")
+        print(f"rideid: error: {msg}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print("rideid: interrupted", file=sys.stderr)
+        return 130
+    except Exception as e:  # a bug: say so, in one line unless debugging
+        if os.environ.get("RIDEID_DEBUG"):
+            traceback.print_exc()
+        print(f"rideid: internal error: {type(e).__name__}: {e} (set RIDEID_DEBUG=1 for the traceback; "
+              "please report it)", file=sys.stderr)
+        return 1
+
+
+if __name__ == "__main__":  # pragma: no cover
+    sys.exit(main())

@@ -1,0 +1,304 @@
+"""The command line: simulate, identify, score, sensitivity, and bad input."""
+
+import json
+import shutil
+import subprocess
+import sys
+import tomllib
+
+import numpy as np
+import pytest
+import tomli_w
+
+from rideid.cli import main
+from rideid.files import read_run_csv
+from rideid.params import DEFAULT_CAR, DEFAULT_GEOMETRY
+from rideid.simulate import simulate_lsim
+
+SCENARIO_ALL_KINDS = """
+name = "all-kinds"
+[vehicle]
+wheelbase = 2.579
+track_front = 1.387
+track_rear = 1.364
+tire_radius = 0.30
+[known]
+total_mass = 1093.3
+[truth]
+m_s = 965.7
+I_xx = 207.3
+I_yy = 1565.8
+a = 1.156
+m_uf = 31.9
+m_ur = 31.9
+k_sf = 24445.0
+k_sr = 19629.0
+c_sf = 1786.0
+c_sr = 1649.0
+k_tf = 158240.0
+k_tr = 158240.0
+[[tracks]]
+id = "wb"
+kind = "washboard"
+start = 2.0
+amplitude = 0.006
+wavelength = 0.7
+cycles = 5
+[[tracks]]
+id = "hb"
+kind = "herringbone"
+start = 2.0
+amplitude = 0.005
+wavelength = 0.5
+cycles = 6
+angle = 30.0
+[[tracks]]
+id = "tw"
+kind = "chassis_twist"
+start = 2.0
+height = 0.04
+bump_length = 1.6
+spacing = 4.0
+bumps = 2
+first = "right"
+[[tracks]]
+id = "fl"
+kind = "flat"
+[[tracks]]
+id = "pr"
+kind = "profile"
+file = "road.csv"
+[[runs]]
+id = "W"
+track = "wb"
+speed = 8.0
+fs = 200.0
+duration = 2.0
+[[runs]]
+id = "H"
+track = "hb"
+speed = 6.0
+fs = 250.0
+duration = 2.0
+[[runs]]
+id = "T"
+track = "tw"
+speed = 4.0
+fs = 200.0
+duration = 3.0
+[[runs]]
+id = "F"
+track = "fl"
+speed = 4.0
+fs = 100.0
+duration = 0.5
+[[runs]]
+id = "P"
+track = "pr"
+speed = 5.0
+fs = 200.0
+duration = 2.0
+"""
+
+
+@pytest.fixture(scope="module")
+def scenario_file(tmp_path_factory):
+    d = tmp_path_factory.mktemp("sc")
+    x = np.linspace(2.0, 5.0, 301)
+    np.savetxt(d / "road.csv", np.column_stack([x, 0.01 * np.hanning(301), 0.004 * np.sin(x) ** 2 *
+                                                 np.hanning(301)]),
+               delimiter=",", header="x,z_left,z_right", comments="")
+    (d / "scenario.toml").write_text(SCENARIO_ALL_KINDS)
+    return d / "scenario.toml"
+
+
+def run_cli(args, capsys):
+    rc = main([str(a) for a in args])
+    out, err = capsys.readouterr()
+    return rc, out, err
+
+
+def test_simulate_all_kinds_matches_independent_fine_step(scenario_file, tmp_path, capsys):
+    out = tmp_path / "ds"
+    rc, stdout, err = run_cli(["simulate", scenario_file, "--out", out, "--seed", "1", "--quiet"], capsys)
+    assert rc == 0, err
+    assert (out / "dataset.toml").is_file() and (out / "truth.toml").is_file()
+    assert "bounce" in stdout
+    doc = tomllib.loads((out / "dataset.toml").read_text())
+    assert [r["file"] for r in doc["runs"]] == [f"runs/{k}.csv" for k in "WHTFP"]
+    assert "truth" not in doc
+    from rideid.files import load_scenario
+    sc = load_scenario(scenario_file)
+    P = np.array([DEFAULT_CAR[n] for n in DEFAULT_CAR])
+    for run in sc.runs:
+        rd = read_run_csv(out / "runs" / f"{run.id}.csv")
+        n = int(round(run.duration * run.fs)) + 1
+        assert rd.time.size == n and rd.time[0] == 0 and rd.fs == pytest.approx(run.fs)
+        Y = rd.matrix()
+        ref = simulate_lsim(P, DEFAULT_GEOMETRY, sc.tracks[run.track], run.speed, rd.time, upsample=100)
+        if run.id == "F":
+            assert np.all(Y == 0)
+            continue
+        scale = np.sqrt(np.mean(ref ** 2, axis=0))
+        ok = scale > 1e-9
+        err_rms = np.sqrt(np.mean((Y - ref) ** 2, axis=0))[ok] / scale[ok]
+        assert err_rms.max() < 2e-3, (run.id, err_rms)
+
+
+def test_simulate_noise_is_seeded(scenario_file, tmp_path, capsys):
+    a, b, c = tmp_path / "a", tmp_path / "b", tmp_path / "c"
+    for d, seed in ((a, 3), (b, 3), (c, 4)):
+        assert run_cli(["simulate", scenario_file, "--out", d, "--noise", "0.02", "--seed", seed, "--quiet"],
+                       capsys)[0] == 0
+    ya = read_run_csv(a / "runs" / "W.csv").matrix()
+    yb = read_run_csv(b / "runs" / "W.csv").matrix()
+    yc = read_run_csv(c / "runs" / "W.csv").matrix()
+    np.testing.assert_array_equal(ya, yb)
+    assert np.abs(ya - yc).max() > 0
+    clean = tmp_path / "clean"
+    run_cli(["simulate", scenario_file, "--out", clean, "--quiet"], capsys)
+    y0 = read_run_csv(clean / "runs" / "W.csv").matrix()
+    rel = np.std(ya - y0, axis=0) / np.sqrt(np.mean(y0 ** 2, axis=0))
+    assert np.all(np.abs(rel[:9] - 0.02) < 0.004)
+
+
+def test_lift_off_warning_names_run_and_wheel(tmp_path, capsys):
+    text = SCENARIO_ALL_KINDS.replace("height = 0.04", "height = 0.25").replace('duration = 3.0', 'duration = 3.5')
+    (tmp_path / "road.csv").write_text("x,z_left,z_right\n2,0,0\n3,0,0\n")
+    (tmp_path / "s.toml").write_text(text.replace("speed = 4.0\nfs = 200.0", "speed = 8.0\nfs = 200.0"))
+    rc, out, err = run_cli(["simulate", tmp_path / "s.toml", "--out", tmp_path / "o", "--quiet"], capsys)
+    assert rc == 0
+    assert "run 'T': wheel" in err and "lifts off" in err
+
+
+def test_identify_score_and_exit_codes(sim_dataset, tmp_path, capsys):
+    out = tmp_path / "fit"
+    rc, stdout, err = run_cli(["identify", sim_dataset, "--out", out, "--seed", "1", "--quiet"], capsys)
+    assert rc == 0, err
+    doc = json.loads((out / "result.json").read_text())
+    assert doc["seed"] == 1 and doc["parameters"]["m_s"]["derived"] is True
+    assert "k_tf" in stdout and "N/m" in stdout
+    rc, stdout, err = run_cli(["score", out / "result.json", sim_dataset / "truth.toml"], capsys)
+    assert rc == 0
+    worst = float(stdout.strip().splitlines()[-1].split(":")[1].split("%")[0])
+    assert worst < 0.1
+
+
+def test_sensitivity_command(scenario_file, sim_dataset, tmp_path, capsys):
+    for src in (scenario_file, sim_dataset):
+        out = tmp_path / src.name
+        rc, stdout, err = run_cli(["sensitivity", src, "--out", out, "--quiet"], capsys)
+        assert rc == 0, err
+        for f in ("tables.md", "param_response.csv", "response_track.csv", "param_track.csv",
+                  "param_response.png", "response_track.png", "param_track.png"):
+            assert (out / f).stat().st_size > 100, f
+        md = (out / "tables.md").read_text()
+        assert "★" in md and "k_tf" in md
+
+
+def test_version_and_help():
+    r = subprocess.run([sys.executable, "-m", "rideid.cli", "--version"], capture_output=True, text=True)
+    assert r.returncode == 0 and r.stdout.startswith("rideid ")
+    for cmd in ("simulate", "identify", "sensitivity", "score", "demo"):
+        r = subprocess.run([sys.executable, "-m", "rideid.cli", cmd, "--help"], capture_output=True, text=True)
+        assert r.returncode == 0 and "example:" in r.stdout
+
+
+# -- bad input: one line, exit 2, names the culprit, nothing left behind ---------
+
+def _copy(sim_dataset, tmp_path):
+    d = tmp_path / "ds"
+    shutil.copytree(sim_dataset, d)
+    return d
+
+
+def _edit_toml(d, fn):
+    doc = tomllib.loads((d / "dataset.toml").read_text())
+    fn(doc)
+    (d / "dataset.toml").write_text(tomli_w.dumps(doc))
+
+
+def _edit_csv(d, run, fn):
+    p = d / "runs" / f"{run}.csv"
+    lines = p.read_text().splitlines()
+    p.write_text("\n".join(fn(lines)) + "\n")
+
+
+BAD = {
+    "missing_dataset": (lambda d: shutil.rmtree(d), "ds: no such dataset folder"),
+    "missing_manifest": (lambda d: (d / "dataset.toml").unlink(), "dataset.toml: file not found"),
+    "malformed_toml": (lambda d: (d / "dataset.toml").write_text("name = [\n"), "invalid TOML"),
+    "unknown_track": (lambda d: _edit_toml(d, lambda x: x["runs"][0].update(track="nope")), "unknown track 'nope'"),
+    "unknown_kind": (lambda d: _edit_toml(d, lambda x: x["tracks"][0].update(kind="cobbles")),
+                     "unknown track kind 'cobbles'"),
+    "unknown_key": (lambda d: _edit_toml(d, lambda x: x["tracks"][0].update(hieght=0.1)), "unknown key 'hieght'"),
+    "unknown_top_key": (lambda d: _edit_toml(d, lambda x: x.update(vehicel={})), "unknown key 'vehicel'"),
+    "bounds_order": (lambda d: _edit_toml(d, lambda x: x.update(bounds={"k_sf": [5e4, 1e4]})),
+                     "[bounds] k_sf: lower bound 50000.0 must be less than upper bound 10000.0"),
+    "speed": (lambda d: _edit_toml(d, lambda x: x["runs"][1].update(speed=0.0)), "speed: must be positive"),
+    "tire_radius": (lambda d: _edit_toml(d, lambda x: x["vehicle"].update(tire_radius=-0.3)),
+                    "[vehicle] tire_radius: must be positive"),
+    "duplicate_run": (lambda d: _edit_toml(d, lambda x: x["runs"][1].update(id="T_LL")), "duplicate run id 'T_LL'"),
+    "no_anchor": (lambda d: _edit_toml(d, lambda x: x.pop("known")), "no scale anchor"),
+    "missing_run_file": (lambda d: (d / "runs" / "W_H.csv").unlink(), "W_H.csv: run file not found"),
+    "nan": (lambda d: _edit_csv(d, "T_LH", lambda ls: ls[:5] + [ls[5].rsplit(",", 1)[0] + ",nan"] + ls[6:]),
+            "T_LH.csv: column 'roll_rate' has a NaN or infinite value (line 6)"),
+    "inf": (lambda d: _edit_csv(d, "T_LH", lambda ls: ls[:5] + [ls[5].rsplit(",", 1)[0] + ",inf"] + ls[6:]),
+            "column 'roll_rate' has a NaN or infinite value"),
+    "non_increasing": (lambda d: _edit_csv(d, "H_LL", lambda ls: ls[:3] + [ls[4], ls[3]] + ls[5:]),
+                       "H_LL.csv: column 'time' is not strictly increasing"),
+    "non_uniform": (lambda d: _edit_csv(d, "H_LL", lambda ls: ls[:3] + ls[4:]), "H_LL.csv: column 'time' is not uniform"),
+    "header_only": (lambda d: _edit_csv(d, "W_L", lambda ls: ls[:1]), "W_L.csv: header only"),
+    "no_time": (lambda d: _edit_csv(d, "W_L", lambda ls: [ls[0].replace("time", "t")] + ls[1:]),
+                "W_L.csv: missing column 'time'"),
+    "not_a_number": (lambda d: _edit_csv(d, "W_L", lambda ls: ls[:2] + [ls[2].replace(",", ",x", 1)] + ls[3:]),
+                     "W_L.csv: line 3, column 'body_az_fl': not a number"),
+}
+
+
+@pytest.mark.parametrize("case", list(BAD))
+def test_bad_input(case, sim_dataset, tmp_path, capsys):
+    d = _copy(sim_dataset, tmp_path)
+    fn, msg = BAD[case]
+    fn(d)
+    out = tmp_path / "fit"
+    rc, stdout, err = run_cli(["identify", d, "--out", out, "--quiet"], capsys)
+    assert rc == 2
+    lines = err.strip().splitlines()
+    assert len(lines) == 1, err
+    assert lines[0].startswith("rideid: error: ")
+    assert msg in lines[0]
+    assert "Traceback" not in err
+    assert not out.exists()
+    assert not list(tmp_path.glob(".fit.tmp-*"))
+
+
+def test_extra_column_warns_but_works(sim_dataset, tmp_path, capsys):
+    d = _copy(sim_dataset, tmp_path)
+    _edit_csv(d, "W_L", lambda ls: [ls[0] + ",temperature"] + [x + ",21.5" for x in ls[1:]])
+    from rideid import DataWarning, load_dataset
+    with pytest.warns(DataWarning, match="W_L.csv: ignoring column.*temperature"):
+        load_dataset(d)
+
+
+def test_missing_channels_are_allowed(sim_dataset, tmp_path):
+    d = _copy(sim_dataset, tmp_path)
+    p = d / "runs" / "W_L.csv"
+    rd = read_run_csv(p)
+    cols = ["time", "axle_az_fl", "pitch_rate"]
+    np.savetxt(p, np.column_stack([rd.time, rd.channels["axle_az_fl"], rd.channels["pitch_rate"]]),
+               delimiter=",", header=",".join(cols), comments="")
+    import rideid
+    cost = rideid.CostFunction(rideid.load_dataset(d))
+    w = cost.W[cost.run_ids.index("W_L")]
+    assert (w > 0).sum() == 2
+
+
+def test_scenario_bad_input(tmp_path, capsys, scenario_file):
+    shutil.copy(scenario_file.parent / "road.csv", tmp_path / "road.csv")
+    (tmp_path / "s.toml").write_text(SCENARIO_ALL_KINDS.replace("k_tr = 158240.0", ""))
+    rc, _, err = run_cli(["simulate", tmp_path / "s.toml", "--out", tmp_path / "o"], capsys)
+    assert rc == 2 and "[truth]: missing k_tr" in err and not (tmp_path / "o").exists()
+    (tmp_path / "s.toml").write_text(SCENARIO_ALL_KINDS.replace("total_mass = 1093.3", "total_mass = 1200.0"))
+    rc, _, err = run_cli(["simulate", tmp_path / "s.toml", "--out", tmp_path / "o"], capsys)
+    assert rc == 2 and "total_mass = 1200.0 disagrees with [truth]" in err

@@ -1,0 +1,125 @@
+"""Tracks and the two road-contact methods."""
+
+import numpy as np
+import pytest
+
+from rideid.contact import ContactODEError, contact_ode, envelope, envelope_grid, wheel_input
+from rideid.errors import DataError
+from rideid.tracks import Track
+
+R = 0.3
+
+
+def washboard(L=0.6, A=0.01, cycles=10):
+    return Track.from_table(dict(id="w", kind="washboard", start=2.0, amplitude=A, wavelength=L, cycles=cycles), "t")
+
+
+def brute(h, x, R, n=400001):
+    s = np.linspace(x - R, x + R, n)
+    return float(np.max(h(s) + np.sqrt(np.maximum(R * R - (s - x) ** 2, 0)) - R))
+
+
+def test_track_kinds_heights():
+    w = washboard()
+    x = np.array([1.0, 2.15, 8.5])
+    np.testing.assert_allclose(w.path(0.7).height(x), [0, 0.01, 0], atol=1e-15)
+    np.testing.assert_array_equal(w.path(0.7).height(x), w.path(-0.7).height(x))
+    hb = Track.from_table(dict(id="h", kind="herringbone", start=2.0, amplitude=0.01, wavelength=0.5,
+                               cycles=10, angle=30.0), "t")
+    shift = 2 * 0.7 * np.tan(np.radians(30))
+    xs = np.linspace(4, 5, 11)
+    # the left wheel sees the right wheel's wave shifted by track * tan(angle)
+    np.testing.assert_allclose(hb.path(0.7).height(xs), hb.path(-0.7).height(xs + shift), atol=1e-15)
+    tw = Track.from_table(dict(id="t", kind="chassis_twist", start=3.0, height=0.05, bump_length=1.0,
+                               spacing=4.0, bumps=2), "t")
+    assert tw.path(0.7).height(np.array([3.0]))[0] == pytest.approx(0.05)
+    assert tw.path(-0.7).height(np.array([3.0]))[0] == 0
+    assert tw.path(-0.7).height(np.array([5.0]))[0] == pytest.approx(0.05)
+    assert tw.path(0.7).height(np.array([3.25]))[0] == pytest.approx(0.025)
+    tr = Track.from_table(dict(id="t", kind="chassis_twist", start=3.0, height=0.05, bump_length=1.0,
+                               spacing=4.0, bumps=2, first="right"), "t")
+    assert tr.path(-0.7).height(np.array([3.0]))[0] == pytest.approx(0.05)
+    flat = Track.from_table(dict(id="f", kind="flat"), "t")
+    assert np.all(flat.path(0.5).height(xs) == 0)
+
+
+def test_profile_track(tmp_path):
+    f = tmp_path / "p.csv"
+    f.write_text("x,z_left,z_right\n1.0,0.0,0.0\n1.5,0.02,0.0\n2.0,0.0,0.01\n")
+    tr = Track.from_table(dict(id="p", kind="profile", file="p.csv"), "t", base_dir=tmp_path)
+    np.testing.assert_allclose(tr.path(0.7).height(np.array([0.5, 1.25, 1.5, 3.0])), [0, 0.01, 0.02, 0])
+    np.testing.assert_allclose(tr.path(-0.7).height(np.array([1.75])), [0.005])
+
+
+@pytest.mark.parametrize("table, msg", [
+    (dict(id="w", kind="washbord"), "unknown track kind 'washbord'"),
+    (dict(id="w", kind="washboard", start=1, amplitude=0.01, wavelength=0.5), "missing key 'cycles'"),
+    (dict(id="w", kind="washboard", start=1, amplitude=0.01, wavelength=0.5, cycles=3, angle=3),
+     "unknown key 'angle'"),
+    (dict(id="w", kind="washboard", start=1, amplitude=0.01, wavelength=-0.5, cycles=3), "'wavelength' must be positive"),
+    (dict(id="w", kind="profile", file="nope.csv"), "profile file not found"),
+])
+def test_track_bad_input(table, msg):
+    with pytest.raises(DataError, match=msg):
+        Track.from_table(table, "dataset.toml: tracks[0]")
+
+
+@pytest.mark.parametrize("L", [0.3, 0.6, 1.2])
+def test_envelope_matches_brute_force(L):
+    p = washboard(L=L).path(0.7)
+    xs = np.array([1.8, 2.05, 3.33, 4.71, 5.0])
+    env = envelope(p.h, xs, R)
+    x0, dx, vals = envelope_grid(p, R)
+    grid = np.interp(xs, x0 + dx * np.arange(vals.size), vals)
+    for i, x in enumerate(xs):
+        b = brute(p.h, x, R)
+        assert env[i] == pytest.approx(b, abs=2e-6)
+        assert grid[i] == pytest.approx(b, abs=2e-6)
+    # the envelope is never below the road under the wheel centre
+    xx = np.linspace(1.5, 9, 2000)
+    # (up to the linear interpolation of the tabulated envelope)
+    assert np.all(wheel_input(p, xx, R) >= p.h(xx) - 1e-6)
+
+
+def test_envelope_vs_contact_ode_sinusoid():
+    # inside the sinusoid, started from the exact contact point
+    p = washboard(L=0.6).path(0.7)
+    t = np.linspace(0, 0.7, 1401)  # stays inside the washboard (2 m .. 8 m)
+    V = 5.0
+    r_ode = contact_ode(p, R, V, t, x0=4.0)
+    np.testing.assert_allclose(r_ode, envelope(p.h, 4.0 + V * t, R), atol=1e-9)
+    np.testing.assert_allclose(r_ode, wheel_input(p, 4.0 + V * t, R), atol=1e-7)
+    # far from a sinusoid: the disc input differs strongly from the profile
+    assert np.max(np.abs(r_ode - p.h(4.0 + V * t))) > 0.1 * 0.01
+
+
+def test_envelope_vs_contact_ode_twist_whole_run():
+    tw = Track.from_table(dict(id="t", kind="chassis_twist", start=2.0, height=0.08, bump_length=1.5,
+                               spacing=4.0, bumps=3), "t")
+    p = tw.path(0.69)
+    t = np.linspace(0, 3.0, 3001)
+    np.testing.assert_allclose(contact_ode(p, R, 5.0, t), envelope(p.h, 5.0 * t, R), atol=1e-8)
+
+
+def test_contact_ode_invalid_when_wheel_bridges_troughs():
+    A, L = 0.01, 0.3
+    limit = L * L / (4 * np.pi ** 2 * A)  # 0.228 m: the trough radius of curvature
+    p = washboard(L=L, A=A).path(0.7)
+    assert p.min_trough_radius == pytest.approx(limit)
+    with pytest.raises(ContactODEError, match="bridges"):
+        contact_ode(p, R, 5.0, np.linspace(0, 1, 11), x0=4.0)
+    # just below the limit the ODE is valid and agrees with the envelope
+    r_ok = 0.95 * limit
+    t = np.linspace(0, 0.3, 601)
+    np.testing.assert_allclose(contact_ode(p, r_ok, 5.0, t, x0=2.5), envelope(p.h, 2.5 + 5.0 * t, r_ok),
+                               atol=1e-8)
+    # above it the envelope has kinks: the wheel never touches the trough bottoms
+    xs = np.linspace(2.5, 4.5, 2001)
+    env = envelope(p.h, xs, R)
+    assert env.min() > -A + 5e-4
+
+
+def test_envelope_grid_cached_and_flat_outside():
+    p = washboard().path(0.7)
+    assert envelope_grid(p, R) is envelope_grid(p, R)
+    assert np.all(wheel_input(p, np.array([-5.0, 1.69, 8.31, 20.0]), R) == 0)

@@ -1,0 +1,165 @@
+"""Identification on the built-in car: accuracy, cost definition, maps, weights."""
+
+import warnings
+
+import numpy as np
+import pytest
+
+import rideid
+from rideid.cost import ParameterSpace, channel_weights
+from rideid.params import DEFAULT_CAR, NAMES
+from rideid.scenario import simulate_manifest, write_dataset
+from rideid.sensitivity import adaptive_weights, compute_maps, normalised_spread
+
+
+@pytest.fixture(scope="module")
+def noisy_dataset(tmp_path_factory, default_scenario):
+    out = tmp_path_factory.mktemp("ds") / "noisy"
+    data, _ = simulate_manifest(default_scenario, noise=0.02, seed=7)
+    write_dataset(default_scenario, data, out)
+    return out
+
+
+def max_error(res, truth=DEFAULT_CAR):
+    return max(abs(res.parameters[n] / truth[n] - 1) for n in NAMES)
+
+
+def test_noise_free_identification_within_0p1_percent(sim_dataset):
+    ds = rideid.load_dataset(sim_dataset)
+    res = rideid.identify(ds, seed=1)
+    assert max_error(res) < 1e-3
+    assert res.details["m_s"]["derived"] and not res.details["m_s"]["fixed"]
+    assert res.parameters["m_s"] + 2 * res.parameters["m_uf"] + 2 * res.parameters["m_ur"] == pytest.approx(1093.3)
+    assert sum(res.track_weights.values()) == pytest.approx(1.0)
+    assert res.cost < 1e-12
+
+
+def test_two_percent_noise_within_half_percent(noisy_dataset):
+    ds = rideid.load_dataset(noisy_dataset)
+    res = rideid.identify(ds, seed=2)
+    assert max_error(res) < 5e-3
+    # the standard errors are honest: every error within 4 standard errors
+    for n in NAMES:
+        d = res.details[n]
+        if d["std"]:
+            assert abs(d["value"] - DEFAULT_CAR[n]) < 4 * d["std"] + 1e-9 * abs(d["value"]), n
+
+
+def test_cost_function_contract(sim_dataset):
+    ds = rideid.load_dataset(sim_dataset)
+    cost = rideid.CostFunction(ds)
+    assert cost.names == [n for n in NAMES if n != "m_s"]
+    truth = np.array([[DEFAULT_CAR[n] for n in cost.names]])
+    assert cost(truth)[0] < 1e-20
+    X = np.repeat(truth, 3, axis=0)
+    X[1, cost.names.index("k_sf")] *= 1.1
+    X[2, cost.names.index("m_uf")] = 600.0  # m_s derived negative: unphysical
+    f = cost(X)
+    assert f.shape == (3,) and f[1] > 1e-4 and np.isinf(f[2])
+    # equal weights: J = mean over runs; residuals square-sum to J
+    r = cost.residuals(X[1:2])[0]
+    assert np.sum(r * r) == pytest.approx(f[1], rel=1e-10)
+    # the NumPy reference path gives the same costs
+    ref = rideid.CostFunction(ds, use_kernel=False)
+    np.testing.assert_allclose(ref(X[:2]), f[:2], rtol=1e-9, atol=1e-20)
+
+
+def test_channel_normalisation():
+    rng = np.random.default_rng(0)
+    Y = rng.normal(0, 1, (100, 10))
+    Y[:, 9] *= 1e-6  # barely excited roll rate
+    Y[:, 3] = np.nan  # missing channel
+    W = channel_weights(Y)
+    assert W[3] == 0
+    E = np.nansum(Y * Y, axis=0)
+    assert W[0] == pytest.approx(1 / (9 * E[0]))
+    assert W[9] == pytest.approx(1 / (9 * 0.01 * E[8]))  # floored at 1 % of the pitch rate's energy
+
+
+def test_no_anchor_is_refused(sim_dataset):
+    ds = rideid.load_dataset(sim_dataset)
+    with pytest.raises(rideid.ScaleError, match="multiplied by the same factor"):
+        ParameterSpace({}, ds.geometry)
+    with pytest.raises(rideid.ScaleError, match="total_mass"):
+        ParameterSpace({"a": 1.2}, ds.geometry)
+    sp = ParameterSpace({"k_tf": 158240.0}, ds.geometry)  # any stiffness anchors the scale too
+    assert "k_tf" not in sp.names and "m_s" in sp.names and sp.derived is None
+
+
+def test_known_stiffness_anchor_identifies(sim_dataset, tmp_path):
+    """Identification with a tire stiffness instead of the total mass as anchor."""
+    import shutil
+    import tomllib
+
+    import tomli_w
+    d = tmp_path / "ds"
+    shutil.copytree(sim_dataset, d)
+    doc = tomllib.loads((d / "dataset.toml").read_text())
+    doc["known"] = {"k_tf": DEFAULT_CAR["k_tf"]}
+    (d / "dataset.toml").write_text(tomli_w.dumps(doc))
+    res = rideid.identify(rideid.load_dataset(d), seed=3)
+    assert max_error(res) < 1e-3
+    assert res.details["k_tf"]["fixed"]
+
+
+def test_sensitivity_maps_physics(sim_dataset):
+    ds = rideid.load_dataset(sim_dataset)
+    cost = rideid.CostFunction(ds)
+    base = np.array([DEFAULT_CAR[n] for n in NAMES])
+    m = compute_maps(cost.sim, ds.geometry, base, cost.run_ids)
+    ch = m.channels.index
+    p = m.params.index
+    # tire stiffness moves the axle accelerations more than the body's
+    assert m.S_bar[p("k_tf"), ch("axle_az_fl")] > m.S_bar[p("k_tf"), ch("body_az_fl")]
+    # roll inertia does not touch the (zero) roll rate on the washboard
+    assert np.isnan(m.S[p("I_xx"), ch("roll_rate"), m.runs.index("W_L")])
+    # roll inertia matters most for the roll rate
+    assert np.argmax(m.S_bar[p("I_xx")]) == ch("roll_rate")
+    # the washboard does not excite roll at all
+    assert m.R[ch("roll_rate"), m.runs.index("W_H")] == 0
+    np.testing.assert_allclose(m.M.sum(axis=1), 1.0)
+
+
+def test_adaptive_weights_follow_spread():
+    M = np.array([[0.9, 0.1], [0.2, 0.8]])
+    w = adaptive_weights(M, np.array([1.0, 0.0]))
+    np.testing.assert_allclose(w, [0.9, 0.1])
+    w = adaptive_weights(M, np.array([0.5, 0.5]))
+    np.testing.assert_allclose(w, [0.55, 0.45])
+    X = np.array([[1.0, 100.0], [3.0, 100.0]])
+    np.testing.assert_allclose(normalised_spread(X), [1.0, 0.0])
+    # dimensionless: scaling a column does not change the spread
+    X2 = np.array([[1.0, 1e4], [3.0, 3e4]])
+    np.testing.assert_allclose(normalised_spread(X2), [0.5, 0.5])
+
+
+def test_same_seed_same_result(sim_dataset):
+    ds = rideid.load_dataset(sim_dataset)
+    cost = rideid.CostFunction(ds)
+    r1 = rideid.identify(ds, seed=5, generations=8, polish=False, cost=cost)
+    r2 = rideid.identify(ds, seed=5, generations=8, polish=False, cost=cost)
+    assert r1.parameters == r2.parameters
+    assert [h["best_cost"] for h in r1.history] == [h["best_cost"] for h in r2.history]
+    r3 = rideid.identify(ds, seed=5, generations=8, polish=False, weights="fixed", cost=cost)
+    assert all(abs(v - 0.1) < 1e-15 for v in r3.track_weights.values())
+    assert r3.parameters != r1.parameters
+
+
+def test_history_records_everything(sim_dataset, tmp_path):
+    ds = rideid.load_dataset(sim_dataset)
+    res = rideid.identify(ds, seed=1, generations=5, polish=False)
+    h = res.history[-1]
+    for key in ("generation", "evaluations", "best_cost", "mean_cost", "mu_f", "mu_cr",
+                "mean_k_sf", "spread_k_sf", "weight_W_H"):
+        assert key in h
+    assert sum(v for k, v in h.items() if k.startswith("spread_")) == pytest.approx(1.0)
+    res.save(tmp_path)
+    import json
+    doc = json.loads((tmp_path / "result.json").read_text())
+    assert set(doc["parameters"]) == set(NAMES)
+    assert doc["parameters"]["m_s"]["unit"] == "kg"
+    for key in ("known", "cost", "generations", "evaluations", "wall_time_s", "seed", "track_weights"):
+        assert key in doc
+    assert (tmp_path / "history.csv").read_text().count("\n") == 6
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")

@@ -1,0 +1,123 @@
+"""Closed-form checks of the 7-DOF model."""
+
+import numpy as np
+import pytest
+import scipy.linalg
+
+from rideid.model import blocks, decomposed_mck, mck, modal_summary, state_space, static_corner_loads
+from rideid.params import DEFAULT_CAR, DEFAULT_GEOMETRY, INDEX, NAMES, Geometry, as_vector
+
+G = DEFAULT_GEOMETRY
+P0 = as_vector(DEFAULT_CAR)
+
+
+def quarter_car_freqs(ms, mu, ks, kt):
+    """Undamped 2-DOF quarter-car frequencies (Hz), closed form."""
+    a = ms * mu
+    b = -(ks * mu + (ks + kt) * ms)
+    c = ks * kt
+    disc = np.sqrt(b * b - 4 * a * c)
+    w2 = np.array([(-b - disc) / (2 * a), (-b + disc) / (2 * a)])
+    return np.sqrt(w2) / (2 * np.pi)
+
+
+def undamped(P, geom):
+    M, C, K, _ = mck(P[None], geom)
+    w2 = scipy.linalg.eigh(K[0], M[0], eigvals_only=True)
+    return np.sort(np.sqrt(w2)) / (2 * np.pi)
+
+
+def test_symmetric_block_splits_into_front_and_rear_quarter_cars():
+    # with dynamic index I_yy = m_s a b the body is two point masses over the
+    # axles: the symmetric block is then two independent quarter cars
+    P = P0.copy()
+    a, L = P[INDEX["a"]], G.wheelbase
+    b = L - a
+    P[INDEX["I_yy"]] = P[0] * a * b
+    M, C, K, _ = decomposed_mck(P[None], G)
+    s = np.arange(4)
+    w2 = scipy.linalg.eigh(K[0][np.ix_(s, s)], M[0][np.ix_(s, s)], eigvals_only=True)
+    f = np.sort(np.sqrt(w2) / (2 * np.pi))
+    front = quarter_car_freqs(P[0] * b / L / 2, P[INDEX["m_uf"]], P[INDEX["k_sf"]], P[INDEX["k_tf"]])
+    rear = quarter_car_freqs(P[0] * a / L / 2, P[INDEX["m_ur"]], P[INDEX["k_sr"]], P[INDEX["k_tr"]])
+    np.testing.assert_allclose(f, np.sort(np.concatenate([front, rear])), rtol=1e-10)
+
+
+def test_rigid_tire_roll_and_heavy_body_wheel_hop_limits():
+    P = P0.copy()
+    P[INDEX["k_tf"]] = P[INDEX["k_tr"]] = 1e12
+    summ = modal_summary(P, G)
+    k_roll = 2 * P[INDEX["k_sf"]] * (G.track_front / 2) ** 2 + 2 * P[INDEX["k_sr"]] * (G.track_rear / 2) ** 2
+    f_roll = np.sqrt(k_roll / P[INDEX["I_xx"]]) / (2 * np.pi)
+    assert summ["roll"]["undamped_frequency_hz"] == pytest.approx(f_roll, rel=1e-6)
+    # body infinitely heavy: wheel hop sqrt((k_s + k_t) / m_u)
+    P = P0.copy()
+    for n in ("m_s", "I_xx", "I_yy"):
+        P[INDEX[n]] *= 1e9
+    summ = modal_summary(P, G)
+    f_front = np.sqrt((P[INDEX["k_sf"]] + P[INDEX["k_tf"]]) / P[INDEX["m_uf"]]) / (2 * np.pi)
+    f_rear = np.sqrt((P[INDEX["k_sr"]] + P[INDEX["k_tr"]]) / P[INDEX["m_ur"]]) / (2 * np.pi)
+    for m in ("front hop (in phase)", "front hop (anti-phase)"):
+        assert summ[m]["undamped_frequency_hz"] == pytest.approx(f_front, rel=1e-6)
+    for m in ("rear hop (in phase)", "rear hop (anti-phase)"):
+        assert summ[m]["undamped_frequency_hz"] == pytest.approx(f_rear, rel=1e-6)
+
+
+def test_decomposition_is_exact_and_block_diagonal():
+    rng = np.random.default_rng(3)
+    P = P0 * np.exp(rng.normal(0, 0.3, (5, 12)))
+    M, C, K, Bf = decomposed_mck(P, G)
+    for X in (M, C, K):
+        assert np.abs(X[:, :4, 4:]).max() == 0 and np.abs(X[:, 4:, :4]).max() == 0
+    assert np.abs(Bf[:, :4, 2:]).max() == 0 and np.abs(Bf[:, 4:, :2]).max() == 0
+    # same eigenvalues as the full 14-state model
+    A, *_ = state_space(P, G)
+    bl = blocks(P, G)
+    for i in range(5):
+        full = np.sort_complex(np.linalg.eigvals(A[i]))
+        parts = np.sort_complex(np.concatenate([np.linalg.eigvals(bl["As"][i]), np.linalg.eigvals(bl["Aa"][i])]))
+        np.testing.assert_allclose(full, parts, rtol=1e-9, atol=1e-9)
+
+
+def test_equations_of_motion_signs():
+    # push the front-left wheel up by 1 mm with the body held: the spring
+    # pushes the body up, nose up (theta < 0) and left up (phi > 0)
+    M, C, K, Bf = mck(P0[None], G)
+    q = np.zeros(7)
+    q[3] = 1e-3
+    force_on_body = -(K[0] @ q)[:3]
+    assert force_on_body[0] > 0          # heave force up
+    assert force_on_body[1] < 0          # pitch moment nose-up (theta nose-down +)
+    assert force_on_body[2] > 0          # roll moment left-up (phi right-down +)
+    np.testing.assert_allclose(force_on_body, P0[INDEX["k_sf"]] * 1e-3 *
+                               np.array([1, -P0[INDEX["a"]], G.track_front / 2]))
+
+
+def test_default_car_modal_summary_in_expected_ranges():
+    s = modal_summary(DEFAULT_CAR, G)
+    assert 1.0 <= s["bounce"]["frequency_hz"] <= 1.7
+    assert 1.0 <= s["pitch"]["frequency_hz"] <= 2.0
+    for m in ("front hop (in phase)", "rear hop (in phase)", "front hop (anti-phase)", "rear hop (anti-phase)"):
+        assert 10.0 <= s[m]["frequency_hz"] <= 15.0
+        assert 0.2 < s[m]["damping_ratio"] < 0.6
+    assert 0.15 < s["bounce"]["damping_ratio"] < 0.5
+
+
+def test_static_loads_sum_to_weight():
+    loads = static_corner_loads(P0[None], G)[0]
+    total = P0[0] + 2 * P0[INDEX["m_uf"]] + 2 * P0[INDEX["m_ur"]]
+    assert loads.sum() == pytest.approx(total * 9.81, rel=1e-12)
+    # moment balance about the CG for the sprung part
+    b = G.wheelbase - P0[INDEX["a"]]
+    front_s = loads[0] - P0[INDEX["m_uf"]] * 9.81
+    rear_s = loads[2] - P0[INDEX["m_ur"]] * 9.81
+    assert front_s * P0[INDEX["a"]] == pytest.approx(rear_s * b, rel=1e-12)
+
+
+def test_geometry_validation():
+    from rideid.errors import DataError
+    with pytest.raises(DataError, match="vehicle.wheelbase"):
+        Geometry(0.0, 1.5, 1.5, 0.3)
+    with pytest.raises(DataError, match="tire_radius"):
+        Geometry(2.5, 1.5, 1.5, -0.3)
+    assert len(NAMES) == 12
