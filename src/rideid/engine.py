@@ -10,11 +10,23 @@ the compiled kernel (:mod:`rideid.kernel`) or the plain NumPy reference
 from __future__ import annotations
 
 import numpy as np
+from threadpoolctl import ThreadpoolController
 
 from . import kernel
 from .discretize import N_MAX, Discretized, n_terms, spectral_radius
 from .params import Geometry
 from .simulate import RunInput, initial_states, simulate_reference
+
+
+# The batched small-matrix work (expm, eig, solve) gains nothing from BLAS
+# threads, and OpenBLAS threads keep spinning after each call, taking the
+# cores from the compiled kernel's threads (measured: kernel 2x slower).
+_BLAS = ThreadpoolController()
+
+
+def single_threaded_blas():
+    """Context manager: BLAS limited to one thread."""
+    return _BLAS.limit(limits=1, user_api="blas")
 
 
 class BatchSimulator:
@@ -79,7 +91,13 @@ class BatchSimulator:
         return P, packed, X0s, X0a, a, b
 
     def _call(self, P, Y, W, mode):
-        P, pk, X0s, X0a, a, b = self._pack(P)
+        P = np.atleast_2d(np.asarray(P, dtype=float))
+        n0 = P.shape[0]
+        pad = (-n0) % kernel.CHUNK  # the kernel works on whole chunks: pad with copies
+        if pad:
+            P = np.vstack([P, np.repeat(P[-1:], pad, axis=0)])
+        with single_threaded_blas():
+            P, pk, X0s, X0a, a, b = self._pack(P)
         n = P.shape[0]
         out = np.zeros((self.n_samples, 10, n) if mode == 1 else (1, 10, 1))
         err = kernel.run_kernel(pk["Phi_s"], pk["G_s"], pk["Ca_s"], pk["Da_s"],
@@ -87,7 +105,7 @@ class BatchSimulator:
                                 a, b, self.geom.track_front / 2, self.geom.track_rear / 2,
                                 X0s, X0a, self.run_start, self.run_group, self.UD, self.MU,
                                 Y, W, mode, out)
-        return err, out
+        return err[:, :n0], (out[:, :, :n0] if mode == 1 else out)
 
     # -- public ------------------------------------------------------------
     def errors(self, P, Y, W):

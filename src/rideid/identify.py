@@ -33,6 +33,7 @@ from scipy.optimize import least_squares
 
 from .cost import CostFunction
 from .dataset import Dataset
+from .engine import single_threaded_blas
 from .errors import ArgumentError
 from .jade import JadeSolver
 from .model import modal_summary
@@ -135,6 +136,12 @@ def identify(ds: Dataset, *, seed: int | None = None, population: int = DEFAULT_
     -------
     IdentificationResult
     """
+    with single_threaded_blas():
+        return _identify(ds, seed=seed, population=population, generations=generations, weights=weights,
+                         polish=polish, spread_tol=spread_tol, progress=progress, cost=cost, maps=maps)
+
+
+def _identify(ds, *, seed, population, generations, weights, polish, spread_tol, progress, cost, maps):
     if weights not in ("adaptive", "fixed"):
         raise ArgumentError(f"weights must be 'adaptive' or 'fixed', got {weights!r}")
     if not isinstance(generations, int) or generations < 1:

@@ -26,7 +26,7 @@ import numba
 import numpy as np
 
 #: Candidates per thread chunk (SIMD lanes share a chunk).
-CHUNK = 32
+CHUNK = 8
 #: Largest number of moment terms the kernel accepts (see rideid.discretize.N_MAX).
 N_MAX_K = 24
 
@@ -63,6 +63,8 @@ def run_kernel(Phi_s, G_s, Ca_s, Da_s, Phi_a, G_a, Ca_a, Da_a, nterms,
     run_start (r + 1,) int, run_group (r,) int, UD (T, 4), MU (T, 4, M), Y (T, 10),
     W (r, 10) channel weights (0 for a missing channel).
 
+    ``n`` must be a multiple of :data:`CHUNK` (the caller pads).
+
     mode 0: returns per-run weighted squared errors (r, n); OUT unused.
     mode 1: also writes simulated channels into OUT (T, 10, n).
     """
@@ -72,8 +74,8 @@ def run_kernel(Phi_s, G_s, Ca_s, Da_s, Phi_a, G_a, Ca_a, Da_a, nterms,
     err = np.zeros((n_runs, n))
     for ch in numba.prange(n_chunks):
         c0 = ch * CHUNK
-        c1 = min(n, c0 + CHUNK)
-        m = c1 - c0
+        c1 = c0 + CHUNK
+        m = CHUNK
         xs = np.empty((8, m))
         xa = np.empty((6, m))
         ns = np.empty((8, m))
@@ -94,7 +96,7 @@ def run_kernel(Phi_s, G_s, Ca_s, Da_s, Phi_a, G_a, Ca_a, Da_a, nterms,
         le = np.zeros(m)
         la = np.empty(m)
         lb = np.empty(m)
-        for c in range(m):
+        for c in range(CHUNK):
             la[c] = a_arr[c0 + c]
             lb[c] = b_arr[c0 + c]
         for r in range(n_runs):
@@ -111,34 +113,34 @@ def run_kernel(Phi_s, G_s, Ca_s, Da_s, Phi_a, G_a, Ca_a, Da_a, nterms,
                 lDa[:, :, :] = Da_a[g, :, :, c0:c1]
                 g_loaded = g
             for i in range(8):
-                for c in range(m):
+                for c in range(CHUNK):
                     xs[i, c] = X0_s[r, i, c0 + c]
             for i in range(6):
-                for c in range(m):
+                for c in range(CHUNK):
                     xa[i, c] = X0_a[r, i, c0 + c]
             k0 = run_start[r]
             k1 = run_start[r + 1]
             w0, w1, w2, w3, w4 = W[r, 0], W[r, 1], W[r, 2], W[r, 3], W[r, 4]
             w5, w6, w7, w8, w9 = W[r, 5], W[r, 6], W[r, 7], W[r, 8], W[r, 9]
-            for c in range(m):
+            for c in range(CHUNK):
                 le[c] = 0.0
             for k in range(k0, k1):
                 # outputs at sample k
                 for i in range(4):
-                    for c in range(m):
+                    for c in range(CHUNK):
                         gs[i, c] = lDs[i, 0, c] * UD[k, 0] + lDs[i, 1, c] * UD[k, 1]
                     for j in range(8):
-                        for c in range(m):
+                        for c in range(CHUNK):
                             gs[i, c] += lCs[i, j, c] * xs[j, c]
                 for i in range(3):
-                    for c in range(m):
+                    for c in range(CHUNK):
                         ga[i, c] = lDa[i, 0, c] * UD[k, 2] + lDa[i, 1, c] * UD[k, 3]
                     for j in range(6):
-                        for c in range(m):
+                        for c in range(CHUNK):
                             ga[i, c] += lCa[i, j, c] * xa[j, c]
                 y0, y1, y2, y3, y4 = Y[k, 0], Y[k, 1], Y[k, 2], Y[k, 3], Y[k, 4]
                 y5, y6, y7, y8, y9 = Y[k, 5], Y[k, 6], Y[k, 7], Y[k, 8], Y[k, 9]
-                for c in range(m):
+                for c in range(CHUNK):
                     z = gs[0, c]
                     th = gs[1, c]
                     zfs = gs[2, c]
@@ -161,42 +163,42 @@ def run_kernel(Phi_s, G_s, Ca_s, Da_s, Phi_a, G_a, Ca_a, Da_a, nterms,
                     le[c] += (w0 * d0 * d0 + w1 * d1 * d1 + w2 * d2 * d2 + w3 * d3 * d3 + w4 * d4 * d4
                               + w5 * d5 * d5 + w6 * d6 * d6 + w7 * d7 * d7 + w8 * d8 * d8 + w9 * d9 * d9)
                 if mode == 1:
-                    for c in range(m):
+                    for c in range(CHUNK):
                         _channels(yv, gs, ga, xs[5, c], xa[3, c], la[c], lb[c], hf, hr, c)
                         for q in range(10):
                             OUT[k, q, c0 + c] = yv[q]
                 if k + 1 == k1:
-                    for c in range(m):
+                    for c in range(CHUNK):
                         err[r, c0 + c] = le[c]
                     break
                 # state update over the interval [k, k+1]
                 for i in range(8):
-                    for c in range(m):
+                    for c in range(CHUNK):
                         ns[i, c] = 0.0
                     for j in range(8):
-                        for c in range(m):
+                        for c in range(CHUNK):
                             ns[i, c] += lPs[i, j, c] * xs[j, c]
                     for t in range(N):
                         m0 = MU[k, 0, t]
                         m1 = MU[k, 1, t]
-                        for c in range(m):
+                        for c in range(CHUNK):
                             ns[i, c] += lGs[t, i, 0, c] * m0 + lGs[t, i, 1, c] * m1
                 for i in range(6):
-                    for c in range(m):
+                    for c in range(CHUNK):
                         na[i, c] = 0.0
                     for j in range(6):
-                        for c in range(m):
+                        for c in range(CHUNK):
                             na[i, c] += lPa[i, j, c] * xa[j, c]
                     for t in range(N):
                         m2 = MU[k, 2, t]
                         m3 = MU[k, 3, t]
-                        for c in range(m):
+                        for c in range(CHUNK):
                             na[i, c] += lGa[t, i, 0, c] * m2 + lGa[t, i, 1, c] * m3
                 for i in range(8):
-                    for c in range(m):
+                    for c in range(CHUNK):
                         xs[i, c] = ns[i, c]
                 # (the run's errors are stored after its last sample)
                 for i in range(6):
-                    for c in range(m):
+                    for c in range(CHUNK):
                         xa[i, c] = na[i, c]
     return err
