@@ -181,6 +181,9 @@ def _identify(ds, *, seed, population, generations, weights, polish, spread_tol,
                "best_cost_equal": float(np.mean(E_pop[:, solver.best_index])),
                "mu_f": solver.mu_f, "mu_cr": solver.mu_cr}
         mean = solver.pop.mean(axis=0)
+        xb = solver.x
+        for j, n in enumerate(cf.names):
+            rec[f"best_{n}"] = float(xb[j])
         for j, n in enumerate(cf.names):
             rec[f"mean_{n}"] = float(mean[j])
         for j, n in enumerate(cf.names):

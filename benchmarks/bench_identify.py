@@ -1,0 +1,55 @@
+"""Wall time and peak memory of ``rideid identify`` on the built-in dataset.
+
+Runs the real command line in a subprocess (numba cache warm), noise-free
+data, default settings, with and without polish, and reports the largest
+parameter error. Run: ``make bench``.
+"""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+RUSAGE = ("import resource, sys, runpy; sys.argv = ['rideid'] + sys.argv[1:]; "
+          "from rideid.cli import main; rc = main(sys.argv[1:]); "
+          "print('MAXRSS', resource.getrusage(resource.RUSAGE_SELF).ru_maxrss, file=sys.stderr); sys.exit(rc)")
+
+
+def cli(args):
+    t = time.perf_counter()
+    r = subprocess.run([sys.executable, "-c", RUSAGE] + [str(a) for a in args], capture_output=True, text=True)
+    wall = time.perf_counter() - t
+    if r.returncode != 0:
+        raise RuntimeError(r.stderr)
+    rss = [ln for ln in r.stderr.splitlines() if ln.startswith("MAXRSS")]
+    return wall, int(rss[0].split()[1]) / 1024 if rss else float("nan")
+
+
+def main(out=sys.stdout):
+    def say(*a):
+        print(*a, file=out, flush=True)
+
+    import rideid
+    truth = rideid.default_scenario().truth
+    with tempfile.TemporaryDirectory() as d:
+        d = Path(d)
+        cli(["simulate", rideid.default_scenario_path(), "--out", d / "ds", "--quiet"])
+        cli(["identify", d / "ds", "--out", d / "warm", "--seed", "1", "--quiet", "--generations", "2"])
+        say("## `rideid identify` on the built-in dataset (noise-free, default settings)\n")
+        say("| variant | wall time | peak memory | generations | largest error |")
+        say("|---|---|---|---|---|")
+        for label, extra in (("default (with polish)", []), ("--no-polish", ["--no-polish"])):
+            o = d / label.split()[0]
+            wall, rss = cli(["identify", d / "ds", "--out", o, "--seed", "1", "--quiet"] + extra)
+            res = json.loads((o / "result.json").read_text())
+            worst = max(abs(res["parameters"][n]["value"] / truth[n] - 1) for n in truth)
+            say(f"| {label} | {wall:.1f} s (in-process {res['wall_time_s']:.1f} s) | {rss:.0f} MiB | "
+                f"{res['generations']} | {100 * worst:.2g} % |")
+
+
+if __name__ == "__main__":
+    main()
