@@ -5,7 +5,7 @@ VENV := .venv
 PY := $(VENV)/bin/python
 STAMP := $(VENV)/.installed
 
-.PHONY: demo test test-slow bench venv clean
+.PHONY: demo test test-slow bench venv clean chromium
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -24,6 +24,10 @@ test: $(STAMP)
 # the slow studies as well (JADE benchmark tables at full length, seeds sweeps)
 test-slow: $(STAMP)
 	RIDEID_SLOW=1 $(PY) -m pytest -q
+
+# Debian's Chromium, for the slow test that renders report.html headless
+chromium:
+	command -v chromium >/dev/null 2>&1 || (apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq chromium)
 
 bench: $(STAMP)
 	$(PY) -m pip install --quiet -e '.[bench]'

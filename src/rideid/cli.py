@@ -27,6 +27,7 @@ EXAMPLES = {
     "sensitivity": "example:\n  rideid sensitivity sim --out maps\n  rideid sensitivity scenario.toml --out maps",
     "score": "example:\n  rideid score fit/result.json sim/truth.toml",
     "demo": "example:\n  rideid demo --out rideid-demo",
+    "report": "example:\n  rideid report fit && open fit/report.html",
 }
 
 
@@ -106,7 +107,11 @@ def _parser() -> argparse.ArgumentParser:
     s.add_argument("--weights", choices=("adaptive", "fixed"), default="adaptive",
                    help="adaptive track weights (paper eq. 12-13) or equal weights")
     s.add_argument("--no-polish", action="store_true", help="skip the least-squares polish after JADE")
+    s.add_argument("--no-report", action="store_true", help="write result.json and history.csv only")
     s.add_argument("--quiet", action="store_true", help="no progress line")
+
+    s = add("report", "(re)build report.html in an identification folder")
+    s.add_argument("result_dir", metavar="RESULT_DIR")
 
     s = add("sensitivity", "parameter/response/track sensitivity maps (paper Tables 4-7) as CSV, Markdown, PNG")
     s.add_argument("source", metavar="DATASET_OR_SCENARIO")
@@ -155,7 +160,7 @@ def _summary_table(res) -> str:
 
 
 def run_identify(ds_path, out_dir, *, seed, population=None, generations=None, weights="adaptive",
-                 polish=True, quiet=False, out=None):
+                 polish=True, quiet=False, out=None, report=True):
     out = out or sys.stdout
     from .dataset import load_dataset
     from .files import atomic_output
@@ -168,19 +173,22 @@ def run_identify(ds_path, out_dir, *, seed, population=None, generations=None, w
         raise ArgumentError(f"--population must be at least 4, got {kw['population']}")
     if kw["generations"] < 1:
         raise ArgumentError(f"--generations must be at least 1, got {kw['generations']}")
-    res = identify(ds, seed=seed, weights=weights, polish=polish, progress=prog.identify, **kw)
+    from .cost import CostFunction
+    cost = CostFunction(ds)
+    res = identify(ds, seed=seed, weights=weights, polish=polish, progress=prog.identify, cost=cost, **kw)
     prog.done()
     with atomic_output(out_dir) as tmp:
         res.save(tmp)
-        try:
+        if report:
             from .report import write_report
-        except ImportError:  # pragma: no cover - report module added later
-            write_report = None
-        if write_report is not None:
-            write_report(res, ds, tmp)
+            if not quiet:
+                prog.line("writing the report ...", force=True)
+            write_report(tmp, ds=ds, maps=res.maps, cost=cost)
+            prog.done()
     print(_summary_table(res), file=out)
     print(f"cost {res.cost:.4g}, {res.generations} generations, {res.evaluations} evaluations, "
-          f"{res.wall_time_s:.1f} s; written to {out_dir}", file=out)
+          f"{res.wall_time_s:.1f} s; written to {out_dir}" + (f" (open {Path(out_dir) / 'report.html'})"
+                                                                if report else ""), file=out)
     return res
 
 
@@ -188,7 +196,7 @@ def cmd_identify(args, out=None):
     out = out or sys.stdout
     run_identify(args.dataset, args.out, seed=args.seed, population=args.population,
                  generations=args.generations, weights=args.weights, polish=not args.no_polish,
-                 quiet=args.quiet, out=out)
+                 quiet=args.quiet, out=out, report=not args.no_report)
     return 0
 
 
@@ -305,7 +313,15 @@ def cmd_demo(args, out=None):
     return 0
 
 
-COMMANDS = {"simulate": cmd_simulate, "identify": cmd_identify, "sensitivity": cmd_sensitivity,
+def cmd_report(args, out=None):
+    out = out or sys.stdout
+    from .report import write_report
+    path = write_report(args.result_dir)
+    print(f"report written to {path}", file=out)
+    return 0
+
+
+COMMANDS = {"report": cmd_report, "simulate": cmd_simulate, "identify": cmd_identify, "sensitivity": cmd_sensitivity,
             "score": cmd_score, "demo": cmd_demo}
 
 

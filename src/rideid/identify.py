@@ -37,7 +37,7 @@ from .engine import single_threaded_blas
 from .errors import ArgumentError
 from .jade import JadeSolver
 from .model import modal_summary
-from .params import INDEX, NAMES, UNITS, default_bounds
+from .params import INDEX, NAMES, UNITS
 from .sensitivity import SensitivityMaps, adaptive_weights, coefficient_of_variation, compute_maps, normalised_spread
 
 DEFAULT_POPULATION = 60
@@ -87,7 +87,7 @@ class IdentificationResult:
             "stop": self.stop,
             "polish": self.polish,
             "modal": self.modal,
-            "dataset": self.dataset,
+            "dataset": str(Path(self.dataset).resolve()) if self.dataset else "",
             "history_file": "history.csv",
         }
 
@@ -212,7 +212,6 @@ def _identify(ds, *, seed, population, generations, weights, polish, spread_tol,
     wall = time.perf_counter() - t0
 
     details = {}
-    db = default_bounds(ds.geometry)
     for n in NAMES:
         d = {"value": float(P[INDEX[n]]), "unit": UNITS[n], "fixed": n in space.fixed,
              "derived": n == space.derived}
@@ -222,7 +221,7 @@ def _identify(ds, *, seed, population, generations, weights, polish, spread_tol,
             d["std"] = None if not np.isfinite(std[j]) else float(std[j])
         elif n == space.derived:
             d["std"] = _derived_std(space, cf.names, polish_info)
-            d["lower"], d["upper"] = db[n]
+            d["lower"] = d["upper"] = None  # follows from the anchor: never searched
         else:
             d["std"] = 0.0
         details[n] = d

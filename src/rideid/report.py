@@ -1,0 +1,298 @@
+"""The identification report: one self-contained HTML file plus its PNGs.
+
+``write_report(result_dir)`` reads ``result.json`` and ``history.csv``,
+reloads the dataset named in the result (or takes it as an argument),
+simulates the identified car, and writes ``report.html`` with every figure
+embedded (base64 PNG) and also saved under ``figures/``. Nothing here is
+needed by the numerical core; it only reads results.
+"""
+
+from __future__ import annotations
+
+import base64
+import csv
+import html
+import json
+from dataclasses import dataclass
+from importlib import resources
+from pathlib import Path
+
+import numpy as np
+
+from .errors import DataError
+
+FIG_DPI = 90
+
+
+@dataclass
+class Figure:
+    id: str
+    title: str
+    caption: str
+    file: str
+    data_uri: str
+
+
+def read_history(path: Path) -> list[dict]:
+    if not path.is_file() or path.stat().st_size == 0:
+        return []
+    with open(path, newline="") as f:
+        rows = list(csv.DictReader(f))
+    return [{k: float(v) for k, v in r.items()} for r in rows]
+
+
+def _plt():
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    plt.rcParams.update({"font.size": 8, "axes.grid": True, "grid.alpha": 0.3, "figure.dpi": FIG_DPI})
+    return plt
+
+
+def _save(fig, out_dir: Path, name: str, title: str, caption: str) -> Figure:
+    plt = _plt()
+    fdir = out_dir / "figures"
+    fdir.mkdir(parents=True, exist_ok=True)
+    path = fdir / f"{name}.png"
+    fig.savefig(path, dpi=FIG_DPI)
+    plt.close(fig)
+    uri = "data:image/png;base64," + base64.b64encode(path.read_bytes()).decode("ascii")
+    return Figure(name, title, caption, f"figures/{name}.png", uri)
+
+
+def fig_convergence(hist, out_dir):
+    plt = _plt()
+    g = [h["generation"] for h in hist]
+    fig, (a1, a2) = plt.subplots(1, 2, figsize=(10, 3.2))
+    lg = lambda k: [np.log10(max(h[k], 1e-300)) for h in hist]  # noqa: E731
+    a1.plot(g, lg("best_cost"), label="best (current weights)")
+    a1.plot(g, lg("mean_cost"), label="population mean", alpha=0.8)
+    if "best_cost_equal" in hist[0]:
+        a1.plot(g, lg("best_cost_equal"), "--", label="best, equal weights")
+    a1.set_xlabel("generation")
+    a1.set_ylabel("log10 cost")
+    a1.legend()
+    a2.plot(g, [h["mu_f"] for h in hist], label="μ_F")
+    a2.plot(g, [h["mu_cr"] for h in hist], label="μ_CR")
+    a2.set_ylim(0, 1)
+    a2.set_xlabel("generation")
+    a2.legend()
+    a2.set_title("JADE adaptation")
+    a1.set_title("convergence")
+    fig.tight_layout()
+    return _save(fig, out_dir, "convergence", "Convergence",
+                 "Best and mean cost per generation (log scale); JADE's adaptive means μ_F and μ_CR.")
+
+
+def _styles(n):
+    """Distinct colour and line style for up to 20 lines."""
+    import matplotlib
+    cmap = matplotlib.colormaps["tab10"]
+    return [{"color": cmap(i % 10), "ls": "-" if i < 10 else "--"} for i in range(n)]
+
+
+def fig_spread(hist, names, out_dir):
+    plt = _plt()
+    sty = _styles(len(names))
+    g = [h["generation"] for h in hist]
+    fig, (a1, a2) = plt.subplots(1, 2, figsize=(10, 3.6))
+    for k, n in enumerate(names):
+        a1.plot(g, [np.log10(max(h[f"cv_{n}"], 1e-16)) for h in hist], label=n, **sty[k])
+    a1.set_xlabel("generation")
+    a1.set_ylabel("log10 coefficient of variation")
+    a1.set_title("parameter spread (paper eq. 12 before normalisation)")
+    a1.legend(ncol=2, fontsize=6)
+    final = {n: hist[-1][f"best_{n}"] for n in names}
+    for k, n in enumerate(names):
+        a2.plot(g, [h[f"mean_{n}"] / final[n] for h in hist], label=n, **sty[k])
+    a2.set_xlabel("generation")
+    a2.set_ylabel("population mean / final best")
+    a2.set_title("parameter traces")
+    a2.set_ylim(0, 2.5)
+    fig.tight_layout()
+    return _save(fig, out_dir, "spread", "Parameter spread",
+                 "Each free parameter's coefficient of variation in the JADE population (left) and its population "
+                 "mean relative to the final best (right). Parameters whose spread falls slowly are the ones the "
+                 "data pin down least.")
+
+
+def fig_weights(hist, runs, out_dir, mode):
+    plt = _plt()
+    g = [h["generation"] for h in hist]
+    W = np.array([[h[f"weight_{r}"] for r in runs] for h in hist]).T
+    fig, ax = plt.subplots(figsize=(10, 3.2))
+    ax.stackplot(g, W, labels=runs)
+    ax.set_xlim(g[0], g[-1])
+    ax.set_ylim(0, 1)
+    ax.set_xlabel("generation")
+    ax.set_ylabel("track weight")
+    ax.legend(ncol=5, fontsize=6, loc="upper center", bbox_to_anchor=(0.5, -0.2))
+    ax.set_title(f"track weights ({mode})")
+    fig.tight_layout()
+    return _save(fig, out_dir, "weights", "Track weights",
+                 "Track weights per generation (stacked, sum 1). Adaptive weights follow the parameter spread through "
+                 "the parameter→track map (paper eq. 13); fixed weights stay equal.")
+
+
+def _db(x):
+    # decibels on a linear axis: log-scale axes cost matplotlib mathtext per tick
+    return 20 * np.log10(np.maximum(np.abs(x), 1e-12))
+
+
+GROUPS = (("body accelerations", "m/s²", (0, 1, 2, 3)), ("axle accelerations", "m/s²", (4, 5, 6, 7)),
+          ("rates", "rad/s", (8, 9)))
+
+
+def fig_fit(run_id, t, Y, Ysim, out_dir):
+    """Measured vs simulated per channel group, and residual spectra."""
+    from .model import CHANNELS
+    plt = _plt()
+    fig, axes = plt.subplots(3, 2, figsize=(12, 6.2), gridspec_kw={"width_ratios": [2.2, 1]})
+    fs = 1.0 / (t[1] - t[0])
+    f = np.fft.rfftfreq(t.size, 1 / fs)
+    for row, (label, unit, idx) in enumerate(GROUPS):
+        a, b = axes[row]
+        for k, i in enumerate(idx):
+            if np.all(np.isnan(Y[:, i])):
+                continue
+            name = CHANNELS[i].split("_")[-1] if row < 2 else CHANNELS[i]
+            a.plot(t, Y[:, i], lw=0.7, color=f"C{k}")
+            a.plot(t, Ysim[:, i], lw=0.7, ls="--", color="k", alpha=0.7)
+            r = Y[:, i] - Ysim[:, i]
+            b.plot(f, _db(np.fft.rfft(r) / t.size), lw=0.6, color=f"C{k}", label=name)
+        b.plot(f, _db(np.nanmax(np.abs(np.fft.rfft(np.nan_to_num(Y[:, list(idx)]), axis=0)), axis=1) / t.size),
+               lw=0.6, color="0.6", label="largest\nmeasured")
+        b.set_ylabel(f"dB re 1 {unit}")
+        a.set_ylabel(f"{label}\n[{unit}]")
+        # one legend per row, outside the data: colours are channels in both panels
+        b.legend(fontsize=6, loc="upper left", bbox_to_anchor=(1.02, 1.0), borderaxespad=0)
+    axes[0, 0].set_title(f"run {run_id}: measured (colour) vs simulated (dashed)")
+    axes[0, 1].set_title("amplitude spectra of the residuals")
+    axes[-1, 0].set_xlabel("time [s]")
+    axes[-1, 1].set_xlabel("frequency [Hz]")
+    fig.tight_layout()
+    return _save(fig, out_dir, f"fit_{run_id}", f"Fit: run {run_id}",
+                 f"Run {run_id}: measured channels (colour) and the identified model (dashed), grouped as body "
+                 "accelerations, axle accelerations and rates (left); amplitude spectra of each channel's residual "
+                 "against the largest measured spectrum (right). A good fit leaves residuals at the noise floor, "
+                 "flat across frequency; a peak in a residual spectrum points at unmodelled dynamics there.")
+
+
+def fit_statistics(Y, Ysim):
+    from .model import CHANNELS
+    out = {}
+    for i, c in enumerate(CHANNELS):
+        if np.all(np.isnan(Y[:, i])):
+            continue
+        e = np.sqrt(np.mean((Y[:, i] - Ysim[:, i]) ** 2))
+        s = np.sqrt(np.mean(Y[:, i] ** 2))
+        out[c] = float(e / s) if s > 0 else float("nan")
+    return out
+
+
+def _fig_job(args):
+    return fig_fit(*args)
+
+
+def _map_figures(fn, jobs):
+    """Render figures on all cores (matplotlib is single-threaded); serial fallback."""
+    import os
+    n = min(len(jobs), os.cpu_count() or 1)
+    if n > 1:
+        try:
+            import multiprocessing as mp
+            from concurrent.futures import ProcessPoolExecutor
+            with ProcessPoolExecutor(n, mp_context=mp.get_context("fork")) as ex:
+                return list(ex.map(_fig_job, jobs))
+        except (OSError, ValueError, RuntimeError):  # no fork on this platform, or a broken pool
+            pass
+    return [fn(*j) for j in jobs]
+
+
+def write_report(out_dir, ds=None, maps=None, cost=None) -> Path:
+    """Build ``report.html`` (and ``figures/*.png``) in an identification folder."""
+    import jinja2
+
+    from .cost import CostFunction, ParameterSpace
+    from .dataset import load_dataset
+    from .params import NAMES, as_vector
+    from .sensitivity import compute_maps, heatmaps, stars, P2T_STARS
+
+    out_dir = Path(out_dir)
+    rpath = out_dir / "result.json"
+    if not rpath.is_file():
+        raise DataError(f"{rpath}: not found (is {out_dir} an identification folder?)")
+    try:
+        res = json.loads(rpath.read_text())
+    except json.JSONDecodeError as e:
+        raise DataError(f"{rpath}: not valid JSON: {e}") from None
+    hist = read_history(out_dir / "history.csv")
+    if ds is None:
+        dpath = res.get("dataset")
+        if not dpath or not Path(dpath).exists():
+            raise DataError(f"{rpath}: the dataset it names ({dpath!r}) is not found; the report needs it")
+        ds = load_dataset(dpath)
+    cf = cost or CostFunction(ds)
+    P = as_vector({n: res["parameters"][n]["value"] for n in NAMES})
+    sims = cf.simulate(P)
+    if maps is None:
+        space = ParameterSpace(ds.known, ds.geometry, ds.manifest.bounds)
+        maps = compute_maps(cf.sim, ds.geometry, space.nominal(), cf.run_ids, cf.W > 0)
+
+    figs = []
+    if hist:
+        names = [k[len("cv_"):] for k in hist[0] if k.startswith("cv_")]
+        figs.append(fig_convergence(hist, out_dir))
+        figs.append(fig_spread(hist, names, out_dir))
+        figs.append(fig_weights(hist, cf.run_ids, out_dir, res.get("weights", "adaptive")))
+    fit_rows = []
+    jobs = [(r.id, ds.data[r.id].time, ds.data[r.id].matrix(), sims[r.id], out_dir) for r in ds.runs]
+    fit_figs = _map_figures(fig_fit, jobs)
+    for r in ds.runs:
+        Y = ds.data[r.id].matrix()
+        st = fit_statistics(Y, sims[r.id])
+        fit_rows.append({"run": r.id, "track": r.track, "speed": r.speed, "weight": res["track_weights"].get(r.id),
+                         "worst": max(st.values()) if st else float("nan"),
+                         "median": float(np.median(list(st.values()))) if st else float("nan")})
+    heat_dir = out_dir / "figures"
+    heat_dir.mkdir(parents=True, exist_ok=True)
+    heat_files = heatmaps(maps, heat_dir)
+    heat_figs = []
+    caps = {"param_response": "Parameter → response: mean |% change of each channel's peak| for +25 % of each "
+                              "parameter, over all runs (paper Table 5); stars as in docs/method.md.",
+            "response_track": "Response → track: how strongly each run excites each channel (RMS relative to "
+                              "the run that excites it most).",
+            "param_track": "Parameter → track: share of each parameter's sensitivity carried by each run "
+                           "(rows sum to 1); the matrix the adaptive weights use."}
+    for f in heat_files:
+        key = f.stem
+        uri = "data:image/png;base64," + base64.b64encode(f.read_bytes()).decode("ascii")
+        heat_figs.append(Figure(key, key.replace("_", " → ").replace("param", "parameter"), caps[key],
+                                f"figures/{f.name}", uri))
+
+    params = []
+    for n in NAMES:
+        d = res["parameters"][n]
+        std = d.get("std")
+        params.append({
+            "name": n, "value": d["value"], "unit": d["unit"],
+            "std": std, "rel_std": (100 * std / abs(d["value"])) if std not in (None, 0.0) and d["value"] else None,
+            "lower": d.get("lower"), "upper": d.get("upper"),
+            "status": "known" if d.get("fixed") else ("derived" if d.get("derived") else "estimated"),
+        })
+    p2t = [{"param": p, "cells": [(f"{maps.M[i, r]:.2f}", stars(maps.M[i, r] * len(maps.runs), P2T_STARS))
+                                  for r in range(len(maps.runs))]} for i, p in enumerate(maps.params)]
+    env = jinja2.Environment(loader=jinja2.FileSystemLoader(str(resources.files("rideid") / "templates")),
+                             autoescape=jinja2.select_autoescape(["html", "j2"]))
+    tpl = env.get_template("report.html.j2")
+    text = tpl.render(
+        title=f"rideid identification: {html.escape(ds.name)}", res=res, params=params, modal=res.get("modal") or {},
+        figures=figs, fit_figures=fit_figs, fit_rows=fit_rows, heat_figures=heat_figs, runs=maps.runs, p2t=p2t,
+        known=res.get("known", {}), n_runs=len(ds.runs), dataset=str(ds.path),
+    )
+    out = out_dir / "report.html"
+    out.write_text(text)
+    return out
+
+
+SECTIONS = ("estimates", "modal", "convergence", "spread", "weights", "fits", "maps")

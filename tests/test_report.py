@@ -1,0 +1,84 @@
+"""The HTML report: structure, figures, rebuild, and (slow) a real browser."""
+
+import json
+import re
+import shutil
+import subprocess
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from rideid.cli import main
+from rideid.report import SECTIONS
+
+
+@pytest.fixture(scope="module")
+def fit_dir(sim_dataset, tmp_path_factory):
+    out = tmp_path_factory.mktemp("fit") / "fit"
+    assert main(["identify", str(sim_dataset), "--out", str(out), "--seed", "1", "--quiet",
+                 "--generations", "30"]) == 0
+    return out
+
+
+def _images(html):
+    return re.findall(r'<img src="data:image/png;base64,([A-Za-z0-9+/=]+)"', html)
+
+
+def test_report_has_every_section_and_nonempty_figures(fit_dir):
+    html = (fit_dir / "report.html").read_text()
+    for s in SECTIONS:
+        assert f'id="{s}"' in html, s
+    imgs = _images(html)
+    # convergence, spread, weights, 10 fits, 3 maps
+    assert len(imgs) == 16
+    import base64
+    import io
+
+    import matplotlib.image as mpimg
+    for b in imgs:
+        arr = mpimg.imread(io.BytesIO(base64.b64decode(b)), format="png")
+        assert arr.shape[0] > 150 and arr.shape[1] > 300
+        assert arr[..., :3].std() > 0.05  # not a blank image
+    for f in ("convergence", "spread", "weights", "fit_W_H", "param_track"):
+        assert (fit_dir / "figures" / f"{f}.png").stat().st_size > 5000
+    # the estimates table lists all twelve parameters, the anchor is stated
+    for n in ("m_s", "I_xx", "k_tr"):
+        assert f"<td>{n}</td>" in html
+    assert "total_mass = 1093.3" in html
+    assert "http://" not in html and "https://" not in html  # opens offline
+
+
+def test_report_rebuild(fit_dir, capsys):
+    before = (fit_dir / "report.html").stat().st_mtime_ns
+    (fit_dir / "report.html").unlink()
+    assert main(["report", str(fit_dir)]) == 0
+    assert (fit_dir / "report.html").stat().st_size > 100_000
+    assert "report written" in capsys.readouterr().out
+    assert before > 0
+
+
+def test_report_bad_folder(tmp_path, capsys):
+    assert main(["report", str(tmp_path)]) == 2
+    assert "result.json: not found" in capsys.readouterr().err
+
+
+@pytest.mark.slow
+def test_report_renders_in_headless_chromium(fit_dir, tmp_path):
+    chromium = shutil.which("chromium") or shutil.which("chromium-browser")
+    if chromium is None:
+        pytest.skip("chromium not installed (make chromium)")
+    shot = tmp_path / "shot.png"
+    cmd = [chromium, "--headless", "--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run",
+           "--disable-background-networking", "--disable-component-update", "--disable-sync",
+           f"--user-data-dir={tmp_path / 'profile'}", "--window-size=1300,2000", f"--screenshot={shot}",
+           (fit_dir / "report.html").as_uri()]
+    subprocess.run(cmd, capture_output=True, timeout=120)
+    import matplotlib.image as mpimg
+    img = mpimg.imread(shot)
+    assert img.shape[0] >= 1000
+    gray = img[..., :3].mean(axis=2)
+    assert gray.std() > 0.05                    # not blank
+    assert (gray < 0.5).mean() > 0.01           # text and plots drawn
+    dark_rows = np.nonzero((gray < 0.5).mean(axis=1) > 0.002)[0]
+    assert dark_rows.max() - dark_rows.min() > 800  # content down the page, not just the header
