@@ -101,7 +101,7 @@ def _parser() -> argparse.ArgumentParser:
     s.add_argument("dataset", metavar="DATASET_DIR")
     s.add_argument("--out", required=True, metavar="DIR")
     s.add_argument("--seed", type=int, default=None, metavar="N")
-    s.add_argument("--population", type=int, default=None, metavar="NP", help="JADE population (default 60)")
+    s.add_argument("--population", type=int, default=None, metavar="NP", help="JADE population (default 64)")
     s.add_argument("--generations", type=int, default=None, metavar="G",
                    help="largest number of JADE generations (default 400)")
     s.add_argument("--weights", choices=("adaptive", "fixed"), default="adaptive",
@@ -325,6 +325,17 @@ COMMANDS = {"report": cmd_report, "simulate": cmd_simulate, "identify": cmd_iden
             "score": cmd_score, "demo": cmd_demo}
 
 
+def _compile(quiet: bool):
+    """Compile or load the kernels up front, and say so when it is slow."""
+    from .kernel import compile_kernels
+    prog = Progress(quiet)
+    prog.line("loading the compiled simulation kernel (compiles once after install, ~30 s) ...", force=True)
+    dt = compile_kernels()
+    prog.done()
+    if dt > 2.0 and not quiet:
+        print(f"rideid: compiled the simulation kernel in {dt:.0f} s (cached for later runs)", file=sys.stderr)
+
+
 def main(argv=None) -> int:
     parser = _parser()
     args = parser.parse_args(argv)
@@ -333,6 +344,8 @@ def main(argv=None) -> int:
         return 2
     warnings.showwarning = _warning_line
     try:
+        if args.command in ("simulate", "identify", "sensitivity", "demo", "report"):
+            _compile(getattr(args, "quiet", False))
         return COMMANDS[args.command](args)
     except RideidError as e:
         msg = str(e).replace("\n", " ")

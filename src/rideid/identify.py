@@ -40,9 +40,9 @@ from .model import modal_summary
 from .params import INDEX, NAMES, UNITS
 from .sensitivity import SensitivityMaps, adaptive_weights, coefficient_of_variation, compute_maps, normalised_spread
 
-DEFAULT_POPULATION = 60
+DEFAULT_POPULATION = 64
 DEFAULT_GENERATIONS = 400
-DEFAULT_SPREAD_TOL = 5e-3
+DEFAULT_SPREAD_TOL = 1e-2
 
 
 @dataclass

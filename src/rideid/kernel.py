@@ -202,3 +202,27 @@ def run_kernel(Phi_s, G_s, Ca_s, Da_s, Phi_a, G_a, Ca_a, Da_a, nterms,
                     for c in range(CHUNK):
                         xa[i, c] = na[i, c]
     return err
+
+
+def compile_kernels() -> float:
+    """Compile (or load from Numba's on-disk cache) the kernels; seconds taken.
+
+    The first call in a fresh install compiles for ~20-40 s; later processes
+    load the cache in well under a second. The command line calls this first
+    and says so when it takes long, rather than hiding it in the first
+    generation.
+    """
+    import time
+
+    from .contact import _lattice_max
+
+    t = time.perf_counter()
+    n = CHUNK
+    f = np.zeros
+    run_kernel(f((1, 8, 8, n)), f((1, N_MAX_K, 8, 2, n)), f((1, 4, 8, n)), f((1, 4, 2, n)),
+               f((1, 6, 6, n)), f((1, N_MAX_K, 6, 2, n)), f((1, 3, 6, n)), f((1, 3, 2, n)),
+               np.ones((1, 1), dtype=np.int64), f(n), f(n), 0.7, 0.7, f((1, 8, n)), f((1, 6, n)),
+               np.array([0, 2], dtype=np.int64), np.zeros(1, dtype=np.int64), f((2, 4)), f((2, 4, N_MAX_K)),
+               f((2, 10)), f((1, 10)), 0, f((1, 10, 1)))
+    _lattice_max(f(4), f(2))
+    return time.perf_counter() - t

@@ -170,7 +170,8 @@ def fig_fit(run_id, t, Y, Ysim, out_dir):
     axes[0, 1].set_title("amplitude spectra of the residuals")
     axes[-1, 0].set_xlabel("time [s]")
     axes[-1, 1].set_xlabel("frequency [Hz]")
-    fig.tight_layout()
+    # fixed margins: tight_layout costs an extra full draw (a third of the time)
+    fig.subplots_adjust(left=0.07, right=0.91, bottom=0.08, top=0.95, hspace=0.28, wspace=0.2)
     return _save(fig, out_dir, f"fit_{run_id}", f"Fit: run {run_id}",
                  f"Run {run_id}: measured channels (colour) and the identified model (dashed), grouped as body "
                  "accelerations, axle accelerations and rates (left); amplitude spectra of each channel's residual "
@@ -190,11 +191,34 @@ def fit_statistics(Y, Ysim):
     return out
 
 
-def _fig_job(args):
-    return fig_fit(*args)
+HEAT_CAPTIONS = {
+    "param_response": "Parameter → response: mean |% change of each channel's peak| for +25 % of each parameter, "
+                      "over all runs (paper Table 5); stars as in docs/method.md.",
+    "response_track": "Response → track: how strongly each run excites each channel (RMS relative to the run "
+                      "that excites it most).",
+    "param_track": "Parameter → track: share of each parameter's sensitivity carried by each run (rows sum to 1); "
+                   "the matrix the adaptive weights use.",
+}
 
 
-def _map_figures(fn, jobs):
+def heatmap_figures(maps, out_dir):
+    from .sensitivity import heatmaps
+    heat_dir = Path(out_dir) / "figures"
+    heat_dir.mkdir(parents=True, exist_ok=True)
+    out = []
+    for f in heatmaps(maps, heat_dir):
+        uri = "data:image/png;base64," + base64.b64encode(f.read_bytes()).decode("ascii")
+        out.append(Figure(f.stem, f.stem.replace("_", " → ").replace("param", "parameter"), HEAT_CAPTIONS[f.stem],
+                          f"figures/{f.name}", uri))
+    return out
+
+
+def _fig_job(job):
+    name, args = job
+    return globals()[name](*args)
+
+
+def _map_figures(jobs):
     """Render figures on all cores (matplotlib is single-threaded); serial fallback."""
     import os
     n = min(len(jobs), os.cpu_count() or 1)
@@ -206,7 +230,7 @@ def _map_figures(fn, jobs):
                 return list(ex.map(_fig_job, jobs))
         except (OSError, ValueError, RuntimeError):  # no fork on this platform, or a broken pool
             pass
-    return [fn(*j) for j in jobs]
+    return [_fig_job(j) for j in jobs]
 
 
 def write_report(out_dir, ds=None, maps=None, cost=None) -> Path:
@@ -216,7 +240,7 @@ def write_report(out_dir, ds=None, maps=None, cost=None) -> Path:
     from .cost import CostFunction, ParameterSpace
     from .dataset import load_dataset
     from .params import NAMES, as_vector
-    from .sensitivity import compute_maps, heatmaps, stars, P2T_STARS
+    from .sensitivity import P2T_STARS, compute_maps, stars
 
     out_dir = Path(out_dir)
     rpath = out_dir / "result.json"
@@ -239,36 +263,25 @@ def write_report(out_dir, ds=None, maps=None, cost=None) -> Path:
         space = ParameterSpace(ds.known, ds.geometry, ds.manifest.bounds)
         maps = compute_maps(cf.sim, ds.geometry, space.nominal(), cf.run_ids, cf.W > 0)
 
-    figs = []
+    # every figure is an independent job: render them on all cores
+    jobs = []
     if hist:
         names = [k[len("cv_"):] for k in hist[0] if k.startswith("cv_")]
-        figs.append(fig_convergence(hist, out_dir))
-        figs.append(fig_spread(hist, names, out_dir))
-        figs.append(fig_weights(hist, cf.run_ids, out_dir, res.get("weights", "adaptive")))
+        jobs += [("fig_convergence", (hist, out_dir)), ("fig_spread", (hist, names, out_dir)),
+                 ("fig_weights", (hist, cf.run_ids, out_dir, res.get("weights", "adaptive")))]
+    jobs += [("fig_fit", (r.id, ds.data[r.id].time, ds.data[r.id].matrix(), sims[r.id], out_dir)) for r in ds.runs]
+    jobs.append(("heatmap_figures", (maps, out_dir)))
+    done = _map_figures(jobs)
+    heat_figs = done.pop()
+    figs = done[:3] if hist else []
+    fit_figs = done[3:] if hist else done
     fit_rows = []
-    jobs = [(r.id, ds.data[r.id].time, ds.data[r.id].matrix(), sims[r.id], out_dir) for r in ds.runs]
-    fit_figs = _map_figures(fig_fit, jobs)
     for r in ds.runs:
         Y = ds.data[r.id].matrix()
         st = fit_statistics(Y, sims[r.id])
         fit_rows.append({"run": r.id, "track": r.track, "speed": r.speed, "weight": res["track_weights"].get(r.id),
                          "worst": max(st.values()) if st else float("nan"),
                          "median": float(np.median(list(st.values()))) if st else float("nan")})
-    heat_dir = out_dir / "figures"
-    heat_dir.mkdir(parents=True, exist_ok=True)
-    heat_files = heatmaps(maps, heat_dir)
-    heat_figs = []
-    caps = {"param_response": "Parameter → response: mean |% change of each channel's peak| for +25 % of each "
-                              "parameter, over all runs (paper Table 5); stars as in docs/method.md.",
-            "response_track": "Response → track: how strongly each run excites each channel (RMS relative to "
-                              "the run that excites it most).",
-            "param_track": "Parameter → track: share of each parameter's sensitivity carried by each run "
-                           "(rows sum to 1); the matrix the adaptive weights use."}
-    for f in heat_files:
-        key = f.stem
-        uri = "data:image/png;base64," + base64.b64encode(f.read_bytes()).decode("ascii")
-        heat_figs.append(Figure(key, key.replace("_", " → ").replace("param", "parameter"), caps[key],
-                                f"figures/{f.name}", uri))
 
     params = []
     for n in NAMES:
