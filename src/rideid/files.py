@@ -7,7 +7,6 @@ the file and the key or column at fault. Unknown keys are errors.
 from __future__ import annotations
 
 import contextlib
-import csv
 import math
 import os
 import shutil
@@ -20,6 +19,7 @@ from pathlib import Path
 import numpy as np
 import tomli_w
 
+from .csvio import read_csv_rows
 from .errors import DataError, DataWarning
 from .model import CHANNELS
 from .params import EXTRA_KNOWN, INDEX, NAMES, Geometry, check_parameters
@@ -303,22 +303,13 @@ class RunData:
 def read_run_csv(path: Path) -> RunData:
     """Read and validate a run CSV (SPEC §3)."""
     path = Path(path)
-    if not path.is_file():
-        raise DataError(f"{path}: run file not found")
-    try:
-        with open(path, newline="") as f:
-            rows = list(csv.reader(f))
-    except (OSError, UnicodeDecodeError) as e:
-        raise DataError(f"{path}: cannot read: {e}") from None
-    if not rows:
-        raise DataError(f"{path}: empty file (expected a header row)")
-    header = [c.strip() for c in rows[0]]
+    header, body = read_csv_rows(path, f"{path}: run file not found")
     if "time" not in header:
         raise DataError(f"{path}: missing column 'time'")
     dup = {c for c in header if header.count(c) > 1}
     if dup:
         raise DataError(f"{path}: duplicate column '{sorted(dup)[0]}'")
-    data_rows = [r for r in rows[1:] if r and any(x.strip() for x in r)]
+    data_rows = [r for r in body if r and any(x.strip() for x in r)]
     if not data_rows:
         raise DataError(f"{path}: header only, no data rows")
     if len(data_rows) < 3:

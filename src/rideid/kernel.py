@@ -47,6 +47,36 @@ def _channels(out, gs, ga, xs5, xa3, a, b, hf, hr, c):  # pragma: no cover - com
     out[9] = xa3
 
 
+@numba.njit(cache=True, fastmath=True, inline="always")
+def _accelerations(g, lC, lD, x, UD, k, u0, S, R):  # pragma: no cover - compiled
+    """g[i] = C[i] x + D[i] u_k for one block (S states, R acceleration rows)."""
+    for i in range(R):
+        for c in range(CHUNK):
+            g[i, c] = lD[i, 0, c] * UD[k, u0] + lD[i, 1, c] * UD[k, u0 + 1]
+        for j in range(S):
+            for c in range(CHUNK):
+                g[i, c] += lC[i, j, c] * x[j, c]
+
+
+@numba.njit(cache=True, fastmath=True, inline="always")
+def _advance(x, nx, lP, lG, MU, k, u0, S, N):  # pragma: no cover - compiled
+    """x <- Phi x + sum_n G_n mu_{k,n} for one block (S states, inputs u0, u0+1)."""
+    for i in range(S):
+        for c in range(CHUNK):
+            nx[i, c] = 0.0
+        for j in range(S):
+            for c in range(CHUNK):
+                nx[i, c] += lP[i, j, c] * x[j, c]
+        for t in range(N):
+            m0 = MU[k, u0, t]
+            m1 = MU[k, u0 + 1, t]
+            for c in range(CHUNK):
+                nx[i, c] += lG[t, i, 0, c] * m0 + lG[t, i, 1, c] * m1
+    for i in range(S):
+        for c in range(CHUNK):
+            x[i, c] = nx[i, c]
+
+
 @numba.njit(cache=True, parallel=True, fastmath=True)
 def run_kernel(Phi_s, G_s, Ca_s, Da_s, Phi_a, G_a, Ca_a, Da_a, nterms,
                a_arr, b_arr, hf, hr,
@@ -126,18 +156,8 @@ def run_kernel(Phi_s, G_s, Ca_s, Da_s, Phi_a, G_a, Ca_a, Da_a, nterms,
                 le[c] = 0.0
             for k in range(k0, k1):
                 # outputs at sample k
-                for i in range(4):
-                    for c in range(CHUNK):
-                        gs[i, c] = lDs[i, 0, c] * UD[k, 0] + lDs[i, 1, c] * UD[k, 1]
-                    for j in range(8):
-                        for c in range(CHUNK):
-                            gs[i, c] += lCs[i, j, c] * xs[j, c]
-                for i in range(3):
-                    for c in range(CHUNK):
-                        ga[i, c] = lDa[i, 0, c] * UD[k, 2] + lDa[i, 1, c] * UD[k, 3]
-                    for j in range(6):
-                        for c in range(CHUNK):
-                            ga[i, c] += lCa[i, j, c] * xa[j, c]
+                _accelerations(gs, lCs, lDs, xs, UD, k, 0, 8, 4)
+                _accelerations(ga, lCa, lDa, xa, UD, k, 2, 6, 3)
                 y0, y1, y2, y3, y4 = Y[k, 0], Y[k, 1], Y[k, 2], Y[k, 3], Y[k, 4]
                 y5, y6, y7, y8, y9 = Y[k, 5], Y[k, 6], Y[k, 7], Y[k, 8], Y[k, 9]
                 for c in range(CHUNK):
@@ -172,35 +192,8 @@ def run_kernel(Phi_s, G_s, Ca_s, Da_s, Phi_a, G_a, Ca_a, Da_a, nterms,
                         err[r, c0 + c] = le[c]
                     break
                 # state update over the interval [k, k+1]
-                for i in range(8):
-                    for c in range(CHUNK):
-                        ns[i, c] = 0.0
-                    for j in range(8):
-                        for c in range(CHUNK):
-                            ns[i, c] += lPs[i, j, c] * xs[j, c]
-                    for t in range(N):
-                        m0 = MU[k, 0, t]
-                        m1 = MU[k, 1, t]
-                        for c in range(CHUNK):
-                            ns[i, c] += lGs[t, i, 0, c] * m0 + lGs[t, i, 1, c] * m1
-                for i in range(6):
-                    for c in range(CHUNK):
-                        na[i, c] = 0.0
-                    for j in range(6):
-                        for c in range(CHUNK):
-                            na[i, c] += lPa[i, j, c] * xa[j, c]
-                    for t in range(N):
-                        m2 = MU[k, 2, t]
-                        m3 = MU[k, 3, t]
-                        for c in range(CHUNK):
-                            na[i, c] += lGa[t, i, 0, c] * m2 + lGa[t, i, 1, c] * m3
-                for i in range(8):
-                    for c in range(CHUNK):
-                        xs[i, c] = ns[i, c]
-                # (the run's errors are stored after its last sample)
-                for i in range(6):
-                    for c in range(CHUNK):
-                        xa[i, c] = na[i, c]
+                _advance(xs, ns, lPs, lGs, MU, k, 0, 8, N)
+                _advance(xa, na, lPa, lGa, MU, k, 2, 6, N)
     return err
 
 

@@ -8,13 +8,13 @@ flat (0) outside the track's features. Analytic kinds also give ``h'`` and
 
 from __future__ import annotations
 
-import csv
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
+from .csvio import read_csv_rows
 from .errors import DataError
 
 KINDS = ("washboard", "herringbone", "chassis_twist", "flat", "profile")
@@ -172,22 +172,13 @@ class Track:
         path = Path(self.keys["file"])
         if not path.is_absolute() and self.base_dir is not None:
             path = self.base_dir / path
-        if not path.is_file():
-            raise DataError(f"{where}: profile file not found: {path}")
-        try:
-            with open(path, newline="") as f:
-                rows = list(csv.reader(f))
-        except (OSError, UnicodeDecodeError) as e:
-            raise DataError(f"{path}: cannot read profile: {e}") from None
-        if not rows:
-            raise DataError(f"{path}: empty profile file")
-        header = [c.strip() for c in rows[0]]
+        header, body = read_csv_rows(path, f"{where}: profile file not found: {path}", "profile")
         for c in ("x", "z_left", "z_right"):
             if c not in header:
                 raise DataError(f"{path}: missing column '{c}' (need x, z_left, z_right)")
         idx = [header.index(c) for c in ("x", "z_left", "z_right")]
         data = []
-        for ln, row in enumerate(rows[1:], start=2):
+        for ln, row in enumerate(body, start=2):
             if not row:
                 continue
             try:
