@@ -127,6 +127,12 @@ def test_simulate_all_kinds_matches_independent_fine_step(scenario_file, tmp_pat
     doc = tomllib.loads((out / "dataset.toml").read_text())
     assert [r["file"] for r in doc["runs"]] == [f"runs/{k}.csv" for k in "WHTFP"]
     assert "truth" not in doc
+    # the dataset stands on its own: the profile travels with it
+    assert doc["tracks"][4]["file"] == "profiles/pr.csv"
+    moved = tmp_path / "moved"
+    shutil.copytree(out, moved)
+    import rideid
+    assert len(rideid.load_dataset(moved).runs) == 5
     from rideid.files import load_scenario
     sc = load_scenario(scenario_file)
     P = np.array([DEFAULT_CAR[n] for n in DEFAULT_CAR])

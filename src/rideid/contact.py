@@ -124,7 +124,7 @@ def _lattice_max(H, circ):  # pragma: no cover - compiled
     return best, arg
 
 
-def envelope_grid(path: WheelPath, R: float, dx: float = 5e-4, n_fine: int = 21):
+def envelope_grid(path: WheelPath, R: float, dx: float = 5e-4, n_fine: int = 9):
     """The envelope of a wheel path tabulated on a uniform grid.
 
     The disc's footprint offsets are taken on the grid's own lattice, so the

@@ -134,6 +134,9 @@ class CostFunction:
         Run weights (normalised to sum 1); equal by default.
     use_kernel : bool
         Compiled kernel (default) or the plain NumPy reference.
+    space : ParameterSpace, optional
+        Free/fixed/derived parameters and bounds (default: from the dataset's
+        ``[known]`` and ``[bounds]``).
 
     Attributes
     ----------

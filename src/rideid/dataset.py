@@ -49,7 +49,19 @@ class Dataset:
 def load_dataset(path) -> Dataset:
     """Load and validate a dataset folder (or its ``dataset.toml``).
 
-    Raises :class:`rideid.DataError` naming the file, key or column at fault.
+    Parameters
+    ----------
+    path : str or Path
+        The dataset folder, or its ``dataset.toml``.
+
+    Returns
+    -------
+    Dataset
+
+    Raises
+    ------
+    DataError
+        Naming the file, key or column at fault.
     """
     man = load_manifest(path)
     data = {}

@@ -131,6 +131,10 @@ def identify(ds: Dataset, *, seed: int | None = None, population: int = DEFAULT_
     progress : callable, optional
         ``progress(info)`` each generation with a dict (generation, best,
         spread, evaluations, elapsed).
+    cost : CostFunction, optional
+        Reuse an existing cost function of ``ds`` (its weights are reset).
+    maps : SensitivityMaps, optional
+        Reuse parameter -> track maps (default: computed around the nominal car).
 
     Returns
     -------

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import shutil
 import warnings
 from dataclasses import dataclass
 from importlib import resources
@@ -97,6 +98,16 @@ def write_dataset(sc: Manifest, data: dict, out_dir, comment: str | None = None)
             write_run_csv(tmp / "runs" / f"{run.id}.csv", t, Y, CHANNELS)
             runs.append(RunSpec(run.id, run.track, run.speed, file=f"runs/{run.id}.csv"))
         doc = Manifest(sc.path, sc.name, sc.geometry, sc.known, sc.bounds, sc.tracks, runs).to_dataset_doc()
+        # measured road profiles travel with the dataset
+        for tab, tr in zip(doc["tracks"], sc.tracks.values()):
+            if tr.kind == "profile":
+                src = Path(tr.keys["file"])
+                if not src.is_absolute() and tr.base_dir is not None:
+                    src = tr.base_dir / src
+                dst = tmp / "profiles" / f"{tr.id}.csv"
+                dst.parent.mkdir(exist_ok=True)
+                shutil.copyfile(src, dst)
+                tab["file"] = f"profiles/{tr.id}.csv"
         write_toml(tmp / "dataset.toml", doc, comment)
         if sc.truth is not None:
             write_toml(tmp / "truth.toml", {"truth": {n: sc.truth[n] for n in NAMES}},

@@ -1,0 +1,28 @@
+"""The public namespace (SPEC §5) and its documentation."""
+
+import inspect
+
+import pytest
+
+import rideid
+
+DOCUMENTED = [rideid.identify, rideid.jade, rideid.load_dataset, rideid.CostFunction, rideid.JadeSolver,
+              rideid.modal_summary]
+
+
+def test_spec_entry_points_exist():
+    for name in ("load_dataset", "identify", "CostFunction", "jade"):
+        assert callable(getattr(rideid, name))
+    assert issubclass(rideid.DataError, ValueError)
+    assert issubclass(rideid.ScaleError, rideid.DataError)
+
+
+@pytest.mark.parametrize("obj", DOCUMENTED, ids=lambda o: o.__name__)
+def test_every_parameter_is_documented(obj):
+    doc = inspect.getdoc(obj) or ""
+    assert "Parameters" in doc, f"{obj.__name__} has no Parameters section"
+    target = obj.__init__ if inspect.isclass(obj) else obj
+    for name, p in inspect.signature(target).parameters.items():
+        if name in ("self",) or p.kind in (p.VAR_POSITIONAL, p.VAR_KEYWORD):
+            continue
+        assert name in doc, f"{obj.__name__}: parameter '{name}' is not documented"
