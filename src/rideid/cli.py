@@ -227,13 +227,19 @@ def cmd_sensitivity(args, out=None):
         baseline = ParameterSpace(ds.known, geom, man.bounds).nominal()
         from .model import CHANNELS
         mask = np.array([[c in ds.data[r.id].channels for c in CHANNELS] for r in ds.runs])
-    runs = [prepare_run(man.tracks[r.track], geom, r.speed, times[r.id]) for r in man.runs]
+    prog = Progress(args.quiet)
+    runs = []
+    for i, r in enumerate(man.runs):
+        prog.steps(i + 1, len(man.runs), "preparing run")
+        runs.append(prepare_run(man.tracks[r.track], geom, r.speed, times[r.id]))
+    prog.line("simulating 13 cars (baseline and +25 % per parameter) ...", force=True)
     sim = BatchSimulator(geom, runs)
     maps = compute_maps(sim, geom, baseline, [r.id for r in man.runs], mask)
     with atomic_output(args.out) as tmp:
         write_csvs(maps, tmp)
         (tmp / "tables.md").write_text(tables_markdown(maps))
         heatmaps(maps, tmp)
+    prog.done()
     print(f"sensitivity maps written to {args.out} (tables.md, 3 CSV, 3 PNG)", file=out)
     return 0
 
