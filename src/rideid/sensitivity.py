@@ -198,6 +198,7 @@ def heatmaps(m: SensitivityMaps, out_dir) -> list:
     for name, data, rows, cols, title, th, scale in specs:
         fig, ax = plt.subplots(figsize=(1.0 + 0.75 * len(cols), 1.2 + 0.38 * len(rows)))
         im = ax.imshow(data, aspect="auto", cmap="viridis")
+        ax.grid(False)
         ax.set_xticks(range(len(cols)), cols, rotation=45, ha="right", fontsize=8)
         ax.set_yticks(range(len(rows)), rows, fontsize=8)
         for i in range(data.shape[0]):
