@@ -42,7 +42,7 @@ from .sensitivity import SensitivityMaps, adaptive_weights, coefficient_of_varia
 
 DEFAULT_POPULATION = 64
 DEFAULT_GENERATIONS = 400
-DEFAULT_SPREAD_TOL = 1e-2
+DEFAULT_SPREAD_TOL = 2e-2
 
 
 @dataclass

@@ -222,6 +222,7 @@ def _map_figures(jobs):
     """Render figures on all cores (matplotlib is single-threaded); serial fallback."""
     import os
     n = min(len(jobs), os.cpu_count() or 1)
+    _plt()  # import matplotlib once here: forked workers inherit it
     if n > 1:
         try:
             import multiprocessing as mp
