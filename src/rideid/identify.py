@@ -43,6 +43,8 @@ from .sensitivity import SensitivityMaps, adaptive_weights, coefficient_of_varia
 DEFAULT_POPULATION = 64
 DEFAULT_GENERATIONS = 400
 DEFAULT_SPREAD_TOL = 2e-2
+#: Without a polish JADE itself must converge: a much tighter stop.
+DEFAULT_SPREAD_TOL_NO_POLISH = 1e-5
 
 
 @dataclass
@@ -110,7 +112,7 @@ def write_history(history, path):
 
 def identify(ds: Dataset, *, seed: int | None = None, population: int = DEFAULT_POPULATION,
              generations: int = DEFAULT_GENERATIONS, weights: str = "adaptive", polish: bool = True,
-             spread_tol: float = DEFAULT_SPREAD_TOL, progress=None, cost: CostFunction | None = None,
+             spread_tol: float | None = None, progress=None, cost: CostFunction | None = None,
              maps: SensitivityMaps | None = None) -> IdentificationResult:
     """Estimate the ride parameters of a dataset.
 
@@ -125,9 +127,10 @@ def identify(ds: Dataset, *, seed: int | None = None, population: int = DEFAULT_
         Adaptive track weights (paper eq. 12-13) or equal weights.
     polish : bool
         Refine with ``scipy.optimize.least_squares`` after JADE.
-    spread_tol : float
+    spread_tol : float, optional
         Stop JADE once every free parameter's coefficient of variation in the
-        population is below this (0 disables the early stop).
+        population is below this (0 disables the early stop). Default 2e-2
+        with the polish (it only needs the right basin), 1e-5 without.
     progress : callable, optional
         ``progress(info)`` each generation with a dict (generation, best,
         spread, evaluations, elapsed).
@@ -146,6 +149,8 @@ def identify(ds: Dataset, *, seed: int | None = None, population: int = DEFAULT_
 
 
 def _identify(ds, *, seed, population, generations, weights, polish, spread_tol, progress, cost, maps):
+    if spread_tol is None:
+        spread_tol = DEFAULT_SPREAD_TOL if polish else DEFAULT_SPREAD_TOL_NO_POLISH
     if weights not in ("adaptive", "fixed"):
         raise ArgumentError(f"weights must be 'adaptive' or 'fixed', got {weights!r}")
     if not isinstance(generations, int) or generations < 1:
