@@ -151,8 +151,6 @@ def parse_manifest(doc: dict, path: Path, scenario: bool) -> Manifest:
         known[k] = _number(v, f"{where}: [known] {k}", positive=True)
         if k == "a" and not known[k] < geom.wheelbase:
             raise DataError(f"{where}: [known] a = {known[k]} must be less than the wheelbase {geom.wheelbase}")
-    if "total_mass" in known and "m_s" in known:
-        pass  # both fine: the unsprung masses are then tied by total_mass
 
     bounds = {}
     for k, v in _table(doc, "bounds", where, required=False).items():

@@ -45,10 +45,6 @@ DESCRIPTIONS = {
     "k_tr": "tire vertical stiffness, one rear tire",
 }
 
-#: How each parameter scales under the identifiability transformation
-#: (every mass, inertia, stiffness and damping times s): exponent of s.
-SCALE_EXPONENT = {n: (0 if n == "a" else 1) for n in NAMES}
-
 #: Anchors accepted in ``[known]`` besides the twelve names.
 EXTRA_KNOWN = {"total_mass": "kg"}
 
@@ -131,18 +127,6 @@ def as_vector(values: dict[str, float]) -> np.ndarray:
     if missing:
         raise DataError(f"parameters missing: {', '.join(missing)}")
     return np.array([float(values[n]) for n in NAMES])
-
-
-def as_dict(vector) -> dict[str, float]:
-    """Vector in :data:`NAMES` order -> dict."""
-    v = np.asarray(vector, dtype=float).reshape(-1)
-    return {n: float(v[i]) for i, n in enumerate(NAMES)}
-
-
-def total_mass(P) -> np.ndarray:
-    """``m_s + 2 m_uf + 2 m_ur`` for a batch ``(n, 12)`` (or one vector)."""
-    P = np.asarray(P, dtype=float)
-    return P[..., 0] + 2 * P[..., INDEX["m_uf"]] + 2 * P[..., INDEX["m_ur"]]
 
 
 def check_parameters(P, geometry: Geometry, where: str = "parameters") -> np.ndarray:

@@ -240,7 +240,7 @@ def write_report(out_dir, ds=None, maps=None, cost=None) -> Path:
 
     from .cost import CostFunction, ParameterSpace
     from .dataset import load_dataset
-    from .params import NAMES, as_vector
+    from .params import DESCRIPTIONS, NAMES, as_vector
     from .sensitivity import P2T_STARS, compute_maps, stars
 
     out_dir = Path(out_dir)
@@ -289,7 +289,7 @@ def write_report(out_dir, ds=None, maps=None, cost=None) -> Path:
         d = res["parameters"][n]
         std = d.get("std")
         params.append({
-            "name": n, "value": d["value"], "unit": d["unit"],
+            "name": n, "meaning": DESCRIPTIONS[n], "value": d["value"], "unit": d["unit"],
             "std": std, "rel_std": (100 * std / abs(d["value"])) if std not in (None, 0.0) and d["value"] else None,
             "lower": d.get("lower"), "upper": d.get("upper"),
             "status": "known" if d.get("fixed") else ("derived" if d.get("derived") else "estimated"),
