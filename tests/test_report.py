@@ -58,6 +58,21 @@ def test_report_rebuild(fit_dir, capsys):
     assert before > 0
 
 
+def test_report_compares_adaptive_and_fixed(fit_dir, sim_dataset, tmp_path, capsys):
+    fixed = tmp_path / "fixed"
+    assert main(["identify", str(sim_dataset), "--out", str(fixed), "--seed", "1", "--quiet", "--generations", "20",
+                 "--weights", "fixed", "--no-report"]) == 0
+    assert not (fixed / "report.html").exists()
+    assert main(["report", str(fit_dir), "--compare", str(fixed)]) == 0
+    html = (fit_dir / "report.html").read_text()
+    assert 'id="compare"' in html and "adaptive (this) vs fixed (fixed)" in html
+    assert len(_images(html)) == 17
+    assert (fit_dir / "figures" / "compare.png").stat().st_size > 5000
+    # comparing with a folder that is not an identification is bad input
+    assert main(["report", str(fit_dir), "--compare", str(tmp_path)]) == 2
+    assert "result.json: not found" in capsys.readouterr().err
+
+
 def test_report_bad_folder(tmp_path, capsys):
     assert main(["report", str(tmp_path)]) == 2
     assert "result.json: not found" in capsys.readouterr().err

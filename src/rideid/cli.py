@@ -27,7 +27,8 @@ EXAMPLES = {
     "sensitivity": "example:\n  rideid sensitivity sim --out maps\n  rideid sensitivity scenario.toml --out maps",
     "score": "example:\n  rideid score fit/result.json sim/truth.toml",
     "demo": "example:\n  rideid demo --out rideid-demo",
-    "report": "example:\n  rideid report fit && open fit/report.html",
+    "report": "example:\n  rideid report fit\n  rideid identify sim --out fit-fixed --weights fixed --no-report\n"
+              "  rideid report fit --compare fit-fixed",
 }
 
 
@@ -112,6 +113,8 @@ def _parser() -> argparse.ArgumentParser:
 
     s = add("report", "(re)build report.html in an identification folder")
     s.add_argument("result_dir", metavar="RESULT_DIR")
+    s.add_argument("--compare", metavar="OTHER_DIR",
+                   help="another identification of the same dataset (e.g. --weights fixed) to overlay")
 
     s = add("sensitivity", "parameter/response/track sensitivity maps (paper Tables 4-7) as CSV, Markdown, PNG")
     s.add_argument("source", metavar="DATASET_OR_SCENARIO")
@@ -322,7 +325,7 @@ def cmd_demo(args, out=None):
 def cmd_report(args, out=None):
     out = out or sys.stdout
     from .report import write_report
-    path = write_report(args.result_dir)
+    path = write_report(args.result_dir, compare=args.compare)
     print(f"report written to {path}", file=out)
     return 0
 

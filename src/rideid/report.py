@@ -143,6 +143,34 @@ GROUPS = (("body accelerations", "m/s²", (0, 1, 2, 3)), ("axle accelerations", 
           ("rates", "rad/s", (8, 9)))
 
 
+def fig_compare(hist, label, other_hist, other_label, runs, out_dir):
+    """Two identifications of one dataset (e.g. adaptive vs fixed weights)."""
+    plt = _plt()
+    fig = plt.figure(figsize=(11, 6.4))
+    gs = fig.add_gridspec(2, 2, height_ratios=[1, 1])
+    a = fig.add_subplot(gs[:, 0])
+    for h, lab, ls in ((hist, label, "-"), (other_hist, other_label, "--")):
+        key = "best_cost_equal" if "best_cost_equal" in h[0] else "best_cost"
+        a.plot([x["evaluations"] for x in h], [np.log10(max(x[key], 1e-300)) for x in h], ls, label=lab)
+    a.set_xlabel("evaluations")
+    a.set_ylabel("log10 best cost (equal weights)")
+    a.set_title("convergence")
+    a.legend()
+    for row, (h, lab) in enumerate(((hist, label), (other_hist, other_label))):
+        ax = fig.add_subplot(gs[row, 1])
+        ax.stackplot([x["generation"] for x in h], np.array([[x.get(f"weight_{r}", 0.0) for r in runs] for x in h]).T,
+                     labels=runs)
+        ax.set_ylim(0, 1)
+        ax.set_title(f"track weights: {lab}")
+        if row == 1:
+            ax.set_xlabel("generation")
+            ax.legend(ncol=5, fontsize=6, loc="upper center", bbox_to_anchor=(0.5, -0.25))
+    fig.tight_layout()
+    return _save(fig, out_dir, "compare", f"Comparison: {label} vs {other_label}",
+                 "Best equal-weight cost against evaluations for both identifications (left) and their track "
+                 "weights per generation (right).")
+
+
 def fig_fit(run_id, t, Y, Ysim, out_dir):
     """Measured vs simulated per channel group, and residual spectra."""
     from .model import CHANNELS
@@ -234,8 +262,23 @@ def _map_figures(jobs):
     return [_fig_job(j) for j in jobs]
 
 
-def write_report(out_dir, ds=None, maps=None, cost=None) -> Path:
-    """Build ``report.html`` (and ``figures/*.png``) in an identification folder."""
+def _load_result(out_dir: Path) -> dict:
+    rpath = out_dir / "result.json"
+    if not rpath.is_file():
+        raise DataError(f"{rpath}: not found (is {out_dir} an identification folder?)")
+    try:
+        return json.loads(rpath.read_text())
+    except json.JSONDecodeError as e:
+        raise DataError(f"{rpath}: not valid JSON: {e}") from None
+
+
+def write_report(out_dir, ds=None, maps=None, cost=None, compare=None) -> Path:
+    """Build ``report.html`` (and ``figures/*.png``) in an identification folder.
+
+    ``compare`` names another identification folder of the same dataset (for
+    example ``--weights fixed`` beside an adaptive run); the report then
+    overlays their convergence and shows both runs' track weights.
+    """
     import jinja2
 
     from .cost import CostFunction, ParameterSpace
@@ -245,13 +288,21 @@ def write_report(out_dir, ds=None, maps=None, cost=None) -> Path:
 
     out_dir = Path(out_dir)
     rpath = out_dir / "result.json"
-    if not rpath.is_file():
-        raise DataError(f"{rpath}: not found (is {out_dir} an identification folder?)")
-    try:
-        res = json.loads(rpath.read_text())
-    except json.JSONDecodeError as e:
-        raise DataError(f"{rpath}: not valid JSON: {e}") from None
+    res = _load_result(out_dir)
     hist = read_history(out_dir / "history.csv")
+    other = None
+    if compare is not None:
+        compare = Path(compare)
+        ores = _load_result(compare)
+        ohist = read_history(compare / "history.csv")
+        if not ohist or not hist:
+            raise DataError(f"{compare}: history.csv missing or empty; nothing to compare")
+        if ores.get("dataset") != res.get("dataset"):
+            raise DataError(f"{compare}: identifies another dataset ({ores.get('dataset')}) than {out_dir} "
+                            f"({res.get('dataset')})")
+        lab = f"{res.get('weights', '?')} (this)"
+        olab = f"{ores.get('weights', '?')} ({compare.name})"
+        other = (lab, ohist, olab)
     if ds is None:
         dpath = res.get("dataset")
         if not dpath or not Path(dpath).exists():
@@ -272,7 +323,10 @@ def write_report(out_dir, ds=None, maps=None, cost=None) -> Path:
                  ("fig_weights", (hist, cf.run_ids, out_dir, res.get("weights", "adaptive")))]
     jobs += [("fig_fit", (r.id, ds.data[r.id].time, ds.data[r.id].matrix(), sims[r.id], out_dir)) for r in ds.runs]
     jobs.append(("heatmap_figures", (maps, out_dir)))
+    if other is not None:
+        jobs.append(("fig_compare", (hist, other[0], other[1], other[2], cf.run_ids, out_dir)))
     done = _map_figures(jobs)
+    compare_figs = [done.pop()] if other is not None else []
     heat_figs = done.pop()
     figs = done[:3] if hist else []
     fit_figs = done[3:] if hist else done
@@ -301,7 +355,7 @@ def write_report(out_dir, ds=None, maps=None, cost=None) -> Path:
     tpl = env.get_template("report.html.j2")
     text = tpl.render(
         title=f"rideid identification: {html.escape(ds.name)}", res=res, params=params, modal=res.get("modal") or {},
-        figures=figs, fit_figures=fit_figs, fit_rows=fit_rows, heat_figures=heat_figs, runs=maps.runs, p2t=p2t,
+        figures=figs + compare_figs, fit_figures=fit_figs, fit_rows=fit_rows, heat_figures=heat_figs, runs=maps.runs, p2t=p2t,
         known=res.get("known", {}), n_runs=len(ds.runs), dataset=str(ds.path),
     )
     out = out_dir / "report.html"
