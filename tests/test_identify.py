@@ -185,3 +185,21 @@ def test_a_light_van_is_identified_too(tmp_path, default_scenario):
     write_dataset(sc, data, tmp_path / "ds")
     res = rideid.identify(rideid.load_dataset(tmp_path / "ds"), seed=1)
     assert max_error(res, truth) < 2e-3
+
+
+@pytest.mark.parametrize("known, derived", [({"total_mass": 1093.3}, "m_s"),
+                                            ({"total_mass": 1093.3, "m_s": 965.7}, "m_ur"),
+                                            ({"total_mass": 1093.3, "m_s": 965.7, "m_ur": 31.9}, "m_uf")])
+def test_derived_mass_and_its_gradient(known, derived):
+    from rideid.params import DEFAULT_GEOMETRY, INDEX
+    sp = ParameterSpace(known, DEFAULT_GEOMETRY)
+    assert sp.derived == derived
+    x = np.array([DEFAULT_CAR[n] for n in sp.names]) * 1.01
+    P = sp.full(x)[0]
+    assert P[INDEX["m_s"]] + 2 * P[INDEX["m_uf"]] + 2 * P[INDEX["m_ur"]] == pytest.approx(1093.3, rel=1e-14)
+    g = sp.derived_gradient()
+    for j in range(len(sp.names)):
+        dx = np.zeros_like(x)
+        dx[j] = 1e-3
+        fd = (sp.full(x + dx)[0][INDEX[derived]] - P[INDEX[derived]]) / 1e-3
+        assert fd == pytest.approx(g[j], abs=1e-9)

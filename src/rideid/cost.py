@@ -29,10 +29,12 @@ from .dataset import Dataset, check_known_consistent, scale_anchor
 from .engine import BatchSimulator
 from .errors import ArgumentError, DataError
 from .model import CHANNEL_KIND, CHANNELS
-from .params import DEFAULT_CAR, INDEX, NAMES, default_bounds
+from .params import DEFAULT_CAR, DEFAULT_GEOMETRY, INDEX, NAMES, default_bounds
 from .simulate import prepare_run
 
 ENERGY_FLOOR = 0.01
+#: total_mass = sum of count * mass over these (one body, two corners per axle)
+MASS_COUNT = {"m_s": 1, "m_uf": 2, "m_ur": 2}
 
 
 def channel_weights(Y: np.ndarray) -> np.ndarray:
@@ -86,19 +88,19 @@ class ParameterSpace:
         for n, v in self.fixed.items():
             P[:, INDEX[n]] = v
         if self.derived is not None:
-            tm = self.known["total_mass"]
-            i = INDEX[self.derived]
-            if self.derived == "m_s":
-                P[:, i] = tm - 2 * P[:, INDEX["m_uf"]] - 2 * P[:, INDEX["m_ur"]]
-            elif self.derived == "m_ur":
-                P[:, i] = (tm - P[:, INDEX["m_s"]] - 2 * P[:, INDEX["m_uf"]]) / 2
-            else:
-                P[:, i] = (tm - P[:, INDEX["m_s"]] - 2 * P[:, INDEX["m_ur"]]) / 2
+            others = [n for n in MASS_COUNT if n != self.derived]
+            rest = sum(MASS_COUNT[n] * P[:, INDEX[n]] for n in others)
+            P[:, INDEX[self.derived]] = (self.known["total_mass"] - rest) / MASS_COUNT[self.derived]
         return P
 
-    def free(self, P) -> np.ndarray:
-        P = np.atleast_2d(P)
-        return P[:, [INDEX[n] for n in self.names]]
+    def derived_gradient(self) -> np.ndarray:
+        """d(derived mass)/d(free parameters), shape (d,); zeros if nothing is derived."""
+        g = np.zeros(len(self.names))
+        if self.derived is not None:
+            for n in MASS_COUNT:
+                if n != self.derived and n in self.names:
+                    g[self.names.index(n)] = -MASS_COUNT[n] / MASS_COUNT[self.derived]
+        return g
 
     def valid(self, P) -> np.ndarray:
         """Rows that are physical: positive masses etc., 0 < a < wheelbase."""
@@ -113,7 +115,7 @@ class ParameterSpace:
         anchor, clipped into the bounds (used for sensitivity maps and as a
         reference point, never as a starting guess)."""
         base = np.array([DEFAULT_CAR[n] for n in NAMES])
-        base[INDEX["a"]] = DEFAULT_CAR["a"] / 2.579 * self.geometry.wheelbase
+        base[INDEX["a"]] = DEFAULT_CAR["a"] / DEFAULT_GEOMETRY.wheelbase * self.geometry.wheelbase
         anchor = scale_anchor(self.known)
         if anchor == "total_mass":
             s = self.known["total_mass"] / (base[0] + 2 * base[INDEX["m_uf"]] + 2 * base[INDEX["m_ur"]])

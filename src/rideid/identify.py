@@ -229,7 +229,7 @@ def _identify(ds, *, seed, population, generations, weights, polish, spread_tol,
             d["lower"], d["upper"] = float(cf.bounds[j, 0]), float(cf.bounds[j, 1])
             d["std"] = None if not np.isfinite(std[j]) else float(std[j])
         elif n == space.derived:
-            d["std"] = _derived_std(space, cf.names, polish_info)
+            d["std"] = _derived_std(space, polish_info)
             d["lower"] = d["upper"] = None  # follows from the anchor: never searched
         else:
             d["std"] = 0.0
@@ -281,15 +281,11 @@ def _polish(cf: CostFunction, x0, weights):
     return x, info, std
 
 
-def _derived_std(space, names, polish_info):
+def _derived_std(space, polish_info):
     if polish_info is None or space.derived is None:
         return None
     cov = np.array(polish_info["covariance"])
     if not np.all(np.isfinite(cov)):
         return None
-    g = np.zeros(len(names))
-    coeffs = {"m_s": {"m_uf": -2, "m_ur": -2}, "m_ur": {"m_s": -0.5, "m_uf": -1}, "m_uf": {"m_s": -0.5, "m_ur": -1}}
-    for n, cval in coeffs[space.derived].items():
-        if n in names:
-            g[names.index(n)] = cval
+    g = space.derived_gradient()
     return float(np.sqrt(max(g @ cov @ g, 0.0)))
