@@ -321,7 +321,8 @@ def write_report(out_dir, ds=None, maps=None, cost=None, compare=None) -> Path:
         names = [k[len("cv_"):] for k in hist[0] if k.startswith("cv_")]
         jobs += [("fig_convergence", (hist, out_dir)), ("fig_spread", (hist, names, out_dir)),
                  ("fig_weights", (hist, cf.run_ids, out_dir, res.get("weights", "adaptive")))]
-    jobs += [("fig_fit", (r.id, ds.data[r.id].time, ds.data[r.id].matrix(), sims[r.id], out_dir)) for r in ds.runs]
+    measured = {r.id: ds.data[r.id].matrix() for r in ds.runs}
+    jobs += [("fig_fit", (r.id, ds.data[r.id].time, measured[r.id], sims[r.id], out_dir)) for r in ds.runs]
     jobs.append(("heatmap_figures", (maps, out_dir)))
     if other is not None:
         jobs.append(("fig_compare", (hist, other[0], other[1], other[2], cf.run_ids, out_dir)))
@@ -332,8 +333,7 @@ def write_report(out_dir, ds=None, maps=None, cost=None, compare=None) -> Path:
     fit_figs = done[3:] if hist else done
     fit_rows = []
     for r in ds.runs:
-        Y = ds.data[r.id].matrix()
-        st = fit_statistics(Y, sims[r.id])
+        st = fit_statistics(measured[r.id], sims[r.id])
         fit_rows.append({"run": r.id, "track": r.track, "speed": r.speed, "weight": res["track_weights"].get(r.id),
                          "worst": max(st.values()) if st else float("nan"),
                          "median": float(np.median(list(st.values()))) if st else float("nan")})
