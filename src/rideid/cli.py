@@ -186,7 +186,8 @@ def run_identify(ds_path, out_dir, *, seed, population=None, generations=None, w
             from .report import write_report
             if not quiet:
                 prog.line("writing the report ...", force=True)
-            write_report(tmp, ds=ds, maps=res.maps, cost=cost)
+            # estimated starts move the measured data: then the report rebuilds the cost on the final data
+            write_report(tmp, ds=ds, maps=res.maps, cost=None if ds.auto_start_runs() else cost)
             prog.done()
     print(_summary_table(res), file=out)
     print(f"cost {res.cost:.4g}, {res.generations} generations, {res.evaluations} evaluations, "
@@ -234,7 +235,8 @@ def cmd_sensitivity(args, out=None):
     runs = []
     for i, r in enumerate(man.runs):
         prog.steps(i + 1, len(man.runs), "preparing run")
-        runs.append(prepare_run(man.tracks[r.track], geom, r.speed, times[r.id]))
+        dist = None if is_scenario else ds.data[r.id].distance
+        runs.append(prepare_run(man.tracks[r.track], geom, r.speed, times[r.id], distance=dist))
     prog.line("simulating 13 cars (baseline and +25 % per parameter) ...", force=True)
     sim = BatchSimulator(geom, runs)
     maps = compute_maps(sim, geom, baseline, [r.id for r in man.runs], mask)

@@ -25,12 +25,11 @@ from __future__ import annotations
 
 import numpy as np
 
-from .dataset import Dataset, check_known_consistent, scale_anchor
+from .dataset import Dataset, check_known_consistent, prepare_inputs, scale_anchor
 from .engine import BatchSimulator
 from .errors import ArgumentError, DataError
 from .model import CHANNEL_KIND, CHANNELS
 from .params import DEFAULT_CAR, DEFAULT_GEOMETRY, INDEX, NAMES, default_bounds
-from .simulate import prepare_run
 
 ENERGY_FLOOR = 0.01
 #: total_mass = sum of count * mass over these (one body, two corners per axle)
@@ -154,11 +153,9 @@ class CostFunction:
         self.names = list(self.space.names)
         self.bounds = self.space.bounds
         self.run_ids = [r.id for r in ds.runs]
-        runs, Ys, Ws = [], [], []
+        runs, Ys, Ws = prepare_inputs(ds), [], []
         for r in ds.runs:
-            rd = ds.data[r.id]
-            runs.append(prepare_run(ds.manifest.tracks[r.track], ds.geometry, r.speed, rd.time))
-            Y = rd.matrix()
+            Y = ds.data[r.id].matrix()
             Ws.append(channel_weights(Y))
             Ys.append(np.nan_to_num(Y, nan=0.0))
         self.sim = BatchSimulator(ds.geometry, runs)
@@ -196,19 +193,29 @@ class CostFunction:
         """Costs ``(n,)`` for free-parameter rows ``X`` of shape ``(n, d)``."""
         return self.combine(self.run_errors(X))
 
-    def residuals(self, X, weights=None) -> np.ndarray:
-        """Stacked weighted residuals ``(n, m)`` whose squared sum is ``J``."""
+    def residuals(self, X, weights=None, Y=None) -> np.ndarray:
+        """Stacked weighted residuals ``(n, m)`` whose squared sum is ``J``.
+
+        ``Y`` replaces the measured data (same layout as :attr:`Y`), e.g. the
+        data re-read at other start times. The layout: run by run, time-major,
+        the run's used channels (``W[r] > 0``) within each sample.
+        """
         P = self.space.full(X)
         outs = self.sim.outputs(P)
         w = self.weights if weights is None else np.asarray(weights, dtype=float)
+        Y = self.Y if Y is None else Y
         parts = []
         for ri, (s, e) in enumerate(zip(self.sim.run_start[:-1], self.sim.run_start[1:])):
-            cols = np.nonzero(self.W[ri] > 0)[0]
-            sc = np.sqrt(w[ri] * self.W[ri, cols])
-            d = (outs[ri][:, :, cols] - self.Y[None, s:e, cols]) * sc
+            cols, sc = self.residual_scale(ri, w)
+            d = (outs[ri][:, :, cols] - Y[None, s:e, cols]) * sc
             parts.append(d.reshape(P.shape[0], -1))
         self.nfev += P.shape[0]
         return np.concatenate(parts, axis=1)
+
+    def residual_scale(self, ri, weights):
+        """Used channel indices of run ``ri`` and their residual scale ``sqrt(w_r W_rc)``."""
+        cols = np.nonzero(self.W[ri] > 0)[0]
+        return cols, np.sqrt(weights[ri] * self.W[ri, cols])
 
     def simulate(self, params) -> dict[str, np.ndarray]:
         """Simulated channels ``(n_time, 10)`` per run for one full parameter vector (12)."""

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -20,10 +20,16 @@ class Dataset:
     ----------
     manifest : Manifest
     data : dict run id -> RunData
+        Model-ready data: uniform time relative to the run's start (the
+        front axle at x = 0), SI channels.
+    measured : dict run id -> MeasuredRun
+        Runs read through :mod:`rideid.measured` (logger files, channel maps,
+        preprocessing); SPEC §3 CSVs taken as they are have no entry.
     """
 
     manifest: Manifest
     data: dict[str, RunData]
+    measured: dict = field(default_factory=dict)
 
     @property
     def geometry(self) -> Geometry:
@@ -45,14 +51,45 @@ class Dataset:
     def path(self) -> Path:
         return self.manifest.base_dir
 
+    def preprocessing(self) -> dict:
+        """What was done to each run's file (for ``result.json`` and the report)."""
+        out = {}
+        for r in self.runs:
+            mr = self.measured.get(r.id)
+            if mr is None:
+                rd = self.data[r.id]
+                out[r.id] = {"file": str(r.file), "format": "CSV (SPEC channels, SI units, taken as it is)",
+                             "fs": rd.fs, "samples": int(rd.time.size),
+                             "start": {"value": 0.0, "source": "SPEC: time 0 is the front axle at x = 0"}}
+            else:
+                rec = dict(mr.record)
+                rec["samples"] = int(mr.grid.size)
+                rec["model_time"] = [float(mr.grid[0]), float(mr.grid[-1])]
+                rec["start"] = dict(mr.record.get("start", {}), value=mr.start)
+                rec["warnings"] = list(mr.warnings)
+                out[r.id] = rec
+        return out
 
-def load_dataset(path) -> Dataset:
+    def auto_start_runs(self) -> list[str]:
+        return [rid for rid, mr in self.measured.items() if mr.auto_start]
+
+
+def load_dataset(path, starts: dict[str, float] | None = None) -> Dataset:
     """Load and validate a dataset folder (or its ``dataset.toml``).
+
+    SPEC §3 CSVs are taken as they are. Runs that need more (logger formats,
+    channel maps, units, gravity, resampling, start alignment, a speed
+    channel: :mod:`rideid.measured`) are preprocessed, and runs whose start is
+    not given are aligned with a nominal car; ``Dataset.preprocessing()``
+    says what was done.
 
     Parameters
     ----------
     path : str or Path
         The dataset folder, or its ``dataset.toml``.
+    starts : dict, optional
+        Run id -> start (file time, s) to use instead of estimating it, e.g.
+        the starts a previous identification settled on (``result.json``).
 
     Returns
     -------
@@ -63,15 +100,46 @@ def load_dataset(path) -> Dataset:
     DataError
         Naming the file, key or column at fault.
     """
+    from .measured import estimate_start, load_measured_run, nominal_car
+
     man = load_manifest(path)
-    data = {}
+    data, measured = {}, {}
     for run in man.runs:
+        if man.is_measured(run):
+            mr = load_measured_run(run, man)
+            measured[run.id] = mr
+            continue
         f = Path(run.file)
         if not f.is_absolute():
             f = man.base_dir / f
-        rd = read_run_csv(f)
-        data[run.id] = rd
-    return Dataset(man, data)
+        data[run.id] = read_run_csv(f)
+    for rid, mr in measured.items():
+        run = man.run(rid)
+        track = man.tracks[run.track]
+        if starts and rid in starts:
+            s = float(starts[rid])
+            mr.record["start"] = {"source": "given (from a previous identification)"}
+        elif not mr.auto_start:
+            s = mr.options["start"]
+            mr.record["start"] = {"source": "given"}
+        else:
+            s, rho = estimate_start(mr, nominal_car(man.geometry), man.geometry, track)
+            mr.record["start"] = {"source": "estimated (nominal car)", "nominal_estimate": s, "correlation": rho}
+        mr.make_grid(s)
+        data[rid] = mr.run_data(s)
+    data = {r.id: data[r.id] for r in man.runs}
+    return Dataset(man, data, measured)
+
+
+def prepare_inputs(ds: Dataset) -> list:
+    """:class:`rideid.simulate.RunInput` of every run (wheel inputs and their moments)."""
+    from .simulate import prepare_run
+
+    out = []
+    for r in ds.runs:
+        rd = ds.data[r.id]
+        out.append(prepare_run(ds.manifest.tracks[r.track], ds.geometry, r.speed, rd.time, distance=rd.distance))
+    return out
 
 
 def scale_anchor(known: dict[str, float], where: str = "[known]") -> str:

@@ -21,13 +21,15 @@ import tomli_w
 
 from .csvio import read_csv_rows
 from .errors import DataError, DataWarning
+from .measured import RUN_PREPROCESS_KEYS, parse_channel_map, parse_csv_options, parse_preprocess
 from .model import CHANNELS
 from .params import EXTRA_KNOWN, INDEX, NAMES, Geometry, check_parameters
 from .tracks import Track
 
-TOP_KEYS_DATASET = ("name", "vehicle", "known", "bounds", "tracks", "runs")
-TOP_KEYS_SCENARIO = TOP_KEYS_DATASET + ("truth",)
-RUN_KEYS_DATASET = ("id", "track", "speed", "file")
+TOP_KEYS_SCENARIO = ("name", "vehicle", "known", "bounds", "tracks", "runs", "truth")
+#: a dataset may also describe how its files were logged (rideid.measured)
+TOP_KEYS_DATASET = ("name", "vehicle", "known", "bounds", "channels", "preprocess", "csv", "tracks", "runs")
+RUN_KEYS_DATASET = ("id", "track", "speed", "file", "channels") + RUN_PREPROCESS_KEYS
 RUN_KEYS_SCENARIO = ("id", "track", "speed", "fs", "duration")
 
 
@@ -69,18 +71,27 @@ class RunSpec:
 
     id: str
     track: str
-    speed: float
+    speed: float | None
     file: str | None = None
     fs: float | None = None
     duration: float | None = None
+    #: measured-data options of this run (rideid.measured): its channel map and preprocessing keys
+    channels: dict = field(default_factory=dict)
+    options: dict = field(default_factory=dict)
 
     def to_table(self) -> dict:
-        d = {"id": self.id, "track": self.track, "speed": self.speed}
+        d = {"id": self.id, "track": self.track}
+        if self.speed is not None:
+            d["speed"] = self.speed
         if self.file is not None:
             d["file"] = self.file
         else:
             d["fs"] = self.fs
             d["duration"] = self.duration
+        if self.channels:
+            d["channels"] = {k: e.to_table() for k, e in self.channels.items()}
+        for k, v in self.options.items():
+            d[k] = list(v) if isinstance(v, tuple) else v
         return d
 
 
@@ -96,7 +107,15 @@ class Manifest:
     tracks: dict[str, Track]
     runs: list[RunSpec]
     truth: dict[str, float] | None = None
-    extra: dict = field(default_factory=dict)
+    channel_map: dict = field(default_factory=dict)
+    preprocess: dict = field(default_factory=dict)
+    csv_options: object = None
+    csv_table: dict = field(default_factory=dict)
+
+    def is_measured(self, run: RunSpec) -> bool:
+        """Whether a run goes through rideid.measured (anything beyond a SPEC §3 CSV taken as it is)."""
+        return bool(self.channel_map or self.preprocess or self.csv_table or run.channels or run.options
+                    or run.speed is None or (run.file is not None and not run.file.lower().endswith(".csv")))
 
     @property
     def base_dir(self) -> Path:
@@ -115,6 +134,12 @@ class Manifest:
             doc["known"] = dict(self.known)
         if self.bounds:
             doc["bounds"] = {k: list(v) for k, v in self.bounds.items()}
+        if self.channel_map:
+            doc["channels"] = {k: e.to_table() for k, e in self.channel_map.items()}
+        if self.preprocess:
+            doc["preprocess"] = {k: list(v) if isinstance(v, tuple) else v for k, v in self.preprocess.items()}
+        if self.csv_table:
+            doc["csv"] = dict(self.csv_table)
         doc["tracks"] = [t.to_table() for t in self.tracks.values()]
         doc["runs"] = [r.to_table() for r in self.runs]
         return doc
@@ -204,7 +229,8 @@ def parse_manifest(doc: dict, path: Path, scenario: bool) -> Manifest:
                 if k == "file" and scenario:
                     hint = " (a scenario run gives 'fs' and 'duration' instead of a file)"
                 raise DataError(f"{w}: unknown key '{k}'{hint}; allowed: {', '.join(run_keys)}")
-        for k in run_keys:
+        required = RUN_KEYS_SCENARIO if scenario else ("id", "track", "file")
+        for k in required:
             if k not in r:
                 raise DataError(f"{w}: missing key '{k}'")
         if rid in seen:
@@ -212,7 +238,7 @@ def parse_manifest(doc: dict, path: Path, scenario: bool) -> Manifest:
         seen.add(rid)
         if r["track"] not in tracks:
             raise DataError(f"{w}: unknown track '{r['track']}'; tracks are: {', '.join(tracks)}")
-        speed = _number(r["speed"], f"{w}: speed", positive=True)
+        speed = _number(r["speed"], f"{w}: speed", positive=True) if "speed" in r else None
         if scenario:
             fs = _number(r["fs"], f"{w}: fs", positive=True)
             dur = _number(r["duration"], f"{w}: duration", positive=True)
@@ -222,7 +248,10 @@ def parse_manifest(doc: dict, path: Path, scenario: bool) -> Manifest:
         else:
             if not isinstance(r["file"], str):
                 raise DataError(f"{w}: key 'file' must be a path string")
-            runs.append(RunSpec(rid, r["track"], speed, file=r["file"]))
+            chans = parse_channel_map(r["channels"], f"{w}: channels") if "channels" in r else {}
+            opts = parse_preprocess({k: v for k, v in r.items() if k in RUN_PREPROCESS_KEYS}, w,
+                                    RUN_PREPROCESS_KEYS)
+            runs.append(RunSpec(rid, r["track"], speed, file=r["file"], channels=chans, options=opts))
 
     truth = None
     if scenario:
@@ -235,7 +264,16 @@ def parse_manifest(doc: dict, path: Path, scenario: bool) -> Manifest:
         for k, v in known.items():
             if k in truth and abs(truth[k] - v) > 1e-9 * abs(v):
                 raise DataError(f"{where}: [known] {k} = {v} disagrees with [truth] {k} = {truth[k]}")
-    return Manifest(path, name, geom, known, bounds, tracks, runs, truth)
+    man = Manifest(path, name, geom, known, bounds, tracks, runs, truth)
+    if not scenario:
+        if "channels" in doc:
+            man.channel_map = parse_channel_map(doc["channels"], f"{where}: [channels]")
+        if "preprocess" in doc:
+            man.preprocess = parse_preprocess(doc["preprocess"], f"{where}: [preprocess]")
+        if "csv" in doc:
+            man.csv_options = parse_csv_options(doc["csv"], f"{where}: [csv]")
+            man.csv_table = dict(doc["csv"])
+    return man
 
 
 def parse_truth(tab: dict, where: str, geom: Geometry | None) -> dict[str, float]:
@@ -284,6 +322,8 @@ class RunData:
 
     time: np.ndarray
     channels: dict[str, np.ndarray]
+    #: ``distance(t)``: front-axle distance past x = 0 at model time t (varying speed); None for constant speed
+    distance: object = None
 
     @property
     def fs(self) -> float:

@@ -16,7 +16,15 @@
    one batch) minimises the **equal-weight** cost from the best individual.
    The adaptive weights steer the search; the estimate is defined by the
    equal-weight objective so that adaptive and fixed runs are comparable.
-6. Standard errors: ``cov = s^2 (J^T J)^-1`` at the optimum with
+6. Runs whose start was estimated (:mod:`rideid.measured`, ``start =
+   "auto"``) were aligned with a nominal car; after the polish their starts
+   become unknowns of the polish beside the parameters (the data are re-read
+   at each start; ``ds.data`` is updated in place, the estimates and their
+   standard errors go to ``result.json``). Runs with a speed channel, whose
+   wheel inputs depend on the start, are re-simulated and polished again
+   until no start moves by more than 1e-3 of a sample interval (at most 5
+   rounds). Without the polish the nominal alignment stands.
+7. Standard errors: ``cov = s^2 (J^T J)^-1`` at the optimum with
    ``s^2 = RSS / (m - d)``, assuming white residuals (an optimistic lower
    bound when residuals are correlated or the model is wrong).
 """
@@ -69,6 +77,7 @@ class IdentificationResult:
     polish: dict | None
     stop: str
     history: list[dict] = field(default_factory=list)
+    preprocessing: dict = field(default_factory=dict)
     modal: dict | None = None
     dataset: str = ""
     maps: SensitivityMaps | None = None
@@ -89,6 +98,7 @@ class IdentificationResult:
             "stop": self.stop,
             "polish": self.polish,
             "modal": self.modal,
+            "preprocessing": self.preprocessing,
             "dataset": str(Path(self.dataset).resolve()) if self.dataset else "",
             "history_file": "history.csv",
         }
@@ -214,7 +224,9 @@ def _identify(ds, *, seed, population, generations, weights, polish, spread_tol,
     equal = np.full(n_runs, 1.0 / n_runs)
     polish_info = None
     std = np.full(len(cf.names), np.nan)
-    if polish:
+    if polish and ds.auto_start_runs():
+        x_best, polish_info, std, cf = _polish_aligned(ds, cf, x_best, equal)
+    elif polish:
         x_best, polish_info, std = _polish(cf, x_best, equal)
     final_E = cf.run_errors(x_best[None])[:, 0]
     P = space.full(x_best[None])[0]
@@ -239,46 +251,140 @@ def _identify(ds, *, seed, population, generations, weights, polish, spread_tol,
         cost=float(equal @ final_E), generations=solver.nit, evaluations=cf.nfev, wall_time_s=wall,
         seed=seed, track_weights={rid: float(w[r]) for r, rid in enumerate(cf.run_ids)},
         weights_mode=weights, polish=polish_info, stop=stop, history=history,
-        modal=modal_summary(P, ds.geometry), dataset=str(ds.path), maps=maps)
+        modal=modal_summary(P, ds.geometry), dataset=str(ds.path), maps=maps,
+        preprocessing=ds.preprocessing())
 
 
-def _polish(cf: CostFunction, x0, weights):
+def _polish(cf: CostFunction, x0, weights, align=None):
+    """Least squares from ``x0``; ``align`` = [(run index, MeasuredRun, start)] adds those starts as unknowns.
+
+    A start enters through the measured data, re-read at ``start + t`` (its
+    Jacobian column is minus the data's time derivative); the model's wheel
+    inputs stay put (exact for constant speed; with a speed channel the
+    outer loop in :func:`_polish_aligned` accounts for the rest).
+    """
     lo, hi = cf.bounds[:, 0], cf.bounds[:, 1]
     span = hi - lo
+    d = len(cf.names)
+    align = align or []
+    starts = [cf.sim.run_start[ri] for ri, _, _ in align]
 
     def to_x(z):
         return lo + span * z
 
-    def fun(z):
-        return cf.residuals(to_x(z)[None], weights)[0]
+    def start_of(v, k):
+        ri, mr, s0 = align[k]
+        return s0 + v[d + k] / mr.fs
 
-    def jac(z):
+    def measured(v):
+        if not align:
+            return None
+        Y = cf.Y.copy()
+        for k, (ri, mr, _) in enumerate(align):
+            a, b = cf.sim.run_start[ri], cf.sim.run_start[ri + 1]
+            Y[a:b] = np.nan_to_num(mr.measured_at(start_of(v, k)), nan=0.0)
+        return Y
+
+    def fun(v):
+        return cf.residuals(to_x(v[:d])[None], weights, Y=measured(v))[0]
+
+    def jac(v):
         h = 1e-7
-        Z = np.tile(z, (z.size + 1, 1))
+        z = v[:d]
+        Z = np.tile(z, (d + 1, 1))
         steps = np.where(z + h <= 1, h, -h)
-        Z[1:][np.arange(z.size), np.arange(z.size)] += steps
-        R = cf.residuals(to_x(Z), weights)
-        return ((R[1:] - R[0]) / steps[:, None]).T
+        Z[1:][np.arange(d), np.arange(d)] += steps
+        R = cf.residuals(to_x(Z), weights, Y=measured(v))
+        J = np.zeros((R.shape[1], v.size))
+        J[:, :d] = ((R[1:] - R[0]) / steps[:, None]).T
+        offsets = np.cumsum([0] + [(e - s) * cf.residual_scale(ri, weights)[0].size
+                                   for ri, (s, e) in enumerate(zip(cf.sim.run_start[:-1], cf.sim.run_start[1:]))])
+        for k, (ri, mr, _) in enumerate(align):
+            cols, sc = cf.residual_scale(ri, weights)
+            dY = np.nan_to_num(mr.measured_at(start_of(v, k), nu=1), nan=0.0)[:, cols]
+            J[offsets[ri]:offsets[ri + 1], d + k] = (-dY * sc / mr.fs).ravel()
+        return J
 
     z0 = np.clip((x0 - lo) / span, 0, 1)
-    sol = least_squares(fun, z0, jac=jac, bounds=(0, 1), method="trf", x_scale="jac",
+    v0 = np.concatenate([z0, np.zeros(len(align))])
+    blo = np.concatenate([np.zeros(d), np.full(len(align), -5.0)])
+    bhi = np.concatenate([np.ones(d), np.full(len(align), 5.0)])
+    sol = least_squares(fun, v0, jac=jac, bounds=(blo, bhi), method="trf", x_scale="jac",
                         ftol=1e-15, xtol=1e-12, gtol=1e-15, max_nfev=100)
     J = sol.jac
-    m, d = J.shape
+    m, n = J.shape
     rss = float(sol.fun @ sol.fun)
-    s2 = rss / max(m - d, 1)
+    s2 = rss / max(m - n, 1)
+    scale = np.concatenate([span, [1.0 / mr.fs for _, mr, _ in align]])
     try:
-        cov_z = s2 * np.linalg.inv(J.T @ J)
-        cov = cov_z * np.outer(span, span)
-        std = np.sqrt(np.clip(np.diag(cov), 0, None))
+        cov_all = s2 * np.linalg.inv(J.T @ J) * np.outer(scale, scale)
+        std_all = np.sqrt(np.clip(np.diag(cov_all), 0, None))
     except np.linalg.LinAlgError:
-        cov = np.full((d, d), np.nan)
-        std = np.full(d, np.nan)
-    x = to_x(sol.x)
+        cov_all = np.full((n, n), np.nan)
+        std_all = np.full(n, np.nan)
+    x = to_x(sol.x[:d])
     info = {"success": bool(sol.success), "message": sol.message, "nfev": int(sol.nfev),
-            "cost_before": float(np.sum(fun(z0) ** 2)), "cost_after": 2 * float(sol.cost),
-            "covariance": cov.tolist(), "names": list(cf.names)}
-    return x, info, std
+            "cost_before": float(np.sum(fun(v0) ** 2)), "cost_after": 2 * float(sol.cost),
+            "covariance": cov_all[:d, :d].tolist(), "names": list(cf.names)}
+    if align:
+        info["starts"] = {mr.run_id: {"value": start_of(sol.x, k), "std": float(std_all[d + k])}
+                          for k, (_, mr, _) in enumerate(align)}
+    return x, info, std_all[:d]
+
+
+#: re-estimate the starts until none moves by more than this fraction of a sample interval
+REALIGN_TOL = 1e-3
+REALIGN_MAX = 5
+
+
+def _polish_aligned(ds, cf, x_best, equal):
+    """Polish parameters and the estimated starts together; with speed channels, re-simulate and repeat."""
+    rounds = []
+    for _ in range(REALIGN_MAX):
+        align = [(cf.run_ids.index(rid), ds.measured[rid], ds.measured[rid].start) for rid in ds.auto_start_runs()]
+        x_best, info, std = _polish(cf, x_best, equal, align)
+        changes = {}
+        for rid, st in info["starts"].items():
+            mr = ds.measured[rid]
+            changes[rid] = st["value"] - mr.start
+            ds.data[rid] = mr.run_data(st["value"])
+            mr.record["start"].update({"source": "estimated with the parameters (least squares)",
+                                       "std": st["std"]})
+        worst = max(abs(v) * ds.measured[rid].fs for rid, v in changes.items())
+        rounds.append({"max_change_samples": worst})
+        varying = [rid for rid in changes if ds.measured[rid].distance is not None]
+        slipped = _cycle_check(ds, cf.space.full(x_best[None])[0])
+        if slipped:
+            rounds[-1]["cycle_slips"] = slipped
+        elif not varying or worst < REALIGN_TOL:
+            break
+        # the wheel inputs of speed-channel runs depend on the start: rebuild them and polish again
+        nfev = cf.nfev
+        cf = CostFunction(ds, space=cf.space)
+        cf.nfev = nfev
+    info["alignment_rounds"] = rounds
+    return x_best, info, std, cf
+
+
+def _cycle_check(ds, P) -> dict:
+    """Constant-speed auto runs: redo the all-lags correlation with the identified car.
+
+    On a periodic track the nominal car may have picked a neighbouring cycle
+    (the polish only moves a start by a few samples). Where the identified
+    car's correlation peaks more than two samples away, take its start.
+    """
+    from .measured import _coarse
+
+    slipped = {}
+    for rid in ds.auto_start_runs():
+        mr = ds.measured[rid]
+        if mr.distance is not None:
+            continue
+        s = _coarse(mr, P, ds.geometry, ds.manifest.tracks[ds.manifest.run(rid).track])
+        if abs(s - mr.start) > 2.0 / mr.fs:
+            slipped[rid] = s - mr.start
+            ds.data[rid] = mr.run_data(s)
+    return slipped
 
 
 def _derived_std(space, polish_info):

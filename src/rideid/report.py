@@ -307,7 +307,11 @@ def write_report(out_dir, ds=None, maps=None, cost=None, compare=None) -> Path:
         dpath = res.get("dataset")
         if not dpath or not Path(dpath).exists():
             raise DataError(f"{rpath}: the dataset it names ({dpath!r}) is not found; the report needs it")
-        ds = load_dataset(dpath)
+        pre = res.get("preprocessing") or {}
+        starts = {rid: rec["start"]["value"] for rid, rec in pre.items()
+                  if isinstance(rec, dict) and isinstance(rec.get("start"), dict)
+                  and rec["start"].get("value") is not None}
+        ds = load_dataset(dpath, starts=starts)
     cf = cost or CostFunction(ds)
     P = as_vector({n: res["parameters"][n]["value"] for n in NAMES})
     sims = cf.simulate(P)
@@ -338,6 +342,8 @@ def write_report(out_dir, ds=None, maps=None, cost=None, compare=None) -> Path:
                          "worst": max(st.values()) if st else float("nan"),
                          "median": float(np.median(list(st.values()))) if st else float("nan")})
 
+    data_rows, channel_rows, data_warnings = data_tables(res.get("preprocessing") or ds.preprocessing())
+
     params = []
     for n in NAMES:
         d = res["parameters"][n]
@@ -357,10 +363,40 @@ def write_report(out_dir, ds=None, maps=None, cost=None, compare=None) -> Path:
         title=f"rideid identification: {html.escape(ds.name)}", res=res, params=params, modal=res.get("modal") or {},
         figures=figs + compare_figs, fit_figures=fit_figs, fit_rows=fit_rows, heat_figures=heat_figs, runs=maps.runs, p2t=p2t,
         known=res.get("known", {}), n_runs=len(ds.runs), dataset=str(ds.path),
+        data_rows=data_rows, channel_rows=channel_rows, data_warnings=data_warnings,
     )
     out = out_dir / "report.html"
     out.write_text(text)
     return out
 
 
-SECTIONS = ("estimates", "modal", "convergence", "spread", "weights", "fits", "maps")
+def data_tables(pre: dict):
+    """Rows of the report's data section from ``result.json``'s ``preprocessing``."""
+    rows, chans, warns = [], [], []
+    maps_seen = []
+    for rid, rec in pre.items():
+        st = rec.get("start", {})
+        sp = rec.get("speed", {})
+        if not sp:
+            speed = ""
+        elif sp.get("source") == "constant":
+            speed = f"constant {sp.get('value'):g} m/s"
+        else:
+            speed = f"{sp['source']}: {sp.get('min', 0):.2f}..{sp.get('max', 0):.2f} m/s"
+        rows.append({"run": rid, "file": Path(rec.get("file", "")).name, "format": rec.get("format", ""),
+                     "samples": rec.get("samples"), "fs": rec.get("fs", float("nan")), "start": st.get("value"),
+                     "start_std": st.get("std"), "start_source": st.get("source", ""), "speed": speed})
+        ch = rec.get("channels")
+        if ch:
+            key = [(c, {k: v for k, v in d.items() if k not in ("removed", "samples")}) for c, d in ch.items()]
+            if key not in maps_seen:  # show a run's channel table only when its map differs from one shown
+                maps_seen.append(key)
+                for c, d in ch.items():
+                    chans.append({"run": rid, "channel": c, **{k: d.get(k) for k in (
+                        "source", "unit", "unit_from", "sign", "scale", "rate_hz", "removed", "removed_as",
+                        "filter")}})
+        warns += rec.get("warnings", [])
+    return rows, chans, warns
+
+
+SECTIONS = ("estimates", "modal", "convergence", "spread", "weights", "data", "fits", "maps")

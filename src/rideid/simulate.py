@@ -71,13 +71,26 @@ class RunInput:
         return self.t.size
 
 
-def prepare_run(track: Track, geom: Geometry, speed: float, t, quad_order: int = 2) -> RunInput:
-    """Tabulate inputs and moments for a run at constant ``speed`` sampled at ``t``."""
+def prepare_run(track: Track, geom: Geometry, speed: float | None, t, quad_order: int = 2,
+                distance=None) -> RunInput:
+    """Tabulate inputs and moments for a run sampled at ``t``.
+
+    The front axle is at ``x = speed t`` (constant speed), or at
+    ``x = distance(t)`` when a vectorised ``distance`` function is given
+    (varying speed; it then needs a ``max_speed`` attribute or ``speed`` as an
+    upper bound of the speed).
+    """
     t = np.asarray(t, dtype=float)
     h = float(t[1] - t[0])
-    u = corner_inputs(track, geom, speed * t)
+    if distance is None:
+        def distance(tt, v=speed):
+            return v * tt
+        vmax = speed
+    else:
+        vmax = speed if speed is not None else distance.max_speed
+    u = corner_inputs(track, geom, distance(t))
     # quadrature panels no longer than the envelope grid spacing
-    n_panels = max(8, int(np.ceil(speed * h / ENVELOPE_DX)))
+    n_panels = max(8, int(np.ceil(max(vmax, 1e-3) * h / ENVELOPE_DX)))
     nodes, weights = gauss_nodes(n_panels, quad_order)
     W = moment_weights(nodes, weights, N_MAX)  # (q, N)
     n_int = t.size - 1
@@ -86,7 +99,7 @@ def prepare_run(track: Track, geom: Geometry, speed: float, t, quad_order: int =
     for lo in range(0, n_int, block):
         hi = min(n_int, lo + block)
         tq = (t[lo:hi, None] + h * nodes[None, :]).ravel()
-        uq = corner_inputs(track, geom, speed * tq).reshape(hi - lo, nodes.size, 4)
+        uq = corner_inputs(track, geom, distance(tq)).reshape(hi - lo, nodes.size, 4)
         mc = np.einsum("kqc,qn->kcn", uq, W)
         mu[lo:hi] = np.einsum("dc,kcn->kdn", CORNER_TO_DECOMPOSED, mc)
     ud = u @ CORNER_TO_DECOMPOSED.T

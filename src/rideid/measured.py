@@ -1,0 +1,755 @@
+"""Measured runs as loggers write them: channel maps, units, gravity, rates, start.
+
+A run is *measured* (rather than a SPEC §3 CSV taken as it is) when the
+dataset gives a channel map, preprocessing options or CSV options, when the
+run file is not a CSV, or when the run names its own channels, start, window
+or lead-in, or carries a speed or distance channel instead of a constant
+``speed``. Its file is then turned into model-ready data in these steps,
+each recorded in :attr:`MeasuredRun.record` (and in ``result.json``):
+
+1. **Read** the mapped channels (:mod:`rideid.readers`).
+2. **Units, sign, scale** to SI (``g`` -> m/s², ``deg/s`` -> rad/s,
+   ``km/h`` -> m/s, ``ms`` -> s ...); unknown units are errors.
+3. **Plausibility warnings** (:class:`rideid.DataWarning`): gaps in time,
+   flat-lined or clipped channels, an acceleration whose mean is about g
+   while ``gravity_included`` is false, a rate labelled rad/s whose values
+   look like deg/s, a lead-in that is not stationary.
+4. **Gravity and bias**: with ``gravity_included`` the mean of each
+   acceleration over the stationary lead-in (gravity plus sensor bias) is
+   subtracted; ``remove_bias`` subtracts the lead-in mean of every channel
+   (gyro bias too).
+5. **Anti-alias filtering and resampling** to one rate ``fs``: channels
+   faster than ``fs`` are low-passed (Butterworth, order 8, zero-phase, at
+   0.4 fs); channels are then represented on a grid at least five times
+   finer than ``fs`` (polyphase upsampling where needed) and read off by a
+   cubic spline at ``start + t`` for the model's sample times ``t``, so the
+   start may be any real number.
+6. **Start**: the file time at which the front axle reaches ``x = 0``
+   (SPEC §2). When not given (``start = "auto"``, the default for measured
+   runs) it is estimated by correlating the measurement with the response of
+   a nominal car (the built-in car on this geometry; the absolute scale does
+   not matter for accelerations), first over all lags at the sample rate,
+   then to a fraction of a sample by maximising the summed normalised
+   correlation of all channels. :func:`rideid.identify` re-estimates it with
+   the identified car and polishes again until it settles.
+7. **Window**: the model's samples run from ``pre_roll`` (default 0.5 s)
+   before the start, or from ``window[0]``, to the end of the recording or
+   ``window[1]``.
+8. **Speed**: a constant ``speed`` or a ``speed`` channel (integrated) or a
+   ``distance`` channel; the wheel inputs follow the distance travelled
+   since the start.
+"""
+
+from __future__ import annotations
+
+import math
+import warnings
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from .errors import DataError, DataWarning
+from .model import CHANNEL_KIND, CHANNELS
+from .readers import FORMAT_NAMES, CsvOptions, Signal, open_signals
+
+G0 = 9.80665
+
+#: accepted units (lower case, spaces removed) -> factor to SI, per quantity
+UNITS = {
+    "acceleration": {"m/s^2": 1.0, "m/s2": 1.0, "m/s²": 1.0, "m/s/s": 1.0, "g": G0},
+    "rate": {"rad/s": 1.0, "deg/s": math.pi / 180, "°/s": math.pi / 180},
+    "speed": {"m/s": 1.0, "km/h": 1 / 3.6, "kph": 1 / 3.6, "mph": 0.44704},
+    "distance": {"m": 1.0, "km": 1000.0},
+    "time": {"s": 1.0, "ms": 1e-3, "us": 1e-6, "µs": 1e-6, "ns": 1e-9},
+}
+SI = {"acceleration": "m/s^2", "rate": "rad/s", "speed": "m/s", "distance": "m", "time": "s"}
+EXTRA_TARGETS = ("time", "speed", "distance")
+TARGETS = CHANNELS + EXTRA_TARGETS
+
+PREPROCESS_KEYS = ("gravity_included", "remove_bias", "lead_in", "fs", "start", "window", "pre_roll")
+#: keys a run may set for itself (the rest are dataset-wide)
+RUN_PREPROCESS_KEYS = ("gravity_included", "remove_bias", "lead_in", "start", "window", "pre_roll")
+CSV_KEYS = ("delimiter", "decimal", "skip_rows")
+CHANNEL_KEYS = ("name", "unit", "sign", "scale")
+
+DEFAULT_FS = 200.0
+DEFAULT_LEAD_IN = 1.0
+DEFAULT_PRE_ROLL = 0.5
+#: auto-start runs keep this much recording beyond the model's last sample, s
+AUTO_MARGIN = 0.05
+FILTER_ORDER = 8
+FILTER_CUTOFF = 0.4  # x fs
+UPSAMPLE_TO = 5.0  # x fs
+
+
+def quantity(target: str) -> str:
+    if target in CHANNELS:
+        return "rate" if CHANNEL_KIND[target] == "rate" else "acceleration"
+    return target
+
+
+def unit_factor(unit: str, target: str, where: str) -> float:
+    q = quantity(target)
+    key = unit.strip().replace(" ", "").lower()
+    if key not in UNITS[q]:
+        raise DataError(f"{where}: unknown unit '{unit}' for {target} ({q}); use one of "
+                        f"{', '.join(UNITS[q])}")
+    return UNITS[q][key]
+
+
+# ---------------------------------------------------------------------------
+# Configuration
+
+@dataclass
+class ChannelEntry:
+    """Where a SPEC channel (or time, speed, distance) comes from in the file."""
+
+    name: str
+    unit: str | None = None
+    sign: float = 1.0
+    scale: float = 1.0
+
+    def to_table(self):
+        d = {"name": self.name}
+        if self.unit is not None:
+            d["unit"] = self.unit
+        if self.sign != 1:
+            d["sign"] = int(self.sign)
+        if self.scale != 1:
+            d["scale"] = self.scale
+        return d
+
+
+def parse_channel_map(tab, where: str) -> dict[str, ChannelEntry]:
+    if not isinstance(tab, dict):
+        raise DataError(f"{where} must be a table: SPEC channel = \"file channel\" or {{ name, unit, sign, scale }}")
+    out = {}
+    for target, v in tab.items():
+        w = f"{where} {target}"
+        if target not in TARGETS:
+            raise DataError(f"{where}: unknown channel '{target}'; map file channels to {', '.join(TARGETS)}")
+        if isinstance(v, str):
+            v = {"name": v}
+        if not isinstance(v, dict):
+            raise DataError(f"{w}: expected a file channel name or a table {{ name, unit, sign, scale }}")
+        for k in v:
+            if k not in CHANNEL_KEYS:
+                raise DataError(f"{w}: unknown key '{k}'; allowed: {', '.join(CHANNEL_KEYS)}")
+        name = v.get("name")
+        if not isinstance(name, str) or not name:
+            raise DataError(f"{w}: missing key 'name' (the channel's name in the file)")
+        unit = v.get("unit")
+        if unit is not None:
+            if not isinstance(unit, str):
+                raise DataError(f"{w}: unit must be a string")
+            unit_factor(unit, target, f"{w} unit")
+        sign = v.get("sign", 1)
+        if sign not in (1, -1) or isinstance(sign, bool):
+            raise DataError(f"{w}: sign must be 1 or -1, got {sign!r}")
+        scale = v.get("scale", 1.0)
+        if isinstance(scale, bool) or not isinstance(scale, (int, float)) or not math.isfinite(scale) or scale == 0:
+            raise DataError(f"{w}: scale must be a finite non-zero number, got {scale!r}")
+        if target in ("time", "distance", "speed") and sign != 1:
+            raise DataError(f"{w}: sign is for measured channels only")
+        out[target] = ChannelEntry(name, unit, float(sign), float(scale))
+    return out
+
+
+def _window(v, w):
+    if (not isinstance(v, list) or len(v) != 2
+            or not all(isinstance(x, (int, float)) and not isinstance(x, bool) and math.isfinite(x) for x in v)):
+        raise DataError(f"{w}: expected [from, to] in seconds of file time")
+    if not v[0] < v[1]:
+        raise DataError(f"{w}: from ({v[0]}) must be less than to ({v[1]})")
+    return (float(v[0]), float(v[1]))
+
+
+def parse_preprocess(tab, where: str, keys=PREPROCESS_KEYS) -> dict:
+    if not isinstance(tab, dict):
+        raise DataError(f"{where} must be a table")
+    out = {}
+    for k, v in tab.items():
+        w = f"{where} {k}"
+        if k not in keys:
+            raise DataError(f"{where}: unknown key '{k}'; allowed: {', '.join(keys)}")
+        if k in ("gravity_included", "remove_bias"):
+            if not isinstance(v, bool):
+                raise DataError(f"{w}: expected true or false")
+            out[k] = v
+        elif k in ("lead_in", "window"):
+            out[k] = _window(v, w)
+        elif k == "start":
+            if v == "auto":
+                out[k] = "auto"
+            elif isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v):
+                out[k] = float(v)
+            else:
+                raise DataError(f"{w}: expected a time in seconds of file time, or \"auto\"")
+        elif k in ("fs", "pre_roll"):
+            if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) or v < 0 \
+                    or (k == "fs" and v == 0):
+                raise DataError(f"{w}: expected a {'positive' if k == 'fs' else 'non-negative'} number")
+            out[k] = float(v)
+    return out
+
+
+def parse_csv_options(tab, where: str) -> CsvOptions:
+    if not isinstance(tab, dict):
+        raise DataError(f"{where} must be a table")
+    for k in tab:
+        if k not in CSV_KEYS:
+            raise DataError(f"{where}: unknown key '{k}'; allowed: {', '.join(CSV_KEYS)}")
+    opts = CsvOptions()
+    for k in ("delimiter", "decimal"):
+        if k in tab:
+            v = tab[k]
+            if not isinstance(v, str) or len(v) != 1:
+                raise DataError(f"{where} {k}: expected one character, got {v!r}")
+            setattr(opts, k, v)
+    if "skip_rows" in tab:
+        v = tab["skip_rows"]
+        if not isinstance(v, int) or isinstance(v, bool) or v < 0:
+            raise DataError(f"{where} skip_rows: expected a non-negative integer")
+        opts.skip_rows = v
+    return opts
+
+
+# ---------------------------------------------------------------------------
+# Signal helpers
+
+class Resampled:
+    """A channel after filtering, read off by a cubic spline at any file time (0 outside)."""
+
+    def __init__(self, t0: float, h: float, y: np.ndarray):
+        from scipy.interpolate import make_interp_spline
+
+        self.t0, self.h, self.n = t0, h, y.size
+        self.t1 = t0 + h * (y.size - 1)
+        self.spline = make_interp_spline(t0 + h * np.arange(y.size), y, k=3)
+        self._d1 = None
+
+    def __call__(self, t, nu: int = 0):
+        t = np.asarray(t, dtype=float)
+        inside = (t >= self.t0) & (t <= self.t1)
+        out = np.zeros(t.shape)
+        out[inside] = self.spline(t[inside], nu)
+        return out
+
+
+class Distance:
+    """Distance travelled (m) as a function of file time, linear beyond the ends."""
+
+    def __init__(self, t, d):
+        from scipy.interpolate import PchipInterpolator
+
+        self.t, self.d = t, d
+        self.f = PchipInterpolator(t, d, extrapolate=False)
+        self.v0 = (d[1] - d[0]) / (t[1] - t[0])
+        self.v1 = (d[-1] - d[-2]) / (t[-1] - t[-2])
+
+    def __call__(self, t):
+        t = np.asarray(t, dtype=float)
+        tc = np.clip(t, self.t[0], self.t[-1])
+        out = self.f(tc)
+        out = out + np.where(t < self.t[0], (t - self.t[0]) * self.v0, 0.0)
+        out = out + np.where(t > self.t[-1], (t - self.t[-1]) * self.v1, 0.0)
+        return out
+
+    def speed_range(self):
+        v = np.diff(self.d) / np.diff(self.t)
+        return float(v.min()), float(np.mean(v)), float(v.max())
+
+
+@dataclass
+class RelativeDistance:
+    """x(t) = d(start + t) - d(start): distance of the front axle past x = 0 at model time t."""
+
+    dist: Distance
+    start: float
+
+    def __call__(self, t):
+        return self.dist(self.start + np.asarray(t, dtype=float)) - float(self.dist(np.array([self.start]))[0])
+
+    @property
+    def max_speed(self):
+        return self.dist.speed_range()[2]
+
+
+def _longest_run(mask: np.ndarray) -> int:
+    if not mask.any():
+        return 0
+    m = np.concatenate([[0], mask.astype(np.int8), [0]])
+    d = np.diff(m)
+    return int(np.max(np.nonzero(d == -1)[0] - np.nonzero(d == 1)[0]))
+
+
+# ---------------------------------------------------------------------------
+# A measured run
+
+@dataclass
+class MeasuredRun:
+    """One run file turned into SI channels on a continuous time axis (file clock).
+
+    ``channels`` maps SPEC channel names to :class:`Resampled` signals;
+    :meth:`run_data` samples them at ``start + t`` on the model grid.
+    """
+
+    run_id: str
+    path: Path
+    fs: float
+    channels: dict
+    t_first: float
+    t_last: float
+    speed: float | None
+    distance: Distance | None
+    options: dict
+    record: dict
+    warnings: list = field(default_factory=list)
+    start: float | None = None
+    grid: np.ndarray | None = None
+
+    @property
+    def auto_start(self) -> bool:
+        return self.options.get("start", "auto") == "auto"
+
+    def relative_distance(self, start):
+        if self.distance is None:
+            return None
+        return RelativeDistance(self.distance, start)
+
+    def make_grid(self, start: float):
+        """Fix the model's sample times (relative to the start) for a start estimate."""
+        h = 1.0 / self.fs
+        pre = self.options.get("pre_roll", DEFAULT_PRE_ROLL)
+        w0, w1 = self.options.get("window", (-math.inf, math.inf))
+        lo = max(self.t_first, w0 if "window" in self.options else start - pre)
+        hi = min(self.t_last, w1)
+        if self.auto_start:
+            hi -= AUTO_MARGIN
+            lo += AUTO_MARGIN if lo == self.t_first else 0.0
+        n = int(math.floor((hi - lo) / h + 1e-9)) + 1
+        if n < 3:
+            raise DataError(f"{self.path}: fewer than 3 samples between {lo:.3f} s and {hi:.3f} s "
+                            "(check window, start and the recording)")
+        self.grid = (lo - start) + h * np.arange(n)
+        return self.grid
+
+    def run_data(self, start: float):
+        """:class:`rideid.files.RunData` sampled at ``start + grid``."""
+        from .files import RunData
+
+        if self.grid is None:
+            self.make_grid(start)
+        tt = start + self.grid
+        chans = {c: f(tt) for c, f in self.channels.items()}
+        self.start = float(start)
+        return RunData(self.grid.copy(), chans, distance=self.relative_distance(start))
+
+    def measured_at(self, start: float, grid=None, nu: int = 0) -> np.ndarray:
+        """(n, 10) measurement (``nu = 1``: its time derivative) at ``start + grid``, NaN for missing channels."""
+        grid = self.grid if grid is None else grid
+        Y = np.full((grid.size, len(CHANNELS)), np.nan)
+        for i, c in enumerate(CHANNELS):
+            if c in self.channels:
+                Y[:, i] = self.channels[c](start + grid, nu)
+        return Y
+
+
+def _warn(mr_warnings: list, msg: str):
+    mr_warnings.append(msg)
+    warnings.warn(msg, DataWarning, stacklevel=3)
+
+
+def load_measured_run(run, man) -> MeasuredRun:
+    """Read and preprocess one measured run (steps 1-5 of the module docstring)."""
+    from scipy.signal import butter, resample_poly, sosfiltfilt
+
+    path = Path(run.file)
+    if not path.is_absolute():
+        path = man.base_dir / path
+    opts = dict(man.preprocess)
+    opts.update(run.options)
+    cmap = dict(man.channel_map)
+    cmap.update(run.channels)
+    where_map = f"{man.path}: run '{run.id}'"
+    sf = open_signals(path, man.csv_options)
+    fs = opts.get("fs", None)
+    warns: list[str] = []
+
+    # time column (CSV, Parquet) or time channel (TDMS)
+    time_name, time_scale = None, 1.0
+    if "time" in cmap:
+        te = cmap["time"]
+        time_name = te.name
+        time_scale = unit_factor(te.unit, "time", f"{where_map} time unit") if te.unit else 1.0
+        time_scale *= te.scale
+
+    # the channels to read: mapped ones, plus SPEC-named columns the map does not mention
+    targets = {}
+    for c in TARGETS:
+        if c == "time":
+            continue
+        if c in cmap:
+            targets[c] = cmap[c]
+        elif c in CHANNELS and sf.has(c):
+            targets[c] = ChannelEntry(c)
+    measured = [c for c in targets if c in CHANNELS]
+    if not measured:
+        raise DataError(f"{path}: none of the SPEC channels found; map the file's channels in [channels] "
+                        f"(the file has: {', '.join(sf.names()[:12])})")
+    if "speed" in targets and "distance" in targets:
+        raise DataError(f"{where_map}: map either a speed or a distance channel, not both")
+    has_motion = "speed" in targets or "distance" in targets
+    if has_motion and run.speed is not None:
+        raise DataError(f"{where_map}: give either a constant 'speed' or a speed/distance channel, not both")
+    if not has_motion and run.speed is None:
+        raise DataError(f"{where_map}: missing key 'speed' (m/s), or map a speed or distance channel")
+
+    raw: dict[str, Signal] = {}
+    rec_ch = {}
+    for c, e in targets.items():
+        w = f"channel '{e.name}' mapped to {c}"
+        sig = sf.get(e.name, w, time_name, time_scale)
+        if sig.values.size < 3:
+            raise DataError(f"{path}: {w}: only {sig.values.size} samples")
+        if not np.all(np.isfinite(sig.values)):
+            k = int(np.argmax(~np.isfinite(sig.values)))
+            raise DataError(f"{path}: {w}: NaN or infinite value at t = {sig.time[k]:.6g} s")
+        if not np.all(np.isfinite(sig.time)):
+            raise DataError(f"{path}: {w}: time has a NaN or infinite value")
+        dt = np.diff(sig.time)
+        if np.any(dt <= 0):
+            k = int(np.argmax(dt <= 0))
+            raise DataError(f"{path}: {w}: time is not strictly increasing at t = {sig.time[k]:.6g} s")
+        # unit: the map's, else the file's (if known), else SI
+        unit, unit_src = e.unit, "map"
+        if unit is None:
+            if sig.unit:
+                try:
+                    unit_factor(sig.unit, c, "")
+                except DataError:
+                    raise DataError(f"{path}: {w}: the file's unit '{sig.unit}' is not one rideid knows; "
+                                    f"give unit in [channels] ({', '.join(UNITS[quantity(c)])})") from None
+                unit, unit_src = sig.unit, "file"
+            else:
+                unit, unit_src = SI[quantity(c)], "SI (none given)"
+        elif sig.unit:
+            try:
+                fu = unit_factor(sig.unit, c, "")
+            except DataError:
+                fu = None
+            if fu is not None and fu != unit_factor(unit, c, ""):
+                _warn(warns, f"{path}: {w}: the file says unit '{sig.unit}' but the map says '{unit}'; "
+                             "using the map's")
+        factor = unit_factor(unit, c, f"{where_map} {c}") * e.scale * e.sign
+        v = sig.values * factor
+        raw[c] = Signal(sig.time, v, unit)
+        med = float(np.median(dt))
+        rec_ch[c] = {"source": e.name, "unit": unit, "unit_from": unit_src, "sign": int(e.sign),
+                     "scale": e.scale, "rate_hz": round(1.0 / med, 6), "samples": int(v.size)}
+        # plausibility
+        gap = dt > 1.5 * med
+        if gap.any():
+            k = int(np.argmax(dt))
+            _warn(warns, f"{path}: {w}: {int(gap.sum())} gap(s) in time, the longest {dt[k]:.4g} s at "
+                         f"t = {sig.time[k]:.6g} s (sample interval {med:.4g} s); bridged by interpolation")
+        if c in CHANNELS:
+            _plausibility(c, v, unit, opts, f"{path}: {w}", warns)
+
+    t_first = max(s.time[0] for c, s in raw.items() if c in CHANNELS)
+    t_last = min(s.time[-1] for c, s in raw.items() if c in CHANNELS)
+    if t_last - t_first <= 0:
+        raise DataError(f"{path}: the channels do not overlap in time")
+    rate_min = min(rec_ch[c]["rate_hz"] for c in measured)
+    if fs is None:
+        fs = min(DEFAULT_FS, rate_min)
+    if fs > rate_min * 1.0001:
+        _warn(warns, f"{path}: resampling to {fs:g} Hz, above the slowest channel's rate ({rate_min:g} Hz): "
+                     "that channel carries nothing above its own Nyquist frequency")
+
+    # gravity and bias over the lead-in
+    lead = opts.get("lead_in", (t_first, t_first + DEFAULT_LEAD_IN))
+    grav = opts.get("gravity_included", False)
+    bias = opts.get("remove_bias", False)
+    for c in measured:
+        s = raw[c]
+        in_lead = (s.time >= lead[0]) & (s.time <= lead[1])
+        is_acc = quantity(c) == "acceleration"
+        if not ((grav and is_acc) or bias):
+            continue
+        if in_lead.sum() < 3:
+            raise DataError(f"{where_map}: lead_in [{lead[0]:g}, {lead[1]:g}] s holds fewer than 3 samples of "
+                            f"{c} (its time runs {s.time[0]:.6g} .. {s.time[-1]:.6g} s)")
+        seg = s.values[in_lead]
+        m = float(np.mean(seg))
+        if grav and is_acc and not (0.8 * G0 < m < 1.2 * G0):
+            if -1.2 * G0 < m < -0.8 * G0:
+                _warn(warns, f"{path}: {c}: reads {m:.3g} m/s^2 at rest (gravity included): mounted upside down? "
+                             "set sign = -1 in its channel map")
+            else:
+                _warn(warns, f"{path}: {c}: lead-in mean {m:.3g} m/s^2 with gravity_included = true "
+                             f"(expected about {G0:.2f}); check its unit and the lead_in window")
+        whole = s.values - np.mean(s.values)
+        rms_all = float(np.sqrt(np.mean(whole ** 2)))
+        rms_lead = float(np.std(seg))
+        if rms_all > 0 and rms_lead > 0.25 * rms_all:
+            _warn(warns, f"{path}: {c}: the lead-in [{lead[0]:g}, {lead[1]:g}] s is not stationary (RMS "
+                         f"{rms_lead:.3g} vs {rms_all:.3g} over the run); set lead_in to a part at rest")
+        raw[c] = Signal(s.time, s.values - m, s.unit)
+        rec_ch[c]["removed"] = m
+        rec_ch[c]["removed_as"] = "gravity and bias" if (grav and is_acc) else "bias"
+
+    # anti-alias filter and a fine uniform grid for interpolation
+    channels = {}
+    for c in measured:
+        s = raw[c]
+        t, v = s.time, s.values
+        med = float(np.median(np.diff(t)))
+        if np.max(np.abs(np.diff(t) - med)) > 1e-6 * med:
+            from scipy.interpolate import make_interp_spline
+            n = int(math.floor((t[-1] - t[0]) / med)) + 1
+            tu = t[0] + med * np.arange(n)
+            v = make_interp_spline(t, v, k=3)(tu)
+            rec_ch[c]["regridded"] = "non-uniform time put on a uniform grid (cubic spline)"
+        src_fs = 1.0 / med
+        if src_fs > fs * 1.0001:
+            sos = butter(FILTER_ORDER, FILTER_CUTOFF * fs, fs=src_fs, output="sos")
+            v = sosfiltfilt(sos, v)
+            rec_ch[c]["filter"] = (f"Butterworth order {FILTER_ORDER}, zero-phase, {FILTER_CUTOFF * fs:g} Hz")
+        up = int(math.ceil(UPSAMPLE_TO * fs / src_fs - 1e-9))
+        if up > 1:
+            v = resample_poly(v, up, 1, padtype="line")
+        channels[c] = Resampled(t[0], med / up, v)
+
+    distance, motion_rec = None, {}
+    if "distance" in raw:
+        s = raw["distance"]
+        if np.any(np.diff(s.values) < -1e-6 * max(1.0, np.ptp(s.values))):
+            raise DataError(f"{path}: distance channel '{targets['distance'].name}' decreases "
+                            "(the car must not reverse)")
+        distance = Distance(s.time, s.values)
+        motion_rec = {"source": f"distance channel '{targets['distance'].name}' ({s.unit})"}
+    elif "speed" in raw:
+        s = raw["speed"]
+        if np.min(s.values) < -0.1:
+            raise DataError(f"{path}: speed channel '{targets['speed'].name}' goes negative "
+                            f"({np.min(s.values):.3g} m/s); the car must not reverse")
+        from scipy.integrate import cumulative_trapezoid
+        d = cumulative_trapezoid(np.clip(s.values, 0, None), s.time, initial=0.0)
+        distance = Distance(s.time, d)
+        motion_rec = {"source": f"speed channel '{targets['speed'].name}' ({s.unit}), integrated"}
+    else:
+        motion_rec = {"source": "constant", "value": run.speed}
+    if distance is not None:
+        vmin, vmean, vmax = distance.speed_range()
+        motion_rec.update({"min": vmin, "mean": vmean, "max": vmax})
+
+    record = {"file": str(path), "format": FORMAT_NAMES[sf.format], "channels": rec_ch, "fs": fs,
+              "speed": motion_rec, "recording": [t_first, t_last]}
+    if grav or bias:
+        record["lead_in"] = list(lead)
+    if sf.format == "csv":
+        record["csv"] = {"delimiter": sf.delimiter, "decimal": sf.decimal}
+    return MeasuredRun(run.id, path, fs, channels, t_first, t_last, run.speed, distance, opts, record, warns)
+
+
+def _plausibility(c, v, unit, opts, w, warns):
+    ptp = float(np.ptp(v))
+    if ptp == 0.0:
+        _warn(warns, f"{w}: flat-lined (every sample is {v[0]:.6g}); check the sensor and its cable")
+        return
+    for end, val in (("maximum", v.max()), ("minimum", v.min())):
+        run = _longest_run(v == val)
+        if run >= 3:
+            _warn(warns, f"{w}: clipped: {run} consecutive samples at its {end} {val:.6g} "
+                         f"(sensor or logger range exceeded?)")
+    if quantity(c) == "acceleration" and not opts.get("gravity_included", False):
+        m = float(np.mean(v))
+        if 0.8 * G0 < abs(m) < 1.2 * G0:
+            _warn(warns, f"{w}: mean {m:.3g} m/s^2 is about g: the channel seems to include gravity; "
+                         "set gravity_included = true in [preprocess]")
+    if quantity(c) == "rate" and UNITS["rate"].get(unit.strip().replace(" ", "").lower()) == 1.0:
+        peak = float(np.max(np.abs(v - np.median(v))))
+        if peak > 3.0:
+            _warn(warns, f"{w}: peaks at {peak:.3g} rad/s ({math.degrees(peak):.0f} deg/s), implausible for a "
+                         "car body on a ride track: are the values in deg/s? set unit = \"deg/s\"")
+
+
+# ---------------------------------------------------------------------------
+# Start alignment
+
+def _feature_end(track, geom) -> float:
+    """Distance (front axle) at which the rear wheels leave the last feature."""
+    ends = []
+    hf, hr = geom.track_front / 2, geom.track_rear / 2
+    for y in (hf, -hf, hr, -hr):
+        ext = track.path(y).extent
+        if ext is not None:
+            ends.append(ext[1])
+    return (max(ends) if ends else 0.0) + geom.wheelbase
+
+
+def _simulate(P, geom, track, t, speed, distance):
+    from .engine import BatchSimulator
+    from .simulate import prepare_run
+
+    ri = prepare_run(track, geom, speed, t, distance=distance)
+    return BatchSimulator(geom, [ri]).outputs(np.atleast_2d(P))[0][0]
+
+
+def _score(Yhat, Y, cols):
+    """Mean normalised correlation over the channels ``cols`` that are not zero."""
+    s, n = 0.0, 0
+    for i in cols:
+        a, b = Yhat[:, i], Y[:, i]
+        na, nb = np.linalg.norm(a), np.linalg.norm(b)
+        if na > 0 and nb > 0:
+            s += float(a @ b) / (na * nb)
+            n += 1
+    return s / max(n, 1)
+
+
+def _long_grid(mr: MeasuredRun, track, geom, v):
+    """Model times covering the whole feature passage (and settling) at speed ``v``, or the recording."""
+    h = 1.0 / mr.fs
+    pre = mr.options.get("pre_roll", DEFAULT_PRE_ROLL)
+    T = min(_feature_end(track, geom) / v + 2.0, mr.t_last - mr.t_first + pre)
+    return -pre + h * np.arange(int((T + pre) / h) + 1)
+
+
+def _correlation(mr: MeasuredRun, Yhat, tm, tau=None):
+    """Mean normalised cross-correlation over channels; returns (starts, values) for every lag.
+
+    ``tau``: the file times at which the measurement is read (default: the
+    recording at the sample rate); ``Yhat`` at model times ``tm`` is then
+    compared with the measurement at ``tau[k + lag]``.
+    """
+    from scipy.signal import correlate
+
+    h = 1.0 / mr.fs
+    if tau is None:
+        tau = mr.t_first + h * np.arange(int((mr.t_last - mr.t_first) / h) + 1)
+    Y = mr.measured_at(0.0, tau)
+    total, n = None, 0
+    for i, c in enumerate(CHANNELS):
+        if c not in mr.channels:
+            continue
+        a, b = Yhat[:, i], Y[:, i]
+        na, nb = np.linalg.norm(a), np.linalg.norm(b)
+        if na == 0 or nb == 0:
+            continue
+        cc = correlate(b, a, mode="full", method="fft") / (na * nb)
+        total = cc if total is None else total + cc
+        n += 1
+    if total is None:
+        raise DataError(f"{mr.path}: cannot estimate the start: the nominal car's response or the measurement "
+                        "is zero on every channel; give start in seconds")
+    lags = np.arange(total.size) - (tm.size - 1)
+    return lags, total / n
+
+
+def _peaks(values, k):
+    """Indices of the ``k`` highest local maxima."""
+    inner = np.nonzero((values[1:-1] >= values[:-2]) & (values[1:-1] > values[2:]))[0] + 1
+    return inner[np.argsort(values[inner])[::-1][:k]]
+
+
+def _coarse(mr: MeasuredRun, P, geom, track):
+    """Start to the nearest sample by cross-correlation over all lags.
+
+    Constant speed: the model's response only shifts with the start, so the
+    highest correlation wins. With a speed channel the response depends on
+    the start; each of the best few correlation peaks (on a periodic track:
+    the neighbouring cycles) is re-simulated with its own distance profile
+    and scored at its own start, and the best self-consistent one wins.
+    """
+    h = 1.0 / mr.fs
+    if mr.distance is None:
+        tm = _long_grid(mr, track, geom, mr.speed)
+        lags, corr = _correlation(mr, _simulate(P, geom, track, tm, mr.speed, None), tm)
+        # y_hat at model time tm[k] matches the measurement at t_first + (k + lag) h
+        return float(mr.t_first + lags[int(np.argmax(corr))] * h - tm[0])
+    # varying speed: correlate over distance (the road is fixed in x), with the response at the mean speed
+    vmean = max(mr.distance.speed_range()[1], 0.1)
+    tm = _long_grid(mr, track, geom, vmean)
+    dist = mr.distance
+    x_all = dist.d
+    xs = x_all[0] + vmean * h * np.arange(int((x_all[-1] - x_all[0]) / (vmean * h)) + 1)
+    keep = np.concatenate([[True], np.diff(x_all) > 0])
+    tau = np.interp(xs, x_all[keep], dist.t[keep])
+    lags, corr = _correlation(mr, _simulate(P, geom, track, tm, vmean, None), tm, tau)
+    # model x = vmean tm[k] matches the road at distance xs[k + lag]: x = 0 is at xs[lag] - vmean tm[0]
+    cand = [float(np.interp(xs[0] + (lags[i] * vmean * h) - vmean * tm[0], x_all[keep], dist.t[keep]))
+            for i in _peaks(corr, 5)]
+    best, best_score = None, -np.inf
+    tgrid = mr.t_first + h * np.arange(int((mr.t_last - mr.t_first) / h) + 1)
+    for s in cand:
+        score = -np.inf
+        for _ in range(4):  # fixed point: simulate with this start's distance profile, re-pick the lag nearby
+            Yhat = _simulate(P, geom, track, tm, None, RelativeDistance(dist, s))
+            lg, cc = _correlation(mr, Yhat, tm, tgrid)
+            st = mr.t_first + lg * h - tm[0]
+            near = np.abs(st - s) <= 3.0 * h
+            j = int(np.argmax(np.where(near, cc, -np.inf)))
+            moved = abs(st[j] - s) > 0.5 * h
+            s, score = float(st[j]), float(cc[j])
+            if not moved:
+                break
+        if score > best_score:
+            best, best_score = s, score
+    return best
+
+
+def _fine(mr: MeasuredRun, Yhat, s0, width):
+    """Maximise the summed normalised correlation over the start in ``s0 ± width``."""
+    from scipy.optimize import minimize_scalar
+
+    cols = [i for i, c in enumerate(CHANNELS) if c in mr.channels]
+
+    def neg(s):
+        return -_score(Yhat, mr.measured_at(s), cols)
+
+    lo, hi = s0 - width, s0 + width
+    for _ in range(6):
+        r = minimize_scalar(neg, bounds=(lo, hi), method="bounded", options={"xatol": 1e-7})
+        s = float(r.x)
+        if lo + 0.05 * width < s < hi - 0.05 * width:
+            break
+        lo, hi = s - width, s + width  # optimum at an edge: move the bracket
+    return s, -float(r.fun)
+
+
+def estimate_start(mr: MeasuredRun, P, geom, track, s0: float | None = None, refine_only: bool = False):
+    """Estimate the run's start (file time when the front axle reaches x = 0) for the car ``P``.
+
+    ``refine_only`` searches within two samples of ``s0`` instead of all lags.
+    Returns ``(start, correlation)``, the correlation being the mean
+    normalised correlation over the channels that are not zero.
+    """
+    h = 1.0 / mr.fs
+    s = s0 if refine_only else _coarse(mr, P, geom, track)
+    if mr.grid is None:
+        mr.make_grid(s)
+    rho = 0.0
+    for _ in range(8 if mr.distance is not None else 1):
+        Yhat = _simulate(P, geom, track, mr.grid, mr.speed, mr.relative_distance(s))
+        s_new, rho = _fine(mr, Yhat, s, 2.0 * h)
+        done = abs(s_new - s) < 1e-6 * h
+        s = s_new
+        if done:
+            break
+    return s, rho
+
+
+def nominal_car(geom) -> np.ndarray:
+    """The built-in car with its CG at the same fraction of this wheelbase (scale is irrelevant here)."""
+    from .params import DEFAULT_CAR, DEFAULT_GEOMETRY, NAMES
+
+    P = np.array([DEFAULT_CAR[n] for n in NAMES])
+    P[NAMES.index("a")] *= geom.wheelbase / DEFAULT_GEOMETRY.wheelbase
+    return P
+
+
+__all__ = ["MeasuredRun", "load_measured_run", "estimate_start", "parse_channel_map", "parse_preprocess",
+           "parse_csv_options", "UNITS", "ChannelEntry"]
