@@ -38,6 +38,28 @@ def sim_dataset(tmp_path_factory, default_scenario):
     return out
 
 
+#: a 2.45 t van: other geometry, rates and tire radius than the built-in car
+VAN_VEHICLE = {"wheelbase": 3.3, "track_front": 1.70, "track_rear": 1.68, "tire_radius": 0.35}
+VAN_TRUTH = {"m_s": 2200.0, "I_xx": 900.0, "I_yy": 4500.0, "a": 1.6, "m_uf": 55.0, "m_ur": 70.0,
+             "k_sf": 45000.0, "k_sr": 60000.0, "c_sf": 3500.0, "c_sr": 4000.0, "k_tf": 280000.0, "k_tr": 300000.0}
+
+
+def van_scenario(folder):
+    """The built-in tracks and runs with the van as truth, written to ``folder/van.toml`` and loaded."""
+    import tomllib
+
+    import tomli_w
+
+    import rideid
+    doc = tomllib.loads(rideid.default_scenario_path().read_text())
+    doc["name"] = "van"
+    doc["vehicle"] = dict(VAN_VEHICLE)
+    doc["known"] = {"total_mass": 2450.0}
+    doc["truth"] = dict(VAN_TRUTH)
+    (folder / "van.toml").write_text(tomli_w.dumps(doc))
+    return rideid.load_scenario(folder / "van.toml")
+
+
 @pytest.fixture
 def rng():
     return np.random.default_rng(12345)

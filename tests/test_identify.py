@@ -167,18 +167,9 @@ def test_history_records_everything(sim_dataset, tmp_path):
 
 def test_a_light_van_is_identified_too(tmp_path, default_scenario):
     """A 2.45 t van (different geometry, rates, tire radius) on the built-in tracks, 1 % noise."""
-    import tomllib
-
-    import tomli_w
-    doc = tomllib.loads(rideid.default_scenario_path().read_text())
-    doc["name"] = "van"
-    doc["vehicle"] = {"wheelbase": 3.3, "track_front": 1.70, "track_rear": 1.68, "tire_radius": 0.35}
-    doc["known"] = {"total_mass": 2450.0}
-    truth = {"m_s": 2200.0, "I_xx": 900.0, "I_yy": 4500.0, "a": 1.6, "m_uf": 55.0, "m_ur": 70.0,
-             "k_sf": 45000.0, "k_sr": 60000.0, "c_sf": 3500.0, "c_sr": 4000.0, "k_tf": 280000.0, "k_tr": 300000.0}
-    doc["truth"] = truth
-    (tmp_path / "van.toml").write_text(tomli_w.dumps(doc))
-    sc = rideid.load_scenario(tmp_path / "van.toml")
+    from conftest import VAN_TRUTH as truth
+    from conftest import van_scenario
+    sc = van_scenario(tmp_path)
     with warnings.catch_warnings():
         warnings.simplefilter("error")
         data, _ = simulate_manifest(sc, noise=0.01, seed=3)

@@ -82,15 +82,9 @@ def test_csv_with_semicolons_decimal_commas_and_a_units_row_reads_like_mdf(tmp_p
 
 def test_nominal_car_misaligns_and_the_joint_polish_recovers(tmp_path):
     """A 2.45 t van: the built-in nominal car puts starts off by up to ~2 samples; identification fixes them."""
-    import tomllib
-    doc = tomllib.loads(rideid.default_scenario_path().read_text())
-    doc["vehicle"] = {"wheelbase": 3.3, "track_front": 1.70, "track_rear": 1.68, "tire_radius": 0.35}
-    doc["known"] = {"total_mass": 2450.0}
-    truth = {"m_s": 2200.0, "I_xx": 900.0, "I_yy": 4500.0, "a": 1.6, "m_uf": 55.0, "m_ur": 70.0,
-             "k_sf": 45000.0, "k_sr": 60000.0, "c_sf": 3500.0, "c_sr": 4000.0, "k_tf": 280000.0, "k_tr": 300000.0}
-    doc["truth"] = truth
-    (tmp_path / "van.toml").write_text(tomli_w.dumps(doc))
-    sc = rideid.load_scenario(tmp_path / "van.toml")
+    from conftest import VAN_TRUTH as truth
+    from conftest import van_scenario
+    sc = van_scenario(tmp_path)
     path = write_logger_dataset(sc, simulate_raw(sc, offset=OFFSET), tmp_path / "ds", "tdms")
     ds = quiet_load(path)
     nominal = {rid: rec["start"]["value"] - OFFSET for rid, rec in ds.preprocessing().items()}
