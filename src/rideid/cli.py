@@ -96,6 +96,9 @@ def _parser() -> argparse.ArgumentParser:
     s.add_argument("--noise", type=float, default=0.0, metavar="FRACTION",
                    help="white Gaussian noise, standard deviation as a fraction of each channel's RMS")
     s.add_argument("--seed", type=int, default=None, metavar="N")
+    s.add_argument("--engine", choices=("rideid", "mujoco"), default="rideid",
+                   help="rideid's exact 7-DOF response (default), or the independent MuJoCo multibody car "
+                        "(needs: pip install 'rideid[hifi]'; sample rates must divide 1 kHz)")
     s.add_argument("--quiet", action="store_true", help="no progress line")
 
     s = add("identify", "estimate the twelve ride parameters of a dataset")
@@ -142,12 +145,12 @@ def cmd_simulate(args, out=None):
 
     sc = load_scenario(args.scenario)
     prog = Progress(args.quiet)
-    data, lifts = simulate_manifest(sc, noise=args.noise, seed=args.seed,
+    data, lifts = simulate_manifest(sc, noise=args.noise, seed=args.seed, engine=args.engine,
                                     progress=lambda i, n, rid: prog.steps(i, n, "simulating run"))
     prog.done()
     write_dataset(sc, data, args.out,
                   comment=f"simulated by rideid {__version__} from {Path(args.scenario).name}"
-                          f" (noise {args.noise}, seed {args.seed})")
+                          f" (engine {args.engine}, noise {args.noise}, seed {args.seed})")
     print(f"dataset written to {args.out} ({len(sc.runs)} runs)", file=out)
     print(format_modal_summary(modal_summary(sc.truth, sc.geometry)), file=out)
     return 0

@@ -59,8 +59,13 @@ def lift_offs(P, geom, run_id, run_input, states) -> list[LiftOff]:
     return out
 
 
-def simulate_manifest(sc: Manifest, noise: float = 0.0, seed: int | None = None, progress=None):
+def simulate_manifest(sc: Manifest, noise: float = 0.0, seed: int | None = None, progress=None,
+                      engine: str = "rideid"):
     """Simulate every run of a scenario with its ``[truth]`` parameters.
+
+    ``engine``: ``"rideid"`` (the exact 7-DOF response) or ``"mujoco"`` (the
+    independent multibody car of :mod:`rideid.hifi`, RK4 at 1 ms; lift-off is
+    then judged by the 7-DOF model alongside).
 
     Returns
     -------
@@ -77,6 +82,11 @@ def simulate_manifest(sc: Manifest, noise: float = 0.0, seed: int | None = None,
         ri = prepare_run(sc.tracks[run.track], sc.geometry, run.speed, t)
         y, states = simulate_reference(P, sc.geometry, ri, return_states=True)
         y = y[0]
+        if engine == "mujoco":
+            from .hifi import simulate_mujoco
+            y = simulate_mujoco(P[0], sc.geometry, sc.tracks[run.track], run.speed, t)
+        elif engine != "rideid":
+            raise ArgumentError(f"engine must be 'rideid' or 'mujoco', got {engine!r}")
         lifts += lift_offs(P[0], sc.geometry, run.id, ri, states[0])
         if noise > 0:
             rms = np.sqrt(np.mean(y * y, axis=0))
