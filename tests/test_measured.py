@@ -17,8 +17,8 @@ from rideid.model import CHANNELS
 from rideid.params import NAMES
 
 sys.path.insert(0, str(Path(__file__).parent))
-from logger_files import (G0, LOGGER, Wobble, channel_map, logger_channels, simulate_raw,  # noqa: E402
-                          write_csv, write_logger_dataset)
+from logger_files import (G0, Wobble, channel_map, logger_channels, simulate_raw,  # noqa: E402
+                          write_logger_dataset)
 
 OFFSET = 2.3  # the recording starts 2.3 s before the front axle reaches x = 0
 

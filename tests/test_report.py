@@ -1,10 +1,8 @@
 """The HTML report: structure, figures, rebuild, and (slow) a real browser."""
 
-import json
 import re
 import shutil
 import subprocess
-from pathlib import Path
 
 import numpy as np
 import pytest

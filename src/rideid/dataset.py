@@ -5,7 +5,6 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from pathlib import Path
 
-import numpy as np
 
 from .errors import DataError, ScaleError
 from .files import Manifest, RunData, load_manifest, read_run_csv

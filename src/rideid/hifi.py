@@ -191,7 +191,6 @@ def simulate_mujoco(P, geom: Geometry, track, speed, t, distance=None, **hifi) -
     r = corner_inputs(track, geom, x_of(tf))
     rdot = (corner_inputs(track, geom, x_of(tf + eps)) - corner_inputs(track, geom, x_of(tf - eps))) / (2 * eps)
     out = np.empty((t.size, len(CHANNELS)))
-    car.set_road(r[0], rdot[0])
     for j in range(tf.size):
         car.set_road(r[j], rdot[j])
         mj.mj_step(m, d)  # sensordata (and site frames) now describe the start of this step, time tf[j]

@@ -267,7 +267,6 @@ def _polish(cf: CostFunction, x0, weights, align=None):
     span = hi - lo
     d = len(cf.names)
     align = align or []
-    starts = [cf.sim.run_start[ri] for ri, _, _ in align]
 
     def to_x(z):
         return lo + span * z

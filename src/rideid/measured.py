@@ -227,7 +227,6 @@ class Resampled:
         self.t0, self.h, self.n = t0, h, y.size
         self.t1 = t0 + h * (y.size - 1)
         self.spline = make_interp_spline(t0 + h * np.arange(y.size), y, k=3)
-        self._d1 = None
 
     def __call__(self, t, nu: int = 0):
         t = np.asarray(t, dtype=float)
