@@ -282,9 +282,9 @@ class MdfFile(SignalFile):
         except Exception as e:  # asammdf raises MdfException and others for damaged files
             raise DataError(f"{path}: cannot read MDF file: {e}") from None
         masters = set()
-        for g in self.mdf.groups:
+        for gi, g in enumerate(self.mdf.groups):
             try:
-                masters.add(g.channels[self.mdf.masters_db[self.mdf.groups.index(g)]].name)
+                masters.add(g.channels[self.mdf.masters_db[gi]].name)
             except (KeyError, IndexError, AttributeError):
                 pass
         self._names = [n for n in self.mdf.channels_db if n not in masters]
