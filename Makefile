@@ -5,7 +5,7 @@ VENV := .venv
 PY := $(VENV)/bin/python
 STAMP := $(VENV)/.installed
 
-.PHONY: demo test test-slow bench venv clean chromium
+.PHONY: demo test test-slow bench verify venv clean chromium
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -32,6 +32,10 @@ chromium:
 bench: $(STAMP)
 	$(PY) -m pip install --quiet -e '.[bench]'
 	$(PY) benchmarks/run_all.py
+
+# verification on the independent MuJoCo car (docs/verification.md): about 3 minutes, tables in bench-out/verify/
+verify: $(STAMP)
+	$(PY) benchmarks/verify_mujoco.py --out bench-out/verify
 
 clean:
 	rm -rf $(VENV) demo-out bench-out .pytest_cache

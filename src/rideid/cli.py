@@ -98,7 +98,11 @@ def _parser() -> argparse.ArgumentParser:
     s.add_argument("--seed", type=int, default=None, metavar="N")
     s.add_argument("--engine", choices=("rideid", "mujoco"), default="rideid",
                    help="rideid's exact 7-DOF response (default), or the independent MuJoCo multibody car "
-                        "(needs: pip install 'rideid[hifi]'; sample rates must divide 1 kHz)")
+                        "with the scenario's [hifi] properties (needs: pip install 'rideid[hifi]'; "
+                        "sample rates must divide 1 kHz)")
+    s.add_argument("--raw", action="store_true",
+                   help="with --engine mujoco: write the sensors' own readings (gravity included, "
+                        "1 s standing still first) as a logger would, mapped for the measured-data pipeline")
     s.add_argument("--quiet", action="store_true", help="no progress line")
 
     s = add("identify", "estimate the twelve ride parameters of a dataset")
@@ -145,12 +149,16 @@ def cmd_simulate(args, out=None):
 
     sc = load_scenario(args.scenario)
     prog = Progress(args.quiet)
-    data, lifts = simulate_manifest(sc, noise=args.noise, seed=args.seed, engine=args.engine,
+    data, lifts = simulate_manifest(sc, noise=args.noise, seed=args.seed, engine=args.engine, raw=args.raw,
                                     progress=lambda i, n, rid: prog.steps(i, n, "simulating run"))
     prog.done()
-    write_dataset(sc, data, args.out,
+    engine = args.engine
+    if engine == "mujoco":
+        from .hifi import HifiProperties
+        engine += f"; [hifi] {(sc.hifi or HifiProperties()).describe()}" + ("; raw sensor readings" if args.raw else "")
+    write_dataset(sc, data, args.out, raw=args.raw,
                   comment=f"simulated by rideid {__version__} from {Path(args.scenario).name}"
-                          f" (engine {args.engine}, noise {args.noise}, seed {args.seed})")
+                          f" (engine {engine}, noise {args.noise}, seed {args.seed})")
     print(f"dataset written to {args.out} ({len(sc.runs)} runs)", file=out)
     print(format_modal_summary(modal_summary(sc.truth, sc.geometry)), file=out)
     return 0

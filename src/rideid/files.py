@@ -26,7 +26,8 @@ from .model import CHANNELS
 from .params import EXTRA_KNOWN, INDEX, NAMES, Geometry, check_parameters
 from .tracks import Track
 
-TOP_KEYS_SCENARIO = ("name", "vehicle", "known", "bounds", "tracks", "runs", "truth")
+#: a scenario may also describe the multibody car of rideid.hifi (``[hifi]``, used by --engine mujoco)
+TOP_KEYS_SCENARIO = ("name", "vehicle", "known", "bounds", "tracks", "runs", "truth", "hifi")
 #: a dataset may also describe how its files were logged (rideid.measured)
 TOP_KEYS_DATASET = ("name", "vehicle", "known", "bounds", "channels", "preprocess", "csv", "tracks", "runs")
 RUN_KEYS_DATASET = ("id", "track", "speed", "file", "channels") + RUN_PREPROCESS_KEYS
@@ -111,6 +112,8 @@ class Manifest:
     preprocess: dict = field(default_factory=dict)
     csv_options: object = None
     csv_table: dict = field(default_factory=dict)
+    #: scenario only: the ``[hifi]`` properties of the MuJoCo car (rideid.hifi.HifiProperties), or None
+    hifi: object = None
 
     def is_measured(self, run: RunSpec) -> bool:
         """Whether a run goes through rideid.measured (anything beyond a SPEC §3 CSV taken as it is)."""
@@ -265,6 +268,9 @@ def parse_manifest(doc: dict, path: Path, scenario: bool) -> Manifest:
             if k in truth and abs(truth[k] - v) > 1e-9 * abs(v):
                 raise DataError(f"{where}: [known] {k} = {v} disagrees with [truth] {k} = {truth[k]}")
     man = Manifest(path, name, geom, known, bounds, tracks, runs, truth)
+    if scenario and "hifi" in doc:
+        from .hifi import parse_hifi
+        man.hifi = parse_hifi(doc["hifi"], f"{where}: [hifi]")
     if not scenario:
         if "channels" in doc:
             man.channel_map = parse_channel_map(doc["channels"], f"{where}: [channels]")

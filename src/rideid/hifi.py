@@ -1,19 +1,60 @@
 """An independent multibody car in MuJoCo, driven on a 4-poster (verification data).
 
-Work in progress (issue 8): the linear car of SPEC §1 built as a MuJoCo
-multibody model — sprung body with heave, pitch and roll joints at its CG,
-four wheels on vertical slides (suspension spring and damper as joint
-stiffness and damping, preloaded through ``springref`` so the car starts in
-equilibrium), each tire resting on a heavy post whose position and velocity
-are set every step to the rigid-wheel envelope under that wheel. The tire's
-vertical stiffness is MuJoCo's soft contact with a tiny constant impedance
-and a direct (negative) ``solref`` scaled by the wheel's ``body_invweight0``.
-Integration: RK4 at 1 ms. Outputs: the SPEC channels from accelerometers at
-the body corners and wheel centres (gravity removed in the sensor frame) and
-a body gyro.
+The paper checks its estimator on data from an ADAMS car before trusting it
+on a real one; this module gives rideid the same step with MuJoCo
+(``mujoco-core``, ``pip install 'rideid[hifi]'``).
+
+The car: a sprung body with heave, pitch and roll joints at its CG; four
+wheels on vertical slides in the body frame (suspension spring and damper on
+the slide, preloaded through ``springref`` so the car starts in static
+equilibrium); each tire resting on a heavy post whose position and velocity
+are set every step to the rigid-wheel envelope (SPEC §2) under that wheel.
+The tire's vertical stiffness is MuJoCo's soft contact with a tiny constant
+impedance and a direct (negative) ``solref`` scaled by the wheel's
+``body_invweight0``; the contact can push but never pull, so a wheel really
+leaves the road. Integration: RK4 at 1 ms.
+
+With the default :class:`HifiProperties` this is the physics of SPEC §1 in
+another engine. The optional ``[hifi]`` table of a scenario adds what a real
+car has and the 7-DOF model lacks:
+
+``cg_height`` (m)
+    CG above the wheel centres; the wheels then swing about the body's
+    pitch and roll axes (through the CG) instead of moving only vertically.
+``wheel_inertia`` (kg m²)
+    spin inertia of a wheel and tire (a thin disc: half of it about the
+    wheel's other two axes); the wheels turn with the body in pitch and roll.
+``damper_rebound_ratio``
+    rebound over compression damping rate. The two rates average to the
+    scenario's ``c_sf``/``c_sr`` (which is what a linear fit of a symmetric
+    cycle returns), e.g. 2.0 gives 2/3 c_s in compression and 4/3 c_s in
+    rebound.
+``damper_knee_velocity`` (m/s), ``damper_knee_ratio``
+    a digressive damper: above the knee velocity each branch continues with
+    ``knee_ratio`` times its low-speed slope.
+``bumpstop_clearance`` (m), ``bumpstop_rate`` (N/m)
+    suspension compression from static ride height at which a linear bump
+    stop engages, and its rate.
+``tire_damping`` (N s/m)
+    vertical damping of the tire contact.
+
+Every key but ``cg_height`` is one number (all corners) or ``[front, rear]``.
+
+Sensors: accelerometers at the four suspension attachment points and the
+four wheel centres, a gyro on the body. :meth:`MujocoCar.outputs` gives the
+SPEC channels: each accelerometer's reading along its own z axis with
+gravity removed in the sensor frame (the strapdown reading minus g times the
+vertical component of the sensor's z axis), and the gyro's body-frame roll
+and pitch rates (ISO 8855). ``raw=True`` gives what the sensors themselves
+read (specific force along the sensor's z axis, gravity included), for
+:mod:`rideid.measured`.
 """
 
 from __future__ import annotations
+
+import math
+from contextlib import contextmanager
+from dataclasses import dataclass, fields
 
 import numpy as np
 
@@ -26,6 +67,10 @@ IMPEDANCE = 1e-3
 POST_MASS = 1e6
 TIMESTEP = 1e-3
 
+#: logger-style names of the raw sensor channels, in CHANNELS order
+RAW_NAMES = tuple([f"acc_body_{c}_z" for c in CORNERS] + [f"acc_axle_{c}_z" for c in CORNERS]
+                  + ["gyro_y", "gyro_x"])
+
 
 def _require():
     try:
@@ -35,60 +80,129 @@ def _require():
     return mujoco
 
 
+# ---------------------------------------------------------------------------
+# the [hifi] properties
+
+@dataclass(frozen=True)
+class HifiProperties:
+    """What the multibody car has beyond the twelve parameters (module docstring).
+
+    Per-axle properties are ``(front, rear)`` pairs. The defaults are the
+    reduced configuration whose physics equal SPEC §1 exactly.
+    """
+
+    cg_height: float = 0.0
+    wheel_inertia: tuple = (0.0, 0.0)
+    damper_rebound_ratio: tuple = (1.0, 1.0)
+    damper_knee_velocity: tuple = (math.inf, math.inf)
+    damper_knee_ratio: tuple = (1.0, 1.0)
+    bumpstop_clearance: tuple = (math.inf, math.inf)
+    bumpstop_rate: tuple = (0.0, 0.0)
+    tire_damping: tuple = (0.0, 0.0)
+
+    def __post_init__(self):
+        for f in fields(self):
+            if f.name != "cg_height":
+                v = getattr(self, f.name)
+                pair = (float(v), float(v)) if np.isscalar(v) else tuple(float(x) for x in v)
+                object.__setattr__(self, f.name, pair)
+
+    @property
+    def linear_dampers(self) -> bool:
+        return self.damper_rebound_ratio == (1.0, 1.0) and self.damper_knee_ratio == (1.0, 1.0)
+
+    @property
+    def bumpstops(self) -> bool:
+        return any(r > 0 and math.isfinite(c) for c, r in zip(self.bumpstop_clearance, self.bumpstop_rate))
+
+    def to_table(self) -> dict:
+        """The ``[hifi]`` table (keys that differ from the defaults)."""
+        out, default = {}, HifiProperties()
+        for f in fields(self):
+            v = getattr(self, f.name)
+            if v != getattr(default, f.name):
+                out[f.name] = v if f.name == "cg_height" else (v[0] if v[0] == v[1] else list(v))
+        return out
+
+    def describe(self) -> str:
+        t = self.to_table()
+        return ", ".join(f"{k} = {v}" for k, v in t.items()) if t else "reduced configuration (the 7-DOF physics)"
+
+
+HIFI_KEYS = tuple(f.name for f in fields(HifiProperties))
+
+
+def parse_hifi(tab, where: str) -> HifiProperties:
+    """Validate a ``[hifi]`` table; one clear line naming the key at fault."""
+    if not isinstance(tab, dict):
+        raise DataError(f"{where} must be a table")
+
+    def num(v, w):
+        if isinstance(v, bool) or not isinstance(v, (int, float)) or math.isnan(v):
+            raise DataError(f"{w}: expected a number, got {v!r}")
+        return float(v)
+
+    kw = {}
+    for k, v in tab.items():
+        w = f"{where} {k}"
+        if k not in HIFI_KEYS:
+            raise DataError(f"{where}: unknown key '{k}'; allowed: {', '.join(HIFI_KEYS)}")
+        if k == "cg_height":
+            x = num(v, w)
+            if not math.isfinite(x):
+                raise DataError(f"{w}: expected a finite height in m, got {v!r}")
+            kw[k] = x
+            continue
+        if isinstance(v, list):
+            if len(v) != 2:
+                raise DataError(f"{w}: expected one number or [front, rear], got {len(v)} values")
+            pair = (num(v[0], w), num(v[1], w))
+        else:
+            x = num(v, w)
+            pair = (x, x)
+        for x in pair:
+            if k == "bumpstop_clearance":
+                ok = x > 0
+            elif k in ("damper_rebound_ratio", "damper_knee_velocity"):
+                ok = x > 0
+            elif k == "damper_knee_ratio":
+                ok = 0 <= x and math.isfinite(x)
+            else:
+                ok = 0 <= x and math.isfinite(x)
+            if not ok or (k == "damper_rebound_ratio" and not math.isfinite(x)):
+                need = {"bumpstop_clearance": "a positive compression travel in m (inf: none)",
+                        "damper_rebound_ratio": "a positive finite ratio",
+                        "damper_knee_velocity": "a positive velocity in m/s (inf: no knee)",
+                        }.get(k, "a finite non-negative number")
+                raise DataError(f"{w}: expected {need}, got {x!r}")
+        kw[k] = pair
+    return HifiProperties(**kw)
+
+
+def damper_force(v, c_s, rebound_ratio=1.0, knee_velocity=math.inf, knee_ratio=1.0):
+    """Damper force (N, resisting, same sign as ``v``) at compression velocity ``v`` (m/s).
+
+    Compression (``v > 0``) and rebound slopes ``2 c_s / (1 + r)`` and
+    ``2 r c_s / (1 + r)`` average to ``c_s``; above ``knee_velocity`` each
+    continues with ``knee_ratio`` times its slope.
+    """
+    v = np.asarray(v, dtype=float)
+    c_s, r = np.asarray(c_s, dtype=float), np.asarray(rebound_ratio, dtype=float)
+    vk, kr = np.asarray(knee_velocity, dtype=float), np.asarray(knee_ratio, dtype=float)
+    slope = np.where(v >= 0, 2 * c_s / (1 + r), 2 * r * c_s / (1 + r))
+    av = np.abs(v)
+    mag = np.where(av <= vk, slope * av, slope * (vk + kr * (av - np.minimum(av, vk))))
+    return np.sign(v) * mag
+
+
+# ---------------------------------------------------------------------------
+# the MJCF car
+
 def corner_xy(P, geom: Geometry):
     a = P[NAMES.index("a")]
     b = geom.wheelbase - a
     hf, hr = geom.track_front / 2, geom.track_rear / 2
     return [(a, hf), (a, -hf), (-b, hr), (-b, -hr)]
-
-
-def build_mjcf(P, geom: Geometry, cg_height: float = 0.0, wheel_inertia: float = 0.0) -> str:
-    """MJCF text of the car. ``cg_height``: CG above the wheel centres (m)."""
-    p = dict(zip(NAMES, np.asarray(P, dtype=float)))
-    R = geom.tire_radius
-    izz = p["I_xx"] + p["I_yy"]
-    loads = _static_loads(p, geom)
-    wheels, posts = [], []
-    for i, (c, (x, y)) in enumerate(zip(CORNERS, corner_xy(np.asarray(P, dtype=float), geom))):
-        front = c.startswith("f")
-        mu, ks, cs = (p["m_uf"], p["k_sf"], p["c_sf"]) if front else (p["m_ur"], p["k_sr"], p["c_sr"])
-        spring_force = loads["spring"][i]
-        wi = max(wheel_inertia, 1e-6 * mu * R * R)
-        wheels.append(f"""
-      <site name="body_{c}" pos="{x} {y} 0" size="0.01"/>
-      <body name="wheel_{c}" pos="{x} {y} {-cg_height}">
-        <joint name="susp_{c}" type="slide" axis="0 0 1" stiffness="{ks}" damping="{cs}"
-               springref="{-spring_force / ks}"/>
-        <inertial pos="0 0 0" mass="{mu}" diaginertia="{wi} {wi} {wi}"/>
-        <geom name="tire_{c}" type="sphere" size="{R}" priority="1" contype="1" conaffinity="1"
-              solimp="{IMPEDANCE} {IMPEDANCE} 0.001 0.5 2" margin="0" friction="0 0 0" condim="1"/>
-        <site name="axle_{c}" size="0.01"/>
-      </body>""")
-        pen = loads["tire"][i] / (p["k_tf"] if front else p["k_tr"])
-        posts.append(f"""
-    <body name="post_{c}" pos="{x} {y} {pen}" gravcomp="1">
-      <joint name="post_{c}" type="slide" axis="0 0 1"/>
-      <inertial pos="0 0 -0.05" mass="{POST_MASS}" diaginertia="1e4 1e4 1e4"/>
-      <geom name="pad_{c}" type="box" size="0.2 0.2 0.05" pos="0 0 -0.05" contype="2" conaffinity="1"/>
-    </body>""")
-    z0 = R + cg_height
-    return f"""<mujoco model="rideid-car">
-  <option timestep="{TIMESTEP}" integrator="RK4" gravity="0 0 {-GRAVITY}"/>
-  <worldbody>
-    <body name="chassis" pos="0 0 {z0}">
-      <joint name="heave" type="slide" axis="0 0 1"/>
-      <joint name="pitch" type="hinge" axis="0 1 0"/>
-      <joint name="roll" type="hinge" axis="1 0 0"/>
-      <inertial pos="0 0 0" mass="{p['m_s']}" diaginertia="{p['I_xx']} {p['I_yy']} {izz}"/>
-      <site name="gyro" size="0.01"/>{''.join(wheels)}
-    </body>{''.join(posts)}
-  </worldbody>
-  <sensor>
-{''.join(f'    <accelerometer name="acc_body_{c}" site="body_{c}"/>{chr(10)}' for c in CORNERS)}\
-{''.join(f'    <accelerometer name="acc_axle_{c}" site="axle_{c}"/>{chr(10)}' for c in CORNERS)}\
-    <gyro name="gyro" site="gyro"/>
-  </sensor>
-</mujoco>"""
 
 
 def _static_loads(p, geom):
@@ -101,84 +215,210 @@ def _static_loads(p, geom):
     return {"spring": spring, "tire": tire}
 
 
-class MujocoCar:
-    """A compiled MuJoCo car with the tire contact tuned to ``k_tf``/``k_tr``."""
+def build_mjcf(P, geom: Geometry, hifi: HifiProperties | None = None) -> str:
+    """MJCF text of the car (the contact stiffness is set after compiling, :class:`MujocoCar`)."""
+    hifi = hifi or HifiProperties()
+    p = dict(zip(NAMES, np.asarray(P, dtype=float)))
+    R = geom.tire_radius
+    h = hifi.cg_height
+    izz = p["I_xx"] + p["I_yy"]
+    loads = _static_loads(p, geom)
+    wheels, posts = [], []
+    for i, (c, (x, y)) in enumerate(zip(CORNERS, corner_xy(np.asarray(P, dtype=float), geom))):
+        ax = 0 if c.startswith("f") else 1
+        mu, ks, cs = (p["m_uf"], p["k_sf"], p["c_sf"]) if ax == 0 else (p["m_ur"], p["k_sr"], p["c_sr"])
+        damping = cs if hifi.linear_dampers else 0.0  # nonlinear dampers: the passive callback
+        spring_force = loads["spring"][i]
+        iw = max(hifi.wheel_inertia[ax], 1e-6 * mu * R * R)
+        wheels.append(f"""
+      <site name="body_{c}" pos="{x} {y} 0" size="0.01"/>
+      <body name="wheel_{c}" pos="{x} {y} {-h}">
+        <joint name="susp_{c}" type="slide" axis="0 0 1" stiffness="{ks}" damping="{damping}"
+               springref="{-spring_force / ks}"/>
+        <inertial pos="0 0 0" mass="{mu}" diaginertia="{iw / 2} {iw} {iw / 2}"/>
+        <geom name="tire_{c}" type="sphere" size="{R}" priority="1" contype="1" conaffinity="1"
+              solimp="{IMPEDANCE} {IMPEDANCE} 0.001 0.5 2" margin="0" friction="0 0 0" condim="1"/>
+        <site name="axle_{c}" size="0.01"/>
+      </body>""")
+        pen = loads["tire"][i] / (p["k_tf"] if ax == 0 else p["k_tr"])
+        posts.append(f"""
+    <body name="post_{c}" pos="{x} {y} {pen}" gravcomp="1">
+      <joint name="post_{c}" type="slide" axis="0 0 1"/>
+      <inertial pos="0 0 -0.05" mass="{POST_MASS}" diaginertia="1e4 1e4 1e4"/>
+      <geom name="pad_{c}" type="box" size="0.2 0.2 0.05" pos="0 0 -0.05" contype="2" conaffinity="1"/>
+    </body>""")
+    sites = [f"body_{c}" for c in CORNERS] + [f"axle_{c}" for c in CORNERS]
+    sensors = "".join(f'    <accelerometer name="acc_{s}" site="{s}"/>\n'
+                      f'    <framezaxis name="zaxis_{s}" objtype="site" objname="{s}"/>\n' for s in sites)
+    return f"""<mujoco model="rideid-car">
+  <option timestep="{TIMESTEP}" integrator="RK4" gravity="0 0 {-GRAVITY}"/>
+  <worldbody>
+    <body name="chassis" pos="0 0 {R + h}">
+      <joint name="heave" type="slide" axis="0 0 1"/>
+      <joint name="pitch" type="hinge" axis="0 1 0"/>
+      <joint name="roll" type="hinge" axis="1 0 0"/>
+      <inertial pos="0 0 0" mass="{p['m_s']}" diaginertia="{p['I_xx']} {p['I_yy']} {izz}"/>
+      <site name="gyro" size="0.01"/>{''.join(wheels)}
+    </body>{''.join(posts)}
+  </worldbody>
+  <sensor>
+{sensors}    <gyro name="gyro" site="gyro"/>
+  </sensor>
+</mujoco>"""
 
-    def __init__(self, P, geom: Geometry, cg_height: float = 0.0, wheel_inertia: float = 0.0,
-                 tire_damping: float = 0.0):
+
+class MujocoCar:
+    """A compiled MuJoCo car with the tire contact tuned to ``k_tf``/``k_tr``.
+
+    ``hifi``: :class:`HifiProperties` (or its fields as keyword arguments).
+    Nonlinear dampers and bump stops act through MuJoCo's passive-force
+    callback, so every RK4 stage sees them; step the car inside
+    :meth:`active` (:func:`simulate_mujoco` does).
+    """
+
+    def __init__(self, P, geom: Geometry, hifi: HifiProperties | None = None, **kw):
         mujoco = _require()
+        if hifi is None:
+            hifi = HifiProperties(**kw)
+        elif kw:
+            raise TypeError("give either hifi or its fields, not both")
         self.mj = mujoco
+        self.hifi = hifi
         self.P = np.asarray(P, dtype=float)
         self.geom = geom
-        self.model = mujoco.MjModel.from_xml_string(build_mjcf(self.P, geom, cg_height, wheel_inertia))
+        self.model = mujoco.MjModel.from_xml_string(build_mjcf(self.P, geom, hifi))
         m = self.model
         p = dict(zip(NAMES, self.P))
         d_imp = IMPEDANCE
-        for c in CORNERS:
-            gid = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_GEOM, f"tire_{c}")
-            bid = m.geom_bodyid[gid]
-            A = m.body_invweight0[bid, 0]
-            K = p["k_tf"] if c.startswith("f") else p["k_tr"]
-            m.geom_solref[gid] = (-K * (1 - d_imp) * A, -tire_damping * (1 - d_imp) * A)
-        self.data = mujoco.MjData(m)
-        self._qadr = {c: m.jnt_qposadr[mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_JOINT, f"post_{c}")]
-                      for c in CORNERS}
-        self._vadr = {c: m.jnt_dofadr[mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_JOINT, f"post_{c}")]
-                      for c in CORNERS}
-        self._sens = {}
-        for name in [f"acc_body_{c}" for c in CORNERS] + [f"acc_axle_{c}" for c in CORNERS] + ["gyro"]:
-            sid = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_SENSOR, name)
-            self._sens[name] = m.sensor_adr[sid]
-        self._site = {n: mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_SITE, n)
-                      for n in [f"body_{c}" for c in CORNERS] + [f"axle_{c}" for c in CORNERS] + ["gyro"]}
 
+        def jid(name):
+            return mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_JOINT, name)
+
+        self._tire_ids = []
+        for c in CORNERS:
+            ax = 0 if c.startswith("f") else 1
+            gid = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_GEOM, f"tire_{c}")
+            A = m.body_invweight0[m.geom_bodyid[gid], 0]
+            K = p["k_tf"] if ax == 0 else p["k_tr"]
+            m.geom_solref[gid] = (-K * (1 - d_imp) * A, -hifi.tire_damping[ax] * (1 - d_imp) * A)
+            self._tire_ids.append(gid)
+        self.data = mujoco.MjData(m)
+        self._post_q = np.array([m.jnt_qposadr[jid(f"post_{c}")] for c in CORNERS])
+        self._post_v = np.array([m.jnt_dofadr[jid(f"post_{c}")] for c in CORNERS])
+        self.susp_q = np.array([m.jnt_qposadr[jid(f"susp_{c}")] for c in CORNERS])
+        self.susp_v = np.array([m.jnt_dofadr[jid(f"susp_{c}")] for c in CORNERS])
+
+        def sadr(name):
+            return m.sensor_adr[mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_SENSOR, name)]
+
+        sites = [f"body_{c}" for c in CORNERS] + [f"axle_{c}" for c in CORNERS]
+        self._acc_z = np.array([sadr(f"acc_{s}") + 2 for s in sites])
+        self._zax_z = np.array([sadr(f"zaxis_{s}") + 2 for s in sites])
+        g = sadr("gyro")
+        self._gyro = np.array([g + 1, g])  # pitch rate (about y), roll rate (about x)
+
+        # per-corner damper and bump-stop constants for the passive callback
+        axle = np.array([0, 0, 1, 1])
+        self._c_s = np.array([p["c_sf"], p["c_sf"], p["c_sr"], p["c_sr"]])
+        self._reb = np.array(hifi.damper_rebound_ratio)[axle]
+        self._knee_v = np.array(hifi.damper_knee_velocity)[axle]
+        self._knee_r = np.array(hifi.damper_knee_ratio)[axle]
+        self._bs_clear = np.array(hifi.bumpstop_clearance)[axle]
+        self._bs_rate = np.array(hifi.bumpstop_rate)[axle]
+        self.needs_callback = not hifi.linear_dampers or hifi.bumpstops
+
+    # -- suspension forces beyond MuJoCo's linear joint spring and damper ------------------
+    def suspension_force(self, q, v):
+        """Generalised force on the four suspension slides (N) from nonlinear dampers and bump stops."""
+        f = np.zeros(4)
+        if not self.hifi.linear_dampers:
+            f -= damper_force(v, self._c_s, self._reb, self._knee_v, self._knee_r)
+        if self.hifi.bumpstops:
+            f -= self._bs_rate * np.maximum(q - self._bs_clear, 0.0)
+        return f
+
+    def _passive(self, m, d):
+        if m.nv != self.model.nv:  # another model stepping meanwhile: not ours
+            return
+        d.qfrc_passive[self.susp_v] += self.suspension_force(d.qpos[self.susp_q], d.qvel[self.susp_v])
+
+    @contextmanager
+    def active(self):
+        """Install this car's passive-force callback (if it needs one) for the duration."""
+        if not self.needs_callback:
+            yield self
+            return
+        previous = self.mj.get_mjcb_passive()
+        self.mj.set_mjcb_passive(self._passive)
+        try:
+            yield self
+        finally:
+            self.mj.set_mjcb_passive(previous)
+
+    # -- road, sensors, loads ---------------------------------------------------------------
     def set_road(self, r, rdot):
-        d = self.data
-        for i, c in enumerate(CORNERS):
-            d.qpos[self._qadr[c]] = r[i]
-            d.qvel[self._vadr[c]] = rdot[i]
+        self.data.qpos[self._post_q] = r
+        self.data.qvel[self._post_v] = rdot
 
     def outputs(self, raw: bool = False) -> np.ndarray:
-        """The ten SPEC channels (vertical accelerations, gravity removed; ISO 8855 rates) from the sensors."""
-        d = self.data
+        """The ten SPEC channels from the sensors (``raw``: specific force along each sensor's z, with gravity)."""
+        s = self.data.sensordata
         out = np.empty(len(CHANNELS))
-        for k, kind in enumerate(("body", "axle")):
-            for i, c in enumerate(CORNERS):
-                a = self._sens[f"acc_{kind}_{c}"]
-                f = d.sensordata[a:a + 3]
-                R = d.site_xmat[self._site[f"{kind}_{c}"]].reshape(3, 3)
-                out[4 * k + i] = (R @ f)[2] - GRAVITY
-        g = self._sens["gyro"]
-        w = d.sensordata[g:g + 3]
-        out[8], out[9] = w[1], w[0]
+        out[:8] = s[self._acc_z] if raw else s[self._acc_z] - GRAVITY * s[self._zax_z]
+        out[8:] = s[self._gyro]
         return out
+
+    def suspension_travel(self) -> np.ndarray:
+        """Compression of each suspension from static ride height (m)."""
+        return self.data.qpos[self.susp_q].copy()
 
     def tire_loads(self) -> np.ndarray:
         """Normal force of each tire contact (N), 0 where a tire has lifted."""
         mujoco, m, d = self.mj, self.model, self.data
         loads = np.zeros(4)
-        ids = [mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_GEOM, f"tire_{c}") for c in CORNERS]
         f6 = np.zeros(6)
         for j in range(d.ncon):
             con = d.contact[j]
-            for i, gid in enumerate(ids):
+            for i, gid in enumerate(self._tire_ids):
                 if gid in (con.geom1, con.geom2):
                     mujoco.mj_contactForce(m, d, j, f6)
                     loads[i] += f6[0]
         return loads
 
 
-def simulate_mujoco(P, geom: Geometry, track, speed, t, distance=None, **hifi) -> np.ndarray:
-    """Outputs ``(n, 10)`` of the MuJoCo car at the sample times ``t``.
+@dataclass
+class MujocoRun:
+    """One simulated run: outputs at the sample times and what happened at every 1 ms step."""
+
+    y: np.ndarray              # (n, 10) SPEC channels (or raw readings)
+    tire_load_min: np.ndarray  # (4,) smallest tire load over the run, N (0: the tire left the road)
+    lift_time: np.ndarray      # (4,) first time a tire had no load, s (nan: never)
+    travel_min: np.ndarray     # (4,) most extension (negative) and compression of each suspension, m
+    travel_max: np.ndarray
+    damper_work: np.ndarray    # (4,) energy each damper dissipated, J (integral of F v dt)
+    damper_v2: np.ndarray      # (4,) integral of v^2 dt, m^2/s
+
+    @property
+    def equivalent_damping(self) -> np.ndarray:
+        """Energy-equivalent linear damping of each corner on this run (N s/m): work / integral of v^2."""
+        return self.damper_work / self.damper_v2
+
+
+def simulate_mujoco(P, geom: Geometry, track, speed, t, distance=None, hifi: HifiProperties | None = None,
+                    raw: bool = False, details: bool = False, **kw):
+    """Outputs ``(n, 10)`` of the MuJoCo car at the sample times ``t`` (CHANNELS order).
 
     ``t`` must be uniform with a step that is a multiple of 1 ms; the posts
     follow the rigid-wheel envelope (SPEC §2) at the front-axle distance
     ``speed * t`` (or ``distance(t)``), their velocity from a central
-    difference of the envelope. ``hifi``: keyword arguments of :class:`MujocoCar`.
+    difference of the envelope. ``hifi``: :class:`HifiProperties` (or its
+    fields as keyword arguments); ``raw``: the sensors' own readings, gravity
+    included; ``details``: return a :class:`MujocoRun` with tire loads,
+    lift-off times and suspension travel as well.
     """
     from .simulate import corner_inputs
 
-    car = MujocoCar(P, geom, **hifi)
+    car = MujocoCar(P, geom, hifi, **kw)
     mj, m, d = car.mj, car.model, car.data
     t = np.asarray(t, dtype=float)
     h = float(t[1] - t[0])
@@ -191,12 +431,29 @@ def simulate_mujoco(P, geom: Geometry, track, speed, t, distance=None, **hifi) -
     r = corner_inputs(track, geom, x_of(tf))
     rdot = (corner_inputs(track, geom, x_of(tf + eps)) - corner_inputs(track, geom, x_of(tf - eps))) / (2 * eps)
     out = np.empty((t.size, len(CHANNELS)))
-    for j in range(tf.size):
-        car.set_road(r[j], rdot[j])
-        mj.mj_step(m, d)  # sensordata (and site frames) now describe the start of this step, time tf[j]
-        if j % sub == 0:
-            out[j // sub] = car.outputs()
+    load_min = np.full(4, np.inf)
+    lift = np.full(4, np.nan)
+    tmin, tmax = np.zeros(4), np.zeros(4)
+    work, v2 = np.zeros(4), np.zeros(4)
+    with car.active():
+        for j in range(tf.size):
+            car.set_road(r[j], rdot[j])
+            mj.mj_step(m, d)  # sensordata now describe the start of this step, time tf[j]
+            if j % sub == 0:
+                out[j // sub] = car.outputs(raw)
+            if details:
+                loads = car.tire_loads()
+                load_min = np.minimum(load_min, loads)
+                new = np.isnan(lift) & (loads <= 0)
+                lift[new] = tf[j]
+                q, v = d.qpos[car.susp_q], d.qvel[car.susp_v]
+                tmin, tmax = np.minimum(tmin, q), np.maximum(tmax, q)
+                work += damper_force(v, car._c_s, car._reb, car._knee_v, car._knee_r) * v * TIMESTEP
+                v2 += v * v * TIMESTEP
+    if details:
+        return MujocoRun(out, load_min, lift, tmin, tmax, work, v2)
     return out
 
 
-__all__ = ["MujocoCar", "build_mjcf", "simulate_mujoco"]
+__all__ = ["HIFI_KEYS", "HifiProperties", "MujocoCar", "MujocoRun", "RAW_NAMES", "build_mjcf", "damper_force",
+           "parse_hifi", "simulate_mujoco"]

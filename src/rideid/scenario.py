@@ -10,7 +10,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .errors import ArgumentError, ModelValidityWarning
+from .errors import ArgumentError, DataWarning, ModelValidityWarning
 from .files import Manifest, RunSpec, atomic_output, load_scenario, write_run_csv, write_toml
 from .model import CHANNELS, static_corner_loads
 from .params import CORNERS, NAMES, as_vector
@@ -37,9 +37,13 @@ class LiftOff:
     run: str
     wheel: str
     time: float
-    force: float  # most negative total tire force, N
+    force: float  # most negative total tire force, N (7-DOF); 0 for the MuJoCo car, whose tire cannot pull
+    engine: str = "rideid"
 
     def message(self) -> str:
+        if self.engine == "mujoco":
+            return (f"run '{self.run}': wheel {self.wheel} leaves the road in the MuJoCo car at t = {self.time:.3f} s; "
+                    "the linear model assumes every tire stays on the road")
         return (f"run '{self.run}': wheel {self.wheel} lifts off (tire force would reach {self.force:.0f} N "
                 f"at t = {self.time:.3f} s); the linear model assumes every tire stays on the road")
 
@@ -59,13 +63,22 @@ def lift_offs(P, geom, run_id, run_input, states) -> list[LiftOff]:
     return out
 
 
+#: stationary lead-in of a raw (logger-style) MuJoCo run, s
+RAW_LEAD_IN = 1.0
+
+
 def simulate_manifest(sc: Manifest, noise: float = 0.0, seed: int | None = None, progress=None,
-                      engine: str = "rideid"):
+                      engine: str = "rideid", raw: bool = False):
     """Simulate every run of a scenario with its ``[truth]`` parameters.
 
     ``engine``: ``"rideid"`` (the exact 7-DOF response) or ``"mujoco"`` (the
-    independent multibody car of :mod:`rideid.hifi`, RK4 at 1 ms; lift-off is
-    then judged by the 7-DOF model alongside).
+    independent multibody car of :mod:`rideid.hifi` with the scenario's
+    ``[hifi]`` properties, RK4 at 1 ms; lift-off is then what happened in
+    MuJoCo: a tire contact carrying no load).
+
+    ``raw`` (MuJoCo only): the sensors' own readings, gravity included, as a
+    logger would record them, with :data:`RAW_LEAD_IN` s standing still
+    before the run (the front axle reaches x = 0 at that file time).
 
     Returns
     -------
@@ -74,22 +87,36 @@ def simulate_manifest(sc: Manifest, noise: float = 0.0, seed: int | None = None,
     """
     if noise < 0 or not np.isfinite(noise):
         raise ArgumentError(f"--noise must be a non-negative fraction, got {noise}")
+    if engine not in ("rideid", "mujoco"):
+        raise ArgumentError(f"engine must be 'rideid' or 'mujoco', got {engine!r}")
+    if raw and engine != "mujoco":
+        raise ArgumentError("--raw needs --engine mujoco (raw sensor readings come from the MuJoCo car)")
+    if engine == "rideid" and sc.hifi is not None:
+        warnings.warn(f"{sc.path}: [hifi] describes the MuJoCo car and is ignored by the 7-DOF engine "
+                      "(use --engine mujoco)", DataWarning, stacklevel=2)
     rng = np.random.default_rng(seed)
     P = as_vector(sc.truth)[None]
     out, lifts = {}, []
     for i, run in enumerate(sc.runs):
         t = run_times(run)
-        ri = prepare_run(sc.tracks[run.track], sc.geometry, run.speed, t)
-        y, states = simulate_reference(P, sc.geometry, ri, return_states=True)
-        y = y[0]
         if engine == "mujoco":
             from .hifi import simulate_mujoco
-            y = simulate_mujoco(P[0], sc.geometry, sc.tracks[run.track], run.speed, t)
-        elif engine != "rideid":
-            raise ArgumentError(f"engine must be 'rideid' or 'mujoco', got {engine!r}")
-        lifts += lift_offs(P[0], sc.geometry, run.id, ri, states[0])
+            lead = RAW_LEAD_IN if raw else 0.0
+            t = np.arange(int(round((run.duration + lead) * run.fs)) + 1) / run.fs
+            res = simulate_mujoco(P[0], sc.geometry, sc.tracks[run.track], run.speed, t,
+                                  distance=lambda tt, v=run.speed, t0=lead: v * (tt - t0),
+                                  hifi=sc.hifi, raw=raw, details=True)
+            y = res.y
+            lifts += [LiftOff(run.id, w, float(res.lift_time[k]), 0.0, "mujoco")
+                      for k, w in enumerate(CORNERS) if np.isfinite(res.lift_time[k])]
+        else:
+            ri = prepare_run(sc.tracks[run.track], sc.geometry, run.speed, t)
+            y, states = simulate_reference(P, sc.geometry, ri, return_states=True)
+            y = y[0]
+            lifts += lift_offs(P[0], sc.geometry, run.id, ri, states[0])
         if noise > 0:
-            rms = np.sqrt(np.mean(y * y, axis=0))
+            dyn = y - y[:1] if raw else y  # raw: the noise scales with the motion, not with g
+            rms = np.sqrt(np.mean(dyn * dyn, axis=0))
             y = y + rng.standard_normal(y.shape) * (noise * rms)[None, :]
         out[run.id] = (t, y)
         if progress is not None:
@@ -99,15 +126,33 @@ def simulate_manifest(sc: Manifest, noise: float = 0.0, seed: int | None = None,
     return out, lifts
 
 
-def write_dataset(sc: Manifest, data: dict, out_dir, comment: str | None = None):
-    """Write ``dataset.toml``, ``runs/<id>.csv`` and ``truth.toml`` (atomically)."""
+def write_dataset(sc: Manifest, data: dict, out_dir, comment: str | None = None, raw: bool = False):
+    """Write ``dataset.toml``, ``runs/<id>.csv`` and ``truth.toml`` (atomically).
+
+    ``raw``: the runs are raw MuJoCo sensor readings (:func:`simulate_manifest`
+    with ``raw=True``); the dataset then maps the logger-style columns
+    (:data:`rideid.hifi.RAW_NAMES`) to the SPEC channels and tells
+    :mod:`rideid.measured` that gravity is included, with the stationary
+    lead-in and the start time.
+    """
     with atomic_output(out_dir) as tmp:
         runs = []
         for run in sc.runs:
             t, Y = data[run.id]
-            write_run_csv(tmp / "runs" / f"{run.id}.csv", t, Y, CHANNELS)
+            if raw:
+                from .hifi import RAW_NAMES
+                write_run_csv(tmp / "runs" / f"{run.id}.csv", t, Y, RAW_NAMES)
+            else:
+                write_run_csv(tmp / "runs" / f"{run.id}.csv", t, Y, CHANNELS)
             runs.append(RunSpec(run.id, run.track, run.speed, file=f"runs/{run.id}.csv"))
-        doc = Manifest(sc.path, sc.name, sc.geometry, sc.known, sc.bounds, sc.tracks, runs).to_dataset_doc()
+        man = Manifest(sc.path, sc.name, sc.geometry, sc.known, sc.bounds, sc.tracks, runs)
+        if raw:
+            from .hifi import RAW_NAMES
+            from .measured import ChannelEntry
+            man.channel_map = {c: ChannelEntry(n, "rad/s" if c.endswith("rate") else "m/s^2")
+                               for c, n in zip(CHANNELS, RAW_NAMES)}
+            man.preprocess = {"gravity_included": True, "lead_in": (0.0, RAW_LEAD_IN), "start": RAW_LEAD_IN}
+        doc = man.to_dataset_doc()
         # measured road profiles travel with the dataset
         for tab, tr in zip(doc["tracks"], sc.tracks.values()):
             if tr.kind == "profile":
