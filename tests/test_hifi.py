@@ -346,6 +346,7 @@ def test_hifi_table_parses_and_round_trips():
     ({"tire_damping": -5}, "sc.toml: [hifi] tire_damping: expected a finite non-negative number"),
     ({"damper_rebound_ratio": 0}, "sc.toml: [hifi] damper_rebound_ratio: expected a positive finite ratio"),
     ({"cg_height": "high"}, "sc.toml: [hifi] cg_height: expected a number, got 'high'"),
+    ({"cg_height": -0.4}, "sc.toml: [hifi] cg_height: a CG 0.4 m below the wheel centres is under the road"),
 ])
 def test_hifi_table_errors_name_the_key(tab, msg, tmp_path, capsys):
     import tomli_w

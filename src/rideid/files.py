@@ -271,6 +271,9 @@ def parse_manifest(doc: dict, path: Path, scenario: bool) -> Manifest:
     if scenario and "hifi" in doc:
         from .hifi import parse_hifi
         man.hifi = parse_hifi(doc["hifi"], f"{where}: [hifi]")
+        if man.hifi.cg_height <= -geom.tire_radius:
+            raise DataError(f"{where}: [hifi] cg_height: a CG {-man.hifi.cg_height} m below the wheel centres "
+                            f"is under the road (tire_radius {geom.tire_radius} m)")
     if not scenario:
         if "channels" in doc:
             man.channel_map = parse_channel_map(doc["channels"], f"{where}: [channels]")

@@ -160,20 +160,17 @@ def parse_hifi(tab, where: str) -> HifiProperties:
         else:
             x = num(v, w)
             pair = (x, x)
+        need = {"bumpstop_clearance": "a positive compression travel in m (inf: none)",
+                "damper_rebound_ratio": "a positive finite ratio",
+                "damper_knee_velocity": "a positive velocity in m/s (inf: no knee)"}.get(k, "a finite non-negative number")
         for x in pair:
-            if k == "bumpstop_clearance":
+            if k in ("bumpstop_clearance", "damper_knee_velocity"):
                 ok = x > 0
-            elif k in ("damper_rebound_ratio", "damper_knee_velocity"):
-                ok = x > 0
-            elif k == "damper_knee_ratio":
-                ok = 0 <= x and math.isfinite(x)
+            elif k == "damper_rebound_ratio":
+                ok = 0 < x < math.inf
             else:
-                ok = 0 <= x and math.isfinite(x)
-            if not ok or (k == "damper_rebound_ratio" and not math.isfinite(x)):
-                need = {"bumpstop_clearance": "a positive compression travel in m (inf: none)",
-                        "damper_rebound_ratio": "a positive finite ratio",
-                        "damper_knee_velocity": "a positive velocity in m/s (inf: no knee)",
-                        }.get(k, "a finite non-negative number")
+                ok = 0 <= x < math.inf
+            if not ok:
                 raise DataError(f"{w}: expected {need}, got {x!r}")
         kw[k] = pair
     return HifiProperties(**kw)
