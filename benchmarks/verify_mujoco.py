@@ -10,7 +10,7 @@ dampers also against the energy-equivalent linear damping of the simulated
 runs (the damping a linear model can see). Also listed: the smallest tire
 load and the largest suspension compression over all runs.
 
-Run: ``make verify`` (about 4 minutes) or ``python benchmarks/verify_mujoco.py
+Run: ``make verify`` (about 2.5 minutes on 2 cores) or ``python benchmarks/verify_mujoco.py
 --out DIR``; writes ``DIR/verification.md`` and ``DIR/verification.json``.
 """
 
