@@ -112,7 +112,7 @@ def _sorted_modes(lam):
     return lam[np.argsort(np.abs(lam))]
 
 
-def _closed_form_eigenvalues(P, geom, cg_height=0.0, wheel_inertia=0.0, tire_damping=0.0):
+def _closed_form_state_space(P, geom, cg_height=0.0, wheel_inertia=0.0, tire_damping=0.0):
     """The 7-DOF model (SPEC §1) plus what a raised CG, wheel inertia and tire damping add, by hand.
 
     With the CG a height h above the wheel centres, each wheel swings about
@@ -123,11 +123,12 @@ def _closed_form_eigenvalues(P, geom, cg_height=0.0, wheel_inertia=0.0, tire_dam
     each wheel by the same, net -(Σ static tire load - Σ m_u g) h φ²/2.
     A thin-disc wheel of spin inertia I_w turns with the body: +4 I_w on
     I_yy, +2 I_w on I_xx. Tire damping: +c_t on each wheel's diagonal.
+    Returns the state matrices A (14x14) and B (14x4, per unit road input).
     """
     from rideid.model import mck
     from rideid.params import GRAVITY, NAMES
     p = dict(zip(NAMES, P))
-    M, C, K, _ = (x[0].copy() for x in mck(P[None], geom))
+    M, C, K, Bf = (x[0].copy() for x in mck(P[None], geom))
     unsprung = 2 * (p["m_uf"] + p["m_ur"])
     M[1, 1] += unsprung * cg_height ** 2 + 4 * wheel_inertia
     M[2, 2] += unsprung * cg_height ** 2 + 2 * wheel_inertia
@@ -136,7 +137,12 @@ def _closed_form_eigenvalues(P, geom, cg_height=0.0, wheel_inertia=0.0, tire_dam
     C[3:, 3:] += tire_damping * np.eye(4)
     Minv = np.linalg.inv(M)
     A = np.block([[np.zeros((7, 7)), np.eye(7)], [-Minv @ K, -Minv @ C]])
-    return _sorted_modes(np.linalg.eigvals(A))
+    B = np.vstack([np.zeros((7, 4)), Minv @ Bf])
+    return A, B
+
+
+def _closed_form_eigenvalues(P, geom, **hifi):
+    return _sorted_modes(np.linalg.eigvals(_closed_form_state_space(P, geom, **hifi)[0]))
 
 
 def test_linearised_frequencies_equal_the_seven_dof_ones(default_scenario):
@@ -170,18 +176,10 @@ def _modified_linear_response(P, geom, track, speed, t, cg_height):
     """SPEC channels of the closed-form linear car with a raised CG (scipy.signal.lsim on a 1 ms grid)."""
     from scipy.signal import lsim
 
-    from rideid.model import mck
-    from rideid.params import GRAVITY, NAMES
+    from rideid.params import NAMES
     from rideid.simulate import corner_inputs
     p = dict(zip(NAMES, P))
-    M, C, K, Bf = (x[0].copy() for x in mck(P[None], geom))
-    unsprung = 2 * (p["m_uf"] + p["m_ur"])
-    for k in (1, 2):
-        M[k, k] += unsprung * cg_height ** 2
-        K[k, k] -= p["m_s"] * GRAVITY * cg_height
-    Minv = np.linalg.inv(M)
-    A = np.block([[np.zeros((7, 7)), np.eye(7)], [-Minv @ K, -Minv @ C]])
-    B = np.vstack([np.zeros((7, 4)), Minv @ Bf])
+    A, B = _closed_form_state_space(P, geom, cg_height=cg_height)
     x, y = geom.corner_xy(p["a"])
     G = np.zeros((10, 7))  # accelerations of the body corners and wheels, in generalised accelerations
     G[:4, 0], G[:4, 1], G[:4, 2] = 1.0, -np.ravel(x), np.ravel(y)
