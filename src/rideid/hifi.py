@@ -59,7 +59,7 @@ from dataclasses import dataclass, fields
 import numpy as np
 
 from .errors import DataError
-from .model import CHANNELS
+from .model import CHANNELS, static_corner_loads
 from .params import CORNERS, GRAVITY, NAMES, Geometry
 
 #: contact impedance (solimp dmin = dmax): tiny, so the contact adds no normal "mass"
@@ -202,16 +202,6 @@ def corner_xy(P, geom: Geometry):
     return [(a, hf), (a, -hf), (-b, hr), (-b, -hr)]
 
 
-def _static_loads(p, geom):
-    a = p["a"]
-    b = geom.wheelbase - a
-    fb = p["m_s"] * GRAVITY * b / geom.wheelbase / 2
-    rb = p["m_s"] * GRAVITY * a / geom.wheelbase / 2
-    spring = [fb, fb, rb, rb]
-    tire = [fb + p["m_uf"] * GRAVITY, fb + p["m_uf"] * GRAVITY, rb + p["m_ur"] * GRAVITY, rb + p["m_ur"] * GRAVITY]
-    return {"spring": spring, "tire": tire}
-
-
 def build_mjcf(P, geom: Geometry, hifi: HifiProperties | None = None) -> str:
     """MJCF text of the car (the contact stiffness is set after compiling, :class:`MujocoCar`)."""
     hifi = hifi or HifiProperties()
@@ -219,13 +209,13 @@ def build_mjcf(P, geom: Geometry, hifi: HifiProperties | None = None) -> str:
     R = geom.tire_radius
     h = hifi.cg_height
     izz = p["I_xx"] + p["I_yy"]
-    loads = _static_loads(p, geom)
+    tire_loads = static_corner_loads(np.asarray(P, dtype=float)[None], geom, GRAVITY)[0]
     wheels, posts = [], []
     for i, (c, (x, y)) in enumerate(zip(CORNERS, corner_xy(np.asarray(P, dtype=float), geom))):
         ax = 0 if c.startswith("f") else 1
         mu, ks, cs = (p["m_uf"], p["k_sf"], p["c_sf"]) if ax == 0 else (p["m_ur"], p["k_sr"], p["c_sr"])
         damping = cs if hifi.linear_dampers else 0.0  # nonlinear dampers: the passive callback
-        spring_force = loads["spring"][i]
+        spring_force = tire_loads[i] - mu * GRAVITY  # the sprung mass's share
         iw = max(hifi.wheel_inertia[ax], 1e-6 * mu * R * R)
         wheels.append(f"""
       <site name="body_{c}" pos="{x} {y} 0" size="0.01"/>
@@ -237,7 +227,7 @@ def build_mjcf(P, geom: Geometry, hifi: HifiProperties | None = None) -> str:
               solimp="{IMPEDANCE} {IMPEDANCE} 0.001 0.5 2" margin="0" friction="0 0 0" condim="1"/>
         <site name="axle_{c}" size="0.01"/>
       </body>""")
-        pen = loads["tire"][i] / (p["k_tf"] if ax == 0 else p["k_tr"])
+        pen = tire_loads[i] / (p["k_tf"] if ax == 0 else p["k_tr"])
         posts.append(f"""
     <body name="post_{c}" pos="{x} {y} {pen}" gravcomp="1">
       <joint name="post_{c}" type="slide" axis="0 0 1"/>
@@ -325,11 +315,15 @@ class MujocoCar:
         self.needs_callback = not hifi.linear_dampers or hifi.bumpstops
 
     # -- suspension forces beyond MuJoCo's linear joint spring and damper ------------------
+    def damper(self, v):
+        """Damper force of the four corners (N, resisting) at compression velocities ``v`` (m/s)."""
+        return damper_force(v, self._c_s, self._reb, self._knee_v, self._knee_r)
+
     def suspension_force(self, q, v):
         """Generalised force on the four suspension slides (N) from nonlinear dampers and bump stops."""
         f = np.zeros(4)
         if not self.hifi.linear_dampers:
-            f -= damper_force(v, self._c_s, self._reb, self._knee_v, self._knee_r)
+            f -= self.damper(v)
         if self.hifi.bumpstops:
             f -= self._bs_rate * np.maximum(q - self._bs_clear, 0.0)
         return f
@@ -365,10 +359,6 @@ class MujocoCar:
         out[8:] = s[self._gyro]
         return out
 
-    def suspension_travel(self) -> np.ndarray:
-        """Compression of each suspension from static ride height (m)."""
-        return self.data.qpos[self.susp_q].copy()
-
     def tire_loads(self) -> np.ndarray:
         """Normal force of each tire contact (N), 0 where a tire has lifted."""
         mujoco, m, d = self.mj, self.model, self.data
@@ -394,11 +384,6 @@ class MujocoRun:
     travel_max: np.ndarray
     damper_work: np.ndarray    # (4,) energy each damper dissipated, J (integral of F v dt)
     damper_v2: np.ndarray      # (4,) integral of v^2 dt, m^2/s
-
-    @property
-    def equivalent_damping(self) -> np.ndarray:
-        """Energy-equivalent linear damping of each corner on this run (N s/m): work / integral of v^2."""
-        return self.damper_work / self.damper_v2
 
 
 def simulate_mujoco(P, geom: Geometry, track, speed, t, distance=None, hifi: HifiProperties | None = None,
@@ -445,7 +430,7 @@ def simulate_mujoco(P, geom: Geometry, track, speed, t, distance=None, hifi: Hif
                 lift[new] = tf[j]
                 q, v = d.qpos[car.susp_q], d.qvel[car.susp_v]
                 tmin, tmax = np.minimum(tmin, q), np.maximum(tmax, q)
-                work += damper_force(v, car._c_s, car._reb, car._knee_v, car._knee_r) * v * TIMESTEP
+                work += car.damper(v) * v * TIMESTEP
                 v2 += v * v * TIMESTEP
     if details:
         return MujocoRun(out, load_min, lift, tmin, tmax, work, v2)

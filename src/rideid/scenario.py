@@ -102,7 +102,8 @@ def simulate_manifest(sc: Manifest, noise: float = 0.0, seed: int | None = None,
         if engine == "mujoco":
             from .hifi import simulate_mujoco
             lead = RAW_LEAD_IN if raw else 0.0
-            t = np.arange(int(round((run.duration + lead) * run.fs)) + 1) / run.fs
+            if raw:  # the same samples, after the lead-in
+                t = np.arange(int(round(lead * run.fs)) + t.size) / run.fs
             res = simulate_mujoco(P[0], sc.geometry, sc.tracks[run.track], run.speed, t,
                                   distance=lambda tt, v=run.speed, t0=lead: v * (tt - t0),
                                   hifi=sc.hifi, raw=raw, details=True)
