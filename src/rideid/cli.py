@@ -95,6 +95,9 @@ def _parser() -> argparse.ArgumentParser:
     s.add_argument("--out", required=True, metavar="DIR")
     s.add_argument("--noise", type=float, default=0.0, metavar="FRACTION",
                    help="white Gaussian noise, standard deviation as a fraction of each channel's RMS")
+    s.add_argument("--noise-ar1", type=float, default=0.0, metavar="RHO",
+                   help="colour the noise: AR(1) in time with this coefficient per sample (0 <= RHO < 1; "
+                        "same standard deviation), as real sensors' noise is")
     s.add_argument("--seed", type=int, default=None, metavar="N")
     s.add_argument("--engine", choices=("rideid", "mujoco"), default="rideid",
                    help="rideid's exact 7-DOF response (default), or the independent MuJoCo multibody car "
@@ -150,7 +153,7 @@ def cmd_simulate(args, out=None):
     sc = load_scenario(args.scenario)
     prog = Progress(args.quiet)
     data, lifts = simulate_manifest(sc, noise=args.noise, seed=args.seed, engine=args.engine, raw=args.raw,
-                                    progress=lambda i, n, rid: prog.steps(i, n, "simulating run"))
+                                    noise_ar1=args.noise_ar1, progress=lambda i, n, rid: prog.steps(i, n, "simulating run"))
     prog.done()
     engine = args.engine
     if engine == "mujoco":
@@ -158,18 +161,20 @@ def cmd_simulate(args, out=None):
         engine += f"; [hifi] {(sc.hifi or HifiProperties()).describe()}" + ("; raw sensor readings" if args.raw else "")
     write_dataset(sc, data, args.out, raw=args.raw,
                   comment=f"simulated by rideid {__version__} from {Path(args.scenario).name}"
-                          f" (engine {engine}, noise {args.noise}, seed {args.seed})")
+                          f" (engine {engine}, noise {args.noise}"
+                          + (f" AR(1) {args.noise_ar1}" if args.noise_ar1 else "") + f", seed {args.seed})")
     print(f"dataset written to {args.out} ({len(sc.runs)} runs)", file=out)
     print(format_modal_summary(modal_summary(sc.truth, sc.geometry)), file=out)
     return 0
 
 
 def _summary_table(res) -> str:
-    lines = [f"{'parameter':<10} {'estimate':>14} {'± std':>11}  {'unit':<8} note"]
+    lines = [f"{'parameter':<10} {'estimate':>14} {'± std':>11} {'± robust':>11}  {'unit':<8} note"]
     for n, d in res.details.items():
         note = "known" if d["fixed"] else ("derived" if d["derived"] else "")
         std = "" if d.get("std") in (None, 0.0) else f"{d['std']:.3g}"
-        lines.append(f"{n:<10} {d['value']:>14.6g} {std:>11}  {d['unit']:<8} {note}")
+        rob = "" if d.get("std_robust") in (None, 0.0) else f"{d['std_robust']:.3g}"
+        lines.append(f"{n:<10} {d['value']:>14.6g} {std:>11} {rob:>11}  {d['unit']:<8} {note}")
     return "\n".join(lines)
 
 

@@ -24,9 +24,11 @@
    wheel inputs depend on the start, are re-simulated and polished again
    until no start moves by more than 1e-3 of a sample interval (at most 5
    rounds). Without the polish the nominal alignment stands.
-7. Standard errors: ``cov = s^2 (J^T J)^-1`` at the optimum with
+7. Standard errors: ``std`` from ``cov = s^2 (J^T J)^-1`` at the optimum with
    ``s^2 = RSS / (m - d)``, assuming white residuals (an optimistic lower
-   bound when residuals are correlated or the model is wrong).
+   bound when residuals are correlated or the model is wrong), and
+   ``std_robust`` from the HAC sandwich of :mod:`rideid.estimate.uncertainty`
+   (residuals correlated in time and across channels, runs independent).
 """
 
 from __future__ import annotations
@@ -46,6 +48,7 @@ from ..errors import ArgumentError
 from .jade import JadeSolver
 from ..model.equations import modal_summary
 from ..model.params import INDEX, NAMES, UNITS
+from .uncertainty import estimate_covariance, hac_covariance
 from .sensitivity import SensitivityMaps, adaptive_weights, coefficient_of_variation, compute_maps, normalised_spread
 
 DEFAULT_POPULATION = 64
@@ -81,6 +84,7 @@ class IdentificationResult:
     modal: dict | None = None
     dataset: str = ""
     maps: SensitivityMaps | None = None
+    correlation: dict | None = None
 
     def to_dict(self) -> dict:
         return {
@@ -97,6 +101,7 @@ class IdentificationResult:
             "weights": self.weights_mode,
             "stop": self.stop,
             "polish": self.polish,
+            "correlation": self.correlation,
             "modal": self.modal,
             "preprocessing": self.preprocessing,
             "dataset": str(Path(self.dataset).resolve()) if self.dataset else "",
@@ -232,6 +237,7 @@ def _identify(ds, *, seed, population, generations, weights, polish, spread_tol,
     P = space.full(x_best[None])[0]
     wall = time.perf_counter() - t0
 
+    robust = estimate_covariance(polish_info, space)
     details = {}
     for n in NAMES:
         d = {"value": float(P[INDEX[n]]), "unit": UNITS[n], "fixed": n in space.fixed,
@@ -245,6 +251,7 @@ def _identify(ds, *, seed, population, generations, weights, polish, spread_tol,
             d["lower"] = d["upper"] = None  # follows from the anchor: never searched
         else:
             d["std"] = 0.0
+        d["std_robust"] = robust.std_robust(n) if n not in space.fixed else 0.0
         details[n] = d
     return IdentificationResult(
         parameters={n: float(P[INDEX[n]]) for n in NAMES}, details=details, known=dict(ds.known),
@@ -252,7 +259,7 @@ def _identify(ds, *, seed, population, generations, weights, polish, spread_tol,
         seed=seed, track_weights={rid: float(w[r]) for r, rid in enumerate(cf.run_ids)},
         weights_mode=weights, polish=polish_info, stop=stop, history=history,
         modal=modal_summary(P, ds.geometry), dataset=str(ds.path), maps=maps,
-        preprocessing=ds.preprocessing())
+        preprocessing=ds.preprocessing(), correlation=robust.correlation_dict())
 
 
 def _polish(cf: CostFunction, x0, weights, align=None):
@@ -321,12 +328,21 @@ def _polish(cf: CostFunction, x0, weights, align=None):
     except np.linalg.LinAlgError:
         cov_all = np.full((n, n), np.nan)
         std_all = np.full(n, np.nan)
+    # robust (HAC) covariance: runs as independent blocks of samples, see rideid.estimate.uncertainty
+    blocks = [(int(e - s), int(np.count_nonzero(cf.W[ri] > 0)))
+              for ri, (s, e) in enumerate(zip(cf.sim.run_start[:-1], cf.sim.run_start[1:]))]
+    hac = hac_covariance(J, sol.fun, blocks)
+    cov_rob = hac.cov * np.outer(scale, scale)
+    std_rob = np.sqrt(np.clip(np.diag(cov_rob), 0, None))
     x = to_x(sol.x[:d])
     info = {"success": bool(sol.success), "message": sol.message, "nfev": int(sol.nfev),
             "cost_before": float(np.sum(fun(v0) ** 2)), "cost_after": 2 * float(sol.cost),
-            "covariance": cov_all[:d, :d].tolist(), "names": list(cf.names)}
+            "covariance": cov_all[:d, :d].tolist(), "names": list(cf.names),
+            "covariance_robust": cov_rob[:d, :d].tolist(),
+            "hac_bandwidths": {rid: float(b) for rid, b in zip(cf.run_ids, hac.bandwidths)}}
     if align:
-        info["starts"] = {mr.run_id: {"value": start_of(sol.x, k), "std": float(std_all[d + k])}
+        info["starts"] = {mr.run_id: {"value": start_of(sol.x, k), "std": float(std_all[d + k]),
+                                      "std_robust": float(std_rob[d + k])}
                           for k, (_, mr, _) in enumerate(align)}
     return x, info, std_all[:d]
 

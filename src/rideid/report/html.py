@@ -285,6 +285,7 @@ def write_report(out_dir, ds=None, maps=None, cost=None, compare=None) -> Path:
     from ..data.dataset import load_dataset
     from ..model.params import DESCRIPTIONS, NAMES, as_vector
     from ..estimate.sensitivity import P2T_STARS, compute_maps, stars
+    from .estimate_sections import estimate_context
 
     out_dir = Path(out_dir)
     rpath = out_dir / "result.json"
@@ -348,9 +349,12 @@ def write_report(out_dir, ds=None, maps=None, cost=None, compare=None) -> Path:
     for n in NAMES:
         d = res["parameters"][n]
         std = d.get("std")
+        rob = d.get("std_robust")
         params.append({
             "name": n, "meaning": DESCRIPTIONS[n], "value": d["value"], "unit": d["unit"],
             "std": std, "rel_std": (100 * std / abs(d["value"])) if std not in (None, 0.0) and d["value"] else None,
+            "std_robust": rob,
+            "rel_std_robust": (100 * rob / abs(d["value"])) if rob not in (None, 0.0) and d["value"] else None,
             "lower": d.get("lower"), "upper": d.get("upper"),
             "status": "known" if d.get("fixed") else ("derived" if d.get("derived") else "estimated"),
         })
@@ -364,6 +368,7 @@ def write_report(out_dir, ds=None, maps=None, cost=None, compare=None) -> Path:
         figures=figs + compare_figs, fit_figures=fit_figs, fit_rows=fit_rows, heat_figures=heat_figs, runs=maps.runs, p2t=p2t,
         known=res.get("known", {}), n_runs=len(ds.runs), dataset=str(ds.path),
         data_rows=data_rows, channel_rows=channel_rows, data_warnings=data_warnings,
+        **estimate_context(res),
     )
     out = out_dir / "report.html"
     out.write_text(text)

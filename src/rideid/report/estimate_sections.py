@@ -1,0 +1,37 @@
+"""Report sections on the quality of the estimate: robust errors, correlations, adequacy, model choice.
+
+Builds plain template context from ``result.json`` (no file access).
+"""
+
+from __future__ import annotations
+
+import math
+
+
+def correlation_rows(res: dict) -> dict | None:
+    """The estimates' correlation matrix as table rows with a colour per cell.
+
+    Returns ``{"names": [...], "rows": [{"name", "cells": [(text, css)]}]}``
+    or ``None`` when result.json has none.
+    """
+    cor = res.get("correlation")
+    if not cor:
+        return None
+    rows = []
+    for name, row in zip(cor["names"], cor["matrix"]):
+        cells = []
+        for v in row:
+            if v is None or not math.isfinite(v):
+                cells.append(("–", ""))
+                continue
+            # strong correlations (|r| > 0.9) mean the data fix a combination better than each parameter
+            alpha = min(abs(v), 1.0) * 0.6
+            colour = f"rgba(220,38,38,{alpha:.2f})" if v > 0 else f"rgba(37,99,235,{alpha:.2f})"
+            cells.append((f"{v:+.2f}", f"background:{colour}"))
+        rows.append({"name": name, "cells": cells})
+    return {"names": cor["names"], "rows": rows}
+
+
+def estimate_context(res: dict) -> dict:
+    """Everything the template's quality sections need, from ``result.json``."""
+    return {"correlation": correlation_rows(res)}
