@@ -46,6 +46,26 @@ def simulated(sc, out, *, noise=0.02, rho=0.0, seed=1):
     return rideid.load_dataset(out)
 
 
+def simulate_car(sc, extra: dict | None = None):
+    """Noise-free runs of scenario ``sc`` for its twelve ``[truth]`` values plus the extension
+    parameters in ``extra`` (SPEC §6 names; absent = 0), through the reference simulation.
+
+    Returns ``{run id: (t, Y)}`` as :func:`rideid.simulate_manifest` does.
+    """
+    from rideid.data.scenario import run_times
+    from rideid.model.params import ALL_NAMES
+    from rideid.model.simulate import prepare_run, simulate_reference
+
+    vals = {**{n: 0.0 for n in ALL_NAMES}, **sc.truth, **(extra or {})}
+    P = np.array([[vals[n] for n in ALL_NAMES]])
+    out = {}
+    for run in sc.runs:
+        t = run_times(run)
+        ri = prepare_run(sc.tracks[run.track], sc.geometry, run.speed, t)
+        out[run.id] = (t, simulate_reference(P, sc.geometry, ri)[0])
+    return out
+
+
 def add_noise(data, noise, rho, seed):
     """Noise as ``rideid simulate --noise NOISE --noise-ar1 RHO`` adds it, on already simulated runs."""
     from rideid.data.noise import sensor_noise

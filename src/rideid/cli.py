@@ -10,6 +10,7 @@ import argparse
 import json
 import os
 import sys
+import textwrap
 import time
 import traceback
 import warnings
@@ -206,6 +207,12 @@ def run_identify(ds_path, out_dir, *, seed, population=None, generations=None, w
             write_report(tmp, ds=ds, maps=res.maps, cost=None if ds.auto_start_runs() else cost)
             prog.done()
     print(_summary_table(res), file=out)
+    from .estimate.adequacy import verdict_paragraph
+    para = verdict_paragraph(res.adequacy)
+    if para:
+        print("\n" + textwrap.fill(para, 100) + "\n", file=out)
+    elif res.adequacy:
+        print("model adequate: " + res.adequacy["reasons"][0], file=out)
     print(f"cost {res.cost:.4g}, {res.generations} generations, {res.evaluations} evaluations, "
           f"{res.wall_time_s:.1f} s; written to {out_dir}" + (f" (open {Path(out_dir) / 'report.html'})"
                                                                 if report else ""), file=out)

@@ -29,6 +29,9 @@
    bound when residuals are correlated or the model is wrong), and
    ``std_robust`` from the HAC sandwich of :mod:`rideid.estimate.uncertainty`
    (residuals correlated in time and across channels, runs independent).
+8. Adequacy (:mod:`rideid.estimate.adequacy`): per run and channel, the
+   residual level against the quiet lead-in, a whiteness test and the
+   decisive test: does the road input explain the prewhitened residual?
 """
 
 from __future__ import annotations
@@ -48,6 +51,7 @@ from ..errors import ArgumentError
 from .jade import JadeSolver
 from ..model.equations import modal_summary
 from ..model.params import INDEX, NAMES, UNITS
+from .adequacy import assess_fit
 from .uncertainty import estimate_covariance, hac_covariance
 from .sensitivity import SensitivityMaps, adaptive_weights, coefficient_of_variation, compute_maps, normalised_spread
 
@@ -85,6 +89,7 @@ class IdentificationResult:
     dataset: str = ""
     maps: SensitivityMaps | None = None
     correlation: dict | None = None
+    adequacy: dict | None = None
 
     def to_dict(self) -> dict:
         return {
@@ -102,6 +107,7 @@ class IdentificationResult:
             "stop": self.stop,
             "polish": self.polish,
             "correlation": self.correlation,
+            "adequacy": self.adequacy,
             "modal": self.modal,
             "preprocessing": self.preprocessing,
             "dataset": str(Path(self.dataset).resolve()) if self.dataset else "",
@@ -235,9 +241,10 @@ def _identify(ds, *, seed, population, generations, weights, polish, spread_tol,
         x_best, polish_info, std = _polish(cf, x_best, equal)
     final_E = cf.run_errors(x_best[None])[:, 0]
     P = space.full(x_best[None])[0]
-    wall = time.perf_counter() - t0
 
     robust = estimate_covariance(polish_info, space)
+    adequacy = assess_fit(cf, P)
+    wall = time.perf_counter() - t0
     details = {}
     for n in NAMES:
         d = {"value": float(P[INDEX[n]]), "unit": UNITS[n], "fixed": n in space.fixed,
@@ -259,7 +266,7 @@ def _identify(ds, *, seed, population, generations, weights, polish, spread_tol,
         seed=seed, track_weights={rid: float(w[r]) for r, rid in enumerate(cf.run_ids)},
         weights_mode=weights, polish=polish_info, stop=stop, history=history,
         modal=modal_summary(P, ds.geometry), dataset=str(ds.path), maps=maps,
-        preprocessing=ds.preprocessing(), correlation=robust.correlation_dict())
+        preprocessing=ds.preprocessing(), correlation=robust.correlation_dict(), adequacy=adequacy)
 
 
 def _polish(cf: CostFunction, x0, weights, align=None):

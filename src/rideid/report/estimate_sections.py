@@ -32,6 +32,25 @@ def correlation_rows(res: dict) -> dict | None:
     return {"names": cor["names"], "rows": rows}
 
 
+def adequacy_rows(res: dict) -> dict | None:
+    """Verdict, reasons, advice and one row per run (worst channel of each figure)."""
+    adq = res.get("adequacy")
+    if not adq:
+        return None
+    rows = []
+    for rid, rec in adq.get("runs", {}).items():
+        if not rec:
+            continue
+        levels = [(f["level"], c) for c, f in rec.items() if f.get("level") is not None]
+        lv, lc = max(levels) if levels else (None, "")
+        ex, ec = max((f["input_explained"], c) for c, f in rec.items())
+        rows.append({"run": rid, "level": lv, "level_channel": lc, "explained": ex, "explained_channel": ec,
+                     "structure": [c for c, f in rec.items() if f["structure"]],
+                     "white": sum(f["white"] for f in rec.values()), "channels": len(rec)})
+    return {"adequate": adq["adequate"], "reasons": adq["reasons"], "advice": adq.get("advice"),
+            "method": adq.get("method", ""), "rows": rows}
+
+
 def estimate_context(res: dict) -> dict:
     """Everything the template's quality sections need, from ``result.json``."""
-    return {"correlation": correlation_rows(res)}
+    return {"correlation": correlation_rows(res), "adequacy": adequacy_rows(res)}

@@ -404,4 +404,4 @@ def data_tables(pre: dict):
     return rows, chans, warns
 
 
-SECTIONS = ("estimates", "modal", "convergence", "spread", "weights", "data", "fits", "maps")
+SECTIONS = ("estimates", "adequacy", "modal", "convergence", "spread", "weights", "data", "fits", "maps")
