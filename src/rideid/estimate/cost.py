@@ -78,6 +78,9 @@ class ParameterSpace:
         model has an extension group or an extension value is known.
     param_names : tuple of str
         The names of those columns.
+    reported_names : tuple of str
+        The twelve, the model's extension parameters and known extensions
+        (an extension neither in the model nor known is 0 and not reported).
     """
 
     def __init__(self, known: dict[str, float], geometry, bounds: dict | None = None, extensions=()):
@@ -101,6 +104,8 @@ class ParameterSpace:
         self.names = [n for n in list(NAMES) + model_ext if n not in self.fixed and n != self.derived]
         self.width = len(ALL_NAMES) if (model_ext or any(n in self.fixed for n in EXT_NAMES)) else len(NAMES)
         self.param_names = ALL_NAMES[:self.width]
+        #: what a result reports: the twelve, the model's extensions and any known extension
+        self.reported_names = tuple(n for n in ALL_NAMES if n in NAMES or n in model_ext or n in self.fixed)
         db = default_bounds(geometry)
         bounds = dict(bounds or {})
         for k in bounds:

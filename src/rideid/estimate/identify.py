@@ -270,7 +270,7 @@ def _identify(ds, *, seed, population, generations, weights, polish, spread_tol,
     wall = time.perf_counter() - t0
 
     details = {}
-    for n in space.param_names:
+    for n in space.reported_names:
         d = {"value": float(P[INDEX[n]]), "unit": UNITS[n], "fixed": n in space.fixed,
              "derived": n == space.derived}
         if n in cf.names:
@@ -284,7 +284,7 @@ def _identify(ds, *, seed, population, generations, weights, polish, spread_tol,
             d["std"] = 0.0
         details[n] = d
     return IdentificationResult(
-        parameters={n: float(P[INDEX[n]]) for n in space.param_names}, details=details, known=dict(ds.known),
+        parameters={n: float(P[INDEX[n]]) for n in space.reported_names}, details=details, known=dict(ds.known),
         cost=float(equal @ final_E), generations=solver.nit, evaluations=cf.nfev, wall_time_s=wall,
         seed=seed, track_weights={rid: float(w[r]) for r, rid in enumerate(cf.run_ids)},
         weights_mode=weights, polish=polish_info, stop=stop, history=history,
