@@ -480,3 +480,61 @@ def test_extended_model_recovers_a_car_with_bars_and_tire_damping(tmp_path):
     # the base model on the same data is biased far beyond that
     base = rideid.identify(ds, seed=2, model="base")
     assert max(abs(base.parameters[n] / sc.truth[n] - 1) for n in NAMES) > 0.02
+
+
+# ---------------------------------------------------------------------------
+# the MuJoCo car with real anti-roll bars and tire damping
+
+def test_mujoco_car_with_bars_and_tire_damping_linearises_to_the_extended_model(default_scenario):
+    pytest.importorskip("mujoco")
+    from test_hifi import _linearised_eigenvalues, _sorted_modes
+    P = as_vector({**default_scenario.truth, **EXT})
+    mj = _linearised_eigenvalues(P, G, None)
+    ext = _sorted_modes(np.linalg.eigvals(state_space(P[None], G)[0][0]))
+    base = _sorted_modes(np.linalg.eigvals(state_space(P0[None], G)[0][0]))
+    np.testing.assert_allclose(np.abs(mj), np.abs(ext), rtol=2e-3)
+    np.testing.assert_allclose(-mj.real / np.abs(mj), -ext.real / np.abs(ext), rtol=5e-3)
+    assert np.abs(np.abs(mj) / np.abs(base) - 1).max() > 0.1  # the roll mode moved: the bars act
+
+
+@pytest.mark.parametrize("rid", ["T_LL", "H_LL"])
+def test_mujoco_car_with_extensions_matches_the_extended_response(rid, default_scenario):
+    pytest.importorskip("mujoco")
+    from rideid.model.equations import CHANNEL_KIND
+    from rideid.verify.hifi import simulate_mujoco
+    sc = default_scenario
+    P = as_vector({**sc.truth, **EXT})
+    run = sc.run(rid)
+    track = sc.tracks[run.track]
+    t = np.arange(int(run.duration * 200) + 1) / 200
+    y = simulate_mujoco(P, G, track, run.speed, t)
+    ri = prepare_run(track, G, run.speed, t)
+    yr = simulate_reference(P[None], G, ri)[0]
+    y0 = simulate_reference(P0[None], G, ri)[0]
+    rms = np.sqrt(np.mean(yr ** 2, axis=0))
+    err = np.sqrt(np.mean((y - yr) ** 2, axis=0))
+    err0 = np.sqrt(np.mean((y - y0) ** 2, axis=0))
+    checked = 0
+    for i, c in enumerate(CHANNELS):
+        same_kind = max(rms[j] for j, c2 in enumerate(CHANNELS) if CHANNEL_KIND[c2] == CHANNEL_KIND[c])
+        if rms[i] > 1e-3 * same_kind:
+            assert err[i] < 1e-2 * rms[i], (c, err[i] / rms[i])
+            checked += 1
+    assert checked >= 9
+    assert np.max(err0 / np.maximum(rms, 1e-12)) > 0.05  # the base car misses what MuJoCo's bars and tires do
+
+
+def test_tire_damping_given_twice_is_refused(tmp_path, capsys):
+    pytest.importorskip("mujoco")
+    import tomllib
+
+    import tomli_w
+
+    from rideid.cli import main
+    path = _ext_scenario(tmp_path, {"c_tf": 150.0})
+    doc = tomllib.loads(path.read_text())
+    doc["hifi"] = {"tire_damping": 200.0}
+    path.write_text(tomli_w.dumps(doc))
+    assert main(["simulate", str(path), "--out", str(tmp_path / "o"), "--engine", "mujoco", "--quiet"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "suv.toml: tire damping is given twice" in err[0] and not (tmp_path / "o").exists()

@@ -310,6 +310,8 @@ def parse_manifest(doc: dict, path: Path, scenario: bool) -> Manifest:
     if scenario and "hifi" in doc:
         from ..verify.hifi import parse_hifi
         man.hifi = parse_hifi(doc["hifi"], f"{where}: [hifi]")
+        from ..verify.hifi import tire_damping_of
+        tire_damping_of([truth[n] for n in NAMES] + [truth.get(n, 0.0) for n in EXT_NAMES], man.hifi, where)
         if man.hifi.cg_height <= -geom.tire_radius:
             raise DataError(f"{where}: [hifi] cg_height: a CG {-man.hifi.cg_height} m below the wheel centres "
                             f"is under the road (tire_radius {geom.tire_radius} m)")
