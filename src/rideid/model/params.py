@@ -1,7 +1,10 @@
-"""The twelve ride parameters, the known geometry and the built-in car.
+"""The ride parameters, the known geometry and the built-in car.
 
-Parameter vectors are always in :data:`NAMES` order; a batch of candidates is
-an array of shape ``(n_pop, 12)``.
+Parameter vectors are in :data:`NAMES` order (the twelve of SPEC §1), a batch
+of candidates an array of shape ``(n_pop, 12)``. The model extensions of
+SPEC §6 (anti-roll bars, tire damping; groups :data:`GROUPS`) follow as
+columns 12-15 (:data:`ALL_NAMES`): model functions accept rows of 12 or 16
+(absent extensions are 0, :func:`full_rows`).
 """
 
 from __future__ import annotations
@@ -94,6 +97,12 @@ DEFAULT_BOUNDS = {
     "c_tf": (0.0, 1.5e3),
     "c_tr": (0.0, 1.5e3),
 }
+
+#: Typical extension values for the built-in car's size (a mid-size car with
+#: anti-roll bars and radial tires), scaled with the car like the rest of the
+#: nominal car: the reference point of sensitivity maps when the model has the
+#: extensions, never a starting guess.
+NOMINAL_EXTENSIONS = {"k_arf": 12000.0, "k_arr": 6000.0, "c_tf": 150.0, "c_tr": 150.0}
 
 GRAVITY = 9.81
 
