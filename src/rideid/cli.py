@@ -121,7 +121,8 @@ def _parser() -> argparse.ArgumentParser:
     s.add_argument("--no-polish", action="store_true", help="skip the least-squares polish after JADE")
     s.add_argument("--model", default=None, metavar="MODEL",
                    help="base: the twelve parameters; full: with anti-roll bars (k_arf, k_arr) and tire damping "
-                        "(c_tf, c_tr) (default: the dataset's [model] extensions, else base)")
+                        "(c_tf, c_tr); auto: fit the candidates and keep what the data support (docs/model-choice.md) "
+                        "(default: the dataset's [model] extensions, else auto)")
     s.add_argument("--no-report", action="store_true", help="write result.json and history.csv only")
     s.add_argument("--quiet", action="store_true", help="no progress line")
 
@@ -182,15 +183,30 @@ def _summary_table(res) -> str:
     return "\n".join(lines)
 
 
+def _candidates_table(model: dict) -> str:
+    lines = [f"--model auto kept: {' + '.join(model['extensions']) or 'base'}",
+             f"{'candidate':<30} {'cost':>11} {'criterion':>11} {'adequate':>9}"]
+    for c in model["candidates"]:
+        crit = "" if c["criterion"] is None else f"{c['criterion']:.4g}"
+        adq = {True: "yes", False: "no", None: "-"}[c.get("adequate")]
+        lines.append(f"{' + '.join(c['extensions']) or 'base':<30} {c['cost']:>11.5g} {crit:>11} {adq:>9}")
+    return "\n".join(lines)
+
+
 def run_identify(ds_path, out_dir, *, seed, population=None, generations=None, weights="adaptive",
                  polish=True, quiet=False, out=None, report=True, model=None):
     out = out or sys.stdout
     from .data.dataset import load_dataset
     from .data.schema import atomic_output
-    from .estimate.identify import DEFAULT_GENERATIONS, DEFAULT_POPULATION, identify, model_extensions
+    from .estimate.identify import DEFAULT_GENERATIONS, DEFAULT_POPULATION, MODELS, identify, model_extensions
 
+    if model is not None and model not in MODELS:
+        raise ArgumentError(f"--model must be one of {', '.join(MODELS)}, got {model!r}")
     ds = load_dataset(ds_path)
-    extensions = model_extensions(ds, model)
+    if model is None and ds.manifest.extensions is None:
+        model = "auto"  # SPEC §6: without a [model] table the data choose
+    auto = model == "auto"
+    extensions = None if auto else model_extensions(ds, model)
     prog = Progress(quiet)
     kw = {"population": population or DEFAULT_POPULATION, "generations": generations or DEFAULT_GENERATIONS}
     if kw["population"] < 4:
@@ -198,8 +214,12 @@ def run_identify(ds_path, out_dir, *, seed, population=None, generations=None, w
     if kw["generations"] < 1:
         raise ArgumentError(f"--generations must be at least 1, got {kw['generations']}")
     from .estimate.cost import CostFunction
-    cost = CostFunction(ds, extensions=extensions)
-    res = identify(ds, seed=seed, weights=weights, polish=polish, progress=prog.identify, cost=cost, **kw)
+    if auto:
+        cost = None
+        res = identify(ds, seed=seed, weights=weights, polish=polish, progress=prog.identify, model="auto", **kw)
+    else:
+        cost = CostFunction(ds, extensions=extensions)
+        res = identify(ds, seed=seed, weights=weights, polish=polish, progress=prog.identify, cost=cost, **kw)
     prog.done()
     with atomic_output(out_dir) as tmp:
         res.save(tmp)
@@ -211,6 +231,8 @@ def run_identify(ds_path, out_dir, *, seed, population=None, generations=None, w
             write_report(tmp, ds=ds, maps=res.maps, cost=None if ds.auto_start_runs() else cost)
             prog.done()
     print(_summary_table(res), file=out)
+    if res.model.get("candidates"):
+        print(_candidates_table(res.model), file=out)
     from .estimate.adequacy import verdict_paragraph
     para = verdict_paragraph(res.adequacy)
     if para:

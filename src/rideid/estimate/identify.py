@@ -136,7 +136,7 @@ def write_history(history, path):
 
 
 #: ``--model`` choices handled here (SPEC §6)
-MODELS = ("base", "full")
+MODELS = ("base", "full", "auto")
 
 
 def model_extensions(ds: Dataset, model=None) -> tuple[str, ...]:
@@ -164,7 +164,7 @@ def model_extensions(ds: Dataset, model=None) -> tuple[str, ...]:
 def identify(ds: Dataset, *, seed: int | None = None, population: int = DEFAULT_POPULATION,
              generations: int = DEFAULT_GENERATIONS, weights: str = "adaptive", polish: bool = True,
              spread_tol: float | None = None, progress=None, cost: CostFunction | None = None,
-             maps: SensitivityMaps | None = None, model=None) -> IdentificationResult:
+             maps: SensitivityMaps | None = None, model=None, start=None) -> IdentificationResult:
     """Estimate the ride parameters of a dataset.
 
     Parameters
@@ -194,19 +194,28 @@ def identify(ds: Dataset, *, seed: int | None = None, population: int = DEFAULT_
         group (``"full"``), or the given groups; ``None``: the dataset's
         ``[model]``, else the twelve. Ignored when ``cost`` is given (its
         parameter space decides). Known extension values are held fixed and
-        used whatever the model.
+        used whatever the model. ``"auto"``: fit the candidates and keep the
+        model the data support (:func:`rideid.estimate.model_choice.identify_auto`).
+    start : array_like, shape (d,), optional
+        Free-parameter row (the cost's ``names`` order) to polish from,
+        skipping the search (used to fit nested models from a larger one).
 
     Returns
     -------
     IdentificationResult
     """
+    if isinstance(model, str) and model == "auto" and cost is None:
+        from .model_choice import identify_auto
+        return identify_auto(ds, seed=seed, population=population, generations=generations, weights=weights,
+                             polish=polish, spread_tol=spread_tol, progress=progress, maps=maps)
     with single_threaded_blas():
         return _identify(ds, seed=seed, population=population, generations=generations, weights=weights,
                          polish=polish, spread_tol=spread_tol, progress=progress, cost=cost, maps=maps,
-                         model=model)
+                         model=model, start=start)
 
 
-def _identify(ds, *, seed, population, generations, weights, polish, spread_tol, progress, cost, maps, model):
+def _identify(ds, *, seed, population, generations, weights, polish, spread_tol, progress, cost, maps, model,
+              start=None):
     if spread_tol is None:
         spread_tol = DEFAULT_SPREAD_TOL if polish else DEFAULT_SPREAD_TOL_NO_POLISH
     if weights not in ("adaptive", "fixed"):
@@ -231,8 +240,8 @@ def _identify(ds, *, seed, population, generations, weights, polish, spread_tol,
     E = cf.run_errors(X)
     solver.tell(cf.combine(E, w))
     E_pop = E
-    stop = "generations"
-    for g in range(1, generations + 1):
+    stop = "generations" if start is None else "start given (polish only)"
+    for g in range(1, (generations if start is None else 0) + 1):
         X = solver.ask()
         E_trial = cf.run_errors(X)
         better = solver.tell(cf.combine(E_trial, w))
@@ -241,7 +250,7 @@ def _identify(ds, *, seed, population, generations, weights, polish, spread_tol,
         if weights == "adaptive":
             w = adaptive_weights(M_free, spread)
             solver.rescore(cf.combine(E_pop, w))
-        cv = coefficient_of_variation(solver.pop)
+        cv = _relative_spread(solver.pop, cf.bounds)
         finite = np.isfinite(solver.costs)
         rec = {"generation": g, "evaluations": solver.nfev, "best_cost": float(solver.fun),
                "mean_cost": float(np.mean(solver.costs[finite])) if finite.any() else float("inf"),
@@ -268,7 +277,7 @@ def _identify(ds, *, seed, population, generations, weights, polish, spread_tol,
             stop = "spread"
             break
 
-    x_best = solver.x
+    x_best = solver.x if start is None else np.asarray(start, dtype=float)
     equal = np.full(n_runs, 1.0 / n_runs)
     polish_info = None
     std = np.full(len(cf.names), np.nan)
@@ -305,6 +314,22 @@ def _identify(ds, *, seed, population, generations, weights, polish, spread_tol,
         modal=modal_summary(P, ds.geometry), dataset=str(ds.path), maps=maps,
         preprocessing=ds.preprocessing(), model={"extensions": list(space.extensions)},
         correlation=robust.correlation_dict(), adequacy=adequacy)
+
+
+#: a parameter whose search range starts at 0 (an extension) may truly be 0, where its coefficient of
+#: variation never settles: its spread is judged against this share of its range instead
+ZERO_SCALE = 0.05
+
+
+def _relative_spread(pop, bounds) -> np.ndarray:
+    """Coefficient of variation of each column; for columns bounded below by 0, std over
+    ``max(|mean|, ZERO_SCALE * upper)`` (the early stop of step 4 for a model with extensions)."""
+    cv = coefficient_of_variation(pop)
+    zero = bounds[:, 0] == 0
+    if zero.any():
+        P = np.asarray(pop, dtype=float)[:, zero]
+        cv[zero] = P.std(axis=0) / np.maximum(np.abs(P.mean(axis=0)), ZERO_SCALE * bounds[zero, 1])
+    return cv
 
 
 def _polish(cf: CostFunction, x0, weights, align=None):

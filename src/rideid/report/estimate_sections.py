@@ -51,6 +51,40 @@ def adequacy_rows(res: dict) -> dict | None:
             "method": adq.get("method", ""), "rows": rows}
 
 
+def model_rows(res: dict) -> dict | None:
+    """The ``--model auto`` candidates side by side: cost, criterion, adequacy, and each parameter's
+    value per candidate, marked where it moved by more than 2 std_robust of the chosen model."""
+    model = res.get("model") or {}
+    cands = model.get("candidates")
+    if not cands:
+        return None
+
+    def label(ext):
+        return " + ".join(ext) if ext else "base"
+
+    chosen = label(model.get("extensions", []))
+    heads = [{"label": label(c["extensions"]), "cost": c["cost"], "criterion": c["criterion"], "wald": c.get("wald"),
+              "adequate": c.get("adequate"), "chosen": label(c["extensions"]) == chosen} for c in cands]
+    ref = next(c for c in cands if label(c["extensions"]) == chosen)
+    names = []
+    for c in cands:
+        names += [n for n in c["parameters"] if n not in names]
+    rows = []
+    for n in names:
+        std = (ref.get("std_robust") or {}).get(n)
+        v0 = ref["parameters"].get(n, 0.0)
+        cells = []
+        for c in cands:
+            v = c["parameters"].get(n)
+            if v is None:
+                cells.append(("–", False))
+                continue
+            moved = bool(std) and abs(v - v0) > 2 * std
+            cells.append((f"{v:.5g}", moved))
+        rows.append({"name": n, "cells": cells})
+    return {"chosen": chosen, "criterion": model.get("criterion", ""), "heads": heads, "rows": rows}
+
+
 def estimate_context(res: dict) -> dict:
     """Everything the template's quality sections need, from ``result.json``."""
-    return {"correlation": correlation_rows(res), "adequacy": adequacy_rows(res)}
+    return {"correlation": correlation_rows(res), "adequacy": adequacy_rows(res), "model_choice": model_rows(res)}
