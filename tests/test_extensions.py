@@ -7,7 +7,6 @@ fine-step ``lsim``, and the invariances the extensions must keep.
 
 import numpy as np
 import pytest
-import scipy.linalg
 
 from rideid.model.batch import BatchSimulator
 from rideid.model.discretize import gauss_nodes, moment_weights, N_MAX
