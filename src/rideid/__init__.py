@@ -21,6 +21,7 @@ from .estimate.identify import IdentificationResult, identify
 from .estimate.jade import JadeSolver, jade
 from .model.equations import CHANNELS, modal_summary
 from .model.params import DEFAULT_CAR, DEFAULT_GEOMETRY, NAMES, UNITS, Geometry
+from .model.params import ALL_NAMES, EXT_NAMES, GROUPS
 from .data.scenario import default_scenario, default_scenario_path, simulate_manifest, write_dataset
 from .model.tracks import Track
 
@@ -35,4 +36,5 @@ __all__ = [
     "CostFunction", "ParameterSpace", "Dataset", "Geometry", "IdentificationResult", "JadeSolver", "Manifest",
     "Track", "default_scenario", "default_scenario_path", "identify", "jade", "load_dataset", "load_scenario",
     "load_truth", "modal_summary", "simulate_manifest", "write_dataset", "__version__",
+    "ALL_NAMES", "EXT_NAMES", "GROUPS",
 ]
