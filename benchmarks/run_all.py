@@ -9,6 +9,7 @@ sys.path.insert(0, str(Path(__file__).parent))
 import bench_cost  # noqa: E402
 import bench_identify  # noqa: E402
 import bench_jade  # noqa: E402
+import bench_model_auto  # noqa: E402
 import study_weights  # noqa: E402
 
 
