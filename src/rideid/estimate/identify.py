@@ -164,7 +164,8 @@ def model_extensions(ds: Dataset, model=None) -> tuple[str, ...]:
 def identify(ds: Dataset, *, seed: int | None = None, population: int = DEFAULT_POPULATION,
              generations: int = DEFAULT_GENERATIONS, weights: str = "adaptive", polish: bool = True,
              spread_tol: float | None = None, progress=None, cost: CostFunction | None = None,
-             maps: SensitivityMaps | None = None, model=None, start=None) -> IdentificationResult:
+             maps: SensitivityMaps | None = None, model=None, start=None,
+             assess: bool = True) -> IdentificationResult:
     """Estimate the ride parameters of a dataset.
 
     Parameters
@@ -199,6 +200,9 @@ def identify(ds: Dataset, *, seed: int | None = None, population: int = DEFAULT_
     start : array_like, shape (d,), optional
         Free-parameter row (the cost's ``names`` order) to polish from,
         skipping the search (used to fit nested models from a larger one).
+    assess : bool
+        Compute the adequacy verdict (:mod:`rideid.estimate.adequacy`; a few
+        seconds); ``False`` leaves ``adequacy`` None.
 
     Returns
     -------
@@ -211,11 +215,11 @@ def identify(ds: Dataset, *, seed: int | None = None, population: int = DEFAULT_
     with single_threaded_blas():
         return _identify(ds, seed=seed, population=population, generations=generations, weights=weights,
                          polish=polish, spread_tol=spread_tol, progress=progress, cost=cost, maps=maps,
-                         model=model, start=start)
+                         model=model, start=start, assess=assess)
 
 
 def _identify(ds, *, seed, population, generations, weights, polish, spread_tol, progress, cost, maps, model,
-              start=None):
+              start=None, assess=True):
     if spread_tol is None:
         spread_tol = DEFAULT_SPREAD_TOL if polish else DEFAULT_SPREAD_TOL_NO_POLISH
     if weights not in ("adaptive", "fixed"):
@@ -289,7 +293,7 @@ def _identify(ds, *, seed, population, generations, weights, polish, spread_tol,
     P = space.full(x_best[None])[0]
 
     robust = estimate_covariance(polish_info, space)
-    adequacy = assess_fit(cf, P)
+    adequacy = assess_fit(cf, P) if assess else None
     wall = time.perf_counter() - t0
     details = {}
     for n in space.reported_names:
@@ -436,7 +440,7 @@ def _polish_aligned(ds, cf, x_best, equal):
             changes[rid] = st["value"] - mr.start
             ds.data[rid] = mr.run_data(st["value"])
             mr.record["start"].update({"source": "estimated with the parameters (least squares)",
-                                       "std": st["std"]})
+                                       "std": st["std"], "std_robust": st["std_robust"]})
         worst = max(abs(v) * ds.measured[rid].fs for rid, v in changes.items())
         rounds.append({"max_change_samples": worst})
         varying = [rid for rid in changes if ds.measured[rid].distance is not None]

@@ -100,11 +100,14 @@ def identify_auto(ds, *, seed=None, progress=None, maps=None, **kw):
     ``criterion``, ``wald``, ``adequate``, ``parameters``, ``std_robust``).
     Its ``evaluations`` and ``wall_time_s`` cover all candidates.
     """
+    from .adequacy import assess_fit
     from .cost import CostFunction
     from .identify import identify
+    from ..model.batch import single_threaded_blas
 
     t0 = time.perf_counter()
-    full = identify(ds, seed=seed, progress=progress, maps=maps, model="full", **kw)
+    cf_full = CostFunction(ds, extensions=tuple(GROUPS))
+    full = identify(ds, seed=seed, progress=progress, maps=maps, cost=cf_full, **kw)
     pol = full.polish or {}
     names = list(pol.get("names", []))
     free_ext = {g: [n for n in GROUPS[g] if n in names] for g in GROUPS}
@@ -117,21 +120,27 @@ def identify_auto(ds, *, seed=None, progress=None, maps=None, **kw):
     else:  # no polish, no covariance: keep the full model and say why
         crit = [{"extensions": list(c), "wald": None, "k": None,
                  "criterion": 0.0 if set(c) == set(GROUPS) else None} for c in candidates]
-    results = {}
+    results, costs = {}, {}
     evaluations = full.evaluations
     for cand in candidates:
         if set(cand) == set(GROUPS):
-            results[cand] = full
+            results[cand], costs[cand] = full, cf_full
             continue
-        cf = CostFunction(ds, extensions=cand)
+        cf = _nested_cost(cf_full, ds, cand)
         x0 = np.array([full.parameters[n] for n in cf.names])
         kw_nested = {k: v for k, v in kw.items() if k in ("weights", "polish", "population")}
-        results[cand] = identify(ds, seed=seed, cost=cf, maps=full.maps, start=x0, **kw_nested)
-        evaluations += results[cand].evaluations
+        # the adequacy verdict only for the model kept (below): it costs as much as a polish
+        results[cand] = identify(ds, seed=seed, cost=cf, maps=full.maps, start=x0, assess=False, **kw_nested)
+        costs[cand] = cf
+        evaluations += cf.nfev
     scored = [c for c in crit if c["criterion"] is not None]
     best = min(scored, key=lambda c: (c["criterion"], c["k"] or 0))
     chosen = tuple(best["extensions"])
     res = results[chosen]
+    if res.adequacy is None:
+        cf = costs[chosen]
+        with single_threaded_blas():
+            res.adequacy = assess_fit(cf, cf.space.full(np.array([[res.parameters[n] for n in cf.names]]))[0])
     table = []
     for c in crit:
         r = results[tuple(c["extensions"])]
@@ -149,3 +158,18 @@ def identify_auto(ds, *, seed=None, progress=None, maps=None, **kw):
     res.evaluations = evaluations
     res.wall_time_s = time.perf_counter() - t0
     return res
+
+
+def _nested_cost(cf_full, ds, extensions):
+    """The full model's cost function over a smaller parameter space (same data, same simulator).
+
+    Saves re-tabulating every run's road input for each candidate.
+    """
+    import copy
+
+    from .cost import ParameterSpace
+
+    space = ParameterSpace(ds.known, ds.geometry, ds.manifest.bounds, extensions=extensions)
+    cf = copy.copy(cf_full)
+    cf.space, cf.names, cf.bounds, cf.nfev = space, list(space.names), space.bounds, 0
+    return cf
