@@ -1,10 +1,9 @@
 """Robust standard errors (rideid.estimate.uncertainty): closed forms, then coverage on simulated cars."""
 
-import tomllib
-
 import numpy as np
 import pytest
 
+import rideid
 from rideid.data.noise import sensor_noise
 from rideid.estimate.uncertainty import (andrews_bandwidth, correlation, hac_covariance, long_run_covariance,
                                          white_covariance, with_derived)
@@ -142,8 +141,6 @@ def _coverage(rows):
     z_r = np.concatenate([r[1] for r in rows])
     return np.mean(np.abs(z_w) <= 2), np.mean(np.abs(z_r) <= 2), z_w, z_r
 
-
-import rideid  # noqa: E402
 
 
 def test_polish_std_robust_on_coloured_noise(tmp_path):
