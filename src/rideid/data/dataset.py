@@ -8,7 +8,7 @@ from pathlib import Path
 
 from ..errors import DataError, ScaleError
 from .schema import Manifest, RunData, load_manifest, read_run_csv
-from ..model.params import EXTRA_KNOWN, NAMES, Geometry
+from ..model.params import EXTRA_KNOWN, MASS_COUNT, NAMES, Geometry, nominal_car, total_mass
 
 
 @dataclass
@@ -99,7 +99,7 @@ def load_dataset(path, starts: dict[str, float] | None = None) -> Dataset:
     DataError
         Naming the file, key or column at fault.
     """
-    from .measured import estimate_start, load_measured_run, nominal_car
+    from .measured import estimate_start, load_measured_run
 
     man = load_manifest(path)
     data, measured = {}, {}
@@ -155,12 +155,12 @@ def scale_anchor(known: dict[str, float], where: str = "[known]") -> str:
 
 def check_known_consistent(known: dict[str, float]):
     if "total_mass" in known:
-        fixed_mass = sum(known.get(n, 0.0) * (1 if n == "m_s" else 2) for n in ("m_s", "m_uf", "m_ur"))
+        fixed_mass = sum(known.get(n, 0.0) * c for n, c in MASS_COUNT.items())
         if fixed_mass >= known["total_mass"]:
             raise DataError(f"[known]: total_mass = {known['total_mass']} is not more than the fixed masses "
                             f"(m_s + 2 m_uf + 2 m_ur = {fixed_mass})")
-        if all(n in known for n in ("m_s", "m_uf", "m_ur")):
-            tm = known["m_s"] + 2 * known["m_uf"] + 2 * known["m_ur"]
+        if all(n in known for n in MASS_COUNT):
+            tm = total_mass(known)
             if abs(tm - known["total_mass"]) > 1e-6 * tm:
                 raise DataError(f"[known]: total_mass = {known['total_mass']} disagrees with m_s + 2 m_uf + "
                                 f"2 m_ur = {tm}")

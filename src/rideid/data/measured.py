@@ -51,13 +51,13 @@ import numpy as np
 
 from ..errors import DataError, DataWarning
 from ..model.equations import CHANNEL_KIND, CHANNELS
+from ..model.params import GRAVITY
 from .readers import FORMAT_NAMES, CsvOptions, Signal, open_signals
 
-G0 = 9.80665
 
 #: accepted units (lower case, spaces removed) -> factor to SI, per quantity
 UNITS = {
-    "acceleration": {"m/s^2": 1.0, "m/s2": 1.0, "m/s²": 1.0, "m/s/s": 1.0, "g": G0},
+    "acceleration": {"m/s^2": 1.0, "m/s2": 1.0, "m/s²": 1.0, "m/s/s": 1.0, "g": GRAVITY},
     "rate": {"rad/s": 1.0, "deg/s": math.pi / 180, "°/s": math.pi / 180},
     "speed": {"m/s": 1.0, "km/h": 1 / 3.6, "kph": 1 / 3.6, "mph": 0.44704},
     "distance": {"m": 1.0, "km": 1000.0},
@@ -482,13 +482,13 @@ def load_measured_run(run, man) -> MeasuredRun:
                             f"{c} (its time runs {s.time[0]:.6g} .. {s.time[-1]:.6g} s)")
         seg = s.values[in_lead]
         m = float(np.mean(seg))
-        if grav and is_acc and not (0.8 * G0 < m < 1.2 * G0):
-            if -1.2 * G0 < m < -0.8 * G0:
+        if grav and is_acc and not (0.8 * GRAVITY < m < 1.2 * GRAVITY):
+            if -1.2 * GRAVITY < m < -0.8 * GRAVITY:
                 _warn(warns, f"{path}: {c}: reads {m:.3g} m/s^2 at rest (gravity included): mounted upside down? "
                              "set sign = -1 in its channel map")
             else:
                 _warn(warns, f"{path}: {c}: lead-in mean {m:.3g} m/s^2 with gravity_included = true "
-                             f"(expected about {G0:.2f}); check its unit and the lead_in window")
+                             f"(expected about {GRAVITY:.2f}); check its unit and the lead_in window")
         whole = s.values - np.mean(s.values)
         rms_all = float(np.sqrt(np.mean(whole ** 2)))
         rms_lead = float(np.std(seg))
@@ -565,7 +565,7 @@ def _plausibility(c, v, unit, opts, w, warns):
                          f"(sensor or logger range exceeded?)")
     if quantity(c) == "acceleration" and not opts.get("gravity_included", False):
         m = float(np.mean(v))
-        if 0.8 * G0 < abs(m) < 1.2 * G0:
+        if 0.8 * GRAVITY < abs(m) < 1.2 * GRAVITY:
             _warn(warns, f"{w}: mean {m:.3g} m/s^2 is about g: the channel seems to include gravity; "
                          "set gravity_included = true in [preprocess]")
     if quantity(c) == "rate" and UNITS["rate"].get(unit.strip().replace(" ", "").lower()) == 1.0:
@@ -581,8 +581,7 @@ def _plausibility(c, v, unit, opts, w, warns):
 def _feature_end(track, geom) -> float:
     """Distance (front axle) at which the rear wheels leave the last feature."""
     ends = []
-    hf, hr = geom.track_front / 2, geom.track_rear / 2
-    for y in (hf, -hf, hr, -hr):
+    for y in geom.corner_y:
         ext = track.path(y).extent
         if ext is not None:
             ends.append(ext[1])
@@ -739,15 +738,6 @@ def estimate_start(mr: MeasuredRun, P, geom, track, s0: float | None = None, ref
         if done:
             break
     return s, rho
-
-
-def nominal_car(geom) -> np.ndarray:
-    """The built-in car with its CG at the same fraction of this wheelbase (scale is irrelevant here)."""
-    from ..model.params import DEFAULT_CAR, DEFAULT_GEOMETRY, NAMES
-
-    P = np.array([DEFAULT_CAR[n] for n in NAMES])
-    P[NAMES.index("a")] *= geom.wheelbase / DEFAULT_GEOMETRY.wheelbase
-    return P
 
 
 __all__ = ["MeasuredRun", "load_measured_run", "estimate_start", "parse_channel_map", "parse_preprocess",

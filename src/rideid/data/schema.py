@@ -23,7 +23,7 @@ from .csvio import read_csv_rows
 from ..errors import DataError, DataWarning
 from .measured import RUN_PREPROCESS_KEYS, parse_channel_map, parse_csv_options, parse_preprocess
 from ..model.equations import CHANNELS
-from ..model.params import EXTRA_KNOWN, INDEX, NAMES, Geometry, check_parameters
+from ..model.params import EXTRA_KNOWN, INDEX, NAMES, Geometry, check_parameters, total_mass
 from ..model.tracks import Track
 
 #: a scenario may also describe the multibody car of rideid.hifi (``[hifi]``, used by --engine mujoco)
@@ -260,7 +260,7 @@ def parse_manifest(doc: dict, path: Path, scenario: bool) -> Manifest:
     if scenario:
         truth = parse_truth(_table(doc, "truth", where), f"{where}: [truth]", geom)
         if "total_mass" in known:
-            tm = truth["m_s"] + 2 * truth["m_uf"] + 2 * truth["m_ur"]
+            tm = total_mass(truth)
             if abs(tm - known["total_mass"]) > 1e-6 * tm:
                 raise DataError(f"{where}: [known] total_mass = {known['total_mass']} disagrees with [truth] "
                                 f"(m_s + 2 m_uf + 2 m_ur = {tm:.6g})")

@@ -29,11 +29,9 @@ from ..data.dataset import Dataset, check_known_consistent, prepare_inputs, scal
 from ..model.batch import BatchSimulator
 from ..errors import ArgumentError, DataError
 from ..model.equations import CHANNEL_KIND, CHANNELS
-from ..model.params import DEFAULT_CAR, DEFAULT_GEOMETRY, INDEX, NAMES, default_bounds
+from ..model.params import INDEX, MASS_COUNT, NAMES, default_bounds, nominal_car, total_mass
 
 ENERGY_FLOOR = 0.01
-#: total_mass = sum of count * mass over these (one body, two corners per axle)
-MASS_COUNT = {"m_s": 1, "m_uf": 2, "m_ur": 2}
 
 
 def channel_weights(Y: np.ndarray) -> np.ndarray:
@@ -81,7 +79,7 @@ class ParameterSpace:
         X = np.atleast_2d(np.asarray(X, dtype=float))
         if X.shape[1] != len(self.names):
             raise ArgumentError(f"expected {len(self.names)} columns ({', '.join(self.names)}), got {X.shape[1]}")
-        P = np.empty((X.shape[0], 12))
+        P = np.empty((X.shape[0], len(NAMES)))
         for j, n in enumerate(self.names):
             P[:, INDEX[n]] = X[:, j]
         for n, v in self.fixed.items():
@@ -113,11 +111,10 @@ class ParameterSpace:
         """A physically consistent nominal car: the built-in car scaled to the
         anchor, clipped into the bounds (used for sensitivity maps and as a
         reference point, never as a starting guess)."""
-        base = np.array([DEFAULT_CAR[n] for n in NAMES])
-        base[INDEX["a"]] = DEFAULT_CAR["a"] / DEFAULT_GEOMETRY.wheelbase * self.geometry.wheelbase
+        base = nominal_car(self.geometry)
         anchor = scale_anchor(self.known)
         if anchor == "total_mass":
-            s = self.known["total_mass"] / (base[0] + 2 * base[INDEX["m_uf"]] + 2 * base[INDEX["m_ur"]])
+            s = self.known["total_mass"] / total_mass(base)
         else:
             s = self.known[anchor] / base[INDEX[anchor]]
         P = base * np.where(np.array(NAMES) == "a", 1.0, s)

@@ -16,7 +16,11 @@ Written as ``M q'' + C q' + K q = Bf r`` with ``K = sum k_i e_i e_i^T +
 diag(0,0,0,k_t)``, ``e_i = [-G_i, unit_i]``; the same form for ``C``.
 
 State ``x = [q, q']`` (14), ``x' = A x + B r``. Outputs (SPEC channel order,
-:data:`CHANNELS`) ``y = Cy x + Dy r``.
+:data:`CHANNELS`) ``y = Cy x + Dy r``: the accelerometers read
+``Omega q''`` (:func:`output_map`: body corner ``i`` reads ``G_i q_b''``,
+axle ``i`` reads ``z_i''``) and the gyros ``theta'``, ``phi'``
+(:data:`RATE_COORDS`). This is the one definition of the output map; the
+compiled kernel and the reference simulation are tested against it.
 
 With equal left/right parameters the model splits exactly into a symmetric
 part (heave, pitch and the in-phase wheel motions, 8 states) and an
@@ -29,7 +33,7 @@ from __future__ import annotations
 import numpy as np
 import scipy.linalg
 
-from .params import INDEX, Geometry, NAMES
+from .params import GRAVITY, INDEX, NAMES, Geometry
 
 CHANNELS: tuple[str, ...] = (
     "body_az_fl", "body_az_fr", "body_az_rl", "body_az_rr",
@@ -48,6 +52,9 @@ COORDS = ("z", "theta", "phi", "z_fl", "z_fr", "z_rl", "z_rr")
 SYM_COORDS = ("z", "theta", "zf_s", "zr_s")
 ANTI_COORDS = ("phi", "zf_a", "zr_a")
 
+#: Coordinate index (in :data:`COORDS`) whose rate each gyro channel reads.
+RATE_COORDS = {"pitch_rate": 1, "roll_rate": 2}
+
 # q = T qt  (qt in decomposed order), r = TR rt
 _T = np.zeros((7, 7))
 _T[0, 0] = 1  # z
@@ -60,11 +67,41 @@ _T[6, 3], _T[6, 6] = 1, -1   # z_rr
 _TR = np.array([[1, 0, 1, 0], [1, 0, -1, 0], [0, 1, 0, 1], [0, 1, 0, -1]], dtype=float)
 #: Corner inputs -> decomposed inputs (inverse of ``_TR``).
 CORNER_TO_DECOMPOSED = np.linalg.inv(_TR)
+#: Decomposed coordinates ``[z, theta, zf_s, zr_s, phi, zf_a, zr_a]`` -> :data:`COORDS`.
+DECOMPOSED_TO_COORDS = _T.copy()
 
 
 def _cols(P):
     P = np.atleast_2d(np.asarray(P, dtype=float))
     return {n: P[:, i] for i, n in enumerate(NAMES)}, P.shape[0]
+
+
+def output_map(P, geom: Geometry) -> np.ndarray:
+    """The accelerometer channels as a linear map of the generalised accelerations.
+
+    Body corner ``i`` at ``(x_i, y_i)`` from the CG reads
+    ``z'' - x_i theta'' + y_i phi''`` (pitch nose-down +, roll right-side-down
+    +); axle ``i`` reads its wheel's ``z_i''``.
+
+    Parameters
+    ----------
+    P : array_like, shape (n, len(NAMES))
+    geom : Geometry
+
+    Returns
+    -------
+    Omega : ndarray, shape (n, 8, 7)
+        ``y[:8] = Omega q''`` for the first eight :data:`CHANNELS`, ``q`` in
+        :data:`COORDS` order.
+    """
+    p, n = _cols(P)
+    x, y = geom.corner_xy(p["a"])
+    Om = np.zeros((n, 8, 7))
+    Om[:, :4, 0] = 1.0
+    Om[:, :4, 1] = -x
+    Om[:, :4, 2] = y
+    Om[:, 4 + np.arange(4), 3 + np.arange(4)] = 1.0
+    return Om
 
 
 def mck(P, geom: Geometry):
@@ -83,16 +120,12 @@ def mck(P, geom: Geometry):
         Generalised force per unit road input (tire springs).
     """
     p, n = _cols(P)
-    x, y = geom.corner_xy(p["a"])
     ks = np.stack([p["k_sf"], p["k_sf"], p["k_sr"], p["k_sr"]], -1)
     cs = np.stack([p["c_sf"], p["c_sf"], p["c_sr"], p["c_sr"]], -1)
     kt = np.stack([p["k_tf"], p["k_tf"], p["k_tr"], p["k_tr"]], -1)
     mu = np.stack([p["m_uf"], p["m_uf"], p["m_ur"], p["m_ur"]], -1)
-    E = np.zeros((n, 4, 7))  # e_i rows
-    E[:, :, 0] = -1.0
-    E[:, :, 1] = x
-    E[:, :, 2] = -y
-    E[:, np.arange(4), 3 + np.arange(4)] = 1.0
+    Om = output_map(P, geom)
+    E = Om[:, 4:] - Om[:, :4]  # e_i rows: wheel minus body corner motion (the deflection)
     K = np.einsum("nij,ni,nik->njk", E, ks, E)
     C = np.einsum("nij,ni,nik->njk", E, cs, E)
     K[:, 3 + np.arange(4), 3 + np.arange(4)] += kt
@@ -128,19 +161,14 @@ def state_space(P, geom: Geometry):
     """
     M, C, K, Bf = mck(P, geom)
     A, B = _state_space(M, C, K, Bf)
-    p, n = _cols(P)
-    x, y = geom.corner_xy(p["a"])
+    n = A.shape[0]
+    Om = output_map(P, geom)
     Cy = np.zeros((n, 10, 14))
     Dy = np.zeros((n, 10, 4))
-    acc_A, acc_B = A[:, 7:, :], B[:, 7:, :]
-    for i in range(4):
-        g = np.stack([np.ones(n), -x[:, i], y[:, i]], -1)  # (n, 3)
-        Cy[:, i] = np.einsum("nk,nkj->nj", g, acc_A[:, :3])
-        Dy[:, i] = np.einsum("nk,nkj->nj", g, acc_B[:, :3])
-        Cy[:, 4 + i] = acc_A[:, 3 + i]
-        Dy[:, 4 + i] = acc_B[:, 3 + i]
-    Cy[:, 8, 7 + 1] = 1.0  # pitch rate
-    Cy[:, 9, 7 + 2] = 1.0  # roll rate
+    Cy[:, :8] = Om @ A[:, 7:, :]
+    Dy[:, :8] = Om @ B[:, 7:, :]
+    for c, k in RATE_COORDS.items():
+        Cy[:, CHANNELS.index(c), 7 + k] = 1.0
     return A, B, Cy, Dy
 
 
@@ -186,7 +214,7 @@ def static_state(A, B, u0):
     return -np.linalg.solve(A, (B @ u0)[..., None])[..., 0]
 
 
-def static_corner_loads(P, geom: Geometry, g: float = 9.81):
+def static_corner_loads(P, geom: Geometry, g: float = GRAVITY):
     """Static vertical tire loads (N) at fl, fr, rl, rr, shape (n, 4)."""
     p, n = _cols(P)
     b = geom.wheelbase - p["a"]
@@ -293,5 +321,5 @@ def format_modal_summary(summary) -> str:
     return "\n".join(lines)
 
 
-__all__ = ["CHANNELS", "mck", "state_space", "blocks", "modal_summary", "static_corner_loads",
+__all__ = ["CHANNELS", "mck", "output_map", "state_space", "blocks", "modal_summary", "static_corner_loads",
            "static_state", "INDEX"]

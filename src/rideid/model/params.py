@@ -68,7 +68,35 @@ DEFAULT_BOUNDS = {
     "k_tr": (8.0e4, 6.0e5),
 }
 
-GRAVITY = 9.81
+#: Standard gravity (m/s^2), the one value used for static loads, the
+#: MuJoCo car and the logger unit ``g`` (ISO 80000-3).
+GRAVITY = 9.80665
+
+#: total_mass = sum over these of count x mass (one body, two corners per axle).
+MASS_COUNT = {"m_s": 1, "m_uf": 2, "m_ur": 2}
+
+
+def total_mass(values):
+    """Total mass (kg) of a car: ``m_s + 2 m_uf + 2 m_ur``.
+
+    Parameters
+    ----------
+    values : dict or array_like, shape (..., len(NAMES))
+        Parameters by name, or rows in :data:`NAMES` order.
+
+    Returns
+    -------
+    float or ndarray, shape (...)
+    """
+    if isinstance(values, dict):
+        return float(sum(c * float(values[n]) for n, c in MASS_COUNT.items()))
+    P = np.asarray(values, dtype=float)
+    return sum(c * P[..., INDEX[n]] for n, c in MASS_COUNT.items())
+
+
+def column(P, name: str) -> np.ndarray:
+    """The column of parameter ``name`` in rows ``P`` of shape ``(..., len(NAMES))``."""
+    return np.asarray(P)[..., INDEX[name]]
 
 
 @dataclass(frozen=True)
@@ -88,6 +116,17 @@ class Geometry:
             if not (np.isfinite(v) and v > 0):
                 raise DataError(f"vehicle.{k} must be a positive number of metres, got {v!r}")
 
+    @property
+    def corner_y(self) -> tuple[float, float, float, float]:
+        """Lateral wheel positions fl, fr, rl, rr (y left, m)."""
+        hf, hr = self.track_front / 2, self.track_rear / 2
+        return (hf, -hf, hr, -hr)
+
+    @property
+    def corner_x_from_front(self) -> tuple[float, float, float, float]:
+        """Longitudinal wheel positions fl, fr, rl, rr relative to the front axle (x forward, m)."""
+        return (0.0, 0.0, -self.wheelbase, -self.wheelbase)
+
     def corner_xy(self, a):
         """Corner coordinates relative to the CG.
 
@@ -103,10 +142,8 @@ class Geometry:
             fl, fr, rl, rr (x forward, y left, m).
         """
         a = np.asarray(a, dtype=float)
-        b = self.wheelbase - a
-        x = np.stack([a, a, -b, -b], axis=-1)
-        hf, hr = self.track_front / 2, self.track_rear / 2
-        y = np.broadcast_to(np.array([hf, -hf, hr, -hr]), x.shape).copy()
+        x = a[..., None] + np.array(self.corner_x_from_front)
+        y = np.broadcast_to(np.array(self.corner_y), x.shape).copy()
         return x, y
 
 
@@ -166,3 +203,18 @@ DEFAULT_CAR = {
     "k_tf": 158240.0,
     "k_tr": 158240.0,
 }
+
+
+def nominal_car(geometry: Geometry) -> np.ndarray:
+    """The built-in car with its CG at the same fraction of ``geometry``'s wheelbase.
+
+    Returns
+    -------
+    ndarray, shape (len(NAMES),)
+        In :data:`NAMES` order, at the built-in car's scale (callers that need
+        another absolute scale multiply it, see
+        :meth:`rideid.ParameterSpace.nominal`).
+    """
+    P = as_vector(DEFAULT_CAR)
+    P[INDEX["a"]] *= geometry.wheelbase / DEFAULT_GEOMETRY.wheelbase
+    return P
