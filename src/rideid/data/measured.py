@@ -121,14 +121,20 @@ class ChannelEntry:
         return d
 
 
-def parse_channel_map(tab, where: str) -> dict[str, ChannelEntry]:
+def checked_items(tab, where: str, allowed, what: str = "", unknown: str = "unknown key '{key}'; allowed: {allowed}"):
+    """``(key, value, where key)`` of a TOML table, after checking it is a table with only ``allowed`` keys."""
     if not isinstance(tab, dict):
-        raise DataError(f"{where} must be a table: SPEC channel = \"file channel\" or {{ name, unit, sign, scale }}")
+        raise DataError(f"{where} must be a table{what}")
+    for k in tab:
+        if k not in allowed:
+            raise DataError(f"{where}: " + unknown.format(key=k, allowed=", ".join(allowed)))
+    return [(k, v, f"{where} {k}") for k, v in tab.items()]
+
+
+def parse_channel_map(tab, where: str) -> dict[str, ChannelEntry]:
     out = {}
-    for target, v in tab.items():
-        w = f"{where} {target}"
-        if target not in TARGETS:
-            raise DataError(f"{where}: unknown channel '{target}'; map file channels to {', '.join(TARGETS)}")
+    for target, v, w in checked_items(tab, where, TARGETS, ": SPEC channel = \"file channel\" or { name, unit, sign, scale }",
+                                      "unknown channel '{key}'; map file channels to {allowed}"):
         if isinstance(v, str):
             v = {"name": v}
         if not isinstance(v, dict):
@@ -166,13 +172,8 @@ def _window(v, w):
 
 
 def parse_preprocess(tab, where: str, keys=PREPROCESS_KEYS) -> dict:
-    if not isinstance(tab, dict):
-        raise DataError(f"{where} must be a table")
     out = {}
-    for k, v in tab.items():
-        w = f"{where} {k}"
-        if k not in keys:
-            raise DataError(f"{where}: unknown key '{k}'; allowed: {', '.join(keys)}")
+    for k, v, w in checked_items(tab, where, keys):
         if k in ("gravity_included", "remove_bias"):
             if not isinstance(v, bool):
                 raise DataError(f"{w}: expected true or false")
@@ -195,11 +196,7 @@ def parse_preprocess(tab, where: str, keys=PREPROCESS_KEYS) -> dict:
 
 
 def parse_csv_options(tab, where: str) -> CsvOptions:
-    if not isinstance(tab, dict):
-        raise DataError(f"{where} must be a table")
-    for k in tab:
-        if k not in CSV_KEYS:
-            raise DataError(f"{where}: unknown key '{k}'; allowed: {', '.join(CSV_KEYS)}")
+    checked_items(tab, where, CSV_KEYS)
     opts = CsvOptions()
     for k in ("delimiter", "decimal"):
         if k in tab:
@@ -287,6 +284,29 @@ def _longest_run(mask: np.ndarray) -> int:
 # A measured run
 
 @dataclass
+class RunData:
+    """Measured data of one run: uniform time and the channels present."""
+
+    time: np.ndarray
+    channels: dict[str, np.ndarray]
+    #: ``distance(t)``: front-axle distance past x = 0 at model time t (varying speed); None for constant speed
+    distance: object = None
+
+    @property
+    def fs(self) -> float:
+        return 1.0 / float(self.time[1] - self.time[0])
+
+    def matrix(self) -> np.ndarray:
+        """(n, 10) in CHANNELS order, NaN where a channel is missing."""
+        Y = np.full((self.time.size, len(CHANNELS)), np.nan)
+        for i, c in enumerate(CHANNELS):
+            if c in self.channels:
+                Y[:, i] = self.channels[c]
+        return Y
+
+
+
+@dataclass
 class MeasuredRun:
     """One run file turned into SI channels on a continuous time axis (file clock).
 
@@ -335,14 +355,11 @@ class MeasuredRun:
         return self.grid
 
     def run_data(self, start: float):
-        """:class:`rideid.files.RunData` sampled at ``start + grid``."""
-        from .schema import RunData
-
+        """:class:`RunData` sampled at ``start + grid``."""
         if self.grid is None:
             self.make_grid(start)
         tt = start + self.grid
         chans = {c: f(tt) for c, f in self.channels.items()}
-        self.start = float(start)
         return RunData(self.grid.copy(), chans, distance=self.relative_distance(start))
 
     def measured_at(self, start: float, grid=None, nu: int = 0) -> np.ndarray:
@@ -653,7 +670,7 @@ def _peaks(values, k):
     return inner[np.argsort(values[inner])[::-1][:k]]
 
 
-def _coarse(mr: MeasuredRun, P, geom, track):
+def coarse_start(mr: MeasuredRun, P, geom, track):
     """Start to the nearest sample by cross-correlation over all lags.
 
     Constant speed: the model's response only shifts with the start, so the
@@ -726,7 +743,7 @@ def estimate_start(mr: MeasuredRun, P, geom, track, s0: float | None = None, ref
     normalised correlation over the channels that are not zero.
     """
     h = 1.0 / mr.fs
-    s = s0 if refine_only else _coarse(mr, P, geom, track)
+    s = s0 if refine_only else coarse_start(mr, P, geom, track)
     if mr.grid is None:
         mr.make_grid(s)
     rho = 0.0

@@ -19,9 +19,9 @@ from pathlib import Path
 import numpy as np
 import tomli_w
 
-from .csvio import read_csv_rows
+from ..csvio import read_csv_rows
 from ..errors import DataError, DataWarning
-from .measured import RUN_PREPROCESS_KEYS, parse_channel_map, parse_csv_options, parse_preprocess
+from .measured import RUN_PREPROCESS_KEYS, RunData, parse_channel_map, parse_csv_options, parse_preprocess
 from ..model.equations import CHANNELS
 from ..model.params import EXTRA_KNOWN, INDEX, NAMES, Geometry, check_parameters, total_mass
 from ..model.tracks import Track
@@ -303,13 +303,17 @@ def load_scenario(path) -> Manifest:
     return parse_manifest(read_toml(path), path, scenario=True)
 
 
+def in_folder(path, name: str) -> Path:
+    """``path/name`` when ``path`` is a folder, else ``path`` itself (a folder's main file given directly)."""
+    path = Path(path)
+    return path / name if path.is_dir() else path
+
+
 def load_manifest(path) -> Manifest:
     """``dataset.toml`` of a dataset folder (or the file itself)."""
-    path = Path(path)
-    if path.is_dir():
-        path = path / "dataset.toml"
-    elif not path.exists():
+    if not Path(path).exists():
         raise DataError(f"{path}: no such dataset folder")
+    path = in_folder(path, "dataset.toml")
     return parse_manifest(read_toml(path), path, scenario=False)
 
 
@@ -324,28 +328,6 @@ def load_truth(path, geom: Geometry | None = None) -> dict[str, float]:
 
 # ---------------------------------------------------------------------------
 # Run files
-
-@dataclass
-class RunData:
-    """Measured data of one run: uniform time and the channels present."""
-
-    time: np.ndarray
-    channels: dict[str, np.ndarray]
-    #: ``distance(t)``: front-axle distance past x = 0 at model time t (varying speed); None for constant speed
-    distance: object = None
-
-    @property
-    def fs(self) -> float:
-        return 1.0 / float(self.time[1] - self.time[0])
-
-    def matrix(self) -> np.ndarray:
-        """(n, 10) in CHANNELS order, NaN where a channel is missing."""
-        Y = np.full((self.time.size, len(CHANNELS)), np.nan)
-        for i, c in enumerate(CHANNELS):
-            if c in self.channels:
-                Y[:, i] = self.channels[c]
-        return Y
-
 
 def read_run_csv(path: Path) -> RunData:
     """Read and validate a run CSV (SPEC §3)."""

@@ -145,6 +145,10 @@ class CostFunction:
     """
 
     def __init__(self, ds: Dataset, weights=None, use_kernel: bool = True, space: ParameterSpace | None = None):
+        unaligned = [r.id for r in ds.runs if r.id not in ds.data]
+        if unaligned:
+            raise ArgumentError(f"runs {', '.join(unaligned)} have no start yet: load the dataset with "
+                                "rideid.load_dataset (or pass it through rideid.data.dataset.align_starts)")
         self.ds = ds
         self.space = space or ParameterSpace(ds.known, ds.geometry, ds.manifest.bounds)
         self.names = list(self.space.names)
@@ -163,6 +167,17 @@ class CostFunction:
         if weights is not None:
             self.set_weights(weights)
         self.nfev = 0
+
+    def copy(self, weights=None) -> "CostFunction":
+        """A copy sharing the prepared runs and data, with its own weights
+        (equal unless given) and its own evaluation count (0)."""
+        new = object.__new__(CostFunction)
+        new.__dict__.update(self.__dict__)
+        new.weights = np.full(len(self.run_ids), 1.0 / len(self.run_ids))
+        if weights is not None:
+            new.set_weights(weights)
+        new.nfev = 0
+        return new
 
     def set_weights(self, w):
         w = np.asarray(w, dtype=float)
