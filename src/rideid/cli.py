@@ -114,6 +114,9 @@ def _parser() -> argparse.ArgumentParser:
     s.add_argument("--weights", choices=("adaptive", "fixed"), default="adaptive",
                    help="adaptive track weights (paper eq. 12-13) or equal weights")
     s.add_argument("--no-polish", action="store_true", help="skip the least-squares polish after JADE")
+    s.add_argument("--model", default=None, metavar="MODEL",
+                   help="base: the twelve parameters; full: with anti-roll bars (k_arf, k_arr) and tire damping "
+                        "(c_tf, c_tr) (default: the dataset's [model] extensions, else base)")
     s.add_argument("--no-report", action="store_true", help="write result.json and history.csv only")
     s.add_argument("--quiet", action="store_true", help="no progress line")
 
@@ -173,20 +176,22 @@ def _summary_table(res) -> str:
 
 
 def run_identify(ds_path, out_dir, *, seed, population=None, generations=None, weights="adaptive",
-                 polish=True, quiet=False, out=None, report=True):
+                 polish=True, quiet=False, out=None, report=True, model=None):
     out = out or sys.stdout
     import rideid
     from .data.schema import atomic_output
-    from .estimate.identify import DEFAULT_GENERATIONS, DEFAULT_POPULATION
+    from .estimate.identify import DEFAULT_GENERATIONS, DEFAULT_POPULATION, model_extensions
 
     ds = rideid.load_dataset(ds_path)
+    extensions = model_extensions(ds, model)
     prog = Progress(quiet)
     kw = {"population": population or DEFAULT_POPULATION, "generations": generations or DEFAULT_GENERATIONS}
     if kw["population"] < 4:
         raise ArgumentError(f"--population must be at least 4, got {kw['population']}")
     if kw["generations"] < 1:
         raise ArgumentError(f"--generations must be at least 1, got {kw['generations']}")
-    res = rideid.identify(ds, rng=seed, weights=weights, polish=polish, callback=prog.identify, **kw)
+    cost = rideid.CostFunction(ds, extensions=extensions)
+    res = rideid.identify(ds, rng=seed, weights=weights, polish=polish, callback=prog.identify, cost=cost, **kw)
     prog.done()
     with atomic_output(out_dir) as tmp:
         res.save(tmp)
@@ -207,7 +212,7 @@ def cmd_identify(args, out=None):
     out = out or sys.stdout
     run_identify(args.dataset, args.out, seed=args.seed, population=args.population,
                  generations=args.generations, weights=args.weights, polish=not args.no_polish,
-                 quiet=args.quiet, out=out, report=not args.no_report)
+                 quiet=args.quiet, out=out, report=not args.no_report, model=args.model)
     return 0
 
 
@@ -221,7 +226,7 @@ def cmd_sensitivity(args, out=None):
     is_scenario = src.is_file() and "truth" in read_toml(src)
     source = rideid.load_scenario(src) if is_scenario else rideid.load_dataset(src)
     prog = Progress(args.quiet)
-    prog.line("simulating 13 cars (baseline and +25 % per parameter) ...", force=True)
+    prog.line("simulating the baseline car and +25 % per parameter ...", force=True)
     maps = rideid.sensitivity_maps(source)
     with atomic_output(args.out) as tmp:
         write_csvs(maps, tmp)
@@ -236,6 +241,10 @@ def score_table(scored: dict) -> str:
     """The text table of :func:`rideid.score`."""
     lines = [f"{'parameter':<10} {'estimate':>14} {'truth':>14} {'error %':>9}"]
     for n, r in scored["parameters"].items():
+        if r["error_percent"] is None:  # no relative error of a zero truth: the estimate in its unit
+            lines.append(f"{n:<10} {r['estimate']:>14.6g} {r['truth']:>14.6g} {'-':>9}"
+                         + (" (not in the model)" if r["status"] == "not in the model" else ""))
+            continue
         note = "" if r["status"] == "estimated" else f" {r['status']}"
         lines.append(f"{n:<10} {r['estimate']:>14.6g} {r['truth']:>14.6g} {r['error_percent']:>9.4f}{note}")
     lines.append(f"largest error of the estimated parameters: {scored['worst_percent']:.4f} %")

@@ -43,7 +43,7 @@ from ..data.measured import coarse_start
 from ..errors import ArgumentError
 from ..model.batch import single_threaded_blas
 from ..model.equations import modal_summary
-from ..model.params import INDEX, NAMES, UNITS
+from ..model.params import GROUPS, INDEX, UNITS
 from .cost import CostFunction
 from .jade import JadeSolver, make_rng, stop_requested
 from .result import History, IdentificationResult
@@ -60,10 +60,36 @@ MESSAGES = {"generations": "Maximum number of generations reached.",
             "callback": "Stopped by callback."}
 
 
+#: ``--model`` choices handled here (SPEC §6)
+MODELS = ("base", "full")
+
+
+def model_extensions(ds: Dataset, model=None) -> tuple[str, ...]:
+    """Extension groups of the model to fit.
+
+    ``model``: ``None`` (the dataset's ``[model] extensions``, else the
+    twelve), ``"base"`` (the twelve), ``"full"`` (every group), or a sequence
+    of group names.
+    """
+    if model is None:
+        return tuple(ds.manifest.extensions or ())
+    if isinstance(model, str):
+        if model == "base":
+            return ()
+        if model == "full":
+            return tuple(GROUPS)
+        raise ArgumentError(f"--model must be one of {', '.join(MODELS)}, got {model!r}")
+    groups = tuple(model)
+    for g in groups:
+        if g not in GROUPS:
+            raise ArgumentError(f"unknown extension group '{g}'; groups are: {', '.join(GROUPS)}")
+    return tuple(g for g in GROUPS if g in groups)
+
+
 def identify(ds: Dataset, *, rng=None, seed=None, population: int = DEFAULT_POPULATION,
              generations: int = DEFAULT_GENERATIONS, weights: str = "adaptive", polish: bool = True,
              spread_tol: float | None = None, callback=None, cost: CostFunction | None = None,
-             maps: SensitivityMaps | None = None) -> IdentificationResult:
+             maps: SensitivityMaps | None = None, model=None) -> IdentificationResult:
     """Estimate the ride parameters of a dataset.
 
     Parameter space -> global search (JADE with track weighting) -> polish
@@ -99,6 +125,12 @@ def identify(ds: Dataset, *, rng=None, seed=None, population: int = DEFAULT_POPU
         runs); it is copied, never modified.
     maps : SensitivityMaps, optional
         Parameter -> track maps (default: computed around the nominal car).
+    model : {None, "base", "full"} or sequence of group names
+        The model (SPEC §6): the twelve (``"base"``), with every extension
+        group (``"full"``), or the given groups; ``None``: the dataset's
+        ``[model]``, else the twelve. Ignored when ``cost`` is given (its
+        parameter space decides). Known extension values are held fixed and
+        used whatever the model.
 
     Returns
     -------
@@ -112,7 +144,7 @@ def identify(ds: Dataset, *, rng=None, seed=None, population: int = DEFAULT_POPU
     gen, rng_record = make_rng(rng, seed)
     with single_threaded_blas():
         t0 = time.perf_counter()
-        cf = (cost if cost is not None else CostFunction(ds)).copy(weights=None)
+        cf = (cost if cost is not None else CostFunction(ds, extensions=model_extensions(ds, model))).copy()
         if maps is None:
             maps = sensitivity_maps(ds, cost=cf)
         search = global_search(cf, weighting, maps, gen, population=population, generations=generations,
@@ -211,7 +243,7 @@ def _result(ds, cf, search, fit, weighting, maps, rng_record, wall) -> Identific
     final_E = cf.run_errors(x[None])[:, 0]
     P = space.full(x[None])[0]
     details = {}
-    for n in NAMES:
+    for n in space.reported_names:
         e = {"value": float(P[INDEX[n]]), "unit": UNITS[n], "fixed": n in space.fixed,
              "derived": n == space.derived}
         if n in cf.names:
@@ -223,7 +255,6 @@ def _result(ds, cf, search, fit, weighting, maps, rng_record, wall) -> Identific
             e["lower"] = e["upper"] = None  # follows from the anchor: never searched
         else:
             e["std"] = 0.0
-        e["std_robust"] = None  # SPEC §6: filled by the robust standard error
         details[n] = e
     starts = {} if fit is None else fit.starts
     pre = ds.preprocessing()
@@ -235,12 +266,12 @@ def _result(ds, cf, search, fit, weighting, maps, rng_record, wall) -> Identific
     return IdentificationResult(
         x=np.asarray(x, dtype=float), names=list(cf.names), std=np.asarray(std, dtype=float), covariance=cov,
         fun=float(np.full(final_E.size, 1.0 / final_E.size) @ final_E), success=success, message=message, stop=search.stop,
-        nit=int(search.nit), nfev=int(cf.nfev), parameters={n: float(P[INDEX[n]]) for n in NAMES},
+        nit=int(search.nit), nfev=int(cf.nfev), parameters={n: float(P[INDEX[n]]) for n in space.reported_names},
         details=details, known=dict(ds.known), wall_time_s=wall, seed=rng_record["seed"],
         rng_state=rng_record["rng_state"], track_weights=search.track_weights, weights_mode=weighting.name,
         polish=info, history=History(search.history), starts=starts, preprocessing=pre,
         modal=modal_summary(P, ds.geometry), dataset=str(ds.path), maps=maps,
-        model={"extensions": [], "parameters": list(NAMES)}, response=cf.simulate(P))
+        model={"extensions": list(space.extensions)}, response=cf.simulate(P))
 
 
 def _polish(cf: CostFunction, x0, weights, align=None):

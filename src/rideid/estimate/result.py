@@ -4,7 +4,7 @@ Shaped like SciPy's :class:`scipy.optimize.OptimizeResult`: ``x`` (the free
 parameters, in ``names`` order), ``std`` and ``covariance`` of ``x``,
 ``fun``, ``success``, ``message``, ``nit``, ``nfev``; besides them
 ``parameters`` (all names -> value, SPEC §5), ``details`` (per parameter:
-value, unit, fixed, derived, std, std_robust, bounds), the estimated
+value, unit, fixed, derived, std, bounds; std_robust where computed), the estimated
 ``starts`` of measured runs, ``history`` (a :class:`History` table, one row
 per JADE generation) and what the report renders (``modal``, ``maps``,
 ``preprocessing``).
@@ -158,7 +158,8 @@ class IdentificationResult:
     parameters : dict
         Every parameter name -> value (fixed and derived ones included).
     details : dict
-        Name -> ``value, unit, fixed, derived, std, std_robust, lower, upper``.
+        Name -> ``value, unit, fixed, derived, std, lower, upper`` (and
+        ``std_robust``, SPEC §6, where the robust standard error is computed).
     starts : dict
         Run id -> ``{"value", "std", "source", ...}``: the start of each
         measured run with an estimated start, as the identification settled it.

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from ..model.params import NAMES
+from ..model.params import ALL_NAMES, EXT_NAMES
 
 
 def score(result, truth: dict) -> dict:
@@ -22,16 +22,22 @@ def score(result, truth: dict) -> dict:
         ``{"parameters": {name: {"estimate", "truth", "error_percent",
         "status"}}, "worst_percent": largest |error| over the estimated
         (not fixed) parameters}``; ``status`` is ``"estimated"``,
-        ``"known"`` or ``"derived"``.
+        ``"known"``, ``"derived"`` or ``"not in the model"`` (an extension
+        of the truth the model lacks: estimate 0); ``error_percent`` is None
+        for a zero truth.
     """
     details = result.details if hasattr(result, "details") else result["parameters"]
     rows, worst = {}, 0.0
-    for n in NAMES:
-        d = details[n]
-        est, tr = float(d["value"]), float(truth[n])
-        err = 100.0 * (est - tr) / tr
-        status = "known" if d.get("fixed") else ("derived" if d.get("derived") else "estimated")
-        if status != "known":
+    for n in ALL_NAMES:
+        if n in EXT_NAMES and n not in details and n not in truth:
+            continue
+        d = details.get(n, {})
+        est = float(d["value"]) if n in details else 0.0
+        tr = float(truth.get(n, 0.0))  # an extension absent from the truth is 0
+        status = ("not in the model" if n not in details else "known" if d.get("fixed")
+                  else "derived" if d.get("derived") else "estimated")
+        err = None if tr == 0 else 100.0 * (est - tr) / tr  # no relative error of a zero truth
+        if err is not None and status in ("estimated", "derived"):
             worst = max(worst, abs(err))
         rows[n] = {"estimate": est, "truth": tr, "error_percent": err, "status": status}
     return {"parameters": rows, "worst_percent": worst}

@@ -278,7 +278,7 @@ def write_report(result, dataset, out_dir, *, compare=None, compare_label: str |
     """
     import jinja2
 
-    from ..model.params import DESCRIPTIONS, NAMES
+    from ..model.params import ALL_NAMES, DESCRIPTIONS
     from ..estimate.sensitivity import P2T_STARS, stars
 
     out_dir = Path(out_dir)
@@ -294,9 +294,10 @@ def write_report(result, dataset, out_dir, *, compare=None, compare_label: str |
         lab = f"{result.weights_mode} (this)"
         olab = compare_label or f"{compare.weights_mode} (other)"
         other = (lab, list(compare.history), olab)
+    pnames = [n for n in ALL_NAMES if n in result.details]  # the twelve, and the extensions when fitted
     sims = result.response
     if sims is None or set(sims) != set(run_ids):
-        sims = simulate_runs(dataset, result.parameters)
+        sims = simulate_runs(dataset, {n: result.parameters[n] for n in pnames})
 
     # every figure is an independent job: render them on all cores
     jobs = []
@@ -324,7 +325,7 @@ def write_report(result, dataset, out_dir, *, compare=None, compare_label: str |
     data_rows, channel_rows, data_warnings = data_tables(result.preprocessing or dataset.preprocessing())
 
     params = []
-    for n in NAMES:
+    for n in pnames:
         d = result.details[n]
         std = d.get("std")
         params.append({
