@@ -23,7 +23,6 @@ from pathlib import Path
 
 import numpy as np
 
-from ..data.schema import in_folder
 from ..errors import DataError
 from ..model.params import NAMES
 from .sensitivity import SensitivityMaps
@@ -270,9 +269,11 @@ class IdentificationResult:
 
 def read_result_json(path) -> dict:
     """``result.json`` as a dict, checked for every parameter's value; :class:`DataError` naming the file."""
-    path = in_folder(path, "result.json")
+    given = Path(path)
+    path = given if given.suffix == ".json" else given / "result.json"
     if not path.is_file():
-        raise DataError(f"{path}: not found (is {path.parent} an identification folder?)")
+        raise DataError(f"{path}: file not found" if path is given else
+                        f"{path}: not found (is {given} an identification folder?)")
     try:
         doc = json.loads(path.read_text())
     except (json.JSONDecodeError, UnicodeDecodeError) as e:
@@ -292,8 +293,8 @@ def load(path) -> IdentificationResult:
     Results written before ``names``/``covariance`` were stored take them
     from ``polish`` (or from the parameters that are neither fixed nor derived).
     """
-    rpath = in_folder(path, "result.json")
-    doc = read_result_json(rpath)
+    doc = read_result_json(path)
+    rpath = Path(path) if Path(path).suffix == ".json" else Path(path) / "result.json"
     details = {n: dict(d) for n, d in doc["parameters"].items()}
     polish = doc.get("polish")
     names = doc.get("names") or (polish or {}).get("names") or [
