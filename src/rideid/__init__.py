@@ -26,6 +26,7 @@ from .estimate.sensitivity import SensitivityMaps, sensitivity_maps
 from .estimate.jade import JadeSolver, jade
 from .model.equations import CHANNELS, modal_summary
 from .model.params import DEFAULT_CAR, DEFAULT_GEOMETRY, NAMES, UNITS, Geometry
+from .model.params import ALL_NAMES, EXT_NAMES, GROUPS
 from .data.scenario import default_scenario, default_scenario_path, simulate_manifest, write_dataset
 from .model.tracks import Track
 
@@ -41,4 +42,5 @@ __all__ = [
     "Track", "default_scenario", "default_scenario_path", "identify", "jade", "load_dataset", "load_scenario",
     "load_truth", "modal_summary", "simulate_manifest", "write_dataset", "__version__",
     "History", "SensitivityMaps", "load_result", "score", "sensitivity_maps",
+    "ALL_NAMES", "EXT_NAMES", "GROUPS",
 ]
