@@ -91,7 +91,7 @@ def criteria(names, theta, cov, candidates, free_ext) -> list[dict]:
     return out
 
 
-def identify_auto(ds, *, seed=None, progress=None, maps=None, **kw):
+def identify_auto(ds, *, rng=None, seed=None, callback=None, maps=None, **kw):
     """:func:`rideid.identify` with ``model="auto"`` (module docstring).
 
     Returns the chosen candidate's :class:`~rideid.estimate.identify.IdentificationResult`
@@ -107,7 +107,7 @@ def identify_auto(ds, *, seed=None, progress=None, maps=None, **kw):
 
     t0 = time.perf_counter()
     cf_full = CostFunction(ds, extensions=tuple(GROUPS))
-    full = identify(ds, seed=seed, progress=progress, maps=maps, cost=cf_full, **kw)
+    full = identify(ds, rng=rng, seed=seed, callback=callback, maps=maps, cost=cf_full, **kw)
     pol = full.polish or {}
     names = list(pol.get("names", []))
     free_ext = {g: [n for n in GROUPS[g] if n in names] for g in GROUPS}
@@ -130,9 +130,10 @@ def identify_auto(ds, *, seed=None, progress=None, maps=None, **kw):
         x0 = np.array([full.parameters[n] for n in cf.names])
         kw_nested = {k: v for k, v in kw.items() if k in ("weights", "polish", "population")}
         # the adequacy verdict only for the model kept (below): it costs as much as a polish
-        results[cand] = identify(ds, seed=seed, cost=cf, maps=full.maps, start=x0, assess=False, **kw_nested)
+        results[cand] = identify(ds, rng=rng, seed=seed, cost=cf, maps=full.maps, start=x0, assess=False,
+                                 **kw_nested)
         costs[cand] = cf
-        evaluations += cf.nfev
+        evaluations += results[cand].nfev
     scored = [c for c in crit if c["criterion"] is not None]
     best = min(scored, key=lambda c: (c["criterion"], c["k"] or 0))
     chosen = tuple(best["extensions"])
@@ -153,9 +154,9 @@ def identify_auto(ds, *, seed=None, progress=None, maps=None, **kw):
         })
     res.model = {"extensions": list(chosen), "selection": "auto", "criterion": CRITERION, "candidates": table}
     if res is not full:  # the search was the full model's: its history and counts belong to this result
-        res.history, res.generations, res.stop = full.history, full.generations, full.stop
+        res.history, res.nit, res.stop, res.message = full.history, full.nit, full.stop, full.message
         res.track_weights = full.track_weights
-    res.evaluations = evaluations
+    res.nfev = evaluations
     res.wall_time_s = time.perf_counter() - t0
     return res
 
@@ -165,11 +166,10 @@ def _nested_cost(cf_full, ds, extensions):
 
     Saves re-tabulating every run's road input for each candidate.
     """
-    import copy
 
     from .cost import ParameterSpace
 
     space = ParameterSpace(ds.known, ds.geometry, ds.manifest.bounds, extensions=extensions)
-    cf = copy.copy(cf_full)
+    cf = cf_full.copy()
     cf.space, cf.names, cf.bounds, cf.nfev = space, list(space.names), space.bounds, 0
     return cf
