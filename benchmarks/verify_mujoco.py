@@ -2,16 +2,26 @@
 
 The built-in car and its ten runs are simulated by the MuJoCo car of
 :mod:`rideid.verify.hifi` — first in the reduced configuration (the 7-DOF physics in
-another engine), then with each property a real car has and the 7-DOF model
-lacks switched on alone, then with all of them together (a realistic car) —
-and identified by rideid as a user would (noise-free, seed 1, defaults). The
-table gives each parameter's error against the scenario's truth, and for the
-dampers also against the energy-equivalent linear damping of the simulated
-runs (the damping a linear model can see). Also listed: the smallest tire
-load and the largest suspension compression over all runs.
+another engine), then with each property a real car has switched on alone:
+those the twelve-parameter model lacks and no extension describes (CG height,
+wheel spin inertia, asymmetric and digressive dampers, bump stops) and those
+the extended model of SPEC section 6 describes (tire damping, anti-roll bars,
+both), then all together (a realistic car with bars and tire damping). Each
+dataset (1 % white sensor noise, seed 1) is identified by rideid as a user
+would with ``--model auto`` and with the base and the full model. Per fit: each
+parameter's error against the scenario's truth (and against the effective
+values a linear model can see: inertias with the wheels' swing and spin,
+energy-equivalent linear damping), the extension estimates, the adequacy
+verdict, and how many truths lie within ±2 std and ±2 std_robust. Also
+listed: the smallest tire load and the largest suspension compression.
 
-Run: ``make verify`` (about 2.5 minutes on 2 cores) or ``python benchmarks/verify_mujoco.py
---out DIR``; writes ``DIR/verification.md`` and ``DIR/verification.json``.
+The base and full fits are polished from ``--model auto``'s candidates of the
+same name (auto searches once, on the full model, and polishes the nested
+models from its estimate), so each has its own std, std_robust and verdict.
+
+Run: ``make verify`` (about 10 minutes on 2 idle cores) or ``python benchmarks/verify_mujoco.py
+--out DIR [--only I ...] [--noise F] [--seed N]``; writes ``DIR/verification.md`` and
+``DIR/verification.json``.
 """
 
 from __future__ import annotations
@@ -29,15 +39,19 @@ import numpy as np
 
 import rideid
 from rideid.verify.hifi import HifiProperties, simulate_mujoco
-from rideid.model.params import NAMES, as_vector
+from rideid.estimate.cost import ParameterSpace
+from rideid.model.params import EXT_NAMES, GROUPS, NAMES, as_vector
 from rideid.data.scenario import run_times, write_dataset
 
 #: the realistic car: a saloon's CG about 0.55 m above the ground (0.25 m above the wheel centres), a 16-17"
 #: wheel and tire (spin inertia 1.0 kg m^2), dampers with 2:1 rebound:compression and a digressive knee at
-#: 0.15 m/s (slope x 0.5 above it), bump stops engaging after 60 mm of compression (50 kN/m), tire damping
-#: 150 N s/m
+#: 0.15 m/s (slope x 0.5 above it), bump stops engaging after 60 mm of compression (50 kN/m)
 REALISTIC = dict(cg_height=0.25, wheel_inertia=1.0, damper_rebound_ratio=2.0, damper_knee_velocity=0.15,
-                 damper_knee_ratio=0.5, bumpstop_clearance=0.06, bumpstop_rate=50e3, tire_damping=150.0)
+                 damper_knee_ratio=0.5, bumpstop_clearance=0.06, bumpstop_rate=50e3)
+#: ... with anti-roll bars (front 15 kN/m, rear 6 kN/m at the wheel) and tire damping (150 N s/m per tire),
+#: which the extended model (SPEC section 6) describes; they go into the scenario's [truth]
+BARS = {"k_arf": 15e3, "k_arr": 6e3}
+TIRE_DAMPING = {"c_tf": 150.0, "c_tr": 150.0}
 
 CONFIGS = [
     ("reduced (7-DOF physics)", {}),
@@ -46,114 +60,193 @@ CONFIGS = [
     ("dampers 2:1 rebound:compression", {"damper_rebound_ratio": REALISTIC["damper_rebound_ratio"]}),
     ("dampers digressive above 0.15 m/s", {k: REALISTIC[k] for k in ("damper_knee_velocity", "damper_knee_ratio")}),
     ("bump stops at 60 mm, 50 kN/m", {k: REALISTIC[k] for k in ("bumpstop_clearance", "bumpstop_rate")}),
-    ("tire damping 150 N s/m", {"tire_damping": REALISTIC["tire_damping"]}),
-    ("all together (realistic car)", REALISTIC),
-    ("all together, without W_H (lift-off)", dict(REALISTIC, drop=["W_H"])),
+    ("tire damping 150 N s/m", {"truth": TIRE_DAMPING}),
+    ("anti-roll bars 15/6 kN/m", {"truth": BARS}),
+    ("bars + tire damping", {"truth": {**BARS, **TIRE_DAMPING}}),
+    ("realistic car (all + bars + tire damping)", dict(REALISTIC, truth={**BARS, **TIRE_DAMPING})),
 ]
 
 SHOWN = list(NAMES)
+#: the model fits of every row: what `rideid identify --model base|full|auto` would return
+MODELS = ("base", "full", "auto")
+#: parameter groups of the summary table
+PARTS = {"mass, inertia, CG": ("m_s", "I_xx", "I_yy", "a", "m_uf", "m_ur"),
+         "suspension": ("k_sf", "k_sr", "c_sf", "c_sr"), "tires": ("k_tf", "k_tr")}
 
 
-def simulate(sc, hifi: HifiProperties):
+def simulate(sc, hifi: HifiProperties, noise: float, rng):
     P = as_vector(sc.truth)
     data, details = {}, {}
     for run in sc.runs:
         t = run_times(run)
         res = simulate_mujoco(P, sc.geometry, sc.tracks[run.track], run.speed, t, hifi=hifi, details=True)
-        data[run.id] = (t, res.y)
+        y = res.y
+        if noise > 0:  # white sensor noise, noise x each channel's RMS (as `rideid simulate --noise`)
+            y = y + rng.standard_normal(y.shape) * (noise * np.sqrt(np.mean(y * y, axis=0)))[None, :]
+        data[run.id] = (t, y)
         details[run.id] = res
     return data, details
+
+
+def free_names(ds, extensions):
+    """The free parameters (``identify``'s ``start`` order) of the model with these extension groups."""
+    return list(ParameterSpace(ds.known, ds.geometry, ds.manifest.bounds, extensions=tuple(extensions)).names)
+
+
+def fit_record(res, truth, extensions):
+    """Errors, coverage and verdict of one fit against the truth."""
+    est = res.parameters
+    err = {n: 100 * (est[n] / truth[n] - 1) for n in NAMES}
+    ext = {n: {"estimate": float(est.get(n, 0.0)), "truth": float(truth.get(n, 0.0))} for n in EXT_NAMES}
+    cover = {}
+    for n, d in res.details.items():
+        if d.get("fixed") or d.get("derived"):
+            continue
+        miss = abs(est[n] - truth.get(n, 0.0))
+        cover[n] = {"std": bool(miss <= 2 * d["std"]) if d.get("std") is not None else None,
+                    "std_robust": bool(miss <= 2 * d["std_robust"]) if d.get("std_robust") is not None else None,
+                    "z_std": float(miss / d["std"]) if d.get("std") else None,
+                    "z_std_robust": float(miss / d["std_robust"]) if d.get("std_robust") else None}
+    part = {g: max(abs(err[n]) for n in ns) for g, ns in PARTS.items()}
+    return {"extensions": list(extensions), "error_pct": err, "extension_values": ext,
+            "largest_error_pct": max(abs(v) for v in err.values()), "largest_error_by_part_pct": part,
+            "covered_std": sum(bool(c["std"]) for c in cover.values()),
+            "covered_std_robust": sum(bool(c["std_robust"]) for c in cover.values()),
+            "estimated": len(cover), "coverage": cover,
+            "adequate": (res.adequacy or {}).get("adequate"),
+            "adequacy_reasons": (res.adequacy or {}).get("reasons"), "cost": float(res.cost)}
+
+
+def identify_models(ds, seed, truth):
+    """`--model auto` (one search on the full model, nested polishes), then base and full as
+    fits of their own polished from auto's candidates (white std, std_robust and adequacy of each)."""
+    t0 = time.perf_counter()
+    auto = rideid.identify(ds, seed=seed, model="auto")
+    t_auto = time.perf_counter() - t0
+    cands = {tuple(sorted(c["extensions"])): c for c in auto.model["candidates"]}
+    fits = {"auto": fit_record(auto, truth, auto.model["extensions"])}
+    fits["auto"]["candidates"] = [{k: c[k] for k in ("extensions", "cost", "criterion", "wald")}
+                                  for c in auto.model["candidates"]]
+    for m, ext in (("base", ()), ("full", tuple(GROUPS))):
+        c = cands[tuple(sorted(ext))]
+        x0 = [c["parameters"][n] for n in free_names(ds, ext)]
+        res = rideid.identify(ds, seed=seed, model=m, start=x0, maps=auto.maps)
+        fits[m] = fit_record(res, truth, ext)
+    return fits, time.perf_counter() - t0, t_auto
 
 
 def main(argv=None, out=sys.stdout):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--out", default="bench-out/verify", metavar="DIR")
     ap.add_argument("--seed", type=int, default=1)
+    ap.add_argument("--noise", type=float, default=0.01, help="white sensor noise, fraction of each channel's RMS")
     ap.add_argument("--only", type=int, nargs="*", help="indices of CONFIGS to run (default all)")
     a = ap.parse_args(argv)
 
     def say(*x):
         print(*x, file=out, flush=True)
 
-    sc = rideid.default_scenario()
-    truth = sc.truth
+    base_sc = rideid.default_scenario()
+    outdir = Path(a.out)
+    outdir.mkdir(parents=True, exist_ok=True)
     rows = []
     configs = [CONFIGS[i] for i in a.only] if a.only else CONFIGS
-    full = sc
     for label, kw in configs:
         kw = dict(kw)
-        drop = kw.pop("drop", [])
-        sc = dataclasses.replace(full, runs=[r for r in full.runs if r.id not in drop])
+        extra_truth = kw.pop("truth", {})
+        truth = dict(base_sc.truth, **extra_truth)
+        sc = dataclasses.replace(base_sc, truth=truth)
         hifi = HifiProperties(**kw)
+        rng = np.random.default_rng(a.seed)
         t0 = time.perf_counter()
-        data, det = simulate(sc, hifi)
+        data, det = simulate(sc, hifi, a.noise, rng)
         t_sim = time.perf_counter() - t0
         with tempfile.TemporaryDirectory() as tmp:
             write_dataset(sc, data, Path(tmp) / "ds")
             ds = rideid.load_dataset(Path(tmp) / "ds")
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore")
-                t0 = time.perf_counter()
-                res = rideid.identify(ds, seed=a.seed)
-                t_id = time.perf_counter() - t0
-        est = res.parameters
-        err = {n: 100 * (est[n] / truth[n] - 1) for n in NAMES}
+                fits, t_id, t_auto = identify_models(ds, a.seed, truth)
         # energy-equivalent linear damping over all runs, per axle
         work = sum(d.damper_work for d in det.values())
         v2 = sum(d.damper_v2 for d in det.values())
         c_eq = {"c_sf": float((work[0] + work[1]) / (v2[0] + v2[1])),
                 "c_sr": float((work[2] + work[3]) / (v2[2] + v2[3]))}
-        err_eq = {k: 100 * (est[k] / v - 1) for k, v in c_eq.items()}
         # what a linear model can see: the wheels' swing about the CG and their spin inertia in I_xx, I_yy;
         # the energy-equivalent dampers
         swing = 2 * (truth["m_uf"] + truth["m_ur"]) * hifi.cg_height ** 2
         iw = 2 * (hifi.wheel_inertia[0] + hifi.wheel_inertia[1])  # 4 thin discs: I_w each in pitch, I_w/2 in roll
         effective = dict(truth, I_xx=truth["I_xx"] + swing + iw / 2, I_yy=truth["I_yy"] + swing + iw, **c_eq)
-        err_eff = {n: 100 * (est[n] / effective[n] - 1) for n in NAMES}
+        for f in fits.values():
+            f["error_vs_effective_pct"] = {n: 100 * (f["error_pct"][n] / 100 + 1) * truth[n] / effective[n] - 100
+                                           for n in NAMES}
+            f["largest_error_vs_effective_pct"] = max(abs(v) for v in f["error_vs_effective_pct"].values())
         load_min = min(float(d.tire_load_min.min()) for d in det.values())
         lifted = sorted(rid for rid, d in det.items() if np.isfinite(d.lift_time).any())
         travel = max(float(d.travel_max.max()) for d in det.values())
-        row = {"config": label, "hifi": hifi.to_table(), "runs_left_out": drop, "error_pct": err,
-               "error_vs_effective_pct": err_eff, "effective": effective,
-               "c_eq": c_eq, "error_vs_c_eq_pct": err_eq,
-               "largest_error_pct": max(abs(v) for v in err.values()),
-               "largest_error_vs_effective_pct": max(abs(v) for v in err_eff.values()),
+        row = {"config": label, "hifi": hifi.to_table(), "truth_extensions": extra_truth, "noise": a.noise,
+               "fits": fits, "effective": effective, "c_eq": c_eq,
                "min_tire_load_N": load_min, "lift_off_runs": lifted, "max_compression_m": travel,
-               "cost": float(res.cost), "simulate_s": t_sim, "identify_s": t_id}
+               "simulate_s": t_sim, "identify_s": t_id, "identify_auto_s": t_auto}
         rows.append(row)
-        say(f"{label:<38} largest |error| {row['largest_error_pct']:6.2f} % (vs effective "
-            f"{row['largest_error_vs_effective_pct']:5.2f} %) "
-            f"(c_eq {c_eq['c_sf']:.0f}/{c_eq['c_sr']:.0f} N s/m; min tire load {load_min:.0f} N; "
-            f"lift-off {', '.join(lifted) or 'none'}; max compression {1000 * travel:.0f} mm; "
-            f"sim {t_sim:.1f} s, identify {t_id:.1f} s)")
+        (outdir / "verification.json").write_text(json.dumps(rows, indent=1))  # each row as it is done
+        say(f"{label:<42} " + "; ".join(
+            f"{m} {f['largest_error_pct']:.2f} % (eff {f['largest_error_vs_effective_pct']:.2f} %), "
+            f"{'adequate' if f['adequate'] else 'NOT adequate'}, 2std {f['covered_std']}/{f['estimated']}, "
+            f"2std_robust {f['covered_std_robust']}/{f['estimated']}" for m, f in fits.items())
+            + f"; auto chose [{', '.join(fits['auto']['extensions']) or 'base'}] "
+            f"(lift-off {', '.join(lifted) or 'none'}; max compression {1000 * travel:.0f} mm; "
+            f"sim {t_sim:.0f} s, identify {t_id:.0f} s)")
 
-    outdir = Path(a.out)
-    outdir.mkdir(parents=True, exist_ok=True)
-    (outdir / "verification.json").write_text(json.dumps(rows, indent=1))
-    head = "| configuration | " + " | ".join(SHOWN) + " |"
-    lines = [head, "|" + "---|" * (len(SHOWN) + 1)]
-    for r in rows:
-        cells = [f"{r['error_pct'][n]:+.2f}" for n in SHOWN]
-        lines.append(f"| {r['config']} | " + " | ".join(cells) + " |")
-    lines += ["", "Against the effective values a linear model can see (I_xx, I_yy with the wheels' swing and spin "
-              "inertia; c_sf, c_sr the energy-equivalent damping):", "", head, lines[1]]
-    for r in rows:
-        cells = [f"{r['error_vs_effective_pct'][n]:+.2f}" for n in SHOWN]
-        lines.append(f"| {r['config']} | " + " | ".join(cells) + " |")
-    lines += ["", "| configuration | c_eq front / rear (N s/m) | c_sf, c_sr error vs c_eq (%) | min tire load (N) | "
-              "lift-off | max compression (mm) |", "|---|---|---|---|---|---|"]
-    for r in rows:
-        lines.append(f"| {r['config']} | {r['c_eq']['c_sf']:.0f} / {r['c_eq']['c_sr']:.0f} | "
-                     f"{r['error_vs_c_eq_pct']['c_sf']:+.2f}, {r['error_vs_c_eq_pct']['c_sr']:+.2f} | "
-                     f"{r['min_tire_load_N']:.0f} | {', '.join(r['lift_off_runs']) or 'none'} | "
-                     f"{1000 * r['max_compression_m']:.0f} |")
-    text = "\n".join(lines) + "\n"
+    text = tables(rows)
     (outdir / "verification.md").write_text(text)
     say("")
-    say("errors against the scenario's truth, % (m_s derived from total_mass):")
+    say(f"errors against the scenario's truth, % (m_s derived from total_mass; {100 * a.noise:g} % white noise, "
+        f"seed {a.seed}):")
     say(text)
     say(f"written to {outdir}")
     return 0
+
+
+def _ext(f):
+    v = f["extension_values"]
+    return (f"{v['k_arf']['estimate'] / 1e3:.1f}/{v['k_arr']['estimate'] / 1e3:.1f}",
+            f"{v['c_tf']['estimate']:.0f}/{v['c_tr']['estimate']:.0f}")
+
+
+def tables(rows) -> str:
+    """The study's tables (markdown)."""
+    head = "| configuration | model | " + " | ".join(SHOWN) + " |"
+    sep = "|" + "---|" * (len(SHOWN) + 2)
+    lines = [head, sep]
+    for r in rows:
+        for m in ("base", "full"):
+            f = r["fits"][m]
+            lines.append(f"| {r['config']} | {m} | " + " | ".join(f"{f['error_pct'][n]:+.2f}" for n in SHOWN) + " |")
+    lines += ["", "Summary per fit: largest |error| (%) per part of the twelve (against the truth; in brackets "
+              "against the effective values a linear model can see), the extension estimates (truth in the "
+              "configuration's name, else 0), auto's choice, the adequacy verdict, and how many of the estimated "
+              "parameters' truths lie within ±2 std and ±2 std_robust:", "",
+              "| configuration | model | mass, inertia, CG | suspension | tires | largest (vs effective) | "
+              "k_arf/k_arr (kN/m) | c_tf/c_tr (N s/m) | adequate | ±2 std | ±2 std_robust |",
+              "|---|---|---|---|---|---|---|---|---|---|---|"]
+    for r in rows:
+        for m in MODELS:
+            f = r["fits"][m]
+            p = f["largest_error_by_part_pct"]
+            bars, td = _ext(f)
+            name = m if m != "auto" else f"auto → {'+'.join(f['extensions']) or 'base'}"
+            lines.append(f"| {r['config']} | {name} | {p['mass, inertia, CG']:.2f} | {p['suspension']:.2f} | "
+                         f"{p['tires']:.2f} | {f['largest_error_pct']:.2f} ({f['largest_error_vs_effective_pct']:.2f}) | "
+                         f"{bars} | {td} | {'yes' if f['adequate'] else 'no'} | "
+                         f"{f['covered_std']}/{f['estimated']} | {f['covered_std_robust']}/{f['estimated']} |")
+    lines += ["", "| configuration | c_eq front / rear (N s/m) | min tire load (N) | lift-off | max compression (mm) |",
+              "|---|---|---|---|---|"]
+    for r in rows:
+        lines.append(f"| {r['config']} | {r['c_eq']['c_sf']:.0f} / {r['c_eq']['c_sr']:.0f} | "
+                     f"{r['min_tire_load_N']:.0f} | {', '.join(r['lift_off_runs']) or 'none'} | "
+                     f"{1000 * r['max_compression_m']:.0f} |")
+    return "\n".join(lines) + "\n"
 
 
 if __name__ == "__main__":
