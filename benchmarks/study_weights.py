@@ -18,8 +18,8 @@ import warnings
 import numpy as np
 
 import rideid
-from rideid.cost import CostFunction
-from rideid.scenario import simulate_manifest, write_dataset
+from rideid.estimate.cost import CostFunction
+from rideid.data.scenario import simulate_manifest, write_dataset
 
 
 def evals_to(history, names, truth, tol):

@@ -9,7 +9,7 @@ import pytest
 
 import rideid
 from rideid.cli import main
-from rideid.cost import ParameterSpace, channel_weights
+from rideid.estimate.cost import ParameterSpace, channel_weights
 from rideid.design import NoiseModel, Selector, brute_force, catalogue_path, messages, subset_precision
 from rideid.design.fisher import jacobians, run_information, simulator
 
@@ -53,7 +53,7 @@ def test_sensitivities_match_numpy_reference_simulator(setup):
         def outputs(self, P):
             return sim.outputs_reference(P)
 
-    one = rideid.engine.BatchSimulator(sc.geometry, [sim.runs[k]])
+    one = rideid.model.batch.BatchSimulator(sc.geometry, [sim.runs[k]])
 
     class RefOne:
         def outputs(self, P):

@@ -41,12 +41,12 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..cost import ParameterSpace, channel_weights
-from ..engine import BatchSimulator
+from ..estimate.cost import ParameterSpace, channel_weights
+from ..model.batch import BatchSimulator
 from ..errors import ArgumentError
-from ..model import CHANNEL_KIND, CHANNELS
-from ..scenario import run_times
-from ..simulate import prepare_run
+from ..model.equations import CHANNEL_KIND, CHANNELS
+from ..data.scenario import run_times
+from ..model.simulate import prepare_run
 
 #: relative finite-difference step
 STEP = 1e-5

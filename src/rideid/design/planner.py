@@ -13,9 +13,9 @@ from pathlib import Path
 
 import numpy as np
 
-from ..cost import ParameterSpace
+from ..estimate.cost import ParameterSpace
 from ..errors import ArgumentError, DataError
-from ..files import Manifest, load_scenario
+from ..data.schema import Manifest, load_scenario
 from .fisher import STEP, NoiseModel, Precision, messages, run_information, simulator, subset_precision
 from .select import Selector
 
@@ -161,7 +161,7 @@ class PlanResult:
                + ", ".join(self.selected_runs) + "\n",
                "| parameter | nominal | unit | selected CRLB ± | selected identify ± | all runs CRLB ± | all runs identify ± |",
                "|---|---|---|---|---|---|---|"]
-        from ..params import UNITS
+        from ..model.params import UNITS
         for j, n in enumerate(self.names):
             out.append(f"| {n} | {self.nominal[n]:.6g} | {UNITS.get(n, '')} | {_pct(self.selected.rel_crlb[j])} | "
                        f"{_pct(self.selected.rel_identify[j])} | {_pct(self.all_runs.rel_crlb[j])} | "
@@ -463,13 +463,13 @@ def plan(scenario, *, noise=None, accel_density: float = 0.0, gyro_density: floa
 
 
 def _channels():
-    from ..model import CHANNELS
+    from ..model.equations import CHANNELS
     return CHANNELS
 
 
 def _check_truth(sc, space, P0):
     """The anchor must describe the nominal car: fixed and derived values equal to [truth]."""
-    from ..params import NAMES
+    from ..model.params import NAMES
     for k, n in enumerate(NAMES):
         if n in sc.truth and abs(P0[k] - sc.truth[n]) > 1e-6 * max(abs(sc.truth[n]), 1e-12):
             src = "derived from [known] total_mass" if n == space.derived else "[known]"
@@ -498,7 +498,7 @@ def _compare_maps(sim, sc, P0, run_ids, info, names, greedy_order, criterion) ->
     """Where the paper's sensitivity map (rideid sensitivity) and the Fisher information agree."""
     from scipy.stats import spearmanr
 
-    from ..sensitivity import compute_maps
+    from ..estimate.sensitivity import compute_maps
     maps = compute_maps(sim, sc.geometry, P0, run_ids)
     M = maps.submap(names)  # (d, R), rows sum to 1
     diag = np.stack([np.diag(F) for F in info.F], axis=1)  # (d, R): information about p alone, per run

@@ -12,9 +12,9 @@ from pathlib import Path
 
 import numpy as np
 
-from ..dataset import load_dataset
-from ..identify import identify
-from ..scenario import simulate_manifest, write_dataset
+from ..data.dataset import load_dataset
+from ..estimate.identify import identify
+from ..data.scenario import simulate_manifest, write_dataset
 
 
 def sub_scenario(sc, run_ids):
