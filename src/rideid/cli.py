@@ -297,7 +297,7 @@ def cmd_plan(args, out=None):
     out = out or sys.stdout
     from . import plan
     from .design import parse_target
-    from .files import atomic_output
+    from .data.schema import atomic_output
 
     targets = {}
     for t in args.target:

@@ -500,8 +500,10 @@ def _compare_maps(sim, sc, P0, run_ids, info, names, greedy_order, criterion) ->
 
     from ..estimate.sensitivity import compute_maps
     maps = compute_maps(sim, sc.geometry, P0, run_ids)
+    names = [n for n in names if n in maps.params]  # parameters the map covers
     M = maps.submap(names)  # (d, R), rows sum to 1
     diag = np.stack([np.diag(F) for F in info.F], axis=1)  # (d, R): information about p alone, per run
+    diag = diag[[info.names.index(n) for n in names]]
     share = diag / np.maximum(diag.sum(1, keepdims=True), 1e-300)
     out = {}
     for j, n in enumerate(names):
