@@ -319,3 +319,27 @@ def test_planned_runs_deliver_the_promised_precision():
     st = spread_ratio(est, truth, res.selected.std_identify)
     assert np.all(st["ratio"] < 1.2), dict(zip(res.names, st["ratio"]))
     assert np.all(st["ratio"] > 0.8)
+
+
+def test_extensions_in_truth_become_free_parameters(tmp_path):
+    """A nominal car with anti-roll bars (SPEC §6): k_arf, k_arr are planned too; no roll on a washboard."""
+    import tomllib
+
+    import tomli_w
+    doc = tomllib.loads(rideid.default_scenario_path().read_text())
+    doc["truth"].update(k_arf=12000.0, k_arr=6000.0)
+    (tmp_path / "bars.toml").write_text(tomli_w.dumps(doc))
+    res = rideid.plan(tmp_path / "bars.toml", noise=0.01, budget_runs=3)
+    assert res.names[-2:] == ["k_arf", "k_arr"] and res.to_dict()["model"]["extensions"] == ["anti_roll_bars"]
+    assert np.all(np.isfinite(res.selected.rel_crlb))
+    # bars only act in roll: more unknowns in roll, so I_xx is less precise than without bars
+    base = rideid.plan(rideid.default_scenario_path(), noise=0.01, budget_runs=3)
+    assert res.all_runs.rel_crlb[0] > base.all_runs.rel_crlb[0]
+    wash = [k for k, c in enumerate(res.candidates) if c["track"] == "washboard"]
+    from rideid.design.fisher import run_information as ri
+    sc = rideid.load_scenario(tmp_path / "bars.toml")
+    space = ParameterSpace(sc.known, sc.geometry, sc.bounds, extensions=("anti_roll_bars",))
+    x0 = np.array([sc.truth[n] for n in space.names])
+    info = ri(simulator(sc), space, x0, NOISE, [r.fs for r in sc.runs])
+    p = subset_precision(info, wash)
+    assert set(np.array(space.names)[~p.identifiable]) == {"I_xx", "k_arf", "k_arr"}

@@ -14,6 +14,7 @@ from pathlib import Path
 import numpy as np
 
 from ..estimate.cost import ParameterSpace
+from ..model.params import GROUPS
 from ..errors import ArgumentError, DataError
 from ..data.schema import Manifest, load_scenario
 from .fisher import STEP, NoiseModel, Precision, messages, run_information, simulator, subset_precision
@@ -37,6 +38,7 @@ class PlanResult:
     nominal: dict
     derived: str | None
     known: dict
+    extensions: list
     noise: dict
     criterion: str
     budget: dict
@@ -109,6 +111,7 @@ class PlanResult:
             "nominal": self.nominal,
             "known": self.known,
             "derived": self.derived,
+            "model": {"extensions": self.extensions},
             "noise": self.noise,
             "criterion": self.criterion,
             "budget": self.budget,
@@ -287,7 +290,7 @@ def plan(scenario, *, noise=None, accel_density: float = 0.0, gyro_density: floa
          bandwidth: float | None = None, budget_runs: int | None = None, budget_time: float | None = None,
          overhead: float = 0.0, criterion: str | None = None, targets: dict | None = None, robust: int = 1,
          robust_spread: float = DEFAULT_ROBUST_SPREAD, seed: int = 0, within: float = DEFAULT_WITHIN,
-         step: float = STEP) -> PlanResult:
+         step: float = STEP, extensions=None) -> PlanResult:
     """Plan a test: the precision of every candidate run, and the best subset under a budget.
 
     Parameters
@@ -325,6 +328,10 @@ def plan(scenario, *, noise=None, accel_density: float = 0.0, gyro_density: floa
         factor of all candidates' on every parameter.
     step : float
         Relative finite-difference step of the sensitivities.
+    extensions : sequence of str, optional
+        SPEC §6 groups whose parameters are free (as identify ``--model``);
+        default the scenario's ``[model]``, else every group with a positive
+        value in ``[truth]`` (the car has it, so identify must fit it).
 
     Returns
     -------
@@ -333,9 +340,16 @@ def plan(scenario, *, noise=None, accel_density: float = 0.0, gyro_density: floa
     sc = scenario if isinstance(scenario, Manifest) else load_scenario(scenario)
     if sc.truth is None:
         raise DataError(f"{sc.path}: a plan needs a scenario with a [truth] table (the nominal car)")
-    space = ParameterSpace(sc.known, sc.geometry, sc.bounds)  # refuses a missing scale anchor
+    if extensions is None:  # the scenario's [model], else the groups the nominal car has
+        extensions = sc.extensions if sc.extensions is not None else \
+            tuple(g for g, ns in GROUPS.items() if any(sc.truth.get(n, 0.0) > 0 for n in ns))
+    space = ParameterSpace(sc.known, sc.geometry, sc.bounds, extensions=extensions)  # refuses a missing anchor
     names = list(space.names)
-    x0 = np.array([float(sc.truth[n]) for n in names])
+    x0 = np.array([float(sc.truth.get(n, 0.0)) for n in names])
+    if np.any(x0 <= 0):
+        zero = [n for n, v in zip(names, x0) if v <= 0]
+        raise DataError(f"{sc.path}: [truth] has no positive value for {', '.join(zero)}, a free parameter of the "
+                        "model; precision is planned relative to the nominal value, so give one")
     P0 = space.full(x0[None])[0]
     _check_truth(sc, space, P0)
     run_ids = [r.id for r in sc.runs]
@@ -447,7 +461,7 @@ def plan(scenario, *, noise=None, accel_density: float = 0.0, gyro_density: floa
     res = PlanResult(
         scenario=str(sc.path), names=names,
         nominal={n: float(v) for n, v in sc.truth.items()},
-        derived=space.derived, known=dict(sc.known), noise=nm.to_dict(), criterion=criterion,
+        derived=space.derived, known=dict(sc.known), extensions=list(space.extensions), noise=nm.to_dict(), criterion=criterion,
         budget={"runs": budget_runs, "time_s": budget_time, "overhead_s": overhead,
                 "within": None if (budget_runs or budget_time or criterion == "target") else within},
         targets=targets,
@@ -469,11 +483,12 @@ def _channels():
 
 def _check_truth(sc, space, P0):
     """The anchor must describe the nominal car: fixed and derived values equal to [truth]."""
-    from ..model.params import NAMES
-    for k, n in enumerate(NAMES):
-        if n in sc.truth and abs(P0[k] - sc.truth[n]) > 1e-6 * max(abs(sc.truth[n]), 1e-12):
+    from ..model.params import ALL_NAMES
+    for k, n in enumerate(ALL_NAMES[:P0.size]):
+        if abs(P0[k] - sc.truth.get(n, 0.0)) > 1e-6 * max(abs(sc.truth.get(n, 0.0)), 1e-12):
             src = "derived from [known] total_mass" if n == space.derived else "[known]"
-            raise DataError(f"{sc.path}: {n} = {P0[k]:.6g} ({src}) disagrees with [truth] {n} = {sc.truth[n]:.6g}; "
+            raise DataError(f"{sc.path}: {n} = {P0[k]:.6g} ({src}) disagrees with [truth] {n} = "
+                            f"{sc.truth.get(n, 0.0):.6g}; "
                             "the plan is made for the [truth] car, so [known] must match it")
 
 
