@@ -23,7 +23,25 @@ def sub_scenario(sc, run_ids):
     return dataclasses.replace(sc, runs=keep)
 
 
-def monte_carlo(sc, run_ids, names, noise: float, seeds, identify_kw=None, progress=None) -> np.ndarray:
+def gauss_newton_from_truth(ds, names, x0, step: float = 1e-5) -> np.ndarray:
+    """One Gauss-Newton step from ``x0`` on identify's own cost of dataset ``ds``.
+
+    At small noise identify's least-squares polish converges to this point:
+    the linearised estimator whose spread the plan predicts.
+    """
+    from ..estimate.cost import CostFunction
+    cf = CostFunction(ds)
+    if list(cf.names) != list(names):
+        raise ValueError(f"free parameters differ: {cf.names} vs {names}")
+    x0 = np.asarray(x0, dtype=float)
+    d, h = x0.size, step * x0
+    R = cf.residuals(np.vstack([x0, x0 + np.diag(h), x0 - np.diag(h)]))
+    J = ((R[1:1 + d] - R[1 + d:]) / (2 * h[:, None])).T
+    return x0 - np.linalg.lstsq(J, R[0], rcond=None)[0]
+
+
+def monte_carlo(sc, run_ids, names, noise: float, seeds, identify_kw=None, progress=None,
+                linearised: bool = False):
     """Identify ``len(seeds)`` noisy simulations of the runs ``run_ids``.
 
     Each seed ``s`` draws the noise with ``simulate_manifest(seed=s)`` (SPEC
@@ -33,10 +51,13 @@ def monte_carlo(sc, run_ids, names, noise: float, seeds, identify_kw=None, progr
     Returns
     -------
     ndarray (n_seeds, len(names))
-        The estimates of ``names``.
+        The estimates of ``names``; with ``linearised`` also the
+        :func:`gauss_newton_from_truth` estimates on the same data.
     """
     sub = sub_scenario(sc, run_ids)
     out = np.zeros((len(seeds), len(names)))
+    lin = np.zeros_like(out)
+    x_true = np.array([sc.truth[n] for n in names])
     with tempfile.TemporaryDirectory() as tmp:
         for k, s in enumerate(seeds):
             with warnings.catch_warnings():
@@ -44,11 +65,14 @@ def monte_carlo(sc, run_ids, names, noise: float, seeds, identify_kw=None, progr
                 data, _ = simulate_manifest(sub, noise=noise, seed=int(s))
             folder = Path(tmp) / f"s{s}"
             write_dataset(sub, data, folder)
-            res = identify(load_dataset(folder), seed=int(s), **(identify_kw or {}))
+            ds = load_dataset(folder)
+            res = identify(ds, seed=int(s), **(identify_kw or {}))
             out[k] = [res.parameters[n] for n in names]
+            if linearised:
+                lin[k] = gauss_newton_from_truth(ds, names, x_true)
             if progress is not None:
                 progress(k + 1, len(seeds), out[k])
-    return out
+    return (out, lin) if linearised else out
 
 
 def spread_ratio(estimates: np.ndarray, truth: np.ndarray, predicted_std: np.ndarray) -> dict:
