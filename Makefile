@@ -33,7 +33,7 @@ bench: $(STAMP)
 	$(PY) -m pip install --quiet -e '.[bench]'
 	$(PY) benchmarks/run_all.py
 
-# verification on the independent MuJoCo car (docs/verification.md): about 10 minutes (3 models x 10 cars), tables in bench-out/verify/
+# verification on the independent MuJoCo car (docs/verification.md): about 15 minutes (10 cars x 3 models), tables in bench-out/verify/
 verify: $(STAMP)
 	$(PY) benchmarks/verify_mujoco.py --out bench-out/verify
 

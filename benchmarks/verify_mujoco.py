@@ -19,7 +19,7 @@ The base and full fits are polished from ``--model auto``'s candidates of the
 same name (auto searches once, on the full model, and polishes the nested
 models from its estimate), so each has its own std, std_robust and verdict.
 
-Run: ``make verify`` (about 10 minutes on 2 idle cores) or ``python benchmarks/verify_mujoco.py
+Run: ``make verify`` (about 15 minutes on an idle machine) or ``python benchmarks/verify_mujoco.py
 --out DIR [--only I ...] [--noise F] [--seed N]``; writes ``DIR/verification.md`` and
 ``DIR/verification.json``.
 """
@@ -214,6 +214,11 @@ def _ext(f):
             f"{v['c_tf']['estimate']:.0f}/{v['c_tr']['estimate']:.0f}")
 
 
+def _median_z(f, key):
+    z = [c[key] for c in f["coverage"].values() if c[key] is not None]
+    return float(np.median(z)) if z else float("nan")
+
+
 def tables(rows) -> str:
     """The study's tables (markdown)."""
     head = "| configuration | model | " + " | ".join(SHOWN) + " |"
@@ -226,10 +231,11 @@ def tables(rows) -> str:
     lines += ["", "Summary per fit: largest |error| (%) per part of the twelve (against the truth; in brackets "
               "against the effective values a linear model can see), the extension estimates (truth in the "
               "configuration's name, else 0), auto's choice, the adequacy verdict, and how many of the estimated "
-              "parameters' truths lie within ±2 std and ±2 std_robust:", "",
+              "parameters' truths lie within ±2 std and ±2 std_robust, with the median of |error| / std and "
+              "|error| / std_robust over them:", "",
               "| configuration | model | mass, inertia, CG | suspension | tires | largest (vs effective) | "
-              "k_arf/k_arr (kN/m) | c_tf/c_tr (N s/m) | adequate | ±2 std | ±2 std_robust |",
-              "|---|---|---|---|---|---|---|---|---|---|---|"]
+              "k_arf/k_arr (kN/m) | c_tf/c_tr (N s/m) | adequate | ±2 std | ±2 std_robust | median z std, robust |",
+              "|---|---|---|---|---|---|---|---|---|---|---|---|"]
     for r in rows:
         for m in MODELS:
             f = r["fits"][m]
@@ -239,7 +245,8 @@ def tables(rows) -> str:
             lines.append(f"| {r['config']} | {name} | {p['mass, inertia, CG']:.2f} | {p['suspension']:.2f} | "
                          f"{p['tires']:.2f} | {f['largest_error_pct']:.2f} ({f['largest_error_vs_effective_pct']:.2f}) | "
                          f"{bars} | {td} | {'yes' if f['adequate'] else 'no'} | "
-                         f"{f['covered_std']}/{f['estimated']} | {f['covered_std_robust']}/{f['estimated']} |")
+                         f"{f['covered_std']}/{f['estimated']} | {f['covered_std_robust']}/{f['estimated']} | "
+                         f"{_median_z(f, 'z_std'):.1f}, {_median_z(f, 'z_std_robust'):.1f} |")
     lines += ["", "| configuration | c_eq front / rear (N s/m) | min tire load (N) | lift-off | max compression (mm) |",
               "|---|---|---|---|---|"]
     for r in rows:
