@@ -29,6 +29,8 @@ class Dataset:
     manifest: Manifest
     data: dict[str, RunData]
     measured: dict = field(default_factory=dict)
+    #: what the data checks found (:mod:`rideid.data.checks`); errors never get this far
+    findings: list = field(default_factory=list)
 
     @property
     def geometry(self) -> Geometry:
@@ -101,7 +103,10 @@ def load_dataset(path, starts: dict[str, float] | None = None) -> Dataset:
     """
     from .measured import estimate_start, load_measured_run, nominal_car
 
+    from . import checks
+
     man = load_manifest(path)
+    checks.enforce(checks.check_numbers(man))
     data, measured = {}, {}
     for run in man.runs:
         if man.is_measured(run):
@@ -127,7 +132,11 @@ def load_dataset(path, starts: dict[str, float] | None = None) -> Dataset:
         mr.make_grid(s)
         data[rid] = mr.run_data(s)
     data = {r.id: data[r.id] for r in man.runs}
-    return Dataset(man, data, measured)
+    ds = Dataset(man, data, measured)
+    # the one hook for the physics checks: every run conditioned and aligned
+    ds.findings = checks.check_dataset(ds)
+    checks.enforce(ds.findings, f"{man.path}: ")
+    return ds
 
 
 def prepare_inputs(ds: Dataset) -> list:

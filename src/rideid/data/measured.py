@@ -445,7 +445,7 @@ def load_measured_run(run, man) -> MeasuredRun:
         v = sig.values * factor
         raw[c] = Signal(sig.time, v, unit)
         med = float(np.median(dt))
-        rec_ch[c] = {"source": e.name, "unit": unit, "unit_from": unit_src, "sign": int(e.sign),
+        rec_ch[c] = {"source": e.name, "unit": unit, "unit_from": unit_src, "file_unit": sig.unit, "sign": int(e.sign),
                      "scale": e.scale, "rate_hz": round(1.0 / med, 6), "samples": int(v.size)}
         # plausibility
         gap = dt > 1.5 * med
