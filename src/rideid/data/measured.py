@@ -537,7 +537,10 @@ def load_measured_run(run, man) -> MeasuredRun:
         from scipy.integrate import cumulative_trapezoid
         d = cumulative_trapezoid(np.clip(s.values, 0, None), s.time, initial=0.0)
         distance = Distance(s.time, d)
-        motion_rec = {"source": f"speed channel '{targets['speed'].name}' ({s.unit}), integrated"}
+        # white-noise level of the speed channel (differences cancel the smooth speed): its integral drifts
+        noise = float(np.std(np.diff(s.values)) / math.sqrt(2.0)) if s.values.size > 2 else 0.0
+        motion_rec = {"source": f"speed channel '{targets['speed'].name}' ({s.unit}), integrated",
+                      "noise_std": noise, "noise_interval": float(np.median(np.diff(s.time)))}
     else:
         motion_rec = {"source": "constant", "value": run.speed}
     if distance is not None:

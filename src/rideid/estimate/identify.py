@@ -32,7 +32,9 @@
 from __future__ import annotations
 
 import json
+import math
 import time
+import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -42,7 +44,7 @@ from scipy.optimize import least_squares
 from .cost import CostFunction
 from ..data.dataset import Dataset
 from ..model.batch import single_threaded_blas
-from ..errors import ArgumentError
+from ..errors import ArgumentError, DataWarning
 from .jade import JadeSolver
 from ..model.equations import modal_summary
 from ..model.params import INDEX, NAMES, UNITS
@@ -81,6 +83,8 @@ class IdentificationResult:
     modal: dict | None = None
     dataset: str = ""
     maps: SensitivityMaps | None = None
+    #: findings of the data checks and the bound check (rideid.data.checks), as dicts
+    checks: list = field(default_factory=list)
 
     def to_dict(self) -> dict:
         return {
@@ -99,6 +103,7 @@ class IdentificationResult:
             "polish": self.polish,
             "modal": self.modal,
             "preprocessing": self.preprocessing,
+            "checks": self.checks,
             "dataset": str(Path(self.dataset).resolve()) if self.dataset else "",
             "history_file": "history.csv",
         }
@@ -246,7 +251,14 @@ def _identify(ds, *, seed, population, generations, weights, polish, spread_tol,
         else:
             d["std"] = 0.0
         details[n] = d
+    from ..data.checks import bound_findings
+    findings = list(getattr(ds, "findings", [])) + bound_findings(details)
+    for f in findings:
+        if f.check == "bounds":
+            details[f.channel]["at_bound"] = True
+            warnings.warn(f.message, DataWarning, stacklevel=3)
     return IdentificationResult(
+        checks=[f.to_dict() for f in findings],
         parameters={n: float(P[INDEX[n]]) for n in NAMES}, details=details, known=dict(ds.known),
         cost=float(equal @ final_E), generations=solver.nit, evaluations=cf.nfev, wall_time_s=wall,
         seed=seed, track_weights={rid: float(w[r]) for r, rid in enumerate(cf.run_ids)},
@@ -348,7 +360,7 @@ def _polish_aligned(ds, cf, x_best, equal):
             changes[rid] = st["value"] - mr.start
             ds.data[rid] = mr.run_data(st["value"])
             mr.record["start"].update({"source": "estimated with the parameters (least squares)",
-                                       "std": st["std"]})
+                                       **_start_std(ds, rid, st["std"])})
         worst = max(abs(v) * ds.measured[rid].fs for rid, v in changes.items())
         rounds.append({"max_change_samples": worst})
         varying = [rid for rid in changes if ds.measured[rid].distance is not None]
@@ -362,7 +374,40 @@ def _polish_aligned(ds, cf, x_best, equal):
         cf = CostFunction(ds, space=cf.space)
         cf.nfev = nfev
     info["alignment_rounds"] = rounds
+    # the data moved with the starts: the final cost is the cost on the data at the final starts
+    nfev = cf.nfev
+    cf = CostFunction(ds, space=cf.space)
+    cf.nfev = nfev
     return x_best, info, std, cf
+
+
+def _start_std(ds, rid, std_fit) -> dict:
+    """A start's standard error: the fit's, and the drift of an integrated noisy speed channel.
+
+    The model drives along ``x(t) = d(start + t) - d(start)``. White noise of
+    standard deviation ``sigma_v`` on a speed channel sampled every ``dt``
+    makes the integrated distance a random walk, ``sigma_x(T) = sigma_v
+    sqrt(T dt)`` after ``T`` seconds; the start is fixed by the road
+    features, met about ``T_mid`` (front axle at the middle of the features,
+    half a wheelbase on) after it, so the distance error there moves the
+    start by ``sigma_x(T_mid) / v_mean``. Added in quadrature to the fit's
+    (Jacobian) standard error, which assumes the distance exact. A speed
+    channel's calibration error is not included.
+    """
+    from ..data.checks import feature_span
+    mr = ds.measured[rid]
+    out = {"std": std_fit, "std_fit": std_fit}
+    sp = mr.record.get("speed", {})
+    if "noise_std" not in sp or not sp.get("mean"):
+        return out
+    span = feature_span(ds.manifest.tracks[ds.manifest.run(rid).track], ds.geometry)
+    x_mid = (0.0 if span is None else 0.5 * (span[0] + span[1])) + 0.5 * ds.geometry.wheelbase
+    v = max(float(sp["mean"]), 1e-6)
+    s_speed = float(sp["noise_std"]) * math.sqrt(max(x_mid / v, 0.0) * float(sp["noise_interval"])) / v
+    out["std_speed_channel"] = s_speed
+    if std_fit is not None and np.isfinite(std_fit):
+        out["std"] = float(math.hypot(std_fit, s_speed))
+    return out
 
 
 def _cycle_check(ds, P) -> dict:
