@@ -41,7 +41,11 @@ def hatch(tmp_path_factory):
                known={"total_mass": 1050.0 + 2 * 38.0 + 2 * 33.0})
     (folder / "hatch.toml").write_text(tomli_w.dumps(doc))
     sc = rideid.load_scenario(folder / "hatch.toml")
-    return sc, simulate_raw(sc, offset=OFFSET, runs=set(RUNS))
+    raw = simulate_raw(sc, offset=OFFSET, runs=set(RUNS))
+    # sensor noise: 0.02 m/s^2 on the accelerometers, 0.002 rad/s on the gyro (white, seeded)
+    rng = np.random.default_rng(16)
+    floor = np.array([0.02] * 8 + [0.002] * 2)
+    return sc, {rid: (t, Y + floor * rng.standard_normal(Y.shape)) for rid, (t, Y) in raw.items()}
 
 
 def one_run(folder, sc, raw, rid, *, mutate=None, cmap=None, edit=None):
@@ -181,7 +185,7 @@ def test_the_fix_rideid_prints_loads_cleanly(hatch, tmp_path):
         warnings.simplefilter("error", DataWarning)
         ds = rideid.load_dataset(path)
     assert ds.findings == []
-    assert abs(ds.measured["T_HH"].start - OFFSET) < 1e-3
+    assert abs(ds.measured["T_HH"].start - OFFSET) < 2e-3  # the nominal car is not the hatchback: within half a sample
 
 
 @pytest.mark.parametrize("rid", RUNS)

@@ -117,7 +117,7 @@ PLAUSIBLE = {
     "k_tf": (1.0e3, 1.0e9), "k_tr": (1.0e3, 1.0e9),
     "speed": (0.1, 100.0),
     # track dimensions, m (start and extent: a proving-ground track is not kilometres away)
-    "start": (0.0, 1.0e4), "amplitude": (0.0, 0.5), "height": (0.0, 0.5), "wavelength": (0.01, 1.0e3),
+    "start": (-1.0e4, 1.0e4), "amplitude": (0.0, 0.5), "height": (0.0, 0.5), "wavelength": (0.01, 1.0e3),
     "bump_length": (0.01, 1.0e3), "spacing": (0.01, 1.0e3), "cycles": (0.0, 1.0e5), "bumps": (0.0, 1.0e5),
 }
 UNIT_OF = {"wheelbase": "m", "track_front": "m", "track_rear": "m", "tire_radius": "m", "total_mass": "kg",
@@ -234,6 +234,16 @@ def check_coverage(run_id: str, track, geom, x_end: float, x_begin: float = 0.0,
                            f"(front axle at {x_end:.3g} m, the rear wheels clear the last feature at "
                            f"{hi + geom.wheelbase + R:.3g} m): a longer recording fits better", run_id, "duration"))
     return out
+
+
+def check_reach(run_id: str, track, geom, max_distance: float, where: str = "") -> list[Finding]:
+    """Before a start is estimated: can the recording reach the track at all?
+
+    ``max_distance``: the most the front axle can travel during the whole
+    recording (constant speed x its length, or the distance channel's range).
+    """
+    return [f for f in check_coverage(run_id, track, geom, max_distance, 0.0, where)
+            if f.severity == ERROR and f.channel == "speed"]
 
 
 # ---------------------------------------------------------------------------
@@ -759,7 +769,7 @@ def enforce(findings: list[Finding], where: str = ""):
         if f.severity == WARNING:
             warnings.warn(f"{where}{f.message}", DataWarning, stacklevel=3)
     if errors:
-        more = f" ({len(errors) - 1} more error(s) in other runs)" if len(errors) > 1 else ""
+        more = f" ({len(errors) - 1} more error(s) of this kind)" if len(errors) > 1 else ""
         raise DataError(f"{where}{errors[0].message}{more}")
 
 
@@ -789,6 +799,6 @@ def bound_findings(details: dict, fraction: float = BOUND_FRACTION) -> list[Find
     return out
 
 
-__all__ = ["Finding", "check_dataset", "enforce", "check_numbers", "check_coverage", "rigid_body_scores", "assignment", "wiring_fix",
+__all__ = ["Finding", "check_dataset", "enforce", "check_reach", "check_numbers", "check_coverage", "rigid_body_scores", "assignment", "wiring_fix",
            "corrected", "describe_fix", "match_finding", "speed_candidates", "bound_findings", "PLAUSIBLE",
            "MATCH_MIN", "CHECK_NAMES"]

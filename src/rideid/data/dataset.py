@@ -127,6 +127,9 @@ def load_dataset(path, starts: dict[str, float] | None = None) -> Dataset:
             s = mr.options["start"]
             mr.record["start"] = {"source": "given"}
         else:
+            longest = (mr.speed * (mr.t_last - mr.t_first) if mr.distance is None
+                       else float(mr.distance.d[-1] - mr.distance.d[0]))
+            checks.enforce(checks.check_reach(rid, track, man.geometry, longest), f"{man.path}: ")
             s, rho = estimate_start(mr, nominal_car(man.geometry), man.geometry, track)
             mr.record["start"] = {"source": "estimated (nominal car)", "nominal_estimate": s, "correlation": rho}
         mr.make_grid(s)
