@@ -87,7 +87,9 @@ def quiet_library(*loggers: str):
     Traceback"). Inside this context none of that reaches the terminal; the
     reader's exception is turned into one :class:`rideid.DataError` line.
     """
-    saved = [(lg, lg.disabled) for lg in (logging.getLogger(n) for n in loggers)]
+    names = set(loggers) | {n for n in logging.root.manager.loggerDict
+                            if any(n.startswith(p + ".") for p in loggers)}
+    saved = [(lg, lg.disabled) for lg in (logging.getLogger(n) for n in sorted(names))]
     hook = sys.unraisablehook
     for lg, _ in saved:
         lg.disabled = True
