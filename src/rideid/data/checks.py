@@ -721,6 +721,8 @@ def check_dataset(ds) -> list[Finding]:
             continue
         Y = rd.matrix()
         Yhat = _nominal_response(P, geom, track, t, r.speed, rd.distance)
+        if not np.any(Yhat):
+            continue  # a flat road excites nothing: nothing to check the data against
         entries = _map_entries(ds, rid)
         wire = (wiring_fix(Y, Yhat, rd.fs, geom, _entry_factors(entries))
                 if _level(ds, rid, "wiring") != "off" else None)
