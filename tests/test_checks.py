@@ -136,6 +136,10 @@ MISTAKES = {
     "forgot sign = -1 on an upside-down channel": (
         "H_HL", dict(cmap={**channel_map(), "body_az_fr": {"name": "AccZ_Body_FR", "unit": "g"}}),
         ["body_az_fr has its sign flipped", 'body_az_fr = { name = "AccZ_Body_FR", unit = "g", sign = -1 }']),
+    "pitch gyro alone in deg/s mapped as rad/s": (
+        "T_HH", dict(cmap={**channel_map(), "pitch_rate": {"name": "Gyro_Y", "unit": "rad/s", "sign": -1}}),
+        ["pitch_rate reads 57.3x too large (deg/s mapped as rad/s?)",
+         'pitch_rate = { name = "Gyro_Y", unit = "deg/s", sign = -1 }']),
     "pitch gyro sign (nose-up positive logger)": (
         "T_HH", dict(cmap={**channel_map(), "pitch_rate": {"name": "Gyro_Y", "unit": "deg/s"}}),
         ["pitch_rate has its sign flipped", 'pitch_rate = { name = "Gyro_Y", unit = "deg/s", sign = -1 }']),

@@ -278,8 +278,16 @@ def _hypotheses(has_gyro: bool):
     body = [(p, s) for p in perms for s in signs] + [(tuple(range(4)), u) for u in units]
     if not has_gyro:
         return [(p, s, 1.0, 1.0, 1.0, False, False) for p, s in body]
-    return [(p, s, f, sp, sr, sw, False) for p, s in body for f in GYRO_FACTORS
+    hyps = [(p, s, f, sp, sr, sw, False) for p, s in body for f in GYRO_FACTORS
             for sp in (1.0, -1.0) for sr in (1.0, -1.0) for sw in (False, True)]
+    # one gyro channel in another unit than the other (body channels only signed)
+    for s in signs:
+        for fp in GYRO_FACTORS:
+            for fr in GYRO_FACTORS:
+                if fp != fr:
+                    hyps += [(tuple(range(4)), s, 1.0, fp * sp, fr * sr, False, False)
+                             for sp in (1.0, -1.0) for sr in (1.0, -1.0)]
+    return hyps
 
 
 def _rename_hypotheses(F, has_gyro: bool):
