@@ -269,3 +269,49 @@ def test_bound_findings_flag_within_one_percent():
                "m_s": {"value": 965.7, "lower": None, "upper": None, "fixed": False}}
     f = checks.bound_findings(details)
     assert len(f) == 1 and f[0].channel == "k_sf" and "upper search bound 150000" in f[0].message
+
+
+# ---------------------------------------------------------------------------
+# After the fit: bounds flagged; the recorded cost is the cost at the final parameters and starts
+
+def test_estimate_on_a_bound_is_flagged_everywhere(sim_dataset, tmp_path, capsys):
+    import json
+    import shutil
+
+    from rideid.cli import main
+    path = tmp_path / "ds"
+    shutil.copytree(sim_dataset, path)
+    doc = tomllib.loads((path / "dataset.toml").read_text())
+    doc["runs"] = [r for r in doc["runs"] if r["id"] in ("T_HH", "H_HH", "W_H")]
+    doc["bounds"] = {"k_sf": [8.0e3, 1.5e4]}  # the car's k_sf is 24445 N/m: out of reach
+    doc["known"].update(I_xx=207.3, I_yy=1565.8, a=1.156)
+    (path / "dataset.toml").write_text(tomli_w.dumps(doc))
+    out = tmp_path / "fit"
+    assert main(["identify", str(path), "--out", str(out), "--quiet", "--seed", "1", "--generations", "15",
+                 "--no-report"]) == 0
+    cap = capsys.readouterr()
+    res = json.loads((out / "result.json").read_text())
+    assert res["parameters"]["k_sf"]["value"] == pytest.approx(1.5e4, rel=1e-3)
+    assert res["parameters"]["k_sf"]["at_bound"] is True
+    assert [c["channel"] for c in res["checks"] if c["check"] == "bounds"] == ["k_sf"]
+    assert "k_sf = 15000 ended at its upper search bound 15000" in cap.err
+    assert any(ln.startswith("k_sf") and "AT A SEARCH BOUND" in ln for ln in cap.out.splitlines())
+
+
+def test_recorded_cost_is_at_the_final_parameters_and_starts(hatch, tmp_path):
+    """Estimated starts move the data: the cost in the result is recomputed on the data at the final starts."""
+    sc, raw = hatch
+
+    def edit(doc):
+        doc["known"].update({k: HATCH_TRUTH[k] for k in ("I_xx", "I_yy", "a", "m_uf", "k_tf", "k_tr")})
+    path = one_run(tmp_path, sc, raw, "T_HH", edit=edit)
+    ds = rideid.load_dataset(path)
+    start0 = ds.measured["T_HH"].start
+    res = rideid.identify(ds, seed=1, generations=10)
+    start1 = res.preprocessing["T_HH"]["start"]["value"]
+    assert abs(start1 - start0) > 1e-4 and abs(start1 - OFFSET) < 2e-4  # the hatchback moved it
+    again = rideid.load_dataset(path, starts={"T_HH": start1})
+    cf = rideid.CostFunction(again)
+    x = np.array([[res.parameters[n] for n in cf.names]])
+    assert res.cost == pytest.approx(float(cf(x)[0]), rel=1e-9)
+    assert res.cost == pytest.approx(res.polish["cost_after"], rel=1e-6)
