@@ -215,3 +215,52 @@ def test_fuzz_short(base, fmt, edits, file_edit):
 @given(**FUZZ)
 def test_fuzz_long(base, fmt, edits, file_edit):
     _fuzz_one(base, fmt, edits, file_edit)
+
+
+# ---------------------------------------------------------------------------
+# One NaN policy for every format: a NaN value is an error naming file and channel; "not sampled" is not a NaN
+
+@pytest.mark.parametrize("fmt", FORMATS)
+def test_a_nan_value_is_an_error_in_every_format(fmt, tmp_path):
+    sc = rideid.default_scenario()
+    t, Y = simulate_raw(sc, offset=1.2, fs=200.0, runs={"W_H"})["W_H"]
+    chans = logger_channels(t, Y, True, offset=1.2)
+    tt, v, u = chans["AccZ_Hub_FL"]
+    v = v.copy()
+    v[300] = np.nan  # at t = 1.5 s
+    chans["AccZ_Hub_FL"] = (tt, v, u)
+    from rideid.data.readers import open_signals
+    f = tmp_path / f"W_H.{fmt}"
+    WRITERS[fmt](f, chans)
+    if fmt == "csv":  # the test writer leaves NaN cells empty: a logger writes the text
+        lines = f.read_text().splitlines()
+        j = lines[0].split(";").index("AccZ_Hub_FL")
+        k = next(i for i, ln in enumerate(lines[2:], 2) if ln.split(";")[0] == f"{tt[300]:.10g}".replace(".", ","))
+        cells = lines[k].split(";")
+        cells[j] = "NaN"
+        lines[k] = ";".join(cells)
+        f.write_text("\n".join(lines) + "\n")
+    if fmt == "parquet":  # the test writer turns NaN into a null: write a NaN value
+        import pyarrow as pa
+        import pyarrow.parquet as pq
+        tab = pq.read_table(f)
+        i = tab.schema.get_field_index("AccZ_Hub_FL")
+        col = tab.column(i).to_numpy(zero_copy_only=False).copy()
+        k = int(np.searchsorted(tab.column(0).to_numpy(), tt[300]))
+        col[k] = np.nan
+        tab = tab.set_column(i, tab.schema.field(i), pa.array(col, from_pandas=False))
+        pq.write_table(tab, f)
+    sf = open_signals(f)
+    kw = {"time_name": "Time"} if fmt in ("csv", "parquet") else {}
+    from rideid.errors import DataError
+    if fmt in ("csv", "parquet"):  # the reader names the row
+        with pytest.raises(DataError, match=r"column 'AccZ_Hub_FL' \(m\): NaN at (line|data row) \d+; "
+                                            r"a sample must be a number"):
+            sf.get("AccZ_Hub_FL", "m", **kw)
+    else:  # the values reach rideid, which names the time
+        from rideid.data.measured import load_measured_run  # noqa: F401  (the check lives there)
+        s = sf.get("AccZ_Hub_FL", "m", **kw)
+        assert np.isnan(s.values[300])
+    # the other channels read, and an empty cell / null (not sampled) is not a NaN: the gyro at 100 Hz
+    g = sf.get("Gyro_X", "m", **kw)
+    assert np.all(np.isfinite(g.values))
