@@ -315,3 +315,36 @@ def test_recorded_cost_is_at_the_final_parameters_and_starts(hatch, tmp_path):
     x = np.array([[res.parameters[n] for n in cf.names]])
     assert res.cost == pytest.approx(float(cf(x)[0]), rel=1e-9)
     assert res.cost == pytest.approx(res.polish["cost_after"], rel=1e-6)
+
+
+@pytest.mark.slow
+def test_start_std_includes_a_noisy_speed_channel(tmp_path):
+    """A GPS speed channel with 0.1 m/s of white noise at 100 Hz: the fit's std alone is ~100x too small.
+
+    Measured (seed 1): start errors 0.9-1.6 ms; the fit's std 5-17 us; with the integrated noise 0.9-2.7 ms.
+    """
+    from logger_files import WRITERS, Wobble, write_logger_dataset
+    sc = rideid.default_scenario()
+    runs = {"T_HH", "H_HH", "W_H"}
+    wob = {r.id: Wobble(r.speed, 0.1, 2.0) for r in sc.runs if r.id in runs}
+    raw = simulate_raw(sc, offset=OFFSET, runs=runs, distance=lambda run: wob.get(run.id))
+    path = write_logger_dataset(sc, raw, tmp_path / "ds", "mf4", wobbles=wob)
+    rng = np.random.default_rng(1)
+    for rid in runs:
+        t, Y = raw[rid]
+        ch = logger_channels(t, Y, True, wob[rid], OFFSET)
+        tt, v, u = ch["Speed"]
+        ch["Speed"] = (tt, v + rng.normal(0, 0.36, v.size), u)  # 0.1 m/s in km/h
+        WRITERS["mf4"](path / "runs" / f"{rid}.mf4", ch)
+    doc = tomllib.loads((path / "dataset.toml").read_text())
+    doc["known"] = {"total_mass": 1093.3, "I_xx": 207.3, "a": 1.156}
+    (path / "dataset.toml").write_text(tomli_w.dumps(doc))
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", DataWarning)
+        res = rideid.identify(rideid.load_dataset(path), seed=1, generations=60)
+    ratios = []
+    for rid, rec in res.preprocessing.items():
+        st = rec["start"]
+        assert st["std"] > 30 * st["std_fit"]  # the speed channel dominates
+        ratios.append(abs(st["value"] - OFFSET) / st["std"])
+    assert max(ratios) < 3.0 and max(ratios) > 0.2  # honest: neither optimistic nor absurdly wide
