@@ -46,6 +46,7 @@ The checks, and why they can tell:
 
 from __future__ import annotations
 
+import functools
 import itertools
 import math
 from dataclasses import asdict, dataclass
@@ -307,6 +308,22 @@ def _rename_hypotheses(F, has_gyro: bool):
     return out
 
 
+def _transforms(hyps) -> np.ndarray:
+    """(H, 6, 6): corrected signals = T @ raw signals, for each hypothesis."""
+    T = np.zeros((len(hyps), 6, 6))
+    for h, (perm, sg, f, sp, sr, sw, _) in enumerate(hyps):
+        T[h, np.arange(4), perm] = sg
+        T[h, 4, 5 if sw else 4] = f * sp
+        T[h, 5, 4 if sw else 5] = f * sr
+    return T
+
+
+@functools.lru_cache(maxsize=2)
+def _base_transforms(has_gyro: bool):
+    hyps = tuple(_hypotheses(has_gyro))
+    return hyps, _transforms(hyps)
+
+
 def rigid_body_scores(Y: np.ndarray, fs: float, geom, F=None):
     """Rigid-body residual of every wiring hypothesis.
 
@@ -351,18 +368,16 @@ def rigid_body_scores(Y: np.ndarray, fs: float, geom, F=None):
                       [-1 / (2 * L), -1 / (2 * L), 1 / (2 * L), 1 / (2 * L), -1, 0]])
     else:
         K = np.array([[1 / tf, -1 / tf, -1 / tr, 1 / tr, 0, 0]])
-    hyps = _hypotheses(has_gyro) + ([] if F is None else _rename_hypotheses(np.asarray(F, float), has_gyro))
-    H = len(hyps)
-    # T: (H, 6, 6) maps raw signals to corrected ones: corrected = T @ raw
-    T = np.zeros((H, 6, 6))
-    for h, (perm, sg, f, sp, sr, sw, _) in enumerate(hyps):
-        for c in range(4):
-            T[h, c, perm[c]] = sg[c]
-        T[h, 4, 5 if sw else 4] = f * sp
-        T[h, 5, 4 if sw else 5] = f * sr
-    C = np.einsum("kc,hcr->hkr", K, T)  # (H, k, 6) coefficients on the raw signals
-    num = np.einsum("hkr,rs,hks->hk", C, G, C)
-    den = np.einsum("hkr,r->hk", C * C, np.diag(G))
+    base, T0 = _base_transforms(has_gyro)
+    hyps = list(base)
+    T = T0
+    if F is not None:
+        extra = _rename_hypotheses(np.asarray(F, float), has_gyro)
+        hyps += extra
+        T = np.concatenate([T0, _transforms(extra)])
+    C = np.matmul(K[None], T)  # (H, k, 6) coefficients on the raw signals
+    num = np.sum(np.matmul(C, G) * C, axis=-1)
+    den = (C * C) @ np.diag(G)
     with np.errstate(invalid="ignore", divide="ignore"):
         e = np.where(den > 0, num / np.where(den > 0, den, 1.0), 0.0)
     return hyps, e.mean(axis=1)
