@@ -725,7 +725,7 @@ def check_dataset(ds) -> list[Finding]:
     each run with its track and speed. Returns every finding; the caller
     raises on errors (:func:`enforce`).
     """
-    from .measured import nominal_car
+    from ..model.params import nominal_car
 
     man, geom = ds.manifest, ds.geometry
     P = nominal_car(geom)

@@ -121,6 +121,25 @@ def _import(fmt: str, path: Path):
                         f"'{module}': pip install 'rideid[{extra}]'") from None
 
 
+_LABEL = {"parquet": "Parquet", "mdf": "MDF", "tdms": "TDMS"}
+
+
+def _read_with(fmt: str, path: Path, read):
+    """``read(library)`` with the format's optional library; a damaged file is a DataError naming it."""
+    lib = _import(fmt, path)
+    msg = None
+    with quiet_library(_LOGGERS[fmt]):
+        try:
+            return read(lib)
+        except Exception as e:  # pyarrow, asammdf and npTDMS raise their own errors for damaged files
+            msg = str(e) or type(e).__name__
+    raise DataError(f"{path}: cannot read {_LABEL[fmt]} file: {msg}") from None
+
+
+#: the loggers of each format's library (silenced while rideid reports the error itself)
+_LOGGERS = {"mdf": "asammdf", "tdms": "nptdms", "parquet": "pyarrow"}
+
+
 class SignalFile:
     """A run file opened for reading channels by name."""
 
@@ -310,15 +329,7 @@ class ParquetFile(_ColumnFile):
 
     def __init__(self, path):
         super().__init__(path)
-        pq = _import("parquet", path)
-        msg = None
-        with quiet_library("pyarrow"):
-            try:
-                table = pq.read_table(path)
-            except Exception as e:  # pyarrow raises its own errors for damaged files
-                msg = str(e) or type(e).__name__
-        if msg is not None:
-            raise DataError(f"{path}: cannot read Parquet file: {msg}") from None
+        table = _read_with("parquet", path, lambda pq: pq.read_table(path))
         self.columns, self.units, self.nan_rows = {}, {}, {}
         for fld, col in zip(table.schema, table.columns):
             try:
@@ -343,15 +354,7 @@ class MdfFile(SignalFile):
 
     def __init__(self, path):
         super().__init__(path)
-        asammdf = _import("mdf", path)
-        msg = None
-        with quiet_library("asammdf"):
-            try:
-                self.mdf = asammdf.MDF(str(path))
-            except Exception as e:  # asammdf raises MdfException and others for damaged files
-                msg = f"{type(e).__name__}: {e}" if not str(e) else str(e)
-        if msg is not None:
-            raise DataError(f"{path}: cannot read MDF file: {msg}") from None
+        self.mdf = _read_with("mdf", path, lambda asammdf: asammdf.MDF(str(path)))
         masters = set()
         for gi, g in enumerate(self.mdf.groups):
             try:
@@ -391,15 +394,7 @@ class TdmsSignals(SignalFile):
 
     def __init__(self, path):
         super().__init__(path)
-        nptdms = _import("tdms", path)
-        msg = None
-        with quiet_library("nptdms"):
-            try:
-                self.tdms = nptdms.TdmsFile.read(str(path))
-            except Exception as e:  # npTDMS raises ValueError and others for damaged files
-                msg = f"{type(e).__name__}: {e}" if not str(e) else str(e)
-        if msg is not None:
-            raise DataError(f"{path}: cannot read TDMS file: {msg}") from None
+        self.tdms = _read_with("tdms", path, lambda nptdms: nptdms.TdmsFile.read(str(path)))
         self._by_full, self._by_name = {}, {}
         for grp in self.tdms.groups():
             for ch in grp.channels():
