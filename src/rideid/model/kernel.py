@@ -18,8 +18,8 @@ The same exact discretisation as :func:`rideid.simulate.simulate_reference`
 Multiply-adds per sample and candidate, with ``N`` moment terms:
 state update ``8*8 + 6*6 = 100``, inputs ``(8*2 + 6*2) N = 28 N``,
 accelerations ``4*8 + 3*6 + (4 + 3)*2*2 = 78`` (with the rate feedthrough),
-channels 12, errors 20: ``210 + 28 N`` (``N = 8..10`` for realistic cars at 200 Hz: 420-476), against
-about 550 for the plain 14-state update with 10 outputs, which moreover
+channels 12, errors 20: ``210 + 28 N`` (``N = 8..10`` for realistic cars at
+200 Hz: 434-490), against about 550 for the plain 14-state update with 10 outputs, which moreover
 assumes the input is linear between samples.
 """
 
