@@ -209,6 +209,8 @@ def _summary_table(res) -> str:
     lines = [f"{'parameter':<10} {'estimate':>14} {'± std':>11} {'± robust':>11}  {'unit':<8} note"]
     for n, d in res.details.items():
         note = "known" if d["fixed"] else ("derived" if d["derived"] else "")
+        if d.get("at_bound"):
+            note = "AT A SEARCH BOUND: set by the bound, not the data"
         std = "" if d.get("std") in (None, 0.0) else f"{d['std']:.3g}"
         rob = "" if d.get("std_robust") in (None, 0.0) else f"{d['std_robust']:.3g}"
         lines.append(f"{n:<10} {d['value']:>14.6g} {std:>11} {rob:>11}  {d['unit']:<8} {note}")
