@@ -9,6 +9,7 @@ Public API (SPEC §5)::
     cost = rideid.CostFunction(ds)            # cost(P): (n, d) -> (n,)
     cost.names                                # free parameter names
     rideid.jade(fun, bounds, population=..., generations=..., seed=...)
+    rideid.study("study.toml", "out")         # many identifications on Dask (SPEC §7)
 """
 
 from importlib.metadata import PackageNotFoundError, version
@@ -22,6 +23,7 @@ from .jade import JadeSolver, jade
 from .model import CHANNELS, modal_summary
 from .params import DEFAULT_CAR, DEFAULT_GEOMETRY, NAMES, UNITS, Geometry
 from .scenario import default_scenario, default_scenario_path, simulate_manifest, write_dataset
+from .studies import StudyResult, load_study, study
 from .tracks import Track
 
 try:
@@ -35,4 +37,5 @@ __all__ = [
     "CostFunction", "ParameterSpace", "Dataset", "Geometry", "IdentificationResult", "JadeSolver", "Manifest",
     "Track", "default_scenario", "default_scenario_path", "identify", "jade", "load_dataset", "load_scenario",
     "load_truth", "modal_summary", "simulate_manifest", "write_dataset", "__version__",
+    "StudyResult", "load_study", "study",
 ]
