@@ -97,7 +97,8 @@ def _parser() -> argparse.ArgumentParser:
     sub = p.add_subparsers(dest="command", metavar="COMMAND")
 
     def add(name, help_):
-        return sub.add_parser(name, help=help_, description=help_, epilog=EXAMPLES[name],
+        # argparse %-formats subcommand help ("1 % noise" broke `rideid --help`)
+        return sub.add_parser(name, help=help_.replace("%", "%%"), description=help_, epilog=EXAMPLES[name],
                               formatter_class=argparse.RawDescriptionHelpFormatter)
 
     s = add("simulate", "simulate a scenario (truth + tracks + runs) into a dataset folder")

@@ -4,9 +4,11 @@ Data flow
 ---------
 * The client (this process) validates the study file, hashes every task's
   data and writes nothing until that succeeded.
-* Scenario studies: the parsed scenario is scattered to every worker once;
-  each task simulates its noisy dataset in the worker (no files needed on
-  the workers, except profile tracks' CSVs). Dataset studies: tasks carry the
+* Scenario studies: the parsed scenario (a few kB) is sent inside every
+  task, and each task simulates its noisy dataset in the worker (no files
+  needed on the workers, except profile tracks' CSVs). It is not scattered:
+  scattered data die with the worker that holds them and Dask cannot
+  recompute them, while a task's own arguments survive any worker's death. Dataset studies: tasks carry the
   dataset's absolute path and the worker reads it, so on a remote cluster
   the datasets must be on a filesystem every worker sees at the same path.
 * Workers return each task's record to the client, which writes it to
@@ -183,14 +185,14 @@ def _compute(spec, todo, tasks_dir, records, state, scheduler, n_workers, progre
         except (OSError, TimeoutError) as e:
             raise ArgumentError(f"--scheduler {scheduler}: cannot connect to a Dask scheduler there ({e})") from None
     try:
-        sc_future = None
+        sc = None
         if spec.scenario is not None:
+            # a few kB: it travels inside every task. Scattered data would be lost with the worker holding
+            # it (Dask cannot recompute it), while a task's own arguments survive any worker's death.
             sc = rideid.default_scenario() if spec.scenario == BUILTIN else rideid.load_scenario(spec.scenario)
-            sc_future = client.scatter(sc, broadcast=True, hash=False)
         futures = {}
         for t in todo:
-            f = client.submit(run_task, t.options, t.dataset_path, sc_future, key=f"rideid-study-{t.key}",
-                              retries=0)
+            f = client.submit(run_task, t.options, t.dataset_path, sc, key=f"rideid-study-{t.key}", retries=0)
             futures[f] = t
         first = time.perf_counter()
         computed = 0

@@ -353,7 +353,22 @@ def parse_study(doc: dict, path: Path | None = None, base: Path | None = None) -
 
 
 def load_study(path) -> Study:
-    """Read and validate a study TOML file (see :func:`parse_study`)."""
+    """Read and validate a study TOML file (format: ``docs/studies.md``).
+
+    Parameters
+    ----------
+    path : str or Path
+        The study file; relative paths in it are taken from its folder.
+
+    Returns
+    -------
+    Study
+
+    Raises
+    ------
+    rideid.DataError
+        Naming the file and the key at fault.
+    """
     path = Path(path)
     if not path.is_file():
         raise DataError(f"{path}: study file not found")

@@ -84,29 +84,47 @@ def _param_names(rows):
     return names
 
 
-def crlb_for(spec, row) -> tuple[dict | None, str]:
-    """CRLB standard deviations of a scenario group, via :func:`rideid.plan` where available.
+_PLANS: dict = {}
 
-    Returns ``({name: std}, note)`` or ``(None, why not)``.
+
+def crlb_for(spec, row) -> tuple[dict | None, str]:
+    """CRLB and identify's expected spread for a scenario group, from :func:`rideid.plan` where available.
+
+    Parameters
+    ----------
+    spec : Study
+    row : dict
+        A row of the group (its ``noise`` and ``runs``).
+
+    Returns
+    -------
+    ({name: (crlb std, expected identify std)}, note), or (None, why not).
     """
     import rideid
 
     if spec.scenario is None:
-        return None, "CRLB: only for scenario studies (the truth and noise level must be known)"
+        return None, "CRLB: only for scenario studies (the truth and the noise level must be known)"
+    if not row.get("noise"):
+        return None, "CRLB: not for noise-free data"
     plan = getattr(rideid, "plan", None)
     if plan is None:
         return None, "CRLB not available (this rideid has no rideid.plan)"
-    try:
-        sc = rideid.default_scenario() if spec.scenario == BUILTIN else rideid.load_scenario(spec.scenario)
-        if row.get("runs"):
-            keep = set(row["runs"].split(","))
-            sc = dataclasses.replace(sc, runs=[r for r in sc.runs if r.id in keep])
-        res = plan(sc, noise=row["noise"])
-        d = res.to_dict() if hasattr(res, "to_dict") else res
-        crlb = d["all_runs"]["crlb"]
-        return {n: float(v["std"]) for n, v in crlb.items()}, "CRLB from rideid.plan (all runs of the group)"
-    except Exception as e:  # an API this module was not written against: say so, do not guess
-        return None, f"CRLB not available (rideid.plan failed: {type(e).__name__}: {e})"
+    key = (spec.scenario, row["noise"], row.get("runs"))
+    if key not in _PLANS:
+        try:
+            sc = rideid.default_scenario() if spec.scenario == BUILTIN else rideid.load_scenario(spec.scenario)
+            if row.get("runs"):
+                keep = set(row["runs"].split(","))
+                sc = dataclasses.replace(sc, runs=[r for r in sc.runs if r.id in keep])
+            res = plan(sc, noise=row["noise"])
+            d = (res.to_dict() if hasattr(res, "to_dict") else res)["all_runs"]
+            out = {n: (v.get("std"), d.get("identify_std", {}).get(n, {}).get("std")) for n, v in d["crlb"].items()}
+            for n, v in d.get("derived", {}).items():
+                out[n] = (v.get("std"), v.get("std_identify"))
+            _PLANS[key] = (out, "CRLB and identify's expected spread from rideid.plan (the group's runs and noise)")
+        except Exception as e:  # an API this module was not written against: say so, do not guess
+            _PLANS[key] = (None, f"CRLB not available (rideid.plan failed: {type(e).__name__}: {e})")
+    return _PLANS[key]
 
 
 def group_stats(spec, rows):
@@ -141,12 +159,13 @@ def group_stats(spec, rows):
                     ok = [abs(r[n] - r[f"{n}_truth"]) <= 2 * r[f"{n}_{k}"] for r in rs
                           if r.get(f"{n}_{k}") is not None]
                     s[f"coverage_2{k}"] = float(np.mean(ok)) if ok else None
-            s["crlb_std"] = None if crlb is None else crlb.get(n)
+            s["crlb_std"], s["plan_identify_std"] = (crlb or {}).get(n, (None, None))
             out.append(s)
     return out, notes
 
 
-STAT_COLUMNS = ("group", "parameter", "n", "mean", "spread", "mean_std", "mean_std_robust", "crlb_std", "truth",
+STAT_COLUMNS = ("group", "parameter", "n", "mean", "spread", "mean_std", "mean_std_robust", "crlb_std",
+                "plan_identify_std", "truth",
                 "bias_pct", "rms_error_pct", "coverage_2std", "coverage_2std_robust")
 
 
@@ -187,6 +206,22 @@ def _tables(spec, rows, stats, notes):
     if failed:
         tables.append(("Failed tasks", ["task", "options", "error"],
                        [[r["task"], _task_label(r, _varying(rows, OPTION_COLUMNS)), r["error"]] for r in failed]))
+    gcols = _varying(rows, [c for c in OPTION_COLUMNS if c not in SEED_COLUMNS])
+    groups: dict[str, list] = {}
+    for r in rows:
+        groups.setdefault(_label(r, gcols), []).append(r)
+    body = []
+    for label, rs in groups.items():
+        ok = [r for r in rs if r["status"] == "done"]
+
+        def med(k, scale=1.0):
+            v = [r[k] for r in ok if r.get(k) is not None]
+            return _fmt(float(np.median(v)) * scale) if v else ""
+        body.append([label, len(rs), len(ok), med("evaluations"), med("generations_run"), med("cost"),
+                     med("max_abs_error", 100.0), med("identify_wall_s")])
+    tables.append(("Per group (medians over the done tasks)",
+                   ["group", "tasks", "done", "evaluations", "generations", "cost", "largest error %", "wall s"],
+                   body))
     if stats:
         cols = [c for c in STAT_COLUMNS if any(s.get(c) is not None for s in stats)]
         tables.append(("Groups: spread over seeds, reported standard errors, errors vs truth", cols,
@@ -210,6 +245,7 @@ def _figures(rows, stats, out: Path) -> list[tuple[str, str]]:
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
+    from matplotlib.ticker import MaxNLocator
 
     figs = []
     fdir = out / "figures"
@@ -254,7 +290,8 @@ def _figures(rows, stats, out: Path) -> list[tuple[str, str]]:
             ss = [s for s in multi if s["group"] == g]
             x = np.arange(len(ss))
             series = [("spread over seeds", "spread"), ("mean std", "mean_std"),
-                      ("mean std_robust", "mean_std_robust"), ("CRLB", "crlb_std")]
+                      ("mean std_robust", "mean_std_robust"), ("CRLB", "crlb_std"),
+                      ("plan: identify's expected spread", "plan_identify_std")]
             series = [(lab, k) for lab, k in series if any(s.get(k) for s in ss)]
             wdt = 0.8 / max(len(series), 1)
             for i, (lab, k) in enumerate(series):
@@ -281,6 +318,7 @@ def _figures(rows, stats, out: Path) -> list[tuple[str, str]]:
             ax.plot(tr, y, "k|", ms=8, label="truth")
         ax.set_title(n, fontsize=9)
         ax.tick_params(labelsize=7)
+        ax.xaxis.set_major_locator(MaxNLocator(4))
         ax.set_yticks(y, [str(r["task"]) for r in done] if len(done) <= 40 else [])
         ax.invert_yaxis()
     for ax in list(axs.flat)[len(names):]:
@@ -307,7 +345,9 @@ def write_outputs(spec, ordered, out: Path) -> Path:
         md += [f"## {title}", "", _md_table(header, body), ""]
     md += ["Spread: sample standard deviation of the estimates over the group's seeds. mean_std: the mean "
            "standard error identify reported (white residuals assumed: optimistic when residuals are "
-           "correlated). coverage_2std: share of tasks whose truth lies within ± 2 std.", ""]
+           "correlated). coverage_2std: share of tasks whose truth lies within ± 2 std. crlb_std: the "
+           "Cramér-Rao lower bound of the group's runs at its noise level; plan_identify_std: the spread rideid "
+           "plan expects of identify's estimator (both from rideid.plan, where available).", ""]
     write_atomic(out / "summary.md", "\n".join(md))
     figs = _figures(rows, stats, out)
     e = html.escape

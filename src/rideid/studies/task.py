@@ -68,7 +68,7 @@ def run_task(options: dict, dataset_path: str | None = None, scenario=None) -> d
         Absolute dataset folder (dataset tasks; read by the worker, so it
         must be on a filesystem the workers share).
     scenario : rideid.Manifest, optional
-        The parsed scenario (scenario tasks; scattered to the workers once).
+        The parsed scenario (scenario tasks; sent with the task).
 
     Returns
     -------
