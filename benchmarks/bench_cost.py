@@ -27,12 +27,12 @@ import scipy.integrate
 import scipy.signal
 
 import rideid
-from rideid.contact import envelope
-from rideid.cost import CostFunction
-from rideid.engine import BatchSimulator, single_threaded_blas
-from rideid.model import state_space, static_state
-from rideid.scenario import run_times, simulate_manifest, write_dataset
-from rideid.simulate import corner_positions, corner_ys, prepare_run, simulate_lsim
+from rideid.model.contact import envelope
+from rideid.estimate.cost import CostFunction
+from rideid.model.batch import BatchSimulator, single_threaded_blas
+from rideid.model.equations import state_space, static_state
+from rideid.data.scenario import run_times, simulate_manifest, write_dataset
+from rideid.model.simulate import corner_positions, corner_ys, prepare_run, simulate_lsim
 
 
 def timeit(f, repeat=3, number=1):
@@ -115,7 +115,7 @@ def main(out=sys.stdout):
     say(f"rideid kernel: {t_pop * 1e3:.1f} ms per population of 64 -> {per_cand * 1e3:.3f} ms per candidate, "
         f"{64 * n_samples / t_pop / 1e6:.1f} M candidate-samples/s")
 
-    # flops: (196 + 28 N) multiply-adds per candidate-sample (see rideid.kernel)
+    # flops: (196 + 28 N) multiply-adds per candidate-sample (see rideid.model.kernel)
     N = 10
     flops = 2 * (196 + 28 * N) * 64 * n_samples / t_pop
     peak, mhz, width = cpu_peak_gflops()

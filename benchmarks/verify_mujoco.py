@@ -1,7 +1,7 @@
 """Verification on an independent multibody car (MuJoCo), as the paper used ADAMS.
 
 The built-in car and its ten runs are simulated by the MuJoCo car of
-:mod:`rideid.hifi` — first in the reduced configuration (the 7-DOF physics in
+:mod:`rideid.verify.hifi` — first in the reduced configuration (the 7-DOF physics in
 another engine), then with each property a real car has and the 7-DOF model
 lacks switched on alone, then with all of them together (a realistic car) —
 and identified by rideid as a user would (noise-free, seed 1, defaults). The
@@ -28,9 +28,9 @@ from pathlib import Path
 import numpy as np
 
 import rideid
-from rideid.hifi import HifiProperties, simulate_mujoco
-from rideid.params import NAMES, as_vector
-from rideid.scenario import run_times, write_dataset
+from rideid.verify.hifi import HifiProperties, simulate_mujoco
+from rideid.model.params import NAMES, as_vector
+from rideid.data.scenario import run_times, write_dataset
 
 #: the realistic car: a saloon's CG about 0.55 m above the ground (0.25 m above the wheel centres), a 16-17"
 #: wheel and tire (spin inertia 1.0 kg m^2), dampers with 2:1 rebound:compression and a digressive knee at

@@ -11,11 +11,11 @@ from __future__ import annotations
 
 import numpy as np
 
-from rideid.engine import BatchSimulator
-from rideid.files import Manifest, RunSpec, write_toml
-from rideid.model import CHANNELS
-from rideid.params import as_vector
-from rideid.simulate import prepare_run
+from rideid.model.batch import BatchSimulator
+from rideid.data.schema import Manifest, RunSpec, write_toml
+from rideid.model.equations import CHANNELS
+from rideid.model.params import as_vector
+from rideid.model.simulate import prepare_run
 
 G0 = 9.80665
 #: file channel names, units and signs of a made-up logger

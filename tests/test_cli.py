@@ -11,9 +11,9 @@ import pytest
 import tomli_w
 
 from rideid.cli import main
-from rideid.files import read_run_csv
-from rideid.params import DEFAULT_CAR, DEFAULT_GEOMETRY
-from rideid.simulate import simulate_lsim
+from rideid.data.schema import read_run_csv
+from rideid.model.params import DEFAULT_CAR, DEFAULT_GEOMETRY
+from rideid.model.simulate import simulate_lsim
 
 SCENARIO_ALL_KINDS = """
 name = "all-kinds"
@@ -133,7 +133,7 @@ def test_simulate_all_kinds_matches_independent_fine_step(scenario_file, tmp_pat
     shutil.copytree(out, moved)
     import rideid
     assert len(rideid.load_dataset(moved).runs) == 5
-    from rideid.files import load_scenario
+    from rideid.data.schema import load_scenario
     sc = load_scenario(scenario_file)
     P = np.array([DEFAULT_CAR[n] for n in DEFAULT_CAR])
     for run in sc.runs:

@@ -3,9 +3,9 @@
 import numpy as np
 import pytest
 
-from rideid.contact import ContactODEError, contact_ode, envelope, envelope_grid, wheel_input
+from rideid.model.contact import ContactODEError, contact_ode, envelope, envelope_grid, wheel_input
 from rideid.errors import DataError
-from rideid.tracks import Track
+from rideid.model.tracks import Track
 
 R = 0.3
 

@@ -1,14 +1,14 @@
-"""The MuJoCo car (rideid.hifi): an independent multibody model of the same physics."""
+"""The MuJoCo car (rideid.verify.hifi): an independent multibody model of the same physics."""
 
 import numpy as np
 import pytest
 
 pytest.importorskip("mujoco")
 
-from rideid.hifi import HifiProperties, MujocoCar, simulate_mujoco  # noqa: E402
-from rideid.model import CHANNEL_KIND, CHANNELS, static_corner_loads  # noqa: E402
-from rideid.params import CORNERS, as_vector  # noqa: E402
-from rideid.simulate import prepare_run, simulate_reference  # noqa: E402
+from rideid.verify.hifi import HifiProperties, MujocoCar, simulate_mujoco  # noqa: E402
+from rideid.model.equations import CHANNEL_KIND, CHANNELS, static_corner_loads  # noqa: E402
+from rideid.model.params import CORNERS, as_vector  # noqa: E402
+from rideid.model.simulate import prepare_run, simulate_reference  # noqa: E402
 
 
 def test_static_tire_deflection_is_load_over_stiffness(default_scenario):
@@ -59,7 +59,7 @@ def test_simulate_engine_mujoco_from_the_command_line(raw, tmp_path, default_sce
 
     import rideid
     from rideid.cli import main
-    doc = rideid.files.read_toml(rideid.default_scenario_path())
+    doc = rideid.data.schema.read_toml(rideid.default_scenario_path())
     doc["runs"] = [r for r in doc["runs"] if r["id"] in ("T_HL", "H_LL")]
     (tmp_path / "sc.toml").write_text(tomli_w.dumps(doc))
     assert main(["simulate", str(tmp_path / "sc.toml"), "--out", str(tmp_path / "ds"), "--engine", "mujoco",
@@ -125,8 +125,8 @@ def _closed_form_state_space(P, geom, cg_height=0.0, wheel_inertia=0.0, tire_dam
     I_yy, +2 I_w on I_xx. Tire damping: +c_t on each wheel's diagonal.
     Returns the state matrices A (14x14) and B (14x4, per unit road input).
     """
-    from rideid.model import mck
-    from rideid.params import GRAVITY, NAMES
+    from rideid.model.equations import mck
+    from rideid.model.params import GRAVITY, NAMES
     p = dict(zip(NAMES, P))
     M, C, K, Bf = (x[0].copy() for x in mck(P[None], geom))
     unsprung = 2 * (p["m_uf"] + p["m_ur"])
@@ -147,7 +147,7 @@ def _closed_form_eigenvalues(P, geom, **hifi):
 
 def test_linearised_frequencies_equal_the_seven_dof_ones(default_scenario):
     """Reduced configuration (CG at wheel-centre height, no wheel inertia): the same seven modes."""
-    from rideid.model import state_space
+    from rideid.model.equations import state_space
     P, geom = as_vector(default_scenario.truth), default_scenario.geometry
     mj = _linearised_eigenvalues(P, geom, None)
     seven = _sorted_modes(np.linalg.eigvals(state_space(P[None], geom)[0][0]))
@@ -176,8 +176,8 @@ def _modified_linear_response(P, geom, track, speed, t, cg_height):
     """SPEC channels of the closed-form linear car with a raised CG (scipy.signal.lsim on a 1 ms grid)."""
     from scipy.signal import lsim
 
-    from rideid.params import NAMES
-    from rideid.simulate import corner_inputs
+    from rideid.model.params import NAMES
+    from rideid.model.simulate import corner_inputs
     p = dict(zip(NAMES, P))
     A, B = _closed_form_state_space(P, geom, cg_height=cg_height)
     x, y = geom.corner_xy(p["a"])
@@ -222,7 +222,7 @@ def test_raised_cg_response(rid, default_scenario):
 # dampers, bump stops, lift-off
 
 def test_damper_curves():
-    from rideid.hifi import damper_force
+    from rideid.verify.hifi import damper_force
     v = np.array([-0.5, -0.1, 0.1, 0.5])
     # rebound twice compression; the two slopes average to c_s
     f = damper_force(v, 1500.0, rebound_ratio=2.0)
@@ -271,8 +271,8 @@ def test_lift_off_exactly_when_the_seven_dof_model_warns(default_scenario):
     import warnings
 
     from rideid.errors import ModelValidityWarning
-    from rideid.scenario import lift_offs
-    from rideid.tracks import Track
+    from rideid.data.scenario import lift_offs
+    from rideid.model.tracks import Track
     sc = default_scenario
     P, geom, run = as_vector(sc.truth), sc.geometry, sc.run("W_H")
     t = np.arange(int(run.duration * 200) + 1) / 200
@@ -284,7 +284,7 @@ def test_lift_off_exactly_when_the_seven_dof_model_warns(default_scenario):
     def seven_dof_force(scale):
         ri = prepare_run(track(scale), geom, run.speed, t)
         _, states = simulate_reference(P[None], geom, ri, return_states=True)
-        from rideid.simulate import wheel_displacements
+        from rideid.model.simulate import wheel_displacements
         kt = np.array([P[10], P[10], P[11], P[11]])
         return static_corner_loads(P[None], geom)[0] + kt * (ri.u - wheel_displacements(states[0]))
 
@@ -316,7 +316,7 @@ def test_lift_off_exactly_when_the_seven_dof_model_warns(default_scenario):
         else:
             assert mj.tire_load_min.min() > 0
     # and `simulate_manifest` with the MuJoCo engine warns from MuJoCo's own contact
-    from rideid.scenario import simulate_manifest
+    from rideid.data.scenario import simulate_manifest
     sc2 = dataclasses.replace(sc, runs=[run], tracks={base.id: track(critical * 1.02)})
     with warnings.catch_warnings(record=True) as rec:
         warnings.simplefilter("always")
@@ -329,7 +329,7 @@ def test_lift_off_exactly_when_the_seven_dof_model_warns(default_scenario):
 # the [hifi] table
 
 def test_hifi_table_parses_and_round_trips():
-    from rideid.hifi import parse_hifi
+    from rideid.verify.hifi import parse_hifi
     h = parse_hifi({"cg_height": 0.25, "wheel_inertia": [1.1, 0.9], "damper_rebound_ratio": 2,
                     "bumpstop_clearance": 0.05, "bumpstop_rate": 5e4}, "sc.toml: [hifi]")
     assert h.wheel_inertia == (1.1, 0.9) and h.damper_rebound_ratio == (2.0, 2.0)
@@ -351,7 +351,7 @@ def test_hifi_table_errors_name_the_key(tab, msg, tmp_path, capsys):
 
     import rideid
     from rideid.cli import main
-    doc = rideid.files.read_toml(rideid.default_scenario_path())
+    doc = rideid.data.schema.read_toml(rideid.default_scenario_path())
     doc["hifi"] = tab
     doc["runs"] = doc["runs"][:1]
     (tmp_path / "sc.toml").write_text(tomli_w.dumps(doc))

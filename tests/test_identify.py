@@ -6,10 +6,10 @@ import numpy as np
 import pytest
 
 import rideid
-from rideid.cost import ParameterSpace, channel_weights
-from rideid.params import DEFAULT_CAR, NAMES
-from rideid.scenario import simulate_manifest, write_dataset
-from rideid.sensitivity import adaptive_weights, compute_maps, normalised_spread
+from rideid.estimate.cost import ParameterSpace, channel_weights
+from rideid.model.params import DEFAULT_CAR, NAMES
+from rideid.data.scenario import simulate_manifest, write_dataset
+from rideid.estimate.sensitivity import adaptive_weights, compute_maps, normalised_spread
 
 
 @pytest.fixture(scope="module")
@@ -182,7 +182,7 @@ def test_a_light_van_is_identified_too(tmp_path, default_scenario):
                                             ({"total_mass": 1093.3, "m_s": 965.7}, "m_ur"),
                                             ({"total_mass": 1093.3, "m_s": 965.7, "m_ur": 31.9}, "m_uf")])
 def test_derived_mass_and_its_gradient(known, derived):
-    from rideid.params import DEFAULT_GEOMETRY, INDEX
+    from rideid.model.params import DEFAULT_GEOMETRY, INDEX
     sp = ParameterSpace(known, DEFAULT_GEOMETRY)
     assert sp.derived == derived
     x = np.array([DEFAULT_CAR[n] for n in sp.names]) * 1.01

@@ -1,4 +1,4 @@
-"""Measured data (rideid.measured, rideid.readers): logger files written by the real libraries."""
+"""Measured data (rideid.data.measured, rideid.data.readers): logger files written by the real libraries."""
 
 import json
 import math
@@ -13,8 +13,8 @@ import tomli_w
 
 import rideid
 from rideid.errors import DataError, DataWarning
-from rideid.model import CHANNELS
-from rideid.params import NAMES
+from rideid.model.equations import CHANNELS
+from rideid.model.params import NAMES
 
 sys.path.insert(0, str(Path(__file__).parent))
 from logger_files import (G0, Wobble, channel_map, logger_channels, simulate_raw,  # noqa: E402
@@ -148,7 +148,7 @@ def test_report_shows_the_data_section(tmp_path, default_scenario, raw):
     from rideid.cli import main
     path = write_logger_dataset(default_scenario, {k: raw[k] for k in ("T_HH", "H_HH", "W_H")},
                                 tmp_path / "ds", "mf4")
-    doc = rideid.files.read_toml(path / "dataset.toml")
+    doc = rideid.data.schema.read_toml(path / "dataset.toml")
     doc["known"] = {"total_mass": 1093.3, "I_xx": 207.3, "a": 1.156}  # three runs: help the search a little
     (path / "dataset.toml").write_text(tomli_w.dumps(doc))
     assert main(["identify", str(path), "--out", str(tmp_path / "out"), "--quiet", "--seed", "2",
@@ -165,7 +165,7 @@ def test_report_shows_the_data_section(tmp_path, default_scenario, raw):
 # Units, readers, options
 
 def test_unit_factors():
-    from rideid.measured import unit_factor
+    from rideid.data.measured import unit_factor
     assert unit_factor("g", "body_az_fl", "") == G0
     assert unit_factor("deg/s", "roll_rate", "") == pytest.approx(math.pi / 180)
     assert unit_factor("km/h", "speed", "") == pytest.approx(1 / 3.6)
@@ -176,7 +176,7 @@ def test_unit_factors():
 
 
 def test_csv_detection_and_explicit_options(tmp_path):
-    from rideid.readers import CsvOptions, open_signals
+    from rideid.data.readers import CsvOptions, open_signals
     f = tmp_path / "a.csv"
     f.write_text("time\tbody_az_fl\n0\t1.5\n0.01\t2.5\n0.02\t3.5\n")
     s = open_signals(f).get("body_az_fl", "x")
@@ -196,7 +196,7 @@ def test_missing_extra_names_the_package(tmp_path, monkeypatch):
             raise ImportError(name)
         return real(name, *a, **k)
     monkeypatch.setattr(builtins, "__import__", fake)
-    from rideid.readers import open_signals
+    from rideid.data.readers import open_signals
     f = tmp_path / "x.mf4"
     f.write_bytes(b"MDF     ")
     with pytest.raises(DataError, match=r"x.mf4: reading ASAM MDF files needs the package 'asammdf': "
@@ -327,7 +327,7 @@ def test_negative_speed_channel_is_refused(tmp_path, default_scenario, raw):
         chans["Speed"] = (t, np.where(t < 1, -1.0, 18.0), "km/h")
     path = _one_run(tmp_path, default_scenario, raw, mutate=add_speed,
                     cmap={**channel_map(), "speed": {"name": "Speed", "unit": "km/h"}})
-    doc = rideid.files.read_toml(path / "dataset.toml")
+    doc = rideid.data.schema.read_toml(path / "dataset.toml")
     del doc["runs"][0]["speed"]
     (path / "dataset.toml").write_text(tomli_w.dumps(doc))
     with pytest.raises(DataError, match=r"speed channel 'Speed' goes negative \(-0.278 m/s\)"):

@@ -4,8 +4,8 @@ import numpy as np
 import pytest
 import scipy.linalg
 
-from rideid.model import blocks, decomposed_mck, mck, modal_summary, state_space, static_corner_loads
-from rideid.params import DEFAULT_CAR, DEFAULT_GEOMETRY, INDEX, NAMES, Geometry, as_vector
+from rideid.model.equations import blocks, decomposed_mck, mck, modal_summary, state_space, static_corner_loads
+from rideid.model.params import DEFAULT_CAR, DEFAULT_GEOMETRY, INDEX, NAMES, Geometry, as_vector
 
 G = DEFAULT_GEOMETRY
 P0 = as_vector(DEFAULT_CAR)

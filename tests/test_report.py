@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from rideid.cli import main
-from rideid.report import SECTIONS
+from rideid.report.html import SECTIONS
 
 
 @pytest.fixture(scope="module")

@@ -4,11 +4,11 @@ physical checks, and the compiled kernel vs the NumPy reference."""
 import numpy as np
 import pytest
 
-from rideid.engine import BatchSimulator
-from rideid.model import CHANNELS
-from rideid.params import DEFAULT_CAR, DEFAULT_GEOMETRY, INDEX, as_vector
-from rideid.simulate import prepare_run, simulate_lsim, simulate_reference
-from rideid.tracks import Track
+from rideid.model.batch import BatchSimulator
+from rideid.model.equations import CHANNELS
+from rideid.model.params import DEFAULT_CAR, DEFAULT_GEOMETRY, INDEX, as_vector
+from rideid.model.simulate import prepare_run, simulate_lsim, simulate_reference
+from rideid.model.tracks import Track
 
 G = DEFAULT_GEOMETRY
 P0 = as_vector(DEFAULT_CAR)
@@ -107,7 +107,7 @@ def test_rear_input_is_front_input_delayed():
     run = prepare_run(tr, G, V, t)
     d = int(round(G.wheelbase / V * fs))
     # wheelbase/V = 0.2579 s is not a whole number of samples: compare on the path
-    from rideid.simulate import corner_inputs
+    from rideid.model.simulate import corner_inputs
     rear_shifted = corner_inputs(tr, G, V * t + G.wheelbase)[:, 2]
     np.testing.assert_allclose(run.u[:, 0], rear_shifted, atol=1e-12)  # equal tracks on a washboard
     assert np.abs(run.u[d:, 2] - run.u[:-d, 0]).max() < 5e-4

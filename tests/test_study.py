@@ -126,7 +126,8 @@ def test_model_option_needs_an_identify_that_has_it(tmp_path):
 def test_cli_bad_study_file_exits_2_and_writes_nothing(tmp_path):
     f = tmp_path / "s.toml"
     f.write_text("[data]\nscenario = 'builtin'\nnoise = 0.01\n[identify]\ngenerations = 0\n")
-    p = subprocess.run(RIDEID + ["study", str(f), "--out", str(tmp_path / "out")], capture_output=True, text=True)
+    p = subprocess.run(RIDEID + ["study", str(f), "--out", str(tmp_path / "out"), "--quiet"], capture_output=True,
+                       text=True)
     assert p.returncode == 2
     assert p.stderr.strip().splitlines() == [f"rideid: error: {f} [identify] generations: must be at least 1, got 0"]
     assert not (tmp_path / "out").exists()
@@ -137,6 +138,15 @@ def test_cli_help_lists_study(capsys):
     with pytest.raises(SystemExit) as e:
         main(["--help"])
     assert e.value.code == 0 and "study" in capsys.readouterr().out
+
+
+def test_unreachable_scheduler_is_bad_input_and_writes_nothing(folder, tmp_path, monkeypatch):
+    from rideid.studies import engine
+    monkeypatch.setattr(engine, "CONNECT_TIMEOUT", "1s")
+    addr = f"tcp://127.0.0.1:{_free_port()}"
+    with pytest.raises(rideid.ArgumentError, match=f"--scheduler {addr}: no Dask scheduler reachable there"):
+        rideid.study(folder / "mc.toml", tmp_path / "out", scheduler=addr)
+    assert not (tmp_path / "out").exists()
 
 
 def test_tasks_are_the_product_of_the_axes_and_keyed_by_content(folder, tmp_path):

@@ -14,17 +14,17 @@ Public API (SPEC §5)::
 
 from importlib.metadata import PackageNotFoundError, version
 
-from .cost import CostFunction, ParameterSpace
-from .dataset import Dataset, load_dataset
+from .estimate.cost import CostFunction, ParameterSpace
+from .data.dataset import Dataset, load_dataset
 from .errors import ArgumentError, DataError, DataWarning, ModelValidityWarning, RideidError, ScaleError
-from .files import Manifest, load_scenario, load_truth
-from .identify import IdentificationResult, identify
-from .jade import JadeSolver, jade
-from .model import CHANNELS, modal_summary
-from .params import DEFAULT_CAR, DEFAULT_GEOMETRY, NAMES, UNITS, Geometry
-from .scenario import default_scenario, default_scenario_path, simulate_manifest, write_dataset
+from .data.schema import Manifest, load_scenario, load_truth
+from .estimate.identify import IdentificationResult, identify
+from .estimate.jade import JadeSolver, jade
+from .model.equations import CHANNELS, modal_summary
+from .model.params import DEFAULT_CAR, DEFAULT_GEOMETRY, NAMES, UNITS, Geometry
+from .data.scenario import default_scenario, default_scenario_path, simulate_manifest, write_dataset
+from .model.tracks import Track
 from .studies import StudyResult, load_study, study
-from .tracks import Track
 
 try:
     __version__ = version("rideid")

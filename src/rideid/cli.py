@@ -97,8 +97,7 @@ def _parser() -> argparse.ArgumentParser:
     sub = p.add_subparsers(dest="command", metavar="COMMAND")
 
     def add(name, help_):
-        # argparse %-formats subcommand help ("1 % noise" broke `rideid --help`)
-        return sub.add_parser(name, help=help_.replace("%", "%%"), description=help_, epilog=EXAMPLES[name],
+        return sub.add_parser(name, help=help_, description=help_, epilog=EXAMPLES[name],
                               formatter_class=argparse.RawDescriptionHelpFormatter)
 
     s = add("simulate", "simulate a scenario (truth + tracks + runs) into a dataset folder")
@@ -153,7 +152,7 @@ def _parser() -> argparse.ArgumentParser:
     s.add_argument("result", metavar="RESULT.json")
     s.add_argument("truth", metavar="TRUTH.toml")
 
-    s = add("demo", "the whole job on the built-in car and tracks: simulate (1 % noise), identify, score")
+    s = add("demo", "the whole job on the built-in car and tracks: simulate (1 %% noise), identify, score")
     s.add_argument("--out", default="rideid-demo", metavar="DIR")
     s.add_argument("--seed", type=int, default=1, metavar="N")
     s.add_argument("--quiet", action="store_true", help="no progress line")
@@ -164,9 +163,9 @@ def _parser() -> argparse.ArgumentParser:
 
 def cmd_simulate(args, out=None):
     out = out or sys.stdout
-    from .files import load_scenario
-    from .model import format_modal_summary, modal_summary
-    from .scenario import simulate_manifest, write_dataset
+    from .data.schema import load_scenario
+    from .model.equations import format_modal_summary, modal_summary
+    from .data.scenario import simulate_manifest, write_dataset
 
     sc = load_scenario(args.scenario)
     prog = Progress(args.quiet)
@@ -175,7 +174,7 @@ def cmd_simulate(args, out=None):
     prog.done()
     engine = args.engine
     if engine == "mujoco":
-        from .hifi import HifiProperties
+        from .verify.hifi import HifiProperties
         engine += f"; [hifi] {(sc.hifi or HifiProperties()).describe()}" + ("; raw sensor readings" if args.raw else "")
     write_dataset(sc, data, args.out, raw=args.raw,
                   comment=f"simulated by rideid {__version__} from {Path(args.scenario).name}"
@@ -197,9 +196,9 @@ def _summary_table(res) -> str:
 def run_identify(ds_path, out_dir, *, seed, population=None, generations=None, weights="adaptive",
                  polish=True, quiet=False, out=None, report=True):
     out = out or sys.stdout
-    from .dataset import load_dataset
-    from .files import atomic_output
-    from .identify import DEFAULT_GENERATIONS, DEFAULT_POPULATION, identify
+    from .data.dataset import load_dataset
+    from .data.schema import atomic_output
+    from .estimate.identify import DEFAULT_GENERATIONS, DEFAULT_POPULATION, identify
 
     ds = load_dataset(ds_path)
     prog = Progress(quiet)
@@ -208,14 +207,14 @@ def run_identify(ds_path, out_dir, *, seed, population=None, generations=None, w
         raise ArgumentError(f"--population must be at least 4, got {kw['population']}")
     if kw["generations"] < 1:
         raise ArgumentError(f"--generations must be at least 1, got {kw['generations']}")
-    from .cost import CostFunction
+    from .estimate.cost import CostFunction
     cost = CostFunction(ds)
     res = identify(ds, seed=seed, weights=weights, polish=polish, progress=prog.identify, cost=cost, **kw)
     prog.done()
     with atomic_output(out_dir) as tmp:
         res.save(tmp)
         if report:
-            from .report import write_report
+            from .report.html import write_report
             if not quiet:
                 prog.line("writing the report ...", force=True)
             # estimated starts move the measured data: then the report rebuilds the cost on the final data
@@ -238,19 +237,19 @@ def cmd_identify(args, out=None):
 
 def cmd_sensitivity(args, out=None):
     out = out or sys.stdout
-    from .cost import ParameterSpace
-    from .dataset import load_dataset
-    from .engine import BatchSimulator
-    from .files import atomic_output, read_toml
-    from .scenario import run_times
-    from .sensitivity import compute_maps, heatmaps, tables_markdown, write_csvs
-    from .simulate import prepare_run
+    from .estimate.cost import ParameterSpace
+    from .data.dataset import load_dataset
+    from .model.batch import BatchSimulator
+    from .data.schema import atomic_output, read_toml
+    from .data.scenario import run_times
+    from .estimate.sensitivity import compute_maps, heatmaps, tables_markdown, write_csvs
+    from .model.simulate import prepare_run
 
     src = Path(args.source)
     is_scenario = src.is_file() and "truth" in read_toml(src)
     if is_scenario:
-        from .files import load_scenario
-        from .params import as_vector
+        from .data.schema import load_scenario
+        from .model.params import as_vector
         sc = load_scenario(src)
         geom, man = sc.geometry, sc
         times = {r.id: run_times(r) for r in sc.runs}
@@ -261,7 +260,7 @@ def cmd_sensitivity(args, out=None):
         man, geom = ds.manifest, ds.geometry
         times = {r.id: ds.data[r.id].time for r in ds.runs}
         baseline = ParameterSpace(ds.known, geom, man.bounds).nominal()
-        from .model import CHANNELS
+        from .model.equations import CHANNELS
         mask = np.array([[c in ds.data[r.id].channels for c in CHANNELS] for r in ds.runs])
     prog = Progress(args.quiet)
     runs = []
@@ -282,7 +281,7 @@ def cmd_sensitivity(args, out=None):
 
 
 def score_table(result: dict, truth: dict) -> tuple[str, float]:
-    from .params import NAMES
+    from .model.params import NAMES
     lines = [f"{'parameter':<10} {'estimate':>14} {'truth':>14} {'error %':>9}"]
     worst = 0.0
     for n in NAMES:
@@ -299,7 +298,7 @@ def score_table(result: dict, truth: dict) -> tuple[str, float]:
 
 
 def load_result(path) -> dict:
-    from .params import NAMES
+    from .model.params import NAMES
     path = Path(path)
     if not path.is_file():
         raise DataError(f"{path}: file not found")
@@ -318,7 +317,7 @@ def load_result(path) -> dict:
 
 def cmd_score(args, out=None):
     out = out or sys.stdout
-    from .files import load_truth
+    from .data.schema import load_truth
 
     res = load_result(args.result)
     truth = load_truth(args.truth)
@@ -329,9 +328,9 @@ def cmd_score(args, out=None):
 
 def cmd_demo(args, out=None):
     out = out or sys.stdout
-    from .files import load_truth
-    from .model import format_modal_summary, modal_summary
-    from .scenario import default_scenario, simulate_manifest, write_dataset
+    from .data.schema import load_truth
+    from .model.equations import format_modal_summary, modal_summary
+    from .data.scenario import default_scenario, simulate_manifest, write_dataset
 
     root = Path(args.out)
     sc = default_scenario()
@@ -358,7 +357,7 @@ def cmd_demo(args, out=None):
 
 def cmd_report(args, out=None):
     out = out or sys.stdout
-    from .report import write_report
+    from .report.html import write_report
     path = write_report(args.result_dir, compare=args.compare)
     print(f"report written to {path}", file=out)
     return 0
@@ -378,13 +377,13 @@ def cmd_study(args, out=None):
     return 0
 
 
-COMMANDS = {"report": cmd_report, "study": cmd_study, "simulate": cmd_simulate, "identify": cmd_identify, "sensitivity": cmd_sensitivity,
-            "score": cmd_score, "demo": cmd_demo}
+COMMANDS = {"report": cmd_report, "simulate": cmd_simulate, "identify": cmd_identify, "sensitivity": cmd_sensitivity,
+            "score": cmd_score, "demo": cmd_demo, "study": cmd_study}
 
 
 def _compile(quiet: bool):
     """Compile or load the kernels up front, and say so when it is slow."""
-    from .kernel import compile_kernels
+    from .model.kernel import compile_kernels
     prog = Progress(quiet)
     prog.line("loading the compiled simulation kernel (compiles once after install, ~30 s) ...", force=True)
     dt = compile_kernels()

@@ -138,29 +138,35 @@ def study(study_file_or_spec, out_dir, *, scheduler: str | None = None, progress
     if out.exists() and not out.is_dir():
         raise DataError(f"{out}: exists and is not a folder")
     tasks_dir = out / "tasks"
-    try:
-        tasks_dir.mkdir(parents=True, exist_ok=True)
-    except OSError as e:
-        raise DataError(f"{out}: cannot create output folder: {e}") from None
-    write_atomic(out / "study.json", json.dumps(
-        {"name": spec.name, "file": str(spec.path) if spec.path else None, "study": spec.doc,
-         "tasks": [{"index": t.index, "key": t.key, "options": t.options} for t in spec.tasks]},
-        indent=1, default=str) + "\n")
-
     records = {}
     for t in spec.tasks:
         rec = read_record(tasks_dir / f"{t.key}.json")
         if rec is not None and (rec["status"] == "done" or rec.get("final")):
             records[t.key] = rec
-    resumed = len(records)
     todo = [t for t in spec.tasks if t.key not in records]
     state = {"total": len(spec.tasks), "done": sum(r["status"] == "done" for r in records.values()),
-             "failed": sum(r["status"] == "failed" for r in records.values()), "resumed": resumed,
+             "failed": sum(r["status"] == "failed" for r in records.values()), "resumed": len(records),
              "running": len(todo), "elapsed": 0.0, "eta": None}
-    if progress is not None:
-        progress(dict(state))
-    if todo:
-        _compute(spec, todo, tasks_dir, records, state, scheduler, n_workers, progress, t0)
+    # connect first: a wrong --scheduler leaves nothing behind
+    client, cluster = _connect(scheduler, n_workers) if todo else (None, None)
+    try:
+        try:
+            tasks_dir.mkdir(parents=True, exist_ok=True)
+        except OSError as e:
+            raise DataError(f"{out}: cannot create output folder: {e}") from None
+        write_atomic(out / "study.json", json.dumps(
+            {"name": spec.name, "file": str(spec.path) if spec.path else None, "study": spec.doc,
+             "tasks": [{"index": t.index, "key": t.key, "options": t.options} for t in spec.tasks]},
+            indent=1, default=str) + "\n")
+        if progress is not None:
+            progress(dict(state))
+        if todo:
+            _compute(client, spec, todo, tasks_dir, records, state, progress, t0)
+    finally:
+        if client is not None:
+            client.close()
+        if cluster is not None:
+            cluster.close()
 
     from .summary import write_outputs
     ordered = [(t, records.get(t.key)) for t in spec.tasks]
@@ -171,49 +177,51 @@ def study(study_file_or_spec, out_dir, *, scheduler: str | None = None, progress
                        time.perf_counter() - t0)
 
 
-def _compute(spec, todo, tasks_dir, records, state, scheduler, n_workers, progress, t0):
-    import rideid
-    from distributed import Client, as_completed
+#: how long to wait for an existing scheduler to answer
+CONNECT_TIMEOUT = "20s"
 
-    cluster = None
+
+def _connect(scheduler, n_workers):
+    from distributed import Client
+
     if scheduler is None:
         cluster = local_cluster(n_workers)
-        client = Client(cluster)
-    else:
-        try:
-            client = Client(scheduler, timeout="20s")
-        except (OSError, TimeoutError) as e:
-            raise ArgumentError(f"--scheduler {scheduler}: cannot connect to a Dask scheduler there ({e})") from None
+        return Client(cluster), cluster
     try:
-        sc = None
-        if spec.scenario is not None:
-            # a few kB: it travels inside every task. Scattered data would be lost with the worker holding
-            # it (Dask cannot recompute it), while a task's own arguments survive any worker's death.
-            sc = rideid.default_scenario() if spec.scenario == BUILTIN else rideid.load_scenario(spec.scenario)
-        futures = {}
-        for t in todo:
-            f = client.submit(run_task, t.options, t.dataset_path, sc, key=f"rideid-study-{t.key}", retries=0)
-            futures[f] = t
-        first = time.perf_counter()
-        computed = 0
-        for fut in as_completed(futures):
-            t = futures.pop(fut)
-            try:
-                rec = fut.result()
-            except Exception as e:  # the task never returned (workers died repeatedly, cancelled, ...)
-                rec = {"status": "failed", "final": False, "warnings": [], "row": {}, "result": None,
-                       "error": f"not computed: {type(e).__name__}: {' '.join(str(e).split())}"}
-            write_atomic(tasks_dir / f"{t.key}.json", json.dumps(rec, default=str) + "\n")
-            records[t.key] = rec
-            computed += 1
-            state["done" if rec["status"] == "done" else "failed"] += 1
-            state["running"] = len(futures)
-            state["elapsed"] = time.perf_counter() - t0
-            rate = computed / (time.perf_counter() - first)
-            state["eta"] = len(futures) / rate if rate > 0 else None
-            if progress is not None:
-                progress(dict(state))
-    finally:
-        client.close()
-        if cluster is not None:
-            cluster.close()
+        return Client(scheduler, timeout=CONNECT_TIMEOUT), None
+    except (OSError, TimeoutError, ValueError) as e:
+        raise ArgumentError(f"--scheduler {scheduler}: no Dask scheduler reachable there ({e})") from None
+
+
+def _compute(client, spec, todo, tasks_dir, records, state, progress, t0):
+    import rideid
+    from distributed import as_completed
+
+    sc = None
+    if spec.scenario is not None:
+        # a few kB: it travels inside every task. Scattered data would be lost with the worker holding
+        # it (Dask cannot recompute it), while a task's own arguments survive any worker's death.
+        sc = rideid.default_scenario() if spec.scenario == BUILTIN else rideid.load_scenario(spec.scenario)
+    futures = {}
+    for t in todo:
+        f = client.submit(run_task, t.options, t.dataset_path, sc, key=f"rideid-study-{t.key}", retries=0)
+        futures[f] = t
+    first = time.perf_counter()
+    computed = 0
+    for fut in as_completed(futures):
+        t = futures.pop(fut)
+        try:
+            rec = fut.result()
+        except Exception as e:  # the task never returned (workers died repeatedly, cancelled, ...)
+            rec = {"status": "failed", "final": False, "warnings": [], "row": {}, "result": None,
+                   "error": f"not computed: {type(e).__name__}: {' '.join(str(e).split())}"}
+        write_atomic(tasks_dir / f"{t.key}.json", json.dumps(rec, default=str) + "\n")
+        records[t.key] = rec
+        computed += 1
+        state["done" if rec["status"] == "done" else "failed"] += 1
+        state["running"] = len(futures)
+        state["elapsed"] = time.perf_counter() - t0
+        rate = computed / (time.perf_counter() - first)
+        state["eta"] = len(futures) / rate if rate > 0 else None
+        if progress is not None:
+            progress(dict(state))

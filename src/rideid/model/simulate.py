@@ -21,7 +21,7 @@ import numpy as np
 
 from .contact import wheel_input
 from .discretize import N_MAX, Discretized, gauss_nodes, moment_weights
-from .model import CHANNELS, CORNER_TO_DECOMPOSED, state_space, static_state
+from .equations import CHANNELS, CORNER_TO_DECOMPOSED, state_space, static_state
 from .params import Geometry
 from .tracks import Track
 

@@ -40,12 +40,12 @@ import numpy as np
 from scipy.optimize import least_squares
 
 from .cost import CostFunction
-from .dataset import Dataset
-from .engine import single_threaded_blas
-from .errors import ArgumentError
+from ..data.dataset import Dataset
+from ..model.batch import single_threaded_blas
+from ..errors import ArgumentError
 from .jade import JadeSolver
-from .model import modal_summary
-from .params import INDEX, NAMES, UNITS
+from ..model.equations import modal_summary
+from ..model.params import INDEX, NAMES, UNITS
 from .sensitivity import SensitivityMaps, adaptive_weights, coefficient_of_variation, compute_maps, normalised_spread
 
 DEFAULT_POPULATION = 64
@@ -372,7 +372,7 @@ def _cycle_check(ds, P) -> dict:
     (the polish only moves a start by a few samples). Where the identified
     car's correlation peaks more than two samples away, take its start.
     """
-    from .measured import _coarse
+    from ..data.measured import _coarse
 
     slipped = {}
     for rid in ds.auto_start_runs():

@@ -49,8 +49,8 @@ from pathlib import Path
 
 import numpy as np
 
-from .errors import DataError, DataWarning
-from .model import CHANNEL_KIND, CHANNELS
+from ..errors import DataError, DataWarning
+from ..model.equations import CHANNEL_KIND, CHANNELS
 from .readers import FORMAT_NAMES, CsvOptions, Signal, open_signals
 
 G0 = 9.80665
@@ -336,7 +336,7 @@ class MeasuredRun:
 
     def run_data(self, start: float):
         """:class:`rideid.files.RunData` sampled at ``start + grid``."""
-        from .files import RunData
+        from .schema import RunData
 
         if self.grid is None:
             self.make_grid(start)
@@ -590,8 +590,8 @@ def _feature_end(track, geom) -> float:
 
 
 def _simulate(P, geom, track, t, speed, distance):
-    from .engine import BatchSimulator
-    from .simulate import prepare_run
+    from ..model.batch import BatchSimulator
+    from ..model.simulate import prepare_run
 
     ri = prepare_run(track, geom, speed, t, distance=distance)
     return BatchSimulator(geom, [ri]).outputs(np.atleast_2d(P))[0][0]
@@ -743,7 +743,7 @@ def estimate_start(mr: MeasuredRun, P, geom, track, s0: float | None = None, ref
 
 def nominal_car(geom) -> np.ndarray:
     """The built-in car with its CG at the same fraction of this wheelbase (scale is irrelevant here)."""
-    from .params import DEFAULT_CAR, DEFAULT_GEOMETRY, NAMES
+    from ..model.params import DEFAULT_CAR, DEFAULT_GEOMETRY, NAMES
 
     P = np.array([DEFAULT_CAR[n] for n in NAMES])
     P[NAMES.index("a")] *= geom.wheelbase / DEFAULT_GEOMETRY.wheelbase

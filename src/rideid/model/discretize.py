@@ -26,7 +26,7 @@ from __future__ import annotations
 import numpy as np
 import scipy.linalg
 
-from .model import blocks
+from .equations import blocks
 
 #: Largest number of moments precomputed per interval.
 N_MAX = 24

@@ -14,8 +14,8 @@ from pathlib import Path
 
 import numpy as np
 
-from .csvio import read_csv_rows
-from .errors import DataError
+from ..data.csvio import read_csv_rows
+from ..errors import DataError
 
 KINDS = ("washboard", "herringbone", "chassis_twist", "flat", "profile")
 

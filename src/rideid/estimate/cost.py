@@ -25,11 +25,11 @@ from __future__ import annotations
 
 import numpy as np
 
-from .dataset import Dataset, check_known_consistent, prepare_inputs, scale_anchor
-from .engine import BatchSimulator
-from .errors import ArgumentError, DataError
-from .model import CHANNEL_KIND, CHANNELS
-from .params import DEFAULT_CAR, DEFAULT_GEOMETRY, INDEX, NAMES, default_bounds
+from ..data.dataset import Dataset, check_known_consistent, prepare_inputs, scale_anchor
+from ..model.batch import BatchSimulator
+from ..errors import ArgumentError, DataError
+from ..model.equations import CHANNEL_KIND, CHANNELS
+from ..model.params import DEFAULT_CAR, DEFAULT_GEOMETRY, INDEX, NAMES, default_bounds
 
 ENERGY_FLOOR = 0.01
 #: total_mass = sum of count * mass over these (one body, two corners per axle)

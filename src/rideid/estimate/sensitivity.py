@@ -27,9 +27,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .engine import BatchSimulator
-from .model import CHANNEL_KIND, CHANNELS
-from .params import NAMES, Geometry
+from ..model.batch import BatchSimulator
+from ..model.equations import CHANNEL_KIND, CHANNELS
+from ..model.params import NAMES, Geometry
 
 STEP = 0.25
 P2R_STARS = (1.0, 5.0, 15.0)

@@ -20,11 +20,11 @@ import numpy as np
 import tomli_w
 
 from .csvio import read_csv_rows
-from .errors import DataError, DataWarning
+from ..errors import DataError, DataWarning
 from .measured import RUN_PREPROCESS_KEYS, parse_channel_map, parse_csv_options, parse_preprocess
-from .model import CHANNELS
-from .params import EXTRA_KNOWN, INDEX, NAMES, Geometry, check_parameters
-from .tracks import Track
+from ..model.equations import CHANNELS
+from ..model.params import EXTRA_KNOWN, INDEX, NAMES, Geometry, check_parameters
+from ..model.tracks import Track
 
 #: a scenario may also describe the multibody car of rideid.hifi (``[hifi]``, used by --engine mujoco)
 TOP_KEYS_SCENARIO = ("name", "vehicle", "known", "bounds", "tracks", "runs", "truth", "hifi")
@@ -269,7 +269,7 @@ def parse_manifest(doc: dict, path: Path, scenario: bool) -> Manifest:
                 raise DataError(f"{where}: [known] {k} = {v} disagrees with [truth] {k} = {truth[k]}")
     man = Manifest(path, name, geom, known, bounds, tracks, runs, truth)
     if scenario and "hifi" in doc:
-        from .hifi import parse_hifi
+        from ..verify.hifi import parse_hifi
         man.hifi = parse_hifi(doc["hifi"], f"{where}: [hifi]")
         if man.hifi.cg_height <= -geom.tire_radius:
             raise DataError(f"{where}: [hifi] cg_height: a CG {-man.hifi.cg_height} m below the wheel centres "

@@ -10,16 +10,16 @@ from pathlib import Path
 
 import numpy as np
 
-from .errors import ArgumentError, DataWarning, ModelValidityWarning
-from .files import Manifest, RunSpec, atomic_output, load_scenario, write_run_csv, write_toml
-from .model import CHANNELS, static_corner_loads
-from .params import CORNERS, NAMES, as_vector
-from .simulate import prepare_run, simulate_reference, wheel_displacements
+from ..errors import ArgumentError, DataWarning, ModelValidityWarning
+from .schema import Manifest, RunSpec, atomic_output, load_scenario, write_run_csv, write_toml
+from ..model.equations import CHANNELS, static_corner_loads
+from ..model.params import CORNERS, NAMES, as_vector
+from ..model.simulate import prepare_run, simulate_reference, wheel_displacements
 
 
 def default_scenario_path() -> Path:
     """Path of the built-in scenario TOML (the BMW 320i on the paper's ten runs)."""
-    return Path(str(resources.files("rideid") / "data" / "default_scenario.toml"))
+    return Path(str(resources.files("rideid.data") / "default_scenario.toml"))
 
 
 def default_scenario() -> Manifest:
@@ -100,7 +100,7 @@ def simulate_manifest(sc: Manifest, noise: float = 0.0, seed: int | None = None,
     for i, run in enumerate(sc.runs):
         t = run_times(run)
         if engine == "mujoco":
-            from .hifi import simulate_mujoco
+            from ..verify.hifi import simulate_mujoco
             lead = RAW_LEAD_IN if raw else 0.0
             if raw:  # the same samples, after the lead-in
                 t = np.arange(int(round(lead * run.fs)) + t.size) / run.fs
@@ -141,14 +141,14 @@ def write_dataset(sc: Manifest, data: dict, out_dir, comment: str | None = None,
         for run in sc.runs:
             t, Y = data[run.id]
             if raw:
-                from .hifi import RAW_NAMES
+                from ..verify.hifi import RAW_NAMES
                 write_run_csv(tmp / "runs" / f"{run.id}.csv", t, Y, RAW_NAMES)
             else:
                 write_run_csv(tmp / "runs" / f"{run.id}.csv", t, Y, CHANNELS)
             runs.append(RunSpec(run.id, run.track, run.speed, file=f"runs/{run.id}.csv"))
         man = Manifest(sc.path, sc.name, sc.geometry, sc.known, sc.bounds, sc.tracks, runs)
         if raw:
-            from .hifi import RAW_NAMES
+            from ..verify.hifi import RAW_NAMES
             from .measured import ChannelEntry
             man.channel_map = {c: ChannelEntry(n, "rad/s" if c.endswith("rate") else "m/s^2")
                                for c, n in zip(CHANNELS, RAW_NAMES)}

@@ -6,9 +6,9 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 
-from .errors import DataError, ScaleError
-from .files import Manifest, RunData, load_manifest, read_run_csv
-from .params import EXTRA_KNOWN, NAMES, Geometry
+from ..errors import DataError, ScaleError
+from .schema import Manifest, RunData, load_manifest, read_run_csv
+from ..model.params import EXTRA_KNOWN, NAMES, Geometry
 
 
 @dataclass
@@ -132,7 +132,7 @@ def load_dataset(path, starts: dict[str, float] | None = None) -> Dataset:
 
 def prepare_inputs(ds: Dataset) -> list:
     """:class:`rideid.simulate.RunInput` of every run (wheel inputs and their moments)."""
-    from .simulate import prepare_run
+    from ..model.simulate import prepare_run
 
     out = []
     for r in ds.runs:

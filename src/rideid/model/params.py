@@ -10,7 +10,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .errors import DataError
+from ..errors import DataError
 
 #: The twelve parameter names of SPEC §1, in canonical column order.
 NAMES: tuple[str, ...] = (

@@ -33,7 +33,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .errors import DataError
+from ..errors import DataError
 
 FORMATS = {
     ".csv": "csv", ".txt": "csv",

@@ -19,7 +19,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .errors import DataError
+from ..errors import DataError
 
 FIG_DPI = 90
 
@@ -173,7 +173,7 @@ def fig_compare(hist, label, other_hist, other_label, runs, out_dir):
 
 def fig_fit(run_id, t, Y, Ysim, out_dir):
     """Measured vs simulated per channel group, and residual spectra."""
-    from .model import CHANNELS
+    from ..model.equations import CHANNELS
     plt = _plt()
     fig, axes = plt.subplots(3, 2, figsize=(12, 6.2), gridspec_kw={"width_ratios": [2.2, 1]})
     fs = 1.0 / (t[1] - t[0])
@@ -208,7 +208,7 @@ def fig_fit(run_id, t, Y, Ysim, out_dir):
 
 
 def fit_statistics(Y, Ysim):
-    from .model import CHANNELS
+    from ..model.equations import CHANNELS
     out = {}
     for i, c in enumerate(CHANNELS):
         if np.all(np.isnan(Y[:, i])):
@@ -230,7 +230,7 @@ HEAT_CAPTIONS = {
 
 
 def heatmap_figures(maps, out_dir):
-    from .sensitivity import heatmaps
+    from ..estimate.sensitivity import heatmaps
     heat_dir = Path(out_dir) / "figures"
     heat_dir.mkdir(parents=True, exist_ok=True)
     out = []
@@ -281,10 +281,10 @@ def write_report(out_dir, ds=None, maps=None, cost=None, compare=None) -> Path:
     """
     import jinja2
 
-    from .cost import CostFunction, ParameterSpace
-    from .dataset import load_dataset
-    from .params import DESCRIPTIONS, NAMES, as_vector
-    from .sensitivity import P2T_STARS, compute_maps, stars
+    from ..estimate.cost import CostFunction, ParameterSpace
+    from ..data.dataset import load_dataset
+    from ..model.params import DESCRIPTIONS, NAMES, as_vector
+    from ..estimate.sensitivity import P2T_STARS, compute_maps, stars
 
     out_dir = Path(out_dir)
     rpath = out_dir / "result.json"
@@ -356,7 +356,7 @@ def write_report(out_dir, ds=None, maps=None, cost=None, compare=None) -> Path:
         })
     p2t = [{"param": p, "cells": [(f"{maps.M[i, r]:.2f}", stars(maps.M[i, r] * len(maps.runs), P2T_STARS))
                                   for r in range(len(maps.runs))]} for i, p in enumerate(maps.params)]
-    env = jinja2.Environment(loader=jinja2.FileSystemLoader(str(resources.files("rideid") / "templates")),
+    env = jinja2.Environment(loader=jinja2.FileSystemLoader(str(resources.files("rideid.report") / "templates")),
                              autoescape=jinja2.select_autoescape(["html", "j2"]))
     tpl = env.get_template("report.html.j2")
     text = tpl.render(

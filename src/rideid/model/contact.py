@@ -37,7 +37,7 @@ import numba
 import numpy as np
 from scipy.integrate import solve_ivp
 
-from .errors import RideidError
+from ..errors import RideidError
 from .tracks import WheelPath
 
 

@@ -58,9 +58,9 @@ from dataclasses import dataclass, fields
 
 import numpy as np
 
-from .errors import DataError
-from .model import CHANNELS, static_corner_loads
-from .params import CORNERS, GRAVITY, NAMES, Geometry
+from ..errors import DataError
+from ..model.equations import CHANNELS, static_corner_loads
+from ..model.params import CORNERS, GRAVITY, NAMES, Geometry
 
 #: contact impedance (solimp dmin = dmax): tiny, so the contact adds no normal "mass"
 IMPEDANCE = 1e-3
@@ -398,7 +398,7 @@ def simulate_mujoco(P, geom: Geometry, track, speed, t, distance=None, hifi: Hif
     included; ``details``: return a :class:`MujocoRun` with tire loads,
     lift-off times and suspension travel as well.
     """
-    from .simulate import corner_inputs
+    from ..model.simulate import corner_inputs
 
     car = MujocoCar(P, geom, hifi, **kw)
     mj, m, d = car.mj, car.model, car.data

@@ -1,0 +1,1 @@
+"""The data layer: file schemas and readers, conditioning of measured runs, datasets and scenarios."""

@@ -1,0 +1,1 @@
+"""Estimation: the cost, JADE, sensitivity maps and the identification orchestrator."""

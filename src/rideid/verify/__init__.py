@@ -1,0 +1,1 @@
+"""Verification on an independent multibody car (MuJoCo)."""
