@@ -59,7 +59,7 @@ def main(argv=None, out=sys.stdout):
         t = time.perf_counter()
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
-            for k, task in enumerate(st.tasks):
+            for task in st.tasks:
                 with tempfile.TemporaryDirectory() as tmp:
                     _identify(task.options, None, sc, Path(tmp))
         t_threads = time.perf_counter() - t

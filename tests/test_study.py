@@ -6,6 +6,7 @@ external-scheduler runs must end with the same table, bit for bit (wall
 times aside).
 """
 
+import contextlib
 import inspect
 import os
 import shutil
@@ -86,7 +87,8 @@ def table(path):
 
 BAD = [
     ("colour = 1\n[data]\nscenario = 'builtin'\nnoise = 0.01\n", "unknown key 'colour' in the study file"),
-    ("[data]\nscenario = 'builtin'\nnoise = 0.01\n[identify]\npopulaton = 8\n", "unknown key 'populaton' in [identify]"),
+    ("[data]\nscenario = 'builtin'\nnoise = 0.01\n[identify]\npopulaton = 8\n",
+     "unknown key 'populaton' in [identify]"),
     ("[data]\nscenario = 'builtin'\nnoise = 0.01\ndatasets = ['x']\n", "either 'datasets'"),
     ("[data]\nscenario = 'builtin'\n", "[data] missing key 'noise'"),
     ("[data]\nscenario = 'builtin'\nnoise = 0.01\n[identify]\nweights = 'adaptiv'\n",
@@ -391,16 +393,21 @@ def test_forty_task_monte_carlo_killed_twice_and_resumed(tmp_path):
     small_scenario(tmp_path / "small.toml")
     (tmp_path / "mc.toml").write_text(MC.format(n=40))
     out = tmp_path / "killed"
-    for kill_at in (8, 20):
+    for kill_at, how in ((8, "SIGINT"), (20, "SIGKILL")):
         p = subprocess.Popen(RIDEID + ["study", str(tmp_path / "mc.toml"), "--out", str(out), "--quiet"],
-                             start_new_session=True)
+                             start_new_session=True, stderr=subprocess.PIPE, text=True)
         try:
             deadline = time.monotonic() + 600
             while time.monotonic() < deadline and len(list((out / "tasks").glob("*.json"))) < kill_at:
                 assert p.poll() is None
                 time.sleep(0.05)
+            if how == "SIGINT":  # Ctrl-C on a terminal (the whole process group): the client says how to resume
+                os.killpg(p.pid, signal.SIGINT)
+                assert p.wait(timeout=120) == 130
+                assert "run the same command again to resume" in p.stderr.read()
         finally:
-            os.killpg(p.pid, signal.SIGKILL)
+            with contextlib.suppress(ProcessLookupError):  # SIGKILL: the client and its local cluster's workers
+                os.killpg(p.pid, signal.SIGKILL)
             p.wait()
     before = len(list((out / "tasks").glob("*.json")))
     assert 20 <= before < 40

@@ -369,7 +369,13 @@ def cmd_study(args, out=None):
 
     spec = load_study(args.study)  # a bad study file stops here, before DIR is created
     prog = Progress(args.quiet)
-    res = study(spec, args.out, scheduler=args.scheduler, progress=prog.study)
+    try:
+        res = study(spec, args.out, scheduler=args.scheduler, progress=prog.study)
+    except KeyboardInterrupt:
+        prog.done()
+        print(f"rideid: the finished tasks are kept in {Path(args.out) / 'tasks'}; run the same command again "
+              "to resume", file=sys.stderr)
+        raise
     prog.done()
     print(f"{res.tasks} tasks: {res.done} done, {res.failed} failed ({res.computed} computed now, "
           f"{res.tasks - res.computed} from an earlier run), {res.wall_time_s:.0f} s", file=out)

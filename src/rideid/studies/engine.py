@@ -82,10 +82,22 @@ def local_cluster(n_workers: int | None = None):
     """A :class:`distributed.LocalCluster` sized to the machine: ``n_workers`` processes x 1 thread."""
     import logging
 
+    import signal
+    import threading
+
     from distributed import LocalCluster
     n = n_workers or machine_cores()
-    return LocalCluster(n_workers=n, threads_per_worker=1, processes=True, dashboard_address=None,
-                        silence_logs=logging.ERROR, env=dict(WORKER_ENV))
+    # Ctrl-C on a terminal reaches the whole process group: the workers are started with SIGINT ignored
+    # (inherited, and kept by Python), so that only the client handles it and closes the cluster cleanly
+    old = signal.signal(signal.SIGINT, signal.SIG_IGN) if threading.current_thread() is threading.main_thread() \
+        else None
+    try:
+        # ":0": the scheduler always serves HTTP (dashboard or not); a free port, not 8787 taken by another cluster
+        return LocalCluster(n_workers=n, threads_per_worker=1, processes=True, dashboard_address=":0",
+                            silence_logs=logging.ERROR, env=dict(WORKER_ENV))
+    finally:
+        if old is not None:
+            signal.signal(signal.SIGINT, old)
 
 
 def write_atomic(path: Path, text: str):
