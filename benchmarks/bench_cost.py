@@ -84,6 +84,24 @@ def solve_ivp_run(P, geom, track, speed, t):
     return sol.y.T @ Cy.T
 
 
+#: an SUV-like set of extensions (bar rates at the wheel, tire damping)
+EXTENSIONS = {"k_arf": 15600.0, "k_arr": 6000.0, "c_tf": 180.0, "c_tr": 200.0}
+
+
+def extended_cost_ratio(cf, X, repeat=5):
+    """Seconds per candidate of the simulation-and-error kernel, base (12) vs extended (16) rows."""
+    from rideid.model.params import EXT_NAMES, full_rows
+
+    P12 = cf.space.full(X)[:, :12]
+    P16 = full_rows(P12)
+    P16[:, 12:] = [EXTENSIONS[n] for n in EXT_NAMES]
+    with single_threaded_blas():
+        tb = timeit(lambda: cf.sim.errors(P12, cf.Y, cf.W), repeat=repeat)
+        te = timeit(lambda: cf.sim.errors(P16, cf.Y, cf.W), repeat=repeat)
+    n = X.shape[0]
+    return {"base": tb / n, "ext": te / n, "ratio": te / tb}
+
+
 def main(out=sys.stdout):
     def say(*a):
         print(*a, file=out, flush=True)
@@ -115,13 +133,18 @@ def main(out=sys.stdout):
     say(f"rideid kernel: {t_pop * 1e3:.1f} ms per population of 64 -> {per_cand * 1e3:.3f} ms per candidate, "
         f"{64 * n_samples / t_pop / 1e6:.1f} M candidate-samples/s")
 
-    # flops: (196 + 28 N) multiply-adds per candidate-sample (see rideid.model.kernel)
+    # flops: (210 + 28 N) multiply-adds per candidate-sample (see rideid.model.kernel)
     N = 10
-    flops = 2 * (196 + 28 * N) * 64 * n_samples / t_pop
+    flops = 2 * (210 + 28 * N) * 64 * n_samples / t_pop
     peak, mhz, width = cpu_peak_gflops()
     if peak > 0:
         say(f"arithmetic: {flops / 1e9:.1f} GFLOP/s = {100 * flops / 1e9 / peak:.0f} % of the {peak:.0f} GFLOP/s peak "
             f"({os.cpu_count()} cores x {mhz:.0f} MHz x {width}-wide FMA x 2 pipes)")
+
+    # the extended model (SPEC §6: anti-roll bars and tire damping) on the same data
+    ext = extended_cost_ratio(cf, X)
+    say(f"extended model (bars + tire damping, 16 parameters): {ext['ext'] * 1e3:.3f} ms per candidate vs "
+        f"{ext['base'] * 1e3:.3f} ms base (simulation only): {ext['ratio']:.2f}x (target <= 1.3x)")
 
     # accuracy of lsim at the data rate and upsampled, against a 200x reference
     r0, tr0, t0_ = runs[6]  # H_HL: herringbone, the hardest input

@@ -125,6 +125,9 @@ def _parser() -> argparse.ArgumentParser:
     s.add_argument("--weights", choices=("adaptive", "fixed"), default="adaptive",
                    help="adaptive track weights (paper eq. 12-13) or equal weights")
     s.add_argument("--no-polish", action="store_true", help="skip the least-squares polish after JADE")
+    s.add_argument("--model", default=None, metavar="MODEL",
+                   help="base: the twelve parameters; full: with anti-roll bars (k_arf, k_arr) and tire damping "
+                        "(c_tf, c_tr) (default: the dataset's [model] extensions, else base)")
     s.add_argument("--no-report", action="store_true", help="write result.json and history.csv only")
     s.add_argument("--quiet", action="store_true", help="no progress line")
 
@@ -194,13 +197,14 @@ def _summary_table(res) -> str:
 
 
 def run_identify(ds_path, out_dir, *, seed, population=None, generations=None, weights="adaptive",
-                 polish=True, quiet=False, out=None, report=True):
+                 polish=True, quiet=False, out=None, report=True, model=None):
     out = out or sys.stdout
     from .data.dataset import load_dataset
     from .data.schema import atomic_output
-    from .estimate.identify import DEFAULT_GENERATIONS, DEFAULT_POPULATION, identify
+    from .estimate.identify import DEFAULT_GENERATIONS, DEFAULT_POPULATION, identify, model_extensions
 
     ds = load_dataset(ds_path)
+    extensions = model_extensions(ds, model)
     prog = Progress(quiet)
     kw = {"population": population or DEFAULT_POPULATION, "generations": generations or DEFAULT_GENERATIONS}
     if kw["population"] < 4:
@@ -208,7 +212,7 @@ def run_identify(ds_path, out_dir, *, seed, population=None, generations=None, w
     if kw["generations"] < 1:
         raise ArgumentError(f"--generations must be at least 1, got {kw['generations']}")
     from .estimate.cost import CostFunction
-    cost = CostFunction(ds)
+    cost = CostFunction(ds, extensions=extensions)
     res = identify(ds, seed=seed, weights=weights, polish=polish, progress=prog.identify, cost=cost, **kw)
     prog.done()
     with atomic_output(out_dir) as tmp:
@@ -231,7 +235,7 @@ def cmd_identify(args, out=None):
     out = out or sys.stdout
     run_identify(args.dataset, args.out, seed=args.seed, population=args.population,
                  generations=args.generations, weights=args.weights, polish=not args.no_polish,
-                 quiet=args.quiet, out=out, report=not args.no_report)
+                 quiet=args.quiet, out=out, report=not args.no_report, model=args.model)
     return 0
 
 
@@ -259,7 +263,7 @@ def cmd_sensitivity(args, out=None):
         ds = load_dataset(src)
         man, geom = ds.manifest, ds.geometry
         times = {r.id: ds.data[r.id].time for r in ds.runs}
-        baseline = ParameterSpace(ds.known, geom, man.bounds).nominal()
+        baseline = ParameterSpace(ds.known, geom, man.bounds, extensions=man.extensions or ()).nominal()
         from .model.equations import CHANNELS
         mask = np.array([[c in ds.data[r.id].channels for c in CHANNELS] for r in ds.runs])
     prog = Progress(args.quiet)
@@ -268,7 +272,7 @@ def cmd_sensitivity(args, out=None):
         prog.steps(i + 1, len(man.runs), "preparing run")
         dist = None if is_scenario else ds.data[r.id].distance
         runs.append(prepare_run(man.tracks[r.track], geom, r.speed, times[r.id], distance=dist))
-    prog.line("simulating 13 cars (baseline and +25 % per parameter) ...", force=True)
+    prog.line(f"simulating {len(baseline) + 1} cars (baseline and +25 % per parameter) ...", force=True)
     sim = BatchSimulator(geom, runs)
     maps = compute_maps(sim, geom, baseline, [r.id for r in man.runs], mask)
     with atomic_output(args.out) as tmp:
@@ -281,12 +285,18 @@ def cmd_sensitivity(args, out=None):
 
 
 def score_table(result: dict, truth: dict) -> tuple[str, float]:
-    from .model.params import NAMES
+    from .model.params import ALL_NAMES, EXT_NAMES
     lines = [f"{'parameter':<10} {'estimate':>14} {'truth':>14} {'error %':>9}"]
     worst = 0.0
-    for n in NAMES:
-        est = result["parameters"][n]["value"]
-        tr = truth[n]
+    for n in ALL_NAMES:
+        if n in EXT_NAMES and n not in result["parameters"] and n not in truth:
+            continue
+        est = result["parameters"][n]["value"] if n in result["parameters"] else 0.0
+        tr = truth.get(n, 0.0)  # an extension absent from the truth is 0
+        if tr == 0:  # no relative error of a zero truth: the estimate in its unit
+            lines.append(f"{n:<10} {est:>14.6g} {tr:>14.6g} {'-':>9}" + (" (not in the model)"
+                                                                         if n not in result["parameters"] else ""))
+            continue
         err = 100.0 * (est - tr) / tr
         flag = result["parameters"][n]
         note = " known" if flag.get("fixed") else (" derived" if flag.get("derived") else "")

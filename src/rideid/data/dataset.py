@@ -8,7 +8,7 @@ from pathlib import Path
 
 from ..errors import DataError, ScaleError
 from .schema import Manifest, RunData, load_manifest, read_run_csv
-from ..model.params import EXTRA_KNOWN, NAMES, Geometry
+from ..model.params import EXT_NAMES, EXTRA_KNOWN, NAMES, Geometry
 
 
 @dataclass
@@ -143,8 +143,8 @@ def prepare_inputs(ds: Dataset) -> list:
 
 def scale_anchor(known: dict[str, float], where: str = "[known]") -> str:
     """The known value that fixes the absolute scale, or raise :class:`ScaleError`."""
-    for k in ("total_mass",) + tuple(n for n in NAMES if n != "a"):
-        if k in known:
+    for k in ("total_mass",) + tuple(n for n in NAMES if n != "a") + EXT_NAMES:
+        if known.get(k, 0.0) > 0:  # a known zero extension (none fitted) fixes no scale
             return k
     raise ScaleError(
         f"{where}: no scale anchor. Accelerations driven by a known road do not change when every mass, "

@@ -13,8 +13,8 @@ import numpy as np
 from ..errors import ArgumentError, DataWarning, ModelValidityWarning
 from .schema import Manifest, RunSpec, atomic_output, load_scenario, write_run_csv, write_toml
 from ..model.equations import CHANNELS, static_corner_loads
-from ..model.params import CORNERS, NAMES, as_vector
-from ..model.simulate import prepare_run, simulate_reference, wheel_displacements
+from ..model.params import CORNERS, EXT_NAMES, INDEX, NAMES, as_vector, full_rows
+from ..model.simulate import prepare_run, simulate_reference, wheel_displacements, wheel_velocities
 
 
 def default_scenario_path() -> Path:
@@ -49,12 +49,18 @@ class LiftOff:
 
 
 def lift_offs(P, geom, run_id, run_input, states) -> list[LiftOff]:
-    """Wheels whose total tire load (static + k_t (r - z)) goes negative."""
-    P = np.asarray(P, dtype=float).reshape(-1)
+    """Wheels whose total tire load (static + k_t (r - z) + c_t (r' - z')) goes negative.
+
+    ``states``: the physical states of :func:`rideid.model.simulate.simulate_reference`
+    (``return_states=True``); ``P`` 12 or 16 parameters.
+    """
+    P = full_rows(np.asarray(P, dtype=float).reshape(-1))[0]
     static = static_corner_loads(P[None], geom)[0]
-    kt = np.array([P[NAMES.index("k_tf")]] * 2 + [P[NAMES.index("k_tr")]] * 2)
+    kt = np.array([P[INDEX["k_tf"]]] * 2 + [P[INDEX["k_tr"]]] * 2)
+    ct = np.array([P[INDEX["c_tf"]]] * 2 + [P[INDEX["c_tr"]]] * 2)
     zw = wheel_displacements(states)
-    force = static[None, :] + kt[None, :] * (run_input.u - zw)
+    force = (static[None, :] + kt[None, :] * (run_input.u - zw)
+             + ct[None, :] * (run_input.rate - wheel_velocities(states)))
     out = []
     for i, w in enumerate(CORNERS):
         j = int(np.argmin(force[:, i]))
@@ -146,7 +152,8 @@ def write_dataset(sc: Manifest, data: dict, out_dir, comment: str | None = None,
             else:
                 write_run_csv(tmp / "runs" / f"{run.id}.csv", t, Y, CHANNELS)
             runs.append(RunSpec(run.id, run.track, run.speed, file=f"runs/{run.id}.csv"))
-        man = Manifest(sc.path, sc.name, sc.geometry, sc.known, sc.bounds, sc.tracks, runs)
+        man = Manifest(sc.path, sc.name, sc.geometry, sc.known, sc.bounds, sc.tracks, runs,
+                       extensions=sc.extensions)
         if raw:
             from ..verify.hifi import RAW_NAMES
             from .measured import ChannelEntry
@@ -166,6 +173,6 @@ def write_dataset(sc: Manifest, data: dict, out_dir, comment: str | None = None,
                 tab["file"] = f"profiles/{tr.id}.csv"
         write_toml(tmp / "dataset.toml", doc, comment)
         if sc.truth is not None:
-            write_toml(tmp / "truth.toml", {"truth": {n: sc.truth[n] for n in NAMES}},
+            write_toml(tmp / "truth.toml", {"truth": {n: sc.truth[n] for n in NAMES + EXT_NAMES if n in sc.truth}},
                        "true parameters of the simulated car (rideid simulate)")
     return Path(out_dir)

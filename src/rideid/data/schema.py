@@ -23,13 +23,14 @@ from .csvio import read_csv_rows
 from ..errors import DataError, DataWarning
 from .measured import RUN_PREPROCESS_KEYS, parse_channel_map, parse_csv_options, parse_preprocess
 from ..model.equations import CHANNELS
-from ..model.params import EXTRA_KNOWN, INDEX, NAMES, Geometry, check_parameters
+from ..model.params import EXT_NAMES, EXTRA_KNOWN, GROUPS, INDEX, NAMES, Geometry, check_parameters
 from ..model.tracks import Track
 
 #: a scenario may also describe the multibody car of rideid.hifi (``[hifi]``, used by --engine mujoco)
-TOP_KEYS_SCENARIO = ("name", "vehicle", "known", "bounds", "tracks", "runs", "truth", "hifi")
+TOP_KEYS_SCENARIO = ("name", "vehicle", "known", "bounds", "model", "tracks", "runs", "truth", "hifi")
 #: a dataset may also describe how its files were logged (rideid.measured)
-TOP_KEYS_DATASET = ("name", "vehicle", "known", "bounds", "channels", "preprocess", "csv", "tracks", "runs")
+TOP_KEYS_DATASET = ("name", "vehicle", "known", "bounds", "model", "channels", "preprocess", "csv", "tracks",
+                    "runs")
 RUN_KEYS_DATASET = ("id", "track", "speed", "file", "channels") + RUN_PREPROCESS_KEYS
 RUN_KEYS_SCENARIO = ("id", "track", "speed", "fs", "duration")
 
@@ -53,6 +54,33 @@ def _number(v, where, positive=False):
     if positive and v <= 0:
         raise DataError(f"{where}: must be positive, got {v!r}")
     return float(v)
+
+
+def _param_value(v, name, where):
+    """A parameter value: the twelve positive, the extensions (SPEC §6) non-negative."""
+    v = _number(v, where)
+    if name in EXT_NAMES:
+        if v < 0:
+            raise DataError(f"{where}: must not be negative (0 means none), got {v!r}")
+    elif v <= 0:
+        raise DataError(f"{where}: must be positive, got {v!r}")
+    return v
+
+
+def parse_model(tab, where: str) -> tuple[str, ...]:
+    """The ``[model]`` table: ``extensions = [group, ...]`` (SPEC §6) -> the groups in canonical order."""
+    if not isinstance(tab, dict):
+        raise DataError(f"{where}: [model] must be a table")
+    for k in tab:
+        if k != "extensions":
+            raise DataError(f"{where}: [model]: unknown key '{k}'; allowed: extensions")
+    ext = tab.get("extensions", [])
+    if not isinstance(ext, list) or not all(isinstance(g, str) for g in ext):
+        raise DataError(f"{where}: [model] extensions: expected a list of group names ({', '.join(GROUPS)})")
+    for g in ext:
+        if g not in GROUPS:
+            raise DataError(f"{where}: [model] extensions: unknown group '{g}'; groups are: {', '.join(GROUPS)}")
+    return tuple(g for g in GROUPS if g in ext)
 
 
 def _table(doc, key, where, required=True):
@@ -114,6 +142,8 @@ class Manifest:
     csv_table: dict = field(default_factory=dict)
     #: scenario only: the ``[hifi]`` properties of the MuJoCo car (rideid.hifi.HifiProperties), or None
     hifi: object = None
+    #: ``[model] extensions`` (SPEC §6): the extension groups to estimate; None without a [model] table
+    extensions: tuple[str, ...] | None = None
 
     def is_measured(self, run: RunSpec) -> bool:
         """Whether a run goes through rideid.measured (anything beyond a SPEC §3 CSV taken as it is)."""
@@ -137,6 +167,8 @@ class Manifest:
             doc["known"] = dict(self.known)
         if self.bounds:
             doc["bounds"] = {k: list(v) for k, v in self.bounds.items()}
+        if self.extensions is not None:
+            doc["model"] = {"extensions": list(self.extensions)}
         if self.channel_map:
             doc["channels"] = {k: e.to_table() for k, e in self.channel_map.items()}
         if self.preprocess:
@@ -174,23 +206,27 @@ def parse_manifest(doc: dict, path: Path, scenario: bool) -> Manifest:
 
     known = {}
     for k, v in _table(doc, "known", where, required=False).items():
-        if k not in NAMES and k not in EXTRA_KNOWN:
-            raise DataError(f"{where}: [known]: unknown key '{k}'; allowed: total_mass or one of {', '.join(NAMES)}")
-        known[k] = _number(v, f"{where}: [known] {k}", positive=True)
+        if k not in NAMES and k not in EXT_NAMES and k not in EXTRA_KNOWN:
+            raise DataError(f"{where}: [known]: unknown key '{k}'; allowed: total_mass or one of "
+                            f"{', '.join(NAMES + EXT_NAMES)}")
+        known[k] = (_number(v, f"{where}: [known] {k}", positive=True) if k in EXTRA_KNOWN
+                    else _param_value(v, k, f"{where}: [known] {k}"))
         if k == "a" and not known[k] < geom.wheelbase:
             raise DataError(f"{where}: [known] a = {known[k]} must be less than the wheelbase {geom.wheelbase}")
 
     bounds = {}
     for k, v in _table(doc, "bounds", where, required=False).items():
         w = f"{where}: [bounds] {k}"
-        if k not in NAMES:
-            raise DataError(f"{w}: unknown parameter; allowed: {', '.join(NAMES)}")
+        if k not in NAMES and k not in EXT_NAMES:
+            raise DataError(f"{w}: unknown parameter; allowed: {', '.join(NAMES + EXT_NAMES)}")
         if not isinstance(v, list) or len(v) != 2:
             raise DataError(f"{w}: expected [lower, upper]")
         lo, hi = _number(v[0], w), _number(v[1], w)
         if not lo < hi:
             raise DataError(f"{w}: lower bound {lo} must be less than upper bound {hi}")
-        if k != "a" and lo <= 0:
+        if k in EXT_NAMES and lo < 0:
+            raise DataError(f"{w}: lower bound must not be negative, got {lo}")
+        if k != "a" and k not in EXT_NAMES and lo <= 0:
             raise DataError(f"{w}: lower bound must be positive, got {lo}")
         if k == "a" and not (0 < lo and hi < geom.wheelbase):
             raise DataError(f"{w}: must lie within (0, wheelbase = {geom.wheelbase})")
@@ -265,12 +301,17 @@ def parse_manifest(doc: dict, path: Path, scenario: bool) -> Manifest:
                 raise DataError(f"{where}: [known] total_mass = {known['total_mass']} disagrees with [truth] "
                                 f"(m_s + 2 m_uf + 2 m_ur = {tm:.6g})")
         for k, v in known.items():
-            if k in truth and abs(truth[k] - v) > 1e-9 * abs(v):
-                raise DataError(f"{where}: [known] {k} = {v} disagrees with [truth] {k} = {truth[k]}")
+            tv = truth.get(k, 0.0 if k in EXT_NAMES else None)
+            if tv is not None and abs(tv - v) > 1e-9 * abs(v):
+                raise DataError(f"{where}: [known] {k} = {v} disagrees with [truth] {k} = {tv}")
     man = Manifest(path, name, geom, known, bounds, tracks, runs, truth)
+    if "model" in doc:
+        man.extensions = parse_model(doc["model"], where)
     if scenario and "hifi" in doc:
         from ..verify.hifi import parse_hifi
         man.hifi = parse_hifi(doc["hifi"], f"{where}: [hifi]")
+        from ..verify.hifi import tire_damping_of
+        tire_damping_of([truth[n] for n in NAMES] + [truth.get(n, 0.0) for n in EXT_NAMES], man.hifi, where)
         if man.hifi.cg_height <= -geom.tire_radius:
             raise DataError(f"{where}: [hifi] cg_height: a CG {-man.hifi.cg_height} m below the wheel centres "
                             f"is under the road (tire_radius {geom.tire_radius} m)")
@@ -286,13 +327,15 @@ def parse_manifest(doc: dict, path: Path, scenario: bool) -> Manifest:
 
 
 def parse_truth(tab: dict, where: str, geom: Geometry | None) -> dict[str, float]:
+    """The twelve parameters, and any of the four extensions (SPEC §6; absent means 0, not stored)."""
     for k in tab:
-        if k not in NAMES:
-            raise DataError(f"{where}: unknown parameter '{k}'; expected the twelve: {', '.join(NAMES)}")
+        if k not in NAMES and k not in EXT_NAMES:
+            raise DataError(f"{where}: unknown parameter '{k}'; expected the twelve: {', '.join(NAMES)} "
+                            f"(and optionally {', '.join(EXT_NAMES)})")
     missing = [k for k in NAMES if k not in tab]
     if missing:
         raise DataError(f"{where}: missing {', '.join(missing)} (all twelve parameters are needed)")
-    vals = {k: _number(tab[k], f"{where} {k}", positive=True) for k in NAMES}
+    vals = {k: _param_value(tab[k], k, f"{where} {k}") for k in NAMES + EXT_NAMES if k in tab}
     if geom is not None:
         check_parameters([vals[n] for n in NAMES], geom, where)
     return vals

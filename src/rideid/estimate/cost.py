@@ -18,7 +18,10 @@ with equal weights by default; identification adapts them (paper eq. 13).
 
 Free parameters: the twelve less those in ``[known]``; with ``total_mass``
 known, ``m_s = total_mass - 2 m_uf - 2 m_ur`` is derived (if ``m_s`` itself
-is known, ``m_ur`` is derived instead).
+is known, ``m_ur`` is derived instead). The model's extension groups (SPEC §6:
+``[model] extensions`` or ``identify --model``) add their parameters
+(:data:`rideid.model.params.GROUPS`), free unless known; a known extension
+value is used whatever the model, and an extension the model lacks is 0.
 """
 
 from __future__ import annotations
@@ -29,7 +32,8 @@ from ..data.dataset import Dataset, check_known_consistent, prepare_inputs, scal
 from ..model.batch import BatchSimulator
 from ..errors import ArgumentError, DataError
 from ..model.equations import CHANNEL_KIND, CHANNELS
-from ..model.params import DEFAULT_CAR, DEFAULT_GEOMETRY, INDEX, NAMES, default_bounds
+from ..model.params import (ALL_NAMES, DEFAULT_CAR, DEFAULT_GEOMETRY, EXT_NAMES, GROUPS, INDEX, NAMES,
+                            NOMINAL_EXTENSIONS, default_bounds)
 
 ENERGY_FLOOR = 0.01
 #: total_mass = sum of count * mass over these (one body, two corners per axle)
@@ -54,34 +58,67 @@ def channel_weights(Y: np.ndarray) -> np.ndarray:
 
 
 class ParameterSpace:
-    """Free, fixed and derived parameters of a dataset, and their bounds."""
+    """Free, fixed and derived parameters of a dataset, and their bounds.
 
-    def __init__(self, known: dict[str, float], geometry, bounds: dict | None = None):
+    Parameters
+    ----------
+    known : dict
+        ``[known]`` values (``total_mass`` or parameter names, extensions too).
+    geometry : Geometry
+    bounds : dict, optional
+        ``[bounds]``; bounds of parameters that are not free are not used.
+    extensions : sequence of str
+        The model's extension groups (:data:`rideid.model.params.GROUPS`);
+        their parameters are free unless known.
+
+    Attributes
+    ----------
+    width : int
+        Columns of the full rows :meth:`full` returns: 12, or 16 when the
+        model has an extension group or an extension value is known.
+    param_names : tuple of str
+        The names of those columns.
+    reported_names : tuple of str
+        The twelve, the model's extension parameters and known extensions
+        (an extension neither in the model nor known is 0 and not reported).
+    """
+
+    def __init__(self, known: dict[str, float], geometry, bounds: dict | None = None, extensions=()):
         scale_anchor(known)
         check_known_consistent(known)
         self.known = dict(known)
         self.geometry = geometry
+        extensions = tuple(extensions)
+        for g in extensions:
+            if g not in GROUPS:
+                raise ArgumentError(f"unknown extension group '{g}'; groups are: {', '.join(GROUPS)}")
+        self.extensions = tuple(g for g in GROUPS if g in extensions)
         self.derived = None
         if "total_mass" in known:
             for cand in ("m_s", "m_ur", "m_uf"):
                 if cand not in known:
                     self.derived = cand
                     break
-        self.fixed = {n: v for n, v in known.items() if n in NAMES}
-        self.names = [n for n in NAMES if n not in self.fixed and n != self.derived]
+        self.fixed = {n: v for n, v in known.items() if n in ALL_NAMES}
+        model_ext = [n for g in self.extensions for n in GROUPS[g]]
+        self.names = [n for n in list(NAMES) + model_ext if n not in self.fixed and n != self.derived]
+        self.width = len(ALL_NAMES) if (model_ext or any(n in self.fixed for n in EXT_NAMES)) else len(NAMES)
+        self.param_names = ALL_NAMES[:self.width]
+        #: what a result reports: the twelve, the model's extensions and any known extension
+        self.reported_names = tuple(n for n in ALL_NAMES if n in NAMES or n in model_ext or n in self.fixed)
         db = default_bounds(geometry)
         bounds = dict(bounds or {})
         for k in bounds:
-            if k not in NAMES:
+            if k not in ALL_NAMES:
                 raise DataError(f"[bounds]: unknown parameter '{k}'")
         self.bounds = np.array([bounds.get(n, db[n]) for n in self.names], dtype=float)
 
     def full(self, X) -> np.ndarray:
-        """Free-parameter rows ``(n, d)`` -> all twelve ``(n, 12)``."""
+        """Free-parameter rows ``(n, d)`` -> full rows ``(n, width)`` (:attr:`param_names`)."""
         X = np.atleast_2d(np.asarray(X, dtype=float))
         if X.shape[1] != len(self.names):
             raise ArgumentError(f"expected {len(self.names)} columns ({', '.join(self.names)}), got {X.shape[1]}")
-        P = np.empty((X.shape[0], 12))
+        P = np.zeros((X.shape[0], self.width))
         for j, n in enumerate(self.names):
             P[:, INDEX[n]] = X[:, j]
         for n, v in self.fixed.items():
@@ -102,25 +139,27 @@ class ParameterSpace:
         return g
 
     def valid(self, P) -> np.ndarray:
-        """Rows that are physical: positive masses etc., 0 < a < wheelbase."""
+        """Rows that are physical: positive masses etc., 0 < a < wheelbase, extensions >= 0."""
         ok = np.all(np.isfinite(P), axis=1)
         for n in NAMES:
             col = P[:, INDEX[n]]
             ok &= (col > 0) & ((col < self.geometry.wheelbase) if n == "a" else True)
+        if P.shape[1] > len(NAMES):
+            ok &= np.all(P[:, len(NAMES):] >= 0, axis=1)
         return ok
 
     def nominal(self) -> np.ndarray:
         """A physically consistent nominal car: the built-in car scaled to the
         anchor, clipped into the bounds (used for sensitivity maps and as a
         reference point, never as a starting guess)."""
-        base = np.array([DEFAULT_CAR[n] for n in NAMES])
+        base = np.array([DEFAULT_CAR[n] for n in NAMES] + [NOMINAL_EXTENSIONS[n] for n in EXT_NAMES])
         base[INDEX["a"]] = DEFAULT_CAR["a"] / DEFAULT_GEOMETRY.wheelbase * self.geometry.wheelbase
         anchor = scale_anchor(self.known)
         if anchor == "total_mass":
             s = self.known["total_mass"] / (base[0] + 2 * base[INDEX["m_uf"]] + 2 * base[INDEX["m_ur"]])
         else:
             s = self.known[anchor] / base[INDEX[anchor]]
-        P = base * np.where(np.array(NAMES) == "a", 1.0, s)
+        P = base * np.where(np.array(ALL_NAMES) == "a", 1.0, s)
         x = np.clip(P[[INDEX[n] for n in self.names]], self.bounds[:, 0], self.bounds[:, 1])
         return self.full(x)[0]
 
@@ -138,6 +177,9 @@ class CostFunction:
     space : ParameterSpace, optional
         Free/fixed/derived parameters and bounds (default: from the dataset's
         ``[known]`` and ``[bounds]``).
+    extensions : sequence of str, optional
+        Extension groups of the model when ``space`` is not given (default:
+        the dataset's ``[model] extensions``, else none: the twelve).
 
     Attributes
     ----------
@@ -147,9 +189,14 @@ class CostFunction:
     run_ids : list of str
     """
 
-    def __init__(self, ds: Dataset, weights=None, use_kernel: bool = True, space: ParameterSpace | None = None):
+    def __init__(self, ds: Dataset, weights=None, use_kernel: bool = True, space: ParameterSpace | None = None,
+                 extensions=None):
         self.ds = ds
-        self.space = space or ParameterSpace(ds.known, ds.geometry, ds.manifest.bounds)
+        if space is None:
+            if extensions is None:  # the dataset's [model], else the twelve
+                extensions = ds.manifest.extensions or ()
+            space = ParameterSpace(ds.known, ds.geometry, ds.manifest.bounds, extensions=extensions)
+        self.space = space
         self.names = list(self.space.names)
         self.bounds = self.space.bounds
         self.run_ids = [r.id for r in ds.runs]
@@ -218,7 +265,7 @@ class CostFunction:
         return cols, np.sqrt(weights[ri] * self.W[ri, cols])
 
     def simulate(self, params) -> dict[str, np.ndarray]:
-        """Simulated channels ``(n_time, 10)`` per run for one full parameter vector (12)."""
-        P = np.asarray(params, dtype=float).reshape(1, 12)
+        """Simulated channels ``(n_time, 10)`` per run for one full parameter vector (12 or 16)."""
+        P = np.asarray(params, dtype=float).reshape(1, -1)
         outs = self.sim.outputs(P)
         return {rid: o[0] for rid, o in zip(self.run_ids, outs)}

@@ -45,7 +45,7 @@ from ..model.batch import single_threaded_blas
 from ..errors import ArgumentError
 from .jade import JadeSolver
 from ..model.equations import modal_summary
-from ..model.params import INDEX, NAMES, UNITS
+from ..model.params import GROUPS, INDEX, UNITS
 from .sensitivity import SensitivityMaps, adaptive_weights, coefficient_of_variation, compute_maps, normalised_spread
 
 DEFAULT_POPULATION = 64
@@ -59,7 +59,9 @@ DEFAULT_SPREAD_TOL_NO_POLISH = 1e-5
 class IdentificationResult:
     """What :func:`identify` returns.
 
-    ``parameters`` maps all twelve names to values; ``details`` adds unit,
+    ``parameters`` maps all twelve names to values (and the four extensions
+    of SPEC §6 when the model has them or one is known); ``model`` holds the
+    model's extension groups; ``details`` adds unit,
     bounds, fixed/derived flags and standard error; ``history`` has one dict
     per generation.
     """
@@ -81,10 +83,12 @@ class IdentificationResult:
     modal: dict | None = None
     dataset: str = ""
     maps: SensitivityMaps | None = None
+    model: dict = field(default_factory=lambda: {"extensions": []})
 
     def to_dict(self) -> dict:
         return {
             "parameters": self.details,
+            "model": self.model,
             "known": self.known,
             "cost": self.cost,
             "cost_definition": "equal-weight sum over runs of the per-channel energy-normalised squared error "
@@ -120,10 +124,36 @@ def write_history(history, path):
     Path(path).write_text("\n".join(lines) + "\n")
 
 
+#: ``--model`` choices handled here (SPEC §6)
+MODELS = ("base", "full")
+
+
+def model_extensions(ds: Dataset, model=None) -> tuple[str, ...]:
+    """Extension groups of the model to fit.
+
+    ``model``: ``None`` (the dataset's ``[model] extensions``, else the
+    twelve), ``"base"`` (the twelve), ``"full"`` (every group), or a sequence
+    of group names.
+    """
+    if model is None:
+        return tuple(ds.manifest.extensions or ())
+    if isinstance(model, str):
+        if model == "base":
+            return ()
+        if model == "full":
+            return tuple(GROUPS)
+        raise ArgumentError(f"--model must be one of {', '.join(MODELS)}, got {model!r}")
+    groups = tuple(model)
+    for g in groups:
+        if g not in GROUPS:
+            raise ArgumentError(f"unknown extension group '{g}'; groups are: {', '.join(GROUPS)}")
+    return tuple(g for g in GROUPS if g in groups)
+
+
 def identify(ds: Dataset, *, seed: int | None = None, population: int = DEFAULT_POPULATION,
              generations: int = DEFAULT_GENERATIONS, weights: str = "adaptive", polish: bool = True,
              spread_tol: float | None = None, progress=None, cost: CostFunction | None = None,
-             maps: SensitivityMaps | None = None) -> IdentificationResult:
+             maps: SensitivityMaps | None = None, model=None) -> IdentificationResult:
     """Estimate the ride parameters of a dataset.
 
     Parameters
@@ -148,6 +178,12 @@ def identify(ds: Dataset, *, seed: int | None = None, population: int = DEFAULT_
         Reuse an existing cost function of ``ds`` (its weights are reset).
     maps : SensitivityMaps, optional
         Reuse parameter -> track maps (default: computed around the nominal car).
+    model : {None, "base", "full"} or sequence of group names
+        The model (SPEC §6): the twelve (``"base"``), with every extension
+        group (``"full"``), or the given groups; ``None``: the dataset's
+        ``[model]``, else the twelve. Ignored when ``cost`` is given (its
+        parameter space decides). Known extension values are held fixed and
+        used whatever the model.
 
     Returns
     -------
@@ -155,10 +191,11 @@ def identify(ds: Dataset, *, seed: int | None = None, population: int = DEFAULT_
     """
     with single_threaded_blas():
         return _identify(ds, seed=seed, population=population, generations=generations, weights=weights,
-                         polish=polish, spread_tol=spread_tol, progress=progress, cost=cost, maps=maps)
+                         polish=polish, spread_tol=spread_tol, progress=progress, cost=cost, maps=maps,
+                         model=model)
 
 
-def _identify(ds, *, seed, population, generations, weights, polish, spread_tol, progress, cost, maps):
+def _identify(ds, *, seed, population, generations, weights, polish, spread_tol, progress, cost, maps, model):
     if spread_tol is None:
         spread_tol = DEFAULT_SPREAD_TOL if polish else DEFAULT_SPREAD_TOL_NO_POLISH
     if weights not in ("adaptive", "fixed"):
@@ -166,7 +203,7 @@ def _identify(ds, *, seed, population, generations, weights, polish, spread_tol,
     if not isinstance(generations, int) or generations < 1:
         raise ArgumentError(f"generations must be a positive integer, got {generations!r}")
     t0 = time.perf_counter()
-    cf = cost or CostFunction(ds)
+    cf = cost or CostFunction(ds, extensions=model_extensions(ds, model))
     cf.set_weights(np.ones(len(cf.run_ids)))
     space = cf.space
     if maps is None:
@@ -233,7 +270,7 @@ def _identify(ds, *, seed, population, generations, weights, polish, spread_tol,
     wall = time.perf_counter() - t0
 
     details = {}
-    for n in NAMES:
+    for n in space.reported_names:
         d = {"value": float(P[INDEX[n]]), "unit": UNITS[n], "fixed": n in space.fixed,
              "derived": n == space.derived}
         if n in cf.names:
@@ -247,12 +284,12 @@ def _identify(ds, *, seed, population, generations, weights, polish, spread_tol,
             d["std"] = 0.0
         details[n] = d
     return IdentificationResult(
-        parameters={n: float(P[INDEX[n]]) for n in NAMES}, details=details, known=dict(ds.known),
+        parameters={n: float(P[INDEX[n]]) for n in space.reported_names}, details=details, known=dict(ds.known),
         cost=float(equal @ final_E), generations=solver.nit, evaluations=cf.nfev, wall_time_s=wall,
         seed=seed, track_weights={rid: float(w[r]) for r, rid in enumerate(cf.run_ids)},
         weights_mode=weights, polish=polish_info, stop=stop, history=history,
         modal=modal_summary(P, ds.geometry), dataset=str(ds.path), maps=maps,
-        preprocessing=ds.preprocessing())
+        preprocessing=ds.preprocessing(), model={"extensions": list(space.extensions)})
 
 
 def _polish(cf: CostFunction, x0, weights, align=None):

@@ -29,7 +29,7 @@ import numpy as np
 
 from ..model.batch import BatchSimulator
 from ..model.equations import CHANNEL_KIND, CHANNELS
-from ..model.params import NAMES, Geometry
+from ..model.params import ALL_NAMES, Geometry
 
 STEP = 0.25
 P2R_STARS = (1.0, 5.0, 15.0)
@@ -53,7 +53,7 @@ class SensitivityMaps:
     S_bar: np.ndarray    # (p, c)
     R: np.ndarray        # (c, r)
     M: np.ndarray        # (p, r), rows sum to 1
-    baseline: np.ndarray  # (12,)
+    baseline: np.ndarray  # (12,) or (16,) with the extensions
 
     def submap(self, names) -> np.ndarray:
         """Rows of ``M`` for the given parameter names."""
@@ -61,14 +61,17 @@ class SensitivityMaps:
 
 
 def compute_maps(sim: BatchSimulator, geom: Geometry, baseline, run_ids, channel_mask=None) -> SensitivityMaps:
-    """Compute the three maps around ``baseline`` (12 parameters).
+    """Compute the three maps around ``baseline`` (12 parameters, or 16 with the extensions of SPEC §6).
 
     ``channel_mask`` (n_runs, 10) bool marks the channels measured per run
-    (default: all).
+    (default: all). An extension at 0 in the baseline is raised from 0 to
+    nothing and gets an all-zero row: give the baseline a typical value
+    (:data:`rideid.model.params.NOMINAL_EXTENSIONS`).
     """
-    base = np.asarray(baseline, dtype=float).reshape(12)
-    P = np.tile(base, (13, 1))
-    for i, n in enumerate(NAMES):
+    base = np.asarray(baseline, dtype=float).reshape(-1)
+    names = ALL_NAMES[:base.size]
+    P = np.tile(base, (base.size + 1, 1))
+    for i, n in enumerate(names):
         v = base[i] * (1 + STEP)
         if n == "a":
             v = min(v, 0.95 * geom.wheelbase)
@@ -77,7 +80,7 @@ def compute_maps(sim: BatchSimulator, geom: Geometry, baseline, run_ids, channel
     n_runs = len(outs)
     if channel_mask is None:
         channel_mask = np.ones((n_runs, len(CHANNELS)), bool)
-    peaks = np.stack([np.abs(o).max(axis=1) for o in outs], axis=-1)  # (13, c, r)
+    peaks = np.stack([np.abs(o).max(axis=1) for o in outs], axis=-1)  # (1 + p, c, r)
     rms = np.stack([np.sqrt(np.mean(o[0] ** 2, axis=0)) for o in outs], axis=-1)  # (c, r)
     excited = np.zeros((len(CHANNELS), n_runs), bool)
     for ci, c in enumerate(CHANNELS):
@@ -96,7 +99,7 @@ def compute_maps(sim: BatchSimulator, geom: Geometry, baseline, run_ids, channel
     M = S_bar @ R
     rs = M.sum(axis=1, keepdims=True)
     M = np.divide(M, rs, out=np.full_like(M, 1.0 / n_runs), where=rs > 0)
-    return SensitivityMaps(list(NAMES), list(CHANNELS), list(run_ids), S, S_bar, R, M, base)
+    return SensitivityMaps(list(names), list(CHANNELS), list(run_ids), S, S_bar, R, M, base)
 
 
 def normalised_spread(X) -> np.ndarray:

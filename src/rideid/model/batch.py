@@ -1,7 +1,8 @@
 """Batched simulation of many candidate cars over many runs.
 
 :class:`BatchSimulator` owns the parameter-independent data of a set of runs
-(packed once) and evaluates a population ``P`` of shape ``(n_pop, 12)``
+(packed once) and evaluates a population ``P`` of shape ``(n_pop, 12)`` or
+``(n_pop, 16)`` (with the extensions of SPEC §6)
 either to simulated channels or to per-run weighted squared errors, through
 the compiled kernel (:mod:`rideid.kernel`) or the plain NumPy reference
 (:func:`rideid.simulate.simulate_reference`).
@@ -48,9 +49,11 @@ class BatchSimulator:
         self.run_start = np.concatenate([[0], np.cumsum(lens)]).astype(np.int64)
         T = int(self.run_start[-1])
         self.UD = np.zeros((T, 4))
+        self.RD = np.zeros((T, 4))
         self.MU = np.zeros((T, 4, N_MAX))
         for r, s in zip(self.runs, self.run_start[:-1]):
             self.UD[s:s + r.n] = r.ud
+            self.RD[s:s + r.n] = r.rated
             self.MU[s:s + r.n - 1] = r.mu
         self.n_samples = T
 
@@ -77,8 +80,8 @@ class BatchSimulator:
             return np.ascontiguousarray(np.stack([np.moveaxis(a, 0, -1) for a in arrs]))
 
         packed = dict(
-            Phi_s=stack("Phi_s"), G_s=stack("G_s", 1), Ca_s=stack("Ca_s"), Da_s=stack("Da_s"),
-            Phi_a=stack("Phi_a"), G_a=stack("G_a", 1), Ca_a=stack("Ca_a"), Da_a=stack("Da_a"),
+            Phi_s=stack("Phi_s"), G_s=stack("G_s", 1), Ca_s=stack("Ca_s"), Da_s=stack("Da_s"), Dr_s=stack("Dr_s"),
+            Phi_a=stack("Phi_a"), G_a=stack("G_a", 1), Ca_a=stack("Ca_a"), Da_a=stack("Da_a"), Dr_a=stack("Dr_a"),
             nterms=nt,
         )
         X0s = np.zeros((len(self.runs), 8, n))
@@ -100,10 +103,10 @@ class BatchSimulator:
             P, pk, X0s, X0a, a, b = self._pack(P)
         n = P.shape[0]
         out = np.zeros((self.n_samples, 10, n) if mode == 1 else (1, 10, 1))
-        err = kernel.run_kernel(pk["Phi_s"], pk["G_s"], pk["Ca_s"], pk["Da_s"],
-                                pk["Phi_a"], pk["G_a"], pk["Ca_a"], pk["Da_a"], pk["nterms"],
+        err = kernel.run_kernel(pk["Phi_s"], pk["G_s"], pk["Ca_s"], pk["Da_s"], pk["Dr_s"],
+                                pk["Phi_a"], pk["G_a"], pk["Ca_a"], pk["Da_a"], pk["Dr_a"], pk["nterms"],
                                 a, b, self.geom.track_front / 2, self.geom.track_rear / 2,
-                                X0s, X0a, self.run_start, self.run_group, self.UD, self.MU,
+                                X0s, X0a, self.run_start, self.run_group, self.UD, self.RD, self.MU,
                                 Y, W, mode, out)
         return err[:, :n0], (out[:, :, :n0] if mode == 1 else out)
 

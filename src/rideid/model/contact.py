@@ -154,6 +154,7 @@ def envelope_grid(path: WheelPath, R: float, dx: float = 5e-4, n_fine: int = 9):
         # refine: exact profile on +-1 lattice step around the best offset
         t = np.linspace(-1.0, 1.0, n_fine)
         vals = np.empty(n)
+        contact = np.zeros(n)  # contact offset s - x of each grid point (for the slope)
         chunk = 65536
         for a in range(0, n, chunk):
             b = min(n, a + chunk)
@@ -168,8 +169,11 @@ def envelope_grid(path: WheelPath, R: float, dx: float = 5e-4, n_fine: int = 9):
             ok = (den < 0) & (np.abs(delta) <= 1)
             s = np.clip(d[rows, k] + np.where(ok, delta, 0.0) * (d[rows, k + 1] - d[rows, k]), -R, R)
             fr = path.h(xg[a:b] + s) + np.sqrt(np.maximum(R * R - s * s, 0.0))
-            vals[a:b] = np.maximum(np.maximum(f.max(axis=1), fr), best[a:b]) - R
+            fmax = f.max(axis=1)
+            vals[a:b] = np.maximum(np.maximum(fmax, fr), best[a:b]) - R
+            contact[a:b] = np.where(ok & (fr >= fmax), s, d[rows, np.argmax(f, axis=1)])
         res = (lo, dx, vals)
+        path._env_cache[key + ("contact",)] = contact
     path._env_cache[key] = res
     return res
 
@@ -179,6 +183,49 @@ def wheel_input(path: WheelPath, x, R: float, dx: float = 5e-4):
     x0, step, vals = envelope_grid(path, R, dx)
     xg = x0 + step * np.arange(vals.size)
     return np.interp(x, xg, vals, left=0.0, right=0.0)
+
+
+def wheel_input_slope(path: WheelPath, x, R: float, dx: float = 5e-4):
+    """Slope ``dr/dx`` of the envelope input at positions ``x`` (dimensionless).
+
+    From the contact geometry: a disc touching the road at offset ``d = s - x``
+    from its centre has ``dr/dx = d / sqrt(R^2 - d^2)`` (envelope theorem).
+    Between two grid points on the same contact branch the slopes are
+    interpolated linearly (second order); where the contact point jumps
+    between them (the envelope's slope kinks: a concave corner, a bridged
+    trough) the branch that is higher at ``x`` is the contact, and its own
+    slope is used, so a kink is resolved exactly, as the height's kinks are
+    in the input moments.
+    """
+    x = np.asarray(x, dtype=float)
+    x0, step, vals = envelope_grid(path, R, dx)
+    out = np.zeros_like(x)
+    if vals.size < 3:
+        return out
+    off = path._env_cache[(float(R), float(dx), "contact")]
+    pos = (x - x0) / step
+    inside = (pos >= 0) & (pos <= vals.size - 1)
+    p = pos[inside]
+    j = np.minimum(np.floor(p).astype(np.int64), vals.size - 2)
+    w = p - j
+    d0, d1 = off[j], off[j + 1]
+    s0, s1 = d0 / np.sqrt(R * R - d0 * d0), d1 / np.sqrt(R * R - d1 * d1)
+    smooth = s0 + w * (s1 - s0)
+    # contact jump between the grid points: pick the higher circle at x
+    xs = x[inside]
+    xj = x0 + step * j
+    c0, c1 = xj + d0, xj + step + d1  # contact points (absolute)
+    jump = np.abs(c1 - c0) > 4 * step
+    if jump.any():
+        h0 = vals[j] + R - np.sqrt(R * R - d0 * d0)  # road height at the contact points
+        h1 = vals[j + 1] + R - np.sqrt(R * R - d1 * d1)
+        e0, e1 = c0 - xs, c1 - xs
+        v0 = h0 + np.sqrt(np.maximum(R * R - e0 * e0, 0.0))
+        v1 = h1 + np.sqrt(np.maximum(R * R - e1 * e1, 0.0))
+        e = np.clip(np.where(v0 >= v1, e0, e1), -0.999 * R, 0.999 * R)
+        smooth = np.where(jump, e / np.sqrt(R * R - e * e), smooth)
+    out[inside] = smooth
+    return out
 
 
 def contact_ode(path: WheelPath, R: float, speed: float, t, x0: float = 0.0,

@@ -18,6 +18,20 @@ once per dataset (by fine quadrature of the envelope, :mod:`rideid.simulate`);
 the matrices ``G_n`` depend only on the candidate. The series converges like
 ``rho^n / n!`` with ``rho = h/2 max|eig(A)|``; :func:`n_terms` picks the
 length for a relative truncation error below ``tol`` (1e-11).
+
+Tire damping (SPEC §6) brings the road input's rate in:
+``x' = A x + B u + Br u'``. The rate is never integrated (the envelope's
+slope has kinks, its derivative would be impulses): the shifted state
+``xi = x - Br u`` obeys
+
+    xi' = A xi + (A Br + B) u ,
+
+so the moment scheme above stays exact with ``B~ = A Br + B``. The outputs
+(accelerations ``Ca x + Da u + Dr u'``) become ``Ca xi + (Ca Br + Da) u +
+Dr u'``: the rate enters only at the sample instants, as the direct
+feedthrough ``c_t u' / m_u`` into the wheel accelerations. Velocities of the
+body (pitch and roll rate) are unshifted (``Br`` acts on wheel velocities
+only). Without tire damping ``Br = 0`` and nothing changes.
 """
 
 from __future__ import annotations
@@ -80,27 +94,36 @@ def discretize_block(A, B, h: float, nterms: int | None = None, tol: float = 1e-
 class Discretized:
     """Per-candidate discrete matrices of both blocks at one sample rate.
 
+    The states are the shifted states ``xi = x - Br u`` (see the module
+    docstring; ``xi = x`` without tire damping).
+
     Attributes (candidate axis first)
     ---------------------------------
-    Phi_s (n, 8, 8), G_s (N, n, 8, 2), Ca_s (n, 4, 8), Da_s (n, 4, 2):
-        symmetric block; ``Ca_s, Da_s`` give the accelerations
-        ``[z'', theta'', zf_s'', zr_s'']``.
-    Phi_a (n, 6, 6), G_a (N, n, 6, 2), Ca_a (n, 3, 6), Da_a (n, 3, 2):
+    Phi_s (n, 8, 8), G_s (N, n, 8, 2), Ca_s (n, 4, 8), Da_s (n, 4, 2), Dr_s (n, 4, 2):
+        symmetric block; the accelerations ``[z'', theta'', zf_s'', zr_s'']``
+        are ``Ca_s xi + Da_s u + Dr_s u'``.
+    Phi_a (n, 6, 6), G_a (N, n, 6, 2), Ca_a (n, 3, 6), Da_a (n, 3, 2), Dr_a (n, 3, 2):
         antisymmetric block; accelerations ``[phi'', zf_a'', zr_a'']``.
+    Bt_s, Bt_a : the input matrices ``A Br + B`` of the shifted states;
+    Brs, Bra : the rate input matrices ``Br`` (``x = xi + Br u``).
     """
 
     def __init__(self, P, geom, h: float, nterms: int | None = None, tol: float = 1e-11):
         bl = blocks(P, geom)
         self.As, self.Bs, self.Aa, self.Ba = bl["As"], bl["Bs"], bl["Aa"], bl["Ba"]
+        self.Brs, self.Bra = bl["Brs"], bl["Bra"]
+        self.Bt_s = self.As @ self.Brs + self.Bs
+        self.Bt_a = self.Aa @ self.Bra + self.Ba
         if nterms is None:
             rho = max(float(spectral_radius(self.As).max()), float(spectral_radius(self.Aa).max())) * h / 2
             nterms = n_terms(rho, tol)
         self.h = h
         self.N = nterms
-        self.Phi_s, self.G_s, _ = discretize_block(self.As, self.Bs, h, nterms)
-        self.Phi_a, self.G_a, _ = discretize_block(self.Aa, self.Ba, h, nterms)
-        self.Ca_s, self.Da_s = self.As[:, 4:, :], self.Bs[:, 4:, :]
-        self.Ca_a, self.Da_a = self.Aa[:, 3:, :], self.Ba[:, 3:, :]
+        self.Phi_s, self.G_s, _ = discretize_block(self.As, self.Bt_s, h, nterms)
+        self.Phi_a, self.G_a, _ = discretize_block(self.Aa, self.Bt_a, h, nterms)
+        self.Ca_s, self.Ca_a = self.As[:, 4:, :], self.Aa[:, 3:, :]
+        self.Da_s, self.Da_a = self.Bt_s[:, 4:, :], self.Bt_a[:, 3:, :]  # = Ca Br + Da (Br has no position rows)
+        self.Dr_s, self.Dr_a = self.Brs[:, 4:, :], self.Bra[:, 3:, :]
 
 
 def gauss_nodes(n_panels: int, order: int = 2):

@@ -12,11 +12,19 @@ relative to the CG; the body moves there by ``z_bi = G_i q_b`` with
     I_xx ph'' =  sum y_i F_i
     m_u z_i'' = -F_i + k_t (r_i - z_i)
 
-Written as ``M q'' + C q' + K q = Bf r`` with ``K = sum k_i e_i e_i^T +
+Written as ``M q'' + C q' + K q = Bf r + Bd r'`` with ``K = sum k_i e_i e_i^T +
 diag(0,0,0,k_t)``, ``e_i = [-G_i, unit_i]``; the same form for ``C``.
 
-State ``x = [q, q']`` (14), ``x' = A x + B r``. Outputs (SPEC channel order,
-:data:`CHANNELS`) ``y = Cy x + Dy r``.
+Extensions (SPEC §6, 0 when absent). An anti-roll bar of rate ``k_ar`` on the
+axle with corners ``i, j`` adds ``k_ar (d_i - d_j)`` to ``F_i`` (``d_i = e_i q``
+the suspension deflection), i.e. ``K += k_ar (e_i - e_j)(e_i - e_j)^T``: heave
+(``d_i = d_j``) leaves it unloaded, in roll the axle's roll stiffness is
+``(k_s + 2 k_ar) track^2 / 2``. Tire damping ``c_t`` adds ``c_t`` to ``C`` at
+the wheel and the road-rate input ``Bd r'`` (``Bd = diag(c_t)`` on the wheels).
+
+State ``x = [q, q']`` (14), ``x' = A x + B r + Br r'``. Outputs (SPEC channel
+order, :data:`CHANNELS`) ``y = Cy x + Dy r + Dyr r'`` (:func:`state_space`,
+:func:`rate_input`).
 
 With equal left/right parameters the model splits exactly into a symmetric
 part (heave, pitch and the in-phase wheel motions, 8 states) and an
@@ -29,7 +37,7 @@ from __future__ import annotations
 import numpy as np
 import scipy.linalg
 
-from .params import INDEX, Geometry, NAMES
+from .params import ALL_NAMES, INDEX, Geometry, NAMES, full_rows
 
 CHANNELS: tuple[str, ...] = (
     "body_az_fl", "body_az_fr", "body_az_rl", "body_az_rr",
@@ -63,8 +71,19 @@ CORNER_TO_DECOMPOSED = np.linalg.inv(_TR)
 
 
 def _cols(P):
-    P = np.atleast_2d(np.asarray(P, dtype=float))
-    return {n: P[:, i] for i, n in enumerate(NAMES)}, P.shape[0]
+    P = full_rows(P)
+    return {n: P[:, i] for i, n in enumerate(ALL_NAMES)}, P.shape[0]
+
+
+def _corner_vectors(p, n, geom):
+    """Rows ``e_i = [-G_i, unit_i]`` (n, 4, 7): ``d_i = e_i q`` is corner i's deflection."""
+    x, y = geom.corner_xy(p["a"])
+    E = np.zeros((n, 4, 7))
+    E[:, :, 0] = -1.0
+    E[:, :, 1] = x
+    E[:, :, 2] = -y
+    E[:, np.arange(4), 3 + np.arange(4)] = 1.0
+    return E
 
 
 def mck(P, geom: Geometry):
@@ -72,8 +91,10 @@ def mck(P, geom: Geometry):
 
     Parameters
     ----------
-    P : array_like, shape (n, 12)
-        Parameter rows in :data:`rideid.params.NAMES` order.
+    P : array_like, shape (n, 12) or (n, 16)
+        Parameter rows in :data:`rideid.model.params.NAMES` order, optionally
+        followed by the extensions (:data:`rideid.model.params.EXT_NAMES`;
+        absent means 0).
     geom : Geometry
 
     Returns
@@ -83,19 +104,20 @@ def mck(P, geom: Geometry):
         Generalised force per unit road input (tire springs).
     """
     p, n = _cols(P)
-    x, y = geom.corner_xy(p["a"])
     ks = np.stack([p["k_sf"], p["k_sf"], p["k_sr"], p["k_sr"]], -1)
     cs = np.stack([p["c_sf"], p["c_sf"], p["c_sr"], p["c_sr"]], -1)
     kt = np.stack([p["k_tf"], p["k_tf"], p["k_tr"], p["k_tr"]], -1)
+    ct = np.stack([p["c_tf"], p["c_tf"], p["c_tr"], p["c_tr"]], -1)
     mu = np.stack([p["m_uf"], p["m_uf"], p["m_ur"], p["m_ur"]], -1)
-    E = np.zeros((n, 4, 7))  # e_i rows
-    E[:, :, 0] = -1.0
-    E[:, :, 1] = x
-    E[:, :, 2] = -y
-    E[:, np.arange(4), 3 + np.arange(4)] = 1.0
+    E = _corner_vectors(p, n, geom)
     K = np.einsum("nij,ni,nik->njk", E, ks, E)
     C = np.einsum("nij,ni,nik->njk", E, cs, E)
+    # anti-roll bars: k_ar (e_i - e_j)(e_i - e_j)^T per axle
+    for (i, j), kar in (((0, 1), p["k_arf"]), ((2, 3), p["k_arr"])):
+        De = E[:, i] - E[:, j]
+        K += kar[:, None, None] * De[:, :, None] * De[:, None, :]
     K[:, 3 + np.arange(4), 3 + np.arange(4)] += kt
+    C[:, 3 + np.arange(4), 3 + np.arange(4)] += ct
     M = np.zeros((n, 7, 7))
     M[:, 0, 0] = p["m_s"]
     M[:, 1, 1] = p["I_yy"]
@@ -104,6 +126,18 @@ def mck(P, geom: Geometry):
     Bf = np.zeros((n, 7, 4))
     Bf[:, 3 + np.arange(4), np.arange(4)] = kt
     return M, C, K, Bf
+
+
+def rate_input(P, geom: Geometry):
+    """Generalised force per unit road-input rate (tire dampers), shape (n, 7, 4).
+
+    Zero without tire damping.
+    """
+    p, n = _cols(P)
+    Bd = np.zeros((n, 7, 4))
+    ct = np.stack([p["c_tf"], p["c_tf"], p["c_tr"], p["c_tr"]], -1)
+    Bd[:, 3 + np.arange(4), np.arange(4)] = ct
+    return Bd
 
 
 def _state_space(M, C, K, Bf):
@@ -119,41 +153,56 @@ def _state_space(M, C, K, Bf):
     return A, B
 
 
-def state_space(P, geom: Geometry):
+def _output_rows(acc, x, y, n):
+    """Ten channels' rows from generalised-acceleration rows ``acc`` (n, 7, k)."""
+    out = np.zeros((n, 10, acc.shape[-1]))
+    for i in range(4):
+        g = np.stack([np.ones(n), -x[:, i], y[:, i]], -1)  # (n, 3)
+        out[:, i] = np.einsum("nk,nkj->nj", g, acc[:, :3])
+        out[:, 4 + i] = acc[:, 3 + i]
+    return out
+
+
+def state_space(P, geom: Geometry, rate: bool = False):
     """Full 14-state model with the ten SPEC output channels.
+
+    ``x' = A x + B r + Br r'``, ``y = Cy x + Dy r + Dyr r'``.
 
     Returns
     -------
     A : (n, 14, 14), B : (n, 14, 4), Cy : (n, 10, 14), Dy : (n, 10, 4)
+        and, with ``rate``, also ``Br : (n, 14, 4)``, ``Dyr : (n, 10, 4)``
+        (zero without tire damping).
     """
     M, C, K, Bf = mck(P, geom)
     A, B = _state_space(M, C, K, Bf)
     p, n = _cols(P)
     x, y = geom.corner_xy(p["a"])
-    Cy = np.zeros((n, 10, 14))
-    Dy = np.zeros((n, 10, 4))
-    acc_A, acc_B = A[:, 7:, :], B[:, 7:, :]
-    for i in range(4):
-        g = np.stack([np.ones(n), -x[:, i], y[:, i]], -1)  # (n, 3)
-        Cy[:, i] = np.einsum("nk,nkj->nj", g, acc_A[:, :3])
-        Dy[:, i] = np.einsum("nk,nkj->nj", g, acc_B[:, :3])
-        Cy[:, 4 + i] = acc_A[:, 3 + i]
-        Dy[:, 4 + i] = acc_B[:, 3 + i]
+    Cy = _output_rows(A[:, 7:, :], x, y, n)
+    Dy = _output_rows(B[:, 7:, :], x, y, n)
     Cy[:, 8, 7 + 1] = 1.0  # pitch rate
     Cy[:, 9, 7 + 2] = 1.0  # roll rate
-    return A, B, Cy, Dy
+    if not rate:
+        return A, B, Cy, Dy
+    _, Br = _state_space(M, C, K, rate_input(P, geom))
+    Dyr = _output_rows(Br[:, 7:, :], x, y, n)
+    return A, B, Cy, Dy, Br, Dyr
 
 
-def decomposed_mck(P, geom: Geometry):
-    """``M, C, K, Bf`` in the symmetric/antisymmetric coordinates.
+def decomposed_mck(P, geom: Geometry, rate: bool = False):
+    """``M, C, K, Bf`` (and with ``rate`` also ``Bd``) in the symmetric/antisymmetric coordinates.
 
     Exact congruence ``T^T M T`` etc.; the off-diagonal blocks vanish
-    because left and right share parameters (tested).
+    because left and right share parameters (tested). The anti-roll bars
+    enter only the antisymmetric block.
     """
     M, C, K, Bf = mck(P, geom)
     T = _T
     f = lambda X: T.T @ X @ T  # noqa: E731
-    return f(M), f(C), f(K), T.T @ Bf @ _TR
+    out = (f(M), f(C), f(K), T.T @ Bf @ _TR)
+    if rate:
+        out += (T.T @ rate_input(P, geom) @ _TR,)
+    return out
 
 
 def blocks(P, geom: Geometry):
@@ -162,17 +211,20 @@ def blocks(P, geom: Geometry):
     Returns
     -------
     dict with
-      ``As`` (n, 8, 8), ``Bs`` (n, 8, 2): states ``[z, theta, zf_s, zr_s, rates]``,
-      inputs ``[rf_s, rr_s]``;
-      ``Aa`` (n, 6, 6), ``Ba`` (n, 6, 2): states ``[phi, zf_a, zr_a, rates]``,
-      inputs ``[rf_a, rr_a]``.
+      ``As`` (n, 8, 8), ``Bs`` (n, 8, 2), ``Brs`` (n, 8, 2): states
+      ``[z, theta, zf_s, zr_s, rates]``, inputs ``[rf_s, rr_s]`` and their rates;
+      ``Aa`` (n, 6, 6), ``Ba`` (n, 6, 2), ``Bra`` (n, 6, 2): states
+      ``[phi, zf_a, zr_a, rates]``, inputs ``[rf_a, rr_a]`` and their rates.
+      ``x' = A x + B u + Br u'``; ``Br`` is zero without tire damping.
     """
-    M, C, K, Bf = decomposed_mck(P, geom)
+    M, C, K, Bf, Bd = decomposed_mck(P, geom, rate=True)
     s, a = np.arange(4), np.arange(4, 7)
     sel = lambda X, r, c: X[:, r][:, :, c]  # noqa: E731
     As, Bs = _state_space(sel(M, s, s), sel(C, s, s), sel(K, s, s), sel(Bf, s, np.arange(2)))
     Aa, Ba = _state_space(sel(M, a, a), sel(C, a, a), sel(K, a, a), sel(Bf, a, np.arange(2, 4)))
-    return {"As": As, "Bs": Bs, "Aa": Aa, "Ba": Ba}
+    _, Brs = _state_space(sel(M, s, s), sel(C, s, s), sel(K, s, s), sel(Bd, s, np.arange(2)))
+    _, Bra = _state_space(sel(M, a, a), sel(C, a, a), sel(K, a, a), sel(Bd, a, np.arange(2, 4)))
+    return {"As": As, "Bs": Bs, "Aa": Aa, "Ba": Ba, "Brs": Brs, "Bra": Bra}
 
 
 def static_state(A, B, u0):
@@ -243,7 +295,7 @@ def modal_summary(params, geom: Geometry) -> dict[str, dict[str, float]]:
 
     Parameters
     ----------
-    params : array_like, shape (12,) or dict
+    params : array_like, shape (12,) or (16,), or dict (absent extensions 0)
     geom : Geometry
 
     Returns
@@ -256,8 +308,8 @@ def modal_summary(params, geom: Geometry) -> dict[str, dict[str, float]]:
         frequency and the modal damping estimate are given.
     """
     if isinstance(params, dict):
-        params = [params[n] for n in NAMES]
-    P = np.asarray(params, dtype=float).reshape(1, -1)
+        params = [params.get(n, 0.0) if n not in NAMES else params[n] for n in ALL_NAMES]
+    P = full_rows(np.asarray(params, dtype=float).reshape(1, -1))
     M, C, K, _ = decomposed_mck(P, geom)
     s, a = np.arange(4), np.arange(4, 7)
 
@@ -293,5 +345,5 @@ def format_modal_summary(summary) -> str:
     return "\n".join(lines)
 
 
-__all__ = ["CHANNELS", "mck", "state_space", "blocks", "modal_summary", "static_corner_loads",
+__all__ = ["CHANNELS", "mck", "rate_input", "state_space", "blocks", "modal_summary", "static_corner_loads",
            "static_state", "INDEX"]

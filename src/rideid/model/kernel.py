@@ -9,13 +9,16 @@ The same exact discretisation as :func:`rideid.simulate.simulate_reference`
 * the model is integrated as its symmetric (8 states, 2 inputs) and
   antisymmetric (6 states, 2 inputs) blocks;
 * road inputs enter through precomputed, parameter-independent moments;
+  with tire damping the states are shifted (``xi = x - Br u``, see
+  :mod:`rideid.model.discretize`) and the input rates enter the
+  accelerations at the samples only (``Dr u'``: 14 multiply-adds);
 * squared errors are accumulated on the fly: memory per candidate is
   O(states), never O(samples).
 
 Multiply-adds per sample and candidate, with ``N`` moment terms:
 state update ``8*8 + 6*6 = 100``, inputs ``(8*2 + 6*2) N = 28 N``,
-accelerations ``4*8 + 3*6 + (4 + 3)*2 = 64``, channels 12, errors 20:
-``196 + 28 N`` (``N = 8..10`` for realistic cars at 200 Hz: 420-476), against
+accelerations ``4*8 + 3*6 + (4 + 3)*2*2 = 78`` (with the rate feedthrough),
+channels 12, errors 20: ``210 + 28 N`` (``N = 8..10`` for realistic cars at 200 Hz: 420-476), against
 about 550 for the plain 14-state update with 10 outputs, which moreover
 assumes the input is linear between samples.
 """
@@ -48,11 +51,12 @@ def _channels(out, gs, ga, xs5, xa3, a, b, hf, hr, c):  # pragma: no cover - com
 
 
 @numba.njit(cache=True, fastmath=True, inline="always")
-def _accelerations(g, lC, lD, x, UD, k, u0, S, R):  # pragma: no cover - compiled
-    """g[i] = C[i] x + D[i] u_k for one block (S states, R acceleration rows)."""
+def _accelerations(g, lC, lD, lR, x, UD, RD, k, u0, S, R):  # pragma: no cover - compiled
+    """g[i] = C[i] x + D[i] u_k + Dr[i] u'_k for one block (S states, R acceleration rows)."""
     for i in range(R):
         for c in range(CHUNK):
-            g[i, c] = lD[i, 0, c] * UD[k, u0] + lD[i, 1, c] * UD[k, u0 + 1]
+            g[i, c] = (lD[i, 0, c] * UD[k, u0] + lD[i, 1, c] * UD[k, u0 + 1]
+                       + lR[i, 0, c] * RD[k, u0] + lR[i, 1, c] * RD[k, u0 + 1])
         for j in range(S):
             for c in range(CHUNK):
                 g[i, c] += lC[i, j, c] * x[j, c]
@@ -78,19 +82,19 @@ def _advance(x, nx, lP, lG, MU, k, u0, S, N):  # pragma: no cover - compiled
 
 
 @numba.njit(cache=True, parallel=True, fastmath=True)
-def run_kernel(Phi_s, G_s, Ca_s, Da_s, Phi_a, G_a, Ca_a, Da_a, nterms,
+def run_kernel(Phi_s, G_s, Ca_s, Da_s, Dr_s, Phi_a, G_a, Ca_a, Da_a, Dr_a, nterms,
                a_arr, b_arr, hf, hr,
-               X0_s, X0_a, run_start, run_group, UD, MU, Y, W,
+               X0_s, X0_a, run_start, run_group, UD, RD, MU, Y, W,
                mode, OUT):  # pragma: no cover - compiled
     """Simulate all runs for all candidates.
 
     Shapes (``n`` candidates last, ``g`` sample-rate groups, ``r`` runs,
     ``T`` total samples over all runs):
 
-    Phi_s (g, 8, 8, n), G_s (g, Nmax, 8, 2, n), Ca_s (g, 4, 8, n), Da_s (g, 4, 2, n),
-    Phi_a (g, 6, 6, n), G_a (g, Nmax, 6, 2, n), Ca_a (g, 3, 6, n), Da_a (g, 3, 2, n),
+    Phi_s (g, 8, 8, n), G_s (g, Nmax, 8, 2, n), Ca_s (g, 4, 8, n), Da_s (g, 4, 2, n), Dr_s (g, 4, 2, n),
+    Phi_a (g, 6, 6, n), G_a (g, Nmax, 6, 2, n), Ca_a (g, 3, 6, n), Da_a (g, 3, 2, n), Dr_a (g, 3, 2, n),
     nterms (g, n_chunks) int, a_arr/b_arr (n,), X0_s (r, 8, n), X0_a (r, 6, n),
-    run_start (r + 1,) int, run_group (r,) int, UD (T, 4), MU (T, 4, M), Y (T, 10),
+    run_start (r + 1,) int, run_group (r,) int, UD (T, 4), RD (T, 4) input rates, MU (T, 4, M), Y (T, 10),
     W (r, 10) channel weights (0 for a missing channel).
 
     ``n`` must be a multiple of :data:`CHUNK` (the caller pads).
@@ -118,10 +122,12 @@ def run_kernel(Phi_s, G_s, Ca_s, Da_s, Phi_a, G_a, Ca_a, Da_a, nterms,
         lGs = np.empty((N_MAX_K, 8, 2, m))
         lCs = np.empty((4, 8, m))
         lDs = np.empty((4, 2, m))
+        lRs = np.empty((4, 2, m))
         lPa = np.empty((6, 6, m))
         lGa = np.empty((N_MAX_K, 6, 2, m))
         lCa = np.empty((3, 6, m))
         lDa = np.empty((3, 2, m))
+        lRa = np.empty((3, 2, m))
         g_loaded = -1
         le = np.zeros(m)
         la = np.empty(m)
@@ -137,10 +143,12 @@ def run_kernel(Phi_s, G_s, Ca_s, Da_s, Phi_a, G_a, Ca_a, Da_a, nterms,
                 lGs[:N] = G_s[g, :N, :, :, c0:c1]
                 lCs[:, :, :] = Ca_s[g, :, :, c0:c1]
                 lDs[:, :, :] = Da_s[g, :, :, c0:c1]
+                lRs[:, :, :] = Dr_s[g, :, :, c0:c1]
                 lPa[:, :, :] = Phi_a[g, :, :, c0:c1]
                 lGa[:N] = G_a[g, :N, :, :, c0:c1]
                 lCa[:, :, :] = Ca_a[g, :, :, c0:c1]
                 lDa[:, :, :] = Da_a[g, :, :, c0:c1]
+                lRa[:, :, :] = Dr_a[g, :, :, c0:c1]
                 g_loaded = g
             for i in range(8):
                 for c in range(CHUNK):
@@ -156,8 +164,8 @@ def run_kernel(Phi_s, G_s, Ca_s, Da_s, Phi_a, G_a, Ca_a, Da_a, nterms,
                 le[c] = 0.0
             for k in range(k0, k1):
                 # outputs at sample k
-                _accelerations(gs, lCs, lDs, xs, UD, k, 0, 8, 4)
-                _accelerations(ga, lCa, lDa, xa, UD, k, 2, 6, 3)
+                _accelerations(gs, lCs, lDs, lRs, xs, UD, RD, k, 0, 8, 4)
+                _accelerations(ga, lCa, lDa, lRa, xa, UD, RD, k, 2, 6, 3)
                 y0, y1, y2, y3, y4 = Y[k, 0], Y[k, 1], Y[k, 2], Y[k, 3], Y[k, 4]
                 y5, y6, y7, y8, y9 = Y[k, 5], Y[k, 6], Y[k, 7], Y[k, 8], Y[k, 9]
                 for c in range(CHUNK):
@@ -212,10 +220,11 @@ def compile_kernels() -> float:
     t = time.perf_counter()
     n = CHUNK
     f = np.zeros
-    run_kernel(f((1, 8, 8, n)), f((1, N_MAX_K, 8, 2, n)), f((1, 4, 8, n)), f((1, 4, 2, n)),
-               f((1, 6, 6, n)), f((1, N_MAX_K, 6, 2, n)), f((1, 3, 6, n)), f((1, 3, 2, n)),
+    run_kernel(f((1, 8, 8, n)), f((1, N_MAX_K, 8, 2, n)), f((1, 4, 8, n)), f((1, 4, 2, n)), f((1, 4, 2, n)),
+               f((1, 6, 6, n)), f((1, N_MAX_K, 6, 2, n)), f((1, 3, 6, n)), f((1, 3, 2, n)), f((1, 3, 2, n)),
                np.ones((1, 1), dtype=np.int64), f(n), f(n), 0.7, 0.7, f((1, 8, n)), f((1, 6, n)),
-               np.array([0, 2], dtype=np.int64), np.zeros(1, dtype=np.int64), f((2, 4)), f((2, 4, N_MAX_K)),
+               np.array([0, 2], dtype=np.int64), np.zeros(1, dtype=np.int64), f((2, 4)), f((2, 4)),
+               f((2, 4, N_MAX_K)),
                f((2, 10)), f((1, 10)), 0, f((1, 10, 1)))
     _lattice_max(f(4), f(2))
     return time.perf_counter() - t

@@ -1,7 +1,10 @@
-"""The twelve ride parameters, the known geometry and the built-in car.
+"""The ride parameters, the known geometry and the built-in car.
 
-Parameter vectors are always in :data:`NAMES` order; a batch of candidates is
-an array of shape ``(n_pop, 12)``.
+Parameter vectors are in :data:`NAMES` order (the twelve of SPEC §1), a batch
+of candidates an array of shape ``(n_pop, 12)``. The model extensions of
+SPEC §6 (anti-roll bars, tire damping; groups :data:`GROUPS`) follow as
+columns 12-15 (:data:`ALL_NAMES`): model functions accept rows of 12 or 16
+(absent extensions are 0, :func:`full_rows`).
 """
 
 from __future__ import annotations
@@ -20,7 +23,20 @@ NAMES: tuple[str, ...] = (
     "c_sf", "c_sr",
     "k_tf", "k_tr",
 )
-INDEX = {n: i for i, n in enumerate(NAMES)}
+
+#: Optional extension parameters of SPEC §6 (absent means 0), by group.
+GROUPS: dict[str, tuple[str, ...]] = {
+    "anti_roll_bars": ("k_arf", "k_arr"),
+    "tire_damping": ("c_tf", "c_tr"),
+}
+#: The four extension names, in column order after the twelve.
+EXT_NAMES: tuple[str, ...] = tuple(n for g in GROUPS.values() for n in g)
+#: All sixteen names: full parameter rows have these columns.
+ALL_NAMES: tuple[str, ...] = NAMES + EXT_NAMES
+#: Column of every name in a full (16-column) row; the twelve keep their columns.
+INDEX = {n: i for i, n in enumerate(ALL_NAMES)}
+#: Group of each extension parameter.
+GROUP_OF = {n: g for g, ns in GROUPS.items() for n in ns}
 
 UNITS = {
     "m_s": "kg", "I_xx": "kg m^2", "I_yy": "kg m^2", "a": "m",
@@ -28,6 +44,8 @@ UNITS = {
     "k_sf": "N/m", "k_sr": "N/m",
     "c_sf": "N s/m", "c_sr": "N s/m",
     "k_tf": "N/m", "k_tr": "N/m",
+    "k_arf": "N/m", "k_arr": "N/m",
+    "c_tf": "N s/m", "c_tr": "N s/m",
 }
 
 DESCRIPTIONS = {
@@ -43,6 +61,10 @@ DESCRIPTIONS = {
     "c_sr": "suspension damping at the wheel, one rear corner",
     "k_tf": "tire vertical stiffness, one front tire",
     "k_tr": "tire vertical stiffness, one rear tire",
+    "k_arf": "anti-roll bar rate at the wheel, front axle",
+    "k_arr": "anti-roll bar rate at the wheel, rear axle",
+    "c_tf": "tire vertical damping, one front tire",
+    "c_tr": "tire vertical damping, one rear tire",
 }
 
 #: Anchors accepted in ``[known]`` besides the twelve names.
@@ -66,7 +88,21 @@ DEFAULT_BOUNDS = {
     "c_sr": (300.0, 8.0e3),
     "k_tf": (8.0e4, 6.0e5),
     "k_tr": (8.0e4, 6.0e5),
+    # Extensions (SPEC §6). Bar rates at the wheel: 0 (no bar) to about three
+    # times a stiff wheel rate (sports cars and SUVs: 5-60 kN/m per axle).
+    # Tire damping: radial tires 50-500 N s/m (Gillespie ch. 5; Pacejka,
+    # *Tire and Vehicle Dynamics*, ch. 9), widened.
+    "k_arf": (0.0, 1.0e5),
+    "k_arr": (0.0, 1.0e5),
+    "c_tf": (0.0, 1.5e3),
+    "c_tr": (0.0, 1.5e3),
 }
+
+#: Typical extension values for the built-in car's size (a mid-size car with
+#: anti-roll bars and radial tires), scaled with the car like the rest of the
+#: nominal car: the reference point of sensitivity maps when the model has the
+#: extensions, never a starting guess.
+NOMINAL_EXTENSIONS = {"k_arf": 12000.0, "k_arr": 6000.0, "c_tf": 150.0, "c_tr": 150.0}
 
 GRAVITY = 9.81
 
@@ -121,24 +157,49 @@ def default_bounds(geometry: Geometry) -> dict[str, tuple[float, float]]:
     return out
 
 
-def as_vector(values: dict[str, float]) -> np.ndarray:
-    """Dict of the twelve parameters -> vector in :data:`NAMES` order."""
+def as_vector(values: dict[str, float], extended: bool = False) -> np.ndarray:
+    """Dict of parameters -> vector in :data:`NAMES` order.
+
+    The twelve must be present. With ``extended`` (or when the dict holds any
+    extension name) the vector has all sixteen columns (:data:`ALL_NAMES`),
+    absent extensions 0.
+    """
     missing = [n for n in NAMES if n not in values]
     if missing:
         raise DataError(f"parameters missing: {', '.join(missing)}")
+    if extended or any(n in values for n in EXT_NAMES):
+        return np.array([float(values.get(n, 0.0)) for n in ALL_NAMES])
     return np.array([float(values[n]) for n in NAMES])
 
 
-def check_parameters(P, geometry: Geometry, where: str = "parameters") -> np.ndarray:
-    """Validate a batch of parameter rows; returns it as ``(n, 12)`` float array."""
+def full_rows(P) -> np.ndarray:
+    """Parameter rows ``(n, 12)`` or ``(n, 16)`` -> ``(n, 16)``, absent extensions 0."""
     P = np.atleast_2d(np.asarray(P, dtype=float))
+    if P.shape[-1] == len(ALL_NAMES):
+        return P
     if P.shape[-1] != len(NAMES):
-        raise DataError(f"{where}: expected 12 parameters in order {', '.join(NAMES)}, got {P.shape[-1]}")
-    for i, n in enumerate(NAMES):
+        raise DataError(f"parameter rows must have 12 columns ({', '.join(NAMES)}) or 16 "
+                        f"(then {', '.join(EXT_NAMES)}), got {P.shape[-1]}")
+    return np.concatenate([P, np.zeros(P.shape[:-1] + (len(EXT_NAMES),))], axis=-1)
+
+
+def check_parameters(P, geometry: Geometry, where: str = "parameters") -> np.ndarray:
+    """Validate a batch of parameter rows; returns it as an ``(n, 12)`` or ``(n, 16)`` float array.
+
+    The twelve must be positive (``0 < a < wheelbase``), the extensions non-negative.
+    """
+    P = np.atleast_2d(np.asarray(P, dtype=float))
+    if P.shape[-1] not in (len(NAMES), len(ALL_NAMES)):
+        raise DataError(f"{where}: expected 12 parameters in order {', '.join(NAMES)} "
+                        f"(or 16 with {', '.join(EXT_NAMES)}), got {P.shape[-1]}")
+    for i, n in enumerate(ALL_NAMES[:P.shape[-1]]):
         col = P[:, i]
         if not np.all(np.isfinite(col)):
             raise DataError(f"{where}: {n} is not finite")
-        if n == "a":
+        if n in EXT_NAMES:
+            if np.any(col < 0):
+                raise DataError(f"{where}: {n} must not be negative ({UNITS[n]}), got {col.min():g}")
+        elif n == "a":
             if np.any(col <= 0) or np.any(col >= geometry.wheelbase):
                 raise DataError(
                     f"{where}: a must satisfy 0 < a < wheelbase ({geometry.wheelbase} m), got {col.min():g}..{col.max():g}")

@@ -19,7 +19,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .contact import wheel_input
+from .contact import wheel_input, wheel_input_slope
 from .discretize import N_MAX, Discretized, gauss_nodes, moment_weights
 from .equations import CHANNELS, CORNER_TO_DECOMPOSED, state_space, static_state
 from .params import Geometry
@@ -47,6 +47,13 @@ def corner_inputs(track: Track, geom: Geometry, distance):
                      for i, y in enumerate(corner_ys(geom))], axis=-1)
 
 
+def corner_input_slopes(track: Track, geom: Geometry, distance):
+    """Slopes ``dr/dx`` ``(n, 4)`` of the road inputs at front-axle distances ``(n,)``."""
+    xs = corner_positions(geom, distance)
+    return np.stack([wheel_input_slope(track.path(y), xs[:, i], geom.tire_radius, ENVELOPE_DX)
+                     for i, y in enumerate(corner_ys(geom))], axis=-1)
+
+
 @dataclass
 class RunInput:
     """Parameter-independent data of one run.
@@ -58,6 +65,8 @@ class RunInput:
     u : (n, 4) corner inputs fl, fr, rl, rr at the samples, m
     ud : (n, 4) decomposed inputs ``[rf_s, rr_s, rf_a, rr_a]``
     mu : (n-1, 4, N_MAX) decomposed input moments per interval
+    rate : (n, 4) input rates ``r'`` (speed times envelope slope) at the samples, m/s
+    rated : (n, 4) decomposed input rates (used with tire damping)
     """
 
     t: np.ndarray
@@ -65,6 +74,8 @@ class RunInput:
     u: np.ndarray
     ud: np.ndarray
     mu: np.ndarray
+    rate: np.ndarray
+    rated: np.ndarray
 
     @property
     def n(self) -> int:
@@ -82,6 +93,7 @@ def prepare_run(track: Track, geom: Geometry, speed: float | None, t, quad_order
     """
     t = np.asarray(t, dtype=float)
     h = float(t[1] - t[0])
+    distance_given = distance is not None
     if distance is None:
         def distance(tt, v=speed):
             return v * tt
@@ -103,13 +115,23 @@ def prepare_run(track: Track, geom: Geometry, speed: float | None, t, quad_order
         mc = np.einsum("kqc,qn->kcn", uq, W)
         mu[lo:hi] = np.einsum("dc,kcn->kdn", CORNER_TO_DECOMPOSED, mc)
     ud = u @ CORNER_TO_DECOMPOSED.T
-    return RunInput(t=t, h=h, u=u, ud=ud, mu=mu)
+    # input rates at the samples: speed x envelope slope (only the tire dampers use them)
+    if distance_given:
+        dt = h * 1e-3
+        v = (distance(t + dt) - distance(t - dt)) / (2 * dt)
+    else:
+        v = np.full(t.size, float(speed))
+    rate = corner_input_slopes(track, geom, distance(t)) * v[:, None]
+    return RunInput(t=t, h=h, u=u, ud=ud, mu=mu, rate=rate, rated=rate @ CORNER_TO_DECOMPOSED.T)
 
 
 def initial_states(disc: Discretized, ud0):
-    """Static-equilibrium states of both blocks for the input at ``t = 0``."""
-    xs = static_state(disc.As, disc.Bs, ud0[:2])
-    xa = static_state(disc.Aa, disc.Ba, ud0[2:])
+    """Static-equilibrium (shifted) states ``xi`` of both blocks for the input at ``t = 0``.
+
+    At rest ``x = -A^-1 B u0``, so ``xi = x - Br u0 = -A^-1 (A Br + B) u0``.
+    """
+    xs = static_state(disc.As, disc.Bt_s, ud0[:2])
+    xa = static_state(disc.Aa, disc.Bt_a, ud0[2:])
     return xs, xa
 
 
@@ -137,7 +159,7 @@ def simulate_reference(P, geom: Geometry, run: RunInput, disc: Discretized | Non
 
     Parameters
     ----------
-    P : (n_pop, 12)
+    P : (n_pop, 12) or (n_pop, 16)
     geom : Geometry
     run : RunInput
 
@@ -145,8 +167,9 @@ def simulate_reference(P, geom: Geometry, run: RunInput, disc: Discretized | Non
     -------
     y : (n_pop, n_time, 10) in :data:`rideid.model.CHANNELS` order.
     states : (n_pop, n_time, 14) in decomposed order
-        ``[z, theta, zf_s, zr_s, rates(4), phi, zf_a, zr_a, rates(3)]``,
-        only with ``return_states``.
+        ``[z, theta, zf_s, zr_s, rates(4), phi, zf_a, zr_a, rates(3)]``
+        (the physical states ``x``, not the shifted ones), only with
+        ``return_states``.
     """
     P = np.atleast_2d(np.asarray(P, dtype=float))
     if disc is None:
@@ -160,8 +183,10 @@ def simulate_reference(P, geom: Geometry, run: RunInput, disc: Discretized | Non
     Xa = np.empty((P.shape[0], n, 6))
     for k in range(n):
         Xs[:, k], Xa[:, k] = xs, xa
-        gs[:, k] = np.einsum("pij,pj->pi", disc.Ca_s, xs) + disc.Da_s @ run.ud[k, :2]
-        ga[:, k] = np.einsum("pij,pj->pi", disc.Ca_a, xa) + disc.Da_a @ run.ud[k, 2:]
+        gs[:, k] = (np.einsum("pij,pj->pi", disc.Ca_s, xs) + disc.Da_s @ run.ud[k, :2]
+                    + disc.Dr_s @ run.rated[k, :2])
+        ga[:, k] = (np.einsum("pij,pj->pi", disc.Ca_a, xa) + disc.Da_a @ run.ud[k, 2:]
+                    + disc.Dr_a @ run.rated[k, 2:])
         if k + 1 < n:
             mus, mua = run.mu[k, :2, :N], run.mu[k, 2:, :N]
             xs = np.einsum("pij,pj->pi", disc.Phi_s, xs) + np.einsum("npij,jn->pi", disc.G_s, mus)
@@ -170,6 +195,8 @@ def simulate_reference(P, geom: Geometry, run: RunInput, disc: Discretized | Non
     b = geom.wheelbase - a
     y = assemble_channels(gs, ga, Xs[:, :, 5], Xa[:, :, 3], a, b, geom)
     if return_states:
+        Xs = Xs + np.einsum("pij,tj->pti", disc.Brs, run.ud[:, :2])  # x = xi + Br u
+        Xa = Xa + np.einsum("pij,tj->pti", disc.Bra, run.ud[:, 2:])
         return y, np.concatenate([Xs, Xa], axis=-1)
     return y
 
@@ -181,13 +208,23 @@ def wheel_displacements(states):
     return np.stack([zfs + zfa, zfs - zfa, zrs + zra, zrs - zra], axis=-1)
 
 
+def wheel_velocities(states):
+    """Corner wheel heave rates ``(…, 4)`` from decomposed states."""
+    zfs, zrs = states[..., 6], states[..., 7]
+    zfa, zra = states[..., 12], states[..., 13]
+    return np.stack([zfs + zfa, zfs - zfa, zrs + zra, zrs - zra], axis=-1)
+
+
 def simulate_lsim(P, geom: Geometry, track: Track, speed: float, t, upsample: int = 100,
                   exact_envelope: bool = True):
     """Independent fine-step reference with ``scipy.signal.lsim``.
 
     The full 14-state model is driven by the envelope evaluated directly
     (not tabulated) on a grid ``upsample`` times finer than ``t`` with
-    first-order hold; outputs are taken at ``t``. One candidate.
+    first-order hold; outputs are taken at ``t``. One candidate. With tire
+    damping the input rate ``r'`` is a second input, taken as the central
+    difference of the fine envelope (no state shift: independent of
+    :mod:`rideid.model.discretize`).
 
     Returns
     -------
@@ -206,10 +243,16 @@ def simulate_lsim(P, geom: Geometry, track: Track, speed: float, t, upsample: in
                       for i, y in enumerate(corner_ys(geom))], -1)
     else:
         u = corner_inputs(track, geom, speed * tf)
-    A, B, Cy, Dy = state_space(np.atleast_2d(P), geom)
+    A, B, Cy, Dy, Br, Dyr = state_space(np.atleast_2d(P), geom, rate=True)
     x0 = static_state(A, B, u[0])[0]
-    sys = scipy.signal.StateSpace(A[0], B[0], Cy[0], Dy[0])
-    _, y, _ = scipy.signal.lsim(sys, u, tf, X0=x0, interp=True)
+    if not np.any(Br):
+        sys = scipy.signal.StateSpace(A[0], B[0], Cy[0], Dy[0])
+        _, y, _ = scipy.signal.lsim(sys, u, tf, X0=x0, interp=True)
+        return y[::upsample]
+    ud = np.gradient(u, tf, axis=0)
+    sys = scipy.signal.StateSpace(A[0], np.concatenate([B[0], Br[0]], 1), Cy[0],
+                                  np.concatenate([Dy[0], Dyr[0]], 1))
+    _, y, _ = scipy.signal.lsim(sys, np.concatenate([u, ud], 1), tf, X0=x0, interp=True)
     return y[::upsample]
 
 

@@ -283,7 +283,7 @@ def write_report(out_dir, ds=None, maps=None, cost=None, compare=None) -> Path:
 
     from ..estimate.cost import CostFunction, ParameterSpace
     from ..data.dataset import load_dataset
-    from ..model.params import DESCRIPTIONS, NAMES, as_vector
+    from ..model.params import ALL_NAMES, DESCRIPTIONS, as_vector
     from ..estimate.sensitivity import P2T_STARS, compute_maps, stars
 
     out_dir = Path(out_dir)
@@ -312,11 +312,13 @@ def write_report(out_dir, ds=None, maps=None, cost=None, compare=None) -> Path:
                   if isinstance(rec, dict) and isinstance(rec.get("start"), dict)
                   and rec["start"].get("value") is not None}
         ds = load_dataset(dpath, starts=starts)
-    cf = cost or CostFunction(ds)
-    P = as_vector({n: res["parameters"][n]["value"] for n in NAMES})
+    extensions = (res.get("model") or {}).get("extensions", [])
+    cf = cost or CostFunction(ds, extensions=extensions)
+    pnames = [n for n in ALL_NAMES if n in res["parameters"]]  # the twelve, and the extensions when fitted
+    P = as_vector({n: res["parameters"][n]["value"] for n in pnames})
     sims = cf.simulate(P)
     if maps is None:
-        space = ParameterSpace(ds.known, ds.geometry, ds.manifest.bounds)
+        space = ParameterSpace(ds.known, ds.geometry, ds.manifest.bounds, extensions=extensions)
         maps = compute_maps(cf.sim, ds.geometry, space.nominal(), cf.run_ids, cf.W > 0)
 
     # every figure is an independent job: render them on all cores
@@ -345,7 +347,7 @@ def write_report(out_dir, ds=None, maps=None, cost=None, compare=None) -> Path:
     data_rows, channel_rows, data_warnings = data_tables(res.get("preprocessing") or ds.preprocessing())
 
     params = []
-    for n in NAMES:
+    for n in pnames:
         d = res["parameters"][n]
         std = d.get("std")
         params.append({

@@ -36,7 +36,13 @@ car has and the 7-DOF model lacks:
     suspension compression from static ride height at which a linear bump
     stop engages, and its rate.
 ``tire_damping`` (N s/m)
-    vertical damping of the tire contact.
+    vertical damping of the tire contact (or ``c_tf``/``c_tr`` in
+    ``[truth]``, SPEC §6; giving both is refused).
+
+The scenario's ``[truth]`` anti-roll bars (``k_arf``, ``k_arr``, SPEC §6)
+are real bars: per axle a force ``k_ar (d_i - d_j)`` on the two suspension
+slides (``d`` the compression from static ride height), added in MuJoCo's
+passive-force callback, so it acts between wheel and body at each corner.
 
 Every key but ``cg_height`` is one number (all corners) or ``[front, rear]``.
 
@@ -60,7 +66,7 @@ import numpy as np
 
 from ..errors import DataError
 from ..model.equations import CHANNELS, static_corner_loads
-from ..model.params import CORNERS, GRAVITY, NAMES, Geometry
+from ..model.params import CORNERS, GRAVITY, INDEX, NAMES, Geometry, full_rows
 
 #: contact impedance (solimp dmin = dmax): tiny, so the contact adds no normal "mass"
 IMPEDANCE = 1e-3
@@ -176,6 +182,17 @@ def parse_hifi(tab, where: str) -> HifiProperties:
     return HifiProperties(**kw)
 
 
+def tire_damping_of(P, hifi: HifiProperties | None, where: str = "scenario") -> tuple[float, float]:
+    """Tire damping (front, rear) of the MuJoCo car: ``[truth]`` c_tf/c_tr or ``[hifi] tire_damping``, not both."""
+    P = full_rows(np.asarray(P, dtype=float).reshape(-1))[0]
+    truth = (float(P[INDEX["c_tf"]]), float(P[INDEX["c_tr"]]))
+    hifi_td = (hifi or HifiProperties()).tire_damping
+    if any(truth) and any(hifi_td):
+        raise DataError(f"{where}: tire damping is given twice, as [truth] c_tf/c_tr = {truth[0]:g}/{truth[1]:g} "
+                        f"and as [hifi] tire_damping = {hifi_td[0]:g}/{hifi_td[1]:g}; give it in one place")
+    return truth if any(truth) else hifi_td
+
+
 def damper_force(v, c_s, rebound_ratio=1.0, knee_velocity=math.inf, knee_ratio=1.0):
     """Damper force (N, resisting, same sign as ``v``) at compression velocity ``v`` (m/s).
 
@@ -271,7 +288,11 @@ class MujocoCar:
             raise TypeError("give either hifi or its fields, not both")
         self.mj = mujoco
         self.hifi = hifi
-        self.P = np.asarray(P, dtype=float)
+        self.P = np.asarray(P, dtype=float).reshape(-1)
+        ext = full_rows(self.P)[0]
+        self.tire_damping = tire_damping_of(self.P, hifi)
+        #: anti-roll bar rates (front, rear), N/m at the wheel
+        self.bars = (float(ext[INDEX["k_arf"]]), float(ext[INDEX["k_arr"]]))
         self.geom = geom
         self.model = mujoco.MjModel.from_xml_string(build_mjcf(self.P, geom, hifi))
         m = self.model
@@ -287,7 +308,7 @@ class MujocoCar:
             gid = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_GEOM, f"tire_{c}")
             A = m.body_invweight0[m.geom_bodyid[gid], 0]
             K = p["k_tf"] if ax == 0 else p["k_tr"]
-            m.geom_solref[gid] = (-K * (1 - d_imp) * A, -hifi.tire_damping[ax] * (1 - d_imp) * A)
+            m.geom_solref[gid] = (-K * (1 - d_imp) * A, -self.tire_damping[ax] * (1 - d_imp) * A)
             self._tire_ids.append(gid)
         self.data = mujoco.MjData(m)
         self._post_q = np.array([m.jnt_qposadr[jid(f"post_{c}")] for c in CORNERS])
@@ -312,7 +333,8 @@ class MujocoCar:
         self._knee_r = np.array(hifi.damper_knee_ratio)[axle]
         self._bs_clear = np.array(hifi.bumpstop_clearance)[axle]
         self._bs_rate = np.array(hifi.bumpstop_rate)[axle]
-        self.needs_callback = not hifi.linear_dampers or hifi.bumpstops
+        self.susp_q0 = self.data.qpos[self.susp_q].copy()  # static ride height (bar unloaded)
+        self.needs_callback = not hifi.linear_dampers or hifi.bumpstops or any(self.bars)
 
     # -- suspension forces beyond MuJoCo's linear joint spring and damper ------------------
     def damper(self, v):
@@ -320,8 +342,12 @@ class MujocoCar:
         return damper_force(v, self._c_s, self._reb, self._knee_v, self._knee_r)
 
     def suspension_force(self, q, v):
-        """Generalised force on the four suspension slides (N) from nonlinear dampers and bump stops."""
+        """Generalised force on the four suspension slides (N) from nonlinear dampers, bump stops and anti-roll bars."""
         f = np.zeros(4)
+        if any(self.bars):  # bar of each axle: -k_ar (d_i - d_j) on wheel i, the reaction on the body
+            d = q - self.susp_q0
+            kf, kr = self.bars
+            f -= np.array([kf * (d[0] - d[1]), kf * (d[1] - d[0]), kr * (d[2] - d[3]), kr * (d[3] - d[2])])
         if not self.hifi.linear_dampers:
             f -= self.damper(v)
         if self.hifi.bumpstops:
@@ -438,4 +464,4 @@ def simulate_mujoco(P, geom: Geometry, track, speed, t, distance=None, hifi: Hif
 
 
 __all__ = ["HIFI_KEYS", "HifiProperties", "MujocoCar", "MujocoRun", "RAW_NAMES", "build_mjcf", "damper_force",
-           "parse_hifi", "simulate_mujoco"]
+           "parse_hifi", "simulate_mujoco", "tire_damping_of"]
