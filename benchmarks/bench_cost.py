@@ -32,7 +32,7 @@ from rideid.estimate.cost import CostFunction
 from rideid.model.batch import BatchSimulator, single_threaded_blas
 from rideid.model.equations import state_space, static_state
 from rideid.data.scenario import run_times, simulate_manifest, write_dataset
-from rideid.model.simulate import corner_positions, corner_ys, prepare_run, simulate_lsim
+from rideid.model.simulate import corner_positions, prepare_run, simulate_lsim
 
 
 def timeit(f, repeat=3, number=1):
@@ -73,7 +73,7 @@ def solve_ivp_run(P, geom, track, speed, t):
     A, B, Cy, Dy = A[0], B[0], Cy[0], Dy[0]
     tf = np.linspace(t[0], t[-1], (t.size - 1) * 20 + 1)
     xs = corner_positions(geom, speed * tf)
-    u = np.stack([envelope(track.path(y).h, xs[:, i], geom.tire_radius) for i, y in enumerate(corner_ys(geom))], -1)
+    u = np.stack([envelope(track.path(y).h, xs[:, i], geom.tire_radius) for i, y in enumerate(geom.corner_y)], -1)
 
     def rhs(tt, x):
         ui = np.array([np.interp(tt, tf, u[:, i]) for i in range(4)])

@@ -7,7 +7,6 @@ fine-step ``lsim``, and the invariances the extensions must keep.
 
 import numpy as np
 import pytest
-import scipy.linalg
 
 from rideid.model.batch import BatchSimulator
 from rideid.model.discretize import gauss_nodes, moment_weights, N_MAX
@@ -196,14 +195,14 @@ def test_quarter_car_with_tire_damping_matches_transfer_function(f_hz):
 # ---------------------------------------------------------------------------
 # time response: reference = lsim = kernel
 
-@pytest.mark.parametrize("kind", list(TRACKS))
+@pytest.mark.parametrize("kind", ["herringbone", "chassis_twist"])  # the washboard: quarter-car test
 def test_extended_car_matches_fine_step_lsim(kind):
     table, V = TRACKS[kind]
     tr = Track.from_table(table, "t")
-    t = np.arange(int(2.5 * FS) + 1) / FS
+    t = np.arange(int(2.0 * FS) + 1) / FS
     run = prepare_run(tr, G, V, t)
     y = simulate_reference(PX[None], G, run)[0]
-    ref = simulate_lsim(PX, G, tr, V, t, upsample=200)
+    ref = simulate_lsim(PX, G, tr, V, t, upsample=100)
     err = rel_rms(y, ref)
     excited = np.sqrt(np.mean(ref ** 2, axis=0)) > 1e-9
     assert excited.sum() >= 9
@@ -222,10 +221,11 @@ def test_extended_car_matches_fine_step_lsim(kind):
 
 
 def test_kernel_matches_reference_with_extensions(rng):
-    runs = [prepare_run(Track.from_table(table, "t"), G, V, np.arange(401) / FS) for table, V in TRACKS.values()]
+    runs = [prepare_run(Track.from_table(TRACKS[k][0], "t"), G, TRACKS[k][1], np.arange(401) / FS)
+            for k in ("herringbone", "chassis_twist")]
     runs.append(prepare_run(Track.from_table(TRACKS["washboard"][0], "t"), G, 7.0, np.arange(301) / 500.0))
     sim = BatchSimulator(G, runs)
-    P = PX * np.exp(rng.normal(0, 0.3, (29, 16)))
+    P = PX * np.exp(rng.normal(0, 0.3, (19, 16)))
     P[:, INDEX["a"]] = np.clip(P[:, INDEX["a"]], 0.5, 2.0)
     P[::3, 12:14] = 0.0  # some without bars
     P[1::3, 14:] = 0.0  # some without tire damping
@@ -276,18 +276,18 @@ def _ext_scenario(folder, truth_extra, runs=None, model=None):
 def test_simulate_honours_extensions_in_truth(tmp_path, capsys):
     import rideid
     from rideid.cli import main
-    path = _ext_scenario(tmp_path, EXT, runs=("T_LL", "H_HL"), model=["tire_damping"])
+    path = _ext_scenario(tmp_path, EXT, runs=("H_HL",), model=["tire_damping"])
     assert main(["simulate", str(path), "--out", str(tmp_path / "sim"), "--quiet"]) == 0
     truth = rideid.load_truth(tmp_path / "sim" / "truth.toml")
     assert {k: truth[k] for k in EXT} == EXT
     ds = rideid.load_dataset(tmp_path / "sim")
     assert ds.manifest.extensions == ("tire_damping",)
     sc = rideid.load_scenario(path)
-    for run in sc.runs:
-        rd = ds.data[run.id]
-        ref = simulate_lsim(PX, G, sc.tracks[run.track], run.speed, rd.time, upsample=100)
-        err = rel_rms(rd.matrix(), ref)
-        assert err.max() < 1e-3, (run.id, err)  # CSV rounding and the reference's corner resolution
+    run = sc.runs[0]
+    rd = ds.data[run.id]
+    ri = prepare_run(sc.tracks[run.track], G, run.speed, rd.time)
+    assert rel_rms(rd.matrix(), simulate_reference(PX[None], G, ri)[0]).max() < 1e-9  # as written
+    assert rel_rms(rd.matrix(), simulate_reference(P0[None], G, ri)[0]).max() > 0.02
 
 
 def test_wheel_velocities_are_the_physical_ones():
@@ -430,10 +430,10 @@ def test_identify_model_choice_and_known_extension(sim_dataset, tmp_path, capsys
 
     from rideid.cli import main
     d = _copy_ds(sim_dataset, tmp_path, lambda x: x["known"].update(c_tf=150.0))
-    for model, expect in (("base", ["c_tf"]), ("full", list(EXT_NAMES))):
+    for model, expect in (("full", list(EXT_NAMES)),):  # base with a known c_tf: test_parameter_space_...
         out = tmp_path / model
-        rc = main(["identify", str(d), "--out", str(out), "--quiet", "--model", model, "--generations", "2",
-                   "--population", "16", "--no-polish", "--no-report", "--seed", "1"])
+        rc = main(["identify", str(d), "--out", str(out), "--quiet", "--model", model, "--generations", "1",
+                   "--population", "8", "--no-polish", "--no-report", "--seed", "1"])
         assert rc == 0, capsys.readouterr().err
         res = json.loads((out / "result.json").read_text())
         assert res["model"]["extensions"] == ([] if model == "base" else list(GROUPS))

@@ -67,7 +67,7 @@ def test_simulate_engine_mujoco_from_the_command_line(raw, tmp_path, default_sce
     if raw:
         head = (tmp_path / "ds" / "runs" / "T_HL.csv").read_text().splitlines()[:2]
         assert head[0].split(",")[1] == "acc_body_fl_z"
-        assert float(head[1].split(",")[1]) == pytest.approx(9.81, abs=1e-6)  # at rest: +g along the sensor z
+        assert float(head[1].split(",")[1]) == pytest.approx(9.80665, abs=1e-6)  # at rest: +g (standard) along z
     ds = rideid.load_dataset(tmp_path / "ds")
     cf = rideid.CostFunction(ds)
     truth = as_vector(default_scenario.truth)

@@ -165,6 +165,21 @@ def test_same_seed_same_bits():
     np.testing.assert_array_equal(r1.population, r2.population)
     r3 = jade(rastrigin, [(-5.12, 5.12)] * 10, population=30, generations=50, seed=43)
     assert r3.fun != r1.fun
+    # the rng argument (SciPy >= 1.15): an int or a Generator, the same bits as seed=
+    r4 = jade(rastrigin, [(-5.12, 5.12)] * 10, population=30, generations=50, rng=42)
+    r5 = jade(rastrigin, [(-5.12, 5.12)] * 10, population=30, generations=50, rng=np.random.default_rng(42))
+    np.testing.assert_array_equal(r4.population, r1.population)
+    np.testing.assert_array_equal(r5.population, r1.population)
+    with pytest.raises(ArgumentError, match="rng or seed"):
+        jade(rastrigin, [(-5.12, 5.12)] * 2, population=8, generations=1, rng=1, seed=1)
+
+
+def test_callback_stops_by_stopiteration():
+    def cb(st):
+        if st.nit == 4:
+            raise StopIteration
+    r = jade(sphere, [(-5, 5)] * 3, population=20, generations=100, rng=1, callback=cb)
+    assert r.stop == "callback" and r.nit == 4
 
 
 def test_stopping_criteria_and_result():

@@ -89,12 +89,21 @@ def test_nominal_car_misaligns_and_the_joint_polish_recovers(tmp_path):
     ds = quiet_load(path)
     nominal = {rid: rec["start"]["value"] - OFFSET for rid, rec in ds.preprocessing().items()}
     assert max(abs(v) for v in nominal.values()) > 2e-3  # the nominal car is not the van
+    data_before = {rid: rd.matrix() for rid, rd in ds.data.items()}
     res = rideid.identify(ds, seed=1)
     assert max_error(res, truth) < 5e-3
     for rid, rec in res.preprocessing.items():
         assert abs(rec["start"]["value"] - OFFSET) < 5e-5, rid
         assert rec["start"]["source"] == "estimated with the parameters (least squares)"
         assert rec["start"]["nominal_estimate"] - OFFSET == pytest.approx(nominal[rid])
+        assert res.starts[rid]["value"] == rec["start"]["value"] and res.starts[rid]["std"] > 0
+    # the dataset it was given is untouched: nominal starts and data as loaded
+    assert {rid: rec["start"]["value"] - OFFSET for rid, rec in ds.preprocessing().items()} == nominal
+    for rid, Y in data_before.items():
+        np.testing.assert_array_equal(ds.data[rid].matrix(), Y)
+    # the starts it settled on give the aligned dataset
+    aligned = ds.with_starts(res.starts)
+    assert all(abs(aligned.measured[rid].start - OFFSET) < 5e-5 for rid in res.starts)
 
 
 @pytest.mark.parametrize("distance", [False, True])
@@ -332,3 +341,27 @@ def test_negative_speed_channel_is_refused(tmp_path, default_scenario, raw):
     (path / "dataset.toml").write_text(tomli_w.dumps(doc))
     with pytest.raises(DataError, match=r"speed channel 'Speed' goes negative \(-0.278 m/s\)"):
         quiet_load(path)
+
+
+def test_reading_and_start_estimation_are_separate_steps(tmp_path, default_scenario, raw):
+    """read_dataset only reads and conditions; align_starts estimates the starts, on a new dataset."""
+    from rideid.data.dataset import align_starts, read_dataset
+    path = _one_run(tmp_path, default_scenario, raw, rid="T_LL")
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", DataWarning)
+        unaligned = read_dataset(path)
+    assert "T_LL" not in unaligned.data and unaligned.measured["T_LL"].start is None
+    with pytest.raises(rideid.ArgumentError, match="T_LL have no start yet"):
+        rideid.CostFunction(unaligned)
+    ds = align_starts(unaligned)
+    assert unaligned.measured["T_LL"].start is None and "T_LL" not in unaligned.data  # not changed
+    assert abs(ds.measured["T_LL"].start - OFFSET) < 1e-4
+    assert ds.preprocessing()["T_LL"]["start"]["source"] == "estimated (nominal car)"
+    given = align_starts(unaligned, {"T_LL": OFFSET + 0.01})
+    assert given.measured["T_LL"].start == OFFSET + 0.01
+    assert given.preprocessing()["T_LL"]["start"]["source"].startswith("given")
+    # a dataset re-read at other starts is a new object; the original keeps its data
+    moved = ds.with_starts({"T_LL": {"value": OFFSET + 0.02, "std": 1e-4}})
+    assert moved.measured["T_LL"].start == OFFSET + 0.02 and ds.measured["T_LL"].start != OFFSET + 0.02
+    assert moved.preprocessing()["T_LL"]["start"]["std"] == 1e-4
+    assert not np.array_equal(moved.data["T_LL"].matrix(), ds.data["T_LL"].matrix())

@@ -4,8 +4,9 @@ import numpy as np
 import pytest
 import scipy.linalg
 
-from rideid.model.equations import blocks, decomposed_mck, mck, modal_summary, state_space, static_corner_loads
-from rideid.model.params import DEFAULT_CAR, DEFAULT_GEOMETRY, INDEX, NAMES, Geometry, as_vector
+from rideid.model.equations import (blocks, decomposed_mck, mck, modal_summary, output_map, state_space,
+                                    static_corner_loads)
+from rideid.model.params import DEFAULT_CAR, DEFAULT_GEOMETRY, GRAVITY, INDEX, NAMES, Geometry, as_vector, total_mass
 
 G = DEFAULT_GEOMETRY
 P0 = as_vector(DEFAULT_CAR)
@@ -105,12 +106,14 @@ def test_default_car_modal_summary_in_expected_ranges():
 
 def test_static_loads_sum_to_weight():
     loads = static_corner_loads(P0[None], G)[0]
-    total = P0[0] + 2 * P0[INDEX["m_uf"]] + 2 * P0[INDEX["m_ur"]]
-    assert loads.sum() == pytest.approx(total * 9.81, rel=1e-12)
+    total = P0[INDEX["m_s"]] + 2 * P0[INDEX["m_uf"]] + 2 * P0[INDEX["m_ur"]]
+    assert total_mass(P0) == total and total_mass(DEFAULT_CAR) == pytest.approx(1093.3, rel=1e-12)
+    assert GRAVITY == 9.80665  # standard gravity, also the logger unit "g"
+    assert loads.sum() == pytest.approx(total * 9.80665, rel=1e-12)
     # moment balance about the CG for the sprung part
     b = G.wheelbase - P0[INDEX["a"]]
-    front_s = loads[0] - P0[INDEX["m_uf"]] * 9.81
-    rear_s = loads[2] - P0[INDEX["m_ur"]] * 9.81
+    front_s = loads[0] - P0[INDEX["m_uf"]] * 9.80665
+    rear_s = loads[2] - P0[INDEX["m_ur"]] * 9.80665
     assert front_s * P0[INDEX["a"]] == pytest.approx(rear_s * b, rel=1e-12)
 
 
@@ -121,3 +124,20 @@ def test_geometry_validation():
     with pytest.raises(DataError, match="tire_radius"):
         Geometry(2.5, 1.5, 1.5, -0.3)
     assert len(NAMES) == 12
+
+
+def test_output_map_closed_form_and_state_space():
+    """Pitch nose-down + moves the front corners down by a and the rear up by b;
+    roll right-side-down + moves the left corners up by half the track."""
+    Om = output_map(P0[None], G)[0]
+    a, b = P0[INDEX["a"]], G.wheelbase - P0[INDEX["a"]]
+    hf, hr = G.track_front / 2, G.track_rear / 2
+    np.testing.assert_allclose(Om[:4, 0], 1.0)                          # heave
+    np.testing.assert_allclose(Om[:4, 1], [-a, -a, b, b], rtol=1e-15)   # pitch
+    np.testing.assert_allclose(Om[:4, 2], [hf, -hf, hr, -hr], rtol=1e-15)  # roll
+    np.testing.assert_array_equal(Om[4:, 3:], np.eye(4))
+    assert not Om[4:, :3].any() and not Om[:4, 3:].any()
+    # the state-space outputs are this map applied to the accelerations
+    A, B, Cy, Dy = state_space(P0[None], G)
+    np.testing.assert_allclose(Cy[0, :8], Om @ A[0, 7:], rtol=1e-14, atol=0)
+    np.testing.assert_allclose(Dy[0, :8], Om @ B[0, 7:], rtol=1e-14, atol=0)

@@ -140,3 +140,23 @@ def test_kernel_matches_reference(rng):
     W = rng.random((len(runs), 10))
     ek, er = sim.errors(P, Y, W), sim.errors_reference(P, Y, W)
     np.testing.assert_allclose(ek, er, rtol=1e-9)
+
+
+def test_kernel_outputs_are_the_output_map_of_the_continuous_model(rng):
+    """Kernel channels = Omega (A x + B u)[7:] and the gyro rows = theta', phi' at the reference states."""
+    from rideid.model.equations import DECOMPOSED_TO_COORDS, output_map, state_space
+    run = prepare_run(Track.from_table(TRACKS["chassis_twist"][0], "t"), G, TRACKS["chassis_twist"][1], np.arange(301) / FS)
+    P = P0 * np.exp(rng.normal(0, 0.2, (3, 12)))
+    y_k = BatchSimulator(G, [run]).outputs(P)[0]
+    _, X = simulate_reference(P, G, run, return_states=True)
+    T = DECOMPOSED_TO_COORDS
+    q = np.concatenate([X[..., 0:4], X[..., 8:11]], -1) @ T.T        # positions in COORDS order
+    qd = np.concatenate([X[..., 4:8], X[..., 11:14]], -1) @ T.T     # rates
+    x = np.concatenate([q, qd], -1)
+    A, B, _, _ = state_space(P, G)
+    acc = np.einsum("pij,ptj->pti", A, x) + np.einsum("pij,tj->pti", B, run.u)
+    expect = np.einsum("pcq,ptq->ptc", output_map(P, G), acc[..., 7:])
+    scale = np.abs(expect).max()
+    np.testing.assert_allclose(y_k[..., :8], expect, rtol=1e-8, atol=1e-8 * scale)
+    np.testing.assert_allclose(y_k[..., 8], qd[..., 1], rtol=1e-8, atol=1e-10)
+    np.testing.assert_allclose(y_k[..., 9], qd[..., 2], rtol=1e-8, atol=1e-10)

@@ -5,7 +5,8 @@ Public API (SPEC §5)::
 
     import rideid
     ds = rideid.load_dataset(path)            # validated Dataset
-    res = rideid.identify(ds, seed=1)         # .parameters: name -> value
+    res = rideid.identify(ds, rng=1)          # .parameters: name -> value; seed= also works
+    res.save(folder); rideid.load_result(folder)
     cost = rideid.CostFunction(ds)            # cost(P): (n, d) -> (n,)
     cost.names                                # free parameter names
     rideid.jade(fun, bounds, population=..., generations=..., seed=...)
@@ -18,10 +19,15 @@ from .estimate.cost import CostFunction, ParameterSpace
 from .data.dataset import Dataset, load_dataset
 from .errors import ArgumentError, DataError, DataWarning, ModelValidityWarning, RideidError, ScaleError
 from .data.schema import Manifest, load_scenario, load_truth
-from .estimate.identify import IdentificationResult, identify
+from .estimate.identify import identify
+from .estimate.result import History, IdentificationResult
+from .estimate.result import load as load_result
+from .estimate.score import score
+from .estimate.sensitivity import SensitivityMaps, sensitivity_maps
 from .estimate.jade import JadeSolver, jade
 from .model.equations import CHANNELS, modal_summary
 from .model.params import DEFAULT_CAR, DEFAULT_GEOMETRY, NAMES, UNITS, Geometry
+from .model.params import ALL_NAMES, EXT_NAMES, GROUPS
 from .data.scenario import default_scenario, default_scenario_path, simulate_manifest, write_dataset
 from .model.tracks import Track
 from .studies import StudyResult, load_study, study
@@ -37,5 +43,7 @@ __all__ = [
     "CostFunction", "ParameterSpace", "Dataset", "Geometry", "IdentificationResult", "JadeSolver", "Manifest",
     "Track", "default_scenario", "default_scenario_path", "identify", "jade", "load_dataset", "load_scenario",
     "load_truth", "modal_summary", "simulate_manifest", "write_dataset", "__version__",
+    "History", "SensitivityMaps", "load_result", "score", "sensitivity_maps",
+    "ALL_NAMES", "EXT_NAMES", "GROUPS",
     "StudyResult", "load_study", "study",
 ]

@@ -7,15 +7,12 @@ or column), 1 internal error (a bug: set ``RIDEID_DEBUG=1`` for the traceback).
 from __future__ import annotations
 
 import argparse
-import json
 import os
 import sys
 import time
 import traceback
 import warnings
 from pathlib import Path
-
-import numpy as np
 
 from . import __version__
 from .errors import ArgumentError, DataError, RideidError
@@ -62,13 +59,15 @@ class Progress:
             self.stream.flush()
             self._width = 0
 
-    def identify(self, info):
-        g, G = info["generation"], info["generations"]
-        el = info["elapsed"]
-        rate = info["evaluations"] / el if el > 0 else 0.0
+    def identify(self, state):
+        """The :func:`rideid.identify` callback: one line per generation (never stops the run)."""
+        g, G = state.nit, state.generations
+        el = state.elapsed
+        rate = state.nfev / el if el > 0 else 0.0
         left = el / g * (G - g) if g else 0.0
-        self.line(f"generation {g}/{G}  best {info['best']:.3e}  largest spread {info['spread']:.2e}  "
+        self.line(f"generation {g}/{G}  best {state.fun:.3e}  largest spread {state.spread:.2e}  "
                   f"{rate:,.0f} eval/s  at most {left:.0f} s left")
+        return False
 
     def steps(self, i, n, label):
         self.line(f"{label} {i}/{n}", force=i == n)
@@ -199,11 +198,11 @@ def _summary_table(res) -> str:
 def run_identify(ds_path, out_dir, *, seed, population=None, generations=None, weights="adaptive",
                  polish=True, quiet=False, out=None, report=True, model=None):
     out = out or sys.stdout
-    from .data.dataset import load_dataset
+    import rideid
     from .data.schema import atomic_output
-    from .estimate.identify import DEFAULT_GENERATIONS, DEFAULT_POPULATION, identify, model_extensions
+    from .estimate.identify import DEFAULT_GENERATIONS, DEFAULT_POPULATION, model_extensions
 
-    ds = load_dataset(ds_path)
+    ds = rideid.load_dataset(ds_path)
     extensions = model_extensions(ds, model)
     prog = Progress(quiet)
     kw = {"population": population or DEFAULT_POPULATION, "generations": generations or DEFAULT_GENERATIONS}
@@ -211,9 +210,8 @@ def run_identify(ds_path, out_dir, *, seed, population=None, generations=None, w
         raise ArgumentError(f"--population must be at least 4, got {kw['population']}")
     if kw["generations"] < 1:
         raise ArgumentError(f"--generations must be at least 1, got {kw['generations']}")
-    from .estimate.cost import CostFunction
-    cost = CostFunction(ds, extensions=extensions)
-    res = identify(ds, seed=seed, weights=weights, polish=polish, progress=prog.identify, cost=cost, **kw)
+    cost = rideid.CostFunction(ds, extensions=extensions)
+    res = rideid.identify(ds, rng=seed, weights=weights, polish=polish, callback=prog.identify, cost=cost, **kw)
     prog.done()
     with atomic_output(out_dir) as tmp:
         res.save(tmp)
@@ -221,8 +219,7 @@ def run_identify(ds_path, out_dir, *, seed, population=None, generations=None, w
             from .report.html import write_report
             if not quiet:
                 prog.line("writing the report ...", force=True)
-            # estimated starts move the measured data: then the report rebuilds the cost on the final data
-            write_report(tmp, ds=ds, maps=res.maps, cost=None if ds.auto_start_runs() else cost)
+            write_report(res, ds.with_starts(res.starts), tmp)
             prog.done()
     print(_summary_table(res), file=out)
     print(f"cost {res.cost:.4g}, {res.generations} generations, {res.evaluations} evaluations, "
@@ -241,40 +238,16 @@ def cmd_identify(args, out=None):
 
 def cmd_sensitivity(args, out=None):
     out = out or sys.stdout
-    from .estimate.cost import ParameterSpace
-    from .data.dataset import load_dataset
-    from .model.batch import BatchSimulator
+    import rideid
     from .data.schema import atomic_output, read_toml
-    from .data.scenario import run_times
-    from .estimate.sensitivity import compute_maps, heatmaps, tables_markdown, write_csvs
-    from .model.simulate import prepare_run
+    from .estimate.sensitivity import heatmaps, tables_markdown, write_csvs
 
     src = Path(args.source)
     is_scenario = src.is_file() and "truth" in read_toml(src)
-    if is_scenario:
-        from .data.schema import load_scenario
-        from .model.params import as_vector
-        sc = load_scenario(src)
-        geom, man = sc.geometry, sc
-        times = {r.id: run_times(r) for r in sc.runs}
-        baseline = as_vector(sc.truth)
-        mask = None
-    else:
-        ds = load_dataset(src)
-        man, geom = ds.manifest, ds.geometry
-        times = {r.id: ds.data[r.id].time for r in ds.runs}
-        baseline = ParameterSpace(ds.known, geom, man.bounds, extensions=man.extensions or ()).nominal()
-        from .model.equations import CHANNELS
-        mask = np.array([[c in ds.data[r.id].channels for c in CHANNELS] for r in ds.runs])
+    source = rideid.load_scenario(src) if is_scenario else rideid.load_dataset(src)
     prog = Progress(args.quiet)
-    runs = []
-    for i, r in enumerate(man.runs):
-        prog.steps(i + 1, len(man.runs), "preparing run")
-        dist = None if is_scenario else ds.data[r.id].distance
-        runs.append(prepare_run(man.tracks[r.track], geom, r.speed, times[r.id], distance=dist))
-    prog.line(f"simulating {len(baseline) + 1} cars (baseline and +25 % per parameter) ...", force=True)
-    sim = BatchSimulator(geom, runs)
-    maps = compute_maps(sim, geom, baseline, [r.id for r in man.runs], mask)
+    prog.line("simulating the baseline car and +25 % per parameter ...", force=True)
+    maps = rideid.sensitivity_maps(source)
     with atomic_output(args.out) as tmp:
         write_csvs(maps, tmp)
         (tmp / "tables.md").write_text(tables_markdown(maps))
@@ -284,61 +257,35 @@ def cmd_sensitivity(args, out=None):
     return 0
 
 
-def score_table(result: dict, truth: dict) -> tuple[str, float]:
-    from .model.params import ALL_NAMES, EXT_NAMES
+def score_table(scored: dict) -> str:
+    """The text table of :func:`rideid.score`."""
     lines = [f"{'parameter':<10} {'estimate':>14} {'truth':>14} {'error %':>9}"]
-    worst = 0.0
-    for n in ALL_NAMES:
-        if n in EXT_NAMES and n not in result["parameters"] and n not in truth:
+    for n, r in scored["parameters"].items():
+        if r["error_percent"] is None:  # no relative error of a zero truth: the estimate in its unit
+            lines.append(f"{n:<10} {r['estimate']:>14.6g} {r['truth']:>14.6g} {'-':>9}"
+                         + (" (not in the model)" if r["status"] == "not in the model" else ""))
             continue
-        est = result["parameters"][n]["value"] if n in result["parameters"] else 0.0
-        tr = truth.get(n, 0.0)  # an extension absent from the truth is 0
-        if tr == 0:  # no relative error of a zero truth: the estimate in its unit
-            lines.append(f"{n:<10} {est:>14.6g} {tr:>14.6g} {'-':>9}" + (" (not in the model)"
-                                                                         if n not in result["parameters"] else ""))
-            continue
-        err = 100.0 * (est - tr) / tr
-        flag = result["parameters"][n]
-        note = " known" if flag.get("fixed") else (" derived" if flag.get("derived") else "")
-        if not flag.get("fixed"):
-            worst = max(worst, abs(err))
-        lines.append(f"{n:<10} {est:>14.6g} {tr:>14.6g} {err:>9.4f}{note}")
-    lines.append(f"largest error of the estimated parameters: {worst:.4f} %")
-    return "\n".join(lines), worst
-
-
-def load_result(path) -> dict:
-    from .model.params import NAMES
-    path = Path(path)
-    if not path.is_file():
-        raise DataError(f"{path}: file not found")
-    try:
-        res = json.loads(path.read_text())
-    except (json.JSONDecodeError, UnicodeDecodeError) as e:
-        raise DataError(f"{path}: not valid JSON: {e}") from None
-    pars = res.get("parameters") if isinstance(res, dict) else None
-    if not isinstance(pars, dict):
-        raise DataError(f"{path}: missing key 'parameters'")
-    for n in NAMES:
-        if n not in pars or not isinstance(pars[n], dict) or "value" not in pars[n]:
-            raise DataError(f"{path}: parameters.{n}.value missing")
-    return res
+        note = "" if r["status"] == "estimated" else f" {r['status']}"
+        lines.append(f"{n:<10} {r['estimate']:>14.6g} {r['truth']:>14.6g} {r['error_percent']:>9.4f}{note}")
+    lines.append(f"largest error of the estimated parameters: {scored['worst_percent']:.4f} %")
+    return "\n".join(lines)
 
 
 def cmd_score(args, out=None):
     out = out or sys.stdout
-    from .data.schema import load_truth
+    import rideid
+    from .estimate.result import read_result_json
 
-    res = load_result(args.result)
-    truth = load_truth(args.truth)
-    text, _ = score_table(res, truth)
-    print(text, file=out)
+    res = read_result_json(args.result)
+    truth = rideid.load_truth(args.truth)
+    print(score_table(rideid.score(res, truth)), file=out)
     return 0
 
 
 def cmd_demo(args, out=None):
     out = out or sys.stdout
     from .data.schema import load_truth
+    from .estimate.score import score
     from .model.equations import format_modal_summary, modal_summary
     from .data.scenario import default_scenario, simulate_manifest, write_dataset
 
@@ -353,12 +300,10 @@ def cmd_demo(args, out=None):
     write_dataset(sc, data, root / "dataset", comment="rideid demo: built-in scenario, 1 % noise")
     print(f"\n1. simulated {len(sc.runs)} runs with 1 % noise -> {root / 'dataset'}", file=out)
     print(f"2. identifying (total mass {sc.known['total_mass']} kg known) ...", file=out)
-    run_identify(root / "dataset", root / "identify", seed=args.seed, quiet=args.quiet, out=out)
-    res = load_result(root / "identify" / "result.json")
+    res = run_identify(root / "dataset", root / "identify", seed=args.seed, quiet=args.quiet, out=out)
     truth = load_truth(root / "dataset" / "truth.toml", sc.geometry)
-    text, worst = score_table(res, truth)
     print("\n3. score against the truth", file=out)
-    print(text, file=out)
+    print(score_table(score(res, truth)), file=out)
     report = root / "identify" / "report.html"
     if report.is_file():
         print(f"\nreport: {report}", file=out)
@@ -367,8 +312,25 @@ def cmd_demo(args, out=None):
 
 def cmd_report(args, out=None):
     out = out or sys.stdout
+    import rideid
     from .report.html import write_report
-    path = write_report(args.result_dir, compare=args.compare)
+
+    folder = Path(args.result_dir)
+    res = rideid.load_result(folder)
+    other = None
+    if args.compare is not None:
+        compare = Path(args.compare)
+        other = rideid.load_result(compare)
+        if not other.history or not res.history:
+            raise DataError(f"{compare}: history.csv missing or empty; nothing to compare")
+        if other.dataset != res.dataset:
+            raise DataError(f"{compare}: identifies another dataset ({other.dataset}) than {folder} ({res.dataset})")
+    if not res.dataset or not Path(res.dataset).exists():
+        raise DataError(f"{folder / 'result.json'}: the dataset it names ({res.dataset!r}) is not found; "
+                        "the report needs it")
+    ds = rideid.load_dataset(res.dataset, starts=res.start_values())
+    path = write_report(res, ds, folder, compare=other,
+                        compare_label=None if other is None else f"{other.weights_mode} ({Path(args.compare).name})")
     print(f"report written to {path}", file=out)
     return 0
 

@@ -2,13 +2,13 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 
 from ..errors import DataError, ScaleError
 from .schema import Manifest, RunData, load_manifest, read_run_csv
-from ..model.params import EXT_NAMES, EXTRA_KNOWN, NAMES, Geometry
+from ..model.params import EXT_NAMES, EXTRA_KNOWN, MASS_COUNT, NAMES, Geometry, nominal_car, total_mass
 
 
 @dataclass
@@ -69,18 +69,42 @@ class Dataset:
                 out[r.id] = rec
         return out
 
+    def with_data(self, data: dict) -> "Dataset":
+        """A new dataset with other run data (same manifest and measured runs)."""
+        return Dataset(self.manifest, {r.id: data[r.id] for r in self.runs}, self.measured)
+
+    def with_starts(self, starts: dict) -> "Dataset":
+        """A new dataset with measured runs re-read at other starts.
+
+        ``starts``: run id -> start (file time, s) or a start record
+        ``{"value", ...}`` such as :attr:`rideid.IdentificationResult.starts`;
+        the record's other keys (source, std) join the run's preprocessing record.
+        """
+        measured, data = dict(self.measured), dict(self.data)
+        for rid, st in starts.items():
+            if rid not in self.measured:
+                raise DataError(f"start given for run '{rid}', which is not a measured run of {self.name}")
+            rec = st if isinstance(st, dict) else {"value": st}
+            s = float(rec["value"])
+            mr = self.measured[rid]
+            record = dict(mr.record, start={**mr.record.get("start", {}),
+                                            **{k: v for k, v in rec.items() if k != "value"}})
+            measured[rid] = replace(mr, start=s, record=record)
+            data[rid] = measured[rid].run_data(s)
+        return Dataset(self.manifest, data, measured)
+
     def auto_start_runs(self) -> list[str]:
         return [rid for rid, mr in self.measured.items() if mr.auto_start]
 
 
 def load_dataset(path, starts: dict[str, float] | None = None) -> Dataset:
-    """Load and validate a dataset folder (or its ``dataset.toml``).
+    """Load and validate a dataset folder (or its ``dataset.toml``), ready to identify.
 
-    SPEC §3 CSVs are taken as they are. Runs that need more (logger formats,
-    channel maps, units, gravity, resampling, start alignment, a speed
-    channel: :mod:`rideid.measured`) are preprocessed, and runs whose start is
-    not given are aligned with a nominal car; ``Dataset.preprocessing()``
-    says what was done.
+    Two steps, each available on its own: :func:`read_dataset` (formats and
+    conditioning: SPEC §3 CSVs taken as they are, logger files through
+    :mod:`rideid.data.measured`) and :func:`align_starts` (the start of every
+    measured run whose start is not given, estimated with a nominal car).
+    ``Dataset.preprocessing()`` says what was done.
 
     Parameters
     ----------
@@ -99,22 +123,46 @@ def load_dataset(path, starts: dict[str, float] | None = None) -> Dataset:
     DataError
         Naming the file, key or column at fault.
     """
-    from .measured import estimate_start, load_measured_run, nominal_car
+    return align_starts(read_dataset(path), starts)
+
+
+def read_dataset(path) -> Dataset:
+    """Read and condition every run of a dataset; no simulation.
+
+    Measured runs come back without a start (``Dataset.data`` lacks them)
+    until :func:`align_starts` fixes one.
+    """
+    from .measured import load_measured_run
 
     man = load_manifest(path)
     data, measured = {}, {}
     for run in man.runs:
         if man.is_measured(run):
-            mr = load_measured_run(run, man)
-            measured[run.id] = mr
+            measured[run.id] = load_measured_run(run, man)
             continue
         f = Path(run.file)
         if not f.is_absolute():
             f = man.base_dir / f
         data[run.id] = read_run_csv(f)
-    for rid, mr in measured.items():
-        run = man.run(rid)
-        track = man.tracks[run.track]
+    return Dataset(man, data, measured)
+
+
+def align_starts(ds: Dataset, starts: dict[str, float] | None = None) -> Dataset:
+    """The estimation step of loading: fix the start of every measured run.
+
+    A start given in ``starts`` or in the run's ``[preprocess] start`` is
+    taken; otherwise it is estimated by correlating the run with the response
+    of the nominal car (:func:`rideid.model.params.nominal_car`; the record
+    keeps the estimate and its correlation). Returns a new dataset; ``ds``
+    is not changed.
+    """
+    from .measured import estimate_start
+
+    man = ds.manifest
+    data, measured = dict(ds.data), {}
+    for rid, mr0 in ds.measured.items():
+        mr = replace(mr0, record=dict(mr0.record), grid=None, start=None)
+        track = man.tracks[man.run(rid).track]
         if starts and rid in starts:
             s = float(starts[rid])
             mr.record["start"] = {"source": "given (from a previous identification)"}
@@ -125,9 +173,10 @@ def load_dataset(path, starts: dict[str, float] | None = None) -> Dataset:
             s, rho = estimate_start(mr, nominal_car(man.geometry), man.geometry, track)
             mr.record["start"] = {"source": "estimated (nominal car)", "nominal_estimate": s, "correlation": rho}
         mr.make_grid(s)
+        mr.start = float(s)
+        measured[rid] = mr
         data[rid] = mr.run_data(s)
-    data = {r.id: data[r.id] for r in man.runs}
-    return Dataset(man, data, measured)
+    return Dataset(man, {r.id: data[r.id] for r in man.runs}, measured)
 
 
 def prepare_inputs(ds: Dataset) -> list:
@@ -155,15 +204,15 @@ def scale_anchor(known: dict[str, float], where: str = "[known]") -> str:
 
 def check_known_consistent(known: dict[str, float]):
     if "total_mass" in known:
-        fixed_mass = sum(known.get(n, 0.0) * (1 if n == "m_s" else 2) for n in ("m_s", "m_uf", "m_ur"))
+        fixed_mass = sum(known.get(n, 0.0) * c for n, c in MASS_COUNT.items())
         if fixed_mass >= known["total_mass"]:
             raise DataError(f"[known]: total_mass = {known['total_mass']} is not more than the fixed masses "
                             f"(m_s + 2 m_uf + 2 m_ur = {fixed_mass})")
-        if all(n in known for n in ("m_s", "m_uf", "m_ur")):
-            tm = known["m_s"] + 2 * known["m_uf"] + 2 * known["m_ur"]
+        if all(n in known for n in MASS_COUNT):
+            tm = total_mass(known)
             if abs(tm - known["total_mass"]) > 1e-6 * tm:
                 raise DataError(f"[known]: total_mass = {known['total_mass']} disagrees with m_s + 2 m_uf + "
                                 f"2 m_ur = {tm}")
 
 
-__all__ = ["Dataset", "load_dataset", "scale_anchor"]
+__all__ = ["Dataset", "load_dataset", "read_dataset", "align_starts", "scale_anchor"]

@@ -51,13 +51,13 @@ import numpy as np
 
 from ..errors import DataError, DataWarning
 from ..model.equations import CHANNEL_KIND, CHANNELS
+from ..model.params import GRAVITY
 from .readers import FORMAT_NAMES, CsvOptions, Signal, open_signals
 
-G0 = 9.80665
 
 #: accepted units (lower case, spaces removed) -> factor to SI, per quantity
 UNITS = {
-    "acceleration": {"m/s^2": 1.0, "m/s2": 1.0, "m/s²": 1.0, "m/s/s": 1.0, "g": G0},
+    "acceleration": {"m/s^2": 1.0, "m/s2": 1.0, "m/s²": 1.0, "m/s/s": 1.0, "g": GRAVITY},
     "rate": {"rad/s": 1.0, "deg/s": math.pi / 180, "°/s": math.pi / 180},
     "speed": {"m/s": 1.0, "km/h": 1 / 3.6, "kph": 1 / 3.6, "mph": 0.44704},
     "distance": {"m": 1.0, "km": 1000.0},
@@ -121,14 +121,20 @@ class ChannelEntry:
         return d
 
 
-def parse_channel_map(tab, where: str) -> dict[str, ChannelEntry]:
+def checked_items(tab, where: str, allowed, what: str = "", unknown: str = "unknown key '{key}'; allowed: {allowed}"):
+    """``(key, value, where key)`` of a TOML table, after checking it is a table with only ``allowed`` keys."""
     if not isinstance(tab, dict):
-        raise DataError(f"{where} must be a table: SPEC channel = \"file channel\" or {{ name, unit, sign, scale }}")
+        raise DataError(f"{where} must be a table{what}")
+    for k in tab:
+        if k not in allowed:
+            raise DataError(f"{where}: " + unknown.format(key=k, allowed=", ".join(allowed)))
+    return [(k, v, f"{where} {k}") for k, v in tab.items()]
+
+
+def parse_channel_map(tab, where: str) -> dict[str, ChannelEntry]:
     out = {}
-    for target, v in tab.items():
-        w = f"{where} {target}"
-        if target not in TARGETS:
-            raise DataError(f"{where}: unknown channel '{target}'; map file channels to {', '.join(TARGETS)}")
+    for target, v, w in checked_items(tab, where, TARGETS, ": SPEC channel = \"file channel\" or { name, unit, sign, scale }",
+                                      "unknown channel '{key}'; map file channels to {allowed}"):
         if isinstance(v, str):
             v = {"name": v}
         if not isinstance(v, dict):
@@ -166,13 +172,8 @@ def _window(v, w):
 
 
 def parse_preprocess(tab, where: str, keys=PREPROCESS_KEYS) -> dict:
-    if not isinstance(tab, dict):
-        raise DataError(f"{where} must be a table")
     out = {}
-    for k, v in tab.items():
-        w = f"{where} {k}"
-        if k not in keys:
-            raise DataError(f"{where}: unknown key '{k}'; allowed: {', '.join(keys)}")
+    for k, v, w in checked_items(tab, where, keys):
         if k in ("gravity_included", "remove_bias"):
             if not isinstance(v, bool):
                 raise DataError(f"{w}: expected true or false")
@@ -195,11 +196,7 @@ def parse_preprocess(tab, where: str, keys=PREPROCESS_KEYS) -> dict:
 
 
 def parse_csv_options(tab, where: str) -> CsvOptions:
-    if not isinstance(tab, dict):
-        raise DataError(f"{where} must be a table")
-    for k in tab:
-        if k not in CSV_KEYS:
-            raise DataError(f"{where}: unknown key '{k}'; allowed: {', '.join(CSV_KEYS)}")
+    checked_items(tab, where, CSV_KEYS)
     opts = CsvOptions()
     for k in ("delimiter", "decimal"):
         if k in tab:
@@ -287,6 +284,29 @@ def _longest_run(mask: np.ndarray) -> int:
 # A measured run
 
 @dataclass
+class RunData:
+    """Measured data of one run: uniform time and the channels present."""
+
+    time: np.ndarray
+    channels: dict[str, np.ndarray]
+    #: ``distance(t)``: front-axle distance past x = 0 at model time t (varying speed); None for constant speed
+    distance: object = None
+
+    @property
+    def fs(self) -> float:
+        return 1.0 / float(self.time[1] - self.time[0])
+
+    def matrix(self) -> np.ndarray:
+        """(n, 10) in CHANNELS order, NaN where a channel is missing."""
+        Y = np.full((self.time.size, len(CHANNELS)), np.nan)
+        for i, c in enumerate(CHANNELS):
+            if c in self.channels:
+                Y[:, i] = self.channels[c]
+        return Y
+
+
+
+@dataclass
 class MeasuredRun:
     """One run file turned into SI channels on a continuous time axis (file clock).
 
@@ -335,14 +355,11 @@ class MeasuredRun:
         return self.grid
 
     def run_data(self, start: float):
-        """:class:`rideid.files.RunData` sampled at ``start + grid``."""
-        from .schema import RunData
-
+        """:class:`RunData` sampled at ``start + grid``."""
         if self.grid is None:
             self.make_grid(start)
         tt = start + self.grid
         chans = {c: f(tt) for c, f in self.channels.items()}
-        self.start = float(start)
         return RunData(self.grid.copy(), chans, distance=self.relative_distance(start))
 
     def measured_at(self, start: float, grid=None, nu: int = 0) -> np.ndarray:
@@ -482,13 +499,13 @@ def load_measured_run(run, man) -> MeasuredRun:
                             f"{c} (its time runs {s.time[0]:.6g} .. {s.time[-1]:.6g} s)")
         seg = s.values[in_lead]
         m = float(np.mean(seg))
-        if grav and is_acc and not (0.8 * G0 < m < 1.2 * G0):
-            if -1.2 * G0 < m < -0.8 * G0:
+        if grav and is_acc and not (0.8 * GRAVITY < m < 1.2 * GRAVITY):
+            if -1.2 * GRAVITY < m < -0.8 * GRAVITY:
                 _warn(warns, f"{path}: {c}: reads {m:.3g} m/s^2 at rest (gravity included): mounted upside down? "
                              "set sign = -1 in its channel map")
             else:
                 _warn(warns, f"{path}: {c}: lead-in mean {m:.3g} m/s^2 with gravity_included = true "
-                             f"(expected about {G0:.2f}); check its unit and the lead_in window")
+                             f"(expected about {GRAVITY:.2f}); check its unit and the lead_in window")
         whole = s.values - np.mean(s.values)
         rms_all = float(np.sqrt(np.mean(whole ** 2)))
         rms_lead = float(np.std(seg))
@@ -565,7 +582,7 @@ def _plausibility(c, v, unit, opts, w, warns):
                          f"(sensor or logger range exceeded?)")
     if quantity(c) == "acceleration" and not opts.get("gravity_included", False):
         m = float(np.mean(v))
-        if 0.8 * G0 < abs(m) < 1.2 * G0:
+        if 0.8 * GRAVITY < abs(m) < 1.2 * GRAVITY:
             _warn(warns, f"{w}: mean {m:.3g} m/s^2 is about g: the channel seems to include gravity; "
                          "set gravity_included = true in [preprocess]")
     if quantity(c) == "rate" and UNITS["rate"].get(unit.strip().replace(" ", "").lower()) == 1.0:
@@ -581,8 +598,7 @@ def _plausibility(c, v, unit, opts, w, warns):
 def _feature_end(track, geom) -> float:
     """Distance (front axle) at which the rear wheels leave the last feature."""
     ends = []
-    hf, hr = geom.track_front / 2, geom.track_rear / 2
-    for y in (hf, -hf, hr, -hr):
+    for y in geom.corner_y:
         ext = track.path(y).extent
         if ext is not None:
             ends.append(ext[1])
@@ -654,7 +670,7 @@ def _peaks(values, k):
     return inner[np.argsort(values[inner])[::-1][:k]]
 
 
-def _coarse(mr: MeasuredRun, P, geom, track):
+def coarse_start(mr: MeasuredRun, P, geom, track):
     """Start to the nearest sample by cross-correlation over all lags.
 
     Constant speed: the model's response only shifts with the start, so the
@@ -727,7 +743,7 @@ def estimate_start(mr: MeasuredRun, P, geom, track, s0: float | None = None, ref
     normalised correlation over the channels that are not zero.
     """
     h = 1.0 / mr.fs
-    s = s0 if refine_only else _coarse(mr, P, geom, track)
+    s = s0 if refine_only else coarse_start(mr, P, geom, track)
     if mr.grid is None:
         mr.make_grid(s)
     rho = 0.0
@@ -739,15 +755,6 @@ def estimate_start(mr: MeasuredRun, P, geom, track, s0: float | None = None, ref
         if done:
             break
     return s, rho
-
-
-def nominal_car(geom) -> np.ndarray:
-    """The built-in car with its CG at the same fraction of this wheelbase (scale is irrelevant here)."""
-    from ..model.params import DEFAULT_CAR, DEFAULT_GEOMETRY, NAMES
-
-    P = np.array([DEFAULT_CAR[n] for n in NAMES])
-    P[NAMES.index("a")] *= geom.wheelbase / DEFAULT_GEOMETRY.wheelbase
-    return P
 
 
 __all__ = ["MeasuredRun", "load_measured_run", "estimate_start", "parse_channel_map", "parse_preprocess",

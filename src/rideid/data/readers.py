@@ -88,6 +88,18 @@ def _import(fmt: str, path: Path):
                         f"'{module}': pip install 'rideid[{extra}]'") from None
 
 
+_LABEL = {"parquet": "Parquet", "mdf": "MDF", "tdms": "TDMS"}
+
+
+def _read_with(fmt: str, path: Path, read):
+    """``read(library)`` with the format's optional library; a damaged file is a DataError naming it."""
+    lib = _import(fmt, path)
+    try:
+        return read(lib)
+    except Exception as e:  # pyarrow, asammdf and npTDMS raise their own errors for damaged files
+        raise DataError(f"{path}: cannot read {_LABEL[fmt]} file: {e}") from None
+
+
 class SignalFile:
     """A run file opened for reading channels by name."""
 
@@ -251,11 +263,7 @@ class ParquetFile(_ColumnFile):
 
     def __init__(self, path):
         super().__init__(path)
-        pq = _import("parquet", path)
-        try:
-            table = pq.read_table(path)
-        except Exception as e:  # pyarrow raises its own errors for damaged files
-            raise DataError(f"{path}: cannot read Parquet file: {e}") from None
+        table = _read_with("parquet", path, lambda pq: pq.read_table(path))
         self.columns, self.units = {}, {}
         for fld, col in zip(table.schema, table.columns):
             try:
@@ -276,11 +284,7 @@ class MdfFile(SignalFile):
 
     def __init__(self, path):
         super().__init__(path)
-        asammdf = _import("mdf", path)
-        try:
-            self.mdf = asammdf.MDF(str(path))
-        except Exception as e:  # asammdf raises MdfException and others for damaged files
-            raise DataError(f"{path}: cannot read MDF file: {e}") from None
+        self.mdf = _read_with("mdf", path, lambda asammdf: asammdf.MDF(str(path)))
         masters = set()
         for gi, g in enumerate(self.mdf.groups):
             try:
@@ -313,11 +317,7 @@ class TdmsSignals(SignalFile):
 
     def __init__(self, path):
         super().__init__(path)
-        nptdms = _import("tdms", path)
-        try:
-            self.tdms = nptdms.TdmsFile.read(str(path))
-        except Exception as e:  # npTDMS raises ValueError and others for damaged files
-            raise DataError(f"{path}: cannot read TDMS file: {e}") from None
+        self.tdms = _read_with("tdms", path, lambda nptdms: nptdms.TdmsFile.read(str(path)))
         self._by_full, self._by_name = {}, {}
         for grp in self.tdms.groups():
             for ch in grp.channels():

@@ -19,11 +19,11 @@ from pathlib import Path
 import numpy as np
 import tomli_w
 
-from .csvio import read_csv_rows
+from ..csvio import read_csv_rows
 from ..errors import DataError, DataWarning
-from .measured import RUN_PREPROCESS_KEYS, parse_channel_map, parse_csv_options, parse_preprocess
+from .measured import RUN_PREPROCESS_KEYS, RunData, parse_channel_map, parse_csv_options, parse_preprocess
 from ..model.equations import CHANNELS
-from ..model.params import EXT_NAMES, EXTRA_KNOWN, GROUPS, INDEX, NAMES, Geometry, check_parameters
+from ..model.params import EXT_NAMES, EXTRA_KNOWN, GROUPS, INDEX, NAMES, Geometry, check_parameters, total_mass
 from ..model.tracks import Track
 
 #: a scenario may also describe the multibody car of rideid.hifi (``[hifi]``, used by --engine mujoco)
@@ -296,7 +296,7 @@ def parse_manifest(doc: dict, path: Path, scenario: bool) -> Manifest:
     if scenario:
         truth = parse_truth(_table(doc, "truth", where), f"{where}: [truth]", geom)
         if "total_mass" in known:
-            tm = truth["m_s"] + 2 * truth["m_uf"] + 2 * truth["m_ur"]
+            tm = total_mass(truth)
             if abs(tm - known["total_mass"]) > 1e-6 * tm:
                 raise DataError(f"{where}: [known] total_mass = {known['total_mass']} disagrees with [truth] "
                                 f"(m_s + 2 m_uf + 2 m_ur = {tm:.6g})")
@@ -346,13 +346,17 @@ def load_scenario(path) -> Manifest:
     return parse_manifest(read_toml(path), path, scenario=True)
 
 
+def in_folder(path, name: str) -> Path:
+    """``path/name`` when ``path`` is a folder, else ``path`` itself (a folder's main file given directly)."""
+    path = Path(path)
+    return path / name if path.is_dir() else path
+
+
 def load_manifest(path) -> Manifest:
     """``dataset.toml`` of a dataset folder (or the file itself)."""
-    path = Path(path)
-    if path.is_dir():
-        path = path / "dataset.toml"
-    elif not path.exists():
+    if not Path(path).exists():
         raise DataError(f"{path}: no such dataset folder")
+    path = in_folder(path, "dataset.toml")
     return parse_manifest(read_toml(path), path, scenario=False)
 
 
@@ -367,28 +371,6 @@ def load_truth(path, geom: Geometry | None = None) -> dict[str, float]:
 
 # ---------------------------------------------------------------------------
 # Run files
-
-@dataclass
-class RunData:
-    """Measured data of one run: uniform time and the channels present."""
-
-    time: np.ndarray
-    channels: dict[str, np.ndarray]
-    #: ``distance(t)``: front-axle distance past x = 0 at model time t (varying speed); None for constant speed
-    distance: object = None
-
-    @property
-    def fs(self) -> float:
-        return 1.0 / float(self.time[1] - self.time[0])
-
-    def matrix(self) -> np.ndarray:
-        """(n, 10) in CHANNELS order, NaN where a channel is missing."""
-        Y = np.full((self.time.size, len(CHANNELS)), np.nan)
-        for i, c in enumerate(CHANNELS):
-            if c in self.channels:
-                Y[:, i] = self.channels[c]
-        return Y
-
 
 def read_run_csv(path: Path) -> RunData:
     """Read and validate a run CSV (SPEC §3)."""

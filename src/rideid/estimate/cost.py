@@ -32,12 +32,10 @@ from ..data.dataset import Dataset, check_known_consistent, prepare_inputs, scal
 from ..model.batch import BatchSimulator
 from ..errors import ArgumentError, DataError
 from ..model.equations import CHANNEL_KIND, CHANNELS
-from ..model.params import (ALL_NAMES, DEFAULT_CAR, DEFAULT_GEOMETRY, EXT_NAMES, GROUPS, INDEX, NAMES,
-                            NOMINAL_EXTENSIONS, default_bounds)
+from ..model.params import (ALL_NAMES, EXT_NAMES, GROUPS, INDEX, MASS_COUNT, NAMES, default_bounds, nominal_car,
+                            total_mass)
 
 ENERGY_FLOOR = 0.01
-#: total_mass = sum of count * mass over these (one body, two corners per axle)
-MASS_COUNT = {"m_s": 1, "m_uf": 2, "m_ur": 2}
 
 
 def channel_weights(Y: np.ndarray) -> np.ndarray:
@@ -152,11 +150,10 @@ class ParameterSpace:
         """A physically consistent nominal car: the built-in car scaled to the
         anchor, clipped into the bounds (used for sensitivity maps and as a
         reference point, never as a starting guess)."""
-        base = np.array([DEFAULT_CAR[n] for n in NAMES] + [NOMINAL_EXTENSIONS[n] for n in EXT_NAMES])
-        base[INDEX["a"]] = DEFAULT_CAR["a"] / DEFAULT_GEOMETRY.wheelbase * self.geometry.wheelbase
+        base = nominal_car(self.geometry, extensions=True)
         anchor = scale_anchor(self.known)
         if anchor == "total_mass":
-            s = self.known["total_mass"] / (base[0] + 2 * base[INDEX["m_uf"]] + 2 * base[INDEX["m_ur"]])
+            s = self.known["total_mass"] / total_mass(base)
         else:
             s = self.known[anchor] / base[INDEX[anchor]]
         P = base * np.where(np.array(ALL_NAMES) == "a", 1.0, s)
@@ -191,6 +188,10 @@ class CostFunction:
 
     def __init__(self, ds: Dataset, weights=None, use_kernel: bool = True, space: ParameterSpace | None = None,
                  extensions=None):
+        unaligned = [r.id for r in ds.runs if r.id not in ds.data]
+        if unaligned:
+            raise ArgumentError(f"runs {', '.join(unaligned)} have no start yet: load the dataset with "
+                                "rideid.load_dataset (or pass it through rideid.data.dataset.align_starts)")
         self.ds = ds
         if space is None:
             if extensions is None:  # the dataset's [model], else the twelve
@@ -213,6 +214,17 @@ class CostFunction:
         if weights is not None:
             self.set_weights(weights)
         self.nfev = 0
+
+    def copy(self, weights=None) -> "CostFunction":
+        """A copy sharing the prepared runs and data, with its own weights
+        (equal unless given) and its own evaluation count (0)."""
+        new = object.__new__(CostFunction)
+        new.__dict__.update(self.__dict__)
+        new.weights = np.full(len(self.run_ids), 1.0 / len(self.run_ids))
+        if weights is not None:
+            new.set_weights(weights)
+        new.nfev = 0
+        return new
 
     def set_weights(self, w):
         w = np.asarray(w, dtype=float)

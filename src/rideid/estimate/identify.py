@@ -2,11 +2,12 @@
 
 1. The free parameters and bounds come from the dataset (``[known]``,
    ``[bounds]``, defaults in :data:`rideid.params.DEFAULT_BOUNDS`).
-2. The parameter -> track map ``M`` (:mod:`rideid.sensitivity`) is computed
-   around a nominal car (the built-in car scaled to the anchor).
+2. The parameter -> track map ``M`` (:mod:`rideid.estimate.sensitivity`) is
+   computed around a nominal car (the built-in car scaled to the anchor).
 3. JADE evolves the population on ``J = sum_r w_r E_r``. After every
-   generation (``weights="adaptive"``) the normalised spread of each free
-   parameter (eq. 12) gives new weights ``w ∝ spread @ M`` (eq. 13) and the
+   generation the track weighting (:mod:`rideid.estimate.weighting`;
+   ``weights="adaptive"``) takes the normalised spread of each free
+   parameter (eq. 12) to new weights ``w ∝ spread @ M`` (eq. 13) and the
    population is re-scored with them before the next generation (no new
    simulation: the per-run errors of every individual are kept).
 4. JADE stops after ``generations``, or earlier once every free parameter's
@@ -19,9 +20,10 @@
 6. Runs whose start was estimated (:mod:`rideid.measured`, ``start =
    "auto"``) were aligned with a nominal car; after the polish their starts
    become unknowns of the polish beside the parameters (the data are re-read
-   at each start; ``ds.data`` is updated in place, the estimates and their
-   standard errors go to ``result.json``). Runs with a speed channel, whose
-   wheel inputs depend on the start, are re-simulated and polished again
+   at each start into a new dataset: the caller's is never changed; the
+   estimates and their standard errors come back in ``result.starts``).
+   Runs with a speed channel, whose wheel inputs depend on the start, are
+   re-simulated and polished again
    until no start moves by more than 1e-3 of a sample interval (at most 5
    rounds). Without the polish the nominal alignment stands.
 7. Standard errors: ``cov = s^2 (J^T J)^-1`` at the optimum with
@@ -31,97 +33,31 @@
 
 from __future__ import annotations
 
-import json
 import time
-from dataclasses import dataclass, field
-from pathlib import Path
 
 import numpy as np
-from scipy.optimize import least_squares
+from scipy.optimize import OptimizeResult, least_squares
 
-from .cost import CostFunction
 from ..data.dataset import Dataset
-from ..model.batch import single_threaded_blas
+from ..data.measured import coarse_start
 from ..errors import ArgumentError
-from .jade import JadeSolver
+from ..model.batch import single_threaded_blas
 from ..model.equations import modal_summary
 from ..model.params import GROUPS, INDEX, UNITS
-from .sensitivity import SensitivityMaps, adaptive_weights, coefficient_of_variation, compute_maps, normalised_spread
+from .cost import CostFunction
+from .jade import JadeSolver, make_rng, stop_requested
+from .result import History, IdentificationResult
+from .sensitivity import SensitivityMaps, sensitivity_maps
+from .weighting import TrackWeighting, coefficient_of_variation
 
 DEFAULT_POPULATION = 64
 DEFAULT_GENERATIONS = 400
 DEFAULT_SPREAD_TOL = 2e-2
 #: Without a polish JADE itself must converge: a much tighter stop.
 DEFAULT_SPREAD_TOL_NO_POLISH = 1e-5
-
-
-@dataclass
-class IdentificationResult:
-    """What :func:`identify` returns.
-
-    ``parameters`` maps all twelve names to values (and the four extensions
-    of SPEC §6 when the model has them or one is known); ``model`` holds the
-    model's extension groups; ``details`` adds unit,
-    bounds, fixed/derived flags and standard error; ``history`` has one dict
-    per generation.
-    """
-
-    parameters: dict[str, float]
-    details: dict[str, dict]
-    known: dict[str, float]
-    cost: float
-    generations: int
-    evaluations: int
-    wall_time_s: float
-    seed: int | None
-    track_weights: dict[str, float]
-    weights_mode: str
-    polish: dict | None
-    stop: str
-    history: list[dict] = field(default_factory=list)
-    preprocessing: dict = field(default_factory=dict)
-    modal: dict | None = None
-    dataset: str = ""
-    maps: SensitivityMaps | None = None
-    model: dict = field(default_factory=lambda: {"extensions": []})
-
-    def to_dict(self) -> dict:
-        return {
-            "parameters": self.details,
-            "model": self.model,
-            "known": self.known,
-            "cost": self.cost,
-            "cost_definition": "equal-weight sum over runs of the per-channel energy-normalised squared error "
-                               "(see rideid.cost)",
-            "generations": self.generations,
-            "evaluations": self.evaluations,
-            "wall_time_s": self.wall_time_s,
-            "seed": self.seed,
-            "track_weights": self.track_weights,
-            "weights": self.weights_mode,
-            "stop": self.stop,
-            "polish": self.polish,
-            "modal": self.modal,
-            "preprocessing": self.preprocessing,
-            "dataset": str(Path(self.dataset).resolve()) if self.dataset else "",
-            "history_file": "history.csv",
-        }
-
-    def save(self, out_dir):
-        out_dir = Path(out_dir)
-        (out_dir / "result.json").write_text(json.dumps(self.to_dict(), indent=2) + "\n")
-        write_history(self.history, out_dir / "history.csv")
-
-
-def write_history(history, path):
-    if not history:
-        Path(path).write_text("")
-        return
-    keys = list(history[0].keys())
-    lines = [",".join(keys)]
-    for h in history:
-        lines.append(",".join(f"{h[k]:.10g}" if isinstance(h[k], float) else str(h[k]) for k in keys))
-    Path(path).write_text("\n".join(lines) + "\n")
+MESSAGES = {"generations": "Maximum number of generations reached.",
+            "spread": "Every free parameter's spread in the population fell below spread_tol.",
+            "callback": "Stopped by callback."}
 
 
 #: ``--model`` choices handled here (SPEC §6)
@@ -150,34 +86,45 @@ def model_extensions(ds: Dataset, model=None) -> tuple[str, ...]:
     return tuple(g for g in GROUPS if g in groups)
 
 
-def identify(ds: Dataset, *, seed: int | None = None, population: int = DEFAULT_POPULATION,
+def identify(ds: Dataset, *, rng=None, seed=None, population: int = DEFAULT_POPULATION,
              generations: int = DEFAULT_GENERATIONS, weights: str = "adaptive", polish: bool = True,
-             spread_tol: float | None = None, progress=None, cost: CostFunction | None = None,
+             spread_tol: float | None = None, callback=None, cost: CostFunction | None = None,
              maps: SensitivityMaps | None = None, model=None) -> IdentificationResult:
     """Estimate the ride parameters of a dataset.
+
+    Parameter space -> global search (JADE with track weighting) -> polish
+    (least squares, with the estimated starts of measured runs) -> result.
+    Neither ``ds`` nor ``cost`` is changed.
 
     Parameters
     ----------
     ds : Dataset
+    rng : int, numpy.random.Generator or None
+        Seed or generator of all randomness (same seed, same result). The
+        seed, or the generator's starting state, is recorded in the result.
     seed : int, optional
-        Seed of the ``numpy.random.Generator`` (same seed, same result).
+        The older name of ``rng`` (SPEC §5).
     population, generations : int
         JADE's NP and generation limit.
     weights : {"adaptive", "fixed"}
-        Adaptive track weights (paper eq. 12-13) or equal weights.
+        Adaptive track weights (paper eq. 12-13) or equal weights
+        (:class:`rideid.estimate.sensitivity.TrackWeighting`).
     polish : bool
         Refine with ``scipy.optimize.least_squares`` after JADE.
     spread_tol : float, optional
         Stop JADE once every free parameter's coefficient of variation in the
         population is below this (0 disables the early stop). Default 2e-2
         with the polish (it only needs the right basin), 1e-5 without.
-    progress : callable, optional
-        ``progress(info)`` each generation with a dict (generation, best,
-        spread, evaluations, elapsed).
+    callback : callable, optional
+        ``callback(state)`` after each generation with an ``OptimizeResult``
+        (``x, fun, nit, nfev, generations, spread, elapsed, track_weights``);
+        returning True or raising ``StopIteration`` stops the search (the
+        polish still runs), as for :func:`rideid.jade`.
     cost : CostFunction, optional
-        Reuse an existing cost function of ``ds`` (its weights are reset).
+        An existing cost function of ``ds`` to reuse (saves preparing the
+        runs); it is copied, never modified.
     maps : SensitivityMaps, optional
-        Reuse parameter -> track maps (default: computed around the nominal car).
+        Parameter -> track maps (default: computed around the nominal car).
     model : {None, "base", "full"} or sequence of group names
         The model (SPEC §6): the twelve (``"base"``), with every extension
         group (``"full"``), or the given groups; ``None``: the dataset's
@@ -189,33 +136,39 @@ def identify(ds: Dataset, *, seed: int | None = None, population: int = DEFAULT_
     -------
     IdentificationResult
     """
-    with single_threaded_blas():
-        return _identify(ds, seed=seed, population=population, generations=generations, weights=weights,
-                         polish=polish, spread_tol=spread_tol, progress=progress, cost=cost, maps=maps,
-                         model=model)
-
-
-def _identify(ds, *, seed, population, generations, weights, polish, spread_tol, progress, cost, maps, model):
     if spread_tol is None:
         spread_tol = DEFAULT_SPREAD_TOL if polish else DEFAULT_SPREAD_TOL_NO_POLISH
-    if weights not in ("adaptive", "fixed"):
-        raise ArgumentError(f"weights must be 'adaptive' or 'fixed', got {weights!r}")
-    if not isinstance(generations, int) or generations < 1:
+    if not isinstance(generations, (int, np.integer)) or generations < 1:
         raise ArgumentError(f"generations must be a positive integer, got {generations!r}")
-    t0 = time.perf_counter()
-    cf = cost or CostFunction(ds, extensions=model_extensions(ds, model))
-    cf.set_weights(np.ones(len(cf.run_ids)))
-    space = cf.space
-    if maps is None:
-        mask = cf.W > 0
-        maps = compute_maps(cf.sim, ds.geometry, space.nominal(), cf.run_ids, mask)
-    M_free = maps.submap(cf.names)
-    rng = np.random.default_rng(seed)
-    solver = JadeSolver(cf.bounds, population, rng)
-    n_runs = len(cf.run_ids)
-    w = np.full(n_runs, 1.0 / n_runs)
-    history: list[dict] = []
+    weighting = TrackWeighting.create(weights)
+    gen, rng_record = make_rng(rng, seed)
+    with single_threaded_blas():
+        t0 = time.perf_counter()
+        cf = (cost if cost is not None else CostFunction(ds, extensions=model_extensions(ds, model))).copy()
+        if maps is None:
+            maps = sensitivity_maps(ds, cost=cf)
+        search = global_search(cf, weighting, maps, gen, population=population, generations=generations,
+                               spread_tol=spread_tol, callback=callback, t0=t0)
+        fit = polish_fit(ds, cf, search.x) if polish else None
+        return _result(ds, cf if fit is None else fit.cost, search, fit, weighting, maps, rng_record,
+                       time.perf_counter() - t0)
 
+
+def global_search(cf: CostFunction, weighting, maps: SensitivityMaps, rng, *, population, generations,
+                  spread_tol, callback=None, t0=None) -> OptimizeResult:
+    """JADE on the weighted cost, the weights updated by ``weighting`` after every generation.
+
+    Returns
+    -------
+    OptimizeResult
+        ``x`` (best individual), ``nit``, ``stop``, ``history`` (list of
+        dicts), ``track_weights`` (final, per run).
+    """
+    t0 = time.perf_counter() if t0 is None else t0
+    M_free = maps.submap(cf.names)
+    solver = JadeSolver(cf.bounds, population, rng)
+    w = weighting.initial(len(cf.run_ids))
+    history = []
     X = solver.ask()
     E = cf.run_errors(X)
     solver.tell(cf.combine(E, w))
@@ -226,70 +179,99 @@ def _identify(ds, *, seed, population, generations, weights, polish, spread_tol,
         E_trial = cf.run_errors(X)
         better = solver.tell(cf.combine(E_trial, w))
         E_pop = np.where(better[None, :], E_trial, E_pop)
-        spread = normalised_spread(solver.pop)
-        if weights == "adaptive":
-            w = adaptive_weights(M_free, spread)
+        spread, w_new = weighting.update(M_free, solver.pop, w)
+        if w_new is not w:
+            w = w_new
             solver.rescore(cf.combine(E_pop, w))
         cv = coefficient_of_variation(solver.pop)
-        finite = np.isfinite(solver.costs)
-        rec = {"generation": g, "evaluations": solver.nfev, "best_cost": float(solver.fun),
-               "mean_cost": float(np.mean(solver.costs[finite])) if finite.any() else float("inf"),
-               "best_cost_equal": float(np.mean(E_pop[:, solver.best_index])),
-               "mu_f": solver.mu_f, "mu_cr": solver.mu_cr}
-        mean = solver.pop.mean(axis=0)
-        xb = solver.x
-        for j, n in enumerate(cf.names):
-            rec[f"best_{n}"] = float(xb[j])
-        for j, n in enumerate(cf.names):
-            rec[f"mean_{n}"] = float(mean[j])
-        for j, n in enumerate(cf.names):
-            rec[f"spread_{n}"] = float(spread[j])
-        for j, n in enumerate(cf.names):
-            rec[f"cv_{n}"] = float(cv[j])
-        for r, rid in enumerate(cf.run_ids):
-            rec[f"weight_{rid}"] = float(w[r])
-        history.append(rec)
-        if progress is not None:
-            progress({"generation": g, "generations": generations, "best": float(solver.fun),
-                      "spread": float(cv.max()), "evaluations": solver.nfev,
-                      "elapsed": time.perf_counter() - t0})
+        history.append(_generation_record(g, solver, E_pop, cf, spread, cv, w))
+        state = OptimizeResult(x=solver.x, fun=float(solver.fun), nit=g, nfev=solver.nfev, generations=generations,
+                               spread=float(cv.max()), elapsed=time.perf_counter() - t0,
+                               track_weights=dict(zip(cf.run_ids, w.tolist())))
+        if stop_requested(callback, state):
+            stop = "callback"
+            break
         if spread_tol > 0 and cv.max() < spread_tol:
             stop = "spread"
             break
+    return OptimizeResult(x=solver.x, nit=solver.nit, stop=stop, history=history,
+                          track_weights={rid: float(w[r]) for r, rid in enumerate(cf.run_ids)})
 
-    x_best = solver.x
-    equal = np.full(n_runs, 1.0 / n_runs)
-    polish_info = None
-    std = np.full(len(cf.names), np.nan)
-    if polish and ds.auto_start_runs():
-        x_best, polish_info, std, cf = _polish_aligned(ds, cf, x_best, equal)
-    elif polish:
-        x_best, polish_info, std = _polish(cf, x_best, equal)
-    final_E = cf.run_errors(x_best[None])[:, 0]
-    P = space.full(x_best[None])[0]
-    wall = time.perf_counter() - t0
 
+def _generation_record(g, solver, E_pop, cf, spread, cv, w) -> dict:
+    """One row of ``history.csv`` (column names in docs/formats.md)."""
+    finite = np.isfinite(solver.costs)
+    rec = {"generation": g, "evaluations": solver.nfev, "best_cost": float(solver.fun),
+           "mean_cost": float(np.mean(solver.costs[finite])) if finite.any() else float("inf"),
+           "best_cost_equal": float(np.mean(E_pop[:, solver.best_index])),
+           "mu_f": solver.mu_f, "mu_cr": solver.mu_cr}
+    mean = solver.pop.mean(axis=0)
+    xb = solver.x
+    for prefix, values in (("best", xb), ("mean", mean), ("spread", spread), ("cv", cv)):
+        for j, n in enumerate(cf.names):
+            rec[f"{prefix}_{n}"] = float(values[j])
+    for r, rid in enumerate(cf.run_ids):
+        rec[f"weight_{rid}"] = float(w[r])
+    return rec
+
+
+def polish_fit(ds: Dataset, cf: CostFunction, x0) -> OptimizeResult:
+    """Least squares on the equal-weight cost from ``x0``; estimated starts join as unknowns.
+
+    Returns
+    -------
+    OptimizeResult
+        ``x``, ``std``, ``info`` (the ``polish`` block of result.json),
+        ``cost`` (the cost function on the final data), ``starts`` (run id ->
+        start record, for runs whose start was estimated).
+    """
+    equal = np.full(len(cf.run_ids), 1.0 / len(cf.run_ids))
+    if ds.auto_start_runs():
+        x, info, std, cf, starts = _polish_aligned(ds, cf, x0, equal)
+    else:
+        (x, info, std), starts = _polish(cf, x0, equal), {}
+    return OptimizeResult(x=x, std=std, info=info, cost=cf, starts=starts)
+
+
+def _result(ds, cf, search, fit, weighting, maps, rng_record, wall) -> IdentificationResult:
+    space = cf.space
+    x = search.x if fit is None else fit.x
+    d = len(cf.names)
+    std = np.full(d, np.nan) if fit is None else fit.std
+    info = None if fit is None else fit.info
+    cov = np.full((d, d), np.nan) if info is None else np.array(info["covariance"], dtype=float)
+    final_E = cf.run_errors(x[None])[:, 0]
+    P = space.full(x[None])[0]
     details = {}
     for n in space.reported_names:
-        d = {"value": float(P[INDEX[n]]), "unit": UNITS[n], "fixed": n in space.fixed,
+        e = {"value": float(P[INDEX[n]]), "unit": UNITS[n], "fixed": n in space.fixed,
              "derived": n == space.derived}
         if n in cf.names:
             j = cf.names.index(n)
-            d["lower"], d["upper"] = float(cf.bounds[j, 0]), float(cf.bounds[j, 1])
-            d["std"] = None if not np.isfinite(std[j]) else float(std[j])
+            e["lower"], e["upper"] = float(cf.bounds[j, 0]), float(cf.bounds[j, 1])
+            e["std"] = None if not np.isfinite(std[j]) else float(std[j])
         elif n == space.derived:
-            d["std"] = _derived_std(space, polish_info)
-            d["lower"] = d["upper"] = None  # follows from the anchor: never searched
+            e["std"] = _derived_std(space, cov)
+            e["lower"] = e["upper"] = None  # follows from the anchor: never searched
         else:
-            d["std"] = 0.0
-        details[n] = d
+            e["std"] = 0.0
+        details[n] = e
+    starts = {} if fit is None else fit.starts
+    pre = ds.preprocessing()
+    for rid, st in starts.items():
+        pre[rid]["start"] = dict(pre[rid].get("start", {}), **st)
+    finite = bool(np.all(np.isfinite(x)) and np.isfinite(final_E).all())
+    success = finite and (info is None or bool(info["success"]))
+    message = MESSAGES[search.stop] + ("" if info is None else f" Polish: {info['message']}")
     return IdentificationResult(
-        parameters={n: float(P[INDEX[n]]) for n in space.reported_names}, details=details, known=dict(ds.known),
-        cost=float(equal @ final_E), generations=solver.nit, evaluations=cf.nfev, wall_time_s=wall,
-        seed=seed, track_weights={rid: float(w[r]) for r, rid in enumerate(cf.run_ids)},
-        weights_mode=weights, polish=polish_info, stop=stop, history=history,
+        x=np.asarray(x, dtype=float), names=list(cf.names), std=np.asarray(std, dtype=float), covariance=cov,
+        fun=float(np.full(final_E.size, 1.0 / final_E.size) @ final_E), success=success, message=message, stop=search.stop,
+        nit=int(search.nit), nfev=int(cf.nfev), parameters={n: float(P[INDEX[n]]) for n in space.reported_names},
+        details=details, known=dict(ds.known), wall_time_s=wall, seed=rng_record["seed"],
+        rng_state=rng_record["rng_state"], track_weights=search.track_weights, weights_mode=weighting.name,
+        polish=info, history=History(search.history), starts=starts, preprocessing=pre,
         modal=modal_summary(P, ds.geometry), dataset=str(ds.path), maps=maps,
-        preprocessing=ds.preprocessing(), model={"extensions": list(space.extensions)})
+        model={"extensions": list(space.extensions)}, response=cf.simulate(P))
 
 
 def _polish(cf: CostFunction, x0, weights, align=None):
@@ -374,60 +356,63 @@ REALIGN_MAX = 5
 
 
 def _polish_aligned(ds, cf, x_best, equal):
-    """Polish parameters and the estimated starts together; with speed channels, re-simulate and repeat."""
+    """Polish parameters and the estimated starts together; with speed channels, re-simulate and repeat.
+
+    Works on its own copy of the run data: ``ds`` is not changed.
+    """
+    starts = {rid: ds.measured[rid].start for rid in ds.auto_start_runs()}
+    records = {rid: {} for rid in starts}
+    data = dict(ds.data)
     rounds = []
     for _ in range(REALIGN_MAX):
-        align = [(cf.run_ids.index(rid), ds.measured[rid], ds.measured[rid].start) for rid in ds.auto_start_runs()]
+        align = [(cf.run_ids.index(rid), ds.measured[rid], starts[rid]) for rid in starts]
         x_best, info, std = _polish(cf, x_best, equal, align)
         changes = {}
         for rid, st in info["starts"].items():
-            mr = ds.measured[rid]
-            changes[rid] = st["value"] - mr.start
-            ds.data[rid] = mr.run_data(st["value"])
-            mr.record["start"].update({"source": "estimated with the parameters (least squares)",
-                                       "std": st["std"]})
+            changes[rid] = st["value"] - starts[rid]
+            starts[rid] = st["value"]
+            data[rid] = ds.measured[rid].run_data(st["value"])
+            records[rid] = {"source": "estimated with the parameters (least squares)", "std": st["std"]}
         worst = max(abs(v) * ds.measured[rid].fs for rid, v in changes.items())
         rounds.append({"max_change_samples": worst})
         varying = [rid for rid in changes if ds.measured[rid].distance is not None]
-        slipped = _cycle_check(ds, cf.space.full(x_best[None])[0])
+        slipped = _cycle_check(ds, cf.space.full(x_best[None])[0], starts, data)
         if slipped:
             rounds[-1]["cycle_slips"] = slipped
         elif not varying or worst < REALIGN_TOL:
             break
         # the wheel inputs of speed-channel runs depend on the start: rebuild them and polish again
         nfev = cf.nfev
-        cf = CostFunction(ds, space=cf.space)
+        cf = CostFunction(ds.with_data(data), space=cf.space)
         cf.nfev = nfev
     info["alignment_rounds"] = rounds
-    return x_best, info, std, cf
+    out = {rid: {"value": float(starts[rid]), **records[rid]} for rid in starts}
+    return x_best, info, std, cf, out
 
 
-def _cycle_check(ds, P) -> dict:
+def _cycle_check(ds, P, starts, data) -> dict:
     """Constant-speed auto runs: redo the all-lags correlation with the identified car.
 
     On a periodic track the nominal car may have picked a neighbouring cycle
     (the polish only moves a start by a few samples). Where the identified
-    car's correlation peaks more than two samples away, take its start.
+    car's correlation peaks more than two samples away, take its start
+    (updating ``starts`` and ``data``, the caller's working copies).
     """
-    from ..data.measured import _coarse
-
     slipped = {}
-    for rid in ds.auto_start_runs():
+    for rid in starts:
         mr = ds.measured[rid]
         if mr.distance is not None:
             continue
-        s = _coarse(mr, P, ds.geometry, ds.manifest.tracks[ds.manifest.run(rid).track])
-        if abs(s - mr.start) > 2.0 / mr.fs:
-            slipped[rid] = s - mr.start
-            ds.data[rid] = mr.run_data(s)
+        s = coarse_start(mr, P, ds.geometry, ds.manifest.tracks[ds.manifest.run(rid).track])
+        if abs(s - starts[rid]) > 2.0 / mr.fs:
+            slipped[rid] = s - starts[rid]
+            starts[rid] = s
+            data[rid] = mr.run_data(s)
     return slipped
 
 
-def _derived_std(space, polish_info):
-    if polish_info is None or space.derived is None:
-        return None
-    cov = np.array(polish_info["covariance"])
-    if not np.all(np.isfinite(cov)):
+def _derived_std(space, cov):
+    if space.derived is None or not np.all(np.isfinite(cov)):
         return None
     g = space.derived_gradient()
     return float(np.sqrt(max(g @ cov @ g, 0.0)))

@@ -34,6 +34,51 @@ from scipy.optimize import OptimizeResult
 from ..errors import ArgumentError
 
 
+def make_rng(rng=None, seed=None):
+    """The one ``rng`` argument of :func:`jade` and :func:`rideid.identify`.
+
+    Parameters
+    ----------
+    rng : None, int, numpy.random.SeedSequence or numpy.random.Generator
+        As SciPy >= 1.15: anything ``numpy.random.default_rng`` accepts. A
+        Generator is used as it is (and advanced).
+    seed : int, optional
+        The older name (SPEC §5); give one of the two.
+
+    Returns
+    -------
+    generator : numpy.random.Generator
+    record : dict
+        ``{"seed": int or None, "rng_state": the bit generator's state before
+        the first draw}``, JSON-serialisable: with a Generator the state
+        reproduces the run (``numpy.random.Generator(PCG64())`` with
+        ``bit_generator.state = rng_state``).
+    """
+    if seed is not None and rng is not None:
+        raise ArgumentError("give rng or seed, not both (seed is the older name of rng)")
+    src = rng if rng is not None else seed
+    if isinstance(src, (bool, np.bool_)) or not (
+            src is None or isinstance(src, (int, np.integer, np.random.Generator, np.random.SeedSequence))):
+        raise ArgumentError(f"rng must be None, an integer seed, a SeedSequence or a numpy.random.Generator, "
+                            f"got {type(src).__name__}")
+    if isinstance(src, (int, np.integer)) and src < 0:
+        raise ArgumentError(f"seed must be a non-negative integer, got {src}")
+    gen = np.random.default_rng(src)
+    seed_rec = int(src) if isinstance(src, (int, np.integer)) else None
+    return gen, {"seed": seed_rec, "rng_state": gen.bit_generator.state}
+
+
+def stop_requested(callback, state) -> bool:
+    """The one callback protocol: ``callback(state)`` returning True, or raising
+    ``StopIteration`` (as SciPy's optimisers), asks to stop."""
+    if callback is None:
+        return False
+    try:
+        return bool(callback(state))
+    except StopIteration:
+        return True
+
+
 def _check_bounds(bounds):
     try:
         b = np.asarray(bounds, dtype=float)
@@ -59,6 +104,7 @@ class JadeSolver:
     population : int
         NP, at least 4.
     rng : numpy.random.Generator or int or None
+        See :func:`make_rng`.
     p : float
         Greediness: ``x_pbest`` from the best ``max(2, ceil(p NP))``.
     c : float
@@ -92,7 +138,7 @@ class JadeSolver:
             if not (0 <= v <= 1):
                 raise ArgumentError(f"{name} must be in [0, 1], got {v}")
         self.np_ = int(population)
-        self.rng = np.random.default_rng(rng)
+        self.rng = rng if isinstance(rng, np.random.Generator) else make_rng(rng)[0]
         self.p, self.c = float(p), float(c)
         self.mu_cr, self.mu_f = float(mu_cr), float(mu_f)
         self.use_archive = bool(archive)
@@ -232,7 +278,7 @@ class JadeSolver:
                               nit=self.nit, nfev=self.nfev)
 
 
-def jade(fun, bounds, *, population: int = 100, generations: int = 1000, seed=None,
+def jade(fun, bounds, *, population: int = 100, generations: int = 1000, rng=None, seed=None,
          max_evals: int | None = None, target: float | None = None, callback=None,
          p: float = 0.05, c: float = 0.1, archive: bool = True, init=None) -> OptimizeResult:
     """Minimise ``fun`` with JADE.
@@ -247,14 +293,19 @@ def jade(fun, bounds, *, population: int = 100, generations: int = 1000, seed=No
         NP (the paper used 100 at d = 30).
     generations : int
         Largest number of generations.
-    seed : int, numpy.random.Generator or None
+    rng : int, numpy.random.Generator or None
+        Seed or generator of all randomness (see :func:`make_rng`); same
+        seed, same bits.
+    seed : int, optional
+        The older name of ``rng`` (SPEC §5).
     max_evals : int, optional
         Stop when the next generation would exceed this many evaluations.
     target : float, optional
         Stop once the best cost is <= target.
     callback : callable, optional
         ``callback(state)`` after each generation with the solver's
-        :meth:`JadeSolver.state`; returning True stops. It may call
+        :meth:`JadeSolver.state`; returning True or raising ``StopIteration``
+        stops (:func:`stop_requested`). It may call
         ``state.solver.rescore`` (the solver is passed as ``state.solver``).
     p, c, archive, init
         See :class:`JadeSolver`.
@@ -270,7 +321,8 @@ def jade(fun, bounds, *, population: int = 100, generations: int = 1000, seed=No
         raise ArgumentError("fun must be callable")
     if not isinstance(generations, (int, np.integer)) or generations < 0:
         raise ArgumentError(f"generations must be a non-negative integer, got {generations!r}")
-    s = JadeSolver(bounds, population, seed, p=p, c=c, archive=archive, init=init)
+    gen, _ = make_rng(rng, seed)
+    s = JadeSolver(bounds, population, gen, p=p, c=c, archive=archive, init=init)
 
     X = s.ask()
     s.tell(_call(fun, X, s.np_))
@@ -290,7 +342,7 @@ def jade(fun, bounds, *, population: int = 100, generations: int = 1000, seed=No
         if callback is not None:
             st = s.state()
             st.solver = s
-            if callback(st):
+            if stop_requested(callback, st):
                 stop = "callback"
                 break
     messages = {

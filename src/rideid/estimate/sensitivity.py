@@ -27,6 +27,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..errors import ArgumentError
 from ..model.batch import BatchSimulator
 from ..model.equations import CHANNEL_KIND, CHANNELS
 from ..model.params import ALL_NAMES, Geometry
@@ -102,31 +103,36 @@ def compute_maps(sim: BatchSimulator, geom: Geometry, baseline, run_ids, channel
     return SensitivityMaps(list(names), list(CHANNELS), list(run_ids), S, S_bar, R, M, base)
 
 
-def normalised_spread(X) -> np.ndarray:
-    """Paper eq. 12: each parameter's population variance normalised by its
-    mean, then over all parameters (sums to 1).
+def sensitivity_maps(source, *, cost=None) -> SensitivityMaps:
+    """The three maps of a dataset or a scenario (``rideid sensitivity``).
 
-    ``var / mean`` has the parameter's unit, so N/m parameters would swamp
-    kg m^2 ones; we use the dimensionless ``var / mean^2`` (the squared
-    coefficient of variation) as the per-parameter spread.
+    Parameters
+    ----------
+    source : Dataset or Manifest
+        A dataset: maps around the nominal car of its parameter space
+        (:meth:`rideid.ParameterSpace.nominal`), over its measured channels.
+        A scenario (a manifest with ``[truth]``): around the truth, all channels.
+    cost : CostFunction, optional
+        A cost function of the dataset to reuse its prepared runs.
+
+    Returns
+    -------
+    SensitivityMaps
     """
-    X = np.asarray(X, dtype=float)
-    mean = X.mean(axis=0)
-    v = X.var(axis=0) / np.maximum(mean * mean, 1e-300)
-    s = v.sum()
-    return v / s if s > 0 else np.full(v.shape, 1.0 / v.size)
+    from ..data.dataset import Dataset
+    from ..data.scenario import run_times
+    from ..model.params import as_vector
+    from ..model.simulate import prepare_run
+    from .cost import CostFunction
 
-
-def coefficient_of_variation(X) -> np.ndarray:
-    X = np.asarray(X, dtype=float)
-    return X.std(axis=0) / np.maximum(np.abs(X.mean(axis=0)), 1e-300)
-
-
-def adaptive_weights(M_free: np.ndarray, spread: np.ndarray) -> np.ndarray:
-    """Paper eq. 13: ``w_r ∝ sum_p spread_p M[p, r]``, normalised to sum 1."""
-    w = spread @ M_free
-    s = w.sum()
-    return w / s if s > 0 else np.full(M_free.shape[1], 1.0 / M_free.shape[1])
+    if isinstance(source, Dataset) or cost is not None:
+        cf = cost if cost is not None else CostFunction(source)
+        return compute_maps(cf.sim, cf.space.geometry, cf.space.nominal(), cf.run_ids, cf.W > 0)
+    if not getattr(source, "truth", None):
+        raise ArgumentError("sensitivity_maps: give a Dataset or a scenario with [truth]")
+    runs = [prepare_run(source.tracks[r.track], source.geometry, r.speed, run_times(r)) for r in source.runs]
+    return compute_maps(BatchSimulator(source.geometry, runs), source.geometry, as_vector(source.truth),
+                        [r.id for r in source.runs])
 
 
 def tables_markdown(m: SensitivityMaps) -> str:
@@ -217,4 +223,4 @@ def heatmaps(m: SensitivityMaps, out_dir) -> list:
     return files
 
 
-__all__ = ["compute_maps", "SensitivityMaps", "adaptive_weights", "normalised_spread"]
+__all__ = ["compute_maps", "sensitivity_maps", "SensitivityMaps"]

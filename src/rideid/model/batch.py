@@ -15,7 +15,7 @@ from threadpoolctl import ThreadpoolController
 
 from . import kernel
 from .discretize import N_MAX, Discretized, n_terms, spectral_radius
-from .params import Geometry
+from .params import Geometry, column
 from .simulate import RunInput, initial_states, simulate_reference
 
 
@@ -89,7 +89,7 @@ class BatchSimulator:
         for ri, r in enumerate(self.runs):
             xs, xa = initial_states(discs[self.run_group[ri]], r.ud[0])
             X0s[ri], X0a[ri] = xs.T, xa.T
-        a = np.ascontiguousarray(P[:, 3])
+        a = np.ascontiguousarray(column(P, "a"))
         b = self.geom.wheelbase - a
         return P, packed, X0s, X0a, a, b
 
@@ -105,7 +105,7 @@ class BatchSimulator:
         out = np.zeros((self.n_samples, 10, n) if mode == 1 else (1, 10, 1))
         err = kernel.run_kernel(pk["Phi_s"], pk["G_s"], pk["Ca_s"], pk["Da_s"], pk["Dr_s"],
                                 pk["Phi_a"], pk["G_a"], pk["Ca_a"], pk["Da_a"], pk["Dr_a"], pk["nterms"],
-                                a, b, self.geom.track_front / 2, self.geom.track_rear / 2,
+                                a, b, self.geom.corner_y[0], self.geom.corner_y[2],
                                 X0s, X0a, self.run_start, self.run_group, self.UD, self.RD, self.MU,
                                 Y, W, mode, out)
         return err[:, :n0], (out[:, :, :n0] if mode == 1 else out)

@@ -105,7 +105,7 @@ def _refine(h, xs, dj, step, R, t, rows):
 
 
 @numba.njit(cache=True, parallel=True)
-def _lattice_max(H, circ):  # pragma: no cover - compiled
+def lattice_max(H, circ):  # pragma: no cover - compiled
     """``max_j H[i + j] + circ[j]`` and its argmax for every i."""
     n = H.size - circ.size + 1
     best = np.empty(n)
@@ -150,7 +150,7 @@ def envelope_grid(path: WheelPath, R: float, dx: float = 5e-4, n_fine: int = 9):
         offs = dx * np.arange(-m, m + 1)
         circ = np.sqrt(np.maximum(R * R - offs * offs, 0.0))
         H = path.h(lo + dx * np.arange(-m, n + m))
-        best, arg = _lattice_max(H, circ)
+        best, arg = lattice_max(H, circ)
         # refine: exact profile on +-1 lattice step around the best offset
         t = np.linspace(-1.0, 1.0, n_fine)
         vals = np.empty(n)

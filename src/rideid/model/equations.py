@@ -24,7 +24,11 @@ the wheel and the road-rate input ``Bd r'`` (``Bd = diag(c_t)`` on the wheels).
 
 State ``x = [q, q']`` (14), ``x' = A x + B r + Br r'``. Outputs (SPEC channel
 order, :data:`CHANNELS`) ``y = Cy x + Dy r + Dyr r'`` (:func:`state_space`,
-:func:`rate_input`).
+:func:`rate_input`): the accelerometers read ``Omega q''`` (:func:`output_map`:
+body corner ``i`` reads ``G_i q_b''``, axle ``i`` reads ``z_i''``) and the
+gyros ``theta'``, ``phi'`` (:data:`RATE_COORDS`). This is the one definition
+of the output map; the compiled kernel and the reference simulation are
+tested against it.
 
 With equal left/right parameters the model splits exactly into a symmetric
 part (heave, pitch and the in-phase wheel motions, 8 states) and an
@@ -37,7 +41,7 @@ from __future__ import annotations
 import numpy as np
 import scipy.linalg
 
-from .params import ALL_NAMES, INDEX, Geometry, NAMES, full_rows
+from .params import ALL_NAMES, GRAVITY, INDEX, NAMES, Geometry, full_rows
 
 CHANNELS: tuple[str, ...] = (
     "body_az_fl", "body_az_fr", "body_az_rl", "body_az_rr",
@@ -56,6 +60,9 @@ COORDS = ("z", "theta", "phi", "z_fl", "z_fr", "z_rl", "z_rr")
 SYM_COORDS = ("z", "theta", "zf_s", "zr_s")
 ANTI_COORDS = ("phi", "zf_a", "zr_a")
 
+#: Coordinate index (in :data:`COORDS`) whose rate each gyro channel reads.
+RATE_COORDS = {"pitch_rate": 1, "roll_rate": 2}
+
 # q = T qt  (qt in decomposed order), r = TR rt
 _T = np.zeros((7, 7))
 _T[0, 0] = 1  # z
@@ -68,6 +75,8 @@ _T[6, 3], _T[6, 6] = 1, -1   # z_rr
 _TR = np.array([[1, 0, 1, 0], [1, 0, -1, 0], [0, 1, 0, 1], [0, 1, 0, -1]], dtype=float)
 #: Corner inputs -> decomposed inputs (inverse of ``_TR``).
 CORNER_TO_DECOMPOSED = np.linalg.inv(_TR)
+#: Decomposed coordinates ``[z, theta, zf_s, zr_s, phi, zf_a, zr_a]`` -> :data:`COORDS`.
+DECOMPOSED_TO_COORDS = _T.copy()
 
 
 def _cols(P):
@@ -75,15 +84,39 @@ def _cols(P):
     return {n: P[:, i] for i, n in enumerate(ALL_NAMES)}, P.shape[0]
 
 
-def _corner_vectors(p, n, geom):
-    """Rows ``e_i = [-G_i, unit_i]`` (n, 4, 7): ``d_i = e_i q`` is corner i's deflection."""
+def _corner_vectors(P, geom):
+    """Rows ``e_i = [-G_i, unit_i]`` (n, 4, 7): ``d_i = e_i q`` is corner i's deflection
+    (wheel minus body corner motion, both read off the output map)."""
+    Om = output_map(P, geom)
+    return Om[:, 4:] - Om[:, :4]
+
+
+def output_map(P, geom: Geometry) -> np.ndarray:
+    """The accelerometer channels as a linear map of the generalised accelerations.
+
+    Body corner ``i`` at ``(x_i, y_i)`` from the CG reads
+    ``z'' - x_i theta'' + y_i phi''`` (pitch nose-down +, roll right-side-down
+    +); axle ``i`` reads its wheel's ``z_i''``.
+
+    Parameters
+    ----------
+    P : array_like, shape (n, len(NAMES))
+    geom : Geometry
+
+    Returns
+    -------
+    Omega : ndarray, shape (n, 8, 7)
+        ``y[:8] = Omega q''`` for the first eight :data:`CHANNELS`, ``q`` in
+        :data:`COORDS` order.
+    """
+    p, n = _cols(P)
     x, y = geom.corner_xy(p["a"])
-    E = np.zeros((n, 4, 7))
-    E[:, :, 0] = -1.0
-    E[:, :, 1] = x
-    E[:, :, 2] = -y
-    E[:, np.arange(4), 3 + np.arange(4)] = 1.0
-    return E
+    Om = np.zeros((n, 8, 7))
+    Om[:, :4, 0] = 1.0
+    Om[:, :4, 1] = -x
+    Om[:, :4, 2] = y
+    Om[:, 4 + np.arange(4), 3 + np.arange(4)] = 1.0
+    return Om
 
 
 def mck(P, geom: Geometry):
@@ -109,7 +142,7 @@ def mck(P, geom: Geometry):
     kt = np.stack([p["k_tf"], p["k_tf"], p["k_tr"], p["k_tr"]], -1)
     ct = np.stack([p["c_tf"], p["c_tf"], p["c_tr"], p["c_tr"]], -1)
     mu = np.stack([p["m_uf"], p["m_uf"], p["m_ur"], p["m_ur"]], -1)
-    E = _corner_vectors(p, n, geom)
+    E = _corner_vectors(P, geom)
     K = np.einsum("nij,ni,nik->njk", E, ks, E)
     C = np.einsum("nij,ni,nik->njk", E, cs, E)
     # anti-roll bars: k_ar (e_i - e_j)(e_i - e_j)^T per axle
@@ -153,13 +186,10 @@ def _state_space(M, C, K, Bf):
     return A, B
 
 
-def _output_rows(acc, x, y, n):
-    """Ten channels' rows from generalised-acceleration rows ``acc`` (n, 7, k)."""
-    out = np.zeros((n, 10, acc.shape[-1]))
-    for i in range(4):
-        g = np.stack([np.ones(n), -x[:, i], y[:, i]], -1)  # (n, 3)
-        out[:, i] = np.einsum("nk,nkj->nj", g, acc[:, :3])
-        out[:, 4 + i] = acc[:, 3 + i]
+def _output_rows(acc, Om):
+    """Ten channels' rows from generalised-acceleration rows ``acc`` (n, 7, k); gyro rows left 0."""
+    out = np.zeros((acc.shape[0], 10, acc.shape[-1]))
+    out[:, :8] = Om @ acc
     return out
 
 
@@ -177,15 +207,15 @@ def state_space(P, geom: Geometry, rate: bool = False):
     M, C, K, Bf = mck(P, geom)
     A, B = _state_space(M, C, K, Bf)
     p, n = _cols(P)
-    x, y = geom.corner_xy(p["a"])
-    Cy = _output_rows(A[:, 7:, :], x, y, n)
-    Dy = _output_rows(B[:, 7:, :], x, y, n)
-    Cy[:, 8, 7 + 1] = 1.0  # pitch rate
-    Cy[:, 9, 7 + 2] = 1.0  # roll rate
+    Om = output_map(P, geom)
+    Cy = _output_rows(A[:, 7:, :], Om)
+    Dy = _output_rows(B[:, 7:, :], Om)
+    for c, k in RATE_COORDS.items():
+        Cy[:, CHANNELS.index(c), 7 + k] = 1.0
     if not rate:
         return A, B, Cy, Dy
     _, Br = _state_space(M, C, K, rate_input(P, geom))
-    Dyr = _output_rows(Br[:, 7:, :], x, y, n)
+    Dyr = _output_rows(Br[:, 7:, :], Om)
     return A, B, Cy, Dy, Br, Dyr
 
 
@@ -238,7 +268,7 @@ def static_state(A, B, u0):
     return -np.linalg.solve(A, (B @ u0)[..., None])[..., 0]
 
 
-def static_corner_loads(P, geom: Geometry, g: float = 9.81):
+def static_corner_loads(P, geom: Geometry, g: float = GRAVITY):
     """Static vertical tire loads (N) at fl, fr, rl, rr, shape (n, 4)."""
     p, n = _cols(P)
     b = geom.wheelbase - p["a"]
@@ -345,5 +375,5 @@ def format_modal_summary(summary) -> str:
     return "\n".join(lines)
 
 
-__all__ = ["CHANNELS", "mck", "rate_input", "state_space", "blocks", "modal_summary", "static_corner_loads",
+__all__ = ["CHANNELS", "mck", "output_map", "rate_input", "state_space", "blocks", "modal_summary", "static_corner_loads",
            "static_state", "INDEX"]

@@ -18,8 +18,8 @@ The same exact discretisation as :func:`rideid.simulate.simulate_reference`
 Multiply-adds per sample and candidate, with ``N`` moment terms:
 state update ``8*8 + 6*6 = 100``, inputs ``(8*2 + 6*2) N = 28 N``,
 accelerations ``4*8 + 3*6 + (4 + 3)*2*2 = 78`` (with the rate feedthrough),
-channels 12, errors 20: ``210 + 28 N`` (``N = 8..10`` for realistic cars at 200 Hz: 420-476), against
-about 550 for the plain 14-state update with 10 outputs, which moreover
+channels 12, errors 20: ``210 + 28 N`` (``N = 8..10`` for realistic cars at
+200 Hz: 434-490), against about 550 for the plain 14-state update with 10 outputs, which moreover
 assumes the input is linear between samples.
 """
 
@@ -32,22 +32,6 @@ import numpy as np
 CHUNK = 8
 #: Largest number of moment terms the kernel accepts (see rideid.discretize.N_MAX).
 N_MAX_K = 24
-
-
-@numba.njit(cache=True, fastmath=True, inline="always")
-def _channels(out, gs, ga, xs5, xa3, a, b, hf, hr, c):  # pragma: no cover - compiled
-    z, th, zfs, zrs = gs[0, c], gs[1, c], gs[2, c], gs[3, c]
-    ph, zfa, zra = ga[0, c], ga[1, c], ga[2, c]
-    out[0] = z - a * th + hf * ph
-    out[1] = z - a * th - hf * ph
-    out[2] = z + b * th + hr * ph
-    out[3] = z + b * th - hr * ph
-    out[4] = zfs + zfa
-    out[5] = zfs - zfa
-    out[6] = zrs + zra
-    out[7] = zrs - zra
-    out[8] = xs5
-    out[9] = xa3
 
 
 @numba.njit(cache=True, fastmath=True, inline="always")
@@ -116,7 +100,7 @@ def run_kernel(Phi_s, G_s, Ca_s, Da_s, Dr_s, Phi_a, G_a, Ca_a, Da_a, Dr_a, nterm
         na = np.empty((6, m))
         gs = np.empty((4, m))
         ga = np.empty((3, m))
-        yv = np.empty(10)
+        yh = np.empty((10, m))
         # chunk-local contiguous copies of the coefficients (candidates last)
         lPs = np.empty((8, 8, m))
         lGs = np.empty((N_MAX_K, 8, 2, m))
@@ -158,43 +142,36 @@ def run_kernel(Phi_s, G_s, Ca_s, Da_s, Dr_s, Phi_a, G_a, Ca_a, Da_a, Dr_a, nterm
                     xa[i, c] = X0_a[r, i, c0 + c]
             k0 = run_start[r]
             k1 = run_start[r + 1]
-            w0, w1, w2, w3, w4 = W[r, 0], W[r, 1], W[r, 2], W[r, 3], W[r, 4]
-            w5, w6, w7, w8, w9 = W[r, 5], W[r, 6], W[r, 7], W[r, 8], W[r, 9]
             for c in range(CHUNK):
                 le[c] = 0.0
             for k in range(k0, k1):
                 # outputs at sample k
                 _accelerations(gs, lCs, lDs, lRs, xs, UD, RD, k, 0, 8, 4)
                 _accelerations(ga, lCa, lDa, lRa, xa, UD, RD, k, 2, 6, 3)
-                y0, y1, y2, y3, y4 = Y[k, 0], Y[k, 1], Y[k, 2], Y[k, 3], Y[k, 4]
-                y5, y6, y7, y8, y9 = Y[k, 5], Y[k, 6], Y[k, 7], Y[k, 8], Y[k, 9]
                 for c in range(CHUNK):
-                    z = gs[0, c]
-                    th = gs[1, c]
-                    zfs = gs[2, c]
-                    zrs = gs[3, c]
-                    ph = ga[0, c]
-                    zfa = ga[1, c]
-                    zra = ga[2, c]
-                    fa = z - la[c] * th
-                    ra = z + lb[c] * th
-                    d0 = fa + hf * ph - y0
-                    d1 = fa - hf * ph - y1
-                    d2 = ra + hr * ph - y2
-                    d3 = ra - hr * ph - y3
-                    d4 = zfs + zfa - y4
-                    d5 = zfs - zfa - y5
-                    d6 = zrs + zra - y6
-                    d7 = zrs - zra - y7
-                    d8 = xs[5, c] - y8
-                    d9 = xa[3, c] - y9
-                    le[c] += (w0 * d0 * d0 + w1 * d1 * d1 + w2 * d2 * d2 + w3 * d3 * d3 + w4 * d4 * d4
-                              + w5 * d5 * d5 + w6 * d6 * d6 + w7 * d7 * d7 + w8 * d8 * d8 + w9 * d9 * d9)
-                if mode == 1:
+                    # the output map of rideid.model.equations.output_map (tested against it)
+                    fa = gs[0, c] - la[c] * gs[1, c]
+                    ra = gs[0, c] + lb[c] * gs[1, c]
+                    yh[0, c] = fa + hf * ga[0, c]
+                    yh[1, c] = fa - hf * ga[0, c]
+                    yh[2, c] = ra + hr * ga[0, c]
+                    yh[3, c] = ra - hr * ga[0, c]
+                    yh[4, c] = gs[2, c] + ga[1, c]
+                    yh[5, c] = gs[2, c] - ga[1, c]
+                    yh[6, c] = gs[3, c] + ga[2, c]
+                    yh[7, c] = gs[3, c] - ga[2, c]
+                    yh[8, c] = xs[5, c]
+                    yh[9, c] = xa[3, c]
+                for q in range(10):
+                    yq = Y[k, q]
+                    wq = W[r, q]
                     for c in range(CHUNK):
-                        _channels(yv, gs, ga, xs[5, c], xa[3, c], la[c], lb[c], hf, hr, c)
-                        for q in range(10):
-                            OUT[k, q, c0 + c] = yv[q]
+                        d = yh[q, c] - yq
+                        le[c] += wq * d * d
+                if mode == 1:
+                    for q in range(10):
+                        for c in range(CHUNK):
+                            OUT[k, q, c0 + c] = yh[q, c]
                 if k + 1 == k1:
                     for c in range(CHUNK):
                         err[r, c0 + c] = le[c]
@@ -215,7 +192,7 @@ def compile_kernels() -> float:
     """
     import time
 
-    from .contact import _lattice_max
+    from .contact import lattice_max
 
     t = time.perf_counter()
     n = CHUNK
@@ -226,5 +203,5 @@ def compile_kernels() -> float:
                np.array([0, 2], dtype=np.int64), np.zeros(1, dtype=np.int64), f((2, 4)), f((2, 4)),
                f((2, 4, N_MAX_K)),
                f((2, 10)), f((1, 10)), 0, f((1, 10, 1)))
-    _lattice_max(f(4), f(2))
+    lattice_max(f(4), f(2))
     return time.perf_counter() - t

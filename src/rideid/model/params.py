@@ -80,22 +80,16 @@ DEFAULT_BOUNDS = {
     "I_xx": (50.0, 2500.0),
     "I_yy": (300.0, 8000.0),
     "a": (0.25, 0.75),  # fraction of wheelbase
-    "m_uf": (15.0, 120.0),
-    "m_ur": (15.0, 120.0),
-    "k_sf": (8.0e3, 1.5e5),
-    "k_sr": (8.0e3, 1.5e5),
-    "c_sf": (300.0, 8.0e3),
-    "c_sr": (300.0, 8.0e3),
-    "k_tf": (8.0e4, 6.0e5),
-    "k_tr": (8.0e4, 6.0e5),
+    "m_uf": (15.0, 120.0), "m_ur": (15.0, 120.0),
+    "k_sf": (8.0e3, 1.5e5), "k_sr": (8.0e3, 1.5e5),
+    "c_sf": (300.0, 8.0e3), "c_sr": (300.0, 8.0e3),
+    "k_tf": (8.0e4, 6.0e5), "k_tr": (8.0e4, 6.0e5),
     # Extensions (SPEC §6). Bar rates at the wheel: 0 (no bar) to about three
     # times a stiff wheel rate (sports cars and SUVs: 5-60 kN/m per axle).
     # Tire damping: radial tires 50-500 N s/m (Gillespie ch. 5; Pacejka,
     # *Tire and Vehicle Dynamics*, ch. 9), widened.
-    "k_arf": (0.0, 1.0e5),
-    "k_arr": (0.0, 1.0e5),
-    "c_tf": (0.0, 1.5e3),
-    "c_tr": (0.0, 1.5e3),
+    "k_arf": (0.0, 1.0e5), "k_arr": (0.0, 1.0e5),
+    "c_tf": (0.0, 1.5e3), "c_tr": (0.0, 1.5e3),
 }
 
 #: Typical extension values for the built-in car's size (a mid-size car with
@@ -104,7 +98,35 @@ DEFAULT_BOUNDS = {
 #: extensions, never a starting guess.
 NOMINAL_EXTENSIONS = {"k_arf": 12000.0, "k_arr": 6000.0, "c_tf": 150.0, "c_tr": 150.0}
 
-GRAVITY = 9.81
+#: Standard gravity (m/s^2), the one value used for static loads, the
+#: MuJoCo car and the logger unit ``g`` (ISO 80000-3).
+GRAVITY = 9.80665
+
+#: total_mass = sum over these of count x mass (one body, two corners per axle).
+MASS_COUNT = {"m_s": 1, "m_uf": 2, "m_ur": 2}
+
+
+def total_mass(values):
+    """Total mass (kg) of a car: ``m_s + 2 m_uf + 2 m_ur``.
+
+    Parameters
+    ----------
+    values : dict or array_like, shape (..., len(NAMES))
+        Parameters by name, or rows in :data:`NAMES` order.
+
+    Returns
+    -------
+    float or ndarray, shape (...)
+    """
+    if isinstance(values, dict):
+        return float(sum(c * float(values[n]) for n, c in MASS_COUNT.items()))
+    P = np.asarray(values, dtype=float)
+    return sum(c * P[..., INDEX[n]] for n, c in MASS_COUNT.items())
+
+
+def column(P, name: str) -> np.ndarray:
+    """The column of parameter ``name`` in rows ``P`` of shape ``(..., len(NAMES))``."""
+    return np.asarray(P)[..., INDEX[name]]
 
 
 @dataclass(frozen=True)
@@ -124,6 +146,17 @@ class Geometry:
             if not (np.isfinite(v) and v > 0):
                 raise DataError(f"vehicle.{k} must be a positive number of metres, got {v!r}")
 
+    @property
+    def corner_y(self) -> tuple[float, float, float, float]:
+        """Lateral wheel positions fl, fr, rl, rr (y left, m)."""
+        hf, hr = self.track_front / 2, self.track_rear / 2
+        return (hf, -hf, hr, -hr)
+
+    @property
+    def corner_x_from_front(self) -> tuple[float, float, float, float]:
+        """Longitudinal wheel positions fl, fr, rl, rr relative to the front axle (x forward, m)."""
+        return (0.0, 0.0, -self.wheelbase, -self.wheelbase)
+
     def corner_xy(self, a):
         """Corner coordinates relative to the CG.
 
@@ -139,10 +172,8 @@ class Geometry:
             fl, fr, rl, rr (x forward, y left, m).
         """
         a = np.asarray(a, dtype=float)
-        b = self.wheelbase - a
-        x = np.stack([a, a, -b, -b], axis=-1)
-        hf, hr = self.track_front / 2, self.track_rear / 2
-        y = np.broadcast_to(np.array([hf, -hf, hr, -hr]), x.shape).copy()
+        x = a[..., None] + np.array(self.corner_x_from_front)
+        y = np.broadcast_to(np.array(self.corner_y), x.shape).copy()
         return x, y
 
 
@@ -227,3 +258,23 @@ DEFAULT_CAR = {
     "k_tf": 158240.0,
     "k_tr": 158240.0,
 }
+
+
+def nominal_car(geometry: Geometry, extensions: bool = False) -> np.ndarray:
+    """The built-in car with its CG at the same fraction of ``geometry``'s wheelbase.
+
+    Parameters
+    ----------
+    geometry : Geometry
+    extensions : bool
+        Append :data:`NOMINAL_EXTENSIONS` (16 columns, :data:`ALL_NAMES`).
+
+    Returns
+    -------
+    ndarray, shape (12,) or (16,)
+        At the built-in car's scale (callers that need another absolute scale
+        multiply it, see :meth:`rideid.ParameterSpace.nominal`).
+    """
+    P = as_vector({**DEFAULT_CAR, **(NOMINAL_EXTENSIONS if extensions else {})})
+    P[INDEX["a"]] *= geometry.wheelbase / DEFAULT_GEOMETRY.wheelbase
+    return P

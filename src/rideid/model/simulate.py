@@ -21,7 +21,8 @@ import numpy as np
 
 from .contact import wheel_input, wheel_input_slope
 from .discretize import N_MAX, Discretized, gauss_nodes, moment_weights
-from .equations import CHANNELS, CORNER_TO_DECOMPOSED, state_space, static_state
+from .equations import (CHANNELS, CORNER_TO_DECOMPOSED, DECOMPOSED_TO_COORDS, RATE_COORDS, output_map,
+                        state_space, static_state)
 from .params import Geometry
 from .tracks import Track
 
@@ -32,26 +33,21 @@ ENVELOPE_DX = 5e-4
 def corner_positions(geom: Geometry, distance):
     """Wheel-centre positions ``(n, 4)`` for front-axle distances ``(n,)``."""
     d = np.asarray(distance, dtype=float)
-    return np.stack([d, d, d - geom.wheelbase, d - geom.wheelbase], axis=-1)
-
-
-def corner_ys(geom: Geometry):
-    hf, hr = geom.track_front / 2, geom.track_rear / 2
-    return (hf, -hf, hr, -hr)
+    return d[..., None] + np.array(geom.corner_x_from_front)
 
 
 def corner_inputs(track: Track, geom: Geometry, distance):
     """Road inputs ``(n, 4)`` (envelope, m) at front-axle distances ``(n,)``."""
     xs = corner_positions(geom, distance)
     return np.stack([wheel_input(track.path(y), xs[:, i], geom.tire_radius, ENVELOPE_DX)
-                     for i, y in enumerate(corner_ys(geom))], axis=-1)
+                     for i, y in enumerate(geom.corner_y)], axis=-1)
 
 
 def corner_input_slopes(track: Track, geom: Geometry, distance):
     """Slopes ``dr/dx`` ``(n, 4)`` of the road inputs at front-axle distances ``(n,)``."""
     xs = corner_positions(geom, distance)
     return np.stack([wheel_input_slope(track.path(y), xs[:, i], geom.tire_radius, ENVELOPE_DX)
-                     for i, y in enumerate(corner_ys(geom))], axis=-1)
+                     for i, y in enumerate(geom.corner_y)], axis=-1)
 
 
 @dataclass
@@ -135,22 +131,24 @@ def initial_states(disc: Discretized, ud0):
     return xs, xa
 
 
-def assemble_channels(gs, ga, xs_rate, xa_rate, a, b, geom: Geometry):
-    """Ten SPEC channels from generalised accelerations and rates.
+def assemble_channels(P, geom: Geometry, gs, ga, rates):
+    """Ten SPEC channels from decomposed generalised accelerations and the rates.
 
-    gs : (..., 4) ``[z'', theta'', zf_s'', zr_s'']``, ga : (..., 3)
-    ``[phi'', zf_a'', zr_a'']``, rates ``theta'``, ``phi'``; ``a, b`` broadcast
-    against the leading axes. Returns (..., 10).
+    Parameters
+    ----------
+    P : (n_pop, len(NAMES))
+    gs : (n_pop, n_time, 4) ``[z'', theta'', zf_s'', zr_s'']``
+    ga : (n_pop, n_time, 3) ``[phi'', zf_a'', zr_a'']``
+    rates : (n_pop, n_time, 7) generalised velocities in :data:`rideid.model.equations.COORDS` order
+
+    Returns
+    -------
+    (n_pop, n_time, 10) through :func:`rideid.model.equations.output_map`.
     """
-    hf, hr = geom.track_front / 2, geom.track_rear / 2
-    z, th, zfs, zrs = gs[..., 0], gs[..., 1], gs[..., 2], gs[..., 3]
-    ph, zfa, zra = ga[..., 0], ga[..., 1], ga[..., 2]
-    return np.stack([
-        z - a * th + hf * ph, z - a * th - hf * ph,
-        z + b * th + hr * ph, z + b * th - hr * ph,
-        zfs + zfa, zfs - zfa, zrs + zra, zrs - zra,
-        xs_rate, xa_rate,
-    ], axis=-1)
+    qdd = np.concatenate([gs, ga], axis=-1) @ DECOMPOSED_TO_COORDS.T
+    acc = np.einsum("pcq,ptq->ptc", output_map(P, geom), qdd)
+    gyro = np.stack([rates[..., k] for k in RATE_COORDS.values()], axis=-1)
+    return np.concatenate([acc, gyro], axis=-1)
 
 
 def simulate_reference(P, geom: Geometry, run: RunInput, disc: Discretized | None = None,
@@ -191,9 +189,9 @@ def simulate_reference(P, geom: Geometry, run: RunInput, disc: Discretized | Non
             mus, mua = run.mu[k, :2, :N], run.mu[k, 2:, :N]
             xs = np.einsum("pij,pj->pi", disc.Phi_s, xs) + np.einsum("npij,jn->pi", disc.G_s, mus)
             xa = np.einsum("pij,pj->pi", disc.Phi_a, xa) + np.einsum("npij,jn->pi", disc.G_a, mua)
-    a = P[:, 3][:, None]
-    b = geom.wheelbase - a
-    y = assemble_channels(gs, ga, Xs[:, :, 5], Xa[:, :, 3], a, b, geom)
+    # generalised velocities: decomposed rates -> COORDS
+    rates = np.concatenate([Xs[:, :, 4:], Xa[:, :, 3:]], axis=-1) @ DECOMPOSED_TO_COORDS.T
+    y = assemble_channels(P, geom, gs, ga, rates)
     if return_states:
         Xs = Xs + np.einsum("pij,tj->pti", disc.Brs, run.ud[:, :2])  # x = xi + Br u
         Xa = Xa + np.einsum("pij,tj->pti", disc.Bra, run.ud[:, 2:])
@@ -240,7 +238,7 @@ def simulate_lsim(P, geom: Geometry, track: Track, speed: float, t, upsample: in
     xs = corner_positions(geom, speed * tf)
     if exact_envelope:
         u = np.stack([envelope(track.path(y).h, xs[:, i], geom.tire_radius)
-                      for i, y in enumerate(corner_ys(geom))], -1)
+                      for i, y in enumerate(geom.corner_y)], -1)
     else:
         u = corner_inputs(track, geom, speed * tf)
     A, B, Cy, Dy, Br, Dyr = state_space(np.atleast_2d(P), geom, rate=True)

@@ -14,7 +14,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..data.csvio import read_csv_rows
+from ..csvio import read_csv_rows
 from ..errors import DataError
 
 KINDS = ("washboard", "herringbone", "chassis_twist", "flat", "profile")

@@ -1,18 +1,16 @@
 """The identification report: one self-contained HTML file plus its PNGs.
 
-``write_report(result_dir)`` reads ``result.json`` and ``history.csv``,
-reloads the dataset named in the result (or takes it as an argument),
-simulates the identified car, and writes ``report.html`` with every figure
-embedded (base64 PNG) and also saved under ``figures/``. Nothing here is
-needed by the numerical core; it only reads results.
+``write_report(result, dataset, out_dir)`` renders an identification result
+(:class:`rideid.IdentificationResult`) beside the dataset it was fitted to:
+``report.html`` with every figure embedded (base64 PNG) and also saved under
+``figures/``. Nothing here is needed by the numerical core; it reads no
+files (the command line loads the result and the dataset).
 """
 
 from __future__ import annotations
 
 import base64
-import csv
 import html
-import json
 from dataclasses import dataclass
 from importlib import resources
 from pathlib import Path
@@ -31,14 +29,6 @@ class Figure:
     caption: str
     file: str
     data_uri: str
-
-
-def read_history(path: Path) -> list[dict]:
-    if not path.is_file() or path.stat().st_size == 0:
-        return []
-    with open(path, newline="") as f:
-        rows = list(csv.DictReader(f))
-    return [{k: float(v) for k, v in r.items()} for r in rows]
 
 
 def _plt():
@@ -262,93 +252,81 @@ def _map_figures(jobs):
     return [_fig_job(j) for j in jobs]
 
 
-def _load_result(out_dir: Path) -> dict:
-    rpath = out_dir / "result.json"
-    if not rpath.is_file():
-        raise DataError(f"{rpath}: not found (is {out_dir} an identification folder?)")
-    try:
-        return json.loads(rpath.read_text())
-    except json.JSONDecodeError as e:
-        raise DataError(f"{rpath}: not valid JSON: {e}") from None
+def write_report(result, dataset, out_dir, *, compare=None, compare_label: str | None = None) -> Path:
+    """Render ``report.html`` (and ``figures/*.png``) into ``out_dir``.
 
+    Only renders: everything comes from ``result`` (estimates, history,
+    maps, preprocessing) and ``dataset`` (the measured runs, at the starts
+    the identification settled on: ``dataset.with_starts(result.starts)``);
+    the one computation is the identified car's response on the runs.
 
-def write_report(out_dir, ds=None, maps=None, cost=None, compare=None) -> Path:
-    """Build ``report.html`` (and ``figures/*.png``) in an identification folder.
+    Parameters
+    ----------
+    result : IdentificationResult
+    dataset : Dataset
+    out_dir : str or Path
+        An existing folder (normally the identification's).
+    compare : IdentificationResult, optional
+        Another identification of the same dataset (for example
+        ``--weights fixed`` beside an adaptive run), overlaid.
+    compare_label : str, optional
+        Its label in the comparison (default: its weighting).
 
-    ``compare`` names another identification folder of the same dataset (for
-    example ``--weights fixed`` beside an adaptive run); the report then
-    overlays their convergence and shows both runs' track weights.
+    Returns
+    -------
+    Path of ``report.html``.
     """
     import jinja2
 
-    from ..estimate.cost import CostFunction, ParameterSpace
-    from ..data.dataset import load_dataset
-    from ..model.params import ALL_NAMES, DESCRIPTIONS, as_vector
-    from ..estimate.sensitivity import P2T_STARS, compute_maps, stars
+    from ..model.params import ALL_NAMES, DESCRIPTIONS
+    from ..estimate.sensitivity import P2T_STARS, stars
 
     out_dir = Path(out_dir)
-    rpath = out_dir / "result.json"
-    res = _load_result(out_dir)
-    hist = read_history(out_dir / "history.csv")
+    res = result.to_dict()
+    hist = list(result.history)
+    maps = result.maps
+    if maps is None:
+        raise DataError(f"{out_dir}: the result carries no sensitivity maps (written by an older rideid?); "
+                        "identify again to render the report")
+    run_ids = [r.id for r in dataset.runs]
     other = None
     if compare is not None:
-        compare = Path(compare)
-        ores = _load_result(compare)
-        ohist = read_history(compare / "history.csv")
-        if not ohist or not hist:
-            raise DataError(f"{compare}: history.csv missing or empty; nothing to compare")
-        if ores.get("dataset") != res.get("dataset"):
-            raise DataError(f"{compare}: identifies another dataset ({ores.get('dataset')}) than {out_dir} "
-                            f"({res.get('dataset')})")
-        lab = f"{res.get('weights', '?')} (this)"
-        olab = f"{ores.get('weights', '?')} ({compare.name})"
-        other = (lab, ohist, olab)
-    if ds is None:
-        dpath = res.get("dataset")
-        if not dpath or not Path(dpath).exists():
-            raise DataError(f"{rpath}: the dataset it names ({dpath!r}) is not found; the report needs it")
-        pre = res.get("preprocessing") or {}
-        starts = {rid: rec["start"]["value"] for rid, rec in pre.items()
-                  if isinstance(rec, dict) and isinstance(rec.get("start"), dict)
-                  and rec["start"].get("value") is not None}
-        ds = load_dataset(dpath, starts=starts)
-    extensions = (res.get("model") or {}).get("extensions", [])
-    cf = cost or CostFunction(ds, extensions=extensions)
-    pnames = [n for n in ALL_NAMES if n in res["parameters"]]  # the twelve, and the extensions when fitted
-    P = as_vector({n: res["parameters"][n]["value"] for n in pnames})
-    sims = cf.simulate(P)
-    if maps is None:
-        space = ParameterSpace(ds.known, ds.geometry, ds.manifest.bounds, extensions=extensions)
-        maps = compute_maps(cf.sim, ds.geometry, space.nominal(), cf.run_ids, cf.W > 0)
+        lab = f"{result.weights_mode} (this)"
+        olab = compare_label or f"{compare.weights_mode} (other)"
+        other = (lab, list(compare.history), olab)
+    pnames = [n for n in ALL_NAMES if n in result.details]  # the twelve, and the extensions when fitted
+    sims = result.response
+    if sims is None or set(sims) != set(run_ids):
+        sims = simulate_runs(dataset, {n: result.parameters[n] for n in pnames})
 
     # every figure is an independent job: render them on all cores
     jobs = []
     if hist:
         names = [k[len("cv_"):] for k in hist[0] if k.startswith("cv_")]
         jobs += [("fig_convergence", (hist, out_dir)), ("fig_spread", (hist, names, out_dir)),
-                 ("fig_weights", (hist, cf.run_ids, out_dir, res.get("weights", "adaptive")))]
-    measured = {r.id: ds.data[r.id].matrix() for r in ds.runs}
-    jobs += [("fig_fit", (r.id, ds.data[r.id].time, measured[r.id], sims[r.id], out_dir)) for r in ds.runs]
+                 ("fig_weights", (hist, run_ids, out_dir, result.weights_mode))]
+    measured = {r.id: dataset.data[r.id].matrix() for r in dataset.runs}
+    jobs += [("fig_fit", (r.id, dataset.data[r.id].time, measured[r.id], sims[r.id], out_dir)) for r in dataset.runs]
     jobs.append(("heatmap_figures", (maps, out_dir)))
     if other is not None:
-        jobs.append(("fig_compare", (hist, other[0], other[1], other[2], cf.run_ids, out_dir)))
+        jobs.append(("fig_compare", (hist, other[0], other[1], other[2], run_ids, out_dir)))
     done = _map_figures(jobs)
     compare_figs = [done.pop()] if other is not None else []
     heat_figs = done.pop()
     figs = done[:3] if hist else []
     fit_figs = done[3:] if hist else done
     fit_rows = []
-    for r in ds.runs:
+    for r in dataset.runs:
         st = fit_statistics(measured[r.id], sims[r.id])
-        fit_rows.append({"run": r.id, "track": r.track, "speed": r.speed, "weight": res["track_weights"].get(r.id),
+        fit_rows.append({"run": r.id, "track": r.track, "speed": r.speed, "weight": result.track_weights.get(r.id),
                          "worst": max(st.values()) if st else float("nan"),
                          "median": float(np.median(list(st.values()))) if st else float("nan")})
 
-    data_rows, channel_rows, data_warnings = data_tables(res.get("preprocessing") or ds.preprocessing())
+    data_rows, channel_rows, data_warnings = data_tables(result.preprocessing or dataset.preprocessing())
 
     params = []
     for n in pnames:
-        d = res["parameters"][n]
+        d = result.details[n]
         std = d.get("std")
         params.append({
             "name": n, "meaning": DESCRIPTIONS[n], "value": d["value"], "unit": d["unit"],
@@ -362,14 +340,25 @@ def write_report(out_dir, ds=None, maps=None, cost=None, compare=None) -> Path:
                              autoescape=jinja2.select_autoescape(["html", "j2"]))
     tpl = env.get_template("report.html.j2")
     text = tpl.render(
-        title=f"rideid identification: {html.escape(ds.name)}", res=res, params=params, modal=res.get("modal") or {},
-        figures=figs + compare_figs, fit_figures=fit_figs, fit_rows=fit_rows, heat_figures=heat_figs, runs=maps.runs, p2t=p2t,
-        known=res.get("known", {}), n_runs=len(ds.runs), dataset=str(ds.path),
-        data_rows=data_rows, channel_rows=channel_rows, data_warnings=data_warnings,
+        title=f"rideid identification: {html.escape(dataset.name)}", res=res, params=params,
+        modal=result.modal or {}, figures=figs + compare_figs, fit_figures=fit_figs, fit_rows=fit_rows,
+        heat_figures=heat_figs, runs=maps.runs, p2t=p2t, known=result.known, n_runs=len(dataset.runs),
+        dataset=str(dataset.path), data_rows=data_rows, channel_rows=channel_rows, data_warnings=data_warnings,
     )
     out = out_dir / "report.html"
     out.write_text(text)
     return out
+
+
+def simulate_runs(dataset, parameters: dict) -> dict:
+    """The response of the car ``parameters`` on every run of ``dataset``: run id -> (n_time, 10)."""
+    from ..data.dataset import prepare_inputs
+    from ..model.batch import BatchSimulator
+    from ..model.params import as_vector
+
+    sim = BatchSimulator(dataset.geometry, prepare_inputs(dataset))
+    outs = sim.outputs(as_vector(parameters)[None])
+    return {r.id: o[0] for r, o in zip(dataset.runs, outs)}
 
 
 def data_tables(pre: dict):

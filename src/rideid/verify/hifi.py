@@ -212,13 +212,6 @@ def damper_force(v, c_s, rebound_ratio=1.0, knee_velocity=math.inf, knee_ratio=1
 # ---------------------------------------------------------------------------
 # the MJCF car
 
-def corner_xy(P, geom: Geometry):
-    a = P[NAMES.index("a")]
-    b = geom.wheelbase - a
-    hf, hr = geom.track_front / 2, geom.track_rear / 2
-    return [(a, hf), (a, -hf), (-b, hr), (-b, -hr)]
-
-
 def build_mjcf(P, geom: Geometry, hifi: HifiProperties | None = None) -> str:
     """MJCF text of the car (the contact stiffness is set after compiling, :class:`MujocoCar`)."""
     hifi = hifi or HifiProperties()
@@ -228,7 +221,8 @@ def build_mjcf(P, geom: Geometry, hifi: HifiProperties | None = None) -> str:
     izz = p["I_xx"] + p["I_yy"]
     tire_loads = static_corner_loads(np.asarray(P, dtype=float)[None], geom, GRAVITY)[0]
     wheels, posts = [], []
-    for i, (c, (x, y)) in enumerate(zip(CORNERS, corner_xy(np.asarray(P, dtype=float), geom))):
+    xs, ys = geom.corner_xy(p["a"])
+    for i, (c, x, y) in enumerate(zip(CORNERS, xs.tolist(), ys.tolist())):
         ax = 0 if c.startswith("f") else 1
         mu, ks, cs = (p["m_uf"], p["k_sf"], p["c_sf"]) if ax == 0 else (p["m_ur"], p["k_sr"], p["c_sr"])
         damping = cs if hifi.linear_dampers else 0.0  # nonlinear dampers: the passive callback

@@ -5,7 +5,7 @@ from __future__ import annotations
 import csv
 from pathlib import Path
 
-from ..errors import DataError
+from .errors import DataError
 
 
 def read_csv_rows(path: Path, missing: str, what: str = "file") -> tuple[list[str], list[list[str]]]:

@@ -1,0 +1,322 @@
+"""The identification result: one object, its JSON/CSV formats, ``save`` and ``load``.
+
+Shaped like SciPy's :class:`scipy.optimize.OptimizeResult`: ``x`` (the free
+parameters, in ``names`` order), ``std`` and ``covariance`` of ``x``,
+``fun``, ``success``, ``message``, ``nit``, ``nfev``; besides them
+``parameters`` (all names -> value, SPEC §5), ``details`` (per parameter:
+value, unit, fixed, derived, std, bounds; std_robust where computed), the estimated
+``starts`` of measured runs, ``history`` (a :class:`History` table, one row
+per JADE generation) and what the report renders (``modal``, ``maps``,
+``preprocessing``).
+
+Files (docs/formats.md): ``result.json`` and ``history.csv`` in one folder.
+This module is the only place that writes or reads them.
+"""
+
+from __future__ import annotations
+
+import csv
+import json
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from ..errors import DataError
+from ..model.params import NAMES
+from .sensitivity import SensitivityMaps
+
+COST_DEFINITION = ("equal-weight sum over runs of the per-channel energy-normalised squared error "
+                   "(see rideid.cost)")
+
+
+class History:
+    """Per-generation records as a table.
+
+    ``h[i]`` is row ``i`` as a dict, ``h["best_cost"]`` column ``best_cost``
+    as an ndarray; iterating gives the rows; :meth:`to_pandas` a DataFrame.
+    """
+
+    def __init__(self, rows=None):
+        self._rows = [dict(r) for r in (rows or [])]
+
+    @property
+    def columns(self) -> list[str]:
+        return list(self._rows[0]) if self._rows else []
+
+    def append(self, row: dict):
+        self._rows.append(dict(row))
+
+    def __len__(self):
+        return len(self._rows)
+
+    def __iter__(self):
+        return iter(self._rows)
+
+    def __bool__(self):
+        return bool(self._rows)
+
+    def __getitem__(self, key):
+        if isinstance(key, str):
+            if key not in self.columns:
+                raise KeyError(f"history has no column {key!r}; columns: {', '.join(self.columns)}")
+            return np.array([r[key] for r in self._rows], dtype=float)
+        return self._rows[key]
+
+    def __eq__(self, other):
+        return isinstance(other, History) and self._rows == other._rows
+
+    def __repr__(self):
+        return f"History({len(self)} generations x {len(self.columns)} columns)"
+
+    def to_pandas(self):
+        """The table as a ``pandas.DataFrame`` (needs pandas)."""
+        import pandas as pd
+        return pd.DataFrame(self._rows)
+
+    def write_csv(self, path):
+        """``history.csv``: a header of column names, one line per generation."""
+        if not self._rows:
+            Path(path).write_text("")
+            return
+        keys = self.columns
+        lines = [",".join(keys)]
+        for h in self._rows:
+            lines.append(",".join(f"{h[k]:.10g}" if isinstance(h[k], float) else str(h[k]) for k in keys))
+        Path(path).write_text("\n".join(lines) + "\n")
+
+    @classmethod
+    def read_csv(cls, path) -> "History":
+        path = Path(path)
+        if not path.is_file() or path.stat().st_size == 0:
+            return cls()
+        with open(path, newline="") as f:
+            rows = list(csv.DictReader(f))
+        try:
+            return cls([{k: float(v) for k, v in r.items()} for r in rows])
+        except (TypeError, ValueError) as e:
+            raise DataError(f"{path}: not a history table of numbers: {e}") from None
+
+
+def _jsonable(v):
+    """NaN/inf -> None, NumPy scalars/arrays -> Python, recursively (strict JSON)."""
+    if isinstance(v, dict):
+        return {str(k): _jsonable(x) for k, x in v.items()}
+    if isinstance(v, (list, tuple)):
+        return [_jsonable(x) for x in v]
+    if isinstance(v, np.ndarray):
+        return _jsonable(v.tolist())
+    if isinstance(v, (np.integer,)):
+        return int(v)
+    if isinstance(v, (float, np.floating)):
+        v = float(v)
+        return v if math.isfinite(v) else None
+    return v
+
+
+def _maps_to_json(m: SensitivityMaps | None):
+    if m is None:
+        return None
+    return {"params": m.params, "channels": m.channels, "runs": m.runs, "S": m.S, "S_bar": m.S_bar,
+            "R": m.R, "M": m.M, "baseline": m.baseline}
+
+
+def _maps_from_json(d, where):
+    if d is None:
+        return None
+    try:  # None (JSON null) becomes NaN
+        arr = {k: np.array(d[k], dtype=float) for k in ("S", "S_bar", "R", "M", "baseline")}
+        return SensitivityMaps(list(d["params"]), list(d["channels"]), list(d["runs"]), **arr)
+    except (KeyError, TypeError, ValueError) as e:
+        raise DataError(f"{where}: sensitivity: malformed ({e})") from None
+
+
+@dataclass(repr=False)
+class IdentificationResult:
+    """What :func:`rideid.identify` returns (see the module docstring).
+
+    Attributes
+    ----------
+    x : ndarray, shape (d,)
+        The free parameters, in ``names`` order (SI units).
+    names : list of str
+        The free parameter names.
+    std, covariance : ndarray, shape (d,), (d, d)
+        Standard errors and covariance of ``x`` from the polish's Jacobian
+        (white residuals assumed: an optimistic lower bound when residuals
+        are correlated); NaN without the polish.
+    fun : float
+        Equal-weight cost at ``x`` (also ``cost``).
+    success, message, stop
+        Whether the result is usable, why the search stopped, and which
+        criterion fired (``"generations"``, ``"spread"``, ``"callback"``).
+    nit, nfev : int
+        JADE generations (also ``generations``) and cost evaluations
+        (also ``evaluations``).
+    parameters : dict
+        Every parameter name -> value (fixed and derived ones included).
+    details : dict
+        Name -> ``value, unit, fixed, derived, std, lower, upper`` (and
+        ``std_robust``, SPEC §6, where the robust standard error is computed).
+    starts : dict
+        Run id -> ``{"value", "std", "source", ...}``: the start of each
+        measured run with an estimated start, as the identification settled it.
+    history : History
+    model, adequacy : dict or None
+        SPEC §6 blocks (which model was fitted; the residual verdict).
+    """
+
+    x: np.ndarray
+    names: list
+    std: np.ndarray
+    covariance: np.ndarray
+    fun: float
+    success: bool
+    message: str
+    stop: str
+    nit: int
+    nfev: int
+    parameters: dict
+    details: dict
+    known: dict
+    wall_time_s: float
+    seed: int | None
+    track_weights: dict
+    weights_mode: str
+    polish: dict | None
+    history: History = field(default_factory=History)
+    starts: dict = field(default_factory=dict)
+    preprocessing: dict = field(default_factory=dict)
+    modal: dict | None = None
+    dataset: str = ""
+    maps: SensitivityMaps | None = None
+    rng_state: dict | None = None
+    model: dict | None = None
+    adequacy: dict | None = None
+    #: the identified car's channels per run on the final data (in memory only, for the report)
+    response: dict | None = None
+
+    # SciPy/SPEC §4 names for the same numbers
+    @property
+    def cost(self) -> float:
+        return self.fun
+
+    @property
+    def generations(self) -> int:
+        return self.nit
+
+    @property
+    def evaluations(self) -> int:
+        return self.nfev
+
+    def __repr__(self):
+        lines = [f"IdentificationResult(success={self.success}, stop={self.stop!r}, fun={self.fun:.4g}, "
+                 f"nit={self.nit}, nfev={self.nfev},"]
+        for n, d in self.details.items():
+            std = d.get("std")
+            note = " (known)" if d.get("fixed") else (" (derived)" if d.get("derived") else "")
+            err = f" ± {std:.3g}" if std not in (None, 0.0) else ""
+            lines.append(f"  {n}={d['value']:.6g}{err} {d['unit']}{note}")
+        return "\n".join(lines) + ")"
+
+    def start_values(self) -> dict[str, float]:
+        """Run id -> start (file time, s) of every run the identification settled,
+        from ``starts`` (results written before it existed: from ``preprocessing``)."""
+        out = {rid: rec["start"]["value"] for rid, rec in self.preprocessing.items()
+               if isinstance(rec, dict) and isinstance(rec.get("start"), dict)
+               and rec["start"].get("value") is not None}
+        out.update({rid: st["value"] for rid, st in self.starts.items()})
+        return out
+
+    # -- formats -------------------------------------------------------------
+    def to_dict(self) -> dict:
+        """``result.json`` as a dict (docs/formats.md)."""
+        return _jsonable({
+            "parameters": self.details,
+            "known": self.known,
+            "cost": self.fun,
+            "cost_definition": COST_DEFINITION,
+            "generations": self.nit,
+            "evaluations": self.nfev,
+            "wall_time_s": self.wall_time_s,
+            "seed": self.seed,
+            "rng_state": self.rng_state,
+            "track_weights": self.track_weights,
+            "weights": self.weights_mode,
+            "stop": self.stop,
+            "success": self.success,
+            "message": self.message,
+            "names": list(self.names),
+            "covariance": self.covariance,
+            "polish": self.polish,
+            "starts": self.starts,
+            "modal": self.modal,
+            "model": self.model,
+            "adequacy": self.adequacy,
+            "preprocessing": self.preprocessing,
+            "dataset": str(Path(self.dataset).resolve()) if self.dataset else "",
+            "sensitivity": _maps_to_json(self.maps),
+            "history_file": "history.csv",
+        })
+
+    def save(self, out_dir):
+        """Write ``result.json`` and ``history.csv`` into ``out_dir`` (which must exist)."""
+        out_dir = Path(out_dir)
+        (out_dir / "result.json").write_text(json.dumps(self.to_dict(), indent=2, allow_nan=False) + "\n")
+        self.history.write_csv(out_dir / "history.csv")
+
+
+def read_result_json(path) -> dict:
+    """``result.json`` as a dict, checked for every parameter's value; :class:`DataError` naming the file."""
+    given = Path(path)
+    path = given if given.suffix == ".json" else given / "result.json"
+    if not path.is_file():
+        raise DataError(f"{path}: file not found" if path is given else
+                        f"{path}: not found (is {given} an identification folder?)")
+    try:
+        doc = json.loads(path.read_text())
+    except (json.JSONDecodeError, UnicodeDecodeError) as e:
+        raise DataError(f"{path}: not valid JSON: {e}") from None
+    pars = doc.get("parameters") if isinstance(doc, dict) else None
+    if not isinstance(pars, dict):
+        raise DataError(f"{path}: missing key 'parameters'")
+    for n in NAMES:
+        if n not in pars or not isinstance(pars[n], dict) or "value" not in pars[n]:
+            raise DataError(f"{path}: parameters.{n}.value missing")
+    return doc
+
+
+def load(path) -> IdentificationResult:
+    """Read an identification folder (or its ``result.json``) back into a result.
+
+    Results written before ``names``/``covariance`` were stored take them
+    from ``polish`` (or from the parameters that are neither fixed nor derived).
+    """
+    doc = read_result_json(path)
+    rpath = Path(path) if Path(path).suffix == ".json" else Path(path) / "result.json"
+    details = {n: dict(d) for n, d in doc["parameters"].items()}
+    polish = doc.get("polish")
+    names = doc.get("names") or (polish or {}).get("names") or [
+        n for n, d in details.items() if not d.get("fixed") and not d.get("derived")]
+    cov = doc.get("covariance", (polish or {}).get("covariance"))
+    d = len(names)
+    cov = np.full((d, d), np.nan) if cov is None else np.array(cov, dtype=float)  # null -> NaN
+    std = np.array([details[n].get("std") for n in names], dtype=float)
+    stop = doc.get("stop", "")
+    return IdentificationResult(
+        x=np.array([details[n]["value"] for n in names], dtype=float), names=list(names), std=std, covariance=cov,
+        fun=float(doc.get("cost", np.nan)), success=bool(doc.get("success", True)),
+        message=doc.get("message", stop), stop=stop, nit=int(doc.get("generations", 0)),
+        nfev=int(doc.get("evaluations", 0)), parameters={n: float(v["value"]) for n, v in details.items()},
+        details=details, known=dict(doc.get("known") or {}), wall_time_s=float(doc.get("wall_time_s", 0.0)),
+        seed=doc.get("seed"), track_weights=dict(doc.get("track_weights") or {}),
+        weights_mode=doc.get("weights", "adaptive"), polish=polish,
+        history=History.read_csv(rpath.parent / doc.get("history_file", "history.csv")),
+        starts=dict(doc.get("starts") or {}), preprocessing=dict(doc.get("preprocessing") or {}),
+        modal=doc.get("modal"), dataset=doc.get("dataset", ""),
+        maps=_maps_from_json(doc.get("sensitivity"), rpath), rng_state=doc.get("rng_state"),
+        model=doc.get("model"), adequacy=doc.get("adequacy"))
+
+
+__all__ = ["IdentificationResult", "History", "load", "read_result_json"]
