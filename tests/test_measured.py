@@ -255,7 +255,8 @@ WARNINGS = {
     "gravity not declared": (dict(preprocess={}), "AccZ_Body_FL' mapped to body_az_fl: mean 9.81 m/s^2 is about g: "
                              "the channel seems to include gravity; set gravity_included = true"),
     "deg/s labelled rad/s": (dict(cmap={**channel_map(), "pitch_rate": {"name": "Gyro_Y", "unit": "rad/s",
-                                                                         "sign": -1}}),
+                                                                         "sign": -1}},
+                                  extra={"checks": {"wiring": "warn"}}),
                              "mapped to pitch_rate: peaks at"),
     "flat-lined": (dict(mutate=_set("AccZ_Hub_FL", lambda t, v, u: (t, np.full_like(v, 1.0), u))),
                    "AccZ_Hub_FL' mapped to axle_az_fl: flat-lined (every sample is 1)"),
@@ -264,7 +265,8 @@ WARNINGS = {
     "gap": (dict(mutate=_set("Gyro_X", lambda t, v, u: (np.delete(t, range(2000, 2050)),
                                                         np.delete(v, range(2000, 2050)), u))),
             "Gyro_X' mapped to roll_rate: 1 gap(s) in time, the longest 0.102 s at t = 3.998 s"),
-    "upside down": (dict(cmap={**channel_map(), "body_az_fr": {"name": "AccZ_Body_FR", "unit": "g"}}),
+    "upside down": (dict(cmap={**channel_map(), "body_az_fr": {"name": "AccZ_Body_FR", "unit": "g"}},
+                         extra={"checks": {"wiring": "warn"}}),  # else an error: tests/test_checks.py
                     "body_az_fr: reads -9.81 m/s^2 at rest (gravity included): mounted upside down? set sign = -1"),
     "lead-in moving": (dict(preprocess={"gravity_included": True, "lead_in": [2.5, 4.0]}),
                        "the lead-in [2.5, 4] s is not stationary"),

@@ -10,6 +10,7 @@ Public API (SPEC §5)::
     cost = rideid.CostFunction(ds)            # cost(P): (n, d) -> (n,)
     cost.names                                # free parameter names
     rideid.jade(fun, bounds, population=..., generations=..., seed=...)
+    p = rideid.plan(scenario, noise=0.01, budget_runs=4)   # SPEC §7; p.save(dir)
     rideid.study("study.toml", "out")         # many identifications on Dask (SPEC §7)
 """
 
@@ -17,6 +18,7 @@ from importlib.metadata import PackageNotFoundError, version
 
 from .estimate.cost import CostFunction, ParameterSpace
 from .data.dataset import Dataset, load_dataset
+from .design import PlanResult, plan
 from .errors import ArgumentError, DataError, DataWarning, ModelValidityWarning, RideidError, ScaleError
 from .data.schema import Manifest, load_scenario, load_truth
 from .estimate.identify import identify
@@ -42,7 +44,7 @@ __all__ = [
     "ArgumentError", "DataError", "DataWarning", "ModelValidityWarning", "RideidError", "ScaleError",
     "CostFunction", "ParameterSpace", "Dataset", "Geometry", "IdentificationResult", "JadeSolver", "Manifest",
     "Track", "default_scenario", "default_scenario_path", "identify", "jade", "load_dataset", "load_scenario",
-    "load_truth", "modal_summary", "simulate_manifest", "write_dataset", "__version__",
+    "load_truth", "modal_summary", "plan", "PlanResult", "simulate_manifest", "write_dataset", "__version__",
     "History", "SensitivityMaps", "load_result", "score", "sensitivity_maps",
     "ALL_NAMES", "EXT_NAMES", "GROUPS",
     "StudyResult", "load_study", "study",

@@ -24,6 +24,9 @@ EXAMPLES = {
     "sensitivity": "example:\n  rideid sensitivity sim --out maps\n  rideid sensitivity scenario.toml --out maps",
     "score": "example:\n  rideid score fit/result.json sim/truth.toml",
     "demo": "example:\n  rideid demo --out rideid-demo",
+    "plan": "example:\n  rideid plan scenario.toml --out plan --noise 0.01 --budget-runs 4\n"
+            "  rideid plan catalogue.toml --out plan --budget-time 600 --overhead 90 --robust 8\n"
+            "  rideid plan catalogue.toml --out plan --target k_sr=0.5% --target I_xx=2%",
     "report": "example:\n  rideid report fit\n  rideid identify sim --out fit-fixed --weights fixed --no-report\n"
               "  rideid report fit --compare fit-fixed",
     "study": "example:\n  rideid study monte_carlo.toml --out mc\n"
@@ -150,6 +153,36 @@ def _parser() -> argparse.ArgumentParser:
                         "one single-threaded worker process per core)")
     s.add_argument("--quiet", action="store_true", help="no progress line")
 
+    s = add("plan", "plan a test: the precision (CRLB) each candidate run buys, and which runs to drive")
+    s.add_argument("scenario", metavar="SCENARIO.toml",
+                   help="[truth] = the nominal car, [[runs]] = the candidate runs, [known] = the scale anchor")
+    s.add_argument("--out", required=True, metavar="DIR")
+    s.add_argument("--noise", type=float, default=None, metavar="FRACTION",
+                   help="noise sd as a fraction of each channel's RMS, per run (as simulate --noise; "
+                        "default 0.01, or 0 when a noise density is given)")
+    s.add_argument("--accel-noise-density", type=float, default=0.0, metavar="D",
+                   help="accelerometer noise density, (m/s^2)/sqrt(Hz)")
+    s.add_argument("--gyro-noise-density", type=float, default=0.0, metavar="D",
+                   help="gyro noise density, (rad/s)/sqrt(Hz)")
+    s.add_argument("--bandwidth", type=float, default=None, metavar="HZ",
+                   help="logger bandwidth for the densities (default each run's fs/2)")
+    s.add_argument("--budget-runs", type=int, default=None, metavar="N", help="drive at most N runs")
+    s.add_argument("--budget-time", type=float, default=None, metavar="S",
+                   help="at most S seconds of track time (each run: its duration + --overhead)")
+    s.add_argument("--overhead", type=float, default=0.0, metavar="S",
+                   help="per-run overhead in seconds (turning round, lining up; default 0)")
+    s.add_argument("--criterion", default=None, metavar="D|A|target",
+                   help="D-optimal (default), A-optimal, or target (the cheapest runs that reach every --target)")
+    s.add_argument("--target", action="append", default=[], metavar="NAME=PREC",
+                   help="relative precision to reach on a free parameter, e.g. k_sr=0.5%% (repeatable)")
+    s.add_argument("--robust", type=int, default=1, metavar="N",
+                   help="plan for the worst of N cars: the nominal one and N-1 sampled in the scenario's "
+                        "[bounds] (else +-20%% of nominal)")
+    s.add_argument("--seed", type=int, default=0, metavar="N", help="seed of the robust cars' sampling")
+    s.add_argument("--within", type=float, default=None, metavar="F",
+                   help="without a budget: the fewest runs whose CRLB is within F x that of all runs (default 1.5)")
+    s.add_argument("--quiet", action="store_true", help="no progress line")
+
     s = add("score", "compare an identification result with the truth")
     s.add_argument("result", metavar="RESULT.json")
     s.add_argument("truth", metavar="TRUTH.toml")
@@ -190,6 +223,8 @@ def _summary_table(res) -> str:
     lines = [f"{'parameter':<10} {'estimate':>14} {'± std':>11}  {'unit':<8} note"]
     for n, d in res.details.items():
         note = "known" if d["fixed"] else ("derived" if d["derived"] else "")
+        if d.get("at_bound"):
+            note = "AT A SEARCH BOUND: set by the bound, not the data"
         std = "" if d.get("std") in (None, 0.0) else f"{d['std']:.3g}"
         lines.append(f"{n:<10} {d['value']:>14.6g} {std:>11}  {d['unit']:<8} {note}")
     return "\n".join(lines)
@@ -254,6 +289,32 @@ def cmd_sensitivity(args, out=None):
         heatmaps(maps, tmp)
     prog.done()
     print(f"sensitivity maps written to {args.out} (tables.md, 3 CSV, 3 PNG)", file=out)
+    return 0
+
+
+def cmd_plan(args, out=None):
+    out = out or sys.stdout
+    from . import plan
+    from .design import parse_target
+    from .data.schema import atomic_output
+
+    targets = {}
+    for t in args.target:
+        n, v = parse_target(t)
+        targets[n] = v
+    kw = {} if args.within is None else {"within": args.within}
+    prog = Progress(args.quiet)
+    prog.line("simulating the candidate runs and their sensitivities ...", force=True)
+    res = plan(args.scenario, noise=args.noise, accel_density=args.accel_noise_density,
+               gyro_density=args.gyro_noise_density, bandwidth=args.bandwidth, budget_runs=args.budget_runs,
+               budget_time=args.budget_time, overhead=args.overhead, criterion=args.criterion, targets=targets,
+               robust=args.robust, seed=args.seed, **kw)
+    prog.done()
+    with atomic_output(args.out) as tmp:
+        res.save(tmp)
+    print(res.summary(), file=out)
+    print(f"plan written to {args.out} (plan.json, plan.md, crlb.csv, path.csv, correlation.csv, "
+          "precision_path.png)", file=out)
     return 0
 
 
@@ -355,7 +416,7 @@ def cmd_study(args, out=None):
     return 0
 
 
-COMMANDS = {"report": cmd_report, "simulate": cmd_simulate, "identify": cmd_identify, "sensitivity": cmd_sensitivity,
+COMMANDS = {"plan": cmd_plan, "report": cmd_report, "simulate": cmd_simulate, "identify": cmd_identify, "sensitivity": cmd_sensitivity,
             "score": cmd_score, "demo": cmd_demo, "study": cmd_study}
 
 
@@ -378,7 +439,7 @@ def main(argv=None) -> int:
         return 2
     warnings.showwarning = _warning_line
     try:
-        if args.command in ("simulate", "identify", "sensitivity", "demo", "report", "study"):
+        if args.command in ("simulate", "identify", "sensitivity", "demo", "report", "plan", "study"):
             _compile(getattr(args, "quiet", False))
         return COMMANDS[args.command](args)
     except RideidError as e:

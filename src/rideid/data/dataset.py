@@ -6,6 +6,7 @@ from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 
+from . import checks
 from ..errors import DataError, ScaleError
 from .schema import Manifest, RunData, load_manifest, read_run_csv
 from ..model.params import EXT_NAMES, EXTRA_KNOWN, MASS_COUNT, NAMES, Geometry, nominal_car, total_mass
@@ -29,6 +30,8 @@ class Dataset:
     manifest: Manifest
     data: dict[str, RunData]
     measured: dict = field(default_factory=dict)
+    #: what the data checks found (:mod:`rideid.data.checks`); errors never get this far
+    findings: list = field(default_factory=list)
 
     @property
     def geometry(self) -> Geometry:
@@ -135,6 +138,7 @@ def read_dataset(path) -> Dataset:
     from .measured import load_measured_run
 
     man = load_manifest(path)
+    checks.enforce(checks.check_numbers(man))
     data, measured = {}, {}
     for run in man.runs:
         if man.is_measured(run):
@@ -170,13 +174,20 @@ def align_starts(ds: Dataset, starts: dict[str, float] | None = None) -> Dataset
             s = mr.options["start"]
             mr.record["start"] = {"source": "given"}
         else:
+            longest = (mr.speed * (mr.t_last - mr.t_first) if mr.distance is None
+                       else float(mr.distance.d[-1] - mr.distance.d[0]))
+            checks.enforce(checks.check_reach(rid, track, man.geometry, longest), f"{man.path}: ")
             s, rho = estimate_start(mr, nominal_car(man.geometry), man.geometry, track)
             mr.record["start"] = {"source": "estimated (nominal car)", "nominal_estimate": s, "correlation": rho}
         mr.make_grid(s)
         mr.start = float(s)
         measured[rid] = mr
         data[rid] = mr.run_data(s)
-    return Dataset(man, {r.id: data[r.id] for r in man.runs}, measured)
+    ds = Dataset(man, {r.id: data[r.id] for r in man.runs}, measured)
+    # the one hook for the physics checks (rideid.data.checks): every run conditioned and aligned
+    ds.findings = checks.check_dataset(ds)
+    checks.enforce(ds.findings, f"{man.path}: ")
+    return ds
 
 
 def prepare_inputs(ds: Dataset) -> list:

@@ -462,7 +462,7 @@ def load_measured_run(run, man) -> MeasuredRun:
         v = sig.values * factor
         raw[c] = Signal(sig.time, v, unit)
         med = float(np.median(dt))
-        rec_ch[c] = {"source": e.name, "unit": unit, "unit_from": unit_src, "sign": int(e.sign),
+        rec_ch[c] = {"source": e.name, "unit": unit, "unit_from": unit_src, "file_unit": sig.unit, "sign": int(e.sign),
                      "scale": e.scale, "rate_hz": round(1.0 / med, 6), "samples": int(v.size)}
         # plausibility
         gap = dt > 1.5 * med
@@ -554,7 +554,10 @@ def load_measured_run(run, man) -> MeasuredRun:
         from scipy.integrate import cumulative_trapezoid
         d = cumulative_trapezoid(np.clip(s.values, 0, None), s.time, initial=0.0)
         distance = Distance(s.time, d)
-        motion_rec = {"source": f"speed channel '{targets['speed'].name}' ({s.unit}), integrated"}
+        # white-noise level of the speed channel (differences cancel the smooth speed): its integral drifts
+        noise = float(np.std(np.diff(s.values)) / math.sqrt(2.0)) if s.values.size > 2 else 0.0
+        motion_rec = {"source": f"speed channel '{targets['speed'].name}' ({s.unit}), integrated",
+                      "noise_std": noise, "noise_interval": float(np.median(np.diff(s.time)))}
     else:
         motion_rec = {"source": "constant", "value": run.speed}
     if distance is not None:

@@ -26,8 +26,13 @@ Every problem raises :class:`rideid.DataError` naming the file and channel.
 
 from __future__ import annotations
 
+import contextlib
 import csv
+import gc
 import io
+import logging
+import sys
+import warnings
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -72,6 +77,34 @@ def file_format(path: Path) -> str:
     return fmt
 
 
+@contextlib.contextmanager
+def quiet_library(*loggers: str):
+    """Silence a third-party reader while rideid reports its errors itself.
+
+    asammdf and npTDMS log warnings and errors of damaged files through
+    :mod:`logging`, emit Python warnings, and a half-built asammdf object
+    raises again from its ``__del__`` (printed as "Exception ignored in ...
+    Traceback"). Inside this context none of that reaches the terminal; the
+    reader's exception is turned into one :class:`rideid.DataError` line.
+    """
+    names = set(loggers) | {n for n in logging.root.manager.loggerDict
+                            if any(n.startswith(p + ".") for p in loggers)}
+    saved = [(lg, lg.disabled) for lg in (logging.getLogger(n) for n in sorted(names))]
+    hook = sys.unraisablehook
+    for lg, _ in saved:
+        lg.disabled = True
+    sys.unraisablehook = lambda unraisable: None
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            yield
+    finally:
+        gc.collect()  # finalise half-built reader objects while their noise is still silenced
+        sys.unraisablehook = hook
+        for lg, was in saved:
+            lg.disabled = was
+
+
 def _import(fmt: str, path: Path):
     module, extra = _EXTRA[fmt]
     try:
@@ -94,10 +127,17 @@ _LABEL = {"parquet": "Parquet", "mdf": "MDF", "tdms": "TDMS"}
 def _read_with(fmt: str, path: Path, read):
     """``read(library)`` with the format's optional library; a damaged file is a DataError naming it."""
     lib = _import(fmt, path)
-    try:
-        return read(lib)
-    except Exception as e:  # pyarrow, asammdf and npTDMS raise their own errors for damaged files
-        raise DataError(f"{path}: cannot read {_LABEL[fmt]} file: {e}") from None
+    msg = None
+    with quiet_library(_LOGGERS[fmt]):
+        try:
+            return read(lib)
+        except Exception as e:  # pyarrow, asammdf and npTDMS raise their own errors for damaged files
+            msg = str(e) or type(e).__name__
+    raise DataError(f"{path}: cannot read {_LABEL[fmt]} file: {msg}") from None
+
+
+#: the loggers of each format's library (silenced while rideid reports the error itself)
+_LOGGERS = {"mdf": "asammdf", "tdms": "nptdms", "parquet": "pyarrow"}
 
 
 class SignalFile:
@@ -142,7 +182,19 @@ def open_signals(path: Path, csv_options: CsvOptions | None = None) -> SignalFil
 # Shared-time-column formats
 
 class _ColumnFile(SignalFile):
-    """Columns sharing one time column; NaN marks a row a channel did not sample."""
+    """Columns sharing one time column.
+
+    NaN policy (every format): an empty CSV cell or a Parquet null means
+    "not sampled at this row" (how these formats carry mixed rates); a NaN
+    *value* (the text ``nan`` in a CSV, a NaN float in Parquet, MDF or TDMS)
+    is an error naming the file, channel and row or time.
+    """
+
+    #: column -> first data row (0-based) holding an explicit NaN
+    nan_rows: dict = {}
+
+    def _row_name(self, row):
+        return f"data row {row + 1}"
 
     columns: dict[str, np.ndarray]
     units: dict[str, str]
@@ -163,6 +215,11 @@ class _ColumnFile(SignalFile):
             raise self._missing(tname, "the time column")
         t = self.columns[tname] * time_scale
         v = self.columns[name]
+        for col in (name, tname):
+            row = getattr(self, "nan_rows", {}).get(col)
+            if row is not None:
+                raise DataError(f"{self.path}: column '{col}' ({where}): NaN at {self._row_name(row)}; a sample must be "
+                                "a number (an empty cell or a null means 'not sampled')")
         if np.isnan(t).any():
             raise DataError(f"{self.path}: time column '{tname}' has an empty or non-numeric cell "
                             f"(row {int(np.argmax(np.isnan(t))) + 1})")
@@ -217,6 +274,8 @@ class CsvFile(_ColumnFile):
             raise DataError(f"{path}: empty file (expected a header row)")
         delim, dec = _sniff(lines, self.path, opts)
         self.delimiter, self.decimal = delim, dec
+        self.nan_rows = {}
+        self._first_line = 2 + opts.skip_rows
         rows = list(csv.reader(io.StringIO("\n".join(lines)), delimiter=delim))
         header = [c.strip() for c in rows[0]]
         dup = {c for c in header if header.count(c) > 1}
@@ -241,6 +300,9 @@ class CsvFile(_ColumnFile):
             for j, cell in enumerate(row):
                 try:
                     arr[i, j] = _to_float(cell, dec)
+                    if arr[i, j] != arr[i, j] and cell.strip():  # the text 'nan': a value, not an empty cell
+                        self.nan_rows.setdefault(header[j], i)
+                        arr[i, j] = 0.0
                 except ValueError:
                     raise DataError(f"{path}: line {ln}, column '{header[j]}': not a number: {cell!r} "
                                     f"(decimal '{dec}')") from None
@@ -249,6 +311,10 @@ class CsvFile(_ColumnFile):
             i, j = np.argwhere(bad)[0]
             raise DataError(f"{path}: column '{header[j]}' has an infinite value (line {i + 2 + first_data})")
         self.columns = {h: arr[:, j] for j, h in enumerate(header)}
+        self._first_line += first_data
+
+    def _row_name(self, row):
+        return f"line {row + self._first_line}"
 
 
 def _is_number(cell: str, dec: str) -> bool:
@@ -264,13 +330,17 @@ class ParquetFile(_ColumnFile):
     def __init__(self, path):
         super().__init__(path)
         table = _read_with("parquet", path, lambda pq: pq.read_table(path))
-        self.columns, self.units = {}, {}
+        self.columns, self.units, self.nan_rows = {}, {}, {}
         for fld, col in zip(table.schema, table.columns):
             try:
-                arr = col.to_numpy(zero_copy_only=False)
-                self.columns[fld.name] = np.asarray(arr, dtype=float)
-            except (TypeError, ValueError):
+                arr = np.asarray(col.to_numpy(zero_copy_only=False), dtype=float)
+                nulls = np.asarray(col.is_null().to_numpy(zero_copy_only=False), dtype=bool)
+            except (TypeError, ValueError, AttributeError):
                 continue  # text or nested columns are not channels
+            bad = np.isnan(arr) & ~nulls
+            if bad.any():
+                self.nan_rows[fld.name] = int(np.argmax(bad))
+            self.columns[fld.name] = np.where(bad, 0.0, arr)
             meta = fld.metadata or {}
             if b"unit" in meta:
                 self.units[fld.name] = meta[b"unit"].decode()
@@ -304,7 +374,14 @@ class MdfFile(SignalFile):
             raise DataError(f"{self.path}: channel '{name}' ({where}) occurs in {len(occ)} groups; "
                             "rename it in the logger export")
         g, i = occ[0]
-        sig = self.mdf.get(name, group=g, index=i)
+        msg = None
+        with quiet_library("asammdf"):
+            try:
+                sig = self.mdf.get(name, group=g, index=i)
+            except Exception as e:  # a damaged data block
+                msg = f"{type(e).__name__}: {e}"
+        if msg is not None:
+            raise DataError(f"{self.path}: cannot read channel '{name}' ({where}): {msg}")
         values = np.asarray(sig.samples)
         if values.dtype.kind not in "fiub":
             raise DataError(f"{self.path}: channel '{name}' ({where}) is not numeric")
@@ -344,7 +421,11 @@ class TdmsSignals(SignalFile):
 
     def get(self, name, where, time_name=None, time_scale=1.0):
         grp, ch = self._find(name, where)
-        values = np.asarray(ch[:], dtype=float)
+        try:
+            with quiet_library("nptdms"):
+                values = np.asarray(ch[:], dtype=float)
+        except (ValueError, TypeError) as e:
+            raise DataError(f"{self.path}: channel '{name}' ({where}) is not numeric: {e}") from None
         unit = ch.properties.get("unit_string") or None
         if time_name is not None:
             tname = time_name if "/" in time_name else f"{grp.name}/{time_name}"

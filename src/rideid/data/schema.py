@@ -29,9 +29,9 @@ from ..model.tracks import Track
 #: a scenario may also describe the multibody car of rideid.hifi (``[hifi]``, used by --engine mujoco)
 TOP_KEYS_SCENARIO = ("name", "vehicle", "known", "bounds", "model", "tracks", "runs", "truth", "hifi")
 #: a dataset may also describe how its files were logged (rideid.measured)
-TOP_KEYS_DATASET = ("name", "vehicle", "known", "bounds", "model", "channels", "preprocess", "csv", "tracks",
-                    "runs")
-RUN_KEYS_DATASET = ("id", "track", "speed", "file", "channels") + RUN_PREPROCESS_KEYS
+TOP_KEYS_DATASET = ("name", "vehicle", "known", "bounds", "model", "channels", "preprocess", "csv", "checks",
+                    "tracks", "runs")
+RUN_KEYS_DATASET = ("id", "track", "speed", "file", "channels", "checks") + RUN_PREPROCESS_KEYS
 RUN_KEYS_SCENARIO = ("id", "track", "speed", "fs", "duration")
 
 
@@ -107,6 +107,8 @@ class RunSpec:
     #: measured-data options of this run (rideid.measured): its channel map and preprocessing keys
     channels: dict = field(default_factory=dict)
     options: dict = field(default_factory=dict)
+    #: this run's levels of the data checks (rideid.data.checks), over the dataset's [checks]
+    checks: dict = field(default_factory=dict)
 
     def to_table(self) -> dict:
         d = {"id": self.id, "track": self.track}
@@ -121,6 +123,8 @@ class RunSpec:
             d["channels"] = {k: e.to_table() for k, e in self.channels.items()}
         for k, v in self.options.items():
             d[k] = list(v) if isinstance(v, tuple) else v
+        if self.checks:
+            d["checks"] = dict(self.checks)
         return d
 
 
@@ -140,6 +144,8 @@ class Manifest:
     preprocess: dict = field(default_factory=dict)
     csv_options: object = None
     csv_table: dict = field(default_factory=dict)
+    #: ``[checks]``: check name -> "error" | "warn" | "off" (rideid.data.checks)
+    checks: dict = field(default_factory=dict)
     #: scenario only: the ``[hifi]`` properties of the MuJoCo car (rideid.hifi.HifiProperties), or None
     hifi: object = None
     #: ``[model] extensions`` (SPEC §6): the extension groups to estimate; None without a [model] table
@@ -175,6 +181,8 @@ class Manifest:
             doc["preprocess"] = {k: list(v) if isinstance(v, tuple) else v for k, v in self.preprocess.items()}
         if self.csv_table:
             doc["csv"] = dict(self.csv_table)
+        if self.checks:
+            doc["checks"] = dict(self.checks)
         doc["tracks"] = [t.to_table() for t in self.tracks.values()]
         doc["runs"] = [r.to_table() for r in self.runs]
         return doc
@@ -290,7 +298,8 @@ def parse_manifest(doc: dict, path: Path, scenario: bool) -> Manifest:
             chans = parse_channel_map(r["channels"], f"{w}: channels") if "channels" in r else {}
             opts = parse_preprocess({k: v for k, v in r.items() if k in RUN_PREPROCESS_KEYS}, w,
                                     RUN_PREPROCESS_KEYS)
-            runs.append(RunSpec(rid, r["track"], speed, file=r["file"], channels=chans, options=opts))
+            lv = parse_checks(r["checks"], f"{w}: checks") if "checks" in r else {}
+            runs.append(RunSpec(rid, r["track"], speed, file=r["file"], channels=chans, options=opts, checks=lv))
 
     truth = None
     if scenario:
@@ -323,7 +332,22 @@ def parse_manifest(doc: dict, path: Path, scenario: bool) -> Manifest:
         if "csv" in doc:
             man.csv_options = parse_csv_options(doc["csv"], f"{where}: [csv]")
             man.csv_table = dict(doc["csv"])
+        if "checks" in doc:
+            man.checks = parse_checks(doc["checks"], f"{where}: [checks]")
     return man
+
+
+def parse_checks(tab, where: str) -> dict:
+    """``[checks]`` (or a run's ``checks``): check name -> "error", "warn" or "off"."""
+    from .checks import CHECK_LEVELS, CHECK_NAMES
+    if not isinstance(tab, dict):
+        raise DataError(f"{where} must be a table, e.g. {{ wiring = \"warn\" }}")
+    for k, v in tab.items():
+        if k not in CHECK_NAMES:
+            raise DataError(f"{where}: unknown check '{k}'; allowed: {', '.join(CHECK_NAMES)}")
+        if v not in CHECK_LEVELS:
+            raise DataError(f"{where} {k}: expected one of {', '.join(CHECK_LEVELS)}, got {v!r}")
+    return dict(tab)
 
 
 def parse_truth(tab: dict, where: str, geom: Geometry | None) -> dict[str, float]:
@@ -342,8 +366,11 @@ def parse_truth(tab: dict, where: str, geom: Geometry | None) -> dict[str, float
 
 
 def load_scenario(path) -> Manifest:
+    from .checks import check_numbers, enforce
     path = Path(path)
-    return parse_manifest(read_toml(path), path, scenario=True)
+    man = parse_manifest(read_toml(path), path, scenario=True)
+    enforce(check_numbers(man))
+    return man
 
 
 def in_folder(path, name: str) -> Path:

@@ -33,14 +33,17 @@
 
 from __future__ import annotations
 
+import math
 import time
+import warnings
 
 import numpy as np
 from scipy.optimize import OptimizeResult, least_squares
 
+from ..data.checks import bound_findings
 from ..data.dataset import Dataset
 from ..data.measured import coarse_start
-from ..errors import ArgumentError
+from ..errors import ArgumentError, DataWarning
 from ..model.batch import single_threaded_blas
 from ..model.equations import modal_summary
 from ..model.params import GROUPS, INDEX, UNITS
@@ -256,6 +259,12 @@ def _result(ds, cf, search, fit, weighting, maps, rng_record, wall) -> Identific
         else:
             e["std"] = 0.0
         details[n] = e
+    # an estimate the bound stopped, not the data (rideid.data.checks)
+    findings = list(getattr(ds, "findings", [])) + bound_findings(details)
+    for f in findings:
+        if f.check == "bounds":
+            details[f.channel]["at_bound"] = True
+            warnings.warn(f.message, DataWarning, stacklevel=4)
     starts = {} if fit is None else fit.starts
     pre = ds.preprocessing()
     for rid, st in starts.items():
@@ -271,7 +280,8 @@ def _result(ds, cf, search, fit, weighting, maps, rng_record, wall) -> Identific
         rng_state=rng_record["rng_state"], track_weights=search.track_weights, weights_mode=weighting.name,
         polish=info, history=History(search.history), starts=starts, preprocessing=pre,
         modal=modal_summary(P, ds.geometry), dataset=str(ds.path), maps=maps,
-        model={"extensions": list(space.extensions)}, response=cf.simulate(P))
+        model={"extensions": list(space.extensions)}, response=cf.simulate(P),
+        checks=[f.to_dict() for f in findings])
 
 
 def _polish(cf: CostFunction, x0, weights, align=None):
@@ -372,7 +382,8 @@ def _polish_aligned(ds, cf, x_best, equal):
             changes[rid] = st["value"] - starts[rid]
             starts[rid] = st["value"]
             data[rid] = ds.measured[rid].run_data(st["value"])
-            records[rid] = {"source": "estimated with the parameters (least squares)", "std": st["std"]}
+            records[rid] = {"source": "estimated with the parameters (least squares)",
+                            **_start_std(ds, rid, st["std"])}
         worst = max(abs(v) * ds.measured[rid].fs for rid, v in changes.items())
         rounds.append({"max_change_samples": worst})
         varying = [rid for rid in changes if ds.measured[rid].distance is not None]
@@ -386,8 +397,41 @@ def _polish_aligned(ds, cf, x_best, equal):
         cf = CostFunction(ds.with_data(data), space=cf.space)
         cf.nfev = nfev
     info["alignment_rounds"] = rounds
+    # the data moved with the starts: the final cost (printed, recorded) is the cost on the data at the final starts
+    nfev = cf.nfev
+    cf = CostFunction(ds.with_data(data), space=cf.space)
+    cf.nfev = nfev
     out = {rid: {"value": float(starts[rid]), **records[rid]} for rid in starts}
     return x_best, info, std, cf, out
+
+
+def _start_std(ds, rid, std_fit) -> dict:
+    """A start's standard error: the fit's, and the drift of an integrated noisy speed channel.
+
+    The model drives along ``x(t) = d(start + t) - d(start)``. White noise of
+    standard deviation ``sigma_v`` on a speed channel sampled every ``dt``
+    makes the integrated distance a random walk, ``sigma_x(T) = sigma_v
+    sqrt(T dt)`` after ``T`` seconds; the start is fixed by the road
+    features, met about ``T_mid`` (front axle at the middle of the features,
+    half a wheelbase on) after it, so the distance error there moves the
+    start by ``sigma_x(T_mid) / v_mean``. Added in quadrature to the fit's
+    (Jacobian) standard error, which assumes the distance exact. A speed
+    channel's calibration error is not included.
+    """
+    from ..data.checks import feature_span
+    mr = ds.measured[rid]
+    out = {"std": std_fit, "std_fit": std_fit}
+    sp = mr.record.get("speed", {})
+    if "noise_std" not in sp or not sp.get("mean"):
+        return out
+    span = feature_span(ds.manifest.tracks[ds.manifest.run(rid).track], ds.geometry)
+    x_mid = (0.0 if span is None else 0.5 * (span[0] + span[1])) + 0.5 * ds.geometry.wheelbase
+    v = max(float(sp["mean"]), 1e-6)
+    s_speed = float(sp["noise_std"]) * math.sqrt(max(x_mid / v, 0.0) * float(sp["noise_interval"])) / v
+    out["std_speed_channel"] = s_speed
+    if std_fit is not None and np.isfinite(std_fit):
+        out["std"] = float(math.hypot(std_fit, s_speed))
+    return out
 
 
 def _cycle_check(ds, P, starts, data) -> dict:

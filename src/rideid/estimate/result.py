@@ -196,6 +196,8 @@ class IdentificationResult:
     adequacy: dict | None = None
     #: the identified car's channels per run on the final data (in memory only, for the report)
     response: dict | None = None
+    #: findings of the data checks and of the bound check (rideid.data.checks), as dicts
+    checks: list = field(default_factory=list)
 
     # SciPy/SPEC §4 names for the same numbers
     @property
@@ -255,6 +257,7 @@ class IdentificationResult:
             "model": self.model,
             "adequacy": self.adequacy,
             "preprocessing": self.preprocessing,
+            "checks": self.checks,
             "dataset": str(Path(self.dataset).resolve()) if self.dataset else "",
             "sensitivity": _maps_to_json(self.maps),
             "history_file": "history.csv",
@@ -316,7 +319,7 @@ def load(path) -> IdentificationResult:
         starts=dict(doc.get("starts") or {}), preprocessing=dict(doc.get("preprocessing") or {}),
         modal=doc.get("modal"), dataset=doc.get("dataset", ""),
         maps=_maps_from_json(doc.get("sensitivity"), rpath), rng_state=doc.get("rng_state"),
-        model=doc.get("model"), adequacy=doc.get("adequacy"))
+        model=doc.get("model"), adequacy=doc.get("adequacy"), checks=list(doc.get("checks") or []))
 
 
 __all__ = ["IdentificationResult", "History", "load", "read_result_json"]

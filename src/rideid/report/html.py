@@ -323,6 +323,9 @@ def write_report(result, dataset, out_dir, *, compare=None, compare_label: str |
                          "median": float(np.median(list(st.values()))) if st else float("nan")})
 
     data_rows, channel_rows, data_warnings = data_tables(result.preprocessing or dataset.preprocessing())
+    # the data checks' and the bound check's findings (rideid.data.checks)
+    data_warnings = data_warnings + [c["message"] for c in (getattr(result, "checks", None) or [])
+                                     if isinstance(c, dict) and "message" in c]
 
     params = []
     for n in pnames:
@@ -332,7 +335,8 @@ def write_report(result, dataset, out_dir, *, compare=None, compare_label: str |
             "name": n, "meaning": DESCRIPTIONS[n], "value": d["value"], "unit": d["unit"],
             "std": std, "rel_std": (100 * std / abs(d["value"])) if std not in (None, 0.0) and d["value"] else None,
             "lower": d.get("lower"), "upper": d.get("upper"),
-            "status": "known" if d.get("fixed") else ("derived" if d.get("derived") else "estimated"),
+            "status": "known" if d.get("fixed") else ("derived" if d.get("derived") else
+                                                      ("AT A SEARCH BOUND" if d.get("at_bound") else "estimated")),
         })
     p2t = [{"param": p, "cells": [(f"{maps.M[i, r]:.2f}", stars(maps.M[i, r] * len(maps.runs), P2T_STARS))
                                   for r in range(len(maps.runs))]} for i, p in enumerate(maps.params)]

@@ -1,0 +1,829 @@
+"""Physics checks on a dataset: catch the user's mistakes before they become confident wrong answers.
+
+Each check is a pure function over numbers and arrays (a manifest's values;
+a run's model times, its ``(n, 10)`` channel matrix in SPEC channel order,
+the geometry, the track and the speed) and returns :class:`Finding` objects:
+a severity, the run and channel concerned, a plain message that names the
+likely cause, and, for wiring mistakes, the ``[channels]`` entries that fix
+it. The data layer calls them from one place (:func:`rideid.data.dataset.load_dataset`,
+after each run has been conditioned), the identification once more after
+the fit (:func:`bound_findings`).
+
+The checks, and why they can tell:
+
+* **Numbers** (:func:`check_numbers`): every value of the manifest against
+  the range a road vehicle on a ride track can have (a 1e308 kg car, a
+  300 m/s run, a 5 m tire are typing errors, not data).
+* **Coverage** (:func:`check_coverage`): the car starts at rest on flat road
+  (SPEC §2), so no feature may lie under a wheel at the start; the run must
+  reach its track and, ideally, leave it.
+* **Rigid body** (:func:`rigid_body_scores`): the four body accelerometers
+  and the gyro measure one rigid body. With corners at ``x = a, -b`` and
+  ``y = ±track/2``, the body accelerations are ``z'' - x θ'' + y φ''``, so
+
+  - roll: ``(a_fl - a_fr) / track_front = (a_rl - a_rr) / track_rear = d/dt roll_rate``
+  - pitch: ``((a_rl + a_rr) - (a_fl + a_fr)) / (2 wheelbase) = d/dt pitch_rate``
+
+  independent of the CG and of every mass and stiffness. A swapped pair, a
+  flipped sign or a unit factor (57.3 deg/rad, 9.81 m/s² per g) breaks these
+  identities; the hypothesis that restores them names the mistake, with no
+  model at all.
+* **Assignment to the road** (:func:`assignment`): each axle channel follows
+  its own wheel path's road input (front before rear by wheelbase/speed; left
+  and right as the track's asymmetry dictates). Correlating every measured
+  channel with every channel of a nominal car's response on the run's track
+  tells which permutation and signs of the channels the road supports; it
+  also breaks the rigid-body check's ties (front/rear body swap versus a
+  flipped pitch gyro).
+* **Track and speed** (:func:`match_finding`): the measurement must
+  correlate with the response to the stated track at the stated speed.
+  Otherwise the speed (km/h typed as m/s) or the track is wrong; the caller
+  re-tries other speeds and the manifest's other tracks and the message
+  names the one that fits.
+* **Bounds** (:func:`bound_findings`): an estimate at or within 1 % (of the
+  search range) of a bound was stopped by the bound, not by the data.
+"""
+
+from __future__ import annotations
+
+import functools
+import itertools
+import math
+from dataclasses import asdict, dataclass
+
+import numpy as np
+
+from ..model.equations import CHANNELS
+
+G0 = 9.80665
+DEG = 180.0 / math.pi
+
+#: severities, in order
+ERROR, WARNING = "error", "warning"
+#: the checks a dataset may relax (``[checks]``): each "error" (default), "warn" or "off"
+CHECK_NAMES = ("wiring", "track")
+CHECK_LEVELS = ("error", "warn", "off")
+
+#: correlation with the nominal car below which a run does not match its track and speed
+MATCH_MIN = 0.5
+#: rigid-body residual (relative) that counts as consistent / as inconsistent
+RIGID_OK = 0.05
+RIGID_BAD = 0.15
+#: a re-wiring must beat the map by this much summed correlation to be reported
+ASSIGN_MARGIN = 0.6
+#: estimates within this fraction of the search range of a bound are flagged
+BOUND_FRACTION = 0.01
+
+
+@dataclass(frozen=True)
+class Finding:
+    """One result of a check.
+
+    Attributes
+    ----------
+    severity : {"error", "warning"}
+    check : str
+        Which check: "numbers", "coverage", "wiring", "track", "bounds".
+    message : str
+        One line: what is wrong, the likely cause and the fix.
+    run : str or None
+        The run concerned (None for the manifest or the fit).
+    channel : str or None
+        The SPEC channel or key concerned.
+    fix : dict or None
+        SPEC channel -> ``{source, factor}``: the corrected channel is
+        ``factor`` times the channel currently mapped to ``source``.
+    """
+
+    severity: str
+    check: str
+    message: str
+    run: str | None = None
+    channel: str | None = None
+    fix: dict | None = None
+
+    def to_dict(self) -> dict:
+        return {k: v for k, v in asdict(self).items() if v is not None}
+
+
+# ---------------------------------------------------------------------------
+# Numbers: physical plausibility of every value of a manifest
+
+#: (lower, upper) a value may take; outside is a typing error, not a car
+PLAUSIBLE = {
+    "wheelbase": (0.5, 20.0), "track_front": (0.3, 5.0), "track_rear": (0.3, 5.0), "tire_radius": (0.05, 2.0),
+    "total_mass": (50.0, 1.0e5), "m_s": (30.0, 1.0e5), "m_uf": (1.0, 2000.0), "m_ur": (1.0, 2000.0),
+    "I_xx": (1.0, 1.0e6), "I_yy": (1.0, 1.0e7),
+    "k_sf": (100.0, 1.0e8), "k_sr": (100.0, 1.0e8), "c_sf": (1.0, 1.0e6), "c_sr": (1.0, 1.0e6),
+    "k_tf": (1.0e3, 1.0e9), "k_tr": (1.0e3, 1.0e9),
+    "speed": (0.1, 100.0),
+    # track dimensions, m (start and extent: a proving-ground track is not kilometres away)
+    "start": (-1.0e4, 1.0e4), "amplitude": (0.0, 0.5), "height": (0.0, 0.5), "wavelength": (0.01, 1.0e3),
+    "bump_length": (0.01, 1.0e3), "spacing": (0.01, 1.0e3), "cycles": (0.0, 1.0e5), "bumps": (0.0, 1.0e5),
+}
+UNIT_OF = {"wheelbase": "m", "track_front": "m", "track_rear": "m", "tire_radius": "m", "total_mass": "kg",
+           "m_s": "kg", "m_uf": "kg", "m_ur": "kg", "I_xx": "kg m^2", "I_yy": "kg m^2", "k_sf": "N/m",
+           "k_sr": "N/m", "c_sf": "N s/m", "c_sr": "N s/m", "k_tf": "N/m", "k_tr": "N/m", "speed": "m/s",
+           "start": "m", "amplitude": "m", "height": "m", "wavelength": "m", "bump_length": "m",
+           "spacing": "m", "cycles": "", "bumps": "", "fs": "Hz", "duration": "s"}
+
+
+def _range_finding(where: str, key: str, value: float, lo: float, hi: float, absolute: bool = False):
+    v = abs(value) if absolute else value
+    if lo <= v <= hi:
+        return None
+    unit = UNIT_OF.get(key, "")
+    what = f"|{key}|" if absolute else key
+    return Finding(ERROR, "numbers", f"{where}: {key} = {value:g} {unit}".rstrip() +
+                   f" is not physically plausible (expected {lo:g} <= {what} <= {hi:g} {unit}); "
+                   "a typing or unit error?".replace("  ", " "), channel=key)
+
+
+def check_numbers(man) -> list[Finding]:
+    """Plausibility of every number of a manifest (dataset or scenario).
+
+    Parameters
+    ----------
+    man : rideid.data.schema.Manifest
+
+    Returns
+    -------
+    list of Finding (errors)
+    """
+    out = []
+    where = str(man.path)
+    g = man.geometry
+    for k in ("wheelbase", "track_front", "track_rear", "tire_radius"):
+        out.append(_range_finding(f"{where}: [vehicle]", k, getattr(g, k), *PLAUSIBLE[k]))
+    if g.tire_radius >= 0.5 * g.wheelbase:
+        out.append(Finding(ERROR, "numbers", f"{where}: [vehicle] tire_radius = {g.tire_radius:g} m is not less "
+                           f"than half the wheelbase ({g.wheelbase:g} m): the wheels would overlap", channel="tire_radius"))
+    for k, v in man.known.items():
+        if k in PLAUSIBLE:
+            out.append(_range_finding(f"{where}: [known]", k, v, *PLAUSIBLE[k]))
+    truth = getattr(man, "truth", None) or {}
+    for k, v in truth.items():
+        if k in PLAUSIBLE:
+            out.append(_range_finding(f"{where}: [truth]", k, v, *PLAUSIBLE[k]))
+    for tid, tr in man.tracks.items():
+        w = f"{where}: track '{tid}'"
+        for k, v in tr.keys.items():
+            if k in PLAUSIBLE and isinstance(v, float):
+                out.append(_range_finding(w, k, v, *PLAUSIBLE[k], absolute=k in ("amplitude", "height")))
+    for r in man.runs:
+        w = f"{where}: run '{r.id}'"
+        if r.speed is not None:
+            out.append(_range_finding(w, "speed", r.speed, *PLAUSIBLE["speed"]))
+        if r.fs is not None:
+            out.append(_range_finding(w, "fs", r.fs, 1.0, 1.0e6))
+        if r.duration is not None:
+            out.append(_range_finding(w, "duration", r.duration, 1e-3, 1.0e5))
+            if r.fs is not None and r.fs * r.duration > 5e7:
+                out.append(Finding(ERROR, "numbers", f"{w}: fs * duration = {r.fs * r.duration:.3g} samples; "
+                                   "more than 5e7 is not a ride run", r.id, "duration"))
+    return [f for f in out if f is not None]
+
+
+# ---------------------------------------------------------------------------
+# Coverage: the car starts at rest on flat road, reaches the track and leaves it
+
+def feature_span(track, geom) -> tuple[float, float] | None:
+    """(first, last) x of the track's features over the four wheel paths, or None (flat)."""
+    lo, hi = [], []
+    for y in (geom.track_front / 2, -geom.track_front / 2, geom.track_rear / 2, -geom.track_rear / 2):
+        ext = track.path(y).extent
+        if ext is not None and ext[1] > ext[0]:
+            lo.append(ext[0])
+            hi.append(ext[1])
+    if not lo:
+        return None
+    return min(lo), max(hi)
+
+
+def check_coverage(run_id: str, track, geom, x_end: float, x_begin: float = 0.0, where: str = "") -> list[Finding]:
+    """Does the run start at rest on flat road, reach the track, and leave it?
+
+    Parameters
+    ----------
+    run_id : str
+    track : rideid.model.tracks.Track
+    geom : Geometry
+    x_end : float
+        Front-axle distance (m) past x = 0 at the run's last sample.
+    x_begin : float
+        Front-axle distance (m) at the run's first sample (negative with a pre-roll).
+    """
+    span = feature_span(track, geom)
+    w = f"{where}run '{run_id}'"
+    if span is None:
+        return []
+    lo, hi = span
+    R = geom.tire_radius
+    out = []
+    # the rigid wheel touches a feature up to R ahead of its centre; the rear axle is a wheelbase behind
+    if lo - R < min(x_begin, 0.0):
+        out.append(Finding(ERROR, "coverage", f"{w}: track '{track.id}' has features from x = {lo:g} m, under or "
+                           f"within a tire radius ({R:g} m) of the front wheels at the start: the car must start at "
+                           f"rest on flat road (SPEC §2); move the track's start to at least {R + max(0.0, -x_begin):g} m",
+                           run_id, "start"))
+    elif x_end < lo - R:
+        out.append(Finding(ERROR, "coverage", f"{w}: never reaches track '{track.id}': the front axle travels "
+                           f"{x_end:.3g} m but the first feature is at x = {lo:g} m (check the track's start, the "
+                           "run's speed and the recording's length)", run_id, "speed"))
+    elif x_end < hi + geom.wheelbase + R:
+        out.append(Finding(WARNING, "coverage", f"{w}: ends before the rear wheels leave track '{track.id}' "
+                           f"(front axle at {x_end:.3g} m, the rear wheels clear the last feature at "
+                           f"{hi + geom.wheelbase + R:.3g} m): a longer recording fits better", run_id, "duration"))
+    return out
+
+
+def check_reach(run_id: str, track, geom, max_distance: float, where: str = "") -> list[Finding]:
+    """Before a start is estimated: can the recording reach the track at all?
+
+    ``max_distance``: the most the front axle can travel during the whole
+    recording (constant speed x its length, or the distance channel's range).
+    """
+    return [f for f in check_coverage(run_id, track, geom, max_distance, 0.0, where)
+            if f.severity == ERROR and f.channel == "speed"]
+
+
+# ---------------------------------------------------------------------------
+# Rigid body: body accelerometers against the gyro
+
+def _lowpass(Y, fs, fc=10.0):
+    from scipy.signal import butter, sosfiltfilt
+    fc = min(fc, 0.3 * fs)
+    if Y.shape[-1] < 30:
+        return Y
+    sos = butter(4, fc, fs=fs, output="sos")
+    return sosfiltfilt(sos, Y, axis=-1)
+
+
+#: relative factors a mapped gyro can be off by (values too small by 57.3: rad/s mapped as deg/s, ...)
+GYRO_FACTORS = (1.0, DEG, 1 / DEG, G0, 1 / G0)
+
+
+def _hypotheses(has_gyro: bool):
+    """Every (body permutation, body factors, gyro factor, pitch sign, roll sign, gyro swap).
+
+    Body factors are signs, or one channel off by g (a single accelerometer in
+    the wrong unit; all four off by g is the gyro factor's inverse).
+    """
+    perms = list(itertools.permutations(range(4)))
+    signs = list(itertools.product((1.0, -1.0), repeat=4))
+    units = []
+    for c in range(4):
+        for f in (G0, 1 / G0):
+            for s in signs:
+                units.append(tuple(s[k] * (f if k == c else 1.0) for k in range(4)))
+    body = [(p, s) for p in perms for s in signs] + [(tuple(range(4)), u) for u in units]
+    if not has_gyro:
+        return [(p, s, 1.0, 1.0, 1.0, False, False) for p, s in body]
+    hyps = [(p, s, f, sp, sr, sw, False) for p, s in body for f in GYRO_FACTORS
+            for sp in (1.0, -1.0) for sr in (1.0, -1.0) for sw in (False, True)]
+    # one gyro channel in another unit than the other (body channels only signed)
+    for s in signs:
+        for fp in GYRO_FACTORS:
+            for fr in GYRO_FACTORS:
+                if fp != fr:
+                    hyps += [(tuple(range(4)), s, 1.0, fp * sp, fr * sr, False, False)
+                             for sp in (1.0, -1.0) for sr in (1.0, -1.0)]
+    return hyps
+
+
+def _rename_hypotheses(F, has_gyro: bool):
+    """Names permuted in the map while each entry's unit, sign and scale stay put.
+
+    ``F``: (10,) the factor (unit x sign x scale) each SPEC channel was read
+    with. If the file channel of entry ``p(c)`` really is channel ``c``,
+    then ``true_c = F_c / F_p(c) * loaded_p(c)``.
+    """
+    out = []
+    for p in itertools.permutations(range(4)):
+        sg = tuple(F[c] / F[p[c]] for c in range(4))
+        for sw in ((False, True) if has_gyro else (False,)):
+            sp = F[8] / F[9 if sw else 8] if has_gyro else 1.0
+            sr = F[9] / F[8 if sw else 9] if has_gyro else 1.0
+            out.append((p, sg, 1.0, sp, sr, sw, True))
+    return out
+
+
+def _transforms(hyps) -> np.ndarray:
+    """(H, 6, 6): corrected signals = T @ raw signals, for each hypothesis."""
+    T = np.zeros((len(hyps), 6, 6))
+    for h, (perm, sg, f, sp, sr, sw, _) in enumerate(hyps):
+        T[h, np.arange(4), perm] = sg
+        T[h, 4, 5 if sw else 4] = f * sp
+        T[h, 5, 4 if sw else 5] = f * sr
+    return T
+
+
+@functools.lru_cache(maxsize=2)
+def _base_transforms(has_gyro: bool):
+    hyps = tuple(_hypotheses(has_gyro))
+    return hyps, _transforms(hyps)
+
+
+def rigid_body_scores(Y: np.ndarray, fs: float, geom, F=None):
+    """Rigid-body residual of every wiring hypothesis.
+
+    Parameters
+    ----------
+    Y : (n, 10) array
+        The run's channels in SPEC order (SI units), NaN where missing.
+    fs : float
+        Sample rate, Hz.
+    geom : Geometry
+
+    Returns
+    -------
+    F : (10,) array, optional
+        The factor (unit x sign x scale) each channel was read with: adds
+        the hypotheses "names swapped in the map" (:func:`_rename_hypotheses`).
+    hyps : list of tuples, or None when the body channels are incomplete
+        ``(perm, signs, gyro_factor, pitch_sign, roll_sign, gyro_swapped, renamed)``;
+        the corrected ``body[c] = signs[c] * Y[:, perm[c]]``, the corrected
+        pitch rate ``gyro_factor * pitch_sign * (roll_rate if swapped else
+        pitch_rate)``, likewise roll.
+    scores : (H,) array
+        Mean relative residual of the rigid-body identities (roll front, roll
+        rear, pitch; without a gyro the warp ``roll front = roll rear``):
+        0 is a perfect rigid body, about 1 unrelated signals.
+    """
+    present = ~np.all(np.isnan(Y), axis=0)
+    if not present[:4].all():
+        return None, None
+    has_gyro = bool(present[8] and present[9])
+    X = np.nan_to_num(Y[:, [0, 1, 2, 3, 8, 9]].T, nan=0.0)
+    X = X - X.mean(axis=1, keepdims=True)
+    if has_gyro:
+        X[4:] = np.gradient(X[4:], 1.0 / fs, axis=1)
+    X = _lowpass(X, fs)
+    G = X @ X.T
+    tf, tr, L = geom.track_front, geom.track_rear, geom.wheelbase
+    # constraints on corrected signals [b_fl, b_fr, b_rl, b_rr, pitch'', roll'']
+    if has_gyro:
+        K = np.array([[1 / tf, -1 / tf, 0, 0, 0, -1],
+                      [0, 0, 1 / tr, -1 / tr, 0, -1],
+                      [-1 / (2 * L), -1 / (2 * L), 1 / (2 * L), 1 / (2 * L), -1, 0]])
+    else:
+        K = np.array([[1 / tf, -1 / tf, -1 / tr, 1 / tr, 0, 0]])
+    base, T0 = _base_transforms(has_gyro)
+    hyps = list(base)
+    T = T0
+    if F is not None:
+        extra = _rename_hypotheses(np.asarray(F, float), has_gyro)
+        hyps += extra
+        T = np.concatenate([T0, _transforms(extra)])
+    C = np.matmul(K[None], T)  # (H, k, 6) coefficients on the raw signals
+    num = np.sum(np.matmul(C, G) * C, axis=-1)
+    den = (C * C) @ np.diag(G)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        e = np.where(den > 0, num / np.where(den > 0, den, 1.0), 0.0)
+    return hyps, e.mean(axis=1)
+
+
+# ---------------------------------------------------------------------------
+# Assignment: measured channels against a nominal car's response on the track
+
+def _corr_matrix(Y, Yhat, idx):
+    """corr(Y[:, i], Yhat[:, j]) for i, j in idx (NaN where a channel is missing or zero)."""
+    C = np.full((len(idx), len(idx)), np.nan)
+    for a, i in enumerate(idx):
+        y = Y[:, i]
+        if np.all(np.isnan(y)):
+            continue
+        ny = np.linalg.norm(y)
+        for b, j in enumerate(idx):
+            m = Yhat[:, j]
+            nm = np.linalg.norm(m)
+            if ny > 0 and nm > 0:
+                C[a, b] = float(y @ m) / (ny * nm)
+    return C
+
+
+def best_assignment(C: np.ndarray):
+    """The permutation and signs maximising the summed correlation ``sum_c s_c C[perm[c], c]``.
+
+    ``C[i, j]``: measured channel ``i`` against model channel ``j``. Returns
+    ``(perm, signs, score, identity_score)``; ``perm[c]`` is the measured
+    channel that best serves as channel ``c``.
+    """
+    n = C.shape[0]
+    Cz = np.nan_to_num(C, nan=0.0)
+    ident = float(np.trace(Cz))
+    best = (tuple(range(n)), (1.0,) * n, ident)
+    for perm in itertools.permutations(range(n)):
+        vals = np.array([Cz[perm[c], c] for c in range(n)])
+        s = np.where(vals < 0, -1.0, 1.0)
+        score = float(np.sum(np.abs(vals)))
+        if score > best[2] + 1e-9:
+            best = (perm, tuple(s), score)
+    return best[0], best[1], best[2], ident
+
+
+def assignment(Y: np.ndarray, Yhat: np.ndarray):
+    """Best re-wiring per channel group (body 0-3, axles 4-7, gyro 8-9) by correlation with ``Yhat``.
+
+    Returns a dict group -> (channel indices, perm, signs, score, identity score, C).
+    """
+    out = {}
+    for name, idx in (("body", [0, 1, 2, 3]), ("axle", [4, 5, 6, 7]), ("gyro", [8, 9])):
+        C = _corr_matrix(Y, Yhat, idx)
+        perm, signs, score, ident = best_assignment(C)
+        out[name] = (idx, perm, signs, score, ident, C)
+    return out
+
+
+def _track_score(hyp, A):
+    """Summed correlation with the nominal response of a rigid-body hypothesis's body and gyro channels."""
+    perm, sg, f, sp, sr, sw, _ = hyp
+    Cb = np.nan_to_num(A["body"][5], nan=0.0)
+    Cg = np.nan_to_num(A["gyro"][5], nan=0.0)
+    s = sum(sg[c] * Cb[perm[c], c] for c in range(4))
+    s += sp * Cg[1 if sw else 0, 0] + sr * Cg[0 if sw else 1, 1]
+    return float(s)
+
+
+def _n_changes(hyp):
+    perm, sg, f, sp, sr, sw, renamed = hyp
+    if renamed:
+        return sum(perm[c] != c for c in range(4)) + 2 * sw
+    return (sum(perm[c] != c for c in range(4)) + sum(s < 0 for s in sg) + sum(abs(s) != 1 for s in sg)
+            + (f != 1.0) + (sp < 0) + (sr < 0) + 2 * sw)
+
+
+def wiring_fix(Y: np.ndarray, Yhat: np.ndarray, fs: float, geom, F=None):
+    """The re-wiring the data support, or None when the map is right.
+
+    The rigid-body identities pick the consistent hypotheses (and the unit
+    factors, which correlation cannot see); the correlation with the nominal
+    car's response on the track picks among them (front/rear swap versus a
+    flipped pitch gyro) and assigns the axle channels.
+
+    Returns
+    -------
+    dict or None
+        ``{"fix": {channel: {"source": channel, "factor": f}}, "rigid": (before, after),
+        "track": (before, after)}`` listing only the channels that change.
+    """
+    fix = {}
+    info = {}
+    A = assignment(Y, Yhat)
+    hyps, scores = rigid_body_scores(Y, fs, geom, F)
+    if hyps is not None:
+        ident = 0
+        e_id = float(scores[ident])
+        e_best = float(scores.min())
+        if e_id > RIGID_OK and e_best < e_id / 10:
+            tie = np.nonzero(scores <= max(2.0 * e_best, e_best + 0.01))[0]
+            h = max(tie, key=lambda k: (round(_track_score(hyps[k], A), 1), -_n_changes(hyps[k])))
+            perm, sg, f, sp, sr, sw, renamed = hyps[h]
+            for c in range(4):
+                if perm[c] != c or (sg[c] != 1.0 and not renamed):
+                    fix[CHANNELS[c]] = {"source": CHANNELS[perm[c]], "factor": sg[c], "renamed": renamed}
+            for c, src, s in ((8, 9 if sw else 8, sp), (9, 8 if sw else 9, sr)):
+                if src != c or (f * s != 1.0 and not renamed):
+                    fix[CHANNELS[c]] = {"source": CHANNELS[src], "factor": f * s, "renamed": renamed}
+            info["rigid"] = (e_id, float(scores[h]))
+        elif e_id > RIGID_BAD:
+            info["rigid_inconsistent"] = (e_id, e_best)
+    else:
+        # no complete body set: signs and order of the body and gyro channels from the track alone
+        for g in ("body", "gyro"):
+            idx, perm, signs, score, ident, C = A[g]
+            if score - ident > ASSIGN_MARGIN and score / len(idx) > 0.5:
+                for c in range(len(idx)):
+                    if perm[c] != c or signs[c] != 1.0:
+                        fix[CHANNELS[idx[c]]] = {"source": CHANNELS[idx[perm[c]]], "factor": signs[c]}
+    idx, perm, signs, score, ident, C = A["axle"]
+    if score - ident > ASSIGN_MARGIN and score / 4 > 0.5:
+        # names swapped in the map (each entry's unit and sign stay) when that explains the signs too
+        renamed = F is not None and all(np.sign(F[idx[c]] / F[idx[perm[c]]]) == signs[c] for c in range(4))
+        for c in range(4):
+            if perm[c] != c or (signs[c] != 1.0 and not renamed):
+                f = F[idx[c]] / F[idx[perm[c]]] if renamed else signs[c]
+                fix[CHANNELS[idx[c]]] = {"source": CHANNELS[idx[perm[c]]], "factor": f, "renamed": renamed}
+        info["axle"] = (ident, score)
+    if not fix:
+        return {"fix": {}, **info} if info else None
+    return {"fix": fix, **info}
+
+
+def corrected(Y: np.ndarray, fix: dict) -> np.ndarray:
+    """``Y`` with a wiring fix applied."""
+    Z = Y.copy()
+    for c, e in fix.items():
+        Z[:, CHANNELS.index(c)] = e["factor"] * Y[:, CHANNELS.index(e["source"])]
+    return Z
+
+
+def describe_fix(fix: dict) -> str:
+    """Plain words for a wiring fix: 'axle_az_fl and axle_az_rl swapped', 'pitch_rate sign flipped', ..."""
+    parts, done = [], set()
+    for c, e in fix.items():
+        if c in done:
+            continue
+        src, f = e["source"], e["factor"]
+        other = fix.get(src)
+        if e.get("renamed"):
+            if other and other["source"] == c:
+                parts.append(f"the file channels of {c} and {src} are swapped in the map")
+                done |= {c, src}
+            else:
+                parts.append(f"{c} takes the file channel mapped to {src}")
+                done.add(c)
+            continue
+        if src != c and other and other["source"] == c and abs(abs(f) - 1) < 1e-9 and abs(abs(other["factor"]) - 1) < 1e-9:
+            s = "" if f > 0 and other["factor"] > 0 else " (and a sign)"
+            parts.append(f"{c} and {src} swapped{s}")
+            done |= {c, src}
+            continue
+        words = []
+        if src != c:
+            words.append(f"{c} is the file's {src} channel")
+        a = abs(f)
+        if abs(a - DEG) < 1e-6 * DEG:
+            words.append(f"{c} reads 57.3x too small (rad/s mapped as deg/s?)")
+        elif abs(a - 1 / DEG) < 1e-9:
+            words.append(f"{c} reads 57.3x too large (deg/s mapped as rad/s?)")
+        elif abs(a - G0) < 1e-6:
+            words.append(f"{c} reads 9.81x too small (g mapped as m/s^2?)")
+        elif abs(a - 1 / G0) < 1e-9:
+            words.append(f"{c} reads 9.81x too large (m/s^2 mapped as g?)")
+        if f < 0:
+            words.append(f"{c} has its sign flipped")
+        parts.append(", ".join(words) if words else c)
+        done.add(c)
+    return "; ".join(parts)
+
+
+# ---------------------------------------------------------------------------
+# Track and speed
+
+def match_finding(run_id: str, track_id: str, speed, rho: float, alternatives: list, where: str = "") -> Finding | None:
+    """A finding when the run does not match its track and speed.
+
+    Parameters
+    ----------
+    rho : float
+        Mean normalised correlation of the measurement with a nominal car's
+        response on the stated track at the stated speed (1 = same shape).
+    alternatives : list of (description, correlation)
+        Other speeds and tracks tried; the best one is named if it fits.
+    """
+    if rho >= MATCH_MIN:
+        return None
+    what = f"speed {speed:g} m/s" if speed is not None else "its speed channel"
+    msg = (f"{where}run '{run_id}' does not match track '{track_id}' at {what}: correlation {rho:.2f} with a "
+           f"nominal car's response (a matching run gives 0.8 or more)")
+    good = [a for a in alternatives if a[1] >= MATCH_MIN]
+    if good:
+        desc, r = max(good, key=lambda a: a[1])
+        msg += f"; {desc} fits (correlation {r:.2f})"
+    else:
+        msg += ("; no other speed or track of the dataset fits either: check the run's track, its speed, its file "
+                "and the channel map")
+    return Finding(ERROR, "track", msg, run_id, "speed" if good and "speed" in good[0][0] else "track")
+
+
+def speed_candidates(speed: float) -> list[tuple[float, str]]:
+    """Speeds a typing slip makes of the true one: (candidate m/s, how the slip happens)."""
+    return [(speed / 3.6, f"{speed:g} is km/h"), (speed * 3.6, f"{speed:g} m/s was meant as km/h the other way"),
+            (speed * 0.44704, f"{speed:g} is mph"), (speed / 2.0, "half the speed"), (speed * 2.0, "twice the speed")]
+
+
+# ---------------------------------------------------------------------------
+# The hook: every conditioned run of a dataset
+
+def _map_entries(ds, rid) -> dict:
+    """SPEC channel -> {name, unit, sign, scale} as the run was read."""
+    mr = ds.measured.get(rid)
+    if mr is not None:
+        return {c: dict(name=e["source"], unit=e["unit"], sign=e["sign"], scale=e["scale"], file_unit=e.get("file_unit"))
+                for c, e in mr.record["channels"].items() if c in CHANNELS}
+    from .measured import SI, quantity
+    return {c: dict(name=c, unit=SI[quantity(c)], sign=1, scale=1.0) for c in ds.data[rid].channels}
+
+
+def _entry_factors(entries: dict) -> np.ndarray:
+    """(10,) factor (unit x sign x scale) each SPEC channel was read with (1 where missing)."""
+    from .measured import UNITS, quantity
+    F = np.ones(len(CHANNELS))
+    for i, c in enumerate(CHANNELS):
+        e = entries.get(c)
+        if e is not None:
+            u = UNITS[quantity(c)].get(str(e["unit"]).strip().replace(" ", "").lower(), 1.0)
+            F[i] = u * e["sign"] * e["scale"]
+    return F
+
+
+def fix_entries(fix: dict, entries: dict) -> list[str]:
+    """``[channels]`` lines (TOML) that apply a wiring fix to the map the run was read with."""
+    from .measured import UNITS, quantity
+    lines = []
+    for c, e in fix.items():
+        base = entries.get(e["source"])
+        if base is None:
+            continue
+        if e.get("renamed"):  # only the file channel's name moves
+            own = dict(entries[c], name=base["name"])
+            parts = [f'name = "{own["name"]}"', f'unit = "{own["unit"]}"']
+            if own["sign"] != 1:
+                parts.append("sign = -1")
+            if own["scale"] != 1:
+                parts.append(f"scale = {own['scale']:g}")
+            lines.append(f"{c} = {{ {', '.join(parts)} }}")
+            continue
+        f = e["factor"]
+        sign = int(base["sign"] * (1 if f > 0 else -1))
+        q = UNITS[quantity(c)]
+        unit, scale = base["unit"], float(base["scale"])
+        fu = base.get("file_unit")
+        if fu and fu.strip().replace(" ", "").lower() in q and abs(abs(f) - 1) <= 1e-9:
+            unit = fu  # a unit belongs to the file's channel: a swapped name takes its own unit along
+        if abs(abs(f) - 1) > 1e-9:
+            want = q.get(unit.strip().replace(" ", "").lower(), 1.0) * abs(f)
+            named = [u for u, v in q.items() if abs(v - want) <= 1e-6 * want]
+            if named:
+                unit = named[0]
+            else:
+                scale *= abs(f)
+        parts = [f'name = "{base["name"]}"', f'unit = "{unit}"']
+        if sign != 1:
+            parts.append("sign = -1")
+        if scale != 1:
+            parts.append(f"scale = {scale:g}")
+        lines.append(f"{c} = {{ {', '.join(parts)} }}")
+    return lines
+
+
+def _level(ds, rid, check) -> str:
+    lv = dict(getattr(ds.manifest, "checks", {}) or {})
+    run = ds.manifest.run(rid)
+    lv.update(getattr(run, "checks", {}) or {})
+    return lv.get(check, "error")
+
+
+def _nominal_response(P, geom, track, t, speed, distance):
+    from .measured import _simulate
+    return _simulate(P, geom, track, t, speed, distance)
+
+
+def _score(Y, Yhat):
+    from .measured import _score as score
+    cols = [i for i in range(len(CHANNELS)) if not np.all(np.isnan(Y[:, i]))]
+    return score(Yhat, np.nan_to_num(Y, nan=0.0), cols)
+
+
+def _alternatives(ds, rid, P, rho_now):
+    """(description, correlation) of the run under other speeds and the dataset's other tracks."""
+    import dataclasses
+
+    from .measured import Distance, estimate_start
+    man, geom = ds.manifest, ds.geometry
+    run = man.run(rid)
+    mr = ds.measured.get(rid)
+    rd = ds.data[rid]
+    out = []
+
+    def try_it(track, speed, factor=None):
+        if mr is not None and mr.auto_start:
+            dist = mr.distance
+            if factor is not None:
+                dist = Distance(dist.t, dist.d * factor)
+            alt = dataclasses.replace(mr, speed=speed, distance=dist, grid=None, start=None, warnings=[])
+            try:
+                _, r = estimate_start(alt, P, geom, track)
+            except Exception:  # a candidate that cannot even be aligned does not fit
+                return -1.0
+            return r
+        dist = rd.distance
+        if factor is not None and dist is not None:
+            from .measured import RelativeDistance
+            dist = RelativeDistance(Distance(dist.dist.t, dist.dist.d * factor), dist.start)
+        return _score(rd.matrix(), _nominal_response(P, geom, track, rd.time, speed, dist))
+
+    track = man.tracks[run.track]
+    if run.speed is not None:
+        for v, why in speed_candidates(run.speed):
+            if PLAUSIBLE["speed"][0] <= v <= PLAUSIBLE["speed"][1]:
+                out.append((f"speed = {v:.4g} m/s ({why})", try_it(track, v)))
+    elif mr is not None and mr.distance is not None:
+        for f, why in ((1 / 3.6, "km/h mapped as m/s"), (3.6, "m/s mapped as km/h"), (0.44704, "mph mapped as m/s")):
+            out.append((f"the speed channel x {f:.4g} ({why}; fix its unit in the channel map)", try_it(track, None, f)))
+    for tid, tr in man.tracks.items():
+        if tid != run.track:
+            out.append((f"track = \"{tid}\"", try_it(tr, run.speed)))
+    return out
+
+
+def check_dataset(ds) -> list[Finding]:
+    """Run the data checks on every run of a loaded dataset.
+
+    Coverage, wiring (rigid body and road assignment), and the match of
+    each run with its track and speed. Returns every finding; the caller
+    raises on errors (:func:`enforce`).
+    """
+    from ..model.params import nominal_car
+
+    man, geom = ds.manifest, ds.geometry
+    P = nominal_car(geom)
+    out: list[Finding] = []
+    for r in man.runs:
+        rid = r.id
+        rd = ds.data[rid]
+        track = man.tracks[r.track]
+        t = rd.time
+        x_of = (lambda tt: r.speed * tt) if rd.distance is None else rd.distance
+        x_end = float(np.asarray(x_of(np.array([t[-1]])))[0])
+        x_begin = float(np.asarray(x_of(np.array([min(t[0], 0.0)])))[0])
+        cov = check_coverage(rid, track, geom, x_end, x_begin)
+        out += cov
+        if any(f.severity == ERROR for f in cov):
+            continue
+        Y = rd.matrix()
+        Yhat = _nominal_response(P, geom, track, t, r.speed, rd.distance)
+        if not np.any(Yhat):
+            continue  # a flat road excites nothing: nothing to check the data against
+        entries = _map_entries(ds, rid)
+        wire = (wiring_fix(Y, Yhat, rd.fs, geom, _entry_factors(entries))
+                if _level(ds, rid, "wiring") != "off" else None)
+        Yc = Y
+        if wire and wire["fix"]:
+            Yc = corrected(Y, wire["fix"])
+            sev = ERROR if _level(ds, rid, "wiring") == "error" else WARNING
+            lines = fix_entries(wire["fix"], entries)
+            how = []
+            if "rigid" in wire:
+                how.append(f"the body accelerometers and the gyro then agree as one rigid body (residual "
+                           f"{wire['rigid'][0]:.0%} -> {wire['rigid'][1]:.1%})")
+            if "axle" in wire:
+                how.append(f"the axle channels then follow their own wheel paths (summed correlation with the "
+                           f"road {wire['axle'][0]:.2f} -> {wire['axle'][1]:.2f} of 4)")
+            msg = (f"run '{rid}': the channels look wired differently from the map: {describe_fix(wire['fix'])}; "
+                   f"{' and '.join(how)}. Fix the channel map: {'; '.join(lines)}"
+                   " (or set [checks] wiring = \"warn\" if the map is right)")
+            out.append(Finding(sev, "wiring", msg, rid, next(iter(wire["fix"])), wire["fix"]))
+        elif wire and "rigid_inconsistent" in wire:
+            e_id, _ = wire["rigid_inconsistent"]
+            out.append(Finding(WARNING, "wiring", f"run '{rid}': the body accelerometers and the gyro do not agree as "
+                               f"one rigid body (residual {e_id:.0%}) and no swap, sign or unit explains it: check "
+                               "the sensors' positions (at the spring/damper top mounts), units and the map", rid))
+        if _level(ds, rid, "track") == "off":
+            continue
+        rho = _score(Yc, Yhat)
+        if rho < MATCH_MIN:
+            f = match_finding(rid, r.track, r.speed, rho, _alternatives(ds, rid, P, rho))
+            if _level(ds, rid, "track") == "warn":
+                f = Finding(WARNING, f.check, f.message + " ([checks] track = \"warn\")", f.run, f.channel)
+            else:
+                f = Finding(f.severity, f.check, f.message + " (set [checks] track = \"warn\" to go on anyway)",
+                            f.run, f.channel)
+            out.append(f)
+    return out
+
+
+def enforce(findings: list[Finding], where: str = ""):
+    """Raise :class:`rideid.DataError` with the first error (one line); warn of the rest."""
+    import warnings
+
+    from ..errors import DataError, DataWarning
+    errors = [f for f in findings if f.severity == ERROR]
+    for f in findings:
+        if f.severity == WARNING:
+            warnings.warn(f"{where}{f.message}", DataWarning, stacklevel=3)
+    if errors:
+        more = f" ({len(errors) - 1} more error(s) of this kind)" if len(errors) > 1 else ""
+        raise DataError(f"{where}{errors[0].message}{more}")
+
+
+# ---------------------------------------------------------------------------
+# After the fit
+
+def bound_findings(details: dict, fraction: float = BOUND_FRACTION) -> list[Finding]:
+    """Estimates at or within ``fraction`` of the search range of a bound.
+
+    Parameters
+    ----------
+    details : dict
+        name -> {"value", "lower", "upper", "fixed", ...} (``IdentificationResult.details``).
+    """
+    out = []
+    for n, d in details.items():
+        lo, hi = d.get("lower"), d.get("upper")
+        if d.get("fixed") or lo is None or hi is None:
+            continue
+        v, span = d["value"], hi - lo
+        for side, b in (("lower", lo), ("upper", hi)):
+            if abs(v - b) <= fraction * span:
+                out.append(Finding(WARNING, "bounds", f"{n} = {v:.6g} ended at its {side} search bound {b:g}: the "
+                                   "bound, not the data, set it; widen [bounds] "
+                                   f"{n} (or check the data: a wrong unit, speed or wiring often shows here first)",
+                                   channel=n))
+    return out
+
+
+__all__ = ["Finding", "check_dataset", "enforce", "check_reach", "check_numbers", "check_coverage", "rigid_body_scores", "assignment", "wiring_fix",
+           "corrected", "describe_fix", "match_finding", "speed_candidates", "bound_findings", "PLAUSIBLE",
+           "MATCH_MIN", "CHECK_NAMES"]
