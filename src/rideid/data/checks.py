@@ -666,12 +666,12 @@ def _level(ds, rid, check) -> str:
 
 
 def _nominal_response(P, geom, track, t, speed, distance):
-    from .measured import _simulate
-    return _simulate(P, geom, track, t, speed, distance)
+    from .measured import simulate_response
+    return simulate_response(P, geom, track, t, speed, distance)
 
 
 def _score(Y, Yhat):
-    from .measured import _score as score
+    from .measured import correlation_score as score
     cols = [i for i in range(len(CHANNELS)) if not np.all(np.isnan(Y[:, i]))]
     return score(Yhat, np.nan_to_num(Y, nan=0.0), cols)
 

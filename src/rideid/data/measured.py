@@ -608,7 +608,7 @@ def _feature_end(track, geom) -> float:
     return (max(ends) if ends else 0.0) + geom.wheelbase
 
 
-def _simulate(P, geom, track, t, speed, distance):
+def simulate_response(P, geom, track, t, speed, distance):
     from ..model.batch import BatchSimulator
     from ..model.simulate import prepare_run
 
@@ -616,7 +616,7 @@ def _simulate(P, geom, track, t, speed, distance):
     return BatchSimulator(geom, [ri]).outputs(np.atleast_2d(P))[0][0]
 
 
-def _score(Yhat, Y, cols):
+def correlation_score(Yhat, Y, cols):
     """Mean normalised correlation over the channels ``cols`` that are not zero."""
     s, n = 0.0, 0
     for i in cols:
@@ -685,7 +685,7 @@ def coarse_start(mr: MeasuredRun, P, geom, track):
     h = 1.0 / mr.fs
     if mr.distance is None:
         tm = _long_grid(mr, track, geom, mr.speed)
-        lags, corr = _correlation(mr, _simulate(P, geom, track, tm, mr.speed, None), tm)
+        lags, corr = _correlation(mr, simulate_response(P, geom, track, tm, mr.speed, None), tm)
         # y_hat at model time tm[k] matches the measurement at t_first + (k + lag) h
         return float(mr.t_first + lags[int(np.argmax(corr))] * h - tm[0])
     # varying speed: correlate over distance (the road is fixed in x), with the response at the mean speed
@@ -696,7 +696,7 @@ def coarse_start(mr: MeasuredRun, P, geom, track):
     xs = x_all[0] + vmean * h * np.arange(int((x_all[-1] - x_all[0]) / (vmean * h)) + 1)
     keep = np.concatenate([[True], np.diff(x_all) > 0])
     tau = np.interp(xs, x_all[keep], dist.t[keep])
-    lags, corr = _correlation(mr, _simulate(P, geom, track, tm, vmean, None), tm, tau)
+    lags, corr = _correlation(mr, simulate_response(P, geom, track, tm, vmean, None), tm, tau)
     # model x = vmean tm[k] matches the road at distance xs[k + lag]: x = 0 is at xs[lag] - vmean tm[0]
     cand = [float(np.interp(xs[0] + (lags[i] * vmean * h) - vmean * tm[0], x_all[keep], dist.t[keep]))
             for i in _peaks(corr, 5)]
@@ -705,7 +705,7 @@ def coarse_start(mr: MeasuredRun, P, geom, track):
     for s in cand:
         score = -np.inf
         for _ in range(4):  # fixed point: simulate with this start's distance profile, re-pick the lag nearby
-            Yhat = _simulate(P, geom, track, tm, None, RelativeDistance(dist, s))
+            Yhat = simulate_response(P, geom, track, tm, None, RelativeDistance(dist, s))
             lg, cc = _correlation(mr, Yhat, tm, tgrid)
             st = mr.t_first + lg * h - tm[0]
             near = np.abs(st - s) <= 3.0 * h
@@ -726,7 +726,7 @@ def _fine(mr: MeasuredRun, Yhat, s0, width):
     cols = [i for i, c in enumerate(CHANNELS) if c in mr.channels]
 
     def neg(s):
-        return -_score(Yhat, mr.measured_at(s), cols)
+        return -correlation_score(Yhat, mr.measured_at(s), cols)
 
     lo, hi = s0 - width, s0 + width
     for _ in range(6):
@@ -751,7 +751,7 @@ def estimate_start(mr: MeasuredRun, P, geom, track, s0: float | None = None, ref
         mr.make_grid(s)
     rho = 0.0
     for _ in range(8 if mr.distance is not None else 1):
-        Yhat = _simulate(P, geom, track, mr.grid, mr.speed, mr.relative_distance(s))
+        Yhat = simulate_response(P, geom, track, mr.grid, mr.speed, mr.relative_distance(s))
         s_new, rho = _fine(mr, Yhat, s, 2.0 * h)
         done = abs(s_new - s) < 1e-6 * h
         s = s_new
