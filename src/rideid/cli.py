@@ -9,6 +9,7 @@ from __future__ import annotations
 import argparse
 import os
 import sys
+import textwrap
 import time
 import traceback
 import warnings
@@ -107,6 +108,9 @@ def _parser() -> argparse.ArgumentParser:
     s.add_argument("--out", required=True, metavar="DIR")
     s.add_argument("--noise", type=float, default=0.0, metavar="FRACTION",
                    help="white Gaussian noise, standard deviation as a fraction of each channel's RMS")
+    s.add_argument("--noise-ar1", type=float, default=0.0, metavar="RHO",
+                   help="colour the noise: AR(1) in time with this coefficient per sample (0 <= RHO < 1; "
+                        "same standard deviation), as real sensors' noise is")
     s.add_argument("--seed", type=int, default=None, metavar="N")
     s.add_argument("--engine", choices=("rideid", "mujoco"), default="rideid",
                    help="rideid's exact 7-DOF response (default), or the independent MuJoCo multibody car "
@@ -129,7 +133,8 @@ def _parser() -> argparse.ArgumentParser:
     s.add_argument("--no-polish", action="store_true", help="skip the least-squares polish after JADE")
     s.add_argument("--model", default=None, metavar="MODEL",
                    help="base: the twelve parameters; full: with anti-roll bars (k_arf, k_arr) and tire damping "
-                        "(c_tf, c_tr) (default: the dataset's [model] extensions, else base)")
+                        "(c_tf, c_tr); auto: fit the candidates and keep what the data support (docs/model-choice.md) "
+                        "(default: the dataset's [model] extensions, else auto)")
     s.add_argument("--no-report", action="store_true", help="write result.json and history.csv only")
     s.add_argument("--quiet", action="store_true", help="no progress line")
 
@@ -205,7 +210,7 @@ def cmd_simulate(args, out=None):
     sc = load_scenario(args.scenario)
     prog = Progress(args.quiet)
     data, lifts = simulate_manifest(sc, noise=args.noise, seed=args.seed, engine=args.engine, raw=args.raw,
-                                    progress=lambda i, n, rid: prog.steps(i, n, "simulating run"))
+                                    noise_ar1=args.noise_ar1, progress=lambda i, n, rid: prog.steps(i, n, "simulating run"))
     prog.done()
     engine = args.engine
     if engine == "mujoco":
@@ -213,20 +218,32 @@ def cmd_simulate(args, out=None):
         engine += f"; [hifi] {(sc.hifi or HifiProperties()).describe()}" + ("; raw sensor readings" if args.raw else "")
     write_dataset(sc, data, args.out, raw=args.raw,
                   comment=f"simulated by rideid {__version__} from {Path(args.scenario).name}"
-                          f" (engine {engine}, noise {args.noise}, seed {args.seed})")
+                          f" (engine {engine}, noise {args.noise}"
+                          + (f" AR(1) {args.noise_ar1}" if args.noise_ar1 else "") + f", seed {args.seed})")
     print(f"dataset written to {args.out} ({len(sc.runs)} runs)", file=out)
     print(format_modal_summary(modal_summary(sc.truth, sc.geometry)), file=out)
     return 0
 
 
 def _summary_table(res) -> str:
-    lines = [f"{'parameter':<10} {'estimate':>14} {'± std':>11}  {'unit':<8} note"]
+    lines = [f"{'parameter':<10} {'estimate':>14} {'± std':>11} {'± robust':>11}  {'unit':<8} note"]
     for n, d in res.details.items():
         note = "known" if d["fixed"] else ("derived" if d["derived"] else "")
         if d.get("at_bound"):
             note = "AT A SEARCH BOUND: set by the bound, not the data"
         std = "" if d.get("std") in (None, 0.0) else f"{d['std']:.3g}"
-        lines.append(f"{n:<10} {d['value']:>14.6g} {std:>11}  {d['unit']:<8} {note}")
+        rob = "" if d.get("std_robust") in (None, 0.0) else f"{d['std_robust']:.3g}"
+        lines.append(f"{n:<10} {d['value']:>14.6g} {std:>11} {rob:>11}  {d['unit']:<8} {note}")
+    return "\n".join(lines)
+
+
+def _candidates_table(model: dict) -> str:
+    lines = [f"--model auto kept: {' + '.join(model['extensions']) or 'base'}",
+             f"{'candidate':<30} {'cost':>11} {'criterion':>11} {'adequate':>9}"]
+    for c in model["candidates"]:
+        crit = "" if c["criterion"] is None else f"{c['criterion']:.4g}"
+        adq = {True: "yes", False: "no", None: "-"}[c.get("adequate")]
+        lines.append(f"{' + '.join(c['extensions']) or 'base':<30} {c['cost']:>11.5g} {crit:>11} {adq:>9}")
     return "\n".join(lines)
 
 
@@ -235,18 +252,26 @@ def run_identify(ds_path, out_dir, *, seed, population=None, generations=None, w
     out = out or sys.stdout
     import rideid
     from .data.schema import atomic_output
-    from .estimate.identify import DEFAULT_GENERATIONS, DEFAULT_POPULATION, model_extensions
+    from .estimate.identify import DEFAULT_GENERATIONS, DEFAULT_POPULATION, MODELS, model_extensions
 
+    if model is not None and model not in MODELS:
+        raise ArgumentError(f"--model must be one of {', '.join(MODELS)}, got {model!r}")
     ds = rideid.load_dataset(ds_path)
-    extensions = model_extensions(ds, model)
+    if model is None and ds.manifest.extensions is None:
+        model = "auto"  # SPEC §6: without a [model] table the data choose
+    auto = model == "auto"
+    extensions = None if auto else model_extensions(ds, model)
     prog = Progress(quiet)
     kw = {"population": population or DEFAULT_POPULATION, "generations": generations or DEFAULT_GENERATIONS}
     if kw["population"] < 4:
         raise ArgumentError(f"--population must be at least 4, got {kw['population']}")
     if kw["generations"] < 1:
         raise ArgumentError(f"--generations must be at least 1, got {kw['generations']}")
-    cost = rideid.CostFunction(ds, extensions=extensions)
-    res = rideid.identify(ds, rng=seed, weights=weights, polish=polish, callback=prog.identify, cost=cost, **kw)
+    if auto:
+        res = rideid.identify(ds, rng=seed, weights=weights, polish=polish, callback=prog.identify, model="auto", **kw)
+    else:
+        cost = rideid.CostFunction(ds, extensions=extensions)
+        res = rideid.identify(ds, rng=seed, weights=weights, polish=polish, callback=prog.identify, cost=cost, **kw)
     prog.done()
     with atomic_output(out_dir) as tmp:
         res.save(tmp)
@@ -257,6 +282,14 @@ def run_identify(ds_path, out_dir, *, seed, population=None, generations=None, w
             write_report(res, ds.with_starts(res.starts), tmp)
             prog.done()
     print(_summary_table(res), file=out)
+    if res.model.get("candidates"):
+        print(_candidates_table(res.model), file=out)
+    from .estimate.adequacy import verdict_paragraph
+    para = verdict_paragraph(res.adequacy)
+    if para:
+        print("\n" + textwrap.fill(para, 100) + "\n", file=out)
+    elif res.adequacy:
+        print("model adequate: " + res.adequacy["reasons"][0], file=out)
     print(f"cost {res.cost:.4g}, {res.generations} generations, {res.evaluations} evaluations, "
           f"{res.wall_time_s:.1f} s; written to {out_dir}" + (f" (open {Path(out_dir) / 'report.html'})"
                                                                 if report else ""), file=out)

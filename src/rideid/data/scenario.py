@@ -12,6 +12,7 @@ import numpy as np
 
 from ..errors import ArgumentError, DataWarning, ModelValidityWarning
 from .schema import Manifest, RunSpec, atomic_output, load_scenario, write_run_csv, write_toml
+from .noise import sensor_noise
 from ..model.equations import CHANNELS, static_corner_loads
 from ..model.params import CORNERS, EXT_NAMES, INDEX, NAMES, as_vector, full_rows
 from ..model.simulate import prepare_run, simulate_reference, wheel_displacements, wheel_velocities
@@ -74,7 +75,7 @@ RAW_LEAD_IN = 1.0
 
 
 def simulate_manifest(sc: Manifest, noise: float = 0.0, seed: int | None = None, progress=None,
-                      engine: str = "rideid", raw: bool = False):
+                      engine: str = "rideid", raw: bool = False, noise_ar1: float = 0.0):
     """Simulate every run of a scenario with its ``[truth]`` parameters.
 
     ``engine``: ``"rideid"`` (the exact 7-DOF response) or ``"mujoco"`` (the
@@ -86,6 +87,10 @@ def simulate_manifest(sc: Manifest, noise: float = 0.0, seed: int | None = None,
     logger would record them, with :data:`RAW_LEAD_IN` s standing still
     before the run (the front axle reaches x = 0 at that file time).
 
+    ``noise_ar1``: the noise is coloured, AR(1) in time with this coefficient
+    per sample (:func:`rideid.data.noise.sensor_noise`), same standard
+    deviation; 0 (default) is white.
+
     Returns
     -------
     dict run id -> (t, Y) with ``Y`` (n, 10) in CHANNELS order, and the list
@@ -93,6 +98,8 @@ def simulate_manifest(sc: Manifest, noise: float = 0.0, seed: int | None = None,
     """
     if noise < 0 or not np.isfinite(noise):
         raise ArgumentError(f"--noise must be a non-negative fraction, got {noise}")
+    if not (np.isfinite(noise_ar1) and 0 <= noise_ar1 < 1):
+        raise ArgumentError(f"--noise-ar1 must be an AR(1) coefficient in [0, 1), got {noise_ar1}")
     if engine not in ("rideid", "mujoco"):
         raise ArgumentError(f"engine must be 'rideid' or 'mujoco', got {engine!r}")
     if raw and engine != "mujoco":
@@ -124,7 +131,7 @@ def simulate_manifest(sc: Manifest, noise: float = 0.0, seed: int | None = None,
         if noise > 0:
             dyn = y - y[:1] if raw else y  # raw: the noise scales with the motion, not with g
             rms = np.sqrt(np.mean(dyn * dyn, axis=0))
-            y = y + rng.standard_normal(y.shape) * (noise * rms)[None, :]
+            y = y + sensor_noise(rng, y.shape, noise_ar1) * (noise * rms)[None, :]
         out[run.id] = (t, y)
         if progress is not None:
             progress(i + 1, len(sc.runs), run.id)

@@ -194,6 +194,8 @@ class IdentificationResult:
     rng_state: dict | None = None
     model: dict | None = None
     adequacy: dict | None = None
+    #: correlation matrix of the estimates (robust covariance): {"names", "matrix", "basis"}
+    correlation: dict | None = None
     #: the identified car's channels per run on the final data (in memory only, for the report)
     response: dict | None = None
     #: findings of the data checks and of the bound check (rideid.data.checks), as dicts
@@ -256,6 +258,7 @@ class IdentificationResult:
             "modal": self.modal,
             "model": self.model,
             "adequacy": self.adequacy,
+            "correlation": self.correlation,
             "preprocessing": self.preprocessing,
             "checks": self.checks,
             "dataset": str(Path(self.dataset).resolve()) if self.dataset else "",
@@ -319,7 +322,8 @@ def load(path) -> IdentificationResult:
         starts=dict(doc.get("starts") or {}), preprocessing=dict(doc.get("preprocessing") or {}),
         modal=doc.get("modal"), dataset=doc.get("dataset", ""),
         maps=_maps_from_json(doc.get("sensitivity"), rpath), rng_state=doc.get("rng_state"),
-        model=doc.get("model"), adequacy=doc.get("adequacy"), checks=list(doc.get("checks") or []))
+        model=doc.get("model"), adequacy=doc.get("adequacy"), correlation=doc.get("correlation"),
+        checks=list(doc.get("checks") or []))
 
 
 __all__ = ["IdentificationResult", "History", "load", "read_result_json"]

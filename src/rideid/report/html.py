@@ -280,6 +280,7 @@ def write_report(result, dataset, out_dir, *, compare=None, compare_label: str |
 
     from ..model.params import ALL_NAMES, DESCRIPTIONS
     from ..estimate.sensitivity import P2T_STARS, stars
+    from .estimate_sections import estimate_context
 
     out_dir = Path(out_dir)
     res = result.to_dict()
@@ -331,9 +332,12 @@ def write_report(result, dataset, out_dir, *, compare=None, compare_label: str |
     for n in pnames:
         d = result.details[n]
         std = d.get("std")
+        rob = d.get("std_robust")
         params.append({
             "name": n, "meaning": DESCRIPTIONS[n], "value": d["value"], "unit": d["unit"],
             "std": std, "rel_std": (100 * std / abs(d["value"])) if std not in (None, 0.0) and d["value"] else None,
+            "std_robust": rob,
+            "rel_std_robust": (100 * rob / abs(d["value"])) if rob not in (None, 0.0) and d["value"] else None,
             "lower": d.get("lower"), "upper": d.get("upper"),
             "status": "known" if d.get("fixed") else ("derived" if d.get("derived") else
                                                       ("AT A SEARCH BOUND" if d.get("at_bound") else "estimated")),
@@ -348,6 +352,7 @@ def write_report(result, dataset, out_dir, *, compare=None, compare_label: str |
         modal=result.modal or {}, figures=figs + compare_figs, fit_figures=fit_figs, fit_rows=fit_rows,
         heat_figures=heat_figs, runs=maps.runs, p2t=p2t, known=result.known, n_runs=len(dataset.runs),
         dataset=str(dataset.path), data_rows=data_rows, channel_rows=channel_rows, data_warnings=data_warnings,
+        **estimate_context(res),
     )
     out = out_dir / "report.html"
     out.write_text(text)
@@ -380,7 +385,7 @@ def data_tables(pre: dict):
             speed = f"{sp['source']}: {sp.get('min', 0):.2f}..{sp.get('max', 0):.2f} m/s"
         rows.append({"run": rid, "file": Path(rec.get("file", "")).name, "format": rec.get("format", ""),
                      "samples": rec.get("samples"), "fs": rec.get("fs", float("nan")), "start": st.get("value"),
-                     "start_std": st.get("std"), "start_source": st.get("source", ""), "speed": speed})
+                     "start_std": st.get("std_robust", st.get("std")), "start_source": st.get("source", ""), "speed": speed})
         ch = rec.get("channels")
         if ch:
             key = [(c, {k: v for k, v in d.items() if k not in ("removed", "samples")}) for c, d in ch.items()]
@@ -394,4 +399,4 @@ def data_tables(pre: dict):
     return rows, chans, warns
 
 
-SECTIONS = ("estimates", "modal", "convergence", "spread", "weights", "data", "fits", "maps")
+SECTIONS = ("estimates", "adequacy", "modal", "convergence", "spread", "weights", "data", "fits", "maps")
