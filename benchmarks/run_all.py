@@ -10,7 +10,9 @@ import bench_cost  # noqa: E402
 import bench_identify  # noqa: E402
 import bench_jade  # noqa: E402
 import bench_model_auto  # noqa: E402
-import study_weights  # noqa: E402
+import bench_study  # noqa: E402
+
+ROOT = Path(__file__).resolve().parents[1]
 
 
 class Tee(io.TextIOBase):
@@ -27,14 +29,24 @@ class Tee(io.TextIOBase):
             st.flush()
 
 
+def weights_study(out=sys.stdout):
+    """Fixed vs adaptive track weights: the study file examples/studies/weights.toml (about 5 minutes)."""
+    import rideid
+    res = rideid.study(ROOT / "examples" / "studies" / "weights.toml", Path("bench-out") / "weights-study")
+    out.write((Path("bench-out") / "weights-study" / "summary.md").read_text())
+    return res
+
+
 def main():
     out = Path("bench-out")
     out.mkdir(exist_ok=True)
     for name, mod, kw in (("cost", bench_cost, {}), ("identify", bench_identify, {}), ("jade", bench_jade, {}),
-                          ("weights", study_weights, {"argv": []})):
+                          ("model_auto", bench_model_auto, {}), ("study", bench_study, {"argv": []})):
         with open(out / f"{name}.md", "w") as f:
             mod.main(out=Tee(sys.stdout, f), **kw)
         print()
+    with open(out / "weights.md", "w") as f:
+        weights_study(out=Tee(sys.stdout, f))
 
 
 if __name__ == "__main__":

@@ -11,6 +11,7 @@ Public API (SPEC §5)::
     cost.names                                # free parameter names
     rideid.jade(fun, bounds, population=..., generations=..., seed=...)
     p = rideid.plan(scenario, noise=0.01, budget_runs=4)   # SPEC §7; p.save(dir)
+    rideid.study("study.toml", "out")         # many identifications on Dask (SPEC §7)
 """
 
 from importlib.metadata import PackageNotFoundError, version
@@ -31,6 +32,7 @@ from .model.params import DEFAULT_CAR, DEFAULT_GEOMETRY, NAMES, UNITS, Geometry
 from .model.params import ALL_NAMES, EXT_NAMES, GROUPS
 from .data.scenario import default_scenario, default_scenario_path, simulate_manifest, write_dataset
 from .model.tracks import Track
+from .studies import StudyResult, load_study, study
 
 try:
     __version__ = version("rideid")
@@ -45,4 +47,5 @@ __all__ = [
     "load_truth", "modal_summary", "plan", "PlanResult", "simulate_manifest", "write_dataset", "__version__",
     "History", "SensitivityMaps", "load_result", "score", "sensitivity_maps",
     "ALL_NAMES", "EXT_NAMES", "GROUPS",
+    "StudyResult", "load_study", "study",
 ]

@@ -30,6 +30,9 @@ EXAMPLES = {
             "  rideid plan catalogue.toml --out plan --target k_sr=0.5% --target I_xx=2%",
     "report": "example:\n  rideid report fit\n  rideid identify sim --out fit-fixed --weights fixed --no-report\n"
               "  rideid report fit --compare fit-fixed",
+    "study": "example:\n  rideid study monte_carlo.toml --out mc\n"
+             "  rideid study fleet.toml --out fleet --scheduler tcp://10.0.0.5:8786\n"
+             "a killed study resumes: run the same command again (finished tasks are kept in DIR/tasks)",
 }
 
 
@@ -72,6 +75,13 @@ class Progress:
 
     def steps(self, i, n, label):
         self.line(f"{label} {i}/{n}", force=i == n)
+
+    def study(self, info):
+        eta = "" if info["eta"] is None else f"  ETA {info['eta']:.0f} s"
+        failed = f"  {info['failed']} failed" if info["failed"] else ""
+        resumed = f"  ({info['resumed']} from an earlier run)" if info["resumed"] else ""
+        self.line(f"tasks {info['done'] + info['failed']}/{info['total']} finished{failed}{resumed}  "
+                  f"{info['elapsed']:.0f} s{eta}", force=info["running"] == 0)
 
 
 def _warning_line(message, category, filename, lineno, file=None, line=None):
@@ -136,6 +146,16 @@ def _parser() -> argparse.ArgumentParser:
     s = add("sensitivity", "parameter/response/track sensitivity maps (paper Tables 4-7) as CSV, Markdown, PNG")
     s.add_argument("source", metavar="DATASET_OR_SCENARIO")
     s.add_argument("--out", required=True, metavar="DIR")
+    s.add_argument("--quiet", action="store_true", help="no progress line")
+
+    s = add("study", "many identifications (Monte Carlo, fleet, run subsets) on Dask; resumable")
+    s.add_argument("study", metavar="STUDY.toml")
+    s.add_argument("--out", required=True, metavar="DIR",
+                   help="output folder (tasks/, results.parquet, summary.md/.csv/.html); tasks already "
+                        "there are not recomputed")
+    s.add_argument("--scheduler", metavar="ADDRESS", default=None,
+                   help="a running Dask scheduler, e.g. tcp://host:8786 (default: a local cluster, "
+                        "one single-threaded worker process per core)")
     s.add_argument("--quiet", action="store_true", help="no progress line")
 
     s = add("plan", "plan a test: the precision (CRLB) each candidate run buys, and which runs to drive")
@@ -409,8 +429,28 @@ def cmd_report(args, out=None):
     return 0
 
 
+def cmd_study(args, out=None):
+    out = out or sys.stdout
+    from .studies import load_study, study
+
+    spec = load_study(args.study)  # a bad study file stops here, before DIR is created
+    prog = Progress(args.quiet)
+    try:
+        res = study(spec, args.out, scheduler=args.scheduler, progress=prog.study)
+    except KeyboardInterrupt:
+        prog.done()
+        print(f"rideid: the finished tasks are kept in {Path(args.out) / 'tasks'}; run the same command again "
+              "to resume", file=sys.stderr)
+        raise
+    prog.done()
+    print(f"{res.tasks} tasks: {res.done} done, {res.failed} failed ({res.computed} computed now, "
+          f"{res.tasks - res.computed} from an earlier run), {res.wall_time_s:.0f} s", file=out)
+    print(f"written to {args.out}: results.parquet, summary.md, summary.csv (open {res.summary})", file=out)
+    return 0
+
+
 COMMANDS = {"plan": cmd_plan, "report": cmd_report, "simulate": cmd_simulate, "identify": cmd_identify, "sensitivity": cmd_sensitivity,
-            "score": cmd_score, "demo": cmd_demo}
+            "score": cmd_score, "demo": cmd_demo, "study": cmd_study}
 
 
 def _compile(quiet: bool):
@@ -432,7 +472,7 @@ def main(argv=None) -> int:
         return 2
     warnings.showwarning = _warning_line
     try:
-        if args.command in ("simulate", "identify", "sensitivity", "demo", "report", "plan"):
+        if args.command in ("simulate", "identify", "sensitivity", "demo", "report", "plan", "study"):
             _compile(getattr(args, "quiet", False))
         return COMMANDS[args.command](args)
     except RideidError as e:
