@@ -323,6 +323,22 @@ def test_planned_runs_deliver_the_promised_precision():
     assert np.all(np.abs(est - lin) < 0.02 * st["sd"])
 
 
+
+@pytest.mark.slow
+def test_monte_carlo_on_a_van_of_our_own(tmp_path):
+    """Another car than the built-in one (the 2.45 t van: other geometry, rates, tire radius), 1 % noise,
+    ten runs, 30 seeds: identify's spread within 20 % of the plan's prediction for every parameter."""
+    from conftest import van_scenario
+
+    from rideid.design.validate import monte_carlo, spread_ratio
+    sc = van_scenario(tmp_path)
+    res = rideid.plan(sc, noise=0.01)
+    truth = np.array([sc.truth[n] for n in res.names])
+    est = monte_carlo(sc, _ids(sc), res.names, 0.01, list(range(1, 31)))
+    st = spread_ratio(est, truth, res.all_runs.std_identify)
+    assert np.all(np.abs(st["ratio"] - 1) < 0.2), dict(zip(res.names, st["ratio"]))
+    assert np.all(np.abs(st["bias_in_sd"]) < 3.5)
+
 def test_extensions_in_truth_become_free_parameters(tmp_path):
     """A nominal car with anti-roll bars (SPEC §6): k_arf, k_arr are planned too; no roll on a washboard."""
     import tomllib

@@ -121,7 +121,7 @@ def _parser() -> argparse.ArgumentParser:
                         "1 s standing still first) as a logger would, mapped for the measured-data pipeline")
     s.add_argument("--quiet", action="store_true", help="no progress line")
 
-    s = add("identify", "estimate the twelve ride parameters of a dataset")
+    s = add("identify", "estimate the ride parameters of a dataset (the twelve, plus anti-roll bars and tire damping when the model has them)")
     s.add_argument("dataset", metavar="DATASET_DIR")
     s.add_argument("--out", required=True, metavar="DIR")
     s.add_argument("--seed", type=int, default=None, metavar="N")
@@ -482,6 +482,9 @@ def main(argv=None) -> int:
     except KeyboardInterrupt:
         print("rideid: interrupted", file=sys.stderr)
         return 130
+    except BrokenPipeError:  # output piped into a reader that stopped early (e.g. `| head`): not an error
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        return 141
     except Exception as e:  # a bug: say so, in one line unless debugging
         if os.environ.get("RIDEID_DEBUG"):
             traceback.print_exc()
