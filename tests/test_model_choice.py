@@ -86,6 +86,7 @@ def test_criterion_adds_both_groups_on_a_car_with_bars_and_tire_damping(suv, tmp
 # -- end to end (slow): rideid identify --model auto, search included ------------------------------------
 
 @pytest.mark.slow
+@pytest.mark.expensive
 @pytest.mark.parametrize("groups", [(), ("anti_roll_bars",), ("tire_damping",), BOTH])
 def test_identify_auto_picks_exactly_the_groups_the_car_has(groups, tmp_path, capsys):
     from cars import SUV_BARS, SUV_TIRE_DAMPING, add_noise, simulate_car, suv_scenario
@@ -110,6 +111,7 @@ def test_identify_auto_picks_exactly_the_groups_the_car_has(groups, tmp_path, ca
 
 
 @pytest.mark.slow
+@pytest.mark.expensive
 def test_base_model_on_a_real_car_says_not_adequate_in_terminal_and_report(tmp_path, capsys):
     from cars import SUV_BARS, SUV_TIRE_DAMPING, add_noise, simulate_car, suv_scenario
     from rideid.data.scenario import write_dataset

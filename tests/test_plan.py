@@ -296,6 +296,7 @@ def test_cli_plan_bad_input(tmp_path, capsys, args, needle):
 # -- validation against identify (slow) ----------------------------------------
 
 @pytest.mark.slow
+@pytest.mark.expensive
 def test_monte_carlo_identify_spread_matches_prediction():
     """30 noise seeds, rideid identify on the built-in car's ten runs: sample sd within 20 % of the prediction."""
     from rideid.design.validate import monte_carlo, spread_ratio
@@ -309,6 +310,7 @@ def test_monte_carlo_identify_spread_matches_prediction():
 
 
 @pytest.mark.slow
+@pytest.mark.expensive
 def test_planned_runs_deliver_the_promised_precision():
     """Catalogue (22 runs) -> 3-run D-optimal plan -> identify over 30 seeds: sd at most 1.2 x the promise,
     and identify lands on the linearised estimate whose spread the plan predicts (so a spread below the
@@ -325,6 +327,7 @@ def test_planned_runs_deliver_the_promised_precision():
 
 
 @pytest.mark.slow
+@pytest.mark.expensive
 def test_monte_carlo_on_a_van_of_our_own(tmp_path):
     """Another car than the built-in one (the 2.45 t van: other geometry, rates, tire radius), 1 % noise,
     ten runs, 30 seeds: identify's spread within 20 % of the plan's prediction for every parameter."""

@@ -172,6 +172,7 @@ def test_polish_std_robust_on_coloured_noise(tmp_path):
 
 
 @pytest.mark.slow
+@pytest.mark.expensive
 def test_std_robust_covers_the_truth_under_coloured_noise(tmp_path):
     """rideid.identify (search + polish) on the SUV over 6 seeds of AR(1) noise at 2 % of RMS:
     72 estimates (11 free + the derived m_s per seed)."""
