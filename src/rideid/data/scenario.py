@@ -170,10 +170,8 @@ def write_dataset(sc: Manifest, data: dict, out_dir, comment: str | None = None,
         doc = man.to_dataset_doc()
         # measured road profiles travel with the dataset
         for tab, tr in zip(doc["tracks"], sc.tracks.values()):
-            if tr.kind == "profile":
-                src = Path(tr.keys["file"])
-                if not src.is_absolute() and tr.base_dir is not None:
-                    src = tr.base_dir / src
+            src = tr.data_file
+            if src is not None:
                 dst = tmp / "profiles" / f"{tr.id}.csv"
                 dst.parent.mkdir(exist_ok=True)
                 shutil.copyfile(src, dst)

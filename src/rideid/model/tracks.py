@@ -4,6 +4,11 @@ A :class:`Track` gives, for a lateral offset ``y`` (m, left +), a
 :class:`WheelPath`: the road height ``h(x)`` along the distance ``x`` (m),
 flat (0) outside the track's features. Analytic kinds also give ``h'`` and
 ``h''``, which the contact-point ODE (:mod:`rideid.contact`) needs.
+
+Each SPEC kind is one small subclass of :class:`Track` (its keys, their
+checks and its wheel path); :data:`TRACK_KINDS` maps the ``kind`` string to
+the class. ``Track(id, kind, keys)`` and :meth:`Track.from_table` pick the
+class from ``kind``.
 """
 
 from __future__ import annotations
@@ -11,23 +16,12 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import ClassVar
 
 import numpy as np
 
 from ..csvio import read_csv_rows
 from ..errors import DataError
-
-KINDS = ("washboard", "herringbone", "chassis_twist", "flat", "profile")
-
-_KEYS = {
-    "washboard": {"start": None, "amplitude": None, "wavelength": None, "cycles": None},
-    "herringbone": {"start": None, "amplitude": None, "wavelength": None, "cycles": None, "angle": None},
-    "chassis_twist": {"start": None, "height": None, "bump_length": None, "spacing": None, "bumps": None,
-                      "first": "left"},
-    "flat": {},
-    "profile": {"file": None},
-}
-
 
 @dataclass
 class WheelPath:
@@ -49,6 +43,11 @@ class WheelPath:
     def height(self, x):
         x = np.asarray(x, dtype=float)
         return self.h(x)
+
+
+def _zeros(x):
+    """Height 0 (or its derivatives) at every ``x``."""
+    return np.zeros_like(np.asarray(x, float))
 
 
 def _sin_path(start, A, L, n, shift):
@@ -94,15 +93,31 @@ def _cos_bumps(centres, H, length):
     d1 = lambda x: each(x, lambda d: -H / 2 * k * np.sin(k * d))  # noqa: E731
     d2 = lambda x: each(x, lambda d: -H / 2 * k * k * np.cos(k * d))  # noqa: E731
     if centres.size == 0:
-        return WheelPath(lambda x: np.zeros_like(np.asarray(x, float)), None)
+        return WheelPath(_zeros, None)
     ext = (float(centres.min() - length / 2), float(centres.max() + length / 2))
     # concave where the bump meets the flat: radius 1/(H/2 k^2)
     return WheelPath(h, ext, d1, d2, min_trough_radius=1.0 / (abs(H) / 2 * k * k) if H else math.inf)
 
 
+def _whole(keys: dict, name: str, where: str) -> None:
+    """Reject a negative or fractional count (cycles, bumps)."""
+    if keys[name] < 0 or keys[name] != int(keys[name]):
+        raise DataError(f"{where}: key '{name}' must be a non-negative whole number, got {keys[name]}")
+
+
+def _positive(keys: dict, name: str, where: str) -> None:
+    """Reject a length that is zero or negative (wavelength, bump length, spacing)."""
+    if keys[name] <= 0:
+        raise DataError(f"{where}: key '{name}' must be positive, got {keys[name]}")
+
+
 @dataclass
 class Track:
-    """A test track: ``id``, ``kind`` and the kind's keys (SPEC §2)."""
+    """A test track: ``id``, ``kind`` and the kind's keys (SPEC §2).
+
+    The base of the per-kind classes; ``Track(id, kind, keys)`` builds the
+    class registered for ``kind`` in :data:`TRACK_KINDS`.
+    """
 
     id: str
     kind: str
@@ -110,6 +125,24 @@ class Track:
     base_dir: Path | None = None
     _profile: tuple | None = field(default=None, repr=False)
     _paths: dict = field(default_factory=dict, repr=False)
+
+    #: the SPEC ``kind`` string of the class
+    KIND: ClassVar[str] = ""
+    #: the kind's keys and their defaults (``None``: required), in SPEC order
+    KEYS: ClassVar[dict] = {}
+
+    def __new__(cls, *args, **kwargs):
+        if cls is Track:
+            kind = args[1] if len(args) > 1 else kwargs.get("kind")
+            if kind not in TRACK_KINDS:
+                raise DataError(f"unknown track kind {kind!r}; expected one of {', '.join(KINDS)}")
+            cls = TRACK_KINDS[kind]
+        return super().__new__(cls)
+
+    def __post_init__(self):
+        if self.kind != self.KIND:
+            raise DataError(f"track '{self.id}': kind {self.kind!r} does not match {type(self).__name__} "
+                            f"(kind {self.KIND!r})")
 
     @classmethod
     def from_table(cls, table: dict, where: str, base_dir: Path | None = None) -> "Track":
@@ -125,7 +158,15 @@ class Track:
         kind = table.pop("kind", None)
         if kind not in KINDS:
             raise DataError(f"{where}: unknown track kind {kind!r}; expected one of {', '.join(KINDS)}")
-        spec = _KEYS[kind]
+        kc = TRACK_KINDS[kind]
+        tr = kc(tid, kind, kc._read_keys(table, where), base_dir)
+        tr._load(where)
+        return tr
+
+    @classmethod
+    def _read_keys(cls, table: dict, where: str) -> dict:
+        """The kind's keys from ``table`` (without id/kind): defaults filled, types and values checked."""
+        spec, kind = cls.KEYS, cls.KIND
         for k in table:
             if k not in spec:
                 allowed = ", ".join(["id", "kind", *spec]) or "id, kind"
@@ -137,41 +178,139 @@ class Track:
                     raise DataError(f"{where}: missing key '{k}' for kind '{kind}'")
                 keys[k] = default
                 continue
-            v = table[k]
-            if k == "file":
-                if not isinstance(v, str):
-                    raise DataError(f"{where}: key 'file' must be a path string")
-                keys[k] = v
-            elif k == "first":
-                if v not in ("left", "right"):
-                    raise DataError(f"{where}: key 'first' must be \"left\" or \"right\", got {v!r}")
-                keys[k] = v
-            else:
-                if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
-                    raise DataError(f"{where}: key '{k}' must be a finite number, got {v!r}")
-                keys[k] = float(v)
-        for k in ("wavelength", "bump_length", "spacing"):
-            if k in keys and keys[k] <= 0:
-                raise DataError(f"{where}: key '{k}' must be positive, got {keys[k]}")
-        for k in ("cycles", "bumps"):
-            if k in keys:
-                if keys[k] < 0 or keys[k] != int(keys[k]):
-                    raise DataError(f"{where}: key '{k}' must be a non-negative whole number, got {keys[k]}")
-        if "angle" in keys and not (-89.0 < keys["angle"] < 89.0):
-            raise DataError(f"{where}: key 'angle' must be between -89 and 89 degrees, got {keys['angle']}")
-        tr = cls(tid, kind, keys, base_dir)
-        if kind == "profile":
-            tr._load_profile(where)
-        return tr
+            keys[k] = cls._read_value(k, table[k], where)
+        cls._check(keys, where)
+        return keys
+
+    @classmethod
+    def _read_value(cls, k: str, v, where: str):
+        """One key's value; numbers by default (kinds with other keys override)."""
+        if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
+            raise DataError(f"{where}: key '{k}' must be a finite number, got {v!r}")
+        return float(v)
+
+    @classmethod
+    def _check(cls, keys: dict, where: str) -> None:
+        """The kind's checks across its keys (ranges, whole counts)."""
+
+    def _load(self, where: str) -> None:
+        """Read what the track needs beyond its keys (a profile file)."""
+
+    @property
+    def data_file(self) -> Path | None:
+        """The file the track's road comes from (resolved against ``base_dir``), or None."""
+        return None
 
     def to_table(self) -> dict:
         return {"id": self.id, "kind": self.kind, **{k: (int(v) if k in ("cycles", "bumps") else v)
                                                    for k, v in self.keys.items()}}
 
-    def _load_profile(self, where):
+    def path(self, y: float) -> WheelPath:
+        """The wheel path at lateral offset ``y`` (m, left +)."""
+        key = round(float(y), 9)
+        if key not in self._paths:
+            self._paths[key] = self._wheel_path(float(y))
+        return self._paths[key]
+
+    def _wheel_path(self, y: float) -> WheelPath:  # pragma: no cover - every kind overrides
+        raise NotImplementedError
+
+
+class FlatTrack(Track):
+    """``flat``: no features; height 0 everywhere."""
+
+    KIND = "flat"
+    KEYS = {}
+
+    def _wheel_path(self, y):
+        return WheelPath(_zeros, None, _zeros, _zeros)
+
+
+class WashboardTrack(Track):
+    """``washboard``: ``cycles`` sine waves from ``start``, the same under both wheels."""
+
+    KIND = "washboard"
+    KEYS = {"start": None, "amplitude": None, "wavelength": None, "cycles": None}
+
+    @classmethod
+    def _check(cls, keys, where):
+        _positive(keys, "wavelength", where)
+        _whole(keys, "cycles", where)
+
+    def _wheel_path(self, y):
+        k = self.keys
+        return _sin_path(k["start"], k["amplitude"], k["wavelength"], int(k["cycles"]), self._shift(y))
+
+    def _shift(self, y):
+        """Distance (m) the wave is ahead at lateral offset ``y``: none on a washboard."""
+        return 0.0
+
+
+class HerringboneTrack(WashboardTrack):
+    """``herringbone``: a washboard whose crests cross the road at ``angle`` degrees."""
+
+    KIND = "herringbone"
+    KEYS = {**WashboardTrack.KEYS, "angle": None}
+
+    @classmethod
+    def _check(cls, keys, where):
+        super()._check(keys, where)
+        if not (-89.0 < keys["angle"] < 89.0):
+            raise DataError(f"{where}: key 'angle' must be between -89 and 89 degrees, got {keys['angle']}")
+
+    def _shift(self, y):
+        return y * math.tan(math.radians(self.keys["angle"]))
+
+
+class ChassisTwistTrack(Track):
+    """``chassis_twist``: raised-cosine bumps alternating left and right, ``first`` side first."""
+
+    KIND = "chassis_twist"
+    KEYS = {"start": None, "height": None, "bump_length": None, "spacing": None, "bumps": None, "first": "left"}
+
+    @classmethod
+    def _read_value(cls, k, v, where):
+        if k == "first":
+            if v not in ("left", "right"):
+                raise DataError(f"{where}: key 'first' must be \"left\" or \"right\", got {v!r}")
+            return v
+        return super()._read_value(k, v, where)
+
+    @classmethod
+    def _check(cls, keys, where):
+        _positive(keys, "bump_length", where)
+        _positive(keys, "spacing", where)
+        _whole(keys, "bumps", where)
+
+    def _wheel_path(self, y):
+        k = self.keys
+        left_first = k["first"] == "left"
+        offset = 0.0 if (y > 0) == left_first else 0.5
+        centres = k["start"] + (np.arange(int(k["bumps"])) + offset) * k["spacing"]
+        return _cos_bumps(centres, k["height"], k["bump_length"])
+
+
+class ProfileTrack(Track):
+    """``profile``: measured heights ``z_left``/``z_right`` against ``x`` from a CSV file."""
+
+    KIND = "profile"
+    KEYS = {"file": None}
+
+    @classmethod
+    def _read_value(cls, k, v, where):
+        if not isinstance(v, str):
+            raise DataError(f"{where}: key 'file' must be a path string")
+        return v
+
+    @property
+    def data_file(self) -> Path:
         path = Path(self.keys["file"])
         if not path.is_absolute() and self.base_dir is not None:
             path = self.base_dir / path
+        return path
+
+    def _load(self, where):
+        path = self.data_file
         header, body = read_csv_rows(path, f"{where}: profile file not found: {path}", "profile")
         for c in ("x", "z_left", "z_right"):
             if c not in header:
@@ -195,34 +334,13 @@ class Track:
             raise DataError(f"{path}: column 'x' must be strictly increasing")
         self._profile = (arr[:, 0], arr[:, 1], arr[:, 2])
 
-    def path(self, y: float) -> WheelPath:
-        """The wheel path at lateral offset ``y`` (m, left +)."""
-        key = round(float(y), 9)
-        if key in self._paths:
-            return self._paths[key]
-        k = self.keys
-        if self.kind == "flat":
-            p = WheelPath(lambda x: np.zeros_like(np.asarray(x, float)), None,
-                          lambda x: np.zeros_like(np.asarray(x, float)),
-                          lambda x: np.zeros_like(np.asarray(x, float)))
-        elif self.kind == "washboard":
-            p = _sin_path(k["start"], k["amplitude"], k["wavelength"], int(k["cycles"]), 0.0)
-        elif self.kind == "herringbone":
-            shift = y * math.tan(math.radians(k["angle"]))
-            p = _sin_path(k["start"], k["amplitude"], k["wavelength"], int(k["cycles"]), shift)
-        elif self.kind == "chassis_twist":
-            n = int(k["bumps"])
-            left_first = k["first"] == "left"
-            is_left = y > 0
-            offset = 0.0 if is_left == left_first else 0.5
-            centres = k["start"] + (np.arange(n) + offset) * k["spacing"]
-            p = _cos_bumps(centres, k["height"], k["bump_length"])
-        elif self.kind == "profile":
-            xs, zl, zr = self._profile
-            z = zl if y > 0 else zr
-            lo, hi = float(xs[0]), float(xs[-1])
-            p = WheelPath(lambda x, xs=xs, z=z: np.interp(x, xs, z, left=0.0, right=0.0), (lo, hi))
-        else:  # pragma: no cover - validated in from_table
-            raise DataError(f"unknown kind {self.kind}")
-        self._paths[key] = p
-        return p
+    def _wheel_path(self, y):
+        xs, zl, zr = self._profile
+        z = zl if y > 0 else zr
+        return WheelPath(lambda x: np.interp(x, xs, z, left=0.0, right=0.0), (float(xs[0]), float(xs[-1])))
+
+
+#: SPEC track kind -> its class
+TRACK_KINDS: dict[str, type[Track]] = {c.KIND: c for c in (WashboardTrack, HerringboneTrack, ChassisTwistTrack,
+                                                          FlatTrack, ProfileTrack)}
+KINDS = tuple(TRACK_KINDS)

@@ -1,0 +1,85 @@
+"""Track kinds as classes: the registry, construction by kind, per-kind checks."""
+
+import math
+
+import numpy as np
+import pytest
+
+import rideid
+from rideid.errors import DataError
+from rideid.model.tracks import (KINDS, TRACK_KINDS, ChassisTwistTrack, FlatTrack, HerringboneTrack, ProfileTrack,
+                                 WashboardTrack)
+
+WB = dict(start=1.0, amplitude=0.01, wavelength=0.5, cycles=3.0)
+
+
+def test_registry_holds_the_spec_kinds():
+    assert set(KINDS) == {"washboard", "herringbone", "chassis_twist", "flat", "profile"}
+    assert {k: c.KIND for k, c in TRACK_KINDS.items()} == {k: k for k in KINDS}
+
+
+@pytest.mark.parametrize("table, cls", [
+    (dict(id="w", kind="washboard", **WB), WashboardTrack),
+    (dict(id="h", kind="herringbone", angle=30.0, **WB), HerringboneTrack),
+    (dict(id="t", kind="chassis_twist", start=2.0, height=0.05, bump_length=1.0, spacing=3.0, bumps=2), ChassisTwistTrack),
+    (dict(id="f", kind="flat"), FlatTrack),
+])
+def test_kind_picks_class_and_round_trips(table, cls):
+    tr = rideid.Track.from_table(table, "t")
+    assert type(tr) is cls and isinstance(tr, rideid.Track)
+    again = rideid.Track(tr.id, tr.kind, dict(tr.keys))  # the constructor dispatches on kind too
+    assert type(again) is cls
+    x = np.linspace(0.0, 12.0, 241)
+    for y in (0.7, -0.7):
+        assert np.array_equal(again.path(y).height(x), tr.path(y).height(x))
+    back = rideid.Track.from_table(tr.to_table(), "t")
+    assert back.to_table() == tr.to_table() and back.data_file is None
+
+
+def test_herringbone_shift_is_the_angle():
+    # crests at 30 degrees: the right wheel path (y = -0.7) leads by 0.7 tan 30 deg more than the centre
+    hb = rideid.Track.from_table(dict(id="h", kind="herringbone", angle=30.0, **WB), "t")
+    wb = rideid.Track.from_table(dict(id="w", kind="washboard", **WB), "t")
+    shift = 0.7 * math.tan(math.radians(30.0))
+    x = np.linspace(2.0, 2.4, 9)
+    assert np.allclose(hb.path(0.7).height(x - shift), wb.path(0.7).height(x), atol=1e-15)
+    assert hb.path(0.7).extent == pytest.approx((1.0 - shift, 2.5 - shift))
+
+
+def test_chassis_twist_first_right_swaps_sides():
+    base = dict(id="t", kind="chassis_twist", start=2.0, height=0.05, bump_length=1.0, spacing=3.0, bumps=2)
+    left = rideid.Track.from_table(base, "t")
+    right = rideid.Track.from_table({**base, "first": "right"}, "t")
+    assert left.path(0.7).extent == right.path(-0.7).extent == (1.5, 5.5)
+    assert left.path(-0.7).extent == right.path(0.7).extent == (3.0, 7.0)
+
+
+def test_profile_data_file_resolves_against_base_dir(tmp_path):
+    (tmp_path / "p.csv").write_text("x,z_left,z_right\n0,0,0\n1,0.01,0.02\n")
+    tr = rideid.Track.from_table(dict(id="p", kind="profile", file="p.csv"), "t", base_dir=tmp_path)
+    assert type(tr) is ProfileTrack and tr.data_file == tmp_path / "p.csv"
+    assert tr.path(0.7).height(0.5) == pytest.approx(0.005) and tr.path(-0.7).height(0.5) == pytest.approx(0.01)
+
+
+@pytest.mark.parametrize("table, msg", [
+    (dict(id="t", kind="chassis_twist", start=2.0, height=0.05, bump_length=1.0, spacing=3.0, bumps=2, first="up"),
+     "key 'first' must be \"left\" or \"right\", got 'up'"),
+    (dict(id="t", kind="chassis_twist", start=2.0, height=0.05, bump_length=1.0, spacing=0.0, bumps=2),
+     "key 'spacing' must be positive, got 0.0"),
+    (dict(id="t", kind="chassis_twist", start=2.0, height=0.05, bump_length=1.0, spacing=3.0, bumps=1.5),
+     "key 'bumps' must be a non-negative whole number, got 1.5"),
+    (dict(id="h", kind="herringbone", angle=89.0, **WB), "key 'angle' must be between -89 and 89 degrees, got 89.0"),
+    (dict(id="w", kind="washboard", **{**WB, "cycles": True}), "key 'cycles' must be a finite number, got True"),
+    (dict(id="p", kind="profile", file=3), "key 'file' must be a path string"),
+    (dict(id="f", kind="flat", start=1.0), r"unknown key 'start' for kind 'flat' \(allowed: id, kind\)"),
+])
+def test_per_kind_checks(table, msg):
+    with pytest.raises(DataError, match=msg):
+        rideid.Track.from_table(table, "dataset.toml: tracks[0]")
+
+
+def test_constructor_rejects_unknown_or_mismatched_kind():
+    with pytest.raises(DataError, match="unknown track kind 'bumpy'"):
+        rideid.Track("x", "bumpy", {})
+    with pytest.raises(DataError, match="kind 'flat' does not match WashboardTrack"):
+        WashboardTrack("x", "flat", {})
