@@ -21,7 +21,8 @@ def test_registry_holds_the_spec_kinds():
 @pytest.mark.parametrize("table, cls", [
     (dict(id="w", kind="washboard", **WB), WashboardTrack),
     (dict(id="h", kind="herringbone", angle=30.0, **WB), HerringboneTrack),
-    (dict(id="t", kind="chassis_twist", start=2.0, height=0.05, bump_length=1.0, spacing=3.0, bumps=2), ChassisTwistTrack),
+    (dict(id="t", kind="chassis_twist", start=2.0, height=0.05, bump_length=1.0, spacing=3.0, bumps=2),
+     ChassisTwistTrack),
     (dict(id="f", kind="flat"), FlatTrack),
 ])
 def test_kind_picks_class_and_round_trips(table, cls):

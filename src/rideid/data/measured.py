@@ -372,15 +372,26 @@ class MeasuredRun:
         return Y
 
 
-def _warn(mr_warnings: list, msg: str):
+def _warn(mr_warnings: list, msg: str, stacklevel: int = 3):
     mr_warnings.append(msg)
-    warnings.warn(msg, DataWarning, stacklevel=3)
+    warnings.warn(msg, DataWarning, stacklevel=stacklevel)
+
+
+#: stack depth from :func:`warnings.warn` in :func:`_warn` to the caller of
+#: :func:`load_measured_run`, for the warnings its stages give
+_STAGE = 4
 
 
 def load_measured_run(run, man) -> MeasuredRun:
-    """Read and preprocess one measured run (steps 1-5 of the module docstring)."""
-    from scipy.signal import butter, resample_poly, sosfiltfilt
+    """Read and preprocess one measured run (steps 1-5 and 8 of the module docstring).
 
+    The stages: read the mapped channels in SI units (:func:`_map_channels`,
+    :func:`_read_si`), find the common time span and rate
+    (:func:`_span_and_rate`), subtract gravity and bias over the lead-in
+    (:func:`_remove_gravity_bias`), filter and resample
+    (:func:`_filter_resample`), and take the speed or distance
+    (:func:`_motion`). Each stage adds to the run's record.
+    """
     path = Path(run.file)
     if not path.is_absolute():
         path = man.base_dir / path
@@ -390,9 +401,35 @@ def load_measured_run(run, man) -> MeasuredRun:
     cmap.update(run.channels)
     where_map = f"{man.path}: run '{run.id}'"
     sf = open_signals(path, man.csv_options)
-    fs = opts.get("fs", None)
     warns: list[str] = []
 
+    targets, time_name, time_scale = _map_channels(run, cmap, sf, path, where_map)
+    measured = [c for c in targets if c in CHANNELS]
+    raw, rec_ch = _read_si(targets, sf, time_name, time_scale, opts, path, where_map, warns)
+    t_first, t_last, fs = _span_and_rate(raw, rec_ch, measured, opts.get("fs", None), path, warns)
+    lead = opts.get("lead_in", (t_first, t_first + DEFAULT_LEAD_IN))
+    grav = opts.get("gravity_included", False)
+    bias = opts.get("remove_bias", False)
+    _remove_gravity_bias(raw, rec_ch, measured, lead, grav, bias, path, where_map, warns)
+    channels = _filter_resample(raw, rec_ch, measured, fs)
+    distance, motion_rec = _motion(raw, targets, run.speed, path)
+
+    record = {"file": str(path), "format": FORMAT_NAMES[sf.format], "channels": rec_ch, "fs": fs,
+              "speed": motion_rec, "recording": [t_first, t_last]}
+    if grav or bias:
+        record["lead_in"] = list(lead)
+    if sf.format == "csv":
+        record["csv"] = {"delimiter": sf.delimiter, "decimal": sf.decimal}
+    return MeasuredRun(run.id, path, fs, channels, t_first, t_last, run.speed, distance, opts, record, warns)
+
+
+def _map_channels(run, cmap: dict, sf, path: Path, where_map: str):
+    """Which file channel feeds which SPEC target, and how the file's time is read.
+
+    Returns ``(targets, time_name, time_scale)``: ``targets`` maps SPEC names
+    (channels, ``speed``, ``distance``) to :class:`ChannelEntry`; the mapped
+    ones plus SPEC-named columns the map does not mention.
+    """
     # time column (CSV, Parquet) or time channel (TDMS)
     time_name, time_scale = None, 1.0
     if "time" in cmap:
@@ -401,7 +438,6 @@ def load_measured_run(run, man) -> MeasuredRun:
         time_scale = unit_factor(te.unit, "time", f"{where_map} time unit") if te.unit else 1.0
         time_scale *= te.scale
 
-    # the channels to read: mapped ones, plus SPEC-named columns the map does not mention
     targets = {}
     for c in TARGETS:
         if c == "time":
@@ -410,8 +446,7 @@ def load_measured_run(run, man) -> MeasuredRun:
             targets[c] = cmap[c]
         elif c in CHANNELS and sf.has(c):
             targets[c] = ChannelEntry(c)
-    measured = [c for c in targets if c in CHANNELS]
-    if not measured:
+    if not any(c in CHANNELS for c in targets):
         raise DataError(f"{path}: none of the SPEC channels found; map the file's channels in [channels] "
                         f"(the file has: {', '.join(sf.names()[:12])})")
     if "speed" in targets and "distance" in targets:
@@ -421,7 +456,16 @@ def load_measured_run(run, man) -> MeasuredRun:
         raise DataError(f"{where_map}: give either a constant 'speed' or a speed/distance channel, not both")
     if not has_motion and run.speed is None:
         raise DataError(f"{where_map}: missing key 'speed' (m/s), or map a speed or distance channel")
+    return targets, time_name, time_scale
 
+
+def _read_si(targets: dict, sf, time_name, time_scale: float, opts: dict, path: Path, where_map: str,
+             warns: list):
+    """Read each target, check its time axis, convert it to SI (unit, scale, sign) and warn on the implausible.
+
+    Returns ``(raw, rec_ch)``: SPEC name -> :class:`Signal` in SI units, and
+    SPEC name -> its record (source, unit, sign, rate, ...).
+    """
     raw: dict[str, Signal] = {}
     rec_ch = {}
     for c, e in targets.items():
@@ -438,26 +482,7 @@ def load_measured_run(run, man) -> MeasuredRun:
         if np.any(dt <= 0):
             k = int(np.argmax(dt <= 0))
             raise DataError(f"{path}: {w}: time is not strictly increasing at t = {sig.time[k]:.6g} s")
-        # unit: the map's, else the file's (if known), else SI
-        unit, unit_src = e.unit, "map"
-        if unit is None:
-            if sig.unit:
-                try:
-                    unit_factor(sig.unit, c, "")
-                except DataError:
-                    raise DataError(f"{path}: {w}: the file's unit '{sig.unit}' is not one rideid knows; "
-                                    f"give unit in [channels] ({', '.join(UNITS[quantity(c)])})") from None
-                unit, unit_src = sig.unit, "file"
-            else:
-                unit, unit_src = SI[quantity(c)], "SI (none given)"
-        elif sig.unit:
-            try:
-                fu = unit_factor(sig.unit, c, "")
-            except DataError:
-                fu = None
-            if fu is not None and fu != unit_factor(unit, c, ""):
-                _warn(warns, f"{path}: {w}: the file says unit '{sig.unit}' but the map says '{unit}'; "
-                             "using the map's")
+        unit, unit_src = _channel_unit(c, e, sig, path, w, warns)
         factor = unit_factor(unit, c, f"{where_map} {c}") * e.scale * e.sign
         v = sig.values * factor
         raw[c] = Signal(sig.time, v, unit)
@@ -469,10 +494,38 @@ def load_measured_run(run, man) -> MeasuredRun:
         if gap.any():
             k = int(np.argmax(dt))
             _warn(warns, f"{path}: {w}: {int(gap.sum())} gap(s) in time, the longest {dt[k]:.4g} s at "
-                         f"t = {sig.time[k]:.6g} s (sample interval {med:.4g} s); bridged by interpolation")
+                         f"t = {sig.time[k]:.6g} s (sample interval {med:.4g} s); bridged by interpolation", _STAGE)
         if c in CHANNELS:
             _plausibility(c, v, unit, opts, f"{path}: {w}", warns)
+    return raw, rec_ch
 
+
+def _channel_unit(c: str, e: ChannelEntry, sig: Signal, path: Path, w: str, warns: list):
+    """The unit of target ``c``: the map's, else the file's (if known), else SI; and where it came from."""
+    unit, unit_src = e.unit, "map"
+    if unit is None:
+        if sig.unit:
+            try:
+                unit_factor(sig.unit, c, "")
+            except DataError:
+                raise DataError(f"{path}: {w}: the file's unit '{sig.unit}' is not one rideid knows; "
+                                f"give unit in [channels] ({', '.join(UNITS[quantity(c)])})") from None
+            unit, unit_src = sig.unit, "file"
+        else:
+            unit, unit_src = SI[quantity(c)], "SI (none given)"
+    elif sig.unit:
+        try:
+            fu = unit_factor(sig.unit, c, "")
+        except DataError:
+            fu = None
+        if fu is not None and fu != unit_factor(unit, c, ""):
+            _warn(warns, f"{path}: {w}: the file says unit '{sig.unit}' but the map says '{unit}'; "
+                         "using the map's", _STAGE + 1)
+    return unit, unit_src
+
+
+def _span_and_rate(raw: dict, rec_ch: dict, measured: list, fs, path: Path, warns: list):
+    """``(t_first, t_last, fs)``: the time all measured channels cover, and the model rate (default: the slowest)."""
     t_first = max(s.time[0] for c, s in raw.items() if c in CHANNELS)
     t_last = min(s.time[-1] for c, s in raw.items() if c in CHANNELS)
     if t_last - t_first <= 0:
@@ -482,12 +535,13 @@ def load_measured_run(run, man) -> MeasuredRun:
         fs = min(DEFAULT_FS, rate_min)
     if fs > rate_min * 1.0001:
         _warn(warns, f"{path}: resampling to {fs:g} Hz, above the slowest channel's rate ({rate_min:g} Hz): "
-                     "that channel carries nothing above its own Nyquist frequency")
+                     "that channel carries nothing above its own Nyquist frequency", _STAGE)
+    return t_first, t_last, fs
 
-    # gravity and bias over the lead-in
-    lead = opts.get("lead_in", (t_first, t_first + DEFAULT_LEAD_IN))
-    grav = opts.get("gravity_included", False)
-    bias = opts.get("remove_bias", False)
+
+def _remove_gravity_bias(raw: dict, rec_ch: dict, measured: list, lead, grav: bool, bias: bool, path: Path,
+                         where_map: str, warns: list) -> None:
+    """Subtract the lead-in mean (gravity and bias) from ``raw`` in place and note it in ``rec_ch``."""
     for c in measured:
         s = raw[c]
         in_lead = (s.time >= lead[0]) & (s.time <= lead[1])
@@ -502,21 +556,25 @@ def load_measured_run(run, man) -> MeasuredRun:
         if grav and is_acc and not (0.8 * GRAVITY < m < 1.2 * GRAVITY):
             if -1.2 * GRAVITY < m < -0.8 * GRAVITY:
                 _warn(warns, f"{path}: {c}: reads {m:.3g} m/s^2 at rest (gravity included): mounted upside down? "
-                             "set sign = -1 in its channel map")
+                             "set sign = -1 in its channel map", _STAGE)
             else:
                 _warn(warns, f"{path}: {c}: lead-in mean {m:.3g} m/s^2 with gravity_included = true "
-                             f"(expected about {GRAVITY:.2f}); check its unit and the lead_in window")
+                             f"(expected about {GRAVITY:.2f}); check its unit and the lead_in window", _STAGE)
         whole = s.values - np.mean(s.values)
         rms_all = float(np.sqrt(np.mean(whole ** 2)))
         rms_lead = float(np.std(seg))
         if rms_all > 0 and rms_lead > 0.25 * rms_all:
             _warn(warns, f"{path}: {c}: the lead-in [{lead[0]:g}, {lead[1]:g}] s is not stationary (RMS "
-                         f"{rms_lead:.3g} vs {rms_all:.3g} over the run); set lead_in to a part at rest")
+                         f"{rms_lead:.3g} vs {rms_all:.3g} over the run); set lead_in to a part at rest", _STAGE)
         raw[c] = Signal(s.time, s.values - m, s.unit)
         rec_ch[c]["removed"] = m
         rec_ch[c]["removed_as"] = "gravity and bias" if (grav and is_acc) else "bias"
 
-    # anti-alias filter and a fine uniform grid for interpolation
+
+def _filter_resample(raw: dict, rec_ch: dict, measured: list, fs: float) -> dict:
+    """Anti-alias filter each measured channel and put it on a fine uniform grid: name -> :class:`Resampled`."""
+    from scipy.signal import butter, resample_poly, sosfiltfilt
+
     channels = {}
     for c in measured:
         s = raw[c]
@@ -537,7 +595,11 @@ def load_measured_run(run, man) -> MeasuredRun:
         if up > 1:
             v = resample_poly(v, up, 1, padtype="line")
         channels[c] = Resampled(t[0], med / up, v)
+    return channels
 
+
+def _motion(raw: dict, targets: dict, speed: float | None, path: Path):
+    """``(distance, record)``: distance from a distance or (integrated) speed channel; None at a constant speed."""
     distance, motion_rec = None, {}
     if "distance" in raw:
         s = raw["distance"]
@@ -559,18 +621,11 @@ def load_measured_run(run, man) -> MeasuredRun:
         motion_rec = {"source": f"speed channel '{targets['speed'].name}' ({s.unit}), integrated",
                       "noise_std": noise, "noise_interval": float(np.median(np.diff(s.time)))}
     else:
-        motion_rec = {"source": "constant", "value": run.speed}
+        motion_rec = {"source": "constant", "value": speed}
     if distance is not None:
         vmin, vmean, vmax = distance.speed_range()
         motion_rec.update({"min": vmin, "mean": vmean, "max": vmax})
-
-    record = {"file": str(path), "format": FORMAT_NAMES[sf.format], "channels": rec_ch, "fs": fs,
-              "speed": motion_rec, "recording": [t_first, t_last]}
-    if grav or bias:
-        record["lead_in"] = list(lead)
-    if sf.format == "csv":
-        record["csv"] = {"delimiter": sf.delimiter, "decimal": sf.decimal}
-    return MeasuredRun(run.id, path, fs, channels, t_first, t_last, run.speed, distance, opts, record, warns)
+    return distance, motion_rec
 
 
 def _plausibility(c, v, unit, opts, w, warns):
