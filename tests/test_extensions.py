@@ -398,7 +398,7 @@ BAD = {
     "negative_known": (lambda x: x["known"].update(c_tf=-20.0), [], "[known] c_tf: must not be negative"),
     "negative_bound": (lambda x: x.update(bounds={"k_arf": [-1.0, 5e4]}), [],
                        "[bounds] k_arf: lower bound must not be negative"),
-    "unknown_model": (None, ["--model", "fancy"], "--model must be one of base, full, got 'fancy'"),
+    "unknown_model": (None, ["--model", "fancy"], "--model must be one of base, full, auto, got 'fancy'"),
 }
 
 
@@ -439,7 +439,7 @@ def test_identify_model_choice_and_known_extension(sim_dataset, tmp_path, capsys
         assert res["model"]["extensions"] == ([] if model == "base" else list(GROUPS))
         assert [n for n in res["parameters"] if n in EXT_NAMES] == expect
         assert res["parameters"]["c_tf"] == {"value": 150.0, "unit": "N s/m", "fixed": True, "derived": False,
-                                             "std": 0.0}
+                                             "std": 0.0, "std_robust": 0.0}
         if model == "full":
             assert res["parameters"]["k_arf"]["fixed"] is False
             assert res["parameters"]["k_arf"]["lower"] == 0.0

@@ -343,24 +343,23 @@ def modal_summary(params, geom: Geometry) -> dict[str, dict[str, float]]:
     M, C, K, _ = decomposed_mck(P, geom)
     s, a = np.arange(4), np.arange(4, 7)
 
-    def sym_name(k, phi, used):
-        if k >= 2:  # wheel-dominated; if front and rear mix, the other is free
-            first, other = "front hop (in phase)", "rear hop (in phase)"
-            if k == 3:
-                first, other = other, first
-            return first if first not in used else other
-        # body mode: bounce vs pitch by which body coordinate dominates
-        # kinetic energy; if taken already, the other one
-        first = "bounce" if k == 0 else "pitch"
-        return first if first not in used else ("pitch" if first == "bounce" else "bounce")
+    sym_modes = MODES[:2] + MODES[3:5]  # bounce, pitch, front/rear hop in phase
+    anti_modes = (MODES[2],) + MODES[5:]  # roll, front/rear hop anti-phase
+    sym_pref = {0: (0, 1), 1: (1, 0), 2: (2, 3), 3: (3, 2)}  # dominant coordinate -> preferred names
+    anti_pref = {0: (0,), 1: (1, 2), 2: (2, 1)}
 
-    def anti_name(k, phi, used):
-        if k == 0:
-            return "roll"
-        first, other = "front hop (anti-phase)", "rear hop (anti-phase)"
-        if k == 2:
-            first, other = other, first
-        return first if first not in used else other
+    def namer(block, pref):
+        # the dominant coordinate's names first, then any name of the block still free: two modes
+        # dominated by the same coordinate (a light roll inertia beside heavy wheels) still get
+        # distinct names, and every name of the block is given once
+        def name(k, phi, used):
+            for n in [block[i] for i in pref[k]] + list(block):
+                if n not in used:
+                    return n
+            raise AssertionError("more modes than names")  # pragma: no cover - block sizes match
+        return name
+
+    sym_name, anti_name = namer(sym_modes, sym_pref), namer(anti_modes, anti_pref)
 
     res = {}
     res.update(_block_modes(M[0][np.ix_(s, s)], C[0][np.ix_(s, s)], K[0][np.ix_(s, s)], sym_name))
