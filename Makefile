@@ -18,8 +18,9 @@ venv: $(STAMP)
 demo: $(STAMP)
 	$(VENV)/bin/rideid demo --out demo-out
 
+# the default suite on every core (pytest-xdist): about 10 minutes on 2 cores
 test: $(STAMP)
-	$(PY) -m pytest -q
+	$(PY) -m pytest -q -n auto
 
 # the slow studies as well (JADE benchmark tables at full length, seeds sweeps)
 test-slow: $(STAMP)
