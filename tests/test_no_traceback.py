@@ -210,6 +210,7 @@ def test_fuzz_short(base, fmt, edits, file_edit):
 
 
 @pytest.mark.slow
+@pytest.mark.expensive
 @settings(max_examples=150, deadline=None, database=None,
           suppress_health_check=[HealthCheck.function_scoped_fixture, HealthCheck.too_slow])
 @given(**FUZZ)
