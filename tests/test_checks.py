@@ -348,3 +348,15 @@ def test_start_std_includes_a_noisy_speed_channel(tmp_path):
         assert st["std"] > 30 * st["std_fit"]  # the speed channel dominates
         ratios.append(abs(st["value"] - OFFSET) / st["std"])
     assert max(ratios) < 3.0 and max(ratios) > 0.2  # honest: neither optimistic nor absurdly wide
+
+
+def test_an_extension_at_zero_is_no_bound_finding():
+    """An anti-roll bar or tire damping estimated at 0 (its lower bound) says the data see none: no
+    warning; a twelve-parameter estimate on its bound, or an extension on its upper bound, still warns."""
+    from rideid.data.checks import bound_findings
+    details = {"c_tr": {"value": 0.25, "lower": 0.0, "upper": 1500.0, "fixed": False},
+               "k_arf": {"value": 99990.0, "lower": 0.0, "upper": 1e5, "fixed": False},
+               "k_sf": {"value": 10010.0, "lower": 10000.0, "upper": 200000.0, "fixed": False}}
+    found = bound_findings(details)
+    assert sorted(f.channel for f in found) == ["k_arf", "k_sf"]
+    assert "upper search bound" in [f for f in found if f.channel == "k_arf"][0].message

@@ -54,6 +54,7 @@ from dataclasses import asdict, dataclass
 import numpy as np
 
 from ..model.equations import CHANNELS
+from ..model.params import EXT_NAMES
 
 G0 = 9.80665
 DEG = 180.0 / math.pi
@@ -816,6 +817,8 @@ def bound_findings(details: dict, fraction: float = BOUND_FRACTION) -> list[Find
             continue
         v, span = d["value"], hi - lo
         for side, b in (("lower", lo), ("upper", hi)):
+            if side == "lower" and b == 0 and n in EXT_NAMES:
+                continue  # no bar or no tire damping seen: a physical answer, not one the bound imposed
             if abs(v - b) <= fraction * span:
                 out.append(Finding(WARNING, "bounds", f"{n} = {v:.6g} ended at its {side} search bound {b:g}: the "
                                    "bound, not the data, set it; widen [bounds] "
