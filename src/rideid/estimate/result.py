@@ -99,19 +99,21 @@ class History:
             raise DataError(f"{path}: not a history table of numbers: {e}") from None
 
 
-def _jsonable(v):
+def jsonable(v):
     """NaN/inf -> None, NumPy scalars/arrays -> Python, recursively (strict JSON)."""
     if isinstance(v, dict):
-        return {str(k): _jsonable(x) for k, x in v.items()}
+        return {str(k): jsonable(x) for k, x in v.items()}
     if isinstance(v, (list, tuple)):
-        return [_jsonable(x) for x in v]
+        return [jsonable(x) for x in v]
     if isinstance(v, np.ndarray):
-        return _jsonable(v.tolist())
+        return jsonable(v.tolist())
     if isinstance(v, (np.integer,)):
         return int(v)
     if isinstance(v, (float, np.floating)):
         v = float(v)
         return v if math.isfinite(v) else None
+    if isinstance(v, np.generic):  # np.bool_ and other NumPy scalars
+        return v.item()
     return v
 
 
@@ -236,7 +238,7 @@ class IdentificationResult:
     # -- formats -------------------------------------------------------------
     def to_dict(self) -> dict:
         """``result.json`` as a dict (docs/formats.md)."""
-        return _jsonable({
+        return jsonable({
             "parameters": self.details,
             "known": self.known,
             "cost": self.fun,

@@ -17,7 +17,7 @@ import time
 import warnings
 from pathlib import Path
 
-import numpy as np
+from ..estimate.result import jsonable
 
 #: columns of a record that differ between two runs of the same task (excluded when tables are compared)
 TIMING_COLUMNS = ("identify_wall_s", "task_wall_s")
@@ -90,7 +90,7 @@ def run_task(options: dict, dataset_path: str | None = None, scenario=None) -> d
         try:
             res, truth = _identify(options, dataset_path, scenario, Path(tmp))
             rec["row"] = result_row(res.to_dict(), truth)
-            rec["result"] = _jsonable(res.to_dict())
+            rec["result"] = jsonable(res.to_dict())
             rec["status"] = "done"
         except rideid.RideidError as e:
             rec["error"] = _one_line(e)
@@ -163,15 +163,3 @@ def result_row(result: dict, truth: dict | None) -> dict:
         row["adequate"] = bool(adequacy["adequate"])
     row["identify_wall_s"] = float(result["wall_time_s"])
     return row
-
-
-def _jsonable(x):
-    if isinstance(x, dict):
-        return {str(k): _jsonable(v) for k, v in x.items()}
-    if isinstance(x, (list, tuple)):
-        return [_jsonable(v) for v in x]
-    if isinstance(x, np.generic):
-        return x.item()
-    if isinstance(x, float) and not np.isfinite(x):
-        return None
-    return x
