@@ -16,25 +16,13 @@ from rideid.model.params import (ALL_NAMES, DEFAULT_CAR, DEFAULT_GEOMETRY, EXT_N
                                  as_vector, check_parameters, full_rows)
 from rideid.model.simulate import RunInput, prepare_run, simulate_lsim, simulate_reference
 from rideid.model.tracks import Track
+from test_simulate import FS, TRACKS, rel_rms  # the same three tracks and error measure
 
 G = DEFAULT_GEOMETRY
 #: the built-in car with an SUV-like set of extensions
 EXT = {"k_arf": 15600.0, "k_arr": 6000.0, "c_tf": 180.0, "c_tr": 200.0}
 P0 = as_vector(DEFAULT_CAR)
 PX = as_vector({**DEFAULT_CAR, **EXT})
-FS = 200.0
-
-TRACKS = {
-    "washboard": (dict(id="w", kind="washboard", start=2.0, amplitude=0.008, wavelength=0.8, cycles=6), 10.0),
-    "herringbone": (dict(id="h", kind="herringbone", start=2.0, amplitude=0.008, wavelength=0.5, cycles=8,
-                         angle=30.0), 8.0),
-    "chassis_twist": (dict(id="t", kind="chassis_twist", start=2.0, height=0.06, bump_length=1.6, spacing=4.0,
-                           bumps=2), 5.0),
-}
-
-
-def rel_rms(a, b):
-    return np.sqrt(np.mean((a - b) ** 2, axis=0)) / np.maximum(np.sqrt(np.mean(b ** 2, axis=0)), 1e-300)
 
 
 # ---------------------------------------------------------------------------

@@ -295,18 +295,23 @@ def test_cli_plan_bad_input(tmp_path, capsys, args, needle):
 
 # -- validation against identify (slow) ----------------------------------------
 
-@pytest.mark.slow
-@pytest.mark.expensive
-def test_monte_carlo_identify_spread_matches_prediction():
-    """30 noise seeds, rideid identify on the built-in car's ten runs: sample sd within 20 % of the prediction."""
+def _assert_identify_spread_matches_plan(sc):
+    """30 noise seeds (1 %), rideid identify on all of ``sc``'s runs: every parameter's sample sd within
+    20 % of the plan's predicted spread, and no bias beyond 3.5 sd."""
     from rideid.design.validate import monte_carlo, spread_ratio
-    sc = rideid.default_scenario()
     res = rideid.plan(sc, noise=0.01)
     truth = np.array([sc.truth[n] for n in res.names])
     est = monte_carlo(sc, _ids(sc), res.names, 0.01, list(range(1, 31)))
     st = spread_ratio(est, truth, res.all_runs.std_identify)
     assert np.all(np.abs(st["ratio"] - 1) < 0.2), dict(zip(res.names, st["ratio"]))
     assert np.all(np.abs(st["bias_in_sd"]) < 3.5)
+
+
+@pytest.mark.slow
+@pytest.mark.expensive
+def test_monte_carlo_identify_spread_matches_prediction():
+    """30 noise seeds, rideid identify on the built-in car's ten runs: sample sd within 20 % of the prediction."""
+    _assert_identify_spread_matches_plan(rideid.default_scenario())
 
 
 @pytest.mark.slow
@@ -325,7 +330,6 @@ def test_planned_runs_deliver_the_promised_precision():
     assert np.all(np.abs(est - lin) < 0.02 * st["sd"])
 
 
-
 @pytest.mark.slow
 @pytest.mark.expensive
 @pytest.mark.xfail(strict=True, reason="open (issue 18): over seeds 1-30 identify's spread on the van is "
@@ -335,14 +339,7 @@ def test_monte_carlo_on_a_van_of_our_own(tmp_path):
     ten runs, 30 seeds: identify's spread within 20 % of the plan's prediction for every parameter."""
     from conftest import van_scenario
 
-    from rideid.design.validate import monte_carlo, spread_ratio
-    sc = van_scenario(tmp_path)
-    res = rideid.plan(sc, noise=0.01)
-    truth = np.array([sc.truth[n] for n in res.names])
-    est = monte_carlo(sc, _ids(sc), res.names, 0.01, list(range(1, 31)))
-    st = spread_ratio(est, truth, res.all_runs.std_identify)
-    assert np.all(np.abs(st["ratio"] - 1) < 0.2), dict(zip(res.names, st["ratio"]))
-    assert np.all(np.abs(st["bias_in_sd"]) < 3.5)
+    _assert_identify_spread_matches_plan(van_scenario(tmp_path))
 
 def test_extensions_in_truth_become_free_parameters(tmp_path):
     """A nominal car with anti-roll bars (SPEC §6): k_arf, k_arr are planned too; no roll on a washboard."""
