@@ -16,6 +16,7 @@ from rideid.model.params import (ALL_NAMES, DEFAULT_CAR, DEFAULT_GEOMETRY, EXT_N
                                  as_vector, check_parameters, full_rows)
 from rideid.model.simulate import RunInput, prepare_run, simulate_lsim, simulate_reference
 from rideid.model.tracks import Track
+from test_model import assert_blocks_have_the_full_eigenvalues
 from test_simulate import FS, TRACKS, rel_rms  # the same three tracks and error measure
 
 G = DEFAULT_GEOMETRY
@@ -104,12 +105,7 @@ def test_bars_touch_only_the_antisymmetric_block():
         assert np.abs(X[:, :4, 4:]).max() == 0 and np.abs(X[:, 4:, :4]).max() == 0
     for X in (Bf, Bd):
         assert np.abs(X[:, :4, 2:]).max() == 0 and np.abs(X[:, 4:, :2]).max() == 0
-    A, *_ = state_space(P, G)
-    bl = blocks(P, G)
-    for i in range(5):
-        full = np.sort_complex(np.linalg.eigvals(A[i]))
-        parts = np.sort_complex(np.concatenate([np.linalg.eigvals(bl["As"][i]), np.linalg.eigvals(bl["Aa"][i])]))
-        np.testing.assert_allclose(full, parts, rtol=1e-9, atol=1e-9)
+    assert_blocks_have_the_full_eigenvalues(P, G)
 
 
 def test_washboard_leaves_the_bars_unloaded():

@@ -28,6 +28,16 @@ def undamped(P, geom):
     return np.sort(np.sqrt(w2)) / (2 * np.pi)
 
 
+def assert_blocks_have_the_full_eigenvalues(P, G):
+    """The symmetric and antisymmetric blocks together have the full 14-state model's eigenvalues."""
+    A, *_ = state_space(P, G)
+    bl = blocks(P, G)
+    for i in range(len(A)):
+        full = np.sort_complex(np.linalg.eigvals(A[i]))
+        parts = np.sort_complex(np.concatenate([np.linalg.eigvals(bl["As"][i]), np.linalg.eigvals(bl["Aa"][i])]))
+        np.testing.assert_allclose(full, parts, rtol=1e-9, atol=1e-9)
+
+
 def test_symmetric_block_splits_into_front_and_rear_quarter_cars():
     # with dynamic index I_yy = m_s a b the body is two point masses over the
     # axles: the symmetric block is then two independent quarter cars
@@ -72,12 +82,7 @@ def test_decomposition_is_exact_and_block_diagonal():
         assert np.abs(X[:, :4, 4:]).max() == 0 and np.abs(X[:, 4:, :4]).max() == 0
     assert np.abs(Bf[:, :4, 2:]).max() == 0 and np.abs(Bf[:, 4:, :2]).max() == 0
     # same eigenvalues as the full 14-state model
-    A, *_ = state_space(P, G)
-    bl = blocks(P, G)
-    for i in range(5):
-        full = np.sort_complex(np.linalg.eigvals(A[i]))
-        parts = np.sort_complex(np.concatenate([np.linalg.eigvals(bl["As"][i]), np.linalg.eigvals(bl["Aa"][i])]))
-        np.testing.assert_allclose(full, parts, rtol=1e-9, atol=1e-9)
+    assert_blocks_have_the_full_eigenvalues(P, G)
 
 
 def test_equations_of_motion_signs():
