@@ -293,53 +293,88 @@ def test_cli_plan_bad_input(tmp_path, capsys, args, needle):
     assert not out.exists()
 
 
+# -- the many-seed Monte Carlo shortcut ------------------------------------------
+
+def test_linearised_monte_carlo_draws_simulate_manifests_noise(setup, tmp_path):
+    """The many-seed shortcut equals a Gauss-Newton step from the truth on the dataset that
+    simulate_manifest(noise, seed) writes, seed by seed (the same noise draws, the same weights)."""
+    from rideid.design.validate import gauss_newton_from_truth, linearised_monte_carlo, sub_scenario
+    sc, space, x0, sim, info = setup
+    runs = ["T_HL", "W_H"]
+    sub = sub_scenario(sc, runs)
+    fast = linearised_monte_carlo(sc, runs, space.names, 0.02, [3, 11])
+    sd = subset_precision(info, [_ids(sc).index(r) for r in runs]).std_identify * 2  # 2 % noise
+    for k, s in enumerate([3, 11]):
+        data, _ = rideid.simulate_manifest(sub, noise=0.02, seed=s)
+        rideid.write_dataset(sub, data, tmp_path / f"s{s}")
+        slow = gauss_newton_from_truth(rideid.load_dataset(tmp_path / f"s{s}"), space.names, x0)
+        assert np.all(np.abs(fast[k] - slow) < 1e-6 * sd)
+        assert np.abs(fast[k] - x0).max() > 0.1 * sd.min()  # the noise is there
+
+
 # -- validation against identify (slow) ----------------------------------------
 
-def _assert_identify_spread_matches_plan(sc):
-    """30 noise seeds (1 %), rideid identify on all of ``sc``'s runs: every parameter's sample sd within
-    20 % of the plan's predicted spread, and no bias beyond 3.5 sd."""
-    from rideid.design.validate import monte_carlo, spread_ratio
-    res = rideid.plan(sc, noise=0.01)
-    truth = np.array([sc.truth[n] for n in res.names])
-    est = monte_carlo(sc, _ids(sc), res.names, 0.01, list(range(1, 31)))
-    st = spread_ratio(est, truth, res.all_runs.std_identify)
-    assert np.all(np.abs(st["ratio"] - 1) < 0.2), dict(zip(res.names, st["ratio"]))
-    assert np.all(np.abs(st["bias_in_sd"]) < 3.5)
+#: seeds for identify itself (each identification takes seconds) and for its linearised estimate
+IDENTIFY_SEEDS = list(range(1, 31))
+MANY_SEEDS = list(range(1, 1001))
+
+
+def _assert_identify_spread_matches_plan(sc, run_ids, prec):
+    """Identify on ``run_ids`` of ``sc`` has the spread ``prec`` predicts, at 1 % noise.
+
+    Thirty seeds alone cannot show it: the sample sd of one parameter over 30 seeds scatters by
+    1/sqrt(58) = 13 %, so 11 parameters all land within 20 % of an exact prediction only about
+    a third of the time (over 100 blocks of 30 seeds of the van: 32). Two checks that can:
+    (1) on seeds 1-30, identify (JADE + polish) lands on the linearised estimate, one Gauss-Newton
+    step from the truth on its own cost, to 0.02 sd: no missed optimum, no nonlinearity; (2) that
+    estimator over seeds 1-1000 (the same noise draws as simulate_manifest), whose ratio scatters
+    by 2.2 %, is within 10 % of the prediction for every parameter and unbiased to 0.15 sd.
+    """
+    from rideid.design.validate import linearised_monte_carlo, monte_carlo, spread_ratio
+    names, pred = prec.names, prec.std_identify
+    truth = np.array([sc.truth[n] for n in names])
+    est, lin = monte_carlo(sc, run_ids, names, 0.01, IDENTIFY_SEEDS, linearised=True)
+    st30 = spread_ratio(est, truth, pred)
+    gap = np.abs(est - lin).max(0) / pred
+    assert np.all(gap < 0.02), dict(zip(names, gap))
+    assert np.all(np.abs(st30["bias_in_sd"]) < 3.5), dict(zip(names, st30["bias_in_sd"]))
+    many = linearised_monte_carlo(sc, run_ids, names, 0.01, MANY_SEEDS)
+    assert np.all(np.abs(many[:len(IDENTIFY_SEEDS)] - lin) < 1e-6 * pred)
+    st = spread_ratio(many, truth, pred)
+    assert np.all(np.abs(st["ratio"] - 1) < 0.1), (dict(zip(names, st["ratio"])), dict(zip(names, st30["ratio"])))
+    assert np.all(np.abs(many.mean(0) - truth) < 0.15 * pred)
 
 
 @pytest.mark.slow
 @pytest.mark.expensive
 def test_monte_carlo_identify_spread_matches_prediction():
-    """30 noise seeds, rideid identify on the built-in car's ten runs: sample sd within 20 % of the prediction."""
-    _assert_identify_spread_matches_plan(rideid.default_scenario())
+    """The built-in car's ten runs: identify's spread is the plan's prediction (seeds 1-30 of identify:
+    0.86-1.12 x; seeds 1-1000 of its linearised estimate: 1.00-1.04 x)."""
+    sc = rideid.default_scenario()
+    _assert_identify_spread_matches_plan(sc, _ids(sc), rideid.plan(sc, noise=0.01).all_runs)
 
 
 @pytest.mark.slow
 @pytest.mark.expensive
 def test_planned_runs_deliver_the_promised_precision():
-    """Catalogue (22 runs) -> 3-run D-optimal plan -> identify over 30 seeds: sd at most 1.2 x the promise,
-    and identify lands on the linearised estimate whose spread the plan predicts (so a spread below the
-    prediction is the luck of 30 draws: with seeds 1-30 c_sf comes out at 0.63 x)."""
-    from rideid.design.validate import monte_carlo, spread_ratio
+    """Catalogue (22 runs) -> 3-run D-optimal plan -> identify on the planned runs: the promised spread
+    (seeds 1-30 of identify alone put c_sf at 0.63 x: the luck of 30 draws)."""
     sc = rideid.load_scenario(catalogue_path())
     res = rideid.plan(sc, noise=0.01, budget_runs=3)
-    truth = np.array([sc.truth[n] for n in res.names])
-    est, lin = monte_carlo(sc, res.selected_runs, res.names, 0.01, list(range(1, 31)), linearised=True)
-    st = spread_ratio(est, truth, res.selected.std_identify)
-    assert np.all(st["ratio"] < 1.2), dict(zip(res.names, st["ratio"]))
-    assert np.all(np.abs(est - lin) < 0.02 * st["sd"])
+    _assert_identify_spread_matches_plan(sc, res.selected_runs, res.selected)
 
 
 @pytest.mark.slow
 @pytest.mark.expensive
-@pytest.mark.xfail(strict=True, reason="open (issue 18): over seeds 1-30 identify's spread on the van is "
-                   "1.42x the predicted spread for a, 1.23x for m_uf and c_sf (the built-in car: 0.86-1.12)")
 def test_monte_carlo_on_a_van_of_our_own(tmp_path):
-    """Another car than the built-in one (the 2.45 t van: other geometry, rates, tire radius), 1 % noise,
-    ten runs, 30 seeds: identify's spread within 20 % of the plan's prediction for every parameter."""
+    """Another car than the built-in one (the 2.45 t van: other geometry, rates, tire radius), ten runs:
+    identify's spread is the plan's prediction. Seeds 1-30 of identify alone give a 1.42 x, m_uf 1.23 x,
+    c_sf 1.23 x (seeds 30 and 1 put a at +3.4 and -2.6 sd); seeds 1-1000 of the same estimator 0.96-1.03 x."""
     from conftest import van_scenario
 
-    _assert_identify_spread_matches_plan(van_scenario(tmp_path))
+    sc = van_scenario(tmp_path)
+    _assert_identify_spread_matches_plan(sc, _ids(sc), rideid.plan(sc, noise=0.01).all_runs)
+
 
 def test_extensions_in_truth_become_free_parameters(tmp_path):
     """A nominal car with anti-roll bars (SPEC §6): k_arf, k_arr are planned too; no roll on a washboard."""
