@@ -70,10 +70,10 @@ class BatchSimulator:
         bl = blocks_of(P, self.geom)
         radius = np.maximum(spectral_radius(bl["As"]), spectral_radius(bl["Aa"]))
         for gi, h in enumerate(self.h_groups):
-            rho = radius * h / 2
-            rho_chunk = rho.reshape(n_chunks, kernel.CHUNK).max(axis=1)
-            nt[gi] = [n_terms(float(r)) for r in rho_chunk]
-            # the series to the longest chunk's length; shorter chunks ignore the tail
+            # one series length for the whole call, set by its fastest car: the truncation is then a
+            # smooth function of the parameters within a call (finite-difference sensitivities through
+            # this call never see one candidate with a term more than its neighbour)
+            nt[gi] = n_terms(float(radius.max()) * h / 2)
             d = Discretized(P, self.geom, h, nterms=int(nt[gi].max()), blocks=bl)
             discs.append(d)
             for name in blocks:
