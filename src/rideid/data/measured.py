@@ -51,6 +51,7 @@ import numpy as np
 
 from ..errors import DataError, DataWarning
 from ..model.equations import CHANNELS
+from ..model.params import GRAVITY
 from .readers import FORMAT_NAMES, Signal, open_signals
 from .schema.channels import SI, TARGETS, UNITS, ChannelEntry, quantity, unit_factor
 from .schema.runfiles import RunData
