@@ -25,8 +25,8 @@ class ReadOnlyDict(dict):
     """A dict that refuses changes: the tables of a parsed, frozen file type.
 
     A subclass of ``dict`` (rather than :class:`types.MappingProxyType`) so
-    that it pickles (scenarios travel to Dask workers), deep-copies and
-    serialises to JSON/TOML like the dict it was read as. Build a changed
+    that it pickles, deep-copies and serialises to JSON/TOML like the dict
+    it was read as. Build a changed
     copy with ``{**d, key: value}`` and :func:`dataclasses.replace` on its owner.
     """
 
