@@ -20,7 +20,9 @@ module                     format
 
 ``[[tracks]]`` tables are parsed by the track kinds themselves
 (:meth:`rideid.model.tracks.Track.from_table`: each kind knows its keys);
-study files by :mod:`rideid.studies.spec`. This package imports only
+study files by :mod:`rideid.studies.spec`. The loaders that add the physics
+checks (:mod:`rideid.data.checks`) sit one level up: :func:`rideid.load_scenario`
+(:mod:`rideid.data.scenario`) and :func:`rideid.load_dataset` (:mod:`rideid.data.dataset`). This package imports only
 :mod:`rideid.errors`, :mod:`rideid.csvio` and :mod:`rideid.model`; the
 physics and IO code imports from it, never the other way.
 """
