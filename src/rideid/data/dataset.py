@@ -8,7 +8,7 @@ from pathlib import Path
 
 from . import checks
 from ..errors import DataError, ScaleError
-from .schema import Manifest, RunData, load_manifest, read_run_csv
+from .schema import DatasetManifest, RunData, load_manifest, read_run_csv
 from ..model.params import EXT_NAMES, EXTRA_KNOWN, MASS_COUNT, NAMES, Geometry, nominal_car, total_mass
 
 
@@ -18,7 +18,8 @@ class Dataset:
 
     Attributes
     ----------
-    manifest : Manifest
+    manifest : DatasetManifest
+        The parsed ``dataset.toml`` (frozen).
     data : dict run id -> RunData
         Model-ready data: uniform time relative to the run's start (the
         front axle at x = 0), SI channels.
@@ -27,7 +28,7 @@ class Dataset:
         preprocessing); SPEC §3 CSVs taken as they are have no entry.
     """
 
-    manifest: Manifest
+    manifest: DatasetManifest
     data: dict[str, RunData]
     measured: dict = field(default_factory=dict)
     #: what the data checks found (:mod:`rideid.data.checks`); errors never get this far
