@@ -202,11 +202,3 @@ def test_series_length_meets_its_stated_tolerance(rng, fs):
         assert (err <= 100 * TOL * rms + 1e-14).all(), (table["kind"], N, (err / rms).max())
         shorter = simulate_reference(P, G, run, disc=Discretized(P, G, run.h, nterms=N - 2))
         assert np.sqrt(np.mean((shorter - ref) ** 2, axis=1)).max() > err.max()  # the terms matter
-
-
-def test_generated_kernel_is_up_to_date():
-    """The compiled kernel's straight-line source is generated; the committed file must match its generator."""
-    from pathlib import Path
-
-    from rideid.model import kernel_source
-    assert Path(kernel_source.TARGET).read_text() == kernel_source.generate()

@@ -35,7 +35,7 @@ import numba
 import numpy as np
 from numba.core import config as _numba_config
 
-from .kernel_source import LANES, N_COEF, N_MAX_K, OFFSETS, PER_TERM
+from .kernel_source import LANES, N_COEF, N_MAX_K, OFFSETS, PER_TERM, run_chunks_function
 
 #: Candidates per chunk (the kernel pads a population to whole chunks).
 CHUNK = LANES
@@ -63,9 +63,7 @@ def _slp_vectoriser():
 
 
 def _kernel():
-    from . import kernel_unrolled
-
-    fn = kernel_unrolled.run_chunks
+    fn = run_chunks_function()
     if not fn.signatures:
         with _slp_vectoriser():
             fn.compile(_SIGNATURE)
