@@ -1,4 +1,4 @@
-"""Source generator of the compiled kernel (:mod:`rideid.model.kernel_unrolled`).
+"""Source generator of the compiled kernel's driver (used by :mod:`rideid.model.kernel`).
 
 The kernel integrates :data:`LANES` candidate cars side by side. Written as
 loops over small matrices, LLVM sees stores that may alias the coefficient
