@@ -144,3 +144,19 @@ def test_a_dataset_manifest_round_trips_through_its_toml_document(default_scenar
     assert dataclasses.replace(back, tracks=man.tracks) == man
     assert back.is_measured(back.runs[1]) and back.runs[0].options["window"] == (0.5, 9.0)
     assert back.channel_map["roll_rate"].sign == -1.0 and back.csv_options.decimal == ","
+
+
+def test_a_loaded_dataset_cannot_be_changed(sim_dataset):
+    """identify and the report get a dataset nobody can change under them; the steps return new ones."""
+    import dataclasses
+
+    import pytest
+
+    import rideid
+    ds = rideid.load_dataset(sim_dataset)
+    with pytest.raises(dataclasses.FrozenInstanceError):
+        ds.findings = ()
+    with pytest.raises(TypeError, match="read-only"):
+        ds.data["T_LL"] = None
+    other = ds.with_data(dict(ds.data))
+    assert other is not ds and other.data == ds.data
