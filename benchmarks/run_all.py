@@ -9,6 +9,7 @@ sys.path.insert(0, str(Path(__file__).parent))
 import bench_cost  # noqa: E402
 import bench_identify  # noqa: E402
 import bench_jade  # noqa: E402
+import bench_kernel  # noqa: E402
 import bench_model_auto  # noqa: E402
 import bench_study  # noqa: E402
 
@@ -40,7 +41,7 @@ def weights_study(out=sys.stdout):
 def main():
     out = Path("bench-out")
     out.mkdir(exist_ok=True)
-    for name, mod, kw in (("cost", bench_cost, {}), ("identify", bench_identify, {}), ("jade", bench_jade, {}),
+    for name, mod, kw in (("kernel", bench_kernel, {}), ("cost", bench_cost, {}), ("identify", bench_identify, {}), ("jade", bench_jade, {}),
                           ("model_auto", bench_model_auto, {}), ("study", bench_study, {"argv": []})):
         with open(out / f"{name}.md", "w") as f:
             mod.main(out=Tee(sys.stdout, f), **kw)

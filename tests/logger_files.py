@@ -12,7 +12,7 @@ from __future__ import annotations
 import numpy as np
 
 from rideid.model.batch import BatchSimulator
-from rideid.data.schema import Manifest, RunSpec, write_toml
+from rideid.data.schema import DatasetManifest, RunSpec, write_toml
 from rideid.model.equations import CHANNELS
 from rideid.model.params import as_vector
 from rideid.model.simulate import prepare_run
@@ -172,7 +172,7 @@ def write_logger_dataset(sc, raw, out, fmt="mf4", preprocess=None, runs_extra=No
         wob = (wobbles or {}).get(run.id)
         WRITERS[fmt](f, logger_channels(t, Y, gravity, wob, offset, distance))
         runs.append(RunSpec(run.id, run.track, None if wob else run.speed, file=f"runs/{run.id}.{fmt}"))
-    doc = Manifest(sc.path, sc.name, sc.geometry, sc.known, sc.bounds, sc.tracks, runs).to_dataset_doc()
+    doc = DatasetManifest(**{**sc.shared(), "runs": runs, "extensions": None}).to_dataset_doc()
     cmap = channel_map()
     if fmt in ("csv", "parquet"):
         cmap["time"] = {"name": "Time", "unit": "s"}

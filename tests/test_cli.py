@@ -133,7 +133,7 @@ def test_simulate_all_kinds_matches_independent_fine_step(scenario_file, tmp_pat
     shutil.copytree(out, moved)
     import rideid
     assert len(rideid.load_dataset(moved).runs) == 5
-    from rideid.data.schema import load_scenario
+    from rideid.data.scenario import load_scenario
     sc = load_scenario(scenario_file)
     P = np.array([DEFAULT_CAR[n] for n in DEFAULT_CAR])
     for run in sc.runs:

@@ -14,10 +14,11 @@ from rideid.model.equations import (CHANNELS, CORNER_TO_DECOMPOSED, blocks, deco
                                     state_space)
 from rideid.model.params import (ALL_NAMES, DEFAULT_CAR, DEFAULT_GEOMETRY, EXT_NAMES, GROUPS, INDEX, NAMES,
                                  as_vector, check_parameters, full_rows)
-from rideid.model.simulate import RunInput, prepare_run, simulate_lsim, simulate_reference
+from rideid.model.simulate import RunInput, prepare_run, simulate_reference
 from rideid.model.tracks import Track
 from test_model import assert_blocks_have_the_full_eigenvalues
-from test_simulate import FS, TRACKS, rel_rms  # the same three tracks and error measure
+# the same three tracks, error measure and cross-checks as the base model's
+from test_simulate import FS, TRACKS, assert_kernel_matches_reference, assert_scale_invariant, lsim_error, rel_rms
 
 G = DEFAULT_GEOMETRY
 #: the built-in car with an SUV-like set of extensions
@@ -181,15 +182,7 @@ def test_quarter_car_with_tire_damping_matches_transfer_function(f_hz):
 
 @pytest.mark.parametrize("kind", ["herringbone", "chassis_twist"])  # the washboard: quarter-car test
 def test_extended_car_matches_fine_step_lsim(kind):
-    table, V = TRACKS[kind]
-    tr = Track.from_table(table, "t")
-    t = np.arange(int(2.0 * FS) + 1) / FS
-    run = prepare_run(tr, G, V, t)
-    y = simulate_reference(PX[None], G, run)[0]
-    ref = simulate_lsim(PX, G, tr, V, t, upsample=100)
-    err = rel_rms(y, ref)
-    excited = np.sqrt(np.mean(ref ** 2, axis=0)) > 1e-9
-    assert excited.sum() >= 9
+    err, excited, ref, run = lsim_error(PX, kind, 2.0, upsample=100)
     # The reference's envelope() searches the contact on a grid that moves
     # with the wheel, so where the disc rolls over a convex corner (where a
     # herringbone wave ends on flat road) it follows the wave's slope for
@@ -208,33 +201,19 @@ def test_kernel_matches_reference_with_extensions(rng):
     runs = [prepare_run(Track.from_table(TRACKS[k][0], "t"), G, TRACKS[k][1], np.arange(401) / FS)
             for k in ("herringbone", "chassis_twist")]
     runs.append(prepare_run(Track.from_table(TRACKS["washboard"][0], "t"), G, 7.0, np.arange(301) / 500.0))
-    sim = BatchSimulator(G, runs)
     P = PX * np.exp(rng.normal(0, 0.3, (19, 16)))
     P[:, INDEX["a"]] = np.clip(P[:, INDEX["a"]], 0.5, 2.0)
     P[::3, 12:14] = 0.0  # some without bars
     P[1::3, 14:] = 0.0  # some without tire damping
-    out_k = sim.outputs(P)
-    out_r = sim.outputs_reference(P)
-    for a, b in zip(out_k, out_r):
-        np.testing.assert_allclose(a, b, rtol=1e-9, atol=1e-9 * np.abs(b).max())
-    Y = np.concatenate([o[0] for o in out_r]) + rng.normal(0, 0.1, (sim.n_samples, 10))
-    W = rng.random((len(runs), 10))
-    np.testing.assert_allclose(sim.errors(P, Y, W), sim.errors_reference(P, Y, W), rtol=1e-9)
+    assert_kernel_matches_reference(runs, P, rng)
 
 
 def test_scale_invariance_with_all_sixteen():
-    table, V = TRACKS["herringbone"]
-    run = prepare_run(Track.from_table(table, "t"), G, V, np.arange(501) / FS)
-    P = np.tile(PX, (3, 1))
-    for i, s in enumerate((1.0, 2.5, 0.37)):
-        P[i] = PX * np.where(np.arange(16) == INDEX["a"], 1.0, s)
-    y = simulate_reference(P, G, run)
-    np.testing.assert_allclose(y[1], y[0], rtol=1e-9, atol=1e-12 * np.abs(y[0]).max())
-    np.testing.assert_allclose(y[2], y[0], rtol=1e-9, atol=1e-12 * np.abs(y[0]).max())
+    run, y0 = assert_scale_invariant(PX)
     # scaling only the twelve is a different car
     Q = PX * np.where(np.arange(16) == INDEX["a"], 1.0, 2.5)
     Q[12:] = PX[12:]
-    assert rel_rms(simulate_reference(Q[None], G, run)[0], y[0]).max() > 1e-3
+    assert rel_rms(simulate_reference(Q[None], G, run)[0], y0).max() > 1e-3
 
 
 
@@ -441,6 +420,7 @@ def test_extended_model_recovers_a_car_with_bars_and_tire_damping(tmp_path):
     """Issue 15 acceptance: the van of the test suite with anti-roll bars and
     tire damping, 2 % white noise, total mass known: the extended model
     recovers the twelve within 0.5 % and the four extensions within 3 %."""
+    import dataclasses
     import warnings
 
     import rideid
@@ -448,8 +428,7 @@ def test_extended_model_recovers_a_car_with_bars_and_tire_damping(tmp_path):
     from rideid.data.scenario import simulate_manifest, write_dataset
     sc = van_scenario(tmp_path)
     truth_ext = {"k_arf": 22000.0, "k_arr": 9000.0, "c_tf": 250.0, "c_tr": 300.0}
-    sc.truth.update(truth_ext)
-    sc.extensions = tuple(GROUPS)
+    sc = dataclasses.replace(sc, truth={**sc.truth, **truth_ext}, extensions=tuple(GROUPS))
     with warnings.catch_warnings():
         warnings.simplefilter("error")
         data, lifts = simulate_manifest(sc, noise=0.02, seed=5)

@@ -161,7 +161,7 @@ def test_report_shows_the_data_section(tmp_path, default_scenario, raw):
     doc["known"] = {"total_mass": 1093.3, "I_xx": 207.3, "a": 1.156}  # three runs: help the search a little
     (path / "dataset.toml").write_text(tomli_w.dumps(doc))
     assert main(["identify", str(path), "--out", str(tmp_path / "out"), "--quiet", "--seed", "2",
-                 "--generations", "60"]) == 0
+                 "--generations", "60", "--model", "base"]) == 0  # the data section, not the model choice
     res = json.loads((tmp_path / "out" / "result.json").read_text())
     assert abs(res["preprocessing"]["H_HH"]["start"]["value"] - OFFSET) < 1e-4
     html = (tmp_path / "out" / "report.html").read_text()

@@ -20,7 +20,7 @@ from .estimate.cost import CostFunction, ParameterSpace
 from .data.dataset import Dataset, load_dataset
 from .design import PlanResult, plan
 from .errors import ArgumentError, DataError, DataWarning, ModelValidityWarning, RideidError, ScaleError
-from .data.schema import Manifest, load_scenario, load_truth
+from .data.schema import DatasetManifest, Manifest, Scenario, load_truth
 from .estimate.identify import identify
 from .estimate.result import History, IdentificationResult
 from .estimate.result import load as load_result
@@ -30,7 +30,7 @@ from .estimate.jade import JadeSolver, jade
 from .model.equations import CHANNELS, modal_summary
 from .model.params import DEFAULT_CAR, DEFAULT_GEOMETRY, NAMES, UNITS, Geometry
 from .model.params import ALL_NAMES, EXT_NAMES, GROUPS
-from .data.scenario import default_scenario, default_scenario_path, simulate_manifest, write_dataset
+from .data.scenario import default_scenario, default_scenario_path, load_scenario, simulate_manifest, write_dataset
 from .model.tracks import Track
 from .studies import StudyResult, load_study, study
 
@@ -46,6 +46,6 @@ __all__ = [
     "Track", "default_scenario", "default_scenario_path", "identify", "jade", "load_dataset", "load_scenario",
     "load_truth", "modal_summary", "plan", "PlanResult", "simulate_manifest", "write_dataset", "__version__",
     "History", "SensitivityMaps", "load_result", "score", "sensitivity_maps",
-    "ALL_NAMES", "EXT_NAMES", "GROUPS",
+    "ALL_NAMES", "EXT_NAMES", "GROUPS", "Scenario", "DatasetManifest",
     "StudyResult", "load_study", "study",
 ]

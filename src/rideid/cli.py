@@ -203,9 +203,8 @@ def _parser() -> argparse.ArgumentParser:
 
 def cmd_simulate(args, out=None):
     out = out or sys.stdout
-    from .data.schema import load_scenario
     from .model.equations import format_modal_summary, modal_summary
-    from .data.scenario import simulate_manifest, write_dataset
+    from .data.scenario import load_scenario, simulate_manifest, write_dataset
 
     sc = load_scenario(args.scenario)
     prog = Progress(args.quiet)
@@ -214,7 +213,7 @@ def cmd_simulate(args, out=None):
     prog.done()
     engine = args.engine
     if engine == "mujoco":
-        from .verify.hifi import HifiProperties
+        from .data.schema import HifiProperties
         engine += f"; [hifi] {(sc.hifi or HifiProperties()).describe()}" + ("; raw sensor readings" if args.raw else "")
     write_dataset(sc, data, args.out, raw=args.raw,
                   comment=f"simulated by rideid {__version__} from {Path(args.scenario).name}"

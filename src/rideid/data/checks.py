@@ -55,15 +55,14 @@ import numpy as np
 
 from ..model.equations import CHANNELS
 from ..model.params import EXT_NAMES
+from .schema.channels import SI, UNITS, quantity
 
 G0 = 9.80665
 DEG = 180.0 / math.pi
 
 #: severities, in order
 ERROR, WARNING = "error", "warning"
-#: the checks a dataset may relax (``[checks]``): each "error" (default), "warn" or "off"
-CHECK_NAMES = ("wiring", "track")
-CHECK_LEVELS = ("error", "warn", "off")
+#: the checks a dataset may relax (``[checks]``) are named in rideid.data.schema.manifest (CHECK_NAMES)
 
 #: correlation with the nominal car below which a run does not match its track and speed
 MATCH_MIN = 0.5
@@ -145,7 +144,7 @@ def check_numbers(man) -> list[Finding]:
 
     Parameters
     ----------
-    man : rideid.data.schema.Manifest
+    man : rideid.data.schema.Scenario or rideid.data.schema.DatasetManifest
 
     Returns
     -------
@@ -603,13 +602,11 @@ def _map_entries(ds, rid) -> dict:
     if mr is not None:
         return {c: dict(name=e["source"], unit=e["unit"], sign=e["sign"], scale=e["scale"], file_unit=e.get("file_unit"))
                 for c, e in mr.record["channels"].items() if c in CHANNELS}
-    from .measured import SI, quantity
     return {c: dict(name=c, unit=SI[quantity(c)], sign=1, scale=1.0) for c in ds.data[rid].channels}
 
 
 def _entry_factors(entries: dict) -> np.ndarray:
     """(10,) factor (unit x sign x scale) each SPEC channel was read with (1 where missing)."""
-    from .measured import UNITS, quantity
     F = np.ones(len(CHANNELS))
     for i, c in enumerate(CHANNELS):
         e = entries.get(c)
@@ -621,7 +618,6 @@ def _entry_factors(entries: dict) -> np.ndarray:
 
 def fix_entries(fix: dict, entries: dict) -> list[str]:
     """``[channels]`` lines (TOML) that apply a wiring fix to the map the run was read with."""
-    from .measured import UNITS, quantity
     lines = []
     for c, e in fix.items():
         base = entries.get(e["source"])
@@ -829,4 +825,4 @@ def bound_findings(details: dict, fraction: float = BOUND_FRACTION) -> list[Find
 
 __all__ = ["Finding", "check_dataset", "enforce", "check_reach", "check_numbers", "check_coverage", "rigid_body_scores", "assignment", "wiring_fix",
            "corrected", "describe_fix", "match_finding", "speed_candidates", "bound_findings", "PLAUSIBLE",
-           "MATCH_MIN", "CHECK_NAMES"]
+           "MATCH_MIN"]

@@ -8,17 +8,19 @@ from pathlib import Path
 
 from . import checks
 from ..errors import DataError, ScaleError
-from .schema import Manifest, RunData, load_manifest, read_run_csv
+from .schema import DatasetManifest, ReadOnlyDict, RunData, load_manifest, read_run_csv
 from ..model.params import EXT_NAMES, EXTRA_KNOWN, MASS_COUNT, NAMES, Geometry, nominal_car, total_mass
 
 
-@dataclass
+@dataclass(frozen=True)
 class Dataset:
-    """A dataset (SPEC §3): manifest and the data of every run.
+    """A dataset (SPEC §3): manifest and the data of every run. Immutable: the steps that
+    change a dataset (:func:`align_starts`, :meth:`with_starts`, :meth:`with_data`) return a new one.
 
     Attributes
     ----------
-    manifest : Manifest
+    manifest : DatasetManifest
+        The parsed ``dataset.toml`` (frozen).
     data : dict run id -> RunData
         Model-ready data: uniform time relative to the run's start (the
         front axle at x = 0), SI channels.
@@ -27,11 +29,17 @@ class Dataset:
         preprocessing); SPEC §3 CSVs taken as they are have no entry.
     """
 
-    manifest: Manifest
+    manifest: DatasetManifest
     data: dict[str, RunData]
     measured: dict = field(default_factory=dict)
     #: what the data checks found (:mod:`rideid.data.checks`); errors never get this far
-    findings: list = field(default_factory=list)
+    findings: tuple = ()
+
+    def __post_init__(self):
+        # read-only tables: a dataset handed to identify or a report cannot be changed under them
+        object.__setattr__(self, "data", ReadOnlyDict(self.data))
+        object.__setattr__(self, "measured", ReadOnlyDict(self.measured))
+        object.__setattr__(self, "findings", tuple(self.findings))
 
     @property
     def geometry(self) -> Geometry:
@@ -185,9 +193,9 @@ def align_starts(ds: Dataset, starts: dict[str, float] | None = None) -> Dataset
         data[rid] = mr.run_data(s)
     ds = Dataset(man, {r.id: data[r.id] for r in man.runs}, measured)
     # the one hook for the physics checks (rideid.data.checks): every run conditioned and aligned
-    ds.findings = checks.check_dataset(ds)
-    checks.enforce(ds.findings, f"{man.path}: ")
-    return ds
+    findings = checks.check_dataset(ds)
+    checks.enforce(findings, f"{man.path}: ")
+    return replace(ds, findings=findings)
 
 
 def prepare_inputs(ds: Dataset) -> list:

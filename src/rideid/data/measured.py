@@ -50,28 +50,12 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import DataError, DataWarning
-from ..model.equations import CHANNEL_KIND, CHANNELS
+from ..model.equations import CHANNELS
 from ..model.params import GRAVITY
-from .readers import FORMAT_NAMES, CsvOptions, Signal, open_signals
+from .readers import FORMAT_NAMES, Signal, open_signals
+from .schema.channels import SI, TARGETS, UNITS, ChannelEntry, quantity, unit_factor
+from .schema.runfiles import RunData
 
-
-#: accepted units (lower case, spaces removed) -> factor to SI, per quantity
-UNITS = {
-    "acceleration": {"m/s^2": 1.0, "m/s2": 1.0, "m/s²": 1.0, "m/s/s": 1.0, "g": GRAVITY},
-    "rate": {"rad/s": 1.0, "deg/s": math.pi / 180, "°/s": math.pi / 180},
-    "speed": {"m/s": 1.0, "km/h": 1 / 3.6, "kph": 1 / 3.6, "mph": 0.44704},
-    "distance": {"m": 1.0, "km": 1000.0},
-    "time": {"s": 1.0, "ms": 1e-3, "us": 1e-6, "µs": 1e-6, "ns": 1e-9},
-}
-SI = {"acceleration": "m/s^2", "rate": "rad/s", "speed": "m/s", "distance": "m", "time": "s"}
-EXTRA_TARGETS = ("time", "speed", "distance")
-TARGETS = CHANNELS + EXTRA_TARGETS
-
-PREPROCESS_KEYS = ("gravity_included", "remove_bias", "lead_in", "fs", "start", "window", "pre_roll")
-#: keys a run may set for itself (the rest are dataset-wide)
-RUN_PREPROCESS_KEYS = ("gravity_included", "remove_bias", "lead_in", "start", "window", "pre_roll")
-CSV_KEYS = ("delimiter", "decimal", "skip_rows")
-CHANNEL_KEYS = ("name", "unit", "sign", "scale")
 
 DEFAULT_FS = 200.0
 DEFAULT_LEAD_IN = 1.0
@@ -81,135 +65,6 @@ AUTO_MARGIN = 0.05
 FILTER_ORDER = 8
 FILTER_CUTOFF = 0.4  # x fs
 UPSAMPLE_TO = 5.0  # x fs
-
-
-def quantity(target: str) -> str:
-    if target in CHANNELS:
-        return "rate" if CHANNEL_KIND[target] == "rate" else "acceleration"
-    return target
-
-
-def unit_factor(unit: str, target: str, where: str) -> float:
-    q = quantity(target)
-    key = unit.strip().replace(" ", "").lower()
-    if key not in UNITS[q]:
-        raise DataError(f"{where}: unknown unit '{unit}' for {target} ({q}); use one of "
-                        f"{', '.join(UNITS[q])}")
-    return UNITS[q][key]
-
-
-# ---------------------------------------------------------------------------
-# Configuration
-
-@dataclass
-class ChannelEntry:
-    """Where a SPEC channel (or time, speed, distance) comes from in the file."""
-
-    name: str
-    unit: str | None = None
-    sign: float = 1.0
-    scale: float = 1.0
-
-    def to_table(self):
-        d = {"name": self.name}
-        if self.unit is not None:
-            d["unit"] = self.unit
-        if self.sign != 1:
-            d["sign"] = int(self.sign)
-        if self.scale != 1:
-            d["scale"] = self.scale
-        return d
-
-
-def checked_items(tab, where: str, allowed, what: str = "", unknown: str = "unknown key '{key}'; allowed: {allowed}"):
-    """``(key, value, where key)`` of a TOML table, after checking it is a table with only ``allowed`` keys."""
-    if not isinstance(tab, dict):
-        raise DataError(f"{where} must be a table{what}")
-    for k in tab:
-        if k not in allowed:
-            raise DataError(f"{where}: " + unknown.format(key=k, allowed=", ".join(allowed)))
-    return [(k, v, f"{where} {k}") for k, v in tab.items()]
-
-
-def parse_channel_map(tab, where: str) -> dict[str, ChannelEntry]:
-    out = {}
-    for target, v, w in checked_items(tab, where, TARGETS, ": SPEC channel = \"file channel\" or { name, unit, sign, scale }",
-                                      "unknown channel '{key}'; map file channels to {allowed}"):
-        if isinstance(v, str):
-            v = {"name": v}
-        if not isinstance(v, dict):
-            raise DataError(f"{w}: expected a file channel name or a table {{ name, unit, sign, scale }}")
-        for k in v:
-            if k not in CHANNEL_KEYS:
-                raise DataError(f"{w}: unknown key '{k}'; allowed: {', '.join(CHANNEL_KEYS)}")
-        name = v.get("name")
-        if not isinstance(name, str) or not name:
-            raise DataError(f"{w}: missing key 'name' (the channel's name in the file)")
-        unit = v.get("unit")
-        if unit is not None:
-            if not isinstance(unit, str):
-                raise DataError(f"{w}: unit must be a string")
-            unit_factor(unit, target, f"{w} unit")
-        sign = v.get("sign", 1)
-        if sign not in (1, -1) or isinstance(sign, bool):
-            raise DataError(f"{w}: sign must be 1 or -1, got {sign!r}")
-        scale = v.get("scale", 1.0)
-        if isinstance(scale, bool) or not isinstance(scale, (int, float)) or not math.isfinite(scale) or scale == 0:
-            raise DataError(f"{w}: scale must be a finite non-zero number, got {scale!r}")
-        if target in ("time", "distance", "speed") and sign != 1:
-            raise DataError(f"{w}: sign is for measured channels only")
-        out[target] = ChannelEntry(name, unit, float(sign), float(scale))
-    return out
-
-
-def _window(v, w):
-    if (not isinstance(v, list) or len(v) != 2
-            or not all(isinstance(x, (int, float)) and not isinstance(x, bool) and math.isfinite(x) for x in v)):
-        raise DataError(f"{w}: expected [from, to] in seconds of file time")
-    if not v[0] < v[1]:
-        raise DataError(f"{w}: from ({v[0]}) must be less than to ({v[1]})")
-    return (float(v[0]), float(v[1]))
-
-
-def parse_preprocess(tab, where: str, keys=PREPROCESS_KEYS) -> dict:
-    out = {}
-    for k, v, w in checked_items(tab, where, keys):
-        if k in ("gravity_included", "remove_bias"):
-            if not isinstance(v, bool):
-                raise DataError(f"{w}: expected true or false")
-            out[k] = v
-        elif k in ("lead_in", "window"):
-            out[k] = _window(v, w)
-        elif k == "start":
-            if v == "auto":
-                out[k] = "auto"
-            elif isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v):
-                out[k] = float(v)
-            else:
-                raise DataError(f"{w}: expected a time in seconds of file time, or \"auto\"")
-        elif k in ("fs", "pre_roll"):
-            if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) or v < 0 \
-                    or (k == "fs" and v == 0):
-                raise DataError(f"{w}: expected a {'positive' if k == 'fs' else 'non-negative'} number")
-            out[k] = float(v)
-    return out
-
-
-def parse_csv_options(tab, where: str) -> CsvOptions:
-    checked_items(tab, where, CSV_KEYS)
-    opts = CsvOptions()
-    for k in ("delimiter", "decimal"):
-        if k in tab:
-            v = tab[k]
-            if not isinstance(v, str) or len(v) != 1:
-                raise DataError(f"{where} {k}: expected one character, got {v!r}")
-            setattr(opts, k, v)
-    if "skip_rows" in tab:
-        v = tab["skip_rows"]
-        if not isinstance(v, int) or isinstance(v, bool) or v < 0:
-            raise DataError(f"{where} skip_rows: expected a non-negative integer")
-        opts.skip_rows = v
-    return opts
 
 
 # ---------------------------------------------------------------------------
@@ -282,29 +137,6 @@ def _longest_run(mask: np.ndarray) -> int:
 
 # ---------------------------------------------------------------------------
 # A measured run
-
-@dataclass
-class RunData:
-    """Measured data of one run: uniform time and the channels present."""
-
-    time: np.ndarray
-    channels: dict[str, np.ndarray]
-    #: ``distance(t)``: front-axle distance past x = 0 at model time t (varying speed); None for constant speed
-    distance: object = None
-
-    @property
-    def fs(self) -> float:
-        return 1.0 / float(self.time[1] - self.time[0])
-
-    def matrix(self) -> np.ndarray:
-        """(n, 10) in CHANNELS order, NaN where a channel is missing."""
-        Y = np.full((self.time.size, len(CHANNELS)), np.nan)
-        for i, c in enumerate(CHANNELS):
-            if c in self.channels:
-                Y[:, i] = self.channels[c]
-        return Y
-
-
 
 @dataclass
 class MeasuredRun:
@@ -815,5 +647,4 @@ def estimate_start(mr: MeasuredRun, P, geom, track, s0: float | None = None, ref
     return s, rho
 
 
-__all__ = ["MeasuredRun", "load_measured_run", "estimate_start", "parse_channel_map", "parse_preprocess",
-           "parse_csv_options", "UNITS", "ChannelEntry"]
+__all__ = ["MeasuredRun", "RunData", "load_measured_run", "estimate_start"]

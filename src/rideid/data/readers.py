@@ -39,6 +39,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import DataError
+from .schema.channels import CsvOptions
 
 FORMATS = {
     ".csv": "csv", ".txt": "csv",
@@ -58,15 +59,6 @@ class Signal:
     time: np.ndarray
     values: np.ndarray
     unit: str | None = None
-
-
-@dataclass
-class CsvOptions:
-    """``[csv]`` options: ``delimiter`` and ``decimal`` (detected when ``None``), ``skip_rows``."""
-
-    delimiter: str | None = None
-    decimal: str | None = None
-    skip_rows: int = 0
 
 
 def file_format(path: Path) -> str:

@@ -1,4 +1,7 @@
-"""Scenarios: the built-in car and tracks, and scenario -> dataset simulation."""
+"""Scenarios: loading one, the built-in car and tracks, and scenario -> dataset simulation.
+
+The scenario file format itself is :mod:`rideid.data.schema.manifest`.
+"""
 
 from __future__ import annotations
 
@@ -11,7 +14,9 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import ArgumentError, DataWarning, ModelValidityWarning
-from .schema import Manifest, RunSpec, atomic_output, load_scenario, write_run_csv, write_toml
+from . import checks
+from .schema import (ChannelEntry, DatasetManifest, RunSpec, Scenario, atomic_output, parse_scenario, read_toml,
+                     write_run_csv, write_toml)
 from .noise import sensor_noise
 from ..model.equations import CHANNELS, static_corner_loads
 from ..model.params import CORNERS, EXT_NAMES, INDEX, NAMES, as_vector, full_rows
@@ -23,7 +28,31 @@ def default_scenario_path() -> Path:
     return Path(str(resources.files("rideid.data") / "default_scenario.toml"))
 
 
-def default_scenario() -> Manifest:
+def load_scenario(path) -> Scenario:
+    """Read and validate a scenario file (SPEC §3, §6), its numbers checked for plausibility.
+
+    Parameters
+    ----------
+    path : str or Path
+
+    Returns
+    -------
+    Scenario
+        Frozen; derive another with :func:`dataclasses.replace`.
+
+    Raises
+    ------
+    DataError
+        Naming the file and the key at fault.
+    """
+    path = Path(path)
+    sc = parse_scenario(read_toml(path), path)
+    checks.enforce(checks.check_numbers(sc))
+    return sc
+
+
+def default_scenario() -> Scenario:
+    """The built-in scenario (:func:`default_scenario_path`), loaded."""
     return load_scenario(default_scenario_path())
 
 
@@ -74,7 +103,7 @@ def lift_offs(P, geom, run_id, run_input, states) -> list[LiftOff]:
 RAW_LEAD_IN = 1.0
 
 
-def simulate_manifest(sc: Manifest, noise: float = 0.0, seed: int | None = None, progress=None,
+def simulate_manifest(sc: Scenario, noise: float = 0.0, seed: int | None = None, progress=None,
                       engine: str = "rideid", raw: bool = False, noise_ar1: float = 0.0):
     """Simulate every run of a scenario with its ``[truth]`` parameters.
 
@@ -140,7 +169,13 @@ def simulate_manifest(sc: Manifest, noise: float = 0.0, seed: int | None = None,
     return out, lifts
 
 
-def write_dataset(sc: Manifest, data: dict, out_dir, comment: str | None = None, raw: bool = False):
+def raw_names() -> tuple[str, ...]:
+    """The logger-style names of the MuJoCo car's raw sensor channels (:data:`rideid.verify.hifi.RAW_NAMES`)."""
+    from ..verify.hifi import RAW_NAMES  # the MuJoCo module; loaded only when raw data are written
+    return RAW_NAMES
+
+
+def write_dataset(sc: Scenario, data: dict, out_dir, comment: str | None = None, raw: bool = False):
     """Write ``dataset.toml``, ``runs/<id>.csv`` and ``truth.toml`` (atomically).
 
     ``raw``: the runs are raw MuJoCo sensor readings (:func:`simulate_manifest`
@@ -153,20 +188,14 @@ def write_dataset(sc: Manifest, data: dict, out_dir, comment: str | None = None,
         runs = []
         for run in sc.runs:
             t, Y = data[run.id]
-            if raw:
-                from ..verify.hifi import RAW_NAMES
-                write_run_csv(tmp / "runs" / f"{run.id}.csv", t, Y, RAW_NAMES)
-            else:
-                write_run_csv(tmp / "runs" / f"{run.id}.csv", t, Y, CHANNELS)
+            write_run_csv(tmp / "runs" / f"{run.id}.csv", t, Y, raw_names() if raw else CHANNELS)
             runs.append(RunSpec(run.id, run.track, run.speed, file=f"runs/{run.id}.csv"))
-        man = Manifest(sc.path, sc.name, sc.geometry, sc.known, sc.bounds, sc.tracks, runs,
-                       extensions=sc.extensions)
+        logged = {}
         if raw:
-            from ..verify.hifi import RAW_NAMES
-            from .measured import ChannelEntry
-            man.channel_map = {c: ChannelEntry(n, "rad/s" if c.endswith("rate") else "m/s^2")
-                               for c, n in zip(CHANNELS, RAW_NAMES)}
-            man.preprocess = {"gravity_included": True, "lead_in": (0.0, RAW_LEAD_IN), "start": RAW_LEAD_IN}
+            logged = dict(channel_map={c: ChannelEntry(n, "rad/s" if c.endswith("rate") else "m/s^2")
+                                       for c, n in zip(CHANNELS, raw_names())},
+                          preprocess={"gravity_included": True, "lead_in": (0.0, RAW_LEAD_IN), "start": RAW_LEAD_IN})
+        man = DatasetManifest(**{**sc.shared(), "runs": runs}, **logged)
         doc = man.to_dataset_doc()
         # measured road profiles travel with the dataset
         for tab, tr in zip(doc["tracks"], sc.tracks.values()):

@@ -16,7 +16,8 @@ import numpy as np
 from ..estimate.cost import ParameterSpace
 from ..model.params import GROUPS
 from ..errors import ArgumentError, DataError
-from ..data.schema import Manifest, load_scenario
+from ..data.scenario import load_scenario
+from ..data.schema import Scenario
 from .fisher import STEP, NoiseModel, Precision, messages, run_information, simulator, subset_precision
 from .select import Selector
 
@@ -295,7 +296,7 @@ def plan(scenario, *, noise=None, accel_density: float = 0.0, gyro_density: floa
 
     Parameters
     ----------
-    scenario : path or Manifest
+    scenario : path or Scenario
         A scenario (SPEC §3): ``[truth]`` is the nominal car, ``[[runs]]`` the
         candidate runs (``fs``, ``duration``), ``[known]`` the scale anchor.
     noise : float, optional
@@ -337,7 +338,7 @@ def plan(scenario, *, noise=None, accel_density: float = 0.0, gyro_density: floa
     -------
     PlanResult
     """
-    sc = scenario if isinstance(scenario, Manifest) else load_scenario(scenario)
+    sc = scenario if isinstance(scenario, Scenario) else load_scenario(scenario)
     if sc.truth is None:
         raise DataError(f"{sc.path}: a plan needs a scenario with a [truth] table (the nominal car)")
     if extensions is None:  # the scenario's [model], else the groups the nominal car has

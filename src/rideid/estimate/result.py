@@ -10,7 +10,8 @@ per JADE generation) and what the report renders (``modal``, ``maps``,
 ``preprocessing``).
 
 Files (docs/formats.md): ``result.json`` and ``history.csv`` in one folder.
-This module is the only place that writes or reads them.
+This module is the only place that writes or reads them; the checks of a
+result.json read back are :func:`rideid.data.schema.result.read_result_json`.
 """
 
 from __future__ import annotations
@@ -23,8 +24,8 @@ from pathlib import Path
 
 import numpy as np
 
+from ..data.schema.result import read_result_json
 from ..errors import DataError
-from ..model.params import NAMES
 from .sensitivity import SensitivityMaps
 
 COST_DEFINITION = ("equal-weight sum over runs of the per-channel energy-normalised squared error "
@@ -273,26 +274,6 @@ class IdentificationResult:
         out_dir = Path(out_dir)
         (out_dir / "result.json").write_text(json.dumps(self.to_dict(), indent=2, allow_nan=False) + "\n")
         self.history.write_csv(out_dir / "history.csv")
-
-
-def read_result_json(path) -> dict:
-    """``result.json`` as a dict, checked for every parameter's value; :class:`DataError` naming the file."""
-    given = Path(path)
-    path = given if given.suffix == ".json" else given / "result.json"
-    if not path.is_file():
-        raise DataError(f"{path}: file not found" if path is given else
-                        f"{path}: not found (is {given} an identification folder?)")
-    try:
-        doc = json.loads(path.read_text())
-    except (json.JSONDecodeError, UnicodeDecodeError) as e:
-        raise DataError(f"{path}: not valid JSON: {e}") from None
-    pars = doc.get("parameters") if isinstance(doc, dict) else None
-    if not isinstance(pars, dict):
-        raise DataError(f"{path}: missing key 'parameters'")
-    for n in NAMES:
-        if n not in pars or not isinstance(pars[n], dict) or "value" not in pars[n]:
-            raise DataError(f"{path}: parameters.{n}.value missing")
-    return doc
 
 
 def load(path) -> IdentificationResult:

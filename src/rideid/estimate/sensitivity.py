@@ -108,7 +108,7 @@ def sensitivity_maps(source, *, cost=None) -> SensitivityMaps:
 
     Parameters
     ----------
-    source : Dataset or Manifest
+    source : Dataset or Scenario
         A dataset: maps around the nominal car of its parameter space
         (:meth:`rideid.ParameterSpace.nominal`), over its measured channels.
         A scenario (a manifest with ``[truth]``): around the truth, all channels.

@@ -49,16 +49,27 @@ ANDREWS_BARTLETT = 1.1447
 #: first-order autocorrelations are clipped to this in the plug-in rule (a unit root has no finite bandwidth)
 RHO_MAX = 0.97
 
+#: the two arguments every estimator here takes, written once (``{residual_parameters}`` in their docstrings)
+RESIDUAL_PARAMETERS = """J : ndarray, shape (m, n)
+        Jacobian of the residuals at the optimum.
+    e : ndarray, shape (m,)
+        Residuals at the optimum."""
 
+
+def takes_residuals(f):
+    """Put :data:`RESIDUAL_PARAMETERS` into ``f``'s numpydoc Parameters section."""
+    if f.__doc__:  # None under python -OO
+        f.__doc__ = f.__doc__.replace("{residual_parameters}", RESIDUAL_PARAMETERS)
+    return f
+
+
+@takes_residuals
 def white_covariance(J, e) -> np.ndarray:
     """Covariance ``s^2 (J^T J)^-1`` assuming independent residuals of one variance.
 
     Parameters
     ----------
-    J : ndarray, shape (m, n)
-        Jacobian of the residuals at the optimum.
-    e : ndarray, shape (m,)
-        Residuals at the optimum.
+    {residual_parameters}
 
     Returns
     -------
@@ -150,13 +161,13 @@ class RobustCovariance:
     bandwidths: list
 
 
+@takes_residuals
 def run_scores(J, e, blocks) -> list[np.ndarray]:
     """Per-sample scores ``g_t = J_t^T e_t`` of each run.
 
     Parameters
     ----------
-    J : ndarray, shape (m, n)
-    e : ndarray, shape (m,)
+    {residual_parameters}
     blocks : sequence of (int, int)
         ``(n_time, n_channel)`` of each run; ``sum n_time * n_channel == m``.
 
@@ -179,15 +190,13 @@ def run_scores(J, e, blocks) -> list[np.ndarray]:
     return out
 
 
+@takes_residuals
 def hac_covariance(J, e, blocks, bandwidth: float | None = None) -> RobustCovariance:
     """Robust covariance: Bartlett HAC sandwich with runs as independent blocks (module docstring).
 
     Parameters
     ----------
-    J : ndarray, shape (m, n)
-        Jacobian of the residuals at the optimum.
-    e : ndarray, shape (m,)
-        Residuals at the optimum.
+    {residual_parameters}
     blocks : sequence of (int, int)
         ``(n_time, n_channel)`` of each run, in the residual vector's order.
     bandwidth : float, optional

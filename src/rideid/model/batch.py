@@ -15,6 +15,7 @@ from threadpoolctl import ThreadpoolController
 
 from . import kernel
 from .discretize import N_MAX, Discretized, n_terms, spectral_radius
+from .equations import blocks as blocks_of
 from .params import Geometry, column
 from .simulate import RunInput, initial_states, simulate_reference
 
@@ -61,37 +62,31 @@ class BatchSimulator:
     def _pack(self, P):
         P = np.atleast_2d(np.asarray(P, dtype=float))
         n = P.shape[0]
-        n_chunks = (n + kernel.CHUNK - 1) // kernel.CHUNK
+        n_chunks = n // kernel.CHUNK
         g = len(self.h_groups)
         nt = np.zeros((g, n_chunks), dtype=np.int64)
+        blocks = {name: [] for name in kernel.OFFSETS}
         discs = []
+        bl = blocks_of(P, self.geom)
+        radius = np.maximum(spectral_radius(bl["As"]), spectral_radius(bl["Aa"]))
         for gi, h in enumerate(self.h_groups):
-            d = Discretized(P, self.geom, h, nterms=N_MAX)  # full series; truncated per chunk below
-            rho = np.maximum(spectral_radius(d.As), spectral_radius(d.Aa)) * h / 2
-            for ch in range(n_chunks):
-                nt[gi, ch] = n_terms(float(rho[ch * kernel.CHUNK:(ch + 1) * kernel.CHUNK].max()))
+            # one series length for the whole call, set by its fastest car: the truncation is then a
+            # smooth function of the parameters within a call (finite-difference sensitivities through
+            # this call never see one candidate with a term more than its neighbour)
+            nt[gi] = n_terms(float(radius.max()) * h / 2)
+            d = Discretized(P, self.geom, h, nterms=int(nt[gi].max()), blocks=bl)
             discs.append(d)
-
-        def stack(name, lead=0):
-            # candidate axis to the end: (g, ..., n)
-            arrs = [getattr(d, name) for d in discs]
-            if lead:  # G: (N, n, m, k) -> (N, m, k, n)
-                return np.ascontiguousarray(np.stack([np.moveaxis(a, 1, -1) for a in arrs]))
-            return np.ascontiguousarray(np.stack([np.moveaxis(a, 0, -1) for a in arrs]))
-
-        packed = dict(
-            Phi_s=stack("Phi_s"), G_s=stack("G_s", 1), Ca_s=stack("Ca_s"), Da_s=stack("Da_s"), Dr_s=stack("Dr_s"),
-            Phi_a=stack("Phi_a"), G_a=stack("G_a", 1), Ca_a=stack("Ca_a"), Da_a=stack("Da_a"), Dr_a=stack("Dr_a"),
-            nterms=nt,
-        )
-        X0s = np.zeros((len(self.runs), 8, n))
-        X0a = np.zeros((len(self.runs), 6, n))
+            for name in blocks:
+                blocks[name].append(getattr(d, name) if name not in ("a", "b") else None)
+        a = column(P, "a")
+        blocks["a"] = [a] * g
+        blocks["b"] = [self.geom.wheelbase - a] * g
+        CO = kernel.pack_coefficients(blocks, n)
+        X0 = np.zeros((len(self.runs), 14, n))
         for ri, r in enumerate(self.runs):
             xs, xa = initial_states(discs[self.run_group[ri]], r.ud[0])
-            X0s[ri], X0a[ri] = xs.T, xa.T
-        a = np.ascontiguousarray(column(P, "a"))
-        b = self.geom.wheelbase - a
-        return P, packed, X0s, X0a, a, b
+            X0[ri, :8], X0[ri, 8:] = xs.T, xa.T
+        return CO, nt, X0
 
     def _call(self, P, Y, W, mode):
         P = np.atleast_2d(np.asarray(P, dtype=float))
@@ -100,14 +95,11 @@ class BatchSimulator:
         if pad:
             P = np.vstack([P, np.repeat(P[-1:], pad, axis=0)])
         with single_threaded_blas():
-            P, pk, X0s, X0a, a, b = self._pack(P)
+            CO, nt, X0 = self._pack(P)
         n = P.shape[0]
         out = np.zeros((self.n_samples, 10, n) if mode == 1 else (1, 10, 1))
-        err = kernel.run_kernel(pk["Phi_s"], pk["G_s"], pk["Ca_s"], pk["Da_s"], pk["Dr_s"],
-                                pk["Phi_a"], pk["G_a"], pk["Ca_a"], pk["Da_a"], pk["Dr_a"], pk["nterms"],
-                                a, b, self.geom.corner_y[0], self.geom.corner_y[2],
-                                X0s, X0a, self.run_start, self.run_group, self.UD, self.RD, self.MU,
-                                Y, W, mode, out)
+        err = kernel.run_kernel(CO, nt, self.geom.corner_y[0], self.geom.corner_y[2], X0,
+                                self.run_start, self.run_group, self.UD, self.RD, self.MU, Y, W, mode, out)
         return err[:, :n0], (out[:, :, :n0] if mode == 1 else out)
 
     # -- public ------------------------------------------------------------

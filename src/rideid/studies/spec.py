@@ -23,6 +23,7 @@ import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from ..data.schema import read_toml
 from ..errors import DataError
 
 TOP_KEYS = ("name", "data", "identify", "subsets")
@@ -372,10 +373,4 @@ def load_study(path) -> Study:
     path = Path(path)
     if not path.is_file():
         raise DataError(f"{path}: study file not found")
-    try:
-        doc = tomllib.loads(path.read_text())
-    except tomllib.TOMLDecodeError as e:
-        raise DataError(f"{path}: invalid TOML: {e}") from None
-    except (OSError, UnicodeDecodeError) as e:
-        raise DataError(f"{path}: cannot read: {e}") from None
-    return parse_study(doc, path)
+    return parse_study(read_toml(path), path)

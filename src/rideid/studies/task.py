@@ -67,7 +67,7 @@ def run_task(options: dict, dataset_path: str | None = None, scenario=None) -> d
     dataset_path : str, optional
         Absolute dataset folder (dataset tasks; read by the worker, so it
         must be on a filesystem the workers share).
-    scenario : rideid.Manifest, optional
+    scenario : rideid.Scenario, optional
         The parsed scenario (scenario tasks; sent with the task).
 
     Returns

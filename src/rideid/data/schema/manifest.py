@@ -1,0 +1,459 @@
+"""Scenario files and dataset manifests (SPEC §3, §6): two small frozen types.
+
+A **scenario** (:class:`Scenario`) describes a car to simulate: ``[truth]``,
+runs with ``fs`` and ``duration``, optionally ``[hifi]`` for the MuJoCo car.
+A **dataset manifest** (:class:`DatasetManifest`, ``dataset.toml``)
+describes recorded runs: a ``file`` per run and how the files were logged
+(``[channels]``, ``[preprocess]``, ``[csv]``, ``[checks]``). Both share the
+car's geometry, ``[known]``, ``[bounds]``, ``[model]``, ``[[tracks]]`` and
+``[[runs]]`` (:class:`Manifest`). Every problem is a :class:`rideid.DataError`
+naming the file and the key at fault; unknown keys are errors.
+
+The types are frozen and their tables read-only: change one with
+:func:`dataclasses.replace`, e.g. ``replace(sc, runs=sc.runs[:2])``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field, fields
+from pathlib import Path
+
+from ...errors import DataError
+from ...model.params import EXT_NAMES, EXTRA_KNOWN, GROUPS, NAMES, Geometry, check_parameters, total_mass
+from ...model.tracks import Track
+from .channels import (RUN_PREPROCESS_KEYS, ChannelEntry, CsvOptions, parse_channel_map, parse_csv_options,
+                       parse_preprocess)
+from .common import ReadOnlyDict, in_folder, number, read_only, read_toml, table
+from .hifi import HifiProperties, parse_hifi, tire_damping_of
+
+#: a scenario may also describe the multibody car of rideid.verify.hifi (``[hifi]``, used by --engine mujoco)
+TOP_KEYS_SCENARIO = ("name", "vehicle", "known", "bounds", "model", "tracks", "runs", "truth", "hifi")
+#: a dataset may also describe how its files were logged (rideid.data.measured)
+TOP_KEYS_DATASET = ("name", "vehicle", "known", "bounds", "model", "channels", "preprocess", "csv", "checks",
+                    "tracks", "runs")
+RUN_KEYS_DATASET = ("id", "track", "speed", "file", "channels", "checks") + RUN_PREPROCESS_KEYS
+RUN_KEYS_SCENARIO = ("id", "track", "speed", "fs", "duration")
+#: the data checks (rideid.data.checks) a ``[checks]`` table may set, and their levels
+CHECK_NAMES = ("wiring", "track")
+CHECK_LEVELS = ("error", "warn", "off")
+
+
+# ---------------------------------------------------------------------------
+# The types
+
+@dataclass(frozen=True)
+class RunSpec:
+    """One run of a manifest: its track, speed and file (dataset) or rate and duration (scenario)."""
+
+    id: str
+    track: str
+    speed: float | None
+    file: str | None = None
+    fs: float | None = None
+    duration: float | None = None
+    #: measured-data options of this run (rideid.data.measured): its channel map and preprocessing keys
+    channels: ReadOnlyDict = field(default_factory=ReadOnlyDict)
+    options: ReadOnlyDict = field(default_factory=ReadOnlyDict)
+    #: this run's levels of the data checks (rideid.data.checks), over the dataset's [checks]
+    checks: ReadOnlyDict = field(default_factory=ReadOnlyDict)
+
+    def __post_init__(self):
+        for k in ("channels", "options", "checks"):
+            object.__setattr__(self, k, read_only(getattr(self, k)))
+
+    def to_table(self) -> dict:
+        d = {"id": self.id, "track": self.track}
+        if self.speed is not None:
+            d["speed"] = self.speed
+        if self.file is not None:
+            d["file"] = self.file
+        else:
+            d["fs"] = self.fs
+            d["duration"] = self.duration
+        if self.channels:
+            d["channels"] = {k: e.to_table() for k, e in self.channels.items()}
+        for k, v in self.options.items():
+            d[k] = list(v) if isinstance(v, tuple) else v
+        if self.checks:
+            d["checks"] = dict(self.checks)
+        return d
+
+
+@dataclass(frozen=True)
+class Manifest:
+    """What a scenario and a dataset manifest share: the car, what is known, the tracks and the runs.
+
+    Attributes
+    ----------
+    path : Path
+        The file read (``base_dir`` is its folder).
+    name : str
+    geometry : Geometry
+    known : mapping name -> float
+        ``[known]``: fixed parameters and ``total_mass``.
+    bounds : mapping name -> (float, float)
+        ``[bounds]``: search ranges given in the file.
+    tracks : mapping track id -> Track
+    runs : tuple of RunSpec
+    extensions : tuple of str or None
+        ``[model] extensions`` (SPEC §6), canonical order; None without a ``[model]`` table.
+    """
+
+    path: Path
+    name: str
+    geometry: Geometry
+    known: ReadOnlyDict
+    bounds: ReadOnlyDict
+    tracks: ReadOnlyDict
+    runs: tuple
+    extensions: tuple[str, ...] | None = None
+
+    def __post_init__(self):
+        object.__setattr__(self, "path", Path(self.path))
+        for k in ("known", "bounds", "tracks"):
+            object.__setattr__(self, k, read_only(getattr(self, k)))
+        object.__setattr__(self, "runs", tuple(self.runs))
+        if self.extensions is not None:
+            object.__setattr__(self, "extensions", tuple(self.extensions))
+
+    @property
+    def base_dir(self) -> Path:
+        return self.path.parent
+
+    def run(self, run_id: str) -> RunSpec:
+        for r in self.runs:
+            if r.id == run_id:
+                return r
+        raise KeyError(run_id)
+
+    def shared(self) -> dict:
+        """The fields of :class:`Manifest` as keywords, to build the other kind from this one."""
+        return {f.name: getattr(self, f.name) for f in fields(Manifest)}
+
+
+@dataclass(frozen=True)
+class Scenario(Manifest):
+    """A parsed, validated scenario file: a car to simulate (``[truth]``) on runs of given rate and duration."""
+
+    #: ``[truth]``: the twelve parameters and any extensions (absent means 0, not stored)
+    truth: ReadOnlyDict = field(default_factory=ReadOnlyDict)
+    #: ``[hifi]``: the MuJoCo car's properties (rideid.verify.hifi), or None
+    hifi: HifiProperties | None = None
+
+    def __post_init__(self):
+        super().__post_init__()
+        object.__setattr__(self, "truth", read_only(self.truth))
+
+
+@dataclass(frozen=True)
+class DatasetManifest(Manifest):
+    """A parsed, validated ``dataset.toml``: recorded runs and how their files were logged."""
+
+    #: ``[channels]``: SPEC target -> ChannelEntry, for every run (a run's own ``channels`` take precedence)
+    channel_map: ReadOnlyDict = field(default_factory=ReadOnlyDict)
+    #: ``[preprocess]``: key -> validated value (rideid.data.measured)
+    preprocess: ReadOnlyDict = field(default_factory=ReadOnlyDict)
+    csv_options: CsvOptions | None = None
+    #: ``[csv]`` as written, to write it back
+    csv_table: ReadOnlyDict = field(default_factory=ReadOnlyDict)
+    #: ``[checks]``: check name -> "error" | "warn" | "off" (rideid.data.checks)
+    checks: ReadOnlyDict = field(default_factory=ReadOnlyDict)
+
+    def __post_init__(self):
+        super().__post_init__()
+        for k in ("channel_map", "preprocess", "csv_table", "checks"):
+            object.__setattr__(self, k, read_only(getattr(self, k)))
+
+    def is_measured(self, run: RunSpec) -> bool:
+        """Whether a run goes through rideid.data.measured (anything beyond a SPEC §3 CSV taken as it is)."""
+        return bool(self.channel_map or self.preprocess or self.csv_table or run.channels or run.options
+                    or run.speed is None or (run.file is not None and not run.file.lower().endswith(".csv")))
+
+    def to_dataset_doc(self) -> dict:
+        """The ``dataset.toml`` document (plain dicts and lists, ready for TOML)."""
+        doc = {"name": self.name,
+               "vehicle": {k: getattr(self.geometry, k) for k in Geometry.KEYS}}
+        if self.known:
+            doc["known"] = dict(self.known)
+        if self.bounds:
+            doc["bounds"] = {k: list(v) for k, v in self.bounds.items()}
+        if self.extensions is not None:
+            doc["model"] = {"extensions": list(self.extensions)}
+        if self.channel_map:
+            doc["channels"] = {k: e.to_table() for k, e in self.channel_map.items()}
+        if self.preprocess:
+            doc["preprocess"] = {k: list(v) if isinstance(v, tuple) else v for k, v in self.preprocess.items()}
+        if self.csv_table:
+            doc["csv"] = dict(self.csv_table)
+        if self.checks:
+            doc["checks"] = dict(self.checks)
+        doc["tracks"] = [t.to_table() for t in self.tracks.values()]
+        doc["runs"] = [r.to_table() for r in self.runs]
+        return doc
+
+
+# ---------------------------------------------------------------------------
+# Tables
+
+def _param_value(v, name, where):
+    """A parameter value: the twelve positive, the extensions (SPEC §6) non-negative."""
+    v = number(v, where)
+    if name in EXT_NAMES:
+        if v < 0:
+            raise DataError(f"{where}: must not be negative (0 means none), got {v!r}")
+    elif v <= 0:
+        raise DataError(f"{where}: must be positive, got {v!r}")
+    return v
+
+
+def parse_model(tab, where: str) -> tuple[str, ...]:
+    """The ``[model]`` table: ``extensions = [group, ...]`` (SPEC §6) -> the groups in canonical order."""
+    if not isinstance(tab, dict):
+        raise DataError(f"{where}: [model] must be a table")
+    for k in tab:
+        if k != "extensions":
+            raise DataError(f"{where}: [model]: unknown key '{k}'; allowed: extensions")
+    ext = tab.get("extensions", [])
+    if not isinstance(ext, list) or not all(isinstance(g, str) for g in ext):
+        raise DataError(f"{where}: [model] extensions: expected a list of group names ({', '.join(GROUPS)})")
+    for g in ext:
+        if g not in GROUPS:
+            raise DataError(f"{where}: [model] extensions: unknown group '{g}'; groups are: {', '.join(GROUPS)}")
+    return tuple(g for g in GROUPS if g in ext)
+
+
+def parse_checks(tab, where: str) -> dict:
+    """``[checks]`` (or a run's ``checks``): check name -> "error", "warn" or "off"."""
+    if not isinstance(tab, dict):
+        raise DataError(f"{where} must be a table, e.g. {{ wiring = \"warn\" }}")
+    for k, v in tab.items():
+        if k not in CHECK_NAMES:
+            raise DataError(f"{where}: unknown check '{k}'; allowed: {', '.join(CHECK_NAMES)}")
+        if v not in CHECK_LEVELS:
+            raise DataError(f"{where} {k}: expected one of {', '.join(CHECK_LEVELS)}, got {v!r}")
+    return dict(tab)
+
+
+def parse_truth(tab: dict, where: str, geom: Geometry | None) -> dict[str, float]:
+    """The twelve parameters, and any of the four extensions (SPEC §6; absent means 0, not stored)."""
+    for k in tab:
+        if k not in NAMES and k not in EXT_NAMES:
+            raise DataError(f"{where}: unknown parameter '{k}'; expected the twelve: {', '.join(NAMES)} "
+                            f"(and optionally {', '.join(EXT_NAMES)})")
+    missing = [k for k in NAMES if k not in tab]
+    if missing:
+        raise DataError(f"{where}: missing {', '.join(missing)} (all twelve parameters are needed)")
+    vals = {k: _param_value(tab[k], k, f"{where} {k}") for k in NAMES + EXT_NAMES if k in tab}
+    if geom is not None:
+        check_parameters([vals[n] for n in NAMES], geom, where)
+    return vals
+
+
+def _check_top_keys(doc: dict, where: str, scenario: bool):
+    allowed = TOP_KEYS_SCENARIO if scenario else TOP_KEYS_DATASET
+    for k in doc:
+        if k not in allowed:
+            hint = ""
+            if not scenario and k == "truth":
+                hint = " (a [truth] table belongs in a scenario or in truth.toml)"
+            raise DataError(f"{where}: unknown key '{k}'{hint}; allowed: {', '.join(allowed)}")
+
+
+def _parse_geometry(doc: dict, where: str) -> Geometry:
+    veh = table(doc, "vehicle", where)
+    for k in veh:
+        if k not in Geometry.KEYS:
+            raise DataError(f"{where}: [vehicle]: unknown key '{k}'; allowed: {', '.join(Geometry.KEYS)}")
+    for k in Geometry.KEYS:
+        if k not in veh:
+            raise DataError(f"{where}: [vehicle]: missing key '{k}'")
+    return Geometry(**{k: number(veh[k], f"{where}: [vehicle] {k}", positive=True) for k in Geometry.KEYS})
+
+
+def _parse_known(doc: dict, where: str, geom: Geometry) -> dict[str, float]:
+    known = {}
+    for k, v in table(doc, "known", where, required=False).items():
+        if k not in NAMES and k not in EXT_NAMES and k not in EXTRA_KNOWN:
+            raise DataError(f"{where}: [known]: unknown key '{k}'; allowed: total_mass or one of "
+                            f"{', '.join(NAMES + EXT_NAMES)}")
+        known[k] = (number(v, f"{where}: [known] {k}", positive=True) if k in EXTRA_KNOWN
+                    else _param_value(v, k, f"{where}: [known] {k}"))
+        if k == "a" and not known[k] < geom.wheelbase:
+            raise DataError(f"{where}: [known] a = {known[k]} must be less than the wheelbase {geom.wheelbase}")
+    return known
+
+
+def _parse_bounds(doc: dict, where: str, geom: Geometry, known: dict) -> dict[str, tuple[float, float]]:
+    bounds = {}
+    for k, v in table(doc, "bounds", where, required=False).items():
+        w = f"{where}: [bounds] {k}"
+        if k not in NAMES and k not in EXT_NAMES:
+            raise DataError(f"{w}: unknown parameter; allowed: {', '.join(NAMES + EXT_NAMES)}")
+        if not isinstance(v, list) or len(v) != 2:
+            raise DataError(f"{w}: expected [lower, upper]")
+        lo, hi = number(v[0], w), number(v[1], w)
+        if not lo < hi:
+            raise DataError(f"{w}: lower bound {lo} must be less than upper bound {hi}")
+        if k in EXT_NAMES and lo < 0:
+            raise DataError(f"{w}: lower bound must not be negative, got {lo}")
+        if k != "a" and k not in EXT_NAMES and lo <= 0:
+            raise DataError(f"{w}: lower bound must be positive, got {lo}")
+        if k == "a" and not (0 < lo and hi < geom.wheelbase):
+            raise DataError(f"{w}: must lie within (0, wheelbase = {geom.wheelbase})")
+        if k in known:
+            raise DataError(f"{w}: parameter is known (fixed) in [known]; remove one of the two")
+        bounds[k] = (lo, hi)
+    return bounds
+
+
+def _parse_tracks(doc: dict, where: str, base_dir: Path) -> dict[str, Track]:
+    raw_tracks = doc.get("tracks", [])
+    if not isinstance(raw_tracks, list) or not raw_tracks:
+        raise DataError(f"{where}: needs at least one [[tracks]] table")
+    tracks: dict[str, Track] = {}
+    for i, t in enumerate(raw_tracks):
+        if not isinstance(t, dict):
+            raise DataError(f"{where}: tracks[{i}] must be a table")
+        tr = Track.from_table(t, f"{where}: tracks[{i}]", base_dir=base_dir)
+        if tr.id in tracks:
+            raise DataError(f"{where}: tracks[{i}]: duplicate track id '{tr.id}'")
+        tracks[tr.id] = tr
+    return tracks
+
+
+def _parse_runs(doc: dict, where: str, tracks: dict, scenario: bool) -> list[RunSpec]:
+    raw_runs = doc.get("runs", [])
+    if not isinstance(raw_runs, list) or not raw_runs:
+        raise DataError(f"{where}: needs at least one [[runs]] table")
+    run_keys = RUN_KEYS_SCENARIO if scenario else RUN_KEYS_DATASET
+    runs: list[RunSpec] = []
+    seen = set()
+    for i, r in enumerate(raw_runs):
+        w = f"{where}: runs[{i}]"
+        if not isinstance(r, dict):
+            raise DataError(f"{w} must be a table")
+        rid = r.get("id")
+        if not isinstance(rid, str) or not rid:
+            raise DataError(f"{w}: missing key 'id' (a non-empty string)")
+        w = f"{w} (id '{rid}')"
+        for k in r:
+            if k not in run_keys:
+                hint = ""
+                if k in ("fs", "duration") and not scenario:
+                    hint = " (fs and duration belong to scenarios; a dataset run names its 'file')"
+                if k == "file" and scenario:
+                    hint = " (a scenario run gives 'fs' and 'duration' instead of a file)"
+                raise DataError(f"{w}: unknown key '{k}'{hint}; allowed: {', '.join(run_keys)}")
+        required = RUN_KEYS_SCENARIO if scenario else ("id", "track", "file")
+        for k in required:
+            if k not in r:
+                raise DataError(f"{w}: missing key '{k}'")
+        if rid in seen:
+            raise DataError(f"{w}: duplicate run id '{rid}'")
+        seen.add(rid)
+        if r["track"] not in tracks:
+            raise DataError(f"{w}: unknown track '{r['track']}'; tracks are: {', '.join(tracks)}")
+        speed = number(r["speed"], f"{w}: speed", positive=True) if "speed" in r else None
+        if scenario:
+            fs = number(r["fs"], f"{w}: fs", positive=True)
+            dur = number(r["duration"], f"{w}: duration", positive=True)
+            if round(dur * fs) < 2:
+                raise DataError(f"{w}: duration * fs gives fewer than 3 samples")
+            runs.append(RunSpec(rid, r["track"], speed, fs=fs, duration=dur))
+        else:
+            if not isinstance(r["file"], str):
+                raise DataError(f"{w}: key 'file' must be a path string")
+            chans = parse_channel_map(r["channels"], f"{w}: channels") if "channels" in r else {}
+            opts = parse_preprocess({k: v for k, v in r.items() if k in RUN_PREPROCESS_KEYS}, w,
+                                    RUN_PREPROCESS_KEYS)
+            lv = parse_checks(r["checks"], f"{w}: checks") if "checks" in r else {}
+            runs.append(RunSpec(rid, r["track"], speed, file=r["file"], channels=chans, options=opts, checks=lv))
+    return runs
+
+
+def _parse_shared(doc: dict, path: Path, scenario: bool) -> dict:
+    """The :class:`Manifest` fields, in the order the file's tables are checked."""
+    where = str(path)
+    _check_top_keys(doc, where, scenario)
+    name = doc.get("name", path.parent.name if not scenario else path.stem)
+    if not isinstance(name, str):
+        raise DataError(f"{where}: key 'name' must be a string")
+    geom = _parse_geometry(doc, where)
+    known = _parse_known(doc, where, geom)
+    bounds = _parse_bounds(doc, where, geom, known)
+    tracks = _parse_tracks(doc, where, path.parent)
+    runs = _parse_runs(doc, where, tracks, scenario)
+    return dict(path=path, name=name, geometry=geom, known=known, bounds=bounds, tracks=tracks, runs=runs)
+
+
+# ---------------------------------------------------------------------------
+# The two documents
+
+def parse_scenario(doc: dict, path) -> Scenario:
+    """Validate a scenario document (already parsed TOML) read from ``path``."""
+    path = Path(path)
+    where = str(path)
+    kw = _parse_shared(doc, path, scenario=True)
+    geom, known = kw["geometry"], kw["known"]
+    truth = parse_truth(table(doc, "truth", where), f"{where}: [truth]", geom)
+    if "total_mass" in known:
+        tm = total_mass(truth)
+        if abs(tm - known["total_mass"]) > 1e-6 * tm:
+            raise DataError(f"{where}: [known] total_mass = {known['total_mass']} disagrees with [truth] "
+                            f"(m_s + 2 m_uf + 2 m_ur = {tm:.6g})")
+    for k, v in known.items():
+        tv = truth.get(k, 0.0 if k in EXT_NAMES else None)
+        if tv is not None and abs(tv - v) > 1e-9 * abs(v):
+            raise DataError(f"{where}: [known] {k} = {v} disagrees with [truth] {k} = {tv}")
+    extensions = parse_model(doc["model"], where) if "model" in doc else None
+    hifi = None
+    if "hifi" in doc:
+        hifi = parse_hifi(doc["hifi"], f"{where}: [hifi]")
+        tire_damping_of([truth[n] for n in NAMES] + [truth.get(n, 0.0) for n in EXT_NAMES], hifi, where)
+        if hifi.cg_height <= -geom.tire_radius:
+            raise DataError(f"{where}: [hifi] cg_height: a CG {-hifi.cg_height} m below the wheel centres "
+                            f"is under the road (tire_radius {geom.tire_radius} m)")
+    return Scenario(**kw, extensions=extensions, truth=truth, hifi=hifi)
+
+
+def parse_dataset_manifest(doc: dict, path) -> DatasetManifest:
+    """Validate a ``dataset.toml`` document (already parsed TOML) read from ``path``."""
+    path = Path(path)
+    where = str(path)
+    kw = _parse_shared(doc, path, scenario=False)
+    extensions = parse_model(doc["model"], where) if "model" in doc else None
+    extra = {}
+    if "channels" in doc:
+        extra["channel_map"] = parse_channel_map(doc["channels"], f"{where}: [channels]")
+    if "preprocess" in doc:
+        extra["preprocess"] = parse_preprocess(doc["preprocess"], f"{where}: [preprocess]")
+    if "csv" in doc:
+        extra["csv_options"] = parse_csv_options(doc["csv"], f"{where}: [csv]")
+        extra["csv_table"] = dict(doc["csv"])
+    if "checks" in doc:
+        extra["checks"] = parse_checks(doc["checks"], f"{where}: [checks]")
+    return DatasetManifest(**kw, extensions=extensions, **extra)
+
+
+def load_manifest(path) -> DatasetManifest:
+    """``dataset.toml`` of a dataset folder (or the file itself)."""
+    if not Path(path).exists():
+        raise DataError(f"{path}: no such dataset folder")
+    path = in_folder(path, "dataset.toml")
+    return parse_dataset_manifest(read_toml(path), path)
+
+
+def load_truth(path, geom: Geometry | None = None) -> dict[str, float]:
+    """``truth.toml`` (a ``[truth]`` table alone), as written beside a simulated dataset."""
+    path = Path(path)
+    doc = read_toml(path)
+    for k in doc:
+        if k != "truth":
+            raise DataError(f"{path}: unknown key '{k}'; expected a [truth] table")
+    return parse_truth(table(doc, "truth", str(path)), f"{path}: [truth]", geom)
+
+
+__all__ = ["Manifest", "Scenario", "DatasetManifest", "RunSpec", "ChannelEntry", "parse_scenario",
+           "parse_dataset_manifest", "parse_model", "parse_checks", "parse_truth", "load_manifest",
+           "load_truth", "CHECK_NAMES", "CHECK_LEVELS", "TOP_KEYS_SCENARIO", "TOP_KEYS_DATASET", "RUN_KEYS_SCENARIO",
+           "RUN_KEYS_DATASET"]

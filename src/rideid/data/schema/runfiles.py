@@ -1,0 +1,102 @@
+"""Run files of SPEC §3 (``time`` and the SPEC channels, SI units) and the model-ready run data.
+
+:class:`RunData` is what every run becomes before identification, whether
+read from a SPEC CSV here or conditioned from a logger file by
+:mod:`rideid.data.measured`.
+"""
+
+from __future__ import annotations
+
+import warnings
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from ...csvio import read_csv_rows
+from ...errors import DataError, DataWarning
+from ...model.equations import CHANNELS
+
+
+@dataclass
+class RunData:
+    """Measured data of one run: uniform time and the channels present."""
+
+    time: np.ndarray
+    channels: dict[str, np.ndarray]
+    #: ``distance(t)``: front-axle distance past x = 0 at model time t (varying speed); None for constant speed
+    distance: object = None
+
+    @property
+    def fs(self) -> float:
+        return 1.0 / float(self.time[1] - self.time[0])
+
+    def matrix(self) -> np.ndarray:
+        """(n, 10) in CHANNELS order, NaN where a channel is missing."""
+        Y = np.full((self.time.size, len(CHANNELS)), np.nan)
+        for i, c in enumerate(CHANNELS):
+            if c in self.channels:
+                Y[:, i] = self.channels[c]
+        return Y
+
+
+def read_run_csv(path: Path) -> RunData:
+    """Read and validate a run CSV (SPEC §3)."""
+    path = Path(path)
+    header, body = read_csv_rows(path, f"{path}: run file not found")
+    if "time" not in header:
+        raise DataError(f"{path}: missing column 'time'")
+    dup = {c for c in header if header.count(c) > 1}
+    if dup:
+        raise DataError(f"{path}: duplicate column '{sorted(dup)[0]}'")
+    data_rows = [r for r in body if r and any(x.strip() for x in r)]
+    if not data_rows:
+        raise DataError(f"{path}: header only, no data rows")
+    if len(data_rows) < 3:
+        raise DataError(f"{path}: only {len(data_rows)} data rows; at least 3 are needed")
+    used = [c for c in header if c == "time" or c in CHANNELS]
+    extra = [c for c in header if c not in used]
+    if extra:
+        warnings.warn(f"{path}: ignoring column(s) not in the SPEC channels: {', '.join(extra)}",
+                      DataWarning, stacklevel=2)
+    idx = {c: header.index(c) for c in used}
+    arr = np.empty((len(data_rows), len(used)))
+    for ln, row in enumerate(data_rows, start=2):
+        if len(row) != len(header):
+            raise DataError(f"{path}: line {ln}: {len(row)} fields, header has {len(header)}")
+        for j, c in enumerate(used):
+            try:
+                arr[ln - 2, j] = float(row[idx[c]])
+            except ValueError:
+                raise DataError(f"{path}: line {ln}, column '{c}': not a number: {row[idx[c]]!r}") from None
+    for j, c in enumerate(used):
+        bad = ~np.isfinite(arr[:, j])
+        if bad.any():
+            ln = int(np.argmax(bad)) + 2
+            raise DataError(f"{path}: column '{c}' has a NaN or infinite value (line {ln})")
+    t = arr[:, used.index("time")]
+    dt = np.diff(t)
+    if np.any(dt <= 0):
+        ln = int(np.argmax(dt <= 0)) + 3
+        raise DataError(f"{path}: column 'time' is not strictly increasing (line {ln})")
+    h = (t[-1] - t[0]) / (t.size - 1)
+    if np.max(np.abs(dt - h)) > 1e-6 * h + 1e-9:
+        ln = int(np.argmax(np.abs(dt - h))) + 3
+        raise DataError(f"{path}: column 'time' is not uniform (step {dt[ln - 3]:.6g} s at line {ln}, "
+                        f"mean step {h:.6g} s)")
+    # rebuild an exactly uniform time base
+    t = t[0] + h * np.arange(t.size)
+    channels = {c: arr[:, j] for j, c in enumerate(used) if c != "time"}
+    if not channels:
+        raise DataError(f"{path}: no measured channel; expected some of {', '.join(CHANNELS)}")
+    return RunData(t, channels)
+
+
+def write_run_csv(path: Path, time, Y, channels=CHANNELS):
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    M = np.column_stack([time, Y])
+    np.savetxt(path, M, delimiter=",", header=",".join(("time",) + tuple(channels)), comments="", fmt="%.12g")
+
+
+__all__ = ["RunData", "read_run_csv", "write_run_csv"]
