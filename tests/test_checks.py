@@ -188,7 +188,7 @@ def test_the_fix_rideid_prints_loads_cleanly(hatch, tmp_path):
     with warnings.catch_warnings():
         warnings.simplefilter("error", DataWarning)
         ds = rideid.load_dataset(path)
-    assert ds.findings == []
+    assert ds.findings == ()
     assert abs(ds.measured["T_HH"].start - OFFSET) < 2e-3  # the nominal car is not the hatchback: within half a sample
 
 
@@ -198,7 +198,7 @@ def test_correct_runs_raise_nothing(rid, hatch, tmp_path):
     with warnings.catch_warnings():
         warnings.simplefilter("error", DataWarning)
         ds = rideid.load_dataset(one_run(tmp_path, sc, raw, rid))
-    assert ds.findings == []
+    assert ds.findings == ()
 
 
 def test_warn_level_lets_a_run_through_with_the_warning(hatch, tmp_path):
