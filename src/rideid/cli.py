@@ -456,7 +456,7 @@ def _compile(quiet: bool):
     """Compile or load the kernels up front, and say so when it is slow."""
     from .model.kernel import compile_kernels
     prog = Progress(quiet)
-    prog.line("loading the compiled simulation kernel (compiles once after install, ~30 s) ...", force=True)
+    prog.line("loading the compiled simulation kernel (compiles once after install, ~20 s) ...", force=True)
     dt = compile_kernels()
     prog.done()
     if dt > 2.0 and not quiet:

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import numpy as np
-from scipy.signal import lfilter
 
 
 def sensor_noise(rng: np.random.Generator, shape, rho: float = 0.0) -> np.ndarray:
@@ -31,5 +30,7 @@ def sensor_noise(rng: np.random.Generator, shape, rho: float = 0.0) -> np.ndarra
     s = np.sqrt(1.0 - rho * rho)
     e = np.empty_like(w)
     e[0] = w[0]
+    from scipy.signal import lfilter  # here: scipy.signal takes 0.9 s to import
+
     e[1:], _ = lfilter([s], [1.0, -rho], w[1:], axis=0, zi=(rho * w[0])[None, :])
     return e

@@ -31,12 +31,12 @@ import itertools
 import time
 
 import numpy as np
-from scipy import stats
+from scipy import special
 
 from ..model.params import GROUPS
 
 #: per free extension parameter: a group of two enters at the 99.9 % point of chi-square(2)
-PENALTY = float(stats.chi2.ppf(0.999, 2) / 2)
+PENALTY = float(special.chdtri(2, 0.001) / 2)
 
 CRITERION = ("robust Wald information criterion: C = W + {:.2f} k, W the Wald statistic (HAC covariance, "
              "std_robust) of the full model's extension parameters that the candidate leaves out, k its free "

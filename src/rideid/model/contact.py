@@ -35,7 +35,6 @@ from __future__ import annotations
 
 import numba
 import numpy as np
-from scipy.integrate import solve_ivp
 
 from ..errors import RideidError
 from .tracks import WheelPath
@@ -280,6 +279,8 @@ def contact_ode(path: WheelPath, R: float, speed: float, t, x0: float = 0.0,
 
     singular.terminal = True
     # the disc must start on flat road: its footprint clear of features
+    from scipy.integrate import solve_ivp  # here: SciPy's integrators take 0.4 s to import
+
     sol = solve_ivp(rhs, (t[0], t[-1]), [xp0], method="DOP853", t_eval=t, rtol=rtol, atol=atol,
                     events=singular, max_step=_max_step(path, speed))
     if sol.status == 1 or sol.y.shape[1] != t.size:
