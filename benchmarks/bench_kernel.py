@@ -136,7 +136,7 @@ def main(out=sys.stdout):
         fn(0, n_chunks, CO, n_chunks, np.full_like(nt, N_terms), 0.7, 0.7, X0, sim.run_start, sim.run_group,
            sim.UD, sim.RD, sim.MU, Y, W, 0, err, np.zeros((1, 10, 1)))
 
-    sweep = {k: best_cpu_or_wall(lambda k=k: run(k), wall=False) / cs * 1e9 for k in (0, 4, N, 10, 14)}
+    sweep = {k: best_cpu_or_wall(lambda k=k: run(k)) / cs * 1e9 for k in (0, 4, N, 10, 14)}
     per_term = (sweep[14] - sweep[4]) / 10
     say("\n## Where the time goes (one thread, kernel only)\n")
     say("| moment terms N | ns per candidate-sample |")

@@ -75,7 +75,9 @@ def machine_cores() -> int:
 
 #: environment of local workers: one thread everywhere (a task uses one core; workers = cores)
 WORKER_ENV = {"NUMBA_NUM_THREADS": "1", "OMP_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1",
-              "MKL_NUM_THREADS": "1"}
+              "MKL_NUM_THREADS": "1",
+              # Dask's statistical profiler samples the task thread's stack every 10 ms: not needed
+              "DASK_DISTRIBUTED__WORKER__PROFILE__ENABLED": "False"}
 
 
 def local_cluster(n_workers: int | None = None):
@@ -91,11 +93,30 @@ def local_cluster(n_workers: int | None = None):
     # (inherited, and kept by Python), so that only the client handles it and closes the cluster cleanly
     old = signal.signal(signal.SIGINT, signal.SIG_IGN) if threading.current_thread() is threading.main_thread() \
         else None
+    # The one-thread settings must be in the environment the worker processes start with: the
+    # ``env`` argument is applied after the worker has imported Numba (whose thread count is read
+    # at import), and then every worker ran 2 OpenMP threads whose spinning between parallel regions
+    # took the other worker's core (measured: 10 s per task against 4.5 s in a plain process pool).
+    saved = {k: os.environ.get(k) for k in WORKER_ENV}
+    os.environ.update(WORKER_ENV)
     try:
         # ":0": the scheduler always serves HTTP (dashboard or not); a free port, not 8787 taken by another cluster
-        return LocalCluster(n_workers=n, threads_per_worker=1, processes=True, dashboard_address=":0",
-                            silence_logs=logging.ERROR, env=dict(WORKER_ENV))
+        import dask
+        # Dask's nanny sets MALLOC_TRIM_THRESHOLD_ in its workers, which freezes glibc's mmap threshold
+        # at 128 kB: every large NumPy temporary is then a fresh mmap, page-faulted in and unmapped
+        # (a task took 8 s in a worker, 4.8 s in a plain process); rideid's workers keep glibc's default
+        spawn_env = {k: v for k, v in dask.config.get("distributed.nanny.pre-spawn-environ").items()
+                     if k != "MALLOC_TRIM_THRESHOLD_"}
+        with dask.config.set({"distributed.worker.profile.enabled": False,
+                              "distributed.nanny.pre-spawn-environ": spawn_env}):
+            return LocalCluster(n_workers=n, threads_per_worker=1, processes=True, dashboard_address=":0",
+                                silence_logs=logging.ERROR, env=dict(WORKER_ENV))
     finally:
+        for k, v in saved.items():
+            if v is None:
+                os.environ.pop(k, None)
+            else:
+                os.environ[k] = v
         if old is not None:
             signal.signal(signal.SIGINT, old)
 
