@@ -11,7 +11,7 @@ from __future__ import annotations
 import numba
 import numpy as np
 
-from rideid.model.discretize import N_MAX, Discretized, spectral_radius
+from rideid.model.discretize import N_MAX, Discretized, n_terms, spectral_radius
 from rideid.model.params import column
 from rideid.model.simulate import initial_states
 
@@ -171,15 +171,9 @@ def run_kernel(Phi_s, G_s, Ca_s, Da_s, Dr_s, Phi_a, G_a, Ca_a, Da_a, Dr_a, nterm
 
 
 
-def n_terms_before(rho: float, tol: float = 1e-11) -> int:
-    """The series length rule of that time."""
-    term, n = 1.0, 0
-    while n < N_MAX:
-        n += 1
-        term *= rho / n
-        if term < tol and n >= 4:
-            break
-    return min(max(n + 1, 4), N_MAX)
+def n_terms_before(rho: float) -> int:
+    """The series length rule of that time: one term more than today's rule at 1e-11, at least 4."""
+    return min(max(n_terms(rho, 1e-11) + 1, 4), N_MAX)
 
 
 def errors_before(sim, P, Y, W):

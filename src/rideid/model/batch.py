@@ -76,8 +76,8 @@ class BatchSimulator:
             nt[gi] = n_terms(float(radius.max()) * h / 2)
             d = Discretized(P, self.geom, h, nterms=int(nt[gi].max()), blocks=bl)
             discs.append(d)
-            for name in blocks:
-                blocks[name].append(getattr(d, name) if name not in ("a", "b") else None)
+            for name in blocks.keys() - {"a", "b"}:
+                blocks[name].append(getattr(d, name))
         a = column(P, "a")
         blocks["a"] = [a] * g
         blocks["b"] = [self.geom.wheelbase - a] * g
