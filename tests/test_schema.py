@@ -160,3 +160,25 @@ def test_a_loaded_dataset_cannot_be_changed(sim_dataset):
         ds.data["T_LL"] = None
     other = ds.with_data(dict(ds.data))
     assert other is not ds and other.data == ds.data
+
+
+def test_no_import_cycle_even_through_imports_inside_functions():
+    """The modules form a layered graph: no module reaches itself, counting the imports inside functions
+    (those run when the packages are loaded, so only the imported module itself is an edge)."""
+    mods = dict((m, p) for p, m in _modules())
+    graph = {mod: {f"{b}.{n}" if f"{b}.{n}" in mods else b for b, n, _ in _imports(p, mod)} - {mod}
+             for mod, p in mods.items()}
+    graph = {m: {t for t in ts if t in mods} for m, ts in graph.items()}
+    state = {}
+
+    def visit(m, path):
+        state[m] = "open"
+        for t in graph[m]:
+            assert state.get(t) != "open", "import cycle: " + " -> ".join(path + [t])
+            if t not in state:
+                visit(t, path + [t])
+        state[m] = "done"
+
+    for m in graph:
+        if m not in state:
+            visit(m, [m])

@@ -21,7 +21,7 @@ from .data.dataset import Dataset, load_dataset
 from .design import PlanResult, plan
 from .errors import ArgumentError, DataError, DataWarning, ModelValidityWarning, RideidError, ScaleError
 from .data.schema import DatasetManifest, Manifest, Scenario, load_truth
-from .estimate.identify import identify
+from .estimate.model_choice import identify
 from .estimate.result import History, IdentificationResult
 from .estimate.result import load as load_result
 from .estimate.score import score

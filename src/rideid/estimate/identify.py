@@ -160,9 +160,8 @@ def identify(ds: Dataset, *, rng=None, seed=None, population: int = DEFAULT_POPU
     IdentificationResult
     """
     if isinstance(model, str) and model == "auto" and cost is None:
-        from .model_choice import identify_auto
-        return identify_auto(ds, rng=rng, seed=seed, population=population, generations=generations,
-                             weights=weights, polish=polish, spread_tol=spread_tol, callback=callback, maps=maps)
+        raise ArgumentError("model='auto' is the model choice of rideid.identify "
+                            "(rideid.estimate.model_choice.identify); this function fits one given model")
     if spread_tol is None:
         spread_tol = DEFAULT_SPREAD_TOL if polish else DEFAULT_SPREAD_TOL_NO_POLISH
     if not isinstance(generations, (int, np.integer)) or generations < 1:

@@ -27,6 +27,7 @@ of 1000 datasets whose noise the robust covariance describes.
 
 from __future__ import annotations
 
+import functools
 import itertools
 import time
 
@@ -34,6 +35,7 @@ import numpy as np
 from scipy import special
 
 from ..model.params import GROUPS
+from .identify import identify as identify_model
 
 #: per free extension parameter: a group of two enters at the 99.9 % point of chi-square(2)
 PENALTY = float(special.chdtri(2, 0.001) / 2)
@@ -102,12 +104,11 @@ def identify_auto(ds, *, rng=None, seed=None, callback=None, maps=None, **kw):
     """
     from .adequacy import assess_fit
     from .cost import CostFunction
-    from .identify import identify
     from ..model.batch import single_threaded_blas
 
     t0 = time.perf_counter()
     cf_full = CostFunction(ds, extensions=tuple(GROUPS))
-    full = identify(ds, rng=rng, seed=seed, callback=callback, maps=maps, cost=cf_full, **kw)
+    full = identify_model(ds, rng=rng, seed=seed, callback=callback, maps=maps, cost=cf_full, **kw)
     pol = full.polish or {}
     names = list(pol.get("names", []))
     free_ext = {g: [n for n in GROUPS[g] if n in names] for g in GROUPS}
@@ -130,7 +131,7 @@ def identify_auto(ds, *, rng=None, seed=None, callback=None, maps=None, **kw):
         x0 = np.array([full.parameters[n] for n in cf.names])
         kw_nested = {k: v for k, v in kw.items() if k in ("weights", "polish", "population")}
         # the adequacy verdict only for the model kept (below): it costs as much as a polish
-        results[cand] = identify(ds, rng=rng, seed=seed, cost=cf, maps=full.maps, start=x0, assess=False,
+        results[cand] = identify_model(ds, rng=rng, seed=seed, cost=cf, maps=full.maps, start=x0, assess=False,
                                  **kw_nested)
         costs[cand] = cf
         evaluations += results[cand].nfev
@@ -173,3 +174,14 @@ def _nested_cost(cf_full, ds, extensions):
     cf = cf_full.copy()
     cf.space, cf.names, cf.bounds, cf.nfev = space, list(space.names), space.bounds, 0
     return cf
+
+
+@functools.wraps(identify_model)
+def identify(ds, *args, model=None, cost=None, **kw):
+    # rideid.identify: the model choice for model="auto", else the fitted model as given
+    # (the dispatch lives here, above both, so that identify and the model choice import one way)
+    if isinstance(model, str) and model == "auto" and cost is None:
+        if args:
+            raise TypeError("identify() takes the dataset as its only positional argument")
+        return identify_auto(ds, **kw)
+    return identify_model(ds, *args, model=model, cost=cost, **kw)

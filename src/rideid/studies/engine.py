@@ -30,7 +30,7 @@ from pathlib import Path
 
 from ..errors import ArgumentError, DataError
 from .spec import BUILTIN, Study, load_study
-from .task import run_task
+from .task import run_task, write_atomic
 
 
 @dataclass
@@ -119,12 +119,6 @@ def local_cluster(n_workers: int | None = None):
                 os.environ[k] = v
         if old is not None:
             signal.signal(signal.SIGINT, old)
-
-
-def write_atomic(path: Path, text: str):
-    tmp = path.with_name(f".{path.name}.tmp-{os.getpid()}")
-    tmp.write_text(text)
-    os.replace(tmp, path)
 
 
 def read_record(path: Path) -> dict | None:
@@ -227,7 +221,7 @@ def _connect(scheduler, n_workers):
 
 
 def _compute(client, spec, todo, tasks_dir, records, state, progress, t0):
-    import rideid
+    from . import api as rideid
     from distributed import as_completed
 
     sc = None

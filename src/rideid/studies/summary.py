@@ -15,7 +15,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .engine import write_atomic
+from .task import write_atomic
 from .spec import BUILTIN, IDENTIFY_KEYS
 
 OPTION_COLUMNS = ("dataset", "scenario", "noise", "noise_seed", "subset", "runs") + IDENTIFY_KEYS
@@ -88,7 +88,7 @@ _PLANS: dict = {}
 
 
 def crlb_for(spec, row) -> tuple[dict | None, str]:
-    """CRLB and identify's expected spread for a scenario group, from :func:`rideid.plan` where available.
+    """CRLB and identify's expected spread for a scenario group, from :func:`rideid.plan`.
 
     Parameters
     ----------
@@ -100,15 +100,12 @@ def crlb_for(spec, row) -> tuple[dict | None, str]:
     -------
     ({name: (crlb std, expected identify std)}, note), or (None, why not).
     """
-    import rideid
+    from . import api as rideid
 
     if spec.scenario is None:
         return None, "CRLB: only for scenario studies (the truth and the noise level must be known)"
     if not row.get("noise"):
         return None, "CRLB: not for noise-free data"
-    plan = getattr(rideid, "plan", None)
-    if plan is None:
-        return None, "CRLB not available (this rideid has no rideid.plan)"
     key = (spec.scenario, row["noise"], row.get("runs"))
     if key not in _PLANS:
         try:
@@ -116,7 +113,7 @@ def crlb_for(spec, row) -> tuple[dict | None, str]:
             if row.get("runs"):
                 keep = set(row["runs"].split(","))
                 sc = dataclasses.replace(sc, runs=[r for r in sc.runs if r.id in keep])
-            res = plan(sc, noise=row["noise"])
+            res = rideid.plan(sc, noise=row["noise"])
             d = (res.to_dict() if hasattr(res, "to_dict") else res)["all_runs"]
             out = {n: (v.get("std"), d.get("identify_std", {}).get(n, {}).get("std")) for n, v in d["crlb"].items()}
             for n, v in d.get("derived", {}).items():

@@ -12,12 +12,20 @@ from __future__ import annotations
 
 import contextlib
 import dataclasses
+import os
 import tempfile
 import time
 import warnings
 from pathlib import Path
 
 from ..estimate.result import jsonable
+
+
+def write_atomic(path: Path, text: str):
+    """Write ``text`` to ``path`` through a temporary file and a rename (a reader never sees half)."""
+    tmp = path.with_name(f".{path.name}.tmp-{os.getpid()}")
+    tmp.write_text(text)
+    os.replace(tmp, path)
 
 #: columns of a record that differ between two runs of the same task (excluded when tables are compared)
 TIMING_COLUMNS = ("identify_wall_s", "task_wall_s")
@@ -40,7 +48,7 @@ def one_core():
 
 def subset_dataset(ds, run_ids, subset):
     """The dataset restricted to ``run_ids`` (manifest order kept)."""
-    import rideid
+    from . import api as rideid
 
     have = [r.id for r in ds.runs]
     bad = [r for r in run_ids if r not in have]
@@ -80,7 +88,7 @@ def run_task(options: dict, dataset_path: str | None = None, scenario=None) -> d
         known, cost, generations, wall times) and ``result`` (the
         identification's result.json content).
     """
-    import rideid
+    from . import api as rideid
 
     t0 = time.perf_counter()
     rec = {"status": "failed", "final": True, "error": None, "warnings": [], "row": {}, "result": None,
@@ -108,7 +116,7 @@ def run_task(options: dict, dataset_path: str | None = None, scenario=None) -> d
 
 
 def _identify(options, dataset_path, scenario, tmp: Path):
-    import rideid
+    from . import api as rideid
 
     data = options["data"]
     if "scenario" in data:
