@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import base64
 import html
+import io
 from dataclasses import dataclass
 from importlib import resources
 from pathlib import Path
@@ -35,20 +36,33 @@ def _plt():
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
-    plt.rcParams.update({"font.size": 8, "axes.grid": True, "grid.alpha": 0.3, "figure.dpi": FIG_DPI})
+    # axes.titley fixed: otherwise every axes of every draw searches its tick labels to place the title
+    plt.rcParams.update({"font.size": 8, "axes.grid": True, "grid.alpha": 0.3, "figure.dpi": FIG_DPI,
+                         "axes.titley": 1.0})
     return plt
 
 
 def _save(fig, out_dir: Path, name: str, title: str, caption: str, keep: bool = False) -> Figure:
-    """Write ``fig`` as ``figures/<name>.png`` and close it (unless ``keep``: a reused template)."""
+    """Write ``fig`` as ``figures/<name>.png`` and close it (unless ``keep``: a reused template).
+
+    Drawn once on the Agg canvas and encoded by Pillow as RGB at zlib level 1: the report's
+    figures are opaque, so the alpha channel only costs bytes, and level 1 encodes in about
+    half the time of the default level 6 for a file of about the same size.
+    """
+    from PIL import Image
     plt = _plt()
     fdir = out_dir / "figures"
     fdir.mkdir(parents=True, exist_ok=True)
     path = fdir / f"{name}.png"
-    fig.savefig(path, dpi=FIG_DPI)
+    fig.canvas.draw()
+    img = Image.frombuffer("RGBA", fig.canvas.get_width_height(), fig.canvas.buffer_rgba(), "raw", "RGBA", 0, 1)
+    buf = io.BytesIO()
+    img.convert("RGB").save(buf, format="png", compress_level=1)
+    png = buf.getvalue()
+    path.write_bytes(png)
     if not keep:
         plt.close(fig)
-    uri = "data:image/png;base64," + base64.b64encode(path.read_bytes()).decode("ascii")
+    uri = "data:image/png;base64," + base64.b64encode(png).decode("ascii")
     return Figure(name, title, caption, f"figures/{name}.png", uri)
 
 
@@ -71,7 +85,8 @@ def fig_convergence(hist, out_dir):
     a2.legend()
     a2.set_title("JADE adaptation")
     a1.set_title("convergence")
-    fig.tight_layout()
+    # fixed margins (the labels are fixed words): tight_layout would cost an extra draw
+    fig.subplots_adjust(left=0.06, right=0.985, bottom=0.14, top=0.91, wspace=0.15)
     return _save(fig, out_dir, "convergence", "Convergence",
                  "Best and mean cost per generation (log scale); JADE's adaptive means μ_F and μ_CR.")
 
@@ -101,7 +116,7 @@ def fig_spread(hist, names, out_dir):
     a2.set_ylabel("population mean / final best")
     a2.set_title("parameter traces")
     a2.set_ylim(0, 2.5)
-    fig.tight_layout()
+    fig.subplots_adjust(left=0.06, right=0.985, bottom=0.125, top=0.92, wspace=0.18)
     return _save(fig, out_dir, "spread", "Parameter spread",
                  "Each free parameter's coefficient of variation in the JADE population (left) and its population "
                  "mean relative to the final best (right). Parameters whose spread falls slowly are the ones the "
@@ -169,13 +184,20 @@ _FIT_TEMPLATES: dict = {}
 
 
 def _fit_template(present: tuple):
-    """Figure, axes and line artists of the fit figure for the channels ``present``."""
+    """Figure, axes and line artists of the fit figure for the channels ``present``.
+
+    Built once per channel layout and process; only what changes between runs is drawn again:
+    the lines, the ticks and the title. The time axes share x, as do the spectra, so only the
+    bottom row labels them. The legends are the same for every run: drawn once, they are kept
+    as pixels (``figimage``, exactly what the legend draws) instead of being laid out again.
+    """
     from ..model.equations import CHANNELS
     if present in _FIT_TEMPLATES:
         return _FIT_TEMPLATES[present]
     plt = _plt()
-    fig, axes = plt.subplots(3, 2, figsize=(12, 6.2), gridspec_kw={"width_ratios": [2.2, 1]})
+    fig, axes = plt.subplots(3, 2, figsize=(12, 6.2), sharex="col", gridspec_kw={"width_ratios": [2.2, 1]})
     lines = {}
+    legends = []
     for row, (label, unit, idx) in enumerate(GROUPS):
         a, b = axes[row]
         for k, i in enumerate(idx):
@@ -189,15 +211,39 @@ def _fit_template(present: tuple):
         b.set_ylabel(f"dB re 1 {unit}")
         a.set_ylabel(f"{label}\n[{unit}]")
         # one legend per row, outside the data: colours are channels in both panels
-        b.legend(fontsize=6, loc="upper left", bbox_to_anchor=(1.02, 1.0), borderaxespad=0)
+        legends.append(b.legend(fontsize=6, loc="upper left", bbox_to_anchor=(1.02, 1.0), borderaxespad=0))
     title = axes[0, 0].set_title("")
     axes[0, 1].set_title("amplitude spectra of the residuals")
     axes[-1, 0].set_xlabel("time [s]")
     axes[-1, 1].set_xlabel("frequency [Hz]")
     # fixed margins: tight_layout costs an extra full draw (a third of the time)
-    fig.subplots_adjust(left=0.07, right=0.91, bottom=0.08, top=0.95, hspace=0.28, wspace=0.2)
+    fig.subplots_adjust(left=0.07, right=0.91, bottom=0.08, top=0.95, hspace=0.2, wspace=0.2)
+    _freeze(fig, legends)
     _FIT_TEMPLATES[present] = (fig, axes, lines, title)
     return _FIT_TEMPLATES[present]
+
+
+def _freeze(fig, artists):
+    """Replace ``artists`` that never change (legends outside the axes) by their rendered pixels,
+    and pin the x-axis labels where the first draw put them.
+
+    An x label's place depends only on the height of the tick labels (one line of digits in a
+    fixed font), not on the data; placing it again costs a bounding-box pass over every tick
+    label of the column's axes on every draw.
+    """
+    fig.canvas.draw()
+    renderer = fig.canvas.get_renderer()
+    for ax in fig.axes:
+        y = ax.xaxis.label.get_position()[1]  # pixels below the axes, after the first draw
+        ax.xaxis.set_label_coords(0.5, ax.transAxes.inverted().transform((0.0, y))[1])
+    buf = np.asarray(fig.canvas.buffer_rgba())
+    height = buf.shape[0]
+    for art in artists:
+        bb = art.get_window_extent(renderer)
+        x0, y0 = max(int(np.floor(bb.x0)) - 1, 0), max(int(np.floor(bb.y0)) - 1, 0)
+        x1, y1 = min(int(np.ceil(bb.x1)) + 1, buf.shape[1]), min(int(np.ceil(bb.y1)) + 1, height)
+        fig.figimage(buf[height - y1:height - y0, x0:x1].copy(), xo=x0, yo=y0, origin="upper", zorder=10)
+        art.remove()
 
 
 def fig_fit(run_id, t, Y, Ysim, out_dir):
@@ -249,16 +295,65 @@ HEAT_CAPTIONS = {
 }
 
 
-def heatmap_figures(maps, out_dir):
-    from ..estimate.sensitivity import heatmaps
-    heat_dir = Path(out_dir) / "figures"
-    heat_dir.mkdir(parents=True, exist_ok=True)
-    out = []
-    for f in heatmaps(maps, heat_dir):
-        uri = "data:image/png;base64," + base64.b64encode(f.read_bytes()).decode("ascii")
-        out.append(Figure(f.stem, f.stem.replace("_", " → ").replace("param", "parameter"), HEAT_CAPTIONS[f.stem],
-                          f"figures/{f.name}", uri))
-    return out
+def _heat_specs(maps):
+    from ..estimate.sensitivity import P2R_STARS, P2T_STARS, R2T_STARS
+    return {
+        "param_response": (maps.S_bar, maps.params, maps.channels, "Parameter → response: mean |% change of peak|",
+                           P2R_STARS, 1.0),
+        "response_track": (maps.R, maps.channels, maps.runs, "Response → track: relative RMS", R2T_STARS, 1.0),
+        "param_track": (maps.M, maps.params, maps.runs, "Parameter → track: share per run", P2T_STARS,
+                        len(maps.runs)),
+    }
+
+
+def _star_marks(data, scale, thresholds):
+    """Where to draw each cell's star rating: ``(x, y, n_stars)`` per mark.
+
+    A cell rated n >= 1 gets n star marks side by side, a cell rated zero (or not
+    finite: not excited) one dash, as ``rideid.estimate.sensitivity.stars`` rates it.
+    """
+    from ..estimate.sensitivity import stars
+    xs, ys, dash_x, dash_y, rating = [], [], [], [], np.zeros(data.shape, dtype=int)
+    for i in range(data.shape[0]):
+        for j in range(data.shape[1]):
+            n = stars(data[i, j] * scale, thresholds).count("★")
+            rating[i, j] = n
+            if n == 0:
+                dash_x.append(j)
+                dash_y.append(i)
+            for k in range(n):
+                xs.append(j + 0.11 * (k - (n - 1) / 2))
+                ys.append(i)
+    return np.array(xs), np.array(ys), np.array(dash_x), np.array(dash_y), rating
+
+
+def fig_heatmap(kind, maps, out_dir):
+    """One sensitivity map as a heatmap with each cell's star rating (``kind``: a key of ``HEAT_CAPTIONS``).
+
+    The stars are marker symbols of one scatter per colour, not one text per cell: a map has up to
+    ~120 cells and laying out a text each costs more than the rest of the figure.
+    """
+    plt = _plt()
+    data, rows, cols, title, th, scale = _heat_specs(maps)[kind]
+    fig, ax = plt.subplots(figsize=(1.0 + 0.75 * len(cols), 1.2 + 0.38 * len(rows)), dpi=110)
+    im = ax.imshow(data, aspect="auto", cmap="viridis")
+    ax.grid(False)
+    ax.set_xticks(range(len(cols)), cols, rotation=45, ha="right", fontsize=8)
+    ax.set_yticks(range(len(rows)), rows, fontsize=8)
+    xs, ys, dx, dy, _ = _star_marks(data, scale, th)
+    # white on the dark part of viridis, black on the light part
+    light = data >= 0.6 * np.nanmax(data) if np.isfinite(data).any() else np.zeros(data.shape, bool)
+    for x, y, marker, size in ((xs, ys, "*", 30), (dx, dy, "_", 12)):
+        if x.size:
+            on_light = light[y.astype(int), np.rint(x).astype(int)]
+            ax.scatter(x, y, s=size, marker=marker, c=np.where(on_light, "black", "white"), linewidths=0.8)
+    ax.set_xlim(-0.5, len(cols) - 0.5)
+    ax.set_ylim(len(rows) - 0.5, -0.5)
+    ax.set_title(title, fontsize=10)
+    fig.colorbar(im, ax=ax, fraction=0.04)
+    fig.tight_layout()
+    caption = HEAT_CAPTIONS[kind]
+    return _save(fig, Path(out_dir), kind, kind.replace("_", " → ").replace("param", "parameter"), caption)
 
 
 def _fig_job(job):
@@ -338,12 +433,12 @@ def write_report(result, dataset, out_dir, *, compare=None, compare_label: str |
                  ("fig_weights", (hist, run_ids, out_dir, result.weights_mode))]
     measured = {r.id: dataset.data[r.id].matrix() for r in dataset.runs}
     jobs += [("fig_fit", (r.id, dataset.data[r.id].time, measured[r.id], sims[r.id], out_dir)) for r in dataset.runs]
-    jobs.append(("heatmap_figures", (maps, out_dir)))
+    jobs += [("fig_heatmap", (k, maps, out_dir)) for k in HEAT_CAPTIONS]
     if other is not None:
         jobs.append(("fig_compare", (hist, other[0], other[1], other[2], run_ids, out_dir)))
     done = _map_figures(jobs)
     compare_figs = [done.pop()] if other is not None else []
-    heat_figs = done.pop()
+    heat_figs = [done.pop() for _ in HEAT_CAPTIONS][::-1]
     figs = done[:3] if hist else []
     fit_figs = done[3:] if hist else done
     fit_rows = []
