@@ -42,8 +42,10 @@ def _plt():
     return plt
 
 
-def _save(fig, out_dir: Path, name: str, title: str, caption: str, keep: bool = False) -> Figure:
+def _save(fig, out_dir: Path, name: str, title: str, caption: str, keep: bool = False,
+          drawn: bool = False) -> Figure:
     """Write ``fig`` as ``figures/<name>.png`` and close it (unless ``keep``: a reused template).
+    ``drawn``: the canvas already holds the picture (the caller drew it).
 
     Drawn once on the Agg canvas and encoded by Pillow as RGB at zlib level 1: the report's
     figures are opaque, so the alpha channel only costs bytes, and level 1 encodes in about
@@ -54,7 +56,8 @@ def _save(fig, out_dir: Path, name: str, title: str, caption: str, keep: bool = 
     fdir = out_dir / "figures"
     fdir.mkdir(parents=True, exist_ok=True)
     path = fdir / f"{name}.png"
-    fig.canvas.draw()
+    if not drawn:
+        fig.canvas.draw()
     img = Image.frombuffer("RGBA", fig.canvas.get_width_height(), fig.canvas.buffer_rgba(), "raw", "RGBA", 0, 1)
     buf = io.BytesIO()
     img.convert("RGB").save(buf, format="png", compress_level=1)
@@ -181,6 +184,8 @@ def fig_compare(hist, label, other_hist, other_label, runs, out_dir):
 #: One fit figure per channel layout and process, redrawn for every run: the axes, ticks and
 #: legends are built once (the first draw of a fresh figure costs 3x a redraw; measured 0.5 s vs 0.17 s)
 _FIT_TEMPLATES: dict = {}
+#: per channel layout: the spectra limits and the pixels of the figure without its per-run artists
+_FIT_BACKGROUNDS: dict = {}
 
 
 def _fit_template(present: tuple):
@@ -246,31 +251,97 @@ def _freeze(fig, artists):
         art.remove()
 
 
-def fig_fit(run_id, t, Y, Ysim, out_dir):
-    """Measured vs simulated per channel group, and residual spectra."""
+def _fit_spectra(t, Y, Ysim, present):
+    """Frequencies [Hz] and, per channel group, the residual spectra of its channels and the largest
+    measured spectrum, in dB: ``(f, {channel: dB}, [dB per group])``."""
+    f = np.fft.rfftfreq(t.size, t[1] - t[0])
+    res = {i: _db(np.fft.rfft(Y[:, i] - Ysim[:, i]) / t.size) for i in present}
+    top = [_db(np.nanmax(np.abs(np.fft.rfft(np.nan_to_num(Y[:, list(idx)]), axis=0)), axis=1) / t.size)
+           for _, _, idx in GROUPS]
+    return f, res, top
+
+
+def spectra_limits(runs) -> tuple:
+    """Common axis limits of the fit figures' spectra: ``(xlim, (ylim per channel group))``.
+
+    ``runs``: ``(t, Y, Ysim)`` per run. The same dB scale on every run's figure lets the eye
+    compare residual levels between runs, and lets each figure reuse the drawn spectra axes.
+    Margins as Matplotlib's autoscale (5 % of the range).
+    """
+    fmax, lo, hi = 0.0, [np.inf] * len(GROUPS), [-np.inf] * len(GROUPS)
+    for t, Y, Ysim in runs:
+        present = tuple(i for i in range(Y.shape[1]) if not np.all(np.isnan(Y[:, i])))
+        f, res, top = _fit_spectra(t, Y, Ysim, present)
+        fmax = max(fmax, f[-1])
+        for row, (_, _, idx) in enumerate(GROUPS):
+            curves = [top[row]] + [res[i] for i in idx if i in present]
+            lo[row] = min(lo[row], min(float(np.nanmin(c)) for c in curves))
+            hi[row] = max(hi[row], max(float(np.nanmax(c)) for c in curves))
+    pad = lambda a, b: (a - 0.05 * (b - a), b + 0.05 * (b - a)) if b > a else (a - 1.0, b + 1.0)  # noqa: E731
+    return pad(0.0, fmax), tuple(pad(a, b) for a, b in zip(lo, hi))
+
+
+def _fit_background(present: tuple, limits) -> dict:
+    """The fit figure of the channels ``present`` drawn without its per-run artists (time-domain
+    axes, spectrum lines), for spectra ``limits``: built once per process and limits."""
+    fig, axes, lines, title = _fit_template(present)
+    spec_lines = [lines[("max", row)] for row in range(len(GROUPS))] + [lines[i][2] for i in present]
+    cache = _FIT_BACKGROUNDS.setdefault(present, {})
+    if cache.get("limits") != limits:
+        for b, ylim in zip(axes[:, 1], limits[1]):
+            b.set_xlim(*limits[0])
+            b.set_ylim(*ylim)
+        for art in list(axes[:, 0]) + spec_lines:
+            art.set_visible(False)
+        fig.canvas.draw()
+        cache["background"] = fig.canvas.copy_from_bbox(fig.bbox)
+        cache["limits"] = limits
+        for art in list(axes[:, 0]) + spec_lines:
+            art.set_visible(True)
+    return cache
+
+
+def fig_fit(run_id, t, Y, Ysim, out_dir, limits=None):
+    """Measured vs simulated per channel group, and residual spectra.
+
+    ``limits``: the spectra's axis limits (:func:`spectra_limits`), common to the runs of a
+    report; by default this run's own. The spectra axes (frame, ticks, labels, legends) are
+    then the same for every run of the report: they are drawn once, kept as pixels, and each
+    run draws only its time-domain axes and its spectrum lines over them.
+    """
     present = tuple(i for i in range(Y.shape[1]) if not np.all(np.isnan(Y[:, i])))
     fig, axes, lines, title = _fit_template(present)
-    fs = 1.0 / (t[1] - t[0])
-    f = np.fft.rfftfreq(t.size, 1 / fs)
+    if limits is None:
+        limits = spectra_limits([(t, Y, Ysim)])
+    f, res, top = _fit_spectra(t, Y, Ysim, present)
+    cache = _fit_background(present, limits)
     for row, (_, _, idx) in enumerate(GROUPS):
         for i in idx:
             if i in present:
                 measured, simulated, spectrum = lines[i]
                 measured.set_data(t, Y[:, i])
                 simulated.set_data(t, Ysim[:, i])
-                spectrum.set_data(f, _db(np.fft.rfft(Y[:, i] - Ysim[:, i]) / t.size))
-        lines[("max", row)].set_data(
-            f, _db(np.nanmax(np.abs(np.fft.rfft(np.nan_to_num(Y[:, list(idx)]), axis=0)), axis=1) / t.size))
-        for a in axes[row]:
-            a.relim()
-            a.autoscale_view()
+                spectrum.set_data(f, res[i])
+        lines[("max", row)].set_data(f, top[row])
+        a = axes[row, 0]
+        a.relim()
+        a.autoscale_view()
     title.set_text(f"run {run_id}: measured (colour) vs simulated (dashed)")
+    canvas = fig.canvas
+    canvas.restore_region(cache["background"])
+    renderer = canvas.get_renderer()
+    for a in axes[:, 0]:
+        a.draw(renderer)
+    for b in axes[:, 1]:
+        for ln in b.lines:  # in the order a full draw takes: the same pixels where lines cross
+            b.draw_artist(ln)
     return _save(fig, out_dir, f"fit_{run_id}", f"Fit: run {run_id}",
                  f"Run {run_id}: measured channels (colour) and the identified model (dashed), grouped as body "
                  "accelerations, axle accelerations and rates (left); amplitude spectra of each channel's residual "
-                 "against the largest measured spectrum (right). A good fit leaves residuals at the noise floor, "
-                 "flat across frequency; a peak in a residual spectrum points at unmodelled dynamics there.",
-                 keep=True)
+                 "against the largest measured spectrum (right), on one scale for all runs. A good fit leaves "
+                 "residuals at the noise floor, flat across frequency; a peak in a residual spectrum points at "
+                 "unmodelled dynamics there.",
+                 keep=True, drawn=True)
 
 
 def fit_statistics(Y, Ysim):
@@ -363,6 +434,7 @@ def _fig_job(job):
 
 def _map_figures(jobs):
     """Render figures on all cores (matplotlib is single-threaded); serial fallback."""
+    import gc
     import os
     n = min(len(jobs), os.cpu_count() or 1)
     _plt()  # import matplotlib once here: forked workers inherit it
@@ -370,8 +442,15 @@ def _map_figures(jobs):
         try:
             import multiprocessing as mp
             from concurrent.futures import ProcessPoolExecutor
-            with ProcessPoolExecutor(n, mp_context=mp.get_context("fork")) as ex:
-                return list(ex.map(_fig_job, jobs))
+            # the parent's objects (an identification's worth) out of the workers' garbage collection:
+            # collecting them would touch, and so copy, every page the workers share with the parent
+            gc.collect()
+            gc.freeze()
+            try:
+                with ProcessPoolExecutor(n, mp_context=mp.get_context("fork")) as ex:
+                    return list(ex.map(_fig_job, jobs))
+            finally:
+                gc.unfreeze()
         except (OSError, ValueError, RuntimeError):  # no fork on this platform, or a broken pool
             pass
     return [_fig_job(j) for j in jobs]
@@ -432,7 +511,13 @@ def write_report(result, dataset, out_dir, *, compare=None, compare_label: str |
         jobs += [("fig_convergence", (hist, out_dir)), ("fig_spread", (hist, names, out_dir)),
                  ("fig_weights", (hist, run_ids, out_dir, result.weights_mode))]
     measured = {r.id: dataset.data[r.id].matrix() for r in dataset.runs}
-    jobs += [("fig_fit", (r.id, dataset.data[r.id].time, measured[r.id], sims[r.id], out_dir)) for r in dataset.runs]
+    limits = spectra_limits([(dataset.data[r.id].time, measured[r.id], sims[r.id]) for r in dataset.runs])
+    # the fit figures' common part, drawn here once: the processes that render the runs inherit it
+    _plt()
+    for present in {tuple(i for i in range(m.shape[1]) if not np.all(np.isnan(m[:, i]))) for m in measured.values()}:
+        _fit_background(present, limits)
+    jobs += [("fig_fit", (r.id, dataset.data[r.id].time, measured[r.id], sims[r.id], out_dir, limits))
+             for r in dataset.runs]
     jobs += [("fig_heatmap", (k, maps, out_dir)) for k in HEAT_CAPTIONS]
     if other is not None:
         jobs.append(("fig_compare", (hist, other[0], other[1], other[2], run_ids, out_dir)))

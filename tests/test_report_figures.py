@@ -1,0 +1,61 @@
+"""The report's figures draw what they claim: cheap drawing paths give the picture a full draw gives."""
+
+import numpy as np
+
+from rideid.estimate.sensitivity import P2R_STARS, stars
+from rideid.report import html as H
+
+
+def _run(n=801, fs=200.0, seed=0, amp=1.0):
+    rng = np.random.default_rng(seed)
+    t = np.arange(n) / fs
+    Y = amp * np.sin(2 * np.pi * 1.3 * t[:, None] + rng.uniform(0, 6, 10)) * np.exp(-t[:, None] / 3)
+    Y[:, 8:] *= 0.05
+    Ysim = Y + 0.01 * amp * rng.standard_normal(Y.shape)
+    return t, Y, Ysim
+
+
+def test_fit_figure_partial_redraw_equals_a_full_draw(tmp_path):
+    """Per run only the time-domain axes and the spectrum lines are drawn over pixels kept from
+    the first draw: the PNG must match a complete draw of the same figure."""
+    runs = [_run(801, seed=0), _run(1501, seed=1, amp=4.0)]
+    lim = H.spectra_limits(runs)
+    for k, (t, Y, Ysim) in enumerate(runs):
+        H.fig_fit(f"r{k}", t, Y, Ysim, tmp_path, lim)
+        fig = H._FIT_TEMPLATES[tuple(range(10))][0]
+        partial = np.asarray(fig.canvas.buffer_rgba()).copy()
+        fig.canvas.draw()  # everything, legends' kept pixels included
+        full = np.asarray(fig.canvas.buffer_rgba())
+        differ = np.any(partial != full, axis=2)
+        assert differ.sum() == 0, (k, differ.sum())
+    # the second run's traces are 4x larger: its axes were rescaled, not left at the first run's limits
+    ax = H._FIT_TEMPLATES[tuple(range(10))][1][0, 0]
+    assert ax.get_ylim()[1] > 3.0
+
+
+def test_spectra_limits_hold_every_curve():
+    runs = [_run(801, seed=0), _run(1501, seed=1, amp=4.0), _run(601, seed=2, amp=0.1)]
+    (f0, f1), ylims = H.spectra_limits(runs)
+    assert f0 < 0 and f1 > 100.0  # 0..fs/2 with a margin
+    for t, Y, Ysim in runs:
+        f, res, top = H._fit_spectra(t, Y, Ysim, tuple(range(10)))
+        for row, (_, _, idx) in enumerate(H.GROUPS):
+            lo, hi = ylims[row]
+            for c in [top[row]] + [res[i] for i in idx]:
+                assert lo < c.min() and c.max() < hi
+
+
+def test_heatmap_star_marks_count_the_ratings():
+    """One star mark per star of ``stars()``, a dash where it gives none, each in its own cell."""
+    rng = np.random.default_rng(3)
+    data = rng.uniform(0, 20, (5, 4))
+    data[0, 0] = np.nan
+    xs, ys, dx, dy, rating = H._star_marks(data, 1.0, P2R_STARS)
+    for i in range(5):
+        for j in range(4):
+            n = stars(data[i, j], P2R_STARS).count("★")
+            assert rating[i, j] == n
+            in_cell = (np.abs(xs - j) < 0.5) & (ys == i)
+            assert in_cell.sum() == n
+            assert (((dx == j) & (dy == i)).sum() == 1) == (n == 0)
+    assert rating[0, 0] == 0
