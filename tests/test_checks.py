@@ -257,6 +257,27 @@ def test_rigid_body_identities_hold_for_the_van(tmp_path):
     assert best[2] == pytest.approx(180 / math.pi) and e.min() < 1e-3 < 0.1 < e[0]
 
 
+def test_lowpass_gram_equals_the_gram_of_scipys_zero_phase_butterworth():
+    """The rigid-body check's Gram matrix from one FFT = that of ``sosfiltfilt`` (4th-order Butterworth, 10 Hz)."""
+    from scipy.signal import butter, sosfiltfilt
+    fs, n = 400.0, 8000
+    rng = np.random.default_rng(3)
+    # broadband signals with shared components (off-diagonal terms), half their power above the corner
+    base = rng.standard_normal((3, n))
+    X = np.array([base[0], base[0] + 0.5 * base[1], base[1] - base[2], np.cumsum(base[2]) * 0.05])
+    X -= X.mean(axis=1, keepdims=True)
+    # quiet ends, as a run's lead-in and run-out: sosfiltfilt's reflected padding then adds no edge power
+    X *= np.sin(np.pi * np.arange(n) / (n - 1)) ** 2
+    Xf = sosfiltfilt(butter(4, 10.0, fs=fs, output="sos"), X, axis=-1)
+    G_ref = Xf @ Xf.T
+    G = checks.lowpass_gram(X, fs)
+    scale = np.sqrt(np.outer(np.diag(G_ref), np.diag(G_ref)))
+    assert np.abs(G - G_ref).max() / scale.max() < 2e-4  # the bilinear warp of the digital filter: ~3e-4
+    assert np.allclose(np.diag(G), np.diag(G_ref), rtol=1e-3)
+    # the filter really filters: most of the white signal's power is above 10 Hz and gone
+    assert G[0, 0] < 0.1 * float(X[0] @ X[0])
+
+
 def test_best_assignment_on_a_known_matrix():
     C = np.array([[0.1, 0.9], [-0.95, 0.0]])  # channel 0 is model 1, channel 1 is minus model 0
     perm, signs, score, ident = checks.best_assignment(C)

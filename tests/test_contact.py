@@ -123,3 +123,23 @@ def test_envelope_grid_cached_and_flat_outside():
     p = washboard().path(0.7)
     assert envelope_grid(p, R) is envelope_grid(p, R)
     assert np.all(wheel_input(p, np.array([-5.0, 1.69, 8.31, 20.0]), R) == 0)
+
+
+@pytest.mark.parametrize("road", ["flat", "rough", "sine", "steps"])
+def test_pruned_lattice_search_equals_brute_force(road):
+    """The block-pruned disc search returns the brute-force maxima and first argmaxima, exactly."""
+    from rideid.model.contact import lattice_max, lattice_max_brute
+    rng = np.random.default_rng(7)
+    dx, R = 5e-4, 0.3
+    m = int(R / dx)
+    offs = dx * np.arange(-m, m + 1)
+    circ = np.sqrt(R * R - offs * offs)
+    x = dx * np.arange(20000)
+    H = {"flat": np.zeros_like(x),
+         "rough": np.cumsum(rng.standard_normal(x.size)) * 1e-4,
+         "sine": 0.02 * np.sin(2 * np.pi * x / 0.7) * (x > 3) * (x < 7),
+         "steps": 0.03 * np.floor(x / 0.9) % 0.09}[road]
+    best, arg = lattice_max(H, circ)
+    ref, ref_arg = lattice_max_brute(H, circ)
+    assert np.array_equal(best, ref)
+    assert np.array_equal(arg, ref_arg)

@@ -160,7 +160,7 @@ def test_tasks_are_the_product_of_the_axes_and_keyed_by_content(folder, tmp_path
     assert len({t.key for t in st.tasks}) == len(st.tasks)
     first, last = st.tasks[0].options, st.tasks[-1].options
     assert first == {"data": {"scenario": "small.toml", "noise": 0.0, "noise_seed": 1}, "subset": "all",
-                     "runs": None, "identify": {"weights": "fixed", "population": 64, "generations": 400,
+                     "runs": None, "identify": {"weights": "fixed", "population": 32, "generations": 400,
                                                 "polish": True, "seed": 1}}
     assert last["runs"] == ["T_HH"] and last["identify"]["seed"] == 2 and last["data"]["noise_seed"] == 3
     # the same study again: the same keys; the scenario file changed: new keys

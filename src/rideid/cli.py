@@ -125,7 +125,7 @@ def _parser() -> argparse.ArgumentParser:
     s.add_argument("dataset", metavar="DATASET_DIR")
     s.add_argument("--out", required=True, metavar="DIR")
     s.add_argument("--seed", type=int, default=None, metavar="N")
-    s.add_argument("--population", type=int, default=None, metavar="NP", help="JADE population (default 64)")
+    s.add_argument("--population", type=int, default=None, metavar="NP", help="JADE population (default 32)")
     s.add_argument("--generations", type=int, default=None, metavar="G",
                    help="largest number of JADE generations (default 400)")
     s.add_argument("--weights", choices=("adaptive", "fixed"), default="adaptive",

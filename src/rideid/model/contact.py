@@ -103,24 +103,74 @@ def _refine(h, xs, dj, step, R, t, rows):
     return np.maximum(fk, np.where(ok, fr, -np.inf))
 
 
-@numba.njit(cache=True, parallel=True)
+#: lattice points per block of the pruned search in :func:`lattice_max`
+LATTICE_BLOCK = 32
+
+
+@numba.njit(cache=True)
 def lattice_max(H, circ):  # pragma: no cover - compiled
-    """``max_j H[i + j] + circ[j]`` and its argmax for every i."""
+    """``max_j H[i + j] + circ[j]`` and its (first) argmax for every i.
+
+    ``circ`` is a disc's height: rising to its peak, then falling (any
+    unimodal profile). The road is searched in blocks of
+    :data:`LATTICE_BLOCK` points: a block whose highest road point plus the
+    disc's highest point over the block cannot reach a value already found
+    (the previous point's contact, moved along) cannot hold the maximum and
+    is skipped. The result is the brute-force search's, exactly; on flat
+    road only the block under the disc's centre is searched. 3-9x faster
+    than the brute force on the built-in tracks, on one thread (a parallel
+    loop gained little and, with another process busy on the second core,
+    OpenMP's spinning barriers made it up to 100x slower).
+    """
     n = H.size - circ.size + 1
+    m = circ.size
+    B = LATTICE_BLOCK
+    nb = (H.size + B - 1) // B
+    HB = np.empty(nb)
+    for b in range(nb):
+        HB[b] = H[b * B:min((b + 1) * B, H.size)].max()
+    peak = 0
+    for j in range(m):
+        if circ[j] > circ[peak]:
+            peak = j
     best = np.empty(n)
     arg = np.empty(n, dtype=np.int64)
-    m = circ.size
-    for i in numba.prange(n):
+    guess = peak
+    for i in range(n):
+        # a lower bound on the maximum: the last contact point moved along, and the disc's peak
+        g = min(max(guess - 1, 0), m - 1)
+        lb = max(H[i + g] + circ[g], H[i + peak] + circ[peak])
         bv = -np.inf
         bj = 0
-        for j in range(m):
-            v = H[i + j] + circ[j]
-            if v > bv:
-                bv = v
-                bj = j
+        b0 = i // B
+        b1 = (i + m - 1) // B
+        for b in range(b0, b1 + 1):
+            ja = max(b * B - i, 0)
+            jb = min((b + 1) * B - i, m) - 1
+            if ja <= peak <= jb:
+                cmax = circ[peak]
+            elif jb < peak:
+                cmax = circ[jb]
+            else:
+                cmax = circ[ja]
+            if HB[b] + cmax < lb:
+                continue
+            for j in range(ja, jb + 1):
+                v = H[i + j] + circ[j]
+                if v > bv:
+                    bv = v
+                    bj = j
         best[i] = bv
         arg[i] = bj
+        guess = bj
     return best, arg
+
+
+def lattice_max_brute(H, circ):
+    """:func:`lattice_max` by brute force (NumPy, for tests)."""
+    from numpy.lib.stride_tricks import sliding_window_view
+    V = sliding_window_view(H, circ.size) + circ[None, :]
+    return V.max(axis=1), V.argmax(axis=1)
 
 
 def envelope_grid(path: WheelPath, R: float, dx: float = 5e-4, n_fine: int = 9):

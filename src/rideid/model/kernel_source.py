@@ -103,7 +103,7 @@ def generate(L: int = LANES) -> str:
     w(f"PER_TERM = {PER_TERM}")
     w("")
     w("")
-    w("@numba.njit(cache=True, fastmath=True, nogil=True, error_model='numpy')")
+    w("@numba.njit(cache=True, fastmath=True, nogil=True, error_model='numpy', pipeline_class=NoSSACompiler)")
     w("def run_chunks(ch0, ch1, CO, n_chunks, nterms, hf, hr, X0, run_start, run_group, UD, RD, MU, Y, W,")
     w("               mode, ERR, OUT):  # pragma: no cover - compiled")
     w('    """Integrate chunks ``ch0 <= ch < ch1`` of LANES candidates over every run.')
@@ -143,19 +143,23 @@ def generate(L: int = LANES) -> str:
                 w(f"{ind}g{blk}{i}_{lane} = " + " + ".join(terms))
     # -- channels (the output map of rideid.model.equations.output_map, tested against it)
     for lane in range(L):
-        w(f"{ind}fa = gs0_{lane} - la{lane} * gs1_{lane}")
-        w(f"{ind}ra = gs0_{lane} + lb{lane} * gs1_{lane}")
-        ys = [f"fa + hf * ga0_{lane}", f"fa - hf * ga0_{lane}", f"ra + hr * ga0_{lane}", f"ra - hr * ga0_{lane}",
+        w(f"{ind}fa{lane} = gs0_{lane} - la{lane} * gs1_{lane}")
+        w(f"{ind}ra{lane} = gs0_{lane} + lb{lane} * gs1_{lane}")
+        ys = [f"fa{lane} + hf * ga0_{lane}", f"fa{lane} - hf * ga0_{lane}", f"ra{lane} + hr * ga0_{lane}",
+              f"ra{lane} - hr * ga0_{lane}",
               f"gs2_{lane} + ga1_{lane}", f"gs2_{lane} - ga1_{lane}", f"gs3_{lane} + ga2_{lane}",
               f"gs3_{lane} - ga2_{lane}", f"x5_{lane}", f"x{8 + 3}_{lane}"]
         for q, expr in enumerate(ys):
             w(f"{ind}y{q}_{lane} = {expr}")
+    # every temporary assigned once (a name assigned many times costs Numba's SSA pass dearly),
+    # and one accumulation per lane and sample
     for q in range(10):
-        w(f"{ind}yq = Y[k, {q}]")
-        w(f"{ind}wq = W[r, {q}]")
+        w(f"{ind}yq{q} = Y[k, {q}]")
+        w(f"{ind}wq{q} = W[r, {q}]")
         for lane in range(L):
-            w(f"{ind}d = y{q}_{lane} - yq")
-            w(f"{ind}e_{lane} += wq * d * d")
+            w(f"{ind}d{q}_{lane} = y{q}_{lane} - yq{q}")
+    for lane in range(L):
+        w(f"{ind}e_{lane} += " + " + ".join(f"wq{q} * d{q}_{lane} * d{q}_{lane}" for q in range(10)))
     w(f"{ind}if mode == 1:")
     for q in range(10):
         for lane in range(L):
@@ -190,6 +194,25 @@ def generate(L: int = LANES) -> str:
 _COMPILED = {}
 
 
+def _no_ssa_compiler():
+    """Numba's nopython pipeline without its SSA reconstruction.
+
+    The pass costs about 1.7 s of the kernel's cold compile (it revisits every
+    block for every name assigned more than once: the 56 state variables and
+    their moment accumulators are reassigned each sample) and gains nothing
+    here: every variable is a float64 throughout, the case the pipeline
+    handled before SSA existed, and LLVM builds its own SSA form anyway.
+    """
+    from numba.core.compiler import CompilerBase, DefaultPassBuilder
+
+    class NoSSACompiler(CompilerBase):
+        def define_pipelines(self):
+            self.state.flags.enable_ssa = False
+            return [DefaultPassBuilder.define_nopython_pipeline(self.state)]
+
+    return NoSSACompiler
+
+
 def run_chunks_function(L: int = LANES):
     """The kernel's driver as a Numba dispatcher (not yet compiled), built from :func:`generate`.
 
@@ -200,7 +223,7 @@ def run_chunks_function(L: int = LANES):
     """
     if L not in _COMPILED:
         import numba
-        ns = {"numba": numba, "__name__": __name__}
+        ns = {"numba": numba, "__name__": __name__, "NoSSACompiler": _no_ssa_compiler()}
         exec(compile(generate(L), __file__, "exec"), ns)  # noqa: S102 - our own generated source
         _COMPILED[L] = ns["run_chunks"]
     return _COMPILED[L]

@@ -30,7 +30,7 @@ TOP_KEYS = ("name", "data", "identify", "subsets")
 DATA_KEYS = ("datasets", "scenario", "noise", "noise_seeds")
 #: identify options a study may set, in the order they vary in the task list (last varies fastest)
 IDENTIFY_KEYS = ("model", "weights", "population", "generations", "polish", "spread_tol", "seed")
-IDENTIFY_DEFAULTS = {"population": 64, "generations": 400, "polish": True, "weights": "adaptive", "seed": 1}
+IDENTIFY_DEFAULTS = {"population": 32, "generations": 400, "polish": True, "weights": "adaptive", "seed": 1}
 BUILTIN = "builtin"
 
 
