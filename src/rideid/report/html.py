@@ -393,7 +393,7 @@ def _star_marks(data, scale, thresholds):
                 dash_x.append(j)
                 dash_y.append(i)
             for k in range(n):
-                xs.append(j + 0.11 * (k - (n - 1) / 2))
+                xs.append(j + 0.14 * (k - (n - 1) / 2))
                 ys.append(i)
     return np.array(xs), np.array(ys), np.array(dash_x), np.array(dash_y), rating
 
