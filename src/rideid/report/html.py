@@ -186,6 +186,7 @@ def fig_compare(hist, label, other_hist, other_label, runs, out_dir):
 _FIT_TEMPLATES: dict = {}
 #: per channel layout: the spectra limits and the pixels of the figure without its per-run artists
 _FIT_BACKGROUNDS: dict = {}
+_FIT_LEGENDS: dict = {}
 
 
 def _fit_template(present: tuple):
@@ -223,30 +224,31 @@ def _fit_template(present: tuple):
     axes[-1, 1].set_xlabel("frequency [Hz]")
     # fixed margins: tight_layout costs an extra full draw (a third of the time)
     fig.subplots_adjust(left=0.07, right=0.91, bottom=0.08, top=0.95, hspace=0.2, wspace=0.2)
-    _freeze(fig, legends)
+    _FIT_LEGENDS[present] = legends  # replaced by their pixels at the first draw (_fit_background)
     _FIT_TEMPLATES[present] = (fig, axes, lines, title)
     return _FIT_TEMPLATES[present]
 
 
 def _freeze(fig, artists):
-    """Replace ``artists`` that never change (legends outside the axes) by their rendered pixels,
-    and pin the x-axis labels where the first draw put them.
+    """Replace ``artists`` that never change (legends outside the axes) by the pixels the last
+    draw gave them, and pin the visible axes' x labels where that draw put them.
 
     An x label's place depends only on the height of the tick labels (one line of digits in a
     fixed font), not on the data; placing it again costs a bounding-box pass over every tick
     label of the column's axes on every draw.
     """
-    fig.canvas.draw()
     renderer = fig.canvas.get_renderer()
     for ax in fig.axes:
-        y = ax.xaxis.label.get_position()[1]  # pixels below the axes, after the first draw
-        ax.xaxis.set_label_coords(0.5, ax.transAxes.inverted().transform((0.0, y))[1])
+        if ax.get_visible():
+            y = ax.xaxis.label.get_position()[1]  # pixels below the axes, after the draw
+            ax.xaxis.set_label_coords(0.5, ax.transAxes.inverted().transform((0.0, y))[1])
     buf = np.asarray(fig.canvas.buffer_rgba())
     height = buf.shape[0]
     for art in artists:
         bb = art.get_window_extent(renderer)
-        x0, y0 = max(int(np.floor(bb.x0)) - 1, 0), max(int(np.floor(bb.y0)) - 1, 0)
-        x1, y1 = min(int(np.ceil(bb.x1)) + 1, buf.shape[1]), min(int(np.ceil(bb.y1)) + 1, height)
+        # two pixels of margin: the frame's anti-aliased edge reaches one pixel past its extent
+        x0, y0 = max(int(np.floor(bb.x0)) - 2, 0), max(int(np.floor(bb.y0)) - 2, 0)
+        x1, y1 = min(int(np.ceil(bb.x1)) + 2, buf.shape[1]), min(int(np.ceil(bb.y1)) + 2, height)
         fig.figimage(buf[height - y1:height - y0, x0:x1].copy(), xo=x0, yo=y0, origin="upper", zorder=10)
         art.remove()
 
@@ -294,6 +296,8 @@ def _fit_background(present: tuple, limits) -> dict:
         for art in list(axes[:, 0]) + spec_lines:
             art.set_visible(False)
         fig.canvas.draw()
+        # the first draw of a new template also gives the legends' pixels (one draw, not two)
+        _freeze(fig, _FIT_LEGENDS.pop(present, []))
         cache["background"] = fig.canvas.copy_from_bbox(fig.bbox)
         cache["limits"] = limits
         for art in list(axes[:, 0]) + spec_lines:
