@@ -18,6 +18,7 @@ def _run(n=801, fs=200.0, seed=0, amp=1.0):
 def test_fit_figure_partial_redraw_equals_a_full_draw(tmp_path):
     """Per run only the time-domain axes and the spectrum lines are drawn over pixels kept from
     the first draw: the PNG must match a complete draw of the same figure."""
+    H.fig_fit("other", *_run(601, seed=5, amp=9.0), tmp_path)  # a template already drawn for other limits
     runs = [_run(801, seed=0), _run(1501, seed=1, amp=4.0)]
     lim = H.spectra_limits(runs)
     for k, (t, Y, Ysim) in enumerate(runs):

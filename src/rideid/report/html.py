@@ -297,7 +297,8 @@ def _fit_background(present: tuple, limits) -> dict:
             art.set_visible(False)
         fig.canvas.draw()
         # the first draw of a new template also gives the legends' pixels (one draw, not two)
-        _freeze(fig, _FIT_LEGENDS.pop(present, []))
+        if present in _FIT_LEGENDS:
+            _freeze(fig, _FIT_LEGENDS.pop(present))
         cache["background"] = fig.canvas.copy_from_bbox(fig.bbox)
         cache["limits"] = limits
         for art in list(axes[:, 0]) + spec_lines:
