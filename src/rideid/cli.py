@@ -456,10 +456,10 @@ def _compile(quiet: bool):
     """Compile or load the kernels up front, and say so when it is slow."""
     from .model.kernel import compile_kernels
     prog = Progress(quiet)
-    prog.line("loading the compiled simulation kernel (compiles once after install, ~20 s) ...", force=True)
+    prog.line("loading the compiled simulation kernel (compiles once after install, a few seconds) ...", force=True)
     dt = compile_kernels()
     prog.done()
-    if dt > 2.0 and not quiet:
+    if dt > 1.0 and not quiet:
         print(f"rideid: compiled the simulation kernel in {dt:.0f} s (cached for later runs)", file=sys.stderr)
 
 
