@@ -354,6 +354,33 @@ def _base_transforms(has_gyro: bool):
     return hyps, _transforms(hyps)
 
 
+def _constraints(has_gyro: bool, tf: float, tr: float, L: float) -> np.ndarray:
+    """Rigid-body constraints on the corrected signals ``[b_fl, b_fr, b_rl, b_rr, pitch'', roll'']``."""
+    if has_gyro:
+        return np.array([[1 / tf, -1 / tf, 0, 0, 0, -1],
+                         [0, 0, 1 / tr, -1 / tr, 0, -1],
+                         [-1 / (2 * L), -1 / (2 * L), 1 / (2 * L), 1 / (2 * L), -1, 0]])
+    return np.array([[1 / tf, -1 / tf, -1 / tr, 1 / tr, 0, 0]])
+
+
+@functools.lru_cache(maxsize=4)
+def _base_coefficients(has_gyro: bool, tf: float, tr: float, L: float):
+    """Every base hypothesis's constraint coefficients on the raw signals, (H, k, 6): one per geometry."""
+    hyps, T0 = _base_transforms(has_gyro)
+    C = np.matmul(_constraints(has_gyro, tf, tr, L)[None], T0)
+    C.flags.writeable = False
+    return hyps, C
+
+
+def _relative_residuals(C, G):
+    """Mean over the constraints of ``c^T G c / sum_i c_i^2 G_ii`` for each hypothesis's rows ``C`` (H, k, 6)."""
+    num = np.sum((C.reshape(-1, 6) @ G).reshape(C.shape) * C, axis=-1)
+    den = (C * C) @ np.diag(G)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        e = np.where(den > 0, num / np.where(den > 0, den, 1.0), 0.0)
+    return e.mean(axis=1)
+
+
 def rigid_body_scores(Y: np.ndarray, fs: float, geom, F=None):
     """Rigid-body residual of every wiring hypothesis.
 
@@ -389,27 +416,15 @@ def rigid_body_scores(Y: np.ndarray, fs: float, geom, F=None):
     if has_gyro:
         X[4:] = np.gradient(X[4:], 1.0 / fs, axis=1)
     G = lowpass_gram(X, fs)
-    tf, tr, L = geom.track_front, geom.track_rear, geom.wheelbase
-    # constraints on corrected signals [b_fl, b_fr, b_rl, b_rr, pitch'', roll'']
-    if has_gyro:
-        K = np.array([[1 / tf, -1 / tf, 0, 0, 0, -1],
-                      [0, 0, 1 / tr, -1 / tr, 0, -1],
-                      [-1 / (2 * L), -1 / (2 * L), 1 / (2 * L), 1 / (2 * L), -1, 0]])
-    else:
-        K = np.array([[1 / tf, -1 / tf, -1 / tr, 1 / tr, 0, 0]])
-    base, T0 = _base_transforms(has_gyro)
+    geo = (has_gyro, float(geom.track_front), float(geom.track_rear), float(geom.wheelbase))
+    base, C0 = _base_coefficients(*geo)  # (H, k, 6) coefficients on the raw signals
     hyps = list(base)
-    T = T0
+    scores = _relative_residuals(C0, G)
     if F is not None:
         extra = _rename_hypotheses(np.asarray(F, float), has_gyro)
         hyps += extra
-        T = np.concatenate([T0, _transforms(extra)])
-    C = np.matmul(K[None], T)  # (H, k, 6) coefficients on the raw signals
-    num = np.sum(np.matmul(C, G) * C, axis=-1)
-    den = (C * C) @ np.diag(G)
-    with np.errstate(invalid="ignore", divide="ignore"):
-        e = np.where(den > 0, num / np.where(den > 0, den, 1.0), 0.0)
-    return hyps, e.mean(axis=1)
+        scores = np.concatenate([scores, _relative_residuals(np.matmul(_constraints(*geo)[None], _transforms(extra)), G)])
+    return hyps, scores
 
 
 # ---------------------------------------------------------------------------
@@ -744,6 +759,50 @@ def _alternatives(ds, rid, P, rho_now):
     return out
 
 
+def _prefetch_inputs(ds) -> None:
+    """Tabulate every wheel path's envelope and every run's inputs on parallel threads.
+
+    The checks (and then the identification) take them from the caches of
+    :func:`rideid.model.contact.envelope_grid` and
+    :func:`rideid.model.simulate.prepare_run` one run at a time; most of the
+    work is NumPy and compiled loops that release the GIL, so the cores
+    share it. As many threads as the kernel uses (``numba.get_num_threads``:
+    one in a study's workers). A run that fails here fails again, with its
+    message, in the checks.
+    """
+    import numba
+
+    from ..model.contact import envelope_grid
+    from ..model.simulate import _PREPARED_MAX, ENVELOPE_DX, prepare_run
+
+    man, geom = ds.manifest, ds.geometry
+    runs = man.runs[:_PREPARED_MAX]  # what the cache of prepared runs holds
+    threads = min(numba.get_num_threads(), len(runs))
+    if threads < 2:
+        return
+    paths = {}
+    for r in runs:
+        for y in geom.corner_y:
+            p = man.tracks[r.track].path(y)
+            if p.extent is not None:
+                paths[id(p)] = p
+
+    def envelope(p):
+        envelope_grid(p, geom.tire_radius, ENVELOPE_DX)
+
+    def inputs(r):
+        rd = ds.data[r.id]
+        try:
+            prepare_run(man.tracks[r.track], geom, r.speed, rd.time, distance=rd.distance)
+        except Exception:  # noqa: BLE001 - reported by the checks themselves
+            pass
+
+    from concurrent.futures import ThreadPoolExecutor
+    with ThreadPoolExecutor(threads, thread_name_prefix="rideid-inputs") as ex:
+        list(ex.map(envelope, sorted(paths.values(), key=lambda p: -(p.extent[1] - p.extent[0]))))
+        list(ex.map(inputs, runs))
+
+
 def check_dataset(ds) -> list[Finding]:
     """Run the data checks on every run of a loaded dataset.
 
@@ -756,6 +815,7 @@ def check_dataset(ds) -> list[Finding]:
     man, geom = ds.manifest, ds.geometry
     P = nominal_car(geom)
     out: list[Finding] = []
+    _prefetch_inputs(ds)
     for r in man.runs:
         rid = r.id
         rd = ds.data[rid]

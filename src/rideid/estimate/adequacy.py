@@ -264,10 +264,12 @@ def _assess(runs, channels, alpha, min_explained):
     pairs = [(rid, c) for rid, (E, _, _) in runs.items() for c in range(E.shape[1]) if not np.all(np.isnan(E[:, c]))]
     alpha_each = alpha / max(len(pairs), 1)
     out_runs, flagged, loud = {}, [], []
-    for rid, (E, Y, U) in runs.items():
+
+    def one_run(item):
+        rid, (E, Y, U) = item
         q = quiet_samples(U)
         basis = input_basis(U)
-        rec = {}
+        rec, hits, noisy = {}, [], []
         for c, name in enumerate(channels):
             e = E[:, c]
             if np.all(np.isnan(e)):
@@ -286,10 +288,24 @@ def _assess(runs, channels, alpha, min_explained):
                          "input_f": ic["F"], "input_p": ic["p"], "input_explained": ic["explained"],
                          "input_df": ic["df"], "ar_order": ic["ar_order"], "structure": structure}
             if structure:
-                flagged.append((ic["explained"], rid, name))
+                hits.append((ic["explained"], rid, name))
             if floor and rms / floor > 3:
-                loud.append((rms / floor, rid, name))
+                noisy.append((rms / floor, rid, name))
+        return rid, rec, hits, noisy
+
+    # runs on parallel threads (the SVDs and filters release the GIL), in order
+    import numba
+    threads = min(numba.get_num_threads(), len(runs))
+    if threads > 1:
+        from concurrent.futures import ThreadPoolExecutor
+        with ThreadPoolExecutor(threads, thread_name_prefix="rideid-adequacy") as ex:
+            results = list(ex.map(one_run, runs.items()))
+    else:
+        results = [one_run(item) for item in runs.items()]
+    for rid, rec, f, lo in results:
         out_runs[rid] = rec
+        flagged += f
+        loud += lo
     adequate = not flagged
     reasons = []
     if flagged:

@@ -364,18 +364,25 @@ def _polish(cf: CostFunction, x0, weights, align=None):
             Y[a:b] = np.nan_to_num(mr.measured_at(start_of(v, k)), nan=0.0)
         return Y
 
+    last = {}  # the residuals of the last fun call: least_squares asks for the Jacobian where it just evaluated
+
     def fun(v):
-        return cf.residuals(to_x(v[:d])[None], weights, Y=measured(v))[0]
+        r = cf.residuals(to_x(v[:d])[None], weights, Y=measured(v))[0]
+        last["v"], last["r"] = v.copy(), r
+        return r
 
     def jac(v):
         h = 1e-7
         z = v[:d]
-        Z = np.tile(z, (d + 1, 1))
         steps = np.where(z + h <= 1, h, -h)
-        Z[1:][np.arange(d), np.arange(d)] += steps
-        R = cf.residuals(to_x(Z), weights, Y=measured(v))
+        Z = np.tile(z, (d, 1))
+        Z[np.arange(d), np.arange(d)] += steps
+        Yv = measured(v)
+        R = cf.residuals(to_x(Z), weights, Y=Yv)
+        r0 = last["r"] if "v" in last and np.array_equal(last["v"], v) else cf.residuals(
+            to_x(z[None]), weights, Y=Yv)[0]
         J = np.zeros((R.shape[1], v.size))
-        J[:, :d] = ((R[1:] - R[0]) / steps[:, None]).T
+        J[:, :d] = ((R - r0) / steps[:, None]).T
         offsets = np.cumsum([0] + [(e - s) * cf.residual_scale(ri, weights)[0].size
                                    for ri, (s, e) in enumerate(zip(cf.sim.run_start[:-1], cf.sim.run_start[1:]))])
         for k, (ri, mr, _) in enumerate(align):

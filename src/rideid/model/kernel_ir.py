@@ -1,0 +1,262 @@
+"""The kernel's inner loop as LLVM IR over ``<4 x double>`` vectors (used by :mod:`rideid.model.kernel`).
+
+One call integrates one chunk of :data:`LANES` candidates over one run.
+Every state, input moment accumulator and error sum is one vector of four
+lanes (one candidate each); every coefficient is one unaligned vector load
+from the chunk's lane-innermost block (:mod:`rideid.model.kernel_layout`
+gives the layout); the road inputs are broadcast. ``fast`` multiply-adds
+become AVX2 fused multiply-adds (``make bench`` counts them in the
+assembly).
+
+Why IR and not Python: the same code written as Python for Numba (one
+scalar per state and lane, straight-line, packed into vectors by LLVM's SLP
+pass) took Numba's front end ~8 s to type and lower on every fresh
+install; written here as vectors it is a quarter of the instructions, LLVM
+compiles it in well under a second, and Numba only compiles the small
+driver :func:`run_chunks` that calls it (the IR module is linked into the
+driver's library and cached on disk with it). Same operations in the same
+order: the results are bit for bit those of the former Python kernel.
+
+The function (all pointers as 64-bit integers, doubles otherwise)::
+
+    void rideid_kernel_run(cf, ct, N, k0, k1, UD, RD, MU, M, Y, W, hf, hr, X0, n, mode, OUT, ERR)
+
+``cf``/``ct`` the chunk's fixed and per-term coefficients, ``N`` moment
+terms, samples ``k0 <= k < k1``, ``UD``/``RD`` (T, 4) inputs and rates,
+``MU`` (T, 4, M) moments, ``Y`` (T, 10) measurements, ``W`` the run's 10
+channel weights, ``X0`` the chunk's first initial state (state ``i`` at
+``X0 + i n``), ``OUT`` the chunk's channel 0 at sample 0 (channel ``q`` of
+sample ``k`` at ``OUT + (10 k + q) n``; written when ``mode == 1``),
+``ERR`` the chunk's four error sums (written).
+"""
+
+from __future__ import annotations
+
+from .kernel_layout import FIXED, LANES, N_MAX_K, PER_TERM, flat_index as _flat
+
+NAME = "rideid_kernel_run"
+V = f"<{LANES} x double>"
+#: (block, states, accelerations, first state, first input)
+BLOCKS = (("s", 8, 4, 0, 0), ("a", 6, 3, 8, 2))
+
+
+class _Writer:
+    def __init__(self):
+        self.lines = []
+        self.n = 0
+
+    def __call__(self, line):
+        self.lines.append(line)
+
+    def tmp(self, expr):
+        self.n += 1
+        name = f"%t{self.n}"
+        self.lines.append(f"  {name} = {expr}")
+        return name
+
+    def ptr(self, base, offset):
+        """A pointer ``offset`` doubles after ``base`` (a constant or an i64 value)."""
+        return self.tmp(f"getelementptr inbounds double, ptr {base}, i64 {offset}")
+
+    def vload(self, base, offset):
+        return self.tmp(f"load {V}, ptr {self.ptr(base, offset)}, align 8")
+
+    def coef(self, base, index):
+        """The four lanes of coefficient ``index`` of a lane-innermost block."""
+        return self.vload(base, index * LANES)
+
+    def bcast(self, base, offset):
+        s = self.tmp(f"load double, ptr {self.ptr(base, offset)}, align 8")
+        v = self.tmp(f"insertelement {V} poison, double {s}, i64 0")
+        return self.tmp(f"shufflevector {V} {v}, {V} poison, <{LANES} x i32> zeroinitializer")
+
+    def splat(self, s):
+        v = self.tmp(f"insertelement {V} poison, double {s}, i64 0")
+        return self.tmp(f"shufflevector {V} {v}, {V} poison, <{LANES} x i32> zeroinitializer")
+
+    def fma(self, acc, a, b):
+        m = self.tmp(f"fmul fast {V} {a}, {b}")
+        return m if acc is None else self.tmp(f"fadd fast {V} {acc}, {m}")
+
+    def add(self, a, b):
+        return self.tmp(f"fadd fast {V} {a}, {b}")
+
+    def sub(self, a, b):
+        return self.tmp(f"fsub fast {V} {a}, {b}")
+
+
+def generate_ir() -> str:
+    """LLVM IR (textual, opaque pointers) of :data:`NAME`."""
+    w = _Writer()
+    args = ("i64 %icf, i64 %ict, i64 %N, i64 %k0, i64 %k1, i64 %iUD, i64 %iRD, i64 %iMU, i64 %M, i64 %iY, "
+            "i64 %iW, double %hf, double %hr, i64 %iX0, i64 %n, i64 %mode, i64 %iOUT, i64 %iERR")
+    w(f"define void @{NAME}({args}) nounwind {{")
+    w("entry:")
+    for p in ("cf", "ct", "UD", "RD", "MU", "Y", "W", "X0", "OUT", "ERR"):
+        w(f"  %{p} = inttoptr i64 %i{p} to ptr")
+    la = w.coef("%cf", _flat("a"))
+    lb = w.coef("%cf", _flat("b"))
+    hf = w.splat("%hf")
+    hr = w.splat("%hr")
+    x0 = []
+    for i in range(14):
+        off = w.tmp(f"mul i64 %n, {i}")
+        x0.append(w.tmp(f"load {V}, ptr {w.ptr('%X0', off)}, align 8"))
+    w("  %any = icmp slt i64 %k0, %k1")
+    w("  br i1 %any, label %sample, label %empty")
+
+    # -- one sample: accelerations, channels, errors
+    w("sample:")
+    xs = [f"%x{i}" for i in range(14)]
+    w("  %k = phi i64 [ %k0, %entry ], [ %knext, %update ]")
+    for i in range(14):
+        w(f"  %x{i} = phi {V} [ {x0[i]}, %entry ], [ %nx{i}, %update ]")
+    w(f"  %e = phi {V} [ zeroinitializer, %entry ], [ %enew, %update ]")
+    k4 = w.tmp("mul i64 %k, 4")
+    g = {}
+    for blk, S, R, xo, uo in BLOCKS:
+        u = [w.bcast("%UD", w.tmp(f"add i64 {k4}, {uo + c}")) for c in range(2)]
+        r = [w.bcast("%RD", w.tmp(f"add i64 {k4}, {uo + c}")) for c in range(2)]
+        for i in range(R):
+            acc = None
+            for c in range(2):
+                acc = w.fma(acc, w.coef("%cf", _flat("Da_" + blk, i, c)), u[c])
+                acc = w.fma(acc, w.coef("%cf", _flat("Dr_" + blk, i, c)), r[c])
+            for j in range(S):
+                acc = w.fma(acc, w.coef("%cf", _flat("Ca_" + blk, i, j)), xs[xo + j])
+            g[blk, i] = acc
+    # the channels (the output map of rideid.model.equations.output_map, tested against it)
+    fa = w.sub(g["s", 0], w.tmp(f"fmul fast {V} {la}, {g['s', 1]}"))
+    ra = w.add(g["s", 0], w.tmp(f"fmul fast {V} {lb}, {g['s', 1]}"))
+    hfa = w.tmp(f"fmul fast {V} {hf}, {g['a', 0]}")
+    hra = w.tmp(f"fmul fast {V} {hr}, {g['a', 0]}")
+    ys = [w.add(fa, hfa), w.sub(fa, hfa), w.add(ra, hra), w.sub(ra, hra),
+          w.add(g["s", 2], g["a", 1]), w.sub(g["s", 2], g["a", 1]),
+          w.add(g["s", 3], g["a", 2]), w.sub(g["s", 3], g["a", 2]), xs[5], xs[11]]
+    k10 = w.tmp("mul i64 %k, 10")
+    e = "%e"
+    for q, y in enumerate(ys):
+        d = w.sub(y, w.bcast("%Y", w.tmp(f"add i64 {k10}, {q}")))
+        wq = w.bcast("%W", q)
+        e = w.fma(e, w.tmp(f"fmul fast {V} {wq}, {d}"), d)
+    w(f"  %enew = fadd fast {V} {e}, zeroinitializer")
+    w("  %write = icmp eq i64 %mode, 1")
+    w("  br i1 %write, label %store, label %next")
+    w("store:")
+    for q, y in enumerate(ys):
+        row = w.tmp(f"add i64 {k10}, {q}")
+        off = w.tmp(f"mul i64 %n, {row}")
+        w(f"  store {V} {y}, ptr {w.ptr('%OUT', off)}, align 8")
+    w("  br label %next")
+    w("next:")
+    w("  %knext = add i64 %k, 1")
+    w("  %last = icmp eq i64 %knext, %k1")
+    w("  br i1 %last, label %done, label %terms_s")
+
+    # -- the moment terms over [k, k + 1], one loop per block
+    pred = "next"
+    acc_end = {}
+    for blk, S, R, xo, uo in BLOCKS:
+        lab = f"terms_{blk}"
+        w(f"{lab}:")
+        w(f"  %t_{blk} = phi i64 [ 0, %{pred} ], [ %t_{blk}1, %{lab} ]")
+        for i in range(S):
+            w(f"  %v{xo + i} = phi {V} [ zeroinitializer, %{pred} ], [ %vn{xo + i}, %{lab} ]")
+        base = w.tmp(f"mul i64 %t_{blk}, {PER_TERM * LANES}")
+        tb = w.ptr("%ct", base)
+        m = []
+        for c in range(2):
+            row = w.tmp(f"add i64 {k4}, {uo + c}")
+            start = w.tmp(f"mul i64 {row}, %M")
+            m.append(w.bcast("%MU", w.tmp(f"add i64 {start}, %t_{blk}")))
+        for i in range(S):
+            acc = f"%v{xo + i}"
+            for c in range(2):
+                acc = w.fma(acc, w.coef(tb, _flat("G_" + blk, i, c) - FIXED), m[c])
+            w(f"  %vn{xo + i} = fadd fast {V} {acc}, zeroinitializer")
+        w(f"  %t_{blk}1 = add i64 %t_{blk}, 1")
+        w(f"  %more_{blk} = icmp slt i64 %t_{blk}1, %N")
+        nxt = "terms_a" if blk == "s" else "update"
+        w(f"  br i1 %more_{blk}, label %{lab}, label %{nxt}")
+        pred = lab
+        acc_end.update({xo + i: f"%vn{xo + i}" for i in range(S)})
+    # -- the transition over [k, k + 1]
+    w("update:")
+    for blk, S, R, xo, uo in BLOCKS:
+        for i in range(S):
+            acc = acc_end[xo + i]
+            for j in range(S):
+                acc = w.fma(acc, w.coef("%cf", _flat("Phi_" + blk, i, j)), xs[xo + j])
+            w(f"  %nx{xo + i} = fadd fast {V} {acc}, zeroinitializer")
+    w("  br label %sample")
+    w("done:")
+    w(f"  store {V} %enew, ptr %ERR, align 8")
+    w("  ret void")
+    w("empty:")
+    w(f"  store {V} zeroinitializer, ptr %ERR, align 8")
+    w("  ret void")
+    w("}")
+    return "\n".join(w.lines) + "\n"
+
+
+_LIBRARY = {}
+
+
+def _library(context):
+    """The IR module, optimised and finalised once per process, to link into the driver's library."""
+    codegen = context.codegen()
+    if id(codegen) not in _LIBRARY:
+        import llvmlite.binding as llvm
+        lib = codegen.create_library("rideid_kernel_ir")
+        mod = llvm.parse_assembly(generate_ir())
+        mod.verify()
+        lib.add_llvm_module(mod)
+        lib.finalize()
+        _LIBRARY[id(codegen)] = lib
+    return _LIBRARY[id(codegen)]
+
+
+import numba  # noqa: E402
+from llvmlite import ir  # noqa: E402
+from numba.core import cgutils, types  # noqa: E402
+from numba.extending import intrinsic  # noqa: E402
+
+_ARG_TYPES = [types.int64] * 11 + [types.float64] * 2 + [types.int64] * 5
+#: doubles per chunk's coefficient block
+_COEF = (FIXED + PER_TERM * N_MAX_K) * LANES
+_FIXED_L = FIXED * LANES
+
+
+@intrinsic
+def _run_block(typingctx, cf, ct, N, k0, k1, UD, RD, MU, M, Y, W, hf, hr, X0, n, mode, OUT, ERR):
+    """A call of :data:`NAME`, whose IR module is linked into the caller's library."""
+    sig = types.void(*_ARG_TYPES)
+
+    def codegen(context, builder, signature, args):
+        context.add_linking_libs([_library(context)])
+        i64, f64 = ir.IntType(64), ir.DoubleType()
+        fnty = ir.FunctionType(ir.VoidType(), [i64] * 11 + [f64] * 2 + [i64] * 5)
+        fn = cgutils.get_or_insert_function(builder.module, fnty, NAME)
+        builder.call(fn, args)
+        return context.get_dummy_value()
+
+    return sig, codegen
+
+
+@numba.njit(cache=True, nogil=True)
+def run_chunks(ch0, ch1, CO, n_chunks, nterms, hf, hr, X0, run_start, run_group, UD, RD, MU, Y, W,
+               mode, ERR, OUT):  # pragma: no cover - compiled
+    """Integrate chunks ``ch0 <= ch < ch1`` of LANES candidates over every run (arguments: see
+    :func:`rideid.model.kernel.run_kernel`), one :data:`NAME` call per chunk and run."""
+    n = X0.shape[2]
+    M = MU.shape[2]
+    pco, pud, prd, pmu, py = CO.ctypes.data, UD.ctypes.data, RD.ctypes.data, MU.ctypes.data, Y.ctypes.data
+    pw, px0, pout, perr = W.ctypes.data, X0.ctypes.data, OUT.ctypes.data, ERR.ctypes.data
+    for ch in range(ch0, ch1):
+        c0 = ch * LANES
+        for r in range(run_group.size):
+            g = run_group[r]
+            cb = pco + 8 * (g * n_chunks + ch) * _COEF
+            _run_block(cb, cb + 8 * _FIXED_L, nterms[g, ch], run_start[r], run_start[r + 1], pud, prd, pmu,
+                       M, py, pw + 8 * 10 * r, hf, hr, px0 + 8 * (r * 14 * n + c0), n, mode, pout + 8 * c0,
+                       perr + 8 * (r * n + c0))
