@@ -41,9 +41,14 @@ BLOCKS = (("s", 8, 4, 0, 0), ("a", 6, 3, 8, 2))
 
 
 class _Writer:
-    def __init__(self):
+    """IR lines with numbered temporaries; ``opaque``: LLVM's opaque pointers (LLVM >= 17), else typed ones."""
+
+    def __init__(self, opaque: bool = True):
         self.lines = []
         self.n = 0
+        self.dp = "ptr" if opaque else "double*"  # a pointer to doubles
+        self.vp = "ptr" if opaque else f"{V}*"  # a pointer to a vector
+        self.opaque = opaque
 
     def __call__(self, line):
         self.lines.append(line)
@@ -56,17 +61,24 @@ class _Writer:
 
     def ptr(self, base, offset):
         """A pointer ``offset`` doubles after ``base`` (a constant or an i64 value)."""
-        return self.tmp(f"getelementptr inbounds double, ptr {base}, i64 {offset}")
+        return self.tmp(f"getelementptr inbounds double, {self.dp} {base}, i64 {offset}")
+
+    def vptr(self, p):
+        """``p`` (a pointer to doubles) as a pointer to a vector."""
+        return p if self.opaque else self.tmp(f"bitcast double* {p} to {V}*")
+
+    def vstore(self, value, p):
+        self(f"  store {V} {value}, {self.vp} {self.vptr(p)}, align 8")
 
     def vload(self, base, offset):
-        return self.tmp(f"load {V}, ptr {self.ptr(base, offset)}, align 8")
+        return self.tmp(f"load {V}, {self.vp} {self.vptr(self.ptr(base, offset))}, align 8")
 
     def coef(self, base, index):
         """The four lanes of coefficient ``index`` of a lane-innermost block."""
         return self.vload(base, index * LANES)
 
     def bcast(self, base, offset):
-        s = self.tmp(f"load double, ptr {self.ptr(base, offset)}, align 8")
+        s = self.tmp(f"load double, {self.dp} {self.ptr(base, offset)}, align 8")
         v = self.tmp(f"insertelement {V} poison, double {s}, i64 0")
         return self.tmp(f"shufflevector {V} {v}, {V} poison, <{LANES} x i32> zeroinitializer")
 
@@ -85,15 +97,19 @@ class _Writer:
         return self.tmp(f"fsub fast {V} {a}, {b}")
 
 
-def generate_ir() -> str:
-    """LLVM IR (textual, opaque pointers) of :data:`NAME`."""
-    w = _Writer()
+def generate_ir(opaque: bool | None = None) -> str:
+    """LLVM IR (textual) of :data:`NAME`; pointers opaque (LLVM >= 17) or typed (older LLVM), as the
+    installed llvmlite's LLVM reads them (``opaque=None``)."""
+    if opaque is None:
+        import llvmlite.binding as llvm
+        opaque = llvm.llvm_version_info[0] >= 17
+    w = _Writer(opaque)
     args = ("i64 %icf, i64 %ict, i64 %N, i64 %k0, i64 %k1, i64 %iUD, i64 %iRD, i64 %iMU, i64 %M, i64 %iY, "
             "i64 %iW, double %hf, double %hr, i64 %iX0, i64 %n, i64 %mode, i64 %iOUT, i64 %iERR")
     w(f"define void @{NAME}({args}) nounwind {{")
     w("entry:")
     for p in ("cf", "ct", "UD", "RD", "MU", "Y", "W", "X0", "OUT", "ERR"):
-        w(f"  %{p} = inttoptr i64 %i{p} to ptr")
+        w(f"  %{p} = inttoptr i64 %i{p} to {w.dp}")
     la = w.coef("%cf", _flat("a"))
     lb = w.coef("%cf", _flat("b"))
     hf = w.splat("%hf")
@@ -101,7 +117,7 @@ def generate_ir() -> str:
     x0 = []
     for i in range(14):
         off = w.tmp(f"mul i64 %n, {i}")
-        x0.append(w.tmp(f"load {V}, ptr {w.ptr('%X0', off)}, align 8"))
+        x0.append(w.vload("%X0", off))
     w("  %any = icmp slt i64 %k0, %k1")
     w("  br i1 %any, label %sample, label %empty")
 
@@ -146,7 +162,7 @@ def generate_ir() -> str:
     for q, y in enumerate(ys):
         row = w.tmp(f"add i64 {k10}, {q}")
         off = w.tmp(f"mul i64 %n, {row}")
-        w(f"  store {V} {y}, ptr {w.ptr('%OUT', off)}, align 8")
+        w.vstore(y, w.ptr("%OUT", off))
     w("  br label %next")
     w("next:")
     w("  %knext = add i64 %k, 1")
@@ -190,10 +206,10 @@ def generate_ir() -> str:
             w(f"  %nx{xo + i} = fadd fast {V} {acc}, zeroinitializer")
     w("  br label %sample")
     w("done:")
-    w(f"  store {V} %enew, ptr %ERR, align 8")
+    w.vstore("%enew", "%ERR")
     w("  ret void")
     w("empty:")
-    w(f"  store {V} zeroinitializer, ptr %ERR, align 8")
+    w.vstore("zeroinitializer", "%ERR")
     w("  ret void")
     w("}")
     return "\n".join(w.lines) + "\n"
