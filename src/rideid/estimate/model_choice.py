@@ -123,18 +123,33 @@ def identify_auto(ds, *, rng=None, seed=None, callback=None, maps=None, **kw):
                  "criterion": 0.0 if set(c) == set(GROUPS) else None} for c in candidates]
     results, costs = {}, {}
     evaluations = full.evaluations
+    kw_nested = {k: v for k, v in kw.items() if k in ("weights", "polish", "population")}
+
+    def nested(cand):
+        cf = _nested_cost(cf_full, ds, cand)
+        x0 = np.array([full.parameters[n] for n in cf.names])
+        # the adequacy verdict only for the model kept (below): it costs as much as a polish
+        return cf, identify_model(ds, rng=rng, seed=seed, cost=cf, maps=full.maps, start=x0, assess=False,
+                                  **kw_nested)
+
+    smaller = [c for c in candidates if set(c) != set(GROUPS)]
+    # the smaller candidates' polishes are independent (no randomness: each starts from the full
+    # estimate): on parallel threads, whose kernel calls, SVDs and array work release the GIL
+    import numba
+    threads = min(numba.get_num_threads(), len(smaller))
+    with single_threaded_blas():
+        if threads > 1:
+            from concurrent.futures import ThreadPoolExecutor
+            with ThreadPoolExecutor(threads, thread_name_prefix="rideid-candidates") as ex:
+                fits = list(ex.map(nested, smaller))
+        else:
+            fits = [nested(c) for c in smaller]
     for cand in candidates:
         if set(cand) == set(GROUPS):
             results[cand], costs[cand] = full, cf_full
-            continue
-        cf = _nested_cost(cf_full, ds, cand)
-        x0 = np.array([full.parameters[n] for n in cf.names])
-        kw_nested = {k: v for k, v in kw.items() if k in ("weights", "polish", "population")}
-        # the adequacy verdict only for the model kept (below): it costs as much as a polish
-        results[cand] = identify_model(ds, rng=rng, seed=seed, cost=cf, maps=full.maps, start=x0, assess=False,
-                                 **kw_nested)
-        costs[cand] = cf
-        evaluations += results[cand].nfev
+    for cand, (cf, r) in zip(smaller, fits):
+        results[cand], costs[cand] = r, cf
+        evaluations += r.nfev
     scored = [c for c in crit if c["criterion"] is not None]
     best = min(scored, key=lambda c: (c["criterion"], c["k"] or 0))
     chosen = tuple(best["extensions"])
