@@ -7,7 +7,7 @@ import pytest
 
 import rideid
 from rideid.cli import main
-from rideid.estimate.model_choice import PENALTY, criteria, wald
+from rideid.estimate.model_choice import PENALTY, criteria, fits_better, wald
 
 BOTH = ("anti_roll_bars", "tire_damping")
 CANDIDATES = [(), ("anti_roll_bars",), ("tire_damping",), BOTH]
@@ -31,6 +31,30 @@ def test_wald_and_criterion_closed_form():
     assert crit[("anti_roll_bars",)]["criterion"] == pytest.approx(2.0 + 2 * PENALTY)
     assert crit[BOTH]["criterion"] == pytest.approx(4 * PENALTY)
     assert min(crit.values(), key=lambda c: c["criterion"])["extensions"] == ["anti_roll_bars"]
+
+
+def test_a_candidate_must_fit_better_than_every_candidate_it_contains():
+    costs = {(): 1.0, ("anti_roll_bars",): 0.9, ("tire_damping",): 1.2, BOTH: 0.95}
+    assert fits_better((), costs)  # contains nothing
+    assert fits_better(("anti_roll_bars",), costs)
+    assert not fits_better(("tire_damping",), costs)  # worse than base
+    assert not fits_better(BOTH, costs)  # better than base and tire damping, not than bars alone
+    # materially: (0.5 %)^2 of the relative squared error, whatever the level
+    tiny = {(): 1.3e-24, ("anti_roll_bars",): 1.0e-24}
+    assert not fits_better(("anti_roll_bars",), tiny)
+    assert fits_better(("anti_roll_bars",), {(): 4e-4 + 2.6e-5, ("anti_roll_bars",): 4e-4})
+
+
+def test_noise_free_data_of_a_twelve_parameter_car_keep_base(sim_dataset, tmp_path, capsys):
+    """SPEC §6: on data from a twelve-parameter car --model auto keeps base; without noise every robust
+    std is at rounding level, and only the fits-better rule keeps rounding-level bar rates out."""
+    assert main(["identify", str(sim_dataset), "--out", str(tmp_path / "o"), "--seed", "1", "--quiet",
+                 "--no-report", "--model", "auto"]) == 0
+    model = json.loads((tmp_path / "o" / "result.json").read_text())["model"]
+    assert model["extensions"] == []
+    by = {tuple(c["extensions"]): c for c in model["candidates"]}
+    assert by[()]["fits_better"] and not any(c["fits_better"] for c in model["candidates"][1:])
+    assert "fits better" in capsys.readouterr().out
 
 
 def test_unknown_model_value_is_one_line_exit_2(sim_dataset, tmp_path, capsys):

@@ -238,11 +238,15 @@ def _summary_table(res) -> str:
 
 def _candidates_table(model: dict) -> str:
     lines = [f"--model auto kept: {' + '.join(model['extensions']) or 'base'}",
-             f"{'candidate':<30} {'cost':>11} {'criterion':>11} {'adequate':>9}"]
+             f"{'candidate':<30} {'cost':>11} {'criterion':>11} {'fits better':>12} {'adequate':>9}"]
     for c in model["candidates"]:
         crit = "" if c["criterion"] is None else f"{c['criterion']:.4g}"
         adq = {True: "yes", False: "no", None: "-"}[c.get("adequate")]
-        lines.append(f"{' + '.join(c['extensions']) or 'base':<30} {c['cost']:>11.5g} {crit:>11} {adq:>9}")
+        better = {True: "yes", False: "no", None: "-"}[c.get("fits_better")]
+        lines.append(f"{' + '.join(c['extensions']) or 'base':<30} {c['cost']:>11.5g} {crit:>11} {better:>12} {adq:>9}")
+    if any(c.get("fits_better") is False for c in model["candidates"]):
+        lines.append("fits better: a cost at least (0.5 %)^2 below every candidate it contains; a candidate that "
+                     "does not is not kept, whatever its criterion")
     return "\n".join(lines)
 
 

@@ -19,6 +19,10 @@ parameters are zero with an error bar that holds under coloured,
 cross-channel-correlated noise, so the criterion stays honest where a
 likelihood-ratio test or an AIC/BIC on the raw residual sum of squares (which
 count every sample as independent) would add groups the data do not support.
+A candidate is eligible only if it fits materially better than every
+candidate it contains (:func:`fits_better`: a cost lower by at least
+:data:`MIN_IMPROVEMENT`): on noise-free data, where every standard error is
+at rounding level, this keeps groups estimated at rounding-level values out.
 ``PENALTY`` = half the 99.9 % point of chi-square(2): a group of two
 parameters enters when its Wald statistic exceeds 13.8, i.e. a test at
 0.1 % per group, so a twelve-parameter car keeps the base model in about 999
@@ -35,6 +39,7 @@ import numpy as np
 from scipy import special
 
 from ..model.params import GROUPS
+from .adequacy import MIN_RELATIVE
 from .identify import identify as identify_model
 
 #: per free extension parameter: a group of two enters at the 99.9 % point of chi-square(2)
@@ -91,6 +96,33 @@ def criteria(names, theta, cov, candidates, free_ext) -> list[dict]:
         k = sum(len(free_ext[g]) for g in cand if g in free_ext)
         out.append({"extensions": list(cand), "wald": W, "k": k, "criterion": W + PENALTY * k})
     return out
+
+
+#: the least cost reduction that counts as a better fit: the cost is a relative squared error, so a
+#: group must change the fit by 0.5 % of the channels' RMS, the materiality floor of the adequacy
+#: verdict (rideid.estimate.adequacy.MIN_RELATIVE: below any accelerometer's or gyro's accuracy)
+MIN_IMPROVEMENT = MIN_RELATIVE ** 2
+
+
+def fits_better(extensions, costs: dict, min_improvement: float = MIN_IMPROVEMENT) -> bool:
+    """Does the candidate fit materially better than every candidate it contains?
+
+    Its cost must be at least ``min_improvement`` below each of theirs. A
+    group that does not improve the fit by that much explains nothing that
+    matters, however large its Wald statistic: with (nearly) noise-free
+    data the robust standard errors shrink to rounding level, and a bar rate
+    estimated at 1e-6 N/m would otherwise count as significant. A real bar
+    or tire damper changes the fit by percent (cost by 1e-4 or more); a
+    spurious group on noisy data by ~1e-8.
+
+    Parameters
+    ----------
+    extensions : sequence of str
+    costs : dict
+        candidate (tuple of groups) -> its cost.
+    """
+    mine = costs[tuple(extensions)]
+    return all(mine <= cost - min_improvement for cand, cost in costs.items() if set(cand) < set(extensions))
 
 
 def identify_auto(ds, *, rng=None, seed=None, callback=None, maps=None, **kw):
@@ -150,7 +182,9 @@ def identify_auto(ds, *, rng=None, seed=None, callback=None, maps=None, **kw):
     for cand, (cf, r) in zip(smaller, fits):
         results[cand], costs[cand] = r, cf
         evaluations += r.nfev
-    scored = [c for c in crit if c["criterion"] is not None]
+    for c in crit:
+        c["fits_better"] = fits_better(c["extensions"], {cand: r.cost for cand, r in results.items()})
+    scored = [c for c in crit if c["criterion"] is not None and c["fits_better"]]
     best = min(scored, key=lambda c: (c["criterion"], c["k"] or 0))
     chosen = tuple(best["extensions"])
     res = results[chosen]
@@ -163,6 +197,7 @@ def identify_auto(ds, *, rng=None, seed=None, callback=None, maps=None, **kw):
         r = results[tuple(c["extensions"])]
         table.append({
             "extensions": c["extensions"], "cost": r.cost, "criterion": c["criterion"], "wald": c["wald"],
+            "fits_better": c["fits_better"],
             "free_extension_parameters": c["k"],
             "adequate": (r.adequacy or {}).get("adequate"),
             "parameters": dict(r.parameters),

@@ -64,7 +64,8 @@ def model_rows(res: dict) -> dict | None:
 
     chosen = label(model.get("extensions", []))
     heads = [{"label": label(c["extensions"]), "cost": c["cost"], "criterion": c["criterion"], "wald": c.get("wald"),
-              "adequate": c.get("adequate"), "chosen": label(c["extensions"]) == chosen} for c in cands]
+              "adequate": c.get("adequate"), "fits_better": c.get("fits_better"),
+              "chosen": label(c["extensions"]) == chosen} for c in cands]
     ref = next(c for c in cands if label(c["extensions"]) == chosen)
     names = []
     for c in cands:
