@@ -66,6 +66,11 @@ def test_no_import_cycle_at_load_time_and_no_private_name_across_modules():
             assert not (name.startswith("_") and not name.startswith("__")), f"{mod} imports {base}.{name}"
         graph[mod] = edges
 
+    _assert_acyclic(graph)
+
+
+def _assert_acyclic(graph):
+    """Depth-first search of ``{module: imported modules}``; fails naming the first cycle found."""
     state = {}
 
     def visit(m, path):
@@ -169,16 +174,4 @@ def test_no_import_cycle_even_through_imports_inside_functions():
     graph = {mod: {f"{b}.{n}" if f"{b}.{n}" in mods else b for b, n, _ in _imports(p, mod)} - {mod}
              for mod, p in mods.items()}
     graph = {m: {t for t in ts if t in mods} for m, ts in graph.items()}
-    state = {}
-
-    def visit(m, path):
-        state[m] = "open"
-        for t in graph[m]:
-            assert state.get(t) != "open", "import cycle: " + " -> ".join(path + [t])
-            if t not in state:
-                visit(t, path + [t])
-        state[m] = "done"
-
-    for m in graph:
-        if m not in state:
-            visit(m, [m])
+    _assert_acyclic(graph)
