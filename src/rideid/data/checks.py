@@ -766,19 +766,19 @@ def _prefetch_inputs(ds) -> None:
     :func:`rideid.model.contact.envelope_grid` and
     :func:`rideid.model.simulate.prepare_run` one run at a time; most of the
     work is NumPy and compiled loops that release the GIL, so the cores
-    share it. As many threads as the kernel uses (``numba.get_num_threads``:
-    one in a study's workers). A run that fails here fails again, with its
-    message, in the checks.
+    share it (:func:`rideid.model.batch.thread_map`; with one thread, as in
+    a study's workers, nothing is done ahead). A run that fails here fails
+    again, with its message, in the checks.
     """
     import numba
 
+    from ..model.batch import thread_map
     from ..model.contact import envelope_grid
     from ..model.simulate import _PREPARED_MAX, ENVELOPE_DX, prepare_run
 
     man, geom = ds.manifest, ds.geometry
     runs = man.runs[:_PREPARED_MAX]  # what the cache of prepared runs holds
-    threads = min(numba.get_num_threads(), len(runs))
-    if threads < 2:
+    if min(numba.get_num_threads(), len(runs)) < 2:
         return
     paths = {}
     for r in runs:
@@ -797,10 +797,8 @@ def _prefetch_inputs(ds) -> None:
         except Exception:  # noqa: BLE001 - reported by the checks themselves
             pass
 
-    from concurrent.futures import ThreadPoolExecutor
-    with ThreadPoolExecutor(threads, thread_name_prefix="rideid-inputs") as ex:
-        list(ex.map(envelope, sorted(paths.values(), key=lambda p: -(p.extent[1] - p.extent[0]))))
-        list(ex.map(inputs, runs))
+    thread_map(envelope, sorted(paths.values(), key=lambda p: -(p.extent[1] - p.extent[0])), "rideid-inputs")
+    thread_map(inputs, runs, "rideid-inputs")
 
 
 def check_dataset(ds) -> list[Finding]:

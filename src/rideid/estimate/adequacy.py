@@ -261,6 +261,8 @@ def assess(runs: dict, channels, *, alpha: float = ALPHA, min_explained: float =
 
 
 def _assess(runs, channels, alpha, min_explained):
+    from ..model.batch import thread_map
+
     pairs = [(rid, c) for rid, (E, _, _) in runs.items() for c in range(E.shape[1]) if not np.all(np.isnan(E[:, c]))]
     alpha_each = alpha / max(len(pairs), 1)
     out_runs, flagged, loud = {}, [], []
@@ -294,15 +296,7 @@ def _assess(runs, channels, alpha, min_explained):
         return rid, rec, hits, noisy
 
     # runs on parallel threads (the SVDs and filters release the GIL), in order
-    import numba
-    threads = min(numba.get_num_threads(), len(runs))
-    if threads > 1:
-        from concurrent.futures import ThreadPoolExecutor
-        with ThreadPoolExecutor(threads, thread_name_prefix="rideid-adequacy") as ex:
-            results = list(ex.map(one_run, runs.items()))
-    else:
-        results = [one_run(item) for item in runs.items()]
-    for rid, rec, f, lo in results:
+    for rid, rec, f, lo in thread_map(one_run, runs.items(), "rideid-adequacy"):
         out_runs[rid] = rec
         flagged += f
         loud += lo

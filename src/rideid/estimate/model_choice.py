@@ -136,7 +136,7 @@ def identify_auto(ds, *, rng=None, seed=None, callback=None, maps=None, **kw):
     """
     from .adequacy import assess_fit
     from .cost import CostFunction
-    from ..model.batch import single_threaded_blas
+    from ..model.batch import single_threaded_blas, thread_map
 
     t0 = time.perf_counter()
     cf_full = CostFunction(ds, extensions=tuple(GROUPS))
@@ -164,21 +164,13 @@ def identify_auto(ds, *, rng=None, seed=None, callback=None, maps=None, **kw):
         return cf, identify_model(ds, rng=rng, seed=seed, cost=cf, maps=full.maps, start=x0, assess=False,
                                   **kw_nested)
 
-    smaller = [c for c in candidates if set(c) != set(GROUPS)]
+    full_key = next(c for c in candidates if set(c) == set(GROUPS))
+    smaller = [c for c in candidates if c != full_key]
     # the smaller candidates' polishes are independent (no randomness: each starts from the full
     # estimate): on parallel threads, whose kernel calls, SVDs and array work release the GIL
-    import numba
-    threads = min(numba.get_num_threads(), len(smaller))
     with single_threaded_blas():
-        if threads > 1:
-            from concurrent.futures import ThreadPoolExecutor
-            with ThreadPoolExecutor(threads, thread_name_prefix="rideid-candidates") as ex:
-                fits = list(ex.map(nested, smaller))
-        else:
-            fits = [nested(c) for c in smaller]
-    for cand in candidates:
-        if set(cand) == set(GROUPS):
-            results[cand], costs[cand] = full, cf_full
+        fits = thread_map(nested, smaller, "rideid-candidates")
+    results[full_key], costs[full_key] = full, cf_full
     for cand, (cf, r) in zip(smaller, fits):
         results[cand], costs[cand] = r, cf
         evaluations += r.nfev

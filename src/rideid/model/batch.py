@@ -31,6 +31,23 @@ def single_threaded_blas():
     return _BLAS.limit(limits=1, user_api="blas")
 
 
+def thread_map(fn, items, name: str = "rideid") -> list:
+    """``[fn(x) for x in items]``, on as many threads as the kernel uses (``numba.get_num_threads``).
+
+    For work that spends its time in NumPy, LAPACK and compiled loops, which
+    release the GIL. One thread (a study's workers): a plain loop.
+    """
+    import numba
+
+    items = list(items)
+    threads = min(numba.get_num_threads(), len(items))
+    if threads < 2:
+        return [fn(x) for x in items]
+    from concurrent.futures import ThreadPoolExecutor
+    with ThreadPoolExecutor(threads, thread_name_prefix=name) as ex:
+        return list(ex.map(fn, items))
+
+
 class BatchSimulator:
     """Simulate populations of cars over fixed runs.
 

@@ -166,13 +166,6 @@ def lattice_max(H, circ):  # pragma: no cover - compiled
     return best, arg
 
 
-def lattice_max_brute(H, circ):
-    """:func:`lattice_max` by brute force (NumPy, for tests)."""
-    from numpy.lib.stride_tricks import sliding_window_view
-    V = sliding_window_view(H, circ.size) + circ[None, :]
-    return V.max(axis=1), V.argmax(axis=1)
-
-
 def envelope_grid(path: WheelPath, R: float, dx: float = 5e-4, n_fine: int = 9):
     """The envelope of a wheel path tabulated on a uniform grid.
 

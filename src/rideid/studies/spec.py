@@ -25,12 +25,14 @@ from pathlib import Path
 
 from ..data.schema import read_toml
 from ..errors import DataError
+from ..estimate.identify import DEFAULT_GENERATIONS, DEFAULT_POPULATION
 
 TOP_KEYS = ("name", "data", "identify", "subsets")
 DATA_KEYS = ("datasets", "scenario", "noise", "noise_seeds")
 #: identify options a study may set, in the order they vary in the task list (last varies fastest)
 IDENTIFY_KEYS = ("model", "weights", "population", "generations", "polish", "spread_tol", "seed")
-IDENTIFY_DEFAULTS = {"population": 32, "generations": 400, "polish": True, "weights": "adaptive", "seed": 1}
+IDENTIFY_DEFAULTS = {"population": DEFAULT_POPULATION, "generations": DEFAULT_GENERATIONS, "polish": True,
+                     "weights": "adaptive", "seed": 1}
 BUILTIN = "builtin"
 
 
