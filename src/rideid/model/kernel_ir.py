@@ -78,11 +78,11 @@ class _Writer:
         return self.vload(base, index * LANES)
 
     def bcast(self, base, offset):
-        s = self.tmp(f"load double, {self.dp} {self.ptr(base, offset)}, align 8")
-        v = self.tmp(f"insertelement {V} poison, double {s}, i64 0")
-        return self.tmp(f"shufflevector {V} {v}, {V} poison, <{LANES} x i32> zeroinitializer")
+        """The double ``offset`` after ``base`` in all four lanes."""
+        return self.splat(self.tmp(f"load double, {self.dp} {self.ptr(base, offset)}, align 8"))
 
     def splat(self, s):
+        """The double value ``s`` in all four lanes."""
         v = self.tmp(f"insertelement {V} poison, double {s}, i64 0")
         return self.tmp(f"shufflevector {V} {v}, {V} poison, <{LANES} x i32> zeroinitializer")
 
