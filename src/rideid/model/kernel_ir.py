@@ -32,9 +32,18 @@ sample ``k`` at ``OUT + (10 k + q) n``; written when ``mode == 1``),
 
 from __future__ import annotations
 
+import numba
+from llvmlite import ir
+from numba.core import cgutils, types
+from numba.extending import intrinsic
+
 from .kernel_layout import FIXED, LANES, N_MAX_K, PER_TERM, flat_index as _flat
 
 NAME = "rideid_kernel_run"
+#: the function's arguments in order: pointers (passed as 64-bit integers), counts and the two half-tracks
+ARGS = (("cf", "ptr"), ("ct", "ptr"), ("N", "i64"), ("k0", "i64"), ("k1", "i64"), ("UD", "ptr"), ("RD", "ptr"),
+        ("MU", "ptr"), ("M", "i64"), ("Y", "ptr"), ("W", "ptr"), ("hf", "double"), ("hr", "double"),
+        ("X0", "ptr"), ("n", "i64"), ("mode", "i64"), ("OUT", "ptr"), ("ERR", "ptr"))
 V = f"<{LANES} x double>"
 #: (block, states, accelerations, first state, first input)
 BLOCKS = (("s", 8, 4, 0, 0), ("a", 6, 3, 8, 2))
@@ -104,12 +113,12 @@ def generate_ir(opaque: bool | None = None) -> str:
         import llvmlite.binding as llvm
         opaque = llvm.llvm_version_info[0] >= 17
     w = _Writer(opaque)
-    args = ("i64 %icf, i64 %ict, i64 %N, i64 %k0, i64 %k1, i64 %iUD, i64 %iRD, i64 %iMU, i64 %M, i64 %iY, "
-            "i64 %iW, double %hf, double %hr, i64 %iX0, i64 %n, i64 %mode, i64 %iOUT, i64 %iERR")
+    args = ", ".join(f"i64 %i{a}" if kind == "ptr" else f"{kind} %{a}" for a, kind in ARGS)
     w(f"define void @{NAME}({args}) nounwind {{")
     w("entry:")
-    for p in ("cf", "ct", "UD", "RD", "MU", "Y", "W", "X0", "OUT", "ERR"):
-        w(f"  %{p} = inttoptr i64 %i{p} to {w.dp}")
+    for a, kind in ARGS:
+        if kind == "ptr":
+            w(f"  %{a} = inttoptr i64 %i{a} to {w.dp}")
     la = w.coef("%cf", _flat("a"))
     lb = w.coef("%cf", _flat("b"))
     hf = w.splat("%hf")
@@ -232,12 +241,7 @@ def _library(context):
     return _LIBRARY[id(codegen)]
 
 
-import numba  # noqa: E402
-from llvmlite import ir  # noqa: E402
-from numba.core import cgutils, types  # noqa: E402
-from numba.extending import intrinsic  # noqa: E402
-
-_ARG_TYPES = [types.int64] * 11 + [types.float64] * 2 + [types.int64] * 5
+_ARG_TYPES = [types.float64 if kind == "double" else types.int64 for _, kind in ARGS]
 #: doubles per chunk's coefficient block
 _COEF = (FIXED + PER_TERM * N_MAX_K) * LANES
 _FIXED_L = FIXED * LANES
@@ -250,8 +254,8 @@ def _run_block(typingctx, cf, ct, N, k0, k1, UD, RD, MU, M, Y, W, hf, hr, X0, n,
 
     def codegen(context, builder, signature, args):
         context.add_linking_libs([_library(context)])
-        i64, f64 = ir.IntType(64), ir.DoubleType()
-        fnty = ir.FunctionType(ir.VoidType(), [i64] * 11 + [f64] * 2 + [i64] * 5)
+        fnty = ir.FunctionType(ir.VoidType(), [ir.DoubleType() if kind == "double" else ir.IntType(64)
+                                               for _, kind in ARGS])
         fn = cgutils.get_or_insert_function(builder.module, fnty, NAME)
         builder.call(fn, args)
         return context.get_dummy_value()
