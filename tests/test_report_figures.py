@@ -2,7 +2,7 @@
 
 import numpy as np
 
-from rideid.estimate.sensitivity import P2R_STARS, stars
+from rideid.estimate.sensitivity import P2R_STARS, star_marks, stars
 from rideid.report import html as H
 
 
@@ -51,7 +51,7 @@ def test_heatmap_star_marks_count_the_ratings():
     rng = np.random.default_rng(3)
     data = rng.uniform(0, 20, (5, 4))
     data[0, 0] = np.nan
-    xs, ys, dx, dy, rating = H._star_marks(data, 1.0, P2R_STARS)
+    xs, ys, dx, dy, rating = star_marks(data, 1.0, P2R_STARS)
     for i in range(5):
         for j in range(4):
             n = stars(data[i, j], P2R_STARS).count("★")

@@ -188,38 +188,81 @@ def write_csvs(m: SensitivityMaps, out_dir):
             w.writerow([p] + [f"{v:.6g}" for v in m.M[i]])
 
 
-def heatmaps(m: SensitivityMaps, out_dir) -> list:
-    """Three heatmap PNGs; returns their paths."""
-    from pathlib import Path
+#: the three maps: file stem -> (SensitivityMaps attributes of the values, row and column labels; title;
+#: star thresholds; the parameter -> track shares are rated times the number of runs)
+HEATMAPS = {
+    "param_response": ("S_bar", "params", "channels", "Parameter → response: mean |% change of peak|", P2R_STARS),
+    "response_track": ("R", "channels", "runs", "Response → track: relative RMS", R2T_STARS),
+    "param_track": ("M", "params", "runs", "Parameter → track: share per run", P2T_STARS),
+}
 
+
+def star_marks(data, scale, thresholds):
+    """Where to draw each cell's star rating: ``(x, y, dash_x, dash_y, rating)``.
+
+    A cell rated n >= 1 (:func:`stars` of ``data * scale``) gets n star marks
+    side by side, a cell rated zero (or not finite: not excited) one dash.
+    """
+    xs, ys, dash_x, dash_y, rating = [], [], [], [], np.zeros(data.shape, dtype=int)
+    for i in range(data.shape[0]):
+        for j in range(data.shape[1]):
+            n = stars(data[i, j] * scale, thresholds).count("★")
+            rating[i, j] = n
+            if n == 0:
+                dash_x.append(j)
+                dash_y.append(i)
+            for k in range(n):
+                xs.append(j + 0.14 * (k - (n - 1) / 2))
+                ys.append(i)
+    return np.array(xs), np.array(ys), np.array(dash_x), np.array(dash_y), rating
+
+
+def heatmap_figure(m: SensitivityMaps, kind: str):
+    """One map (``kind``: a key of :data:`HEATMAPS`) as a Matplotlib figure, each cell with its star rating.
+
+    The stars are marker symbols of one scatter per colour, not one text per
+    cell: a map has up to ~120 cells, and laying out a text each costs more
+    than the rest of the figure.
+    """
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    out_dir = Path(out_dir)
+    attr, row_attr, col_attr, title, th = HEATMAPS[kind]
+    data, rows, cols = getattr(m, attr), getattr(m, row_attr), getattr(m, col_attr)
+    scale = len(m.runs) if kind == "param_track" else 1.0  # shares per run: 1/runs is "average"
+    fig, ax = plt.subplots(figsize=(1.0 + 0.75 * len(cols), 1.2 + 0.38 * len(rows)), dpi=110)
+    im = ax.imshow(data, aspect="auto", cmap="viridis")
+    ax.grid(False)
+    ax.set_xticks(range(len(cols)), cols, rotation=45, ha="right", fontsize=8)
+    ax.set_yticks(range(len(rows)), rows, fontsize=8)
+    xs, ys, dx, dy, _ = star_marks(data, scale, th)
+    # white on the dark part of viridis, black on the light part
+    light = data >= 0.6 * np.nanmax(data) if np.isfinite(data).any() else np.zeros(data.shape, bool)
+    for x, y, marker, size in ((xs, ys, "*", 30), (dx, dy, "_", 12)):
+        if x.size:
+            on_light = light[y.astype(int), np.rint(x).astype(int)]
+            ax.scatter(x, y, s=size, marker=marker, c=np.where(on_light, "black", "white"), linewidths=0.8)
+    ax.set_xlim(-0.5, len(cols) - 0.5)
+    ax.set_ylim(len(rows) - 0.5, -0.5)
+    ax.set_title(title, fontsize=10)
+    fig.colorbar(im, ax=ax, fraction=0.04)
+    fig.tight_layout()
+    return fig
+
+
+def heatmaps(m: SensitivityMaps, out_dir) -> list:
+    """The three heatmap PNGs (:func:`heatmap_figure`); returns their paths."""
+    from pathlib import Path
+
+    import matplotlib.pyplot as plt
+
     files = []
-    specs = [
-        ("param_response.png", m.S_bar, m.params, m.channels, "Parameter → response: mean |% change of peak|",
-         P2R_STARS, 1.0),
-        ("response_track.png", m.R, m.channels, m.runs, "Response → track: relative RMS", R2T_STARS, 1.0),
-        ("param_track.png", m.M, m.params, m.runs, "Parameter → track: share per run", P2T_STARS, len(m.runs)),
-    ]
-    for name, data, rows, cols, title, th, scale in specs:
-        fig, ax = plt.subplots(figsize=(1.0 + 0.75 * len(cols), 1.2 + 0.38 * len(rows)))
-        im = ax.imshow(data, aspect="auto", cmap="viridis")
-        ax.grid(False)
-        ax.set_xticks(range(len(cols)), cols, rotation=45, ha="right", fontsize=8)
-        ax.set_yticks(range(len(rows)), rows, fontsize=8)
-        for i in range(data.shape[0]):
-            for j in range(data.shape[1]):
-                ax.text(j, i, stars(data[i, j] * scale, th).replace("⌀", "-"), ha="center", va="center",
-                        fontsize=7, color="white" if data[i, j] < 0.6 * np.nanmax(data) else "black")
-        ax.set_title(title, fontsize=10)
-        fig.colorbar(im, ax=ax, fraction=0.04)
-        fig.tight_layout()
-        fig.savefig(out_dir / name, dpi=110)
+    for kind in HEATMAPS:
+        fig = heatmap_figure(m, kind)
+        fig.savefig(Path(out_dir) / f"{kind}.png", dpi=110)
         plt.close(fig)
-        files.append(out_dir / name)
+        files.append(Path(out_dir) / f"{kind}.png")
     return files
 
 

@@ -372,65 +372,13 @@ HEAT_CAPTIONS = {
 }
 
 
-def _heat_specs(maps):
-    from ..estimate.sensitivity import P2R_STARS, P2T_STARS, R2T_STARS
-    return {
-        "param_response": (maps.S_bar, maps.params, maps.channels, "Parameter → response: mean |% change of peak|",
-                           P2R_STARS, 1.0),
-        "response_track": (maps.R, maps.channels, maps.runs, "Response → track: relative RMS", R2T_STARS, 1.0),
-        "param_track": (maps.M, maps.params, maps.runs, "Parameter → track: share per run", P2T_STARS,
-                        len(maps.runs)),
-    }
-
-
-def _star_marks(data, scale, thresholds):
-    """Where to draw each cell's star rating: ``(x, y, n_stars)`` per mark.
-
-    A cell rated n >= 1 gets n star marks side by side, a cell rated zero (or not
-    finite: not excited) one dash, as ``rideid.estimate.sensitivity.stars`` rates it.
-    """
-    from ..estimate.sensitivity import stars
-    xs, ys, dash_x, dash_y, rating = [], [], [], [], np.zeros(data.shape, dtype=int)
-    for i in range(data.shape[0]):
-        for j in range(data.shape[1]):
-            n = stars(data[i, j] * scale, thresholds).count("★")
-            rating[i, j] = n
-            if n == 0:
-                dash_x.append(j)
-                dash_y.append(i)
-            for k in range(n):
-                xs.append(j + 0.14 * (k - (n - 1) / 2))
-                ys.append(i)
-    return np.array(xs), np.array(ys), np.array(dash_x), np.array(dash_y), rating
-
-
 def fig_heatmap(kind, maps, out_dir):
-    """One sensitivity map as a heatmap with each cell's star rating (``kind``: a key of ``HEAT_CAPTIONS``).
-
-    The stars are marker symbols of one scatter per colour, not one text per cell: a map has up to
-    ~120 cells and laying out a text each costs more than the rest of the figure.
-    """
-    plt = _plt()
-    data, rows, cols, title, th, scale = _heat_specs(maps)[kind]
-    fig, ax = plt.subplots(figsize=(1.0 + 0.75 * len(cols), 1.2 + 0.38 * len(rows)), dpi=110)
-    im = ax.imshow(data, aspect="auto", cmap="viridis")
-    ax.grid(False)
-    ax.set_xticks(range(len(cols)), cols, rotation=45, ha="right", fontsize=8)
-    ax.set_yticks(range(len(rows)), rows, fontsize=8)
-    xs, ys, dx, dy, _ = _star_marks(data, scale, th)
-    # white on the dark part of viridis, black on the light part
-    light = data >= 0.6 * np.nanmax(data) if np.isfinite(data).any() else np.zeros(data.shape, bool)
-    for x, y, marker, size in ((xs, ys, "*", 30), (dx, dy, "_", 12)):
-        if x.size:
-            on_light = light[y.astype(int), np.rint(x).astype(int)]
-            ax.scatter(x, y, s=size, marker=marker, c=np.where(on_light, "black", "white"), linewidths=0.8)
-    ax.set_xlim(-0.5, len(cols) - 0.5)
-    ax.set_ylim(len(rows) - 0.5, -0.5)
-    ax.set_title(title, fontsize=10)
-    fig.colorbar(im, ax=ax, fraction=0.04)
-    fig.tight_layout()
-    caption = HEAT_CAPTIONS[kind]
-    return _save(fig, Path(out_dir), kind, kind.replace("_", " → ").replace("param", "parameter"), caption)
+    """One sensitivity map with each cell's star rating (``kind``: a key of ``HEAT_CAPTIONS``;
+    drawn by :func:`rideid.estimate.sensitivity.heatmap_figure`)."""
+    from ..estimate.sensitivity import heatmap_figure
+    _plt()
+    title = kind.replace("_", " → ").replace("param", "parameter")
+    return _save(heatmap_figure(maps, kind), Path(out_dir), kind, title, HEAT_CAPTIONS[kind])
 
 
 def _fig_job(job):
