@@ -75,9 +75,7 @@ def machine_cores() -> int:
 
 #: environment of local workers: one thread everywhere (a task uses one core; workers = cores)
 WORKER_ENV = {"NUMBA_NUM_THREADS": "1", "OMP_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1",
-              "MKL_NUM_THREADS": "1",
-              # Dask's statistical profiler samples the task thread's stack every 10 ms: not needed
-              "DASK_DISTRIBUTED__WORKER__PROFILE__ENABLED": "False"}
+              "MKL_NUM_THREADS": "1"}
 
 
 def local_cluster(n_workers: int | None = None):
@@ -93,10 +91,11 @@ def local_cluster(n_workers: int | None = None):
     # (inherited, and kept by Python), so that only the client handles it and closes the cluster cleanly
     old = signal.signal(signal.SIGINT, signal.SIG_IGN) if threading.current_thread() is threading.main_thread() \
         else None
-    # The one-thread settings must be in the environment the worker processes start with: the
-    # ``env`` argument is applied after the worker has imported Numba (whose thread count is read
-    # at import), and then every worker ran 2 OpenMP threads whose spinning between parallel regions
-    # took the other worker's core (measured: 10 s per task against 4.5 s in a plain process pool).
+    # The one-thread settings must be in the environment the worker processes start with (they
+    # inherit this process's, set here for the spawn only): LocalCluster's ``env`` argument is applied
+    # after the worker has imported Numba (whose thread count is read at import), and then every
+    # worker ran 2 OpenMP threads whose spinning between parallel regions took the other worker's
+    # core (measured: 10 s per task against 4.5 s in a plain process pool).
     saved = {k: os.environ.get(k) for k in WORKER_ENV}
     os.environ.update(WORKER_ENV)
     try:
@@ -107,10 +106,12 @@ def local_cluster(n_workers: int | None = None):
         # (a task took 8 s in a worker, 4.8 s in a plain process); rideid's workers keep glibc's default
         spawn_env = {k: v for k, v in dask.config.get("distributed.nanny.pre-spawn-environ").items()
                      if k != "MALLOC_TRIM_THRESHOLD_"}
+        # and Dask's statistical profiler (it samples the task thread's stack every 10 ms) is off: the
+        # nanny hands the workers this process's configuration
         with dask.config.set({"distributed.worker.profile.enabled": False,
                               "distributed.nanny.pre-spawn-environ": spawn_env}):
             return LocalCluster(n_workers=n, threads_per_worker=1, processes=True, dashboard_address=":0",
-                                silence_logs=logging.ERROR, env=dict(WORKER_ENV))
+                                silence_logs=logging.ERROR)
     finally:
         for k, v in saved.items():
             if v is None:
