@@ -325,15 +325,16 @@ def _assess(runs, channels, alpha, min_explained):
             "alpha": alpha, "min_explained": min_explained, "runs": out_runs}
 
 
-def assess_fit(cf, P) -> dict:
+def assess_fit(cf, P, sims=None) -> dict:
     """Adequacy of a full parameter row ``P`` on the data of a :class:`rideid.CostFunction`.
 
     The residuals are the unweighted ``measured - simulated`` channels; the
-    inputs are the four wheel inputs and their rates of each run.
+    inputs are the four wheel inputs and their rates of each run. ``sims``:
+    ``cf.simulate(P)`` when the caller has it already.
     """
     from ..model.equations import CHANNELS
 
-    sims = cf.simulate(P)
+    sims = cf.simulate(P) if sims is None else sims
     runs = {}
     for ri, rid in enumerate(cf.run_ids):
         s, e = cf.sim.run_start[ri], cf.sim.run_start[ri + 1]

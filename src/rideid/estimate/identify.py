@@ -322,6 +322,7 @@ def _result(ds, cf, search, fit, weighting, maps, rng_record, wall, assess=True)
     finite = bool(np.all(np.isfinite(x)) and np.isfinite(final_E).all())
     success = finite and (info is None or bool(info["success"]))
     message = MESSAGES[search.stop] + ("" if info is None else f" Polish: {info['message']}")
+    response = cf.simulate(P)
     return IdentificationResult(
         x=np.asarray(x, dtype=float), names=list(cf.names), std=np.asarray(std, dtype=float), covariance=cov,
         fun=float(np.full(final_E.size, 1.0 / final_E.size) @ final_E), success=success, message=message, stop=search.stop,
@@ -330,8 +331,8 @@ def _result(ds, cf, search, fit, weighting, maps, rng_record, wall, assess=True)
         rng_state=rng_record["rng_state"], track_weights=search.track_weights, weights_mode=weighting.name,
         polish=info, history=History(search.history), starts=starts, preprocessing=pre,
         modal=modal_summary(P, ds.geometry), dataset=str(ds.path), maps=maps,
-        model={"extensions": list(space.extensions)}, response=cf.simulate(P),
-        correlation=robust.correlation_dict(), adequacy=assess_fit(cf, P) if assess else None,
+        model={"extensions": list(space.extensions)}, response=response,
+        correlation=robust.correlation_dict(), adequacy=assess_fit(cf, P, response) if assess else None,
         checks=[f.to_dict() for f in findings])
 
 

@@ -183,7 +183,8 @@ def identify_auto(ds, *, rng=None, seed=None, callback=None, maps=None, **kw):
     if res.adequacy is None:
         cf = costs[chosen]
         with single_threaded_blas():
-            res.adequacy = assess_fit(cf, cf.space.full(np.array([[res.parameters[n] for n in cf.names]]))[0])
+            res.adequacy = assess_fit(cf, cf.space.full(np.array([[res.parameters[n] for n in cf.names]]))[0],
+                                      res.response)
     table = []
     for c in crit:
         r = results[tuple(c["extensions"])]
