@@ -733,7 +733,7 @@ def _alternatives(ds, rid, P, rho_now):
             dist = mr.distance
             if factor is not None:
                 dist = Distance(dist.t, dist.d * factor)
-            alt = dataclasses.replace(mr, speed=speed, distance=dist, grid=None, start=None, warnings=[])
+            alt = dataclasses.replace(mr, speed=speed, distance=dist, window=None, start=None, warnings=[])
             try:
                 _, r = estimate_start(alt, P, geom, track)
             except Exception:  # a candidate that cannot even be aligned does not fit

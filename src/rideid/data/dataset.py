@@ -173,7 +173,7 @@ def align_starts(ds: Dataset, starts: dict[str, float] | None = None) -> Dataset
     man = ds.manifest
     data, measured = dict(ds.data), {}
     for rid, mr0 in ds.measured.items():
-        mr = replace(mr0, record=dict(mr0.record), grid=None, start=None)
+        mr = replace(mr0, record=dict(mr0.record), window=None, start=None)
         track = man.tracks[man.run(rid).track]
         if starts and rid in starts:
             s = float(starts[rid])

@@ -21,20 +21,25 @@ each recorded in :attr:`MeasuredRun.record` (and in ``result.json``):
 5. **Anti-alias filtering and resampling** to one rate ``fs``: channels
    faster than ``fs`` are low-passed (Butterworth, order 8, zero-phase, at
    0.4 fs); channels are then represented on a grid at least five times
-   finer than ``fs`` (polyphase upsampling where needed) and read off by a
-   cubic spline at ``start + t`` for the model's sample times ``t``, so the
-   start may be any real number.
+   finer than ``fs`` (polyphase upsampling where needed) and read off once
+   at the run's **samples** ``t_first + k / fs``. A channel logged at ``fs``
+   keeps its own values; the samples never move afterwards.
 6. **Start**: the file time at which the front axle reaches ``x = 0``
    (SPEC §2). When not given (``start = "auto"``, the default for measured
-   runs) it is estimated by correlating the measurement with the response of
-   a nominal car (the built-in car on this geometry; the absolute scale does
-   not matter for accelerations), first over all lags at the sample rate,
-   then to a fraction of a sample by maximising the summed normalised
-   correlation of all channels. :func:`rideid.identify` re-estimates it with
-   the identified car and polishes again until it settles.
+   runs) it is estimated by correlating the samples with the response of a
+   nominal car (the built-in car on this geometry; the absolute scale does
+   not matter for accelerations) over all lags at the sample rate, to a
+   fraction of a sample by a parabola through the correlation peak.
+   :func:`rideid.identify` estimates it again with the parameters. **The
+   model moves, the data never do**: a start ``s`` puts the model's time
+   axis at ``t = T_k - s`` for the fixed samples ``T_k``; the data are never
+   interpolated at a start-dependent time (interpolating noisy samples at a
+   fractional offset smooths their noise, so a cost on re-read data prefers
+   starts between samples: 1-1.7 ms late at 200 Hz, with unsprung masses and
+   tire rates 8-12 % off).
 7. **Window**: the model's samples run from ``pre_roll`` (default 0.5 s)
    before the start, or from ``window[0]``, to the end of the recording or
-   ``window[1]``.
+   ``window[1]``; chosen once, at the first start, as a range of samples.
 8. **Speed**: a constant ``speed`` or a ``speed`` channel (integrated) or a
    ``distance`` channel; the wheel inputs follow the distance travelled
    since the start.
@@ -60,8 +65,6 @@ from .schema.runfiles import RunData
 DEFAULT_FS = 200.0
 DEFAULT_LEAD_IN = 1.0
 DEFAULT_PRE_ROLL = 0.5
-#: auto-start runs keep this much recording beyond the model's last sample, s
-AUTO_MARGIN = 0.05
 FILTER_ORDER = 8
 FILTER_CUTOFF = 0.4  # x fs
 UPSAMPLE_TO = 5.0  # x fs
@@ -82,7 +85,8 @@ class Resampled:
 
     def __call__(self, t, nu: int = 0):
         t = np.asarray(t, dtype=float)
-        inside = (t >= self.t0) & (t <= self.t1)
+        tol = 1e-6 * self.h  # a sample time rounded past an end is still that end's sample
+        inside = (t >= self.t0 - tol) & (t <= self.t1 + tol)
         out = np.zeros(t.shape)
         out[inside] = self.spline(t[inside], nu)
         return out
@@ -158,11 +162,34 @@ class MeasuredRun:
     record: dict
     warnings: list = field(default_factory=list)
     start: float | None = None
-    grid: np.ndarray | None = None
+    #: the run's samples (file time, s): ``t_first + k / fs`` over the recording; the data never move
+    times: np.ndarray | None = None
+    #: ``(n, 10)`` SI channels at :attr:`times` (CHANNELS order, NaN where missing), read off once
+    values: np.ndarray | None = None
+    #: the model's samples: index range ``[i0, i1)`` into :attr:`times`, fixed at the first start
+    window: tuple | None = None
+
+    def __post_init__(self):
+        if self.times is None:
+            n = int(math.floor((self.t_last - self.t_first) * self.fs + 1e-9)) + 1
+            self.times = self.t_first + np.arange(n) / self.fs
+            Y = np.full((n, len(CHANNELS)), np.nan)
+            for i, c in enumerate(CHANNELS):
+                if c in self.channels:
+                    Y[:, i] = self.channels[c](self.times)
+            Y.flags.writeable = False
+            self.values = Y
 
     @property
     def auto_start(self) -> bool:
         return self.options.get("start", "auto") == "auto"
+
+    @property
+    def grid(self) -> np.ndarray | None:
+        """Model times of the window's samples at the current start (None before a start)."""
+        if self.window is None or self.start is None:
+            return None
+        return self.times[self.window[0]:self.window[1]] - self.start
 
     def relative_distance(self, start):
         if self.distance is None:
@@ -170,32 +197,34 @@ class MeasuredRun:
         return RelativeDistance(self.distance, start)
 
     def make_grid(self, start: float):
-        """Fix the model's sample times (relative to the start) for a start estimate."""
-        h = 1.0 / self.fs
+        """Choose the window's samples for a first start estimate; returns their model times."""
         pre = self.options.get("pre_roll", DEFAULT_PRE_ROLL)
         w0, w1 = self.options.get("window", (-math.inf, math.inf))
         lo = max(self.t_first, w0 if "window" in self.options else start - pre)
         hi = min(self.t_last, w1)
-        if self.auto_start:
-            hi -= AUTO_MARGIN
-            lo += AUTO_MARGIN if lo == self.t_first else 0.0
-        n = int(math.floor((hi - lo) / h + 1e-9)) + 1
-        if n < 3:
+        i0 = int(math.ceil((lo - self.t_first) * self.fs - 1e-9))
+        i1 = int(math.floor((hi - self.t_first) * self.fs + 1e-9)) + 1
+        if i1 - i0 < 3:
             raise DataError(f"{self.path}: fewer than 3 samples between {lo:.3f} s and {hi:.3f} s "
                             "(check window, start and the recording)")
-        self.grid = (lo - start) + h * np.arange(n)
-        return self.grid
+        self.window = (i0, i1)
+        return self.times[i0:i1] - start
 
     def run_data(self, start: float):
-        """:class:`RunData` sampled at ``start + grid``."""
-        if self.grid is None:
+        """:class:`RunData` of the window's samples, on the model's time axis for this start."""
+        if self.window is None:
             self.make_grid(start)
-        tt = start + self.grid
-        chans = {c: f(tt) for c, f in self.channels.items()}
-        return RunData(self.grid.copy(), chans, distance=self.relative_distance(start))
+        i0, i1 = self.window
+        Y = self.values
+        chans = {c: Y[i0:i1, i].copy() for i, c in enumerate(CHANNELS) if c in self.channels}
+        return RunData(self.times[i0:i1] - start, chans, distance=self.relative_distance(start))
 
     def measured_at(self, start: float, grid=None, nu: int = 0) -> np.ndarray:
-        """(n, 10) measurement (``nu = 1``: its time derivative) at ``start + grid``, NaN for missing channels."""
+        """(n, 10) measurement (``nu = 1``: its time derivative) at ``start + grid``, NaN for missing channels.
+
+        Interpolated: for looking at the recording between its samples (the
+        coarse alignment of a run with a speed channel), never for a fit.
+        """
         grid = self.grid if grid is None else grid
         Y = np.full((grid.size, len(CHANNELS)), np.nan)
         for i, c in enumerate(CHANNELS):
@@ -527,15 +556,12 @@ def _correlation(mr: MeasuredRun, Yhat, tm, tau=None):
     """Mean normalised cross-correlation over channels; returns (starts, values) for every lag.
 
     ``tau``: the file times at which the measurement is read (default: the
-    recording at the sample rate); ``Yhat`` at model times ``tm`` is then
-    compared with the measurement at ``tau[k + lag]``.
+    run's own samples :attr:`MeasuredRun.times`); ``Yhat`` at model times
+    ``tm`` is then compared with the measurement at ``tau[k + lag]``.
     """
     from scipy.signal import correlate
 
-    h = 1.0 / mr.fs
-    if tau is None:
-        tau = mr.t_first + h * np.arange(int((mr.t_last - mr.t_first) / h) + 1)
-    Y = mr.measured_at(0.0, tau)
+    Y = mr.values if tau is None else mr.measured_at(0.0, tau)
     total, n = None, 0
     for i, c in enumerate(CHANNELS):
         if c not in mr.channels:
@@ -560,21 +586,42 @@ def _peaks(values, k):
     return inner[np.argsort(values[inner])[::-1][:k]]
 
 
-def coarse_start(mr: MeasuredRun, P, geom, track):
-    """Start to the nearest sample by cross-correlation over all lags.
+def _vertex(values, j) -> tuple[float, float]:
+    """Sub-sample peak of ``values`` near its local maximum ``j``: ``(offset, height)`` of the
+    parabola through ``j - 1, j, j + 1`` (offset within ±0.5; 0 at an end)."""
+    if j <= 0 or j >= values.size - 1:
+        return 0.0, float(values[j])
+    ym, y0, yp = (float(v) for v in values[j - 1:j + 2])
+    den = ym - 2.0 * y0 + yp
+    if den >= 0:
+        return 0.0, y0
+    off = float(np.clip(0.5 * (ym - yp) / den, -0.5, 0.5))
+    return off, y0 - 0.25 * (ym - yp) * off
 
-    Constant speed: the model's response only shifts with the start, so the
-    highest correlation wins. With a speed channel the response depends on
-    the start; each of the best few correlation peaks (on a periodic track:
-    the neighbouring cycles) is re-simulated with its own distance profile
-    and scored at its own start, and the best self-consistent one wins.
+
+def estimate_start(mr: MeasuredRun, P, geom, track):
+    """``(start, correlation)``: the run's start (file time when the front axle reaches x = 0) for
+    the car ``P``, by cross-correlation over all lags, to a fraction of a sample.
+
+    The run's samples are correlated with the car's response at the sample
+    rate; the peak lag is refined by a parabola through the correlation at
+    it and its neighbours. Constant speed: the model's response only shifts
+    with the start, so the highest correlation wins. With a speed channel
+    the response depends on the start; each of the best few correlation
+    peaks (on a periodic track: the neighbouring cycles) is re-simulated
+    with its own distance profile and scored at its own start, and the best
+    self-consistent one wins. The correlation returned is the mean normalised
+    correlation over the channels that are not zero, at the peak. Only the
+    car's response is simulated; the run's samples are read as they are.
     """
     h = 1.0 / mr.fs
     if mr.distance is None:
         tm = _long_grid(mr, track, geom, mr.speed)
         lags, corr = _correlation(mr, simulate_response(P, geom, track, tm, mr.speed, None), tm)
         # y_hat at model time tm[k] matches the measurement at t_first + (k + lag) h
-        return float(mr.t_first + lags[int(np.argmax(corr))] * h - tm[0])
+        j = int(np.argmax(corr))
+        off, peak = _vertex(corr, j)
+        return float(mr.t_first + (lags[j] + off) * h - tm[0]), peak
     # varying speed: correlate over distance (the road is fixed in x), with the response at the mean speed
     vmean = max(mr.distance.speed_range()[1], 0.1)
     tm = _long_grid(mr, track, geom, vmean)
@@ -588,63 +635,22 @@ def coarse_start(mr: MeasuredRun, P, geom, track):
     cand = [float(np.interp(xs[0] + (lags[i] * vmean * h) - vmean * tm[0], x_all[keep], dist.t[keep]))
             for i in _peaks(corr, 5)]
     best, best_score = None, -np.inf
-    tgrid = mr.t_first + h * np.arange(int((mr.t_last - mr.t_first) / h) + 1)
     for s in cand:
         score = -np.inf
-        for _ in range(4):  # fixed point: simulate with this start's distance profile, re-pick the lag nearby
+        for _ in range(8):  # fixed point: simulate with this start's distance profile, re-pick the lag nearby
             Yhat = simulate_response(P, geom, track, tm, None, RelativeDistance(dist, s))
-            lg, cc = _correlation(mr, Yhat, tm, tgrid)
+            lg, cc = _correlation(mr, Yhat, tm)
             st = mr.t_first + lg * h - tm[0]
             near = np.abs(st - s) <= 3.0 * h
             j = int(np.argmax(np.where(near, cc, -np.inf)))
-            moved = abs(st[j] - s) > 0.5 * h
-            s, score = float(st[j]), float(cc[j])
+            off, peak = _vertex(cc, j)
+            moved = abs(st[j] + off * h - s) > 1e-3 * h
+            s, score = float(st[j] + off * h), peak
             if not moved:
                 break
         if score > best_score:
             best, best_score = s, score
-    return best
-
-
-def _fine(mr: MeasuredRun, Yhat, s0, width):
-    """Maximise the summed normalised correlation over the start in ``s0 ± width``."""
-    from scipy.optimize import minimize_scalar
-
-    cols = [i for i, c in enumerate(CHANNELS) if c in mr.channels]
-
-    def neg(s):
-        return -correlation_score(Yhat, mr.measured_at(s), cols)
-
-    lo, hi = s0 - width, s0 + width
-    for _ in range(6):
-        r = minimize_scalar(neg, bounds=(lo, hi), method="bounded", options={"xatol": 1e-7})
-        s = float(r.x)
-        if lo + 0.05 * width < s < hi - 0.05 * width:
-            break
-        lo, hi = s - width, s + width  # optimum at an edge: move the bracket
-    return s, -float(r.fun)
-
-
-def estimate_start(mr: MeasuredRun, P, geom, track, s0: float | None = None, refine_only: bool = False):
-    """Estimate the run's start (file time when the front axle reaches x = 0) for the car ``P``.
-
-    ``refine_only`` searches within two samples of ``s0`` instead of all lags.
-    Returns ``(start, correlation)``, the correlation being the mean
-    normalised correlation over the channels that are not zero.
-    """
-    h = 1.0 / mr.fs
-    s = s0 if refine_only else coarse_start(mr, P, geom, track)
-    if mr.grid is None:
-        mr.make_grid(s)
-    rho = 0.0
-    for _ in range(8 if mr.distance is not None else 1):
-        Yhat = simulate_response(P, geom, track, mr.grid, mr.speed, mr.relative_distance(s))
-        s_new, rho = _fine(mr, Yhat, s, 2.0 * h)
-        done = abs(s_new - s) < 1e-6 * h
-        s = s_new
-        if done:
-            break
-    return s, rho
+    return best, best_score
 
 
 __all__ = ["MeasuredRun", "RunData", "load_measured_run", "estimate_start"]

@@ -18,14 +18,15 @@
    The adaptive weights steer the search; the estimate is defined by the
    equal-weight objective so that adaptive and fixed runs are comparable.
 6. Runs whose start was estimated (:mod:`rideid.measured`, ``start =
-   "auto"``) were aligned with a nominal car; after the polish their starts
-   become unknowns of the polish beside the parameters (the data are re-read
-   at each start into a new dataset: the caller's is never changed; the
-   estimates and their standard errors come back in ``result.starts``).
-   Runs with a speed channel, whose wheel inputs depend on the start, are
-   re-simulated and polished again
-   until no start moves by more than 1e-3 of a sample interval (at most 5
-   rounds). Without the polish the nominal alignment stands.
+   "auto"``) were aligned with a nominal car; in the polish their starts
+   become unknowns beside the parameters. The model moves, the data never
+   do: a start sets the model's time axis against the run's fixed samples
+   (and, with a speed channel, its distance profile); the response is
+   linearised in each start, and the polish is repeated on the model's new
+   time axes until no start moves by more than 1e-3 of a sample interval
+   (at most 8 rounds). The caller's dataset is never changed; the starts
+   and their standard errors come back in ``result.starts``. Without the
+   polish the nominal alignment stands.
 7. Standard errors: ``std`` from ``cov = s^2 (J^T J)^-1`` at the optimum with
    ``s^2 = RSS / (m - d)``, assuming white residuals (an optimistic lower
    bound when residuals are correlated or the model is wrong), and
@@ -41,13 +42,14 @@ from __future__ import annotations
 import math
 import time
 import warnings
+from dataclasses import dataclass
 
 import numpy as np
 from scipy.optimize import OptimizeResult, least_squares
 
 from ..data.checks import bound_findings
 from ..data.dataset import Dataset
-from ..data.measured import coarse_start
+from ..data.measured import estimate_start, simulate_response
 from ..errors import ArgumentError, DataWarning
 from ..model.batch import single_threaded_blas
 from ..model.equations import modal_summary
@@ -337,12 +339,13 @@ def _result(ds, cf, search, fit, weighting, maps, rng_record, wall, assess=True)
 
 
 def _polish(cf: CostFunction, x0, weights, align=None):
-    """Least squares from ``x0``; ``align`` = [(run index, MeasuredRun, start)] adds those starts as unknowns.
+    """Least squares from ``x0``; ``align`` = [:class:`_Shift`] adds those runs' starts as unknowns.
 
-    A start enters through the measured data, re-read at ``start + t`` (its
-    Jacobian column is minus the data's time derivative); the model's wheel
-    inputs stay put (exact for constant speed; with a speed channel the
-    outer loop in :func:`_polish_aligned` accounts for the rest).
+    The model moves, the data never do: a start changed by ``delta`` moves the
+    model's time axis, ``y(t - delta)``, linearised as ``y + delta D`` with
+    ``D = dy/d(start)`` from :func:`_start_derivative` (its Jacobian column).
+    The linearisation is centred again by :func:`_polish_aligned` until the
+    starts settle, so at the end it is exact.
     """
     lo, hi = cf.bounds[:, 0], cf.bounds[:, 1]
     span = hi - lo
@@ -353,16 +356,15 @@ def _polish(cf: CostFunction, x0, weights, align=None):
         return lo + span * z
 
     def start_of(v, k):
-        ri, mr, s0 = align[k]
-        return s0 + v[d + k] / mr.fs
+        return align[k].start + v[d + k] / align[k].fs
 
     def measured(v):
         if not align:
             return None
         Y = cf.Y.copy()
-        for k, (ri, mr, _) in enumerate(align):
-            a, b = cf.sim.run_start[ri], cf.sim.run_start[ri + 1]
-            Y[a:b] = np.nan_to_num(mr.measured_at(start_of(v, k)), nan=0.0)
+        for k, sh in enumerate(align):
+            a, b = cf.sim.run_start[sh.index], cf.sim.run_start[sh.index + 1]
+            Y[a:b] -= (v[d + k] / sh.fs) * sh.D  # y_model + delta D - y  ==  y_model - (y - delta D)
         return Y
 
     last = {}  # the residuals of the last fun call: least_squares asks for the Jacobian where it just evaluated
@@ -386,10 +388,9 @@ def _polish(cf: CostFunction, x0, weights, align=None):
         J[:, :d] = ((R - r0) / steps[:, None]).T
         offsets = np.cumsum([0] + [(e - s) * cf.residual_scale(ri, weights)[0].size
                                    for ri, (s, e) in enumerate(zip(cf.sim.run_start[:-1], cf.sim.run_start[1:]))])
-        for k, (ri, mr, _) in enumerate(align):
-            cols, sc = cf.residual_scale(ri, weights)
-            dY = np.nan_to_num(mr.measured_at(start_of(v, k), nu=1), nan=0.0)[:, cols]
-            J[offsets[ri]:offsets[ri + 1], d + k] = (-dY * sc / mr.fs).ravel()
+        for k, sh in enumerate(align):
+            cols, sc = cf.residual_scale(sh.index, weights)
+            J[offsets[sh.index]:offsets[sh.index + 1], d + k] = (sh.D[:, cols] * sc / sh.fs).ravel()
         return J
 
     z0 = np.clip((x0 - lo) / span, 0, 1)
@@ -402,7 +403,7 @@ def _polish(cf: CostFunction, x0, weights, align=None):
     m, n = J.shape
     rss = float(sol.fun @ sol.fun)
     s2 = rss / max(m - n, 1)
-    scale = np.concatenate([span, [1.0 / mr.fs for _, mr, _ in align]])
+    scale = np.concatenate([span, [1.0 / sh.fs for sh in align]])
     try:
         cov_all = s2 * np.linalg.inv(J.T @ J) * np.outer(scale, scale)
         std_all = np.sqrt(np.clip(np.diag(cov_all), 0, None))
@@ -422,19 +423,51 @@ def _polish(cf: CostFunction, x0, weights, align=None):
             "covariance_robust": cov_rob[:d, :d].tolist(),
             "hac_bandwidths": {rid: float(b) for rid, b in zip(cf.run_ids, hac.bandwidths)}}
     if align:
-        info["starts"] = {mr.run_id: {"value": start_of(sol.x, k), "std": float(std_all[d + k]),
+        info["starts"] = {sh.run_id: {"value": start_of(sol.x, k), "std": float(std_all[d + k]),
                                       "std_robust": float(std_rob[d + k])}
-                          for k, (_, mr, _) in enumerate(align)}
+                          for k, sh in enumerate(align)}
     return x, info, std_all[:d]
 
 
 #: re-estimate the starts until none moves by more than this fraction of a sample interval
 REALIGN_TOL = 1e-3
-REALIGN_MAX = 5
+REALIGN_MAX = 8
+#: the start derivative's central difference step, in sample intervals
+SHIFT_STEP = 0.1
+
+
+@dataclass(frozen=True)
+class _Shift:
+    """A run whose start joins the polish: its index in the cost, id, rate, start and ``D = dy/d(start)``."""
+
+    index: int
+    run_id: str
+    fs: float
+    start: float
+    D: np.ndarray
+
+
+def _start_derivative(ds, rid, P, start) -> np.ndarray:
+    """``(n, 10)`` derivative of the car's response at the run's fixed samples with respect to its start.
+
+    A central difference of two simulations whose time axes (and, with a
+    speed channel, distance profiles) belong to ``start -/+ SHIFT_STEP``
+    samples: the model moves, the samples stay.
+    """
+    mr = ds.measured[rid]
+    track = ds.manifest.tracks[ds.manifest.run(rid).track]
+    eps = SHIFT_STEP / mr.fs
+    y = []
+    for s in (start - eps, start + eps):
+        rd = mr.run_data(s)
+        y.append(simulate_response(P, ds.geometry, track, rd.time, mr.speed, rd.distance))
+    return (y[1] - y[0]) / (2 * eps)
 
 
 def _polish_aligned(ds, cf, x_best, equal):
-    """Polish parameters and the estimated starts together; with speed channels, re-simulate and repeat.
+    """Polish the parameters and the estimated starts together, centring the starts' linearisation
+    again (new model time axes, the same samples) until no start moves by more than
+    ``REALIGN_TOL`` of a sample interval.
 
     Works on its own copy of the run data: ``ds`` is not changed.
     """
@@ -443,7 +476,9 @@ def _polish_aligned(ds, cf, x_best, equal):
     data = dict(ds.data)
     rounds = []
     for _ in range(REALIGN_MAX):
-        align = [(cf.run_ids.index(rid), ds.measured[rid], starts[rid]) for rid in starts]
+        P = cf.space.full(x_best[None])[0]
+        align = [_Shift(cf.run_ids.index(rid), rid, ds.measured[rid].fs, starts[rid],
+                        _start_derivative(ds, rid, P, starts[rid])) for rid in starts]
         x_best, info, std = _polish(cf, x_best, equal, align)
         changes = {}
         for rid, st in info["starts"].items():
@@ -454,21 +489,16 @@ def _polish_aligned(ds, cf, x_best, equal):
                             **_start_std(ds, rid, st["std"]), "std_robust": st["std_robust"]}
         worst = max(abs(v) * ds.measured[rid].fs for rid, v in changes.items())
         rounds.append({"max_change_samples": worst})
-        varying = [rid for rid in changes if ds.measured[rid].distance is not None]
         slipped = _cycle_check(ds, cf.space.full(x_best[None])[0], starts, data)
         if slipped:
             rounds[-1]["cycle_slips"] = slipped
-        elif not varying or worst < REALIGN_TOL:
-            break
-        # the wheel inputs of speed-channel runs depend on the start: rebuild them and polish again
+        # the model's time axes moved with the starts: the cost function on them
         nfev = cf.nfev
         cf = CostFunction(ds.with_data(data), space=cf.space)
         cf.nfev = nfev
+        if not slipped and worst < REALIGN_TOL:
+            break
     info["alignment_rounds"] = rounds
-    # the data moved with the starts: the final cost (printed, recorded) is the cost on the data at the final starts
-    nfev = cf.nfev
-    cf = CostFunction(ds.with_data(data), space=cf.space)
-    cf.nfev = nfev
     out = {rid: {"value": float(starts[rid]), **records[rid]} for rid in starts}
     return x_best, info, std, cf, out
 
@@ -515,7 +545,7 @@ def _cycle_check(ds, P, starts, data) -> dict:
         mr = ds.measured[rid]
         if mr.distance is not None:
             continue
-        s = coarse_start(mr, P, ds.geometry, ds.manifest.tracks[ds.manifest.run(rid).track])
+        s, _ = estimate_start(mr, P, ds.geometry, ds.manifest.tracks[ds.manifest.run(rid).track])
         if abs(s - starts[rid]) > 2.0 / mr.fs:
             slipped[rid] = s - starts[rid]
             starts[rid] = s
