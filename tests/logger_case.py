@@ -83,9 +83,13 @@ SUV_RUNS = [("TW3", "twist", 3.0, 8.0), ("TW5", "twist", 5.0, 5.5), ("HB6", "her
 
 
 def suv_scenario(folder, fs=200.0, extensions=("anti_roll_bars",)):
-    """Write the SUV scenario (runs at ``fs``) to ``folder/scenario.toml`` and load it."""
-    text = SUV.replace('extensions = ["anti_roll_bars"]',
-                       "extensions = [" + ", ".join(f'"{e}"' for e in extensions) + "]")
+    """Write the SUV scenario (runs at ``fs``) to ``folder/scenario.toml`` and load it.
+
+    ``extensions``: its ``[model]`` table; None leaves the table out (the model is then chosen).
+    """
+    model = "" if extensions is None else \
+        "[model]\nextensions = [" + ", ".join(f'"{e}"' for e in extensions) + "]\n"
+    text = SUV.replace('[model]\nextensions = ["anti_roll_bars"]\n', model)
     for rid, track, v, dur in SUV_RUNS:
         text += f'[[runs]]\nid = "{rid}"\ntrack = "{track}"\nspeed = {v}\nfs = {fs}\nduration = {dur}\n'
     folder.mkdir(parents=True, exist_ok=True)

@@ -84,9 +84,20 @@ class Resampled:
     def __init__(self, t0: float, h: float, y: np.ndarray):
         from scipy.interpolate import make_interp_spline
 
-        self.t0, self.h, self.n = t0, h, y.size
+        self.t0, self.h, self.n, self.y = t0, h, y.size, y
         self.t1 = t0 + h * (y.size - 1)
         self.spline = make_interp_spline(t0 + h * np.arange(y.size), y, k=3)
+
+    def samples(self, t0: float, fs: float, n: int) -> np.ndarray:
+        """The values at ``t0 + k / fs``, k < n: this channel's own values where those times are
+        its samples (the same clock), else read off the spline."""
+        step = 1.0 / (fs * self.h)
+        k0 = (t0 - self.t0) / self.h
+        if abs(step - round(step)) < 1e-9 and abs(k0 - round(k0)) < 1e-6 and round(step) >= 1:
+            idx = int(round(k0)) + int(round(step)) * np.arange(n)
+            if idx[0] >= 0 and idx[-1] < self.n:
+                return self.y[idx].astype(float)
+        return self(t0 + np.arange(n) / fs)
 
     def __call__(self, t, nu: int = 0):
         t = np.asarray(t, dtype=float)
@@ -181,7 +192,7 @@ class MeasuredRun:
             Y = np.full((n, len(CHANNELS)), np.nan)
             for i, c in enumerate(CHANNELS):
                 if c in self.channels:
-                    Y[:, i] = self.channels[c](self.times)
+                    Y[:, i] = self.channels[c].samples(self.t_first, self.fs, n)
             Y.flags.writeable = False
             self.values = Y
 

@@ -181,9 +181,12 @@ def identify_auto(ds, *, rng=None, seed=None, callback=None, maps=None, **kw):
     chosen = tuple(best["extensions"])
     res = results[chosen]
     if res.adequacy is None:
-        cf = costs[chosen]
+        # at the candidate's own final state: its parameters, and the model's time axes at the starts
+        # its own polish settled (the nested cost function still has the starts it began from)
+        space = costs[chosen].space
+        cf = CostFunction(ds.with_starts(res.starts), space=space) if res.starts else costs[chosen]
         with single_threaded_blas():
-            res.adequacy = assess_fit(cf, cf.space.full(np.array([[res.parameters[n] for n in cf.names]]))[0],
+            res.adequacy = assess_fit(cf, space.full(np.array([[res.parameters[n] for n in cf.names]]))[0],
                                       res.response)
     table = []
     for c in crit:
