@@ -150,9 +150,8 @@ class NoiseModel:
             corr = (f"AR(1) in time, coefficient {self.ar1:g} per sample (R_ts = rho^|t-s|), the same standard "
                     "deviation; independent between channels and runs")
         elif self.psd is not None:
-            corr = ("the spectrum of the noise PSD file " + ("(its shape, scaled per run and channel to sigma)"
-                    if self.white_level else "(absolute: sigma^2 = its integral over 0..fs/2)")
-                    + "; independent between channels and runs")
+            corr = ("coloured with the spectrum of the noise PSD file" + (" (its shape; the level is sigma)"
+                    if self.white_level else "") + "; independent between channels and runs")
         else:
             corr = "white: independent between samples, channels and runs"
         level = ("sigma^2 = (fraction * channel RMS)^2 + density^2 * bandwidth" if self.white_level
