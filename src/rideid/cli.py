@@ -27,7 +27,9 @@ EXAMPLES = {
     "demo": "example:\n  rideid demo --out rideid-demo",
     "plan": "example:\n  rideid plan scenario.toml --out plan --noise 0.01 --budget-runs 4\n"
             "  rideid plan catalogue.toml --out plan --budget-time 600 --overhead 90 --robust 8\n"
-            "  rideid plan catalogue.toml --out plan --target k_sr=0.5% --target I_xx=2%",
+            "  rideid plan catalogue.toml --out plan --target k_sr=0.5% --target I_xx=2%\n"
+            "  rideid plan scenario.toml --out plan --noise 0.02 --noise-ar1 0.9\n"
+            "  rideid plan scenario.toml --out plan --noise-psd sensor_noise_psd.csv",
     "report": "example:\n  rideid report fit\n  rideid identify sim --out fit-fixed --weights fixed --no-report\n"
               "  rideid report fit --compare fit-fixed",
     "study": "example:\n  rideid study monte_carlo.toml --out mc\n"
@@ -164,13 +166,20 @@ def _parser() -> argparse.ArgumentParser:
     s.add_argument("--out", required=True, metavar="DIR")
     s.add_argument("--noise", type=float, default=None, metavar="FRACTION",
                    help="noise sd as a fraction of each channel's RMS, per run (as simulate --noise; "
-                        "default 0.01, or 0 when a noise density is given)")
+                        "default 0.01, or 0 when a noise density or --noise-psd is given)")
     s.add_argument("--accel-noise-density", type=float, default=0.0, metavar="D",
                    help="accelerometer noise density, (m/s^2)/sqrt(Hz)")
     s.add_argument("--gyro-noise-density", type=float, default=0.0, metavar="D",
                    help="gyro noise density, (rad/s)/sqrt(Hz)")
     s.add_argument("--bandwidth", type=float, default=None, metavar="HZ",
                    help="logger bandwidth for the densities (default each run's fs/2)")
+    s.add_argument("--noise-ar1", type=float, default=0.0, metavar="RHO",
+                   help="coloured noise: AR(1) per sample with this coefficient, same RMS (as simulate "
+                        "--noise-ar1; default 0: white)")
+    s.add_argument("--noise-psd", default=None, metavar="FILE.csv",
+                   help="coloured noise with a measured spectrum: columns frequency (Hz) and psd, accel/gyro "
+                        "or channel names (one-sided, unit^2/Hz); alone it is the absolute noise, with --noise "
+                        "or a density only its shape counts (docs/planning.md)")
     s.add_argument("--budget-runs", type=int, default=None, metavar="N", help="drive at most N runs")
     s.add_argument("--budget-time", type=float, default=None, metavar="S",
                    help="at most S seconds of track time (each run: its duration + --overhead)")
@@ -342,7 +351,8 @@ def cmd_plan(args, out=None):
     prog = Progress(args.quiet)
     prog.line("simulating the candidate runs and their sensitivities ...", force=True)
     res = plan(args.scenario, noise=args.noise, accel_density=args.accel_noise_density,
-               gyro_density=args.gyro_noise_density, bandwidth=args.bandwidth, budget_runs=args.budget_runs,
+               gyro_density=args.gyro_noise_density, bandwidth=args.bandwidth, noise_ar1=args.noise_ar1,
+               noise_psd=args.noise_psd, budget_runs=args.budget_runs,
                budget_time=args.budget_time, overhead=args.overhead, criterion=args.criterion, targets=targets,
                robust=args.robust, seed=args.seed, **kw)
     prog.done()

@@ -1,13 +1,15 @@
 """Test planning (SPEC §7): Fisher information of candidate runs, CRLB and
 identifiability of run subsets, and D-/A-/target-optimal run selection under a
-budget. The public entry point is :func:`rideid.plan`."""
+budget, for white or coloured sensor noise. The public entry point is :func:`rideid.plan`."""
 
+from .colour import NoiseSpectrum, ar1_psd, load_noise_psd
 from .fisher import NoiseModel, Precision, RunInformation, messages, precision, run_information, subset_precision
 from .planner import PlanResult, parse_target, plan
 from .select import Selector, brute_force
 
-__all__ = ["NoiseModel", "PlanResult", "Precision", "RunInformation", "Selector", "brute_force", "messages",
-           "parse_target", "plan", "precision", "run_information", "subset_precision"]
+__all__ = ["NoiseModel", "NoiseSpectrum", "PlanResult", "Precision", "RunInformation", "Selector", "ar1_psd",
+           "brute_force", "load_noise_psd", "messages", "parse_target", "plan", "precision", "run_information",
+           "subset_precision"]
 
 
 def catalogue_path():

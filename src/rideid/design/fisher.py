@@ -1,12 +1,15 @@
 """Fisher information of candidate runs, and what it says about precision.
 
 For run ``r`` with sample count ``N_r``, channel ``c`` of the ten SPEC
-channels and white Gaussian sensor noise of standard deviation ``sigma_rc``,
-the Fisher information about the free parameters ``x`` (the names of a
-:class:`rideid.ParameterSpace`: scale anchor, fixed and derived values applied
-exactly as identify applies them) is
+channels and Gaussian sensor noise of standard deviation ``sigma_rc`` and
+correlation ``R_rc`` in time (identity for white noise; AR(1) or a spectrum,
+:mod:`rideid.design.colour`), the Fisher information about the free
+parameters ``x`` (the names of a :class:`rideid.ParameterSpace`: scale
+anchor, fixed and derived values applied exactly as identify applies them) is
 
-    F_r = sum_c  J_rc^T J_rc / sigma_rc^2,     J_rc = d y_rc / d x   (N_r, d)
+    F_r = sum_c  J_rc^T R_rc^-1 J_rc / sigma_rc^2,     J_rc = d y_rc / d x   (N_r, d)
+
+(the information of the whitened problem).
 
 Runs have independent noise, so a subset ``S`` of runs carries
 ``F_S = sum_{r in S} F_r`` and the Cramér-Rao lower bound is
@@ -18,9 +21,11 @@ weight ``W_rc = 1 / (|C_r| D_rc)``. A weighted least-squares estimator with
 weights ``W`` has the (linearised) sandwich covariance
 
     cov_identify = A^-1 B A^-1,   A = sum w_r W_rc J_rc^T J_rc,
-                                  B = sum w_r^2 W_rc^2 sigma_rc^2 J_rc^T J_rc
+                                  B = sum w_r^2 W_rc^2 sigma_rc^2 J_rc^T R_rc J_rc
 
-(equal run weights ``w_r`` cancel). By Gauss-Markov it is never below the
+(equal run weights ``w_r`` cancel). Identify does not whiten coloured noise,
+so ``B`` holds the noise covariance itself. By Gauss-Markov (generalised
+least squares is the efficient linear estimator) it is never below the
 CRLB; both are reported. ``W_rc`` is computed by identify's own
 :func:`rideid.cost.channel_weights` on the expected measured energy
 (signal energy plus ``N_r sigma_rc^2``).
@@ -47,6 +52,7 @@ from ..errors import ArgumentError
 from ..model.equations import CHANNEL_KIND, CHANNELS
 from ..data.scenario import run_times
 from ..model.simulate import prepare_run
+from .colour import NoiseSpectrum, ar1_grams, padded_length, spectral_grams
 
 #: relative finite-difference step
 STEP = 1e-5
@@ -75,14 +81,25 @@ class NoiseModel:
     bandwidth : float, optional
         Logger bandwidth (Hz) for the densities; default each run's ``fs / 2``
         (white noise sampled without further filtering).
+    ar1 : float
+        Coloured noise: AR(1) in time with this coefficient per sample, the
+        same standard deviation (``rideid simulate --noise-ar1``); 0 is white.
+    psd : NoiseSpectrum, optional
+        Coloured noise with a measured spectrum (``--noise-psd``). With a
+        fraction or a density, only its shape counts: it is scaled per run and
+        channel to their standard deviation (as ``ar1``). Alone, it is the
+        absolute noise: ``sigma² = ∫ PSD`` over 0..fs/2.
 
-    The two parts are independent: ``sigma² = (fraction RMS)² + density² B``.
+    The white parts are independent: ``sigma² = (fraction RMS)² + density² B``.
+    Channels and runs are independent in every case.
     """
 
     fraction: float = 0.0
     accel_density: float = 0.0
     gyro_density: float = 0.0
     bandwidth: float | None = None
+    ar1: float = 0.0
+    psd: NoiseSpectrum | None = None
 
     def __post_init__(self):
         for k in ("fraction", "accel_density", "gyro_density"):
@@ -91,21 +108,76 @@ class NoiseModel:
                 raise ArgumentError(f"noise {k} must be a non-negative number, got {v!r}")
         if self.bandwidth is not None and not (np.isfinite(self.bandwidth) and self.bandwidth > 0):
             raise ArgumentError(f"noise bandwidth must be a positive number of Hz, got {self.bandwidth!r}")
-        if self.fraction == 0 and self.accel_density == 0 and self.gyro_density == 0:
+        if not (np.isfinite(self.ar1) and 0 <= self.ar1 < 1):
+            raise ArgumentError(f"--noise-ar1 must be an AR(1) coefficient in [0, 1), got {self.ar1}")
+        if self.ar1 > 0 and self.psd is not None:
+            raise ArgumentError("--noise-ar1 and --noise-psd both give the noise's colour: give one of them")
+        if self.fraction == 0 and self.accel_density == 0 and self.gyro_density == 0 and self.psd is None:
             raise ArgumentError("the noise model is zero: give --noise FRACTION or a noise density "
                                 "(without noise every parameter is known exactly and there is nothing to plan)")
 
+    @property
+    def white_level(self) -> bool:
+        """True when the standard deviation comes from the fraction and densities (not from a PSD alone)."""
+        return self.fraction > 0 or self.accel_density > 0 or self.gyro_density > 0
+
+    @property
+    def coloured(self) -> bool:
+        return self.ar1 > 0 or self.psd is not None
+
     def sigma(self, rms: np.ndarray, fs: float) -> np.ndarray:
         """Noise standard deviation per channel, shape (10,), for channel RMS ``rms`` (10,)."""
+        if not self.white_level:
+            return np.sqrt(self.psd.variance(fs))
         bw = self.bandwidth if self.bandwidth is not None else fs / 2
         dens = np.array([self.gyro_density if CHANNEL_KIND[c] == "rate" else self.accel_density for c in CHANNELS])
         return np.sqrt((self.fraction * rms) ** 2 + dens ** 2 * bw)
 
+    def grams(self, J: np.ndarray, fs: float):
+        """Per channel (10, d, d): ``J^T J``, ``J^T R^-1 J`` and ``J^T R J`` for sensitivities ``J`` (d, n, 10),
+        ``R`` the noise's correlation matrix in time (identity when white)."""
+        G = np.einsum("itc,jtc->cij", J, J)
+        if self.ar1 > 0:
+            return (G, *ar1_grams(J, self.ar1))
+        if self.psd is not None:
+            M = padded_length(J.shape[1])
+            shape = self.psd.at(np.arange(M // 2 + 1) * fs / M)
+            return (G, *spectral_grams(J, shape, M))
+        return G, G, G
+
     def to_dict(self) -> dict:
+        if self.ar1 > 0:
+            corr = (f"AR(1) in time, coefficient {self.ar1:g} per sample (R_ts = rho^|t-s|), the same standard "
+                    "deviation; independent between channels and runs")
+        elif self.psd is not None:
+            corr = ("coloured with the spectrum of the noise PSD file" + (" (its shape; the level is sigma)"
+                    if self.white_level else "") + "; independent between channels and runs")
+        else:
+            corr = "white: independent between samples, channels and runs"
+        level = ("sigma^2 = (fraction * channel RMS)^2 + density^2 * bandwidth" if self.white_level
+                 else "sigma^2 = integral of the noise PSD over 0..fs/2")
         return {"fraction": self.fraction, "accel_density": self.accel_density, "gyro_density": self.gyro_density,
                 "bandwidth": self.bandwidth if self.bandwidth is not None else "fs/2",
-                "definition": "sigma^2 = (fraction * channel RMS)^2 + density^2 * bandwidth, white, "
-                              "independent between samples, channels and runs"}
+                "colour": "ar1" if self.ar1 > 0 else ("psd" if self.psd is not None else "white"),
+                "ar1": self.ar1,
+                "psd": None if self.psd is None else {**self.psd.to_dict(),
+                                                      "scaling": "shape" if self.white_level else "absolute"},
+                "definition": f"{level}; {corr}"}
+
+    def describe(self) -> str:
+        """One line for the terminal and plan.md."""
+        parts = []
+        if self.fraction:
+            parts.append(f"{self.fraction:g} of RMS")
+        if self.accel_density or self.gyro_density:
+            parts.append(f"densities accel {self.accel_density:g} (m/s²)/√Hz, gyro {self.gyro_density:g} (rad/s)/√Hz")
+        level = " + ".join(parts)
+        if self.ar1 > 0:
+            return f"{level}, coloured: AR(1) {self.ar1:g} per sample"
+        if self.psd is not None:
+            return (f"{level}, coloured: the spectrum shape of {self.psd.path}" if level
+                    else f"the spectrum of {self.psd.path}")
+        return f"{level}, white"
 
 
 @dataclass
@@ -218,12 +290,14 @@ def run_information(sim: BatchSimulator, space: ParameterSpace, x0, noise: Noise
         live &= s > 0
         # identify's weights from the expected measured energy (signal + noise): the extra row
         # carries sqrt(n) sigma so that channel_weights sees sum y^2 + n sigma^2 per channel
+        # (stationary coloured noise has the same energy n sigma^2)
         W = channel_weights(np.vstack([y, np.sqrt(n) * s[None, :]]))
-        G = np.einsum("itc,jtc->cij", Jr, Jr)  # (10, d, d)
+        # J^T J, J^T R^-1 J, J^T R J per channel (10, d, d); R = identity for white noise
+        G, Gi, Gc = noise.grams(Jr, fs[r])
         inv_var = np.where(live, 1.0 / np.where(live, s, 1.0) ** 2, 0.0)
-        F[r] = np.einsum("c,cij->ij", inv_var, G)
+        F[r] = np.einsum("c,cij->ij", inv_var, Gi)
         A[r] = np.einsum("c,cij->ij", W * live, G)
-        B[r] = np.einsum("c,cij->ij", (W * live) ** 2 * s ** 2, G)
+        B[r] = np.einsum("c,cij->ij", (W * live) ** 2 * s ** 2, Gc)
         sig[r], rmss[r], used[r] = s, rms, live
     return RunInformation(list(space.names), x0, space.full(x0[None])[0], F, A, B, sig, rmss, used)
 

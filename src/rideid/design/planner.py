@@ -18,6 +18,7 @@ from ..model.params import GROUPS
 from ..errors import ArgumentError, DataError
 from ..data.scenario import load_scenario
 from ..data.schema import Scenario
+from .colour import load_noise_psd
 from .fisher import STEP, NoiseModel, Precision, messages, run_information, simulator, subset_precision
 from .select import Selector
 
@@ -57,6 +58,7 @@ class PlanResult:
     derived_grad: np.ndarray | None = None
     robust_worst: np.ndarray | None = None   # (d,) worst relative spread over the sampled cars, selected runs
     comparison: dict = field(default_factory=dict)
+    noise_text: str = ""
 
     # -- dictionaries ---------------------------------------------------------
     def _crlb(self, p: Precision, which="crlb") -> dict:
@@ -120,11 +122,13 @@ class PlanResult:
             "robust": self.robust,
             "sensitivities": self.sensitivity,
             "precision_definitions": {
-                "crlb": "Cramér-Rao lower bound (J^T Sigma^-1 J)^-1 at the nominal car, white Gaussian noise "
-                        "of the noise model; relative = std / nominal value",
+                "crlb": "Cramér-Rao lower bound (J^T Sigma^-1 J)^-1 at the nominal car for the Gaussian noise "
+                        "of the noise model (coloured noise: the whitened problem, the best any unbiased "
+                        "estimator can do); relative = std / nominal value",
                 "identify_std": "expected spread of rideid identify's estimate: its equal-run-weight, "
-                                "energy-normalised least squares (rideid.cost) has the sandwich covariance "
-                                "A^-1 B A^-1, never below the CRLB; a Monte Carlo of identify should match this",
+                                "energy-normalised least squares (rideid.cost, not whitened) has the sandwich "
+                                "covariance A^-1 B A^-1 with B = sum W^2 J^T Sigma J (Sigma the noise covariance, "
+                                "coloured or white), never below the CRLB; a Monte Carlo of identify should match this",
             },
             "candidates": self.candidates,
             "all_runs": self._block(self.all_runs, self.messages_all),
@@ -147,6 +151,7 @@ class PlanResult:
         lines = [f"plan ({self.criterion}-optimal{', robust over ' + str(self.robust['cars']) + ' cars' if self.robust['cars'] > 1 else ''}): "
                  f"drive {len(self.selected_runs)} of {len(self.candidates)} runs, {t:.0f} s of track time: "
                  + " ".join(self.selected_runs),
+                 f"noise: {self.noise_text}",
                  f"{'parameter':10s} {'nominal':>12s} {'selected ±':>12s} {'(identify)':>10s} {'all runs ±':>10s}"]
         for j, n in enumerate(self.names):
             lines.append(f"{n:10s} {self.nominal[n]:12.6g} {_pct(self.selected.rel_crlb[j]):>12s} "
@@ -157,9 +162,7 @@ class PlanResult:
     def markdown(self) -> str:
         d = self.to_dict()
         out = [f"# Test plan: {Path(self.scenario).name}\n",
-               f"Criterion **{self.criterion}**, noise {self.noise['fraction']:g} of RMS"
-               f" + densities accel {self.noise['accel_density']:g} (m/s²)/√Hz, gyro {self.noise['gyro_density']:g}"
-               f" (rad/s)/√Hz; budget: {_budget_text(self.budget)}; robust over {self.robust['cars']} car(s) "
+               f"Criterion **{self.criterion}**, noise {self.noise_text}; budget: {_budget_text(self.budget)}; robust over {self.robust['cars']} car(s) "
                f"({self.robust['rule']}).\n",
                f"**Selected runs** ({len(self.selected_runs)}, {d['selected']['track_time_s']:.0f} s of track time): "
                + ", ".join(self.selected_runs) + "\n",
@@ -288,7 +291,7 @@ def parse_target(text: str) -> tuple[str, float]:
 
 
 def plan(scenario, *, noise=None, accel_density: float = 0.0, gyro_density: float = 0.0,
-         bandwidth: float | None = None, budget_runs: int | None = None, budget_time: float | None = None,
+         bandwidth: float | None = None, noise_ar1: float = 0.0, noise_psd=None, budget_runs: int | None = None, budget_time: float | None = None,
          overhead: float = 0.0, criterion: str | None = None, targets: dict | None = None, robust: int = 1,
          robust_spread: float = DEFAULT_ROBUST_SPREAD, seed: int = 0, within: float = DEFAULT_WITHIN,
          step: float = STEP, extensions=None) -> PlanResult:
@@ -306,6 +309,14 @@ def plan(scenario, *, noise=None, accel_density: float = 0.0, gyro_density: floa
         Absolute sensor noise densities, (m/s²)/√Hz and (rad/s)/√Hz.
     bandwidth : float, optional
         Logger bandwidth for the densities, Hz (default each run's fs/2).
+    noise_ar1 : float
+        Coloured noise, AR(1) in time with this coefficient per sample and the
+        same standard deviation (as ``simulate --noise-ar1``); 0: white.
+    noise_psd : path or NoiseSpectrum, optional
+        Coloured noise with a measured spectrum (CSV, ``docs/planning.md``).
+        With ``noise`` or a density only its shape counts (scaled to their
+        standard deviation per run and channel); alone it is absolute, and
+        ``noise`` defaults to 0.
     budget_runs : int, optional
         At most this many runs.
     budget_time : float, optional
@@ -358,10 +369,16 @@ def plan(scenario, *, noise=None, accel_density: float = 0.0, gyro_density: floa
         raise DataError(f"{sc.path}: no [[runs]]: nothing to plan")
 
     # -- options -------------------------------------------------------------
+    if isinstance(noise_psd, (str, Path)):
+        noise_psd = load_noise_psd(noise_psd)
     if noise is None:
-        noise = 0.0 if (accel_density or gyro_density) else DEFAULT_NOISE
+        noise = 0.0 if (accel_density or gyro_density or noise_psd is not None) else DEFAULT_NOISE
     nm = noise if isinstance(noise, NoiseModel) else NoiseModel(float(noise), float(accel_density),
-                                                                  float(gyro_density), bandwidth)
+                                                                  float(gyro_density), bandwidth,
+                                                                  float(noise_ar1), noise_psd)
+    if nm.psd is not None:
+        for r in sc.runs:
+            nm.psd.check_covers(r.fs, f"run {r.id} (fs {r.fs:g} Hz)")
     targets = dict(targets or {})
     if criterion is None:
         criterion = "target" if targets else "D"
@@ -457,12 +474,15 @@ def plan(scenario, *, noise=None, accel_density: float = 0.0, gyro_density: floa
     fin = np.isfinite(ratio)
     if fin.any() and ratio[fin].max() > 1.1:
         j = int(np.nanargmax(np.where(fin, ratio, np.nan)))
-        notes.append(f"identify's cost is not noise-weighted: its expected spread exceeds the CRLB by up to "
+        what = ("neither noise-weighted nor whitened (the noise is coloured)" if nm.coloured
+                else "not noise-weighted")
+        notes.append(f"identify's cost is {what}: its expected spread exceeds the CRLB by up to "
                      f"{100 * (ratio[fin].max() - 1):.0f} % ({names[j]}); promises use identify's spread")
     res = PlanResult(
         scenario=str(sc.path), names=names,
         nominal={n: float(v) for n, v in sc.truth.items()},
-        derived=space.derived, known=dict(sc.known), extensions=list(space.extensions), noise=nm.to_dict(), criterion=criterion,
+        derived=space.derived, known=dict(sc.known), extensions=list(space.extensions), noise=nm.to_dict(), noise_text=nm.describe(),
+        criterion=criterion,
         budget={"runs": budget_runs, "time_s": budget_time, "overhead_s": overhead,
                 "within": None if (budget_runs or budget_time or criterion == "target") else within},
         targets=targets,

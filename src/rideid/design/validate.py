@@ -41,11 +41,12 @@ def gauss_newton_from_truth(ds, names, x0, step: float = 1e-5) -> np.ndarray:
 
 
 def monte_carlo(sc, run_ids, names, noise: float, seeds, identify_kw=None, progress=None,
-                linearised: bool = False):
+                linearised: bool = False, noise_ar1: float = 0.0):
     """Identify ``len(seeds)`` noisy simulations of the runs ``run_ids``.
 
     Each seed ``s`` draws the noise with ``simulate_manifest(seed=s)`` (SPEC
-    ``--noise``: fraction of each channel's RMS) and runs
+    ``--noise``: fraction of each channel's RMS; ``noise_ar1``: AR(1) in time
+    with that coefficient, as ``simulate --noise-ar1``) and runs
     :func:`rideid.identify` with ``seed=s``.
 
     Returns
@@ -62,7 +63,7 @@ def monte_carlo(sc, run_ids, names, noise: float, seeds, identify_kw=None, progr
         for k, s in enumerate(seeds):
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore")
-                data, _ = simulate_manifest(sub, noise=noise, seed=int(s))
+                data, _ = simulate_manifest(sub, noise=noise, seed=int(s), noise_ar1=noise_ar1)
             folder = Path(tmp) / f"s{s}"
             write_dataset(sub, data, folder)
             ds = load_dataset(folder)
@@ -75,14 +76,15 @@ def monte_carlo(sc, run_ids, names, noise: float, seeds, identify_kw=None, progr
     return (out, lin) if linearised else out
 
 
-def linearised_monte_carlo(sc, run_ids, names, noise: float, seeds, step: float = 1e-5) -> np.ndarray:
+def linearised_monte_carlo(sc, run_ids, names, noise: float, seeds, step: float = 1e-5,
+                           noise_ar1: float = 0.0) -> np.ndarray:
     """:func:`gauss_newton_from_truth` for many seeds without writing a dataset per seed.
 
     The runs are simulated once without noise and identify's cost is
     linearised once at the truth; each seed then draws exactly the noise that
-    ``simulate_manifest(noise=noise, seed=s)`` adds (same generator, same
-    order: run by run, :func:`rideid.data.noise.sensor_noise` times ``noise``
-    times each channel's noise-free RMS), recomputes identify's channel
+    ``simulate_manifest(noise=noise, seed=s, noise_ar1=noise_ar1)`` adds (same
+    generator, same order: run by run, :func:`rideid.data.noise.sensor_noise`,
+    white or AR(1), times ``noise`` times each channel's noise-free RMS), recomputes identify's channel
     weights from the noisy data (:func:`rideid.estimate.cost.channel_weights`)
     and takes the Gauss-Newton step. About 10 ms a seed for the ten built-in
     runs, so thousands of seeds pin the spread of the estimator the plan
@@ -125,7 +127,7 @@ def linearised_monte_carlo(sc, run_ids, names, noise: float, seeds, step: float 
         A, g = np.zeros((d, d)), np.zeros(d)
         for i, ri in enumerate(order):
             a, b = bounds[ri]
-            e = sensor_noise(rng, clean[i].shape) * (noise * rms[i])[None, :]
+            e = sensor_noise(rng, clean[i].shape, noise_ar1) * (noise * rms[i])[None, :]
             S = cf.weights[ri] * channel_weights(cf.Y[a:b] + e)  # squared residual scale per channel
             A += np.einsum("c,cij->ij", S, G[ri])
             g += S @ g0[ri] - np.einsum("c,itc,tc->i", S, J[ri], e)
