@@ -29,7 +29,8 @@ EXTRA_TARGETS = ("time", "speed", "distance")
 #: what a channel map may map file channels to
 TARGETS = CHANNELS + EXTRA_TARGETS
 
-PREPROCESS_KEYS = ("gravity_included", "remove_bias", "lead_in", "fs", "start", "window", "pre_roll")
+PREPROCESS_KEYS = ("gravity_included", "remove_bias", "lead_in", "fs", "start", "window", "pre_roll",
+                   "anti_alias")
 #: keys a run may set for itself (the rest are dataset-wide)
 RUN_PREPROCESS_KEYS = ("gravity_included", "remove_bias", "lead_in", "start", "window", "pre_roll")
 CSV_KEYS = ("delimiter", "decimal", "skip_rows")
@@ -127,7 +128,7 @@ def parse_preprocess(tab, where: str, keys=PREPROCESS_KEYS) -> dict:
     """``[preprocess]`` (or a run's own keys, ``keys=RUN_PREPROCESS_KEYS``): key -> validated value."""
     out = {}
     for k, v, w in checked_items(tab, where, keys):
-        if k in ("gravity_included", "remove_bias"):
+        if k in ("gravity_included", "remove_bias", "anti_alias"):
             if not isinstance(v, bool):
                 raise DataError(f"{w}: expected true or false")
             out[k] = v
