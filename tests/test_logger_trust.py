@@ -122,3 +122,22 @@ def test_suv_logger_study_unbiased_honest_and_near_the_crlb(tmp_path, ar1):
     ratio = {nm: spread[j] / crlb[nm] for j, nm in enumerate(names) if nm in crlb}
     # a sample std over 10 seeds: its own 95 % band is about 0.55-1.45 of the true spread
     assert max(ratio.values()) < 1.5, ratio
+
+
+@pytest.mark.slow
+@pytest.mark.expensive
+def test_adequacy_false_alarm_rate_on_model_exact_logger_data(tmp_path):
+    """The verdict calibrated on the path users take: logger files of a car that is exactly the
+    model (the SUV with bars, fitted with bars), 200 Hz files and 400 Hz files resampled to 200 Hz,
+    white and AR(1) 0.9 noise, starts estimated. 50 seeds each: at most 2 % 'not adequate'."""
+    alarms, total = [], 0
+    for fs in (200.0, 400.0):
+        sc = suv_scenario(tmp_path / f"sc{fs:g}", fs=fs)
+        for ar1 in (0.0, 0.9):
+            for seed in range(50):
+                folder = write_logger(sc, tmp_path / f"log{fs:g}_{ar1}_{seed}", seed=seed, ar1=ar1, model_fs=200.0)
+                _, res = _identify(folder)
+                total += 1
+                if not res.adequacy["adequate"]:
+                    alarms.append((fs, ar1, seed, res.adequacy["reasons"][0]))
+    assert len(alarms) <= 0.02 * total, alarms
