@@ -101,12 +101,12 @@ class Resampled:
                 return self.y[idx].astype(float)
         return self(t0 + np.arange(n) / fs)
 
-    def __call__(self, t, nu: int = 0):
+    def __call__(self, t):
         t = np.asarray(t, dtype=float)
         tol = 1e-6 * self.h  # a sample time rounded past an end is still that end's sample
         inside = (t >= self.t0 - tol) & (t <= self.t1 + tol)
         out = np.zeros(t.shape)
-        out[inside] = self.spline(t[inside], nu)
+        out[inside] = self.spline(t[inside])
         return out
 
 
@@ -237,17 +237,17 @@ class MeasuredRun:
         chans = {c: Y[i0:i1, i].copy() for i, c in enumerate(CHANNELS) if c in self.channels}
         return RunData(self.times[i0:i1] - start, chans, distance=self.relative_distance(start))
 
-    def measured_at(self, start: float, grid=None, nu: int = 0) -> np.ndarray:
-        """(n, 10) measurement (``nu = 1``: its time derivative) at ``start + grid``, NaN for missing channels.
+    def measured_at(self, times) -> np.ndarray:
+        """(n, 10) measurement at file ``times``, NaN for missing channels.
 
         Interpolated: for looking at the recording between its samples (the
         coarse alignment of a run with a speed channel), never for a fit.
         """
-        grid = self.grid if grid is None else grid
-        Y = np.full((grid.size, len(CHANNELS)), np.nan)
+        times = np.asarray(times, dtype=float)
+        Y = np.full((times.size, len(CHANNELS)), np.nan)
         for i, c in enumerate(CHANNELS):
             if c in self.channels:
-                Y[:, i] = self.channels[c](start + grid, nu)
+                Y[:, i] = self.channels[c](times)
         return Y
 
 
@@ -600,7 +600,7 @@ def _correlation(mr: MeasuredRun, Yhat, tm, tau=None):
     """
     from scipy.signal import correlate
 
-    Y = mr.values if tau is None else mr.measured_at(0.0, tau)
+    Y = mr.values if tau is None else mr.measured_at(tau)
     total, n = None, 0
     for i, c in enumerate(CHANNELS):
         if c not in mr.channels:
