@@ -146,6 +146,22 @@ MISTAKES = {
     "one body accelerometer in g mapped as m/s^2": (
         "W_L", dict(cmap={**channel_map(), "body_az_rl": {"name": "AccZ_Body_RL", "unit": "m/s^2"}}),
         ["body_az_rl reads 9.81x too small (g mapped as m/s^2?)", 'body_az_rl = { name = "AccZ_Body_RL", unit = "g" }']),
+    "one hub accelerometer in g mapped as m/s^2": (
+        "W_L", dict(cmap={**channel_map(), "axle_az_rl": {"name": "AccZ_Hub_RL", "unit": "m/s^2"}}),
+        ["run 'W_L': axle_az_rl reads 9.81x too small (g mapped as m/s^2?)", "its lead-in reads 1",
+         'axle_az_rl = { name = "AccZ_Hub_RL", unit = "g" }']),
+    "one hub accelerometer in m/s^2 mapped as g": (
+        "T_HH", dict(cmap={**channel_map(), "axle_az_fl": {"name": "AccZ_Hub_FL", "unit": "g"}}),
+        ["run 'T_HH': axle_az_fl reads 9.81x too large (m/s^2 mapped as g?)",
+         'axle_az_fl = { name = "AccZ_Hub_FL", unit = "m/s^2" }']),
+    "every hub accelerometer in g mapped as m/s^2": (
+        "H_HL", dict(cmap={**channel_map(), **{c: {"name": n, "unit": "m/s^2"} for c, n in (
+            ("axle_az_fl", "AccZ_Hub_FL"), ("axle_az_fr", "AccZ_Hub_FR"))},
+            **{c: {"name": n, "unit": "m/s^2"} for c, n in (("axle_az_rl", "AccZ_Hub_RL"), ("axle_az_rr", "AccZ_Hub_RR"))}},
+            mutate=lambda chans: chans.update({n: (chans[n][0], chans[n][1] / 9.80665, "g") for n in (
+                "AccZ_Hub_FL", "AccZ_Hub_FR")})),
+        ["axle_az_fl reads 9.81x too small (g mapped as m/s^2?)", 'axle_az_fl = { name = "AccZ_Hub_FL", unit = "g" }',
+         "(3 more error(s) of this kind)"]),
     "speed = 1e308": ("W_L", dict(edit=set_run(speed=1e308)), ["run 'W_L': speed = 1e+308 m/s is not physically plausible"]),
     "total_mass = 1e308": ("W_L", dict(edit=lambda d: d["known"].update(total_mass=1e308)),
                            ["[known]: total_mass = 1e+308 kg is not physically plausible"]),

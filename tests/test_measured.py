@@ -270,10 +270,10 @@ WARNINGS = {
                     "body_az_fr: reads -9.81 m/s^2 at rest (gravity included): mounted upside down? set sign = -1"),
     "lead-in moving": (dict(preprocess={"gravity_included": True, "lead_in": [2.5, 4.0]}),
                        "the lead-in [2.5, 4] s is not stationary"),
-    "unit disagrees with the file": (dict(cmap={**channel_map(), "axle_az_fl": {"name": "AccZ_Hub_FL",
-                                                                                 "unit": "g"}}),
-                                     "AccZ_Hub_FL' mapped to axle_az_fl: the file says unit 'm/s^2' but the map "
-                                     "says 'g'; using the map's"),
+    # the map is right and the file's label wrong (a wrong map is an error: tests/test_checks.py)
+    "unit disagrees with the file": (dict(mutate=_set("AccZ_Hub_FL", lambda t, v, u: (t, v, "g"))),
+                                     "AccZ_Hub_FL' mapped to axle_az_fl: the file says unit 'g' but the map "
+                                     "says 'm/s^2'; using the map's"),
     "fs above the slowest channel": (dict(preprocess={"gravity_included": True, "fs": 800.0}),
                                      "resampling to 800 Hz, above the slowest channel's rate (500 Hz)"),
 }

@@ -52,6 +52,7 @@ import numpy as np
 from ..errors import DataError, DataWarning
 from ..model.equations import CHANNELS
 from ..model.params import GRAVITY
+from .checks import gravity_unit_factor
 from .readers import FORMAT_NAMES, Signal, open_signals
 from .schema.channels import SI, TARGETS, UNITS, ChannelEntry, quantity, unit_factor
 from .schema.runfiles import RunData
@@ -328,7 +329,8 @@ def _read_si(targets: dict, sf, time_name, time_scale: float, opts: dict, path: 
             _warn(warns, f"{path}: {w}: {int(gap.sum())} gap(s) in time, the longest {dt[k]:.4g} s at "
                          f"t = {sig.time[k]:.6g} s (sample interval {med:.4g} s); bridged by interpolation", _STAGE)
         if c in CHANNELS:
-            _plausibility(c, v, unit, opts, f"{path}: {w}", warns)
+            if not _plausibility(c, v, unit, opts, f"{path}: {w}", warns):
+                rec_ch[c]["flat_lined"] = True  # a dead channel: no unit to check (rideid.data.checks.unit_findings)
     return raw, rec_ch
 
 
@@ -385,7 +387,8 @@ def _remove_gravity_bias(raw: dict, rec_ch: dict, measured: list, lead, grav: bo
                             f"{c} (its time runs {s.time[0]:.6g} .. {s.time[-1]:.6g} s)")
         seg = s.values[in_lead]
         m = float(np.mean(seg))
-        if grav and is_acc and not (0.8 * GRAVITY < m < 1.2 * GRAVITY):
+        # a mean that is g in another unit is an error of the data checks (rideid.data.checks.unit_findings)
+        if grav and is_acc and not (0.8 * GRAVITY < m < 1.2 * GRAVITY) and gravity_unit_factor(m) is None:
             if -1.2 * GRAVITY < m < -0.8 * GRAVITY:
                 _warn(warns, f"{path}: {c}: reads {m:.3g} m/s^2 at rest (gravity included): mounted upside down? "
                              "set sign = -1 in its channel map", _STAGE)
@@ -460,11 +463,12 @@ def _motion(raw: dict, targets: dict, speed: float | None, path: Path):
     return distance, motion_rec
 
 
-def _plausibility(c, v, unit, opts, w, warns):
+def _plausibility(c, v, unit, opts, w, warns) -> bool:
+    """Warn of what looks wrong in channel ``c``'s values ``v`` (SI); False when it is flat-lined."""
     ptp = float(np.ptp(v))
     if ptp == 0.0:
         _warn(warns, f"{w}: flat-lined (every sample is {v[0]:.6g}); check the sensor and its cable")
-        return
+        return False
     for end, val in (("maximum", v.max()), ("minimum", v.min())):
         run = _longest_run(v == val)
         if run >= 3:
@@ -480,6 +484,7 @@ def _plausibility(c, v, unit, opts, w, warns):
         if peak > 3.0:
             _warn(warns, f"{w}: peaks at {peak:.3g} rad/s ({math.degrees(peak):.0f} deg/s), implausible for a "
                          "car body on a ride track: are the values in deg/s? set unit = \"deg/s\"")
+    return True
 
 
 # ---------------------------------------------------------------------------
