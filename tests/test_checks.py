@@ -344,7 +344,7 @@ def test_recorded_cost_is_at_the_final_parameters_and_starts(hatch, tmp_path):
     path = one_run(tmp_path, sc, raw, "T_HH", edit=edit)
     ds = rideid.load_dataset(path)
     start0 = ds.measured["T_HH"].start
-    res = rideid.identify(ds, seed=1, generations=10)
+    res = rideid.identify(ds, seed=1, generations=10, model="base")
     start1 = res.preprocessing["T_HH"]["start"]["value"]
     assert abs(start1 - start0) > 1e-4 and abs(start1 - OFFSET) < 2e-4  # the hatchback moved it
     again = rideid.load_dataset(path, starts={"T_HH": start1})
@@ -378,7 +378,7 @@ def test_start_std_includes_a_noisy_speed_channel(tmp_path):
     (path / "dataset.toml").write_text(tomli_w.dumps(doc))
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", DataWarning)
-        res = rideid.identify(rideid.load_dataset(path), seed=1, generations=60)
+        res = rideid.identify(rideid.load_dataset(path), seed=1, generations=60, model="base")
     ratios = []
     for rid, rec in res.preprocessing.items():
         st = rec["start"]

@@ -61,7 +61,7 @@ def test_round_trip_identifies_within_half_percent(fmt, tmp_path, default_scenar
             assert ch[c]["removed"] == pytest.approx(G0, rel=1e-6)
         assert ch["body_az_fr"]["sign"] == -1 and ch["pitch_rate"]["unit"] == "deg/s"
         assert rec["fs"] == 200.0
-    res = rideid.identify(ds, seed=1)
+    res = rideid.identify(ds, seed=1, model="base")
     assert max_error(res, default_scenario.truth) < 5e-3
     for rid, rec in res.preprocessing.items():
         assert abs(rec["start"]["value"] - OFFSET) < 2e-5, rid  # a 250th of a sample after the joint polish
@@ -90,7 +90,7 @@ def test_nominal_car_misaligns_and_the_joint_polish_recovers(tmp_path):
     nominal = {rid: rec["start"]["value"] - OFFSET for rid, rec in ds.preprocessing().items()}
     assert max(abs(v) for v in nominal.values()) > 2e-3  # the nominal car is not the van
     data_before = {rid: rd.matrix() for rid, rd in ds.data.items()}
-    res = rideid.identify(ds, seed=1)
+    res = rideid.identify(ds, seed=1, model="base")
     assert max_error(res, truth) < 5e-3
     for rid, rec in res.preprocessing.items():
         assert abs(rec["start"]["value"] - OFFSET) < 5e-5, rid
@@ -124,7 +124,7 @@ def test_varying_speed_from_a_speed_or_distance_channel(distance, tmp_path, defa
         np.testing.assert_allclose(ds.data[r.id].distance(t), wob[r.id](t), atol=2e-4)
     if distance:
         return  # same data as the speed channel up to integration: identification shown once
-    res = rideid.identify(ds, seed=1)
+    res = rideid.identify(ds, seed=1, model="base")
     assert max_error(res, default_scenario.truth) < 5e-3
 
 

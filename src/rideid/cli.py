@@ -255,26 +255,19 @@ def run_identify(ds_path, out_dir, *, seed, population=None, generations=None, w
     out = out or sys.stdout
     import rideid
     from .data.schema import atomic_output
-    from .estimate.identify import DEFAULT_GENERATIONS, DEFAULT_POPULATION, MODELS, model_extensions
+    from .estimate.identify import DEFAULT_GENERATIONS, DEFAULT_POPULATION, MODELS
 
     if model is not None and model not in MODELS:
         raise ArgumentError(f"--model must be one of {', '.join(MODELS)}, got {model!r}")
     ds = rideid.load_dataset(ds_path)
-    if model is None and ds.manifest.extensions is None:
-        model = "auto"  # SPEC §6: without a [model] table the data choose
-    auto = model == "auto"
-    extensions = None if auto else model_extensions(ds, model)
     prog = Progress(quiet)
     kw = {"population": population or DEFAULT_POPULATION, "generations": generations or DEFAULT_GENERATIONS}
     if kw["population"] < 4:
         raise ArgumentError(f"--population must be at least 4, got {kw['population']}")
     if kw["generations"] < 1:
         raise ArgumentError(f"--generations must be at least 1, got {kw['generations']}")
-    if auto:
-        res = rideid.identify(ds, rng=seed, weights=weights, polish=polish, callback=prog.identify, model="auto", **kw)
-    else:
-        cost = rideid.CostFunction(ds, extensions=extensions)
-        res = rideid.identify(ds, rng=seed, weights=weights, polish=polish, callback=prog.identify, cost=cost, **kw)
+    # the model as rideid.identify chooses it (SPEC §5 amended): --model, else the dataset's [model], else auto
+    res = rideid.identify(ds, rng=seed, weights=weights, polish=polish, callback=prog.identify, model=model, **kw)
     prog.done()
     with atomic_output(out_dir) as tmp:
         res.save(tmp)

@@ -143,13 +143,17 @@ def identify(ds: Dataset, *, rng=None, seed=None, population: int = DEFAULT_POPU
         runs); it is copied, never modified.
     maps : SensitivityMaps, optional
         Parameter -> track maps (default: computed around the nominal car).
-    model : {None, "base", "full"} or sequence of group names
+    model : {None, "base", "full", "auto"} or sequence of group names
         The model (SPEC §6): the twelve (``"base"``), with every extension
-        group (``"full"``), or the given groups; ``None``: the dataset's
-        ``[model]``, else the twelve. Ignored when ``cost`` is given (its
-        parameter space decides). Known extension values are held fixed and
-        used whatever the model. ``"auto"``: fit the candidates and keep the
-        model the data support (:func:`rideid.estimate.model_choice.identify_auto`).
+        group (``"full"``), or the given groups; ``"auto"``: fit the
+        candidates and keep the model the data support
+        (:func:`rideid.estimate.model_choice.identify_auto`). ``None``: the
+        dataset's ``[model]``, else ``"auto"``, as ``rideid identify`` does
+        (SPEC §5 amended; :func:`rideid.estimate.model_choice.default_model`;
+        the single-model fit :func:`rideid.estimate.identify.identify` takes
+        the dataset's ``[model]``, else the twelve). Ignored when ``cost`` is given (its parameter space
+        decides). Known extension values are held fixed and used whatever
+        the model.
     start : array_like, shape (d,), optional
         Free-parameter row (the cost's ``names`` order) to polish from,
         skipping the search (used to fit nested models from a larger one).

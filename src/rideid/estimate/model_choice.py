@@ -219,10 +219,24 @@ def _nested_cost(cf_full, ds, extensions):
     return cf
 
 
+def default_model(ds, model=None):
+    """The model ``rideid.identify`` and ``rideid identify`` fit when none is named (SPEC §5 amended).
+
+    ``model`` as given; without it (``None``) the dataset's ``[model]``
+    extensions, else ``"auto"`` (SPEC §6).
+    """
+    if model is None:
+        return "auto" if ds.manifest.extensions is None else tuple(ds.manifest.extensions)
+    return model
+
+
 @functools.wraps(identify_model)
 def identify(ds, *args, model=None, cost=None, **kw):
-    # rideid.identify: the model choice for model="auto", else the fitted model as given
+    # rideid.identify: the model choice for model="auto", else the fitted model as given; without a model
+    # (and without a cost, whose space decides) the command line's default (default_model)
     # (the dispatch lives here, above both, so that identify and the model choice import one way)
+    if cost is None:
+        model = default_model(ds, model)
     if isinstance(model, str) and model == "auto" and cost is None:
         if args:
             raise TypeError("identify() takes the dataset as its only positional argument")
