@@ -308,3 +308,19 @@ def test_scenario_bad_input(tmp_path, capsys, scenario_file):
     (tmp_path / "s.toml").write_text(SCENARIO_ALL_KINDS.replace("total_mass = 1093.3", "total_mass = 1200.0"))
     rc, _, err = run_cli(["simulate", tmp_path / "s.toml", "--out", tmp_path / "o"], capsys)
     assert rc == 2 and "total_mass = 1200.0 disagrees with [truth]" in err
+
+
+def test_identify_into_a_used_folder_leaves_one_result(sim_dataset, tmp_path, capsys):
+    """An earlier identification's report and figures go; the user's own files stay."""
+    out = tmp_path / "fit"
+    (out / "figures").mkdir(parents=True)
+    (out / "figures" / "fit_W_L.png").write_bytes(b"old")
+    (out / "report.html").write_text("old report")
+    (out / "result.json").write_text("{}")
+    (out / "notes.txt").write_text("mine")
+    (out / "mine").mkdir()
+    rc, _, err = run_cli(["identify", sim_dataset, "--out", out, "--seed", "1", "--quiet", "--model", "base",
+                          "--population", "8", "--generations", "2", "--no-polish", "--no-report"], capsys)
+    assert rc == 0, err
+    assert sorted(p.name for p in out.iterdir()) == ["history.csv", "mine", "notes.txt", "result.json"]
+    assert json.loads((out / "result.json").read_text())["seed"] == 1

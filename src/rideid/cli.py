@@ -250,6 +250,10 @@ def _candidates_table(model: dict) -> str:
     return "\n".join(lines)
 
 
+#: what ``rideid identify`` writes into its folder: a new identification replaces all of it (the user's files stay)
+IDENTIFY_OUTPUTS = ("result.json", "history.csv", "report.html", "figures", "road")
+
+
 def run_identify(ds_path, out_dir, *, seed, population=None, generations=None, weights="adaptive",
                  polish=True, quiet=False, out=None, report=True, model=None):
     out = out or sys.stdout
@@ -269,7 +273,7 @@ def run_identify(ds_path, out_dir, *, seed, population=None, generations=None, w
     # the model as rideid.identify chooses it (SPEC §5 amended): --model, else the dataset's [model], else auto
     res = rideid.identify(ds, rng=seed, weights=weights, polish=polish, callback=prog.identify, model=model, **kw)
     prog.done()
-    with atomic_output(out_dir) as tmp:
+    with atomic_output(out_dir, replaces=IDENTIFY_OUTPUTS) as tmp:
         res.save(tmp)
         if report:
             from .report.html import write_report
