@@ -313,12 +313,12 @@ def _result(ds, cf, search, fit, weighting, maps, rng_record, wall, assess=True)
             e["std"] = 0.0
         e["std_robust"] = robust.std_robust(n) if n not in space.fixed else 0.0
         details[n] = e
-    # an estimate the bound stopped, not the data (rideid.data.checks)
+    # an estimate the bound stopped, not the data (rideid.data.checks); warned of by rideid.identify, once,
+    # for the model it returns (warn_bounds), not for every candidate fitted on the way
     findings = list(getattr(ds, "findings", [])) + bound_findings(details)
     for f in findings:
         if f.check == "bounds":
             details[f.channel]["at_bound"] = True
-            warnings.warn(f.message, DataWarning, stacklevel=4)
     starts = {} if fit is None else fit.starts
     pre = ds.preprocessing()
     for rid, st in starts.items():
@@ -338,6 +338,18 @@ def _result(ds, cf, search, fit, weighting, maps, rng_record, wall, assess=True)
         model={"extensions": list(space.extensions)}, response=response,
         correlation=robust.correlation_dict(), adequacy=assess_fit(cf, P, response) if assess else None,
         checks=[f.to_dict() for f in findings])
+
+
+def warn_bounds(res: IdentificationResult, stacklevel: int = 3) -> None:
+    """A :class:`rideid.DataWarning` for each estimate of ``res`` that ended at a search bound.
+
+    :func:`rideid.identify` calls it once for the result it returns (under
+    ``model="auto"``: the kept model only); the fits themselves only mark
+    ``at_bound`` in ``details`` and list the finding in ``checks``.
+    """
+    for f in res.checks:
+        if f.get("check") == "bounds":
+            warnings.warn(f["message"], DataWarning, stacklevel=stacklevel)
 
 
 def _polish(cf: CostFunction, x0, weights, align=None):

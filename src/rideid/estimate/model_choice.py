@@ -41,6 +41,7 @@ from scipy import special
 from ..model.params import GROUPS
 from .adequacy import MIN_RELATIVE
 from .identify import identify as identify_model
+from .identify import warn_bounds
 
 #: per free extension parameter: a group of two enters at the 99.9 % point of chi-square(2)
 PENALTY = float(special.chdtri(2, 0.001) / 2)
@@ -240,5 +241,8 @@ def identify(ds, *args, model=None, cost=None, **kw):
     if isinstance(model, str) and model == "auto" and cost is None:
         if args:
             raise TypeError("identify() takes the dataset as its only positional argument")
-        return identify_auto(ds, **kw)
-    return identify_model(ds, *args, model=model, cost=cost, **kw)
+        res = identify_auto(ds, **kw)
+    else:
+        res = identify_model(ds, *args, model=model, cost=cost, **kw)
+    warn_bounds(res)
+    return res
