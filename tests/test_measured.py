@@ -290,6 +290,20 @@ def test_clean_logger_run_gives_no_warning(tmp_path, default_scenario, raw):
     assert _warnings_of(_one_run(tmp_path, default_scenario, raw)) == []
 
 
+def test_a_channel_without_signal_has_a_stationary_lead_in(tmp_path, default_scenario, raw):
+    """The washboard hardly rolls the car: roll_rate is noise (or rounding) over the lead-in and the run
+    alike, which is no reason to say the lead-in moves; a lead-in over moving data still is."""
+    rng = np.random.default_rng(3)
+    noisy = _set("Gyro_X", lambda t, v, u: (t, v + 0.02 * rng.standard_normal(v.size), u))
+    pre = {"gravity_included": True, "remove_bias": True}
+    msgs = _warnings_of(_one_run(tmp_path / "a", default_scenario, raw, rid="W_L", preprocess=pre, mutate=noisy))
+    assert not [m for m in msgs if "not stationary" in m], msgs
+    moving = _warnings_of(_one_run(tmp_path / "b", default_scenario, raw, rid="W_L", mutate=noisy,
+                                   preprocess={**pre, "lead_in": [4.0, 5.5]}))
+    assert [m for m in moving if "not stationary" in m and "body_az_fl" in m], moving
+    assert not [m for m in moving if "not stationary" in m and "roll_rate" in m], moving
+
+
 # ---------------------------------------------------------------------------
 # Bad input: one line naming the file, key or channel; exit 2; nothing written
 

@@ -373,9 +373,55 @@ def _span_and_rate(raw: dict, rec_ch: dict, measured: list, fs, path: Path, warn
     return t_first, t_last, fs
 
 
+#: the lead-in is not stationary when its RMS exceeds this share of the run's ...
+LEAD_IN_RUN_SHARE = 0.25
+#: ... and this multiple of the quietest stretch of the run as long as the lead-in (the noise floor)
+LEAD_IN_FLOOR_FACTOR = 2.0
+
+
+def quietest_rms(values: np.ndarray, n: int) -> float:
+    """The least RMS about the mean of any ``n`` consecutive samples (windows every ``n // 2``): the noise floor.
+
+    Where the car stands still at some time of the recording this is the
+    sensor's noise over a lead-in's length; on a channel the run does not
+    excite (a roll rate on a washboard) it is about the whole run's RMS.
+    """
+    v = np.asarray(values, dtype=float)
+    n = max(int(n), 3)
+    if v.size <= n:
+        return float(np.std(v))
+    v = v - np.mean(v)  # sums of squares about zero: no cancellation for a bias of g
+    c1 = np.concatenate([[0.0], np.cumsum(v)])
+    c2 = np.concatenate([[0.0], np.cumsum(v * v)])
+    a = np.arange(0, v.size - n + 1, max(n // 2, 1))
+    mean = (c1[a + n] - c1[a]) / n
+    var = (c2[a + n] - c2[a]) / n - mean ** 2
+    return float(np.sqrt(max(float(np.min(var)), 0.0)))
+
+
+def lead_in_moving(rms_lead: float, rms_run: float, floor: float) -> bool:
+    """Is the lead-in clearly not at rest?
+
+    Its RMS (about its mean) must exceed both :data:`LEAD_IN_RUN_SHARE` of
+    the run's RMS (a share of the signal that matters) and
+    :data:`LEAD_IN_FLOOR_FACTOR` times the noise floor, the RMS of the
+    quietest stretch of the run as long as the lead-in
+    (:func:`quietest_rms`). A lead-in at rest is the noise floor (the
+    floor's own scatter between stretches is well below a factor 2 for
+    hundreds of samples, white or coloured noise), whatever the run's
+    level: so a channel the run hardly excites, whose lead-in and run are
+    both noise, is not flagged, while a lead-in set over moving data, with
+    a standstill elsewhere in the recording, is.
+    """
+    return rms_lead > LEAD_IN_RUN_SHARE * rms_run and rms_lead > LEAD_IN_FLOOR_FACTOR * floor
+
+
 def _remove_gravity_bias(raw: dict, rec_ch: dict, measured: list, lead, grav: bool, bias: bool, path: Path,
                          where_map: str, warns: list) -> None:
-    """Subtract the lead-in mean (gravity and bias) from ``raw`` in place and note it in ``rec_ch``."""
+    """Subtract the lead-in mean (gravity and bias) from ``raw`` in place and note it in ``rec_ch``.
+
+    Warns when the lead-in is not stationary (:func:`lead_in_moving`).
+    """
     for c in measured:
         s = raw[c]
         in_lead = (s.time >= lead[0]) & (s.time <= lead[1])
@@ -398,7 +444,7 @@ def _remove_gravity_bias(raw: dict, rec_ch: dict, measured: list, lead, grav: bo
         whole = s.values - np.mean(s.values)
         rms_all = float(np.sqrt(np.mean(whole ** 2)))
         rms_lead = float(np.std(seg))
-        if rms_all > 0 and rms_lead > 0.25 * rms_all:
+        if lead_in_moving(rms_lead, rms_all, quietest_rms(s.values, seg.size)):
             _warn(warns, f"{path}: {c}: the lead-in [{lead[0]:g}, {lead[1]:g}] s is not stationary (RMS "
                          f"{rms_lead:.3g} vs {rms_all:.3g} over the run); set lead_in to a part at rest", _STAGE)
         raw[c] = Signal(s.time, s.values - m, s.unit)
