@@ -54,7 +54,7 @@ from ..model.equations import modal_summary
 from ..model.params import GROUPS, INDEX, UNITS
 from .cost import CostFunction
 from .jade import JadeSolver, make_rng, stop_requested
-from .adequacy import assess_fit
+from .adequacy import advise, assess_fit
 from .result import History, IdentificationResult
 from .uncertainty import estimate_covariance, hac_covariance
 from .sensitivity import SensitivityMaps, sensitivity_maps
@@ -335,8 +335,8 @@ def _result(ds, cf, search, fit, weighting, maps, rng_record, wall, assess=True)
         rng_state=rng_record["rng_state"], track_weights=search.track_weights, weights_mode=weighting.name,
         polish=info, history=History(search.history), starts=starts, preprocessing=pre,
         modal=modal_summary(P, ds.geometry), dataset=str(ds.path), maps=maps,
-        model={"extensions": list(space.extensions)}, response=response,
-        correlation=robust.correlation_dict(), adequacy=assess_fit(cf, P, response) if assess else None,
+        model={"extensions": list(space.extensions)}, response=response, correlation=robust.correlation_dict(),
+        adequacy=advise(assess_fit(cf, P, response), {"extensions": list(space.extensions)}) if assess else None,
         checks=[f.to_dict() for f in findings])
 
 

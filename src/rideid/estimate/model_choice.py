@@ -39,7 +39,7 @@ import numpy as np
 from scipy import special
 
 from ..model.params import GROUPS
-from .adequacy import MIN_RELATIVE
+from .adequacy import MIN_RELATIVE, advise
 from .identify import identify as identify_model
 from .identify import warn_bounds
 
@@ -198,6 +198,7 @@ def identify_auto(ds, *, rng=None, seed=None, callback=None, maps=None, **kw):
             "std_robust": {n: d.get("std_robust") for n, d in r.details.items() if not d.get("fixed")},
         })
     res.model = {"extensions": list(chosen), "selection": "auto", "criterion": CRITERION, "candidates": table}
+    res.adequacy = advise(res.adequacy, res.model)  # what to try, now that the candidates have been weighed
     if res is not full:  # the search was the full model's: its history and counts belong to this result
         res.history, res.nit, res.stop, res.message = full.history, full.nit, full.stop, full.message
         res.track_weights = full.track_weights
