@@ -324,3 +324,32 @@ def test_identify_into_a_used_folder_leaves_one_result(sim_dataset, tmp_path, ca
     assert rc == 0, err
     assert sorted(p.name for p in out.iterdir()) == ["history.csv", "mine", "notes.txt", "result.json"]
     assert json.loads((out / "result.json").read_text())["seed"] == 1
+
+
+def _subparsers():
+    import argparse
+
+    from rideid.cli import _parser
+    action = next(a for a in _parser()._actions if isinstance(a, argparse._SubParsersAction))
+    return action.choices
+
+
+def test_every_command_has_quiet_and_every_option_help(capsys):
+    """The README promises --quiet on every command; every option and argument says what it is."""
+    for name, sp in _subparsers().items():
+        assert "--quiet" in sp._option_string_actions, name
+        for a in sp._actions:
+            assert a.help, f"rideid {name}: {a.option_strings or a.dest} has no help text"
+        with pytest.raises(SystemExit):
+            sp.parse_args(["--help"])
+        text = capsys.readouterr().out
+        assert "%%" not in text, f"rideid {name} --help: {text}"
+    assert "simulate (1 % noise)" in _subparsers()["demo"].format_help()
+
+
+def test_simulate_builtin_as_study_files_say(tmp_path, capsys):
+    rc, stdout, err = run_cli(["simulate", "builtin", "--out", tmp_path / "sim", "--seed", "1", "--quiet"], capsys)
+    assert rc == 0, err
+    assert "(10 runs)" in stdout and (tmp_path / "sim" / "truth.toml").is_file()
+    import rideid
+    assert rideid.load_scenario("builtin") == rideid.default_scenario()

@@ -100,18 +100,25 @@ def _parser() -> argparse.ArgumentParser:
     sub = p.add_subparsers(dest="command", metavar="COMMAND")
 
     def add(name, help_):
-        return sub.add_parser(name, help=help_, description=help_, epilog=EXAMPLES[name],
-                              formatter_class=argparse.RawDescriptionHelpFormatter)
+        # help_ as printed: the command list's help is %-formatted by argparse, the description is not
+        s = sub.add_parser(name, help=help_.replace("%", "%%"), description=help_, epilog=EXAMPLES[name],
+                           formatter_class=argparse.RawDescriptionHelpFormatter)
+        s.add_argument("--quiet", action="store_true", help="no progress line and no compile notice")
+        return s
 
     s = add("simulate", "simulate a scenario (truth + tracks + runs) into a dataset folder")
-    s.add_argument("scenario", metavar="SCENARIO.toml")
-    s.add_argument("--out", required=True, metavar="DIR")
+    s.add_argument("scenario", metavar="SCENARIO.toml",
+                   help="the scenario: [truth], [vehicle], [known], tracks and runs with fs and duration; "
+                        "'builtin' for the built-in car and the paper's ten runs")
+    s.add_argument("--out", required=True, metavar="DIR",
+                   help="dataset folder to write (dataset.toml, runs/*.csv, truth.toml)")
     s.add_argument("--noise", type=float, default=0.0, metavar="FRACTION",
                    help="white Gaussian noise, standard deviation as a fraction of each channel's RMS")
     s.add_argument("--noise-ar1", type=float, default=0.0, metavar="RHO",
                    help="colour the noise: AR(1) in time with this coefficient per sample (0 <= RHO < 1; "
                         "same standard deviation), as real sensors' noise is")
-    s.add_argument("--seed", type=int, default=None, metavar="N")
+    s.add_argument("--seed", type=int, default=None, metavar="N",
+                   help="seed of the noise (default: a fresh one each time)")
     s.add_argument("--engine", choices=("rideid", "mujoco"), default="rideid",
                    help="rideid's exact 7-DOF response (default), or the independent MuJoCo multibody car "
                         "with the scenario's [hifi] properties (needs: pip install 'rideid[hifi]'; "
@@ -119,12 +126,14 @@ def _parser() -> argparse.ArgumentParser:
     s.add_argument("--raw", action="store_true",
                    help="with --engine mujoco: write the sensors' own readings (gravity included, "
                         "1 s standing still first) as a logger would, mapped for the measured-data pipeline")
-    s.add_argument("--quiet", action="store_true", help="no progress line")
 
     s = add("identify", "estimate the ride parameters of a dataset (the twelve, plus anti-roll bars and tire damping when the model has them)")
-    s.add_argument("dataset", metavar="DATASET_DIR")
-    s.add_argument("--out", required=True, metavar="DIR")
-    s.add_argument("--seed", type=int, default=None, metavar="N")
+    s.add_argument("dataset", metavar="DATASET_DIR", help="dataset folder (or its dataset.toml)")
+    s.add_argument("--out", required=True, metavar="DIR",
+                   help="output folder: result.json, history.csv, report.html, figures/ (rideid's files from "
+                        "an earlier identification there are replaced; other files stay)")
+    s.add_argument("--seed", type=int, default=None, metavar="N",
+                   help="seed of the search (same seed, same result; default: a fresh one each time)")
     s.add_argument("--population", type=int, default=None, metavar="NP", help="JADE population (default 32)")
     s.add_argument("--generations", type=int, default=None, metavar="G",
                    help="largest number of JADE generations (default 400)")
@@ -136,32 +145,34 @@ def _parser() -> argparse.ArgumentParser:
                         "(c_tf, c_tr); auto: fit the candidates and keep what the data support (docs/model-choice.md) "
                         "(default: the dataset's [model] extensions, else auto)")
     s.add_argument("--no-report", action="store_true", help="write result.json and history.csv only")
-    s.add_argument("--quiet", action="store_true", help="no progress line")
 
     s = add("report", "(re)build report.html in an identification folder")
-    s.add_argument("result_dir", metavar="RESULT_DIR")
+    s.add_argument("result_dir", metavar="RESULT_DIR", help="an identification folder (result.json, history.csv)")
     s.add_argument("--compare", metavar="OTHER_DIR",
                    help="another identification of the same dataset (e.g. --weights fixed) to overlay")
 
     s = add("sensitivity", "parameter/response/track sensitivity maps (paper Tables 4-7) as CSV, Markdown, PNG")
-    s.add_argument("source", metavar="DATASET_OR_SCENARIO")
-    s.add_argument("--out", required=True, metavar="DIR")
-    s.add_argument("--quiet", action="store_true", help="no progress line")
+    s.add_argument("source", metavar="DATASET_OR_SCENARIO",
+                   help="a dataset folder or a scenario file ('builtin': the built-in scenario)")
+    s.add_argument("--out", required=True, metavar="DIR",
+                   help="output folder: tables.md, three CSV and three PNG maps")
 
     s = add("study", "many identifications (Monte Carlo, fleet, run subsets) on Dask; resumable")
-    s.add_argument("study", metavar="STUDY.toml")
+    s.add_argument("study", metavar="STUDY.toml",
+                   help="the study: its data, identify options and axes (docs/studies.md; examples/studies/)")
     s.add_argument("--out", required=True, metavar="DIR",
                    help="output folder (tasks/, results.parquet, summary.md/.csv/.html); tasks already "
                         "there are not recomputed")
     s.add_argument("--scheduler", metavar="ADDRESS", default=None,
                    help="a running Dask scheduler, e.g. tcp://host:8786 (default: a local cluster, "
                         "one single-threaded worker process per core)")
-    s.add_argument("--quiet", action="store_true", help="no progress line")
 
     s = add("plan", "plan a test: the precision (CRLB) each candidate run buys, and which runs to drive")
     s.add_argument("scenario", metavar="SCENARIO.toml",
-                   help="[truth] = the nominal car, [[runs]] = the candidate runs, [known] = the scale anchor")
-    s.add_argument("--out", required=True, metavar="DIR")
+                   help="[truth] = the nominal car, [[runs]] = the candidate runs, [known] = the scale anchor "
+                        "('builtin': the built-in scenario)")
+    s.add_argument("--out", required=True, metavar="DIR",
+                   help="output folder: plan.json, plan.md, crlb.csv, path.csv, correlation.csv, precision_path.png")
     s.add_argument("--noise", type=float, default=None, metavar="FRACTION",
                    help="noise sd as a fraction of each channel's RMS, per run (as simulate --noise; "
                         "default 0.01, or 0 when a noise density is given)")
@@ -186,16 +197,15 @@ def _parser() -> argparse.ArgumentParser:
     s.add_argument("--seed", type=int, default=0, metavar="N", help="seed of the robust cars' sampling")
     s.add_argument("--within", type=float, default=None, metavar="F",
                    help="without a budget: the fewest runs whose CRLB is within F x that of all runs (default 1.5)")
-    s.add_argument("--quiet", action="store_true", help="no progress line")
 
     s = add("score", "compare an identification result with the truth")
-    s.add_argument("result", metavar="RESULT.json")
-    s.add_argument("truth", metavar="TRUTH.toml")
+    s.add_argument("result", metavar="RESULT.json", help="an identification's result.json (or its folder)")
+    s.add_argument("truth", metavar="TRUTH.toml", help="the truth, e.g. the truth.toml rideid simulate writes")
 
-    s = add("demo", "the whole job on the built-in car and tracks: simulate (1 %% noise), identify, score")
-    s.add_argument("--out", default="rideid-demo", metavar="DIR")
-    s.add_argument("--seed", type=int, default=1, metavar="N")
-    s.add_argument("--quiet", action="store_true", help="no progress line")
+    s = add("demo", "the whole job on the built-in car and tracks: simulate (1 % noise), identify, score")
+    s.add_argument("--out", default="rideid-demo", metavar="DIR",
+                   help="output folder: dataset/ and identify/ (default rideid-demo)")
+    s.add_argument("--seed", type=int, default=1, metavar="N", help="seed of the noise and the search (default 1)")
     return p
 
 
@@ -307,11 +317,12 @@ def cmd_identify(args, out=None):
 def cmd_sensitivity(args, out=None):
     out = out or sys.stdout
     import rideid
+    from .data.scenario import BUILTIN
     from .data.schema import atomic_output, read_toml
     from .estimate.sensitivity import heatmaps, tables_markdown, write_csvs
 
     src = Path(args.source)
-    is_scenario = src.is_file() and "truth" in read_toml(src)
+    is_scenario = args.source == BUILTIN or (src.is_file() and "truth" in read_toml(src))
     source = rideid.load_scenario(src) if is_scenario else rideid.load_dataset(src)
     prog = Progress(args.quiet)
     prog.line("simulating the baseline car and +25 % per parameter ...", force=True)
