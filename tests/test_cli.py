@@ -353,3 +353,23 @@ def test_simulate_builtin_as_study_files_say(tmp_path, capsys):
     assert "(10 runs)" in stdout and (tmp_path / "sim" / "truth.toml").is_file()
     import rideid
     assert rideid.load_scenario("builtin") == rideid.default_scenario()
+
+
+def test_score_says_whether_two_robust_std_cover_the_truth(sim_dataset, tmp_path, capsys):
+    import rideid
+    truth = rideid.load_truth(sim_dataset / "truth.toml")
+    pars = {n: {"value": truth[n], "unit": "", "fixed": False, "derived": False, "std": 1e-9,
+                "std_robust": 0.01 * truth[n]} for n in truth}
+    pars["k_sf"]["value"] = 1.015 * truth["k_sf"]  # 1.5 robust std off: covered
+    pars["k_sr"]["value"] = 1.03 * truth["k_sr"]  # 3 robust std off: not covered
+    pars["m_s"].update(derived=True)
+    pars["k_tf"].update(fixed=True, std_robust=0.0)  # known: nothing to judge
+    (tmp_path / "result.json").write_text(json.dumps({"parameters": pars}))
+    rc, stdout, err = run_cli(["score", tmp_path / "result.json", sim_dataset / "truth.toml"], capsys)
+    assert rc == 0, err
+    rows = {ln.split()[0]: ln.split() for ln in stdout.splitlines()[1:]}
+    assert "±2 robust covers" in stdout.splitlines()[0]
+    assert rows["k_sf"][4] == "yes" and rows["k_sr"][4] == "NO" and rows["k_tf"][4] == "-"
+    n = len(truth) - 1
+    assert f"±2 std_robust covers the truth for {n - 1} of {n} estimates" in stdout
+    assert stdout.strip().splitlines()[-1].startswith("largest error of the estimated parameters: 3.0000 %")

@@ -363,15 +363,20 @@ def cmd_plan(args, out=None):
 
 
 def score_table(scored: dict) -> str:
-    """The text table of :func:`rideid.score`."""
-    lines = [f"{'parameter':<10} {'estimate':>14} {'truth':>14} {'error %':>9}"]
+    """The text table of :func:`rideid.score`: error and whether ±2 ``std_robust`` covers the truth."""
+    lines = [f"{'parameter':<10} {'estimate':>14} {'truth':>14} {'error %':>9} {'±2 robust covers':>16}"]
     for n, r in scored["parameters"].items():
+        covers = {True: "yes", False: "NO", None: "-"}[r["covered"]]
         if r["error_percent"] is None:  # no relative error of a zero truth: the estimate in its unit
-            lines.append(f"{n:<10} {r['estimate']:>14.6g} {r['truth']:>14.6g} {'-':>9}"
+            lines.append(f"{n:<10} {r['estimate']:>14.6g} {r['truth']:>14.6g} {'-':>9} {covers:>16}"
                          + (" (not in the model)" if r["status"] == "not in the model" else ""))
             continue
         note = "" if r["status"] == "estimated" else f" {r['status']}"
-        lines.append(f"{n:<10} {r['estimate']:>14.6g} {r['truth']:>14.6g} {r['error_percent']:>9.4f}{note}")
+        lines.append(f"{n:<10} {r['estimate']:>14.6g} {r['truth']:>14.6g} {r['error_percent']:>9.4f} "
+                     f"{covers:>16}{note}")
+    if scored["coverable"]:
+        lines.append(f"±2 std_robust covers the truth for {scored['covered']} of {scored['coverable']} estimates "
+                     "(about 95 % expected)")
     lines.append(f"largest error of the estimated parameters: {scored['worst_percent']:.4f} %")
     return "\n".join(lines)
 
