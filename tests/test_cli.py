@@ -373,3 +373,47 @@ def test_score_says_whether_two_robust_std_cover_the_truth(sim_dataset, tmp_path
     n = len(truth) - 1
     assert f"±2 std_robust covers the truth for {n - 1} of {n} estimates" in stdout
     assert stdout.strip().splitlines()[-1].startswith("largest error of the estimated parameters: 3.0000 %")
+
+
+class _Terminal:
+    """A stderr that says it is a terminal, rendering carriage returns as a terminal shows them."""
+
+    def __init__(self):
+        self.text = ""
+
+    def isatty(self):
+        return True
+
+    def write(self, s):
+        self.text += s
+
+    def flush(self):
+        pass
+
+    def lines(self):
+        out = []
+        for raw in self.text.split("\n"):
+            screen = ""
+            for part in raw.split("\r"):
+                screen = part + screen[len(part):]
+            out.append(screen.rstrip())
+        return out
+
+
+def test_every_message_is_on_its_own_line(monkeypatch):
+    """A warning or error while the progress line shows starts a line of its own; the progress line is
+    redrawn on the next update."""
+    import warnings
+
+    from rideid.cli import Progress, _warning_line, say
+    term = _Terminal()
+    monkeypatch.setattr(sys, "stderr", term)
+    monkeypatch.setattr(warnings, "showwarning", _warning_line)
+    prog = Progress()
+    prog.line("generation 35/400  best 1.1e+00", force=True)
+    warnings.warn("k_sf = 8000 ended at its lower search bound 8000", UserWarning)
+    prog.line("generation 36/400  best 1.0e+00", force=True)
+    say("rideid: compiled the simulation kernel in 1 s (cached for later runs)")
+    prog.done()
+    assert term.lines() == ["rideid: warning: k_sf = 8000 ended at its lower search bound 8000",
+                            "rideid: compiled the simulation kernel in 1 s (cached for later runs)", ""]

@@ -37,7 +37,15 @@ EXAMPLES = {
 
 
 class Progress:
-    """A live progress line on stderr (only on a terminal, unless quiet)."""
+    """A live progress line on stderr (only on a terminal, unless quiet).
+
+    The line ends in no newline (it is redrawn in place), so anything else
+    written to the terminal while it shows would continue it; every message
+    goes through :func:`say`, which clears it first (the next update redraws it).
+    """
+
+    #: the progress line on the terminal now, if any
+    showing = None
 
     def __init__(self, quiet: bool = False, stream=None):
         self.stream = stream or sys.stderr
@@ -56,12 +64,15 @@ class Progress:
         self.stream.write("\r" + text + " " * pad)
         self.stream.flush()
         self._width = len(text)
+        Progress.showing = self
 
     def done(self):
         if self.enabled and self._width:
             self.stream.write("\r" + " " * self._width + "\r")
             self.stream.flush()
             self._width = 0
+        if Progress.showing is self:
+            Progress.showing = None
 
     def identify(self, state):
         """The :func:`rideid.identify` callback: one line per generation (never stops the run)."""
@@ -84,8 +95,16 @@ class Progress:
                   f"{info['elapsed']:.0f} s{eta}", force=info["running"] == 0)
 
 
+def say(text: str) -> None:
+    """One message line on stderr, on a line of its own (a progress line showing is cleared first)."""
+    if Progress.showing is not None:
+        Progress.showing.done()
+    sys.stderr.write(text + "\n")
+    sys.stderr.flush()
+
+
 def _warning_line(message, category, filename, lineno, file=None, line=None):
-    sys.stderr.write(f"rideid: warning: {message}\n")
+    say(f"rideid: warning: {message}")
 
 
 def _parser() -> argparse.ArgumentParser:
@@ -455,8 +474,8 @@ def cmd_study(args, out=None):
         res = study(spec, args.out, scheduler=args.scheduler, progress=prog.study)
     except KeyboardInterrupt:
         prog.done()
-        print(f"rideid: the finished tasks are kept in {Path(args.out) / 'tasks'}; run the same command again "
-              "to resume", file=sys.stderr)
+        say(f"rideid: the finished tasks are kept in {Path(args.out) / 'tasks'}; run the same command again "
+            "to resume")
         raise
     prog.done()
     print(f"{res.tasks} tasks: {res.done} done, {res.failed} failed ({res.computed} computed now, "
@@ -477,7 +496,7 @@ def _compile(quiet: bool):
     dt = compile_kernels()
     prog.done()
     if dt > 1.0 and not quiet:
-        print(f"rideid: compiled the simulation kernel in {dt:.0f} s (cached for later runs)", file=sys.stderr)
+        say(f"rideid: compiled the simulation kernel in {dt:.0f} s (cached for later runs)")
 
 
 def main(argv=None) -> int:
@@ -493,10 +512,10 @@ def main(argv=None) -> int:
         return COMMANDS[args.command](args)
     except RideidError as e:
         msg = str(e).replace("\n", " ")
-        print(f"rideid: error: {msg}", file=sys.stderr)
+        say(f"rideid: error: {msg}")
         return 2
     except KeyboardInterrupt:
-        print("rideid: interrupted", file=sys.stderr)
+        say("rideid: interrupted")
         return 130
     except BrokenPipeError:  # output piped into a reader that stopped early (e.g. `| head`): not an error
         os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
@@ -504,8 +523,8 @@ def main(argv=None) -> int:
     except Exception as e:  # a bug: say so, in one line unless debugging
         if os.environ.get("RIDEID_DEBUG"):
             traceback.print_exc()
-        print(f"rideid: internal error: {type(e).__name__}: {e} (set RIDEID_DEBUG=1 for the traceback; "
-              "please report it)", file=sys.stderr)
+        say(f"rideid: internal error: {type(e).__name__}: {e} (set RIDEID_DEBUG=1 for the traceback; "
+            "please report it)")
         return 1
 
 
