@@ -35,7 +35,7 @@ The checks, and why they can tell:
   tells which permutation and signs of the channels the road supports; it
   also breaks the rigid-body check's ties (front/rear body swap versus a
   flipped pitch gyro).
-* **Units** (:func:`unit_findings`): with ``gravity_included`` an
+* **Units** (:func:`unit_findings`, :func:`rideid.data.schema.channels.gravity_unit_factor`): with ``gravity_included`` an
   acceleration reads about g at rest. A lead-in mean of about 1 m/s² is g
   mapped as m/s², of about 96 m/s² m/s² mapped as g: for every
   acceleration channel, axle ones too, which the rigid-body identities do
@@ -60,7 +60,7 @@ import numpy as np
 
 from ..model.equations import CHANNELS
 from ..model.params import EXT_NAMES
-from .schema.channels import SI, UNITS, quantity
+from .schema.channels import SI, UNITS, gravity_unit_factor, quantity
 
 G0 = 9.80665
 DEG = 180.0 / math.pi
@@ -610,27 +610,6 @@ def describe_fix(fix: dict) -> str:
 # ---------------------------------------------------------------------------
 # Units: an acceleration whose lead-in reads g in another unit
 
-#: unit factors an acceleration can be off by (g mapped as m/s^2: values 9.81x too small, and back)
-ACC_FACTORS = (G0, 1 / G0)
-
-
-def gravity_unit_factor(lead_mean: float) -> float | None:
-    """The factor that turns a lead-in mean into gravity, if a unit mistake explains it.
-
-    With gravity included, an acceleration at rest reads about ±g (±20 %); a
-    mean of about ±1 m/s^2 is g mapped as m/s^2 (factor 9.81), about ±96
-    m/s^2 is m/s^2 mapped as g (factor 1/9.81). The three ranges do not
-    overlap, so the factor is unambiguous. Returns the signed factor (minus:
-    also upside down), or None when the mean is about ±g or explained by
-    no unit.
-    """
-    for f in ACC_FACTORS:
-        for s in (1.0, -1.0):
-            if 0.8 * G0 < s * f * lead_mean < 1.2 * G0:
-                return s * f
-    return None
-
-
 def unit_findings(run_id: str, entries: dict, record: dict) -> list[Finding]:
     """Acceleration channels mapped in the wrong unit, seen in the gravity their lead-in reads.
 
@@ -981,6 +960,6 @@ def bound_findings(details: dict, fraction: float = BOUND_FRACTION) -> list[Find
     return out
 
 
-__all__ = ["Finding", "check_dataset", "enforce", "gravity_unit_factor", "unit_findings", "check_reach", "check_numbers", "check_coverage", "rigid_body_scores", "assignment", "wiring_fix",
+__all__ = ["Finding", "check_dataset", "enforce", "unit_findings", "check_reach", "check_numbers", "check_coverage", "rigid_body_scores", "assignment", "wiring_fix",
            "corrected", "describe_fix", "match_finding", "speed_candidates", "bound_findings", "PLAUSIBLE",
            "MATCH_MIN"]

@@ -52,9 +52,8 @@ import numpy as np
 from ..errors import DataError, DataWarning
 from ..model.equations import CHANNELS
 from ..model.params import GRAVITY
-from .checks import gravity_unit_factor
 from .readers import FORMAT_NAMES, Signal, open_signals
-from .schema.channels import SI, TARGETS, UNITS, ChannelEntry, quantity, unit_factor
+from .schema.channels import SI, TARGETS, UNITS, ChannelEntry, gravity_unit_factor, quantity, unit_factor
 from .schema.runfiles import RunData
 
 
