@@ -35,8 +35,9 @@ The checks, and why they can tell:
   tells which permutation and signs of the channels the road supports; it
   also breaks the rigid-body check's ties (front/rear body swap versus a
   flipped pitch gyro).
-* **Units** (:func:`unit_findings`, :func:`rideid.data.schema.channels.gravity_unit_factor`): with ``gravity_included`` an
-  acceleration reads about g at rest. A lead-in mean of about 1 m/s² is g
+* **Units** (:func:`unit_findings`,
+  :func:`rideid.data.schema.channels.gravity_unit_factor`): with
+  ``gravity_included`` an acceleration reads about g at rest. A lead-in mean of about 1 m/s² is g
   mapped as m/s², of about 96 m/s² m/s² mapped as g: for every
   acceleration channel, axle ones too, which the rigid-body identities do
   not cover.
@@ -637,8 +638,8 @@ def unit_findings(run_id: str, entries: dict, record: dict) -> list[Finding]:
         fix = {c: {"source": c, "factor": f}}
         out.append(Finding(ERROR, "wiring", f"run '{run_id}': {describe_fix(fix)}: its lead-in reads "
                            f"{rec['removed']:.3g} m/s^2 with gravity included, g is {G0:.2f}. Fix the channel "
-                           f"map: {'; '.join(fix_entries(fix, entries))} (or set [checks] wiring = \"warn\" if the map is "
-                           "right)", run_id, c, fix))
+                           f"map: {'; '.join(fix_entries(fix, entries))} (or set [checks] wiring = \"warn\" if the "
+                           "map is right)", run_id, c, fix))
     return out
 
 

@@ -188,5 +188,5 @@ def parse_csv_options(tab, where: str) -> CsvOptions:
 
 
 __all__ = ["UNITS", "SI", "TARGETS", "EXTRA_TARGETS", "PREPROCESS_KEYS", "RUN_PREPROCESS_KEYS", "CSV_KEYS",
-           "CHANNEL_KEYS", "ChannelEntry", "CsvOptions", "quantity", "unit_factor", "gravity_unit_factor", "ACC_FACTORS",
-           "parse_channel_map", "parse_preprocess", "parse_csv_options"]
+           "CHANNEL_KEYS", "ChannelEntry", "CsvOptions", "quantity", "unit_factor", "gravity_unit_factor",
+           "ACC_FACTORS", "parse_channel_map", "parse_preprocess", "parse_csv_options"]
