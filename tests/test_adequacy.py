@@ -136,3 +136,21 @@ def test_suv_with_bars_and_tire_damping_is_not_adequate_with_the_base_model(suv,
     assert any(c.startswith("axle_az") for c in flagged)  # tire damping acts on the wheels
     levels = [f["level"] for rec in v["runs"].values() for f in rec.values() if f["level"]]
     assert np.median(levels) > 2
+
+
+def test_advice_follows_the_model_option_used():
+    """--model auto is advised only to who has not run it, nor fitted every group already."""
+    from rideid.estimate.adequacy import advice, advise
+    from rideid.model.params import GROUPS
+    assert advice({"extensions": []}) == ADVICE and "--model auto` (or `--model full`)" in ADVICE
+    assert advice({"extensions": ["anti_roll_bars"]}) == ADVICE
+    auto = advice({"extensions": [], "selection": "auto"})
+    assert "`--model auto` has already weighed anti-roll bars and tire damping (it kept base)" in auto
+    full = advice({"extensions": list(GROUPS)})
+    assert "already has anti-roll bars and tire damping (`--model full`)" in full
+    for text in (auto, full):
+        assert "Try: `rideid identify --model" not in text and "check that the track in dataset.toml" in text
+    bad = {"adequate": False, "reasons": ["the road input explains part"], "advice": ADVICE}
+    para = verdict_paragraph(advise(bad, {"extensions": list(GROUPS), "selection": "auto"}))
+    assert para.startswith("MODEL NOT ADEQUATE") and "it kept anti_roll_bars + tire_damping" in para
+    assert advise({"adequate": True, "advice": None}, {"extensions": []})["advice"] is None

@@ -26,3 +26,12 @@ def test_every_parameter_is_documented(obj):
         if name in ("self",) or p.kind in (p.VAR_POSITIONAL, p.VAR_KEYWORD):
             continue
         assert name in doc, f"{obj.__name__}: parameter '{name}' is not documented"
+
+
+def test_dataset_repr_is_short(sim_dataset):
+    ds = rideid.load_dataset(sim_dataset)
+    text = repr(ds)
+    assert len(text) < 1000, len(text)
+    assert f"name={ds.name!r}" in text and str(ds.path) in text
+    assert f"runs={len(ds.runs)} [{ds.runs[0].id}, {ds.runs[1].id}" in text
+    assert "tracks=[" in text and "'total_mass': 1093.3" in text and "model=none" in text

@@ -146,6 +146,22 @@ MISTAKES = {
     "one body accelerometer in g mapped as m/s^2": (
         "W_L", dict(cmap={**channel_map(), "body_az_rl": {"name": "AccZ_Body_RL", "unit": "m/s^2"}}),
         ["body_az_rl reads 9.81x too small (g mapped as m/s^2?)", 'body_az_rl = { name = "AccZ_Body_RL", unit = "g" }']),
+    "one hub accelerometer in g mapped as m/s^2": (
+        "W_L", dict(cmap={**channel_map(), "axle_az_rl": {"name": "AccZ_Hub_RL", "unit": "m/s^2"}}),
+        ["run 'W_L': axle_az_rl reads 9.81x too small (g mapped as m/s^2?)", "its lead-in reads 1",
+         'axle_az_rl = { name = "AccZ_Hub_RL", unit = "g" }']),
+    "one hub accelerometer in m/s^2 mapped as g": (
+        "T_HH", dict(cmap={**channel_map(), "axle_az_fl": {"name": "AccZ_Hub_FL", "unit": "g"}}),
+        ["run 'T_HH': axle_az_fl reads 9.81x too large (m/s^2 mapped as g?)",
+         'axle_az_fl = { name = "AccZ_Hub_FL", unit = "m/s^2" }']),
+    "every hub accelerometer in g mapped as m/s^2": (
+        "H_HL", dict(cmap={**channel_map(), **{c: {"name": n, "unit": "m/s^2"} for c, n in (
+            ("axle_az_fl", "AccZ_Hub_FL"), ("axle_az_fr", "AccZ_Hub_FR"))},
+            **{c: {"name": n, "unit": "m/s^2"} for c, n in (("axle_az_rl", "AccZ_Hub_RL"), ("axle_az_rr", "AccZ_Hub_RR"))}},
+            mutate=lambda chans: chans.update({n: (chans[n][0], chans[n][1] / 9.80665, "g") for n in (
+                "AccZ_Hub_FL", "AccZ_Hub_FR")})),
+        ["axle_az_fl reads 9.81x too small (g mapped as m/s^2?)", 'axle_az_fl = { name = "AccZ_Hub_FL", unit = "g" }',
+         "(3 more error(s) of this kind)"]),
     "speed = 1e308": ("W_L", dict(edit=set_run(speed=1e308)), ["run 'W_L': speed = 1e+308 m/s is not physically plausible"]),
     "total_mass = 1e308": ("W_L", dict(edit=lambda d: d["known"].update(total_mass=1e308)),
                            ["[known]: total_mass = 1e+308 kg is not physically plausible"]),
@@ -316,6 +332,10 @@ def test_estimate_on_a_bound_is_flagged_everywhere(sim_dataset, tmp_path, capsys
     assert res["parameters"]["k_sf"]["at_bound"] is True
     assert [c["channel"] for c in res["checks"] if c["check"] == "bounds"] == ["k_sf"]
     assert "k_sf = 15000 ended at its upper search bound 15000" in cap.err
+    # once, for the model kept: not for each of --model auto's candidates
+    assert res["model"]["selection"] == "auto" and len(res["model"]["candidates"]) == 4
+    assert [ln for ln in cap.err.splitlines() if "search bound" in ln] == [
+        "rideid: warning: " + c["message"] for c in res["checks"] if c["check"] == "bounds"]
     assert any(ln.startswith("k_sf") and "AT A SEARCH BOUND" in ln for ln in cap.out.splitlines())
 
 
@@ -328,7 +348,7 @@ def test_recorded_cost_is_at_the_final_parameters_and_starts(hatch, tmp_path):
     path = one_run(tmp_path, sc, raw, "T_HH", edit=edit)
     ds = rideid.load_dataset(path)
     start0 = ds.measured["T_HH"].start
-    res = rideid.identify(ds, seed=1, generations=10)
+    res = rideid.identify(ds, seed=1, generations=10, model="base")
     start1 = res.preprocessing["T_HH"]["start"]["value"]
     assert abs(start1 - start0) > 1e-4 and abs(start1 - OFFSET) < 2e-4  # the hatchback moved it
     again = rideid.load_dataset(path, starts={"T_HH": start1})
@@ -362,7 +382,7 @@ def test_start_std_includes_a_noisy_speed_channel(tmp_path):
     (path / "dataset.toml").write_text(tomli_w.dumps(doc))
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", DataWarning)
-        res = rideid.identify(rideid.load_dataset(path), seed=1, generations=60)
+        res = rideid.identify(rideid.load_dataset(path), seed=1, generations=60, model="base")
     ratios = []
     for rid, rec in res.preprocessing.items():
         st = rec["start"]

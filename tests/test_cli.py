@@ -308,3 +308,112 @@ def test_scenario_bad_input(tmp_path, capsys, scenario_file):
     (tmp_path / "s.toml").write_text(SCENARIO_ALL_KINDS.replace("total_mass = 1093.3", "total_mass = 1200.0"))
     rc, _, err = run_cli(["simulate", tmp_path / "s.toml", "--out", tmp_path / "o"], capsys)
     assert rc == 2 and "total_mass = 1200.0 disagrees with [truth]" in err
+
+
+def test_identify_into_a_used_folder_leaves_one_result(sim_dataset, tmp_path, capsys):
+    """An earlier identification's report and figures go; the user's own files stay."""
+    out = tmp_path / "fit"
+    (out / "figures").mkdir(parents=True)
+    (out / "figures" / "fit_W_L.png").write_bytes(b"old")
+    (out / "report.html").write_text("old report")
+    (out / "result.json").write_text("{}")
+    (out / "notes.txt").write_text("mine")
+    (out / "mine").mkdir()
+    rc, _, err = run_cli(["identify", sim_dataset, "--out", out, "--seed", "1", "--quiet", "--model", "base",
+                          "--population", "8", "--generations", "2", "--no-polish", "--no-report"], capsys)
+    assert rc == 0, err
+    assert sorted(p.name for p in out.iterdir()) == ["history.csv", "mine", "notes.txt", "result.json"]
+    assert json.loads((out / "result.json").read_text())["seed"] == 1
+
+
+def _subparsers():
+    import argparse
+
+    from rideid.cli import _parser
+    action = next(a for a in _parser()._actions if isinstance(a, argparse._SubParsersAction))
+    return action.choices
+
+
+def test_every_command_has_quiet_and_every_option_help(capsys):
+    """The README promises --quiet on every command; every option and argument says what it is."""
+    for name, sp in _subparsers().items():
+        assert "--quiet" in sp._option_string_actions, name
+        for a in sp._actions:
+            assert a.help, f"rideid {name}: {a.option_strings or a.dest} has no help text"
+        with pytest.raises(SystemExit):
+            sp.parse_args(["--help"])
+        text = capsys.readouterr().out
+        assert "%%" not in text, f"rideid {name} --help: {text}"
+    assert "simulate (1 % noise)" in _subparsers()["demo"].format_help()
+
+
+def test_simulate_builtin_as_study_files_say(tmp_path, capsys):
+    rc, stdout, err = run_cli(["simulate", "builtin", "--out", tmp_path / "sim", "--seed", "1", "--quiet"], capsys)
+    assert rc == 0, err
+    assert "(10 runs)" in stdout and (tmp_path / "sim" / "truth.toml").is_file()
+    import rideid
+    assert rideid.load_scenario("builtin") == rideid.default_scenario()
+
+
+def test_score_says_whether_two_robust_std_cover_the_truth(sim_dataset, tmp_path, capsys):
+    import rideid
+    truth = rideid.load_truth(sim_dataset / "truth.toml")
+    pars = {n: {"value": truth[n], "unit": "", "fixed": False, "derived": False, "std": 1e-9,
+                "std_robust": 0.01 * truth[n]} for n in truth}
+    pars["k_sf"]["value"] = 1.015 * truth["k_sf"]  # 1.5 robust std off: covered
+    pars["k_sr"]["value"] = 1.03 * truth["k_sr"]  # 3 robust std off: not covered
+    pars["m_s"].update(derived=True)
+    pars["k_tf"].update(fixed=True, std_robust=0.0)  # known: nothing to judge
+    (tmp_path / "result.json").write_text(json.dumps({"parameters": pars}))
+    rc, stdout, err = run_cli(["score", tmp_path / "result.json", sim_dataset / "truth.toml"], capsys)
+    assert rc == 0, err
+    rows = {ln.split()[0]: ln.split() for ln in stdout.splitlines()[1:]}
+    assert "±2 robust covers" in stdout.splitlines()[0]
+    assert rows["k_sf"][4] == "yes" and rows["k_sr"][4] == "NO" and rows["k_tf"][4] == "-"
+    n = len(truth) - 1
+    assert f"±2 std_robust covers the truth for {n - 1} of {n} estimates" in stdout
+    assert stdout.strip().splitlines()[-1].startswith("largest error of the estimated parameters: 3.0000 %")
+
+
+class _Terminal:
+    """A stderr that says it is a terminal, rendering carriage returns as a terminal shows them."""
+
+    def __init__(self):
+        self.text = ""
+
+    def isatty(self):
+        return True
+
+    def write(self, s):
+        self.text += s
+
+    def flush(self):
+        pass
+
+    def lines(self):
+        out = []
+        for raw in self.text.split("\n"):
+            screen = ""
+            for part in raw.split("\r"):
+                screen = part + screen[len(part):]
+            out.append(screen.rstrip())
+        return out
+
+
+def test_every_message_is_on_its_own_line(monkeypatch):
+    """A warning or error while the progress line shows starts a line of its own; the progress line is
+    redrawn on the next update."""
+    import warnings
+
+    from rideid.cli import Progress, _warning_line, say
+    term = _Terminal()
+    monkeypatch.setattr(sys, "stderr", term)
+    monkeypatch.setattr(warnings, "showwarning", _warning_line)
+    prog = Progress()
+    prog.line("generation 35/400  best 1.1e+00", force=True)
+    warnings.warn("k_sf = 8000 ended at its lower search bound 8000", UserWarning)
+    prog.line("generation 36/400  best 1.0e+00", force=True)
+    say("rideid: compiled the simulation kernel in 1 s (cached for later runs)")
+    prog.done()
+    assert term.lines() == ["rideid: warning: k_sf = 8000 ended at its lower search bound 8000",
+                            "rideid: compiled the simulation kernel in 1 s (cached for later runs)", ""]

@@ -1,5 +1,7 @@
 """Identification on the built-in car: accuracy, cost definition, maps, weights."""
 
+import shutil
+import tomllib
 import warnings
 
 import numpy as np
@@ -27,7 +29,7 @@ def max_error(res, truth=DEFAULT_CAR):
 
 def test_noise_free_identification_within_0p1_percent(sim_dataset):
     ds = rideid.load_dataset(sim_dataset)
-    res = rideid.identify(ds, seed=1)
+    res = rideid.identify(ds, seed=1, model="base")
     assert max_error(res) < 1e-3
     assert res.details["m_s"]["derived"] and not res.details["m_s"]["fixed"]
     assert res.parameters["m_s"] + 2 * res.parameters["m_uf"] + 2 * res.parameters["m_ur"] == pytest.approx(1093.3)
@@ -37,7 +39,7 @@ def test_noise_free_identification_within_0p1_percent(sim_dataset):
 
 def test_two_percent_noise_within_half_percent(noisy_dataset):
     ds = rideid.load_dataset(noisy_dataset)
-    res = rideid.identify(ds, seed=2)
+    res = rideid.identify(ds, seed=2, model="base")
     assert max_error(res) < 5e-3
     # the standard errors are honest: every error within 4 standard errors
     for n in NAMES:
@@ -98,7 +100,7 @@ def test_known_stiffness_anchor_identifies(sim_dataset, tmp_path):
     doc = tomllib.loads((d / "dataset.toml").read_text())
     doc["known"] = {"k_tf": DEFAULT_CAR["k_tf"]}
     (d / "dataset.toml").write_text(tomli_w.dumps(doc))
-    res = rideid.identify(rideid.load_dataset(d), seed=3)
+    res = rideid.identify(rideid.load_dataset(d), seed=3, model="base")
     assert max_error(res) < 1e-3
     assert res.details["k_tf"]["fixed"]
 
@@ -148,7 +150,7 @@ def test_same_seed_same_result(sim_dataset):
 
 def test_history_records_everything(sim_dataset, tmp_path):
     ds = rideid.load_dataset(sim_dataset)
-    res = rideid.identify(ds, seed=1, generations=5, polish=False)
+    res = rideid.identify(ds, seed=1, generations=5, polish=False, model="base")
     h = res.history[-1]
     for key in ("generation", "evaluations", "best_cost", "mean_cost", "mu_f", "mu_cr",
                 "mean_k_sf", "spread_k_sf", "weight_W_H"):
@@ -180,7 +182,7 @@ def test_a_light_van_is_identified_too(tmp_path, default_scenario):
         warnings.simplefilter("error")
         data, _ = simulate_manifest(sc, noise=0.01, seed=3)
     write_dataset(sc, data, tmp_path / "ds")
-    res = rideid.identify(rideid.load_dataset(tmp_path / "ds"), seed=1)
+    res = rideid.identify(rideid.load_dataset(tmp_path / "ds"), seed=1, model="base")
     assert max_error(res, truth) < 2e-3
 
 
@@ -261,21 +263,28 @@ def test_callback_stops_identify(sim_dataset):
         seen.append((state.nit, state.fun, state.nfev))
         return state.nit == 2
 
-    res = rideid.identify(ds, seed=1, generations=50, population=8, polish=False, callback=cb)
+    res = rideid.identify(ds, seed=1, generations=50, population=8, polish=False, callback=cb, model="base")
     assert res.stop == "callback" and res.nit == 2 and len(res.history) == 2
     assert [s[0] for s in seen] == [1, 2] and seen[-1][1] == res.history[-1]["best_cost"]
 
     def stop_iter(state):
         raise StopIteration
 
-    res = rideid.identify(ds, seed=1, generations=50, population=8, polish=False, callback=stop_iter)
+    res = rideid.identify(ds, seed=1, generations=50, population=8, polish=False, callback=stop_iter,
+                          model="base")
     assert res.stop == "callback" and res.nit == 1
 
 
 def test_result_round_trip_and_short_repr(sim_dataset, tmp_path):
     ds = rideid.load_dataset(sim_dataset)
-    res = rideid.identify(ds, seed=1, generations=6, population=16)
-    assert len(repr(res)) < 1000 and "k_sf=" in repr(res)
+    res = rideid.identify(ds, seed=1, generations=6, population=16, model="base")
+    text = repr(res)
+    assert len(text) < 1000 and "k_sf=" in text
+    # the standard error to quote and the verdict, not the white-noise std alone
+    d = res.details["k_sf"]
+    assert f"k_sf={d['value']:.6g} ± {d['std_robust']:.3g} (robust) N/m" in text
+    assert f"{d['std']:.3g}" not in text.split("k_sf=")[1].splitlines()[0]
+    assert f"adequate={res.adequacy['adequate']}" in text and "model='base'" in text
     # OptimizeResult-shaped: x/names/std/covariance agree with parameters/details
     assert res.names == [n for n in NAMES if n != "m_s"] and res.x.shape == (11,)
     assert res.covariance.shape == (11, 11)
@@ -302,3 +311,36 @@ def test_result_round_trip_and_short_repr(sim_dataset, tmp_path):
     again.mkdir()
     back.save(again)
     assert (again / "result.json").read_text() == (tmp_path / "result.json").read_text()
+
+
+def test_python_chooses_the_model_as_the_command_line(sim_dataset, tmp_path):
+    """SPEC §5 amended: rideid.identify(ds) fits the dataset's [model], else auto, as `rideid identify` does."""
+    import json
+    import tomli_w
+    from rideid.cli import main
+
+    ds = rideid.load_dataset(sim_dataset)
+    assert ds.manifest.extensions is None
+    kw = dict(seed=1, population=8, generations=3, polish=False)
+    res = rideid.identify(ds, **kw)
+    assert res.model["selection"] == "auto"
+    assert main(["identify", str(sim_dataset), "--out", str(tmp_path / "fit"), "--quiet", "--seed", "1",
+                 "--population", "8", "--generations", "3", "--no-polish", "--no-report"]) == 0
+    doc = json.loads((tmp_path / "fit" / "result.json").read_text())
+    assert doc["model"]["selection"] == "auto"
+    assert {n: d["value"] for n, d in doc["parameters"].items()} == res.parameters
+    # a [model] table decides when present: here the twelve, without candidates
+    d = tmp_path / "ds"
+    shutil.copytree(sim_dataset, d)
+    man = tomllib.loads((d / "dataset.toml").read_text())
+    man["model"] = {"extensions": []}
+    (d / "dataset.toml").write_text(tomli_w.dumps(man))
+    res = rideid.identify(rideid.load_dataset(d), **kw)
+    assert res.model == {"extensions": []} and set(res.parameters) == set(NAMES)
+
+
+def test_save_creates_the_folder(sim_dataset, tmp_path):
+    res = rideid.identify(rideid.load_dataset(sim_dataset), seed=1, generations=2, population=8, polish=False,
+                          model="base")
+    res.save(tmp_path / "new" / "fit")
+    assert rideid.load_result(tmp_path / "new" / "fit").parameters == res.parameters

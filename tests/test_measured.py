@@ -61,7 +61,7 @@ def test_round_trip_identifies_within_half_percent(fmt, tmp_path, default_scenar
             assert ch[c]["removed"] == pytest.approx(G0, rel=1e-6)
         assert ch["body_az_fr"]["sign"] == -1 and ch["pitch_rate"]["unit"] == "deg/s"
         assert rec["fs"] == 200.0
-    res = rideid.identify(ds, seed=1)
+    res = rideid.identify(ds, seed=1, model="base")
     assert max_error(res, default_scenario.truth) < 5e-3
     for rid, rec in res.preprocessing.items():
         assert abs(rec["start"]["value"] - OFFSET) < 2e-5, rid  # a 250th of a sample after the joint polish
@@ -90,7 +90,7 @@ def test_nominal_car_misaligns_and_the_joint_polish_recovers(tmp_path):
     nominal = {rid: rec["start"]["value"] - OFFSET for rid, rec in ds.preprocessing().items()}
     assert max(abs(v) for v in nominal.values()) > 2e-3  # the nominal car is not the van
     data_before = {rid: rd.matrix() for rid, rd in ds.data.items()}
-    res = rideid.identify(ds, seed=1)
+    res = rideid.identify(ds, seed=1, model="base")
     assert max_error(res, truth) < 5e-3
     for rid, rec in res.preprocessing.items():
         assert abs(rec["start"]["value"] - OFFSET) < 5e-5, rid
@@ -124,7 +124,7 @@ def test_varying_speed_from_a_speed_or_distance_channel(distance, tmp_path, defa
         np.testing.assert_allclose(ds.data[r.id].distance(t), wob[r.id](t), atol=2e-4)
     if distance:
         return  # same data as the speed channel up to integration: identification shown once
-    res = rideid.identify(ds, seed=1)
+    res = rideid.identify(ds, seed=1, model="base")
     assert max_error(res, default_scenario.truth) < 5e-3
 
 
@@ -270,10 +270,10 @@ WARNINGS = {
                     "body_az_fr: reads -9.81 m/s^2 at rest (gravity included): mounted upside down? set sign = -1"),
     "lead-in moving": (dict(preprocess={"gravity_included": True, "lead_in": [2.5, 4.0]}),
                        "the lead-in [2.5, 4] s is not stationary"),
-    "unit disagrees with the file": (dict(cmap={**channel_map(), "axle_az_fl": {"name": "AccZ_Hub_FL",
-                                                                                 "unit": "g"}}),
-                                     "AccZ_Hub_FL' mapped to axle_az_fl: the file says unit 'm/s^2' but the map "
-                                     "says 'g'; using the map's"),
+    # the map is right and the file's label wrong (a wrong map is an error: tests/test_checks.py)
+    "unit disagrees with the file": (dict(mutate=_set("AccZ_Hub_FL", lambda t, v, u: (t, v, "g"))),
+                                     "AccZ_Hub_FL' mapped to axle_az_fl: the file says unit 'g' but the map "
+                                     "says 'm/s^2'; using the map's"),
     "fs above the slowest channel": (dict(preprocess={"gravity_included": True, "fs": 800.0}),
                                      "resampling to 800 Hz, above the slowest channel's rate (500 Hz)"),
 }
@@ -288,6 +288,20 @@ def test_plausibility_warning(case, tmp_path, default_scenario, raw):
 
 def test_clean_logger_run_gives_no_warning(tmp_path, default_scenario, raw):
     assert _warnings_of(_one_run(tmp_path, default_scenario, raw)) == []
+
+
+def test_a_channel_without_signal_has_a_stationary_lead_in(tmp_path, default_scenario, raw):
+    """The washboard hardly rolls the car: roll_rate is noise (or rounding) over the lead-in and the run
+    alike, which is no reason to say the lead-in moves; a lead-in over moving data still is."""
+    rng = np.random.default_rng(3)
+    noisy = _set("Gyro_X", lambda t, v, u: (t, v + 0.02 * rng.standard_normal(v.size), u))
+    pre = {"gravity_included": True, "remove_bias": True}
+    msgs = _warnings_of(_one_run(tmp_path / "a", default_scenario, raw, rid="W_L", preprocess=pre, mutate=noisy))
+    assert not [m for m in msgs if "not stationary" in m], msgs
+    moving = _warnings_of(_one_run(tmp_path / "b", default_scenario, raw, rid="W_L", mutate=noisy,
+                                   preprocess={**pre, "lead_in": [4.0, 5.5]}))
+    assert [m for m in moving if "not stationary" in m and "body_az_fl" in m], moving
+    assert not [m for m in moving if "not stationary" in m and "roll_rate" in m], moving
 
 
 # ---------------------------------------------------------------------------

@@ -184,7 +184,7 @@ def test_std_robust_covers_the_truth_under_coloured_noise(tmp_path):
     rows = []
     for seed in range(6):
         write_dataset(sc, add_noise(clean, 0.02, RHO, seed=100 + seed), tmp_path / f"s{seed}")
-        res = rideid.identify(rideid.load_dataset(tmp_path / f"s{seed}"), seed=seed)
+        res = rideid.identify(rideid.load_dataset(tmp_path / f"s{seed}"), seed=seed, model="base")
         est = {n: d for n, d in res.details.items() if not d["fixed"]}
         err = np.array([d["value"] - SUV_TRUTH[n] for n, d in est.items()])
         rows.append((err / np.array([d["std"] for d in est.values()]),

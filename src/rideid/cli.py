@@ -39,7 +39,15 @@ EXAMPLES = {
 
 
 class Progress:
-    """A live progress line on stderr (only on a terminal, unless quiet)."""
+    """A live progress line on stderr (only on a terminal, unless quiet).
+
+    The line ends in no newline (it is redrawn in place), so anything else
+    written to the terminal while it shows would continue it; every message
+    goes through :func:`say`, which clears it first (the next update redraws it).
+    """
+
+    #: the progress line on the terminal now, if any
+    showing = None
 
     def __init__(self, quiet: bool = False, stream=None):
         self.stream = stream or sys.stderr
@@ -58,12 +66,15 @@ class Progress:
         self.stream.write("\r" + text + " " * pad)
         self.stream.flush()
         self._width = len(text)
+        Progress.showing = self
 
     def done(self):
         if self.enabled and self._width:
             self.stream.write("\r" + " " * self._width + "\r")
             self.stream.flush()
             self._width = 0
+        if Progress.showing is self:
+            Progress.showing = None
 
     def identify(self, state):
         """The :func:`rideid.identify` callback: one line per generation (never stops the run)."""
@@ -86,8 +97,16 @@ class Progress:
                   f"{info['elapsed']:.0f} s{eta}", force=info["running"] == 0)
 
 
+def say(text: str) -> None:
+    """One message line on stderr, on a line of its own (a progress line showing is cleared first)."""
+    if Progress.showing is not None:
+        Progress.showing.done()
+    sys.stderr.write(text + "\n")
+    sys.stderr.flush()
+
+
 def _warning_line(message, category, filename, lineno, file=None, line=None):
-    sys.stderr.write(f"rideid: warning: {message}\n")
+    say(f"rideid: warning: {message}")
 
 
 def _parser() -> argparse.ArgumentParser:
@@ -102,18 +121,25 @@ def _parser() -> argparse.ArgumentParser:
     sub = p.add_subparsers(dest="command", metavar="COMMAND")
 
     def add(name, help_):
-        return sub.add_parser(name, help=help_, description=help_, epilog=EXAMPLES[name],
-                              formatter_class=argparse.RawDescriptionHelpFormatter)
+        # help_ as printed: the command list's help is %-formatted by argparse, the description is not
+        s = sub.add_parser(name, help=help_.replace("%", "%%"), description=help_, epilog=EXAMPLES[name],
+                           formatter_class=argparse.RawDescriptionHelpFormatter)
+        s.add_argument("--quiet", action="store_true", help="no progress line and no compile notice")
+        return s
 
     s = add("simulate", "simulate a scenario (truth + tracks + runs) into a dataset folder")
-    s.add_argument("scenario", metavar="SCENARIO.toml")
-    s.add_argument("--out", required=True, metavar="DIR")
+    s.add_argument("scenario", metavar="SCENARIO.toml",
+                   help="the scenario: [truth], [vehicle], [known], tracks and runs with fs and duration; "
+                        "'builtin' for the built-in car and the paper's ten runs")
+    s.add_argument("--out", required=True, metavar="DIR",
+                   help="dataset folder to write (dataset.toml, runs/*.csv, truth.toml)")
     s.add_argument("--noise", type=float, default=0.0, metavar="FRACTION",
                    help="white Gaussian noise, standard deviation as a fraction of each channel's RMS")
     s.add_argument("--noise-ar1", type=float, default=0.0, metavar="RHO",
                    help="colour the noise: AR(1) in time with this coefficient per sample (0 <= RHO < 1; "
                         "same standard deviation), as real sensors' noise is")
-    s.add_argument("--seed", type=int, default=None, metavar="N")
+    s.add_argument("--seed", type=int, default=None, metavar="N",
+                   help="seed of the noise (default: a fresh one each time)")
     s.add_argument("--engine", choices=("rideid", "mujoco"), default="rideid",
                    help="rideid's exact 7-DOF response (default), or the independent MuJoCo multibody car "
                         "with the scenario's [hifi] properties (needs: pip install 'rideid[hifi]'; "
@@ -121,12 +147,14 @@ def _parser() -> argparse.ArgumentParser:
     s.add_argument("--raw", action="store_true",
                    help="with --engine mujoco: write the sensors' own readings (gravity included, "
                         "1 s standing still first) as a logger would, mapped for the measured-data pipeline")
-    s.add_argument("--quiet", action="store_true", help="no progress line")
 
     s = add("identify", "estimate the ride parameters of a dataset (the twelve, plus anti-roll bars and tire damping when the model has them)")
-    s.add_argument("dataset", metavar="DATASET_DIR")
-    s.add_argument("--out", required=True, metavar="DIR")
-    s.add_argument("--seed", type=int, default=None, metavar="N")
+    s.add_argument("dataset", metavar="DATASET_DIR", help="dataset folder (or its dataset.toml)")
+    s.add_argument("--out", required=True, metavar="DIR",
+                   help="output folder: result.json, history.csv, report.html, figures/ (rideid's files from "
+                        "an earlier identification there are replaced; other files stay)")
+    s.add_argument("--seed", type=int, default=None, metavar="N",
+                   help="seed of the search (same seed, same result; default: a fresh one each time)")
     s.add_argument("--population", type=int, default=None, metavar="NP", help="JADE population (default 32)")
     s.add_argument("--generations", type=int, default=None, metavar="G",
                    help="largest number of JADE generations (default 400)")
@@ -138,32 +166,34 @@ def _parser() -> argparse.ArgumentParser:
                         "(c_tf, c_tr); auto: fit the candidates and keep what the data support (docs/model-choice.md) "
                         "(default: the dataset's [model] extensions, else auto)")
     s.add_argument("--no-report", action="store_true", help="write result.json and history.csv only")
-    s.add_argument("--quiet", action="store_true", help="no progress line")
 
     s = add("report", "(re)build report.html in an identification folder")
-    s.add_argument("result_dir", metavar="RESULT_DIR")
+    s.add_argument("result_dir", metavar="RESULT_DIR", help="an identification folder (result.json, history.csv)")
     s.add_argument("--compare", metavar="OTHER_DIR",
                    help="another identification of the same dataset (e.g. --weights fixed) to overlay")
 
     s = add("sensitivity", "parameter/response/track sensitivity maps (paper Tables 4-7) as CSV, Markdown, PNG")
-    s.add_argument("source", metavar="DATASET_OR_SCENARIO")
-    s.add_argument("--out", required=True, metavar="DIR")
-    s.add_argument("--quiet", action="store_true", help="no progress line")
+    s.add_argument("source", metavar="DATASET_OR_SCENARIO",
+                   help="a dataset folder or a scenario file ('builtin': the built-in scenario)")
+    s.add_argument("--out", required=True, metavar="DIR",
+                   help="output folder: tables.md, three CSV and three PNG maps")
 
     s = add("study", "many identifications (Monte Carlo, fleet, run subsets) on Dask; resumable")
-    s.add_argument("study", metavar="STUDY.toml")
+    s.add_argument("study", metavar="STUDY.toml",
+                   help="the study: its data, identify options and axes (docs/studies.md; examples/studies/)")
     s.add_argument("--out", required=True, metavar="DIR",
                    help="output folder (tasks/, results.parquet, summary.md/.csv/.html); tasks already "
                         "there are not recomputed")
     s.add_argument("--scheduler", metavar="ADDRESS", default=None,
                    help="a running Dask scheduler, e.g. tcp://host:8786 (default: a local cluster, "
                         "one single-threaded worker process per core)")
-    s.add_argument("--quiet", action="store_true", help="no progress line")
 
     s = add("plan", "plan a test: the precision (CRLB) each candidate run buys, and which runs to drive")
     s.add_argument("scenario", metavar="SCENARIO.toml",
-                   help="[truth] = the nominal car, [[runs]] = the candidate runs, [known] = the scale anchor")
-    s.add_argument("--out", required=True, metavar="DIR")
+                   help="[truth] = the nominal car, [[runs]] = the candidate runs, [known] = the scale anchor "
+                        "('builtin': the built-in scenario)")
+    s.add_argument("--out", required=True, metavar="DIR",
+                   help="output folder: plan.json, plan.md, crlb.csv, path.csv, correlation.csv, precision_path.png")
     s.add_argument("--noise", type=float, default=None, metavar="FRACTION",
                    help="noise sd as a fraction of each channel's RMS, per run (as simulate --noise; "
                         "default 0.01, or 0 when a noise density or --noise-psd is given)")
@@ -195,16 +225,15 @@ def _parser() -> argparse.ArgumentParser:
     s.add_argument("--seed", type=int, default=0, metavar="N", help="seed of the robust cars' sampling")
     s.add_argument("--within", type=float, default=None, metavar="F",
                    help="without a budget: the fewest runs whose CRLB is within F x that of all runs (default 1.5)")
-    s.add_argument("--quiet", action="store_true", help="no progress line")
 
     s = add("score", "compare an identification result with the truth")
-    s.add_argument("result", metavar="RESULT.json")
-    s.add_argument("truth", metavar="TRUTH.toml")
+    s.add_argument("result", metavar="RESULT.json", help="an identification's result.json (or its folder)")
+    s.add_argument("truth", metavar="TRUTH.toml", help="the truth, e.g. the truth.toml rideid simulate writes")
 
-    s = add("demo", "the whole job on the built-in car and tracks: simulate (1 %% noise), identify, score")
-    s.add_argument("--out", default="rideid-demo", metavar="DIR")
-    s.add_argument("--seed", type=int, default=1, metavar="N")
-    s.add_argument("--quiet", action="store_true", help="no progress line")
+    s = add("demo", "the whole job on the built-in car and tracks: simulate (1 % noise), identify, score")
+    s.add_argument("--out", default="rideid-demo", metavar="DIR",
+                   help="output folder: dataset/ and identify/ (default rideid-demo)")
+    s.add_argument("--seed", type=int, default=1, metavar="N", help="seed of the noise and the search (default 1)")
     return p
 
 
@@ -259,33 +288,30 @@ def _candidates_table(model: dict) -> str:
     return "\n".join(lines)
 
 
+#: what ``rideid identify`` writes into its folder: a new identification replaces all of it (the user's files stay)
+IDENTIFY_OUTPUTS = ("result.json", "history.csv", "report.html", "figures", "road")
+
+
 def run_identify(ds_path, out_dir, *, seed, population=None, generations=None, weights="adaptive",
                  polish=True, quiet=False, out=None, report=True, model=None):
     out = out or sys.stdout
     import rideid
     from .data.schema import atomic_output
-    from .estimate.identify import DEFAULT_GENERATIONS, DEFAULT_POPULATION, MODELS, model_extensions
+    from .estimate.identify import DEFAULT_GENERATIONS, DEFAULT_POPULATION, MODELS
 
     if model is not None and model not in MODELS:
         raise ArgumentError(f"--model must be one of {', '.join(MODELS)}, got {model!r}")
     ds = rideid.load_dataset(ds_path)
-    if model is None and ds.manifest.extensions is None:
-        model = "auto"  # SPEC §6: without a [model] table the data choose
-    auto = model == "auto"
-    extensions = None if auto else model_extensions(ds, model)
     prog = Progress(quiet)
     kw = {"population": population or DEFAULT_POPULATION, "generations": generations or DEFAULT_GENERATIONS}
     if kw["population"] < 4:
         raise ArgumentError(f"--population must be at least 4, got {kw['population']}")
     if kw["generations"] < 1:
         raise ArgumentError(f"--generations must be at least 1, got {kw['generations']}")
-    if auto:
-        res = rideid.identify(ds, rng=seed, weights=weights, polish=polish, callback=prog.identify, model="auto", **kw)
-    else:
-        cost = rideid.CostFunction(ds, extensions=extensions)
-        res = rideid.identify(ds, rng=seed, weights=weights, polish=polish, callback=prog.identify, cost=cost, **kw)
+    # the model as rideid.identify chooses it (SPEC §5 amended): --model, else the dataset's [model], else auto
+    res = rideid.identify(ds, rng=seed, weights=weights, polish=polish, callback=prog.identify, model=model, **kw)
     prog.done()
-    with atomic_output(out_dir) as tmp:
+    with atomic_output(out_dir, replaces=IDENTIFY_OUTPUTS) as tmp:
         res.save(tmp)
         if report:
             from .report.html import write_report
@@ -319,11 +345,12 @@ def cmd_identify(args, out=None):
 def cmd_sensitivity(args, out=None):
     out = out or sys.stdout
     import rideid
+    from .data.scenario import BUILTIN
     from .data.schema import atomic_output, read_toml
     from .estimate.sensitivity import heatmaps, tables_markdown, write_csvs
 
     src = Path(args.source)
-    is_scenario = src.is_file() and "truth" in read_toml(src)
+    is_scenario = args.source == BUILTIN or (src.is_file() and "truth" in read_toml(src))
     source = rideid.load_scenario(src) if is_scenario else rideid.load_dataset(src)
     prog = Progress(args.quiet)
     prog.line("simulating the baseline car and +25 % per parameter ...", force=True)
@@ -365,15 +392,20 @@ def cmd_plan(args, out=None):
 
 
 def score_table(scored: dict) -> str:
-    """The text table of :func:`rideid.score`."""
-    lines = [f"{'parameter':<10} {'estimate':>14} {'truth':>14} {'error %':>9}"]
+    """The text table of :func:`rideid.score`: error and whether ±2 ``std_robust`` covers the truth."""
+    lines = [f"{'parameter':<10} {'estimate':>14} {'truth':>14} {'error %':>9} {'±2 robust covers':>16}"]
     for n, r in scored["parameters"].items():
+        covers = {True: "yes", False: "NO", None: "-"}[r["covered"]]
         if r["error_percent"] is None:  # no relative error of a zero truth: the estimate in its unit
-            lines.append(f"{n:<10} {r['estimate']:>14.6g} {r['truth']:>14.6g} {'-':>9}"
+            lines.append(f"{n:<10} {r['estimate']:>14.6g} {r['truth']:>14.6g} {'-':>9} {covers:>16}"
                          + (" (not in the model)" if r["status"] == "not in the model" else ""))
             continue
         note = "" if r["status"] == "estimated" else f" {r['status']}"
-        lines.append(f"{n:<10} {r['estimate']:>14.6g} {r['truth']:>14.6g} {r['error_percent']:>9.4f}{note}")
+        lines.append(f"{n:<10} {r['estimate']:>14.6g} {r['truth']:>14.6g} {r['error_percent']:>9.4f} "
+                     f"{covers:>16}{note}")
+    if scored["coverable"]:
+        lines.append(f"±2 std_robust covers the truth for {scored['covered']} of {scored['coverable']} estimates "
+                     "(about 95 % expected)")
     lines.append(f"largest error of the estimated parameters: {scored['worst_percent']:.4f} %")
     return "\n".join(lines)
 
@@ -452,8 +484,8 @@ def cmd_study(args, out=None):
         res = study(spec, args.out, scheduler=args.scheduler, progress=prog.study)
     except KeyboardInterrupt:
         prog.done()
-        print(f"rideid: the finished tasks are kept in {Path(args.out) / 'tasks'}; run the same command again "
-              "to resume", file=sys.stderr)
+        say(f"rideid: the finished tasks are kept in {Path(args.out) / 'tasks'}; run the same command again "
+            "to resume")
         raise
     prog.done()
     print(f"{res.tasks} tasks: {res.done} done, {res.failed} failed ({res.computed} computed now, "
@@ -474,7 +506,7 @@ def _compile(quiet: bool):
     dt = compile_kernels()
     prog.done()
     if dt > 1.0 and not quiet:
-        print(f"rideid: compiled the simulation kernel in {dt:.0f} s (cached for later runs)", file=sys.stderr)
+        say(f"rideid: compiled the simulation kernel in {dt:.0f} s (cached for later runs)")
 
 
 def main(argv=None) -> int:
@@ -490,10 +522,10 @@ def main(argv=None) -> int:
         return COMMANDS[args.command](args)
     except RideidError as e:
         msg = str(e).replace("\n", " ")
-        print(f"rideid: error: {msg}", file=sys.stderr)
+        say(f"rideid: error: {msg}")
         return 2
     except KeyboardInterrupt:
-        print("rideid: interrupted", file=sys.stderr)
+        say("rideid: interrupted")
         return 130
     except BrokenPipeError:  # output piped into a reader that stopped early (e.g. `| head`): not an error
         os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
@@ -501,8 +533,8 @@ def main(argv=None) -> int:
     except Exception as e:  # a bug: say so, in one line unless debugging
         if os.environ.get("RIDEID_DEBUG"):
             traceback.print_exc()
-        print(f"rideid: internal error: {type(e).__name__}: {e} (set RIDEID_DEBUG=1 for the traceback; "
-              "please report it)", file=sys.stderr)
+        say(f"rideid: internal error: {type(e).__name__}: {e} (set RIDEID_DEBUG=1 for the traceback; "
+            "please report it)")
         return 1
 
 

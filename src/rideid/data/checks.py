@@ -35,6 +35,12 @@ The checks, and why they can tell:
   tells which permutation and signs of the channels the road supports; it
   also breaks the rigid-body check's ties (front/rear body swap versus a
   flipped pitch gyro).
+* **Units** (:func:`unit_findings`,
+  :func:`rideid.data.schema.channels.gravity_unit_factor`): with
+  ``gravity_included`` an acceleration reads about g at rest. A lead-in mean of about 1 m/s² is g
+  mapped as m/s², of about 96 m/s² m/s² mapped as g: for every
+  acceleration channel, axle ones too, which the rigid-body identities do
+  not cover.
 * **Track and speed** (:func:`match_finding`): the measurement must
   correlate with the response to the stated track at the stated speed.
   Otherwise the speed (km/h typed as m/s) or the track is wrong; the caller
@@ -55,7 +61,7 @@ import numpy as np
 
 from ..model.equations import CHANNELS
 from ..model.params import EXT_NAMES
-from .schema.channels import SI, UNITS, quantity
+from .schema.channels import SI, UNITS, gravity_unit_factor, quantity
 
 G0 = 9.80665
 DEG = 180.0 / math.pi
@@ -603,6 +609,41 @@ def describe_fix(fix: dict) -> str:
 
 
 # ---------------------------------------------------------------------------
+# Units: an acceleration whose lead-in reads g in another unit
+
+def unit_findings(run_id: str, entries: dict, record: dict) -> list[Finding]:
+    """Acceleration channels mapped in the wrong unit, seen in the gravity their lead-in reads.
+
+    Parameters
+    ----------
+    run_id : str
+    entries : dict
+        SPEC channel -> map entry the run was read with (:func:`_map_entries`).
+    record : dict
+        SPEC channel -> its preprocessing record (``removed``: the lead-in
+        mean subtracted, ``removed_as``: ``"gravity and bias"`` when gravity
+        was included; a ``flat_lined`` channel is dead, not in a wrong unit).
+
+    Returns
+    -------
+    list of Finding (errors, check "wiring"), one per channel, with the fix
+    """
+    out = []
+    for c, rec in record.items():
+        if c not in CHANNELS or rec.get("removed_as") != "gravity and bias" or rec.get("flat_lined"):
+            continue
+        f = gravity_unit_factor(rec["removed"])
+        if f is None:
+            continue
+        fix = {c: {"source": c, "factor": f}}
+        out.append(Finding(ERROR, "wiring", f"run '{run_id}': {describe_fix(fix)}: its lead-in reads "
+                           f"{rec['removed']:.3g} m/s^2 with gravity included, g is {G0:.2f}. Fix the channel "
+                           f"map: {'; '.join(fix_entries(fix, entries))} (or set [checks] wiring = \"warn\" if the "
+                           "map is right)", run_id, c, fix))
+    return out
+
+
+# ---------------------------------------------------------------------------
 # Track and speed
 
 def match_finding(run_id: str, track_id: str, speed, rho: float, alternatives: list, where: str = "") -> Finding | None:
@@ -826,17 +867,26 @@ def check_dataset(ds) -> list[Finding]:
         out += cov
         if any(f.severity == ERROR for f in cov):
             continue
+        entries = _map_entries(ds, rid)
+        wiring = _level(ds, rid, "wiring")
+        mr = ds.measured.get(rid)
+        # an acceleration in the wrong unit, seen in its lead-in; a re-wiring below that explains it says it better
+        units = (unit_findings(rid, entries, mr.record["channels"])
+                 if mr is not None and wiring != "off" else [])
+        if wiring == "warn":
+            units = [Finding(WARNING, f.check, f.message, f.run, f.channel, f.fix) for f in units]
         Y = rd.matrix()
         Yhat = _nominal_response(P, geom, track, t, r.speed, rd.distance)
         if not np.any(Yhat):
+            out += units
             continue  # a flat road excites nothing: nothing to check the data against
-        entries = _map_entries(ds, rid)
         wire = (wiring_fix(Y, Yhat, rd.fs, geom, _entry_factors(entries))
-                if _level(ds, rid, "wiring") != "off" else None)
+                if wiring != "off" else None)
         Yc = Y
         if wire and wire["fix"]:
+            units = [f for f in units if f.channel not in wire["fix"]]
             Yc = corrected(Y, wire["fix"])
-            sev = ERROR if _level(ds, rid, "wiring") == "error" else WARNING
+            sev = ERROR if wiring == "error" else WARNING
             lines = fix_entries(wire["fix"], entries)
             how = []
             if "rigid" in wire:
@@ -854,6 +904,7 @@ def check_dataset(ds) -> list[Finding]:
             out.append(Finding(WARNING, "wiring", f"run '{rid}': the body accelerometers and the gyro do not agree as "
                                f"one rigid body (residual {e_id:.0%}) and no swap, sign or unit explains it: check "
                                "the sensors' positions (at the spring/damper top mounts), units and the map", rid))
+        out += units
         if _level(ds, rid, "track") == "off":
             continue
         rho = _score(Yc, Yhat)
@@ -910,6 +961,6 @@ def bound_findings(details: dict, fraction: float = BOUND_FRACTION) -> list[Find
     return out
 
 
-__all__ = ["Finding", "check_dataset", "enforce", "check_reach", "check_numbers", "check_coverage", "rigid_body_scores", "assignment", "wiring_fix",
+__all__ = ["Finding", "check_dataset", "enforce", "unit_findings", "check_reach", "check_numbers", "check_coverage", "rigid_body_scores", "assignment", "wiring_fix",
            "corrected", "describe_fix", "match_finding", "speed_candidates", "bound_findings", "PLAUSIBLE",
            "MATCH_MIN"]

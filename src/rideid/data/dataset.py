@@ -12,7 +12,7 @@ from .schema import DatasetManifest, ReadOnlyDict, RunData, load_manifest, read_
 from ..model.params import EXT_NAMES, EXTRA_KNOWN, MASS_COUNT, NAMES, Geometry, nominal_car, total_mass
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, repr=False)
 class Dataset:
     """A dataset (SPEC §3): manifest and the data of every run. Immutable: the steps that
     change a dataset (:func:`align_starts`, :meth:`with_starts`, :meth:`with_data`) return a new one.
@@ -40,6 +40,19 @@ class Dataset:
         object.__setattr__(self, "data", ReadOnlyDict(self.data))
         object.__setattr__(self, "measured", ReadOnlyDict(self.measured))
         object.__setattr__(self, "findings", tuple(self.findings))
+
+    #: run ids shown by :meth:`__repr__` before it counts the rest
+    REPR_RUNS = 10
+
+    def __repr__(self):
+        """One short line: name, folder, runs, tracks, known values and model (never the data arrays)."""
+        ids = [r.id for r in self.runs]
+        shown = ", ".join(ids[:self.REPR_RUNS]) + (f", ... {len(ids) - self.REPR_RUNS} more"
+                                                     if len(ids) > self.REPR_RUNS else "")
+        ext = self.manifest.extensions
+        model = "none ([model] absent: identify chooses auto)" if ext is None else " + ".join(ext) or "base"
+        return (f"Dataset(name={self.name!r}, path='{self.path}', runs={len(ids)} [{shown}], "
+                f"tracks=[{', '.join(self.manifest.tracks)}], known={dict(self.known)}, model={model})")
 
     @property
     def geometry(self) -> Geometry:

@@ -22,8 +22,9 @@ each recorded in :attr:`MeasuredRun.record` (and in ``result.json``):
    whose rate is a whole multiple of ``fs`` is decimated (its samples at the
    model's times, as the model predicts them: see :func:`_filter_resample`),
    other channels faster than ``fs`` are low-passed (Butterworth, order 8,
-   zero-phase, at 0.4 fs; ``anti_alias`` decides otherwise); a channel slower than ``fs`` is upsampled to a grid at least
-   five times finer (polyphase, Kaiser beta 10: passband gain within 1e-6).
+   zero-phase, at 0.4 fs; ``anti_alias`` decides otherwise); a channel
+   slower than ``fs`` is upsampled to a grid at least five times finer
+   (polyphase, Kaiser beta 10: passband gain within 1e-6).
    Each channel is then read off once, by a cubic spline, at the run's
    **samples** ``t_first + k / fs``; a channel logged at ``fs`` on that
    clock keeps its own values exactly. The samples never move afterwards.
@@ -61,7 +62,7 @@ from ..errors import DataError, DataWarning
 from ..model.equations import CHANNELS
 from ..model.params import GRAVITY
 from .readers import FORMAT_NAMES, Signal, open_signals
-from .schema.channels import SI, TARGETS, UNITS, ChannelEntry, quantity, unit_factor
+from .schema.channels import SI, TARGETS, UNITS, ChannelEntry, gravity_unit_factor, quantity, unit_factor
 from .schema.runfiles import RunData
 
 
@@ -375,7 +376,8 @@ def _read_si(targets: dict, sf, time_name, time_scale: float, opts: dict, path: 
             _warn(warns, f"{path}: {w}: {int(gap.sum())} gap(s) in time, the longest {dt[k]:.4g} s at "
                          f"t = {sig.time[k]:.6g} s (sample interval {med:.4g} s); bridged by interpolation", _STAGE)
         if c in CHANNELS:
-            _plausibility(c, v, unit, opts, f"{path}: {w}", warns)
+            if not _plausibility(c, v, unit, opts, f"{path}: {w}", warns):
+                rec_ch[c]["flat_lined"] = True  # a dead channel: no unit to check (rideid.data.checks.unit_findings)
     return raw, rec_ch
 
 
@@ -418,9 +420,55 @@ def _span_and_rate(raw: dict, rec_ch: dict, measured: list, fs, path: Path, warn
     return t_first, t_last, fs
 
 
+#: the lead-in is not stationary when its RMS exceeds this share of the run's ...
+LEAD_IN_RUN_SHARE = 0.25
+#: ... and this multiple of the quietest stretch of the run as long as the lead-in (the noise floor)
+LEAD_IN_FLOOR_FACTOR = 2.0
+
+
+def quietest_rms(values: np.ndarray, n: int) -> float:
+    """The least RMS about the mean of any ``n`` consecutive samples (windows every ``n // 2``): the noise floor.
+
+    Where the car stands still at some time of the recording this is the
+    sensor's noise over a lead-in's length; on a channel the run does not
+    excite (a roll rate on a washboard) it is about the whole run's RMS.
+    """
+    v = np.asarray(values, dtype=float)
+    n = max(int(n), 3)
+    if v.size <= n:
+        return float(np.std(v))
+    v = v - np.mean(v)  # sums of squares about zero: no cancellation for a bias of g
+    c1 = np.concatenate([[0.0], np.cumsum(v)])
+    c2 = np.concatenate([[0.0], np.cumsum(v * v)])
+    a = np.arange(0, v.size - n + 1, max(n // 2, 1))
+    mean = (c1[a + n] - c1[a]) / n
+    var = (c2[a + n] - c2[a]) / n - mean ** 2
+    return float(np.sqrt(max(float(np.min(var)), 0.0)))
+
+
+def lead_in_moving(rms_lead: float, rms_run: float, floor: float) -> bool:
+    """Is the lead-in clearly not at rest?
+
+    Its RMS (about its mean) must exceed both :data:`LEAD_IN_RUN_SHARE` of
+    the run's RMS (a share of the signal that matters) and
+    :data:`LEAD_IN_FLOOR_FACTOR` times the noise floor, the RMS of the
+    quietest stretch of the run as long as the lead-in
+    (:func:`quietest_rms`). A lead-in at rest is the noise floor (the
+    floor's own scatter between stretches is well below a factor 2 for
+    hundreds of samples, white or coloured noise), whatever the run's
+    level: so a channel the run hardly excites, whose lead-in and run are
+    both noise, is not flagged, while a lead-in set over moving data, with
+    a standstill elsewhere in the recording, is.
+    """
+    return rms_lead > LEAD_IN_RUN_SHARE * rms_run and rms_lead > LEAD_IN_FLOOR_FACTOR * floor
+
+
 def _remove_gravity_bias(raw: dict, rec_ch: dict, measured: list, lead, grav: bool, bias: bool, path: Path,
                          where_map: str, warns: list) -> None:
-    """Subtract the lead-in mean (gravity and bias) from ``raw`` in place and note it in ``rec_ch``."""
+    """Subtract the lead-in mean (gravity and bias) from ``raw`` in place and note it in ``rec_ch``.
+
+    Warns when the lead-in is not stationary (:func:`lead_in_moving`).
+    """
     for c in measured:
         s = raw[c]
         in_lead = (s.time >= lead[0]) & (s.time <= lead[1])
@@ -432,7 +480,8 @@ def _remove_gravity_bias(raw: dict, rec_ch: dict, measured: list, lead, grav: bo
                             f"{c} (its time runs {s.time[0]:.6g} .. {s.time[-1]:.6g} s)")
         seg = s.values[in_lead]
         m = float(np.mean(seg))
-        if grav and is_acc and not (0.8 * GRAVITY < m < 1.2 * GRAVITY):
+        # a mean that is g in another unit is an error of the data checks (rideid.data.checks.unit_findings)
+        if grav and is_acc and not (0.8 * GRAVITY < m < 1.2 * GRAVITY) and gravity_unit_factor(m) is None:
             if -1.2 * GRAVITY < m < -0.8 * GRAVITY:
                 _warn(warns, f"{path}: {c}: reads {m:.3g} m/s^2 at rest (gravity included): mounted upside down? "
                              "set sign = -1 in its channel map", _STAGE)
@@ -442,7 +491,7 @@ def _remove_gravity_bias(raw: dict, rec_ch: dict, measured: list, lead, grav: bo
         whole = s.values - np.mean(s.values)
         rms_all = float(np.sqrt(np.mean(whole ** 2)))
         rms_lead = float(np.std(seg))
-        if rms_all > 0 and rms_lead > 0.25 * rms_all:
+        if lead_in_moving(rms_lead, rms_all, quietest_rms(s.values, seg.size)):
             _warn(warns, f"{path}: {c}: the lead-in [{lead[0]:g}, {lead[1]:g}] s is not stationary (RMS "
                          f"{rms_lead:.3g} vs {rms_all:.3g} over the run); set lead_in to a part at rest", _STAGE)
         raw[c] = Signal(s.time, s.values - m, s.unit)
@@ -528,11 +577,12 @@ def _motion(raw: dict, targets: dict, speed: float | None, path: Path):
     return distance, motion_rec
 
 
-def _plausibility(c, v, unit, opts, w, warns):
+def _plausibility(c, v, unit, opts, w, warns) -> bool:
+    """Warn of what looks wrong in channel ``c``'s values ``v`` (SI); False when it is flat-lined."""
     ptp = float(np.ptp(v))
     if ptp == 0.0:
         _warn(warns, f"{w}: flat-lined (every sample is {v[0]:.6g}); check the sensor and its cable")
-        return
+        return False
     for end, val in (("maximum", v.max()), ("minimum", v.min())):
         run = _longest_run(v == val)
         if run >= 3:
@@ -548,6 +598,7 @@ def _plausibility(c, v, unit, opts, w, warns):
         if peak > 3.0:
             _warn(warns, f"{w}: peaks at {peak:.3g} rad/s ({math.degrees(peak):.0f} deg/s), implausible for a "
                          "car body on a ride track: are the values in deg/s? set unit = \"deg/s\"")
+    return True
 
 
 # ---------------------------------------------------------------------------

@@ -23,6 +23,10 @@ from ..model.params import CORNERS, EXT_NAMES, INDEX, NAMES, as_vector, full_row
 from ..model.simulate import prepare_run, simulate_reference, wheel_displacements, wheel_velocities
 
 
+#: the name that stands for the built-in scenario wherever a scenario file is asked for
+BUILTIN = "builtin"
+
+
 def default_scenario_path() -> Path:
     """Path of the built-in scenario TOML (the BMW 320i on the paper's ten runs)."""
     return Path(str(resources.files("rideid.data") / "default_scenario.toml"))
@@ -34,6 +38,8 @@ def load_scenario(path) -> Scenario:
     Parameters
     ----------
     path : str or Path
+        The scenario file, or ``"builtin"`` (:data:`BUILTIN`) for the
+        built-in one (:func:`default_scenario_path`), as study files say.
 
     Returns
     -------
@@ -45,7 +51,7 @@ def load_scenario(path) -> Scenario:
     DataError
         Naming the file and the key at fault.
     """
-    path = Path(path)
+    path = default_scenario_path() if str(path) == BUILTIN else Path(path)
     sc = parse_scenario(read_toml(path), path)
     checks.enforce(checks.check_numbers(sc))
     return sc

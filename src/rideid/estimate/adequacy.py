@@ -45,6 +45,8 @@ from __future__ import annotations
 import numpy as np
 from scipy import special  # the two tail probabilities; scipy.stats takes 0.5 s to import
 
+from ..model.params import GROUPS
+
 #: lags (samples) of the road inputs and rates regressed on the residual
 LAGS = (0, 1, 2, 3, 4, 6, 8, 12, 16, 24, 32)
 #: family-wise false-alarm rate of the input-correlation tests over all runs and channels
@@ -61,11 +63,14 @@ WHITENESS_LAGS = 25
 #: fewest quiet lead-in samples for a noise floor
 MIN_QUIET = 20
 
-ADVICE = ("The residuals carry road-driven structure the model does not explain, so the estimates are biased "
-          "by more than their error bars say. Try: `rideid identify --model auto` (or `--model full`) to let "
-          "anti-roll bars and tire damping in; check that the track in dataset.toml (kind, start, height, "
-          "wavelength) is the one driven and that each run's start is right; check the channels named "
-          "below for a wrong sign, unit, axis or a loose sensor.")
+_ADVICE_HEAD = ("The residuals carry road-driven structure the model does not explain, so the estimates are "
+                "biased by more than their error bars say. ")
+_ADVICE_CHECKS = ("check that the track in dataset.toml (kind, start, height, wavelength) is the one driven and "
+                  "that each run's start is right; check the channels named below for a wrong sign, unit, axis or "
+                  "a loose sensor.")
+#: the advice when the model lacks extension groups and --model auto has not weighed them (see :func:`advice`)
+ADVICE = (_ADVICE_HEAD + "Try: `rideid identify --model auto` (or `--model full`) to let anti-roll bars and tire "
+          "damping in; " + _ADVICE_CHECKS)
 
 
 def ljung_box(e, lags: int = WHITENESS_LAGS) -> tuple[float, float]:
@@ -344,6 +349,43 @@ def assess_fit(cf, P, sims=None) -> dict:
         U = np.concatenate([run.u, run.rate], axis=1)
         runs[rid] = (Y - sims[rid], Y, U)
     return assess(runs, CHANNELS)
+
+
+def advice(model: dict | None) -> str:
+    """What to try when the model is not adequate, for the model option the identification used.
+
+    Parameters
+    ----------
+    model : dict or None
+        The result's ``model`` block: ``extensions`` (the groups fitted) and,
+        after ``--model auto``, ``selection = "auto"``.
+
+    Returns
+    -------
+    str
+        :data:`ADVICE` (let the extension groups in) unless they have been
+        tried: after ``--model auto`` or with every group fitted it points to
+        the data and to what the linear model lacks instead.
+    """
+    model = model or {}
+    ext = model.get("extensions") or []
+    if model.get("selection") == "auto":
+        tried = (f"`--model auto` has already weighed anti-roll bars and tire damping (it kept "
+                 f"{' + '.join(ext) or 'base'}), so the structure comes from elsewhere. ")
+    elif set(GROUPS) <= set(ext):
+        tried = ("The model already has anti-roll bars and tire damping (`--model full`), so the structure comes "
+                 "from elsewhere. ")
+    else:
+        return ADVICE
+    return (_ADVICE_HEAD + tried + "Try: " + _ADVICE_CHECKS + " Or the car has what the linear seven-degree-of-"
+            "freedom model lacks (nonlinear dampers, bump stops, a flexible body).")
+
+
+def advise(adequacy: dict | None, model: dict | None) -> dict | None:
+    """``adequacy`` with its ``advice`` for ``model`` (:func:`advice`); unchanged when adequate or not assessed."""
+    if not adequacy or adequacy.get("adequate", True):
+        return adequacy
+    return {**adequacy, "advice": advice(model)}
 
 
 def verdict_paragraph(adequacy: dict | None) -> str | None:

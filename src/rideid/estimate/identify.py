@@ -56,7 +56,7 @@ from ..model.equations import modal_summary
 from ..model.params import GROUPS, INDEX, UNITS
 from .cost import CostFunction
 from .jade import JadeSolver, make_rng, stop_requested
-from .adequacy import assess_fit
+from .adequacy import advise, assess_fit
 from .result import History, IdentificationResult
 from .uncertainty import estimate_covariance, hac_covariance
 from .sensitivity import SensitivityMaps, sensitivity_maps
@@ -145,13 +145,17 @@ def identify(ds: Dataset, *, rng=None, seed=None, population: int = DEFAULT_POPU
         runs); it is copied, never modified.
     maps : SensitivityMaps, optional
         Parameter -> track maps (default: computed around the nominal car).
-    model : {None, "base", "full"} or sequence of group names
+    model : {None, "base", "full", "auto"} or sequence of group names
         The model (SPEC §6): the twelve (``"base"``), with every extension
-        group (``"full"``), or the given groups; ``None``: the dataset's
-        ``[model]``, else the twelve. Ignored when ``cost`` is given (its
-        parameter space decides). Known extension values are held fixed and
-        used whatever the model. ``"auto"``: fit the candidates and keep the
-        model the data support (:func:`rideid.estimate.model_choice.identify_auto`).
+        group (``"full"``), or the given groups; ``"auto"``: fit the
+        candidates and keep the model the data support
+        (:func:`rideid.estimate.model_choice.identify_auto`). ``None``: the
+        dataset's ``[model]``, else ``"auto"``, as ``rideid identify`` does
+        (SPEC §5 amended; :func:`rideid.estimate.model_choice.default_model`;
+        the single-model fit :func:`rideid.estimate.identify.identify` takes
+        the dataset's ``[model]``, else the twelve). Ignored when ``cost`` is given (its parameter space
+        decides). Known extension values are held fixed and used whatever
+        the model.
     start : array_like, shape (d,), optional
         Free-parameter row (the cost's ``names`` order) to polish from,
         skipping the search (used to fit nested models from a larger one).
@@ -311,12 +315,12 @@ def _result(ds, cf, search, fit, weighting, maps, rng_record, wall, assess=True)
             e["std"] = 0.0
         e["std_robust"] = robust.std_robust(n) if n not in space.fixed else 0.0
         details[n] = e
-    # an estimate the bound stopped, not the data (rideid.data.checks)
+    # an estimate the bound stopped, not the data (rideid.data.checks); warned of by rideid.identify, once,
+    # for the model it returns (warn_bounds), not for every candidate fitted on the way
     findings = list(getattr(ds, "findings", [])) + bound_findings(details)
     for f in findings:
         if f.check == "bounds":
             details[f.channel]["at_bound"] = True
-            warnings.warn(f.message, DataWarning, stacklevel=4)
     starts = {} if fit is None else fit.starts
     pre = ds.preprocessing()
     for rid, st in starts.items():
@@ -333,9 +337,21 @@ def _result(ds, cf, search, fit, weighting, maps, rng_record, wall, assess=True)
         rng_state=rng_record["rng_state"], track_weights=search.track_weights, weights_mode=weighting.name,
         polish=info, history=History(search.history), starts=starts, preprocessing=pre,
         modal=modal_summary(P, ds.geometry), dataset=str(ds.path), maps=maps,
-        model={"extensions": list(space.extensions)}, response=response,
-        correlation=robust.correlation_dict(), adequacy=assess_fit(cf, P, response) if assess else None,
+        model={"extensions": list(space.extensions)}, response=response, correlation=robust.correlation_dict(),
+        adequacy=advise(assess_fit(cf, P, response), {"extensions": list(space.extensions)}) if assess else None,
         checks=[f.to_dict() for f in findings])
+
+
+def warn_bounds(res: IdentificationResult, stacklevel: int = 3) -> None:
+    """A :class:`rideid.DataWarning` for each estimate of ``res`` that ended at a search bound.
+
+    :func:`rideid.identify` calls it once for the result it returns (under
+    ``model="auto"``: the kept model only); the fits themselves only mark
+    ``at_bound`` in ``details`` and list the finding in ``checks``.
+    """
+    for f in res.checks:
+        if f.get("check") == "bounds":
+            warnings.warn(f["message"], DataWarning, stacklevel=stacklevel)
 
 
 def _polish(cf: CostFunction, x0, weights, align=None):

@@ -39,8 +39,9 @@ import numpy as np
 from scipy import special
 
 from ..model.params import GROUPS
-from .adequacy import MIN_RELATIVE
+from .adequacy import MIN_RELATIVE, advise
 from .identify import identify as identify_model
+from .identify import warn_bounds
 
 #: per free extension parameter: a group of two enters at the 99.9 % point of chi-square(2)
 PENALTY = float(special.chdtri(2, 0.001) / 2)
@@ -200,6 +201,7 @@ def identify_auto(ds, *, rng=None, seed=None, callback=None, maps=None, **kw):
             "std_robust": {n: d.get("std_robust") for n, d in r.details.items() if not d.get("fixed")},
         })
     res.model = {"extensions": list(chosen), "selection": "auto", "criterion": CRITERION, "candidates": table}
+    res.adequacy = advise(res.adequacy, res.model)  # what to try, now that the candidates have been weighed
     if res is not full:  # the search was the full model's: its history and counts belong to this result
         res.history, res.nit, res.stop, res.message = full.history, full.nit, full.stop, full.message
         res.track_weights = full.track_weights
@@ -222,12 +224,29 @@ def _nested_cost(cf_full, ds, extensions):
     return cf
 
 
+def default_model(ds, model=None):
+    """The model ``rideid.identify`` and ``rideid identify`` fit when none is named (SPEC §5 amended).
+
+    ``model`` as given; without it (``None``) the dataset's ``[model]``
+    extensions, else ``"auto"`` (SPEC §6).
+    """
+    if model is None:
+        return "auto" if ds.manifest.extensions is None else tuple(ds.manifest.extensions)
+    return model
+
+
 @functools.wraps(identify_model)
 def identify(ds, *args, model=None, cost=None, **kw):
-    # rideid.identify: the model choice for model="auto", else the fitted model as given
+    # rideid.identify: the model choice for model="auto", else the fitted model as given; without a model
+    # (and without a cost, whose space decides) the command line's default (default_model)
     # (the dispatch lives here, above both, so that identify and the model choice import one way)
+    if cost is None:
+        model = default_model(ds, model)
     if isinstance(model, str) and model == "auto" and cost is None:
         if args:
             raise TypeError("identify() takes the dataset as its only positional argument")
-        return identify_auto(ds, **kw)
-    return identify_model(ds, *args, model=model, cost=cost, **kw)
+        res = identify_auto(ds, **kw)
+    else:
+        res = identify_model(ds, *args, model=model, cost=cost, **kw)
+    warn_bounds(res)
+    return res

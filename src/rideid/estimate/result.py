@@ -218,13 +218,23 @@ class IdentificationResult:
         return self.nfev
 
     def __repr__(self):
+        """Short: the search's outcome, the model and its adequacy verdict, each parameter ± ``std_robust``.
+
+        ``std_robust`` is the standard error to quote (``std`` assumes white
+        residuals: ``details`` has both).
+        """
+        ext = (self.model or {}).get("extensions")
+        model = "" if ext is None else f" model={' + '.join(ext) or 'base'!r},"
+        adequate = (self.adequacy or {}).get("adequate")
         lines = [f"IdentificationResult(success={self.success}, stop={self.stop!r}, fun={self.fun:.4g}, "
-                 f"nit={self.nit}, nfev={self.nfev},"]
+                 f"nit={self.nit}, nfev={self.nfev},{model} adequate={adequate},"]
         for n, d in self.details.items():
-            std = d.get("std")
+            std = d.get("std_robust")
             note = " (known)" if d.get("fixed") else (" (derived)" if d.get("derived") else "")
-            err = f" ± {std:.3g}" if std not in (None, 0.0) else ""
+            err = f" ± {std:.3g} (robust)" if std not in (None, 0.0) else ""
             lines.append(f"  {n}={d['value']:.6g}{err} {d['unit']}{note}")
+        if adequate is False:
+            lines.append("  not adequate: the residuals carry structure the model misses (adequacy)")
         return "\n".join(lines) + ")"
 
     def start_values(self) -> dict[str, float]:
@@ -270,8 +280,12 @@ class IdentificationResult:
         })
 
     def save(self, out_dir):
-        """Write ``result.json`` and ``history.csv`` into ``out_dir`` (which must exist)."""
+        """Write ``result.json`` and ``history.csv`` into ``out_dir`` (created if it does not exist)."""
         out_dir = Path(out_dir)
+        try:
+            out_dir.mkdir(parents=True, exist_ok=True)
+        except OSError as e:
+            raise DataError(f"{out_dir}: cannot create the result folder: {e}") from None
         (out_dir / "result.json").write_text(json.dumps(self.to_dict(), indent=2, allow_nan=False) + "\n")
         self.history.write_csv(out_dir / "history.csv")
 

@@ -23,6 +23,7 @@ import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from ..data.scenario import BUILTIN
 from ..data.schema import read_toml
 from ..errors import DataError
 from ..estimate.identify import DEFAULT_GENERATIONS, DEFAULT_POPULATION
@@ -33,7 +34,6 @@ DATA_KEYS = ("datasets", "scenario", "noise", "noise_seeds")
 IDENTIFY_KEYS = ("model", "weights", "population", "generations", "polish", "spread_tol", "seed")
 IDENTIFY_DEFAULTS = {"population": DEFAULT_POPULATION, "generations": DEFAULT_GENERATIONS, "polish": True,
                      "weights": "adaptive", "seed": 1}
-BUILTIN = "builtin"
 
 
 @dataclass(frozen=True)

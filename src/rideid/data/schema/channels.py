@@ -83,6 +83,27 @@ class CsvOptions:
     skip_rows: int = 0
 
 
+#: unit factors an acceleration can be off by (g mapped as m/s^2: values 9.81x too small, and back)
+ACC_FACTORS = (GRAVITY, 1 / GRAVITY)
+
+
+def gravity_unit_factor(lead_mean: float) -> float | None:
+    """The factor that turns a lead-in mean into gravity, if a unit mistake explains it.
+
+    With gravity included, an acceleration at rest reads about ±g (±20 %); a
+    mean of about ±1 m/s^2 is g mapped as m/s^2 (factor 9.81), about ±96
+    m/s^2 is m/s^2 mapped as g (factor 1/9.81). The three ranges do not
+    overlap, so the factor is unambiguous. Returns the signed factor (minus:
+    also upside down), or None when the mean is about ±g or explained by
+    no unit.
+    """
+    for f in ACC_FACTORS:
+        for s in (1.0, -1.0):
+            if 0.8 * GRAVITY < s * f * lead_mean < 1.2 * GRAVITY:
+                return s * f
+    return None
+
+
 def parse_channel_map(tab, where: str) -> dict[str, ChannelEntry]:
     """``[channels]`` (or a run's ``channels``): SPEC target -> :class:`ChannelEntry`."""
     out = {}
@@ -168,5 +189,5 @@ def parse_csv_options(tab, where: str) -> CsvOptions:
 
 
 __all__ = ["UNITS", "SI", "TARGETS", "EXTRA_TARGETS", "PREPROCESS_KEYS", "RUN_PREPROCESS_KEYS", "CSV_KEYS",
-           "CHANNEL_KEYS", "ChannelEntry", "CsvOptions", "quantity", "unit_factor", "parse_channel_map",
-           "parse_preprocess", "parse_csv_options"]
+           "CHANNEL_KEYS", "ChannelEntry", "CsvOptions", "quantity", "unit_factor", "gravity_unit_factor",
+           "ACC_FACTORS", "parse_channel_map", "parse_preprocess", "parse_csv_options"]

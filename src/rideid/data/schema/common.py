@@ -115,11 +115,21 @@ def in_folder(path, name: str) -> Path:
 
 
 @contextlib.contextmanager
-def atomic_output(out_dir):
+def atomic_output(out_dir, replaces=()):
     """Write into a temporary folder beside ``out_dir``; move into place on success.
 
     On any exception nothing is left in ``out_dir`` (files already there are
     kept; new files replace old ones only on success).
+
+    Parameters
+    ----------
+    out_dir : str or Path
+    replaces : sequence of str
+        Names of files and folders in ``out_dir`` that belong to the output
+        as a whole (what rideid wrote there before): on success they are
+        removed before the new files move in, so that the folder describes
+        one output even when the new one lacks some of them. Anything else
+        in ``out_dir`` (the user's files) is kept.
     """
     out_dir = Path(out_dir)
     parent = out_dir.resolve().parent
@@ -138,6 +148,12 @@ def atomic_output(out_dir):
     if not out_dir.exists():
         os.replace(tmp, out_dir)
         return
+    for name in replaces:
+        old = out_dir / name
+        if old.is_dir() and not old.is_symlink():
+            shutil.rmtree(old)
+        elif old.exists() or old.is_symlink():
+            old.unlink()
     for root, _dirs, files in os.walk(tmp):
         rel = Path(root).relative_to(tmp)
         (out_dir / rel).mkdir(parents=True, exist_ok=True)
