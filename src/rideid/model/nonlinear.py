@@ -467,9 +467,13 @@ class NonlinearSimulator:
     runs : list of RunInput (from :func:`rideid.model.simulate.prepare_run`)
     layout : NonlinearLayout
         Columns of the parameter rows.
+    rho : float
+        Bound on ``h_sub * max|eig|`` of the sub-step (:data:`RHO_MAX`; larger is faster and less
+        accurate where the car crosses its kinks).
     """
 
-    def __init__(self, geom: Geometry, runs: list[RunInput], layout: NonlinearLayout):
+    def __init__(self, geom: Geometry, runs: list[RunInput], layout: NonlinearLayout, rho: float = RHO_MAX):
+        self.rho = float(rho)
         self.geom = geom
         self.runs = list(runs)
         self.layout = layout
@@ -491,7 +495,7 @@ class NonlinearSimulator:
 
     def substeps(self, P) -> list[int]:
         """Sub-steps per sample interval of every run for population ``P`` (one per sample rate)."""
-        return [substeps(P, self.geom, self.layout, r.h) for r in self.runs]
+        return [substeps(P, self.geom, self.layout, r.h, self.rho) for r in self.runs]
 
     # -- backends -----------------------------------------------------------------------
     def outputs_reference(self, P):
