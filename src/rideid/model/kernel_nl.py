@@ -24,7 +24,7 @@ _I_MU, _I_X, _I_Y, _I_KS, _I_CS, _I_KT, _I_CT, _I_L, _I_BC, _I_BR = (
     CI[f"{n}0"] for n in ("inv_mu", "x", "y", "ks", "cs", "kt", "ct", "L", "bs_clear", "bs_rate"))
 
 
-@numba.njit(cache=True, nogil=True, error_model="numpy")
+@numba.njit(cache=True, nogil=True, error_model="numpy", inline="always")
 def _accel(co, p, xk, j0, Fk, Sk, curves, X, u, ud, dX, qdd, d, v):
     """State derivative ``dX`` (14,) and accelerations ``qdd`` (7,) of state ``X`` (14,) for candidate ``p``.
 
