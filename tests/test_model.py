@@ -169,3 +169,72 @@ def test_modal_summary_names_every_mode_once_when_two_share_a_dominant_coordinat
         w2 = scipy.linalg.eigh(K[0][np.ix_(idx, idx)], M[0][np.ix_(idx, idx)], eigvals_only=True)
         got = sorted(s[n]["undamped_frequency_hz"] for n in names)
         np.testing.assert_allclose(got, np.sqrt(w2) / (2 * np.pi), rtol=1e-12)
+
+
+# ---------------------------------------------------------------------------
+# CG height (SPEC §8)
+
+def _with_height(h):
+    return Geometry(G.wheelbase, G.track_front, G.track_rear, G.tire_radius, cg_height=h)
+
+
+def test_cg_height_zero_is_bit_identical():
+    P = as_vector({**DEFAULT_CAR, "k_arf": 9000.0, "c_tf": 120.0})[None]
+    for a, b in zip(mck(P, G), mck(P, _with_height(0.0))):
+        assert np.array_equal(a, b)
+    for k, v in blocks(P, G).items():
+        assert np.array_equal(v, blocks(P, _with_height(0.0))[k])
+
+
+def test_cg_height_adds_swing_inertia_and_toppling_stiffness():
+    h = 0.27
+    P = as_vector({**DEFAULT_CAR, "k_arf": 9000.0, "k_arr": 4000.0, "c_tf": 120.0, "c_tr": 90.0})[None]
+    M0, C0, K0, B0 = mck(P, G)
+    M, C, K, B = mck(P, _with_height(h))
+    p = dict(zip(NAMES, P[0]))
+    swing = 2 * (p["m_uf"] + p["m_ur"]) * h * h
+    dM, dK = np.zeros((7, 7)), np.zeros((7, 7))
+    dM[1, 1] = dM[2, 2] = swing
+    dK[1, 1] = dK[2, 2] = -p["m_s"] * GRAVITY * h
+    np.testing.assert_allclose(M[0] - M0[0], dM, rtol=1e-12, atol=1e-9)
+    np.testing.assert_allclose(K[0] - K0[0], dK, rtol=1e-12, atol=1e-6)
+    assert np.array_equal(C, C0) and np.array_equal(B, B0)
+    # the symmetric/antisymmetric blocks still decouple and carry all the modes
+    Mt, Ct, Kt, _ = decomposed_mck(P, _with_height(h))
+    s, a = np.arange(4), np.arange(4, 7)
+    for X in (Mt, Ct, Kt):
+        assert np.abs(X[0][np.ix_(s, a)]).max() < 1e-9 * np.abs(X[0]).max()
+    assert_blocks_have_the_full_eigenvalues(P[0], _with_height(h))
+
+
+def test_cg_height_locked_wheels_closed_form():
+    """Tires ~rigid: roll frequency sqrt((k_roll - m_s g h) / (I_xx + 2 (m_uf + m_ur) h^2)), pitch-heave 2-DOF."""
+    h = 0.3
+    car = {**DEFAULT_CAR, "k_tf": 1e13, "k_tr": 1e13, "k_arf": 9000.0, "k_arr": 4000.0}
+    P = as_vector(car)
+    geom = _with_height(h)
+    Mt, _, Kt, _ = decomposed_mck(P[None], geom)
+    a_ = np.arange(4, 7)
+    w2 = scipy.linalg.eigh(Kt[0][np.ix_(a_, a_)], Mt[0][np.ix_(a_, a_)], eigvals_only=True)
+    k_roll = ((car["k_sf"] + 2 * car["k_arf"]) * G.track_front ** 2 / 2
+              + (car["k_sr"] + 2 * car["k_arr"]) * G.track_rear ** 2 / 2)
+    mu2 = 2 * (car["m_uf"] + car["m_ur"])
+    roll = (k_roll - car["m_s"] * GRAVITY * h) / (car["I_xx"] + mu2 * h * h)
+    assert abs(w2.min() / roll - 1) < 1e-6
+    # pitch and heave of the body on rigid wheels
+    a, b = car["a"], G.wheelbase - car["a"]
+    kf, kr = 2 * car["k_sf"], 2 * car["k_sr"]
+    Kb = np.array([[kf + kr, -kf * a + kr * b], [-kf * a + kr * b, kf * a * a + kr * b * b - car["m_s"] * GRAVITY * h]])
+    Mb = np.diag([car["m_s"], car["I_yy"] + mu2 * h * h])
+    s = np.arange(4)
+    w2s = np.sort(scipy.linalg.eigh(Kt[0][np.ix_(s, s)], Mt[0][np.ix_(s, s)], eigvals_only=True))[:2]
+    np.testing.assert_allclose(w2s, np.sort(scipy.linalg.eigh(Kb, Mb, eigvals_only=True)), rtol=1e-6)
+
+
+def test_cg_height_validation():
+    from rideid.errors import DataError
+    for bad in (-0.1, float("nan"), float("inf"), "x"):
+        with pytest.raises(DataError, match="vehicle.cg_height"):
+            Geometry(2.5, 1.5, 1.5, 0.3, cg_height=bad)
+    assert Geometry(2.5, 1.5, 1.5, 0.3).cg_height == 0.0
+    assert Geometry.KEYS == ("wheelbase", "track_front", "track_rear", "tire_radius")

@@ -15,6 +15,14 @@ relative to the CG; the body moves there by ``z_bi = G_i q_b`` with
 Written as ``M q'' + C q' + K q = Bf r + Bd r'`` with ``K = sum k_i e_i e_i^T +
 diag(0,0,0,k_t)``, ``e_i = [-G_i, unit_i]``; the same form for ``C``.
 
+CG height (SPEC §8, ``geom.cg_height = h``, 0 by default): each wheel's
+swing about the CG adds ``m_u h^2`` to the pitch and roll inertias
+(``M[theta] = I_yy + 2 (m_uf + m_ur) h^2``, likewise ``M[phi]`` with
+``I_xx``) and gravity adds the toppling stiffness ``-m_s g h`` to the pitch
+and roll diagonal of ``K``. Both are diagonal in pitch and roll, so the
+symmetric/antisymmetric split below still holds; with ``h = 0`` nothing
+changes (bit for bit).
+
 Extensions (SPEC §6, 0 when absent). An anti-roll bar of rate ``k_ar`` on the
 axle with corners ``i, j`` adds ``k_ar (d_i - d_j)`` to ``F_i`` (``d_i = e_i q``
 the suspension deflection), i.e. ``K += k_ar (e_i - e_j)(e_i - e_j)^T``: heave
@@ -156,6 +164,14 @@ def mck(P, geom: Geometry):
     M[:, 1, 1] = p["I_yy"]
     M[:, 2, 2] = p["I_xx"]
     M[:, 3 + np.arange(4), 3 + np.arange(4)] = mu
+    h = geom.cg_height
+    if h > 0:  # SPEC §8: the wheels swing about the CG, gravity topples the body
+        swing = 2.0 * (p["m_uf"] + p["m_ur"]) * h * h
+        M[:, 1, 1] += swing
+        M[:, 2, 2] += swing
+        topple = p["m_s"] * GRAVITY * h
+        K[:, 1, 1] -= topple
+        K[:, 2, 2] -= topple
     Bf = np.zeros((n, 7, 4))
     Bf[:, 3 + np.arange(4), np.arange(4)] = kt
     return M, C, K, Bf

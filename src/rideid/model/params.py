@@ -131,20 +131,40 @@ def column(P, name: str) -> np.ndarray:
 
 @dataclass(frozen=True)
 class Geometry:
-    """Known geometry measured with a tape (m)."""
+    """Known geometry (m): the four tape measures (:data:`KEYS`, required and
+    positive) and the optional CG height (:data:`OPTIONAL_KEYS`).
+
+    ``cg_height`` is the sprung mass CG's height above the wheel centres
+    (SPEC §8, default 0: the model of SPEC §1). When positive the model adds
+    the unsprung masses' swing about the CG (``2 (m_uf + m_ur) h^2`` to
+    ``I_xx`` and ``I_yy``) and gravity's toppling stiffness ``-m_s g h`` in
+    pitch and roll (:func:`rideid.model.equations.mck`).
+    """
 
     wheelbase: float
     track_front: float
     track_rear: float
     tire_radius: float
+    cg_height: float = 0.0
 
+    #: the four tape measures, required in ``[vehicle]``
     KEYS = ("wheelbase", "track_front", "track_rear", "tire_radius")
+    #: optional ``[vehicle]`` keys and their defaults
+    OPTIONAL_KEYS = {"cg_height": 0.0}
 
     def __post_init__(self):
         for k in self.KEYS:
             v = getattr(self, k)
             if not (np.isfinite(v) and v > 0):
                 raise DataError(f"vehicle.{k} must be a positive number of metres, got {v!r}")
+        h = self.cg_height
+        try:
+            ok = bool(np.isfinite(h) and h >= 0)
+        except TypeError:
+            ok = False
+        if not ok:
+            raise DataError(f"vehicle.cg_height must be a number of metres >= 0 (CG above the wheel centres), "
+                            f"got {h!r}")
 
     @property
     def corner_y(self) -> tuple[float, float, float, float]:
