@@ -39,7 +39,7 @@ RUN_KEYS_SCENARIO = ("id", "track", "speed", "fs", "duration")
 CHECK_NAMES = ("wiring", "track")
 CHECK_LEVELS = ("error", "warn", "off")
 #: ``[vehicle]`` keys that may be left out (SPEC §8: ``cg_height``, 0 when absent)
-OPTIONAL_VEHICLE_KEYS = ("cg_height",)
+OPTIONAL_VEHICLE_KEYS = tuple(Geometry.OPTIONAL_KEYS)
 #: every model group a ``[model] extensions`` list may name: the linear ones (SPEC §6), then SPEC §8's
 MODEL_GROUPS = tuple(GROUPS) + NONLINEAR_GROUPS
 MODEL_KEYS = ("extensions", "damper_knots")
@@ -281,10 +281,10 @@ def model_table(man: Manifest) -> dict | None:
 
 def vehicle_table(geom: Geometry) -> dict:
     """The ``[vehicle]`` table of a geometry (``cg_height`` only when not 0)."""
-    out = {k: getattr(geom, k) for k in Geometry.KEYS if k not in OPTIONAL_VEHICLE_KEYS}
+    out = {k: getattr(geom, k) for k in Geometry.KEYS}
     for k in OPTIONAL_VEHICLE_KEYS:
-        v = getattr(geom, k, 0.0)
-        if v:
+        v = getattr(geom, k)
+        if v != Geometry.OPTIONAL_KEYS[k]:
             out[k] = v
     return out
 
@@ -329,7 +329,7 @@ def _check_top_keys(doc: dict, where: str, scenario: bool):
 
 def _parse_geometry(doc: dict, where: str) -> Geometry:
     veh = table(doc, "vehicle", where)
-    required = tuple(k for k in Geometry.KEYS if k not in OPTIONAL_VEHICLE_KEYS)
+    required = Geometry.KEYS
     allowed = required + OPTIONAL_VEHICLE_KEYS
     for k in veh:
         if k not in allowed:
@@ -498,7 +498,7 @@ def parse_scenario(doc: dict, path) -> Scenario:
 
 def _check_hifi_against_scenario(hifi: HifiProperties, geom: Geometry, truth: dict, dampers, where: str):
     """What ``[hifi]`` and the SPEC §8 keys both describe must be given once (or agree, for the CG height)."""
-    h = getattr(geom, "cg_height", 0.0)
+    h = geom.cg_height
     if h and hifi.cg_height and abs(h - hifi.cg_height) > 1e-12:
         raise DataError(f"{where}: the CG height is given twice and differs: [vehicle] cg_height = {h:g} m, "
                         f"[hifi] cg_height = {hifi.cg_height:g} m; give it once, in [vehicle]")
