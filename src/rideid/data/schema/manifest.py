@@ -473,7 +473,11 @@ def parse_scenario(doc: dict, path) -> Scenario:
     where = str(path)
     kw = _parse_shared(doc, path, scenario=True)
     geom, known = kw["geometry"], kw["known"]
-    truth = parse_truth(table(doc, "truth", where), f"{where}: [truth]", geom)
+    dampers = parse_dampers(doc["dampers"], f"{where}: [dampers]") if "dampers" in doc else None
+    truth_tab = table(doc, "truth", where)
+    if dampers is not None:  # the curves are the dampers; c_sf, c_sr (if left out) their mean slope over +-0.1 m/s
+        truth_tab = {**{n: dampers.slope_between(ax) for n, ax in (("c_sf", "f"), ("c_sr", "r"))}, **truth_tab}
+    truth = parse_truth(truth_tab, f"{where}: [truth]", geom)
     if "total_mass" in known:
         tm = total_mass(truth)
         if abs(tm - known["total_mass"]) > 1e-6 * tm:
@@ -484,7 +488,6 @@ def parse_scenario(doc: dict, path) -> Scenario:
         if tv is not None and abs(tv - v) > 1e-9 * abs(v):
             raise DataError(f"{where}: [known] {k} = {v} disagrees with [truth] {k} = {tv}")
     extensions, knots = parse_model_table(doc["model"], where) if "model" in doc else (None, None)
-    dampers = parse_dampers(doc["dampers"], f"{where}: [dampers]") if "dampers" in doc else None
     hifi = None
     if "hifi" in doc:
         hifi = parse_hifi(doc["hifi"], f"{where}: [hifi]")
