@@ -91,12 +91,13 @@ class LiftOff:
                 f"at t = {self.time:.3f} s); the linear model assumes every tire stays on the road")
 
 
-def lift_offs(P, geom, run_id, run_input, states, physics: bool = False) -> list[LiftOff]:
+def lift_offs(P, geom, run_id, run_input, states, physics: bool = False, coords: bool = False) -> list[LiftOff]:
     """Wheels whose total tire load (static + k_t (r - z) + c_t (r' - z')) goes negative.
 
     ``states``: the physical states of :func:`rideid.model.simulate.simulate_reference`
     (``return_states=True``) or of :func:`rideid.model.nonlinear.simulate_nonlinear`
-    (``physics=True``: the wheel is then in the air, its tire carrying nothing);
+    (``physics=True``: the wheel is then in the air, its tire carrying nothing; ``coords=True``: states in
+    :data:`rideid.model.equations.COORDS` order, ``[q, q']``, as that one returns them);
     ``P`` 12 or 16 parameters (or a nonlinear row: its first 16 columns).
     """
     P = np.asarray(P, dtype=float).reshape(-1)
@@ -104,9 +105,9 @@ def lift_offs(P, geom, run_id, run_input, states, physics: bool = False) -> list
     static = static_corner_loads(P[None], geom)[0]
     kt = np.array([P[INDEX["k_tf"]]] * 2 + [P[INDEX["k_tr"]]] * 2)
     ct = np.array([P[INDEX["c_tf"]]] * 2 + [P[INDEX["c_tr"]]] * 2)
-    zw = wheel_displacements(states)
-    force = (static[None, :] + kt[None, :] * (run_input.u - zw)
-             + ct[None, :] * (run_input.rate - wheel_velocities(states)))
+    zw, vw = (states[..., 3:7], states[..., 10:14]) if coords else (wheel_displacements(states),
+                                                                     wheel_velocities(states))
+    force = static[None, :] + kt[None, :] * (run_input.u - zw) + ct[None, :] * (run_input.rate - vw)
     out = []
     for i, w in enumerate(CORNERS):
         j = int(np.argmin(force[:, i]))
@@ -201,7 +202,7 @@ def simulate_manifest(sc: Scenario, noise: float = 0.0, seed: int | None = None,
             ri = prepare_run(sc.tracks[run.track], sc.geometry, run.speed, t)
             y, states = simulate_nonlinear(Pn[None], sc.geometry, ri, layout, return_states=True)
             y = y[0]
-            lifts += lift_offs(P[0], sc.geometry, run.id, ri, states[0], physics=True)
+            lifts += lift_offs(P[0], sc.geometry, run.id, ri, states[0], physics=True, coords=True)
         else:
             ri = prepare_run(sc.tracks[run.track], sc.geometry, run.speed, t)
             y, states = simulate_reference(P, sc.geometry, ri, return_states=True)
