@@ -5,7 +5,10 @@
 ``(n_pop, 16)`` (with the extensions of SPEC §6)
 either to simulated channels or to per-run weighted squared errors, through
 the compiled kernel (:mod:`rideid.kernel`) or the plain NumPy reference
-(:func:`rideid.simulate.simulate_reference`).
+(:func:`rideid.simulate.simulate_reference`; ``RIDEID_KERNEL=numpy``, see
+:mod:`rideid.model.backend`). :func:`make_simulator` picks this class or the
+nonlinear car's :class:`rideid.model.nonlinear.NonlinearSimulator` by the
+parameter layout.
 """
 
 from __future__ import annotations
@@ -13,7 +16,7 @@ from __future__ import annotations
 import numpy as np
 from threadpoolctl import ThreadpoolController
 
-from . import kernel
+from . import backend, kernel
 from .discretize import N_MAX, Discretized, n_terms, spectral_radius
 from .equations import blocks as blocks_of
 from .params import Geometry, column
@@ -132,6 +135,8 @@ class BatchSimulator:
 
     def outputs(self, P):
         """Simulated channels: list over runs of ``(n_pop, n_time, 10)``."""
+        if backend.use_numpy() or not backend.compiled_available("linear"):
+            return self.outputs_reference(P)
         P = np.atleast_2d(P)
         Y = np.zeros((self.n_samples, 10))
         W = np.zeros((len(self.runs), 10))
@@ -154,3 +159,11 @@ class BatchSimulator:
             d = outs[ri] - Y[None, s:e]
             err[ri] = np.einsum("ntq,q->n", d * d, W[ri])
         return err
+
+
+def make_simulator(geom: Geometry, runs: list[RunInput], layout=None):
+    """:class:`BatchSimulator` for a linear layout (``None`` or no curves and no bump stops), else
+    :class:`rideid.model.nonlinear.NonlinearSimulator` (see :func:`rideid.model.nonlinear.make_simulator`)."""
+    from .nonlinear import make_simulator as make
+
+    return make(geom, runs, layout)

@@ -15,7 +15,7 @@ independent fine-step check with ``scipy.signal.lsim``.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -63,6 +63,11 @@ class RunInput:
     mu : (n-1, 4, N_MAX) decomposed input moments per interval
     rate : (n, 4) input rates ``r'`` (speed times envelope slope) at the samples, m/s
     rated : (n, 4) decomposed input rates (used with tire damping)
+    inputs_at : callable ``times (k,) -> (u (k, 4), rate (k, 4))``, the corner inputs and
+        their rates at any times within the run, by the same road model as ``u`` and
+        ``rate`` (equal to them at the samples); the nonlinear car's integrator
+        (:mod:`rideid.model.nonlinear`) evaluates them between the samples. ``None``
+        for a RunInput built by hand.
     """
 
     t: np.ndarray
@@ -72,6 +77,7 @@ class RunInput:
     mu: np.ndarray
     rate: np.ndarray
     rated: np.ndarray
+    inputs_at: object = field(default=None, repr=False, compare=False)
 
     @property
     def n(self) -> int:
@@ -138,7 +144,20 @@ def _prepare_run(track, geom, speed, t, quad_order, distance) -> RunInput:
     else:
         v = np.full(t.size, float(speed))
     rate = corner_input_slopes(track, geom, distance(t)) * v[:, None]
-    return RunInput(t=t, h=h, u=u, ud=ud, mu=mu, rate=rate, rated=rate @ CORNER_TO_DECOMPOSED.T)
+
+    def inputs_at(times):
+        """Corner inputs and their rates at ``times`` (s), as ``u`` and ``rate`` at the samples."""
+        times = np.asarray(times, dtype=float)
+        x = distance(times)
+        if distance_given:
+            eps = h * 1e-3
+            vv = (distance(times + eps) - distance(times - eps)) / (2 * eps)
+        else:
+            vv = np.full(times.shape, float(speed))
+        return corner_inputs(track, geom, x), corner_input_slopes(track, geom, x) * vv[:, None]
+
+    return RunInput(t=t, h=h, u=u, ud=ud, mu=mu, rate=rate, rated=rate @ CORNER_TO_DECOMPOSED.T,
+                    inputs_at=inputs_at)
 
 
 def initial_states(disc: Discretized, ud0):

@@ -1,0 +1,583 @@
+"""The nonlinear full car of SPEC §8: damper curves, bump stops, lift-off, CG height.
+
+The car is the 7-DOF model of SPEC §1/§6 (:mod:`rideid.model.equations`,
+generalised coordinates ``q = [z, theta, phi, z_fl, z_fr, z_rl, z_rr]``,
+deviations from static equilibrium) with these forces at corner ``i``
+(deflection ``d_i = z_i - z_bi``, velocity ``v_i = d_i'``, both compression
++, at the wheel):
+
+* suspension force on the body ``F_i = k_s d_i + bar_i + D(v_i) + S(d_i)``
+  and ``-F_i`` on the wheel, where ``bar_i = k_ar (d_i - d_j)`` (``j`` the
+  other corner of the axle), ``D`` the damper: the axle's curve
+  (:func:`damper_force`, piecewise linear through ``(0, 0)`` and the forces
+  at the knots, continued beyond the outermost knots with the last
+  segment's slope) or ``c_s v`` without curves, and ``S`` the bump stop
+  ``rate * max(d - clearance, 0)`` (0 without bump stops);
+* tire force on the wheel ``T_i = max(L_i + k_t (r_i - z_i) + c_t (r_i' - z_i'), 0) - L_i``
+  with ``L_i`` the static corner load
+  (:func:`rideid.model.equations.static_corner_loads`): the tire pushes but
+  never pulls, a wheel may leave the road;
+* CG height ``h = geom.cg_height``: pitch and roll inertias
+  ``I + 2 (m_uf + m_ur) h^2`` and gravity's toppling moment ``m_s g h theta``
+  (``m_s g h phi``), as the linear model (:func:`rideid.model.equations.mck`).
+
+Equations: ``m_s z'' = sum F_i``, ``I_yy' theta'' = -sum x_i F_i + m_s g h theta``,
+``I_xx' phi'' = sum y_i F_i + m_s g h phi``, ``m_u z_i'' = -F_i + T_i``. The
+mass matrix stays diagonal. Outputs: the ten SPEC channels
+(:data:`rideid.model.equations.CHANNELS`) as in the linear model: body
+corner ``i`` reads ``z'' - x_i theta'' + y_i phi''``, axle ``i`` reads
+``z_i''``, the gyros ``theta'``, ``phi'``. Initial state: the linear static
+equilibrium for the road input at the first sample (``K q = Bf r(0)``,
+exact while the bump stops are clear of it and every tire is loaded, e.g.
+on every track's flat lead-in), zero velocities.
+
+Parameter rows (:class:`NonlinearLayout`): the sixteen
+:data:`rideid.model.params.ALL_NAMES`, then with bump stops
+:data:`BUMP_STOP_NAMES` (``bs_clear_f, bs_clear_r`` m, ``bs_rate_f,
+bs_rate_r`` N/m), then with curves the front forces at the ``K`` knots
+``F_f1 .. F_fK`` and the rear ones ``F_r1 .. F_rK`` (N, knots in ascending
+order). With curves the columns ``c_sf``, ``c_sr`` are not used.
+
+Integration
+-----------
+The exact discretisation of the linear kernel (:mod:`rideid.model.discretize`)
+needs a linear system; here the forces are piecewise linear in the state
+with kinks (damper knots, bump-stop contact, lift-off) that move with the
+state. Alternatives considered:
+
+* *exact linear step with the nonlinear remainder as input* (exponential
+  integrators): exact for the linear part, but the remainder is not smooth
+  either, its quadrature needs the same sub-steps, and the per-candidate
+  matrix exponentials and moment matrices (which make the linear kernel
+  cheap) would need refreshing whenever a corner changes segment;
+* *operator splitting* (linear exact step + nonlinear kick): first or second
+  order only, error hard to bound on a stiff bump stop;
+* *implicit schemes* (trapezoidal, Radau): unconditionally stable, but a
+  Newton solve per step and per candidate, with Jacobians that jump at the
+  kinks; the car is not stiff at a sensible sub-step (the fastest mode is
+  the wheel hop, ~10-20 Hz, or a bump stop), so stability buys nothing;
+* *explicit Runge-Kutta at a fixed sub-step* (chosen): classical RK4 with
+  ``m`` equal sub-steps per sample interval. Branch-free, four cheap
+  force evaluations per sub-step, the same fixed work for every candidate
+  (vectorises across candidates, no step-size control that would make the
+  cost a non-smooth function of the parameters), fourth order where the
+  forces are smooth.
+
+``m`` is set per call by the fastest mode of the linearised car at its
+stiffest (spring plus bump-stop rate, the steepest damper segment, tires
+in contact): the smallest ``m`` with ``h/m * max|eig(A)| <= RHO_MAX``
+(:data:`RHO_MAX`), one ``m`` for the whole population like the linear
+kernel's series length. The road input and its rate are evaluated at the
+sub-step and half-step instants ``t_k + j h / (2 m)``: they depend only on
+the run, so they are tabulated once per run and ``m``
+(:attr:`rideid.model.simulate.RunInput.inputs_at`, the same envelope model
+as the samples). Measured error against RK4 at 64x the sub-steps and
+against SciPy's DOP853 (rtol 1e-10), on every track kind with a car that
+has asymmetric digressive dampers, bars, tire damping, a CG height and
+reaches its bump stops and lifts wheels: below 1e-4 of each channel's RMS
+(``tests/test_nonlinear.py``).
+
+Backends
+--------
+:class:`NonlinearSimulator` has two backends behind one seam: a compiled,
+threaded kernel (Numba, :mod:`rideid.model.kernel_nl`; candidates shared
+among ``numba.get_num_threads()`` threads, the compiled function releases
+the GIL) and a pure-NumPy reference (loop over time in Python, vectorised
+over candidates). ``RIDEID_KERNEL=numpy`` selects the NumPy backend for the
+linear and the nonlinear simulators; if the compiled kernel cannot be built
+the NumPy backend is used with one warning (:mod:`rideid.model.backend`).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..errors import DataError
+from . import backend
+from .equations import CHANNELS, mck, blocks as blocks_of, static_corner_loads
+from .params import ALL_NAMES, GRAVITY, INDEX, Geometry, check_parameters, full_rows
+from .simulate import RunInput
+
+#: Default damper velocity knots (m/s), SPEC §8.
+DEFAULT_KNOTS: tuple[float, ...] = (-0.4, -0.2, -0.1, -0.05, -0.025, 0.025, 0.05, 0.1, 0.2, 0.4)
+#: Bump-stop columns (after the sixteen): clearance m of compression from static, rate N/m.
+BUMP_STOP_NAMES: tuple[str, ...] = ("bs_clear_f", "bs_clear_r", "bs_rate_f", "bs_rate_r")
+#: Largest ``h_sub * max|eig|`` of the RK4 sub-step (accuracy, not stability: RK4 is stable to 2.8).
+RHO_MAX = 0.25
+#: Most sub-steps per sample.
+M_MAX = 4096
+
+
+def curve_names(n_knots: int) -> tuple[str, ...]:
+    """Column names of the curve forces: ``F_f1..F_fK`` then ``F_r1..F_rK``."""
+    return tuple(f"F_f{j + 1}" for j in range(n_knots)) + tuple(f"F_r{j + 1}" for j in range(n_knots))
+
+
+@dataclass(frozen=True)
+class NonlinearLayout:
+    """Columns of a nonlinear parameter row.
+
+    ``knots``: damper velocity knots (m/s, strictly increasing, nonzero;
+    ``None``: linear dampers ``c_sf``, ``c_sr``); ``bump_stops``: the four
+    :data:`BUMP_STOP_NAMES` columns are present. Rows are the sixteen
+    :data:`rideid.model.params.ALL_NAMES`, then the bump stops, then the
+    front and rear curve forces (:func:`curve_names`).
+    """
+
+    knots: tuple | None = None
+    bump_stops: bool = False
+
+    def __post_init__(self):
+        if self.knots is not None:
+            k = tuple(float(v) for v in self.knots)
+            if len(k) < 1 or not all(math.isfinite(v) and v != 0 for v in k) \
+                    or any(b <= a for a, b in zip(k, k[1:])):
+                raise DataError(f"damper knots must be finite, nonzero and strictly increasing (m/s), got {k}")
+            object.__setattr__(self, "knots", k)
+        object.__setattr__(self, "bump_stops", bool(self.bump_stops))
+
+    @property
+    def n_knots(self) -> int:
+        return 0 if self.knots is None else len(self.knots)
+
+    @property
+    def names(self) -> tuple[str, ...]:
+        return ALL_NAMES + (BUMP_STOP_NAMES if self.bump_stops else ()) + curve_names(self.n_knots)
+
+    @property
+    def n_columns(self) -> int:
+        return len(self.names)
+
+    @property
+    def linear(self) -> bool:
+        """No curves and no bump stops: the linear model of SPEC §1/§6."""
+        return self.knots is None and not self.bump_stops
+
+    @property
+    def index(self) -> dict[str, int]:
+        return {n: i for i, n in enumerate(self.names)}
+
+    def curves(self, P):
+        """Front and rear curve forces ``(n, K)`` each from rows ``P`` (``None`` without curves)."""
+        if self.knots is None:
+            return None
+        P = np.atleast_2d(P)
+        s = len(ALL_NAMES) + (4 if self.bump_stops else 0)
+        K = self.n_knots
+        return P[:, s:s + K], P[:, s + K:s + 2 * K]
+
+    def rows(self, P) -> np.ndarray:
+        """Rows ``P`` as a float array ``(n, n_columns)``; for a linear layout 12 columns are accepted too."""
+        P = np.atleast_2d(np.asarray(P, dtype=float))
+        if self.linear and P.shape[-1] in (12, 16):
+            return full_rows(P)
+        if P.shape[-1] != self.n_columns:
+            raise DataError(f"nonlinear parameter rows must have {self.n_columns} columns "
+                            f"({', '.join(self.names)}), got {P.shape[-1]}")
+        return P
+
+
+def _knot_table(knots):
+    """Knots with 0 inserted (K + 1,) and the position of 0."""
+    k = np.asarray(knots, dtype=float)
+    j0 = int(np.searchsorted(k, 0.0))
+    return np.insert(k, j0, 0.0), j0
+
+
+def damper_force(knots, F, v):
+    """Damper force of a piecewise-linear curve through ``(0, 0)`` and ``(knots, F)``.
+
+    Beyond the outermost knots the curve continues with the last segment's
+    slope. Positive in compression (``v = z_i' - z_bi' > 0``); the force on
+    the body is ``+D(v)``, on the wheel ``-D(v)``.
+
+    Parameters
+    ----------
+    knots : (K,) strictly increasing, nonzero velocities, m/s
+    F : (..., K) forces at the knots, N
+    v : (...) velocities, m/s (broadcast against ``F[..., 0]``)
+
+    Returns
+    -------
+    ndarray, the broadcast shape of ``v`` and ``F[..., 0]``
+    """
+    xk, j0 = _knot_table(knots)
+    F = np.asarray(F, dtype=float)
+    Fk = np.insert(F, j0, 0.0, axis=-1)
+    v = np.asarray(v, dtype=float)
+    j = np.clip(np.searchsorted(xk, v, side="right") - 1, 0, xk.size - 2)
+    shape = np.broadcast_shapes(v.shape, F.shape[:-1])
+    Fk = np.broadcast_to(Fk, shape + Fk.shape[-1:])
+    vb, jb = np.broadcast_to(v, shape), np.broadcast_to(j, shape)
+    f0 = np.take_along_axis(Fk, jb[..., None], -1)[..., 0]
+    f1 = np.take_along_axis(Fk, jb[..., None] + 1, -1)[..., 0]
+    x0, x1 = xk[jb], xk[jb + 1]
+    return f0 + (f1 - f0) / (x1 - x0) * (vb - x0)
+
+
+def linear_curve(c, knots=DEFAULT_KNOTS) -> np.ndarray:
+    """Forces ``c v`` at the knots of a linear damper of rate ``c`` (N s/m): shape ``(..., K)``."""
+    return np.asarray(c, dtype=float)[..., None] * np.asarray(knots, dtype=float)
+
+
+def hifi_curve(c_s, knots=DEFAULT_KNOTS, rebound_ratio=1.0, knee_velocity=math.inf, knee_ratio=1.0) -> np.ndarray:
+    """Forces at the knots of the MuJoCo car's parametric damper (:func:`rideid.verify.hifi.damper_force`).
+
+    Exact (the same curve everywhere) when the knee velocity is one of the
+    positive and negative knots.
+    """
+    from ..verify.hifi import damper_force as hifi_damper
+
+    return np.asarray(hifi_damper(np.asarray(knots, dtype=float), c_s, rebound_ratio, knee_velocity, knee_ratio))
+
+
+def _slopes(knots, F):
+    """Segment slopes ``(..., K)`` of curves ``F`` (..., K) through (0, 0)."""
+    xk, j0 = _knot_table(knots)
+    Fk = np.insert(np.asarray(F, dtype=float), j0, 0.0, axis=-1)
+    return np.diff(Fk, axis=-1) / np.diff(xk)
+
+
+# ---------------------------------------------------------------------------
+# per-candidate coefficients
+
+#: columns of the coefficient table (per candidate) used by both backends
+COEF = ("inv_ms", "inv_Iyy", "inv_Ixx", "topple", "kar_f", "kar_r",
+        *(f"{n}{c}" for n in ("inv_mu", "x", "y", "ks", "cs", "kt", "ct", "L", "bs_clear", "bs_rate")
+          for c in range(4)))
+CI = {n: i for i, n in enumerate(COEF)}
+_C4 = {n: [CI[f"{n}{k}"] for k in range(4)]
+       for n in ("inv_mu", "x", "y", "ks", "cs", "kt", "ct", "L", "bs_clear", "bs_rate")}
+
+
+def coefficients(P, geom: Geometry, layout: NonlinearLayout):
+    """Per-candidate coefficients.
+
+    Returns
+    -------
+    co : (n, len(COEF)) float
+    xk : (K + 1,) knots with 0 inserted (``[0, 1]`` dummy without curves)
+    Fk : (n, 2, K + 1) forces at ``xk`` per axle; Sk : (n, 2, K) segment slopes
+    """
+    P = layout.rows(P)
+    n = P.shape[0]
+    p = {nm: P[:, i] for i, nm in enumerate(layout.names)}
+    h = geom.cg_height
+    co = np.zeros((n, len(COEF)))
+    swing = 2.0 * (p["m_uf"] + p["m_ur"]) * h * h
+    co[:, CI["inv_ms"]] = 1.0 / p["m_s"]
+    co[:, CI["inv_Iyy"]] = 1.0 / (p["I_yy"] + swing)
+    co[:, CI["inv_Ixx"]] = 1.0 / (p["I_xx"] + swing)
+    co[:, CI["topple"]] = p["m_s"] * GRAVITY * h
+    co[:, CI["kar_f"]] = p["k_arf"]
+    co[:, CI["kar_r"]] = p["k_arr"]
+    x, y = geom.corner_xy(p["a"])
+    L = static_corner_loads(P[:, :len(ALL_NAMES)], geom)
+
+    def put(name, vals):
+        for c in range(4):
+            co[:, CI[f"{name}{c}"]] = vals[:, c] if np.ndim(vals) == 2 else vals[c]
+
+    axle = lambda f, r: np.stack([f, f, r, r], -1)  # noqa: E731
+    put("inv_mu", 1.0 / axle(p["m_uf"], p["m_ur"]))
+    put("x", x)
+    put("y", y)
+    put("ks", axle(p["k_sf"], p["k_sr"]))
+    put("cs", axle(p["c_sf"], p["c_sr"]))
+    put("kt", axle(p["k_tf"], p["k_tr"]))
+    put("ct", axle(p["c_tf"], p["c_tr"]))
+    put("L", L)
+    if layout.bump_stops:
+        put("bs_clear", axle(p["bs_clear_f"], p["bs_clear_r"]))
+        put("bs_rate", axle(p["bs_rate_f"], p["bs_rate_r"]))
+    else:
+        put("bs_clear", np.full((n, 4), np.inf))
+    if layout.knots is None:
+        xk = np.array([0.0, 1.0])
+        Fk = np.zeros((n, 2, 2))
+    else:
+        xk, j0 = _knot_table(layout.knots)
+        Ff, Fr = layout.curves(P)
+        Fk = np.insert(np.stack([Ff, Fr], 1), j0, 0.0, axis=-1)
+    Sk = np.diff(Fk, axis=-1) / np.diff(xk)
+    return co, xk, np.ascontiguousarray(Fk), np.ascontiguousarray(Sk)
+
+
+def substeps(P, geom: Geometry, layout: NonlinearLayout, h: float, rho: float = RHO_MAX) -> int:
+    """Sub-steps per sample interval ``h``: ``h/m * max|eig| <= rho`` for the stiffest linearised car."""
+    P = layout.rows(P)
+    Q = full_rows(P[:, :len(ALL_NAMES)]).copy()
+    if layout.bump_stops:
+        ix = layout.index
+        Q[:, INDEX["k_sf"]] += P[:, ix["bs_rate_f"]]
+        Q[:, INDEX["k_sr"]] += P[:, ix["bs_rate_r"]]
+    if layout.knots is not None:
+        for (c, F) in zip(("c_sf", "c_sr"), layout.curves(P)):
+            Q[:, INDEX[c]] = np.abs(_slopes(layout.knots, F)).max(axis=-1)
+    Q[:, INDEX["c_sf"]] = np.maximum(Q[:, INDEX["c_sf"]], 0.0)
+    Q[:, INDEX["c_sr"]] = np.maximum(Q[:, INDEX["c_sr"]], 0.0)
+    bl = blocks_of(Q, geom)
+    lam = max(float(np.abs(np.linalg.eigvals(bl["As"])).max()), float(np.abs(np.linalg.eigvals(bl["Aa"])).max()))
+    return int(min(M_MAX, max(1, math.ceil(lam * h / rho - 1e-9))))
+
+
+def initial_state(P, geom: Geometry, layout: NonlinearLayout, u0) -> np.ndarray:
+    """Static equilibrium ``(n, 14)`` for road input ``u0`` (4,): ``K q = Bf u0``, zero velocities."""
+    P = layout.rows(P)
+    n = P.shape[0]
+    X = np.zeros((n, 14))
+    u0 = np.asarray(u0, dtype=float)
+    if np.any(u0):
+        _, _, K, Bf = mck(P[:, :len(ALL_NAMES)], geom)
+        X[:, :7] = np.linalg.solve(K, (Bf @ u0)[..., None])[..., 0]
+    return X
+
+
+# ---------------------------------------------------------------------------
+# NumPy backend
+
+
+def _curve_eval(xk, Fk, Sk, v):
+    """Curve forces at ``v`` (n, 4); ``Fk`` (n, 2, K+1), ``Sk`` (n, 2, K)."""
+    j = np.clip(np.searchsorted(xk, v, side="right") - 1, 0, xk.size - 2)  # (n, 4)
+    ax = np.array([0, 0, 1, 1])
+    rows = np.arange(v.shape[0])[:, None]
+    return Fk[rows, ax, j] + Sk[rows, ax, j] * (v - xk[j])
+
+
+def accelerations(co, xk, Fk, Sk, curves: bool, X, r, rd):
+    """Generalised accelerations ``(n, 7)`` of states ``X`` (n, 14) for road inputs ``r``, rates ``rd`` (4,)."""
+    def c(name):
+        return co[:, _C4[name]]
+
+    q, qd = X[:, :7], X[:, 7:]
+    x, y = c("x"), c("y")
+    zb = q[:, :1] - x * q[:, 1:2] + y * q[:, 2:3]
+    dzb = qd[:, :1] - x * qd[:, 1:2] + y * qd[:, 2:3]
+    d = q[:, 3:] - zb
+    v = qd[:, 3:] - dzb
+    F = c("ks") * d
+    bf = co[:, CI["kar_f"]] * (d[:, 0] - d[:, 1])
+    br = co[:, CI["kar_r"]] * (d[:, 2] - d[:, 3])
+    F = F + np.stack([bf, -bf, br, -br], -1)
+    F = F + (_curve_eval(xk, Fk, Sk, v) if curves else c("cs") * v)
+    F = F + c("bs_rate") * np.maximum(d - c("bs_clear"), 0.0)
+    L = c("L")
+    T = np.maximum(L + c("kt") * (r - q[:, 3:]) + c("ct") * (rd - qd[:, 3:]), 0.0) - L
+    out = np.empty_like(q)
+    topple = co[:, CI["topple"]]
+    out[:, 0] = F.sum(-1) * co[:, CI["inv_ms"]]
+    out[:, 1] = (-(x * F).sum(-1) + topple * q[:, 1]) * co[:, CI["inv_Iyy"]]
+    out[:, 2] = ((y * F).sum(-1) + topple * q[:, 2]) * co[:, CI["inv_Ixx"]]
+    out[:, 3:] = (T - F) * c("inv_mu")
+    return out
+
+
+def channels(co, X, qdd):
+    """The ten channels ``(n, 10)`` from states and accelerations."""
+    x, y = co[:, _C4["x"]], co[:, _C4["y"]]
+    out = np.empty((X.shape[0], 10))
+    out[:, :4] = qdd[:, :1] - x * qdd[:, 1:2] + y * qdd[:, 2:3]
+    out[:, 4:8] = qdd[:, 3:]
+    out[:, 8] = X[:, 8]
+    out[:, 9] = X[:, 9]
+    return out
+
+
+def fine_inputs(run: RunInput, m: int):
+    """Corner inputs and rates at ``t_k + j h / (2 m)``, ``j = 0 .. 2 m (n - 1)``: ``(U, R)`` each ``(.., 4)``."""
+    if run.inputs_at is None:
+        raise DataError("the nonlinear car needs the road between the samples: prepare the run with prepare_run")
+    nf = 2 * m * (run.n - 1) + 1
+    tf = run.t[0] + (run.h / (2 * m)) * np.arange(nf)
+    U, R = run.inputs_at(tf)
+    # at the samples exactly the run's own values
+    U[::2 * m], R[::2 * m] = run.u, run.rate
+    return np.ascontiguousarray(U), np.ascontiguousarray(R)
+
+
+def simulate_numpy(P, geom, run: RunInput, layout: NonlinearLayout, m: int, fine=None, return_states=False):
+    """NumPy backend for one run: outputs ``(n, n_time, 10)`` (and states ``(n, n_time, 14)``)."""
+    co, xk, Fk, Sk = coefficients(P, geom, layout)
+    curves = layout.knots is not None
+    U, R = fine_inputs(run, m) if fine is None else fine
+    X = initial_state(P, geom, layout, run.u[0])
+    n = X.shape[0]
+    hs = run.h / m
+    y = np.empty((n, run.n, 10))
+    Xs = np.empty((n, run.n, 14)) if return_states else None
+
+    def f(X, j):
+        qdd = accelerations(co, xk, Fk, Sk, curves, X, U[j], R[j])
+        return np.concatenate([X[:, 7:], qdd], axis=1), qdd
+
+    for k in range(run.n):
+        j = 2 * m * k
+        d1, qdd = f(X, j)
+        y[:, k] = channels(co, X, qdd)
+        if return_states:
+            Xs[:, k] = X
+        if k + 1 == run.n:
+            break
+        for s in range(m):
+            js = j + 2 * s
+            if s:
+                d1, _ = f(X, js)
+            d2, _ = f(X + (hs / 2) * d1, js + 1)
+            d3, _ = f(X + (hs / 2) * d2, js + 1)
+            d4, _ = f(X + hs * d3, js + 2)
+            X = X + (hs / 6) * (d1 + 2 * d2 + 2 * d3 + d4)
+    return (y, Xs) if return_states else y
+
+
+# ---------------------------------------------------------------------------
+# the simulator
+
+
+class NonlinearSimulator:
+    """Simulate populations of nonlinear cars over fixed runs (the interface of
+    :class:`rideid.model.batch.BatchSimulator`).
+
+    Parameters
+    ----------
+    geom : Geometry
+    runs : list of RunInput (from :func:`rideid.model.simulate.prepare_run`)
+    layout : NonlinearLayout
+        Columns of the parameter rows.
+    """
+
+    def __init__(self, geom: Geometry, runs: list[RunInput], layout: NonlinearLayout):
+        self.geom = geom
+        self.runs = list(runs)
+        self.layout = layout
+        lens = np.array([r.n for r in self.runs])
+        self.run_start = np.concatenate([[0], np.cumsum(lens)]).astype(np.int64)
+        self.n_samples = int(self.run_start[-1])
+        self._fine: dict = {}
+        #: sub-steps per sample of the last call, per run
+        self.last_substeps: list[int] = []
+
+    # -- parameter-independent tables ----------------------------------------------------
+    def fine(self, ri: int, m: int):
+        key = (ri, m)
+        if key not in self._fine:
+            if len(self._fine) > 4 * max(1, len(self.runs)):
+                self._fine.clear()
+            self._fine[key] = fine_inputs(self.runs[ri], m)
+        return self._fine[key]
+
+    def substeps(self, P) -> list[int]:
+        """Sub-steps per sample interval of every run for population ``P`` (one per sample rate)."""
+        return [substeps(P, self.geom, self.layout, r.h) for r in self.runs]
+
+    # -- backends -----------------------------------------------------------------------
+    def outputs_reference(self, P):
+        """As :meth:`outputs`, by the NumPy backend."""
+        P = self.layout.rows(P)
+        ms = self.substeps(P)
+        self.last_substeps = ms
+        return [simulate_numpy(P, self.geom, r, self.layout, m, self.fine(i, m))
+                for i, (r, m) in enumerate(zip(self.runs, ms))]
+
+    def errors_reference(self, P, Y, W):
+        outs = self.outputs_reference(P)
+        return _errors_of(outs, self.run_start, Y, W)
+
+    def _compiled(self, P, Y, W, mode):
+        from . import kernel_nl
+
+        P = self.layout.rows(P)
+        ms = self.substeps(P)
+        self.last_substeps = ms
+        co, xk, Fk, Sk = coefficients(P, self.geom, self.layout)
+        fines = [self.fine(i, m) for i, m in enumerate(ms)]
+        X0 = np.stack([initial_state(P, self.geom, self.layout, r.u[0]) for r in self.runs])
+        return kernel_nl.run(co, xk, Fk, Sk, self.layout.knots is not None, X0, self.run_start,
+                             np.array([r.h for r in self.runs]), np.array(ms, dtype=np.int64), fines, Y, W, mode)
+
+    # -- public -------------------------------------------------------------------------
+    def errors(self, P, Y, W):
+        """Per-run weighted squared errors, shape ``(n_runs, n_pop)`` (as :meth:`BatchSimulator.errors`)."""
+        Y = np.ascontiguousarray(Y, dtype=float)
+        W = np.ascontiguousarray(W, dtype=float)
+        if backend.use_numpy() or not backend.compiled_available("nonlinear"):
+            return self.errors_reference(P, Y, W)
+        err, _ = self._compiled(P, Y, W, 0)
+        return err
+
+    def outputs(self, P):
+        """Simulated channels: list over runs of ``(n_pop, n_time, 10)``."""
+        if backend.use_numpy() or not backend.compiled_available("nonlinear"):
+            return self.outputs_reference(P)
+        Y = np.zeros((self.n_samples, 10))
+        W = np.zeros((len(self.runs), 10))
+        _, out = self._compiled(P, Y, W, 1)
+        return [out[:, s:e] for s, e in zip(self.run_start[:-1], self.run_start[1:])]
+
+
+def _errors_of(outs, run_start, Y, W):
+    err = np.empty((len(outs), outs[0].shape[0] if outs else 0))
+    for ri, (s, e) in enumerate(zip(run_start[:-1], run_start[1:])):
+        d = outs[ri] - Y[None, s:e]
+        err[ri] = np.einsum("ntq,q->n", d * d, W[ri])
+    return err
+
+
+def make_simulator(geom: Geometry, runs: list[RunInput], layout: NonlinearLayout | None = None):
+    """A :class:`rideid.model.batch.BatchSimulator` for a linear layout (``None``, or no
+    curves and no bump stops), else a :class:`NonlinearSimulator`."""
+    if layout is None or layout.linear:
+        from .batch import BatchSimulator
+        return BatchSimulator(geom, runs)
+    return NonlinearSimulator(geom, runs, layout)
+
+
+def check_nonlinear(P, geom: Geometry, layout: NonlinearLayout, where: str = "parameters") -> np.ndarray:
+    """Validate rows: the sixteen as :func:`rideid.model.params.check_parameters` (``c_sf``, ``c_sr``
+    unused with curves), bump stops ``>= 0``, curve forces finite."""
+    P = layout.rows(P)
+    base = P[:, :len(ALL_NAMES)].copy()
+    if layout.knots is not None:
+        base[:, [INDEX["c_sf"], INDEX["c_sr"]]] = 1.0
+    check_parameters(base, geom, where)
+    for i, nm in enumerate(layout.names[len(ALL_NAMES):], start=len(ALL_NAMES)):
+        col = P[:, i]
+        if not np.all(np.isfinite(col)):
+            raise DataError(f"{where}: {nm} is not finite")
+        if nm in BUMP_STOP_NAMES and np.any(col < 0):
+            raise DataError(f"{where}: {nm} must not be negative, got {col.min():g}")
+    return P
+
+
+def simulate_nonlinear(P, geom: Geometry, run: RunInput, layout: NonlinearLayout | None,
+                       return_states: bool = False):
+    """Outputs of the nonlinear car for one run (as :func:`rideid.model.simulate.simulate_reference`).
+
+    Parameters
+    ----------
+    P : (n_pop, layout.n_columns) or (n_columns,)
+    geom : Geometry
+    run : RunInput
+    layout : NonlinearLayout (``None``: linear dampers, no bump stops; the tires may still lift)
+
+    Returns
+    -------
+    y : (n_pop, n_time, 10) in :data:`rideid.model.equations.CHANNELS` order
+    states : (n_pop, n_time, 14) ``[q, q']`` in :data:`rideid.model.equations.COORDS`
+        order (deviations from static equilibrium), only with ``return_states``.
+    """
+    layout = NonlinearLayout() if layout is None else layout
+    P = check_nonlinear(P, geom, layout)
+    m = substeps(P, geom, layout, run.h)
+    if return_states:
+        return simulate_numpy(P, geom, run, layout, m, return_states=True)
+    sim = NonlinearSimulator(geom, [run], layout)
+    return sim.outputs(P)[0]
+
+
+__all__ = ["BUMP_STOP_NAMES", "CHANNELS", "DEFAULT_KNOTS", "NonlinearLayout", "NonlinearSimulator", "RHO_MAX",
+           "curve_names", "damper_force", "hifi_curve", "linear_curve", "make_simulator", "simulate_nonlinear",
+           "substeps"]
