@@ -132,7 +132,8 @@ def nonlinear_car(sc: Scenario):
     row = [float(sc.truth.get(n, 0.0)) for n in ALL_NAMES]
     if sc.bump_stops:
         (cf, cr), (rf, rr) = sc.bump_stop_pairs
-        row += [cf, cr, rf, rr]
+        # an axle without a stop: rate 0 (the simulator takes finite clearances only; with rate 0 any will do)
+        row += [c if np.isfinite(c) else 1.0 for c in (cf, cr)] + [rf, rr]
     if dm is not None:
         row += list(dm.front) + list(dm.rear)
     return np.array(row), layout
