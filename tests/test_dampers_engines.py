@@ -114,8 +114,7 @@ def test_engines_agree_with_damper_curves_on_the_high_twist():
 
 def test_engines_agree_with_bump_stops_reached():
     """Stops at 25 mm (T_LL compresses 33-38 mm) or 50 mm (T_HL, 75 mm): measured 0.7 % and 1.7 %."""
-    from rideid.data.scenario import nonlinear_car
-    from rideid.model.nonlinear import simulate_nonlinear
+    from rideid.data.scenario import nonlinear_car, nonlinear_states
     from rideid.model.simulate import prepare_run
     for rid, clear, tol in (("T_LL", 0.025, 0.01), ("T_HL", 0.05, 0.02)):
         sc = _scenario([rid], truth=dict(bs_clear_f=clear, bs_clear_r=clear, bs_rate_f=5e4, bs_rate_r=5e4))
@@ -125,9 +124,9 @@ def test_engines_agree_with_bump_stops_reached():
         run = sc.runs[0]
         ri = prepare_run(sc.tracks[run.track], sc.geometry, run.speed, a[rid][0])
         P, layout = nonlinear_car(sc)
-        _, X = simulate_nonlinear(P, sc.geometry, ri, layout, return_states=True)
+        X = nonlinear_states(P, sc.geometry, ri, layout)
         x, y = sc.geometry.corner_xy(sc.truth["a"])
-        q = X[0, :, :7]
+        q = X[:, :7]
         d = q[:, 3:] - (q[:, :1] - x * q[:, 1:2] + y * q[:, 2:3])
         assert d.max() > clear + 0.005, (rid, d.max())
 
