@@ -251,13 +251,20 @@ def cmd_simulate(args, out=None):
     prog.done()
     engine = args.engine
     if engine == "mujoco":
-        from .data.schema import HifiProperties
-        engine += f"; [hifi] {(sc.hifi or HifiProperties()).describe()}" + ("; raw sensor readings" if args.raw else "")
+        from .verify.hifi import scenario_properties
+        engine += f"; MuJoCo car: {scenario_properties(sc).describe()}" + ("; raw sensor readings" if args.raw else "")
+    if sc.dampers is not None:
+        engine += "; [dampers] curves"
+    if sc.bump_stops:
+        engine += "; bump stops"
     write_dataset(sc, data, args.out, raw=args.raw,
                   comment=f"simulated by rideid {__version__} from {Path(args.scenario).name}"
                           f" (engine {engine}, noise {args.noise}"
                           + (f" AR(1) {args.noise_ar1}" if args.noise_ar1 else "") + f", seed {args.seed})")
     print(f"dataset written to {args.out} ({len(sc.runs)} runs)", file=out)
+    for lo in lifts:  # a nonlinear car's wheel leaving the road: physics, not a warning (SPEC §8)
+        if lo.physics:
+            print(f"note: {lo.message()}", file=out)
     print(format_modal_summary(modal_summary(sc.truth, sc.geometry)), file=out)
     return 0
 

@@ -38,6 +38,18 @@ from ..model.params import (ALL_NAMES, EXT_NAMES, GROUPS, INDEX, MASS_COUNT, NAM
 ENERGY_FLOOR = 0.01
 
 
+def refuse_unsupported_groups(groups, where: str = "model"):
+    """The nonlinear groups of SPEC §8 (damper_curves, bump_stops) are simulated but not identified yet:
+    one clear :class:`ArgumentError` rather than a fit that silently leaves them out."""
+    from ..data.schema import NONLINEAR_GROUPS
+    bad = [g for g in groups if g in NONLINEAR_GROUPS]
+    if bad:
+        raise ArgumentError(f"{where}: {' and '.join(repr(g) for g in bad)} (SPEC §8) cannot be identified by this "
+                            f"version of rideid: it simulates such a car but fits only the linear model "
+                            f"(groups {', '.join(GROUPS)}); remove {'them' if len(bad) > 1 else 'it'} from "
+                            "[model] extensions or pass --model base|full|auto")
+
+
 def channel_weights(Y: np.ndarray) -> np.ndarray:
     """Per-channel weights ``1 / (|C| D_c)`` of one run; 0 for missing (NaN) channels."""
     present = ~np.all(np.isnan(Y), axis=0)
@@ -87,6 +99,7 @@ class ParameterSpace:
         self.known = dict(known)
         self.geometry = geometry
         extensions = tuple(extensions)
+        refuse_unsupported_groups(extensions)
         for g in extensions:
             if g not in GROUPS:
                 raise ArgumentError(f"unknown extension group '{g}'; groups are: {', '.join(GROUPS)}")
@@ -196,6 +209,7 @@ class CostFunction:
         if space is None:
             if extensions is None:  # the dataset's [model], else the twelve
                 extensions = ds.manifest.extensions or ()
+                refuse_unsupported_groups(extensions, f"{ds.manifest.path}: [model] extensions")
             space = ParameterSpace(ds.known, ds.geometry, ds.manifest.bounds, extensions=extensions)
         self.space = space
         self.names = list(self.space.names)

@@ -54,7 +54,7 @@ from ..errors import ArgumentError, DataWarning
 from ..model.batch import single_threaded_blas
 from ..model.equations import modal_summary
 from ..model.params import GROUPS, INDEX, UNITS
-from .cost import CostFunction
+from .cost import CostFunction, refuse_unsupported_groups
 from .jade import JadeSolver, make_rng, stop_requested
 from .adequacy import advise, assess_fit
 from .result import History, IdentificationResult
@@ -91,6 +91,7 @@ def model_extensions(ds: Dataset, model=None) -> tuple[str, ...]:
     of group names.
     """
     if model is None:
+        refuse_unsupported_groups(ds.manifest.extensions or (), f"{ds.manifest.path}: [model] extensions")
         return tuple(ds.manifest.extensions or ())
     if isinstance(model, str):
         if model == "base":
@@ -99,6 +100,7 @@ def model_extensions(ds: Dataset, model=None) -> tuple[str, ...]:
             return tuple(GROUPS)
         raise ArgumentError(f"--model must be one of {', '.join(MODELS)}, got {model!r}")
     groups = tuple(model)
+    refuse_unsupported_groups(groups)
     for g in groups:
         if g not in GROUPS:
             raise ArgumentError(f"unknown extension group '{g}'; groups are: {', '.join(GROUPS)}")

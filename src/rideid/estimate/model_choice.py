@@ -231,7 +231,11 @@ def default_model(ds, model=None):
     extensions, else ``"auto"`` (SPEC §6).
     """
     if model is None:
-        return "auto" if ds.manifest.extensions is None else tuple(ds.manifest.extensions)
+        if ds.manifest.extensions is None:
+            return "auto"
+        from .cost import refuse_unsupported_groups
+        refuse_unsupported_groups(ds.manifest.extensions, f"{ds.manifest.path}: [model] extensions")
+        return tuple(ds.manifest.extensions)
     return model
 
 

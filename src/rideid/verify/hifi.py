@@ -47,6 +47,15 @@ passive-force callback, so it acts between wheel and body at each corner.
 
 Every key but ``cg_height`` is one number (all corners) or ``[front, rear]``.
 
+The nonlinear suspension of SPEC §8, given in the scenario as the 7-DOF
+engine takes it, is the same car here: ``[dampers]`` curves
+(:class:`rideid.data.schema.DamperCurves`, argument ``dampers``) drive the
+passive-force callback with the kernel's piecewise-linear force
+(:func:`curve_force`); ``[truth]`` bump stops are ``bumpstop_clearance`` and
+``bumpstop_rate`` (:func:`scenario_properties`); ``[vehicle] cg_height``
+(``Geometry.cg_height``) is ``cg_height`` (giving it in both places with
+different values is refused).
+
 Sensors: accelerometers at the four suspension attachment points and the
 four wheel centres, a gyro on the body. :meth:`MujocoCar.outputs` gives the
 SPEC channels: each accelerometer's reading along its own z axis with
@@ -59,6 +68,7 @@ read (specific force along the sensor's z axis, gravity included), for
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from contextlib import contextmanager
 from dataclasses import dataclass
@@ -104,12 +114,55 @@ def damper_force(v, c_s, rebound_ratio=1.0, knee_velocity=math.inf, knee_ratio=1
     return np.sign(v) * mag
 
 
+def curve_force(knots, F, v):
+    """A SPEC §8 damper curve at compression velocities ``v`` (m/s): piecewise linear through (0, 0)
+    and the points ``(knots, F)`` (signed knots, increasing, without 0), continued beyond the outermost
+    points with the last segment's slope. The kernel's :func:`rideid.model.nonlinear.damper_force` once
+    merged; this one is written from the SPEC alone (an independent check of it).
+    """
+    xk = np.asarray(knots, dtype=float)
+    fk = np.asarray(F, dtype=float)
+    k = int(np.searchsorted(xk, 0.0))
+    x = np.concatenate([xk[:k], [0.0], xk[k:]])
+    f = np.concatenate([fk[:k], [0.0], fk[k:]])
+    v = np.asarray(v, dtype=float)
+    i = np.clip(np.searchsorted(x, v, side="right") - 1, 0, x.size - 2)
+    return f[i] + (f[i + 1] - f[i]) / (x[i + 1] - x[i]) * (v - x[i])
+
+
+def effective_properties(hifi: HifiProperties | None, geom: Geometry) -> HifiProperties:
+    """``hifi`` with the CG height of ``geom`` (SPEC §8 ``[vehicle] cg_height``) when that one is given."""
+    hifi = hifi or HifiProperties()
+    h = geom.cg_height
+    if h:
+        if hifi.cg_height and abs(hifi.cg_height - h) > 1e-12:
+            raise DataError(f"the CG height is given twice and differs: [vehicle] cg_height = {h:g} m, "
+                            f"[hifi] cg_height = {hifi.cg_height:g} m; give it once, in [vehicle]")
+        hifi = dataclasses.replace(hifi, cg_height=h)
+    return hifi
+
+
+def scenario_properties(sc) -> HifiProperties:
+    """The MuJoCo car's properties of a scenario: its ``[hifi]`` plus the SPEC §8 keys the 7-DOF engine takes too
+    (``[truth]`` bump stops; ``[vehicle] cg_height``). The ``[dampers]`` curves are passed on their own."""
+    hifi = effective_properties(sc.hifi, sc.geometry)
+    if sc.bump_stops:
+        clear, rate = sc.bump_stop_pairs
+        hifi = dataclasses.replace(hifi, bumpstop_clearance=clear, bumpstop_rate=rate)
+    return hifi
+
+
 # ---------------------------------------------------------------------------
 # the MJCF car
 
-def build_mjcf(P, geom: Geometry, hifi: HifiProperties | None = None) -> str:
-    """MJCF text of the car (the contact stiffness is set after compiling, :class:`MujocoCar`)."""
-    hifi = hifi or HifiProperties()
+def build_mjcf(P, geom: Geometry, hifi: HifiProperties | None = None, dampers=None) -> str:
+    """MJCF text of the car (the contact stiffness is set after compiling, :class:`MujocoCar`).
+
+    ``dampers``: SPEC §8 curves (:class:`rideid.data.schema.DamperCurves`) replace the joints' linear
+    damping (they act in the passive-force callback).
+    """
+    hifi = effective_properties(hifi, geom)
+    linear = hifi.linear_dampers and dampers is None
     p = dict(zip(NAMES, np.asarray(P, dtype=float)))
     R = geom.tire_radius
     h = hifi.cg_height
@@ -120,7 +173,7 @@ def build_mjcf(P, geom: Geometry, hifi: HifiProperties | None = None) -> str:
     for i, (c, x, y) in enumerate(zip(CORNERS, xs.tolist(), ys.tolist())):
         ax = 0 if c.startswith("f") else 1
         mu, ks, cs = (p["m_uf"], p["k_sf"], p["c_sf"]) if ax == 0 else (p["m_ur"], p["k_sr"], p["c_sr"])
-        damping = cs if hifi.linear_dampers else 0.0  # nonlinear dampers: the passive callback
+        damping = cs if linear else 0.0  # nonlinear dampers: the passive callback
         spring_force = tire_loads[i] - mu * GRAVITY  # the sprung mass's share
         iw = max(hifi.wheel_inertia[ax], 1e-6 * mu * R * R)
         wheels.append(f"""
@@ -163,27 +216,35 @@ def build_mjcf(P, geom: Geometry, hifi: HifiProperties | None = None) -> str:
 class MujocoCar:
     """A compiled MuJoCo car with the tire contact tuned to ``k_tf``/``k_tr``.
 
-    ``hifi``: :class:`HifiProperties` (or its fields as keyword arguments).
+    ``hifi``: :class:`HifiProperties` (or its fields as keyword arguments);
+    ``geom.cg_height``, when given, is the car's CG height (:func:`effective_properties`).
+    ``dampers``: SPEC §8 damper curves (:class:`rideid.data.schema.DamperCurves`), instead of c_sf/c_sr
+    (and of ``[hifi]``'s parametric dampers).
     Nonlinear dampers and bump stops act through MuJoCo's passive-force
     callback, so every RK4 stage sees them; step the car inside
     :meth:`active` (:func:`simulate_mujoco` does).
     """
 
-    def __init__(self, P, geom: Geometry, hifi: HifiProperties | None = None, **kw):
+    def __init__(self, P, geom: Geometry, hifi: HifiProperties | None = None, dampers=None, **kw):
         mujoco = _require()
         if hifi is None:
             hifi = HifiProperties(**kw)
         elif kw:
             raise TypeError("give either hifi or its fields, not both")
+        hifi = effective_properties(hifi, geom)
+        if dampers is not None and not hifi.linear_dampers:
+            raise DataError("the dampers are given twice, as [dampers] curves and as [hifi] "
+                            "damper_rebound_ratio/damper_knee_*; give them in one place ([dampers])")
         self.mj = mujoco
         self.hifi = hifi
+        self.dampers = dampers
         self.P = np.asarray(P, dtype=float).reshape(-1)
         ext = full_rows(self.P)[0]
         self.tire_damping = tire_damping_of(self.P, hifi)
         #: anti-roll bar rates (front, rear), N/m at the wheel
         self.bars = (float(ext[INDEX["k_arf"]]), float(ext[INDEX["k_arr"]]))
         self.geom = geom
-        self.model = mujoco.MjModel.from_xml_string(build_mjcf(self.P, geom, hifi))
+        self.model = mujoco.MjModel.from_xml_string(build_mjcf(self.P, geom, hifi, dampers))
         m = self.model
         p = dict(zip(NAMES, self.P))
         d_imp = IMPEDANCE
@@ -223,11 +284,23 @@ class MujocoCar:
         self._bs_clear = np.array(hifi.bumpstop_clearance)[axle]
         self._bs_rate = np.array(hifi.bumpstop_rate)[axle]
         self.susp_q0 = self.data.qpos[self.susp_q].copy()  # static ride height (bar unloaded)
-        self.needs_callback = not hifi.linear_dampers or hifi.bumpstops or any(self.bars)
+        self.linear_dampers = hifi.linear_dampers and dampers is None
+        if dampers is not None:  # the knots with the origin, and per corner its axle's forces there
+            x = np.asarray(dampers.velocity)
+            k = int(np.searchsorted(x, 0.0))
+            self._cx = np.concatenate([x[:k], [0.0], x[k:]])
+            self._cf = np.array([np.concatenate([f[:k], [0.0], f[k:]]) for f in
+                                 (np.asarray(dampers.curve("f" if c.startswith("f") else "r")) for c in CORNERS)])
+        self.needs_callback = not self.linear_dampers or hifi.bumpstops or any(self.bars)
 
     # -- suspension forces beyond MuJoCo's linear joint spring and damper ------------------
     def damper(self, v):
         """Damper force of the four corners (N, resisting) at compression velocities ``v`` (m/s)."""
+        if self.dampers is not None:  # curve_force, for the four corners at once
+            x, f = self._cx, self._cf
+            i = np.clip(np.searchsorted(x, v, side="right") - 1, 0, x.size - 2)
+            c = np.arange(4)
+            return f[c, i] + (f[c, i + 1] - f[c, i]) / (x[i + 1] - x[i]) * (v - x[i])
         return damper_force(v, self._c_s, self._reb, self._knee_v, self._knee_r)
 
     def suspension_force(self, q, v):
@@ -237,7 +310,7 @@ class MujocoCar:
             d = q - self.susp_q0
             kf, kr = self.bars
             f -= np.array([kf * (d[0] - d[1]), kf * (d[1] - d[0]), kr * (d[2] - d[3]), kr * (d[3] - d[2])])
-        if not self.hifi.linear_dampers:
+        if not self.linear_dampers:
             f -= self.damper(v)
         if self.hifi.bumpstops:
             f -= self._bs_rate * np.maximum(q - self._bs_clear, 0.0)
@@ -302,7 +375,7 @@ class MujocoRun:
 
 
 def simulate_mujoco(P, geom: Geometry, track, speed, t, distance=None, hifi: HifiProperties | None = None,
-                    raw: bool = False, details: bool = False, **kw):
+                    raw: bool = False, details: bool = False, dampers=None, **kw):
     """Outputs ``(n, 10)`` of the MuJoCo car at the sample times ``t`` (CHANNELS order).
 
     ``t`` must be uniform with a step that is a multiple of 1 ms; the posts
@@ -311,11 +384,12 @@ def simulate_mujoco(P, geom: Geometry, track, speed, t, distance=None, hifi: Hif
     difference of the envelope. ``hifi``: :class:`HifiProperties` (or its
     fields as keyword arguments); ``raw``: the sensors' own readings, gravity
     included; ``details``: return a :class:`MujocoRun` with tire loads,
-    lift-off times and suspension travel as well.
+    lift-off times and suspension travel as well; ``dampers``: SPEC §8 damper
+    curves (:class:`MujocoCar`).
     """
     from ..model.simulate import corner_inputs
 
-    car = MujocoCar(P, geom, hifi, **kw)
+    car = MujocoCar(P, geom, hifi, dampers=dampers, **kw)
     mj, m, d = car.mj, car.model, car.data
     t = np.asarray(t, dtype=float)
     h = float(t[1] - t[0])
@@ -352,5 +426,6 @@ def simulate_mujoco(P, geom: Geometry, track, speed, t, distance=None, hifi: Hif
     return out
 
 
-__all__ = ["HIFI_KEYS", "HifiProperties", "MujocoCar", "MujocoRun", "RAW_NAMES", "build_mjcf", "damper_force",
-           "parse_hifi", "simulate_mujoco", "tire_damping_of"]
+__all__ = ["HIFI_KEYS", "HifiProperties", "MujocoCar", "MujocoRun", "RAW_NAMES", "build_mjcf", "curve_force",
+           "damper_force", "effective_properties", "parse_hifi", "scenario_properties", "simulate_mujoco",
+           "tire_damping_of"]

@@ -12,6 +12,8 @@ module                     format
 :mod:`.channels`           how logger files are read: ``[channels]`` maps, units,
                            ``[preprocess]``, ``[csv]``
 :mod:`.hifi`               a scenario's ``[hifi]`` table (the MuJoCo car)
+:mod:`.dampers`            SPEC §8 in files: ``[dampers]`` curves, the bump-stop
+                           truths, ``[model] damper_knots``
 :mod:`.runfiles`           run CSVs of SPEC §3 and :class:`RunData`
 :mod:`.result`             ``result.json`` read back
 :mod:`.common`             TOML in and out, number and table checks, read-only
@@ -30,9 +32,12 @@ physics and IO code imports from it, never the other way.
 from .channels import (CHANNEL_KEYS, CSV_KEYS, PREPROCESS_KEYS, RUN_PREPROCESS_KEYS, SI, TARGETS, UNITS, ChannelEntry,
                        CsvOptions, parse_channel_map, parse_csv_options, parse_preprocess, quantity, unit_factor)
 from .common import ReadOnlyDict, atomic_output, checked_items, in_folder, read_toml, write_toml
+from .dampers import (BUMP_NAMES, DEFAULT_DAMPER_KNOTS, NONLINEAR_GROUPS, DamperCurves, parse_bump_stops,
+                      parse_damper_knots, parse_dampers)
 from .hifi import HIFI_KEYS, HifiProperties, parse_hifi, tire_damping_of
-from .manifest import (CHECK_LEVELS, CHECK_NAMES, DatasetManifest, Manifest, RunSpec, Scenario, load_manifest,
-                       load_truth, parse_checks, parse_dataset_manifest, parse_model, parse_scenario, parse_truth)
+from .manifest import (CHECK_LEVELS, CHECK_NAMES, MODEL_GROUPS, DatasetManifest, Manifest, RunSpec, Scenario,
+                       load_manifest, load_truth, load_truth_dampers, parse_checks, parse_dataset_manifest,
+                       parse_model, parse_model_table, parse_scenario, parse_truth)
 from .result import read_result_json
 from .runfiles import RunData, read_run_csv, write_run_csv
 
@@ -44,4 +49,6 @@ __all__ = [
     "atomic_output", "checked_items", "in_folder", "quantity", "unit_factor",
     "CHECK_NAMES", "CHECK_LEVELS", "HIFI_KEYS", "UNITS", "SI", "TARGETS", "PREPROCESS_KEYS", "RUN_PREPROCESS_KEYS",
     "CSV_KEYS", "CHANNEL_KEYS",
+    "BUMP_NAMES", "DEFAULT_DAMPER_KNOTS", "NONLINEAR_GROUPS", "MODEL_GROUPS", "DamperCurves", "parse_dampers",
+    "parse_bump_stops", "parse_damper_knots", "parse_model_table", "load_truth_dampers",
 ]

@@ -24,10 +24,12 @@ from ...model.tracks import Track
 from .channels import (RUN_PREPROCESS_KEYS, ChannelEntry, CsvOptions, parse_channel_map, parse_csv_options,
                        parse_preprocess)
 from .common import ReadOnlyDict, in_folder, number, read_only, read_toml, table
+from .dampers import (BUMP_NAMES, NONLINEAR_GROUPS, DamperCurves, bump_stop_pairs, parse_bump_stops,
+                      parse_damper_knots, parse_dampers)
 from .hifi import HifiProperties, parse_hifi, tire_damping_of
 
 #: a scenario may also describe the multibody car of rideid.verify.hifi (``[hifi]``, used by --engine mujoco)
-TOP_KEYS_SCENARIO = ("name", "vehicle", "known", "bounds", "model", "tracks", "runs", "truth", "hifi")
+TOP_KEYS_SCENARIO = ("name", "vehicle", "known", "bounds", "model", "tracks", "runs", "truth", "dampers", "hifi")
 #: a dataset may also describe how its files were logged (rideid.data.measured)
 TOP_KEYS_DATASET = ("name", "vehicle", "known", "bounds", "model", "channels", "preprocess", "csv", "checks",
                     "tracks", "runs")
@@ -36,6 +38,11 @@ RUN_KEYS_SCENARIO = ("id", "track", "speed", "fs", "duration")
 #: the data checks (rideid.data.checks) a ``[checks]`` table may set, and their levels
 CHECK_NAMES = ("wiring", "track")
 CHECK_LEVELS = ("error", "warn", "off")
+#: ``[vehicle]`` keys that may be left out (SPEC §8: ``cg_height``, 0 when absent)
+OPTIONAL_VEHICLE_KEYS = tuple(Geometry.OPTIONAL_KEYS)
+#: every model group a ``[model] extensions`` list may name: the linear ones (SPEC §6), then SPEC §8's
+MODEL_GROUPS = tuple(GROUPS) + NONLINEAR_GROUPS
+MODEL_KEYS = ("extensions", "damper_knots")
 
 
 # ---------------------------------------------------------------------------
@@ -96,7 +103,11 @@ class Manifest:
     tracks : mapping track id -> Track
     runs : tuple of RunSpec
     extensions : tuple of str or None
-        ``[model] extensions`` (SPEC §6), canonical order; None without a ``[model]`` table.
+        ``[model] extensions`` (SPEC §6, §8), canonical order (:data:`MODEL_GROUPS`); None without a
+        ``[model]`` table (or one that only sets ``damper_knots``).
+    damper_knots : tuple of float or None
+        ``[model] damper_knots`` (SPEC §8): the positive knot velocities (m/s) of damper curves to
+        identify; None: not given (the default knots of SPEC §8).
     """
 
     path: Path
@@ -107,6 +118,7 @@ class Manifest:
     tracks: ReadOnlyDict
     runs: tuple
     extensions: tuple[str, ...] | None = None
+    damper_knots: tuple[float, ...] | None = None
 
     def __post_init__(self):
         object.__setattr__(self, "path", Path(self.path))
@@ -115,6 +127,8 @@ class Manifest:
         object.__setattr__(self, "runs", tuple(self.runs))
         if self.extensions is not None:
             object.__setattr__(self, "extensions", tuple(self.extensions))
+        if self.damper_knots is not None:
+            object.__setattr__(self, "damper_knots", tuple(float(k) for k in self.damper_knots))
 
     @property
     def base_dir(self) -> Path:
@@ -135,14 +149,31 @@ class Manifest:
 class Scenario(Manifest):
     """A parsed, validated scenario file: a car to simulate (``[truth]``) on runs of given rate and duration."""
 
-    #: ``[truth]``: the twelve parameters and any extensions (absent means 0, not stored)
+    #: ``[truth]``: the twelve parameters, any extensions (absent means 0, not stored) and bump stops (SPEC §8)
     truth: ReadOnlyDict = field(default_factory=ReadOnlyDict)
     #: ``[hifi]``: the MuJoCo car's properties (rideid.verify.hifi), or None
     hifi: HifiProperties | None = None
+    #: ``[dampers]``: the car's damper curves (SPEC §8), or None (linear c_sf, c_sr)
+    dampers: DamperCurves | None = None
 
     def __post_init__(self):
         super().__post_init__()
         object.__setattr__(self, "truth", read_only(self.truth))
+
+    @property
+    def bump_stops(self) -> dict[str, float]:
+        """The bump-stop truths given (SPEC §8), name -> value; empty without bump stops."""
+        return {n: self.truth[n] for n in BUMP_NAMES if n in self.truth}
+
+    @property
+    def bump_stop_pairs(self):
+        """``((clear_f, clear_r), (rate_f, rate_r))``; an axle without a stop ``(inf, 0)``."""
+        return bump_stop_pairs(self.truth)
+
+    @property
+    def nonlinear(self) -> bool:
+        """Whether the car has damper curves or bump stops (SPEC §8): its tires then push but never pull."""
+        return self.dampers is not None or bool(self.bump_stops)
 
 
 @dataclass(frozen=True)
@@ -171,14 +202,14 @@ class DatasetManifest(Manifest):
 
     def to_dataset_doc(self) -> dict:
         """The ``dataset.toml`` document (plain dicts and lists, ready for TOML)."""
-        doc = {"name": self.name,
-               "vehicle": {k: getattr(self.geometry, k) for k in Geometry.KEYS}}
+        doc = {"name": self.name, "vehicle": vehicle_table(self.geometry)}
         if self.known:
             doc["known"] = dict(self.known)
         if self.bounds:
             doc["bounds"] = {k: list(v) for k, v in self.bounds.items()}
-        if self.extensions is not None:
-            doc["model"] = {"extensions": list(self.extensions)}
+        model = model_table(self)
+        if model is not None:
+            doc["model"] = model
         if self.channel_map:
             doc["channels"] = {k: e.to_table() for k, e in self.channel_map.items()}
         if self.preprocess:
@@ -207,19 +238,55 @@ def _param_value(v, name, where):
 
 
 def parse_model(tab, where: str) -> tuple[str, ...]:
-    """The ``[model]`` table: ``extensions = [group, ...]`` (SPEC §6) -> the groups in canonical order."""
+    """The ``[model]`` table's ``extensions = [group, ...]`` (SPEC §6, §8) -> the groups in canonical order."""
+    return parse_model_table(tab, where)[0] or ()
+
+
+def parse_model_table(tab, where: str) -> tuple[tuple[str, ...] | None, tuple[float, ...] | None]:
+    """The ``[model]`` table: ``(extensions, damper_knots)``.
+
+    ``extensions``: the groups (:data:`MODEL_GROUPS`, canonical order); None
+    when the table only sets ``damper_knots`` (the model is then chosen as
+    without a table). ``damper_knots``: None when not given.
+    """
     if not isinstance(tab, dict):
         raise DataError(f"{where}: [model] must be a table")
     for k in tab:
-        if k != "extensions":
-            raise DataError(f"{where}: [model]: unknown key '{k}'; allowed: extensions")
+        if k not in MODEL_KEYS:
+            raise DataError(f"{where}: [model]: unknown key '{k}'; allowed: {', '.join(MODEL_KEYS)}")
+    knots = parse_damper_knots(tab["damper_knots"], f"{where}: [model] damper_knots") if "damper_knots" in tab \
+        else None
+    if "extensions" not in tab and knots is not None:
+        return None, knots
     ext = tab.get("extensions", [])
     if not isinstance(ext, list) or not all(isinstance(g, str) for g in ext):
-        raise DataError(f"{where}: [model] extensions: expected a list of group names ({', '.join(GROUPS)})")
+        raise DataError(f"{where}: [model] extensions: expected a list of group names ({', '.join(MODEL_GROUPS)})")
     for g in ext:
-        if g not in GROUPS:
-            raise DataError(f"{where}: [model] extensions: unknown group '{g}'; groups are: {', '.join(GROUPS)}")
-    return tuple(g for g in GROUPS if g in ext)
+        if g not in MODEL_GROUPS:
+            raise DataError(f"{where}: [model] extensions: unknown group '{g}'; groups are: {', '.join(MODEL_GROUPS)}")
+    return tuple(g for g in MODEL_GROUPS if g in ext), knots
+
+
+def model_table(man: Manifest) -> dict | None:
+    """The ``[model]`` table of a manifest (None: none to write)."""
+    if man.extensions is None and man.damper_knots is None:
+        return None
+    out = {}
+    if man.extensions is not None:
+        out["extensions"] = list(man.extensions)
+    if man.damper_knots is not None:
+        out["damper_knots"] = list(man.damper_knots)
+    return out
+
+
+def vehicle_table(geom: Geometry) -> dict:
+    """The ``[vehicle]`` table of a geometry (``cg_height`` only when not 0)."""
+    out = {k: getattr(geom, k) for k in Geometry.KEYS}
+    for k in OPTIONAL_VEHICLE_KEYS:
+        v = getattr(geom, k)
+        if v != Geometry.OPTIONAL_KEYS[k]:
+            out[k] = v
+    return out
 
 
 def parse_checks(tab, where: str) -> dict:
@@ -235,15 +302,16 @@ def parse_checks(tab, where: str) -> dict:
 
 
 def parse_truth(tab: dict, where: str, geom: Geometry | None) -> dict[str, float]:
-    """The twelve parameters, and any of the four extensions (SPEC §6; absent means 0, not stored)."""
+    """The twelve parameters, any of the four extensions (SPEC §6; absent means 0, not stored) and the bump stops (SPEC §8)."""
     for k in tab:
-        if k not in NAMES and k not in EXT_NAMES:
+        if k not in NAMES and k not in EXT_NAMES and k not in BUMP_NAMES:
             raise DataError(f"{where}: unknown parameter '{k}'; expected the twelve: {', '.join(NAMES)} "
-                            f"(and optionally {', '.join(EXT_NAMES)})")
+                            f"(and optionally {', '.join(EXT_NAMES + BUMP_NAMES)})")
     missing = [k for k in NAMES if k not in tab]
     if missing:
         raise DataError(f"{where}: missing {', '.join(missing)} (all twelve parameters are needed)")
     vals = {k: _param_value(tab[k], k, f"{where} {k}") for k in NAMES + EXT_NAMES if k in tab}
+    vals.update(parse_bump_stops(tab, where))
     if geom is not None:
         check_parameters([vals[n] for n in NAMES], geom, where)
     return vals
@@ -261,13 +329,23 @@ def _check_top_keys(doc: dict, where: str, scenario: bool):
 
 def _parse_geometry(doc: dict, where: str) -> Geometry:
     veh = table(doc, "vehicle", where)
+    required = Geometry.KEYS
+    allowed = required + OPTIONAL_VEHICLE_KEYS
     for k in veh:
-        if k not in Geometry.KEYS:
-            raise DataError(f"{where}: [vehicle]: unknown key '{k}'; allowed: {', '.join(Geometry.KEYS)}")
-    for k in Geometry.KEYS:
+        if k not in allowed:
+            raise DataError(f"{where}: [vehicle]: unknown key '{k}'; allowed: {', '.join(allowed)}")
+    for k in required:
         if k not in veh:
             raise DataError(f"{where}: [vehicle]: missing key '{k}'")
-    return Geometry(**{k: number(veh[k], f"{where}: [vehicle] {k}", positive=True) for k in Geometry.KEYS})
+    kw = {k: number(veh[k], f"{where}: [vehicle] {k}", positive=True) for k in required}
+    if "cg_height" in veh:
+        h = number(veh["cg_height"], f"{where}: [vehicle] cg_height")
+        if h < 0:
+            raise DataError(f"{where}: [vehicle] cg_height: the CG height above the wheel centres must not be "
+                            f"negative (m), got {h:g}")
+        if h:
+            kw["cg_height"] = h
+    return Geometry(**kw)
 
 
 def _parse_known(doc: dict, where: str, geom: Geometry) -> dict[str, float]:
@@ -395,7 +473,12 @@ def parse_scenario(doc: dict, path) -> Scenario:
     where = str(path)
     kw = _parse_shared(doc, path, scenario=True)
     geom, known = kw["geometry"], kw["known"]
-    truth = parse_truth(table(doc, "truth", where), f"{where}: [truth]", geom)
+    dampers = parse_dampers(doc["dampers"], f"{where}: [dampers]") if "dampers" in doc else None
+    truth_tab = table(doc, "truth", where)
+    if dampers is not None:  # the curves are the dampers; c_sf, c_sr (if left out) their mean slope over +-0.1 m/s
+        truth_tab = {**{n: float(f"{dampers.slope_between(ax):.12g}") for n, ax in (("c_sf", "f"), ("c_sr", "r"))},
+                     **truth_tab}
+    truth = parse_truth(truth_tab, f"{where}: [truth]", geom)
     if "total_mass" in known:
         tm = total_mass(truth)
         if abs(tm - known["total_mass"]) > 1e-6 * tm:
@@ -405,7 +488,7 @@ def parse_scenario(doc: dict, path) -> Scenario:
         tv = truth.get(k, 0.0 if k in EXT_NAMES else None)
         if tv is not None and abs(tv - v) > 1e-9 * abs(v):
             raise DataError(f"{where}: [known] {k} = {v} disagrees with [truth] {k} = {tv}")
-    extensions = parse_model(doc["model"], where) if "model" in doc else None
+    extensions, knots = parse_model_table(doc["model"], where) if "model" in doc else (None, None)
     hifi = None
     if "hifi" in doc:
         hifi = parse_hifi(doc["hifi"], f"{where}: [hifi]")
@@ -413,7 +496,22 @@ def parse_scenario(doc: dict, path) -> Scenario:
         if hifi.cg_height <= -geom.tire_radius:
             raise DataError(f"{where}: [hifi] cg_height: a CG {-hifi.cg_height} m below the wheel centres "
                             f"is under the road (tire_radius {geom.tire_radius} m)")
-    return Scenario(**kw, extensions=extensions, truth=truth, hifi=hifi)
+        _check_hifi_against_scenario(hifi, geom, truth, dampers, where)
+    return Scenario(**kw, extensions=extensions, damper_knots=knots, truth=truth, hifi=hifi, dampers=dampers)
+
+
+def _check_hifi_against_scenario(hifi: HifiProperties, geom: Geometry, truth: dict, dampers, where: str):
+    """What ``[hifi]`` and the SPEC §8 keys both describe must be given once (or agree, for the CG height)."""
+    h = geom.cg_height
+    if h and hifi.cg_height and abs(h - hifi.cg_height) > 1e-12:
+        raise DataError(f"{where}: the CG height is given twice and differs: [vehicle] cg_height = {h:g} m, "
+                        f"[hifi] cg_height = {hifi.cg_height:g} m; give it once, in [vehicle]")
+    if dampers is not None and not hifi.linear_dampers:
+        raise DataError(f"{where}: the dampers are given twice, as [dampers] curves and as [hifi] "
+                        "damper_rebound_ratio/damper_knee_*; give them in one place ([dampers])")
+    if any(n in truth for n in BUMP_NAMES) and hifi.bumpstops:
+        raise DataError(f"{where}: the bump stops are given twice, as [truth] bs_clear_*/bs_rate_* and as [hifi] "
+                        "bumpstop_clearance/bumpstop_rate; give them in one place ([truth])")
 
 
 def parse_dataset_manifest(doc: dict, path) -> DatasetManifest:
@@ -421,7 +519,7 @@ def parse_dataset_manifest(doc: dict, path) -> DatasetManifest:
     path = Path(path)
     where = str(path)
     kw = _parse_shared(doc, path, scenario=False)
-    extensions = parse_model(doc["model"], where) if "model" in doc else None
+    extensions, knots = parse_model_table(doc["model"], where) if "model" in doc else (None, None)
     extra = {}
     if "channels" in doc:
         extra["channel_map"] = parse_channel_map(doc["channels"], f"{where}: [channels]")
@@ -432,7 +530,7 @@ def parse_dataset_manifest(doc: dict, path) -> DatasetManifest:
         extra["csv_table"] = dict(doc["csv"])
     if "checks" in doc:
         extra["checks"] = parse_checks(doc["checks"], f"{where}: [checks]")
-    return DatasetManifest(**kw, extensions=extensions, **extra)
+    return DatasetManifest(**kw, extensions=extensions, damper_knots=knots, **extra)
 
 
 def load_manifest(path) -> DatasetManifest:
@@ -448,12 +546,21 @@ def load_truth(path, geom: Geometry | None = None) -> dict[str, float]:
     path = Path(path)
     doc = read_toml(path)
     for k in doc:
-        if k != "truth":
-            raise DataError(f"{path}: unknown key '{k}'; expected a [truth] table")
+        if k not in ("truth", "dampers"):
+            raise DataError(f"{path}: unknown key '{k}'; expected a [truth] table (and [dampers])")
+    if "dampers" in doc:
+        parse_dampers(doc["dampers"], f"{path}: [dampers]")
     return parse_truth(table(doc, "truth", str(path)), f"{path}: [truth]", geom)
 
 
+def load_truth_dampers(path) -> DamperCurves | None:
+    """The ``[dampers]`` table of a ``truth.toml`` (SPEC §8: the simulated car's damper curves), or None."""
+    path = Path(path)
+    doc = read_toml(path)
+    return parse_dampers(doc["dampers"], f"{path}: [dampers]") if "dampers" in doc else None
+
+
 __all__ = ["Manifest", "Scenario", "DatasetManifest", "RunSpec", "ChannelEntry", "parse_scenario",
-           "parse_dataset_manifest", "parse_model", "parse_checks", "parse_truth", "load_manifest",
-           "load_truth", "CHECK_NAMES", "CHECK_LEVELS", "TOP_KEYS_SCENARIO", "TOP_KEYS_DATASET", "RUN_KEYS_SCENARIO",
+           "parse_dataset_manifest", "parse_model", "parse_model_table", "parse_checks", "parse_truth", "load_manifest",
+           "load_truth", "load_truth_dampers", "model_table", "vehicle_table", "MODEL_GROUPS", "CHECK_NAMES", "CHECK_LEVELS", "TOP_KEYS_SCENARIO", "TOP_KEYS_DATASET", "RUN_KEYS_SCENARIO",
            "RUN_KEYS_DATASET"]
