@@ -27,7 +27,8 @@ import numpy as np
 from rideid.data.scenario import default_scenario, run_times
 from rideid.model import nonlinear as nl
 from rideid.model.batch import BatchSimulator
-from rideid.model.nonlinear import DEFAULT_KNOTS, NonlinearLayout, NonlinearSimulator, hifi_curve
+from rideid.model.nonlinear import DEFAULT_KNOTS, NonlinearLayout, NonlinearSimulator
+from rideid.verify.hifi import hifi_curve
 from rideid.model.params import ALL_NAMES, as_vector
 from rideid.model.simulate import prepare_run
 

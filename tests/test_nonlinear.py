@@ -10,8 +10,9 @@ from rideid.model import backend, kernel_nl
 from rideid.model import nonlinear as nl
 from rideid.model.batch import BatchSimulator
 from rideid.model.equations import CHANNELS, static_corner_loads
-from rideid.model.nonlinear import (DEFAULT_KNOTS, NonlinearLayout, NonlinearSimulator, damper_force, hifi_curve,
+from rideid.model.nonlinear import (DEFAULT_KNOTS, NonlinearLayout, NonlinearSimulator, damper_force,
                                     linear_curve, make_simulator, simulate_nonlinear)
+from rideid.verify.hifi import hifi_curve
 from rideid.model.params import ALL_NAMES, DEFAULT_CAR, DEFAULT_GEOMETRY, GRAVITY, INDEX, Geometry, as_vector
 from rideid.model.simulate import prepare_run, simulate_reference
 from rideid.model.tracks import Track

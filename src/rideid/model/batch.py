@@ -6,7 +6,7 @@
 either to simulated channels or to per-run weighted squared errors, through
 the compiled kernel (:mod:`rideid.kernel`) or the plain NumPy reference
 (:func:`rideid.simulate.simulate_reference`; ``RIDEID_KERNEL=numpy``, see
-:mod:`rideid.model.backend`). :func:`make_simulator` picks this class or the
+:mod:`rideid.model.backend`). :func:`rideid.model.nonlinear.make_simulator` picks this class or the
 nonlinear car's :class:`rideid.model.nonlinear.NonlinearSimulator` by the
 parameter layout.
 """
@@ -160,10 +160,3 @@ class BatchSimulator:
             err[ri] = np.einsum("ntq,q->n", d * d, W[ri])
         return err
 
-
-def make_simulator(geom: Geometry, runs: list[RunInput], layout=None):
-    """:class:`BatchSimulator` for a linear layout (``None`` or no curves and no bump stops), else
-    :class:`rideid.model.nonlinear.NonlinearSimulator` (see :func:`rideid.model.nonlinear.make_simulator`)."""
-    from .nonlinear import make_simulator as make
-
-    return make(geom, runs, layout)

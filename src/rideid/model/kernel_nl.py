@@ -15,7 +15,7 @@ from __future__ import annotations
 import numba
 import numpy as np
 
-from .nonlinear import CI, COEF
+from .nl_coef import CI, COEF
 
 _NC = len(COEF)
 _I_MS, _I_IYY, _I_IXX, _I_TOP, _I_KF, _I_KR = (CI[n] for n in ("inv_ms", "inv_Iyy", "inv_Ixx", "topple",

@@ -115,6 +115,7 @@ from ..errors import DataError
 from . import backend
 from .equations import CHANNELS, mck, blocks as blocks_of, static_corner_loads
 from .params import ALL_NAMES, GRAVITY, INDEX, Geometry, check_parameters, full_rows
+from .nl_coef import CI, COEF
 from .simulate import RunInput
 
 #: Default damper velocity knots (m/s), SPEC §8.
@@ -239,17 +240,6 @@ def linear_curve(c, knots=DEFAULT_KNOTS) -> np.ndarray:
     return np.asarray(c, dtype=float)[..., None] * np.asarray(knots, dtype=float)
 
 
-def hifi_curve(c_s, knots=DEFAULT_KNOTS, rebound_ratio=1.0, knee_velocity=math.inf, knee_ratio=1.0) -> np.ndarray:
-    """Forces at the knots of the MuJoCo car's parametric damper (:func:`rideid.verify.hifi.damper_force`).
-
-    Exact (the same curve everywhere) when the knee velocity is one of the
-    positive and negative knots.
-    """
-    from ..verify.hifi import damper_force as hifi_damper
-
-    return np.asarray(hifi_damper(np.asarray(knots, dtype=float), c_s, rebound_ratio, knee_velocity, knee_ratio))
-
-
 def _slopes(knots, F):
     """Segment slopes ``(..., K)`` of curves ``F`` (..., K) through (0, 0)."""
     xk, j0 = _knot_table(knots)
@@ -261,10 +251,6 @@ def _slopes(knots, F):
 # per-candidate coefficients
 
 #: columns of the coefficient table (per candidate) used by both backends
-COEF = ("inv_ms", "inv_Iyy", "inv_Ixx", "topple", "kar_f", "kar_r",
-        *(f"{n}{c}" for n in ("inv_mu", "x", "y", "ks", "cs", "kt", "ct", "L", "bs_clear", "bs_rate")
-          for c in range(4)))
-CI = {n: i for i, n in enumerate(COEF)}
 _C4 = {n: [CI[f"{n}{k}"] for k in range(4)]
        for n in ("inv_mu", "x", "y", "ks", "cs", "kt", "ct", "L", "bs_clear", "bs_rate")}
 
@@ -619,5 +605,5 @@ def simulate_nonlinear(P, geom: Geometry, run: RunInput, layout: NonlinearLayout
 
 
 __all__ = ["BUMP_STOP_NAMES", "CHANNELS", "DEFAULT_KNOTS", "NonlinearLayout", "NonlinearSimulator", "RHO_MAX",
-           "curve_names", "damper_force", "hifi_curve", "linear_curve", "make_simulator", "simulate_nonlinear",
+           "curve_names", "damper_force", "linear_curve", "make_simulator", "simulate_nonlinear",
            "substeps"]

@@ -152,6 +152,16 @@ def scenario_properties(sc) -> HifiProperties:
     return hifi
 
 
+def hifi_curve(c_s, knots, rebound_ratio=1.0, knee_velocity=math.inf, knee_ratio=1.0) -> np.ndarray:
+    """Forces at the knots of the MuJoCo car's parametric damper (:func:`damper_force`).
+
+    Exact (the same curve everywhere) when the knee velocity is one of the
+    positive and negative knots.
+    """
+    return np.asarray(damper_force(np.asarray(knots, dtype=float), c_s, rebound_ratio, knee_velocity, knee_ratio))
+
+
+
 # ---------------------------------------------------------------------------
 # the MJCF car
 
@@ -427,5 +437,5 @@ def simulate_mujoco(P, geom: Geometry, track, speed, t, distance=None, hifi: Hif
 
 
 __all__ = ["HIFI_KEYS", "HifiProperties", "MujocoCar", "MujocoRun", "RAW_NAMES", "build_mjcf", "curve_force",
-           "damper_force", "effective_properties", "parse_hifi", "scenario_properties", "simulate_mujoco",
+           "damper_force", "hifi_curve", "effective_properties", "parse_hifi", "scenario_properties", "simulate_mujoco",
            "tire_damping_of"]
