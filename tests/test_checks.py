@@ -48,17 +48,18 @@ def hatch(tmp_path_factory):
     return sc, {rid: (t, Y + floor * rng.standard_normal(Y.shape)) for rid, (t, Y) in raw.items()}
 
 
-def one_run(folder, sc, raw, rid, *, mutate=None, cmap=None, edit=None):
-    """A one-run MDF logger dataset (gravity included); ``mutate(chans)``, ``edit(doc)`` make the mistake."""
+def one_run(folder, sc, raw, rid, *, mutate=None, cmap=None, edit=None, gravity=True):
+    """A one-run MDF logger dataset (gravity included unless ``gravity=False``); ``mutate(chans)``, ``edit(doc)``
+    make the mistake."""
     t, Y = raw[rid]
-    chans = logger_channels(t, Y, True)
+    chans = logger_channels(t, Y, gravity)
     if mutate:
         mutate(chans)
     (folder / "runs").mkdir(parents=True, exist_ok=True)
     write_mdf(folder / "runs" / f"{rid}.mf4", chans)
     run = sc.run(rid)
     doc = {"name": "one", "vehicle": {k: getattr(sc.geometry, k) for k in HATCH_VEHICLE},
-           "known": dict(sc.known), "channels": cmap or channel_map(), "preprocess": {"gravity_included": True},
+           "known": dict(sc.known), "channels": cmap or channel_map(), "preprocess": {"gravity_included": gravity},
            "tracks": [t.to_table() for t in sc.tracks.values()],
            "runs": [{"id": rid, "track": run.track, "speed": run.speed, "file": f"runs/{rid}.mf4"}]}
     if edit:
@@ -158,6 +159,22 @@ MISTAKES = {
         "H_HL", dict(cmap={**channel_map(), **{c: {"name": n, "unit": "m/s^2"} for c, n in (
             ("axle_az_fl", "AccZ_Hub_FL"), ("axle_az_fr", "AccZ_Hub_FR"))},
             **{c: {"name": n, "unit": "m/s^2"} for c, n in (("axle_az_rl", "AccZ_Hub_RL"), ("axle_az_rr", "AccZ_Hub_RR"))}},
+            mutate=lambda chans: chans.update({n: (chans[n][0], chans[n][1] / 9.80665, "g") for n in (
+                "AccZ_Hub_FL", "AccZ_Hub_FR")})),
+        ["axle_az_fl reads 9.81x too small (g mapped as m/s^2?)", 'axle_az_fl = { name = "AccZ_Hub_FL", unit = "g" }',
+         "(3 more error(s) of this kind)"]),
+    "one hub accelerometer in g mapped as m/s^2, gravity removed by the logger": (
+        "W_L", dict(gravity=False, cmap={**channel_map(), "axle_az_rl": {"name": "AccZ_Hub_RL", "unit": "m/s^2"}}),
+        ["run 'W_L': axle_az_rl reads 9.81x too small (g mapped as m/s^2?)", "its amplitude is",
+         'axle_az_rl = { name = "AccZ_Hub_RL", unit = "g" }']),
+    "one hub accelerometer in m/s^2 mapped as g, gravity removed by the logger": (
+        "T_HH", dict(gravity=False, cmap={**channel_map(), "axle_az_fl": {"name": "AccZ_Hub_FL", "unit": "g"}}),
+        ["run 'T_HH': axle_az_fl reads 9.81x too large (m/s^2 mapped as g?)",
+         'axle_az_fl = { name = "AccZ_Hub_FL", unit = "m/s^2" }']),
+    "every hub accelerometer in g mapped as m/s^2, gravity removed by the logger": (
+        "H_HL", dict(gravity=False, cmap={**channel_map(), **{c: {"name": n, "unit": "m/s^2"} for c, n in (
+            ("axle_az_fl", "AccZ_Hub_FL"), ("axle_az_fr", "AccZ_Hub_FR"), ("axle_az_rl", "AccZ_Hub_RL"),
+            ("axle_az_rr", "AccZ_Hub_RR"))}},
             mutate=lambda chans: chans.update({n: (chans[n][0], chans[n][1] / 9.80665, "g") for n in (
                 "AccZ_Hub_FL", "AccZ_Hub_FR")})),
         ["axle_az_fl reads 9.81x too small (g mapped as m/s^2?)", 'axle_az_fl = { name = "AccZ_Hub_FL", unit = "g" }',

@@ -40,7 +40,9 @@ The checks, and why they can tell:
   ``gravity_included`` an acceleration reads about g at rest. A lead-in mean of about 1 m/s² is g
   mapped as m/s², of about 96 m/s² m/s² mapped as g: for every
   acceleration channel, axle ones too, which the rigid-body identities do
-  not cover.
+  not cover. Without gravity (:func:`axle_amplitude_findings`), an axle
+  channel whose amplitude against the nominal car's on the same road is
+  about g times its siblings' (or the body channels') is in the wrong unit.
 * **Track and speed** (:func:`match_finding`): the measurement must
   correlate with the response to the stated track at the stated speed.
   Otherwise the speed (km/h typed as m/s) or the track is wrong; the caller
@@ -643,6 +645,66 @@ def unit_findings(run_id: str, entries: dict, record: dict) -> list[Finding]:
     return out
 
 
+#: an axle channel's amplitude against the road's (nominal car) may differ from its siblings' by this
+#: factor either way before a unit is blamed: real cars differ from the nominal one by far less than g
+AMPLITUDE_BAND = 2.5
+
+
+def axle_amplitude_findings(run_id: str, entries: dict, Y: np.ndarray, Yhat: np.ndarray,
+                            skip=()) -> list[Finding]:
+    """Axle accelerometers in the wrong unit, seen in their amplitude (gravity removed or not logged).
+
+    Without a lead-in reading g, a hub channel in g mapped as m/s^2 is only
+    9.81x too small. Each axle channel's RMS over the nominal car's response
+    on the same road is compared with that of the other axle channels (or,
+    when every hub channel is off by the same factor, with the body
+    channels', which the rigid-body identities have checked): a ratio of
+    about g (within :data:`AMPLITUDE_BAND`) is a unit mistake, since cars
+    differ from the nominal car by far less.
+
+    Returns one error (check "wiring") per channel, with the fix, as
+    :func:`unit_findings`.
+    """
+    def ratio(i):
+        y, yh = Y[:, i], Yhat[:, i]
+        if np.all(np.isnan(y)):
+            return np.nan
+        den = float(np.sqrt(np.mean(yh * yh)))
+        return float(np.sqrt(np.nanmean(y * y))) / den if den > 0 else np.nan
+
+    r = np.array([ratio(i) for i in range(len(CHANNELS))])
+    axles = [i for i in range(4, 8) if np.isfinite(r[i]) and r[i] > 0 and CHANNELS[i] not in skip]
+    body = np.nanmedian(r[:4]) if np.any(np.isfinite(r[:4])) else np.nan
+
+    def factor(q, band=AMPLITUDE_BAND):
+        for f in (G0, 1 / G0):  # the factor that restores the channel: q is about 1/f
+            if 1 / band < q * f < band:
+                return f
+        return None
+
+    flagged = {}
+    for i in axles:
+        others = [r[j] for j in axles if j != i]
+        ref = float(np.median(others)) if len(others) >= 2 else body
+        if not np.isfinite(ref) or ref <= 0:
+            continue
+        f = factor(r[i] / ref)
+        if f is None and len(others) >= 2 and np.isfinite(body) and body > 0:
+            # every hub off alike: against the body channels, whose ratio to the nominal car differs more
+            f = factor(r[i] / body, 2.0) if factor(ref / body, 2.0) is not None else None
+        if f is not None:
+            flagged[CHANNELS[i]] = f
+    out = []
+    for c, f in flagged.items():
+        fix = {c: {"source": c, "factor": f}}
+        i = CHANNELS.index(c)
+        out.append(Finding(ERROR, "wiring", f"run '{run_id}': {describe_fix(fix)}: its amplitude is {r[i]:.3g}x the "
+                           f"nominal car's on this road, the other channels' about {r[i] * f:.3g}x. Fix the channel "
+                           f"map: {'; '.join(fix_entries(fix, entries))} (or set [checks] wiring = \"warn\" if the "
+                           "map is right)", run_id, c, fix))
+    return out
+
+
 # ---------------------------------------------------------------------------
 # Track and speed
 
@@ -904,6 +966,11 @@ def check_dataset(ds) -> list[Finding]:
             out.append(Finding(WARNING, "wiring", f"run '{rid}': the body accelerometers and the gyro do not agree as "
                                f"one rigid body (residual {e_id:.0%}) and no swap, sign or unit explains it: check "
                                "the sensors' positions (at the spring/damper top mounts), units and the map", rid))
+        if wiring != "off" and not (wire and wire["fix"]):
+            amp = axle_amplitude_findings(rid, entries, Y, Yhat, skip={f.channel for f in units})
+            if wiring == "warn":
+                amp = [Finding(WARNING, f.check, f.message, f.run, f.channel, f.fix) for f in amp]
+            units += amp
         out += units
         if _level(ds, rid, "track") == "off":
             continue
@@ -961,6 +1028,6 @@ def bound_findings(details: dict, fraction: float = BOUND_FRACTION) -> list[Find
     return out
 
 
-__all__ = ["Finding", "check_dataset", "enforce", "unit_findings", "check_reach", "check_numbers", "check_coverage", "rigid_body_scores", "assignment", "wiring_fix",
+__all__ = ["Finding", "check_dataset", "enforce", "unit_findings", "axle_amplitude_findings", "check_reach", "check_numbers", "check_coverage", "rigid_body_scores", "assignment", "wiring_fix",
            "corrected", "describe_fix", "match_finding", "speed_candidates", "bound_findings", "PLAUSIBLE",
            "MATCH_MIN"]

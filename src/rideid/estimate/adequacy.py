@@ -66,8 +66,8 @@ MIN_QUIET = 20
 _ADVICE_HEAD = ("The residuals carry road-driven structure the model does not explain, so the estimates are "
                 "biased by more than their error bars say. ")
 _ADVICE_CHECKS = ("check that the track in dataset.toml (kind, start, height, wavelength) is the one driven and "
-                  "that each run's start is right; check the channels named below for a wrong sign, unit, axis or "
-                  "a loose sensor.")
+                  "that each run's start is right; check the run/channel pairs named above for a wrong sign, unit, "
+                  "axis or a loose sensor.")
 #: the advice when the model lacks extension groups and --model auto has not weighed them (see :func:`advice`)
 ADVICE = (_ADVICE_HEAD + "Try: `rideid identify --model auto` (or `--model full`) to let anti-roll bars and tire "
           "damping in; " + _ADVICE_CHECKS)
