@@ -25,16 +25,22 @@ _I_MU, _I_X, _I_Y, _I_KS, _I_CS, _I_KT, _I_CT, _I_L, _I_BC, _I_BR = (
 
 
 @numba.njit(cache=True, nogil=True, error_model="numpy")
-def _accel(co, p, xk, j0, Fk, Sk, curves, X, u, ud, qdd, d, v, F):
-    """Generalised accelerations ``qdd`` (7,) of state ``X`` (14,) for one candidate (row ``p``)."""
+def _accel(co, p, xk, j0, Fk, Sk, curves, X, u, ud, dX, qdd, d, v):
+    """State derivative ``dX`` (14,) and accelerations ``qdd`` (7,) of state ``X`` (14,) for candidate ``p``.
+
+    ``X = [q, theta', phi', z', p_1..4]``, ``p_i = z_i' - (c_t/m_u) r_i`` (as
+    :func:`rideid.model.nonlinear.accelerations`).
+    """
     z, th, ph = X[0], X[1], X[2]
     dz, dth, dph = X[7], X[8], X[9]
     nseg = xk.shape[0] - 1
     for c in range(4):
         x = co[p, _I_X + c]
         y = co[p, _I_Y + c]
+        w = X[10 + c] + co[p, _I_CT + c] * co[p, _I_MU + c] * u[c]
+        dX[3 + c] = w
         d[c] = X[3 + c] - (z - x * th + y * ph)
-        v[c] = X[10 + c] - (dz - x * dth + y * dph)
+        v[c] = w - (dz - x * dth + y * dph)
     bf = co[p, _I_KF] * (d[0] - d[1])
     br = co[p, _I_KR] * (d[2] - d[3])
     sx = 0.0
@@ -68,12 +74,17 @@ def _accel(co, p, xk, j0, Fk, Sk, curves, X, u, ud, qdd, d, v, F):
         e = d[c] - co[p, _I_BC + c]
         if e > 0.0:
             f += co[p, _I_BR + c] * e
-        F[c] = f
         L = co[p, _I_L + c]
-        t = L + co[p, _I_KT + c] * (u[c] - X[3 + c]) + co[p, _I_CT + c] * (ud[c] - X[10 + c])
-        if t < 0.0:
-            t = 0.0
-        qdd[3 + c] = (t - L - f) * co[p, _I_MU + c]
+        ct = co[p, _I_CT + c]
+        imu = co[p, _I_MU + c]
+        t0 = L + co[p, _I_KT + c] * (u[c] - X[3 + c]) - ct * dX[3 + c]
+        crd = ct * ud[c]
+        if t0 + crd >= 0.0:
+            dp = (t0 - L - f) * imu
+        else:
+            dp = (-L - f - crd) * imu
+        dX[10 + c] = dp
+        qdd[3 + c] = dp + ct * imu * ud[c]
         sf += f
         sx += co[p, _I_X + c] * f
         sy += co[p, _I_Y + c] * f
@@ -81,6 +92,12 @@ def _accel(co, p, xk, j0, Fk, Sk, curves, X, u, ud, qdd, d, v, F):
     qdd[0] = sf * co[p, _I_MS]
     qdd[1] = (-sx + top * th) * co[p, _I_IYY]
     qdd[2] = (sy + top * ph) * co[p, _I_IXX]
+    dX[0] = dz
+    dX[1] = dth
+    dX[2] = dph
+    dX[7] = qdd[0]
+    dX[8] = qdd[1]
+    dX[9] = qdd[2]
 
 
 @numba.njit(cache=True, nogil=True, error_model="numpy")
@@ -88,12 +105,11 @@ def run_range(c0, c1, co, xk, j0, Fk, Sk, curves, X0, run_start, hs, ms, fine_st
     """Candidates ``c0 <= p < c1`` over every run (see :func:`run` for the arguments)."""
     X = np.empty(14)
     Xt = np.empty(14)
-    K1 = np.empty(14)
     acc = np.empty(14)
+    dX = np.empty(14)
     qdd = np.empty(7)
     d = np.empty(4)
     v = np.empty(4)
-    F = np.empty(4)
     y = np.empty(10)
     n_runs = run_start.shape[0] - 1
     for p in range(c0, c1):
@@ -102,13 +118,13 @@ def run_range(c0, c1, co, xk, j0, Fk, Sk, curves, X0, run_start, hs, ms, fine_st
                 X[i] = X0[r, p, i]
             m = ms[r]
             h = hs[r]
+            hh = 0.5 * h
             f0 = fine_start[r]
             n = run_start[r + 1] - run_start[r]
             e_sum = 0.0
             for k in range(n):
                 jf = f0 + 2 * m * k
-                _accel(co, p, xk, j0, Fk, Sk, curves, X, UF[jf], RF[jf], qdd, d, v, F)
-                # channels
+                _accel(co, p, xk, j0, Fk, Sk, curves, X, UF[jf], RF[jf], dX, qdd, d, v)
                 for c in range(4):
                     y[c] = qdd[0] - co[p, _I_X + c] * qdd[1] + co[p, _I_Y + c] * qdd[2]
                     y[4 + c] = qdd[3 + c]
@@ -127,34 +143,21 @@ def run_range(c0, c1, co, xk, j0, Fk, Sk, curves, X0, run_start, hs, ms, fine_st
                 for s in range(m):
                     js = jf + 2 * s
                     if s > 0:
-                        _accel(co, p, xk, j0, Fk, Sk, curves, X, UF[js], RF[js], qdd, d, v, F)
-                    # k1 -> K1 (accumulated), stage 2 state
-                    for i in range(7):
-                        K1[i] = X[7 + i]
-                        K1[7 + i] = qdd[i]
-                    hh = 0.5 * h
+                        _accel(co, p, xk, j0, Fk, Sk, curves, X, UF[js], RF[js], dX, qdd, d, v)
                     for i in range(14):
-                        Xt[i] = X[i] + hh * K1[i]
-                    _accel(co, p, xk, j0, Fk, Sk, curves, Xt, UF[js + 1], RF[js + 1], qdd, d, v, F)
-                    for i in range(7):
-                        acc[i] = Xt[7 + i]
-                        acc[7 + i] = qdd[i]
+                        acc[i] = dX[i]
+                        Xt[i] = X[i] + hh * dX[i]
+                    _accel(co, p, xk, j0, Fk, Sk, curves, Xt, UF[js + 1], RF[js + 1], dX, qdd, d, v)
                     for i in range(14):
-                        K1[i] += 2.0 * acc[i]
-                        Xt[i] = X[i] + hh * acc[i]
-                    _accel(co, p, xk, j0, Fk, Sk, curves, Xt, UF[js + 1], RF[js + 1], qdd, d, v, F)
-                    for i in range(7):
-                        acc[i] = Xt[7 + i]
-                        acc[7 + i] = qdd[i]
+                        acc[i] += 2.0 * dX[i]
+                        Xt[i] = X[i] + hh * dX[i]
+                    _accel(co, p, xk, j0, Fk, Sk, curves, Xt, UF[js + 1], RF[js + 1], dX, qdd, d, v)
                     for i in range(14):
-                        K1[i] += 2.0 * acc[i]
-                        Xt[i] = X[i] + h * acc[i]
-                    _accel(co, p, xk, j0, Fk, Sk, curves, Xt, UF[js + 2], RF[js + 2], qdd, d, v, F)
-                    for i in range(7):
-                        acc[i] = Xt[7 + i]
-                        acc[7 + i] = qdd[i]
+                        acc[i] += 2.0 * dX[i]
+                        Xt[i] = X[i] + h * dX[i]
+                    _accel(co, p, xk, j0, Fk, Sk, curves, Xt, UF[js + 2], RF[js + 2], dX, qdd, d, v)
                     for i in range(14):
-                        X[i] += (h / 6.0) * (K1[i] + acc[i])
+                        X[i] += (h / 6.0) * (acc[i] + dX[i])
             err[r, p] = e_sum
 
 

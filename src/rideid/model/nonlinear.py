@@ -106,7 +106,7 @@ DEFAULT_KNOTS: tuple[float, ...] = (-0.4, -0.2, -0.1, -0.05, -0.025, 0.025, 0.05
 #: Bump-stop columns (after the sixteen): clearance m of compression from static, rate N/m.
 BUMP_STOP_NAMES: tuple[str, ...] = ("bs_clear_f", "bs_clear_r", "bs_rate_f", "bs_rate_r")
 #: Largest ``h_sub * max|eig|`` of the RK4 sub-step (accuracy, not stability: RK4 is stable to 2.8).
-RHO_MAX = 0.25
+RHO_MAX = 0.03
 #: Most sub-steps per sample.
 M_MAX = 4096
 
@@ -349,16 +349,25 @@ def _curve_eval(xk, Fk, Sk, v):
 
 
 def accelerations(co, xk, Fk, Sk, curves: bool, X, r, rd):
-    """Generalised accelerations ``(n, 7)`` of states ``X`` (n, 14) for road inputs ``r``, rates ``rd`` (4,)."""
+    """State derivative ``(n, 14)`` and generalised accelerations ``(n, 7)`` for inputs ``r``, rates ``rd`` (4,).
+
+    ``X = [q, theta', phi', z', p]`` with the wheels' shifted velocities
+    ``p_i = z_i' - (c_t / m_u) r_i`` (see :func:`shifted`): in contact the
+    tire damper's ``c_t r'`` cancels from ``p'``, so the road's rate (which
+    jumps where the envelope kinks) enters the integration only while a
+    wheel is off the road, and the outputs at the samples.
+    """
     def c(name):
         return co[:, _C4[name]]
 
-    q, qd = X[:, :7], X[:, 7:]
+    q = X[:, :7]
+    ctm = c("ct") * c("inv_mu")
+    w = X[:, 10:] + ctm * r  # wheel velocities
     x, y = c("x"), c("y")
     zb = q[:, :1] - x * q[:, 1:2] + y * q[:, 2:3]
-    dzb = qd[:, :1] - x * qd[:, 1:2] + y * qd[:, 2:3]
+    dzb = X[:, 7:8] - x * X[:, 8:9] + y * X[:, 9:10]
     d = q[:, 3:] - zb
-    v = qd[:, 3:] - dzb
+    v = w - dzb
     F = c("ks") * d
     bf = co[:, CI["kar_f"]] * (d[:, 0] - d[:, 1])
     br = co[:, CI["kar_r"]] * (d[:, 2] - d[:, 3])
@@ -366,13 +375,25 @@ def accelerations(co, xk, Fk, Sk, curves: bool, X, r, rd):
     F = F + (_curve_eval(xk, Fk, Sk, v) if curves else c("cs") * v)
     F = F + c("bs_rate") * np.maximum(d - c("bs_clear"), 0.0)
     L = c("L")
-    T = np.maximum(L + c("kt") * (r - q[:, 3:]) + c("ct") * (rd - qd[:, 3:]), 0.0) - L
-    out = np.empty_like(q)
+    t0 = L + c("kt") * (r - q[:, 3:]) - c("ct") * w  # tire force without the rate term
+    crd = c("ct") * rd
+    contact = t0 + crd >= 0.0
+    dp = np.where(contact, t0 - L - F, -L - F - crd) * c("inv_mu")
+    qdd = np.empty_like(q)
     topple = co[:, CI["topple"]]
-    out[:, 0] = F.sum(-1) * co[:, CI["inv_ms"]]
-    out[:, 1] = (-(x * F).sum(-1) + topple * q[:, 1]) * co[:, CI["inv_Iyy"]]
-    out[:, 2] = ((y * F).sum(-1) + topple * q[:, 2]) * co[:, CI["inv_Ixx"]]
-    out[:, 3:] = (T - F) * c("inv_mu")
+    qdd[:, 0] = F.sum(-1) * co[:, CI["inv_ms"]]
+    qdd[:, 1] = (-(x * F).sum(-1) + topple * q[:, 1]) * co[:, CI["inv_Iyy"]]
+    qdd[:, 2] = ((y * F).sum(-1) + topple * q[:, 2]) * co[:, CI["inv_Ixx"]]
+    qdd[:, 3:] = dp + ctm * rd
+    dX = np.concatenate([X[:, 7:10], w, qdd[:, :3], dp], axis=1)
+    return dX, qdd
+
+
+def shifted(co, X, r, back: bool = False):
+    """States with wheel velocities ``z'`` -> shifted ``p = z' - (c_t/m_u) r`` (``back``: the inverse)."""
+    ctm = co[:, _C4["ct"]] * co[:, _C4["inv_mu"]]
+    out = X.copy()
+    out[..., 10:] += (ctm if back else -ctm) * r
     return out
 
 
@@ -404,22 +425,21 @@ def simulate_numpy(P, geom, run: RunInput, layout: NonlinearLayout, m: int, fine
     co, xk, Fk, Sk = coefficients(P, geom, layout)
     curves = layout.knots is not None
     U, R = fine_inputs(run, m) if fine is None else fine
-    X = initial_state(P, geom, layout, run.u[0])
+    X = shifted(co, initial_state(P, geom, layout, run.u[0]), run.u[0])
     n = X.shape[0]
     hs = run.h / m
     y = np.empty((n, run.n, 10))
     Xs = np.empty((n, run.n, 14)) if return_states else None
 
     def f(X, j):
-        qdd = accelerations(co, xk, Fk, Sk, curves, X, U[j], R[j])
-        return np.concatenate([X[:, 7:], qdd], axis=1), qdd
+        return accelerations(co, xk, Fk, Sk, curves, X, U[j], R[j])
 
     for k in range(run.n):
         j = 2 * m * k
         d1, qdd = f(X, j)
         y[:, k] = channels(co, X, qdd)
         if return_states:
-            Xs[:, k] = X
+            Xs[:, k] = shifted(co, X, run.u[k], back=True)
         if k + 1 == run.n:
             break
         for s in range(m):
@@ -494,7 +514,7 @@ class NonlinearSimulator:
         self.last_substeps = ms
         co, xk, Fk, Sk = coefficients(P, self.geom, self.layout)
         fines = [self.fine(i, m) for i, m in enumerate(ms)]
-        X0 = np.stack([initial_state(P, self.geom, self.layout, r.u[0]) for r in self.runs])
+        X0 = np.stack([shifted(co, initial_state(P, self.geom, self.layout, r.u[0]), r.u[0]) for r in self.runs])
         return kernel_nl.run(co, xk, Fk, Sk, self.layout.knots is not None, X0, self.run_start,
                              np.array([r.h for r in self.runs]), np.array(ms, dtype=np.int64), fines, Y, W, mode)
 

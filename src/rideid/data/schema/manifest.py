@@ -476,7 +476,8 @@ def parse_scenario(doc: dict, path) -> Scenario:
     dampers = parse_dampers(doc["dampers"], f"{where}: [dampers]") if "dampers" in doc else None
     truth_tab = table(doc, "truth", where)
     if dampers is not None:  # the curves are the dampers; c_sf, c_sr (if left out) their mean slope over +-0.1 m/s
-        truth_tab = {**{n: dampers.slope_between(ax) for n, ax in (("c_sf", "f"), ("c_sr", "r"))}, **truth_tab}
+        truth_tab = {**{n: float(f"{dampers.slope_between(ax):.12g}") for n, ax in (("c_sf", "f"), ("c_sr", "r"))},
+                     **truth_tab}
     truth = parse_truth(truth_tab, f"{where}: [truth]", geom)
     if "total_mass" in known:
         tm = total_mass(truth)

@@ -1,0 +1,308 @@
+"""The nonlinear car (SPEC §8): integration error on every track kind, the two backends,
+closed-form and cross checks against the linear kernel."""
+
+import warnings
+
+import numpy as np
+import pytest
+
+from rideid.model import backend, kernel_nl
+from rideid.model import nonlinear as nl
+from rideid.model.batch import BatchSimulator
+from rideid.model.equations import CHANNELS, static_corner_loads
+from rideid.model.nonlinear import (DEFAULT_KNOTS, NonlinearLayout, NonlinearSimulator, damper_force, hifi_curve,
+                                    linear_curve, make_simulator, simulate_nonlinear)
+from rideid.model.params import ALL_NAMES, DEFAULT_CAR, DEFAULT_GEOMETRY, GRAVITY, INDEX, Geometry, as_vector
+from rideid.model.simulate import prepare_run, simulate_reference
+from rideid.model.tracks import Track
+
+G0 = DEFAULT_GEOMETRY
+GH = Geometry(G0.wheelbase, G0.track_front, G0.track_rear, G0.tire_radius, cg_height=0.25)
+FS = 200.0
+CAR = {**DEFAULT_CAR, "k_arf": 9000.0, "k_arr": 4000.0, "c_tf": 150.0, "c_tr": 120.0}
+FULL = NonlinearLayout(knots=DEFAULT_KNOTS, bump_stops=True)
+
+# severe runs: every one reaches the bump stops and lifts a wheel (checked)
+TRACKS = {
+    "washboard": (dict(id="w", kind="washboard", start=2.0, amplitude=0.011, wavelength=0.8, cycles=6), 10.0),
+    "herringbone": (dict(id="h", kind="herringbone", start=2.0, amplitude=0.011, wavelength=0.7, cycles=8,
+                         angle=30.0), 8.0),
+    "chassis_twist": (dict(id="t", kind="chassis_twist", start=2.0, height=0.07, bump_length=1.2, spacing=3.0,
+                           bumps=2), 6.0),
+    "profile": (dict(id="p", kind="profile", file="road.csv"), 8.0),
+    "flat": (dict(id="f", kind="flat"), 8.0),
+}
+
+
+def nasty_row(P16=None):
+    """Asymmetric digressive dampers (2:1 and 1.6:1, knee 0.1 m/s), bars, tire damping, bump stops."""
+    P16 = as_vector(CAR, extended=True) if P16 is None else P16
+    Ff = hifi_curve(CAR["c_sf"], DEFAULT_KNOTS, 2.0, 0.1, 0.4)
+    Fr = hifi_curve(CAR["c_sr"], DEFAULT_KNOTS, 1.6, 0.1, 0.5)
+    return np.concatenate([P16, [0.02, 0.025, 60000.0, 50000.0], Ff, Fr])
+
+
+@pytest.fixture(scope="module")
+def road_dir(tmp_path_factory):
+    d = tmp_path_factory.mktemp("road")
+    x = np.linspace(2.0, 6.0, 401)
+    zl = 0.03 * np.sin(2 * np.pi * (x - 2) / 0.7) * np.hanning(x.size)
+    zr = 0.012 * np.sin(2 * np.pi * (x - 2) / 1.1) * np.hanning(x.size) ** 0.5
+    np.savetxt(d / "road.csv", np.column_stack([x, zl, zr]), delimiter=",", header="x,z_left,z_right", comments="")
+    return d
+
+
+def make_run(kind, road_dir, geom=GH, duration=2.5, scale=1.0):
+    table, V = TRACKS[kind]
+    table = dict(table)
+    for k in ("amplitude", "height"):
+        if k in table:
+            table[k] *= scale
+    tr = Track.from_table(table, "t", base_dir=road_dir)
+    return prepare_run(tr, geom, V, np.arange(int(duration * FS) + 1) / FS)
+
+
+def compiled(P, geom, run, layout, m):
+    co, xk, Fk, Sk = nl.coefficients(P, geom, layout)
+    X0 = nl.shifted(co, nl.initial_state(P, geom, layout, run.u[0]), run.u[0])[None]
+    _, out = kernel_nl.run(co, xk, Fk, Sk, layout.knots is not None, X0, np.array([0, run.n]), [run.h],
+                           np.array([m]), [nl.fine_inputs(run, m)], np.zeros((run.n, 10)), np.zeros((1, 10)), 1)
+    return out
+
+
+def rel_rms(y, ref):
+    rms = np.sqrt(np.mean(ref ** 2, axis=-2))
+    err = np.sqrt(np.mean((y - ref) ** 2, axis=-2))
+    ok = rms > 1e-9 * rms.max()
+    return np.where(ok, err / np.where(ok, rms, 1), 0.0)
+
+
+def deflections(P, geom, states):
+    q = states[..., :7]
+    x, y = geom.corner_xy(P[..., INDEX["a"]])
+    zb = q[..., :1] - x[:, None] * q[..., 1:2] + y[:, None] * q[..., 2:3]
+    return q[..., 3:] - zb
+
+
+@pytest.mark.parametrize("kind", list(TRACKS))
+def test_integration_error_every_track_kind(kind, road_dir):
+    """Sub-steps chosen by the simulator against RK4 at 64x the sub-steps: < 1e-4 of every channel's RMS,
+    on runs that reach the bump stops and lift wheels off the road."""
+    run = make_run(kind, road_dir)
+    P = nasty_row()[None]
+    sim = NonlinearSimulator(GH, [run], FULL)
+    y = sim.outputs(P)[0]
+    m = sim.last_substeps[0]
+    if kind == "flat":
+        assert np.all(y == 0)
+        return
+    ref = compiled(P, GH, run, FULL, 64 * m)
+    err = rel_rms(y[0], ref[0])
+    print(kind, "m", m, "error", err.max())
+    assert err.max() < 1e-4, dict(zip(CHANNELS, err))
+    # the run is as severe as claimed: a bump stop reached and a wheel off the road
+    _, X = simulate_nonlinear(P, GH, run, FULL, return_states=True)
+    d = deflections(P, GH, X)[0]
+    assert np.any(d[:, :2] > 0.02) or np.any(d[:, 2:] > 0.025)
+    kt = np.array([CAR["k_tf"]] * 2 + [CAR["k_tr"]] * 2)
+    ct = np.array([CAR["c_tf"]] * 2 + [CAR["c_tr"]] * 2)
+    tire = static_corner_loads(P[:, :16], GH)[0] + kt * (run.u - X[0, :, 3:7]) + ct * (run.rate - X[0, :, 10:])
+    assert np.any(tire < 0)
+
+
+def _rhs_physical(P, geom, run, t, X):
+    """The equations of SPEC §1/§6/§8 written out again, unshifted states, one candidate (for solve_ivp)."""
+    p = dict(zip(FULL.names, P))
+    h = geom.cg_height
+    a, b = p["a"], geom.wheelbase - p["a"]
+    xs = np.array([a, a, -b, -b])
+    ys = np.array(geom.corner_y)
+    u, ud = run.inputs_at(np.array([t]))
+    u, ud = u[0], ud[0]
+    q, qd = X[:7], X[7:]
+    zb = q[0] - xs * q[1] + ys * q[2]
+    d = q[3:] - zb
+    v = qd[3:] - (qd[0] - xs * qd[1] + ys * qd[2])
+    ks = np.array([p["k_sf"]] * 2 + [p["k_sr"]] * 2)
+    kt = np.array([p["k_tf"]] * 2 + [p["k_tr"]] * 2)
+    ct = np.array([p["c_tf"]] * 2 + [p["c_tr"]] * 2)
+    mu = np.array([p["m_uf"]] * 2 + [p["m_ur"]] * 2)
+    Ff = [p[f"F_f{j + 1}"] for j in range(len(DEFAULT_KNOTS))]
+    Fr = [p[f"F_r{j + 1}"] for j in range(len(DEFAULT_KNOTS))]
+    kn = np.array(DEFAULT_KNOTS)
+    xk = np.concatenate([kn[:5], [0.0], kn[5:]])
+
+    def curve(F, vv):
+        Fk = np.concatenate([F[:5], [0.0], F[5:]])
+        j = min(max(int(np.searchsorted(xk, vv)) - 1, 0), xk.size - 2)
+        return Fk[j] + (Fk[j + 1] - Fk[j]) / (xk[j + 1] - xk[j]) * (vv - xk[j])
+
+    damp = np.array([curve(Ff, v[0]), curve(Ff, v[1]), curve(Fr, v[2]), curve(Fr, v[3])])
+    bars = np.array([p["k_arf"] * (d[0] - d[1]), p["k_arf"] * (d[1] - d[0]),
+                     p["k_arr"] * (d[2] - d[3]), p["k_arr"] * (d[3] - d[2])])
+    clear = np.array([p["bs_clear_f"]] * 2 + [p["bs_clear_r"]] * 2)
+    rate = np.array([p["bs_rate_f"]] * 2 + [p["bs_rate_r"]] * 2)
+    F = ks * d + bars + damp + rate * np.maximum(d - clear, 0)
+    L = np.array([p["m_s"] * GRAVITY * b / geom.wheelbase / 2 + p["m_uf"] * GRAVITY] * 2
+                 + [p["m_s"] * GRAVITY * a / geom.wheelbase / 2 + p["m_ur"] * GRAVITY] * 2)
+    T = np.maximum(L + kt * (u - q[3:]) + ct * (ud - qd[3:]), 0) - L
+    mw = 2 * (p["m_uf"] + p["m_ur"]) * h * h
+    qdd = np.concatenate([[F.sum() / p["m_s"],
+                           (-(xs * F).sum() + p["m_s"] * GRAVITY * h * q[1]) / (p["I_yy"] + mw),
+                           ((ys * F).sum() + p["m_s"] * GRAVITY * h * q[2]) / (p["I_xx"] + mw)],
+                          (T - F) / mu])
+    return np.concatenate([qd, qdd]), qdd
+
+
+def test_matches_scipy_dop853(road_dir):
+    """An independent integrator (DOP853, rtol 1e-10) on independently written equations."""
+    from scipy.integrate import solve_ivp
+
+    run = make_run("chassis_twist", road_dir, duration=1.6)
+    P = nasty_row()
+    y = simulate_nonlinear(P, GH, run, FULL)[0]
+    sol = solve_ivp(lambda t, X: _rhs_physical(P, GH, run, t, X)[0], (0, run.t[-1]), np.zeros(14),
+                    method="DOP853", t_eval=run.t, rtol=1e-10, atol=1e-12, max_step=run.h / 2)
+    ref = np.empty_like(y)
+    x, yy = GH.corner_xy(np.array([P[INDEX["a"]]]))
+    for k, t in enumerate(run.t):
+        _, qdd = _rhs_physical(P, GH, run, t, sol.y[:, k])
+        ref[k, :4] = qdd[0] - x[0] * qdd[1] + yy[0] * qdd[2]
+        ref[k, 4:8] = qdd[3:]
+        ref[k, 8:] = sol.y[8:10, k]
+    err = rel_rms(y, ref)
+    print("DOP853 error", err.max())
+    assert err.max() < 1e-4, dict(zip(CHANNELS, err))
+
+
+def population(n, seed=0):
+    rng = np.random.default_rng(seed)
+    base = nasty_row()
+    P = base * rng.uniform(0.85, 1.15, size=(n, base.size))
+    P[:, INDEX["a"]] = base[INDEX["a"]] * rng.uniform(0.95, 1.05, n)
+    return P
+
+
+def test_backends_agree(road_dir, monkeypatch):
+    runs = [make_run("herringbone", road_dir, duration=1.5), make_run("chassis_twist", road_dir, duration=1.5)]
+    P = population(6)
+    sim = NonlinearSimulator(GH, runs, FULL)
+    fast = sim.outputs(P)
+    ref = sim.outputs_reference(P)
+    for a, b in zip(fast, ref):
+        assert np.abs(a - b).max() <= 1e-10 * np.abs(b).max()
+    Y = np.concatenate([r[0] for r in ref]) * 1.01
+    W = np.ones((2, 10))
+    e1, e2 = sim.errors(P, Y, W), sim.errors_reference(P, Y, W)
+    np.testing.assert_allclose(e1, e2, rtol=1e-9)
+    monkeypatch.setenv("RIDEID_KERNEL", "numpy")
+    np.testing.assert_allclose(sim.errors(P, Y, W), e2, rtol=1e-12)
+    lin = BatchSimulator(G0, runs)
+    Pl = P[:, :16]
+    Yl = np.concatenate([r[0] for r in lin.outputs_reference(Pl)])
+    np.testing.assert_allclose(lin.errors(Pl, Yl, W), lin.errors_reference(Pl, Yl, W), rtol=1e-12, atol=1e-20)
+    monkeypatch.setenv("RIDEID_KERNEL", "fortran")
+    with pytest.raises(Exception, match="RIDEID_KERNEL"):
+        sim.errors(P, Y, W)
+
+
+def test_compile_failure_falls_back_with_one_warning(road_dir, monkeypatch):
+    run = make_run("chassis_twist", road_dir, duration=0.5)
+    monkeypatch.setattr(backend, "_STATUS", {})
+    monkeypatch.setattr(backend, "_WARNED", False)
+
+    def broken():
+        raise RuntimeError("no compiler")
+
+    monkeypatch.setattr(backend, "_builders", lambda: {"linear": broken, "nonlinear": broken})
+    P = nasty_row()[None]
+    with warnings.catch_warnings(record=True) as w:
+        warnings.simplefilter("always")
+        sim = NonlinearSimulator(GH, [run], FULL)
+        y1 = sim.outputs(P)[0]
+        sim.outputs(P)
+        BatchSimulator(G0, [run]).outputs(P[:, :16])
+    assert len([x for x in w if "could not be built" in str(x.message)]) == 1
+    np.testing.assert_array_equal(y1, sim.outputs_reference(P)[0])
+
+
+def test_linear_curves_equal_the_linear_kernel(road_dir):
+    """F = c v, no bump stops, no lift-off: the RK4 car equals the exact discretisation (two methods)."""
+    layout = NonlinearLayout(knots=DEFAULT_KNOTS)
+    P16 = as_vector(CAR, extended=True)
+    P = np.concatenate([P16, linear_curve(CAR["c_sf"]), linear_curve(CAR["c_sr"])])[None]
+    for kind in ("washboard", "herringbone", "chassis_twist", "profile"):
+        run = make_run(kind, road_dir, scale=0.3)
+        y = NonlinearSimulator(GH, [run], layout).outputs(P)[0][0]
+        ref = simulate_reference(P16[None], GH, run)[0]
+        _, X = simulate_nonlinear(P, GH, run, layout, return_states=True)
+        tire = static_corner_loads(P16[None], GH)[0] + P16[10] * (run.u - X[0, :, 3:7])
+        assert tire.min() > 0  # no lift-off
+        assert rel_rms(y, ref).max() < 1e-4, (kind, rel_rms(y, ref))
+    # linear dampers from the row (no curves), lift-off out of reach
+    y2 = NonlinearSimulator(GH, [run], NonlinearLayout()).outputs(P16[None])[0][0]
+    assert rel_rms(y2, ref).max() < 1e-4
+
+
+def test_symmetric_car_on_symmetric_track_does_not_roll(road_dir):
+    run = make_run("washboard", road_dir)
+    y = NonlinearSimulator(GH, [run], FULL).outputs(nasty_row()[None])[0][0]
+    assert np.abs(y[:, CHANNELS.index("roll_rate")]).max() == 0
+    np.testing.assert_array_equal(y[:, 0], y[:, 1])
+    assert np.abs(y[:, 0]).max() > 1
+
+
+def test_scale_invariance(road_dir):
+    """Masses, inertias, stiffnesses, damping, forces x 3 (CG height 0): the same accelerations."""
+    run = make_run("herringbone", road_dir, geom=G0)
+    P = nasty_row()
+    Q = P * 3.0
+    Q[INDEX["a"]] = P[INDEX["a"]]
+    i = FULL.index
+    Q[i["bs_clear_f"]], Q[i["bs_clear_r"]] = P[i["bs_clear_f"]], P[i["bs_clear_r"]]
+    sim = NonlinearSimulator(G0, [run], FULL)
+    y = sim.outputs(np.stack([P, Q]))[0]
+    assert np.abs(y[0] - y[1]).max() <= 1e-9 * np.abs(y[0]).max()
+
+
+def test_stiff_bump_stop_holds(road_dir):
+    run = make_run("chassis_twist", road_dir, geom=G0, duration=2.0)
+    P = nasty_row()
+    i = FULL.index
+    rate = 5e7
+    P[i["bs_rate_f"]] = P[i["bs_rate_r"]] = rate
+    _, X = simulate_nonlinear(P[None], G0, run, FULL, return_states=True)
+    d = deflections(P[None], G0, X)[0]
+    clear = np.array([P[i["bs_clear_f"]]] * 2 + [P[i["bs_clear_r"]]] * 2)
+    over = (d - clear).max()
+    assert over > 0  # reached
+    total = (P[INDEX["m_s"]] + 2 * P[INDEX["m_uf"]] + 2 * P[INDEX["m_ur"]]) * GRAVITY
+    assert over < 3 * total / rate  # a stop force of three times the car's weight at most
+
+
+def test_damper_force_curves():
+    v = np.linspace(-1.5, 1.5, 3001)
+    for reb, knee, kr in ((1.0, np.inf, 1.0), (2.0, 0.1, 0.4), (0.5, 0.2, 0.3)):
+        F = hifi_curve(2000.0, DEFAULT_KNOTS, reb, knee, kr)
+        from rideid.verify.hifi import damper_force as hifi_damper
+        np.testing.assert_allclose(damper_force(DEFAULT_KNOTS, F, v), hifi_damper(v, 2000.0, reb, knee, kr),
+                                   rtol=1e-12, atol=1e-9)
+    # batched forces, beyond the knots the last slope, through (0, 0)
+    F = np.stack([linear_curve(1000.0), linear_curve(3000.0)])
+    out = damper_force(DEFAULT_KNOTS, F, np.array([[0.0], [0.7]]))
+    np.testing.assert_allclose(out, [[0.0, 0.0], [700.0, 2100.0]])
+
+
+def test_layout_and_factory(road_dir):
+    lay = NonlinearLayout(knots=(-0.2, 0.1, 0.3), bump_stops=True)
+    assert lay.names == ALL_NAMES + ("bs_clear_f", "bs_clear_r", "bs_rate_f", "bs_rate_r",
+                                     "F_f1", "F_f2", "F_f3", "F_r1", "F_r2", "F_r3")
+    assert lay.n_columns == 26 and not lay.linear and NonlinearLayout().linear
+    with pytest.raises(Exception, match="knots"):
+        NonlinearLayout(knots=(0.1, 0.0))
+    run = make_run("chassis_twist", road_dir, duration=0.5)
+    assert isinstance(make_simulator(GH, [run]), BatchSimulator)
+    assert isinstance(make_simulator(GH, [run], NonlinearLayout()), BatchSimulator)
+    assert isinstance(make_simulator(GH, [run], lay), NonlinearSimulator)
+    with pytest.raises(Exception, match="26 columns"):
+        make_simulator(GH, [run], lay).outputs(np.zeros((1, 16)))
