@@ -146,3 +146,43 @@ def test_knot_counts_and_bad_model_names(sim_dataset, tmp_path, capsys):
     with pytest.raises(ArgumentError, match="c_sf"):
         ParameterSpace({"total_mass": 1093.3, "c_sf": 1800.0}, Geometry(2.579, 1.387, 1.364, 0.30),
                        extensions=["damper_curves"])
+
+
+def test_report_draws_the_curves_and_the_velocities_reached(digressive_fit):
+    """The report of a curve result has the "Damper curves" section: both figures, and per run a histogram
+    holding every sample of both corners of each axle (a linear result has none: tests/test_report.py)."""
+    import rideid as _r
+    from rideid.report import html as H
+
+    _, res, out = digressive_fit
+    assert main(["report", str(out)]) == 0
+    html = (out / "report.html").read_text()
+    assert 'id="dampers"' in html and "<h2>Damper curves</h2>" in html
+    assert html.count("data:image/png;base64,") == 16 + 2
+    for f in ("damper_curves", "damper_velocities"):
+        assert (out / "figures" / f"{f}.png").stat().st_size > 5000
+    result = load(out)
+    ds = _r.load_dataset(result.dataset, starts=result.start_values())
+    vels = H.result_suspension_velocities(result, ds)
+    edges, hists = H.velocity_histograms(vels)
+    assert list(hists) == [r.id for r in ds.runs]
+    for r in ds.runs:
+        n = len(ds.data[r.id].time)
+        assert [int(c.sum()) for c in hists[r.id]] == [2 * n, 2 * n], r.id
+    # reached: the built-in runs' suspension velocities pass the outermost knots on both sides
+    assert edges[0] < -0.4 and edges[-1] > 0.4
+
+
+def test_damper_figure_marks_knots_not_excited():
+    from rideid.report import html as H
+
+    F = digressive(1200, 400)
+    dm = {"velocity": VEL}
+    for axle in ("front", "rear"):
+        dm[axle] = {"force": F, "std_robust": [5.0] * 8 + [None, None], "excited": [True] * 8 + [False, False]}
+    fig = H.damper_curves_figure(dm, {"front": 1800.0, "rear": None})
+    labels = [[t.get_text() for t in ax.get_legend().get_texts()] for ax in fig.axes]
+    assert all(H.NOT_EXCITED_LABEL in lab and "± 2 std_robust" in lab for lab in labels)
+    assert any(t.startswith("derived c_sf") for t in labels[0]) and not any("c_sr" in t for t in labels[1])
+    import matplotlib.pyplot as plt
+    plt.close(fig)

@@ -22,7 +22,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..model.nonlinear import curve_names, simulate_nonlinear
+from ..model.nonlinear import check_nonlinear, curve_names, simulate_nonlinear, simulate_numpy, substeps
 
 #: samples (both corners of the axle, all runs) beyond the previous knot that make a knot excited
 MIN_SAMPLES = 20
@@ -30,20 +30,35 @@ MIN_SAMPLES = 20
 NOT_EXCITED = "not excited — not a number to trust"
 
 
-def suspension_velocities(cf, P) -> tuple[np.ndarray, np.ndarray]:
-    """Suspension velocities (m/s, compression +) of car ``P`` (a full row of ``cf.space``) over every
-    run: ``(front, rear)``, the samples of both corners of each axle concatenated."""
+def suspension_velocities_by_run(cf, P, rho: float | None = None) -> list[tuple[np.ndarray, np.ndarray]]:
+    """Suspension velocities (m/s, compression +) of car ``P`` (a full row of ``cf.space``) on each run
+    of ``cf``: per run ``(front, rear)``, the samples of the axle's two corners concatenated.
+
+    ``rho``: the sub-step bound (:func:`rideid.model.nonlinear.substeps`) of the NumPy states; default the
+    kernel's. The report's histograms take the looser lift-off bound
+    (:data:`rideid.data.scenario.LIFT_OFF_RHO`, outputs within 0.02 % of their RMS, about 7x faster)."""
     geom, layout = cf.space.geometry, cf.space.layout
     x, y = geom.corner_xy(np.array([P[cf.space.col["a"]]]))
     x, y = x[0], y[0]
-    front, rear = [], []
+    out = []
     for run in cf.sim.runs:
-        _, X = simulate_nonlinear(P, geom, run, layout, return_states=True)
+        if rho is None:
+            _, X = simulate_nonlinear(P, geom, run, layout, return_states=True)
+        else:
+            Pn = check_nonlinear(P, geom, layout)
+            _, X = simulate_numpy(Pn, geom, run, layout, substeps(Pn, geom, layout, run.h, rho=rho),
+                                  return_states=True)
         qd = X[0, :, 7:]
         v = qd[:, 3:] - (qd[:, :1] - x * qd[:, 1:2] + y * qd[:, 2:3])
-        front.append(v[:, :2].ravel())
-        rear.append(v[:, 2:].ravel())
-    return np.concatenate(front), np.concatenate(rear)
+        out.append((v[:, :2].ravel(), v[:, 2:].ravel()))
+    return out
+
+
+def suspension_velocities(cf, P) -> tuple[np.ndarray, np.ndarray]:
+    """Suspension velocities (m/s, compression +) of car ``P`` (a full row of ``cf.space``) over every
+    run: ``(front, rear)``, the samples of both corners of each axle concatenated."""
+    runs = suspension_velocities_by_run(cf, P)
+    return np.concatenate([f for f, _ in runs]), np.concatenate([r for _, r in runs])
 
 
 def knot_counts(knots, v) -> np.ndarray:
