@@ -142,9 +142,10 @@ def test_bad_damper_knots_in_a_dataset(knots, msg, sim_dataset, tmp_path, capsys
     assert not (tmp_path / "fit").exists()
 
 
-@pytest.mark.parametrize("group", ["damper_curves", "bump_stops"])
+@pytest.mark.parametrize("group", ["bump_stops"])
 def test_identify_refuses_the_nonlinear_groups_in_one_line(group, sim_dataset, tmp_path, capsys):
-    """Simulated, not yet identified: a clear refusal rather than a fit that silently leaves them out."""
+    """Simulated, not yet identified: a clear refusal rather than a fit that silently leaves them out
+    (damper_curves are identified: tests/test_damper_curves.py)."""
     import shutil
 
     from rideid.cli import main

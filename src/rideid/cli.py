@@ -163,7 +163,9 @@ def _parser() -> argparse.ArgumentParser:
     s.add_argument("--no-polish", action="store_true", help="skip the least-squares polish after JADE")
     s.add_argument("--model", default=None, metavar="MODEL",
                    help="base: the twelve parameters; full: with anti-roll bars (k_arf, k_arr) and tire damping "
-                        "(c_tf, c_tr); auto: fit the candidates and keep what the data support (docs/model-choice.md) "
+                        "(c_tf, c_tr); auto: fit the candidates and keep what the data support (docs/model-choice.md); "
+                        "or groups joined by ',': anti_roll_bars, tire_damping, damper_curves (SPEC §8: a force-velocity "
+                        "curve per axle at the [model] damper_knots) "
                         "(default: the dataset's [model] extensions, else auto)")
     s.add_argument("--no-report", action="store_true", help="write result.json and history.csv only")
 
@@ -272,12 +274,19 @@ def cmd_simulate(args, out=None):
 def _summary_table(res) -> str:
     lines = [f"{'parameter':<10} {'estimate':>14} {'± std':>11} {'± robust':>11}  {'unit':<8} note"]
     for n, d in res.details.items():
+        if n.startswith("F_") and res.dampers:
+            continue  # the curves' table below
         note = "known" if d["fixed"] else ("derived" if d["derived"] else "")
+        if d["derived"] and n in ("c_sf", "c_sr") and res.dampers:
+            note = "derived: the curve's mean slope over ±0.1 m/s"
         if d.get("at_bound"):
             note = "AT A SEARCH BOUND: set by the bound, not the data"
         std = "" if d.get("std") in (None, 0.0) else f"{d['std']:.3g}"
         rob = "" if d.get("std_robust") in (None, 0.0) else f"{d['std_robust']:.3g}"
         lines.append(f"{n:<10} {d['value']:>14.6g} {std:>11} {rob:>11}  {d['unit']:<8} {note}")
+    if res.dampers:
+        from .estimate.dampers import format_dampers
+        lines.append(format_dampers(res.dampers))
     return "\n".join(lines)
 
 
@@ -306,8 +315,9 @@ def run_identify(ds_path, out_dir, *, seed, population=None, generations=None, w
     from .data.schema import atomic_output
     from .estimate.identify import DEFAULT_GENERATIONS, DEFAULT_POPULATION, MODELS
 
-    if model is not None and model not in MODELS:
-        raise ArgumentError(f"--model must be one of {', '.join(MODELS)}, got {model!r}")
+    if model is not None:
+        from .estimate.identify import parse_model_arg
+        model = parse_model_arg(model)  # base|full|auto, or groups: damper_curves,anti_roll_bars
     ds = rideid.load_dataset(ds_path)
     prog = Progress(quiet)
     kw = {"population": population or DEFAULT_POPULATION, "generations": generations or DEFAULT_GENERATIONS}

@@ -22,6 +22,21 @@ is known, ``m_ur`` is derived instead). The model's extension groups (SPEC §6:
 ``[model] extensions`` or ``identify --model``) add their parameters
 (:data:`rideid.model.params.GROUPS`), free unless known; a known extension
 value is used whatever the model, and an extension the model lacks is 0.
+
+Damper curves (SPEC §8, group ``damper_curves``): ``c_sf``, ``c_sr`` leave the
+free parameters and the forces at the velocity knots join them (names
+``F_f1 .. F_fK``, ``F_r1 .. F_rK``, :func:`rideid.model.nonlinear.curve_names`;
+knots: the dataset's ``[model] damper_knots`` mirrored into rebound, else
+:data:`rideid.model.nonlinear.DEFAULT_KNOTS`). Full rows then have the
+:class:`~rideid.model.nonlinear.NonlinearLayout` columns (16 + 2K) and the
+cost simulates the nonlinear car (:func:`rideid.model.nonlinear.make_simulator`;
+without curves the linear simulator as before). Every row that reaches the
+simulator is a physical damper (:meth:`ParameterSpace.full`): the forces are
+made monotone outward from 0 (running maximum in compression, running minimum
+in rebound: the identity for a monotone row), knots that no run excites
+(``frozen``) continue the last excited segment's slope, and ``c_sf``,
+``c_sr`` hold each curve's mean slope between -0.1 and +0.1 m/s
+(``(F(0.1) - F(-0.1)) / 0.2``), reported as derived.
 """
 
 from __future__ import annotations
@@ -32,22 +47,47 @@ from ..data.dataset import Dataset, check_known_consistent, prepare_inputs, scal
 from ..model.batch import BatchSimulator
 from ..errors import ArgumentError, DataError
 from ..model.equations import CHANNEL_KIND, CHANNELS
+from ..model.nonlinear import (DEFAULT_KNOTS, NonlinearLayout, NonlinearSimulator, curve_names, damper_force,
+                               make_simulator, substeps)
 from ..model.params import (ALL_NAMES, EXT_NAMES, GROUPS, INDEX, MASS_COUNT, NAMES, default_bounds, nominal_car,
                             total_mass)
 
 ENERGY_FLOOR = 0.01
 
+#: the SPEC §8 group this version identifies
+CURVES = "damper_curves"
+#: the groups a model may have, canonical order: SPEC §6's linear ones, then the damper curves
+IDENTIFIABLE_GROUPS: tuple[str, ...] = tuple(GROUPS) + (CURVES,)
+#: default bounds of a knot force ``F(v)``: the axle's ``c_s`` bounds times ``|v|``, the lower one divided by
+#: the first factor (a digressive damper's high-speed force lies far below ``c_min v``), the upper one times
+#: the second (a progressive or bleed-stiff low-speed force above ``c_max v``); ``F`` has the sign of ``v``.
+#: Wider upper bounds buy nothing but stiffer search candidates (more RK4 sub-steps).
+KNOT_BOUND_FACTOR = (3.0, 2.0)
+#: the velocity (m/s) of the derived ``c_sf``, ``c_sr``: the curve's mean slope over ``[-V, V]``
+MEAN_SLOPE_VELOCITY = 0.1
+
 
 def refuse_unsupported_groups(groups, where: str = "model"):
-    """The nonlinear groups of SPEC §8 (damper_curves, bump_stops) are simulated but not identified yet:
-    one clear :class:`ArgumentError` rather than a fit that silently leaves them out."""
+    """The bump stops of SPEC §8 are simulated but not identified yet: one clear :class:`ArgumentError`
+    rather than a fit that silently leaves them out (damper curves are identified)."""
     from ..data.schema import NONLINEAR_GROUPS
-    bad = [g for g in groups if g in NONLINEAR_GROUPS]
+    bad = [g for g in groups if g in NONLINEAR_GROUPS and g not in IDENTIFIABLE_GROUPS]
     if bad:
         raise ArgumentError(f"{where}: {' and '.join(repr(g) for g in bad)} (SPEC §8) cannot be identified by this "
-                            f"version of rideid: it simulates such a car but fits only the linear model "
-                            f"(groups {', '.join(GROUPS)}); remove {'them' if len(bad) > 1 else 'it'} from "
-                            "[model] extensions or pass --model base|full|auto")
+                            f"version of rideid: it simulates such a car but fits only the groups "
+                            f"{', '.join(IDENTIFIABLE_GROUPS)}; remove {'them' if len(bad) > 1 else 'it'} from "
+                            "[model] extensions or pass another --model")
+
+
+def curve_knots(damper_knots=None) -> tuple[float, ...]:
+    """Signed knots (m/s) of the damper curves: ``[model] damper_knots`` (positive) mirrored into rebound,
+    else :data:`rideid.model.nonlinear.DEFAULT_KNOTS`."""
+    if not damper_knots:
+        return tuple(DEFAULT_KNOTS)
+    pos = tuple(float(k) for k in damper_knots)
+    if any(not k > 0 for k in pos) or any(b <= a for a, b in zip(pos, pos[1:])):
+        raise DataError(f"[model] damper_knots must be positive and strictly increasing (m/s), got {list(pos)}")
+    return tuple(-k for k in reversed(pos)) + pos
 
 
 def channel_weights(Y: np.ndarray) -> np.ndarray:
@@ -78,22 +118,36 @@ class ParameterSpace:
     bounds : dict, optional
         ``[bounds]``; bounds of parameters that are not free are not used.
     extensions : sequence of str
-        The model's extension groups (:data:`rideid.model.params.GROUPS`);
-        their parameters are free unless known.
+        The model's extension groups (:data:`IDENTIFIABLE_GROUPS`); their
+        parameters are free unless known.
+    damper_knots : sequence of float, optional
+        ``[model] damper_knots`` (positive, m/s) for ``damper_curves``
+        (default :data:`rideid.model.nonlinear.DEFAULT_KNOTS`).
+    frozen : sequence of str, optional
+        Knot forces that no run excites: derived (the last excited segment's
+        slope continued), not free (:func:`rideid.estimate.dampers.knot_excitation`).
 
     Attributes
     ----------
     width : int
         Columns of the full rows :meth:`full` returns: 12, or 16 when the
-        model has an extension group or an extension value is known.
+        model has an extension group or an extension value is known; with
+        damper curves the :class:`~rideid.model.nonlinear.NonlinearLayout`'s
+        16 + 2K.
     param_names : tuple of str
         The names of those columns.
+    col : dict
+        Name -> column of the full rows.
+    layout : NonlinearLayout or None
+        The simulator's row layout with damper curves (None: the linear model).
     reported_names : tuple of str
         The twelve, the model's extension parameters and known extensions
-        (an extension neither in the model nor known is 0 and not reported).
+        (an extension neither in the model nor known is 0 and not reported),
+        then the knot forces.
     """
 
-    def __init__(self, known: dict[str, float], geometry, bounds: dict | None = None, extensions=()):
+    def __init__(self, known: dict[str, float], geometry, bounds: dict | None = None, extensions=(),
+                 damper_knots=None, frozen=()):
         scale_anchor(known)
         check_known_consistent(known)
         self.known = dict(known)
@@ -101,9 +155,20 @@ class ParameterSpace:
         extensions = tuple(extensions)
         refuse_unsupported_groups(extensions)
         for g in extensions:
-            if g not in GROUPS:
-                raise ArgumentError(f"unknown extension group '{g}'; groups are: {', '.join(GROUPS)}")
-        self.extensions = tuple(g for g in GROUPS if g in extensions)
+            if g not in IDENTIFIABLE_GROUPS:
+                raise ArgumentError(f"unknown extension group '{g}'; groups are: {', '.join(IDENTIFIABLE_GROUPS)}")
+        self.extensions = tuple(g for g in IDENTIFIABLE_GROUPS if g in extensions)
+        self.curves = CURVES in self.extensions
+        self.damper_knots = None if damper_knots is None else tuple(float(k) for k in damper_knots)
+        self.layout = NonlinearLayout(knots=curve_knots(damper_knots)) if self.curves else None
+        knot_names = curve_names(self.layout.n_knots) if self.curves else ()
+        self.frozen = tuple(n for n in knot_names if n in set(frozen))
+        if self.curves:
+            both = [n for n in ("c_sf", "c_sr") if n in known]
+            if both:
+                raise ArgumentError(f"[known] {', '.join(both)}: with damper_curves the damping is the curves' "
+                                    "(c_sf, c_sr are derived from them); leave it out of [known] or fit "
+                                    "linear dampers")
         self.derived = None
         if "total_mass" in known:
             for cand in ("m_s", "m_ur", "m_uf"):
@@ -111,34 +176,133 @@ class ParameterSpace:
                     self.derived = cand
                     break
         self.fixed = {n: v for n, v in known.items() if n in ALL_NAMES}
-        model_ext = [n for g in self.extensions for n in GROUPS[g]]
-        self.names = [n for n in list(NAMES) + model_ext if n not in self.fixed and n != self.derived]
-        self.width = len(ALL_NAMES) if (model_ext or any(n in self.fixed for n in EXT_NAMES)) else len(NAMES)
-        self.param_names = ALL_NAMES[:self.width]
-        #: what a result reports: the twelve, the model's extensions and any known extension
-        self.reported_names = tuple(n for n in ALL_NAMES if n in NAMES or n in model_ext or n in self.fixed)
+        model_ext = [n for g in self.extensions if g in GROUPS for n in GROUPS[g]]
+        base = [n for n in NAMES if not (self.curves and n in ("c_sf", "c_sr"))]
+        self.names = [n for n in base + model_ext if n not in self.fixed and n != self.derived] + \
+            [n for n in knot_names if n not in self.frozen]
+        if self.curves:
+            self.param_names = self.layout.names
+        else:
+            width = len(ALL_NAMES) if (model_ext or any(n in self.fixed for n in EXT_NAMES)) else len(NAMES)
+            self.param_names = ALL_NAMES[:width]
+        self.width = len(self.param_names)
+        self.col = {n: i for i, n in enumerate(self.param_names)}
+        #: what a result reports: the twelve, the model's extensions and any known extension, the knot forces
+        self.reported_names = tuple(n for n in ALL_NAMES if n in NAMES or n in model_ext or n in self.fixed) + \
+            knot_names
         db = default_bounds(geometry)
         bounds = dict(bounds or {})
+        self._bounds_arg = dict(bounds)
         for k in bounds:
-            if k not in ALL_NAMES:
-                raise DataError(f"[bounds]: unknown parameter '{k}'")
+            if k not in ALL_NAMES and k not in knot_names:
+                raise DataError(f"[bounds]: unknown parameter '{k}'"
+                                + ("" if self.curves or not k.startswith("F_") else
+                                   " (knot forces are parameters of the damper_curves model only)"))
+        if self.curves:
+            for n, v in zip(knot_names, self.knot_velocities()):
+                c = "c_sf" if n.startswith("F_f") else "c_sr"
+                lo, hi = bounds.get(c, db[c])
+                f_lo, f_hi = KNOT_BOUND_FACTOR
+                db[n] = (lo * v / f_lo, hi * v * f_hi) if v > 0 else (hi * v * f_hi, lo * v / f_lo)
         self.bounds = np.array([bounds.get(n, db[n]) for n in self.names], dtype=float)
+        if self.curves:
+            # the mean slope over [-V, V] is linear in the knot forces: c = F @ w
+            eye = np.eye(self.layout.n_knots)
+            V = MEAN_SLOPE_VELOCITY
+            self._slope_w = (damper_force(self.layout.knots, eye, V) - damper_force(self.layout.knots, eye, -V)) / (2 * V)
+
+    def knot_velocities(self) -> np.ndarray:
+        """Velocity (m/s) of each knot-force column, ``F_f1 .. F_fK, F_r1 .. F_rK`` (empty without curves)."""
+        if not self.curves:
+            return np.zeros(0)
+        k = np.asarray(self.layout.knots)
+        return np.concatenate([k, k])
+
+    def with_frozen(self, frozen) -> "ParameterSpace":
+        """The same space with the knot forces ``frozen`` derived instead of free."""
+        return ParameterSpace(self.known, self.geometry, self._bounds_arg, self.extensions, self.damper_knots,
+                              frozen)
+
+    def reduce(self, x, other: "ParameterSpace") -> np.ndarray:
+        """Free row ``x`` of this space -> the free row of ``other`` (same car; dropped columns are lost)."""
+        P = self.full(np.asarray(x, dtype=float)[None])[0]
+        return np.array([P[self.col[n]] for n in other.names])
 
     def full(self, X) -> np.ndarray:
-        """Free-parameter rows ``(n, d)`` -> full rows ``(n, width)`` (:attr:`param_names`)."""
+        """Free-parameter rows ``(n, d)`` -> full rows ``(n, width)`` (:attr:`param_names`).
+
+        With damper curves the knot forces are made physical (module docstring): monotone outward
+        from 0, frozen knots continuing the last excited segment, ``c_sf``, ``c_sr`` the mean slopes.
+        """
         X = np.atleast_2d(np.asarray(X, dtype=float))
         if X.shape[1] != len(self.names):
             raise ArgumentError(f"expected {len(self.names)} columns ({', '.join(self.names)}), got {X.shape[1]}")
         P = np.zeros((X.shape[0], self.width))
+        col = self.col
         for j, n in enumerate(self.names):
-            P[:, INDEX[n]] = X[:, j]
+            P[:, col[n]] = X[:, j]
         for n, v in self.fixed.items():
-            P[:, INDEX[n]] = v
+            P[:, col[n]] = v
         if self.derived is not None:
             others = [n for n in MASS_COUNT if n != self.derived]
-            rest = sum(MASS_COUNT[n] * P[:, INDEX[n]] for n in others)
-            P[:, INDEX[self.derived]] = (self.known["total_mass"] - rest) / MASS_COUNT[self.derived]
+            rest = sum(MASS_COUNT[n] * P[:, col[n]] for n in others)
+            P[:, col[self.derived]] = (self.known["total_mass"] - rest) / MASS_COUNT[self.derived]
+        if self.curves:
+            self._physical_curves(P)
         return P
+
+    def _physical_curves(self, P):
+        """In place: monotone knot forces, frozen knots continued, ``c_sf``, ``c_sr`` = mean slopes."""
+        knots = np.asarray(self.layout.knots)
+        K = knots.size
+        j0 = int(np.searchsorted(knots, 0.0))
+        s = len(ALL_NAMES)
+        frozen = set(self.frozen)
+        for a, (prefix, cname) in enumerate((("F_f", "c_sf"), ("F_r", "c_sr"))):
+            F = P[:, s + a * K:s + (a + 1) * K]  # a view
+            names = [f"{prefix}{j + 1}" for j in range(K)]
+            # compression: running maximum outward from 0; rebound: running minimum outward from 0
+            F[:, j0:] = np.maximum.accumulate(np.maximum(F[:, j0:], 0.0), axis=1)
+            F[:, :j0] = np.minimum.accumulate(np.minimum(F[:, :j0], 0.0)[:, ::-1], axis=1)[:, ::-1]
+            # frozen (not excited) knots: the last excited segment's slope continued outward
+            for side in (range(j0, K), range(j0 - 1, -1, -1)):
+                prev_v, prev_F, last_v, last_F = 0.0, 0.0, 0.0, np.zeros(P.shape[0])
+                slope = None
+                for j in side:
+                    if names[j] in frozen:
+                        if slope is None:
+                            slope = (last_F - prev_F) / (last_v - prev_v) if last_v != prev_v else 0.0
+                        F[:, j] = last_F + slope * (knots[j] - last_v)
+                    else:
+                        prev_v, prev_F, last_v, last_F = last_v, last_F, knots[j], F[:, j].copy()
+            P[:, self.col[cname]] = F @ self._slope_w
+
+    def derived_names(self) -> list[str]:
+        """Reported quantities that follow from the free parameters: the derived mass, then with damper
+        curves the frozen knot forces and ``c_sf``, ``c_sr``."""
+        out = [self.derived] if self.derived is not None else []
+        if self.curves:
+            out += list(self.frozen) + ["c_sf", "c_sr"]
+        return out
+
+    def derived_jacobian(self, x) -> np.ndarray:
+        """``d(derived_names) / d(free parameters)`` at ``x``, shape ``(k, d)``.
+
+        Every derived quantity is piecewise linear in the free parameters (exactly linear where the
+        monotone repair is inactive, e.g. at an interior optimum): one-sided differences are exact there.
+        """
+        names = self.derived_names()
+        d = len(self.names)
+        if not names:
+            return np.zeros((0, d))
+        x = np.asarray(x, dtype=float)
+        h = 1e-6 * np.maximum(np.abs(x), 1.0)
+        steps = np.where(x + h <= self.bounds[:, 1], h, -h)
+        X = np.tile(x, (d + 1, 1))
+        X[1 + np.arange(d), np.arange(d)] += steps
+        P = self.full(X)
+        cols = [self.col[n] for n in names]
+        return ((P[1:, cols] - P[0, cols]) / steps[:, None]).T
 
     def derived_gradient(self) -> np.ndarray:
         """d(derived mass)/d(free parameters), shape (d,); zeros if nothing is derived."""
@@ -150,19 +314,21 @@ class ParameterSpace:
         return g
 
     def valid(self, P) -> np.ndarray:
-        """Rows that are physical: positive masses etc., 0 < a < wheelbase, extensions >= 0."""
+        """Rows that are physical: positive masses etc., 0 < a < wheelbase, extensions >= 0 (the knot
+        forces are made physical by :meth:`full`)."""
         ok = np.all(np.isfinite(P), axis=1)
         for n in NAMES:
             col = P[:, INDEX[n]]
             ok &= (col > 0) & ((col < self.geometry.wheelbase) if n == "a" else True)
         if P.shape[1] > len(NAMES):
-            ok &= np.all(P[:, len(NAMES):] >= 0, axis=1)
+            ok &= np.all(P[:, len(NAMES):len(ALL_NAMES)] >= 0, axis=1)
         return ok
 
     def nominal(self) -> np.ndarray:
         """A physically consistent nominal car: the built-in car scaled to the
         anchor, clipped into the bounds (used for sensitivity maps and as a
-        reference point, never as a starting guess)."""
+        reference point, never as a starting guess); with damper curves its
+        linear dampers as curves (``F = c v``)."""
         base = nominal_car(self.geometry, extensions=True)
         anchor = scale_anchor(self.known)
         if anchor == "total_mass":
@@ -170,7 +336,12 @@ class ParameterSpace:
         else:
             s = self.known[anchor] / base[INDEX[anchor]]
         P = base * np.where(np.array(ALL_NAMES) == "a", 1.0, s)
-        x = np.clip(P[[INDEX[n] for n in self.names]], self.bounds[:, 0], self.bounds[:, 1])
+        if self.curves:
+            v = self.knot_velocities()
+            K = self.layout.n_knots
+            c = np.r_[np.full(K, P[INDEX["c_sf"]]), np.full(K, P[INDEX["c_sr"]])]
+            P = np.concatenate([P, c * v])
+        x = np.clip(P[[self.col[n] for n in self.names]], self.bounds[:, 0], self.bounds[:, 1])
         return self.full(x)[0]
 
 
@@ -210,7 +381,8 @@ class CostFunction:
             if extensions is None:  # the dataset's [model], else the twelve
                 extensions = ds.manifest.extensions or ()
                 refuse_unsupported_groups(extensions, f"{ds.manifest.path}: [model] extensions")
-            space = ParameterSpace(ds.known, ds.geometry, ds.manifest.bounds, extensions=extensions)
+            space = ParameterSpace(ds.known, ds.geometry, ds.manifest.bounds, extensions=extensions,
+                                   damper_knots=ds.manifest.damper_knots)
         self.space = space
         self.names = list(self.space.names)
         self.bounds = self.space.bounds
@@ -220,7 +392,9 @@ class CostFunction:
             Y = ds.data[r.id].matrix()
             Ws.append(channel_weights(Y))
             Ys.append(np.nan_to_num(Y, nan=0.0))
-        self.sim = BatchSimulator(ds.geometry, runs)
+        # the linear BatchSimulator unless the model has damper curves (rideid.model.nonlinear)
+        self.sim = make_simulator(ds.geometry, runs, space.layout) if space.layout is None else \
+            CurveSimulator(ds.geometry, runs, space.layout)
         self.Y = np.ascontiguousarray(np.concatenate(Ys))
         self.W = np.array(Ws)
         self.use_kernel = use_kernel
@@ -253,7 +427,14 @@ class CostFunction:
         E = np.full((len(self.run_ids), P.shape[0]), np.inf)
         if ok.any():
             fn = self.sim.errors if self.use_kernel else self.sim.errors_reference
-            E[:, ok] = fn(P[ok], self.Y, self.W)
+            if isinstance(self.sim, CurveSimulator) and self.sim.pin is None:
+                # the RK4 sub-step is set by the stiffest candidate of a call: candidates grouped by
+                # their own need, so a few stiff ones of a search population do not slow the rest
+                idx = np.nonzero(ok)[0]
+                for group in self.sim.groups(P[idx]):
+                    E[:, idx[group]] = fn(P[idx[group]], self.Y, self.W)
+            else:
+                E[:, ok] = fn(P[ok], self.Y, self.W)
         self.nfev += P.shape[0]
         return E
 
@@ -291,7 +472,47 @@ class CostFunction:
         return cols, np.sqrt(weights[ri] * self.W[ri, cols])
 
     def simulate(self, params) -> dict[str, np.ndarray]:
-        """Simulated channels ``(n_time, 10)`` per run for one full parameter vector (12 or 16)."""
+        """Simulated channels ``(n_time, 10)`` per run for one full parameter vector (12 or 16; with
+        damper curves the space's :attr:`ParameterSpace.width`)."""
         P = np.asarray(params, dtype=float).reshape(1, -1)
         outs = self.sim.outputs(P)
         return {rid: o[0] for rid, o in zip(self.run_ids, outs)}
+
+
+class CurveSimulator(NonlinearSimulator):
+    """The nonlinear simulator of a damper-curve model, with two controls of its RK4 sub-steps.
+
+    :meth:`groups` splits a population by each candidate's own sub-step count
+    (buckets :data:`SUBSTEP_BUCKETS`): the search evaluates each group in one call. :attr:`pin`
+    (per run, or None) is a floor on the sub-steps: the polish pins them at its start (with a
+    margin), so every residual it differences is computed with the same integrator and the
+    Jacobian sees no jump where the stiffest segment's count would change.
+    """
+
+    #: sub-step counts are rounded up to these (groups stay few and large)
+    SUBSTEP_BUCKETS = (1, 2, 3, 4, 6, 8, 12, 16, 24, 32, 48, 64, 96, 128, 256, 512, 1024, 4096)
+
+    def __init__(self, geom, runs, layout):
+        super().__init__(geom, runs, layout)
+        self.pin = None
+
+    def substeps(self, P) -> list[int]:
+        m = super().substeps(P)
+        return m if self.pin is None else [max(a, b) for a, b in zip(m, self.pin)]
+
+    def candidate_substeps(self, P) -> np.ndarray:
+        """Largest sub-step count over the runs of each candidate, ``(n,)``."""
+        P = self.layout.rows(P)
+        hs = sorted({r.h for r in self.runs})
+        return np.array([max(substeps(P[i:i + 1], self.geom, self.layout, h) for h in hs)
+                         for i in range(P.shape[0])])
+
+    def groups(self, P) -> list[np.ndarray]:
+        """Indices of ``P``'s rows grouped by their bucketed sub-step count."""
+        m = self.candidate_substeps(P)
+        b = np.searchsorted(np.array(self.SUBSTEP_BUCKETS), m)
+        return [np.nonzero(b == k)[0] for k in np.unique(b)]
+
+    def pin_at(self, P, margin: float = 1.5):
+        """Pin the sub-steps at ``margin`` times those of rows ``P`` (the polish's start); None unpins."""
+        self.pin = None if P is None else [int(np.ceil(margin * m)) for m in super().substeps(P)]

@@ -35,6 +35,16 @@
 8. Adequacy (:mod:`rideid.estimate.adequacy`): per run and channel, the
    residual level against the quiet lead-in, a whiteness test and the
    decisive test: does the road input explain the prewhitened residual?
+9. Damper curves (SPEC §8, group ``damper_curves``): the global search runs
+   on the linear model (``c_sf``, ``c_sr`` free; the exact linear kernel,
+   ~100x cheaper per candidate than the RK4 nonlinear car, whose cost also
+   grows with the stiffest segment of every random candidate); its best car
+   starts the curves as ``F = c v``. The knots no run excites with that car
+   are frozen (:mod:`rideid.estimate.dampers`), and the polish fits the
+   curves with the other parameters on the nonlinear car, its RK4 sub-steps
+   pinned at its start (so every differenced residual uses one integrator).
+   ``c_sf``, ``c_sr`` and frozen knots are derived; their standard errors
+   follow by the delta method (they are linear in the knot forces).
 """
 
 from __future__ import annotations
@@ -53,8 +63,9 @@ from ..data.measured import estimate_start, simulate_response
 from ..errors import ArgumentError, DataWarning
 from ..model.batch import single_threaded_blas
 from ..model.equations import modal_summary
-from ..model.params import GROUPS, INDEX, UNITS
-from .cost import CostFunction, refuse_unsupported_groups
+from ..model.params import ALL_NAMES, GROUPS, UNITS
+from .dampers import dampers_block
+from .cost import IDENTIFIABLE_GROUPS, CostFunction, ParameterSpace, refuse_unsupported_groups
 from .jade import JadeSolver, make_rng, stop_requested
 from .adequacy import advise, assess_fit
 from .result import History, IdentificationResult
@@ -98,13 +109,29 @@ def model_extensions(ds: Dataset, model=None) -> tuple[str, ...]:
             return ()
         if model == "full":
             return tuple(GROUPS)
-        raise ArgumentError(f"--model must be one of {', '.join(MODELS)}, got {model!r}")
+        if model in MODELS:
+            raise ArgumentError(f"model {model!r} is not one fitted model")
+        model = parse_model_arg(model)
     groups = tuple(model)
     refuse_unsupported_groups(groups)
     for g in groups:
-        if g not in GROUPS:
-            raise ArgumentError(f"unknown extension group '{g}'; groups are: {', '.join(GROUPS)}")
-    return tuple(g for g in GROUPS if g in groups)
+        if g not in IDENTIFIABLE_GROUPS:
+            raise ArgumentError(f"unknown extension group '{g}'; groups are: {', '.join(IDENTIFIABLE_GROUPS)}")
+    return tuple(g for g in IDENTIFIABLE_GROUPS if g in groups)
+
+
+def parse_model_arg(model: str):
+    """``--model``: ``base``, ``full``, ``auto``, or groups joined by ``,`` or ``+``
+    (``damper_curves``, ``damper_curves,anti_roll_bars``) -> the string or a tuple of groups."""
+    if model in MODELS:
+        return model
+    groups = tuple(g.strip() for g in model.replace("+", ",").split(",") if g.strip())
+    bad = [g for g in groups if g not in IDENTIFIABLE_GROUPS]
+    if not groups or bad:
+        refuse_unsupported_groups(bad)
+        raise ArgumentError(f"--model must be one of {', '.join(MODELS)}, got {model!r} (or model groups joined "
+                            f"by ',': {', '.join(IDENTIFIABLE_GROUPS)})")
+    return groups
 
 
 def identify(ds: Dataset, *, rng=None, seed=None, population: int = DEFAULT_POPULATION,
@@ -181,18 +208,63 @@ def identify(ds: Dataset, *, rng=None, seed=None, population: int = DEFAULT_POPU
     with single_threaded_blas():
         t0 = time.perf_counter()
         cf = (cost if cost is not None else CostFunction(ds, extensions=model_extensions(ds, model))).copy()
+        # damper curves: the search on the linear model (step 9 of the module docstring)
+        cf_search = _linear_cost(ds, cf) if cf.space.curves and start is None else cf
         if maps is None:
-            maps = sensitivity_maps(ds, cost=cf)
-        search = global_search(cf, weighting, maps, gen, population=population,
+            maps = sensitivity_maps(ds, cost=cf_search)
+        search = global_search(cf_search, weighting, maps, gen, population=population,
                                generations=generations if start is None else 0,
                                spread_tol=spread_tol, callback=callback, t0=t0)
         if start is not None:
             search.x, search.stop = np.asarray(start, dtype=float), "start"
+        excitation = None
+        if cf.space.curves:
+            cf, search.x, excitation = _curve_start(cf, cf_search, search.x)
+            cf.nfev += cf_search.nfev if cf_search is not cf else 0
         fit = polish_fit(ds, cf, search.x) if polish else None
+        if fit is not None and cf.space.curves:
+            fit.cost.sim.pin = None
         res = _result(ds, cf if fit is None else fit.cost, search, fit, weighting, maps, rng_record,
-                      time.perf_counter() - t0, assess)
+                      time.perf_counter() - t0, assess, excitation)
         res.wall_time_s = time.perf_counter() - t0
         return res
+
+
+def _linear_cost(ds, cf: CostFunction) -> CostFunction:
+    """The linear model of a damper-curve cost function: the same groups less the curves (``c_sf``,
+    ``c_sr`` free, the linear kernel), the same data and bounds."""
+    sp = cf.space
+    space = ParameterSpace(sp.known, sp.geometry, {k: v for k, v in sp._bounds_arg.items() if not k.startswith("F_")},
+                           extensions=[g for g in sp.extensions if g != "damper_curves"])
+    return CostFunction(cf.ds, space=space)
+
+
+def _curve_start(cf: CostFunction, cf_search: CostFunction, x):
+    """The curve model's start from the search's best car: ``x`` mapped into the curve space (a linear
+    car's curves ``F = c v``), its knots' excitation, the space with the knots not excited frozen.
+
+    Returns ``(cost function on that space with its sub-steps pinned, start row, excitation)``.
+    """
+    from .dampers import knot_excitation
+
+    space = cf.space
+    if cf_search is not cf:
+        P_lin = cf_search.space.full(np.asarray(x, dtype=float)[None])[0]
+        vals = {n: P_lin[cf_search.space.col[n]] for n in cf_search.space.param_names}
+        v = space.knot_velocities()
+        K = space.layout.n_knots
+        for j, n in enumerate(space.layout.names[len(space.layout.names) - 2 * K:]):
+            vals[n] = (vals["c_sf"] if j < K else vals["c_sr"]) * v[j]
+        x = np.array([vals[n] for n in space.names])
+        x = np.clip(x, space.bounds[:, 0], space.bounds[:, 1])
+    P = space.full(np.asarray(x, dtype=float)[None])[0]
+    excitation = knot_excitation(cf, P)
+    new = space.with_frozen(excitation["frozen"])
+    x_new = space.reduce(x, new)
+    cf2 = cf.copy()
+    cf2.space, cf2.names, cf2.bounds, cf2.nfev = new, list(new.names), new.bounds, cf.nfev
+    cf2.sim.pin_at(P[None])
+    return cf2, x_new, excitation
 
 
 def global_search(cf: CostFunction, weighting, maps: SensitivityMaps, rng, *, population, generations,
@@ -292,7 +364,8 @@ def polish_fit(ds: Dataset, cf: CostFunction, x0) -> OptimizeResult:
     return OptimizeResult(x=x, std=std, info=info, cost=cf, starts=starts)
 
 
-def _result(ds, cf, search, fit, weighting, maps, rng_record, wall, assess=True) -> IdentificationResult:
+def _result(ds, cf, search, fit, weighting, maps, rng_record, wall, assess=True,
+            excitation=None) -> IdentificationResult:
     space = cf.space
     x = search.x if fit is None else fit.x
     d = len(cf.names)
@@ -301,11 +374,12 @@ def _result(ds, cf, search, fit, weighting, maps, rng_record, wall, assess=True)
     cov = np.full((d, d), np.nan) if info is None else np.array(info["covariance"], dtype=float)
     final_E = cf.run_errors(x[None])[:, 0]
     P = space.full(x[None])[0]
-    robust = estimate_covariance(info, space)
+    robust = estimate_covariance(info, space, x)
+    derived = space.derived_names()
     details = {}
     for n in space.reported_names:
-        e = {"value": float(P[INDEX[n]]), "unit": UNITS[n], "fixed": n in space.fixed,
-             "derived": n == space.derived}
+        e = {"value": float(P[space.col[n]]), "unit": UNITS.get(n, "N"), "fixed": n in space.fixed,
+             "derived": n in derived}
         if n in cf.names:
             j = cf.names.index(n)
             e["lower"], e["upper"] = float(cf.bounds[j, 0]), float(cf.bounds[j, 1])
@@ -313,9 +387,18 @@ def _result(ds, cf, search, fit, weighting, maps, rng_record, wall, assess=True)
         elif n == space.derived:
             e["std"] = _derived_std(space, cov)
             e["lower"] = e["upper"] = None  # follows from the anchor: never searched
+        elif n in derived:
+            e["std"] = robust.std_white(n)
+            e["lower"] = e["upper"] = None
         else:
             e["std"] = 0.0
         e["std_robust"] = robust.std_robust(n) if n not in space.fixed else 0.0
+        if n in space.frozen:  # a knot no run excites: continued, not measured
+            e["std"] = e["std_robust"] = None
+            e["excited"] = False
+            e["note"] = "not excited"
+        elif n.startswith("F_"):
+            e["excited"] = True
         details[n] = e
     # an estimate the bound stopped, not the data (rideid.data.checks); warned of by rideid.identify, once,
     # for the model it returns (warn_bounds), not for every candidate fitted on the way
@@ -334,14 +417,16 @@ def _result(ds, cf, search, fit, weighting, maps, rng_record, wall, assess=True)
     return IdentificationResult(
         x=np.asarray(x, dtype=float), names=list(cf.names), std=np.asarray(std, dtype=float), covariance=cov,
         fun=float(np.full(final_E.size, 1.0 / final_E.size) @ final_E), success=success, message=message, stop=search.stop,
-        nit=int(search.nit), nfev=int(cf.nfev), parameters={n: float(P[INDEX[n]]) for n in space.reported_names},
+        nit=int(search.nit), nfev=int(cf.nfev), parameters={n: float(P[space.col[n]]) for n in space.reported_names},
         details=details, known=dict(ds.known), wall_time_s=wall, seed=rng_record["seed"],
         rng_state=rng_record["rng_state"], track_weights=search.track_weights, weights_mode=weighting.name,
         polish=info, history=History(search.history), starts=starts, preprocessing=pre,
-        modal=modal_summary(P, ds.geometry), dataset=str(ds.path), maps=maps,
+        modal=modal_summary(P[:len(ALL_NAMES)], ds.geometry), dataset=str(ds.path), maps=maps,
         model={"extensions": list(space.extensions)}, response=response, correlation=robust.correlation_dict(),
         adequacy=advise(assess_fit(cf, P, response), {"extensions": list(space.extensions)}) if assess else None,
-        checks=[f.to_dict() for f in findings])
+        checks=[f.to_dict() for f in findings],
+        dampers=None if not space.curves else dampers_block(space, P, robust.white, robust.robust, robust.names,
+                                                            excitation))
 
 
 def warn_bounds(res: IdentificationResult, stacklevel: int = 3) -> None:

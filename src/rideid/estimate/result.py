@@ -203,6 +203,9 @@ class IdentificationResult:
     response: dict | None = None
     #: findings of the data checks and of the bound check (rideid.data.checks), as dicts
     checks: list = field(default_factory=list)
+    #: SPEC §8 damper curves when the model has them: {"velocity", "front": {"force", "std", "std_robust",
+    #: "excited", ...}, "rear": {...}} (rideid.estimate.dampers.dampers_block); None otherwise
+    dampers: dict | None = None
 
     # SciPy/SPEC §4 names for the same numbers
     @property
@@ -229,10 +232,15 @@ class IdentificationResult:
         lines = [f"IdentificationResult(success={self.success}, stop={self.stop!r}, fun={self.fun:.4g}, "
                  f"nit={self.nit}, nfev={self.nfev},{model} adequate={adequate},"]
         for n, d in self.details.items():
+            if n.startswith("F_") and self.dampers:
+                continue  # the curves' table below
             std = d.get("std_robust")
             note = " (known)" if d.get("fixed") else (" (derived)" if d.get("derived") else "")
             err = f" ± {std:.3g} (robust)" if std not in (None, 0.0) else ""
             lines.append(f"  {n}={d['value']:.6g}{err} {d['unit']}{note}")
+        if self.dampers:
+            from .dampers import format_dampers
+            lines += ["  " + ln for ln in format_dampers(self.dampers).splitlines()]
         if adequate is False:
             lines.append("  not adequate: the residuals carry structure the model misses (adequacy)")
         return "\n".join(lines) + ")"
@@ -274,6 +282,7 @@ class IdentificationResult:
             "correlation": self.correlation,
             "preprocessing": self.preprocessing,
             "checks": self.checks,
+            **({"dampers": self.dampers} if self.dampers else {}),
             "dataset": str(Path(self.dataset).resolve()) if self.dataset else "",
             "sensitivity": _maps_to_json(self.maps),
             "history_file": "history.csv",
@@ -320,7 +329,7 @@ def load(path) -> IdentificationResult:
         modal=doc.get("modal"), dataset=doc.get("dataset", ""),
         maps=_maps_from_json(doc.get("sensitivity"), rpath), rng_state=doc.get("rng_state"),
         model=doc.get("model"), adequacy=doc.get("adequacy"), correlation=doc.get("correlation"),
-        checks=list(doc.get("checks") or []))
+        checks=list(doc.get("checks") or []), dampers=doc.get("dampers"))
 
 
 __all__ = ["IdentificationResult", "History", "load", "read_result_json"]

@@ -280,17 +280,37 @@ class EstimateCovariance:
     robust: np.ndarray | None
 
     @classmethod
-    def from_polish(cls, info: dict | None, space) -> "EstimateCovariance":
-        """From the polish's record (``covariance``, ``covariance_robust``) and the ParameterSpace."""
-        names = list(space.names) + ([space.derived] if space.derived is not None else [])
+    def from_polish(cls, info: dict | None, space, x=None) -> "EstimateCovariance":
+        """From the polish's record (``covariance``, ``covariance_robust``) and the ParameterSpace.
+
+        With ``x`` (the free parameters at the optimum) every derived quantity of the space
+        (:meth:`rideid.ParameterSpace.derived_names`: the derived mass, with damper curves the
+        frozen knot forces and ``c_sf``, ``c_sr``) is appended by the delta method, exact for these
+        linear functions; without it only the derived mass.
+        """
+        if x is None or not getattr(space, "curves", False):
+            names = list(space.names) + ([space.derived] if space.derived is not None else [])
+            if info is None or "covariance_robust" not in info:
+                return cls(names, None, None)
+            g = space.derived_gradient()
+            mats = []
+            for key in ("covariance", "covariance_robust"):
+                C = np.array(info[key], dtype=float)
+                mats.append(with_derived(C, g) if space.derived is not None else C)
+            return cls(names, *mats)
+        names = list(space.names) + space.derived_names()
         if info is None or "covariance_robust" not in info:
             return cls(names, None, None)
-        g = space.derived_gradient()
-        mats = []
-        for key in ("covariance", "covariance_robust"):
-            C = np.array(info[key], dtype=float)
-            mats.append(with_derived(C, g) if space.derived is not None else C)
+        A = np.vstack([np.eye(len(space.names)), space.derived_jacobian(x)])
+        mats = [A @ np.array(info[key], dtype=float) @ A.T for key in ("covariance", "covariance_robust")]
         return cls(names, *mats)
+
+    def std_white(self, name: str) -> float | None:
+        """White (Jacobian) standard error of one estimated or derived parameter (``None`` if unavailable)."""
+        if self.white is None or name not in self.names:
+            return None
+        v = self.white[self.names.index(name)][self.names.index(name)]
+        return float(np.sqrt(v)) if np.isfinite(v) and v >= 0 else None
 
     def std_robust(self, name: str) -> float | None:
         """Robust standard error of one estimated parameter (``None`` if unavailable)."""
@@ -308,6 +328,6 @@ class EstimateCovariance:
                 "matrix": [[None if not np.isfinite(v) else round(float(v), 6) for v in row] for row in R]}
 
 
-def estimate_covariance(info: dict | None, space) -> EstimateCovariance:
+def estimate_covariance(info: dict | None, space, x=None) -> EstimateCovariance:
     """Shorthand for :meth:`EstimateCovariance.from_polish`."""
-    return EstimateCovariance.from_polish(info, space)
+    return EstimateCovariance.from_polish(info, space, x)

@@ -381,6 +381,118 @@ def fig_heatmap(kind, maps, out_dir):
     return _save(heatmap_figure(maps, kind), Path(out_dir), kind, title, HEAT_CAPTIONS[kind])
 
 
+#: the label of a knot no run excites in the damper figure
+NOT_EXCITED_LABEL = "not excited — not to be trusted"
+
+
+def result_suspension_velocities(result, dataset) -> dict:
+    """Run id -> ``(front, rear)`` suspension velocities (m/s, compression +, both corners of the axle)
+    of the identified car with damper curves, simulated on each run of ``dataset``
+    (:func:`rideid.estimate.dampers.suspension_velocities_by_run`, the excitation check's, at the looser
+    sub-step bound :data:`rideid.data.scenario.LIFT_OFF_RHO`: a histogram needs no more)."""
+    from ..estimate.cost import CostFunction, ParameterSpace
+    from ..data.scenario import LIFT_OFF_RHO
+    from ..estimate.dampers import suspension_velocities_by_run
+
+    knots = [v for v in result.dampers["velocity"] if v > 0]
+    ext = (result.model or {}).get("extensions") or ["damper_curves"]
+    space = ParameterSpace(dataset.known, dataset.geometry, dataset.manifest.bounds, extensions=ext,
+                           damper_knots=knots)
+    cf = CostFunction(dataset, space=space)
+    P = space.full(np.array([[result.parameters[n] for n in space.names]]))[0]
+    return {r.id: v for r, v in zip(dataset.runs, suspension_velocities_by_run(cf, P, rho=LIFT_OFF_RHO))}
+
+
+def velocity_histograms(vels: dict, n_bins: int = 60):
+    """Common bin edges over every run and axle, and per run the counts ``(front, rear)``: every sample
+    falls in a bin (the edges span the smallest to the largest velocity)."""
+    allv = np.concatenate([np.concatenate(fr) for fr in vels.values()])
+    lo, hi = float(allv.min()), float(allv.max())
+    if hi <= lo:
+        lo, hi = lo - 1e-3, hi + 1e-3
+    edges = np.linspace(lo, hi, n_bins + 1)
+    return edges, {rid: tuple(np.histogram(v, bins=edges)[0] for v in fr) for rid, fr in vels.items()}
+
+
+def fig_damper_curves(dampers: dict, slopes: dict, out_dir):
+    """Per axle the identified force-velocity curve, its +-2 std_robust band at the knots, the knots
+    no run excites marked, and the derived linear c_s for reference."""
+    return _save(damper_curves_figure(dampers, slopes), Path(out_dir), "damper_curves", "Damper curves",
+                 "Identified force–velocity curve per axle (piecewise linear through the origin and the knots), "
+                 "with ± 2 std_robust at the knots (shaded band and bars). Red crosses: knots no run excites "
+                 f"({NOT_EXCITED_LABEL}: the force continues the last excited segment's slope). Dashed: the "
+                 "derived linear c_s (the curve's mean slope between ±0.1 m/s) for reference.")
+
+
+def damper_curves_figure(dampers: dict, slopes: dict):
+    """The Matplotlib figure of :func:`fig_damper_curves` (``slopes``: axle -> derived c_s or None)."""
+    plt = _plt()
+    v = np.asarray(dampers["velocity"], dtype=float)
+    j0 = int(np.searchsorted(v, 0.0))
+    fig, axes = plt.subplots(1, 2, figsize=(10, 3.8))
+    for ax, axle, colour in zip(axes, ("front", "rear"), ("tab:blue", "tab:orange")):
+        d = dampers[axle]
+        F = np.asarray(d["force"], dtype=float)
+        exc = np.asarray(d["excited"], dtype=bool)
+        sd = np.array([np.nan if s is None else s for s in d["std_robust"]], dtype=float)
+        vv, FF = np.insert(v, j0, 0.0), np.insert(F, j0, 0.0)
+        ax.plot(vv, FF, "-", color=colour, lw=1.6, label=f"identified curve ({axle})")
+        ok = exc & np.isfinite(sd)
+        if ok.any():
+            band_v = np.insert(v[ok], int(np.searchsorted(v[ok], 0.0)), 0.0)
+            lo = np.insert((F - 2 * sd)[ok], int(np.searchsorted(v[ok], 0.0)), 0.0)
+            hi = np.insert((F + 2 * sd)[ok], int(np.searchsorted(v[ok], 0.0)), 0.0)
+            ax.fill_between(band_v, lo, hi, color=colour, alpha=0.25, lw=0, label="± 2 std_robust")
+            ax.errorbar(v[ok], F[ok], yerr=2 * sd[ok], fmt="o", ms=4, color=colour, capsize=3, lw=1)
+        if (~exc).any():
+            ax.plot(v[~exc], F[~exc], "x", ms=8, mew=2, color="tab:red", label=NOT_EXCITED_LABEL)
+            for vk, Fk in zip(v[~exc], F[~exc]):
+                ax.annotate("not excited", (vk, Fk), textcoords="offset points", xytext=(0, 8 if vk > 0 else -14),
+                            ha="center", fontsize=7, color="tab:red")
+        c = slopes.get(axle)
+        if c is not None:
+            ax.plot(v[[0, -1]], c * v[[0, -1]], "--", color="0.45", lw=1,
+                    label=f"derived c_s{axle[0]} = {c:.0f} N s/m (mean slope ±0.1 m/s)")
+        ax.axhline(0, color="0.6", lw=0.6)
+        ax.axvline(0, color="0.6", lw=0.6)
+        ax.set_xlabel("suspension velocity (m/s, compression +)")
+        ax.set_ylabel("damper force at the wheel (N)")
+        ax.set_title(f"{axle} axle")
+        ax.legend(fontsize=7, loc="upper left")
+    fig.subplots_adjust(left=0.08, right=0.985, bottom=0.13, top=0.92, wspace=0.25)
+    return fig
+
+
+def fig_damper_velocities(edges, hists: dict, knots, out_dir):
+    """Per run: a histogram of the suspension velocities reached, front and rear."""
+    plt = _plt()
+    n = len(hists)
+    ncol = min(5, n)
+    nrow = -(-n // ncol)
+    fig, axes = plt.subplots(nrow, ncol, figsize=(10, 1.9 * nrow + 0.5), sharex=True, squeeze=False)
+    for ax, (rid, (cf, cr)) in zip(axes.flat, hists.items()):
+        ax.stairs(np.maximum(cf, 0.5), edges, baseline=0.5, color="tab:blue", label="front")
+        ax.stairs(np.maximum(cr, 0.5), edges, baseline=0.5, color="tab:orange", label="rear")
+        ax.set_yscale("log")
+        ax.set_ylim(0.7, None)
+        for k in knots:
+            ax.axvline(k, color="0.5", lw=0.6, ls=":")
+        ax.set_title(rid, fontsize=8)
+    for ax in list(axes.flat)[n:]:
+        ax.set_visible(False)
+    for ax in axes[-1]:
+        ax.set_xlabel("velocity (m/s)")
+    for ax in axes[:, 0]:
+        ax.set_ylabel("samples")
+    axes.flat[0].legend(fontsize=6, loc="upper left")
+    fig.subplots_adjust(left=0.07, right=0.985, bottom=0.5 / (1.9 * nrow + 0.5) + 0.06, top=0.93,
+                        wspace=0.25, hspace=0.45)
+    return _save(fig, Path(out_dir), "damper_velocities", "Suspension velocities reached",
+                 "Per run, histogram (log scale) of the suspension velocities of the identified car simulated on "
+                 "the run, both corners of each axle; dotted: the damper knots. A knot is excited when at least "
+                 "20 samples over all runs go beyond the knot before it.")
+
+
 def _fig_job(job):
     name, args = job
     return globals()[name](*args)
@@ -476,6 +588,13 @@ def write_report(result, dataset, out_dir, *, compare=None, compare_label: str |
     if other is not None:
         jobs.append(("fig_compare", (hist, other[0], other[1], other[2], run_ids, out_dir)))
     done = _map_figures(jobs)
+    damper_figs = []
+    if getattr(result, "dampers", None):
+        vels = result_suspension_velocities(result, dataset)
+        edges, hists = velocity_histograms(vels)
+        slopes = {a: result.parameters.get(n) for a, n in (("front", "c_sf"), ("rear", "c_sr"))}
+        damper_figs = [fig_damper_curves(result.dampers, slopes, out_dir),
+                       fig_damper_velocities(edges, hists, result.dampers["velocity"], out_dir)]
     compare_figs = [done.pop()] if other is not None else []
     heat_figs = [done.pop() for _ in HEAT_CAPTIONS][::-1]
     figs = done[:3] if hist else []
@@ -514,7 +633,7 @@ def write_report(result, dataset, out_dir, *, compare=None, compare_label: str |
     text = tpl.render(
         title=f"rideid identification: {html.escape(dataset.name)}", res=res, params=params,
         modal=result.modal or {}, figures=figs + compare_figs, fit_figures=fit_figs, fit_rows=fit_rows,
-        heat_figures=heat_figs, runs=maps.runs, p2t=p2t, known=result.known, n_runs=len(dataset.runs),
+        heat_figures=heat_figs, damper_figures=damper_figs, runs=maps.runs, p2t=p2t, known=result.known, n_runs=len(dataset.runs),
         dataset=str(dataset.path), data_rows=data_rows, channel_rows=channel_rows, data_warnings=data_warnings,
         **estimate_context(res),
     )
