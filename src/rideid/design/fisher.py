@@ -340,8 +340,10 @@ class Precision:
 
     def derived_std(self, grad_rel: np.ndarray) -> tuple[float, float]:
         """Std of a derived quantity with gradient ``grad_rel`` (d/du), CRLB and identify."""
-        a = float(np.sqrt(max(grad_rel @ self.cov_rel @ grad_rel, 0.0)))
-        b = float(np.sqrt(max(grad_rel @ self.cov_identify_rel @ grad_rel, 0.0)))
+        nz = np.nonzero(grad_rel)[0]  # rows of parameters it does not depend on may be NaN (not identifiable)
+        g = grad_rel[nz]
+        a = float(np.sqrt(max(g @ self.cov_rel[np.ix_(nz, nz)] @ g, 0.0)))
+        b = float(np.sqrt(max(g @ self.cov_identify_rel[np.ix_(nz, nz)] @ g, 0.0)))
         return a, b
 
 

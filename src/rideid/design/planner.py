@@ -19,7 +19,11 @@ from ..errors import ArgumentError, DataError
 from ..data.scenario import load_scenario
 from ..data.schema import Scenario
 from .colour import load_noise_psd
-from .fisher import STEP, NoiseModel, Precision, messages, run_information, simulator, subset_precision
+from ..model.nonlinear import curve_names
+from ..model.params import ALL_NAMES, EXT_NAMES, NAMES
+from .curves import AXLES, CURVES, Excitation, mask_information, nominal_forces, not_excited_names, plan_knots, run_counts
+from .fisher import (STEP, NoiseModel, Precision, messages, precision, run_information, simulator,
+                     subset_precision)
 from .select import Selector
 
 CRITERIA = ("D", "A", "target")
@@ -59,6 +63,7 @@ class PlanResult:
     robust_worst: np.ndarray | None = None   # (d,) worst relative spread over the sampled cars, selected runs
     comparison: dict = field(default_factory=dict)
     noise_text: str = ""
+    dampers: dict | None = None    # with damper curves: knots, excitation, CRLB per knot
 
     # -- dictionaries ---------------------------------------------------------
     def _crlb(self, p: Precision, which="crlb") -> dict:
@@ -75,7 +80,7 @@ class PlanResult:
     def _derived(self, p: Precision) -> dict:
         if self.derived is None:
             return {}
-        if not p.identifiable.all():
+        if not p.identifiable[self.derived_grad != 0].all():
             return {self.derived: {"std": None, "relative": None, "std_identify": None}}
         a, b = p.derived_std(self.derived_grad)
         v = self.nominal[self.derived]
@@ -141,7 +146,7 @@ class PlanResult:
                             for k, (rid, p) in enumerate(self.path)],
             "sensitivity_map_comparison": self.comparison,
             "notes": self.notes,
-        }
+        } | ({"dampers": self.dampers} if self.dampers is not None else {})
 
     # -- output files ---------------------------------------------------------
     def summary(self) -> str:
@@ -153,9 +158,20 @@ class PlanResult:
                  + " ".join(self.selected_runs),
                  f"noise: {self.noise_text}",
                  f"{'parameter':10s} {'nominal':>12s} {'selected ±':>12s} {'(identify)':>10s} {'all runs ±':>10s}"]
+        off_sel = set(self.dampers["selected"]["not_excited"]) if self.dampers else set()
+        off_all = set(self.dampers["all_runs"]["not_excited"]) if self.dampers else set()
+
+        def cell(v, n, off, width):
+            return f"{'not excited' if n in off else _pct(v):>{width}s}"
+
         for j, n in enumerate(self.names):
-            lines.append(f"{n:10s} {self.nominal[n]:12.6g} {_pct(self.selected.rel_crlb[j]):>12s} "
-                         f"{_pct(self.selected.rel_identify[j]):>10s} {_pct(self.all_runs.rel_crlb[j]):>10s}")
+            lines.append(f"{n:10s} {self.nominal[n]:12.6g} {cell(self.selected.rel_crlb[j], n, off_sel, 12)} "
+                         f"{cell(self.selected.rel_identify[j], n, off_sel, 10)} "
+                         f"{cell(self.all_runs.rel_crlb[j], n, off_all, 10)}")
+        if self.dampers:
+            for c in self.candidates:
+                ne = c["dampers"]["not_excited"]
+                lines.append(f"damper knots run {c['id']}: " + (f"not excited {', '.join(ne)}" if ne else "all excited"))
         lines += self.messages_selected + self.notes
         return "\n".join(lines)
 
@@ -355,12 +371,23 @@ def plan(scenario, *, noise=None, accel_density: float = 0.0, gyro_density: floa
     if extensions is None:  # the scenario's [model], else the groups the nominal car has
         extensions = sc.extensions if sc.extensions is not None else \
             tuple(g for g, ns in GROUPS.items() if any(sc.truth.get(n, 0.0) > 0 for n in ns))
-    space = ParameterSpace(sc.known, sc.geometry, sc.bounds, extensions=extensions)  # refuses a missing anchor
+    extensions = tuple(extensions)
+    if sc.dampers is not None and CURVES not in extensions:  # the car has real dampers: plan their curves
+        extensions += (CURVES,)
+    curves = CURVES in extensions
+    knots, knots_from = plan_knots(sc) if curves else (None, None)
+    space = ParameterSpace(sc.known, sc.geometry, sc.bounds, extensions=extensions,
+                           damper_knots=knots)  # refuses a missing anchor
     names = list(space.names)
+    knot_names = [n for n in names if n.startswith("F_")] if curves else []
     x0 = np.array([float(sc.truth.get(n, 0.0)) for n in names])
-    if np.any(x0 <= 0):
-        zero = [n for n, v in zip(names, x0) if v <= 0]
-        raise DataError(f"{sc.path}: [truth] has no positive value for {', '.join(zero)}, a free parameter of the "
+    if curves:
+        Fk = nominal_forces(sc, space.layout)
+        all_knots = curve_names(space.layout.n_knots)
+        x0[[names.index(n) for n in knot_names]] = [Fk[all_knots.index(n)] for n in knot_names]
+    bad = [n for n, v in zip(names, x0) if (v == 0 if n in knot_names else v <= 0)]
+    if bad:
+        raise DataError(f"{sc.path}: [truth] has no positive value for {', '.join(bad)}, a free parameter of the "
                         "model; precision is planned relative to the nominal value, so give one")
     P0 = space.full(x0[None])[0]
     _check_truth(sc, space, P0)
@@ -410,11 +437,36 @@ def plan(scenario, *, noise=None, accel_density: float = 0.0, gyro_density: floa
                             f"takes {sc.runs[j].duration:g} s + {overhead:g} s overhead)")
 
     # -- information -----------------------------------------------------------
+    notes = []
     sim = simulator(sc)
+    lin_sim = sim
+    exc = None
+    if curves:
+        from ..estimate.cost import CurveSimulator
+        sim = CurveSimulator(sc.geometry, sim.runs, space.layout)
+        sim.pin_at(P0[None], margin=1.0)  # one integrator for every row of the differences
+        exc = Excitation(space.layout.knots, run_counts(space, sim, P0), names)
+        if sc.dampers is not None and knots_from == "default knots (SPEC §8)":
+            notes.append("the [dampers] velocities are not symmetric: the plan's car is the truth curve sampled at "
+                         "the default knots (set [model] damper_knots to plan other knots)")
+        if sc.bump_stops:
+            notes.append("bump stops are not in the plan's model (identify cannot fit them): planned without them")
     fs = [r.fs for r in sc.runs]
     cars = [x0] + _sample_cars(space, x0, sc.bounds, robust - 1, robust_spread, seed)
     infos = [run_information(sim, space, x, nm, fs, step=step) for x in cars]
+    if exc is not None:  # a knot no candidate excites is not in any Fisher matrix
+        keep = exc.mask(range(len(run_ids)))
+        for i in infos:
+            i.F, i.A, i.B = (mask_information(M, keep) for M in (i.F, i.A, i.B))
     info = infos[0]
+
+    def prec(S):
+        """Precision of runs ``S``; with curves the knots they do not excite excluded."""
+        if exc is None:
+            return subset_precision(info, S)
+        idx = list(S)
+        k = exc.mask(idx)
+        return precision(*(mask_information(M[idx].sum(0), k) for M in (info.F, info.A, info.B)), info.names, info.x0)
     F = np.stack([i.F for i in infos])
     A = np.stack([i.A for i in infos])
     B = np.stack([i.B for i in infos])
@@ -429,13 +481,12 @@ def plan(scenario, *, noise=None, accel_density: float = 0.0, gyro_density: floa
             return False
         return budget_time is None or tcost[list(S)].sum() <= budget_time * (1 + 1e-12)
 
-    all_p = subset_precision(info, range(len(run_ids)))
+    all_p = prec(range(len(run_ids)))
     # greedy path over all candidates (no budget), for the figure
     order = sel.greedy(lambda S: True, stop_when_met=False) if criterion != "target" else \
         Selector(F, A, B, np.ones(len(run_ids)), criterion, ti, sel.tr).greedy(lambda S: True, stop_when_met=False)
-    path = [(run_ids[j], subset_precision(info, order[:k + 1])) for k, j in enumerate(order)]
+    path = [(run_ids[j], prec(order[:k + 1])) for k, j in enumerate(order)]
 
-    notes = []
     if criterion == "target" or budget_runs is not None or budget_time is not None:
         S = sel.best(fits)
         if criterion == "target" and not sel.met(S):
@@ -448,7 +499,7 @@ def plan(scenario, *, noise=None, accel_density: float = 0.0, gyro_density: floa
         S = None
         for k in range(1, len(run_ids) + 1):
             T = sel.best(lambda S, k=k: fits(S, k))
-            p = subset_precision(info, T)
+            p = prec(T)
             if np.all(p.rel_crlb <= within * all_p.rel_crlb):
                 S = T
                 break
@@ -456,7 +507,7 @@ def plan(scenario, *, noise=None, accel_density: float = 0.0, gyro_density: floa
         notes.append(f"no budget given: the fewest runs whose CRLB is within {within:g}x of all "
                      f"{len(run_ids)} candidates' on every parameter (--within; set --budget-runs or --budget-time)")
     S = sorted(S)
-    sel_p = subset_precision(info, S)
+    sel_p = prec(S)
     chosen = [run_ids[j] for j in S]
     worst = None
     if robust > 1:
@@ -470,7 +521,11 @@ def plan(scenario, *, noise=None, accel_density: float = 0.0, gyro_density: floa
              "time_cost_s": float(tcost[k]),
              "channels_used": [c for c, u in zip(_channels(), info.used[k]) if u]}
             for k, r in enumerate(sc.runs)]
-    ratio = sel_p.rel_identify / sel_p.rel_crlb
+    if exc is not None:
+        for k, c in enumerate(cand):
+            c["dampers"] = exc.run_entry(k)
+    with np.errstate(invalid="ignore"):
+        ratio = sel_p.rel_identify / sel_p.rel_crlb
     fin = np.isfinite(ratio)
     if fin.any() and ratio[fin].max() > 1.1:
         j = int(np.nanargmax(np.where(fin, ratio, np.nan)))
@@ -478,9 +533,16 @@ def plan(scenario, *, noise=None, accel_density: float = 0.0, gyro_density: floa
                 else "not noise-weighted")
         notes.append(f"identify's cost is {what}: its expected spread exceeds the CRLB by up to "
                      f"{100 * (ratio[fin].max() - 1):.0f} % ({names[j]}); promises use identify's spread")
+    nominal = {n: float(v) for n, v in sc.truth.items()}
+    nominal.update({n: float(v) for n, v in zip(names, x0) if n in knot_names})
+    sens = {"method": "central finite differences through the compiled kernel", "relative_step": step}
+    if curves:
+        sens["method"] = ("central finite differences through the compiled nonlinear car (damper curves, RK4 with "
+                          "its sub-step count pinned at the nominal car's for every row of the differences)")
+        sens["substeps"] = {rid: int(m) for rid, m in zip(run_ids, sim.pin)}
     res = PlanResult(
         scenario=str(sc.path), names=names,
-        nominal={n: float(v) for n, v in sc.truth.items()},
+        nominal=nominal,
         derived=space.derived, known=dict(sc.known), extensions=list(space.extensions), noise=nm.to_dict(), noise_text=nm.describe(),
         criterion=criterion,
         budget={"runs": budget_runs, "time_s": budget_time, "overhead_s": overhead,
@@ -489,12 +551,61 @@ def plan(scenario, *, noise=None, accel_density: float = 0.0, gyro_density: floa
         robust={"cars": robust, "rule": "maximin: the criterion of the worst car" if robust > 1 else "nominal car",
                 "seed": seed, "spread": robust_spread if robust > 1 else None,
                 "cars_free": [dict(zip(names, map(float, c))) for c in cars[1:]]},
-        sensitivity={"method": "central finite differences through the compiled kernel", "relative_step": step},
+        sensitivity=sens,
         candidates=cand, all_runs=all_p, selected_runs=chosen, selected=sel_p, path=path,
-        messages_all=messages(all_p), messages_selected=messages(sel_p, chosen), notes=notes,
+        messages_all=_messages(info, exc, range(len(run_ids)), None, all_p),
+        messages_selected=_messages(info, exc, S, chosen, sel_p), notes=notes,
         derived_grad=grad, robust_worst=worst)
-    res.comparison = _compare_maps(sim, sc, P0, run_ids, info, names, [run_ids[j] for j in order], criterion)
+    if exc is not None:
+        res.dampers = _dampers_block(exc, space, x0, names, all_p, sel_p, S, len(run_ids), knots_from)
+    width = len(ALL_NAMES) if any(n in EXT_NAMES for n in names) else len(NAMES)
+    res.comparison = _compare_maps(lin_sim, sc, P0[:width] if curves else P0, run_ids, info, names,
+                                   [run_ids[j] for j in order], criterion)
     return res
+
+
+def _messages(info, exc, runs, run_ids, p) -> list:
+    """:func:`messages` of precision ``p`` of ``runs``; with curves those of the knots the runs excite (the
+    Fisher matrix without the others), and the knots not excited named."""
+    off = exc.not_excited(runs) if exc is not None else []
+    if not off:
+        return messages(p, run_ids)
+    idx, keep = list(runs), np.nonzero(exc.mask(runs))[0]
+    sub = precision(*(M[idx].sum(0)[np.ix_(keep, keep)] for M in (info.F, info.A, info.B)),
+                    [info.names[i] for i in keep], info.x0[keep])
+    out = messages(sub, run_ids)
+    where = f" by {', '.join(run_ids)}" if run_ids is not None else " by any candidate run"
+    return [f"damper knots not excited{where}: {', '.join(off)} (no run reaches them; excluded from the Fisher "
+            "matrix, identify would continue the last excited segment's slope)"] + out
+
+
+def _dampers_block(exc, space, x0, names, all_p, sel_p, S, n_runs, knots_from) -> dict:
+    """plan.json ``"dampers"``: knots, nominal forces, and per axle the CRLB per knot (all runs, selected)."""
+    K = space.layout.n_knots
+    kn = curve_names(K)
+
+    def block(p, runs):
+        e = exc.of(runs)
+        out = {"not_excited": not_excited_names(exc.knots, e)}
+        for a, axle in enumerate(AXLES):
+            rows = []
+            for j, n in enumerate(kn[a * K:(a + 1) * K]):
+                i = names.index(n) if n in names else None
+                ok = i is not None and bool(e[a, j]) and np.isfinite(p.rel_crlb[i])
+                rows.append((n, ok, i))
+            out[axle] = {"names": [n for n, _, _ in rows], "excited": [bool(e[a, j]) for j in range(K)],
+                         "samples_beyond_previous_knot": exc.counts[list(runs)][:, a].sum(0).tolist(),
+                         "crlb_std": [float(p.std[i]) if ok else None for _, ok, i in rows],
+                         "crlb_relative": [float(p.rel_crlb[i]) if ok else None for _, ok, i in rows],
+                         "identify_std": [float(p.std_identify[i]) if ok and np.isfinite(p.std_identify[i]) else None
+                                          for _, ok, i in rows]}
+        return out
+
+    force = {n: float(v) for n, v in zip(names, x0) if n in kn}
+    return {"velocity": list(space.layout.knots), "knots_from": knots_from, "unit": {"velocity": "m/s", "force": "N"},
+            "nominal": {axle: [force.get(n) for n in kn[a * K:(a + 1) * K]] for a, axle in enumerate(AXLES)},
+            "excitation_rule": exc.rule(),
+            "all_runs": block(all_p, range(n_runs)), "selected": block(sel_p, S)}
 
 
 def _channels():
@@ -506,6 +617,8 @@ def _check_truth(sc, space, P0):
     """The anchor must describe the nominal car: fixed and derived values equal to [truth]."""
     from ..model.params import ALL_NAMES
     for k, n in enumerate(ALL_NAMES[:P0.size]):
+        if space.curves and n in ("c_sf", "c_sr"):  # the curves' mean slopes, not parameters of the plan
+            continue
         if abs(P0[k] - sc.truth.get(n, 0.0)) > 1e-6 * max(abs(sc.truth.get(n, 0.0)), 1e-12):
             src = "derived from [known] total_mass" if n == space.derived else "[known]"
             raise DataError(f"{sc.path}: {n} = {P0[k]:.6g} ({src}) disagrees with [truth] {n} = "
