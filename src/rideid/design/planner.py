@@ -210,6 +210,24 @@ class PlanResult:
                 out.append(f"| {n} | {v['top_map']} | {v['top_fisher']} | {v['spearman']:+.2f} |")
             out.append(f"\nRuns ordered by the map's total share: {', '.join(c['map_order'])}  ")
             out.append(f"Runs in greedy {self.criterion} order: {', '.join(c['greedy_order'])}\n")
+        if self.dampers:
+            dm = self.dampers
+            out.append("\n## Damper curves: knots excited and their CRLB (selected runs)\n")
+            out.append(dm["excitation_rule"] + ".\n")
+            out.append("| v (m/s) | front F (N) | front CRLB ± | rear F (N) | rear CRLB ± |")
+            out.append("|---|---|---|---|---|")
+            sel = dm["selected"]
+
+            def c(ax, j):
+                r = sel[ax]["crlb_relative"][j]
+                return "not excited" if not sel[ax]["excited"][j] else ("—" if r is None else f"±{100 * r:.3g} %")
+            for j, v in enumerate(dm["velocity"]):
+                out.append(f"| {v:g} | {dm['nominal']['front'][j]:.6g} | {c('front', j)} | "
+                           f"{dm['nominal']['rear'][j]:.6g} | {c('rear', j)} |")
+            out.append("\n| run | knots not excited |\n|---|---|")
+            for cd in self.candidates:
+                out.append(f"| {cd['id']} | {', '.join(cd['dampers']['not_excited']) or 'none'} |")
+            out.append("")
         if self.notes:
             out.append("## Notes\n")
             out += [f"- {m}" for m in self.notes]
