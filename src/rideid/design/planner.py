@@ -652,8 +652,14 @@ def _sample_cars(space, x0, bounds, n, spread, seed) -> list:
     lo = np.array([bounds[k][0] if k in bounds else x * (1 - spread) for k, x in zip(space.names, x0)])
     hi = np.array([bounds[k][1] if k in bounds else x * (1 + spread) for k, x in zip(space.names, x0)])
     out = []
+    # damper curves without [bounds] for their knots: each axle's curve scaled as a whole (independent knots
+    # would make non-monotone curves, which ParameterSpace.full flattens and the differences could not see)
+    axles = [[j for j, k in enumerate(space.names) if k.startswith(p) and k not in bounds] for p in ("F_f", "F_r")]
     for _ in range(1000 * n):
         x = lo + (hi - lo) * rng.random(lo.size)
+        for js in axles:
+            if js:
+                x[js] = x0[js] * (1 + spread * (2 * rng.random() - 1))
         if space.valid(space.full(x[None]))[0]:
             out.append(x)
             if len(out) == n:
