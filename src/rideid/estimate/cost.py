@@ -279,7 +279,7 @@ class ParameterSpace:
         knots = np.asarray(self.layout.knots)
         K = knots.size
         j0 = int(np.searchsorted(knots, 0.0))
-        s = len(ALL_NAMES)
+        s = self.col["F_f1"]
         frozen = set(self.frozen)
         for a, (prefix, cname) in enumerate((("F_f", "c_sf"), ("F_r", "c_sr"))):
             F = P[:, s + a * K:s + (a + 1) * K]  # a view
