@@ -45,6 +45,12 @@
    pinned at its start (so every differenced residual uses one integrator).
    ``c_sf``, ``c_sr`` and frozen knots are derived; their standard errors
    follow by the delta method (they are linear in the knot forces).
+10. Bump stops (SPEC §8, group ``bump_stops``): the search on the linear
+    model as in 9; a scan of clearance and rate per axle from its car
+    (:mod:`rideid.estimate.bumps`) starts the polish on the nonlinear car;
+    a stop no run reaches is held (not free, reported ``reached: false``
+    without standard errors), also when the polished car no longer reaches
+    it (the polish is then repeated).
 """
 
 from __future__ import annotations
