@@ -162,7 +162,7 @@ def scan_start(cf, x) -> tuple[np.ndarray, dict, dict]:
                     set_stop(row, a, c, k, adjust)
                     rows.append(row)
                     tags.append((a, c, k, adjust is not None))
-    J = cf.copy().__call__(np.array(rows))  # equal weights
+    J = cf(np.array(rows))  # equal weights (cf is the identification's copy)
     record, frozen = {}, {}
     for axle, a in AXLES:
         c_name, r_name = f"bs_clear_{a}", f"bs_rate_{a}"
