@@ -1,5 +1,7 @@
 """Identification of bump stops (SPEC §8, group bump_stops)."""
 
+import contextlib
+import io
 import json
 import shutil
 
@@ -60,17 +62,10 @@ def stops_fit(tmp_path_factory):
     clearance per run, rear 90-280)."""
     tmp = tmp_path_factory.mktemp("stops25")
     ds, truth = simulate(tmp, 0.025)
-    cap = {}
-
-    class Cap:  # capsys is function-scoped: read the terminal output through a redirect
-        pass
-    import contextlib
-    import io
-    buf = io.StringIO()
+    buf = io.StringIO()  # capsys is function-scoped: the terminal output through a redirect
     with contextlib.redirect_stdout(buf):
         res, _ = identify(ds, tmp / "fit")
-    cap["text"] = buf.getvalue()
-    return truth, res, tmp / "fit", cap["text"], ds
+    return truth, res, tmp / "fit", buf.getvalue(), ds
 
 
 def test_bump_stops_are_recovered(stops_fit):
