@@ -142,28 +142,19 @@ def test_bad_damper_knots_in_a_dataset(knots, msg, sim_dataset, tmp_path, capsys
     assert not (tmp_path / "fit").exists()
 
 
-@pytest.mark.parametrize("group", ["bump_stops"])
-def test_identify_refuses_the_nonlinear_groups_in_one_line(group, sim_dataset, tmp_path, capsys):
-    """Simulated, not yet identified: a clear refusal rather than a fit that silently leaves them out
-    (damper_curves are identified: tests/test_damper_curves.py)."""
+def test_dataset_model_with_bump_stops_is_identified(sim_dataset, tmp_path):
+    """[model] extensions = ["bump_stops"] gives the cost function the stops' four parameters (identified:
+    tests/test_bump_stops.py)."""
     import shutil
 
-    from rideid.cli import main
     d = tmp_path / "ds"
     shutil.copytree(sim_dataset, d)
     doc = read_toml(d / "dataset.toml")
-    doc["model"] = {"extensions": [group]}
+    doc["model"] = {"extensions": ["bump_stops"]}
     (d / "dataset.toml").write_text(tomli_w.dumps(doc))
-    assert main(["identify", str(d), "--out", str(tmp_path / "fit"), "--quiet"]) == 2
-    err = capsys.readouterr().err.strip()
-    assert len(err.splitlines()) == 1
-    assert f"dataset.toml: [model] extensions: '{group}' (SPEC §8) cannot be identified" in err
-    assert not (tmp_path / "fit").exists()
-    ds = rideid.load_dataset(d)
-    with pytest.raises(ArgumentError, match="cannot be identified"):
-        rideid.CostFunction(ds)
-    with pytest.raises(ArgumentError, match="cannot be identified"):
-        rideid.CostFunction(ds, extensions=[group])
+    cf = rideid.CostFunction(rideid.load_dataset(d))
+    assert cf.names[-4:] == ["bs_clear_f", "bs_clear_r", "bs_rate_f", "bs_rate_r"]
+    assert cf.space.layout.bump_stops and cf.space.layout.knots is None
 
 
 def test_truth_toml_keeps_dampers_and_bump_stops(tmp_path):

@@ -279,7 +279,9 @@ def _summary_table(res) -> str:
         note = "known" if d["fixed"] else ("derived" if d["derived"] else "")
         if d["derived"] and n in ("c_sf", "c_sr") and res.dampers:
             note = "derived: the curve's mean slope over ±0.1 m/s"
-        if d.get("at_bound"):
+        if d.get("reached") is False and not d["fixed"]:
+            note = "NOT REACHED: no run compresses the suspension to the stop — not a number to trust"
+        elif d.get("at_bound"):
             note = "AT A SEARCH BOUND: set by the bound, not the data"
         std = "" if d.get("std") in (None, 0.0) else f"{d['std']:.3g}"
         rob = "" if d.get("std_robust") in (None, 0.0) else f"{d['std_robust']:.3g}"
@@ -287,6 +289,9 @@ def _summary_table(res) -> str:
     if res.dampers:
         from .estimate.dampers import format_dampers
         lines.append(format_dampers(res.dampers))
+    if res.bump_stops:
+        from .estimate.bumps import format_bump_stops
+        lines.append(format_bump_stops(res.bump_stops))
     return "\n".join(lines)
 
 

@@ -47,17 +47,24 @@ from ..data.dataset import Dataset, check_known_consistent, prepare_inputs, scal
 from ..model.batch import BatchSimulator
 from ..errors import ArgumentError, DataError
 from ..model.equations import CHANNEL_KIND, CHANNELS
-from ..model.nonlinear import (DEFAULT_KNOTS, NonlinearLayout, NonlinearSimulator, curve_names, damper_force,
-                               make_simulator, substeps)
+from ..model.nonlinear import (BUMP_STOP_NAMES, DEFAULT_KNOTS, NonlinearLayout, NonlinearSimulator, curve_names,
+                               damper_force, make_simulator, substeps)
 from ..model.params import (ALL_NAMES, EXT_NAMES, GROUPS, INDEX, MASS_COUNT, NAMES, default_bounds, nominal_car,
                             total_mass)
 
 ENERGY_FLOOR = 0.01
 
-#: the SPEC §8 group this version identifies
+#: the SPEC §8 groups this version identifies
 CURVES = "damper_curves"
-#: the groups a model may have, canonical order: SPEC §6's linear ones, then the damper curves
-IDENTIFIABLE_GROUPS: tuple[str, ...] = tuple(GROUPS) + (CURVES,)
+BUMP = "bump_stops"
+#: the groups a model may have, canonical order: SPEC §6's linear ones, then the damper curves, the bump stops
+IDENTIFIABLE_GROUPS: tuple[str, ...] = tuple(GROUPS) + (CURVES, BUMP)
+#: default bounds of the bump stops (SPEC §8): clearance 10-150 mm of compression from static ride height
+#: (production cars: 20-80 mm at the wheel), rate 0-500 kN/m at the wheel (rubber/PU stops: 20-200 kN/m
+#: before they go solid); ``[bounds]`` overrides them
+BUMP_BOUNDS = {"bs_clear_f": (0.01, 0.15), "bs_clear_r": (0.01, 0.15), "bs_rate_f": (0.0, 5.0e5),
+               "bs_rate_r": (0.0, 5.0e5)}
+BUMP_UNITS = {"bs_clear_f": "m", "bs_clear_r": "m", "bs_rate_f": "N/m", "bs_rate_r": "N/m"}
 #: default bounds of a knot force ``F(v)``: the axle's ``c_s`` bounds times ``|v|``, the lower one divided by
 #: the first factor (a digressive damper's high-speed force lies far below ``c_min v``), the upper one times
 #: the second (a progressive or bleed-stiff low-speed force above ``c_max v``); ``F`` has the sign of ``v``.
@@ -147,7 +154,7 @@ class ParameterSpace:
     """
 
     def __init__(self, known: dict[str, float], geometry, bounds: dict | None = None, extensions=(),
-                 damper_knots=None, frozen=()):
+                 damper_knots=None, frozen=(), bump_frozen=None):
         scale_anchor(known)
         check_known_consistent(known)
         self.known = dict(known)
@@ -159,10 +166,16 @@ class ParameterSpace:
                 raise ArgumentError(f"unknown extension group '{g}'; groups are: {', '.join(IDENTIFIABLE_GROUPS)}")
         self.extensions = tuple(g for g in IDENTIFIABLE_GROUPS if g in extensions)
         self.curves = CURVES in self.extensions
+        self.bump = BUMP in self.extensions
         self.damper_knots = None if damper_knots is None else tuple(float(k) for k in damper_knots)
-        self.layout = NonlinearLayout(knots=curve_knots(damper_knots)) if self.curves else None
+        self.layout = NonlinearLayout(knots=curve_knots(damper_knots) if self.curves else None,
+                                      bump_stops=self.bump) if (self.curves or self.bump) else None
         knot_names = curve_names(self.layout.n_knots) if self.curves else ()
         self.frozen = tuple(n for n in knot_names if n in set(frozen))
+        #: bump-stop columns of axles whose stop no run reaches: held at these values, not free, not measured
+        self.bump_frozen = {n: float(v) for n, v in (bump_frozen or {}).items()
+                            if self.bump and n in BUMP_STOP_NAMES and n not in known}
+        bump_names = BUMP_STOP_NAMES if self.bump else ()
         if self.curves:
             both = [n for n in ("c_sf", "c_sr") if n in known]
             if both:
@@ -175,12 +188,14 @@ class ParameterSpace:
                 if cand not in known:
                     self.derived = cand
                     break
-        self.fixed = {n: v for n, v in known.items() if n in ALL_NAMES}
+        # a known bump stop is used by a model with the group bump_stops (without it the car has no stops)
+        self.fixed = {n: v for n, v in known.items() if n in ALL_NAMES or n in bump_names}
         model_ext = [n for g in self.extensions if g in GROUPS for n in GROUPS[g]]
         base = [n for n in NAMES if not (self.curves and n in ("c_sf", "c_sr"))]
         self.names = [n for n in base + model_ext if n not in self.fixed and n != self.derived] + \
+            [n for n in bump_names if n not in self.fixed and n not in self.bump_frozen] + \
             [n for n in knot_names if n not in self.frozen]
-        if self.curves:
+        if self.layout is not None:
             self.param_names = self.layout.names
         else:
             width = len(ALL_NAMES) if (model_ext or any(n in self.fixed for n in EXT_NAMES)) else len(NAMES)
@@ -189,12 +204,13 @@ class ParameterSpace:
         self.col = {n: i for i, n in enumerate(self.param_names)}
         #: what a result reports: the twelve, the model's extensions and any known extension, the knot forces
         self.reported_names = tuple(n for n in ALL_NAMES if n in NAMES or n in model_ext or n in self.fixed) + \
-            knot_names
+            bump_names + knot_names
         db = default_bounds(geometry)
         bounds = dict(bounds or {})
         self._bounds_arg = dict(bounds)
+        db.update(BUMP_BOUNDS)
         for k in bounds:
-            if k not in ALL_NAMES and k not in knot_names:
+            if k not in ALL_NAMES and k not in knot_names and k not in BUMP_STOP_NAMES:
                 raise DataError(f"[bounds]: unknown parameter '{k}'"
                                 + ("" if self.curves or not k.startswith("F_") else
                                    " (knot forces are parameters of the damper_curves model only)"))
@@ -221,7 +237,12 @@ class ParameterSpace:
     def with_frozen(self, frozen) -> "ParameterSpace":
         """The same space with the knot forces ``frozen`` derived instead of free."""
         return ParameterSpace(self.known, self.geometry, self._bounds_arg, self.extensions, self.damper_knots,
-                              frozen)
+                              frozen, self.bump_frozen)
+
+    def with_bump_frozen(self, bump_frozen) -> "ParameterSpace":
+        """The same space with the bump-stop columns ``bump_frozen`` (name -> value) held, not free."""
+        return ParameterSpace(self.known, self.geometry, self._bounds_arg, self.extensions, self.damper_knots,
+                              self.frozen, bump_frozen)
 
     def reduce(self, x, other: "ParameterSpace") -> np.ndarray:
         """Free row ``x`` of this space -> the free row of ``other`` (same car; dropped columns are lost)."""
@@ -243,6 +264,8 @@ class ParameterSpace:
             P[:, col[n]] = X[:, j]
         for n, v in self.fixed.items():
             P[:, col[n]] = v
+        for n, v in self.bump_frozen.items():
+            P[:, col[n]] = v
         if self.derived is not None:
             others = [n for n in MASS_COUNT if n != self.derived]
             rest = sum(MASS_COUNT[n] * P[:, col[n]] for n in others)
@@ -256,7 +279,7 @@ class ParameterSpace:
         knots = np.asarray(self.layout.knots)
         K = knots.size
         j0 = int(np.searchsorted(knots, 0.0))
-        s = len(ALL_NAMES)
+        s = self.col["F_f1"]
         frozen = set(self.frozen)
         for a, (prefix, cname) in enumerate((("F_f", "c_sf"), ("F_r", "c_sr"))):
             F = P[:, s + a * K:s + (a + 1) * K]  # a view
@@ -322,6 +345,9 @@ class ParameterSpace:
             ok &= (col > 0) & ((col < self.geometry.wheelbase) if n == "a" else True)
         if P.shape[1] > len(NAMES):
             ok &= np.all(P[:, len(NAMES):len(ALL_NAMES)] >= 0, axis=1)
+        if self.bump:
+            for n in BUMP_STOP_NAMES:
+                ok &= (P[:, self.col[n]] > 0) if n.startswith("bs_clear") else (P[:, self.col[n]] >= 0)
         return ok
 
     def nominal(self) -> np.ndarray:
@@ -336,6 +362,8 @@ class ParameterSpace:
         else:
             s = self.known[anchor] / base[INDEX[anchor]]
         P = base * np.where(np.array(ALL_NAMES) == "a", 1.0, s)
+        if self.bump:  # stops at 50 mm, 50 kN/m scaled with the car
+            P = np.concatenate([P, [0.05, 0.05, 5.0e4 * s, 5.0e4 * s]])
         if self.curves:
             v = self.knot_velocities()
             K = self.layout.n_knots

@@ -45,6 +45,12 @@
    pinned at its start (so every differenced residual uses one integrator).
    ``c_sf``, ``c_sr`` and frozen knots are derived; their standard errors
    follow by the delta method (they are linear in the knot forces).
+10. Bump stops (SPEC §8, group ``bump_stops``): the search on the linear
+    model as in 9; a scan of clearance and rate per axle from its car
+    (:mod:`rideid.estimate.bumps`) starts the polish on the nonlinear car;
+    a stop no run reaches is held (not free, reported ``reached: false``
+    without standard errors), also when the polished car no longer reaches
+    it (the polish is then repeated).
 """
 
 from __future__ import annotations
@@ -63,9 +69,12 @@ from ..data.measured import estimate_start, simulate_response
 from ..errors import ArgumentError, DataWarning
 from ..model.batch import single_threaded_blas
 from ..model.equations import modal_summary
+from ..data.schema import NONLINEAR_GROUPS
+from ..model.nonlinear import BUMP_STOP_NAMES
 from ..model.params import ALL_NAMES, GROUPS, UNITS
+from .bumps import bump_block
 from .dampers import dampers_block
-from .cost import IDENTIFIABLE_GROUPS, CostFunction, ParameterSpace, refuse_unsupported_groups
+from .cost import BUMP_UNITS, IDENTIFIABLE_GROUPS, CostFunction, ParameterSpace, refuse_unsupported_groups
 from .jade import JadeSolver, make_rng, stop_requested
 from .adequacy import advise, assess_fit
 from .result import History, IdentificationResult
@@ -208,8 +217,9 @@ def identify(ds: Dataset, *, rng=None, seed=None, population: int = DEFAULT_POPU
     with single_threaded_blas():
         t0 = time.perf_counter()
         cf = (cost if cost is not None else CostFunction(ds, extensions=model_extensions(ds, model))).copy()
-        # damper curves: the search on the linear model (step 9 of the module docstring)
-        cf_search = _linear_cost(ds, cf) if cf.space.curves and start is None else cf
+        # damper curves, bump stops: the search on the linear model (steps 9, 10 of the module docstring)
+        nonlinear = cf.space.layout is not None
+        cf_search = _linear_cost(ds, cf) if nonlinear and start is None else cf
         if maps is None:
             maps = sensitivity_maps(ds, cost=cf_search)
         search = global_search(cf_search, weighting, maps, gen, population=population,
@@ -217,54 +227,113 @@ def identify(ds: Dataset, *, rng=None, seed=None, population: int = DEFAULT_POPU
                                spread_tol=spread_tol, callback=callback, t0=t0)
         if start is not None:
             search.x, search.stop = np.asarray(start, dtype=float), "start"
-        excitation = None
-        if cf.space.curves:
-            cf, search.x, excitation = _curve_start(cf, cf_search, search.x)
+        excitation = bumps = None
+        if nonlinear:
+            cf, search.x, excitation, bumps = _curve_start(cf, cf_search, search.x)
             cf.nfev += cf_search.nfev if cf_search is not cf else 0
         fit = polish_fit(ds, cf, search.x) if polish else None
-        if fit is not None and cf.space.curves:
+        if fit is not None and cf.space.bump:
+            fit, bumps = _bump_recheck(ds, fit, bumps)
+        if fit is not None and nonlinear:
             fit.cost.sim.pin = None
         res = _result(ds, cf if fit is None else fit.cost, search, fit, weighting, maps, rng_record,
-                      time.perf_counter() - t0, assess, excitation)
+                      time.perf_counter() - t0, assess, excitation, bumps)
         res.wall_time_s = time.perf_counter() - t0
         return res
 
 
 def _linear_cost(ds, cf: CostFunction) -> CostFunction:
-    """The linear model of a damper-curve cost function: the same groups less the curves (``c_sf``,
-    ``c_sr`` free, the linear kernel), the same data and bounds."""
+    """The linear model of a damper-curve or bump-stop cost function: the same groups less the curves and
+    the stops (``c_sf``, ``c_sr`` free, the linear kernel), the same data and bounds."""
     sp = cf.space
-    space = ParameterSpace(sp.known, sp.geometry, {k: v for k, v in sp._bounds_arg.items() if not k.startswith("F_")},
-                           extensions=[g for g in sp.extensions if g != "damper_curves"])
+    space = ParameterSpace({k: v for k, v in sp.known.items() if k not in BUMP_STOP_NAMES}, sp.geometry,
+                           {k: v for k, v in sp._bounds_arg.items()
+                            if not k.startswith("F_") and k not in BUMP_STOP_NAMES},
+                           extensions=[g for g in sp.extensions if g not in NONLINEAR_GROUPS])
     return CostFunction(cf.ds, space=space)
 
 
-def _curve_start(cf: CostFunction, cf_search: CostFunction, x):
-    """The curve model's start from the search's best car: ``x`` mapped into the curve space (a linear
-    car's curves ``F = c v``), its knots' excitation, the space with the knots not excited frozen.
+def _with_space(cf: CostFunction, space) -> CostFunction:
+    """A copy of ``cf`` on another parameter space of the same layout (shares the simulator)."""
+    cf2 = cf.copy()
+    cf2.space, cf2.names, cf2.bounds, cf2.nfev = space, list(space.names), space.bounds, cf.nfev
+    return cf2
 
-    Returns ``(cost function on that space with its sub-steps pinned, start row, excitation)``.
+
+def _curve_start(cf: CostFunction, cf_search: CostFunction, x):
+    """The nonlinear model's start from the search's best car: ``x`` mapped into the nonlinear space (a
+    linear car's curves ``F = c v``), its knots' excitation, the space with the knots not excited frozen;
+    with bump stops the scan of :func:`rideid.estimate.bumps.scan_start` and the stops not reached held.
+
+    Returns ``(cost function on that space with its sub-steps pinned, start row, excitation, bump record)``.
     """
+    from .bumps import frozen_values, reach, scan_start
     from .dampers import knot_excitation
 
     space = cf.space
     if cf_search is not cf:
         P_lin = cf_search.space.full(np.asarray(x, dtype=float)[None])[0]
         vals = {n: P_lin[cf_search.space.col[n]] for n in cf_search.space.param_names}
-        v = space.knot_velocities()
-        K = space.layout.n_knots
-        for j, n in enumerate(space.layout.names[len(space.layout.names) - 2 * K:]):
-            vals[n] = (vals["c_sf"] if j < K else vals["c_sr"]) * v[j]
+        if space.curves:
+            v = space.knot_velocities()
+            K = space.layout.n_knots
+            for j, n in enumerate(space.layout.names[len(space.layout.names) - 2 * K:]):
+                vals[n] = (vals["c_sf"] if j < K else vals["c_sr"]) * v[j]
+        for n in BUMP_STOP_NAMES:  # no stop yet: the scan sets the start
+            vals.setdefault(n, 0.0 if n.startswith("bs_rate") else 0.15)
         x = np.array([vals[n] for n in space.names])
         x = np.clip(x, space.bounds[:, 0], space.bounds[:, 1])
+    excitation = bumps = None
+    if space.curves:
+        P = space.full(np.asarray(x, dtype=float)[None])[0]
+        excitation = knot_excitation(cf, P)
+        new = space.with_frozen(excitation["frozen"])
+        x = space.reduce(x, new)
+        cf, space = _with_space(cf, new), new
+    if space.bump:
+        if cf_search is not cf:
+            x, bump_frozen, bumps = scan_start(cf, x)
+        else:  # a given start: its stops, held where they are not reached
+            bumps, bump_frozen = reach(cf, space.full(np.asarray(x, dtype=float)[None])[0]), {}
+            for axle, a in (("front", "f"), ("rear", "r")):
+                if not bumps[axle]["reached"]:
+                    bump_frozen.update(frozen_values(space, a, bumps[axle]["max_compression"]))
+        new = space.with_bump_frozen(bump_frozen)
+        x = space.reduce(x, new)
+        cf, space = _with_space(cf, new), new
+    cf2 = _with_space(cf, space)
     P = space.full(np.asarray(x, dtype=float)[None])[0]
-    excitation = knot_excitation(cf, P)
-    new = space.with_frozen(excitation["frozen"])
-    x_new = space.reduce(x, new)
-    cf2 = cf.copy()
-    cf2.space, cf2.names, cf2.bounds, cf2.nfev = new, list(new.names), new.bounds, cf.nfev
     cf2.sim.pin_at(P[None])
-    return cf2, x_new, excitation
+    return cf2, x, excitation, bumps
+
+
+def _bump_recheck(ds, fit, bumps):
+    """After the polish: a stop the polished car no longer reaches (fewer than ``MIN_SAMPLES`` samples beyond
+    its clearance) is held as not reached and the polish repeated (at most twice)."""
+    from .bumps import frozen_values, reach
+
+    for _ in range(2):
+        cf = fit.cost
+        space = cf.space
+        P = space.full(fit.x[None])[0]
+        r = reach(cf, P)
+        add = {}
+        for axle, a in (("front", "f"), ("rear", "r")):
+            bumps.setdefault(axle, {}).update(r[axle])
+            free = any(f"bs_{k}_{a}" in space.names for k in ("clear", "rate"))
+            if free and not r[axle]["reached"]:
+                add.update(frozen_values(space, a, r[axle]["max_compression"]))
+                bumps[axle]["reached"] = False
+            elif f"bs_clear_{a}" in space.bump_frozen:
+                bumps[axle]["reached"] = False
+        if not add:
+            break
+        new = space.with_bump_frozen({**space.bump_frozen, **add})
+        x = space.reduce(fit.x, new)
+        cf2 = _with_space(cf, new)
+        cf2.sim.pin_at(new.full(x[None]))
+        fit = polish_fit(ds, cf2, x)
+    return fit, bumps
 
 
 def global_search(cf: CostFunction, weighting, maps: SensitivityMaps, rng, *, population, generations,
@@ -365,7 +434,7 @@ def polish_fit(ds: Dataset, cf: CostFunction, x0) -> OptimizeResult:
 
 
 def _result(ds, cf, search, fit, weighting, maps, rng_record, wall, assess=True,
-            excitation=None) -> IdentificationResult:
+            excitation=None, bumps=None) -> IdentificationResult:
     space = cf.space
     x = search.x if fit is None else fit.x
     d = len(cf.names)
@@ -378,7 +447,7 @@ def _result(ds, cf, search, fit, weighting, maps, rng_record, wall, assess=True,
     derived = space.derived_names()
     details = {}
     for n in space.reported_names:
-        e = {"value": float(P[space.col[n]]), "unit": UNITS.get(n, "N"), "fixed": n in space.fixed,
+        e = {"value": float(P[space.col[n]]), "unit": UNITS.get(n, BUMP_UNITS.get(n, "N")), "fixed": n in space.fixed,
              "derived": n in derived}
         if n in cf.names:
             j = cf.names.index(n)
@@ -399,6 +468,12 @@ def _result(ds, cf, search, fit, weighting, maps, rng_record, wall, assess=True,
             e["note"] = "not excited"
         elif n.startswith("F_"):
             e["excited"] = True
+        if n in BUMP_STOP_NAMES:  # a stop no run reaches: held, not measured
+            e["reached"] = n not in space.bump_frozen and bool(
+                ((bumps or {}).get("front" if n.endswith("_f") else "rear") or {}).get("reached", True))
+            if not e["reached"] and not e["fixed"]:
+                e["std"] = e["std_robust"] = None
+                e["note"] = "not reached"
         details[n] = e
     # an estimate the bound stopped, not the data (rideid.data.checks); warned of by rideid.identify, once,
     # for the model it returns (warn_bounds), not for every candidate fitted on the way
@@ -426,7 +501,9 @@ def _result(ds, cf, search, fit, weighting, maps, rng_record, wall, assess=True,
         adequacy=advise(assess_fit(cf, P, response), {"extensions": list(space.extensions)}) if assess else None,
         checks=[f.to_dict() for f in findings],
         dampers=None if not space.curves else dampers_block(space, P, robust.white, robust.robust, robust.names,
-                                                            excitation))
+                                                            excitation),
+        bump_stops=None if not space.bump else bump_block(space, P, robust.white, robust.robust, robust.names,
+                                                          bumps))
 
 
 def warn_bounds(res: IdentificationResult, stacklevel: int = 3) -> None:

@@ -206,6 +206,9 @@ class IdentificationResult:
     #: SPEC §8 damper curves when the model has them: {"velocity", "front": {"force", "std", "std_robust",
     #: "excited", ...}, "rear": {...}} (rideid.estimate.dampers.dampers_block); None otherwise
     dampers: dict | None = None
+    #: SPEC §8 bump stops when the model has them: per axle {"reached", "clearance", "rate", "std",
+    #: "std_robust", ...} (rideid.estimate.bumps.bump_block); None otherwise
+    bump_stops: dict | None = None
 
     # SciPy/SPEC §4 names for the same numbers
     @property
@@ -236,11 +239,16 @@ class IdentificationResult:
                 continue  # the curves' table below
             std = d.get("std_robust")
             note = " (known)" if d.get("fixed") else (" (derived)" if d.get("derived") else "")
+            if d.get("reached") is False and not d.get("fixed"):
+                note = " (not reached — not a number to trust)"
             err = f" ± {std:.3g} (robust)" if std not in (None, 0.0) else ""
             lines.append(f"  {n}={d['value']:.6g}{err} {d['unit']}{note}")
         if self.dampers:
             from .dampers import format_dampers
             lines += ["  " + ln for ln in format_dampers(self.dampers).splitlines()]
+        if self.bump_stops:
+            from .bumps import format_bump_stops
+            lines += ["  " + ln for ln in format_bump_stops(self.bump_stops).splitlines()]
         if adequate is False:
             lines.append("  not adequate: the residuals carry structure the model misses (adequacy)")
         return "\n".join(lines) + ")"
@@ -283,6 +291,7 @@ class IdentificationResult:
             "preprocessing": self.preprocessing,
             "checks": self.checks,
             **({"dampers": self.dampers} if self.dampers else {}),
+            **({"bump_stops": self.bump_stops} if self.bump_stops else {}),
             "dataset": str(Path(self.dataset).resolve()) if self.dataset else "",
             "sensitivity": _maps_to_json(self.maps),
             "history_file": "history.csv",
@@ -329,7 +338,7 @@ def load(path) -> IdentificationResult:
         modal=doc.get("modal"), dataset=doc.get("dataset", ""),
         maps=_maps_from_json(doc.get("sensitivity"), rpath), rng_state=doc.get("rng_state"),
         model=doc.get("model"), adequacy=doc.get("adequacy"), correlation=doc.get("correlation"),
-        checks=list(doc.get("checks") or []), dampers=doc.get("dampers"))
+        checks=list(doc.get("checks") or []), dampers=doc.get("dampers"), bump_stops=doc.get("bump_stops"))
 
 
 __all__ = ["IdentificationResult", "History", "load", "read_result_json"]

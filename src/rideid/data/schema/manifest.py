@@ -229,7 +229,7 @@ class DatasetManifest(Manifest):
 def _param_value(v, name, where):
     """A parameter value: the twelve positive, the extensions (SPEC §6) non-negative."""
     v = number(v, where)
-    if name in EXT_NAMES:
+    if name in EXT_NAMES or name.startswith("bs_rate"):
         if v < 0:
             raise DataError(f"{where}: must not be negative (0 means none), got {v!r}")
     elif v <= 0:
@@ -351,9 +351,9 @@ def _parse_geometry(doc: dict, where: str) -> Geometry:
 def _parse_known(doc: dict, where: str, geom: Geometry) -> dict[str, float]:
     known = {}
     for k, v in table(doc, "known", where, required=False).items():
-        if k not in NAMES and k not in EXT_NAMES and k not in EXTRA_KNOWN:
+        if k not in NAMES and k not in EXT_NAMES and k not in EXTRA_KNOWN and k not in BUMP_NAMES:
             raise DataError(f"{where}: [known]: unknown key '{k}'; allowed: total_mass or one of "
-                            f"{', '.join(NAMES + EXT_NAMES)}")
+                            f"{', '.join(NAMES + EXT_NAMES + BUMP_NAMES)}")
         known[k] = (number(v, f"{where}: [known] {k}", positive=True) if k in EXTRA_KNOWN
                     else _param_value(v, k, f"{where}: [known] {k}"))
         if k == "a" and not known[k] < geom.wheelbase:
@@ -365,16 +365,16 @@ def _parse_bounds(doc: dict, where: str, geom: Geometry, known: dict) -> dict[st
     bounds = {}
     for k, v in table(doc, "bounds", where, required=False).items():
         w = f"{where}: [bounds] {k}"
-        if k not in NAMES and k not in EXT_NAMES:
-            raise DataError(f"{w}: unknown parameter; allowed: {', '.join(NAMES + EXT_NAMES)}")
+        if k not in NAMES and k not in EXT_NAMES and k not in BUMP_NAMES:
+            raise DataError(f"{w}: unknown parameter; allowed: {', '.join(NAMES + EXT_NAMES + BUMP_NAMES)}")
         if not isinstance(v, list) or len(v) != 2:
             raise DataError(f"{w}: expected [lower, upper]")
         lo, hi = number(v[0], w), number(v[1], w)
         if not lo < hi:
             raise DataError(f"{w}: lower bound {lo} must be less than upper bound {hi}")
-        if k in EXT_NAMES and lo < 0:
+        if (k in EXT_NAMES or k.startswith("bs_rate")) and lo < 0:
             raise DataError(f"{w}: lower bound must not be negative, got {lo}")
-        if k != "a" and k not in EXT_NAMES and lo <= 0:
+        if k != "a" and k not in EXT_NAMES and not k.startswith("bs_rate") and lo <= 0:
             raise DataError(f"{w}: lower bound must be positive, got {lo}")
         if k == "a" and not (0 < lo and hi < geom.wheelbase):
             raise DataError(f"{w}: must lie within (0, wheelbase = {geom.wheelbase})")
