@@ -190,7 +190,7 @@ def _auto(ds, out):
 
 def test_auto_keeps_linear_dampers_of_a_linear_car(tmp_path):
     """SPEC §8: a car with linear dampers keeps them: its fitted curves are F = c v within their error bars,
-    so their departure from straight lines does not pay for the extra knots (about 35 s)."""
+    so their departure from straight lines does not pay for the extra knots (about 15-20 s)."""
     from test_damper_curves import simulate
 
     ds, _ = simulate(tmp_path)
@@ -207,7 +207,8 @@ def test_auto_keeps_linear_dampers_of_a_linear_car(tmp_path):
 @pytest.mark.slow
 def test_auto_picks_curves_for_digressive_asymmetric_dampers(tmp_path):
     """A car with 2:1 asymmetric digressive dampers gets curves, and the curve model is adequate; the
-    tire damping the linear model wanted to make up for them is dropped once the curves are in (about 80 s)."""
+    tire damping the linear model wanted to make up for them is dropped once the curves are in (about 45 s;
+    slow: with the linear car's test the pair passes a minute)."""
     from test_damper_curves import VEL, digressive, simulate
 
     ds, truth = simulate(tmp_path, {"velocity": VEL, "front": digressive(1200, 400), "rear": digressive(1100, 370)})
