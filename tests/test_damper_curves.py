@@ -171,6 +171,10 @@ def test_report_draws_the_curves_and_the_velocities_reached(digressive_fit):
         assert [int(c.sum()) for c in hists[r.id]] == [2 * n, 2 * n], r.id
     # reached: the built-in runs' suspension velocities pass the outermost knots on both sides
     assert edges[0] < -0.4 and edges[-1] > 0.4
+    # the rebuilt report's fits are the curves' car (a linear car with the derived c_s misses by 50 %)
+    sims = H.curve_responses(result, ds)
+    for r in ds.runs:
+        assert max(H.fit_statistics(ds.data[r.id].matrix(), sims[r.id]).values()) < 0.05, r.id
 
 
 def test_damper_figure_marks_knots_not_excited():

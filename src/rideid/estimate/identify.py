@@ -197,6 +197,9 @@ def identify(ds: Dataset, *, rng=None, seed=None, population: int = DEFAULT_POPU
     start : array_like, shape (d,), optional
         Free-parameter row (the cost's ``names`` order) to polish from,
         skipping the search (used to fit nested models from a larger one).
+        With damper curves: the row of the same model with linear dampers
+        (``c_sf``, ``c_sr`` free), whose curves ``F = c v`` start the polish,
+        or a row of the curve model itself (its knot forces as given).
     assess : bool
         Compute the adequacy verdict (:mod:`rideid.estimate.adequacy`; a few
         seconds); ``False`` leaves ``adequacy`` None.
@@ -218,18 +221,21 @@ def identify(ds: Dataset, *, rng=None, seed=None, population: int = DEFAULT_POPU
         t0 = time.perf_counter()
         cf = (cost if cost is not None else CostFunction(ds, extensions=model_extensions(ds, model))).copy()
         # damper curves, bump stops: the search on the linear model (steps 9, 10 of the module docstring)
+        # (a start is then the linear model's row: the curves start as its F = c v)
         nonlinear = cf.space.layout is not None
-        cf_search = _linear_cost(ds, cf) if nonlinear and start is None else cf
+        cf_search = _linear_cost(ds, cf) if nonlinear else cf
         if maps is None:
             maps = sensitivity_maps(ds, cost=cf_search)
         search = global_search(cf_search, weighting, maps, gen, population=population,
                                generations=generations if start is None else 0,
                                spread_tol=spread_tol, callback=callback, t0=t0)
+        # a start of the curve model's own width: its knot forces as given (not a linear car's F = c v)
+        own = start is not None and nonlinear and len(start) == len(cf.names) != len(cf_search.names)
         if start is not None:
             search.x, search.stop = np.asarray(start, dtype=float), "start"
         excitation = bumps = None
         if nonlinear:
-            cf, search.x, excitation, bumps = _curve_start(cf, cf_search, search.x)
+            cf, search.x, excitation, bumps = _curve_start(cf, cf if own else cf_search, search.x)
             cf.nfev += cf_search.nfev if cf_search is not cf else 0
         fit = polish_fit(ds, cf, search.x) if polish else None
         if fit is not None and cf.space.bump:

@@ -99,6 +99,26 @@ def criteria(names, theta, cov, candidates, free_ext) -> list[dict]:
     return out
 
 
+def _own_adequacy(ds, cf, res):
+    """The adequacy verdict of a candidate at its own final state: its parameters, and the model's time
+    axes at the starts its own polish settled (a nested cost function still has the starts it began from)."""
+    space = cf.space
+    cf = CostFunction(ds.with_starts(res.starts), space=space) if res.starts else cf
+    with single_threaded_blas():
+        return assess_fit(cf, space.full(np.array([[res.parameters[n] for n in cf.names]]))[0], res.response)
+
+
+CURVES_GROUP = "damper_curves"
+#: model groups in their canonical order (the linear groups, then the curves)
+IDENTIFIABLE_ORDER = tuple(GROUPS) + (CURVES_GROUP,)
+
+CURVE_CRITERION = ("damper curves: one more polish, the chosen linear groups plus damper_curves, started from the "
+                   "linear car's curves F = c v; W_curves = Wald statistic (std_robust) of the curve forces' "
+                   "departure from a straight line per axle; the curves are kept when they fit better and "
+                   "W_curves > {:.2f} per extra free parameter (free knots less the 2 linear rates); with the curves in, the "
+                   "linear groups are weighed again from the curve fit (the same Wald criterion)"
+                   ).format(PENALTY)
+
 #: the least cost reduction that counts as a better fit: the cost is a relative squared error, so a
 #: group must change the fit by 0.5 % of the channels' RMS, the materiality floor of the adequacy
 #: verdict (rideid.estimate.adequacy.MIN_RELATIVE: below any accelerometer's or gyro's accuracy)
@@ -180,15 +200,55 @@ def identify_auto(ds, *, rng=None, seed=None, callback=None, maps=None, **kw):
     scored = [c for c in crit if c["criterion"] is not None and c["fits_better"]]
     best = min(scored, key=lambda c: (c["criterion"], c["k"] or 0))
     chosen = tuple(best["extensions"])
+    # damper curves on top of the linear choice: one more polish, kept when warranted (curve_candidate);
+    # tried only when the linear choice is not adequate: an adequate linear model leaves no road-driven
+    # structure in the residuals for curves to explain (and the extra polish costs as much as the search)
+    lin = results[chosen]
+    lin.adequacy = _own_adequacy(ds, costs[chosen], lin)
+    curves_tried = bool(lin.adequacy) and not lin.adequacy.get("adequate", True)
+    curve = (curve_candidate(ds, lin, chosen, best, rng=rng, seed=seed, maps=full.maps, **kw_nested)
+             if curves_tried else None)
+    if curve is not None:
+        ckey, cf_c, r_c, c_crit = curve
+        results[ckey], costs[ckey] = r_c, cf_c
+        evaluations += r_c.nfev
+        W = c_crit["curve_departure_wald"]
+        for c in crit:  # every linear candidate leaves out the curves' departure from F = c v
+            if c["criterion"] is not None and W is not None and np.isfinite(W):
+                c["wald"] = (c["wald"] or 0.0) + W
+                c["criterion"] += W
+        c_crit["fits_better"] = fits_better(ckey, {cand: r.cost for cand, r in results.items()})
+        crit.append(c_crit)
+        if c_crit["fits_better"] and c_crit["criterion"] is not None and c_crit["criterion"] < best["criterion"]:
+            best, chosen = c_crit, ckey
+            # with the curves in, a linear group the wrong (linear-damper) model needed may be spurious:
+            # the same criterion from the curve fit's robust covariance over the chosen groups' subsets
+            sub = _curve_subset(r_c, chosen, c_crit)
+            if sub is not None:
+                sub_key_lin, W_sub = sub
+                base_entry = next(c for c in crit if tuple(c["extensions"]) == sub_key_lin)
+                lin_entry = dict(base_entry, criterion=c_crit["criterion"] - PENALTY * c_crit["curve_dof"])
+                curve2 = curve_candidate(ds, results[sub_key_lin], sub_key_lin, lin_entry, rng=rng, seed=seed,
+                                         maps=full.maps, start_from=r_c, **kw_nested)
+                if curve2 is not None:
+                    k2, cf2, r2, e2 = curve2
+                    results[k2], costs[k2] = r2, cf2
+                    evaluations += r2.nfev
+                    if e2["criterion"] is not None:
+                        # the linear groups left out: their Wald in the larger curve fit (k counts them no more)
+                        e2["criterion"] = (c_crit["criterion"] - PENALTY * (c_crit["k"] - e2["k"])) + W_sub
+                        e2["wald"] = W_sub
+                    e2["fits_better"] = fits_better(k2, {cand: r.cost for cand, r in results.items()})
+                    # the larger curve model must now fit better than this one too
+                    c_crit["fits_better"] = fits_better(ckey, {cand: r.cost for cand, r in results.items()})
+                    crit.append(e2)
+                    live = [c for c in (c_crit, e2) if c["fits_better"] and c["criterion"] is not None]
+                    if live:
+                        best = min(live, key=lambda c: (c["criterion"], c["k"]))
+                        chosen = tuple(best["extensions"])
     res = results[chosen]
     if res.adequacy is None:
-        # at the candidate's own final state: its parameters, and the model's time axes at the starts
-        # its own polish settled (the nested cost function still has the starts it began from)
-        space = costs[chosen].space
-        cf = CostFunction(ds.with_starts(res.starts), space=space) if res.starts else costs[chosen]
-        with single_threaded_blas():
-            res.adequacy = assess_fit(cf, space.full(np.array([[res.parameters[n] for n in cf.names]]))[0],
-                                      res.response)
+        res.adequacy = _own_adequacy(ds, costs[chosen], res)
     table = []
     for c in crit:
         r = results[tuple(c["extensions"])]
@@ -201,6 +261,12 @@ def identify_auto(ds, *, rng=None, seed=None, callback=None, maps=None, **kw):
             "std_robust": {n: d.get("std_robust") for n, d in r.details.items() if not d.get("fixed")},
         })
     res.model = {"extensions": list(chosen), "selection": "auto", "criterion": CRITERION, "candidates": table}
+    if not curves_tried:
+        res.model["curves"] = ("not tried: the linear model is adequate (its residuals carry no road-driven "
+                               "structure for damper curves to explain)")
+    if curve is not None:
+        res.model["curve_criterion"] = CURVE_CRITERION
+        res.model["curve_departure_wald"] = curve[3]["curve_departure_wald"]
     res.adequacy = advise(res.adequacy, res.model)  # what to try, now that the candidates have been weighed
     if res is not full:  # the search was the full model's: its history and counts belong to this result
         res.history, res.nit, res.stop, res.message = full.history, full.nit, full.stop, full.message
@@ -208,6 +274,99 @@ def identify_auto(ds, *, rng=None, seed=None, callback=None, maps=None, **kw):
     res.nfev = evaluations
     res.wall_time_s = time.perf_counter() - t0
     return res
+
+
+def curve_departure(names, theta, cov, space) -> tuple[float, int]:
+    """Wald statistic of a curve fit's departure from linear dampers, and its degrees of freedom.
+
+    Per axle the free knot forces ``F`` at velocities ``v``: linear dampers are ``F = c v`` for some
+    ``c``, i.e. ``R F = 0`` with ``R = I - v v^T / v^T v`` (the part of ``F`` no slope explains). ``W =
+    (R F)^T (R Cov R^T)^+ (R F)`` over both axles (robust covariance, cross terms kept); the degrees of
+    freedom are the free knots less one slope per axle.
+    """
+    from ..model.nonlinear import curve_names
+
+    K = space.layout.n_knots
+    kv = dict(zip(curve_names(K), space.knot_velocities()))
+    idx, blocks = [], []
+    for axle in (curve_names(K)[:K], curve_names(K)[K:]):
+        j = [names.index(n) for n in axle if n in names]
+        if not j:
+            continue
+        v = np.array([kv[names[i]] for i in j])
+        blocks.append(np.eye(len(j)) - np.outer(v, v) / (v @ v))
+        idx += j
+    if not idx:
+        return 0.0, 0
+    R = np.zeros((len(idx), len(idx)))
+    o = 0
+    for b in blocks:
+        R[o:o + len(b), o:o + len(b)] = b
+        o += len(b)
+    th = np.asarray(theta, dtype=float)[idx]
+    C = np.asarray(cov, dtype=float)[np.ix_(idx, idx)]
+    return wald(R @ th, R @ C @ R.T), len(idx) - len(blocks)
+
+
+def _curve_subset(r_c, chosen, c_crit):
+    """The subset of the linear groups ``chosen`` that the criterion prefers once the curves are in
+    (Wald of the left-out groups' parameters from the curve fit ``r_c``'s robust covariance), with that
+    Wald statistic; None when it is ``chosen`` itself."""
+    lin = tuple(g for g in chosen if g in GROUPS)
+    pol = r_c.polish or {}
+    names = list(pol.get("names", []))
+    if not lin or "covariance_robust" not in pol:
+        return None
+    free = {g: [n for n in GROUPS[g] if n in names] for g in lin}
+    free = {g: ns for g, ns in free.items() if ns}
+    if not free:
+        return None
+    subs = [tuple(g for g in lin if g in sub or g not in free)
+            for r in range(len(free) + 1) for sub in itertools.combinations(free, r)]
+    theta = np.array([r_c.parameters[n] for n in names])
+    crit = criteria(names, theta, np.array(pol["covariance_robust"]), subs, free)
+    best = min(crit, key=lambda c: (c["criterion"], c["k"]))
+    if set(best["extensions"]) == set(lin) or not np.isfinite(best["wald"]):
+        return None
+    return tuple(g for g in GROUPS if g in best["extensions"]), best["wald"]
+
+
+def curve_candidate(ds, lin, chosen, lin_crit, *, rng=None, seed=None, maps=None, start_from=None, **kw):
+    """Fit damper curves on top of the chosen linear model ``chosen`` (result ``lin``, its criterion
+    entry ``lin_crit``): one polish on the nonlinear simulator from the linear car's curves ``F = c v``.
+
+    Returns ``(candidate key, cost function, result, criterion entry)`` or None when curves do not apply
+    (already in the model, or ``c_sf``/``c_sr`` known). ``start_from``: a curve result of a larger model
+    to start from instead (its knot forces). The entry's criterion is the linear choice's plus
+    :data:`PENALTY` per extra free parameter (free knots less the two linear rates it replaces), to be
+    compared with the linear one's plus ``curve_departure_wald`` (:func:`curve_departure`): the curves
+    enter when their departure from straight lines is significant at the same per-parameter price as
+    any group (:data:`CURVE_CRITERION`).
+    """
+    from .cost import CostFunction, ParameterSpace
+
+    if CURVES_GROUP in chosen or any(n in ds.known for n in ("c_sf", "c_sr")) or lin_crit.get("criterion") is None:
+        return None
+    key = tuple(g for g in IDENTIFIABLE_ORDER if g in chosen or g == CURVES_GROUP)
+    space = ParameterSpace(ds.known, ds.geometry, ds.manifest.bounds, extensions=key,
+                           damper_knots=ds.manifest.damper_knots)
+    cf = CostFunction(ds, space=space)
+    if start_from is not None:  # a curve fit of a larger model: its values, knot forces included
+        x0 = np.array([start_from.parameters[n] for n in space.names])
+    else:
+        lin_space = ParameterSpace(ds.known, ds.geometry, ds.manifest.bounds, extensions=chosen)
+        x0 = np.array([lin.parameters[n] for n in lin_space.names])  # the curves start as F = c v
+    r = identify_model(ds, rng=rng, seed=seed, cost=cf, maps=maps, start=x0, assess=False, **kw)
+    pol = r.polish or {}
+    names = list(pol.get("names", []))
+    if "covariance_robust" in pol:
+        W, df = curve_departure(names, [r.parameters[n] for n in names], pol["covariance_robust"], space)
+    else:
+        W, df = None, None
+    k = (lin_crit["k"] or 0) + (df if df is not None else 0)
+    entry = {"extensions": list(key), "wald": 0.0, "k": k, "curve_departure_wald": W, "curve_dof": df,
+             "criterion": None if df is None else lin_crit["criterion"] + PENALTY * df}
+    return key, cf, r, entry
 
 
 def _nested_cost(cf_full, ds, extensions):

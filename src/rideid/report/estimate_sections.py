@@ -83,7 +83,8 @@ def model_rows(res: dict) -> dict | None:
             moved = bool(std) and abs(v - v0) > 2 * std
             cells.append((f"{v:.5g}", moved))
         rows.append({"name": n, "cells": cells})
-    return {"chosen": chosen, "criterion": model.get("criterion", ""), "heads": heads, "rows": rows}
+    return {"chosen": chosen, "criterion": model.get("criterion", ""), "curve_criterion": model.get("curve_criterion"),
+            "heads": heads, "rows": rows}
 
 
 def estimate_context(res: dict) -> dict:

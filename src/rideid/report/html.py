@@ -385,21 +385,34 @@ def fig_heatmap(kind, maps, out_dir):
 NOT_EXCITED_LABEL = "not excited — not to be trusted"
 
 
-def result_suspension_velocities(result, dataset) -> dict:
-    """Run id -> ``(front, rear)`` suspension velocities (m/s, compression +, both corners of the axle)
-    of the identified car with damper curves, simulated on each run of ``dataset``
-    (:func:`rideid.estimate.dampers.suspension_velocities_by_run`, the excitation check's, at the looser
-    sub-step bound :data:`rideid.data.scenario.LIFT_OFF_RHO`: a histogram needs no more)."""
+def _curve_car(result, dataset):
+    """A cost function of ``dataset`` on the curve model of ``result`` and the identified car's full row."""
     from ..estimate.cost import CostFunction, ParameterSpace
-    from ..data.scenario import LIFT_OFF_RHO
-    from ..estimate.dampers import suspension_velocities_by_run
 
     knots = [v for v in result.dampers["velocity"] if v > 0]
     ext = (result.model or {}).get("extensions") or ["damper_curves"]
     space = ParameterSpace(dataset.known, dataset.geometry, dataset.manifest.bounds, extensions=ext,
                            damper_knots=knots)
     cf = CostFunction(dataset, space=space)
-    P = space.full(np.array([[result.parameters[n] for n in space.names]]))[0]
+    return cf, space.full(np.array([[result.parameters[n] for n in space.names]]))[0]
+
+
+def curve_responses(result, dataset) -> dict:
+    """The response of the identified car with damper curves (the nonlinear simulator) on every run:
+    run id -> (n_time, 10); what :func:`simulate_runs` gives a linear result."""
+    cf, P = _curve_car(result, dataset)
+    return {r.id: o[0] for r, o in zip(dataset.runs, cf.sim.outputs(P[None]))}
+
+
+def result_suspension_velocities(result, dataset) -> dict:
+    """Run id -> ``(front, rear)`` suspension velocities (m/s, compression +, both corners of the axle)
+    of the identified car with damper curves, simulated on each run of ``dataset``
+    (:func:`rideid.estimate.dampers.suspension_velocities_by_run`, the excitation check's, at the looser
+    sub-step bound :data:`rideid.data.scenario.LIFT_OFF_RHO`: a histogram needs no more)."""
+    from ..data.scenario import LIFT_OFF_RHO
+    from ..estimate.dampers import suspension_velocities_by_run
+
+    cf, P = _curve_car(result, dataset)
     return {r.id: v for r, v in zip(dataset.runs, suspension_velocities_by_run(cf, P, rho=LIFT_OFF_RHO))}
 
 
@@ -568,7 +581,9 @@ def write_report(result, dataset, out_dir, *, compare=None, compare_label: str |
     pnames = [n for n in ALL_NAMES if n in result.details]  # the twelve, and the extensions when fitted
     sims = result.response
     if sims is None or set(sims) != set(run_ids):
-        sims = simulate_runs(dataset, {n: result.parameters[n] for n in pnames})
+        # (a rebuilt report of a curve result: the curves' car, not a linear car with the derived c_s)
+        sims = curve_responses(result, dataset) if getattr(result, "dampers", None) else \
+            simulate_runs(dataset, {n: result.parameters[n] for n in pnames})
 
     # every figure is an independent job: render them on all cores
     jobs = []
