@@ -102,6 +102,10 @@ def criteria(names, theta, cov, candidates, free_ext) -> list[dict]:
 def _own_adequacy(ds, cf, res):
     """The adequacy verdict of a candidate at its own final state: its parameters, and the model's time
     axes at the starts its own polish settled (a nested cost function still has the starts it began from)."""
+    from ..model.batch import single_threaded_blas
+    from .adequacy import assess_fit
+    from .cost import CostFunction
+
     space = cf.space
     cf = CostFunction(ds.with_starts(res.starts), space=space) if res.starts else cf
     with single_threaded_blas():
@@ -155,7 +159,6 @@ def identify_auto(ds, *, rng=None, seed=None, callback=None, maps=None, **kw):
     ``criterion``, ``wald``, ``adequate``, ``parameters``, ``std_robust``).
     Its ``evaluations`` and ``wall_time_s`` cover all candidates.
     """
-    from .adequacy import assess_fit
     from .cost import CostFunction
     from ..model.batch import single_threaded_blas, thread_map
 
