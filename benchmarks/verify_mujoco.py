@@ -38,7 +38,7 @@ from pathlib import Path
 import numpy as np
 
 import rideid
-from rideid.verify.hifi import HifiProperties, simulate_mujoco
+from rideid.verify.hifi import HifiProperties, hifi_curve, simulate_mujoco
 from rideid.estimate.cost import ParameterSpace
 from rideid.model.params import EXT_NAMES, GROUPS, NAMES, as_vector
 from rideid.data.scenario import run_times, write_dataset
@@ -93,6 +93,20 @@ def free_names(ds, extensions):
     return list(ParameterSpace(ds.known, ds.geometry, ds.manifest.bounds, extensions=tuple(extensions)).names)
 
 
+def curve_errors(dampers, truth, hifi):
+    """Per axle: the fitted knot forces against the MuJoCo car's damper at the same knots (% of the true
+    force), and whether each knot was excited."""
+    v = np.asarray(dampers["velocity"], dtype=float)
+    out = {}
+    for k, (axle, c) in enumerate((("front", "c_sf"), ("rear", "c_sr"))):
+        F_true = hifi_curve(truth[c], v, hifi.damper_rebound_ratio[k], hifi.damper_knee_velocity[k],
+                            hifi.damper_knee_ratio[k])
+        F = np.asarray(dampers[axle]["force"], dtype=float)
+        out[axle] = {"truth": F_true.tolist(), "estimate": F.tolist(),
+                     "error_pct": (100 * (F / F_true - 1)).tolist(), "excited": list(dampers[axle]["excited"])}
+    return out
+
+
 def fit_record(res, truth, extensions):
     """Errors, coverage and verdict of one fit against the truth."""
     est = res.parameters
@@ -114,6 +128,7 @@ def fit_record(res, truth, extensions):
             "covered_std_robust": sum(bool(c["std_robust"]) for c in cover.values()),
             "estimated": len(cover), "coverage": cover,
             "adequate": (res.adequacy or {}).get("adequate"),
+            "dampers": res.dampers, "bump_stops": getattr(res, "bump_stops", None),
             "adequacy_reasons": (res.adequacy or {}).get("reasons"), "cost": float(res.cost)}
 
 
@@ -141,6 +156,8 @@ def main(argv=None, out=sys.stdout):
     ap.add_argument("--seed", type=int, default=1)
     ap.add_argument("--noise", type=float, default=0.01, help="white sensor noise, fraction of each channel's RMS")
     ap.add_argument("--only", type=int, nargs="*", help="indices of CONFIGS to run (default all)")
+    ap.add_argument("--cg-unknown", dest="cg_declared", action="store_false",
+                    help="leave [vehicle] cg_height out of the datasets (the model then lacks it)")
     a = ap.parse_args(argv)
 
     def say(*x):
@@ -155,8 +172,11 @@ def main(argv=None, out=sys.stdout):
         kw = dict(kw)
         extra_truth = kw.pop("truth", {})
         truth = dict(base_sc.truth, **extra_truth)
-        sc = dataclasses.replace(base_sc, truth=truth)
         hifi = HifiProperties(**kw)
+        # the CG height is measured (SPEC §8 [vehicle] cg_height): the dataset declares it, so the model
+        # includes gravity's toppling stiffness and the wheels' swing, and I_xx, I_yy stay the body's own
+        geom = dataclasses.replace(base_sc.geometry, cg_height=hifi.cg_height) if a.cg_declared else base_sc.geometry
+        sc = dataclasses.replace(base_sc, truth=truth, geometry=geom)
         rng = np.random.default_rng(a.seed)
         t0 = time.perf_counter()
         data, det = simulate(sc, hifi, a.noise, rng)
@@ -174,10 +194,15 @@ def main(argv=None, out=sys.stdout):
                 "c_sr": float((work[2] + work[3]) / (v2[2] + v2[3]))}
         # what a linear model can see: the wheels' swing about the CG and their spin inertia in I_xx, I_yy;
         # the energy-equivalent dampers
-        swing = 2 * (truth["m_uf"] + truth["m_ur"]) * hifi.cg_height ** 2
+        swing = 0.0 if a.cg_declared else 2 * (truth["m_uf"] + truth["m_ur"]) * hifi.cg_height ** 2
         iw = 2 * (hifi.wheel_inertia[0] + hifi.wheel_inertia[1])  # 4 thin discs: I_w each in pitch, I_w/2 in roll
         effective = dict(truth, I_xx=truth["I_xx"] + swing + iw / 2, I_yy=truth["I_yy"] + swing + iw, **c_eq)
         for f in fits.values():
+            if f.get("dampers"):  # a curve fit: against the true curves at its knots, and c_s as their mean slope
+                f["curve_errors"] = curve_errors(f["dampers"], truth, hifi)
+                f["largest_curve_error_pct"] = max((abs(e) for ax in f["curve_errors"].values()
+                                                    for e, x in zip(ax["error_pct"], ax["excited"]) if x),
+                                                   default=float("nan"))
             f["error_vs_effective_pct"] = {n: 100 * (f["error_pct"][n] / 100 + 1) * truth[n] / effective[n] - 100
                                            for n in NAMES}
             f["largest_error_vs_effective_pct"] = max(abs(v) for v in f["error_vs_effective_pct"].values())
