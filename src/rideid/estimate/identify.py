@@ -297,7 +297,8 @@ def _curve_start(cf: CostFunction, cf_search: CostFunction, x):
         x = space.reduce(x, new)
         cf, space = _with_space(cf, new), new
     if space.bump:
-        if cf_search is not cf:
+        rates = [x[space.names.index(n)] for n in ("bs_rate_f", "bs_rate_r") if n in space.names]
+        if cf_search is not cf or (rates and not any(rates)):  # a linear car's start, or a start without stops
             x, bump_frozen, bumps = scan_start(cf, x)
         else:  # a given start: its stops, held where they are not reached
             bumps, bump_frozen = reach(cf, space.full(np.asarray(x, dtype=float)[None])[0]), {}

@@ -249,6 +249,21 @@ def identify_auto(ds, *, rng=None, seed=None, callback=None, maps=None, **kw):
                     if live:
                         best = min(live, key=lambda c: (c["criterion"], c["k"]))
                         chosen = tuple(best["extensions"])
+    # bump stops on top of what is chosen, when that is still not adequate: one more polish (bump_candidate)
+    now = results[chosen]
+    if now.adequacy is None:
+        now.adequacy = _own_adequacy(ds, costs[chosen], now)
+    bump = None
+    if curves_tried and not now.adequacy.get("adequate", True):
+        bump = bump_candidate(ds, now, chosen, best, rng=rng, seed=seed, maps=full.maps, **kw_nested)
+    if bump is not None:
+        bkey, cf_b, r_b, e_b = bump
+        results[bkey], costs[bkey] = r_b, cf_b
+        evaluations += r_b.nfev
+        e_b["fits_better"] = fits_better(bkey, {cand: r.cost for cand, r in results.items()})
+        crit.append(e_b)
+        if e_b["fits_better"] and e_b["criterion"] is not None:
+            best, chosen = e_b, bkey
     res = results[chosen]
     if res.adequacy is None:
         res.adequacy = _own_adequacy(ds, costs[chosen], res)
@@ -267,6 +282,8 @@ def identify_auto(ds, *, rng=None, seed=None, callback=None, maps=None, **kw):
     if not curves_tried:
         res.model["curves"] = ("not tried: the linear model is adequate (its residuals carry no road-driven "
                                "structure for damper curves to explain)")
+    if bump is not None:
+        res.model["bump_criterion"] = BUMP_CRITERION
     if curve is not None:
         res.model["curve_criterion"] = CURVE_CRITERION
         res.model["curve_departure_wald"] = curve[3]["curve_departure_wald"]
@@ -369,6 +386,47 @@ def curve_candidate(ds, lin, chosen, lin_crit, *, rng=None, seed=None, maps=None
     k = (lin_crit["k"] or 0) + (df if df is not None else 0)
     entry = {"extensions": list(key), "wald": 0.0, "k": k, "curve_departure_wald": W, "curve_dof": df,
              "criterion": None if df is None else lin_crit["criterion"] + PENALTY * df}
+    return key, cf, r, entry
+
+
+BUMPS_GROUP = "bump_stops"
+
+BUMP_CRITERION = ("bump stops: tried when the model chosen so far (damper curves weighed) is still not adequate: "
+                  "one more polish with bump_stops, started from that model's fit (the stop scan of "
+                  "docs/dampers.md); kept when it fits materially better than every model it contains and at "
+                  "least one stop is reached (a stop not reached is not identifiable and adds nothing)")
+
+
+def bump_candidate(ds, prev, chosen, prev_crit, *, rng=None, seed=None, maps=None, **kw):
+    """Fit bump stops on top of the model ``chosen`` (result ``prev``, criterion entry ``prev_crit``).
+
+    Returns ``(candidate key, cost function, result, criterion entry)`` or None when the group is in
+    already. The entry's criterion is ``prev_crit``'s plus :data:`PENALTY` per free stop parameter of
+    the axles reached, None (never chosen) when no stop is reached (:data:`BUMP_CRITERION`).
+    """
+    from .cost import CostFunction, ParameterSpace
+
+    if BUMPS_GROUP in chosen:
+        return None
+    key = tuple(g for g in IDENTIFIABLE_ORDER + (BUMPS_GROUP,) if g in chosen or g == BUMPS_GROUP)
+    space = ParameterSpace(ds.known, ds.geometry, ds.manifest.bounds, extensions=key,
+                           damper_knots=ds.manifest.damper_knots)
+    cf = CostFunction(ds, space=space)
+    if CURVES_GROUP in chosen:  # the curve fit as it is (knot forces too), no stops yet: the scan starts them
+        x0 = np.array([prev.parameters[n] if n in prev.parameters else
+                       (0.0 if n.startswith("bs_rate") else float(space.bounds[space.names.index(n), 1]))
+                       for n in space.names])
+    else:
+        lin_space = ParameterSpace(ds.known, ds.geometry, ds.manifest.bounds, extensions=chosen)
+        x0 = np.array([prev.parameters[n] for n in lin_space.names])
+    r = identify_model(ds, rng=rng, seed=seed, cost=cf, maps=maps, start=x0, assess=False, **kw)
+    stops = r.bump_stops or {}
+    reached = [ax for ax in ("front", "rear") if (stops.get(ax) or {}).get("reached")]
+    n_free = sum(1 for ax in reached for n in (f"bs_clear_{ax[0]}", f"bs_rate_{ax[0]}") if n not in ds.known)
+    k = (prev_crit.get("k") or 0) + n_free
+    base = prev_crit.get("criterion")
+    entry = {"extensions": list(key), "wald": 0.0, "k": k, "bump_stops_reached": reached,
+             "criterion": None if not reached or base is None else base + PENALTY * n_free}
     return key, cf, r, entry
 
 
