@@ -102,8 +102,27 @@ def curve_errors(dampers, truth, hifi):
         F_true = hifi_curve(truth[c], v, hifi.damper_rebound_ratio[k], hifi.damper_knee_velocity[k],
                             hifi.damper_knee_ratio[k])
         F = np.asarray(dampers[axle]["force"], dtype=float)
+        sr = np.array([np.nan if x is None else x for x in dampers[axle]["std_robust"]], dtype=float)
         out[axle] = {"truth": F_true.tolist(), "estimate": F.tolist(),
-                     "error_pct": (100 * (F / F_true - 1)).tolist(), "excited": list(dampers[axle]["excited"])}
+                     "error_pct": (100 * (F / F_true - 1)).tolist(), "excited": list(dampers[axle]["excited"]),
+                     "z_std_robust": ((F - F_true) / sr).tolist()}
+    return out
+
+
+def stop_errors(stops, hifi):
+    """Per axle reached by the fit: clearance and rate against the MuJoCo car's, with z against std_robust."""
+    out = {}
+    for k, axle in enumerate(("front", "rear")):
+        st = (stops or {}).get(axle) or {}
+        if not st.get("reached"):
+            out[axle] = {"reached": False}
+            continue
+        true = (hifi.bumpstop_clearance[k], hifi.bumpstop_rate[k])
+        got = (st["clearance"], st["rate"])
+        sr = st.get("std_robust") or [None, None]
+        out[axle] = {"reached": True, "truth": true, "estimate": got,
+                     "error_pct": [100 * (g / t - 1) for g, t in zip(got, true)],
+                     "z_std_robust": [(g - t) / s if s else None for g, t, s in zip(got, true, sr)]}
     return out
 
 
@@ -114,8 +133,8 @@ def fit_record(res, truth, extensions):
     ext = {n: {"estimate": float(est.get(n, 0.0)), "truth": float(truth.get(n, 0.0))} for n in EXT_NAMES}
     cover = {}
     for n, d in res.details.items():
-        if d.get("fixed") or d.get("derived"):
-            continue
+        if d.get("fixed") or d.get("derived") or n not in truth:
+            continue  # knot forces and bump stops: against the MuJoCo car's own (curve_errors, stop_errors)
         miss = abs(est[n] - truth.get(n, 0.0))
         cover[n] = {"std": bool(miss <= 2 * d["std"]) if d.get("std") is not None else None,
                     "std_robust": bool(miss <= 2 * d["std_robust"]) if d.get("std_robust") is not None else None,
@@ -205,12 +224,20 @@ def main(argv=None, out=sys.stdout):
         iw = 2 * (hifi.wheel_inertia[0] + hifi.wheel_inertia[1])  # 4 thin discs: I_w each in pitch, I_w/2 in roll
         effective = dict(truth, I_xx=truth["I_xx"] + swing + iw / 2, I_yy=truth["I_yy"] + swing + iw, **c_eq)
         for f in fits.values():
+            if f.get("bump_stops"):
+                f["stop_errors"] = stop_errors(f["bump_stops"], hifi)
             if f.get("dampers"):  # a curve fit: against the true curves at its knots, and c_s as their mean slope
                 f["curve_errors"] = curve_errors(f["dampers"], truth, hifi)
                 f["largest_curve_error_pct"] = max((abs(e) for ax in f["curve_errors"].values()
                                                     for e, x in zip(ax["error_pct"], ax["excited"]) if x),
                                                    default=float("nan"))
-            f["error_vs_effective_pct"] = {n: 100 * (f["error_pct"][n] / 100 + 1) * truth[n] / effective[n] - 100
+            eff = dict(effective)
+            if f.get("dampers"):  # a curve fit's c_sf, c_sr are the curves' mean slope over +-0.1 m/s: the truth's
+                for k, c in enumerate(("c_sf", "c_sr")):
+                    F = hifi_curve(truth[c], np.array([-0.1, 0.1]), hifi.damper_rebound_ratio[k],
+                                   hifi.damper_knee_velocity[k], hifi.damper_knee_ratio[k])
+                    eff[c] = float((F[1] - F[0]) / 0.2)
+            f["error_vs_effective_pct"] = {n: 100 * (f["error_pct"][n] / 100 + 1) * truth[n] / eff[n] - 100
                                            for n in NAMES}
             f["largest_error_vs_effective_pct"] = max(abs(v) for v in f["error_vs_effective_pct"].values())
         load_min = min(float(d.tire_load_min.min()) for d in det.values())
@@ -227,7 +254,9 @@ def main(argv=None, out=sys.stdout):
             f"{'adequate' if f['adequate'] else 'NOT adequate'}, 2std {f['covered_std']}/{f['estimated']}, "
             f"2std_robust {f['covered_std_robust']}/{f['estimated']}" for m, f in fits.items())
             + f"; auto chose [{', '.join(fits['auto']['extensions']) or 'base'}] "
-            f"(lift-off {', '.join(lifted) or 'none'}; max compression {1000 * travel:.0f} mm; "
+            + (f"(curves within {fits['auto']['largest_curve_error_pct']:.2f} % at the excited knots) "
+               if fits["auto"].get("curve_errors") else "")
+            + f"(lift-off {', '.join(lifted) or 'none'}; max compression {1000 * travel:.0f} mm; "
             f"sim {t_sim:.0f} s, identify {t_id:.0f} s)")
 
     text = tables(rows)
