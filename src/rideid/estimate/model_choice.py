@@ -393,8 +393,9 @@ BUMPS_GROUP = "bump_stops"
 
 BUMP_CRITERION = ("bump stops: tried when the model chosen so far (damper curves weighed) is still not adequate: "
                   "one more polish with bump_stops, started from that model's fit (the stop scan of "
-                  "docs/dampers.md); kept when it fits materially better than every model it contains and at "
-                  "least one stop is reached (a stop not reached is not identifiable and adds nothing)")
+                  "docs/dampers.md); kept when it fits materially better than every model it contains, at "
+                  "least one stop is reached (a stop not reached is not identifiable and adds nothing) and no "
+                  "stop parameter ends at its search bound (the bound's value, not the data's)")
 
 
 def bump_candidate(ds, prev, chosen, prev_crit, *, rng=None, seed=None, maps=None, **kw):
@@ -420,12 +421,20 @@ def bump_candidate(ds, prev, chosen, prev_crit, *, rng=None, seed=None, maps=Non
         lin_space = ParameterSpace(ds.known, ds.geometry, ds.manifest.bounds, extensions=chosen)
         x0 = np.array([prev.parameters[n] for n in lin_space.names])
     r = identify_model(ds, rng=rng, seed=seed, cost=cf, maps=maps, start=x0, assess=False, **kw)
+    from ..data.checks import bound_findings
+
     stops = r.bump_stops or {}
     reached = [ax for ax in ("front", "rear") if (stops.get(ax) or {}).get("reached")]
+    # a stop held by its search bound is the bound's, not the data's: a misfit elsewhere (a spring held
+    # by its bound, a wrong track) that a stiff stop at the least clearance patches up
+    at_bound = [f.channel for f in bound_findings(r.details) if f.channel.startswith("bs_")]
+    if at_bound:
+        reached = []
     n_free = sum(1 for ax in reached for n in (f"bs_clear_{ax[0]}", f"bs_rate_{ax[0]}") if n not in ds.known)
     k = (prev_crit.get("k") or 0) + n_free
     base = prev_crit.get("criterion")
     entry = {"extensions": list(key), "wald": 0.0, "k": k, "bump_stops_reached": reached,
+             "bump_stops_at_bound": at_bound,
              "criterion": None if not reached or base is None else base + PENALTY * n_free}
     return key, cf, r, entry
 
