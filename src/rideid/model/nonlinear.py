@@ -123,9 +123,11 @@ DEFAULT_KNOTS: tuple[float, ...] = (-0.4, -0.2, -0.1, -0.05, -0.025, 0.025, 0.05
 #: Bump-stop columns (after the sixteen): clearance m of compression from static, rate N/m.
 BUMP_STOP_NAMES: tuple[str, ...] = ("bs_clear_f", "bs_clear_r", "bs_rate_f", "bs_rate_r")
 #: Largest ``h_sub * max|eig|`` of the RK4 sub-step (accuracy, not stability: RK4 is stable to 2.8).
-RHO_MAX = 0.03
+RHO_MAX = 0.2
 #: Most sub-steps per sample.
 M_MAX = 4096
+#: Gauss panels (two nodes each) per sub-step for the mean road input
+QUAD_PANELS = 16
 
 
 def curve_names(n_knots: int) -> tuple[str, ...]:
@@ -410,7 +412,7 @@ def channels(co, X, qdd):
     return out
 
 
-def fine_inputs(run: RunInput, m: int):
+def fine_inputs(run: RunInput, m: int, quad: bool = True):
     """Corner inputs and rates at ``t_k + j h / (2 m)``, ``j = 0 .. 2 m (n - 1)``: ``(U, R)`` each ``(.., 4)``."""
     if run.inputs_at is None:
         raise DataError("the nonlinear car needs the road between the samples: prepare the run with prepare_run")
@@ -419,10 +421,92 @@ def fine_inputs(run: RunInput, m: int):
     U, R = run.inputs_at(tf)
     # at the samples exactly the run's own values
     U[::2 * m], R[::2 * m] = run.u, run.rate
+    if quad:
+        # mid-step inputs such that Simpson's rule gives each sub-step's exact mean input
+        hs = run.h / m
+        nodes, weights = np.polynomial.legendre.leggauss(2)
+        x = (np.arange(QUAD_PANELS)[:, None] + 0.5 * (nodes[None, :] + 1.0)).ravel() / QUAD_PANELS
+        w = np.repeat(weights[None, :] * 0.5, QUAD_PANELS, 0).ravel() / QUAD_PANELS
+        ns = m * (run.n - 1)
+        tq = (tf[:-1:2, None] + hs * x[None, :]).ravel()
+        uq, _ = run.inputs_at(tq)
+        mean = np.einsum("kqc,q->kc", uq.reshape(ns, x.size, 4), w)
+        U[1::2] = (6.0 * mean - U[:-1:2] - U[2::2]) / 4.0
+        # and mid-step rates such that Simpson's rule integrates them to the input's change
+        R[1::2] = (6.0 * (U[2::2] - U[:-1:2]) / hs - R[:-1:2] - R[2::2]) / 4.0
     return np.ascontiguousarray(U), np.ascontiguousarray(R)
 
 
-def simulate_numpy(P, geom, run: RunInput, layout: NonlinearLayout, m: int, fine=None, return_states=False):
+def switching(co, X, qdd, r, rd):
+    """Switching quantities ``(d, v, g, vd)`` each ``(n, 4)``: deflections, damper velocities, tire loads
+    ``L + k_t (r - z_i) + c_t (r' - z_i')`` and the damper velocities' rates (as the compiled kernel)."""
+    x, y = co[:, _C4["x"]], co[:, _C4["y"]]
+    ct = co[:, _C4["ct"]]
+    w = X[:, 10:] + ct * co[:, _C4["inv_mu"]] * r
+    d = X[:, 3:7] - (X[:, :1] - x * X[:, 1:2] + y * X[:, 2:3])
+    v = w - (X[:, 7:8] - x * X[:, 8:9] + y * X[:, 9:10])
+    t0 = co[:, _C4["L"]] + co[:, _C4["kt"]] * (r - X[:, 3:7]) - ct * w
+    g = t0 + ct * rd
+    vd = qdd[:, 3:] - (qdd[:, :1] - x * qdd[:, 1:2] + y * qdd[:, 2:3])
+    return d, v, g, vd
+
+
+def hermite_root(s0, s1, m0, m1):
+    """Crossing ``0 <= theta <= 1`` of the cubic Hermite with values ``s0, s1`` (opposite signs) and slopes
+    ``m0, m1`` (per unit ``theta``): the chord's root, then two Newton steps kept in ``[0, 1]``."""
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t = s0 / (s0 - s1)
+        for _ in range(2):
+            t2 = t * t
+            t3 = t2 * t
+            val = (2.0 * t3 - 3.0 * t2 + 1.0) * s0 + (t3 - 2.0 * t2 + t) * m0 + (3.0 * t2 - 2.0 * t3) * s1 \
+                + (t3 - t2) * m1
+            der = (6.0 * t2 - 6.0 * t) * (s0 - s1) + (3.0 * t2 - 4.0 * t + 1.0) * m0 + (3.0 * t2 - 2.0 * t) * m1
+            t = np.where(der != 0.0, t - val / np.where(der != 0.0, der, 1.0), t)
+            t = np.minimum(np.maximum(t, 0.0), 1.0)
+    return t
+
+
+def crossings(xk, clear, h, sw0, sw1):
+    """Sorted fractions ``(n, c)`` of a sub-step where a corner's damper velocity crosses an interior knot of
+    ``xk``, its deflection the bump-stop ``clear``-ance or its tire load zero (padded with 1), and their
+    number ``(n,)``; ``sw0``, ``sw1``: :func:`switching` at the sub-step's ends."""
+    d0, v0, g0, a0 = sw0
+    d1, v1, g1, a1 = sw1
+    cols, hits = [], []
+    for kn in xk[1:-1]:
+        hit = (v0 < kn) != (v1 < kn)
+        cols.append(np.where(hit, hermite_root(v0 - kn, v1 - kn, h * a0, h * a1), 1.0))
+        hits.append(hit)
+    with np.errstate(invalid="ignore"):
+        ea, eb = d0 - clear, d1 - clear
+    hit = (ea > 0.0) != (eb > 0.0)
+    cols.append(np.where(hit, hermite_root(np.where(hit, ea, 1.0), np.where(hit, eb, -1.0), h * v0, h * v1), 1.0))
+    hits.append(hit)
+    hit = (g0 >= 0.0) != (g1 >= 0.0)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        cols.append(np.where(hit, g0 / (g0 - g1), 1.0))
+    hits.append(hit)
+    th = np.sort(np.concatenate(cols, axis=1), axis=1)
+    return th, np.concatenate(hits, axis=1).sum(axis=1)
+
+
+def inputs_within(U, R, js, tau, dt):
+    """Road inputs and rates ``(k, 4)`` at fractions ``tau`` (k,) of the sub-step starting at table row ``js``
+    (cubic Hermite of the inputs with their rates over the half sub-step ``dt``; rates linear)."""
+    x = 2.0 * tau
+    up = x >= 1.0
+    i = js + up.astype(np.int64)
+    s = np.where(up, x - 1.0, x)[:, None]
+    om = 1.0 - s
+    s2 = s * s
+    u = ((1.0 + 2.0 * s) * om * om) * U[i] + (s * om * om * dt) * R[i] + (s2 * (3.0 - 2.0 * s)) * U[i + 1] \
+        + (s2 * (s - 1.0) * dt) * R[i + 1]
+    return u, om * R[i] + s * R[i + 1]
+
+
+def simulate_numpy(P, geom, run: RunInput, layout: NonlinearLayout, m: int, fine=None, return_states=False,
+                   split: bool = True):
     """NumPy backend for one run: outputs ``(n, n_time, 10)`` (and states ``(n, n_time, 14)``)."""
     co, xk, Fk, Sk = coefficients(P, geom, layout)
     curves = layout.knots is not None
@@ -430,15 +514,18 @@ def simulate_numpy(P, geom, run: RunInput, layout: NonlinearLayout, m: int, fine
     X = shifted(co, initial_state(P, geom, layout, run.u[0]), run.u[0])
     n = X.shape[0]
     hs = run.h / m
+    hh = 0.5 * hs
+    clear = co[:, _C4["bs_clear"]]
     y = np.empty((n, run.n, 10))
     Xs = np.empty((n, run.n, 14)) if return_states else None
 
-    def f(X, j):
-        return accelerations(co, xk, Fk, Sk, curves, X, U[j], R[j])
+    def f(X, u, ud, rows=slice(None)):
+        dX, qdd = accelerations(co[rows], xk, Fk[rows], Sk[rows], curves, X, u, ud)
+        return dX, qdd, switching(co[rows], X, qdd, u, ud)
 
+    d1, qdd, sw = f(X, U[0], R[0])
     for k in range(run.n):
         j = 2 * m * k
-        d1, qdd = f(X, j)
         y[:, k] = channels(co, X, qdd)
         if return_states:
             Xs[:, k] = shifted(co, X, run.u[k], back=True)
@@ -446,12 +533,38 @@ def simulate_numpy(P, geom, run: RunInput, layout: NonlinearLayout, m: int, fine
             break
         for s in range(m):
             js = j + 2 * s
-            if s:
-                d1, _ = f(X, js)
-            d2, _ = f(X + (hs / 2) * d1, js + 1)
-            d3, _ = f(X + (hs / 2) * d2, js + 1)
-            d4, _ = f(X + hs * d3, js + 2)
+            X0, D0, sw0 = X, d1, sw
+            d2 = f(X + hh * d1, U[js + 1], R[js + 1])[0]
+            d3 = f(X + hh * d2, U[js + 1], R[js + 1])[0]
+            d4 = f(X + hs * d3, U[js + 2], R[js + 2])[0]
             X = X + (hs / 6) * (d1 + 2 * d2 + 2 * d3 + d4)
+            d1, qdd, sw = f(X, U[js + 2], R[js + 2])
+            if not split:
+                continue
+            th, nc = crossings(xk if curves else xk[:0], clear, hs, sw0, sw)
+            rows = np.flatnonzero(nc)
+            if rows.size == 0:
+                continue
+            # a kink inside the step: redo it in pieces that end at the crossings
+            Xr = X0[rows]
+            th = th[rows]
+            a = np.zeros(rows.size)
+            for q in range(th.shape[1] + 1):
+                b = th[:, q] if q < th.shape[1] else np.ones(rows.size)
+                hp = ((b - a) * hs)[:, None]
+                if q == 0:
+                    k1 = D0[rows]
+                else:
+                    k1 = f(Xr, *inputs_within(U, R, js, a, hh), rows)[0]
+                um = inputs_within(U, R, js, 0.5 * (a + b), hh)
+                k2 = f(Xr + (0.5 * hp) * k1, *um, rows)[0]
+                k3 = f(Xr + (0.5 * hp) * k2, *um, rows)[0]
+                k4 = f(Xr + hp * k3, *inputs_within(U, R, js, b, hh), rows)[0]
+                Xr = Xr + (hp / 6.0) * ((k1 + 2.0 * k2 + 2.0 * k3) + k4)
+                a = b
+            X = X.copy()
+            X[rows] = Xr
+            d1, qdd, sw = f(X, U[js + 2], R[js + 2])
     return (y, Xs) if return_states else y
 
 
