@@ -87,8 +87,8 @@ def deflections(P, geom, states):
 
 @pytest.mark.parametrize("kind", list(TRACKS))
 def test_integration_error_every_track_kind(kind, road_dir):
-    """Sub-steps chosen by the simulator against RK4 at 64x the sub-steps: < 1e-4 of every channel's RMS,
-    on runs that reach the bump stops and lift wheels off the road."""
+    """Sub-steps chosen by the simulator (RK4 split at the kinks) against the same at 64x the sub-steps:
+    < 1e-4 of every channel's RMS, on runs that reach the bump stops and lift wheels off the road."""
     run = make_run(kind, road_dir)
     P = nasty_row()[None]
     sim = NonlinearSimulator(GH, [run], FULL)
@@ -328,3 +328,21 @@ def test_layout_and_factory(road_dir):
     assert isinstance(make_simulator(GH, [run], lay), NonlinearSimulator)
     with pytest.raises(Exception, match="26 columns"):
         make_simulator(GH, [run], lay).outputs(np.zeros((1, 16)))
+
+
+def test_split_scheme_cost_is_smooth_in_the_parameters(road_dir):
+    """Sub-steps split where a kink is crossed: the cost stays a smooth function of the parameters (a crossing
+    that leaves a sub-step makes its piece vanish), as the polish's finite differences need."""
+    run = make_run("herringbone", road_dir, duration=1.5)
+    base = nasty_row()
+    sim = NonlinearSimulator(GH, [run], FULL)
+    Y = sim.outputs(population(1, seed=3))[0][0]
+    W = np.ones((1, 10))
+    t = np.linspace(-1.0, 1.0, 41) * 1e-4
+    for col in (INDEX["k_sf"], FULL.index["F_f8"], FULL.index["bs_clear_r"]):
+        Q = np.repeat(base[None], t.size, 0)
+        Q[:, col] *= 1.0 + t
+        e = sim.errors(Q, Y, W)[0]
+        resid = e - np.polyval(np.polyfit(t, e, 3), t)
+        print(FULL.names[col], np.abs(resid).max() / e.mean())
+        assert np.abs(resid).max() < 1e-8 * e.mean()

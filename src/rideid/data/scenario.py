@@ -139,8 +139,9 @@ def nonlinear_car(sc: Scenario):
     return np.array(row), layout
 
 
-#: sub-step bound of the states :func:`nonlinear_states` computes to find lift-off (the kernel's own bound is
-#: tighter; at this one the outputs differ from it by 0.02 % of their RMS, ample to find when a tire unloads)
+#: sub-step bound of the states :func:`nonlinear_states` computes to find lift-off (the kernel's own bound,
+#: :data:`rideid.model.nonlinear.RHO_MAX`, is 0.2; with the sub-steps split at the kinks the outputs at this one
+#: are within about 1e-4 of their RMS, ample to find when a tire unloads)
 LIFT_OFF_RHO = 0.25
 
 

@@ -1,13 +1,27 @@
-"""Compiled kernel of the nonlinear car (:mod:`rideid.model.nonlinear`): RK4 at ``m`` sub-steps per sample.
+"""Compiled kernel of the nonlinear car (:mod:`rideid.model.nonlinear`): RK4 at ``m`` sub-steps per sample,
+split at the kinks.
 
-The same equations and the same operations as the NumPy backend
-(:func:`rideid.model.nonlinear.simulate_numpy`), compiled with Numba: one
-candidate at a time, states in a 14-vector, the forces corner by corner
-(damper curves by a short walk from the zero-velocity segment: most
-velocities are small), squared errors accumulated on the fly (mode 0: memory
-O(states) per candidate) or the channels written (mode 1). Candidates are
-shared among ``numba.get_num_threads()`` threads; the compiled function
-releases the GIL.
+The same equations, the same scheme and the same operations as the NumPy
+backend (:func:`rideid.model.nonlinear.simulate_numpy`), compiled with
+Numba: one candidate at a time, states in a 14-vector, the forces corner by
+corner (damper curves by a short walk from the zero-velocity segment: most
+velocities are small), squared errors accumulated on the fly (mode 0:
+memory O(states) per candidate) or the channels written (mode 1).
+Candidates are shared among ``numba.get_num_threads()`` threads; the
+compiled function releases the GIL.
+
+Each sub-step is a plain RK4 step; its end evaluation (which is the next
+sub-step's first stage, so it costs nothing extra) also gives each corner's
+curve segment, bump-stop side and tire-load sign. Where one differs from
+the sub-step's start the step is redone out of line (:func:`_pieces`) in
+pieces ending at the crossings (:func:`_crossings`, located on the cubic
+Hermite of the switching quantity between the ends); the road inputs
+inside the sub-step are the cubic Hermite of the tabulated ones.
+
+Measured (``benchmarks/bench_nonlinear.py``, 10 runs, 9470 samples, 64
+candidates, one thread on a shared machine): 11.5 ms per candidate at 2
+sub-steps against 23.9 ms for the former plain RK4 at 13 (the same
+accuracy), the linear kernel 0.23 ms.
 """
 
 from __future__ import annotations
@@ -347,7 +361,9 @@ def run(co, xk, Fk, Sk, curves, X0, run_start, h, ms, fines, Y, W, mode, split=T
         (:func:`rideid.model.nonlinear.coefficients`); curves : bool
     X0 : (r, n, 14) initial states; run_start (r + 1,); h (r,) sample intervals; ms (r,) sub-steps
     fines : list over runs of ``(U, R)``, inputs and rates at the sub-step and half-step instants
+        (:func:`rideid.model.nonlinear.fine_inputs`)
     Y : (T, 10), W : (r, 10), mode : 0 errors only, 1 also the channels
+    split : split the sub-steps at the kinks they cross (False: plain RK4 sub-steps)
 
     Returns
     -------
@@ -368,8 +384,8 @@ def run(co, xk, Fk, Sk, curves, X0, run_start, h, ms, fines, Y, W, mode, split=T
     T = int(run_start[-1])
     out = np.zeros((n, T, 10)) if mode == 1 else np.zeros((n, 1, 10))
     args = (np.ascontiguousarray(co), np.ascontiguousarray(xk, dtype=float), j0, np.ascontiguousarray(Fk),
-            np.ascontiguousarray(Sk), bool(curves), bool(split), np.ascontiguousarray(X0), np.asarray(run_start, dtype=np.int64),
-            hs, np.asarray(ms, dtype=np.int64), fine_start, UF, RF, np.ascontiguousarray(Y, dtype=float),
+            np.ascontiguousarray(Sk), bool(curves), bool(split), np.ascontiguousarray(X0),
+            np.asarray(run_start, dtype=np.int64), hs, np.asarray(ms, dtype=np.int64), fine_start, UF, RF, np.ascontiguousarray(Y, dtype=float),
             np.ascontiguousarray(W, dtype=float), int(mode), err, out)
     threads = max(1, min(numba.get_num_threads(), n))
     if threads == 1:

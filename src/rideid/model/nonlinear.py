@@ -56,22 +56,46 @@ state. Alternatives considered:
   Newton solve per step and per candidate, with Jacobians that jump at the
   kinks; the car is not stiff at a sensible sub-step (the fastest mode is
   the wheel hop, ~10-20 Hz, or a bump stop), so stability buys nothing;
-* *explicit Runge-Kutta at a fixed sub-step* (chosen): classical RK4 with
-  ``m`` equal sub-steps per sample interval. Branch-free, four cheap
-  force evaluations per sub-step, the same fixed work for every candidate
-  (vectorises across candidates, no step-size control that would make the
-  cost a non-smooth function of the parameters), fourth order where the
-  forces are smooth.
+* *explicit Runge-Kutta at a fixed sub-step*: classical RK4 with ``m``
+  equal sub-steps per sample interval; four cheap force evaluations per
+  sub-step, fourth order where the forces are smooth, but only second
+  order locally where a stage straddles a kink (damper knot, including
+  the zero-velocity knee of an asymmetric damper, bump-stop contact,
+  lift-off), so the kinks set the accuracy and need ``h/m * max|eig| <=
+  0.03`` (13-15 sub-steps at 200 Hz) for 1e-4 of RMS;
+* *RK4 sub-steps split at the kinks* (chosen): the same sub-steps, and a
+  sub-step whose ends lie on different sides of a kink (a corner's damper
+  velocity in another curve segment, its deflection on the other side of
+  the bump-stop clearance, its tire load of the other sign) is redone in
+  pieces that end at the crossings: each crossing located on the cubic
+  Hermite through the switching quantity's values and rates at the
+  sub-step's ends (the rates are known there: the damper velocity's from
+  the accelerations, the deflection's is the damper velocity; the tire
+  load's crossing by its chord), two Newton steps. Each piece is smooth,
+  so RK4 keeps its order; the pieces' ends move continuously with the
+  parameters (a crossing leaving the sub-step makes its piece vanish), so
+  the cost stays a smooth function of the parameters, as the polish's
+  finite differences need. No step-size control, same ``m`` for the whole
+  population. About a fifth of the sub-steps cross a kink on the built-in
+  scenario, at ~2.5x their cost (their plain step is the trial that finds
+  the crossings).
 
 ``m`` is set per call by the fastest mode of the linearised car at its
 stiffest (spring plus bump-stop rate, the steepest damper segment, tires
 in contact): the smallest ``m`` with ``h/m * max|eig(A)| <= RHO_MAX``
-(:data:`RHO_MAX`), one ``m`` for the whole population like the linear
-kernel's series length. The road input and its rate are evaluated at the
-sub-step and half-step instants ``t_k + j h / (2 m)``: they depend only on
-the run, so they are tabulated once per run and ``m``
-(:attr:`rideid.model.simulate.RunInput.inputs_at`, the same envelope model
-as the samples).
+(:data:`RHO_MAX` = 0.2: 2-3 sub-steps at 200 Hz), one ``m`` for the whole
+population like the linear kernel's series length. The road input and its
+rate are tabulated once per run and ``m`` at the sub-step and half-step
+instants ``t_k + j h / (2 m)`` (:func:`fine_inputs`,
+:attr:`rideid.model.simulate.RunInput.inputs_at`, the same envelope model
+as the samples; inside a split sub-step a cubic Hermite of that table).
+The road is not smooth (a profile's table, the envelope's grid: kinks
+every few mm), which at so few sub-steps would cost first-order errors, so
+the half-step rows hold *Simpson-consistent* values instead of point
+values: the input such that Simpson's rule over the sub-step gives its
+exact mean (Gauss-Legendre, :data:`QUAD_PANELS` panels), and the rate such
+that it gives the input's exact change. Where the road is smooth they
+differ from the point values by ``O(h^4)``.
 
 The wheels' velocity states are shifted, ``p_i = z_i' - (c_t/m_u) r_i``
 (the linear kernel's shift, :mod:`rideid.model.discretize`): in contact the
@@ -79,19 +103,16 @@ tire damper's ``c_t r'`` cancels from ``p'``, so the road's rate, which
 jumps where the envelope kinks, enters the integration only while a wheel
 is off the road (and the outputs at the samples, as a feedthrough).
 
-Accuracy is set by the kinks, not by the smooth fourth-order error: where a
-stage straddles a damper knot (the zero-velocity knee of an asymmetric
-damper is crossed twice per cycle), a bump-stop contact or a lift-off, RK4
-drops to second order locally. Hence the small bound :data:`RHO_MAX` =
-0.03 (13 sub-steps at 200 Hz for the built-in car). Measured, on runs where
-the car (asymmetric digressive dampers, bars, tire damping, CG 0.25 m)
-reaches its bump stops and lifts wheels, against RK4 at 64x the sub-steps
-(largest error over the ten channels, relative to the channel's RMS):
-washboard 4.3e-5, herringbone 3.1e-5, chassis twist 7.9e-6, profile 4.8e-5
-(flat: exactly 0); against SciPy's DOP853 (rtol 1e-10) on independently
-written equations 8.7e-6 (``tests/test_nonlinear.py``). With ``rho = 0.25``
-(2 sub-steps) the same runs are within 0.04-0.33 %, a smooth (linear-curve)
-car within 1e-4.
+Accuracy, measured on runs where the car (asymmetric digressive dampers,
+bars, tire damping, CG 0.25 m) reaches its bump stops and lifts wheels,
+against the same scheme at 64x the sub-steps (largest error over the ten
+channels, relative to the channel's RMS; ``tests/test_nonlinear.py``),
+3 sub-steps at 200 Hz: washboard 2.8e-5, herringbone 2.9e-5, chassis
+twist 8.7e-6, profile 6.6e-5 (flat: exactly 0). The fine references of the
+split and the plain scheme (1024 sub-steps) agree within 5e-8. The plain
+RK4 at the same 3 sub-steps: 2.5e-4 - 7.0e-4; at 15 sub-steps (its former
+``rho = 0.03``) 7.9e-6 - 4.9e-5. At 2 sub-steps the split scheme is within
+4e-5 - 1.4e-4 (the profile the worst).
 
 Backends
 --------
@@ -413,7 +434,12 @@ def channels(co, X, qdd):
 
 
 def fine_inputs(run: RunInput, m: int, quad: bool = True):
-    """Corner inputs and rates at ``t_k + j h / (2 m)``, ``j = 0 .. 2 m (n - 1)``: ``(U, R)`` each ``(.., 4)``."""
+    """Corner inputs and rates at ``t_k + j h / (2 m)``, ``j = 0 .. 2 m (n - 1)``: ``(U, R)`` each ``(.., 4)``.
+
+    At the sub-steps' ends the point values; at their middles (odd ``j``), with ``quad``, the
+    Simpson-consistent values (see the module's Integration section): the input such that Simpson's rule
+    gives the sub-step's exact mean input, the rate such that it gives the input's exact change.
+    """
     if run.inputs_at is None:
         raise DataError("the nonlinear car needs the road between the samples: prepare the run with prepare_run")
     nf = 2 * m * (run.n - 1) + 1
@@ -584,11 +610,16 @@ class NonlinearSimulator:
         Columns of the parameter rows.
     rho : float
         Bound on ``h_sub * max|eig|`` of the sub-step (:data:`RHO_MAX`; larger is faster and less
-        accurate where the car crosses its kinks).
+        accurate).
+    split : bool
+        Split the sub-steps at the kinks they cross (default); False: plain RK4 sub-steps (which then need
+        a much smaller ``rho``, e.g. 0.03, for the same accuracy; kept for comparison).
     """
 
-    def __init__(self, geom: Geometry, runs: list[RunInput], layout: NonlinearLayout, rho: float = RHO_MAX):
+    def __init__(self, geom: Geometry, runs: list[RunInput], layout: NonlinearLayout, rho: float = RHO_MAX,
+                 split: bool = True):
         self.rho = float(rho)
+        self.split = bool(split)
         self.geom = geom
         self.runs = list(runs)
         self.layout = layout
@@ -618,7 +649,7 @@ class NonlinearSimulator:
         P = self.layout.rows(P)
         ms = self.substeps(P)
         self.last_substeps = ms
-        return [simulate_numpy(P, self.geom, r, self.layout, m, self.fine(i, m))
+        return [simulate_numpy(P, self.geom, r, self.layout, m, self.fine(i, m), split=self.split)
                 for i, (r, m) in enumerate(zip(self.runs, ms))]
 
     def errors_reference(self, P, Y, W):
@@ -635,7 +666,8 @@ class NonlinearSimulator:
         fines = [self.fine(i, m) for i, m in enumerate(ms)]
         X0 = np.stack([shifted(co, initial_state(P, self.geom, self.layout, r.u[0]), r.u[0]) for r in self.runs])
         return kernel_nl.run(co, xk, Fk, Sk, self.layout.knots is not None, X0, self.run_start,
-                             np.array([r.h for r in self.runs]), np.array(ms, dtype=np.int64), fines, Y, W, mode)
+                             np.array([r.h for r in self.runs]), np.array(ms, dtype=np.int64), fines, Y, W, mode,
+                             split=self.split)
 
     # -- public -------------------------------------------------------------------------
     def errors(self, P, Y, W):
