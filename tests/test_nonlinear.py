@@ -346,3 +346,19 @@ def test_split_scheme_cost_is_smooth_in_the_parameters(road_dir):
         resid = e - np.polyval(np.polyfit(t, e, 3), t)
         print(FULL.names[col], np.abs(resid).max() / e.mean())
         assert np.abs(resid).max() < 1e-8 * e.mean()
+
+
+def test_kink_mask_marks_only_the_knots_where_the_slope_changes():
+    """A digressive curve bends at its knee and at 0 (rebound 2:1), not at the knots below and above the knee;
+    the outermost knots never split; one mask for the population (a knot bent for any candidate)."""
+    co, xk, Fk, Sk = nl.coefficients(nasty_row()[None], GH, FULL)
+    mask = nl.kink_mask(Sk)
+    assert [float(x) for x in xk[mask[0] == 1]] == [-0.1, 0.0, 0.1]
+    assert np.array_equal(mask[0], mask[1])
+    lin = NonlinearLayout(knots=DEFAULT_KNOTS)
+    P16 = as_vector(CAR, extended=True)
+    P = np.stack([np.concatenate([P16, linear_curve(CAR["c_sf"]), linear_curve(CAR["c_sr"])])] * 2)
+    assert not nl.kink_mask(nl.coefficients(P, GH, lin)[3]).any()
+    P[1, -3] *= 1.01  # the rear curve's third-last knot force: the knots either side of it bend
+    mask = nl.kink_mask(nl.coefficients(P, GH, lin)[3])
+    assert not mask[0].any() and [float(x) for x in xk[mask[1] == 1]] == [0.05, 0.1, 0.2]

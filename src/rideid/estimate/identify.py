@@ -223,7 +223,7 @@ def identify(ds: Dataset, *, rng=None, seed=None, population: int = DEFAULT_POPU
             cf.nfev += cf_search.nfev if cf_search is not cf else 0
         fit = polish_fit(ds, cf, search.x) if polish else None
         if fit is not None and cf.space.curves:
-            fit.cost.sim.pin = None
+            fit.cost.sim.pin_at(None)
         res = _result(ds, cf if fit is None else fit.cost, search, fit, weighting, maps, rng_record,
                       time.perf_counter() - t0, assess, excitation)
         res.wall_time_s = time.perf_counter() - t0

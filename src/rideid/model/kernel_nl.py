@@ -19,9 +19,10 @@ Hermite of the switching quantity between the ends); the road inputs
 inside the sub-step are the cubic Hermite of the tabulated ones.
 
 Measured (``benchmarks/bench_nonlinear.py``, 10 runs, 9470 samples, 64
-candidates, one thread on a shared machine): 11.5 ms per candidate at 2
-sub-steps against 23.9 ms for the former plain RK4 at 13 (the same
-accuracy), the linear kernel 0.23 ms.
+candidates with digressive curves): one thread 7.4 ms per candidate at 2
+sub-steps against 17.1 ms for the former plain RK4 at 13 (the same
+accuracy), the linear kernel 0.23 ms (32x); two threads 3.8 ms, 8.7 ms,
+0.22 ms (17x).
 """
 
 from __future__ import annotations
@@ -166,9 +167,9 @@ def _inputs(UF, RF, js, tau, dt, uu, rr):
 
 
 @numba.njit(cache=True, nogil=True, error_model="numpy", inline="always")
-def _crossings(xk, clear, h, d0, v0, g0, a0, s0, d1, v1, g1, a1, s1, th):
+def _crossings(xk, kink, clear, h, d0, v0, g0, a0, s0, d1, v1, g1, a1, s1, th):
     """Fractions ``theta`` (sorted into ``th``) of the sub-step where a corner's damper velocity crosses an
-    interior knot (segments ``s0``, ``s1`` differ), its deflection the bump-stop clearance or its tire load
+    interior knot marked in ``kink`` (2, K + 1) (segments ``s0``, ``s1`` differ), its deflection the bump-stop clearance or its tire load
     zero; returns their number."""
     nc = 0
     for c in range(4):
@@ -177,9 +178,10 @@ def _crossings(xk, clear, h, d0, v0, g0, a0, s0, d1, v1, g1, a1, s1, th):
         ma = h * a0[c]
         mb = h * a1[c]
         for j in range(min(s0[c], s1[c]) + 1, max(s0[c], s1[c]) + 1):
-            kn = xk[j]
-            th[nc] = _root(va - kn, vb - kn, ma, mb)
-            nc += 1
+            if kink[c // 2, j]:
+                kn = xk[j]
+                th[nc] = _root(va - kn, vb - kn, ma, mb)
+                nc += 1
         ea = d0[c] - clear[c]
         eb = d1[c] - clear[c]
         if (ea > 0.0) != (eb > 0.0):
@@ -237,7 +239,7 @@ def _pieces(co, p, xk, j0, Fk, Sk, curves, UF, RF, js, h, th, nc, X, Xt, acc, dX
 
 
 @numba.njit(cache=True, nogil=True, error_model="numpy")
-def run_range(c0, c1, co, xk, j0, Fk, Sk, curves, split, X0, run_start, hs, ms, fine_start, UF, RF, Y, W, mode,
+def run_range(c0, c1, co, xk, j0, Fk, Sk, curves, split, kink, X0, run_start, hs, ms, fine_start, UF, RF, Y, W, mode,
               err, out):
     """Candidates ``c0 <= p < c1`` over every run (see :func:`run` for the arguments)."""
     X = np.empty(14)
@@ -322,7 +324,7 @@ def run_range(c0, c1, co, xk, j0, Fk, Sk, curves, split, X0, run_start, hs, ms, 
                     _accel(co, p, xk, j0, Fk, Sk, curves, X, UF[js + 2], RF[js + 2], dX, qdd, d, v, g, vd, seg, True)
                     if not split:
                         continue
-                    nc = _crossings(xk, clear, h, d0, v0, g0, vd0, seg0, d, v, g, vd, seg, th)
+                    nc = _crossings(xk, kink, clear, h, d0, v0, g0, vd0, seg0, d, v, g, vd, seg, th)
                     if nc == 0:
                         continue
                     # a kink inside the step: redo it in pieces that end at the crossings
@@ -342,7 +344,7 @@ def _dummy_args():
     Fk = np.zeros((n, 2, 2))
     Sk = np.zeros((n, 2, 1))
     X0 = np.zeros((1, n, 14))
-    return (0, 1, co, xk, 0, Fk, Sk, False, True, X0, np.array([0, 2], dtype=np.int64), np.array([0.01]),
+    return (0, 1, co, xk, 0, Fk, Sk, False, True, np.ones((2, 2), dtype=np.int64), X0, np.array([0, 2], dtype=np.int64), np.array([0.01]),
             np.array([1], dtype=np.int64), np.array([0, 3], dtype=np.int64), np.zeros((3, 4)), np.zeros((3, 4)),
             np.zeros((2, 10)), np.zeros((1, 10)), 0, np.zeros((1, n)), np.zeros((n, 2, 10)))
 
@@ -352,7 +354,7 @@ def compile_kernel() -> None:
     run_range(*_dummy_args())
 
 
-def run(co, xk, Fk, Sk, curves, X0, run_start, h, ms, fines, Y, W, mode, split=True):
+def run(co, xk, Fk, Sk, curves, X0, run_start, h, ms, fines, Y, W, mode, split=True, kinks=None):
     """Simulate every run for every candidate.
 
     Parameters
@@ -364,6 +366,8 @@ def run(co, xk, Fk, Sk, curves, X0, run_start, h, ms, fines, Y, W, mode, split=T
         (:func:`rideid.model.nonlinear.fine_inputs`)
     Y : (T, 10), W : (r, 10), mode : 0 errors only, 1 also the channels
     split : split the sub-steps at the kinks they cross (False: plain RK4 sub-steps)
+    kinks : (2, K + 1) which knots of ``xk`` are kinks, per axle (:func:`rideid.model.nonlinear.kink_mask`;
+        None: every interior knot)
 
     Returns
     -------
@@ -380,11 +384,12 @@ def run(co, xk, Fk, Sk, curves, X0, run_start, h, ms, fines, Y, W, mode, split=T
     RF = np.ascontiguousarray(np.concatenate([f[1] for f in fines]))
     hs = np.ascontiguousarray(np.asarray(h, dtype=float) / np.asarray(ms, dtype=float))
     j0 = int(np.flatnonzero(xk == 0.0)[0])
+    kinks = np.ones((2, xk.size), dtype=np.int64) if kinks is None else np.ascontiguousarray(kinks, dtype=np.int64)
     err = np.zeros((n_runs, n))
     T = int(run_start[-1])
     out = np.zeros((n, T, 10)) if mode == 1 else np.zeros((n, 1, 10))
     args = (np.ascontiguousarray(co), np.ascontiguousarray(xk, dtype=float), j0, np.ascontiguousarray(Fk),
-            np.ascontiguousarray(Sk), bool(curves), bool(split), np.ascontiguousarray(X0),
+            np.ascontiguousarray(Sk), bool(curves), bool(split), kinks, np.ascontiguousarray(X0),
             np.asarray(run_start, dtype=np.int64), hs, np.asarray(ms, dtype=np.int64), fine_start, UF, RF, np.ascontiguousarray(Y, dtype=float),
             np.ascontiguousarray(W, dtype=float), int(mode), err, out)
     threads = max(1, min(numba.get_num_threads(), n))

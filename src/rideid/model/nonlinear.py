@@ -76,9 +76,17 @@ state. Alternatives considered:
   parameters (a crossing leaving the sub-step makes its piece vanish), so
   the cost stays a smooth function of the parameters, as the polish's
   finite differences need. No step-size control, same ``m`` for the whole
-  population. About a fifth of the sub-steps cross a kink on the built-in
-  scenario, at ~2.5x their cost (their plain step is the trial that finds
-  the crossings).
+  population, and one set of knots split at for the whole population
+  (:func:`kink_mask`: the knots where some candidate's curve bends; a
+  digressive curve is straight through the knots below and above its knee,
+  which then cost nothing; the polish pins the set with the sub-steps,
+  :class:`rideid.estimate.cost.CurveSimulator`). On the built-in scenario 15-35 % of the sub-steps cross a
+  kink (0.2-1 crossings per sub-step, the fast runs the most), each such
+  sub-step costing its plain step (the trial that finds the crossings) plus
+  one RK4 step per piece. Measured (``benchmarks/bench_nonlinear.py``, 64
+  candidates with digressive curves, one thread): 7.4 ms per candidate at
+  2 sub-steps, against 17.1 ms for plain RK4 at the 13 sub-steps of the
+  same accuracy; the linear kernel 0.23 ms on the same runs.
 
 ``m`` is set per call by the fastest mode of the linearised car at its
 stiffest (spring plus bump-stop rate, the steepest damper segment, tires
@@ -463,6 +471,25 @@ def fine_inputs(run: RunInput, m: int, quad: bool = True):
     return np.ascontiguousarray(U), np.ascontiguousarray(R)
 
 
+#: a knot is a kink where the curve's slope changes by more than this fraction of the axle's steepest slope
+KINK_TOL = 1e-9
+
+
+def kink_mask(Sk, tol: float = KINK_TOL) -> np.ndarray:
+    """Knots of the curves that are kinks for some candidate: ``(2, K + 1)`` int, per axle, 1 where a sub-step
+    crossing the knot is split (the outermost knots never are: the curves continue straight beyond them).
+
+    One mask for the population, like the sub-step count; a knot where the slope does not change (a
+    digressive curve's knots below and above its knee) costs no split. ``Sk`` (n, 2, K) segment slopes.
+    """
+    Sk = np.asarray(Sk, dtype=float)
+    scale = np.abs(Sk).max(axis=-1, keepdims=True)
+    jump = np.abs(np.diff(Sk, axis=-1)) > tol * scale  # (n, 2, K - 1), the interior knots
+    out = np.zeros((2, Sk.shape[-1] + 1), dtype=np.int64)
+    out[:, 1:-1] = jump.any(axis=0)
+    return out
+
+
 def switching(co, X, qdd, r, rd):
     """Switching quantities ``(d, v, g, vd)`` each ``(n, 4)``: deflections, damper velocities, tire loads
     ``L + k_t (r - z_i) + c_t (r' - z_i')`` and the damper velocities' rates (as the compiled kernel)."""
@@ -493,15 +520,19 @@ def hermite_root(s0, s1, m0, m1):
     return t
 
 
-def crossings(xk, clear, h, sw0, sw1):
+def crossings(xk, clear, h, sw0, sw1, kinks=None):
     """Sorted fractions ``(n, c)`` of a sub-step where a corner's damper velocity crosses an interior knot of
     ``xk``, its deflection the bump-stop ``clear``-ance or its tire load zero (padded with 1), and their
-    number ``(n,)``; ``sw0``, ``sw1``: :func:`switching` at the sub-step's ends."""
+    number ``(n,)``; ``sw0``, ``sw1``: :func:`switching` at the sub-step's ends; ``kinks`` (2, K + 1): the
+    knots that are kinks per axle (:func:`kink_mask`; None: every one)."""
     d0, v0, g0, a0 = sw0
     d1, v1, g1, a1 = sw1
     cols, hits = [], []
-    for kn in xk[1:-1]:
+    for j in range(1, xk.size - 1):
+        kn = xk[j]
         hit = (v0 < kn) != (v1 < kn)
+        if kinks is not None:
+            hit = hit & (kinks[[0, 0, 1, 1], j] != 0)
         cols.append(np.where(hit, hermite_root(v0 - kn, v1 - kn, h * a0, h * a1), 1.0))
         hits.append(hit)
     with np.errstate(invalid="ignore"):
@@ -532,10 +563,11 @@ def inputs_within(U, R, js, tau, dt):
 
 
 def simulate_numpy(P, geom, run: RunInput, layout: NonlinearLayout, m: int, fine=None, return_states=False,
-                   split: bool = True):
+                   split: bool = True, kinks=None):
     """NumPy backend for one run: outputs ``(n, n_time, 10)`` (and states ``(n, n_time, 14)``)."""
     co, xk, Fk, Sk = coefficients(P, geom, layout)
     curves = layout.knots is not None
+    kinks = kink_mask(Sk) if kinks is None else kinks
     U, R = fine_inputs(run, m) if fine is None else fine
     X = shifted(co, initial_state(P, geom, layout, run.u[0]), run.u[0])
     n = X.shape[0]
@@ -567,7 +599,7 @@ def simulate_numpy(P, geom, run: RunInput, layout: NonlinearLayout, m: int, fine
             d1, qdd, sw = f(X, U[js + 2], R[js + 2])
             if not split:
                 continue
-            th, nc = crossings(xk if curves else xk[:0], clear, hs, sw0, sw)
+            th, nc = crossings(xk if curves else xk[:0], clear, hs, sw0, sw, kinks)
             rows = np.flatnonzero(nc)
             if rows.size == 0:
                 continue
@@ -643,13 +675,18 @@ class NonlinearSimulator:
         """Sub-steps per sample interval of every run for population ``P`` (one per sample rate)."""
         return [substeps(P, self.geom, self.layout, r.h, self.rho) for r in self.runs]
 
+    def kinks(self, P) -> np.ndarray:
+        """The knots where the sub-steps are split, for population ``P`` (:func:`kink_mask`)."""
+        return kink_mask(coefficients(P, self.geom, self.layout)[3])
+
     # -- backends -----------------------------------------------------------------------
     def outputs_reference(self, P):
         """As :meth:`outputs`, by the NumPy backend."""
         P = self.layout.rows(P)
         ms = self.substeps(P)
         self.last_substeps = ms
-        return [simulate_numpy(P, self.geom, r, self.layout, m, self.fine(i, m), split=self.split)
+        kinks = self.kinks(P)
+        return [simulate_numpy(P, self.geom, r, self.layout, m, self.fine(i, m), split=self.split, kinks=kinks)
                 for i, (r, m) in enumerate(zip(self.runs, ms))]
 
     def errors_reference(self, P, Y, W):
@@ -667,7 +704,7 @@ class NonlinearSimulator:
         X0 = np.stack([shifted(co, initial_state(P, self.geom, self.layout, r.u[0]), r.u[0]) for r in self.runs])
         return kernel_nl.run(co, xk, Fk, Sk, self.layout.knots is not None, X0, self.run_start,
                              np.array([r.h for r in self.runs]), np.array(ms, dtype=np.int64), fines, Y, W, mode,
-                             split=self.split)
+                             split=self.split, kinks=self.kinks(P))
 
     # -- public -------------------------------------------------------------------------
     def errors(self, P, Y, W):
@@ -750,5 +787,5 @@ def simulate_nonlinear(P, geom: Geometry, run: RunInput, layout: NonlinearLayout
 
 
 __all__ = ["BUMP_STOP_NAMES", "CHANNELS", "DEFAULT_KNOTS", "NonlinearLayout", "NonlinearSimulator", "RHO_MAX",
-           "curve_names", "damper_force", "linear_curve", "make_simulator", "simulate_nonlinear",
+           "curve_names", "damper_force", "kink_mask", "linear_curve", "make_simulator", "simulate_nonlinear",
            "substeps"]
