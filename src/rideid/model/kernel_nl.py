@@ -169,8 +169,8 @@ def _inputs(UF, RF, js, tau, dt, uu, rr):
 @numba.njit(cache=True, nogil=True, error_model="numpy", inline="always")
 def _crossings(xk, kink, clear, h, d0, v0, g0, a0, s0, d1, v1, g1, a1, s1, th):
     """Fractions ``theta`` (sorted into ``th``) of the sub-step where a corner's damper velocity crosses an
-    interior knot marked in ``kink`` (2, K + 1) (segments ``s0``, ``s1`` differ), its deflection the bump-stop clearance or its tire load
-    zero; returns their number."""
+    interior knot marked in ``kink`` (2, K + 1) (segments ``s0``, ``s1`` differ), its deflection the
+    bump-stop clearance or its tire load zero; returns their number."""
     nc = 0
     for c in range(4):
         va = v0[c]
@@ -344,9 +344,10 @@ def _dummy_args():
     Fk = np.zeros((n, 2, 2))
     Sk = np.zeros((n, 2, 1))
     X0 = np.zeros((1, n, 14))
-    return (0, 1, co, xk, 0, Fk, Sk, False, True, np.ones((2, 2), dtype=np.int64), X0, np.array([0, 2], dtype=np.int64), np.array([0.01]),
-            np.array([1], dtype=np.int64), np.array([0, 3], dtype=np.int64), np.zeros((3, 4)), np.zeros((3, 4)),
-            np.zeros((2, 10)), np.zeros((1, 10)), 0, np.zeros((1, n)), np.zeros((n, 2, 10)))
+    return (0, 1, co, xk, 0, Fk, Sk, False, True, np.ones((2, 2), dtype=np.int64), X0,
+            np.array([0, 2], dtype=np.int64), np.array([0.01]), np.array([1], dtype=np.int64),
+            np.array([0, 3], dtype=np.int64), np.zeros((3, 4)), np.zeros((3, 4)), np.zeros((2, 10)),
+            np.zeros((1, 10)), 0, np.zeros((1, n)), np.zeros((n, 2, 10)))
 
 
 def compile_kernel() -> None:
@@ -390,8 +391,8 @@ def run(co, xk, Fk, Sk, curves, X0, run_start, h, ms, fines, Y, W, mode, split=T
     out = np.zeros((n, T, 10)) if mode == 1 else np.zeros((n, 1, 10))
     args = (np.ascontiguousarray(co), np.ascontiguousarray(xk, dtype=float), j0, np.ascontiguousarray(Fk),
             np.ascontiguousarray(Sk), bool(curves), bool(split), kinks, np.ascontiguousarray(X0),
-            np.asarray(run_start, dtype=np.int64), hs, np.asarray(ms, dtype=np.int64), fine_start, UF, RF, np.ascontiguousarray(Y, dtype=float),
-            np.ascontiguousarray(W, dtype=float), int(mode), err, out)
+            np.asarray(run_start, dtype=np.int64), hs, np.asarray(ms, dtype=np.int64), fine_start, UF, RF,
+            np.ascontiguousarray(Y, dtype=float), np.ascontiguousarray(W, dtype=float), int(mode), err, out)
     threads = max(1, min(numba.get_num_threads(), n))
     if threads == 1:
         run_range(0, n, *args)

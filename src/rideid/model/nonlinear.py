@@ -80,8 +80,9 @@ state. Alternatives considered:
   (:func:`kink_mask`: the knots where some candidate's curve bends; a
   digressive curve is straight through the knots below and above its knee,
   which then cost nothing; the polish pins the set with the sub-steps,
-  :class:`rideid.estimate.cost.CurveSimulator`). On the built-in scenario 15-35 % of the sub-steps cross a
-  kink (0.2-1 crossings per sub-step, the fast runs the most), each such
+  :class:`rideid.estimate.cost.CurveSimulator`). On the built-in scenario
+  15-35 % of the sub-steps cross a knot, fewer a kink (0.2-1 knot
+  crossings per sub-step, the fast runs the most), each such
   sub-step costing its plain step (the trial that finds the crossings) plus
   one RK4 step per piece. Measured (``benchmarks/bench_nonlinear.py``, 64
   candidates with digressive curves, one thread): 7.4 ms per candidate at
@@ -115,8 +116,8 @@ Accuracy, measured on runs where the car (asymmetric digressive dampers,
 bars, tire damping, CG 0.25 m) reaches its bump stops and lifts wheels,
 against the same scheme at 64x the sub-steps (largest error over the ten
 channels, relative to the channel's RMS; ``tests/test_nonlinear.py``),
-3 sub-steps at 200 Hz: washboard 2.8e-5, herringbone 2.9e-5, chassis
-twist 8.7e-6, profile 6.6e-5 (flat: exactly 0). The fine references of the
+3 sub-steps at 200 Hz: washboard 3.0e-5, herringbone 2.9e-5, chassis
+twist 1.0e-5, profile 6.0e-5 (flat: exactly 0). The fine references of the
 split and the plain scheme (1024 sub-steps) agree within 5e-8. The plain
 RK4 at the same 3 sub-steps: 2.5e-4 - 7.0e-4; at 15 sub-steps (its former
 ``rho = 0.03``) 7.9e-6 - 4.9e-5. At 2 sub-steps the split scheme is within
@@ -461,10 +462,12 @@ def fine_inputs(run: RunInput, m: int, quad: bool = True):
         nodes, weights = np.polynomial.legendre.leggauss(2)
         x = (np.arange(QUAD_PANELS)[:, None] + 0.5 * (nodes[None, :] + 1.0)).ravel() / QUAD_PANELS
         w = np.repeat(weights[None, :] * 0.5, QUAD_PANELS, 0).ravel() / QUAD_PANELS
-        ns = m * (run.n - 1)
-        tq = (tf[:-1:2, None] + hs * x[None, :]).ravel()
-        uq, _ = run.inputs_at(tq)
-        mean = np.einsum("kqc,q->kc", uq.reshape(ns, x.size, 4), w)
+        starts = tf[:-1:2]
+        mean = np.empty((starts.size, 4))
+        for lo in range(0, starts.size, 1 << 15):  # bounded memory
+            t0 = starts[lo:lo + (1 << 15)]
+            uq, _ = run.inputs_at((t0[:, None] + hs * x[None, :]).ravel())
+            mean[lo:lo + t0.size] = np.einsum("kqc,q->kc", uq.reshape(t0.size, x.size, 4), w)
         U[1::2] = (6.0 * mean - U[:-1:2] - U[2::2]) / 4.0
         # and mid-step rates such that Simpson's rule integrates them to the input's change
         R[1::2] = (6.0 * (U[2::2] - U[:-1:2]) / hs - R[:-1:2] - R[2::2]) / 4.0
