@@ -85,9 +85,9 @@ state. Alternatives considered:
   crossings per sub-step, the fast runs the most), each such
   sub-step costing its plain step (the trial that finds the crossings) plus
   one RK4 step per piece. Measured (``benchmarks/bench_nonlinear.py``, 64
-  candidates with digressive curves, one thread): 7.4 ms per candidate at
-  2 sub-steps, against 17.1 ms for plain RK4 at the 13 sub-steps of the
-  same accuracy; the linear kernel 0.23 ms on the same runs.
+  candidates with digressive curves, one thread): 5.2 ms per candidate at
+  2 sub-steps, against 16.8 ms for plain RK4 at the 13 sub-steps of the
+  same accuracy; the linear kernel 0.17 ms on the same runs (30x).
 
 ``m`` is set per call by the fastest mode of the linearised car at its
 stiffest (spring plus bump-stop rate, the steepest damper segment, tires
