@@ -514,7 +514,9 @@ class CurveSimulator(NonlinearSimulator):
     (buckets :data:`SUBSTEP_BUCKETS`): the search evaluates each group in one call. :attr:`pin`
     (per run, or None) is a floor on the sub-steps: the polish pins them at its start (with a
     margin), so every residual it differences is computed with the same integrator and the
-    Jacobian sees no jump where the stiffest segment's count would change.
+    Jacobian sees no jump where the stiffest segment's count would change; it pins the knots where the
+    sub-steps are split as well (:meth:`kinks`: those that are kinks at its start), so a knot where a
+    difference quotient's curve bends slightly is not split for it and unsplit for its neighbour.
     """
 
     #: sub-step counts are rounded up to these (groups stay few and large)
@@ -523,10 +525,14 @@ class CurveSimulator(NonlinearSimulator):
     def __init__(self, geom, runs, layout):
         super().__init__(geom, runs, layout)
         self.pin = None
+        self.pin_kinks = None
 
     def substeps(self, P) -> list[int]:
         m = super().substeps(P)
         return m if self.pin is None else [max(a, b) for a, b in zip(m, self.pin)]
+
+    def kinks(self, P):
+        return super().kinks(P) if self.pin_kinks is None else self.pin_kinks
 
     def candidate_substeps(self, P) -> np.ndarray:
         """Largest sub-step count over the runs of each candidate, ``(n,)``."""
@@ -544,3 +550,4 @@ class CurveSimulator(NonlinearSimulator):
     def pin_at(self, P, margin: float = 1.5):
         """Pin the sub-steps at ``margin`` times those of rows ``P`` (the polish's start); None unpins."""
         self.pin = None if P is None else [int(np.ceil(margin * m)) for m in super().substeps(P)]
+        self.pin_kinks = None if P is None else super().kinks(P)

@@ -241,7 +241,7 @@ def identify(ds: Dataset, *, rng=None, seed=None, population: int = DEFAULT_POPU
         if fit is not None and cf.space.bump:
             fit, bumps = _bump_recheck(ds, fit, bumps)
         if fit is not None and nonlinear:
-            fit.cost.sim.pin = None
+            fit.cost.sim.pin_at(None)
         res = _result(ds, cf if fit is None else fit.cost, search, fit, weighting, maps, rng_record,
                       time.perf_counter() - t0, assess, excitation, bumps)
         res.wall_time_s = time.perf_counter() - t0

@@ -56,22 +56,55 @@ state. Alternatives considered:
   Newton solve per step and per candidate, with Jacobians that jump at the
   kinks; the car is not stiff at a sensible sub-step (the fastest mode is
   the wheel hop, ~10-20 Hz, or a bump stop), so stability buys nothing;
-* *explicit Runge-Kutta at a fixed sub-step* (chosen): classical RK4 with
-  ``m`` equal sub-steps per sample interval. Branch-free, four cheap
-  force evaluations per sub-step, the same fixed work for every candidate
-  (vectorises across candidates, no step-size control that would make the
-  cost a non-smooth function of the parameters), fourth order where the
-  forces are smooth.
+* *explicit Runge-Kutta at a fixed sub-step*: classical RK4 with ``m``
+  equal sub-steps per sample interval; four cheap force evaluations per
+  sub-step, fourth order where the forces are smooth, but only second
+  order locally where a stage straddles a kink (damper knot, including
+  the zero-velocity knee of an asymmetric damper, bump-stop contact,
+  lift-off), so the kinks set the accuracy and need ``h/m * max|eig| <=
+  0.03`` (13-15 sub-steps at 200 Hz) for 1e-4 of RMS;
+* *RK4 sub-steps split at the kinks* (chosen): the same sub-steps, and a
+  sub-step whose ends lie on different sides of a kink (a corner's damper
+  velocity in another curve segment, its deflection on the other side of
+  the bump-stop clearance, its tire load of the other sign) is redone in
+  pieces that end at the crossings: each crossing located on the cubic
+  Hermite through the switching quantity's values and rates at the
+  sub-step's ends (the rates are known there: the damper velocity's from
+  the accelerations, the deflection's is the damper velocity; the tire
+  load's crossing by its chord), two Newton steps. Each piece is smooth,
+  so RK4 keeps its order; the pieces' ends move continuously with the
+  parameters (a crossing leaving the sub-step makes its piece vanish), so
+  the cost stays a smooth function of the parameters, as the polish's
+  finite differences need. No step-size control, same ``m`` for the whole
+  population, and one set of knots split at for the whole population
+  (:func:`kink_mask`: the knots where some candidate's curve bends; a
+  digressive curve is straight through the knots below and above its knee,
+  which then cost nothing; the polish pins the set with the sub-steps,
+  :class:`rideid.estimate.cost.CurveSimulator`). On the built-in scenario
+  15-35 % of the sub-steps cross a knot, fewer a kink (0.2-1 knot
+  crossings per sub-step, the fast runs the most), each such
+  sub-step costing its plain step (the trial that finds the crossings) plus
+  one RK4 step per piece. Measured (``benchmarks/bench_nonlinear.py``, 64
+  candidates with digressive curves, one thread): 5.2 ms per candidate at
+  2 sub-steps, against 16.8 ms for plain RK4 at the 13 sub-steps of the
+  same accuracy; the linear kernel 0.17 ms on the same runs (30x).
 
 ``m`` is set per call by the fastest mode of the linearised car at its
 stiffest (spring plus bump-stop rate, the steepest damper segment, tires
 in contact): the smallest ``m`` with ``h/m * max|eig(A)| <= RHO_MAX``
-(:data:`RHO_MAX`), one ``m`` for the whole population like the linear
-kernel's series length. The road input and its rate are evaluated at the
-sub-step and half-step instants ``t_k + j h / (2 m)``: they depend only on
-the run, so they are tabulated once per run and ``m``
-(:attr:`rideid.model.simulate.RunInput.inputs_at`, the same envelope model
-as the samples).
+(:data:`RHO_MAX` = 0.2: 2-3 sub-steps at 200 Hz), one ``m`` for the whole
+population like the linear kernel's series length. The road input and its
+rate are tabulated once per run and ``m`` at the sub-step and half-step
+instants ``t_k + j h / (2 m)`` (:func:`fine_inputs`,
+:attr:`rideid.model.simulate.RunInput.inputs_at`, the same envelope model
+as the samples; inside a split sub-step a cubic Hermite of that table).
+The road is not smooth (a profile's table, the envelope's grid: kinks
+every few mm), which at so few sub-steps would cost first-order errors, so
+the half-step rows hold *Simpson-consistent* values instead of point
+values: the input such that Simpson's rule over the sub-step gives its
+exact mean (Gauss-Legendre, :data:`QUAD_PANELS` panels), and the rate such
+that it gives the input's exact change. Where the road is smooth they
+differ from the point values by ``O(h^4)``.
 
 The wheels' velocity states are shifted, ``p_i = z_i' - (c_t/m_u) r_i``
 (the linear kernel's shift, :mod:`rideid.model.discretize`): in contact the
@@ -79,19 +112,17 @@ tire damper's ``c_t r'`` cancels from ``p'``, so the road's rate, which
 jumps where the envelope kinks, enters the integration only while a wheel
 is off the road (and the outputs at the samples, as a feedthrough).
 
-Accuracy is set by the kinks, not by the smooth fourth-order error: where a
-stage straddles a damper knot (the zero-velocity knee of an asymmetric
-damper is crossed twice per cycle), a bump-stop contact or a lift-off, RK4
-drops to second order locally. Hence the small bound :data:`RHO_MAX` =
-0.03 (13 sub-steps at 200 Hz for the built-in car). Measured, on runs where
-the car (asymmetric digressive dampers, bars, tire damping, CG 0.25 m)
-reaches its bump stops and lifts wheels, against RK4 at 64x the sub-steps
-(largest error over the ten channels, relative to the channel's RMS):
-washboard 4.3e-5, herringbone 3.1e-5, chassis twist 7.9e-6, profile 4.8e-5
-(flat: exactly 0); against SciPy's DOP853 (rtol 1e-10) on independently
-written equations 8.7e-6 (``tests/test_nonlinear.py``). With ``rho = 0.25``
-(2 sub-steps) the same runs are within 0.04-0.33 %, a smooth (linear-curve)
-car within 1e-4.
+Accuracy, measured on runs where the car (asymmetric digressive dampers,
+bars, tire damping, CG 0.25 m) reaches its bump stops and lifts wheels,
+against the same scheme at 64x the sub-steps (largest error over the ten
+channels, relative to the channel's RMS; ``tests/test_nonlinear.py``),
+3 sub-steps at 200 Hz: washboard 3.0e-5, herringbone 2.9e-5, chassis
+twist 1.0e-5, profile 6.0e-5 (flat: exactly 0); against SciPy's DOP853
+(rtol 1e-10) on independently written equations 1.0e-5 (chassis twist). The fine references of the
+split and the plain scheme (1024 sub-steps) agree within 5e-8. The plain
+RK4 at the same 3 sub-steps: 2.5e-4 - 7.0e-4; at 15 sub-steps (its former
+``rho = 0.03``) 7.9e-6 - 4.9e-5. At 2 sub-steps the split scheme is within
+4e-5 - 1.4e-4 (the profile the worst).
 
 Backends
 --------
@@ -123,9 +154,11 @@ DEFAULT_KNOTS: tuple[float, ...] = (-0.4, -0.2, -0.1, -0.05, -0.025, 0.025, 0.05
 #: Bump-stop columns (after the sixteen): clearance m of compression from static, rate N/m.
 BUMP_STOP_NAMES: tuple[str, ...] = ("bs_clear_f", "bs_clear_r", "bs_rate_f", "bs_rate_r")
 #: Largest ``h_sub * max|eig|`` of the RK4 sub-step (accuracy, not stability: RK4 is stable to 2.8).
-RHO_MAX = 0.03
+RHO_MAX = 0.2
 #: Most sub-steps per sample.
 M_MAX = 4096
+#: Gauss panels (two nodes each) per sub-step for the mean road input
+QUAD_PANELS = 16
 
 
 def curve_names(n_knots: int) -> tuple[str, ...]:
@@ -410,8 +443,13 @@ def channels(co, X, qdd):
     return out
 
 
-def fine_inputs(run: RunInput, m: int):
-    """Corner inputs and rates at ``t_k + j h / (2 m)``, ``j = 0 .. 2 m (n - 1)``: ``(U, R)`` each ``(.., 4)``."""
+def fine_inputs(run: RunInput, m: int, quad: bool = True):
+    """Corner inputs and rates at ``t_k + j h / (2 m)``, ``j = 0 .. 2 m (n - 1)``: ``(U, R)`` each ``(.., 4)``.
+
+    At the sub-steps' ends the point values; at their middles (odd ``j``), with ``quad``, the
+    Simpson-consistent values (see the module's Integration section): the input such that Simpson's rule
+    gives the sub-step's exact mean input, the rate such that it gives the input's exact change.
+    """
     if run.inputs_at is None:
         raise DataError("the nonlinear car needs the road between the samples: prepare the run with prepare_run")
     nf = 2 * m * (run.n - 1) + 1
@@ -419,26 +457,137 @@ def fine_inputs(run: RunInput, m: int):
     U, R = run.inputs_at(tf)
     # at the samples exactly the run's own values
     U[::2 * m], R[::2 * m] = run.u, run.rate
+    if quad:
+        # mid-step inputs such that Simpson's rule gives each sub-step's exact mean input
+        hs = run.h / m
+        nodes, weights = np.polynomial.legendre.leggauss(2)
+        x = (np.arange(QUAD_PANELS)[:, None] + 0.5 * (nodes[None, :] + 1.0)).ravel() / QUAD_PANELS
+        w = np.repeat(weights[None, :] * 0.5, QUAD_PANELS, 0).ravel() / QUAD_PANELS
+        starts = tf[:-1:2]
+        mean = np.empty((starts.size, 4))
+        for lo in range(0, starts.size, 1 << 15):  # bounded memory
+            t0 = starts[lo:lo + (1 << 15)]
+            uq, _ = run.inputs_at((t0[:, None] + hs * x[None, :]).ravel())
+            mean[lo:lo + t0.size] = np.einsum("kqc,q->kc", uq.reshape(t0.size, x.size, 4), w)
+        U[1::2] = (6.0 * mean - U[:-1:2] - U[2::2]) / 4.0
+        # and mid-step rates such that Simpson's rule integrates them to the input's change
+        R[1::2] = (6.0 * (U[2::2] - U[:-1:2]) / hs - R[:-1:2] - R[2::2]) / 4.0
     return np.ascontiguousarray(U), np.ascontiguousarray(R)
 
 
-def simulate_numpy(P, geom, run: RunInput, layout: NonlinearLayout, m: int, fine=None, return_states=False):
+#: a knot is a kink where the curve's slope changes by more than this fraction of the axle's steepest slope
+KINK_TOL = 1e-9
+
+
+def kink_mask(Sk, tol: float = KINK_TOL) -> np.ndarray:
+    """Knots of the curves that are kinks for some candidate: ``(2, K + 1)`` int, per axle, 1 where a sub-step
+    crossing the knot is split (the outermost knots never are: the curves continue straight beyond them).
+
+    One mask for the population, like the sub-step count; a knot where the slope does not change (a
+    digressive curve's knots below and above its knee) costs no split. ``Sk`` (n, 2, K) segment slopes.
+    """
+    Sk = np.asarray(Sk, dtype=float)
+    scale = np.abs(Sk).max(axis=-1, keepdims=True)
+    jump = np.abs(np.diff(Sk, axis=-1)) > tol * scale  # (n, 2, K - 1), the interior knots
+    out = np.zeros((2, Sk.shape[-1] + 1), dtype=np.int64)
+    out[:, 1:-1] = jump.any(axis=0)
+    return out
+
+
+def switching(co, X, qdd, r, rd):
+    """Switching quantities ``(d, v, g, vd)`` each ``(n, 4)``: deflections, damper velocities, tire loads
+    ``L + k_t (r - z_i) + c_t (r' - z_i')`` and the damper velocities' rates (as the compiled kernel)."""
+    x, y = co[:, _C4["x"]], co[:, _C4["y"]]
+    ct = co[:, _C4["ct"]]
+    w = X[:, 10:] + ct * co[:, _C4["inv_mu"]] * r
+    d = X[:, 3:7] - (X[:, :1] - x * X[:, 1:2] + y * X[:, 2:3])
+    v = w - (X[:, 7:8] - x * X[:, 8:9] + y * X[:, 9:10])
+    t0 = co[:, _C4["L"]] + co[:, _C4["kt"]] * (r - X[:, 3:7]) - ct * w
+    g = t0 + ct * rd
+    vd = qdd[:, 3:] - (qdd[:, :1] - x * qdd[:, 1:2] + y * qdd[:, 2:3])
+    return d, v, g, vd
+
+
+def hermite_root(s0, s1, m0, m1):
+    """Crossing ``0 <= theta <= 1`` of the cubic Hermite with values ``s0, s1`` (opposite signs) and slopes
+    ``m0, m1`` (per unit ``theta``): the chord's root, then two Newton steps kept in ``[0, 1]``."""
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t = s0 / (s0 - s1)
+        for _ in range(2):
+            t2 = t * t
+            t3 = t2 * t
+            val = (2.0 * t3 - 3.0 * t2 + 1.0) * s0 + (t3 - 2.0 * t2 + t) * m0 + (3.0 * t2 - 2.0 * t3) * s1 \
+                + (t3 - t2) * m1
+            der = (6.0 * t2 - 6.0 * t) * (s0 - s1) + (3.0 * t2 - 4.0 * t + 1.0) * m0 + (3.0 * t2 - 2.0 * t) * m1
+            t = np.where(der != 0.0, t - val / np.where(der != 0.0, der, 1.0), t)
+            t = np.minimum(np.maximum(t, 0.0), 1.0)
+    return t
+
+
+def crossings(xk, clear, h, sw0, sw1, kinks=None):
+    """Sorted fractions ``(n, c)`` of a sub-step where a corner's damper velocity crosses an interior knot of
+    ``xk``, its deflection the bump-stop ``clear``-ance or its tire load zero (padded with 1), and their
+    number ``(n,)``; ``sw0``, ``sw1``: :func:`switching` at the sub-step's ends; ``kinks`` (2, K + 1): the
+    knots that are kinks per axle (:func:`kink_mask`; None: every one)."""
+    d0, v0, g0, a0 = sw0
+    d1, v1, g1, a1 = sw1
+    cols, hits = [], []
+    for j in range(1, xk.size - 1):
+        kn = xk[j]
+        hit = (v0 < kn) != (v1 < kn)
+        if kinks is not None:
+            hit = hit & (kinks[[0, 0, 1, 1], j] != 0)
+        cols.append(np.where(hit, hermite_root(v0 - kn, v1 - kn, h * a0, h * a1), 1.0))
+        hits.append(hit)
+    with np.errstate(invalid="ignore"):
+        ea, eb = d0 - clear, d1 - clear
+    hit = (ea > 0.0) != (eb > 0.0)
+    cols.append(np.where(hit, hermite_root(np.where(hit, ea, 1.0), np.where(hit, eb, -1.0), h * v0, h * v1), 1.0))
+    hits.append(hit)
+    hit = (g0 >= 0.0) != (g1 >= 0.0)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        cols.append(np.where(hit, g0 / (g0 - g1), 1.0))
+    hits.append(hit)
+    th = np.sort(np.concatenate(cols, axis=1), axis=1)
+    return th, np.concatenate(hits, axis=1).sum(axis=1)
+
+
+def inputs_within(U, R, js, tau, dt):
+    """Road inputs and rates ``(k, 4)`` at fractions ``tau`` (k,) of the sub-step starting at table row ``js``
+    (cubic Hermite of the inputs with their rates over the half sub-step ``dt``; rates linear)."""
+    x = 2.0 * tau
+    up = x >= 1.0
+    i = js + up.astype(np.int64)
+    s = np.where(up, x - 1.0, x)[:, None]
+    om = 1.0 - s
+    s2 = s * s
+    u = ((1.0 + 2.0 * s) * om * om) * U[i] + (s * om * om * dt) * R[i] + (s2 * (3.0 - 2.0 * s)) * U[i + 1] \
+        + (s2 * (s - 1.0) * dt) * R[i + 1]
+    return u, om * R[i] + s * R[i + 1]
+
+
+def simulate_numpy(P, geom, run: RunInput, layout: NonlinearLayout, m: int, fine=None, return_states=False,
+                   split: bool = True, kinks=None):
     """NumPy backend for one run: outputs ``(n, n_time, 10)`` (and states ``(n, n_time, 14)``)."""
     co, xk, Fk, Sk = coefficients(P, geom, layout)
     curves = layout.knots is not None
+    kinks = kink_mask(Sk) if kinks is None else kinks
     U, R = fine_inputs(run, m) if fine is None else fine
     X = shifted(co, initial_state(P, geom, layout, run.u[0]), run.u[0])
     n = X.shape[0]
     hs = run.h / m
+    hh = 0.5 * hs
+    clear = co[:, _C4["bs_clear"]]
     y = np.empty((n, run.n, 10))
     Xs = np.empty((n, run.n, 14)) if return_states else None
 
-    def f(X, j):
-        return accelerations(co, xk, Fk, Sk, curves, X, U[j], R[j])
+    def f(X, u, ud, rows=slice(None)):
+        dX, qdd = accelerations(co[rows], xk, Fk[rows], Sk[rows], curves, X, u, ud)
+        return dX, qdd, switching(co[rows], X, qdd, u, ud)
 
+    d1, qdd, sw = f(X, U[0], R[0])
     for k in range(run.n):
         j = 2 * m * k
-        d1, qdd = f(X, j)
         y[:, k] = channels(co, X, qdd)
         if return_states:
             Xs[:, k] = shifted(co, X, run.u[k], back=True)
@@ -446,12 +595,38 @@ def simulate_numpy(P, geom, run: RunInput, layout: NonlinearLayout, m: int, fine
             break
         for s in range(m):
             js = j + 2 * s
-            if s:
-                d1, _ = f(X, js)
-            d2, _ = f(X + (hs / 2) * d1, js + 1)
-            d3, _ = f(X + (hs / 2) * d2, js + 1)
-            d4, _ = f(X + hs * d3, js + 2)
+            X0, D0, sw0 = X, d1, sw
+            d2 = f(X + hh * d1, U[js + 1], R[js + 1])[0]
+            d3 = f(X + hh * d2, U[js + 1], R[js + 1])[0]
+            d4 = f(X + hs * d3, U[js + 2], R[js + 2])[0]
             X = X + (hs / 6) * (d1 + 2 * d2 + 2 * d3 + d4)
+            d1, qdd, sw = f(X, U[js + 2], R[js + 2])
+            if not split:
+                continue
+            th, nc = crossings(xk if curves else xk[:0], clear, hs, sw0, sw, kinks)
+            rows = np.flatnonzero(nc)
+            if rows.size == 0:
+                continue
+            # a kink inside the step: redo it in pieces that end at the crossings
+            Xr = X0[rows]
+            th = th[rows]
+            a = np.zeros(rows.size)
+            for q in range(th.shape[1] + 1):
+                b = th[:, q] if q < th.shape[1] else np.ones(rows.size)
+                hp = ((b - a) * hs)[:, None]
+                if q == 0:
+                    k1 = D0[rows]
+                else:
+                    k1 = f(Xr, *inputs_within(U, R, js, a, hh), rows)[0]
+                um = inputs_within(U, R, js, 0.5 * (a + b), hh)
+                k2 = f(Xr + (0.5 * hp) * k1, *um, rows)[0]
+                k3 = f(Xr + (0.5 * hp) * k2, *um, rows)[0]
+                k4 = f(Xr + hp * k3, *inputs_within(U, R, js, b, hh), rows)[0]
+                Xr = Xr + (hp / 6.0) * ((k1 + 2.0 * k2 + 2.0 * k3) + k4)
+                a = b
+            X = X.copy()
+            X[rows] = Xr
+            d1, qdd, sw = f(X, U[js + 2], R[js + 2])
     return (y, Xs) if return_states else y
 
 
@@ -471,11 +646,16 @@ class NonlinearSimulator:
         Columns of the parameter rows.
     rho : float
         Bound on ``h_sub * max|eig|`` of the sub-step (:data:`RHO_MAX`; larger is faster and less
-        accurate where the car crosses its kinks).
+        accurate).
+    split : bool
+        Split the sub-steps at the kinks they cross (default); False: plain RK4 sub-steps (which then need
+        a much smaller ``rho``, e.g. 0.03, for the same accuracy; kept for comparison).
     """
 
-    def __init__(self, geom: Geometry, runs: list[RunInput], layout: NonlinearLayout, rho: float = RHO_MAX):
+    def __init__(self, geom: Geometry, runs: list[RunInput], layout: NonlinearLayout, rho: float = RHO_MAX,
+                 split: bool = True):
         self.rho = float(rho)
+        self.split = bool(split)
         self.geom = geom
         self.runs = list(runs)
         self.layout = layout
@@ -499,13 +679,18 @@ class NonlinearSimulator:
         """Sub-steps per sample interval of every run for population ``P`` (one per sample rate)."""
         return [substeps(P, self.geom, self.layout, r.h, self.rho) for r in self.runs]
 
+    def kinks(self, P) -> np.ndarray:
+        """The knots where the sub-steps are split, for population ``P`` (:func:`kink_mask`)."""
+        return kink_mask(coefficients(P, self.geom, self.layout)[3])
+
     # -- backends -----------------------------------------------------------------------
     def outputs_reference(self, P):
         """As :meth:`outputs`, by the NumPy backend."""
         P = self.layout.rows(P)
         ms = self.substeps(P)
         self.last_substeps = ms
-        return [simulate_numpy(P, self.geom, r, self.layout, m, self.fine(i, m))
+        kinks = self.kinks(P)
+        return [simulate_numpy(P, self.geom, r, self.layout, m, self.fine(i, m), split=self.split, kinks=kinks)
                 for i, (r, m) in enumerate(zip(self.runs, ms))]
 
     def errors_reference(self, P, Y, W):
@@ -522,7 +707,8 @@ class NonlinearSimulator:
         fines = [self.fine(i, m) for i, m in enumerate(ms)]
         X0 = np.stack([shifted(co, initial_state(P, self.geom, self.layout, r.u[0]), r.u[0]) for r in self.runs])
         return kernel_nl.run(co, xk, Fk, Sk, self.layout.knots is not None, X0, self.run_start,
-                             np.array([r.h for r in self.runs]), np.array(ms, dtype=np.int64), fines, Y, W, mode)
+                             np.array([r.h for r in self.runs]), np.array(ms, dtype=np.int64), fines, Y, W, mode,
+                             split=self.split, kinks=self.kinks(P))
 
     # -- public -------------------------------------------------------------------------
     def errors(self, P, Y, W):
@@ -605,5 +791,5 @@ def simulate_nonlinear(P, geom: Geometry, run: RunInput, layout: NonlinearLayout
 
 
 __all__ = ["BUMP_STOP_NAMES", "CHANNELS", "DEFAULT_KNOTS", "NonlinearLayout", "NonlinearSimulator", "RHO_MAX",
-           "curve_names", "damper_force", "linear_curve", "make_simulator", "simulate_nonlinear",
+           "curve_names", "damper_force", "kink_mask", "linear_curve", "make_simulator", "simulate_nonlinear",
            "substeps"]
