@@ -148,7 +148,7 @@ def _parser() -> argparse.ArgumentParser:
                    help="with --engine mujoco: write the sensors' own readings (gravity included, "
                         "1 s standing still first) as a logger would, mapped for the measured-data pipeline")
 
-    s = add("identify", "estimate the ride parameters of a dataset (the twelve, plus anti-roll bars and tire damping when the model has them)")
+    s = add("identify", "estimate the ride parameters of a dataset (the twelve, plus anti-roll bars, tire damping, damper curves and bump stops when the model has them)")
     s.add_argument("dataset", metavar="DATASET_DIR", help="dataset folder (or its dataset.toml)")
     s.add_argument("--out", required=True, metavar="DIR",
                    help="output folder: result.json, history.csv, report.html, figures/ (rideid's files from "
@@ -165,7 +165,7 @@ def _parser() -> argparse.ArgumentParser:
                    help="base: the twelve parameters; full: with anti-roll bars (k_arf, k_arr) and tire damping "
                         "(c_tf, c_tr); auto: fit the candidates and keep what the data support (docs/model-choice.md); "
                         "or groups joined by ',': anti_roll_bars, tire_damping, damper_curves (SPEC §8: a force-velocity "
-                        "curve per axle at the [model] damper_knots) "
+                        "curve per axle at the [model] damper_knots), bump_stops (clearance and rate per axle) "
                         "(default: the dataset's [model] extensions, else auto)")
     s.add_argument("--no-report", action="store_true", help="write result.json and history.csv only")
 
