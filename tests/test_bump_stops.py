@@ -16,29 +16,16 @@ from rideid.estimate.bumps import spring_share
 from rideid.estimate.cost import BUMP_BOUNDS, ParameterSpace
 from rideid.estimate.result import load
 from rideid.model.params import Geometry
+from test_damper_curves import VEL, digressive
+from test_damper_curves import simulate as simulate_car
 
 BS = ("bs_clear_f", "bs_clear_r", "bs_rate_f", "bs_rate_r")
-POS = (0.025, 0.05, 0.1, 0.2, 0.4)
-VEL = [-k for k in reversed(POS)] + list(POS)
-
-
-def digressive(c1, c2, knee=0.1, rebound=2.0):
-    pos = [c1 * min(v, knee) + c2 * max(v - knee, 0.0) for v in POS]
-    return [-rebound * f for f in reversed(pos)] + pos
 
 
 def simulate(tmp, clear, rate=5e4, dampers=None, noise=0.01):
     """The built-in car with bump stops at ``clear`` (m) and ``rate`` (N/m) on both axles, 1 % noise."""
-    doc = read_toml(rideid.default_scenario_path())
-    doc["truth"].update(bs_clear_f=clear, bs_clear_r=clear, bs_rate_f=rate, bs_rate_r=rate)
-    if dampers is not None:
-        doc["dampers"] = dampers
-        del doc["truth"]["c_sf"], doc["truth"]["c_sr"]
-    sc = tmp / "sc.toml"
-    sc.write_text(tomli_w.dumps(doc))
-    out = tmp / "ds"
-    assert main(["simulate", str(sc), "--out", str(out), "--noise", str(noise), "--seed", "3", "--quiet"]) == 0
-    return out, read_toml(out / "truth.toml")
+    return simulate_car(tmp, dampers, noise, truth=dict(bs_clear_f=clear, bs_clear_r=clear, bs_rate_f=rate,
+                                                        bs_rate_r=rate))
 
 
 def identify(ds, out, model="bump_stops", capsys=None):

@@ -26,8 +26,11 @@ def digressive(c1, c2, knee=0.1, rebound=2.0):
     return [-rebound * f for f in reversed(pos)] + pos
 
 
-def simulate(tmp, dampers=None, noise=0.01):
+def simulate(tmp, dampers=None, noise=0.01, truth=None):
+    """The built-in car (``truth`` updates its [truth]) with ``dampers`` as its [dampers], simulated with
+    ``noise`` (seed 3): the dataset folder and its truth.toml."""
     doc = read_toml(rideid.default_scenario_path())
+    doc["truth"].update(truth or {})
     if dampers is not None:
         doc["dampers"] = dampers
         del doc["truth"]["c_sf"], doc["truth"]["c_sr"]
