@@ -56,6 +56,9 @@ MIN_EXPLAINED = 0.05
 #: road-explained residual RMS, as a share of the channel's RMS, below which structure is immaterial
 #: (below the accuracy of any accelerometer or gyro)
 MIN_RELATIVE = 0.005
+#: the least cost reduction that counts as a better fit: the cost is a relative squared error, so a
+#: change must move the fit by MIN_RELATIVE of the channels' RMS (model choice, the bump-stop scan)
+MIN_IMPROVEMENT = MIN_RELATIVE ** 2
 #: highest AR order of the prewhitening filter
 AR_MAX = 10
 #: lags of the whiteness test (MATLAB resid's default)

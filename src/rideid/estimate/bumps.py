@@ -40,7 +40,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..model.nonlinear import BUMP_STOP_NAMES, check_nonlinear, simulate_numpy, substeps
-from .adequacy import MIN_RELATIVE
+from .adequacy import MIN_IMPROVEMENT
 
 #: samples (both corners of the axle, all runs) beyond the clearance that make a stop reached
 MIN_SAMPLES = 20
@@ -50,9 +50,8 @@ SCAN_COUNTS = (20, 40, 80, 160, 320, 640, 1280)
 SCAN_RATES = (1.0e4, 3.0e4, 1.0e5, 3.0e5)
 #: an axle's best scan candidate must lower the equal-weight cost by this share to start a stop
 MIN_GAIN = 0.01
-#: ... or by this much absolutely: the materiality floor of the adequacy verdict (0.5 % of the channels'
-#: RMS, squared), for a car whose cost other misfits dominate (a stop then gains less than 1 % of it)
-MIN_IMPROVEMENT = MIN_RELATIVE ** 2
+# ... or by MIN_IMPROVEMENT absolutely (the adequacy verdict's materiality floor), for a car whose cost
+# other misfits dominate (a stop then gains less than 1 % of it)
 #: an unreached stop is held at this multiple of the largest compression reached
 UNREACHED_FACTOR = 1.25
 #: the sub-step bound of the compression simulations (as the report's velocity histograms)

@@ -39,7 +39,7 @@ import numpy as np
 from scipy import special
 
 from ..model.params import GROUPS
-from .adequacy import MIN_RELATIVE, advise
+from .adequacy import MIN_IMPROVEMENT, advise
 from .identify import identify as identify_model
 from .identify import warn_bounds
 
@@ -123,10 +123,6 @@ CURVE_CRITERION = ("damper curves: one more polish, the chosen linear groups plu
                    "linear groups are weighed again from the curve fit (the same Wald criterion)"
                    ).format(PENALTY)
 
-#: the least cost reduction that counts as a better fit: the cost is a relative squared error, so a
-#: group must change the fit by 0.5 % of the channels' RMS, the materiality floor of the adequacy
-#: verdict (rideid.estimate.adequacy.MIN_RELATIVE: below any accelerometer's or gyro's accuracy)
-MIN_IMPROVEMENT = MIN_RELATIVE ** 2
 
 
 def fits_better(extensions, costs: dict, min_improvement: float = MIN_IMPROVEMENT) -> bool:

@@ -37,7 +37,7 @@ import math
 from dataclasses import dataclass
 
 from ...errors import DataError
-from .common import number
+from .common import checked_items, number
 
 #: the bump-stop names of SPEC §8, in the nonlinear simulator's row order
 BUMP_NAMES: tuple[str, ...] = ("bs_clear_f", "bs_clear_r", "bs_rate_f", "bs_rate_r")
@@ -104,11 +104,7 @@ def _numbers(v, where: str) -> list[float]:
 
 def parse_dampers(tab, where: str) -> DamperCurves:
     """Validate a ``[dampers]`` table (``where``: e.g. ``"scenario.toml: [dampers]"``)."""
-    if not isinstance(tab, dict):
-        raise DataError(f"{where} must be a table with velocity, front and rear")
-    for k in tab:
-        if k not in DAMPER_KEYS:
-            raise DataError(f"{where}: unknown key '{k}'; allowed: {', '.join(DAMPER_KEYS)}")
+    checked_items(tab, where, DAMPER_KEYS, " with velocity, front and rear")
     for k in DAMPER_KEYS:
         if k not in tab:
             raise DataError(f"{where}: missing key '{k}' (velocity in m/s, front and rear forces in N)")
