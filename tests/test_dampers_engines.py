@@ -9,7 +9,8 @@ car agrees within 0.6 % on the built-in runs' realistic amplitudes (1 % held her
 80 mm twist (2 % held), where both engines are converged (kernel sub-steps x4, MuJoCo at 0.25 ms: < 0.1 %)
 and the difference grows with the square of the amplitude (0.16, 0.31, 1.29 % at 20, 40, 80 mm): the
 large-angle kinematics MuJoCo has and the small-angle model lacks, which the softer digressive dampers let
-grow (the linear car with its CG raised 0.25 m shows the same, 1.2 % on the 80 mm twist).
+grow (the linear car with its CG raised 0.25 m shows the same, 1.2 % on the 80 mm twist; the realistic car of
+docs/verification.md 2.5 % on the axle channels, taken apart term by term by benchmarks/engines_kinematics.py).
 """
 
 import numpy as np
