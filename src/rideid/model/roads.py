@@ -309,7 +309,19 @@ def iso8608_fit(x, z, *, waviness: float = 2.0, n_band=ISO_BAND) -> float:
 def iso8608_class(x, z, *, n_band=ISO_BAND) -> tuple[str, float]:
     """``(class letter, Gd(n0))`` of a road record: :func:`iso8608_fit` with ``w = 2``, then :func:`class_of`.
 
-    ``z``: shape (n,) or (n, k) (the paths' periodograms averaged), ``x`` uniform (m).
+    Parameters
+    ----------
+    x : array_like, shape (n,)
+        Uniform positions, m.
+    z : array_like, shape (n,) or (n, k)
+        Heights, m; with ``k`` columns (e.g. both wheel paths) their periodograms are averaged.
+    n_band : (float, float)
+        The band to fit, cycles/m, cut to what the record covers (:func:`fit_band`).
+
+    Returns
+    -------
+    (str, float)
+        The ISO 8608 class (A-H) and the fitted ``Gd(n0)``, m^3.
     """
     gd = iso8608_fit(x, z, waviness=2.0, n_band=n_band)
     return class_of(gd), gd
