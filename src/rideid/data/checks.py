@@ -81,8 +81,9 @@ RIGID_BAD = 0.15
 ASSIGN_MARGIN = 0.6
 #: estimates within this fraction of the search range of a bound are flagged
 BOUND_FRACTION = 0.01
-#: a moving run's nominal response starts at rest this long (s) before the first sample (the nominal
-#: car's slowest mode, about 1.2 Hz at 25 % damping, decays to 1e-3 in about 3.7 s)
+#: a moving run's nominal response starts at rest this long (s) before the first sample: the nominal car's
+#: slowest mode decays to 1e-3 in 2.4-2.7 s on the built-in car, the SUV and the van of the tests
+#: (rideid.data.scenario.settle_time)
 NOMINAL_LEAD_IN = 5.0
 
 
