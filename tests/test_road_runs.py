@@ -4,6 +4,9 @@
 import math
 import shutil
 import tomllib
+import warnings
+from dataclasses import replace
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -327,3 +330,35 @@ def test_commands_that_need_a_known_road_refuse_unknown_road_runs(road_sim, tmp_
     rc, _, err = run_cli(["plan", sc.path, "--out", tmp_path / "plan", "--quiet"], capsys)
     assert rc == 2 and "on a generated (road_class) road) are not supported by rideid plan" in err
     assert not (tmp_path / "maps").exists() and not (tmp_path / "plan").exists()
+
+
+EXAMPLE = Path(__file__).resolve().parents[1] / "examples" / "roads" / "class_b.toml"
+
+
+def test_example_scenario_is_what_its_comments_say(tmp_path):
+    sc = rideid.load_scenario(EXAMPLE)
+    assert sc.geometry == rideid.Geometry(**SUV_VEHICLE) and dict(sc.truth) == pytest.approx(SUV_TRUTH)
+    assert [(r.road.road_class, round(r.speed * 3.6), r.fs, r.duration, r.moving) for r in sc.runs] == \
+        [("B", 50, 200.0, 40.0, True), ("B", 80, 200.0, 40.0, True), ("A", 100, 200.0, 30.0, True),
+         ("C", 30, 200.0, 60.0, True)]
+    # its runs driven 6 s: no wheel lifts, every run starts moving
+    short = replace(sc, runs=tuple(replace(r, duration=6.0) for r in sc.runs))
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", rideid.ModelValidityWarning)
+        data, lifts = simulate_manifest(short, seed=1)
+    assert lifts == []
+    for r in sc.runs:
+        y = data[r.id][1]
+        assert np.all(np.abs(y[0, :8]) > 1e-3 * np.sqrt(np.mean(y[:, :8] ** 2, axis=0)))
+
+
+@pytest.mark.slow  # the whole example through the command line (about 15 s)
+def test_example_scenario_simulates_from_the_command_line(tmp_path, capsys):
+    rc, out, err = run_cli(["simulate", EXAMPLE, "--out", tmp_path / "sim", "--noise", "0.01", "--seed", "1",
+                            "--quiet"], capsys)
+    assert rc == 0, err
+    truth = tomllib.loads((tmp_path / "sim" / "truth.toml").read_text())
+    assert {k: v["fitted_class"] for k, v in truth["roads"].items()} == {"B_50": "B", "B_80": "B", "A_100": "A",
+                                                                        "C_30": "C"}
+    ds = rideid.load_dataset(tmp_path / "sim")
+    assert ds.unknown_road_runs == ["B_50", "B_80", "A_100", "C_30"]
