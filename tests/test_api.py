@@ -7,7 +7,7 @@ import pytest
 import rideid
 
 DOCUMENTED = [rideid.identify, rideid.jade, rideid.load_dataset, rideid.CostFunction, rideid.JadeSolver,
-              rideid.modal_summary]
+              rideid.modal_summary, rideid.iso8608_profile, rideid.iso8608_class]
 
 
 def test_spec_entry_points_exist():

@@ -12,6 +12,8 @@ Public API (SPEC §5)::
     rideid.jade(fun, bounds, population=..., generations=..., seed=...)
     p = rideid.plan(scenario, noise=0.01, budget_runs=4)   # SPEC §7; p.save(dir)
     rideid.study("study.toml", "out")         # many identifications on Dask (SPEC §7)
+    x, zl, zr = rideid.iso8608_profile("B", 500.0, rng)   # an ISO 8608 road (SPEC §9)
+    rideid.iso8608_class(x, zl)               # -> ("B", Gd(n0) in m^3)
 """
 
 from importlib.metadata import PackageNotFoundError, version
@@ -31,6 +33,7 @@ from .model.equations import CHANNELS, modal_summary
 from .model.params import DEFAULT_CAR, DEFAULT_GEOMETRY, NAMES, UNITS, Geometry
 from .model.params import ALL_NAMES, EXT_NAMES, GROUPS
 from .data.scenario import default_scenario, default_scenario_path, load_scenario, simulate_manifest, write_dataset
+from .model.roads import iso8608_class, iso8608_profile
 from .model.tracks import Track
 from .studies import StudyResult, load_study, study
 
@@ -47,5 +50,5 @@ __all__ = [
     "load_truth", "modal_summary", "plan", "PlanResult", "simulate_manifest", "write_dataset", "__version__",
     "History", "SensitivityMaps", "load_result", "score", "sensitivity_maps",
     "ALL_NAMES", "EXT_NAMES", "GROUPS", "Scenario", "DatasetManifest",
-    "StudyResult", "load_study", "study",
+    "StudyResult", "load_study", "study", "iso8608_class", "iso8608_profile",
 ]

@@ -367,6 +367,7 @@ def cmd_identify(args, out=None):
 def cmd_sensitivity(args, out=None):
     out = out or sys.stdout
     import rideid
+    from .data.dataset import refuse_unknown_roads
     from .data.scenario import BUILTIN
     from .data.schema import atomic_output, read_toml
     from .estimate.sensitivity import heatmaps, tables_markdown, write_csvs
@@ -374,6 +375,7 @@ def cmd_sensitivity(args, out=None):
     src = Path(args.source)
     is_scenario = args.source == BUILTIN or (src.is_file() and "truth" in read_toml(src))
     source = rideid.load_scenario(src) if is_scenario else rideid.load_dataset(src)
+    refuse_unknown_roads(source, "rideid sensitivity")
     prog = Progress(args.quiet)
     prog.line("simulating the baseline car and +25 % per parameter ...", force=True)
     maps = rideid.sensitivity_maps(source)

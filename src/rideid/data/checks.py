@@ -81,6 +81,10 @@ RIGID_BAD = 0.15
 ASSIGN_MARGIN = 0.6
 #: estimates within this fraction of the search range of a bound are flagged
 BOUND_FRACTION = 0.01
+#: a moving run's nominal response starts at rest this long (s) before the first sample: the nominal car's
+#: slowest mode decays to 1e-3 in 2.4-2.7 s on the built-in car, the SUV and the van of the tests
+#: (rideid.data.scenario.settle_time)
+NOMINAL_LEAD_IN = 5.0
 
 
 @dataclass(frozen=True)
@@ -208,8 +212,12 @@ def feature_span(track, geom) -> tuple[float, float] | None:
     return min(lo), max(hi)
 
 
-def check_coverage(run_id: str, track, geom, x_end: float, x_begin: float = 0.0, where: str = "") -> list[Finding]:
+def check_coverage(run_id: str, track, geom, x_end: float, x_begin: float = 0.0, where: str = "",
+                   moving: bool = False) -> list[Finding]:
     """Does the run start at rest on flat road, reach the track, and leave it?
+
+    A ``moving`` run (SPEC §9) need not start on flat road: the track may begin under its wheels (a ``profile``
+    at x = 0).
 
     Parameters
     ----------
@@ -229,7 +237,7 @@ def check_coverage(run_id: str, track, geom, x_end: float, x_begin: float = 0.0,
     R = geom.tire_radius
     out = []
     # the rigid wheel touches a feature up to R ahead of its centre; the rear axle is a wheelbase behind
-    if lo - R < min(x_begin, 0.0):
+    if lo - R < min(x_begin, 0.0) and not moving:
         out.append(Finding(ERROR, "coverage", f"{w}: track '{track.id}' has features from x = {lo:g} m, under or "
                            f"within a tire radius ({R:g} m) of the front wheels at the start: the car must start at "
                            f"rest on flat road (SPEC §2); move the track's start to at least {R + max(0.0, -x_begin):g} m",
@@ -505,13 +513,32 @@ def _n_changes(hyp):
             + (f != 1.0) + (sp < 0) + (sr < 0) + 2 * sw)
 
 
-def wiring_fix(Y: np.ndarray, Yhat: np.ndarray, fs: float, geom, F=None):
+def _rigid_fix(hyp) -> dict:
+    """The channel fix of one rigid-body hypothesis (only the channels it changes)."""
+    perm, sg, f, sp, sr, sw, renamed = hyp
+    fix = {}
+    for c in range(4):
+        if perm[c] != c or (sg[c] != 1.0 and not renamed):
+            fix[CHANNELS[c]] = {"source": CHANNELS[perm[c]], "factor": sg[c], "renamed": renamed}
+    for c, src, s in ((8, 9 if sw else 8, sp), (9, 8 if sw else 9, sr)):
+        if src != c or (f * s != 1.0 and not renamed):
+            fix[CHANNELS[c]] = {"source": CHANNELS[src], "factor": f * s, "renamed": renamed}
+    return fix
+
+
+def wiring_fix(Y: np.ndarray, Yhat: np.ndarray | None, fs: float, geom, F=None):
     """The re-wiring the data support, or None when the map is right.
 
     The rigid-body identities pick the consistent hypotheses (and the unit
     factors, which correlation cannot see); the correlation with the nominal
     car's response on the track picks among them (front/rear swap versus a
     flipped pitch gyro) and assigns the axle channels.
+
+    ``Yhat`` None (a run on an unknown road, SPEC §9): the rigid-body
+    identities alone. Among the hypotheses that restore them equally the one
+    with the fewest changes is taken, and the others are listed under
+    ``"alternatives"`` (a front/rear swap of the body channels and a flipped
+    pitch gyro look alike without a road); the axle channels are not checked.
 
     Returns
     -------
@@ -521,7 +548,7 @@ def wiring_fix(Y: np.ndarray, Yhat: np.ndarray, fs: float, geom, F=None):
     """
     fix = {}
     info = {}
-    A = assignment(Y, Yhat)
+    A = assignment(Y, Yhat) if Yhat is not None else None
     hyps, scores = rigid_body_scores(Y, fs, geom, F)
     if hyps is not None:
         ident = 0
@@ -529,18 +556,21 @@ def wiring_fix(Y: np.ndarray, Yhat: np.ndarray, fs: float, geom, F=None):
         e_best = float(scores.min())
         if e_id > RIGID_OK and e_best < e_id / 10:
             tie = np.nonzero(scores <= max(2.0 * e_best, e_best + 0.01))[0]
-            h = max(tie, key=lambda k: (round(_track_score(hyps[k], A), 1), -_n_changes(hyps[k])))
-            perm, sg, f, sp, sr, sw, renamed = hyps[h]
-            for c in range(4):
-                if perm[c] != c or (sg[c] != 1.0 and not renamed):
-                    fix[CHANNELS[c]] = {"source": CHANNELS[perm[c]], "factor": sg[c], "renamed": renamed}
-            for c, src, s in ((8, 9 if sw else 8, sp), (9, 8 if sw else 9, sr)):
-                if src != c or (f * s != 1.0 and not renamed):
-                    fix[CHANNELS[c]] = {"source": CHANNELS[src], "factor": f * s, "renamed": renamed}
+            h = max(tie, key=lambda k: (round(_track_score(hyps[k], A), 1) if A is not None else 0.0,
+                                        -_n_changes(hyps[k])))
+            fix = _rigid_fix(hyps[h])
             info["rigid"] = (e_id, float(scores[h]))
+            if A is None:
+                alts = []
+                for k in sorted(tie, key=lambda k: _n_changes(hyps[k])):
+                    alt = _rigid_fix(hyps[k])
+                    if alt and alt != fix and alt not in alts:
+                        alts.append(alt)
+                if alts:
+                    info["alternatives"] = alts
         elif e_id > RIGID_BAD:
             info["rigid_inconsistent"] = (e_id, e_best)
-    else:
+    elif A is not None:
         # no complete body set: signs and order of the body and gyro channels from the track alone
         for g in ("body", "gyro"):
             idx, perm, signs, score, ident, C = A[g]
@@ -548,15 +578,16 @@ def wiring_fix(Y: np.ndarray, Yhat: np.ndarray, fs: float, geom, F=None):
                 for c in range(len(idx)):
                     if perm[c] != c or signs[c] != 1.0:
                         fix[CHANNELS[idx[c]]] = {"source": CHANNELS[idx[perm[c]]], "factor": signs[c]}
-    idx, perm, signs, score, ident, C = A["axle"]
-    if score - ident > ASSIGN_MARGIN and score / 4 > 0.5:
-        # names swapped in the map (each entry's unit and sign stay) when that explains the signs too
-        renamed = F is not None and all(np.sign(F[idx[c]] / F[idx[perm[c]]]) == signs[c] for c in range(4))
-        for c in range(4):
-            if perm[c] != c or (signs[c] != 1.0 and not renamed):
-                f = F[idx[c]] / F[idx[perm[c]]] if renamed else signs[c]
-                fix[CHANNELS[idx[c]]] = {"source": CHANNELS[idx[perm[c]]], "factor": f, "renamed": renamed}
-        info["axle"] = (ident, score)
+    if A is not None:
+        idx, perm, signs, score, ident, C = A["axle"]
+        if score - ident > ASSIGN_MARGIN and score / 4 > 0.5:
+            # names swapped in the map (each entry's unit and sign stay) when that explains the signs too
+            renamed = F is not None and all(np.sign(F[idx[c]] / F[idx[perm[c]]]) == signs[c] for c in range(4))
+            for c in range(4):
+                if perm[c] != c or (signs[c] != 1.0 and not renamed):
+                    f = F[idx[c]] / F[idx[perm[c]]] if renamed else signs[c]
+                    fix[CHANNELS[idx[c]]] = {"source": CHANNELS[idx[perm[c]]], "factor": f, "renamed": renamed}
+            info["axle"] = (ident, score)
     if not fix:
         return {"fix": {}, **info} if info else None
     return {"fix": fix, **info}
@@ -809,9 +840,9 @@ def _level(ds, rid, check) -> str:
     return lv.get(check, "error")
 
 
-def _nominal_response(P, geom, track, t, speed, distance):
+def _nominal_response(P, geom, track, t, speed, distance, moving: bool = False):
     from .measured import simulate_response
-    return simulate_response(P, geom, track, t, speed, distance)
+    return simulate_response(P, geom, track, t, speed, distance, lead_in=NOMINAL_LEAD_IN if moving else 0.0)
 
 
 def _score(Y, Yhat):
@@ -846,7 +877,7 @@ def _alternatives(ds, rid, P, rho_now):
         if factor is not None and dist is not None:
             from .measured import RelativeDistance
             dist = RelativeDistance(Distance(dist.dist.t, dist.dist.d * factor), dist.start)
-        return _score(rd.matrix(), _nominal_response(P, geom, track, rd.time, speed, dist))
+        return _score(rd.matrix(), _nominal_response(P, geom, track, rd.time, speed, dist, moving=run.moving))
 
     track = man.tracks[run.track]
     if run.speed is not None:
@@ -880,7 +911,7 @@ def _prefetch_inputs(ds) -> None:
     from ..model.simulate import _PREPARED_MAX, ENVELOPE_DX, prepare_run
 
     man, geom = ds.manifest, ds.geometry
-    runs = man.runs[:_PREPARED_MAX]  # what the cache of prepared runs holds
+    runs = [r for r in man.runs[:_PREPARED_MAX] if r.road_known]  # what the cache of prepared runs holds
     if min(numba.get_num_threads(), len(runs)) < 2:
         return
     paths = {}
@@ -910,6 +941,14 @@ def check_dataset(ds) -> list[Finding]:
     Coverage, wiring (rigid body and road assignment), and the match of
     each run with its track and speed. Returns every finding; the caller
     raises on errors (:func:`enforce`).
+
+    A run on an unknown road (SPEC §9) has no road to simulate: coverage,
+    the road assignment of the channels, the axle-amplitude units and the
+    track-and-speed match are skipped; the units seen in a logger's
+    lead-in and the rigid-body identities of the body accelerometers and
+    the gyro still run. A moving run (SPEC §9) may have track features
+    under its wheels at the start; its nominal response is simulated from
+    rest a lead-in before the first sample, on the road before x = 0.
     """
     from ..model.params import nominal_car
 
@@ -920,15 +959,18 @@ def check_dataset(ds) -> list[Finding]:
     for r in man.runs:
         rid = r.id
         rd = ds.data[rid]
-        track = man.tracks[r.track]
+        # a run on an unknown road (SPEC §9): no coverage, no nominal response, no track match; units and the
+        # rigid-body identities need no road and still run
+        track = man.tracks[r.track] if r.road_known else None
         t = rd.time
-        x_of = (lambda tt: r.speed * tt) if rd.distance is None else rd.distance
-        x_end = float(np.asarray(x_of(np.array([t[-1]])))[0])
-        x_begin = float(np.asarray(x_of(np.array([min(t[0], 0.0)])))[0])
-        cov = check_coverage(rid, track, geom, x_end, x_begin)
-        out += cov
-        if any(f.severity == ERROR for f in cov):
-            continue
+        if track is not None:
+            x_of = (lambda tt: r.speed * tt) if rd.distance is None else rd.distance
+            x_end = float(np.asarray(x_of(np.array([t[-1]])))[0])
+            x_begin = float(np.asarray(x_of(np.array([min(t[0], 0.0)])))[0])
+            cov = check_coverage(rid, track, geom, x_end, x_begin, moving=r.moving)
+            out += cov
+            if any(f.severity == ERROR for f in cov):
+                continue
         entries = _map_entries(ds, rid)
         wiring = _level(ds, rid, "wiring")
         mr = ds.measured.get(rid)
@@ -938,10 +980,12 @@ def check_dataset(ds) -> list[Finding]:
         if wiring == "warn":
             units = [Finding(WARNING, f.check, f.message, f.run, f.channel, f.fix) for f in units]
         Y = rd.matrix()
-        Yhat = _nominal_response(P, geom, track, t, r.speed, rd.distance)
-        if not np.any(Yhat):
-            out += units
-            continue  # a flat road excites nothing: nothing to check the data against
+        Yhat = None
+        if track is not None:
+            Yhat = _nominal_response(P, geom, track, t, r.speed, rd.distance, moving=r.moving)
+            if not np.any(Yhat):
+                out += units
+                continue  # a flat road excites nothing: nothing to check the data against
         wire = (wiring_fix(Y, Yhat, rd.fs, geom, _entry_factors(entries))
                 if wiring != "off" else None)
         Yc = Y
@@ -957,8 +1001,12 @@ def check_dataset(ds) -> list[Finding]:
             if "axle" in wire:
                 how.append(f"the axle channels then follow their own wheel paths (summed correlation with the "
                            f"road {wire['axle'][0]:.2f} -> {wire['axle'][1]:.2f} of 4)")
+            alts = ""
+            if wire.get("alternatives"):
+                alts = ("; without a known road this cannot be told from " +
+                        " or from ".join(describe_fix(a) for a in wire["alternatives"][:2]) + ": check which")
             msg = (f"run '{rid}': the channels look wired differently from the map: {describe_fix(wire['fix'])}; "
-                   f"{' and '.join(how)}. Fix the channel map: {'; '.join(lines)}"
+                   f"{' and '.join(how)}{alts}. Fix the channel map: {'; '.join(lines)}"
                    " (or set [checks] wiring = \"warn\" if the map is right)")
             out.append(Finding(sev, "wiring", msg, rid, next(iter(wire["fix"])), wire["fix"]))
         elif wire and "rigid_inconsistent" in wire:
@@ -966,13 +1014,13 @@ def check_dataset(ds) -> list[Finding]:
             out.append(Finding(WARNING, "wiring", f"run '{rid}': the body accelerometers and the gyro do not agree as "
                                f"one rigid body (residual {e_id:.0%}) and no swap, sign or unit explains it: check "
                                "the sensors' positions (at the spring/damper top mounts), units and the map", rid))
-        if wiring != "off" and not (wire and wire["fix"]):
+        if wiring != "off" and Yhat is not None and not (wire and wire["fix"]):
             amp = axle_amplitude_findings(rid, entries, Y, Yhat, skip={f.channel for f in units})
             if wiring == "warn":
                 amp = [Finding(WARNING, f.check, f.message, f.run, f.channel, f.fix) for f in amp]
             units += amp
         out += units
-        if _level(ds, rid, "track") == "off":
+        if track is None or _level(ds, rid, "track") == "off":
             continue
         rho = _score(Yc, Yhat)
         if rho < MATCH_MIN:

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 
@@ -9,7 +10,7 @@ from pathlib import Path
 from . import checks
 from ..errors import DataError, ScaleError
 from .schema import DatasetManifest, ReadOnlyDict, RunData, load_manifest, read_run_csv
-from ..model.params import EXT_NAMES, EXTRA_KNOWN, MASS_COUNT, NAMES, Geometry, nominal_car, total_mass
+from ..model.params import CORNERS, EXT_NAMES, EXTRA_KNOWN, MASS_COUNT, NAMES, Geometry, nominal_car, total_mass
 
 
 @dataclass(frozen=True, repr=False)
@@ -51,7 +52,9 @@ class Dataset:
                                                      if len(ids) > self.REPR_RUNS else "")
         ext = self.manifest.extensions
         model = "none ([model] absent: identify chooses auto)" if ext is None else " + ".join(ext) or "base"
-        return (f"Dataset(name={self.name!r}, path='{self.path}', runs={len(ids)} [{shown}], "
+        unknown = len(self.unknown_road_runs)
+        roads = f" ({unknown} on unknown roads)" if unknown else ""
+        return (f"Dataset(name={self.name!r}, path='{self.path}', runs={len(ids)}{roads} [{shown}], "
                 f"tracks=[{', '.join(self.manifest.tracks)}], known={dict(self.known)}, model={model})")
 
     @property
@@ -118,7 +121,20 @@ class Dataset:
         return Dataset(self.manifest, data, measured)
 
     def auto_start_runs(self) -> list[str]:
-        return [rid for rid, mr in self.measured.items() if mr.auto_start]
+        return [rid for rid, mr in self.measured.items() if mr.auto_start and self.manifest.run(rid).road_known]
+
+    def road_known(self, run_id: str) -> bool:
+        """Whether run ``run_id`` drives a known track (False: a road nobody measured, SPEC §9)."""
+        return self.manifest.run(run_id).road_known
+
+    def moving(self, run_id: str) -> bool:
+        """Whether run ``run_id`` begins with the car moving (SPEC §9 ``moving = true``), not at rest."""
+        return self.manifest.run(run_id).moving
+
+    @property
+    def unknown_road_runs(self) -> list[str]:
+        """Ids of the runs on roads nobody measured (SPEC §9), in manifest order."""
+        return [r.id for r in self.runs if not r.road_known]
 
 
 def load_dataset(path, starts: dict[str, float] | None = None) -> Dataset:
@@ -163,13 +179,42 @@ def read_dataset(path) -> Dataset:
     data, measured = {}, {}
     for run in man.runs:
         if man.is_measured(run):
-            measured[run.id] = load_measured_run(run, man)
+            mr = measured[run.id] = load_measured_run(run, man)
+            if not run.road_known:
+                w0, w1 = mr.options.get("window", (-math.inf, math.inf))
+                span = min(mr.t_last, w1) - max(mr.t_first, w0)
+                check_unknown_road_run(man, run, mr.channels, span, int(math.floor(span * mr.fs + 1e-9)) + 1)
             continue
         f = Path(run.file)
         if not f.is_absolute():
             f = man.base_dir / f
-        data[run.id] = read_run_csv(f)
+        rd = data[run.id] = read_run_csv(f)
+        if not run.road_known:
+            check_unknown_road_run(man, run, rd.channels, float(rd.time[-1] - rd.time[0]), rd.time.size)
     return Dataset(man, data, measured)
+
+
+#: the shortest run on an unknown road (SPEC §9) worth identifying: its road is unknown too, so it must hold
+#: several periods of the slowest body mode (about 1 Hz) and the rear wheels' pass over the road the front
+#: wheels saw (wheelbase / speed later)
+MIN_ROAD_RUN_S = 5.0
+#: ... and at least this many samples
+MIN_ROAD_RUN_SAMPLES = 500
+#: the channels a run on an unknown road must have (SPEC §9)
+ROAD_RUN_CHANNELS = tuple(f"{g}_az_{c}" for g in ("body", "axle") for c in CORNERS)
+
+
+def check_unknown_road_run(man, run, channels, duration: float, samples: int) -> None:
+    """A run on an unknown road (SPEC §9) needs all four body and all four axle channels, and
+    at least :data:`MIN_ROAD_RUN_S` s and :data:`MIN_ROAD_RUN_SAMPLES` samples; :class:`DataError` otherwise."""
+    missing = [c for c in ROAD_RUN_CHANNELS if c not in channels]
+    if missing:
+        raise DataError(f"{man.path}: run '{run.id}' is on an unknown road (no track), which needs all four body "
+                        f"and all four axle acceleration channels (SPEC §9); missing: {', '.join(missing)}")
+    if duration < MIN_ROAD_RUN_S or samples < MIN_ROAD_RUN_SAMPLES:
+        raise DataError(f"{man.path}: run '{run.id}' is on an unknown road and holds {duration:.3g} s "
+                        f"({samples} samples): too short to identify anything; a run on an unknown road needs at "
+                        f"least {MIN_ROAD_RUN_S:g} s and {MIN_ROAD_RUN_SAMPLES} samples")
 
 
 def align_starts(ds: Dataset, starts: dict[str, float] | None = None) -> Dataset:
@@ -187,19 +232,25 @@ def align_starts(ds: Dataset, starts: dict[str, float] | None = None) -> Dataset
     data, measured = dict(ds.data), {}
     for rid, mr0 in ds.measured.items():
         mr = replace(mr0, record=dict(mr0.record), window=None, start=None)
-        track = man.tracks[man.run(rid).track]
+        run = man.run(rid)
         if starts and rid in starts:
             s = float(starts[rid])
             mr.record["start"] = {"source": "given (from a previous identification)"}
         elif not mr.auto_start:
             s = mr.options["start"]
             mr.record["start"] = {"source": "given"}
+        elif not run.road_known:
+            # no road to align with: x = 0 is where the front axle is at the first sample (of the window)
+            s = max(mr.t_first, mr.options.get("window", (-math.inf, math.inf))[0])
+            mr.record["start"] = {"source": "unknown road (SPEC §9): x = 0 at the first sample"}
         else:
+            track = man.tracks[run.track]
             longest = (mr.speed * (mr.t_last - mr.t_first) if mr.distance is None
                        else float(mr.distance.d[-1] - mr.distance.d[0]))
             checks.enforce(checks.check_reach(rid, track, man.geometry, longest), f"{man.path}: ")
             s, rho = estimate_start(mr, nominal_car(man.geometry), man.geometry, track)
-            mr.record["start"] = {"source": "estimated (nominal car)", "nominal_estimate": s, "correlation": rho}
+            mr.record["start"] = {"source": "estimated (nominal car)", "nominal_estimate": s,
+                                  "correlation": rho}
         mr.make_grid(s)
         mr.start = float(s)
         measured[rid] = mr
@@ -212,14 +263,29 @@ def align_starts(ds: Dataset, starts: dict[str, float] | None = None) -> Dataset
 
 
 def prepare_inputs(ds: Dataset) -> list:
-    """:class:`rideid.simulate.RunInput` of every run (wheel inputs and their moments)."""
+    """:class:`rideid.simulate.RunInput` of every run (wheel inputs and their moments).
+
+    Every run must be on a known track: a run on an unknown road (SPEC §9)
+    has no wheel inputs to tabulate (:class:`DataError`).
+    """
     from ..model.simulate import prepare_run
 
+    refuse_unknown_roads(ds, "rideid.CostFunction (the known-road fit of rideid identify)")
     out = []
     for r in ds.runs:
         rd = ds.data[r.id]
         out.append(prepare_run(ds.manifest.tracks[r.track], ds.geometry, r.speed, rd.time, distance=rd.distance))
     return out
+
+
+def refuse_unknown_roads(source, what: str) -> None:
+    """:class:`DataError` naming the first run on an unknown road (SPEC §9) of a dataset or scenario,
+    for code that needs every road known; ``what`` names that code."""
+    for r in source.runs:
+        if not r.road_known:
+            kind = "a generated (road_class)" if r.road is not None else "an unknown"
+            raise DataError(f"{source.path}: run '{r.id}': unknown-road runs (SPEC §9: this one is on {kind} "
+                            f"road) are not supported by {what} yet; leave the run out or give its track")
 
 
 def scale_anchor(known: dict[str, float], where: str = "[known]") -> str:
@@ -247,4 +313,5 @@ def check_known_consistent(known: dict[str, float]):
                                 f"2 m_ur = {tm}")
 
 
-__all__ = ["Dataset", "load_dataset", "read_dataset", "align_starts", "scale_anchor"]
+__all__ = ["Dataset", "load_dataset", "read_dataset", "align_starts", "scale_anchor", "check_unknown_road_run",
+           "refuse_unknown_roads", "MIN_ROAD_RUN_S", "MIN_ROAD_RUN_SAMPLES"]

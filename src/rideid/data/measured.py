@@ -614,12 +614,18 @@ def _feature_end(track, geom) -> float:
     return (max(ends) if ends else 0.0) + geom.wheelbase
 
 
-def simulate_response(P, geom, track, t, speed, distance):
+def simulate_response(P, geom, track, t, speed, distance, lead_in: float = 0.0):
+    """Response ``(n, 10)`` of the car ``P`` at the model times ``t`` (uniform), at rest at ``t[0]``;
+    with ``lead_in`` (s, a moving start, SPEC §9) at rest that long before, on the road before."""
     from ..model.batch import BatchSimulator
     from ..model.simulate import prepare_run
 
+    t = np.asarray(t, dtype=float)
+    k = int(np.ceil(lead_in / (t[1] - t[0]) - 1e-9)) if lead_in > 0 else 0
+    if k:
+        t = np.concatenate([t[0] + (t[1] - t[0]) * np.arange(-k, 0), t])
     ri = prepare_run(track, geom, speed, t, distance=distance)
-    return BatchSimulator(geom, [ri]).outputs(np.atleast_2d(P))[0][0]
+    return BatchSimulator(geom, [ri]).outputs(np.atleast_2d(P))[0][0][k:]
 
 
 def correlation_score(Yhat, Y, cols):

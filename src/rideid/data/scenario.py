@@ -7,7 +7,7 @@ from __future__ import annotations
 
 import shutil
 import warnings
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from importlib import resources
 from pathlib import Path
 
@@ -18,9 +18,11 @@ from . import checks
 from .schema import (BUMP_NAMES, ChannelEntry, DatasetManifest, RunSpec, Scenario, atomic_output, parse_scenario,
                      read_toml, write_run_csv, write_toml)
 from .noise import sensor_noise
-from ..model.equations import CHANNELS, static_corner_loads
+from ..model.equations import CHANNELS, state_space, static_corner_loads
 from ..model.params import ALL_NAMES, CORNERS, EXT_NAMES, INDEX, NAMES, as_vector, full_rows
+from ..model.roads import ROAD_CLASSES, iso8608_class, iso8608_profile
 from ..model.simulate import prepare_run, simulate_reference, wheel_displacements, wheel_velocities
+from ..model.tracks import ProfileTrack
 
 
 #: the name that stands for the built-in scenario wherever a scenario file is asked for
@@ -66,6 +68,143 @@ def run_times(run: RunSpec) -> np.ndarray:
     """``t = k / fs`` for ``k = 0 .. round(duration fs)`` (SPEC §3)."""
     n = int(round(run.duration * run.fs))
     return np.arange(n + 1) / run.fs
+
+
+# ---------------------------------------------------------------------------
+# Moving starts and generated roads (SPEC §9)
+
+#: a moving run's lead-in lets the start transient decay to this fraction of its initial size
+SETTLE_FRACTION = 1e-3
+#: bounds of the settling part of a lead-in, s
+SETTLE_MIN, SETTLE_MAX = 2.0, 30.0
+#: a generated road fades in from flat over the distance the car covers in this time, s
+ROAD_FADE = 1.0
+#: sample spacing of a generated road, m (ISO 8608's band ends at 2.83 cycles/m, a 0.35 m wavelength)
+ROAD_DX = 0.05
+#: road written to ``road_truth/<run>.csv`` behind the rear axle at t = 0 and beyond the front axle at the end, m
+ROAD_MARGIN = 1.0
+#: tag of the seed stream of generated roads (independent of the noise's)
+_ROAD_STREAM = 8608
+
+
+def settle_time(P, geom) -> float:
+    """Time (s) for the car's slowest mode to decay to :data:`SETTLE_FRACTION` of its size.
+
+    ``ln(1 / SETTLE_FRACTION) / sigma_min``, ``sigma_min`` the smallest decay
+    rate ``-Re(lambda)`` over the eigenvalues of the linear 7-DOF model
+    (SPEC §1, §6; a nonlinear car by its linear part, c_sf and c_sr the
+    curves' mean slope), clipped to [:data:`SETTLE_MIN`, :data:`SETTLE_MAX`].
+    """
+    A = state_space(np.atleast_2d(np.asarray(P, dtype=float)), geom)[0][0]
+    sigma = float(np.min(-np.linalg.eigvals(A).real))
+    T = np.log(1.0 / SETTLE_FRACTION) / sigma if sigma > 0 else SETTLE_MAX
+    return float(np.clip(T, SETTLE_MIN, SETTLE_MAX))
+
+
+def lead_in(sc: Scenario, run: RunSpec) -> float:
+    """Seconds a moving run is simulated before its first sample (0 for a run that starts at rest).
+
+    The car starts at rest, ``lead_in`` s before the front axle reaches x = 0.
+    On a track: :func:`settle_time` of the truth (the track's own road before
+    x = 0, flat where it has none). On a generated road the road first fades
+    in from flat (:data:`ROAD_FADE` s of driving), the rear wheels must then
+    reach the full road (``(2 R + wheelbase) / speed``), and then
+    :func:`settle_time` passes, at least long enough that the fade lies
+    behind the road written to ``road_truth`` (:data:`ROAD_MARGIN`).
+    """
+    if not run.moving:
+        return 0.0
+    settle = settle_time(as_vector(sc.truth), sc.geometry)
+    if run.road is None:
+        return settle
+    g = sc.geometry
+    return ROAD_FADE + (2 * g.tire_radius + g.wheelbase) / run.speed + max(settle, ROAD_MARGIN / run.speed)
+
+
+def road_seed(run: RunSpec, index: int, seed: int | None) -> int:
+    """The seed of a run's generated road: its ``road_seed``, else one derived from ``seed``
+    (``rideid simulate --seed``, None as 0) and the run's position ``index`` in the scenario."""
+    if run.road.seed is not None:
+        return int(run.road.seed)
+    ss = np.random.SeedSequence([_ROAD_STREAM, 0 if seed is None else int(seed), int(index)])
+    return int(ss.generate_state(1, np.uint32)[0])
+
+
+@dataclass(frozen=True)
+class GeneratedRoad:
+    """The road a scenario run drives (SPEC §9): its heights and what made them.
+
+    ``x`` (m, front-axle distance from its position at the first sample),
+    ``z_left``/``z_right`` (m) on :data:`ROAD_DX` spacing from the start of
+    the lead-in (flat, then fading in) to :data:`ROAD_MARGIN` beyond the last
+    front-axle position; :meth:`truth` is the part ``road_truth`` holds.
+    """
+
+    run: str
+    road_class: str
+    seed: int
+    coherence: float
+    x: np.ndarray
+    z_left: np.ndarray
+    z_right: np.ndarray
+    #: first x written to road_truth: the rear axle at t = 0, less ROAD_MARGIN
+    x_truth: float
+
+    def track(self):
+        """The road as a ``profile`` track (linear interpolation, flat outside; the tire envelope as for any)."""
+        return ProfileTrack.from_arrays(f"road:{self.run}", self.x, self.z_left, self.z_right)
+
+    def truth(self):
+        """``(x, z_left, z_right)`` from :attr:`x_truth` on: what ``road_truth/<run>.csv`` holds."""
+        k = int(np.searchsorted(self.x, self.x_truth - 1e-9))
+        return self.x[k:], self.z_left[k:], self.z_right[k:]
+
+
+def generate_road(sc: Scenario, run: RunSpec, index: int, seed: int | None = None) -> GeneratedRoad:
+    """The ISO 8608 road of a scenario run (:func:`rideid.model.roads.iso8608_profile`), seeded by :func:`road_seed`.
+
+    Track width: the mean of ``track_front`` and ``track_rear`` (the rear
+    wheels follow the front wheels' paths, SPEC §9). The road covers the
+    lead-in (:func:`lead_in`): flat under every wheel at its start, then
+    faded in by a raised cosine over ``speed`` x :data:`ROAD_FADE` m.
+    Grid points at whole multiples of :data:`ROAD_DX` (x = 0 is one).
+    """
+    g, v = sc.geometry, run.speed
+    R = g.tire_radius
+    T = lead_in(sc, run)
+    x_car = -v * T  # front axle at the start of the lead-in
+    k0 = int(np.floor((x_car - g.wheelbase - R - ROAD_MARGIN) / ROAD_DX))
+    k1 = int(np.ceil((v * run.duration + R + ROAD_MARGIN) / ROAD_DX))
+    s = road_seed(run, index, seed)
+    x, zl, zr = iso8608_profile(run.road.road_class, (k1 - k0) * ROAD_DX, np.random.default_rng(s), dx=ROAD_DX,
+                                x0=0.0, track_width=0.5 * (g.track_front + g.track_rear),
+                                coherence=run.road.coherence)
+    x = ROAD_DX * (k0 + np.arange(x.size))
+    if T > 0:  # flat under every wheel at the start, then a raised-cosine fade over ROAD_FADE s of driving
+        xf0, xf1 = x_car + R, x_car + R + v * ROAD_FADE
+        w = np.clip((x - xf0) / (xf1 - xf0), 0.0, 1.0)
+        fade = 0.5 - 0.5 * np.cos(np.pi * w)
+        zl, zr = zl * fade, zr * fade
+    x_truth = ROAD_DX * np.floor((-g.wheelbase - R - ROAD_MARGIN) / ROAD_DX + 1e-9) if T > 0 else float(x[0])
+    return GeneratedRoad(run.id, run.road.road_class, s, run.road.coherence, x, zl, zr, float(x_truth))
+
+
+class SimulatedRuns(dict):
+    """What :func:`simulate_manifest` returns first: run id -> ``(t, Y)``, plus ``roads``:
+    run id -> :class:`GeneratedRoad` of every run on a generated road (SPEC §9), which
+    :func:`write_dataset` writes to ``road_truth/``."""
+
+    def __init__(self, runs=(), roads=None):
+        super().__init__(runs)
+        self.roads = dict(roads or {})
+
+
+def _tail(ri, k: int):
+    """The run input from sample ``k`` on (a moving run's recorded part), for the lift-off check."""
+    if k == 0:
+        return ri
+    return replace(ri, t=ri.t[k:], u=ri.u[k:], ud=ri.ud[k:], mu=ri.mu[k:], rate=ri.rate[k:], rated=ri.rated[k:],
+                   inputs_at=None)
 
 
 @dataclass
@@ -181,10 +320,20 @@ def simulate_manifest(sc: Scenario, noise: float = 0.0, seed: int | None = None,
     car's tires push but never pull: a wheel leaving the road is simulated,
     not warned of (its :class:`LiftOff` has ``physics=True``).
 
+    A run on a generated road (``road_class``, SPEC §9) drives the ISO 8608
+    road of :func:`generate_road` (seeded by ``road_seed``, else by ``seed``
+    and the run's position: the same command, the same road), a ``profile``
+    under each wheel path with the tire envelope as for any profile. A
+    moving run (``moving = true``, the default on a generated road) is
+    simulated from rest :func:`lead_in` s before its first sample, which is
+    taken when the front axle reaches x = 0; its lift-offs are those of the
+    recorded samples.
+
     Returns
     -------
-    dict run id -> (t, Y) with ``Y`` (n, 10) in CHANNELS order, and the list
-    of :class:`LiftOff` found (for a linear car also issued as :class:`ModelValidityWarning`).
+    SimulatedRuns (a dict) run id -> (t, Y) with ``Y`` (n, 10) in CHANNELS order (``.roads``: the
+    :class:`GeneratedRoad` of each run on a generated road), and the list of :class:`LiftOff` found
+    (for a linear car also issued as :class:`ModelValidityWarning`).
     """
     if noise < 0 or not np.isfinite(noise):
         raise ArgumentError(f"--noise must be a non-negative fraction, got {noise}")
@@ -200,33 +349,49 @@ def simulate_manifest(sc: Scenario, noise: float = 0.0, seed: int | None = None,
     rng = np.random.default_rng(seed)
     P = as_vector(sc.truth)[None]
     nonlinear = nonlinear_car(sc) if engine == "rideid" else None
-    out, lifts = {}, []
+    out, lifts = SimulatedRuns(), []
+    if raw:
+        moving = [r.id for r in sc.runs if r.moving]
+        if moving:
+            raise ArgumentError(f"--raw writes a logger's recording that starts standing still, but run "
+                                f"'{moving[0]}' starts moving (moving = true, the default on a generated road); "
+                                "simulate it without --raw")
     for i, run in enumerate(sc.runs):
         t = run_times(run)
+        if run.road is not None:
+            road = generate_road(sc, run, i, seed)
+            out.roads[run.id] = road
+            track = road.track()
+        else:
+            track = sc.tracks[run.track]
+        # a moving run: simulated from rest, k0 samples (lead_in s) before its first recorded one (SPEC §9)
+        k0 = int(np.ceil(lead_in(sc, run) * run.fs - 1e-9))
+        tt = np.arange(-k0, t.size) / run.fs if k0 else t
         if engine == "mujoco":
             from ..verify.hifi import simulate_mujoco
             lead = RAW_LEAD_IN if raw else 0.0
             if raw:  # the same samples, after the lead-in
                 t = np.arange(int(round(lead * run.fs)) + t.size) / run.fs
+                tt = t
             from ..verify.hifi import scenario_properties
-            res = simulate_mujoco(P[0], sc.geometry, sc.tracks[run.track], run.speed, t,
-                                  distance=lambda tt, v=run.speed, t0=lead: v * (tt - t0),
+            res = simulate_mujoco(P[0], sc.geometry, track, run.speed, tt,
+                                  distance=lambda x, v=run.speed, t0=lead: v * (x - t0),
                                   hifi=scenario_properties(sc), dampers=sc.dampers, raw=raw, details=True)
-            y = res.y
+            y = res.y[k0:]
             lifts += [LiftOff(run.id, w, float(res.lift_time[k]), 0.0, "mujoco", physics=sc.nonlinear)
-                      for k, w in enumerate(CORNERS) if np.isfinite(res.lift_time[k])]
+                      for k, w in enumerate(CORNERS) if res.lift_time[k] >= 0]
         elif nonlinear is not None:
             from ..model.nonlinear import simulate_nonlinear
             Pn, layout = nonlinear
-            ri = prepare_run(sc.tracks[run.track], sc.geometry, run.speed, t)
-            y = simulate_nonlinear(Pn[None], sc.geometry, ri, layout)[0]  # the compiled kernel
-            lifts += lift_offs(P[0], sc.geometry, run.id, ri, nonlinear_states(Pn, sc.geometry, ri, layout),
-                               physics=True, coords=True)
+            ri = prepare_run(track, sc.geometry, run.speed, tt)
+            y = simulate_nonlinear(Pn[None], sc.geometry, ri, layout)[0][k0:]  # the compiled kernel
+            lifts += lift_offs(P[0], sc.geometry, run.id, _tail(ri, k0),
+                               nonlinear_states(Pn, sc.geometry, ri, layout)[k0:], physics=True, coords=True)
         else:
-            ri = prepare_run(sc.tracks[run.track], sc.geometry, run.speed, t)
+            ri = prepare_run(track, sc.geometry, run.speed, tt)
             y, states = simulate_reference(P, sc.geometry, ri, return_states=True)
-            y = y[0]
-            lifts += lift_offs(P[0], sc.geometry, run.id, ri, states[0])
+            y = y[0][k0:]
+            lifts += lift_offs(P[0], sc.geometry, run.id, _tail(ri, k0), states[0][k0:])
         if noise > 0:
             dyn = y - y[:1] if raw else y  # raw: the noise scales with the motion, not with g
             rms = np.sqrt(np.mean(dyn * dyn, axis=0))
@@ -249,18 +414,33 @@ def raw_names() -> tuple[str, ...]:
 def write_dataset(sc: Scenario, data: dict, out_dir, comment: str | None = None, raw: bool = False):
     """Write ``dataset.toml``, ``runs/<id>.csv`` and ``truth.toml`` (atomically).
 
+    A run on a generated road (SPEC §9) is written without a track
+    (``track = "unknown"``, ``moving`` as simulated); its road goes to
+    ``road_truth/<id>.csv`` (columns ``x, z_left, z_right``, m; x measured from
+    the front axle at the first sample, from :data:`ROAD_MARGIN` behind the rear
+    axle to as far beyond the front axle's last position) and how it was made
+    to ``truth.toml`` ``[roads.<id>]`` (:func:`road_record`).
+
     ``raw``: the runs are raw MuJoCo sensor readings (:func:`simulate_manifest`
     with ``raw=True``); the dataset then maps the logger-style columns
     (:data:`rideid.hifi.RAW_NAMES`) to the SPEC channels and tells
     :mod:`rideid.measured` that gravity is included, with the stationary
     lead-in and the start time.
     """
+    roads = getattr(data, "roads", {})
+    missing = [r.id for r in sc.runs if r.road is not None and r.id not in roads]
+    if missing:
+        raise ArgumentError(f"run '{missing[0]}' drives a generated road, but the data carry no road for it: pass "
+                            "what simulate_manifest returned (its .roads)")
     with atomic_output(out_dir) as tmp:
         runs = []
         for run in sc.runs:
             t, Y = data[run.id]
             write_run_csv(tmp / "runs" / f"{run.id}.csv", t, Y, raw_names() if raw else CHANNELS)
-            runs.append(RunSpec(run.id, run.track, run.speed, file=f"runs/{run.id}.csv"))
+            # a generated road is unknown to the dataset (SPEC §9: track "unknown"); its truth goes to road_truth/
+            runs.append(RunSpec(run.id, run.track, run.speed, file=f"runs/{run.id}.csv", moving=run.moving))
+            if run.road is not None:
+                write_road_csv(tmp / "road_truth" / f"{run.id}.csv", *roads[run.id].truth())
         logged = {}
         if raw:
             logged = dict(channel_map={c: ChannelEntry(n, "rad/s" if c.endswith("rate") else "m/s^2")
@@ -269,7 +449,7 @@ def write_dataset(sc: Scenario, data: dict, out_dir, comment: str | None = None,
         man = DatasetManifest(**{**sc.shared(), "runs": runs}, **logged)
         doc = man.to_dataset_doc()
         # measured road profiles travel with the dataset
-        for tab, tr in zip(doc["tracks"], sc.tracks.values()):
+        for tab, tr in zip(doc.get("tracks", []), sc.tracks.values()):
             src = tr.data_file
             if src is not None:
                 dst = tmp / "profiles" / f"{tr.id}.csv"
@@ -281,6 +461,31 @@ def write_dataset(sc: Scenario, data: dict, out_dir, comment: str | None = None,
             doc = {"truth": {n: sc.truth[n] for n in NAMES + EXT_NAMES + BUMP_NAMES if n in sc.truth}}
             if sc.dampers is not None:
                 doc["dampers"] = sc.dampers.to_table()
+            if roads:
+                doc["roads"] = {rid: road_record(rd) for rid, rd in roads.items()}
             write_toml(tmp / "truth.toml", doc, "true parameters of the simulated car (rideid simulate)"
-                       + ("; [dampers]: its damper curves (SPEC §8)" if sc.dampers is not None else ""))
+                       + ("; [dampers]: its damper curves (SPEC §8)" if sc.dampers is not None else "")
+                       + ("; [roads]: the generated roads, their heights in road_truth/ (SPEC §9)" if roads else ""))
     return Path(out_dir)
+
+
+def road_record(road: GeneratedRoad) -> dict:
+    """A generated road in ``truth.toml`` ``[roads.<run>]``: how it was made and the ISO 8608
+    class its road_truth (both paths) fits (:func:`rideid.model.roads.iso8608_class`)."""
+    rec = {"road_class": road.road_class, "road_seed": road.seed, "coherence": road.coherence,
+           "gd_n0_class": ROAD_CLASSES[road.road_class]}
+    x, zl, zr = road.truth()
+    try:
+        c, gd = iso8608_class(x, np.column_stack([zl, zr]))
+    except ArgumentError:  # too short a road to fit
+        return rec
+    rec.update(fitted_class=c, fitted_gd_n0=float(f"{gd:.6g}"))
+    return rec
+
+
+def write_road_csv(path: Path, x, z_left, z_right):
+    """``x, z_left, z_right`` (m) as a CSV, the columns of a ``profile`` file (SPEC §2)."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    np.savetxt(path, np.column_stack([x, z_left, z_right]), delimiter=",", header="x,z_left,z_right",
+               comments="", fmt="%.12g")

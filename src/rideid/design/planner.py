@@ -16,6 +16,7 @@ import numpy as np
 from ..estimate.cost import ParameterSpace
 from ..model.params import GROUPS
 from ..errors import ArgumentError, DataError
+from ..data.dataset import refuse_unknown_roads
 from ..data.scenario import load_scenario
 from ..data.schema import Scenario
 from .colour import load_noise_psd
@@ -384,6 +385,7 @@ def plan(scenario, *, noise=None, accel_density: float = 0.0, gyro_density: floa
     PlanResult
     """
     sc = scenario if isinstance(scenario, Scenario) else load_scenario(scenario)
+    refuse_unknown_roads(sc, "rideid plan")
     if sc.truth is None:
         raise DataError(f"{sc.path}: a plan needs a scenario with a [truth] table (the nominal car)")
     if extensions is None:  # the scenario's [model], else the groups the nominal car has

@@ -302,8 +302,29 @@ class ProfileTrack(Track):
             raise DataError(f"{where}: key 'file' must be a path string")
         return v
 
+    @classmethod
+    def from_arrays(cls, tid: str, x, z_left, z_right) -> "ProfileTrack":
+        """A profile from arrays rather than a file (e.g. a generated road, :mod:`rideid.model.roads`).
+
+        ``x`` (m) strictly increasing, ``z_left``/``z_right`` (m) the heights
+        under the left and right wheel paths; linearly interpolated, flat
+        outside, as a profile file. The track has no ``file`` (``data_file`` is None).
+        """
+        x, zl, zr = (np.array(a, dtype=float) for a in (x, z_left, z_right))
+        if x.ndim != 1 or x.size < 2 or zl.shape != x.shape or zr.shape != x.shape:
+            raise DataError(f"track '{tid}': x, z_left and z_right must be 1-D arrays of one length (at least 2)")
+        if not (np.all(np.isfinite(x)) and np.all(np.isfinite(zl)) and np.all(np.isfinite(zr))):
+            raise DataError(f"track '{tid}': NaN or infinite value in the profile")
+        if np.any(np.diff(x) <= 0):
+            raise DataError(f"track '{tid}': x must be strictly increasing")
+        tr = cls(tid, cls.KIND, {"file": None})
+        tr._profile = (x, zl, zr)
+        return tr
+
     @property
-    def data_file(self) -> Path:
+    def data_file(self) -> Path | None:
+        if self.keys["file"] is None:
+            return None
         path = Path(self.keys["file"])
         if not path.is_absolute() and self.base_dir is not None:
             path = self.base_dir / path

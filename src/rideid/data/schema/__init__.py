@@ -35,14 +35,16 @@ from .common import ReadOnlyDict, atomic_output, checked_items, in_folder, read_
 from .dampers import (BUMP_NAMES, DEFAULT_DAMPER_KNOTS, NONLINEAR_GROUPS, DamperCurves, parse_bump_stops,
                       parse_damper_knots, parse_dampers)
 from .hifi import HIFI_KEYS, HifiProperties, parse_hifi, tire_damping_of
-from .manifest import (CHECK_LEVELS, CHECK_NAMES, MODEL_GROUPS, DatasetManifest, Manifest, RunSpec, Scenario,
-                       load_manifest, load_truth, load_truth_dampers, parse_checks, parse_dataset_manifest,
-                       parse_model, parse_model_table, parse_scenario, parse_truth)
+from .manifest import (CHECK_LEVELS, CHECK_NAMES, MODEL_GROUPS, UNKNOWN_ROAD, DatasetManifest, Manifest, RoadSpec,
+                       RunSpec, Scenario, load_manifest, load_truth, load_truth_dampers, load_truth_roads,
+                       parse_checks, parse_dataset_manifest, parse_model, parse_model_table, parse_scenario,
+                       parse_truth)
 from .result import read_result_json
 from .runfiles import RunData, read_run_csv, write_run_csv
 
 __all__ = [
-    "Manifest", "Scenario", "DatasetManifest", "RunSpec", "RunData", "ChannelEntry", "CsvOptions", "HifiProperties",
+    "Manifest", "Scenario", "DatasetManifest", "RunSpec", "RoadSpec", "UNKNOWN_ROAD", "RunData", "ChannelEntry",
+    "CsvOptions", "HifiProperties",
     "ReadOnlyDict", "parse_scenario", "parse_dataset_manifest", "parse_model", "parse_checks", "parse_truth",
     "parse_channel_map", "parse_preprocess", "parse_csv_options", "parse_hifi", "tire_damping_of",
     "load_manifest", "load_truth", "read_toml", "write_toml", "read_run_csv", "write_run_csv", "read_result_json",
@@ -50,5 +52,5 @@ __all__ = [
     "CHECK_NAMES", "CHECK_LEVELS", "HIFI_KEYS", "UNITS", "SI", "TARGETS", "PREPROCESS_KEYS", "RUN_PREPROCESS_KEYS",
     "CSV_KEYS", "CHANNEL_KEYS",
     "BUMP_NAMES", "DEFAULT_DAMPER_KNOTS", "NONLINEAR_GROUPS", "MODEL_GROUPS", "DamperCurves", "parse_dampers",
-    "parse_bump_stops", "parse_damper_knots", "parse_model_table", "load_truth_dampers",
+    "parse_bump_stops", "parse_damper_knots", "parse_model_table", "load_truth_dampers", "load_truth_roads",
 ]

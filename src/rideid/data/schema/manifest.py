@@ -15,11 +15,13 @@ The types are frozen and their tables read-only: change one with
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field, fields
 from pathlib import Path
 
 from ...errors import DataError
 from ...model.params import EXT_NAMES, EXTRA_KNOWN, GROUPS, NAMES, Geometry, check_parameters, total_mass
+from ...model.roads import ROAD_CLASSES
 from ...model.tracks import Track
 from .channels import (RUN_PREPROCESS_KEYS, ChannelEntry, CsvOptions, parse_channel_map, parse_csv_options,
                        parse_preprocess)
@@ -33,8 +35,13 @@ TOP_KEYS_SCENARIO = ("name", "vehicle", "known", "bounds", "model", "tracks", "r
 #: a dataset may also describe how its files were logged (rideid.data.measured)
 TOP_KEYS_DATASET = ("name", "vehicle", "known", "bounds", "model", "channels", "preprocess", "csv", "checks",
                     "tracks", "runs")
-RUN_KEYS_DATASET = ("id", "track", "speed", "file", "channels", "checks") + RUN_PREPROCESS_KEYS
-RUN_KEYS_SCENARIO = ("id", "track", "speed", "fs", "duration")
+RUN_KEYS_DATASET = ("id", "track", "speed", "file", "moving", "channels", "checks") + RUN_PREPROCESS_KEYS
+#: a scenario run drives a known track (``track``) or a generated ISO 8608 road (``road_class``, SPEC §9)
+RUN_KEYS_SCENARIO = ("id", "track", "road_class", "road_seed", "coherence", "speed", "fs", "duration", "moving")
+#: the keys of a scenario run's generated road (:class:`RoadSpec`)
+ROAD_KEYS = ("road_class", "road_seed", "coherence")
+#: the ``track`` of a run on a road nobody measured (SPEC §9); no [[tracks]] id may take it
+UNKNOWN_ROAD = "unknown"
 #: the data checks (rideid.data.checks) a ``[checks]`` table may set, and their levels
 CHECK_NAMES = ("wiring", "track")
 CHECK_LEVELS = ("error", "warn", "off")
@@ -49,11 +56,39 @@ MODEL_KEYS = ("extensions", "damper_knots")
 # The types
 
 @dataclass(frozen=True)
+class RoadSpec:
+    """The generated road of a scenario run (SPEC §9): an ISO 8608 class (:mod:`rideid.model.roads`).
+
+    ``seed``: the road's seed (None: derived from ``rideid simulate --seed`` and the run's
+    position); ``coherence``: the lateral stretch of the isotropic road
+    (:func:`rideid.model.roads.road_coherency`; 1 isotropic).
+    """
+
+    road_class: str
+    seed: int | None = None
+    coherence: float = 1.0
+
+    def to_table(self) -> dict:
+        d = {"road_class": self.road_class}
+        if self.seed is not None:
+            d["road_seed"] = self.seed
+        if self.coherence != 1.0:
+            d["coherence"] = self.coherence
+        return d
+
+
+@dataclass(frozen=True)
 class RunSpec:
-    """One run of a manifest: its track, speed and file (dataset) or rate and duration (scenario)."""
+    """One run of a manifest: its track (or road), speed and file (dataset) or rate and duration (scenario).
+
+    ``track`` is None for a run on a road nobody measured (SPEC §9: ``track``
+    left out or ``"unknown"``); a scenario's such run has a ``road`` to
+    generate. ``moving``: the car is already moving at the first sample
+    (SPEC §9), not at rest.
+    """
 
     id: str
-    track: str
+    track: str | None
     speed: float | None
     file: str | None = None
     fs: float | None = None
@@ -63,13 +98,28 @@ class RunSpec:
     options: ReadOnlyDict = field(default_factory=ReadOnlyDict)
     #: this run's levels of the data checks (rideid.data.checks), over the dataset's [checks]
     checks: ReadOnlyDict = field(default_factory=ReadOnlyDict)
+    #: the car is moving at the first sample (SPEC §9); default False, True for a scenario's generated road
+    moving: bool = False
+    #: a scenario run's generated road (SPEC §9), or None
+    road: RoadSpec | None = None
 
     def __post_init__(self):
         for k in ("channels", "options", "checks"):
             object.__setattr__(self, k, read_only(getattr(self, k)))
 
+    @property
+    def road_known(self) -> bool:
+        """Whether the run's road is a known track (False: an unknown or generated road, SPEC §9)."""
+        return self.track is not None
+
     def to_table(self) -> dict:
-        d = {"id": self.id, "track": self.track}
+        d = {"id": self.id}
+        if self.road is not None:
+            d.update(self.road.to_table())
+        else:
+            d["track"] = self.track if self.track is not None else UNKNOWN_ROAD
+        if self.moving != (self.road is not None):  # the default: at rest on a track, moving on a generated road
+            d["moving"] = self.moving
         if self.speed is not None:
             d["speed"] = self.speed
         if self.file is not None:
@@ -218,7 +268,8 @@ class DatasetManifest(Manifest):
             doc["csv"] = dict(self.csv_table)
         if self.checks:
             doc["checks"] = dict(self.checks)
-        doc["tracks"] = [t.to_table() for t in self.tracks.values()]
+        if self.tracks:  # none when every run is on an unknown road (SPEC §9)
+            doc["tracks"] = [t.to_table() for t in self.tracks.values()]
         doc["runs"] = [r.to_table() for r in self.runs]
         return doc
 
@@ -385,18 +436,65 @@ def _parse_bounds(doc: dict, where: str, geom: Geometry, known: dict) -> dict[st
 
 
 def _parse_tracks(doc: dict, where: str, base_dir: Path) -> dict[str, Track]:
+    """The ``[[tracks]]`` tables; none at all is allowed (every run then on an unknown road, checked with the runs)."""
     raw_tracks = doc.get("tracks", [])
-    if not isinstance(raw_tracks, list) or not raw_tracks:
-        raise DataError(f"{where}: needs at least one [[tracks]] table")
+    if not isinstance(raw_tracks, list):
+        raise DataError(f"{where}: tracks must be [[tracks]] tables")
     tracks: dict[str, Track] = {}
     for i, t in enumerate(raw_tracks):
         if not isinstance(t, dict):
             raise DataError(f"{where}: tracks[{i}] must be a table")
+        if t.get("id") == UNKNOWN_ROAD:
+            raise DataError(f"{where}: tracks[{i}]: track id '{UNKNOWN_ROAD}' is reserved for runs on roads nobody "
+                            "measured (SPEC §9); give the track another id")
         tr = Track.from_table(t, f"{where}: tracks[{i}]", base_dir=base_dir)
         if tr.id in tracks:
             raise DataError(f"{where}: tracks[{i}]: duplicate track id '{tr.id}'")
         tracks[tr.id] = tr
     return tracks
+
+
+def _run_track(r: dict, w: str, where: str, tracks: dict, scenario: bool) -> str | None:
+    """The run's track id, or None for an unknown (dataset) or generated (scenario) road (SPEC §9)."""
+    track = r.get("track", UNKNOWN_ROAD)
+    if not isinstance(track, str) or not track:
+        raise DataError(f"{w}: key 'track' must be a track id (a string) or \"{UNKNOWN_ROAD}\"")
+    road = "road_class" in r
+    if scenario:
+        if road and track != UNKNOWN_ROAD:
+            raise DataError(f"{w}: give either 'track' (a [[tracks]] id) or 'road_class' (a generated road), "
+                            "not both")
+        if not road and track == UNKNOWN_ROAD:
+            raise DataError(f"{w}: missing key 'track' or 'road_class': a scenario run drives a [[tracks]] id or "
+                            "a generated ISO 8608 road (road_class = \"A\" ... \"H\")")
+        for k in ROAD_KEYS[1:]:
+            if k in r and not road:
+                raise DataError(f"{w}: key '{k}' belongs to a generated road; give 'road_class' too (or leave "
+                                f"'{k}' out)")
+    if track == UNKNOWN_ROAD:
+        return None
+    if track not in tracks:
+        if not tracks:
+            raise DataError(f"{where}: needs at least one [[tracks]] table (run '{r['id']}' names track "
+                            f"'{track}')")
+        raise DataError(f"{w}: unknown track '{track}'; tracks are: {', '.join(tracks)} "
+                        f"(or \"{UNKNOWN_ROAD}\" for a road nobody measured)")
+    return track
+
+
+def _parse_road(r: dict, w: str) -> RoadSpec:
+    """A scenario run's ``road_class``, ``road_seed`` and ``coherence`` (SPEC §9)."""
+    c = r["road_class"]
+    if not isinstance(c, str) or c.strip().upper() not in ROAD_CLASSES:
+        raise DataError(f"{w}: road_class must be an ISO 8608 class letter ({', '.join(ROAD_CLASSES)}), got {c!r}")
+    seed = r.get("road_seed")
+    if seed is not None and (isinstance(seed, bool) or not isinstance(seed, int) or seed < 0):
+        raise DataError(f"{w}: road_seed must be a non-negative whole number, got {seed!r}")
+    coh = r.get("coherence", 1.0)
+    if isinstance(coh, bool) or not isinstance(coh, (int, float)) or math.isnan(coh) or coh < 0:
+        raise DataError(f"{w}: coherence must be a number >= 0 (1: the isotropic road; inf: identical wheel "
+                        f"paths; 0: independent ones), got {coh!r}")
+    return RoadSpec(c.strip().upper(), seed, float(coh))
 
 
 def _parse_runs(doc: dict, where: str, tracks: dict, scenario: bool) -> list[RunSpec]:
@@ -421,23 +519,29 @@ def _parse_runs(doc: dict, where: str, tracks: dict, scenario: bool) -> list[Run
                     hint = " (fs and duration belong to scenarios; a dataset run names its 'file')"
                 if k == "file" and scenario:
                     hint = " (a scenario run gives 'fs' and 'duration' instead of a file)"
+                if k in ROAD_KEYS and not scenario:
+                    hint = (f" ({k} belongs to a scenario, whose roads rideid simulate generates; a dataset run on "
+                            f"a road nobody measured gives track = \"{UNKNOWN_ROAD}\" or leaves 'track' out)")
                 raise DataError(f"{w}: unknown key '{k}'{hint}; allowed: {', '.join(run_keys)}")
-        required = RUN_KEYS_SCENARIO if scenario else ("id", "track", "file")
+        required = ("id", "speed", "fs", "duration") if scenario else ("id", "file")
         for k in required:
             if k not in r:
                 raise DataError(f"{w}: missing key '{k}'")
         if rid in seen:
             raise DataError(f"{w}: duplicate run id '{rid}'")
         seen.add(rid)
-        if r["track"] not in tracks:
-            raise DataError(f"{w}: unknown track '{r['track']}'; tracks are: {', '.join(tracks)}")
+        track = _run_track(r, w, where, tracks, scenario)
+        road = _parse_road(r, w) if scenario and "road_class" in r else None
+        moving = r.get("moving", road is not None)
+        if not isinstance(moving, bool):
+            raise DataError(f"{w}: moving must be true or false, got {moving!r}")
         speed = number(r["speed"], f"{w}: speed", positive=True) if "speed" in r else None
         if scenario:
             fs = number(r["fs"], f"{w}: fs", positive=True)
             dur = number(r["duration"], f"{w}: duration", positive=True)
             if round(dur * fs) < 2:
                 raise DataError(f"{w}: duration * fs gives fewer than 3 samples")
-            runs.append(RunSpec(rid, r["track"], speed, fs=fs, duration=dur))
+            runs.append(RunSpec(rid, track, speed, fs=fs, duration=dur, moving=moving, road=road))
         else:
             if not isinstance(r["file"], str):
                 raise DataError(f"{w}: key 'file' must be a path string")
@@ -445,7 +549,8 @@ def _parse_runs(doc: dict, where: str, tracks: dict, scenario: bool) -> list[Run
             opts = parse_preprocess({k: v for k, v in r.items() if k in RUN_PREPROCESS_KEYS}, w,
                                     RUN_PREPROCESS_KEYS)
             lv = parse_checks(r["checks"], f"{w}: checks") if "checks" in r else {}
-            runs.append(RunSpec(rid, r["track"], speed, file=r["file"], channels=chans, options=opts, checks=lv))
+            runs.append(RunSpec(rid, track, speed, file=r["file"], channels=chans, options=opts, checks=lv,
+                                moving=moving))
     return runs
 
 
@@ -546,11 +651,24 @@ def load_truth(path, geom: Geometry | None = None) -> dict[str, float]:
     path = Path(path)
     doc = read_toml(path)
     for k in doc:
-        if k not in ("truth", "dampers"):
-            raise DataError(f"{path}: unknown key '{k}'; expected a [truth] table (and [dampers])")
+        if k not in ("truth", "dampers", "roads"):
+            raise DataError(f"{path}: unknown key '{k}'; expected a [truth] table (and [dampers], [roads])")
     if "dampers" in doc:
         parse_dampers(doc["dampers"], f"{path}: [dampers]")
+    if "roads" in doc:
+        load_truth_roads(path)
     return parse_truth(table(doc, "truth", str(path)), f"{path}: [truth]", geom)
+
+
+def load_truth_roads(path) -> dict[str, dict]:
+    """The ``[roads]`` table of a ``truth.toml``: run id -> how its generated road was made (SPEC §9:
+    ``road_class``, ``road_seed``, ``coherence``, and the class its road_truth fits); empty without one."""
+    path = Path(path)
+    roads = read_toml(path).get("roads", {})
+    if not isinstance(roads, dict) or not all(isinstance(v, dict) and isinstance(v.get("road_class"), str)
+                                              for v in roads.values()):
+        raise DataError(f"{path}: [roads] must hold one table per run, each with its road_class")
+    return roads
 
 
 def load_truth_dampers(path) -> DamperCurves | None:
@@ -560,7 +678,8 @@ def load_truth_dampers(path) -> DamperCurves | None:
     return parse_dampers(doc["dampers"], f"{path}: [dampers]") if "dampers" in doc else None
 
 
-__all__ = ["Manifest", "Scenario", "DatasetManifest", "RunSpec", "ChannelEntry", "parse_scenario",
-           "parse_dataset_manifest", "parse_model", "parse_model_table", "parse_checks", "parse_truth", "load_manifest",
-           "load_truth", "load_truth_dampers", "model_table", "vehicle_table", "MODEL_GROUPS", "CHECK_NAMES", "CHECK_LEVELS", "TOP_KEYS_SCENARIO", "TOP_KEYS_DATASET", "RUN_KEYS_SCENARIO",
-           "RUN_KEYS_DATASET"]
+__all__ = ["Manifest", "Scenario", "DatasetManifest", "RunSpec", "RoadSpec", "UNKNOWN_ROAD", "ChannelEntry",
+           "parse_scenario", "parse_dataset_manifest", "parse_model", "parse_model_table", "parse_checks", "parse_truth",
+           "load_manifest", "load_truth", "load_truth_dampers", "load_truth_roads", "model_table", "vehicle_table",
+           "MODEL_GROUPS", "CHECK_NAMES", "CHECK_LEVELS", "TOP_KEYS_SCENARIO", "TOP_KEYS_DATASET", "RUN_KEYS_SCENARIO",
+           "RUN_KEYS_DATASET", "ROAD_KEYS"]
