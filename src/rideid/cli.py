@@ -292,6 +292,26 @@ def _summary_table(res) -> str:
     if res.bump_stops:
         from .estimate.bumps import format_bump_stops
         lines.append(format_bump_stops(res.bump_stops))
+    if res.roads:
+        lines.append(_roads_table(res))
+    return "\n".join(lines)
+
+
+def _roads_table(res) -> str:
+    """The unknown-road runs (SPEC §9): each road's ISO 8608 class and file, and what is not assessed."""
+    lines = [f"{'road run':<12} {'class':>5} {'Gd(n0) m^3':>11} {'speed m/s':>10}  estimated road"]
+    for rid, r in res.roads.items():
+        lines.append(f"{rid:<12} {r['iso8608_class']:>5} {r['gd_n0']:>11.3g} {r['speed']:>10.4g}  {r['file']} "
+                     f"({r['wavelengths_m'][0]:g}-{r['wavelengths_m'][1]:g} m wavelengths)")
+    if not res.adequacy:
+        lines.append("ADEQUACY NOT ASSESSED: every run is on an unknown road, where rideid has no residual test yet; "
+                     "the error bars hold only if the linear model describes the car (add a known-track run to "
+                     "test it)")
+    else:
+        lines.append("the adequacy verdict covers the known-track runs only; the road runs are not assessed")
+    note = (res.model or {}).get("note")
+    if note:
+        lines.append(note)
     return "\n".join(lines)
 
 

@@ -42,6 +42,7 @@ from ..model.params import GROUPS
 from .adequacy import MIN_IMPROVEMENT, advise
 from .identify import identify as identify_model
 from .identify import warn_bounds
+from .anyroad import identify_any_road, unknown_road_runs
 
 #: per free extension parameter: a group of two enters at the 99.9 % point of chi-square(2)
 PENALTY = float(special.chdtri(2, 0.001) / 2)
@@ -471,7 +472,11 @@ def identify(ds, *args, model=None, cost=None, **kw):
     # (the dispatch lives here, above both, so that identify and the model choice import one way)
     if cost is None:
         model = default_model(ds, model)
-    if isinstance(model, str) and model == "auto" and cost is None:
+    if cost is None and unknown_road_runs(ds):  # SPEC §9: the road projected out (rideid.estimate.anyroad)
+        if args:
+            raise TypeError("identify() takes the dataset as its only positional argument")
+        res = identify_any_road(ds, model=model, **kw)
+    elif isinstance(model, str) and model == "auto" and cost is None:
         if args:
             raise TypeError("identify() takes the dataset as its only positional argument")
         res = identify_auto(ds, **kw)

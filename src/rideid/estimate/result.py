@@ -209,6 +209,10 @@ class IdentificationResult:
     #: SPEC §8 bump stops when the model has them: per axle {"reached", "clearance", "rate", "std",
     #: "std_robust", ...} (rideid.estimate.bumps.bump_block); None otherwise
     bump_stops: dict | None = None
+    #: SPEC §9 runs on unknown roads: run id -> {"file", "iso8608_class", "gd_n0", ...}; None without such runs
+    roads: dict | None = None
+    #: the estimated roads (in memory; written as road/<run>.csv): run id -> (x (n,), z (n, 2) left, right)
+    road_profiles: dict | None = field(default=None, repr=False)
 
     # SciPy/SPEC §4 names for the same numbers
     @property
@@ -292,6 +296,7 @@ class IdentificationResult:
             "checks": self.checks,
             **({"dampers": self.dampers} if self.dampers else {}),
             **({"bump_stops": self.bump_stops} if self.bump_stops else {}),
+            **({"roads": self.roads} if self.roads else {}),
             "dataset": str(Path(self.dataset).resolve()) if self.dataset else "",
             "sensitivity": _maps_to_json(self.maps),
             "history_file": "history.csv",
@@ -306,6 +311,10 @@ class IdentificationResult:
             raise DataError(f"{out_dir}: cannot create the result folder: {e}") from None
         (out_dir / "result.json").write_text(json.dumps(self.to_dict(), indent=2, allow_nan=False) + "\n")
         self.history.write_csv(out_dir / "history.csv")
+        for rid, (x, z) in (self.road_profiles or {}).items():
+            (out_dir / "road").mkdir(exist_ok=True)
+            np.savetxt(out_dir / "road" / f"{rid}.csv", np.column_stack([x, z]), delimiter=",", fmt="%.9g",
+                       header="x,z_left,z_right", comments="")
 
 
 def load(path) -> IdentificationResult:
@@ -338,7 +347,19 @@ def load(path) -> IdentificationResult:
         modal=doc.get("modal"), dataset=doc.get("dataset", ""),
         maps=_maps_from_json(doc.get("sensitivity"), rpath), rng_state=doc.get("rng_state"),
         model=doc.get("model"), adequacy=doc.get("adequacy"), correlation=doc.get("correlation"),
-        checks=list(doc.get("checks") or []), dampers=doc.get("dampers"), bump_stops=doc.get("bump_stops"))
+        checks=list(doc.get("checks") or []), dampers=doc.get("dampers"), bump_stops=doc.get("bump_stops"),
+        roads=doc.get("roads"), road_profiles=_read_roads(doc.get("roads"), rpath.parent))
+
+
+def _read_roads(roads, folder):
+    """The estimated roads written beside result.json (road/<run>.csv), those that are there."""
+    out = {}
+    for rid, rec in (roads or {}).items():
+        f = folder / rec.get("file", f"road/{rid}.csv")
+        if f.is_file():
+            a = np.loadtxt(f, delimiter=",", skiprows=1, ndmin=2)
+            out[rid] = (a[:, 0], a[:, 1:3])
+    return out or None
 
 
 __all__ = ["IdentificationResult", "History", "load", "read_result_json"]

@@ -129,6 +129,7 @@ def fig_spread(hist, names, out_dir):
 def fig_weights(hist, runs, out_dir, mode):
     plt = _plt()
     g = [h["generation"] for h in hist]
+    runs = [r for r in runs if f"weight_{r}" in hist[0]]  # (unknown-road runs are not weighted by the search)
     W = np.array([[h[f"weight_{r}"] for r in runs] for h in hist]).T
     fig, ax = plt.subplots(figsize=(10, 3.2))
     ax.stackplot(g, W, labels=runs)
@@ -427,6 +428,42 @@ def velocity_histograms(vels: dict, n_bins: int = 60):
     return edges, {rid: tuple(np.histogram(v, bins=edges)[0] for v in fr) for rid, fr in vels.items()}
 
 
+def fig_road(run_id: str, x, z, rec: dict, out_dir):
+    """An unknown-road run's estimated road: both wheel paths against distance, and their spectrum against
+    the ISO 8608 class bands."""
+    return _save(road_figure(x, z, rec, run_id), Path(out_dir), f"road_{run_id}", f"Road of {run_id}",
+                 f"Run {run_id}: the estimated road under the left and right wheel paths (top; over "
+                 f"{rec['wavelengths_m'][0]:g}-{rec['wavelengths_m'][1]:g} m wavelengths, x from the front axle at the "
+                 f"first sample) and its displacement spectrum (bottom) against the ISO 8608 classes' geometric "
+                 f"means (dashed); the fitted class {rec['iso8608_class']}, Gd(n0) = {rec['gd_n0']:.3g} m³.")
+
+
+def road_figure(x, z, rec: dict, run_id: str = ""):
+    """The Matplotlib figure of :func:`fig_road`."""
+    from scipy.signal import welch
+    from ..model.roads import iso8608_psd
+    plt = _plt()
+    fig, (a1, a2) = plt.subplots(2, 1, figsize=(10, 6))
+    a1.plot(x, 1e3 * z[:, 0], lw=0.7, label="left")
+    a1.plot(x, 1e3 * z[:, 1], lw=0.7, label="right")
+    a1.set_xlabel("x, m")
+    a1.set_ylabel("road height, mm")
+    a1.legend(loc="upper right")
+    a1.set_title(f"{run_id}: ISO 8608 class {rec['iso8608_class']}")
+    dx = float(x[1] - x[0])
+    n, P = welch(z, fs=1.0 / dx, nperseg=min(len(x), int(4 * rec["wavelengths_m"][1] / dx)), axis=0)
+    band = (n >= 1 / rec["wavelengths_m"][1]) & (n <= 1 / rec["wavelengths_m"][0])
+    a2.loglog(n[band], P[band].mean(axis=1), "k", lw=1.2, label="estimated road (mean of both paths)")
+    nn = np.geomspace(n[band][0], n[band][-1], 50)
+    for cls in "ABCDE":
+        a2.loglog(nn, iso8608_psd(nn, cls), "--", lw=0.8, label=f"class {cls}")
+    a2.set_xlabel("spatial frequency n, cycles/m")
+    a2.set_ylabel("Gd(n), m³")
+    a2.legend(loc="lower left", fontsize=7, ncol=3)
+    fig.tight_layout()
+    return fig
+
+
 def fig_damper_curves(dampers: dict, slopes: dict, out_dir):
     """Per axle the identified force-velocity curve, its +-2 std_robust band at the knots, the knots
     no run excites marked, and the derived linear c_s for reference."""
@@ -569,7 +606,7 @@ def write_report(result, dataset, out_dir, *, compare=None, compare_label: str |
     res = result.to_dict()
     hist = list(result.history)
     maps = result.maps
-    if maps is None:
+    if maps is None and not getattr(result, "roads", None):
         raise DataError(f"{out_dir}: the result carries no sensitivity maps (written by an older rideid?); "
                         "identify again to render the report")
     run_ids = [r.id for r in dataset.runs]
@@ -599,7 +636,8 @@ def write_report(result, dataset, out_dir, *, compare=None, compare_label: str |
         _fit_background(present, limits)
     jobs += [("fig_fit", (r.id, dataset.data[r.id].time, measured[r.id], sims[r.id], out_dir, limits))
              for r in dataset.runs]
-    jobs += [("fig_heatmap", (k, maps, out_dir)) for k in HEAT_CAPTIONS]
+    heat_kinds = list(HEAT_CAPTIONS) if maps is not None else []
+    jobs += [("fig_heatmap", (k, maps, out_dir)) for k in heat_kinds]
     if other is not None:
         jobs.append(("fig_compare", (hist, other[0], other[1], other[2], run_ids, out_dir)))
     done = _map_figures(jobs)
@@ -611,7 +649,14 @@ def write_report(result, dataset, out_dir, *, compare=None, compare_label: str |
         damper_figs = [fig_damper_curves(result.dampers, slopes, out_dir),
                        fig_damper_velocities(edges, hists, result.dampers["velocity"], out_dir)]
     compare_figs = [done.pop()] if other is not None else []
-    heat_figs = [done.pop() for _ in HEAT_CAPTIONS][::-1]
+    heat_figs = [done.pop() for _ in heat_kinds][::-1]
+    road_figs, road_rows = [], []
+    for rid, rec in (getattr(result, "roads", None) or {}).items():
+        road_rows.append({"run": rid, "cls": rec["iso8608_class"], "gd": rec["gd_n0"], "speed": rec["speed"],
+                          "file": rec["file"]})
+        if result.road_profiles and rid in result.road_profiles:
+            x, z = result.road_profiles[rid]
+            road_figs.append(fig_road(rid, x, z, rec, out_dir))
     figs = done[:3] if hist else []
     fit_figs = done[3:] if hist else done
     fit_rows = []
@@ -640,15 +685,18 @@ def write_report(result, dataset, out_dir, *, compare=None, compare_label: str |
             "status": "known" if d.get("fixed") else ("derived" if d.get("derived") else
                                                       ("AT A SEARCH BOUND" if d.get("at_bound") else "estimated")),
         })
-    p2t = [{"param": p, "cells": [(f"{maps.M[i, r]:.2f}", stars(maps.M[i, r] * len(maps.runs), P2T_STARS))
-                                  for r in range(len(maps.runs))]} for i, p in enumerate(maps.params)]
+    p2t = [] if maps is None else [
+        {"param": p, "cells": [(f"{maps.M[i, r]:.2f}", stars(maps.M[i, r] * len(maps.runs), P2T_STARS))
+                               for r in range(len(maps.runs))]} for i, p in enumerate(maps.params)]
     env = jinja2.Environment(loader=jinja2.FileSystemLoader(str(resources.files("rideid.report") / "templates")),
                              autoescape=jinja2.select_autoescape(["html", "j2"]))
     tpl = env.get_template("report.html.j2")
     text = tpl.render(
         title=f"rideid identification: {html.escape(dataset.name)}", res=res, params=params,
         modal=result.modal or {}, figures=figs + compare_figs, fit_figures=fit_figs, fit_rows=fit_rows,
-        heat_figures=heat_figs, damper_figures=damper_figs, runs=maps.runs, p2t=p2t, known=result.known, n_runs=len(dataset.runs),
+        heat_figures=heat_figs, damper_figures=damper_figs, runs=[] if maps is None else maps.runs, p2t=p2t,
+        road_figures=road_figs, road_rows=road_rows,
+        road_band="{:g}-{:g} m".format(*next(iter((result.roads or {}).values()), {}).get("wavelengths_m", (0.5, 20))), known=result.known, n_runs=len(dataset.runs),
         dataset=str(dataset.path), data_rows=data_rows, channel_rows=channel_rows, data_warnings=data_warnings,
         **estimate_context(res),
     )

@@ -1,0 +1,393 @@
+"""Identification of a dataset with runs on unknown roads (SPEC §9).
+
+The road under an unknown-road run is projected out frequency by frequency
+(:mod:`rideid.estimate.roadfit`); runs on known tracks keep their
+time-domain residuals (:class:`rideid.estimate.cost.CostFunction`). The
+steps:
+
+1. *Start.* With track runs: the usual identification of the track runs
+   alone (search and polish, :func:`rideid.estimate.identify.identify`).
+   Without: JADE on the road runs' search cost
+   (:func:`rideid.estimate.roadfit.search_costs`, a Hann-windowed
+   approximation a few per cent from the exact cost), stopped by the same
+   population-spread rule as the track search.
+2. *Polish.* Least squares on the exact residuals of every run together:
+   each run's residuals (the track runs' as one block) divided by their own
+   standard deviation at the start, again at the first solution (the blocks
+   are different kinds of numbers: time samples of normalised channels, DFT
+   bins of weighted channels; weighting each by its own noise level is the
+   maximum-likelihood combination).
+3. *Uncertainty.* ``std``: ``s^2 (J^T J)^+`` with one variance; ``std_robust``:
+   the sandwich with each road run's DFT bin as a cluster and the track runs'
+   HAC long-run covariance (:mod:`rideid.estimate.uncertainty`), the
+   pseudo-inverse by SVD.
+4. *Road.* Each road run's road under both wheel paths
+   (:func:`rideid.estimate.roadfit.road`), written as ``road/<run>.csv``,
+   and its ISO 8608 class (:func:`rideid.model.roads.iso8608_class`).
+
+The model: linear (the twelve, anti-roll bars, tire damping, CG height).
+Damper curves and bump stops are nonlinear and the projection needs a linear
+car: such a model with an unknown-road run is refused. ``auto`` fits the
+twelve plus the dataset's ``[model]`` groups (model choice is not run on
+unknown roads) and says so in ``result.json`` (``model.note``). The
+adequacy verdict covers the track runs only; road runs are listed as not
+assessed.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import replace
+
+import numpy as np
+from scipy.optimize import OptimizeResult, least_squares
+
+from ..data.schema import NONLINEAR_GROUPS
+from ..errors import ArgumentError, DataError
+from ..model.batch import single_threaded_blas
+from ..model.equations import modal_summary
+from ..model.params import ALL_NAMES, UNITS
+from ..model.roads import iso8608_class
+from . import roadfit
+from .adequacy import advise, assess_fit
+from .cost import CostFunction, ParameterSpace, refuse_unsupported_groups
+from .identify import DEFAULT_GENERATIONS, DEFAULT_POPULATION, _relative_spread, model_extensions
+from .identify import identify as identify_model
+from .jade import JadeSolver, make_rng, stop_requested
+from .result import History, IdentificationResult
+from .uncertainty import andrews_bandwidth, estimate_covariance, long_run_covariance, run_scores
+
+#: an unknown-road run's speed may vary by this fraction of its mean (the delay is taken as constant)
+SPEED_TOLERANCE = 0.02
+#: the search's population-spread stop (as the track search with a polish)
+SPREAD_TOL = 0.2
+
+
+def unknown_road_runs(ds) -> list:
+    """The runs of ``ds`` on unknown roads (SPEC §9)."""
+    return [r for r in ds.runs if not getattr(r, "road_known", True)]
+
+
+def run_speed(ds, run) -> float:
+    """The constant speed (m/s) of an unknown-road run: the manifest's, or its speed/distance channel's
+    mean when it varies by at most :data:`SPEED_TOLERANCE` (else one clear error)."""
+    rd = ds.data[run.id]
+    dist = getattr(rd, "distance", None)
+    if dist is None:
+        return float(run.speed)
+    x = np.asarray(dist(rd.time), dtype=float)
+    v = np.gradient(x, rd.time)
+    vm = float(np.mean(v))
+    spread = float((np.max(v) - np.min(v)) / vm) if vm > 0 else np.inf
+    if not np.isfinite(spread) or spread > 2 * SPEED_TOLERANCE:
+        raise DataError(f"run '{run.id}': an unknown-road run needs a constant speed (the rear wheels' delay "
+                        f"wheelbase/speed is taken as constant), but its speed channel goes from {np.min(v):.2f} to "
+                        f"{np.max(v):.2f} m/s ({100 * spread:.0f} % of its mean; at most "
+                        f"{200 * SPEED_TOLERANCE:.0f} %); cut the run to a stretch of steady speed")
+    return vm
+
+
+def prepare_road_runs(ds) -> list:
+    """:class:`rideid.estimate.roadfit.RoadRun` of each unknown-road run."""
+    out = []
+    for r in unknown_road_runs(ds):
+        rd = ds.data[r.id]
+        out.append(roadfit.prepare_road_run(r.id, rd.matrix(), rd.fs, run_speed(ds, r), ds.geometry))
+    return out
+
+
+def _sub_dataset(ds, runs):
+    """``ds`` with only ``runs`` (same manifest otherwise)."""
+    from ..data.dataset import Dataset
+    ids = {r.id for r in runs}
+    man = replace(ds.manifest, runs=tuple(r for r in ds.runs if r.id in ids))
+    return Dataset(man, {k: v for k, v in ds.data.items() if k in ids},
+                   {k: v for k, v in ds.measured.items() if k in ids}, ds.findings)
+
+
+def _pinv(H):
+    """SVD pseudo-inverse of a symmetric positive semi-definite matrix (never squares a condition number
+    beyond the Jacobian's own)."""
+    return np.linalg.pinv(H, rcond=1e-12, hermitian=True)
+
+
+def _road_meat(J, e, m_per_bin):
+    """Sum over DFT bins of ``(J_k^T e_k)(J_k^T e_k)^T`` (each bin's rows one cluster)."""
+    g = (J * e[:, None]).reshape(-1, m_per_bin, J.shape[1]).sum(axis=1)
+    return g.T @ g
+
+
+def _track_meat(J, e, cf):
+    blocks = [(int(e_ - s), int(np.count_nonzero(cf.W[ri] > 0)))
+              for ri, (s, e_) in enumerate(zip(cf.sim.run_start[:-1], cf.sim.run_start[1:]))]
+    S = np.zeros((J.shape[1], J.shape[1]))
+    for G in run_scores(J, e, blocks):
+        S += long_run_covariance(G, andrews_bandwidth(G))
+    return S
+
+
+class _Problem:
+    """The joint residual of the road runs (and the track runs' cost ``cf``).
+
+    Coordinates ``v``: the logarithm of each parameter bounded away from 0 (relative steps: the road fit's
+    valley along the wheels' common scale, unsprung masses and tires together, is long and shallow, and the
+    solver crosses it in a few steps in these coordinates, not in the bounds' unit box), the parameter over
+    its range's width for those that may be 0 (bars, tire damping)."""
+
+    def __init__(self, space, geom, rruns, cf=None):
+        self.space, self.geom, self.rruns, self.cf = space, geom, rruns, cf
+        lo, hi = space.bounds[:, 0], space.bounds[:, 1]
+        self.log = lo > 0
+        self.span = np.where(self.log, 1.0, hi - lo)
+        self.vbounds = (np.where(self.log, np.log(np.where(self.log, lo, 1.0)), lo / self.span),
+                        np.where(self.log, np.log(np.where(self.log, hi, 1.0)), hi / self.span))
+        self.scale = np.ones(len(rruns) + (cf is not None))
+        self.equal = None if cf is None else np.full(len(cf.run_ids), 1.0 / len(cf.run_ids))
+
+    def x(self, v):
+        v = np.asarray(v, dtype=float)
+        return np.where(self.log, np.exp(v), v * self.span)
+
+    def v(self, x):
+        x = np.asarray(x, dtype=float)
+        return np.clip(np.where(self.log, np.log(np.where(self.log, x, 1.0)), x / self.span), *self.vbounds)
+
+    def dxdv(self, v):
+        """``dx/dv`` (d,): Jacobians in ``v`` divided by it are Jacobians in ``x``."""
+        return np.where(self.log, self.x(v), self.span)
+
+    def blocks(self, z, rruns=None):
+        x = self.x(z)
+        P = self.space.full(x[None])
+        if not self.space.valid(P)[0]:
+            return None
+        parts = [] if self.cf is None else [self.cf.residuals(x[None], self.equal)[0]]
+        return parts + [roadfit.residuals(P[0], self.geom, rr) for rr in (rruns or self.rruns)]
+
+    def hessian(self, v, step: float = 1e-3) -> np.ndarray:
+        """Half the Hessian of the cost ``sum e^2`` at ``v`` (in ``v`` units), by central second differences.
+
+        Not ``J^T J``: the projected residual ``P_perp(theta) Y`` is linear in the
+        data, so its Jacobian carries the noise (``dP_perp/dtheta eps``), and
+        ``J^T J`` over-states the information by ``sigma^2 tr(dP dP)``, which the
+        residual's own curvature ``e . d2e`` cancels in the true Hessian
+        (``tr(P d2P) = -tr(dP dP)`` for a projector). Along the wheels' common
+        scale (unsprung masses and tires together) the over-statement was a factor
+        200 on the built-in SUV's roads (measured): error bars 10-20 times too
+        small. The cost is quadratic over ``step`` (checked at 0.25, 0.5 and 1 times
+        a 0.2 % step: 4.0 and 4.0 times per doubling)."""
+        d = v.size
+        h = np.full(d, step)
+        c0 = float(np.sum(self(v) ** 2))
+        E = np.eye(d) * h
+
+        def c(dv):
+            return float(np.sum(self(v + dv) ** 2))
+
+        H = np.empty((d, d))
+        plus = [c(E[i]) for i in range(d)]
+        minus = [c(-E[i]) for i in range(d)]
+        for i in range(d):
+            H[i, i] = (plus[i] - 2 * c0 + minus[i]) / h[i] ** 2
+            for j in range(i):
+                H[i, j] = H[j, i] = (c(E[i] + E[j]) - c(E[i] - E[j]) - c(E[j] - E[i]) + c(-E[i] - E[j])) / (
+                    4 * h[i] * h[j])
+        return 0.5 * H
+
+    def __call__(self, z):
+        b = self.blocks(z)
+        if b is None:
+            return np.full(self.size, 1e3)
+        return np.concatenate([s * r for s, r in zip(self.scale, b)])
+
+    def reweight(self, z):
+        """Each block divided by its own RMS at ``z``."""
+        b = self.blocks(z)
+        self.scale = np.array([1.0 / max(np.sqrt(np.mean(r ** 2)), 1e-300) for r in b])
+        self.sizes = [r.size for r in b]
+        self.size = sum(self.sizes)
+
+
+def _search(space, geom, rruns, gen, population, generations, callback, t0):
+    """JADE on the road runs' search cost, stopped by the population spread (:data:`SPREAD_TOL`)."""
+    def fun(X):
+        P = space.full(X)
+        out = np.full(P.shape[0], np.inf)
+        ok = space.valid(P)
+        if ok.any():
+            out[ok] = roadfit.search_costs(P[ok], geom, rruns)
+        return out
+
+    solver = JadeSolver(space.bounds, population, gen)
+    X = solver.ask()
+    solver.tell(fun(X))
+    history, stop, g = [], "generations", 0
+    for g in range(1, generations + 1):
+        X = solver.ask()
+        solver.tell(fun(X))
+        cv = _relative_spread(solver.pop, space.bounds)
+        finite = np.isfinite(solver.costs)
+        rec = {"generation": g, "evaluations": solver.nfev, "best_cost": float(solver.fun),
+               "mean_cost": float(np.mean(solver.costs[finite])) if finite.any() else float("inf"),
+               "best_cost_equal": float(solver.fun), "mu_f": solver.mu_f, "mu_cr": solver.mu_cr}
+        mean = solver.pop.mean(axis=0)
+        for prefix, values in (("best", solver.x), ("mean", mean), ("cv", cv)):
+            for j, nme in enumerate(space.names):
+                rec[f"{prefix}_{nme}"] = float(values[j])
+        for rr in rruns:  # the road runs weigh alike in the search
+            rec[f"weight_{rr.run_id}"] = 1.0 / len(rruns)
+        history.append(rec)
+        state = OptimizeResult(x=solver.x, fun=float(solver.fun), nit=g, nfev=solver.nfev, generations=generations,
+                               spread=float(cv.max()), elapsed=time.perf_counter() - t0, track_weights={})
+        if stop_requested(callback, state):
+            stop = "callback"
+            break
+        if cv.max() < SPREAD_TOL:
+            stop = "spread"
+            break
+    return solver.x, g, solver.nfev, stop, history
+
+
+def identify_any_road(ds, **kw) -> IdentificationResult:
+    """Identify ``ds``, which has at least one unknown-road run (module docstring); BLAS on one thread
+    (its small products are many, and threads only contend)."""
+    with single_threaded_blas():
+        return _identify_any_road(ds, **kw)
+
+
+def _identify_any_road(ds, *, rng=None, seed=None, population=None, generations=None, model=None,
+                       polish: bool = True, callback=None, assess: bool = True, **_ignored) -> IdentificationResult:
+    t0 = time.perf_counter()
+    gen, rng_record = make_rng(rng, seed)
+    note = None
+    if isinstance(model, str) and model == "auto":
+        ext = tuple(ds.manifest.extensions or ())
+        note = ("model choice (auto) is not run on unknown roads: fitted the twelve"
+                + (f" plus the dataset's [model] groups ({', '.join(ext)})" if ext else "")
+                + "; give --model to fit anti_roll_bars or tire_damping")
+    else:
+        ext = tuple(model_extensions(ds, model))
+    bad = [g for g in ext if g in NONLINEAR_GROUPS]
+    road_ids = [r.id for r in unknown_road_runs(ds)]
+    if bad:
+        raise ArgumentError(f"{', '.join(bad)}: a nonlinear model cannot be fitted with runs on unknown roads "
+                            f"({', '.join(road_ids)}): the road is projected out of a linear car (docs/roads.md); "
+                            f"fit the linear model, or the curves on known tracks only")
+    refuse_unsupported_groups(ext, "model")
+    geom = ds.geometry
+    space = ParameterSpace(ds.known, geom, ds.manifest.bounds, extensions=ext)
+    rruns = prepare_road_runs(ds)
+    track_runs = [r for r in ds.runs if getattr(r, "road_known", True)]
+    population = population or DEFAULT_POPULATION
+    generations = generations or DEFAULT_GENERATIONS
+    cf = None
+    history = []
+    if track_runs:
+        ds_t = _sub_dataset(ds, track_runs)
+        first = identify_model(ds_t, rng=gen, population=population, generations=generations, model=list(ext),
+                               polish=polish, callback=callback, assess=False)
+        x0 = np.array([first.parameters[n] for n in space.names])
+        cf = CostFunction(ds_t, space=space)
+        nit, nfev, stop = first.nit, first.nfev, first.stop
+        history = list(first.history)
+    else:
+        x0, nit, nfev, stop, history = _search(space, geom, rruns, gen, population, generations, callback, t0)
+    prob = _Problem(space, geom, rruns, cf)
+    z0 = prob.v(x0)
+    info = None
+    z = z0
+    std = np.full(len(space.names), np.nan)
+    cov = np.full((len(space.names),) * 2, np.nan)
+    if polish:
+        prob.reweight(z0)
+        cost_before = float(np.sum(prob(z0) ** 2))
+        # one solve at the start's block weights, the weights again at its solution, a short second solve
+        sol = least_squares(prob, z, bounds=prob.vbounds, method="trf", diff_step=1e-7, max_nfev=100)
+        prob.reweight(sol.x)
+        sol = least_squares(prob, sol.x, bounds=prob.vbounds, method="trf", diff_step=1e-7, max_nfev=50)
+        z = sol.x
+        # sandwich (module docstring): bread the cost's true Hessian, meat the gradient's spread over clusters
+        Ja = sol.jac                          # in v units
+        e = sol.fun
+        m, n = Ja.shape
+        s2 = float(e @ e) / max(m - n, 1)
+        Hinv = _pinv(prob.hessian(z))
+        D = np.diag(prob.dxdv(z))
+        cov = D @ Hinv @ (s2 * Ja.T @ Ja) @ Hinv @ D
+        std = np.sqrt(np.clip(np.diag(cov), 0, None))
+        S = np.zeros((n, n))
+        off = 0
+        for k, size in enumerate(prob.sizes):
+            Jb, eb = Ja[off:off + size], e[off:off + size]
+            if cf is not None and k == 0:
+                S += _track_meat(Jb, eb, cf)
+            else:
+                rr = rruns[k - (cf is not None)]
+                S += _road_meat(Jb, eb, 2 * len(rr.cols))
+            off += size
+        cov_rob = D @ Hinv @ S @ Hinv @ D * (m / max(m - n, 1))
+        info = {"success": bool(sol.success), "message": sol.message, "nfev": int(sol.nfev),
+                "cost_before": cost_before, "cost_after": float(e @ e), "covariance": cov.tolist(),
+                "names": list(space.names), "covariance_robust": (0.5 * (cov_rob + cov_rob.T)).tolist(),
+                "method": "joint: road runs by frequency-domain variable projection (rideid.estimate.roadfit)"}
+        nfev += int(sol.nfev) * (n + 1)
+    x = prob.x(z)
+    P = space.full(x[None])[0]
+    robust = estimate_covariance(info, space, x)
+    derived = space.derived_names()
+    details = {}
+    for nme in space.reported_names:
+        d = {"value": float(P[space.col[nme]]), "unit": UNITS.get(nme, ""), "fixed": nme in space.fixed,
+             "derived": nme in derived}
+        if nme in space.names:
+            j = space.names.index(nme)
+            d["lower"], d["upper"] = float(space.bounds[j, 0]), float(space.bounds[j, 1])
+            d["std"] = float(std[j]) if np.isfinite(std[j]) else None
+        elif nme in derived:
+            d["std"] = robust.std_white(nme)
+            d["lower"] = d["upper"] = None
+        else:
+            d["std"] = 0.0
+        d["std_robust"] = robust.std_robust(nme) if nme not in space.fixed else 0.0
+        details[nme] = d
+    # the roads, their classes and the fitted channels
+    roads, profiles, response = {}, {}, {}
+    for rr in rruns:
+        sol_r = roadfit.solve(P, geom, rr)
+        xr, zr = roadfit.road(P, geom, rr, sol_r)
+        cls, gd = iso8608_class(xr, zr, n_band=(1 / roadfit.ROAD_WAVELENGTHS[1], 1 / roadfit.ROAD_WAVELENGTHS[0]))
+        roads[rr.run_id] = {
+            "file": f"road/{rr.run_id}.csv", "iso8608_class": cls, "gd_n0": float(gd),
+            "gd_n0_unit": "m^3", "speed": rr.speed, "fit_band_hz": [float(roadfit.BAND[0]),
+                                                                   float(min(roadfit.BAND[1], 0.45 * rr.fs))],
+            "wavelengths_m": list(roadfit.ROAD_WAVELENGTHS),
+            "note": (f"the road's content at wavelengths {roadfit.ROAD_WAVELENGTHS[0]}-"
+                     f"{roadfit.ROAD_WAVELENGTHS[1]} m; the first and last {roadfit.ROAD_WAVELENGTHS[1]:.0f} m carry "
+                     "the record's ends and are less certain; adequacy not assessed on this run")}
+        profiles[rr.run_id] = (xr, zr)
+        response[rr.run_id] = roadfit.fitted_channels(P, geom, rr, ds.data[rr.run_id].matrix())
+    adequacy = None
+    if cf is not None:
+        resp_t = cf.simulate(P)
+        response.update(resp_t)
+        if assess:
+            adequacy = advise(assess_fit(cf, P, resp_t), {"extensions": list(ext)})
+            adequacy = dict(adequacy, not_assessed=list(roads),
+                            note="the verdict covers the runs on known tracks; runs on unknown roads are not assessed")
+    model_block = {"extensions": list(ext), "selection": "given" if note is None else "auto (not run: unknown roads)"}
+    if note:
+        model_block["note"] = note
+    pre = ds.preprocessing()
+    wall = time.perf_counter() - t0
+    res = IdentificationResult(
+        x=np.asarray(x, dtype=float), names=list(space.names), std=std, covariance=cov,
+        fun=float(np.nan if info is None else info["cost_after"] / max(len(prob(z)), 1)),
+        success=bool(info is None or info["success"]), message="unknown-road identification" +
+        ("" if info is None else f"; polish: {info['message']}"), stop=stop, nit=int(nit), nfev=int(nfev),
+        parameters={nme: float(P[space.col[nme]]) for nme in space.reported_names}, details=details,
+        known=dict(ds.known), wall_time_s=wall, seed=rng_record["seed"], rng_state=rng_record["rng_state"],
+        track_weights={}, weights_mode="equal", polish=info, history=History(history), starts={},
+        preprocessing=pre, modal=modal_summary(P[:len(ALL_NAMES)], geom), dataset=str(ds.path), maps=None,
+        model=model_block, response=response, correlation=robust.correlation_dict(), adequacy=adequacy,
+        checks=[f.to_dict() for f in getattr(ds, "findings", [])], roads=roads, road_profiles=profiles)
+    return res

@@ -1,0 +1,398 @@
+"""Identification on roads nobody measured (SPEC §9): frequency-domain variable projection.
+
+The problem
+-----------
+On an unknown road the car's input is unknown: the road under the left and
+right wheel paths, ``rho_L(x)`` and ``rho_R(x)``. The rear wheels roll over
+the front wheels' paths ``tau = wheelbase / speed`` later, so one run gives
+ten channels driven by two unknown signals. The car is linear (SPEC §1 with
+the §6 extensions and the CG height), so at each frequency ``omega`` of the
+run's discrete Fourier transform (DFT)
+
+    Y(omega) = A(omega) R(omega) + (boundary terms),
+    A = [H_fl + H_rl E, H_fr + H_rr E]                      (10 x 2),
+
+where ``H`` (10 x 4) is the car's transfer function from the four corner
+inputs to the channels (:func:`rideid.model.equations.state_space`, road
+rate terms included), ``R = [R_L, R_R]`` the DFT of the front wheels' road
+and ``E(omega)`` the rear wheels' delay. The road is a free complex pair at
+every frequency: it is *projected out* (variable projection, Golub and
+Pereyra): for given parameters the best road at each frequency is a 2-column
+least-squares solution and what is left, ``P_perp(omega) Y(omega)``, is the
+part of the ten channels no road can explain. Its squared sum over the
+frequencies is the cost; its stacked real and imaginary parts are the
+residuals the polish (:func:`fit`) and the uncertainty use.
+
+Why the car is identifiable although the road is unknown: with four
+independent corner inputs any tire and unsprung mass would explain the axle
+channels (solve each corner's road from its own axle equation); the delay
+ties the rear road to the front road, and ``E(omega) = exp(-i omega tau)``
+turns through every phase as the frequency rises, so a wrong tire, wrong
+unsprung mass or wrong suspension makes the front-inferred and the
+rear-inferred roads disagree at some frequencies. Eight accelerometers and
+two gyros against two unknown signals leave eight independent equations per
+frequency. What stays unidentifiable is what is unidentifiable with a known
+road too: every mass, inertia, stiffness and damping scaled by one factor
+leaves every transfer function unchanged (the road carries no scale of its
+own: ``A`` is unchanged and so is ``R``). One absolute value, normally the
+total mass, must be known, as for track runs.
+
+Exactness (why the DFT relation above holds to rounding)
+---------------------------------------------------------
+A finite record is not periodic. Two exact correction terms make the DFT
+relation exact rather than approximate (the approximate form leaves 0.2 %
+of the signal's energy unexplained at the true car and biases tires and
+unsprung masses by several per cent):
+
+* the *transient*: the run starts and ends in states the periodic solution
+  does not have. For a linear system sampled at ``h`` the sampled free
+  response's DFT is ``C (I - Phi z^-1)^-1 f`` with ``Phi = exp(A h)``,
+  ``z = exp(i omega h)`` and ``f = (I - Phi^N) x_0`` one real 14-vector per
+  run; it is unknown (the car may start moving, SPEC §9) and joins the
+  projection as 14 real unknowns;
+* the *rear wheels' lead-in*: during the first ``tau`` the rear wheels roll
+  over road the front wheels crossed before the record began, not over the
+  record's wrapped end. The rear input there is free: ``D`` real unknowns
+  per side (the samples ``0 .. D-1``), each acting through ``H_rl`` (``H_rr``)
+  as a delayed impulse.
+
+The delay itself is a fractional number of samples in general. The rear
+input is the front road sampled between the front wheels' samples; it is
+taken as a Lagrange interpolating filter of order :data:`DELAY_ORDER` on
+the front samples (``E(omega)`` its frequency response), exact for road
+content well inside the sampling band. Road content at wavelengths shorter
+than about two sample spacings (``speed / fs``) is seen by the rear wheel
+between the front wheel's samples and by neither sample sequence: it breaks
+the front/rear consistency like input noise. Measured: a road profile given
+on a 5 cm grid (linear interpolation kinks) at 15 m/s and 200 Hz biases the
+tires by -0.5 %; on a 1 cm grid by < 0.02 %; :data:`BAND` stops at 25 Hz for
+the same reason. docs/roads.md says what this asks of a logging rate.
+
+The global unknowns' normal equations are assembled in closed form: the
+lead-in columns at one frequency are one projected vector times
+``exp(-i omega n h)``, so their Gram matrix is a function of ``n - m`` only
+(Toeplitz) and costs one sum over frequencies per lag.
+
+Uncertainty: DFT residuals at different frequencies are uncorrelated for
+any stationary noise (white or coloured), with a variance that may change
+with frequency; ``std`` assumes one variance, ``std_robust`` is the
+sandwich with each frequency's residual block as its own cluster (White's
+estimator over frequencies), which stays honest under coloured noise and
+channels with unequal noise.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.linalg
+
+from ..model.equations import state_space
+from ..model.params import Geometry
+
+#: the fit band (Hz): below, the accelerations carry little of the road; above, the road between
+#: samples (module docstring) and the logger's anti-alias filter take over
+BAND = (0.2, 25.0)
+#: order of the Lagrange filter of the rear wheels' fractional delay
+DELAY_ORDER = 8
+#: the reconstructed road's wavelength band (m), SPEC §9 and issue 26's acceptance band
+ROAD_WAVELENGTHS = (0.5, 20.0)
+#: the search's cost uses every STRIDE-th bin of a Hann-windowed DFT
+SEARCH_BINS = 400
+
+
+@dataclass(frozen=True)
+class RoadRun:
+    """One unknown-road run prepared for the fit.
+
+    Attributes
+    ----------
+    run_id : str
+    fs, speed : float
+        Sample rate (Hz) and constant speed (m/s).
+    n : int
+        Samples.
+    cols : (c,) int
+        The channels used (:data:`rideid.model.equations.CHANNELS` indices).
+    scale : (c,)
+        Each used channel's weight, 1 / its RMS.
+    Y : (nbins, c) complex
+        ``rfft`` of the weighted channels (every bin).
+    fit : (K,) int
+        The bins of the fit band.
+    search : (Ks,) int, Ys : (Ks, c) complex
+        The search's bins and its Hann-windowed DFT there.
+    tau : float
+        Rear wheels' delay (s).
+    """
+
+    run_id: str
+    fs: float
+    speed: float
+    n: int
+    cols: np.ndarray
+    scale: np.ndarray
+    Y: np.ndarray
+    fit: np.ndarray
+    search: np.ndarray
+    Ys: np.ndarray
+    tau: float
+
+    @property
+    def h(self) -> float:
+        return 1.0 / self.fs
+
+    def omega(self, bins) -> np.ndarray:
+        return 2 * np.pi * np.asarray(bins) * self.fs / self.n
+
+    @property
+    def lead_in(self) -> int:
+        """Rear lead-in unknowns per side (samples ``0 .. D-1``)."""
+        return int(np.floor(self.tau * self.fs)) + DELAY_ORDER + 2
+
+
+def prepare_road_run(run_id: str, y, fs: float, speed: float, geom: Geometry, cols=None,
+                     band=BAND) -> RoadRun:
+    """Prepare a run's channels ``y`` (n, 10; NaN columns unused) for :func:`residuals` and :func:`search_costs`."""
+    y = np.asarray(y, dtype=float)
+    if cols is None:
+        cols = np.nonzero(np.isfinite(y).all(axis=0) & (np.nanstd(y, axis=0) > 0))[0]
+    cols = np.asarray(cols, dtype=int)
+    yc = y[:, cols]
+    yc = yc - yc.mean(axis=0)
+    scale = 1.0 / np.sqrt(np.mean(yc ** 2, axis=0))
+    n = yc.shape[0]
+    Y = np.fft.rfft(yc * scale, axis=0)
+    f = np.fft.rfftfreq(n, 1.0 / fs)
+    fit = np.nonzero((f >= band[0]) & (f <= min(band[1], 0.45 * fs)))[0]
+    stride = max(1, fit.size // SEARCH_BINS)
+    search = fit[::stride]
+    Ys = np.fft.rfft(yc * scale * np.hanning(n)[:, None], axis=0)[search]
+    return RoadRun(run_id=run_id, fs=float(fs), speed=float(speed), n=n, cols=cols, scale=scale, Y=Y, fit=fit,
+                   search=search, Ys=Ys, tau=geom.wheelbase / float(speed))
+
+
+def delay_filter(tau: float, h: float, order: int = DELAY_ORDER):
+    """Lagrange fractional-delay filter: taps ``ks`` (samples) and coefficients ``c`` with
+    ``u(t - tau) ~ sum c_j u(t - ks_j h)``."""
+    dl = tau / h
+    k0 = int(np.floor(dl)) - (order - 1) // 2
+    ks = np.arange(k0, k0 + order + 1)
+    c = np.array([np.prod([(dl - j) / (k - j) for j in ks if j != k]) for k in ks])
+    return ks, c
+
+
+#: eigenvector matrices worse conditioned than this use the direct solves instead of the modal form
+MODAL_COND = 1e8
+
+
+def _modal(A):
+    """Eigenvalues and eigenvectors of each ``A`` (n, 14, 14), and whether the modal form is safe."""
+    lam, V = np.linalg.eig(A)
+    ok = np.linalg.cond(V) < MODAL_COND
+    Vi = np.full_like(V, np.nan)
+    if ok.any():
+        Vi[ok] = np.linalg.inv(V[ok])
+    return lam, V, Vi, ok
+
+
+def transfer(P, geom: Geometry, omega, cols) -> np.ndarray:
+    """``H(i omega)`` (n, K, c, 4) of parameter rows ``P`` (n, 16): the used channels' response to the
+    corner inputs fl, fr, rl, rr (road rate terms of tire damping included).
+
+    Modal form ``C V diag(1 / (s - lambda)) V^-1 (B + s B_r)`` where the eigenvectors are well
+    conditioned, else one linear solve per frequency (tested equal to the explicit inverse)."""
+    A, B, Cy, Dy, Br, Dyr = state_space(np.atleast_2d(P), geom, rate=True)
+    s = 1j * np.asarray(omega)
+    n = A.shape[0]
+    lam, V, Vi, ok = _modal(A)
+    H = np.empty((n, s.size, len(cols), 4), dtype=complex)
+    for p in range(n):
+        if ok[p]:
+            CV = Cy[p, cols] @ V[p]
+            g = 1.0 / (s[:, None] - lam[p][None])                                            # (K,14)
+            rhs = (Vi[p] @ B[p])[None] + s[:, None, None] * (Vi[p] @ Br[p])[None]            # (K,14,4)
+            H[p] = (CV[None] * g[:, None, :]) @ rhs
+        else:
+            Ms = s[:, None, None] * np.eye(14) - A[p][None]
+            X = np.linalg.solve(Ms, B[p][None] + s[:, None, None] * Br[p][None])
+            H[p] = Cy[p, cols][None] @ X
+        H[p] += Dy[p, cols][None] + s[:, None, None] * Dyr[p, cols][None]
+    return H
+
+
+def _road_columns(H, E):
+    """``A`` (..., K, c, 2): the left and right front roads' columns (rear through the delay ``E``)."""
+    return np.stack([H[..., 0] + H[..., 2] * E[..., :, None], H[..., 1] + H[..., 3] * E[..., :, None]], -1)
+
+
+def _projector(Acol):
+    """``x -> P_perp x`` at each bin, and the road solution ``x -> (A^H A)^-1 A^H x``."""
+    AH = np.conj(np.swapaxes(Acol, -1, -2))
+    G = AH @ Acol
+    det = (G[..., 0, 0] * G[..., 1, 1] - G[..., 0, 1] * G[..., 1, 0])[..., None, None]
+    Gi = np.stack([np.stack([G[..., 1, 1], -G[..., 0, 1]], -1), np.stack([-G[..., 1, 0], G[..., 0, 0]], -1)], -2) / det
+
+    def road(X):
+        return Gi @ (AH @ X)
+
+    def perp(X):
+        return X - Acol @ road(X)
+
+    return perp, road
+
+
+def search_costs(P, geom: Geometry, runs) -> np.ndarray:
+    """Approximate cost (n,) of parameter rows ``P`` (n, 16) for the global search: the projected
+    residual of a Hann-windowed DFT at a few hundred bins, without the boundary unknowns (a few per
+    cent of bias, no more than the search needs; the polish uses :func:`residuals`)."""
+    P = np.atleast_2d(P)
+    cost = np.zeros(P.shape[0])
+    for rr in runs:
+        w = rr.omega(rr.search)
+        H = transfer(P, geom, w, rr.cols) * rr.scale[None, None, :, None]
+        ks, c = delay_filter(rr.tau, rr.h)
+        E = np.exp(-1j * np.outer(w * rr.h, ks)) @ c
+        perp, _ = _projector(_road_columns(H, E[None]))
+        r = perp(np.broadcast_to(rr.Ys[None, :, :, None], H.shape[:3] + (1,)))[..., 0]
+        cost += np.sum(np.abs(r) ** 2, axis=(1, 2)) / np.sum(np.abs(rr.Ys) ** 2)
+    return cost / len(runs)
+
+
+@dataclass
+class Solution:
+    """The projection at one car: residual (K, c) at the fit bins, the global unknowns and what the
+    road solution needs."""
+
+    residual: np.ndarray
+    f_state: np.ndarray
+    f_lead: np.ndarray
+    rr: RoadRun
+
+
+def _discrete_columns(P, geom, omega, cols, h):
+    """Transient columns ``C (I - Phi z^-1)^-1`` (K, c, 14) of the sampled free response, ``Phi = exp(A h)``."""
+    A, B, Cy, Dy = state_space(np.atleast_2d(P), geom)
+    zi = np.exp(-1j * np.asarray(omega) * h)
+    lam, V, Vi, ok = _modal(A)
+    if ok[0]:
+        g = 1.0 / (1.0 - zi[:, None] * np.exp(lam[0] * h)[None])                           # (K,14)
+        return ((Cy[0, cols] @ V[0])[None] * g[:, None, :]) @ Vi[0][None]
+    Phi = scipy.linalg.expm(A[0] * h)
+    M = np.eye(14)[None] - zi[:, None, None] * Phi[None]
+    X = np.linalg.solve(M, np.broadcast_to(np.eye(14), M.shape))
+    return Cy[0, cols][None] @ X
+
+
+def solve(P, geom: Geometry, rr: RoadRun, bins=None) -> Solution:
+    """Project the road out of run ``rr`` at the car ``P`` (16,) (module docstring): the residual at
+    the fit bins and the global unknowns (transient ``f``, rear lead-in samples)."""
+    bins = rr.fit if bins is None else bins
+    w = rr.omega(bins)
+    h = rr.h
+    H = transfer(P, geom, w, rr.cols)[0] * rr.scale[None, :, None]                           # (K,c,4)
+    ks, c = delay_filter(rr.tau, h)
+    E = np.exp(-1j * np.outer(w * h, ks)) @ c
+    perp, _ = _projector(_road_columns(H, E))
+    S = perp(_discrete_columns(P, geom, w, rr.cols, h) * rr.scale[None, :, None])            # (K,c,14)
+    aL = perp(H[:, :, 2:3])[..., 0]                                                          # (K,c)
+    aR = perp(H[:, :, 3:4])[..., 0]
+    r = perp(rr.Y[bins][:, :, None])[..., 0]                                                 # (K,c)
+    D = rr.lead_in
+    lags = np.arange(-(D - 1), D)
+    ph = np.exp(1j * np.outer(w * h, lags))                                                  # (K, 2D-1)
+
+    def toeplitz(q):  # (K,) -> (D, D): sum_k q_k exp(i w (n - m) h)
+        g = (q @ ph).real
+        idx = np.arange(D)[:, None] - np.arange(D)[None, :] + (D - 1)
+        return g[idx]
+
+    en = np.exp(-1j * np.outer(w * h, np.arange(D)))                                         # (K, D)
+    Sf = S.reshape(-1, 14)
+    SH = np.conj(np.swapaxes(S, 1, 2))                                                        # (K,14,c)
+    G = np.zeros((14 + 2 * D, 14 + 2 * D))
+    b = np.zeros(14 + 2 * D)
+    Sr = np.concatenate([Sf.real, Sf.imag])
+    G[:14, :14] = Sr.T @ Sr
+    b[:14] = Sr.T @ np.concatenate([r.real.ravel(), r.imag.ravel()])
+    for j, a in enumerate((aL, aR)):
+        sl = slice(14 + j * D, 14 + (j + 1) * D)
+        G[:14, sl] = ((SH @ a[:, :, None])[..., 0].T @ en).real
+        G[sl, :14] = G[:14, sl].T
+        b[sl] = (np.sum(np.conj(a) * r, axis=1) @ np.conj(en)).real
+        for i, a2 in enumerate((aL, aR)):
+            sl2 = slice(14 + i * D, 14 + (i + 1) * D)
+            # (n, m): sum_k conj(a e^{-iwnh}) a2 e^{-iwmh} = sum_k conj(a) a2 e^{iw(n-m)h}
+            G[sl, sl2] = toeplitz(np.sum(np.conj(a) * a2, axis=1))
+    d = np.sqrt(np.clip(np.diag(G), 1e-300, None))
+    f = np.linalg.lstsq(G / np.outer(d, d), b / d, rcond=1e-13)[0] / d
+    fS, fL, fR = f[:14], f[14:14 + D], f[14 + D:]
+    res = r - S @ fS - aL * (en @ fL)[:, None] - aR * (en @ fR)[:, None]
+    return Solution(residual=res, f_state=fS, f_lead=np.stack([fL, fR]), rr=rr)
+
+
+def residuals(P, geom: Geometry, rr: RoadRun) -> np.ndarray:
+    """Real residual vector (2 K c,) of run ``rr`` at the car ``P``: real and imaginary parts, bin-major."""
+    r = solve(P, geom, rr).residual
+    return np.concatenate([r.real, r.imag], axis=1).ravel()
+
+
+def road(P, geom: Geometry, rr: RoadRun, sol: Solution | None = None, wavelengths=ROAD_WAVELENGTHS):
+    """The estimated road under the left and right wheel paths.
+
+    The road's DFT is solved at every bin from half the band's lowest frequency to 1.5 times its highest
+    (within 0.45 fs), then band-passed to ``wavelengths`` by a zero-phase Butterworth filter
+    (:func:`band_pass`): a smooth filter keeps the record's ends (where the start's state and the road
+    just before it cannot be told apart) from ringing into the middle as a brick-wall cut would.
+
+    Returns
+    -------
+    x : (n,) m, the front axle's position from its position at the first sample
+    z : (n, 2) m, left and right road heights over ``wavelengths`` (the road's content the accelerations
+        carry; outside, nothing is claimed)
+    """
+    sol = solve(P, geom, rr) if sol is None else sol
+    f = np.fft.rfftfreq(rr.n, rr.h)
+    lo, hi = 0.5 * rr.speed / wavelengths[1], min(1.5 * rr.speed / wavelengths[0], 0.45 * rr.fs)
+    bins = np.nonzero((f >= lo) & (f <= hi))[0]
+    w = rr.omega(bins)
+    h = rr.h
+    H = transfer(P, geom, w, rr.cols)[0] * rr.scale[None, :, None]
+    ks, c = delay_filter(rr.tau, h)
+    E = np.exp(-1j * np.outer(w * h, ks)) @ c
+    _, road_of = _projector(_road_columns(H, E))
+    D = rr.lead_in
+    en = np.exp(-1j * np.outer(w * h, np.arange(D)))
+    known = (_discrete_columns(P, geom, w, rr.cols, h) * rr.scale[None, :, None]) @ sol.f_state \
+        + H[:, :, 2] * (en @ sol.f_lead[0])[:, None] + H[:, :, 3] * (en @ sol.f_lead[1])[:, None]
+    # the boundary unknowns are fitted in the fit band only: outside it their spectrum is not determined
+    # (D free samples have content up to the Nyquist frequency), and subtracting it would add noise there
+    known[~np.isin(bins, rr.fit)] = 0.0
+    R = road_of((rr.Y[bins] - known)[:, :, None])[..., 0]                                  # (K, 2)
+    full = np.zeros((f.size, 2), dtype=complex)
+    full[bins] = R
+    x = rr.speed * np.arange(rr.n) * h
+    return x, band_pass(np.fft.irfft(full, n=rr.n, axis=0), rr.speed * h, wavelengths)
+
+
+def band_pass(z, dx: float, wavelengths=ROAD_WAVELENGTHS):
+    """Zero-phase 4th-order Butterworth band-pass of road heights ``z`` (n, ...) sampled every ``dx`` m to
+    the ``wavelengths`` (m) band (the comparison docs/any-road.md and the tests make with a true road)."""
+    from scipy.signal import butter, sosfiltfilt
+    nyq = 0.5 / dx
+    hi = min(1.0 / wavelengths[0], 0.95 * nyq)
+    sos = butter(4, [1.0 / wavelengths[1], hi], btype="band", fs=1.0 / dx, output="sos")
+    return sosfiltfilt(sos, z, axis=0)
+
+
+def fitted_channels(P, geom: Geometry, rr: RoadRun, y) -> np.ndarray:
+    """The model's channels (n, 10) at the estimated road: the measured ones minus the residual of the
+    fit band (NaN for unused channels). Outside the fit band the residual is not modelled (zero)."""
+    sol = solve(P, geom, rr)
+    full = np.zeros(rr.Y.shape, dtype=complex)
+    full[rr.fit] = sol.residual
+    e = np.fft.irfft(full, n=rr.n, axis=0) / rr.scale
+    out = np.full((rr.n, 10), np.nan)
+    out[:, rr.cols] = np.asarray(y, dtype=float)[:, rr.cols] - e
+    return out

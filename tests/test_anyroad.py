@@ -1,0 +1,115 @@
+"""Identification with runs on unknown roads (SPEC §9, rideid.estimate.anyroad) from the command line and Python:
+the car, its error bars, the estimated roads and their classes, mixed datasets, and what is refused."""
+
+import json
+import tomllib
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+import tomli_w
+
+import rideid
+from rideid.cli import main
+from rideid.errors import DataError
+from rideid.data.scenario import default_scenario
+from rideid.estimate import anyroad, roadfit
+from rideid.model.params import total_mass
+
+RUNS = [{"id": "B40", "road_class": "B", "speed": 11.0, "fs": 200.0, "duration": 20.0},
+        {"id": "C25", "road_class": "C", "speed": 7.0, "fs": 200.0, "duration": 20.0}]
+TWIST = {"id": "tw", "kind": "chassis_twist", "start": 3.0, "height": 0.03, "bump_length": 1.6, "spacing": 4.0,
+         "bumps": 2}
+
+
+def simulate(tmp_path, runs, tracks=None, noise=0.02, seed=3):
+    """The built-in car on ``runs``. (Not the SUV of tests/cars.py: on these two short slow runs its unsprung
+    masses and tires are barely determined, -47 % +- 187 % measured, honestly but uselessly: its front and
+    rear ends respond so alike that the rear wheels' repeat of the road tells little; docs/any-road.md.)"""
+    sc = default_scenario()
+    g = sc.geometry
+    doc = {"name": "roads", "vehicle": {k: getattr(g, k) for k in g.KEYS},
+           "known": {"total_mass": float(total_mass(dict(sc.truth)))}, "truth": dict(sc.truth), "runs": runs}
+    if tracks:
+        doc["tracks"] = tracks
+    (tmp_path / "sc.toml").write_text(tomli_w.dumps(doc))
+    assert main(["simulate", str(tmp_path / "sc.toml"), "--out", str(tmp_path / "sim"), "--noise", str(noise),
+                 "--seed", str(seed), "--quiet"]) == 0
+    return tmp_path / "sim"
+
+
+@pytest.fixture(scope="module")
+def road_fit(tmp_path_factory):
+    d = tmp_path_factory.mktemp("anyroad")
+    sim = simulate(d, RUNS)
+    rc = main(["identify", str(sim), "--out", str(d / "fit"), "--seed", "1", "--quiet"])
+    return rc, sim, d / "fit"
+
+
+def test_the_car_from_two_unknown_roads(road_fit):
+    rc, sim, fit = road_fit
+    assert rc == 0
+    doc = json.loads((fit / "result.json").read_text())
+    truth = tomllib.loads((sim / "truth.toml").read_text())["truth"]
+    for n, t in truth.items():
+        d = doc["parameters"][n]
+        err = d["value"] - t
+        # within 1 % (issue 26's bar) and within 4 std_robust (one seed; the coverage study is docs/any-road.md's)
+        assert abs(err) < 0.01 * t, (n, d["value"], t)
+        assert abs(err) < 4 * d["std_robust"], (n, err / d["std_robust"])
+    assert doc["adequacy"] is None  # no residual test on unknown roads: said, not faked
+    assert "auto" in doc["model"]["selection"] and "not run on unknown roads" in doc["model"]["note"]
+
+
+def test_the_roads_and_their_classes(road_fit):
+    _, sim, fit = road_fit
+    doc = json.loads((fit / "result.json").read_text())
+    truth_roads = tomllib.loads((sim / "truth.toml").read_text())["roads"]
+    for rid, cls in (("B40", "B"), ("C25", "C")):
+        rec = doc["roads"][rid]
+        assert rec["iso8608_class"] == cls == truth_roads[rid]["road_class"]
+        est = np.loadtxt(fit / rec["file"], delimiter=",", skiprows=1)
+        assert (fit / rec["file"]).read_text().splitlines()[0] == "x,z_left,z_right"
+        tru = np.loadtxt(sim / "road_truth" / f"{rid}.csv", delimiter=",", skiprows=1)
+        x = est[:, 0]
+        dx = x[1] - x[0]
+        inner = (x > 20.0) & (x < x[-1] - 20.0)
+        for k in (1, 2):  # left, right: within 10 % RMS over 0.5-20 m wavelengths (issue 26), away from the ends
+            zt = roadfit.band_pass(np.interp(x, tru[:, 0], tru[:, k]), dx)
+            err = np.sqrt(np.mean((est[inner, k] - zt[inner]) ** 2) / np.mean(zt[inner] ** 2))
+            assert err < 0.10, (rid, k, err)
+    res = rideid.load_result(fit)  # the roads come back with the result
+    assert set(res.road_profiles) == {"B40", "C25"} and res.roads["B40"]["iso8608_class"] == "B"
+    assert (fit / "report.html").is_file() and (fit / "figures" / "road_B40.png").is_file()
+
+
+def test_a_dataset_mixing_a_track_and_a_road(tmp_path):
+    sim = simulate(tmp_path, [RUNS[0], {"id": "T", "track": "tw", "speed": 4.0, "fs": 200.0, "duration": 8.0}],
+                   [TWIST], noise=0.01)
+    ds = rideid.load_dataset(sim)
+    assert [r.id for r in anyroad.unknown_road_runs(ds)] == ["B40"]
+    res = rideid.identify(ds, rng=2, model="base")
+    truth = tomllib.loads((sim / "truth.toml").read_text())["truth"]
+    for n, t in truth.items():
+        assert abs(res.parameters[n] / t - 1) < 0.01, n
+    assert res.adequacy["not_assessed"] == ["B40"] and "known tracks" in res.adequacy["note"]
+    assert set(res.response) == {"B40", "T"}
+
+
+def test_a_nonlinear_model_is_refused_with_road_runs(road_fit, tmp_path, capsys):
+    _, sim, _ = road_fit
+    rc = main(["identify", str(sim), "--out", str(tmp_path / "f"), "--model", "damper_curves", "--quiet"])
+    err = capsys.readouterr().err
+    assert rc == 2 and len(err.strip().splitlines()) == 1 and not (tmp_path / "f").exists()
+    assert "damper_curves" in err and "unknown roads (B40, C25)" in err
+
+
+def test_an_unknown_road_needs_a_steady_speed():
+    t = np.arange(0, 20, 0.005)
+    steady = SimpleNamespace(time=t, distance=lambda tt: 10.0 * tt + 0.05 * np.sin(tt))
+    run = SimpleNamespace(id="R1", speed=None)
+    ds = SimpleNamespace(data={"R1": steady})
+    assert anyroad.run_speed(ds, run) == pytest.approx(10.0, rel=1e-3)
+    ds.data["R1"] = SimpleNamespace(time=t, distance=lambda tt: 8.0 * tt + 0.1 * tt ** 2)  # 8 -> 12 m/s
+    with pytest.raises(DataError, match=r"run 'R1': an unknown-road run needs a constant speed .* from 8\.00 to 12\.00"):
+        anyroad.run_speed(ds, run)

@@ -1,0 +1,145 @@
+"""The car on an unknown road (rideid.estimate.roadfit): closed forms, exactness, scale invariance, recovery."""
+
+import numpy as np
+import pytest
+from scipy.optimize import least_squares
+
+from rideid.data.scenario import default_scenario
+from rideid.estimate import roadfit
+from rideid.model.equations import CHANNELS, state_space
+from rideid.model.params import ALL_NAMES, INDEX, NAMES, as_vector
+from rideid.model.roads import iso8608_profile
+from rideid.model.simulate import prepare_run, simulate_reference
+from rideid.model.tracks import Track
+
+FS = 200.0
+
+
+def car():
+    sc = default_scenario()
+    P = as_vector({n: sc.truth.get(n, 0.0) for n in ALL_NAMES}, extended=True)
+    P[INDEX["k_arf"]] = 8000.0  # a front bar: the model's extensions too
+    return sc.geometry, P
+
+
+def road_run(tmp_path, P, geom, speed=12.0, T=20.0, pre=3.0, seed=1, road_class="B", dx=0.01):
+    """Channels of the car moving over a random road (the first sample already moving) and its true inputs."""
+    x0 = -(geom.wheelbase + speed * pre + 2.0)
+    length = speed * (T + pre) + geom.wheelbase + 6.0
+    x, zl, zr = iso8608_profile(road_class, length, np.random.default_rng(seed), dx=dx, x0=x0,
+                                track_width=geom.track_front)
+    f = tmp_path / f"road{seed}.csv"
+    np.savetxt(f, np.column_stack([x + speed * pre, zl, zr]), delimiter=",", header="x,z_left,z_right",
+               comments="")
+    tr = Track.from_table({"id": "r", "kind": "profile", "file": str(f)}, "test")
+    t = np.arange(int(round((T + pre) * FS)) + 1) / FS
+    run = prepare_run(tr, geom, speed, t)
+    k0 = int(round(pre * FS))
+    y = simulate_reference(P[None], geom, run)[0][k0:]
+    return y, run.u[k0:]
+
+
+@pytest.fixture(scope="module")
+def data(tmp_path_factory):
+    geom, P = car()
+    y, u = road_run(tmp_path_factory.mktemp("road"), P, geom)
+    return geom, P, y, u, roadfit.prepare_road_run("R", y, FS, 12.0, geom)
+
+
+def test_transfer_matches_the_state_space_and_the_static_limit(data):
+    geom, P, _, _, rr = data
+    cols = np.arange(10)
+    w = np.array([0.02, 2 * np.pi * 1.3, 2 * np.pi * 11.0])
+    H = roadfit.transfer(P[None], geom, w, cols)[0]
+    A, B, Cy, Dy, Br, Dyr = (a[0] for a in state_space(P[None], geom, rate=True))
+    for k, wk in enumerate(w):  # the modal form against the explicit inverse (both lose digits as w -> 0)
+        s = 1j * wk
+        ref = Cy @ np.linalg.inv(s * np.eye(14) - A) @ (B + s * Br) + Dy + s * Dyr
+        tol = 1e-6 if k == 0 else 1e-9
+        assert np.allclose(H[k], ref, rtol=tol, atol=tol * 1e-3 * np.abs(ref).max())
+    # a road rising under all four wheels at once lifts the whole car: every accelerometer reads -w^2 times it
+    acc = [CHANNELS.index(c) for c in CHANNELS if "_az_" in c]
+    assert np.allclose(H[0, acc].sum(axis=1) / -(w[0] ** 2), 1.0, rtol=1e-3)  # (w / w_bounce)^2 ~ 1e-5
+    assert np.all(np.abs(H[0, [8, 9]].sum(axis=1)) < 1e-6 * w[0])  # and no gyro sees it
+
+
+def test_delay_filter_is_exact_on_polynomials():
+    ks, c = roadfit.delay_filter(0.3137, 1 / FS)
+    assert np.isclose(c.sum(), 1.0)
+    t = -ks / FS  # the samples' times relative to "now"; the filter gives the value 0.3137 s ago
+    for p in range(roadfit.DELAY_ORDER + 1):
+        assert np.isclose(c @ t ** p, (-0.3137) ** p, rtol=1e-8, atol=1e-12)
+
+
+def test_the_projection_is_exact_at_the_true_car(data):
+    geom, P, _, _, rr = data
+    r = roadfit.residuals(P, geom, rr)
+    signal = np.sum(np.abs(rr.Y[rr.fit]) ** 2)
+    assert r @ r / signal < 1e-7
+    # a tire 1 % off is seen: more than a thousand times the residual of the true car
+    P2 = P.copy()
+    P2[INDEX["k_tf"]] *= 1.01
+    r2 = roadfit.residuals(P2, geom, rr)
+    assert r2 @ r2 > 1e3 * (r @ r)
+
+
+def test_tire_damping_sees_the_road_rate(tmp_path):
+    """With tire damping the road's rate drives the wheels: the projection carries it (``i w R``). The true car
+    still fits to 1e-6 of the signal (not 1e-9 as without: the rate of a profile interpolated between 1 cm
+    samples jumps at every sample, texture the rear wheels meet between the front wheels' samples)."""
+    geom, P = car()
+    P[INDEX["c_tf"]] = P[INDEX["c_tr"]] = 150.0
+    y, _ = road_run(tmp_path, P, geom, T=10.0)
+    rr = roadfit.prepare_road_run("R", y, FS, 12.0, geom)
+    r = roadfit.residuals(P, geom, rr)
+    Q = P.copy()
+    Q[INDEX["c_tf"]] = Q[INDEX["c_tr"]] = 0.0
+    q = roadfit.residuals(Q, geom, rr)
+    signal = np.sum(np.abs(rr.Y[rr.fit]) ** 2)
+    assert r @ r / signal < 1e-6
+    assert q @ q > 10 * (r @ r)  # and the tire damper is seen
+
+
+def test_one_scale_is_unidentifiable(data):
+    """Every mass, inertia, stiffness and damping times one factor: the same residual (the road absorbs nothing)."""
+    geom, P, _, _, rr = data
+    Q = P.copy()
+    for n in ALL_NAMES:
+        if n != "a":
+            Q[INDEX[n]] *= 1.7
+    r, q = roadfit.residuals(P, geom, rr), roadfit.residuals(Q, geom, rr)
+    assert np.allclose(q, r, rtol=1e-6, atol=1e-6 * np.abs(r).max())
+
+
+def test_the_rear_delay_carries_the_tires(data):
+    """Without the delay's phase (rear wheels taken as on the front's road at once) the true car no longer fits."""
+    geom, P, _, _, rr = data
+    from dataclasses import replace
+    r = roadfit.residuals(P, geom, rr)
+    wrong = roadfit.residuals(P, geom, replace(rr, tau=rr.tau * 0.9))
+    assert wrong @ wrong > 1e4 * (r @ r)
+
+
+def test_noise_free_recovery_and_the_road(data):
+    geom, P, y, u, rr = data
+    free = [n for n in NAMES if n != "m_s"]
+    M = P[INDEX["m_s"]] + 2 * P[INDEX["m_uf"]] + 2 * P[INDEX["m_ur"]]
+
+    def full(lt):
+        Q = P.copy()
+        for n, v in zip(free, np.exp(lt)):
+            Q[INDEX[n]] = v
+        Q[INDEX["m_s"]] = M - 2 * Q[INDEX["m_uf"]] - 2 * Q[INDEX["m_ur"]]
+        return Q
+
+    th = np.log([P[INDEX[n]] for n in free])
+    start = th + np.log(np.random.default_rng(3).uniform(0.97, 1.03, th.size))
+    sol = least_squares(lambda lt: roadfit.residuals(full(lt), geom, rr), start, diff_step=1e-7)
+    assert np.max(np.abs(sol.x - th)) < 5e-4, dict(zip(free, np.round(100 * (sol.x - th), 4)))
+    # the road: front-left input within 5 % RMS over 0.5-20 m wavelengths, away from the record's ends
+    x, z = roadfit.road(full(sol.x), geom, rr)
+    truth = roadfit.band_pass(u[:, 0], rr.speed / FS)
+    inner = (x > 20.0) & (x < x[-1] - 20.0)
+    err = np.sqrt(np.mean((z[inner, 0] - truth[inner]) ** 2) / np.mean(truth[inner] ** 2))
+    assert err < 0.05
+    assert np.isclose(x[1] - x[0], rr.speed / FS)
