@@ -46,12 +46,12 @@ from ..data.schema import NONLINEAR_GROUPS
 from ..errors import ArgumentError, DataError
 from ..model.batch import single_threaded_blas
 from ..model.equations import modal_summary
-from ..model.params import ALL_NAMES, UNITS
+from ..model.params import ALL_NAMES
 from ..model.roads import iso8608_class
 from . import roadfit
 from .adequacy import advise, assess_fit
 from .cost import CostFunction, ParameterSpace, refuse_unsupported_groups
-from .identify import DEFAULT_GENERATIONS, DEFAULT_POPULATION, _relative_spread, model_extensions
+from .identify import DEFAULT_GENERATIONS, DEFAULT_POPULATION, _relative_spread, model_extensions, parameter_detail
 from .identify import identify as identify_model
 from .jade import JadeSolver, make_rng, stop_requested
 from .result import History, IdentificationResult
@@ -334,22 +334,7 @@ def _identify_any_road(ds, *, rng=None, seed=None, population=None, generations=
     x = prob.x(z)
     P = space.full(x[None])[0]
     robust = estimate_covariance(info, space, x)
-    derived = space.derived_names()
-    details = {}
-    for nme in space.reported_names:
-        d = {"value": float(P[space.col[nme]]), "unit": UNITS.get(nme, ""), "fixed": nme in space.fixed,
-             "derived": nme in derived}
-        if nme in space.names:
-            j = space.names.index(nme)
-            d["lower"], d["upper"] = float(space.bounds[j, 0]), float(space.bounds[j, 1])
-            d["std"] = float(std[j]) if np.isfinite(std[j]) else None
-        elif nme in derived:
-            d["std"] = robust.std_white(nme)
-            d["lower"] = d["upper"] = None
-        else:
-            d["std"] = 0.0
-        d["std_robust"] = robust.std_robust(nme) if nme not in space.fixed else 0.0
-        details[nme] = d
+    details = {nme: parameter_detail(space, P, nme, std, cov, robust) for nme in space.reported_names}
     # the roads, their classes and the fitted channels
     roads, profiles, response = {}, {}, {}
     for rr in rruns:

@@ -451,24 +451,9 @@ def _result(ds, cf, search, fit, weighting, maps, rng_record, wall, assess=True,
     final_E = cf.run_errors(x[None])[:, 0]
     P = space.full(x[None])[0]
     robust = estimate_covariance(info, space, x)
-    derived = space.derived_names()
     details = {}
     for n in space.reported_names:
-        e = {"value": float(P[space.col[n]]), "unit": UNITS.get(n, BUMP_UNITS.get(n, "N")), "fixed": n in space.fixed,
-             "derived": n in derived}
-        if n in cf.names:
-            j = cf.names.index(n)
-            e["lower"], e["upper"] = float(cf.bounds[j, 0]), float(cf.bounds[j, 1])
-            e["std"] = None if not np.isfinite(std[j]) else float(std[j])
-        elif n == space.derived:
-            e["std"] = _derived_std(space, cov)
-            e["lower"] = e["upper"] = None  # follows from the anchor: never searched
-        elif n in derived:
-            e["std"] = robust.std_white(n)
-            e["lower"] = e["upper"] = None
-        else:
-            e["std"] = 0.0
-        e["std_robust"] = robust.std_robust(n) if n not in space.fixed else 0.0
+        e = parameter_detail(space, P, n, std, cov, robust)
         if n in space.frozen:  # a knot no run excites: continued, not measured
             e["std"] = e["std_robust"] = None
             e["excited"] = False
@@ -511,6 +496,28 @@ def _result(ds, cf, search, fit, weighting, maps, rng_record, wall, assess=True,
                                                             excitation),
         bump_stops=None if not space.bump else bump_block(space, P, robust.white, robust.robust, robust.names,
                                                           bumps))
+
+
+def parameter_detail(space, P, n: str, std, cov, robust) -> dict:
+    """Parameter ``n``'s ``result.json`` entry: value, unit, fixed/derived, search bounds, ``std`` (white)
+    and ``std_robust``, from the full row ``P``, the free parameters' ``std`` and white covariance ``cov``
+    and the :class:`~rideid.estimate.uncertainty.EstimateCovariance` ``robust``."""
+    e = {"value": float(P[space.col[n]]), "unit": UNITS.get(n, BUMP_UNITS.get(n, "N")), "fixed": n in space.fixed,
+         "derived": n in space.derived_names()}
+    if n in space.names:
+        j = space.names.index(n)
+        e["lower"], e["upper"] = float(space.bounds[j, 0]), float(space.bounds[j, 1])
+        e["std"] = None if not np.isfinite(std[j]) else float(std[j])
+    elif n == space.derived:
+        e["std"] = _derived_std(space, cov)
+        e["lower"] = e["upper"] = None  # follows from the anchor: never searched
+    elif e["derived"]:
+        e["std"] = robust.std_white(n)
+        e["lower"] = e["upper"] = None
+    else:
+        e["std"] = 0.0
+    e["std_robust"] = robust.std_robust(n) if n not in space.fixed else 0.0
+    return e
 
 
 def warn_bounds(res: IdentificationResult, stacklevel: int = 3) -> None:
