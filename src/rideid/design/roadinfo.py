@@ -31,8 +31,8 @@ predicted from the road fit identify runs on it
 5. *Matrices.* Identify's fit on its weights: ``A = J^T J``,
    ``B = J^T diag(v) J`` (sandwich ``A^-1 B A^-1``); the Fisher information
    ``F = J_w^T diag(1 / v_w) J_w`` of the whitened fit (channels weighted by
-   ``1 / sigma_c``; equal to ``A^2 / B`` in the usual case of ``--noise``
-   alone, where ``sigma_c s_c`` is one number). With a coloured spectrum the
+   ``1 / sigma_c``, ``v_w = N r_c / 2``; with ``--noise`` alone ``sigma_c s_c``
+   is nearly one number and ``A^-1 B A^-1`` equals ``F^-1`` to 1e-4). With a coloured spectrum the
    bins are weighted after the projection, not inside it (the boundary
    unknowns couple bins): an approximation of the whitened fit.
    Each is the mean over the roads (the expected information).
@@ -184,13 +184,10 @@ def road_run_information(sc, space, cars, run, index: int, noise, seed: int,
             a = J.T @ J
             b = J.T @ (v[:, None] * J)
             vbar = float(np.mean(v))
-            # the whitened fit: channels weighted by 1 / sigma (the same fit when sigma * s_id is one number)
-            ratio = sig[cols] * s_id
-            if np.ptp(ratio) <= 1e-9 * ratio.max():
-                Jw = J / ratio[0]
-            else:
-                Jw = residual_jacobian(space, x, geom, _prepared(run.id, y, run.fs, run.speed, geom, cols,
-                                                                 1.0 / sig[cols]), step)
+            # the whitened fit: channels weighted by 1 / sigma (nearly identify's with --noise alone, where
+            # sigma_c s_c is one number but for the channels' means, which the fit removes)
+            Jw = residual_jacobian(space, x, geom, _prepared(run.id, y, run.fs, run.speed, geom, cols,
+                                                             1.0 / sig[cols]), step)
             vw = np.concatenate([shape, shape], axis=1).ravel() * 0.5 * n
             F[k] += Jw.T @ (Jw / vw[:, None]) / len(seeds)
             A[k] += a / vbar / len(seeds)
