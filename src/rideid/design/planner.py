@@ -349,7 +349,10 @@ def plan(scenario, *, noise=None, accel_density: float = 0.0, gyro_density: floa
     ----------
     scenario : path or Scenario
         A scenario (SPEC §3): ``[truth]`` is the nominal car, ``[[runs]]`` the
-        candidate runs (``fs``, ``duration``), ``[known]`` the scale anchor.
+        candidate runs (``fs``, ``duration``), ``[known]`` the scale anchor. A
+        run with ``road_class`` instead of a track is a drive on an unknown
+        road (SPEC §9): its precision is predicted from the road fit on
+        generated roads of the class (:mod:`rideid.design.roadinfo`).
     noise : float, optional
         SPEC ``--noise``: noise sd as a fraction of each channel's RMS, per run.
         Default 0.01 unless a density is given (then 0).
@@ -382,7 +385,8 @@ def plan(scenario, *, noise=None, accel_density: float = 0.0, gyro_density: floa
         scenario's ``[bounds]``, or ±``robust_spread`` around nominal for
         parameters without bounds; the worst car counts).
     seed : int
-        Seed of the ``numpy.random.Generator`` that samples the robust cars.
+        Seed of the ``numpy.random.Generator`` that samples the robust cars, and
+        of the unknown-road candidates' generated roads.
     within : float
         Without a budget (D, A): the fewest runs whose CRLB is within this
         factor of all candidates' on every parameter.
