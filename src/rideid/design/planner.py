@@ -8,7 +8,7 @@ from __future__ import annotations
 import csv
 import json
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
@@ -16,14 +16,14 @@ import numpy as np
 from ..estimate.cost import ParameterSpace
 from ..model.params import GROUPS
 from ..errors import ArgumentError, DataError
-from ..data.dataset import refuse_unknown_roads
 from ..data.scenario import load_scenario
 from ..data.schema import Scenario
 from .colour import load_noise_psd
 from ..model.nonlinear import curve_names
 from ..model.params import ALL_NAMES, EXT_NAMES, NAMES
 from .curves import AXLES, CURVES, Excitation, mask_information, nominal_forces, not_excited_names, plan_knots, run_counts
-from .fisher import (STEP, NoiseModel, Precision, messages, precision, run_information, simulator,
+from . import roadinfo
+from .fisher import (STEP, NoiseModel, Precision, RunInformation, messages, precision, run_information, simulator,
                      subset_precision)
 from .select import Selector
 
@@ -149,6 +149,11 @@ class PlanResult:
             "notes": self.notes,
         } | ({"dampers": self.dampers} if self.dampers is not None else {})
 
+    def label(self, rid: str) -> str:
+        """A run id, with ``(road B)`` for a run on an unknown road of ISO 8608 class B."""
+        c = next((c for c in self.candidates if c["id"] == rid), None)
+        return f"{rid} (road {c['road']['road_class']})" if c is not None and c.get("road") else rid
+
     # -- output files ---------------------------------------------------------
     def summary(self) -> str:
         """Terminal text: the chosen runs and the precision they buy."""
@@ -156,7 +161,7 @@ class PlanResult:
         t = sum(cand[r]["time_cost_s"] for r in self.selected_runs)
         lines = [f"plan ({self.criterion}-optimal{', robust over ' + str(self.robust['cars']) + ' cars' if self.robust['cars'] > 1 else ''}): "
                  f"drive {len(self.selected_runs)} of {len(self.candidates)} runs, {t:.0f} s of track time: "
-                 + " ".join(self.selected_runs),
+                 + ", ".join(self.label(r) for r in self.selected_runs),
                  f"noise: {self.noise_text}",
                  f"{'parameter':10s} {'nominal':>12s} {'selected ±':>12s} {'(identify)':>10s} {'all runs ±':>10s}"]
         off_sel = set(self.dampers["selected"]["not_excited"]) if self.dampers else set()
@@ -182,7 +187,15 @@ class PlanResult:
                f"Criterion **{self.criterion}**, noise {self.noise_text}; budget: {_budget_text(self.budget)}; robust over {self.robust['cars']} car(s) "
                f"({self.robust['rule']}).\n",
                f"**Selected runs** ({len(self.selected_runs)}, {d['selected']['track_time_s']:.0f} s of track time): "
-               + ", ".join(self.selected_runs) + "\n",
+               + ", ".join(self.label(r) for r in self.selected_runs) + "\n",
+               "| candidate run | road | speed (m/s) | fs (Hz) | duration (s) | selected |",
+               "|---|---|---|---|---|---|"]
+        for c in self.candidates:
+            road = (f"unknown road, ISO 8608 class {c['road']['road_class']}" if c.get("road")
+                    else f"track {c['track']}")
+            out.append(f"| {c['id']} | {road} | {c['speed']:g} | {c['fs']:g} | {c['duration_s']:g} | "
+                       f"{'yes' if c['id'] in self.selected_runs else ''} |")
+        out += ["",
                "| parameter | nominal | unit | selected CRLB ± | selected identify ± | all runs CRLB ± | all runs identify ± |",
                "|---|---|---|---|---|---|---|"]
         from ..model.params import UNITS
@@ -200,7 +213,7 @@ class PlanResult:
         out.append("| # | added run | " + " | ".join(self.names) + " |")
         out.append("|---" * (len(self.names) + 2) + "|")
         for k, (rid, p) in enumerate(self.path):
-            out.append(f"| {k + 1} | {rid} | " + " | ".join(_pct(v, sign=False) for v in p.rel_crlb) + " |")
+            out.append(f"| {k + 1} | {self.label(rid)} | " + " | ".join(_pct(v, sign=False) for v in p.rel_crlb) + " |")
         if self.comparison:
             c = self.comparison
             out.append("\n## Fisher information vs the paper's sensitivity map\n")
@@ -336,7 +349,10 @@ def plan(scenario, *, noise=None, accel_density: float = 0.0, gyro_density: floa
     ----------
     scenario : path or Scenario
         A scenario (SPEC §3): ``[truth]`` is the nominal car, ``[[runs]]`` the
-        candidate runs (``fs``, ``duration``), ``[known]`` the scale anchor.
+        candidate runs (``fs``, ``duration``), ``[known]`` the scale anchor. A
+        run with ``road_class`` instead of a track is a drive on an unknown
+        road (SPEC §9): its precision is predicted from the road fit on
+        generated roads of the class (:mod:`rideid.design.roadinfo`).
     noise : float, optional
         SPEC ``--noise``: noise sd as a fraction of each channel's RMS, per run.
         Default 0.01 unless a density is given (then 0).
@@ -369,7 +385,8 @@ def plan(scenario, *, noise=None, accel_density: float = 0.0, gyro_density: floa
         scenario's ``[bounds]``, or ±``robust_spread`` around nominal for
         parameters without bounds; the worst car counts).
     seed : int
-        Seed of the ``numpy.random.Generator`` that samples the robust cars.
+        Seed of the ``numpy.random.Generator`` that samples the robust cars, and
+        of the unknown-road candidates' generated roads.
     within : float
         Without a budget (D, A): the fewest runs whose CRLB is within this
         factor of all candidates' on every parameter.
@@ -385,7 +402,7 @@ def plan(scenario, *, noise=None, accel_density: float = 0.0, gyro_density: floa
     PlanResult
     """
     sc = scenario if isinstance(scenario, Scenario) else load_scenario(scenario)
-    refuse_unknown_roads(sc, "rideid plan")
+    road_ids = [r.id for r in sc.runs if not r.road_known]
     if sc.truth is None:
         raise DataError(f"{sc.path}: a plan needs a scenario with a [truth] table (the nominal car)")
     if extensions is None:  # the scenario's [model], else the groups the nominal car has
@@ -395,6 +412,10 @@ def plan(scenario, *, noise=None, accel_density: float = 0.0, gyro_density: floa
     if sc.dampers is not None and CURVES not in extensions:  # the car has real dampers: plan their curves
         extensions += (CURVES,)
     curves = CURVES in extensions
+    if curves and road_ids:
+        raise ArgumentError(f"runs on unknown roads ({', '.join(road_ids)}) cannot be planned with damper curves: "
+                            "the road fit projects the road out of a linear car (docs/any-road.md); plan the curves "
+                            "on known tracks, or the linear model with --model")
     knots, knots_from = plan_knots(sc) if curves else (None, None)
     space = ParameterSpace(sc.known, sc.geometry, sc.bounds, extensions=extensions,
                            damper_knots=knots)  # refuses a missing anchor
@@ -458,7 +479,8 @@ def plan(scenario, *, noise=None, accel_density: float = 0.0, gyro_density: floa
 
     # -- information -----------------------------------------------------------
     notes = []
-    sim = simulator(sc)
+    sim = simulator(replace(sc, runs=tuple(r for r in sc.runs if r.road_known))) if len(road_ids) < len(run_ids) \
+        else None
     lin_sim = sim
     exc = None
     if curves:
@@ -471,9 +493,12 @@ def plan(scenario, *, noise=None, accel_density: float = 0.0, gyro_density: floa
                          "the default knots (set [model] damper_knots to plan other knots)")
         if sc.bump_stops:
             notes.append("bump stops are not in the plan's model (identify cannot fit them): planned without them")
-    fs = [r.fs for r in sc.runs]
     cars = [x0] + _sample_cars(space, x0, sc.bounds, robust - 1, robust_spread, seed)
-    infos = [run_information(sim, space, x, nm, fs, step=step) for x in cars]
+    infos, road_info = _information(sc, sim, space, cars, nm, seed, step)
+    if road_info:
+        notes.append(f"runs on unknown roads ({', '.join(road_info)}): precision predicted from the road fit of "
+                     f"identify (rideid.estimate.roadfit) on {roadinfo.ROADS} generated roads of their ISO 8608 "
+                     "class per run (seeded by --seed; one with a road_seed), information averaged (docs/planning.md)")
     if exc is not None:  # a knot no candidate excites is not in any Fisher matrix
         keep = exc.mask(range(len(run_ids)))
         for i in infos:
@@ -537,10 +562,16 @@ def plan(scenario, *, noise=None, accel_density: float = 0.0, gyro_density: floa
     if space.derived is not None:
         grad = space.derived_gradient() * x0  # d(derived)/du, u = x / x0
 
-    cand = [{"id": r.id, "track": r.track, "speed": r.speed, "fs": r.fs, "duration_s": r.duration,
-             "time_cost_s": float(tcost[k]),
+    cand = [{"id": r.id, "kind": "track" if r.road_known else "road", "track": r.track, "speed": r.speed,
+             "fs": r.fs, "duration_s": r.duration, "time_cost_s": float(tcost[k]),
              "channels_used": [c for c, u in zip(_channels(), info.used[k]) if u]}
             for k, r in enumerate(sc.runs)]
+    for c, r in zip(cand, sc.runs):
+        if not r.road_known:
+            c["road"] = {"road_class": r.road.road_class, "coherence": r.road.coherence,
+                         "road_seeds": road_info[r.id].seeds,
+                         "method": "an unknown road (SPEC §9): precision of identify's road fit on generated roads "
+                                   "of this ISO 8608 class, information averaged over the roads"}
     if exc is not None:
         for k, c in enumerate(cand):
             c["dampers"] = exc.run_entry(k)
@@ -579,9 +610,45 @@ def plan(scenario, *, noise=None, accel_density: float = 0.0, gyro_density: floa
     if exc is not None:
         res.dampers = _dampers_block(exc, space, x0, names, all_p, sel_p, S, len(run_ids), knots_from)
     width = len(ALL_NAMES) if any(n in EXT_NAMES for n in names) else len(NAMES)
-    res.comparison = _compare_maps(lin_sim, sc, P0[:width] if curves else P0, run_ids, info, names,
-                                   [run_ids[j] for j in order], criterion)
+    tk = [k for k, r in enumerate(sc.runs) if r.road_known]
+    if tk:  # the paper's map covers track runs only
+        sub = replace(info, F=info.F[tk])
+        res.comparison = _compare_maps(lin_sim, replace(sc, runs=tuple(sc.runs[k] for k in tk)),
+                                       P0[:width] if curves else P0, [run_ids[k] for k in tk], sub, names,
+                                       [run_ids[j] for j in order], criterion)
     return res
+
+
+def _information(sc, sim, space, cars, nm, seed, step):
+    """:class:`RunInformation` of every candidate run (scenario order) for each car, and the unknown-road
+    candidates' :class:`rideid.design.roadinfo.RoadRunInformation` by run id.
+
+    Track runs: :func:`run_information`. Runs on unknown roads: :func:`rideid.design.roadinfo.road_run_information`;
+    their Fisher information adds as it is, their identify matrices ``A``, ``B`` times the track runs' noise
+    level ``c = tr(B) / tr(A)`` and ``c^2`` (the joint fit weights each block by its own residual level;
+    module docstring of :mod:`rideid.design.roadinfo`)."""
+    tk = [k for k, r in enumerate(sc.runs) if r.road_known]
+    rk = [k for k, r in enumerate(sc.runs) if not r.road_known]
+    road = {sc.runs[k].id: roadinfo.road_run_information(sc, space, cars, sc.runs[k], k, nm, seed)
+            for k in rk}
+    fs = [sc.runs[k].fs for k in tk]
+    out = []
+    for i, x in enumerate(cars):
+        R, d = len(sc.runs), len(space.names)
+        F, A, B = np.zeros((R, d, d)), np.zeros((R, d, d)), np.zeros((R, d, d))
+        sig, rms, used = np.zeros((R, 10)), np.zeros((R, 10)), np.zeros((R, 10), bool)
+        c = 1.0
+        if tk:
+            t = run_information(sim, space, x, nm, fs, step=step)
+            F[tk], A[tk], B[tk], sig[tk], rms[tk], used[tk] = t.F, t.A, t.B, t.sigma, t.rms, t.used
+            c = float(np.trace(t.B.sum(0)) / np.trace(t.A.sum(0)))
+        for k in rk:
+            ri = road[sc.runs[k].id]
+            F[k], A[k], B[k] = ri.F[i], c * ri.A[i], c * c * ri.B[i]
+            sig[k], rms[k], used[k] = ri.sigma, ri.rms, ri.used
+        out.append(RunInformation(list(space.names), np.asarray(x, float), space.full(np.asarray(x)[None])[0],
+                                  F, A, B, sig, rms, used))
+    return out, road
 
 
 def _messages(info, exc, runs, run_ids, p) -> list:
