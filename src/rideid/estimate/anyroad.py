@@ -16,11 +16,15 @@ steps:
    standard deviation at the start, again at the first solution (the blocks
    are different kinds of numbers: time samples of normalised channels, DFT
    bins of weighted channels; weighting each by its own noise level is the
-   maximum-likelihood combination).
-3. *Uncertainty.* ``std``: ``s^2 (J^T J)^+`` with one variance; ``std_robust``:
-   the sandwich with each road run's DFT bin as a cluster and the track runs'
-   HAC long-run covariance (:mod:`rideid.estimate.uncertainty`), the
-   pseudo-inverse by SVD.
+   maximum-likelihood combination). Then Newton steps on the cost's true
+   Hessian (finite differences): the projected residual's Gauss-Newton
+   ``J^T J`` over-states the curvature along the wheels' common scale, so the
+   least-squares solver stops short there.
+3. *Uncertainty.* Sandwiches ``H^+ B H^+`` with ``H`` that true Hessian (the
+   pseudo-inverse by SVD): ``std`` with ``B = s^2 J^T J`` (one variance),
+   ``std_robust`` with ``B`` the gradient's spread over clusters, each road
+   run's DFT bin one cluster and the track runs' HAC long-run covariance
+   (:mod:`rideid.estimate.uncertainty`).
 4. *Road.* Each road run's road under both wheel paths
    (:func:`rideid.estimate.roadfit.road`), written as ``road/<run>.csv``,
    and its ISO 8608 class (:func:`rideid.model.roads.iso8608_class`).
@@ -164,6 +168,41 @@ class _Problem:
         parts = [] if self.cf is None else [self.cf.residuals(x[None], self.equal)[0]]
         return parts + [roadfit.residuals(P[0], self.geom, rr) for rr in (rruns or self.rruns)]
 
+    def jacobian(self, v, step: float = 1e-7) -> np.ndarray:
+        """Forward-difference Jacobian of the residuals at ``v`` (in ``v`` units)."""
+        r0 = self(v)
+        J = np.empty((r0.size, v.size))
+        for j in range(v.size):
+            vj = v.copy()
+            h = step if vj[j] + step <= self.vbounds[1][j] else -step
+            vj[j] += h
+            J[:, j] = (self(vj) - r0) / h
+        return J
+
+    def newton(self, v, H, steps: int = 3):
+        """Newton steps on the cost with the true (half) Hessian ``H``: where the Gauss-Newton solver stops
+        short along the wheels' common scale (its ``J^T J`` over-states the curvature there, so its steps
+        fall short and its tolerances are met early). Returns ``v``, the residuals and their Jacobian there."""
+        Hinv = _pinv(H)
+        e = self(v)
+        J = self.jacobian(v)
+        for _ in range(steps):
+            dv = -Hinv @ (J.T @ e)
+            t = 1.0
+            while t > 1e-3:
+                vn = np.clip(v + t * dv, *self.vbounds)
+                en = self(vn)
+                if en @ en < e @ e:
+                    break
+                t *= 0.5
+            else:
+                break
+            v, e = vn, en
+            J = self.jacobian(v)
+            if np.max(np.abs(t * dv)) < 1e-7:
+                break
+        return v, e, J
+
     def hessian(self, v, step: float = 1e-3) -> np.ndarray:
         """Half the Hessian of the cost ``sum e^2`` at ``v`` (in ``v`` units), by central second differences.
 
@@ -306,12 +345,13 @@ def _identify_any_road(ds, *, rng=None, seed=None, population=None, generations=
         prob.reweight(sol.x)
         sol = least_squares(prob, sol.x, bounds=prob.vbounds, method="trf", diff_step=1e-7, max_nfev=50)
         z = sol.x
-        # sandwich (module docstring): bread the cost's true Hessian, meat the gradient's spread over clusters
-        Ja = sol.jac                          # in v units
-        e = sol.fun
+        # the true Hessian; Newton steps on it to the minimum (module docstring); the sandwich: bread the
+        # Hessian, meat the gradient's spread over clusters
+        H = prob.hessian(z)
+        z, e, Ja = prob.newton(z, H)          # in v units
         m, n = Ja.shape
         s2 = float(e @ e) / max(m - n, 1)
-        Hinv = _pinv(prob.hessian(z))
+        Hinv = _pinv(H)
         D = np.diag(prob.dxdv(z))
         cov = D @ Hinv @ (s2 * Ja.T @ Ja) @ Hinv @ D
         std = np.sqrt(np.clip(np.diag(cov), 0, None))
