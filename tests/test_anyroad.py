@@ -96,6 +96,17 @@ def test_a_dataset_mixing_a_track_and_a_road(tmp_path):
     assert set(res.response) == {"B40", "T"}
 
 
+def test_a_track_run_that_begins_moving_is_fitted_as_a_road_run(tmp_path):
+    """The track fit starts every run at rest; a run declared moving on a known track goes to the road fit,
+    which estimates the state at the first sample (SPEC §9)."""
+    sim = simulate(tmp_path, [{"id": "T", "track": "tw", "speed": 4.0, "fs": 200.0, "duration": 8.0},
+                              {"id": "Tm", "track": "tw", "speed": 5.0, "fs": 200.0, "duration": 8.0,
+                               "moving": True}], [TWIST], noise=0.0)
+    ds = rideid.load_dataset(sim)
+    assert [r.id for r in anyroad.unknown_road_runs(ds)] == ["Tm"]
+    assert ds.moving("Tm") and not ds.moving("T") and ds.road_known("Tm")
+
+
 def test_a_nonlinear_model_is_refused_with_road_runs(road_fit, tmp_path, capsys):
     _, sim, _ = road_fit
     rc = main(["identify", str(sim), "--out", str(tmp_path / "f"), "--model", "damper_curves", "--quiet"])

@@ -68,8 +68,10 @@ SPREAD_TOL = 0.2
 
 
 def unknown_road_runs(ds) -> list:
-    """The runs of ``ds`` on unknown roads (SPEC §9)."""
-    return [r for r in ds.runs if not getattr(r, "road_known", True)]
+    """The runs of ``ds`` fitted with their road projected out: those on unknown roads (SPEC §9), and those
+    on known tracks that begin moving (``moving = true``: the track fit starts every run at rest; the road
+    fit estimates the state at the first sample, and the road, without using the track's profile)."""
+    return [r for r in ds.runs if not getattr(r, "road_known", True) or getattr(r, "moving", False)]
 
 
 def run_speed(ds, run) -> float:
@@ -316,7 +318,7 @@ def _identify_any_road(ds, *, rng=None, seed=None, population=None, generations=
     geom = ds.geometry
     space = ParameterSpace(ds.known, geom, ds.manifest.bounds, extensions=ext)
     rruns = prepare_road_runs(ds)
-    track_runs = [r for r in ds.runs if getattr(r, "road_known", True)]
+    track_runs = [r for r in ds.runs if r.id not in road_ids]
     population = population or DEFAULT_POPULATION
     generations = generations or DEFAULT_GENERATIONS
     cf = None
@@ -389,6 +391,11 @@ def _identify_any_road(ds, *, rng=None, seed=None, population=None, generations=
             "note": (f"the road's content at wavelengths {roadfit.ROAD_WAVELENGTHS[0]}-"
                      f"{roadfit.ROAD_WAVELENGTHS[1]} m; the first and last {roadfit.ROAD_WAVELENGTHS[1]:.0f} m carry "
                      "the record's ends and are less certain; adequacy not assessed on this run")}
+        run = next(r for r in ds.runs if r.id == rr.run_id)
+        if getattr(run, "road_known", False):
+            roads[rr.run_id]["note"] = (f"moving at its first sample on the known track '{run.track}': fitted as a "
+                                        "road run (its state at the first sample and its road estimated; the "
+                                        "track's profile not used); " + roads[rr.run_id]["note"])
         profiles[rr.run_id] = (xr, zr)
         response[rr.run_id] = roadfit.fitted_channels(P, geom, rr, ds.data[rr.run_id].matrix())
     adequacy = None
