@@ -170,15 +170,20 @@ class _Problem:
         parts = [] if self.cf is None else [self.cf.residuals(x[None], self.equal)[0]]
         return parts + [roadfit.residuals(P[0], self.geom, rr) for rr in (rruns or self.rruns)]
 
-    def jacobian(self, v, step: float = 1e-7) -> np.ndarray:
-        """Forward-difference Jacobian of the residuals at ``v`` (in ``v`` units)."""
-        r0 = self(v)
-        J = np.empty((r0.size, v.size))
+    def jacobian(self, v, step: float = 1e-5) -> np.ndarray:
+        """Central-difference Jacobian of the residuals at ``v`` (in ``v`` units).
+
+        The step is 1e-5 (relative, for the logarithmic coordinates): the residual carries rounding noise
+        (eigenvectors, the boundary unknowns' solve), and at 1e-7 its differences inflated the robust
+        error bars of the unsprung masses 15-fold (0.42 % at 1e-6, 0.20 % at 1e-5, measured)."""
+        J = np.empty((self.size, v.size))
         for j in range(v.size):
-            vj = v.copy()
-            h = step if vj[j] + step <= self.vbounds[1][j] else -step
-            vj[j] += h
-            J[:, j] = (self(vj) - r0) / h
+            hi = min(step, self.vbounds[1][j] - v[j])
+            lo = min(step, v[j] - self.vbounds[0][j])
+            vp, vm = v.copy(), v.copy()
+            vp[j] += hi
+            vm[j] -= lo
+            J[:, j] = (self(vp) - self(vm)) / (hi + lo) if hi + lo > 0 else 0.0
         return J
 
     def newton(self, v, H, steps: int = 3):
