@@ -17,22 +17,18 @@ Run (one core, about 2 minutes)::
     NUMBA_NUM_THREADS=1 OMP_NUM_THREADS=1 OPENBLAS_NUM_THREADS=1 \\
         python benchmarks/road_methods.py [--classes ABC] [--seeds 3] [--methods 12]
 
-Prints one line per fit, then the table of docs/road-methods.md. Method 1's
-module is imported from rideid, or else from ``src/`` of this checkout or
-``/work/main``.
+Prints one line per fit, then the table of docs/road-methods.md.
 """
 
 from __future__ import annotations
 
 import argparse
-import importlib
-import importlib.util
+
+
 import os
-import sys
 import tempfile
 import time
 from dataclasses import replace
-from pathlib import Path
 
 for _v in ("NUMBA_NUM_THREADS", "OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
     os.environ.setdefault(_v, "1")
@@ -42,26 +38,10 @@ import scipy.optimize  # noqa: E402
 
 from rideid.data.scenario import default_scenario  # noqa: E402
 from rideid.estimate import roadstaged  # noqa: E402
+from rideid.estimate import roadfit  # noqa: E402
 from rideid.model.params import ALL_NAMES, INDEX, NAMES, as_vector  # noqa: E402
 from rideid.model.simulate import prepare_run, simulate_reference  # noqa: E402
 from rideid.model.tracks import Track  # noqa: E402
-
-
-def load_roadfit():
-    """Method 1's module: from the installed rideid, else from the main checkout beside this worktree."""
-    try:
-        return importlib.import_module("rideid.estimate.roadfit")
-    except ImportError:
-        pass
-    for base in (Path(__file__).resolve().parents[1], Path("/work/main")):
-        path = base / "src" / "rideid" / "estimate" / "roadfit.py"
-        if path.exists():
-            spec = importlib.util.spec_from_file_location("rideid.estimate.roadfit", path)
-            mod = importlib.util.module_from_spec(spec)
-            sys.modules[spec.name] = mod
-            spec.loader.exec_module(mod)
-            return mod
-    raise ImportError("rideid.estimate.roadfit not found")
 
 
 #: ISO 8608 Gd(n0) at n0 = 0.1 cycles/m, m^3
@@ -221,7 +201,7 @@ def main(argv=None):
                     help="rms: 2 %% of each channel's RMS (default); floor: a fixed sensor floor, FLOOR")
     args = ap.parse_args(argv)
     P, geom, M = truth_and_geometry()
-    rf = load_roadfit() if "1" in args.methods else None
+    rf = roadfit if "1" in args.methods else None
     rows = []   # (class, seed, method, errors %, std %, wall s)
     t_all = time.perf_counter()
     with tempfile.TemporaryDirectory() as work:
