@@ -348,9 +348,9 @@ def _identify_any_road(ds, *, rng=None, seed=None, population=None, generations=
         prob.reweight(z0)
         cost_before = float(np.sum(prob(z0) ** 2))
         # one solve at the start's block weights, the weights again at its solution, a short second solve
-        sol = least_squares(prob, z, bounds=prob.vbounds, method="trf", diff_step=1e-7, max_nfev=100)
+        sol = least_squares(prob, z, bounds=prob.vbounds, method="trf", diff_step=1e-5, max_nfev=100)
         prob.reweight(sol.x)
-        sol = least_squares(prob, sol.x, bounds=prob.vbounds, method="trf", diff_step=1e-7, max_nfev=50)
+        sol = least_squares(prob, sol.x, bounds=prob.vbounds, method="trf", diff_step=1e-5, max_nfev=50)
         z = sol.x
         # the true Hessian; Newton steps on it to the minimum (module docstring); the sandwich: bread the
         # Hessian, meat the gradient's spread over clusters
