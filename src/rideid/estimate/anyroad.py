@@ -55,7 +55,7 @@ from ..model.roads import iso8608_class
 from . import roadfit
 from .adequacy import advise, assess_fit
 from .cost import CostFunction, ParameterSpace, refuse_unsupported_groups
-from .identify import DEFAULT_GENERATIONS, DEFAULT_POPULATION, _relative_spread, model_extensions, parameter_detail
+from .identify import DEFAULT_GENERATIONS, DEFAULT_POPULATION, relative_spread, model_extensions, parameter_detail
 from .identify import identify as identify_model
 from .jade import JadeSolver, make_rng, stop_requested
 from .result import History, IdentificationResult
@@ -271,7 +271,7 @@ def _search(space, geom, rruns, gen, population, generations, callback, t0):
     for g in range(1, generations + 1):
         X = solver.ask()
         solver.tell(fun(X))
-        cv = _relative_spread(solver.pop, space.bounds)
+        cv = relative_spread(solver.pop, space.bounds)
         finite = np.isfinite(solver.costs)
         rec = {"generation": g, "evaluations": solver.nfev, "best_cost": float(solver.fun),
                "mean_cost": float(np.mean(solver.costs[finite])) if finite.any() else float("inf"),

@@ -372,7 +372,7 @@ def global_search(cf: CostFunction, weighting, maps: SensitivityMaps, rng, *, po
         if w_new is not w:
             w = w_new
             solver.rescore(cf.combine(E_pop, w))
-        cv = _relative_spread(solver.pop, cf.bounds)
+        cv = relative_spread(solver.pop, cf.bounds)
         history.append(_generation_record(g, solver, E_pop, cf, spread, cv, w))
         state = OptimizeResult(x=solver.x, fun=float(solver.fun), nit=g, nfev=solver.nfev, generations=generations,
                                spread=float(cv.max()), elapsed=time.perf_counter() - t0,
@@ -394,7 +394,7 @@ def global_search(cf: CostFunction, weighting, maps: SensitivityMaps, rng, *, po
 ZERO_SCALE = 1.0
 
 
-def _relative_spread(pop, bounds) -> np.ndarray:
+def relative_spread(pop, bounds) -> np.ndarray:
     """Coefficient of variation of each column; for columns bounded below by 0, std over
     ``max(|mean|, ZERO_SCALE * upper)`` (the early stop of step 4 for a model with extensions)."""
     cv = coefficient_of_variation(pop)
