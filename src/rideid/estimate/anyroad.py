@@ -402,7 +402,7 @@ def _identify_any_road(ds, *, rng=None, seed=None, population=None, generations=
                                         "road run (its state at the first sample and its road estimated; the "
                                         "track's profile not used); " + roads[rr.run_id]["note"])
         profiles[rr.run_id] = (xr, zr)
-        response[rr.run_id] = roadfit.fitted_channels(P, geom, rr, ds.data[rr.run_id].matrix())
+        response[rr.run_id] = roadfit.fitted_channels(P, geom, rr, ds.data[rr.run_id].matrix(), sol_r)
     adequacy = None
     if cf is not None:
         resp_t = cf.simulate(P)

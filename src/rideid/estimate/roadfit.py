@@ -387,10 +387,11 @@ def band_pass(z, dx: float, wavelengths=ROAD_WAVELENGTHS):
     return sosfiltfilt(sos, z, axis=0)
 
 
-def fitted_channels(P, geom: Geometry, rr: RoadRun, y) -> np.ndarray:
+def fitted_channels(P, geom: Geometry, rr: RoadRun, y, sol: Solution | None = None) -> np.ndarray:
     """The model's channels (n, 10) at the estimated road: the measured ones minus the residual of the
-    fit band (NaN for unused channels). Outside the fit band the residual is not modelled (zero)."""
-    sol = solve(P, geom, rr)
+    fit band (NaN for unused channels). Outside the fit band the residual is not modelled (zero).
+    ``sol``: the projection at ``P`` when already solved (:func:`solve`)."""
+    sol = solve(P, geom, rr) if sol is None else sol
     full = np.zeros(rr.Y.shape, dtype=complex)
     full[rr.fit] = sol.residual
     e = np.fft.irfft(full, n=rr.n, axis=0) / rr.scale
