@@ -5,24 +5,24 @@ See ``docs/planning.md`` for the method, the choices and the validation.
 
 from __future__ import annotations
 
-import csv
-import json
 import math
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
 
-from ..estimate.cost import ParameterSpace
-from ..model.params import GROUPS
-from ..errors import ArgumentError, DataError
 from ..data.scenario import load_scenario
 from ..data.schema import Scenario
-from .colour import load_noise_psd
+from ..errors import ArgumentError, DataError
+from ..estimate.cost import CurveSimulator, ParameterSpace
+from ..estimate.sensitivity import compute_maps
+from ..model.equations import CHANNELS
 from ..model.nonlinear import curve_names
-from ..model.params import ALL_NAMES, EXT_NAMES, NAMES
-from .curves import AXLES, CURVES, Excitation, mask_information, nominal_forces, not_excited_names, plan_knots, run_counts
+from ..model.params import ALL_NAMES, EXT_NAMES, GROUPS, NAMES
+from ..report.plan_files import pct as _pct, plan_markdown, write_plan
 from . import roadinfo
+from .colour import load_noise_psd
+from .curves import AXLES, CURVES, Excitation, mask_information, nominal_forces, not_excited_names, plan_knots, run_counts
 from .fisher import (STEP, NoiseModel, Precision, RunInformation, messages, precision, run_information, simulator,
                      subset_precision)
 from .select import Selector
@@ -182,145 +182,14 @@ class PlanResult:
         return "\n".join(lines)
 
     def markdown(self) -> str:
-        d = self.to_dict()
-        out = [f"# Test plan: {Path(self.scenario).name}\n",
-               f"Criterion **{self.criterion}**, noise {self.noise_text}; budget: {_budget_text(self.budget)}; robust over {self.robust['cars']} car(s) "
-               f"({self.robust['rule']}).\n",
-               f"**Selected runs** ({len(self.selected_runs)}, {d['selected']['track_time_s']:.0f} s of track time): "
-               + ", ".join(self.label(r) for r in self.selected_runs) + "\n",
-               "| candidate run | road | speed (m/s) | fs (Hz) | duration (s) | selected |",
-               "|---|---|---|---|---|---|"]
-        for c in self.candidates:
-            road = (f"unknown road, ISO 8608 class {c['road']['road_class']}" if c.get("road")
-                    else f"track {c['track']}")
-            out.append(f"| {c['id']} | {road} | {c['speed']:g} | {c['fs']:g} | {c['duration_s']:g} | "
-                       f"{'yes' if c['id'] in self.selected_runs else ''} |")
-        out += ["",
-               "| parameter | nominal | unit | selected CRLB ± | selected identify ± | all runs CRLB ± | all runs identify ± |",
-               "|---|---|---|---|---|---|---|"]
-        from ..model.params import UNITS
-        for j, n in enumerate(self.names):
-            out.append(f"| {n} | {self.nominal[n]:.6g} | {UNITS.get(n, '')} | {_pct(self.selected.rel_crlb[j])} | "
-                       f"{_pct(self.selected.rel_identify[j])} | {_pct(self.all_runs.rel_crlb[j])} | "
-                       f"{_pct(self.all_runs.rel_identify[j])} |")
-        out.append("\n± are one relative standard deviation. CRLB: the best any unbiased estimator can do with "
-                   "this noise; identify: the expected spread of `rideid identify` (its cost is not noise-weighted).\n")
-        for title, msgs in (("Selected runs", self.messages_selected), ("All candidate runs", self.messages_all)):
-            out.append(f"## Identifiability: {title.lower()}\n")
-            out += [f"- {m}" for m in msgs] or ["- every parameter identifiable, no pair with |correlation| > 0.9"]
-            out.append("")
-        out.append("## Greedy path (relative CRLB, % — precision after adding each run)\n")
-        out.append("| # | added run | " + " | ".join(self.names) + " |")
-        out.append("|---" * (len(self.names) + 2) + "|")
-        for k, (rid, p) in enumerate(self.path):
-            out.append(f"| {k + 1} | {self.label(rid)} | " + " | ".join(_pct(v, sign=False) for v in p.rel_crlb) + " |")
-        if self.comparison:
-            c = self.comparison
-            out.append("\n## Fisher information vs the paper's sensitivity map\n")
-            out.append(c["method"] + "\n")
-            out.append("| parameter | top run (map) | top run (Fisher) | rank correlation |")
-            out.append("|---|---|---|---|")
-            for n, v in c["parameters"].items():
-                out.append(f"| {n} | {v['top_map']} | {v['top_fisher']} | {v['spearman']:+.2f} |")
-            out.append(f"\nRuns ordered by the map's total share: {', '.join(c['map_order'])}  ")
-            out.append(f"Runs in greedy {self.criterion} order: {', '.join(c['greedy_order'])}\n")
-        if self.dampers:
-            dm = self.dampers
-            out.append("\n## Damper curves: knots excited and their CRLB (selected runs)\n")
-            out.append(dm["excitation_rule"] + ".\n")
-            out.append("| v (m/s) | front F (N) | front CRLB ± | rear F (N) | rear CRLB ± |")
-            out.append("|---|---|---|---|---|")
-            sel = dm["selected"]
-
-            def c(ax, j):
-                r = sel[ax]["crlb_relative"][j]
-                return "not excited" if not sel[ax]["excited"][j] else ("—" if r is None else f"±{100 * r:.3g} %")
-            for j, v in enumerate(dm["velocity"]):
-                out.append(f"| {v:g} | {dm['nominal']['front'][j]:.6g} | {c('front', j)} | "
-                           f"{dm['nominal']['rear'][j]:.6g} | {c('rear', j)} |")
-            out.append("\n| run | knots not excited |\n|---|---|")
-            for cd in self.candidates:
-                out.append(f"| {cd['id']} | {', '.join(cd['dampers']['not_excited']) or 'none'} |")
-            out.append("")
-        if self.notes:
-            out.append("## Notes\n")
-            out += [f"- {m}" for m in self.notes]
-        return "\n".join(out) + "\n"
+        """plan.md: the candidates, the precision per parameter, identifiability, the greedy path
+        (:func:`rideid.report.plan_files.plan_markdown`)."""
+        return plan_markdown(self)
 
     def save(self, out_dir) -> Path:
-        """Write plan.json, plan.md, crlb.csv, path.csv, correlation.csv and precision_path.png into ``out_dir``."""
-        out_dir = Path(out_dir)
-        out_dir.mkdir(parents=True, exist_ok=True)
-        (out_dir / "plan.json").write_text(json.dumps(self.to_dict(), indent=2, allow_nan=False) + "\n")
-        (out_dir / "plan.md").write_text(self.markdown())
-        with open(out_dir / "crlb.csv", "w", newline="") as f:
-            w = csv.writer(f)
-            w.writerow(["parameter", "nominal", "selected_std", "selected_relative", "selected_identify_std",
-                        "all_std", "all_relative", "all_identify_std"])
-            for j, n in enumerate(self.names):
-                s, a = self.selected, self.all_runs
-                w.writerow([n, f"{self.nominal[n]:.10g}", _num(s.std[j]), _num(s.rel_crlb[j]), _num(s.std_identify[j]),
-                            _num(a.std[j]), _num(a.rel_crlb[j]), _num(a.std_identify[j])])
-        with open(out_dir / "path.csv", "w", newline="") as f:
-            w = csv.writer(f)
-            w.writerow(["n_runs", "added"] + [f"rel_{n}" for n in self.names])
-            for k, (rid, p) in enumerate(self.path):
-                w.writerow([k + 1, rid] + [_num(v) for v in p.rel_crlb])
-        with open(out_dir / "correlation.csv", "w", newline="") as f:
-            w = csv.writer(f)
-            w.writerow(["selected"] + self.names)
-            for n, row in zip(self.names, self.selected.correlation()):
-                w.writerow([n] + [_num(v) for v in row])
-        self.figure(out_dir / "precision_path.png")
-        return out_dir
-
-    def figure(self, path):
-        import matplotlib
-        matplotlib.use("Agg")
-        import matplotlib.pyplot as plt
-        k = np.arange(1, len(self.path) + 1)
-        R = np.array([p.rel_crlb for _, p in self.path]) * 100
-        fig, ax = plt.subplots(figsize=(8, 5))
-        cmap = matplotlib.colormaps["tab20"]
-        for j, n in enumerate(self.names):
-            y = np.where(np.isfinite(R[:, j]), R[:, j], np.nan)
-            ax.semilogy(k, y, "o-", ms=3, color=cmap(j % 20), label=n)
-        ns = len(self.selected_runs)
-        ax.axvline(ns, color="k", ls=":", lw=1)
-        ax.text(ns, ax.get_ylim()[1], f" selected size {ns}", va="top", fontsize=8)
-        ax.set_xticks(k)
-        ax.set_xticklabels([f"{i}\n{rid}" for i, (rid, _) in zip(k, self.path)], fontsize=6)
-        ax.set_xlabel(f"runs along the greedy {self.criterion} path (run added)")
-        ax.set_ylabel("relative CRLB, % (1 sd)")
-        ax.set_title("Precision per parameter vs number of runs (missing points: not identifiable)", fontsize=9)
-        ax.grid(True, which="both", alpha=0.3)
-        ax.legend(fontsize=7, ncol=2)
-        fig.tight_layout()
-        fig.savefig(path, dpi=110)
-        plt.close(fig)
-
-
-def _budget_text(b) -> str:
-    parts = []
-    if b.get("runs") is not None:
-        parts.append(f"at most {b['runs']} runs")
-    if b.get("time_s") is not None:
-        parts.append(f"at most {b['time_s']:g} s of track time")
-    if b.get("within") is not None:
-        parts.append(f"none (fewest runs within {b['within']:g}x of all candidates' CRLB)")
-    parts.append(f"{b.get('overhead_s', 0):g} s overhead per run")
-    return ", ".join(parts) if parts else "none"
-
-
-def _pct(v, sign=True) -> str:
-    if not np.isfinite(v):
-        return "not identifiable" if sign else "—"
-    s = f"{100 * v:.3g} %"
-    return ("±" + s) if sign else f"{100 * v:.3g}"
-
-
-def _num(v) -> str:
-    return f"{v:.8g}" if np.isfinite(v) else ""
+        """Write plan.json, plan.md, crlb.csv, path.csv, correlation.csv and precision_path.png into ``out_dir``
+        (:func:`rideid.report.plan_files.write_plan`)."""
+        return write_plan(self, out_dir)
 
 
 def parse_target(text: str) -> tuple[str, float]:
@@ -336,6 +205,188 @@ def parse_target(text: str) -> tuple[str, float]:
     if not (math.isfinite(v) and v > 0):
         raise ArgumentError(f"--target {text!r}: the precision must be positive")
     return name, v
+
+
+@dataclass(frozen=True)
+class PlanProblem:
+    """What a plan is made for: the scenario's candidate runs, the free parameters and the nominal car.
+
+    Attributes
+    ----------
+    sc : Scenario
+    space : ParameterSpace
+        The free parameters (``extensions`` free, damper-curve knots with curves).
+    names : list of str
+        ``space.names``.
+    x0 : ndarray, shape (d,)
+        Nominal value of each free parameter ([truth]; knot forces from the curves).
+    P0 : ndarray, shape (n_param,)
+        The nominal car's full parameter row.
+    curves : bool
+        Whether damper curves are planned (SPEC §8).
+    knots_from : str or None
+        Where the knot velocities come from (curves only).
+    run_ids, road_ids : list of str
+        Every candidate run; those on unknown roads (SPEC §9).
+    """
+
+    sc: Scenario
+    space: ParameterSpace
+    names: list
+    x0: np.ndarray
+    P0: np.ndarray
+    curves: bool
+    knots_from: str | None
+    run_ids: list
+    road_ids: list
+
+    @property
+    def knot_names(self) -> list:
+        """The free damper-knot forces (empty without curves)."""
+        return [n for n in self.names if n.startswith("F_")] if self.curves else []
+
+    @classmethod
+    def build(cls, scenario, extensions=None) -> "PlanProblem":
+        """Load ``scenario`` (path or :class:`Scenario`) and check it describes a nominal car to plan for."""
+        sc = scenario if isinstance(scenario, Scenario) else load_scenario(scenario)
+        road_ids = [r.id for r in sc.runs if not r.road_known]
+        if sc.truth is None:
+            raise DataError(f"{sc.path}: a plan needs a scenario with a [truth] table (the nominal car)")
+        extensions = _extensions(sc, extensions)
+        curves = CURVES in extensions
+        if curves and road_ids:
+            raise ArgumentError(f"runs on unknown roads ({', '.join(road_ids)}) cannot be planned with damper "
+                                "curves: the road fit projects the road out of a linear car (docs/any-road.md); plan "
+                                "the curves on known tracks, or the linear model with --model")
+        knots, knots_from = plan_knots(sc) if curves else (None, None)
+        space = ParameterSpace(sc.known, sc.geometry, sc.bounds, extensions=extensions,
+                               damper_knots=knots)  # refuses a missing anchor
+        names = list(space.names)
+        x0 = _nominal_free(sc, space, names, curves)
+        P0 = space.full(x0[None])[0]
+        _check_truth(sc, space, P0)
+        run_ids = [r.id for r in sc.runs]
+        if not run_ids:
+            raise DataError(f"{sc.path}: no [[runs]]: nothing to plan")
+        return cls(sc, space, names, x0, P0, curves, knots_from, run_ids, road_ids)
+
+
+def _extensions(sc, extensions) -> tuple:
+    """The groups to plan: ``extensions``, else the scenario's [model], else the groups the nominal car has;
+    damper curves added when the car has real dampers."""
+    if extensions is None:
+        extensions = sc.extensions if sc.extensions is not None else \
+            tuple(g for g, ns in GROUPS.items() if any(sc.truth.get(n, 0.0) > 0 for n in ns))
+    extensions = tuple(extensions)
+    if sc.dampers is not None and CURVES not in extensions:  # the car has real dampers: plan their curves
+        extensions += (CURVES,)
+    return extensions
+
+
+def _nominal_free(sc, space, names, curves) -> np.ndarray:
+    """(d,) nominal value of each free parameter; refuses one without a positive [truth] value."""
+    knot_names = [n for n in names if n.startswith("F_")] if curves else []
+    x0 = np.array([float(sc.truth.get(n, 0.0)) for n in names])
+    if curves:
+        Fk = nominal_forces(sc, space.layout)
+        all_knots = curve_names(space.layout.n_knots)
+        x0[[names.index(n) for n in knot_names]] = [Fk[all_knots.index(n)] for n in knot_names]
+    bad = [n for n, v in zip(names, x0) if (v == 0 if n in knot_names else v <= 0)]
+    if bad:
+        raise DataError(f"{sc.path}: [truth] has no positive value for {', '.join(bad)}, a free parameter of the "
+                        "model; precision is planned relative to the nominal value, so give one")
+    return x0
+
+
+@dataclass(frozen=True)
+class PlanOptions:
+    """How to plan, checked when built (:meth:`build`): noise, criterion, budget, targets, robustness.
+
+    The fields are :func:`plan`'s keywords after checking; ``noise`` is the :class:`NoiseModel`,
+    ``criterion`` never None, ``time_cost`` (s, shape (R,)) each candidate run's duration plus ``overhead``.
+    """
+
+    noise: NoiseModel
+    criterion: str
+    targets: dict
+    budget_runs: int | None
+    budget_time: float | None
+    overhead: float
+    robust: int
+    robust_spread: float
+    seed: int
+    within: float
+    step: float
+    time_cost: np.ndarray
+
+    @property
+    def budgeted(self) -> bool:
+        """A budget or targets decide the selection (else the fewest runs ``within`` all runs' CRLB)."""
+        return self.criterion == "target" or self.budget_runs is not None or self.budget_time is not None
+
+    @classmethod
+    def build(cls, pb: PlanProblem, *, noise=None, accel_density=0.0, gyro_density=0.0, bandwidth=None,
+              noise_ar1=0.0, noise_psd=None, budget_runs=None, budget_time=None, overhead=0.0, criterion=None,
+              targets=None, robust=1, robust_spread=DEFAULT_ROBUST_SPREAD, seed=0, within=DEFAULT_WITHIN,
+              step=STEP) -> "PlanOptions":
+        """:func:`plan`'s options checked against the problem ``pb``; :class:`ArgumentError` naming the option."""
+        nm = _noise_model(pb.sc, noise, accel_density, gyro_density, bandwidth, noise_ar1, noise_psd)
+        targets = dict(targets or {})
+        if criterion is None:
+            criterion = "target" if targets else "D"
+        if criterion not in CRITERIA:
+            raise ArgumentError(f"--criterion {criterion!r}: expected one of {', '.join(CRITERIA)}")
+        _check_targets(pb, targets)
+        if criterion == "target" and not targets:
+            raise ArgumentError("--criterion target needs at least one --target NAME=PRECISION (e.g. k_sr=0.5%)")
+        _check_budget(budget_runs, budget_time, overhead, robust, within)
+        tcost = np.array([r.duration + overhead for r in pb.sc.runs])
+        if budget_time is not None and tcost.min() > budget_time:
+            j = int(np.argmin(tcost))
+            raise ArgumentError(f"--budget-time {budget_time:g} s: no candidate run fits (the shortest, "
+                                f"{pb.run_ids[j]}, takes {pb.sc.runs[j].duration:g} s + {overhead:g} s overhead)")
+        return cls(nm, criterion, targets, budget_runs, budget_time, overhead, robust, robust_spread, seed, within,
+                   step, tcost)
+
+
+def _noise_model(sc, noise, accel_density, gyro_density, bandwidth, noise_ar1, noise_psd) -> NoiseModel:
+    """The plan's :class:`NoiseModel` (SPEC ``--noise``, densities, AR(1) or a spectrum file)."""
+    if isinstance(noise_psd, (str, Path)):
+        noise_psd = load_noise_psd(noise_psd)
+    if noise is None:
+        noise = 0.0 if (accel_density or gyro_density or noise_psd is not None) else DEFAULT_NOISE
+    nm = noise if isinstance(noise, NoiseModel) else NoiseModel(float(noise), float(accel_density),
+                                                                  float(gyro_density), bandwidth,
+                                                                  float(noise_ar1), noise_psd)
+    if nm.psd is not None:
+        for r in sc.runs:
+            nm.psd.check_covers(r.fs, f"run {r.id} (fs {r.fs:g} Hz)")
+    return nm
+
+
+def _check_targets(pb: PlanProblem, targets: dict) -> None:
+    """Targets name free parameters and ask for a positive relative precision."""
+    for n, v in targets.items():
+        if n not in pb.names:
+            why = (f"{n} is {'derived from the anchor' if n == pb.space.derived else 'fixed in [known]'}"
+                   if n in pb.sc.truth else f"unknown parameter {n!r}")
+            raise ArgumentError(f"--target {n}: {why}; targets apply to the free parameters: {', '.join(pb.names)}")
+        if not (np.isfinite(v) and v > 0):
+            raise ArgumentError(f"--target {n}: the relative precision must be positive, got {v!r}")
+
+
+def _check_budget(budget_runs, budget_time, overhead, robust, within) -> None:
+    """The budget, overhead, robust and within options' ranges."""
+    if budget_runs is not None and (int(budget_runs) != budget_runs or budget_runs < 1):
+        raise ArgumentError(f"--budget-runs must be a positive integer, got {budget_runs!r}")
+    if budget_time is not None and not (np.isfinite(budget_time) and budget_time > 0):
+        raise ArgumentError(f"--budget-time must be a positive number of seconds, got {budget_time!r}")
+    if not (np.isfinite(overhead) and overhead >= 0):
+        raise ArgumentError(f"--overhead must be a non-negative number of seconds, got {overhead!r}")
+    if not (isinstance(robust, int) and robust >= 1):
+        raise ArgumentError(f"--robust must be a positive integer (number of cars), got {robust!r}")
+    if not (np.isfinite(within) and within >= 1):
+        raise ArgumentError(f"--within must be at least 1, got {within!r}")
 
 
 def plan(scenario, *, noise=None, accel_density: float = 0.0, gyro_density: float = 0.0,
@@ -401,222 +452,227 @@ def plan(scenario, *, noise=None, accel_density: float = 0.0, gyro_density: floa
     -------
     PlanResult
     """
-    sc = scenario if isinstance(scenario, Scenario) else load_scenario(scenario)
-    road_ids = [r.id for r in sc.runs if not r.road_known]
-    if sc.truth is None:
-        raise DataError(f"{sc.path}: a plan needs a scenario with a [truth] table (the nominal car)")
-    if extensions is None:  # the scenario's [model], else the groups the nominal car has
-        extensions = sc.extensions if sc.extensions is not None else \
-            tuple(g for g, ns in GROUPS.items() if any(sc.truth.get(n, 0.0) > 0 for n in ns))
-    extensions = tuple(extensions)
-    if sc.dampers is not None and CURVES not in extensions:  # the car has real dampers: plan their curves
-        extensions += (CURVES,)
-    curves = CURVES in extensions
-    if curves and road_ids:
-        raise ArgumentError(f"runs on unknown roads ({', '.join(road_ids)}) cannot be planned with damper curves: "
-                            "the road fit projects the road out of a linear car (docs/any-road.md); plan the curves "
-                            "on known tracks, or the linear model with --model")
-    knots, knots_from = plan_knots(sc) if curves else (None, None)
-    space = ParameterSpace(sc.known, sc.geometry, sc.bounds, extensions=extensions,
-                           damper_knots=knots)  # refuses a missing anchor
-    names = list(space.names)
-    knot_names = [n for n in names if n.startswith("F_")] if curves else []
-    x0 = np.array([float(sc.truth.get(n, 0.0)) for n in names])
-    if curves:
-        Fk = nominal_forces(sc, space.layout)
-        all_knots = curve_names(space.layout.n_knots)
-        x0[[names.index(n) for n in knot_names]] = [Fk[all_knots.index(n)] for n in knot_names]
-    bad = [n for n, v in zip(names, x0) if (v == 0 if n in knot_names else v <= 0)]
-    if bad:
-        raise DataError(f"{sc.path}: [truth] has no positive value for {', '.join(bad)}, a free parameter of the "
-                        "model; precision is planned relative to the nominal value, so give one")
-    P0 = space.full(x0[None])[0]
-    _check_truth(sc, space, P0)
-    run_ids = [r.id for r in sc.runs]
-    if not run_ids:
-        raise DataError(f"{sc.path}: no [[runs]]: nothing to plan")
+    pb = PlanProblem.build(scenario, extensions)
+    opts = PlanOptions.build(pb, noise=noise, accel_density=accel_density, gyro_density=gyro_density,
+                             bandwidth=bandwidth, noise_ar1=noise_ar1, noise_psd=noise_psd, budget_runs=budget_runs,
+                             budget_time=budget_time, overhead=overhead, criterion=criterion, targets=targets,
+                             robust=robust, robust_spread=robust_spread, seed=seed, within=within, step=step)
+    inf = gather_information(pb, opts)
+    chosen = select_runs(pb, opts, inf)
+    return assemble(pb, opts, inf, chosen)
 
-    # -- options -------------------------------------------------------------
-    if isinstance(noise_psd, (str, Path)):
-        noise_psd = load_noise_psd(noise_psd)
-    if noise is None:
-        noise = 0.0 if (accel_density or gyro_density or noise_psd is not None) else DEFAULT_NOISE
-    nm = noise if isinstance(noise, NoiseModel) else NoiseModel(float(noise), float(accel_density),
-                                                                  float(gyro_density), bandwidth,
-                                                                  float(noise_ar1), noise_psd)
-    if nm.psd is not None:
-        for r in sc.runs:
-            nm.psd.check_covers(r.fs, f"run {r.id} (fs {r.fs:g} Hz)")
-    targets = dict(targets or {})
-    if criterion is None:
-        criterion = "target" if targets else "D"
-    if criterion not in CRITERIA:
-        raise ArgumentError(f"--criterion {criterion!r}: expected one of {', '.join(CRITERIA)}")
-    for n, v in targets.items():
-        if n not in names:
-            why = (f"{n} is {'derived from the anchor' if n == space.derived else 'fixed in [known]'}"
-                   if n in sc.truth else f"unknown parameter {n!r}")
-            raise ArgumentError(f"--target {n}: {why}; targets apply to the free parameters: {', '.join(names)}")
-        if not (np.isfinite(v) and v > 0):
-            raise ArgumentError(f"--target {n}: the relative precision must be positive, got {v!r}")
-    if criterion == "target" and not targets:
-        raise ArgumentError("--criterion target needs at least one --target NAME=PRECISION (e.g. k_sr=0.5%)")
-    if budget_runs is not None and (int(budget_runs) != budget_runs or budget_runs < 1):
-        raise ArgumentError(f"--budget-runs must be a positive integer, got {budget_runs!r}")
-    if budget_time is not None and not (np.isfinite(budget_time) and budget_time > 0):
-        raise ArgumentError(f"--budget-time must be a positive number of seconds, got {budget_time!r}")
-    if not (np.isfinite(overhead) and overhead >= 0):
-        raise ArgumentError(f"--overhead must be a non-negative number of seconds, got {overhead!r}")
-    if not (isinstance(robust, int) and robust >= 1):
-        raise ArgumentError(f"--robust must be a positive integer (number of cars), got {robust!r}")
-    if not (np.isfinite(within) and within >= 1):
-        raise ArgumentError(f"--within must be at least 1, got {within!r}")
-    tcost = np.array([r.duration + overhead for r in sc.runs])
-    if budget_time is not None and tcost.min() > budget_time:
-        j = int(np.argmin(tcost))
-        raise ArgumentError(f"--budget-time {budget_time:g} s: no candidate run fits (the shortest, {run_ids[j]}, "
-                            f"takes {sc.runs[j].duration:g} s + {overhead:g} s overhead)")
 
-    # -- information -----------------------------------------------------------
-    notes = []
-    sim = simulator(replace(sc, runs=tuple(r for r in sc.runs if r.road_known))) if len(road_ids) < len(run_ids) \
-        else None
-    lin_sim = sim
-    exc = None
-    if curves:
-        from ..estimate.cost import CurveSimulator
-        sim = CurveSimulator(sc.geometry, sim.runs, space.layout)
-        sim.pin_at(P0[None], margin=1.0)  # one integrator for every row of the differences
-        exc = Excitation(space.layout.knots, run_counts(space, sim, P0), names)
-        if sc.dampers is not None and knots_from == "default knots (SPEC §8)":
+@dataclass
+class PlanInformation:
+    """The Fisher and identify information of every candidate run (:func:`gather_information`).
+
+    ``infos``: one :class:`RunInformation` per car (the nominal car first), knots no run excites masked out;
+    ``road_info``: the unknown-road runs' information by run id; ``sim``: the simulator the
+    information came from (the curves' with damper curves), ``lin_sim`` the linear car's;
+    ``exc``: the damper knots' :class:`Excitation` (None without curves); ``cars``: (d,) rows;
+    ``notes``: what the plan says about how it was made.
+    """
+
+    infos: list
+    road_info: dict
+    sim: object
+    lin_sim: object
+    exc: Excitation | None
+    cars: list
+    notes: list
+
+    @property
+    def info(self) -> RunInformation:
+        """The nominal car's information."""
+        return self.infos[0]
+
+    def precision(self, S) -> Precision:
+        """Precision of runs ``S``; with curves the knots they do not excite excluded."""
+        if self.exc is None:
+            return subset_precision(self.info, S)
+        idx = list(S)
+        k = self.exc.mask(idx)
+        return precision(*(mask_information(M[idx].sum(0), k) for M in (self.info.F, self.info.A, self.info.B)),
+                         self.info.names, self.info.x0)
+
+
+def gather_information(pb: PlanProblem, opts: PlanOptions) -> PlanInformation:
+    """Information of every candidate run for the nominal car and the robust cars."""
+    sc, notes = pb.sc, []
+    sim = simulator(replace(sc, runs=tuple(r for r in sc.runs if r.road_known))) \
+        if len(pb.road_ids) < len(pb.run_ids) else None
+    lin_sim, exc = sim, None
+    if pb.curves:
+        sim = CurveSimulator(sc.geometry, sim.runs, pb.space.layout)
+        sim.pin_at(pb.P0[None], margin=1.0)  # one integrator for every row of the differences
+        exc = Excitation(pb.space.layout.knots, run_counts(pb.space, sim, pb.P0), pb.names)
+        if sc.dampers is not None and pb.knots_from == "default knots (SPEC §8)":
             notes.append("the [dampers] velocities are not symmetric: the plan's car is the truth curve sampled at "
                          "the default knots (set [model] damper_knots to plan other knots)")
         if sc.bump_stops:
             notes.append("bump stops are not in the plan's model (identify cannot fit them): planned without them")
-    cars = [x0] + _sample_cars(space, x0, sc.bounds, robust - 1, robust_spread, seed)
-    infos, road_info = _information(sc, sim, space, cars, nm, seed, step)
+    cars = [pb.x0] + _sample_cars(pb.space, pb.x0, sc.bounds, opts.robust - 1, opts.robust_spread, opts.seed)
+    infos, road_info = _information(sc, sim, pb.space, cars, opts.noise, opts.seed, opts.step)
     if road_info:
         notes.append(f"runs on unknown roads ({', '.join(road_info)}): precision predicted from the road fit of "
                      f"identify (rideid.estimate.roadfit) on {roadinfo.ROADS} generated roads of their ISO 8608 "
                      "class per run (seeded by --seed; one with a road_seed), information averaged (docs/planning.md)")
     if exc is not None:  # a knot no candidate excites is not in any Fisher matrix
-        keep = exc.mask(range(len(run_ids)))
+        keep = exc.mask(range(len(pb.run_ids)))
         for i in infos:
             i.F, i.A, i.B = (mask_information(M, keep) for M in (i.F, i.A, i.B))
-    info = infos[0]
+    return PlanInformation(infos, road_info, sim, lin_sim, exc, cars, notes)
 
-    def prec(S):
-        """Precision of runs ``S``; with curves the knots they do not excite excluded."""
-        if exc is None:
-            return subset_precision(info, S)
-        idx = list(S)
-        k = exc.mask(idx)
-        return precision(*(mask_information(M[idx].sum(0), k) for M in (info.F, info.A, info.B)), info.names, info.x0)
-    F = np.stack([i.F for i in infos])
-    A = np.stack([i.A for i in infos])
-    B = np.stack([i.B for i in infos])
+
+@dataclass(frozen=True)
+class Selection:
+    """What :func:`select_runs` chose: ``S`` (sorted candidate indices), the greedy ``order`` over all
+    candidates, its ``path`` [(run id, Precision)], the selector and the selection's notes."""
+
+    S: list
+    order: list
+    path: list
+    selector: Selector
+    notes: list
+
+
+def select_runs(pb: PlanProblem, opts: PlanOptions, inf: PlanInformation) -> Selection:
+    """The runs to drive: the best subset under the budget or for the targets, else the fewest runs
+    ``within`` all candidates' CRLB; and the greedy path over every candidate (for the figure)."""
+    R = len(pb.run_ids)
+    F, A, B = (np.stack([getattr(i, m) for i in inf.infos]) for m in "FAB")
     # track time is the cost when it is budgeted, and for targets (reach them in the least time)
-    use_time = budget_time is not None or criterion == "target"
-    cost = tcost if use_time else np.ones(len(run_ids))
-    ti = [names.index(n) for n in targets]
-    sel = Selector(F, A, B, cost, criterion, ti, [targets[n] for n in targets])
-
-    def fits(S, limit_runs=budget_runs):
-        if limit_runs is not None and len(S) > limit_runs:
-            return False
-        return budget_time is None or tcost[list(S)].sum() <= budget_time * (1 + 1e-12)
-
-    all_p = prec(range(len(run_ids)))
+    use_time = opts.budget_time is not None or opts.criterion == "target"
+    cost = opts.time_cost if use_time else np.ones(R)
+    ti = [pb.names.index(n) for n in opts.targets]
+    sel = Selector(F, A, B, cost, opts.criterion, ti, [opts.targets[n] for n in opts.targets])
     # greedy path over all candidates (no budget), for the figure
-    order = sel.greedy(lambda S: True, stop_when_met=False) if criterion != "target" else \
-        Selector(F, A, B, np.ones(len(run_ids)), criterion, ti, sel.tr).greedy(lambda S: True, stop_when_met=False)
-    path = [(run_ids[j], prec(order[:k + 1])) for k, j in enumerate(order)]
+    order = sel.greedy(lambda S: True, stop_when_met=False) if opts.criterion != "target" else \
+        Selector(F, A, B, np.ones(R), opts.criterion, ti, sel.tr).greedy(lambda S: True, stop_when_met=False)
+    path = [(pb.run_ids[j], inf.precision(order[:k + 1])) for k, j in enumerate(order)]
+    S, notes = (_budgeted_subset if opts.budgeted else _fewest_within)(pb, opts, inf, sel)
+    return Selection(sorted(S), order, path, sel, notes)
 
-    if criterion == "target" or budget_runs is not None or budget_time is not None:
-        S = sel.best(fits)
-        if criterion == "target" and not sel.met(S):
-            worst = sel.rel_std(S)[:, ti].max(0)
-            miss = [f"{n} ±{100 * w:.3g} % (target {100 * targets[n]:.3g} %)"
-                    for n, w in zip(targets, worst) if w > targets[n] * (1 + 1e-9)]
-            where = "within the budget" if (budget_runs or budget_time) else "even with every candidate run"
-            notes.append(f"targets not reached {where}: best reachable " + ", ".join(miss))
-    else:
-        S = None
-        for k in range(1, len(run_ids) + 1):
-            T = sel.best(lambda S, k=k: fits(S, k))
-            p = prec(T)
-            if np.all(p.rel_crlb <= within * all_p.rel_crlb):
-                S = T
-                break
-        S = S if S is not None else list(range(len(run_ids)))
-        notes.append(f"no budget given: the fewest runs whose CRLB is within {within:g}x of all "
-                     f"{len(run_ids)} candidates' on every parameter (--within; set --budget-runs or --budget-time)")
-    S = sorted(S)
-    sel_p = prec(S)
-    chosen = [run_ids[j] for j in S]
-    worst = None
-    if robust > 1:
-        worst = sel.rel_std(S).max(0)
 
-    grad = None
-    if space.derived is not None:
-        grad = space.derived_gradient() * x0  # d(derived)/du, u = x / x0
+def _fits(opts: PlanOptions, S, limit_runs) -> bool:
+    """Whether runs ``S`` fit at most ``limit_runs`` runs and the time budget."""
+    if limit_runs is not None and len(S) > limit_runs:
+        return False
+    return opts.budget_time is None or opts.time_cost[list(S)].sum() <= opts.budget_time * (1 + 1e-12)
 
-    cand = [{"id": r.id, "kind": "track" if r.road_known else "road", "track": r.track, "speed": r.speed,
-             "fs": r.fs, "duration_s": r.duration, "time_cost_s": float(tcost[k]),
-             "channels_used": [c for c, u in zip(_channels(), info.used[k]) if u]}
-            for k, r in enumerate(sc.runs)]
-    for c, r in zip(cand, sc.runs):
-        if not r.road_known:
-            c["road"] = {"road_class": r.road.road_class, "coherence": r.road.coherence,
-                         "road_seeds": road_info[r.id].seeds,
-                         "method": "an unknown road (SPEC §9): precision of identify's road fit on generated roads "
-                                   "of this ISO 8608 class, information averaged over the roads"}
-    if exc is not None:
-        for k, c in enumerate(cand):
-            c["dampers"] = exc.run_entry(k)
+
+def _budgeted_subset(pb, opts, inf, sel) -> tuple[list, list]:
+    """The best subset within the budget (targets: at the least cost); a note when targets are missed."""
+    S = sel.best(lambda S: _fits(opts, S, opts.budget_runs))
+    notes = []
+    if opts.criterion == "target" and not sel.met(S):
+        ti = [pb.names.index(n) for n in opts.targets]
+        worst = sel.rel_std(S)[:, ti].max(0)
+        miss = [f"{n} ±{100 * w:.3g} % (target {100 * opts.targets[n]:.3g} %)"
+                for n, w in zip(opts.targets, worst) if w > opts.targets[n] * (1 + 1e-9)]
+        where = "within the budget" if (opts.budget_runs or opts.budget_time) else "even with every candidate run"
+        notes.append(f"targets not reached {where}: best reachable " + ", ".join(miss))
+    return S, notes
+
+
+def _fewest_within(pb, opts, inf, sel) -> tuple[list, list]:
+    """Without a budget: the fewest runs whose CRLB is within ``opts.within`` of all candidates' on every
+    parameter."""
+    R = len(pb.run_ids)
+    all_p = inf.precision(range(R))
+    S = None
+    for k in range(1, R + 1):
+        T = sel.best(lambda S, k=k: _fits(opts, S, k))
+        if np.all(inf.precision(T).rel_crlb <= opts.within * all_p.rel_crlb):
+            S = T
+            break
+    S = S if S is not None else list(range(R))
+    return S, [f"no budget given: the fewest runs whose CRLB is within {opts.within:g}x of all "
+               f"{R} candidates' on every parameter (--within; set --budget-runs or --budget-time)"]
+
+
+def assemble(pb: PlanProblem, opts: PlanOptions, inf: PlanInformation, chosen: Selection) -> PlanResult:
+    """The :class:`PlanResult` of the selection: precisions, candidates, messages, notes, comparison."""
+    R, S, names, space = len(pb.run_ids), chosen.S, pb.names, pb.space
+    all_p, sel_p = inf.precision(range(R)), inf.precision(chosen.S)
+    notes = inf.notes + chosen.notes + _identify_note(sel_p, names, opts.noise)
+    res = PlanResult(
+        scenario=str(pb.sc.path), names=names, nominal=_nominal(pb),
+        derived=space.derived, known=dict(pb.sc.known), extensions=list(space.extensions),
+        noise=opts.noise.to_dict(), noise_text=opts.noise.describe(), criterion=opts.criterion,
+        budget={"runs": opts.budget_runs, "time_s": opts.budget_time, "overhead_s": opts.overhead,
+                "within": None if (opts.budget_runs or opts.budget_time or opts.criterion == "target")
+                else opts.within},
+        targets=opts.targets,
+        robust={"cars": opts.robust,
+                "rule": "maximin: the criterion of the worst car" if opts.robust > 1 else "nominal car",
+                "seed": opts.seed, "spread": opts.robust_spread if opts.robust > 1 else None,
+                "cars_free": [dict(zip(names, map(float, c))) for c in inf.cars[1:]]},
+        sensitivity=_sensitivity_method(pb, opts, inf),
+        candidates=_candidates(pb, opts, inf), all_runs=all_p, selected_runs=[pb.run_ids[j] for j in S],
+        selected=sel_p, path=chosen.path,
+        messages_all=_messages(inf.info, inf.exc, range(R), None, all_p),
+        messages_selected=_messages(inf.info, inf.exc, S, [pb.run_ids[j] for j in S], sel_p), notes=notes,
+        derived_grad=None if space.derived is None else space.derived_gradient() * pb.x0,  # d(derived)/du, u = x/x0
+        robust_worst=chosen.selector.rel_std(S).max(0) if opts.robust > 1 else None)
+    if inf.exc is not None:
+        res.dampers = _dampers_block(inf.exc, space, pb.x0, names, all_p, sel_p, S, R, pb.knots_from)
+    tk = [k for k, r in enumerate(pb.sc.runs) if r.road_known]
+    if tk:  # the paper's map covers track runs only
+        width = len(ALL_NAMES) if any(n in EXT_NAMES for n in names) else len(NAMES)
+        res.comparison = _compare_maps(inf.lin_sim, replace(pb.sc, runs=tuple(pb.sc.runs[k] for k in tk)),
+                                       pb.P0[:width] if pb.curves else pb.P0, [pb.run_ids[k] for k in tk],
+                                       replace(inf.info, F=inf.info.F[tk]), names,
+                                       [pb.run_ids[j] for j in chosen.order], opts.criterion)
+    return res
+
+
+def _identify_note(sel_p: Precision, names, nm: NoiseModel) -> list:
+    """A note when identify's expected spread exceeds the CRLB by more than 10 % on some parameter."""
     with np.errstate(invalid="ignore"):
         ratio = sel_p.rel_identify / sel_p.rel_crlb
     fin = np.isfinite(ratio)
-    if fin.any() and ratio[fin].max() > 1.1:
-        j = int(np.nanargmax(np.where(fin, ratio, np.nan)))
-        what = ("neither noise-weighted nor whitened (the noise is coloured)" if nm.coloured
-                else "not noise-weighted")
-        notes.append(f"identify's cost is {what}: its expected spread exceeds the CRLB by up to "
-                     f"{100 * (ratio[fin].max() - 1):.0f} % ({names[j]}); promises use identify's spread")
-    nominal = {n: float(v) for n, v in sc.truth.items()}
-    nominal.update({n: float(v) for n, v in zip(names, x0) if n in knot_names})
-    sens = {"method": "central finite differences through the compiled kernel", "relative_step": step}
-    if curves:
+    if not (fin.any() and ratio[fin].max() > 1.1):
+        return []
+    j = int(np.nanargmax(np.where(fin, ratio, np.nan)))
+    what = "neither noise-weighted nor whitened (the noise is coloured)" if nm.coloured else "not noise-weighted"
+    return [f"identify's cost is {what}: its expected spread exceeds the CRLB by up to "
+            f"{100 * (ratio[fin].max() - 1):.0f} % ({names[j]}); promises use identify's spread"]
+
+
+def _nominal(pb: PlanProblem) -> dict:
+    """plan.json ``"nominal"``: [truth], and the knot forces with curves."""
+    nominal = {n: float(v) for n, v in pb.sc.truth.items()}
+    nominal.update({n: float(v) for n, v in zip(pb.names, pb.x0) if n in pb.knot_names})
+    return nominal
+
+
+def _sensitivity_method(pb: PlanProblem, opts: PlanOptions, inf: PlanInformation) -> dict:
+    """plan.json ``"sensitivities"``: how the derivatives were taken."""
+    sens = {"method": "central finite differences through the compiled kernel", "relative_step": opts.step}
+    if pb.curves:
         sens["method"] = ("central finite differences through the compiled nonlinear car (damper curves, RK4 with "
                           "its sub-step count pinned at the nominal car's for every row of the differences)")
-        sens["substeps"] = {rid: int(m) for rid, m in zip(run_ids, sim.pin)}
-    res = PlanResult(
-        scenario=str(sc.path), names=names,
-        nominal=nominal,
-        derived=space.derived, known=dict(sc.known), extensions=list(space.extensions), noise=nm.to_dict(), noise_text=nm.describe(),
-        criterion=criterion,
-        budget={"runs": budget_runs, "time_s": budget_time, "overhead_s": overhead,
-                "within": None if (budget_runs or budget_time or criterion == "target") else within},
-        targets=targets,
-        robust={"cars": robust, "rule": "maximin: the criterion of the worst car" if robust > 1 else "nominal car",
-                "seed": seed, "spread": robust_spread if robust > 1 else None,
-                "cars_free": [dict(zip(names, map(float, c))) for c in cars[1:]]},
-        sensitivity=sens,
-        candidates=cand, all_runs=all_p, selected_runs=chosen, selected=sel_p, path=path,
-        messages_all=_messages(info, exc, range(len(run_ids)), None, all_p),
-        messages_selected=_messages(info, exc, S, chosen, sel_p), notes=notes,
-        derived_grad=grad, robust_worst=worst)
-    if exc is not None:
-        res.dampers = _dampers_block(exc, space, x0, names, all_p, sel_p, S, len(run_ids), knots_from)
-    width = len(ALL_NAMES) if any(n in EXT_NAMES for n in names) else len(NAMES)
-    tk = [k for k, r in enumerate(sc.runs) if r.road_known]
-    if tk:  # the paper's map covers track runs only
-        sub = replace(info, F=info.F[tk])
-        res.comparison = _compare_maps(lin_sim, replace(sc, runs=tuple(sc.runs[k] for k in tk)),
-                                       P0[:width] if curves else P0, [run_ids[k] for k in tk], sub, names,
-                                       [run_ids[j] for j in order], criterion)
-    return res
+        sens["substeps"] = {rid: int(m) for rid, m in zip(pb.run_ids, inf.sim.pin)}
+    return sens
+
+
+def _candidates(pb: PlanProblem, opts: PlanOptions, inf: PlanInformation) -> list:
+    """plan.json ``"candidates"``: each run's road, rate, duration, cost, channels (and knots excited)."""
+    cand = [{"id": r.id, "kind": "track" if r.road_known else "road", "track": r.track, "speed": r.speed,
+             "fs": r.fs, "duration_s": r.duration, "time_cost_s": float(opts.time_cost[k]),
+             "channels_used": [c for c, u in zip(CHANNELS, inf.info.used[k]) if u]}
+            for k, r in enumerate(pb.sc.runs)]
+    for c, r in zip(cand, pb.sc.runs):
+        if not r.road_known:
+            c["road"] = {"road_class": r.road.road_class, "coherence": r.road.coherence,
+                         "road_seeds": inf.road_info[r.id].seeds,
+                         "method": "an unknown road (SPEC §9): precision of identify's road fit on generated roads "
+                                   "of this ISO 8608 class, information averaged over the roads"}
+    if inf.exc is not None:
+        for k, c in enumerate(cand):
+            c["dampers"] = inf.exc.run_entry(k)
+    return cand
 
 
 def _information(sc, sim, space, cars, nm, seed, step):
@@ -695,14 +751,8 @@ def _dampers_block(exc, space, x0, names, all_p, sel_p, S, n_runs, knots_from) -
             "all_runs": block(all_p, range(n_runs)), "selected": block(sel_p, S)}
 
 
-def _channels():
-    from ..model.equations import CHANNELS
-    return CHANNELS
-
-
 def _check_truth(sc, space, P0):
     """The anchor must describe the nominal car: fixed and derived values equal to [truth]."""
-    from ..model.params import ALL_NAMES
     for k, n in enumerate(ALL_NAMES[:P0.size]):
         if space.curves and n in ("c_sf", "c_sr"):  # the curves' mean slopes, not parameters of the plan
             continue
@@ -738,9 +788,7 @@ def _sample_cars(space, x0, bounds, n, spread, seed) -> list:
 
 def _compare_maps(sim, sc, P0, run_ids, info, names, greedy_order, criterion) -> dict:
     """Where the paper's sensitivity map (rideid sensitivity) and the Fisher information agree."""
-    from scipy.stats import spearmanr
-
-    from ..estimate.sensitivity import compute_maps
+    from scipy.stats import spearmanr  # slow to import, needed by this comparison only
     maps = compute_maps(sim, sc.geometry, P0, run_ids)
     names = [n for n in names if n in maps.params]  # parameters the map covers
     M = maps.submap(names)  # (d, R), rows sum to 1

@@ -10,17 +10,41 @@ files (the command line loads the result and the dataset).
 from __future__ import annotations
 
 import base64
+import functools
+import gc
 import html
 import io
+import multiprocessing as mp
+import os
+import sys
+from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass
 from importlib import resources
 from pathlib import Path
 
+import jinja2
+import matplotlib
 import numpy as np
+from matplotlib.backends.backend_agg import FigureCanvasAgg
+from matplotlib.figure import Figure as MplFigure
+from PIL import Image
 
+from ..data.dataset import prepare_inputs
+from ..data.scenario import LIFT_OFF_RHO
 from ..errors import DataError
+from ..estimate.cost import CostFunction, ParameterSpace
+from ..estimate.dampers import suspension_velocities_by_run
+from ..estimate.sensitivity import P2T_STARS, heatmap_figure, stars
+from ..model.batch import BatchSimulator
+from ..model.equations import CHANNELS
+from ..model.params import ALL_NAMES, DESCRIPTIONS, as_vector
+from ..model.roads import iso8608_psd
+from .estimate_sections import estimate_context
 
 FIG_DPI = 90
+#: the report's Matplotlib style, applied around each figure's drawing (never to the user's global rcParams);
+#: axes.titley fixed: otherwise every axes of every draw searches its tick labels to place the title
+STYLE = {"font.size": 8, "axes.grid": True, "grid.alpha": 0.3, "figure.dpi": FIG_DPI, "axes.titley": 1.0}
 
 
 @dataclass
@@ -32,16 +56,23 @@ class Figure:
     data_uri: str
 
 
-def _plt():
-    import matplotlib
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-    # axes.titley fixed: otherwise every axes of every draw searches its tick labels to place the title
-    plt.rcParams.update({"font.size": 8, "axes.grid": True, "grid.alpha": 0.3, "figure.dpi": FIG_DPI,
-                         "axes.titley": 1.0})
-    return plt
+def styled(fn):
+    """Run ``fn`` (a function that builds or draws figures) with the report's :data:`STYLE`."""
+    @functools.wraps(fn)
+    def wrapper(*args, **kwargs):
+        with matplotlib.rc_context(STYLE):
+            return fn(*args, **kwargs)
+    return wrapper
 
 
+def new_figure(**kwargs) -> MplFigure:
+    """A Matplotlib figure of its own on an Agg canvas: no pyplot, the backend left alone."""
+    fig = MplFigure(**kwargs)
+    FigureCanvasAgg(fig)
+    return fig
+
+
+@styled
 def _save(fig, out_dir: Path, name: str, title: str, caption: str, keep: bool = False,
           drawn: bool = False) -> Figure:
     """Write ``fig`` as ``figures/<name>.png`` and close it (unless ``keep``: a reused template).
@@ -51,8 +82,8 @@ def _save(fig, out_dir: Path, name: str, title: str, caption: str, keep: bool = 
     figures are opaque, so the alpha channel only costs bytes, and level 1 encodes in about
     half the time of the default level 6 for a file of about the same size.
     """
-    from PIL import Image
-    plt = _plt()
+    if not isinstance(fig.canvas, FigureCanvasAgg):  # a figure drawn elsewhere, e.g. through pyplot
+        FigureCanvasAgg(fig)
     fdir = out_dir / "figures"
     fdir.mkdir(parents=True, exist_ok=True)
     path = fdir / f"{name}.png"
@@ -63,16 +94,19 @@ def _save(fig, out_dir: Path, name: str, title: str, caption: str, keep: bool = 
     img.convert("RGB").save(buf, format="png", compress_level=1)
     png = buf.getvalue()
     path.write_bytes(png)
-    if not keep:
-        plt.close(fig)
+    pyplot = sys.modules.get("matplotlib.pyplot")
+    if not keep and pyplot is not None:
+        pyplot.close(fig)  # a pyplot figure (no-op for ours): pyplot must forget it
     uri = "data:image/png;base64," + base64.b64encode(png).decode("ascii")
     return Figure(name, title, caption, f"figures/{name}.png", uri)
 
 
+@styled
 def fig_convergence(hist, out_dir):
-    plt = _plt()
+    """JADE's convergence: best and mean cost per generation, and its adaptive means."""
     g = [h["generation"] for h in hist]
-    fig, (a1, a2) = plt.subplots(1, 2, figsize=(10, 3.2))
+    fig = new_figure(figsize=(10, 3.2))
+    a1, a2 = fig.subplots(1, 2)
     lg = lambda k: [np.log10(max(h[k], 1e-300)) for h in hist]  # noqa: E731
     a1.plot(g, lg("best_cost"), label="best (current weights)")
     a1.plot(g, lg("mean_cost"), label="population mean", alpha=0.8)
@@ -96,16 +130,17 @@ def fig_convergence(hist, out_dir):
 
 def _styles(n):
     """Distinct colour and line style for up to 20 lines."""
-    import matplotlib
     cmap = matplotlib.colormaps["tab10"]
     return [{"color": cmap(i % 10), "ls": "-" if i < 10 else "--"} for i in range(n)]
 
 
+@styled
 def fig_spread(hist, names, out_dir):
-    plt = _plt()
+    """Each free parameter's spread in the JADE population and its population mean per generation."""
     sty = _styles(len(names))
     g = [h["generation"] for h in hist]
-    fig, (a1, a2) = plt.subplots(1, 2, figsize=(10, 3.6))
+    fig = new_figure(figsize=(10, 3.6))
+    a1, a2 = fig.subplots(1, 2)
     for k, n in enumerate(names):
         a1.plot(g, [np.log10(max(h[f"cv_{n}"], 1e-16)) for h in hist], label=n, **sty[k])
     a1.set_xlabel("generation")
@@ -126,12 +161,14 @@ def fig_spread(hist, names, out_dir):
                  "data pin down least.")
 
 
+@styled
 def fig_weights(hist, runs, out_dir, mode):
-    plt = _plt()
+    """The track weights per generation, stacked."""
     g = [h["generation"] for h in hist]
     runs = [r for r in runs if f"weight_{r}" in hist[0]]  # (unknown-road runs are not weighted by the search)
     W = np.array([[h[f"weight_{r}"] for r in runs] for h in hist]).T
-    fig, ax = plt.subplots(figsize=(10, 3.2))
+    fig = new_figure(figsize=(10, 3.2))
+    ax = fig.subplots()
     ax.stackplot(g, W, labels=runs)
     ax.set_xlim(g[0], g[-1])
     ax.set_ylim(0, 1)
@@ -154,10 +191,10 @@ GROUPS = (("body accelerations", "m/s²", (0, 1, 2, 3)), ("axle accelerations", 
           ("rates", "rad/s", (8, 9)))
 
 
+@styled
 def fig_compare(hist, label, other_hist, other_label, runs, out_dir):
     """Two identifications of one dataset (e.g. adaptive vs fixed weights)."""
-    plt = _plt()
-    fig = plt.figure(figsize=(11, 6.4))
+    fig = new_figure(figsize=(11, 6.4))
     gs = fig.add_gridspec(2, 2, height_ratios=[1, 1])
     a = fig.add_subplot(gs[:, 0])
     for h, lab, ls in ((hist, label, "-"), (other_hist, other_label, "--")):
@@ -190,6 +227,7 @@ _FIT_BACKGROUNDS: dict = {}
 _FIT_LEGENDS: dict = {}
 
 
+@styled
 def _fit_template(present: tuple):
     """Figure, axes and line artists of the fit figure for the channels ``present``.
 
@@ -198,11 +236,10 @@ def _fit_template(present: tuple):
     bottom row labels them. The legends are the same for every run: drawn once, they are kept
     as pixels (``figimage``, exactly what the legend draws) instead of being laid out again.
     """
-    from ..model.equations import CHANNELS
     if present in _FIT_TEMPLATES:
         return _FIT_TEMPLATES[present]
-    plt = _plt()
-    fig, axes = plt.subplots(3, 2, figsize=(12, 6.2), sharex="col", gridspec_kw={"width_ratios": [2.2, 1]})
+    fig = new_figure(figsize=(12, 6.2))
+    axes = fig.subplots(3, 2, sharex="col", gridspec_kw={"width_ratios": [2.2, 1]})
     lines = {}
     legends = []
     for row, (label, unit, idx) in enumerate(GROUPS):
@@ -284,6 +321,7 @@ def spectra_limits(runs) -> tuple:
     return pad(0.0, fmax), tuple(pad(a, b) for a, b in zip(lo, hi))
 
 
+@styled
 def _fit_background(present: tuple, limits) -> dict:
     """The fit figure of the channels ``present`` drawn without its per-run artists (time-domain
     axes, spectrum lines), for spectra ``limits``: built once per process and limits."""
@@ -307,6 +345,7 @@ def _fit_background(present: tuple, limits) -> dict:
     return cache
 
 
+@styled
 def fig_fit(run_id, t, Y, Ysim, out_dir, limits=None):
     """Measured vs simulated per channel group, and residual spectra.
 
@@ -351,7 +390,7 @@ def fig_fit(run_id, t, Y, Ysim, out_dir, limits=None):
 
 
 def fit_statistics(Y, Ysim):
-    from ..model.equations import CHANNELS
+    """Per channel present: the RMS of the residual relative to the measured RMS."""
     out = {}
     for i, c in enumerate(CHANNELS):
         if np.all(np.isnan(Y[:, i])):
@@ -373,11 +412,10 @@ HEAT_CAPTIONS = {
 }
 
 
+@styled
 def fig_heatmap(kind, maps, out_dir):
     """One sensitivity map with each cell's star rating (``kind``: a key of ``HEAT_CAPTIONS``;
     drawn by :func:`rideid.estimate.sensitivity.heatmap_figure`)."""
-    from ..estimate.sensitivity import heatmap_figure
-    _plt()
     title = kind.replace("_", " → ").replace("param", "parameter")
     return _save(heatmap_figure(maps, kind), Path(out_dir), kind, title, HEAT_CAPTIONS[kind])
 
@@ -388,8 +426,6 @@ NOT_EXCITED_LABEL = "not excited — not to be trusted"
 
 def _curve_car(result, dataset):
     """A cost function of ``dataset`` on the curve model of ``result`` and the identified car's full row."""
-    from ..estimate.cost import CostFunction, ParameterSpace
-
     knots = [v for v in result.dampers["velocity"] if v > 0]
     ext = (result.model or {}).get("extensions") or ["damper_curves"]
     space = ParameterSpace(dataset.known, dataset.geometry, dataset.manifest.bounds, extensions=ext,
@@ -410,9 +446,6 @@ def result_suspension_velocities(result, dataset) -> dict:
     of the identified car with damper curves, simulated on each run of ``dataset``
     (:func:`rideid.estimate.dampers.suspension_velocities_by_run`, the excitation check's, at the looser
     sub-step bound :data:`rideid.data.scenario.LIFT_OFF_RHO`: a histogram needs no more)."""
-    from ..data.scenario import LIFT_OFF_RHO
-    from ..estimate.dampers import suspension_velocities_by_run
-
     cf, P = _curve_car(result, dataset)
     return {r.id: v for r, v in zip(dataset.runs, suspension_velocities_by_run(cf, P, rho=LIFT_OFF_RHO))}
 
@@ -428,6 +461,7 @@ def velocity_histograms(vels: dict, n_bins: int = 60):
     return edges, {rid: tuple(np.histogram(v, bins=edges)[0] for v in fr) for rid, fr in vels.items()}
 
 
+@styled
 def fig_road(run_id: str, x, z, rec: dict, out_dir):
     """An unknown-road run's estimated road: both wheel paths against distance, and their spectrum against
     the ISO 8608 class bands."""
@@ -438,12 +472,12 @@ def fig_road(run_id: str, x, z, rec: dict, out_dir):
                  f"means (dashed); the fitted class {rec['iso8608_class']}, Gd(n0) = {rec['gd_n0']:.3g} m³.")
 
 
+@styled
 def road_figure(x, z, rec: dict, run_id: str = ""):
     """The Matplotlib figure of :func:`fig_road`."""
-    from scipy.signal import welch
-    from ..model.roads import iso8608_psd
-    plt = _plt()
-    fig, (a1, a2) = plt.subplots(2, 1, figsize=(10, 6))
+    from scipy.signal import welch  # slow to import, for the road figure only
+    fig = new_figure(figsize=(10, 6))
+    a1, a2 = fig.subplots(2, 1)
     a1.plot(x, 1e3 * z[:, 0], lw=0.7, label="left")
     a1.plot(x, 1e3 * z[:, 1], lw=0.7, label="right")
     a1.set_xlabel("x, m")
@@ -464,6 +498,7 @@ def road_figure(x, z, rec: dict, run_id: str = ""):
     return fig
 
 
+@styled
 def fig_damper_curves(dampers: dict, slopes: dict, out_dir):
     """Per axle the identified force-velocity curve, its +-2 std_robust band at the knots, the knots
     no run excites marked, and the derived linear c_s for reference."""
@@ -474,12 +509,13 @@ def fig_damper_curves(dampers: dict, slopes: dict, out_dir):
                  "derived linear c_s (the curve's mean slope between ±0.1 m/s) for reference.")
 
 
+@styled
 def damper_curves_figure(dampers: dict, slopes: dict):
     """The Matplotlib figure of :func:`fig_damper_curves` (``slopes``: axle -> derived c_s or None)."""
-    plt = _plt()
     v = np.asarray(dampers["velocity"], dtype=float)
     j0 = int(np.searchsorted(v, 0.0))
-    fig, axes = plt.subplots(1, 2, figsize=(10, 3.8))
+    fig = new_figure(figsize=(10, 3.8))
+    axes = fig.subplots(1, 2)
     for ax, axle, colour in zip(axes, ("front", "rear"), ("tab:blue", "tab:orange")):
         d = dampers[axle]
         F = np.asarray(d["force"], dtype=float)
@@ -513,13 +549,14 @@ def damper_curves_figure(dampers: dict, slopes: dict):
     return fig
 
 
+@styled
 def fig_damper_velocities(edges, hists: dict, knots, out_dir):
     """Per run: a histogram of the suspension velocities reached, front and rear."""
-    plt = _plt()
     n = len(hists)
     ncol = min(5, n)
     nrow = -(-n // ncol)
-    fig, axes = plt.subplots(nrow, ncol, figsize=(10, 1.9 * nrow + 0.5), sharex=True, squeeze=False)
+    fig = new_figure(figsize=(10, 1.9 * nrow + 0.5))
+    axes = fig.subplots(nrow, ncol, sharex=True, squeeze=False)
     for ax, (rid, (cf, cr)) in zip(axes.flat, hists.items()):
         ax.stairs(np.maximum(cf, 0.5), edges, baseline=0.5, color="tab:blue", label="front")
         ax.stairs(np.maximum(cr, 0.5), edges, baseline=0.5, color="tab:orange", label="rear")
@@ -550,14 +587,9 @@ def _fig_job(job):
 
 def _map_figures(jobs):
     """Render figures on all cores (matplotlib is single-threaded); serial fallback."""
-    import gc
-    import os
     n = min(len(jobs), os.cpu_count() or 1)
-    _plt()  # import matplotlib once here: forked workers inherit it
     if n > 1:
         try:
-            import multiprocessing as mp
-            from concurrent.futures import ProcessPoolExecutor
             # the parent's objects (an identification's worth) out of the workers' garbage collection:
             # collecting them would touch, and so copy, every page the workers share with the parent
             gc.collect()
@@ -596,42 +628,56 @@ def write_report(result, dataset, out_dir, *, compare=None, compare_label: str |
     -------
     Path of ``report.html``.
     """
-    import jinja2
-
-    from ..model.params import ALL_NAMES, DESCRIPTIONS
-    from ..estimate.sensitivity import P2T_STARS, stars
-    from .estimate_sections import estimate_context
-
     out_dir = Path(out_dir)
-    res = result.to_dict()
-    hist = list(result.history)
-    maps = result.maps
-    if maps is None and not getattr(result, "roads", None):
+    if result.maps is None and not getattr(result, "roads", None):
         raise DataError(f"{out_dir}: the result carries no sensitivity maps (written by an older rideid?); "
                         "identify again to render the report")
-    run_ids = [r.id for r in dataset.runs]
-    other = None
-    if compare is not None:
-        lab = f"{result.weights_mode} (this)"
-        olab = compare_label or f"{compare.weights_mode} (other)"
-        other = (lab, list(compare.history), olab)
-    pnames = [n for n in ALL_NAMES if n in result.details]  # the twelve, and the extensions when fitted
+    sims = _responses(result, dataset)
+    context = {**figure_sections(result, dataset, sims, out_dir, compare, compare_label),
+               **road_section(result, out_dir), **fit_section(result, dataset, sims), **data_section(result, dataset),
+               **estimate_section(result, dataset)}
+    out = out_dir / "report.html"
+    out.write_text(render(context))
+    return out
+
+
+def _parameter_names(result) -> list:
+    """The parameters of the result: the twelve, and the extensions when fitted."""
+    return [n for n in ALL_NAMES if n in result.details]
+
+
+def _responses(result, dataset) -> dict:
+    """The identified car's response on every run, run id -> (n_time, 10): the result's own, or simulated."""
     sims = result.response
-    if sims is None or set(sims) != set(run_ids):
+    if sims is None or set(sims) != {r.id for r in dataset.runs}:
         # (a rebuilt report of a curve result: the curves' car, not a linear car with the derived c_s)
         sims = curve_responses(result, dataset) if getattr(result, "dampers", None) else \
-            simulate_runs(dataset, {n: result.parameters[n] for n in pnames})
+            simulate_runs(dataset, {n: result.parameters[n] for n in _parameter_names(result)})
+    return sims
 
-    # every figure is an independent job: render them on all cores
+
+def _measured(dataset) -> dict:
+    """Run id -> the measured (n_time, 10) matrix (NaN columns: channels not logged)."""
+    return {r.id: dataset.data[r.id].matrix() for r in dataset.runs}
+
+
+def figure_sections(result, dataset, sims, out_dir, compare=None, compare_label=None) -> dict:
+    """Template context of the report's figures: convergence, spread, weights (and the comparison), the fit
+    per run, the sensitivity maps and the damper curves. Every figure but the dampers' is an independent
+    job, rendered on all cores."""
+    hist, maps, run_ids = list(result.history), result.maps, [r.id for r in dataset.runs]
+    other = None
+    if compare is not None:
+        other = (f"{result.weights_mode} (this)", list(compare.history),
+                 compare_label or f"{compare.weights_mode} (other)")
     jobs = []
     if hist:
         names = [k[len("cv_"):] for k in hist[0] if k.startswith("cv_")]
         jobs += [("fig_convergence", (hist, out_dir)), ("fig_spread", (hist, names, out_dir)),
                  ("fig_weights", (hist, run_ids, out_dir, result.weights_mode))]
-    measured = {r.id: dataset.data[r.id].matrix() for r in dataset.runs}
+    measured = _measured(dataset)
     limits = spectra_limits([(dataset.data[r.id].time, measured[r.id], sims[r.id]) for r in dataset.runs])
     # the fit figures' common part, drawn here once: the processes that render the runs inherit it
-    _plt()
     for present in {tuple(i for i in range(m.shape[1]) if not np.all(np.isnan(m[:, i]))) for m in measured.values()}:
         _fit_background(present, limits)
     jobs += [("fig_fit", (r.id, dataset.data[r.id].time, measured[r.id], sims[r.id], out_dir, limits))
@@ -641,15 +687,24 @@ def write_report(result, dataset, out_dir, *, compare=None, compare_label: str |
     if other is not None:
         jobs.append(("fig_compare", (hist, other[0], other[1], other[2], run_ids, out_dir)))
     done = _map_figures(jobs)
-    damper_figs = []
-    if getattr(result, "dampers", None):
-        vels = result_suspension_velocities(result, dataset)
-        edges, hists = velocity_histograms(vels)
-        slopes = {a: result.parameters.get(n) for a, n in (("front", "c_sf"), ("rear", "c_sr"))}
-        damper_figs = [fig_damper_curves(result.dampers, slopes, out_dir),
-                       fig_damper_velocities(edges, hists, result.dampers["velocity"], out_dir)]
     compare_figs = [done.pop()] if other is not None else []
     heat_figs = [done.pop() for _ in heat_kinds][::-1]
+    return {"figures": (done[:3] if hist else []) + compare_figs, "fit_figures": done[3:] if hist else done,
+            "heat_figures": heat_figs, "damper_figures": damper_section(result, dataset, out_dir)}
+
+
+def damper_section(result, dataset, out_dir) -> list:
+    """The damper curves and the suspension velocities reached (a result with damper curves; else none)."""
+    if not getattr(result, "dampers", None):
+        return []
+    edges, hists = velocity_histograms(result_suspension_velocities(result, dataset))
+    slopes = {a: result.parameters.get(n) for a, n in (("front", "c_sf"), ("rear", "c_sr"))}
+    return [fig_damper_curves(result.dampers, slopes, out_dir),
+            fig_damper_velocities(edges, hists, result.dampers["velocity"], out_dir)]
+
+
+def road_section(result, out_dir) -> dict:
+    """Template context of the unknown-road runs (SPEC §9): their rows, figures and wavelength band."""
     road_figs, road_rows = [], []
     for rid, rec in (getattr(result, "roads", None) or {}).items():
         road_rows.append({"run": rid, "cls": rec["iso8608_class"], "gd": rec["gd_n0"], "speed": rec["speed"],
@@ -657,22 +712,36 @@ def write_report(result, dataset, out_dir, *, compare=None, compare_label: str |
         if result.road_profiles and rid in result.road_profiles:
             x, z = result.road_profiles[rid]
             road_figs.append(fig_road(rid, x, z, rec, out_dir))
-    figs = done[:3] if hist else []
-    fit_figs = done[3:] if hist else done
+    band = next(iter((result.roads or {}).values()), {}).get("wavelengths_m", (0.5, 20))
+    return {"road_figures": road_figs, "road_rows": road_rows, "road_band": "{:g}-{:g} m".format(*band)}
+
+
+def fit_section(result, dataset, sims) -> dict:
+    """Template context of the fit table: per run its track, speed, weight and worst/median relative error."""
+    measured = _measured(dataset)
     fit_rows = []
     for r in dataset.runs:
         st = fit_statistics(measured[r.id], sims[r.id])
         fit_rows.append({"run": r.id, "track": r.track, "speed": r.speed, "weight": result.track_weights.get(r.id),
                          "worst": max(st.values()) if st else float("nan"),
                          "median": float(np.median(list(st.values()))) if st else float("nan")})
+    return {"fit_rows": fit_rows}
 
+
+def data_section(result, dataset) -> dict:
+    """Template context of the data section: runs, channel maps, and the data checks' findings."""
     data_rows, channel_rows, data_warnings = data_tables(result.preprocessing or dataset.preprocessing())
     # the data checks' and the bound check's findings (rideid.data.checks)
     data_warnings = data_warnings + [c["message"] for c in (getattr(result, "checks", None) or [])
                                      if isinstance(c, dict) and "message" in c]
+    return {"dataset": str(dataset.path), "data_rows": data_rows, "channel_rows": channel_rows,
+            "data_warnings": data_warnings, "n_runs": len(dataset.runs)}
 
+
+def parameter_rows(result) -> list:
+    """One row per parameter: value, unit, standard deviations (absolute and %), bounds, status."""
     params = []
-    for n in pnames:
+    for n in _parameter_names(result):
         d = result.details[n]
         std = d.get("std")
         rob = d.get("std_robust")
@@ -685,32 +754,30 @@ def write_report(result, dataset, out_dir, *, compare=None, compare_label: str |
             "status": "known" if d.get("fixed") else ("derived" if d.get("derived") else
                                                       ("AT A SEARCH BOUND" if d.get("at_bound") else "estimated")),
         })
+    return params
+
+
+def estimate_section(result, dataset) -> dict:
+    """Template context of the estimates: the title, result.json, parameters, modal table, the map's cells,
+    and the quality sections (:func:`rideid.report.estimate_sections.estimate_context`)."""
+    res, maps = result.to_dict(), result.maps
     p2t = [] if maps is None else [
         {"param": p, "cells": [(f"{maps.M[i, r]:.2f}", stars(maps.M[i, r] * len(maps.runs), P2T_STARS))
                                for r in range(len(maps.runs))]} for i, p in enumerate(maps.params)]
+    return {"title": f"rideid identification: {html.escape(dataset.name)}", "res": res,
+            "params": parameter_rows(result), "modal": result.modal or {},
+            "runs": [] if maps is None else maps.runs, "p2t": p2t, "known": result.known, **estimate_context(res)}
+
+
+def render(context: dict) -> str:
+    """report.html's text: the template ``report.html.j2`` rendered with ``context``."""
     env = jinja2.Environment(loader=jinja2.FileSystemLoader(str(resources.files("rideid.report") / "templates")),
                              autoescape=jinja2.select_autoescape(["html", "j2"]))
-    tpl = env.get_template("report.html.j2")
-    text = tpl.render(
-        title=f"rideid identification: {html.escape(dataset.name)}", res=res, params=params,
-        modal=result.modal or {}, figures=figs + compare_figs, fit_figures=fit_figs, fit_rows=fit_rows,
-        heat_figures=heat_figs, damper_figures=damper_figs, runs=[] if maps is None else maps.runs, p2t=p2t,
-        road_figures=road_figs, road_rows=road_rows,
-        road_band="{:g}-{:g} m".format(*next(iter((result.roads or {}).values()), {}).get("wavelengths_m", (0.5, 20))), known=result.known, n_runs=len(dataset.runs),
-        dataset=str(dataset.path), data_rows=data_rows, channel_rows=channel_rows, data_warnings=data_warnings,
-        **estimate_context(res),
-    )
-    out = out_dir / "report.html"
-    out.write_text(text)
-    return out
+    return env.get_template("report.html.j2").render(**context)
 
 
 def simulate_runs(dataset, parameters: dict) -> dict:
     """The response of the car ``parameters`` on every run of ``dataset``: run id -> (n_time, 10)."""
-    from ..data.dataset import prepare_inputs
-    from ..model.batch import BatchSimulator
-    from ..model.params import as_vector
-
     sim = BatchSimulator(dataset.geometry, prepare_inputs(dataset))
     outs = sim.outputs(as_vector(parameters)[None])
     return {r.id: o[0] for r, o in zip(dataset.runs, outs)}
