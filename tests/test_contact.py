@@ -5,13 +5,13 @@ import pytest
 
 from rideid.model.contact import ContactODEError, contact_ode, envelope, envelope_grid, wheel_input
 from rideid.errors import DataError
-from rideid.model.tracks import Track
+from rideid.data.schema.tracks import track_from_table
 
 R = 0.3
 
 
 def washboard(L=0.6, A=0.01, cycles=10):
-    return Track.from_table(dict(id="w", kind="washboard", start=2.0, amplitude=A, wavelength=L, cycles=cycles), "t")
+    return track_from_table(dict(id="w", kind="washboard", start=2.0, amplitude=A, wavelength=L, cycles=cycles), "t")
 
 
 def brute(h, x, R, n=400001):
@@ -24,29 +24,29 @@ def test_track_kinds_heights():
     x = np.array([1.0, 2.15, 8.5])
     np.testing.assert_allclose(w.path(0.7).height(x), [0, 0.01, 0], atol=1e-15)
     np.testing.assert_array_equal(w.path(0.7).height(x), w.path(-0.7).height(x))
-    hb = Track.from_table(dict(id="h", kind="herringbone", start=2.0, amplitude=0.01, wavelength=0.5,
+    hb = track_from_table(dict(id="h", kind="herringbone", start=2.0, amplitude=0.01, wavelength=0.5,
                                cycles=10, angle=30.0), "t")
     shift = 2 * 0.7 * np.tan(np.radians(30))
     xs = np.linspace(4, 5, 11)
     # the left wheel sees the right wheel's wave shifted by track * tan(angle)
     np.testing.assert_allclose(hb.path(0.7).height(xs), hb.path(-0.7).height(xs + shift), atol=1e-15)
-    tw = Track.from_table(dict(id="t", kind="chassis_twist", start=3.0, height=0.05, bump_length=1.0,
+    tw = track_from_table(dict(id="t", kind="chassis_twist", start=3.0, height=0.05, bump_length=1.0,
                                spacing=4.0, bumps=2), "t")
     assert tw.path(0.7).height(np.array([3.0]))[0] == pytest.approx(0.05)
     assert tw.path(-0.7).height(np.array([3.0]))[0] == 0
     assert tw.path(-0.7).height(np.array([5.0]))[0] == pytest.approx(0.05)
     assert tw.path(0.7).height(np.array([3.25]))[0] == pytest.approx(0.025)
-    tr = Track.from_table(dict(id="t", kind="chassis_twist", start=3.0, height=0.05, bump_length=1.0,
+    tr = track_from_table(dict(id="t", kind="chassis_twist", start=3.0, height=0.05, bump_length=1.0,
                                spacing=4.0, bumps=2, first="right"), "t")
     assert tr.path(-0.7).height(np.array([3.0]))[0] == pytest.approx(0.05)
-    flat = Track.from_table(dict(id="f", kind="flat"), "t")
+    flat = track_from_table(dict(id="f", kind="flat"), "t")
     assert np.all(flat.path(0.5).height(xs) == 0)
 
 
 def test_profile_track(tmp_path):
     f = tmp_path / "p.csv"
     f.write_text("x,z_left,z_right\n1.0,0.0,0.0\n1.5,0.02,0.0\n2.0,0.0,0.01\n")
-    tr = Track.from_table(dict(id="p", kind="profile", file="p.csv"), "t", base_dir=tmp_path)
+    tr = track_from_table(dict(id="p", kind="profile", file="p.csv"), "t", base_dir=tmp_path)
     np.testing.assert_allclose(tr.path(0.7).height(np.array([0.5, 1.25, 1.5, 3.0])), [0, 0.01, 0.02, 0])
     np.testing.assert_allclose(tr.path(-0.7).height(np.array([1.75])), [0.005])
 
@@ -61,7 +61,7 @@ def test_profile_track(tmp_path):
 ])
 def test_track_bad_input(table, msg):
     with pytest.raises(DataError, match=msg):
-        Track.from_table(table, "dataset.toml: tracks[0]")
+        track_from_table(table, "dataset.toml: tracks[0]")
 
 
 @pytest.mark.parametrize("L", [0.3, 0.6, 1.2])
@@ -94,7 +94,7 @@ def test_envelope_vs_contact_ode_sinusoid():
 
 
 def test_envelope_vs_contact_ode_twist_whole_run():
-    tw = Track.from_table(dict(id="t", kind="chassis_twist", start=2.0, height=0.08, bump_length=1.5,
+    tw = track_from_table(dict(id="t", kind="chassis_twist", start=2.0, height=0.08, bump_length=1.5,
                                spacing=4.0, bumps=3), "t")
     p = tw.path(0.69)
     t = np.linspace(0, 3.0, 3001)

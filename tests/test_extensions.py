@@ -15,7 +15,7 @@ from rideid.model.equations import (CHANNELS, CORNER_TO_DECOMPOSED, blocks, deco
 from rideid.model.params import (ALL_NAMES, DEFAULT_CAR, DEFAULT_GEOMETRY, EXT_NAMES, GROUPS, INDEX, NAMES,
                                  as_vector, check_parameters, full_rows)
 from rideid.model.simulate import RunInput, prepare_run, simulate_reference
-from rideid.model.tracks import Track
+from rideid.data.schema.tracks import track_from_table
 from test_model import assert_blocks_have_the_full_eigenvalues
 # the same three tracks, error measure and cross-checks as the base model's
 from test_simulate import FS, TRACKS, assert_kernel_matches_reference, assert_scale_invariant, lsim_error, rel_rms
@@ -111,7 +111,7 @@ def test_bars_touch_only_the_antisymmetric_block():
 
 def test_washboard_leaves_the_bars_unloaded():
     table, V = TRACKS["washboard"]
-    run = prepare_run(Track.from_table(table, "t"), G, V, np.arange(601) / FS)
+    run = prepare_run(track_from_table(table, "t"), G, V, np.arange(601) / FS)
     bars = full_rows(P0)
     bars[0, INDEX["k_arf"]], bars[0, INDEX["k_arr"]] = EXT["k_arf"], EXT["k_arr"]
     y0 = simulate_reference(P0[None], G, run)[0]
@@ -198,9 +198,9 @@ def test_extended_car_matches_fine_step_lsim(kind):
 
 
 def test_kernel_matches_reference_with_extensions(rng):
-    runs = [prepare_run(Track.from_table(TRACKS[k][0], "t"), G, TRACKS[k][1], np.arange(401) / FS)
+    runs = [prepare_run(track_from_table(TRACKS[k][0], "t"), G, TRACKS[k][1], np.arange(401) / FS)
             for k in ("herringbone", "chassis_twist")]
-    runs.append(prepare_run(Track.from_table(TRACKS["washboard"][0], "t"), G, 7.0, np.arange(301) / 500.0))
+    runs.append(prepare_run(track_from_table(TRACKS["washboard"][0], "t"), G, 7.0, np.arange(301) / 500.0))
     P = PX * np.exp(rng.normal(0, 0.3, (19, 16)))
     P[:, INDEX["a"]] = np.clip(P[:, INDEX["a"]], 0.5, 2.0)
     P[::3, 12:14] = 0.0  # some without bars
@@ -259,7 +259,7 @@ def test_wheel_velocities_are_the_physical_ones():
     table, V = TRACKS["chassis_twist"]
     fs = 2000.0
     t = np.arange(int(2.0 * fs) + 1) / fs
-    run = prepare_run(Track.from_table(table, "t"), G, V, t)
+    run = prepare_run(track_from_table(table, "t"), G, V, t)
     _, states = simulate_reference(PX[None], G, run, return_states=True)
     v = wheel_velocities(states[0])
     fd = np.gradient(wheel_displacements(states[0]), t, axis=0)
@@ -272,7 +272,7 @@ def test_lift_off_uses_the_full_tire_force():
     from rideid.data.scenario import lift_offs
     from rideid.model.equations import static_corner_loads
     from rideid.model.simulate import wheel_displacements, wheel_velocities
-    tr = Track.from_table(dict(id="t", kind="chassis_twist", start=2.0, height=0.12, bump_length=1.0, spacing=4.0,
+    tr = track_from_table(dict(id="t", kind="chassis_twist", start=2.0, height=0.12, bump_length=1.0, spacing=4.0,
                                bumps=2), "t")
     t = np.arange(int(2.0 * FS) + 1) / FS
     run = prepare_run(tr, G, 8.0, t)
@@ -294,7 +294,7 @@ def test_lift_off_uses_the_full_tire_force():
 def test_sensitivity_maps_include_the_extensions():
     from rideid.estimate.sensitivity import compute_maps
     from rideid.model.params import NOMINAL_EXTENSIONS
-    runs = [prepare_run(Track.from_table(table, "t"), G, V, np.arange(401) / FS) for table, V in TRACKS.values()]
+    runs = [prepare_run(track_from_table(table, "t"), G, V, np.arange(401) / FS) for table, V in TRACKS.values()]
     sim = BatchSimulator(G, runs)
     base = as_vector({**DEFAULT_CAR, **NOMINAL_EXTENSIONS})
     maps = compute_maps(sim, G, base, list(TRACKS))

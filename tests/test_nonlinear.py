@@ -15,7 +15,7 @@ from rideid.model.nonlinear import (DEFAULT_KNOTS, NonlinearLayout, NonlinearSim
 from rideid.verify.hifi import hifi_curve
 from rideid.model.params import ALL_NAMES, DEFAULT_CAR, DEFAULT_GEOMETRY, GRAVITY, INDEX, Geometry, as_vector
 from rideid.model.simulate import prepare_run, simulate_reference
-from rideid.model.tracks import Track
+from rideid.data.schema.tracks import track_from_table
 
 G0 = DEFAULT_GEOMETRY
 GH = Geometry(G0.wheelbase, G0.track_front, G0.track_rear, G0.tire_radius, cg_height=0.25)
@@ -59,7 +59,7 @@ def make_run(kind, road_dir, geom=GH, duration=2.5, scale=1.0):
     for k in ("amplitude", "height"):
         if k in table:
             table[k] *= scale
-    tr = Track.from_table(table, "t", base_dir=road_dir)
+    tr = track_from_table(table, "t", base_dir=road_dir)
     return prepare_run(tr, geom, V, np.arange(int(duration * FS) + 1) / FS)
 
 

@@ -10,7 +10,7 @@ from rideid.model.equations import CHANNELS, state_space
 from rideid.model.params import ALL_NAMES, INDEX, NAMES, as_vector
 from rideid.model.roads import iso8608_profile
 from rideid.model.simulate import prepare_run, simulate_reference
-from rideid.model.tracks import Track
+from rideid.data.schema.tracks import track_from_table
 
 FS = 200.0
 
@@ -31,7 +31,7 @@ def road_run(tmp_path, P, geom, speed=12.0, T=20.0, pre=3.0, seed=1, road_class=
     f = tmp_path / f"road{seed}.csv"
     np.savetxt(f, np.column_stack([x + speed * pre, zl, zr]), delimiter=",", header="x,z_left,z_right",
                comments="")
-    tr = Track.from_table({"id": "r", "kind": "profile", "file": str(f)}, "test")
+    tr = track_from_table({"id": "r", "kind": "profile", "file": str(f)}, "test")
     t = np.arange(int(round((T + pre) * FS)) + 1) / FS
     run = prepare_run(tr, geom, speed, t)
     k0 = int(round(pre * FS))

@@ -8,7 +8,7 @@ from rideid.model.batch import BatchSimulator
 from rideid.model.equations import CHANNELS
 from rideid.model.params import DEFAULT_CAR, DEFAULT_GEOMETRY, INDEX, as_vector
 from rideid.model.simulate import prepare_run, simulate_lsim, simulate_reference
-from rideid.model.tracks import Track
+from rideid.data.schema.tracks import track_from_table
 
 G = DEFAULT_GEOMETRY
 P0 = as_vector(DEFAULT_CAR)
@@ -35,7 +35,7 @@ def profile_track(tmp_path_factory):
     zr = 0.006 * np.sin(2 * np.pi * (x - 2) / 1.1) * np.hanning(x.size) ** 0.5
     np.savetxt(d / "road.csv", np.column_stack([x, zl, zr]), delimiter=",", header="x,z_left,z_right",
                comments="")
-    return Track.from_table(dict(id="p", kind="profile", file="road.csv"), "t", base_dir=d)
+    return track_from_table(dict(id="p", kind="profile", file="road.csv"), "t", base_dir=d)
 
 
 def lsim_error(P, kind, duration, upsample):
@@ -45,7 +45,7 @@ def lsim_error(P, kind, duration, upsample):
     excites (checked to be at least 9 of the 10), the lsim response and the run.
     """
     table, V = TRACKS[kind]
-    tr = Track.from_table(table, "t")
+    tr = track_from_table(table, "t")
     t = np.arange(int(duration * FS) + 1) / FS
     run = prepare_run(tr, G, V, t)
     y = simulate_reference(P[None], G, run)[0]
@@ -67,14 +67,14 @@ def test_profile_and_flat_match_lsim(profile_track):
     y = simulate_reference(P0[None], G, run)[0]
     ref = simulate_lsim(P0, G, profile_track, 6.0, t, upsample=200)
     assert rel_rms(y, ref).max() < 1e-4
-    flat = Track.from_table(dict(id="f", kind="flat"), "t")
+    flat = track_from_table(dict(id="f", kind="flat"), "t")
     yf = simulate_reference(P0[None], G, prepare_run(flat, G, 6.0, t))[0]
     assert np.all(yf == 0)
 
 
 def test_washboard_gives_zero_roll_and_equal_left_right():
     table, V = TRACKS["washboard"]
-    run = prepare_run(Track.from_table(table, "t"), G, V, np.arange(601) / FS)
+    run = prepare_run(track_from_table(table, "t"), G, V, np.arange(601) / FS)
     y = simulate_reference(P0[None], G, run)[0]
     c = {n: y[:, i] for i, n in enumerate(CHANNELS)}
     assert np.abs(c["roll_rate"]).max() == 0
@@ -90,7 +90,7 @@ def test_single_bump_front_left_gives_iso_signs(tmp_path):
     z = 0.02 * np.sin(np.pi * (x - 3.0) / 0.6) ** 2
     np.savetxt(tmp_path / "b.csv", np.column_stack([x, z, 0 * z]), delimiter=",", header="x,z_left,z_right",
                comments="")
-    tr = Track.from_table(dict(id="b", kind="profile", file="b.csv"), "t", base_dir=tmp_path)
+    tr = track_from_table(dict(id="b", kind="profile", file="b.csv"), "t", base_dir=tmp_path)
     V = 5.0
     t = np.arange(int(1.6 * FS) + 1) / FS
     run = prepare_run(tr, G, V, t)
@@ -110,7 +110,7 @@ def test_single_bump_front_left_gives_iso_signs(tmp_path):
 
 def test_rear_input_is_front_input_delayed():
     table, V = TRACKS["washboard"]
-    tr = Track.from_table(table, "t")
+    tr = track_from_table(table, "t")
     fs = 1000.0
     t = np.arange(3001) / fs
     run = prepare_run(tr, G, V, t)
@@ -125,7 +125,7 @@ def test_rear_input_is_front_input_delayed():
 def assert_scale_invariant(P):
     """Every output on the herringbone is unchanged when all of ``P`` but ``a`` is scaled; returns (run, y of P)."""
     table, V = TRACKS["herringbone"]
-    run = prepare_run(Track.from_table(table, "t"), G, V, np.arange(501) / FS)
+    run = prepare_run(track_from_table(table, "t"), G, V, np.arange(501) / FS)
     Ps = np.array([P * np.where(np.arange(P.size) == INDEX["a"], 1.0, s) for s in (1.0, 2.5, 0.37)])
     y = simulate_reference(Ps, G, run)
     np.testing.assert_allclose(y[1], y[0], rtol=1e-9, atol=1e-12 * np.abs(y[0]).max())
@@ -140,8 +140,8 @@ def test_scale_invariance_of_all_outputs():
 def test_kernel_matches_reference(rng):
     runs = []
     for table, V in TRACKS.values():
-        runs.append(prepare_run(Track.from_table(table, "t"), G, V, np.arange(401) / FS))
-    runs.append(prepare_run(Track.from_table(TRACKS["washboard"][0], "t"), G, 7.0, np.arange(301) / 500.0))
+        runs.append(prepare_run(track_from_table(table, "t"), G, V, np.arange(401) / FS))
+    runs.append(prepare_run(track_from_table(TRACKS["washboard"][0], "t"), G, 7.0, np.arange(301) / 500.0))
     P = P0 * np.exp(rng.normal(0, 0.3, (37, 12)))
     P[:, INDEX["a"]] = np.clip(P[:, INDEX["a"]], 0.5, 2.0)
     assert_kernel_matches_reference(runs, P, rng)
@@ -161,7 +161,7 @@ def assert_kernel_matches_reference(runs, P, rng):
 def test_kernel_outputs_are_the_output_map_of_the_continuous_model(rng):
     """Kernel channels = Omega (A x + B u)[7:] and the gyro rows = theta', phi' at the reference states."""
     from rideid.model.equations import DECOMPOSED_TO_COORDS, output_map, state_space
-    run = prepare_run(Track.from_table(TRACKS["chassis_twist"][0], "t"), G, TRACKS["chassis_twist"][1], np.arange(301) / FS)
+    run = prepare_run(track_from_table(TRACKS["chassis_twist"][0], "t"), G, TRACKS["chassis_twist"][1], np.arange(301) / FS)
     P = P0 * np.exp(rng.normal(0, 0.2, (3, 12)))
     y_k = BatchSimulator(G, [run]).outputs(P)[0]
     _, X = simulate_reference(P, G, run, return_states=True)
@@ -188,7 +188,7 @@ def test_series_length_meets_its_stated_tolerance(rng, fs):
     P[0, INDEX["k_tf"]] *= 3.0  # a stiff tire on a light wheel: the fastest mode
     P[0, INDEX["m_uf"]] *= 0.5
     for table, V in TRACKS.values():
-        run = prepare_run(Track.from_table(table, "t"), G, V, np.arange(int(1.5 * fs) + 1) / fs)
+        run = prepare_run(track_from_table(table, "t"), G, V, np.arange(int(1.5 * fs) + 1) / fs)
         full = Discretized(P, G, run.h, nterms=N_MAX)
         rho = max(spectral_radius(full.As).max(), spectral_radius(full.Aa).max()) * run.h / 2
         N = n_terms(rho)

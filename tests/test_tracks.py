@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 
 import rideid
+from rideid.data.schema.tracks import track_from_table
 from rideid.errors import DataError
 from rideid.model.tracks import (KINDS, TRACK_KINDS, ChassisTwistTrack, FlatTrack, HerringboneTrack, ProfileTrack,
                                  WashboardTrack)
@@ -26,21 +27,21 @@ def test_registry_holds_the_spec_kinds():
     (dict(id="f", kind="flat"), FlatTrack),
 ])
 def test_kind_picks_class_and_round_trips(table, cls):
-    tr = rideid.Track.from_table(table, "t")
+    tr = track_from_table(table, "t")
     assert type(tr) is cls and isinstance(tr, rideid.Track)
     again = rideid.Track(tr.id, tr.kind, dict(tr.keys))  # the constructor dispatches on kind too
     assert type(again) is cls
     x = np.linspace(0.0, 12.0, 241)
     for y in (0.7, -0.7):
         assert np.array_equal(again.path(y).height(x), tr.path(y).height(x))
-    back = rideid.Track.from_table(tr.to_table(), "t")
+    back = track_from_table(tr.to_table(), "t")
     assert back.to_table() == tr.to_table() and back.data_file is None
 
 
 def test_herringbone_shift_is_the_angle():
     # crests at 30 degrees: the right wheel path (y = -0.7) leads by 0.7 tan 30 deg more than the centre
-    hb = rideid.Track.from_table(dict(id="h", kind="herringbone", angle=30.0, **WB), "t")
-    wb = rideid.Track.from_table(dict(id="w", kind="washboard", **WB), "t")
+    hb = track_from_table(dict(id="h", kind="herringbone", angle=30.0, **WB), "t")
+    wb = track_from_table(dict(id="w", kind="washboard", **WB), "t")
     shift = 0.7 * math.tan(math.radians(30.0))
     x = np.linspace(2.0, 2.4, 9)
     assert np.allclose(hb.path(0.7).height(x - shift), wb.path(0.7).height(x), atol=1e-15)
@@ -49,15 +50,15 @@ def test_herringbone_shift_is_the_angle():
 
 def test_chassis_twist_first_right_swaps_sides():
     base = dict(id="t", kind="chassis_twist", start=2.0, height=0.05, bump_length=1.0, spacing=3.0, bumps=2)
-    left = rideid.Track.from_table(base, "t")
-    right = rideid.Track.from_table({**base, "first": "right"}, "t")
+    left = track_from_table(base, "t")
+    right = track_from_table({**base, "first": "right"}, "t")
     assert left.path(0.7).extent == right.path(-0.7).extent == (1.5, 5.5)
     assert left.path(-0.7).extent == right.path(0.7).extent == (3.0, 7.0)
 
 
 def test_profile_data_file_resolves_against_base_dir(tmp_path):
     (tmp_path / "p.csv").write_text("x,z_left,z_right\n0,0,0\n1,0.01,0.02\n")
-    tr = rideid.Track.from_table(dict(id="p", kind="profile", file="p.csv"), "t", base_dir=tmp_path)
+    tr = track_from_table(dict(id="p", kind="profile", file="p.csv"), "t", base_dir=tmp_path)
     assert type(tr) is ProfileTrack and tr.data_file == tmp_path / "p.csv"
     assert tr.path(0.7).height(0.5) == pytest.approx(0.005) and tr.path(-0.7).height(0.5) == pytest.approx(0.01)
 
@@ -76,7 +77,7 @@ def test_profile_data_file_resolves_against_base_dir(tmp_path):
 ])
 def test_per_kind_checks(table, msg):
     with pytest.raises(DataError, match=msg):
-        rideid.Track.from_table(table, "dataset.toml: tracks[0]")
+        track_from_table(table, "dataset.toml: tracks[0]")
 
 
 def test_constructor_rejects_unknown_or_mismatched_kind():

@@ -5,10 +5,11 @@ A :class:`Track` gives, for a lateral offset ``y`` (m, left +), a
 flat (0) outside the track's features. Analytic kinds also give ``h'`` and
 ``h''``, which the contact-point ODE (:mod:`rideid.contact`) needs.
 
-Each SPEC kind is one small subclass of :class:`Track` (its keys, their
-checks and its wheel path); :data:`TRACK_KINDS` maps the ``kind`` string to
-the class. ``Track(id, kind, keys)`` and :meth:`Track.from_table` pick the
-class from ``kind``.
+Each SPEC kind is one small subclass of :class:`Track` (its wheel path);
+:data:`TRACK_KINDS` maps the ``kind`` string to the class, and
+``Track(id, kind, keys)`` picks the class from ``kind``. A track holds
+numbers and arrays only: reading ``[[tracks]]`` tables and profile files
+(their keys, checks and messages) is :mod:`rideid.data.schema.tracks`'s.
 """
 
 from __future__ import annotations
@@ -20,7 +21,6 @@ from typing import ClassVar
 
 import numpy as np
 
-from ..csvio import read_csv_rows
 from ..errors import DataError
 
 @dataclass
@@ -99,24 +99,14 @@ def _cos_bumps(centres, H, length):
     return WheelPath(h, ext, d1, d2, min_trough_radius=1.0 / (abs(H) / 2 * k * k) if H else math.inf)
 
 
-def _whole(keys: dict, name: str, where: str) -> None:
-    """Reject a negative or fractional count (cycles, bumps)."""
-    if keys[name] < 0 or keys[name] != int(keys[name]):
-        raise DataError(f"{where}: key '{name}' must be a non-negative whole number, got {keys[name]}")
-
-
-def _positive(keys: dict, name: str, where: str) -> None:
-    """Reject a length that is zero or negative (wavelength, bump length, spacing)."""
-    if keys[name] <= 0:
-        raise DataError(f"{where}: key '{name}' must be positive, got {keys[name]}")
-
-
 @dataclass
 class Track:
-    """A test track: ``id``, ``kind`` and the kind's keys (SPEC §2).
+    """A test track: ``id``, ``kind`` and the kind's keys (SPEC §2), already checked.
 
     The base of the per-kind classes; ``Track(id, kind, keys)`` builds the
-    class registered for ``kind`` in :data:`TRACK_KINDS`.
+    class registered for ``kind`` in :data:`TRACK_KINDS`. ``base_dir``: the
+    folder a profile's ``file`` is relative to. Build one from a TOML table
+    with :func:`rideid.data.schema.tracks.track_from_table`.
     """
 
     id: str
@@ -128,8 +118,6 @@ class Track:
 
     #: the SPEC ``kind`` string of the class
     KIND: ClassVar[str] = ""
-    #: the kind's keys and their defaults (``None``: required), in SPEC order
-    KEYS: ClassVar[dict] = {}
 
     def __new__(cls, *args, **kwargs):
         if cls is Track:
@@ -143,58 +131,6 @@ class Track:
         if self.kind != self.KIND:
             raise DataError(f"track '{self.id}': kind {self.kind!r} does not match {type(self).__name__} "
                             f"(kind {self.KIND!r})")
-
-    @classmethod
-    def from_table(cls, table: dict, where: str, base_dir: Path | None = None) -> "Track":
-        """Build and validate a track from its TOML table.
-
-        ``where`` names the place for messages, e.g. ``"dataset.toml: tracks[0]"``.
-        """
-        table = dict(table)
-        tid = table.pop("id", None)
-        if not isinstance(tid, str) or not tid:
-            raise DataError(f"{where}: missing key 'id' (a non-empty string)")
-        where = f"{where} (id '{tid}')"
-        kind = table.pop("kind", None)
-        if kind not in KINDS:
-            raise DataError(f"{where}: unknown track kind {kind!r}; expected one of {', '.join(KINDS)}")
-        kc = TRACK_KINDS[kind]
-        tr = kc(tid, kind, kc._read_keys(table, where), base_dir)
-        tr._load(where)
-        return tr
-
-    @classmethod
-    def _read_keys(cls, table: dict, where: str) -> dict:
-        """The kind's keys from ``table`` (without id/kind): defaults filled, types and values checked."""
-        spec, kind = cls.KEYS, cls.KIND
-        for k in table:
-            if k not in spec:
-                allowed = ", ".join(["id", "kind", *spec]) or "id, kind"
-                raise DataError(f"{where}: unknown key '{k}' for kind '{kind}' (allowed: {allowed})")
-        keys = {}
-        for k, default in spec.items():
-            if k not in table:
-                if default is None:
-                    raise DataError(f"{where}: missing key '{k}' for kind '{kind}'")
-                keys[k] = default
-                continue
-            keys[k] = cls._read_value(k, table[k], where)
-        cls._check(keys, where)
-        return keys
-
-    @classmethod
-    def _read_value(cls, k: str, v, where: str):
-        """One key's value; numbers by default (kinds with other keys override)."""
-        if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
-            raise DataError(f"{where}: key '{k}' must be a finite number, got {v!r}")
-        return float(v)
-
-    @classmethod
-    def _check(cls, keys: dict, where: str) -> None:
-        """The kind's checks across its keys (ranges, whole counts)."""
-
-    def _load(self, where: str) -> None:
-        """Read what the track needs beyond its keys (a profile file)."""
 
     @property
     def data_file(self) -> Path | None:
@@ -220,7 +156,6 @@ class FlatTrack(Track):
     """``flat``: no features; height 0 everywhere."""
 
     KIND = "flat"
-    KEYS = {}
 
     def _wheel_path(self, y):
         return WheelPath(_zeros, None, _zeros, _zeros)
@@ -230,12 +165,6 @@ class WashboardTrack(Track):
     """``washboard``: ``cycles`` sine waves from ``start``, the same under both wheels."""
 
     KIND = "washboard"
-    KEYS = {"start": None, "amplitude": None, "wavelength": None, "cycles": None}
-
-    @classmethod
-    def _check(cls, keys, where):
-        _positive(keys, "wavelength", where)
-        _whole(keys, "cycles", where)
 
     def _wheel_path(self, y):
         k = self.keys
@@ -250,13 +179,6 @@ class HerringboneTrack(WashboardTrack):
     """``herringbone``: a washboard whose crests cross the road at ``angle`` degrees."""
 
     KIND = "herringbone"
-    KEYS = {**WashboardTrack.KEYS, "angle": None}
-
-    @classmethod
-    def _check(cls, keys, where):
-        super()._check(keys, where)
-        if not (-89.0 < keys["angle"] < 89.0):
-            raise DataError(f"{where}: key 'angle' must be between -89 and 89 degrees, got {keys['angle']}")
 
     def _shift(self, y):
         return y * math.tan(math.radians(self.keys["angle"]))
@@ -266,21 +188,6 @@ class ChassisTwistTrack(Track):
     """``chassis_twist``: raised-cosine bumps alternating left and right, ``first`` side first."""
 
     KIND = "chassis_twist"
-    KEYS = {"start": None, "height": None, "bump_length": None, "spacing": None, "bumps": None, "first": "left"}
-
-    @classmethod
-    def _read_value(cls, k, v, where):
-        if k == "first":
-            if v not in ("left", "right"):
-                raise DataError(f"{where}: key 'first' must be \"left\" or \"right\", got {v!r}")
-            return v
-        return super()._read_value(k, v, where)
-
-    @classmethod
-    def _check(cls, keys, where):
-        _positive(keys, "bump_length", where)
-        _positive(keys, "spacing", where)
-        _whole(keys, "bumps", where)
 
     def _wheel_path(self, y):
         k = self.keys
@@ -291,24 +198,20 @@ class ChassisTwistTrack(Track):
 
 
 class ProfileTrack(Track):
-    """``profile``: measured heights ``z_left``/``z_right`` against ``x`` from a CSV file."""
+    """``profile``: measured heights ``z_left``/``z_right`` against ``x`` (a CSV file's, read by
+    :func:`rideid.data.schema.tracks.read_profile`, or arrays)."""
 
     KIND = "profile"
-    KEYS = {"file": None}
 
     @classmethod
-    def _read_value(cls, k, v, where):
-        if not isinstance(v, str):
-            raise DataError(f"{where}: key 'file' must be a path string")
-        return v
-
-    @classmethod
-    def from_arrays(cls, tid: str, x, z_left, z_right) -> "ProfileTrack":
-        """A profile from arrays rather than a file (e.g. a generated road, :mod:`rideid.model.roads`).
+    def from_arrays(cls, tid: str, x, z_left, z_right, file: str | None = None,
+                    base_dir: Path | None = None) -> "ProfileTrack":
+        """A profile from arrays (a generated road, :mod:`rideid.model.roads`, or a profile file's columns).
 
         ``x`` (m) strictly increasing, ``z_left``/``z_right`` (m) the heights
-        under the left and right wheel paths; linearly interpolated, flat
-        outside, as a profile file. The track has no ``file`` (``data_file`` is None).
+        under the left and right wheel paths, shape (n,) each, n >= 2; linearly
+        interpolated, flat outside. ``file``: the profile file they were read
+        from (relative to ``base_dir``), or None (``data_file`` is then None).
         """
         x, zl, zr = (np.array(a, dtype=float) for a in (x, z_left, z_right))
         if x.ndim != 1 or x.size < 2 or zl.shape != x.shape or zr.shape != x.shape:
@@ -317,7 +220,7 @@ class ProfileTrack(Track):
             raise DataError(f"track '{tid}': NaN or infinite value in the profile")
         if np.any(np.diff(x) <= 0):
             raise DataError(f"track '{tid}': x must be strictly increasing")
-        tr = cls(tid, cls.KIND, {"file": None})
+        tr = cls(tid, cls.KIND, {"file": file}, base_dir)
         tr._profile = (x, zl, zr)
         return tr
 
@@ -329,31 +232,6 @@ class ProfileTrack(Track):
         if not path.is_absolute() and self.base_dir is not None:
             path = self.base_dir / path
         return path
-
-    def _load(self, where):
-        path = self.data_file
-        header, body = read_csv_rows(path, f"{where}: profile file not found: {path}", "profile")
-        for c in ("x", "z_left", "z_right"):
-            if c not in header:
-                raise DataError(f"{path}: missing column '{c}' (need x, z_left, z_right)")
-        idx = [header.index(c) for c in ("x", "z_left", "z_right")]
-        data = []
-        for ln, row in enumerate(body, start=2):
-            if not row:
-                continue
-            try:
-                vals = [float(row[i]) for i in idx]
-            except (ValueError, IndexError):
-                raise DataError(f"{path}: line {ln}: not a number in columns x, z_left, z_right") from None
-            if not all(math.isfinite(v) for v in vals):
-                raise DataError(f"{path}: line {ln}: NaN or infinite value")
-            data.append(vals)
-        if len(data) < 2:
-            raise DataError(f"{path}: a profile needs at least two rows")
-        arr = np.array(data)
-        if np.any(np.diff(arr[:, 0]) <= 0):
-            raise DataError(f"{path}: column 'x' must be strictly increasing")
-        self._profile = (arr[:, 0], arr[:, 1], arr[:, 2])
 
     def _wheel_path(self, y):
         xs, zl, zr = self._profile

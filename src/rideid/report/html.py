@@ -65,10 +65,20 @@ def styled(fn):
     return wrapper
 
 
+class StyledCanvas(FigureCanvasAgg):
+    """An Agg canvas that draws with the report's :data:`STYLE`: what Matplotlib makes at draw time
+    (ticks, their labels and grid lines) takes the style too, whoever asks for the draw."""
+
+    def draw(self):
+        with matplotlib.rc_context(STYLE):
+            super().draw()
+
+
 def new_figure(**kwargs) -> MplFigure:
-    """A Matplotlib figure of its own on an Agg canvas: no pyplot, the backend left alone."""
-    fig = MplFigure(**kwargs)
-    FigureCanvasAgg(fig)
+    """A Matplotlib figure of its own on a :class:`StyledCanvas`: no pyplot, the backend left alone."""
+    with matplotlib.rc_context(STYLE):
+        fig = MplFigure(**kwargs)
+    StyledCanvas(fig)
     return fig
 
 

@@ -20,9 +20,10 @@ module                     format
                            tables, all-or-nothing output folders
 =========================  ==========================================================
 
-``[[tracks]]`` tables are parsed by the track kinds themselves
-(:meth:`rideid.model.tracks.Track.from_table`: each kind knows its keys);
-study files by :mod:`rideid.studies.spec`. The loaders that add the physics
+``[[tracks]]`` tables and profile files are read by :mod:`.tracks`
+(:func:`track_from_table`; one declarative key table per kind), study files
+by :mod:`rideid.studies.spec`; every section's keys are declared with
+:mod:`.keys` (:class:`Key`, :class:`Section`). The loaders that add the physics
 checks (:mod:`rideid.data.checks`) sit one level up: :func:`rideid.load_scenario`
 (:mod:`rideid.data.scenario`) and :func:`rideid.load_dataset` (:mod:`rideid.data.dataset`). This package imports only
 :mod:`rideid.errors`, :mod:`rideid.csvio` and :mod:`rideid.model`; the
@@ -39,8 +40,10 @@ from .manifest import (CHECK_LEVELS, CHECK_NAMES, MODEL_GROUPS, UNKNOWN_ROAD, Da
                        RunSpec, Scenario, load_manifest, load_truth, load_truth_dampers, load_truth_roads,
                        parse_checks, parse_dataset_manifest, parse_model, parse_model_table, parse_scenario,
                        parse_truth)
+from .keys import Key, Messages, Section
 from .result import read_result_json
 from .runfiles import RunData, read_run_csv, write_run_csv
+from .tracks import TRACK_SECTIONS, read_profile, track_from_table
 
 __all__ = [
     "Manifest", "Scenario", "DatasetManifest", "RunSpec", "RoadSpec", "UNKNOWN_ROAD", "RunData", "ChannelEntry",
@@ -53,4 +56,5 @@ __all__ = [
     "CSV_KEYS", "CHANNEL_KEYS",
     "BUMP_NAMES", "DEFAULT_DAMPER_KNOTS", "NONLINEAR_GROUPS", "MODEL_GROUPS", "DamperCurves", "parse_dampers",
     "parse_bump_stops", "parse_damper_knots", "parse_model_table", "load_truth_dampers", "load_truth_roads",
+    "Key", "Messages", "Section", "TRACK_SECTIONS", "read_profile", "track_from_table",
 ]

@@ -29,6 +29,7 @@ from .common import ReadOnlyDict, in_folder, number, read_only, read_toml, table
 from .dampers import (BUMP_NAMES, NONLINEAR_GROUPS, DamperCurves, bump_stop_pairs, parse_bump_stops,
                       parse_damper_knots, parse_dampers)
 from .hifi import HifiProperties, parse_hifi, tire_damping_of
+from .tracks import track_from_table
 
 #: a scenario may also describe the multibody car of rideid.verify.hifi (``[hifi]``, used by --engine mujoco)
 TOP_KEYS_SCENARIO = ("name", "vehicle", "known", "bounds", "model", "tracks", "runs", "truth", "dampers", "hifi")
@@ -447,7 +448,7 @@ def _parse_tracks(doc: dict, where: str, base_dir: Path) -> dict[str, Track]:
         if t.get("id") == UNKNOWN_ROAD:
             raise DataError(f"{where}: tracks[{i}]: track id '{UNKNOWN_ROAD}' is reserved for runs on roads nobody "
                             "measured (SPEC §9); give the track another id")
-        tr = Track.from_table(t, f"{where}: tracks[{i}]", base_dir=base_dir)
+        tr = track_from_table(t, f"{where}: tracks[{i}]", base_dir=base_dir)
         if tr.id in tracks:
             raise DataError(f"{where}: tracks[{i}]: duplicate track id '{tr.id}'")
         tracks[tr.id] = tr
