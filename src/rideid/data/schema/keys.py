@@ -66,7 +66,8 @@ class Key:
 class Messages:
     """The wording of a section's messages: :meth:`str.format` templates.
 
-    Fields available: ``where`` (file and section), ``key``, ``value``,
+    Fields available: ``where`` (file and section), ``key``, ``value`` (as written), ``number``
+    (a number's value as float),
     ``allowed`` (the allowed keys, comma-separated), ``hint`` (the section's
     hint for an unknown key, or ""), ``unit``, ``lo``/``hi`` (of ``between``),
     ``choices`` (``"a" or "b"``) and any extra field passed to :meth:`Section.read`.
@@ -76,8 +77,8 @@ class Messages:
     missing: str = "{where}: missing key '{key}'"
     number: str = "{where} {key}: expected a finite number, got {value!r}"
     positive: str = "{where} {key}: must be positive, got {value!r}"
-    whole: str = "{where}: key '{key}' must be a non-negative whole number, got {value}"
-    between: str = "{where}: key '{key}' must be between {lo:g} and {hi:g} {unit}, got {value}"
+    whole: str = "{where}: key '{key}' must be a non-negative whole number, got {number}"
+    between: str = "{where}: key '{key}' must be between {lo:g} and {hi:g} {unit}, got {number}"
     string: str = "{where}: key '{key}' must be a string, got {value!r}"
     choice: str = "{where}: key '{key}' must be {choices}, got {value!r}"
     bool: str = "{where}: key '{key}' must be true or false, got {value!r}"
@@ -129,7 +130,7 @@ class Section:
                 out[k] = spec.default
         for k, spec in self.keys.items():
             if k in tab and spec.type == "number":
-                self._in_range(k, out[k], spec, where, extra)
+                self._in_range(k, tab[k], spec, where, extra)
         return out
 
     def _typed(self, k, v, spec: Key, where, extra):
@@ -148,17 +149,19 @@ class Section:
         return v
 
     def _in_range(self, k, v, spec: Key, where, extra):
-        if spec.positive and v <= 0:
+        x = float(v)
+        if spec.positive and x <= 0:
             raise self._error("positive", where, k, v, extra)
-        if spec.whole and (v < 0 or v != int(v)):
+        if spec.whole and (x < 0 or x != int(x)):
             raise self._error("whole", where, k, v, extra)
-        if spec.between is not None and not (spec.between[0] < v < spec.between[1]):
+        if spec.between is not None and not (spec.between[0] < x < spec.between[1]):
             raise self._error("between", where, k, v, extra, lo=spec.between[0], hi=spec.between[1])
 
     def _error(self, what, where, key, value, extra, **more) -> DataError:
         spec = self.keys.get(key)
-        fields = {"where": where, "key": key, "value": value, "allowed": ", ".join(self.allowed), "hint": "",
-                  "unit": spec.unit if spec is not None else "", **extra, **more}
+        number = float(value) if isinstance(value, (int, float)) and not isinstance(value, bool) else value
+        fields = {"where": where, "key": key, "value": value, "number": number, "allowed": ", ".join(self.allowed),
+                  "hint": "", "unit": spec.unit if spec is not None else "", **extra, **more}
         return DataError(getattr(self.messages, what).format(**fields))
 
 

@@ -29,6 +29,7 @@ from .common import ReadOnlyDict, in_folder, number, read_only, read_toml, table
 from .dampers import (BUMP_NAMES, NONLINEAR_GROUPS, DamperCurves, bump_stop_pairs, parse_bump_stops,
                       parse_damper_knots, parse_dampers)
 from .hifi import HifiProperties, parse_hifi, tire_damping_of
+from .keys import Key, Messages, Section
 from .tracks import track_from_table
 
 #: a scenario may also describe the multibody car of rideid.verify.hifi (``[hifi]``, used by --engine mujoco)
@@ -51,6 +52,45 @@ OPTIONAL_VEHICLE_KEYS = tuple(Geometry.OPTIONAL_KEYS)
 #: every model group a ``[model] extensions`` list may name: the linear ones (SPEC §6), then SPEC §8's
 MODEL_GROUPS = tuple(GROUPS) + NONLINEAR_GROUPS
 MODEL_KEYS = ("extensions", "damper_knots")
+
+#: a key whose value its section's parser checks itself (a table, a list, an id, a flag with its own words)
+_ANY = Key("any")
+_RUN_HINTS_DATASET = {
+    **{k: " (fs and duration belong to scenarios; a dataset run names its 'file')" for k in ("fs", "duration")},
+    **{k: (f" ({k} belongs to a scenario, whose roads rideid simulate generates; a dataset run on a road nobody "
+           f"measured gives track = \"{UNKNOWN_ROAD}\" or leaves 'track' out)") for k in ROAD_KEYS}}
+_RUN_MESSAGES = Messages(number="{where}: {key}: expected a finite number, got {value!r}",
+                         positive="{where}: {key}: must be positive, got {value!r}",
+                         string="{where}: key '{key}' must be a path string")
+
+#: The declarative key tables of scenario files and ``dataset.toml``: section -> :class:`Section`
+#: (keys in file order, type, required, unit, range; the wording of the section's messages)
+SECTIONS = {
+    "scenario": Section({k: _ANY for k in TOP_KEYS_SCENARIO}),
+    "dataset": Section({k: _ANY for k in TOP_KEYS_DATASET},
+                       hints={"truth": " (a [truth] table belongs in a scenario or in truth.toml)"}),
+    "vehicle": Section({**{k: Key(required=True, unit="m", positive=True) for k in Geometry.KEYS},
+                        **{k: Key(unit="m") for k in OPTIONAL_VEHICLE_KEYS}},
+                       Messages(unknown="{where}: [vehicle]: unknown key '{key}'; allowed: {allowed}",
+                                missing="{where}: [vehicle]: missing key '{key}'",
+                                number="{where}: [vehicle] {key}: expected a finite number, got {value!r}",
+                                positive="{where}: [vehicle] {key}: must be positive, got {value!r}")),
+    "model": Section({"extensions": _ANY, "damper_knots": _ANY},
+                     Messages(unknown="{where}: [model]: unknown key '{key}'; allowed: {allowed}")),
+    "runs.scenario": Section({"id": Key("any", required=True), "track": _ANY, "road_class": _ANY,
+                              "road_seed": _ANY, "coherence": _ANY,
+                              "speed": Key(required=True, unit="m/s", positive=True),
+                              "fs": Key(required=True, unit="Hz", positive=True),
+                              "duration": Key(required=True, unit="s", positive=True), "moving": _ANY},
+                             _RUN_MESSAGES,
+                             hints={"file": " (a scenario run gives 'fs' and 'duration' instead of a file)"}),
+    "runs.dataset": Section({"id": Key("any", required=True), "track": _ANY, "speed": Key(unit="m/s", positive=True),
+                             "file": Key("string", required=True), "moving": _ANY, "channels": _ANY, "checks": _ANY,
+                             **{k: _ANY for k in RUN_PREPROCESS_KEYS}},
+                            _RUN_MESSAGES, hints=_RUN_HINTS_DATASET),
+}
+assert tuple(SECTIONS["runs.scenario"].keys) == RUN_KEYS_SCENARIO and tuple(SECTIONS["runs.dataset"].keys) == \
+    RUN_KEYS_DATASET
 
 
 # ---------------------------------------------------------------------------
@@ -303,9 +343,7 @@ def parse_model_table(tab, where: str) -> tuple[tuple[str, ...] | None, tuple[fl
     """
     if not isinstance(tab, dict):
         raise DataError(f"{where}: [model] must be a table")
-    for k in tab:
-        if k not in MODEL_KEYS:
-            raise DataError(f"{where}: [model]: unknown key '{k}'; allowed: {', '.join(MODEL_KEYS)}")
+    SECTIONS["model"].check_unknown(tab, where)
     knots = parse_damper_knots(tab["damper_knots"], f"{where}: [model] damper_knots") if "damper_knots" in tab \
         else None
     if "extensions" not in tab and knots is not None:
@@ -369,29 +407,10 @@ def parse_truth(tab: dict, where: str, geom: Geometry | None) -> dict[str, float
     return vals
 
 
-def _check_top_keys(doc: dict, where: str, scenario: bool):
-    allowed = TOP_KEYS_SCENARIO if scenario else TOP_KEYS_DATASET
-    for k in doc:
-        if k not in allowed:
-            hint = ""
-            if not scenario and k == "truth":
-                hint = " (a [truth] table belongs in a scenario or in truth.toml)"
-            raise DataError(f"{where}: unknown key '{k}'{hint}; allowed: {', '.join(allowed)}")
-
-
 def _parse_geometry(doc: dict, where: str) -> Geometry:
-    veh = table(doc, "vehicle", where)
-    required = Geometry.KEYS
-    allowed = required + OPTIONAL_VEHICLE_KEYS
-    for k in veh:
-        if k not in allowed:
-            raise DataError(f"{where}: [vehicle]: unknown key '{k}'; allowed: {', '.join(allowed)}")
-    for k in required:
-        if k not in veh:
-            raise DataError(f"{where}: [vehicle]: missing key '{k}'")
-    kw = {k: number(veh[k], f"{where}: [vehicle] {k}", positive=True) for k in required}
-    if "cg_height" in veh:
-        h = number(veh["cg_height"], f"{where}: [vehicle] cg_height")
+    kw = SECTIONS["vehicle"].read(table(doc, "vehicle", where), where)
+    if "cg_height" in kw:
+        h = kw.pop("cg_height")
         if h < 0:
             raise DataError(f"{where}: [vehicle] cg_height: the CG height above the wheel centres must not be "
                             f"negative (m), got {h:g}")
@@ -502,7 +521,7 @@ def _parse_runs(doc: dict, where: str, tracks: dict, scenario: bool) -> list[Run
     raw_runs = doc.get("runs", [])
     if not isinstance(raw_runs, list) or not raw_runs:
         raise DataError(f"{where}: needs at least one [[runs]] table")
-    run_keys = RUN_KEYS_SCENARIO if scenario else RUN_KEYS_DATASET
+    run_keys = SECTIONS["runs.scenario" if scenario else "runs.dataset"]
     runs: list[RunSpec] = []
     seen = set()
     for i, r in enumerate(raw_runs):
@@ -513,21 +532,7 @@ def _parse_runs(doc: dict, where: str, tracks: dict, scenario: bool) -> list[Run
         if not isinstance(rid, str) or not rid:
             raise DataError(f"{w}: missing key 'id' (a non-empty string)")
         w = f"{w} (id '{rid}')"
-        for k in r:
-            if k not in run_keys:
-                hint = ""
-                if k in ("fs", "duration") and not scenario:
-                    hint = " (fs and duration belong to scenarios; a dataset run names its 'file')"
-                if k == "file" and scenario:
-                    hint = " (a scenario run gives 'fs' and 'duration' instead of a file)"
-                if k in ROAD_KEYS and not scenario:
-                    hint = (f" ({k} belongs to a scenario, whose roads rideid simulate generates; a dataset run on "
-                            f"a road nobody measured gives track = \"{UNKNOWN_ROAD}\" or leaves 'track' out)")
-                raise DataError(f"{w}: unknown key '{k}'{hint}; allowed: {', '.join(run_keys)}")
-        required = ("id", "speed", "fs", "duration") if scenario else ("id", "file")
-        for k in required:
-            if k not in r:
-                raise DataError(f"{w}: missing key '{k}'")
+        vals = run_keys.read(r, w)
         if rid in seen:
             raise DataError(f"{w}: duplicate run id '{rid}'")
         seen.add(rid)
@@ -536,16 +541,13 @@ def _parse_runs(doc: dict, where: str, tracks: dict, scenario: bool) -> list[Run
         moving = r.get("moving", road is not None)
         if not isinstance(moving, bool):
             raise DataError(f"{w}: moving must be true or false, got {moving!r}")
-        speed = number(r["speed"], f"{w}: speed", positive=True) if "speed" in r else None
+        speed = vals.get("speed")
         if scenario:
-            fs = number(r["fs"], f"{w}: fs", positive=True)
-            dur = number(r["duration"], f"{w}: duration", positive=True)
+            fs, dur = vals["fs"], vals["duration"]
             if round(dur * fs) < 2:
                 raise DataError(f"{w}: duration * fs gives fewer than 3 samples")
             runs.append(RunSpec(rid, track, speed, fs=fs, duration=dur, moving=moving, road=road))
         else:
-            if not isinstance(r["file"], str):
-                raise DataError(f"{w}: key 'file' must be a path string")
             chans = parse_channel_map(r["channels"], f"{w}: channels") if "channels" in r else {}
             opts = parse_preprocess({k: v for k, v in r.items() if k in RUN_PREPROCESS_KEYS}, w,
                                     RUN_PREPROCESS_KEYS)
@@ -558,7 +560,7 @@ def _parse_runs(doc: dict, where: str, tracks: dict, scenario: bool) -> list[Run
 def _parse_shared(doc: dict, path: Path, scenario: bool) -> dict:
     """The :class:`Manifest` fields, in the order the file's tables are checked."""
     where = str(path)
-    _check_top_keys(doc, where, scenario)
+    SECTIONS["scenario" if scenario else "dataset"].check_unknown(doc, where)
     name = doc.get("name", path.parent.name if not scenario else path.stem)
     if not isinstance(name, str):
         raise DataError(f"{where}: key 'name' must be a string")
@@ -683,4 +685,4 @@ __all__ = ["Manifest", "Scenario", "DatasetManifest", "RunSpec", "RoadSpec", "UN
            "parse_scenario", "parse_dataset_manifest", "parse_model", "parse_model_table", "parse_checks", "parse_truth",
            "load_manifest", "load_truth", "load_truth_dampers", "load_truth_roads", "model_table", "vehicle_table",
            "MODEL_GROUPS", "CHECK_NAMES", "CHECK_LEVELS", "TOP_KEYS_SCENARIO", "TOP_KEYS_DATASET", "RUN_KEYS_SCENARIO",
-           "RUN_KEYS_DATASET", "ROAD_KEYS"]
+           "RUN_KEYS_DATASET", "ROAD_KEYS", "SECTIONS"]

@@ -24,9 +24,9 @@ TRACK_MESSAGES = Messages(
     unknown="{where}: unknown key '{key}' for kind '{kind}' (allowed: {allowed})",
     missing="{where}: missing key '{key}' for kind '{kind}'",
     number="{where}: key '{key}' must be a finite number, got {value!r}",
-    positive="{where}: key '{key}' must be positive, got {value}",
-    whole="{where}: key '{key}' must be a non-negative whole number, got {value}",
-    between="{where}: key '{key}' must be between {lo:g} and {hi:g} {unit}, got {value}",
+    positive="{where}: key '{key}' must be positive, got {number}",
+    whole="{where}: key '{key}' must be a non-negative whole number, got {number}",
+    between="{where}: key '{key}' must be between {lo:g} and {hi:g} {unit}, got {number}",
     string="{where}: key '{key}' must be a path string",
     choice="{where}: key '{key}' must be {choices}, got {value!r}")
 
