@@ -24,9 +24,10 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from ..data.scenario import BUILTIN
-from ..data.schema import read_toml
+from ..data.schema import Key, Messages, Section, read_toml
 from ..errors import DataError
 from ..estimate.identify import DEFAULT_GENERATIONS, DEFAULT_POPULATION
+from . import api as rideid
 
 TOP_KEYS = ("name", "data", "identify", "subsets")
 DATA_KEYS = ("datasets", "scenario", "noise", "noise_seeds")
@@ -34,6 +35,17 @@ DATA_KEYS = ("datasets", "scenario", "noise", "noise_seeds")
 IDENTIFY_KEYS = ("model", "weights", "population", "generations", "polish", "spread_tol", "seed")
 IDENTIFY_DEFAULTS = {"population": DEFAULT_POPULATION, "generations": DEFAULT_GENERATIONS, "polish": True,
                      "weights": "adaptive", "seed": 1}
+
+
+def _section(keys, what: str) -> Section:
+    """A study section whose values (one or a list: an axis of the study) its parser checks."""
+    return Section({k: Key("any") for k in keys},
+                   Messages(unknown="{where}: unknown key '{key}' in " + what + " (allowed: {allowed})"))
+
+
+#: The declarative key tables of a study file: section -> :class:`rideid.data.schema.Section`
+SECTIONS = {"study": _section(TOP_KEYS, "the study file"), "data": _section(DATA_KEYS, "[data]"),
+            "identify": _section(IDENTIFY_KEYS, "[identify]"), "noise_seeds": _section(("first", "count"), "noise_seeds")}
 
 
 @dataclass(frozen=True)
@@ -91,12 +103,6 @@ def _int(v, where, lo):
     return int(v)
 
 
-def _check_unknown(tab, allowed, where, what):
-    for k in tab:
-        if k not in allowed:
-            raise _err(where, f"unknown key '{k}' in {what} (allowed: {', '.join(allowed)})")
-
-
 def _hash_files(h, paths):
     for p in paths:
         h.update(str(p.name).encode() + b"\0")
@@ -132,7 +138,6 @@ def dataset_content_hash(folder: Path) -> str:
 
 
 def scenario_content_hash(path) -> str:
-    from . import api as rideid
     p = rideid.default_scenario_path() if path == BUILTIN else Path(path)
     h = hashlib.sha256()
     _hash_files(h, [p])
@@ -149,14 +154,13 @@ def task_key(options: dict, content: str) -> str:
 
 def identify_accepts(name: str) -> bool:
     """Whether the installed :func:`rideid.identify` takes keyword ``name``."""
-    from . import api as rideid
     return name in inspect.signature(rideid.identify).parameters
 
 
 # ---------------------------------------------------------------------------
 
 def _parse_identify(tab, where):
-    _check_unknown(tab, IDENTIFY_KEYS, where, "[identify]")
+    SECTIONS["identify"].check_unknown(tab, where)
     axes = {}
     for k in IDENTIFY_KEYS:
         if k not in tab:
@@ -202,7 +206,7 @@ def _parse_identify(tab, where):
 
 def _parse_seeds(v, where):
     if isinstance(v, dict):
-        _check_unknown(v, ("first", "count"), where, "noise_seeds")
+        SECTIONS["noise_seeds"].check_unknown(v, where)
         if "count" not in v:
             raise _err(where, "missing key 'count' (noise_seeds = { first = 1, count = 40 })")
         first = _int(v.get("first", 1), f"{where}.first", 0)
@@ -219,7 +223,7 @@ def _parse_seeds(v, where):
 
 def _parse_data(tab, where, base):
     """-> (items, scenario): items = [(options['data'], dataset path or None, content hash)]."""
-    _check_unknown(tab, DATA_KEYS, where, "[data]")
+    SECTIONS["data"].check_unknown(tab, where)
     has_ds, has_sc = "datasets" in tab, "scenario" in tab
     if has_ds == has_sc:
         raise _err(where, "[data] needs either 'datasets' (folders or globs) or 'scenario' "
@@ -255,7 +259,6 @@ def _parse_data(tab, where, base):
     sc = tab["scenario"]
     if not isinstance(sc, str) or not sc:
         raise _err(w, f"expected a scenario file (relative to the study file) or \"builtin\", got {sc!r}")
-    from . import api as rideid
     if sc == BUILTIN:
         sc_path, label = BUILTIN, BUILTIN
     else:
@@ -323,7 +326,7 @@ def parse_study(doc: dict, path: Path | None = None, base: Path | None = None) -
     base = Path(base) if base is not None else (Path(path).parent if path is not None else Path.cwd())
     if not isinstance(doc, dict):
         raise _err(where, "a study must be a table")
-    _check_unknown(doc, TOP_KEYS, where, "the study file")
+    SECTIONS["study"].check_unknown(doc, where)
     name = doc.get("name", Path(path).stem if path is not None else "study")
     if not isinstance(name, str):
         raise _err(f"{where} name", f"expected a string, got {name!r}")
@@ -336,7 +339,6 @@ def parse_study(doc: dict, path: Path | None = None, base: Path | None = None) -
     axes = _parse_identify(idt, where)
     sc_runs = None
     if scenario is not None:
-        from . import api as rideid
         sc = rideid.default_scenario() if scenario == BUILTIN else rideid.load_scenario(scenario)
         sc_runs = [r.id for r in sc.runs]
     subsets = _parse_subsets(doc["subsets"], where, sc_runs) if "subsets" in doc else [(None, None)]
