@@ -398,3 +398,28 @@ def test_extensions_in_truth_become_free_parameters(tmp_path):
     info = ri(simulator(sc), space, x0, NOISE, [r.fs for r in sc.runs])
     p = subset_precision(info, wash)
     assert set(np.array(space.names)[~p.identifiable]) == {"I_xx", "k_arf", "k_arr"}
+
+
+def test_plan_options_are_checked_when_built_and_frozen():
+    """PlanOptions: the defaults plan() documents, each run's time cost, and today's one-line errors."""
+    from rideid.design.planner import PlanOptions, PlanProblem
+    pb = PlanProblem.build(rideid.default_scenario_path())
+    sc = rideid.default_scenario()
+    assert pb.run_ids == [r.id for r in sc.runs] and pb.road_ids == [] and not pb.curves
+    assert np.array_equal(pb.x0, [sc.truth[n] for n in pb.names])
+    opts = PlanOptions.build(pb, budget_runs=3, overhead=5.0)
+    assert (opts.criterion, opts.noise.fraction, opts.robust, opts.within) == ("D", 0.01, 1, 1.5) and opts.budgeted
+    assert np.array_equal(opts.time_cost, [r.duration + 5.0 for r in sc.runs])
+    assert PlanOptions.build(pb, targets={"k_sr": 0.005}).criterion == "target"
+    assert not PlanOptions.build(pb).budgeted
+    with pytest.raises(dataclasses.FrozenInstanceError):
+        opts.criterion = "A"
+    shortest = min(r.duration for r in sc.runs)
+    for kw, msg in [({"budget_runs": 0}, "--budget-runs must be a positive integer, got 0"),
+                    ({"criterion": "E"}, "--criterion 'E': expected one of D, A, target"),
+                    ({"targets": {"k_sr": -1.0}}, "--target k_sr: the relative precision must be positive, got -1.0"),
+                    ({"within": 0.5}, "--within must be at least 1, got 0.5"),
+                    ({"budget_time": shortest / 2}, f"--budget-time {shortest / 2:g} s: no candidate run fits")]:
+        with pytest.raises(rideid.ArgumentError) as e:
+            PlanOptions.build(pb, **kw)
+        assert str(e.value).startswith(msg), str(e.value)

@@ -60,3 +60,30 @@ def test_heatmap_star_marks_count_the_ratings():
             assert in_cell.sum() == n
             assert (((dx == j) & (dy == i)).sum() == 1) == (n == 0)
     assert rating[0, 0] == 0
+
+
+def test_figures_leave_the_backend_and_the_global_style_alone(tmp_path):
+    """A notebook user's backend and rcParams survive a report figure and a plan figure; pyplot is not used."""
+    import subprocess
+    import sys
+    code = f"""
+import sys
+import matplotlib
+matplotlib.use("svg")
+before = dict(matplotlib.rcParams)
+import numpy as np
+from pathlib import Path
+from rideid.report import html as H
+from rideid.report.plan_files import precision_path_figure
+hist = [{{"generation": g, "best_cost": 10.0 ** -g, "mean_cost": 10.0 ** (1 - g), "mu_f": 0.5, "mu_cr": 0.5}}
+        for g in range(5)]
+fig = H.fig_convergence(hist, Path({str(tmp_path)!r}))
+assert Path({str(tmp_path)!r}, "figures", "convergence.png").stat().st_size > 1000
+assert matplotlib.get_backend() == "svg", matplotlib.get_backend()
+changed = [k for k, v in matplotlib.rcParams.items() if before[k] != v]
+assert not changed, changed
+assert "matplotlib.pyplot" not in sys.modules
+print("ok")
+"""
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
+    assert out.returncode == 0 and out.stdout.strip() == "ok", out.stderr[-2000:]

@@ -175,3 +175,58 @@ def test_no_import_cycle_even_through_imports_inside_functions():
              for mod, p in mods.items()}
     graph = {m: {t for t in ts if t in mods} for m, ts in graph.items()}
     _assert_acyclic(graph)
+
+
+def _scenario_doc():
+    return tomllib.loads(rideid.default_scenario_path().read_text())
+
+
+@pytest.mark.parametrize("edit, message", [
+    (lambda d: d["vehicle"].update(wheel_base=2.7), "sc.toml: [vehicle]: unknown key 'wheel_base'; allowed: "
+     "wheelbase, track_front, track_rear, tire_radius, cg_height"),
+    (lambda d: d["vehicle"].pop("track_rear"), "sc.toml: [vehicle]: missing key 'track_rear'"),
+    (lambda d: d["vehicle"].update(wheelbase="2.7"), "sc.toml: [vehicle] wheelbase: expected a finite number, got '2.7'"),
+    (lambda d: d["vehicle"].update(wheelbase=True), "sc.toml: [vehicle] wheelbase: expected a finite number, got True"),
+    (lambda d: d["vehicle"].update(tire_radius=0), "sc.toml: [vehicle] tire_radius: must be positive, got 0"),
+    (lambda d: d["runs"][0].update(fs=-200), "sc.toml: runs[0] (id 'T_LL'): fs: must be positive, got -200"),
+    (lambda d: d["runs"][0].pop("duration"), "sc.toml: runs[0] (id 'T_LL'): missing key 'duration'"),
+    (lambda d: d["runs"][0].update(file="w.csv"), "sc.toml: runs[0] (id 'T_LL'): unknown key 'file' (a scenario run "
+     "gives 'fs' and 'duration' instead of a file); allowed: id, track, road_class, road_seed, coherence, speed, fs, "
+     "duration, moving"),
+    (lambda d: d["model"].update(knots=[0.1]) if "model" in d else d.update(model={"knots": [0.1]}),
+     "sc.toml: [model]: unknown key 'knots'; allowed: extensions, damper_knots"),
+    (lambda d: d.update(truths={}), "sc.toml: unknown key 'truths'; allowed: name, vehicle, known, bounds, model, "
+     "tracks, runs, truth, dampers, hifi"),
+])
+def test_declarative_sections_give_one_line_naming_file_section_and_key(tmp_path, edit, message):
+    """Unknown, missing and mistyped keys, worded from the section tables (data/schema/keys.py)."""
+    doc = _scenario_doc()
+    assert doc["runs"][0]["id"] == "T_LL"
+    edit(doc)
+    with pytest.raises(rideid.DataError) as e:
+        rideid.data.schema.parse_scenario(doc, tmp_path / "sc.toml")
+    assert str(e.value) == str(tmp_path / message)
+
+
+def test_section_reads_types_defaults_and_ranges_in_order():
+    from rideid.data.schema import Key, Messages, Section
+    sec = Section({"length": Key(required=True, unit="m", positive=True), "count": Key(whole=True, default=2.0),
+                   "side": Key("string", default="left", choices=("left", "right")),
+                   "angle": Key(unit="degrees", between=(-89.0, 89.0))},
+                  Messages(missing="{where}: no {key}"), also=("id",))
+    assert sec.read({"id": "x", "length": 3}, "f") == {"length": 3.0, "count": 2.0, "side": "left"}
+    assert sec.allowed == ("id", "length", "count", "side", "angle")
+    for tab, msg in [({"lenght": 1}, "f: unknown key 'lenght'; allowed: id, length, count, side, angle"),
+                     ({}, "f: no length"),
+                     # types are checked before ranges: the count's type error comes first
+                     ({"length": -1, "count": "two"}, "f count: expected a finite number, got 'two'"),
+                     ({"length": -1}, "f length: must be positive, got -1"),
+                     ({"length": 1, "count": 2.5}, "f: key 'count' must be a non-negative whole number, got 2.5"),
+                     ({"length": 1, "side": "up"}, "f: key 'side' must be \"left\" or \"right\", got 'up'"),
+                     ({"length": 1, "angle": 90}, "f: key 'angle' must be between -89 and 89 degrees, got 90.0"),
+                     ([1], "f must be a table")]:
+        with pytest.raises(rideid.DataError) as e:
+            sec.read(tab, "f")
+        assert str(e.value) == msg
+    with pytest.raises(ValueError, match="Key type 'float'"):
+        Key("float")

@@ -85,3 +85,32 @@ def test_constructor_rejects_unknown_or_mismatched_kind():
         rideid.Track("x", "bumpy", {})
     with pytest.raises(DataError, match="kind 'flat' does not match WashboardTrack"):
         WashboardTrack("x", "flat", {})
+
+
+def test_the_track_model_reads_no_file_and_imports_no_data_layer():
+    """model/tracks.py holds numbers and arrays: the CSV and TOML reading is data/schema/tracks.py's."""
+    import ast
+    from pathlib import Path
+
+    src = Path(rideid.__file__).parent / "model" / "tracks.py"
+    tree = ast.parse(src.read_text())
+    mods = {n.module for n in ast.walk(tree) if isinstance(n, ast.ImportFrom)}
+    mods |= {a.name for n in ast.walk(tree) if isinstance(n, ast.Import) for a in n.names}
+    assert not any(m and ({"csvio", "data"} & set(m.split(".")) or m in ("csv", "tomllib")) for m in mods), mods
+    assert "open(" not in src.read_text() and not hasattr(rideid.Track, "from_table")
+
+
+def test_profile_file_gives_the_track_of_its_arrays(tmp_path):
+    x = np.array([0.0, 1.0, 2.5])
+    zl, zr = np.array([0.0, 0.02, -0.01]), np.array([0.01, 0.0, 0.03])
+    (tmp_path / "p.csv").write_text("x,z_left,z_right\n" + "".join(f"{a},{b},{c}\n" for a, b, c in zip(x, zl, zr)))
+    read = track_from_table(dict(id="p", kind="profile", file="p.csv"), "t", base_dir=tmp_path)
+    made = ProfileTrack.from_arrays("p", x, zl, zr, file="p.csv", base_dir=tmp_path)
+    assert read.to_table() == made.to_table() == {"id": "p", "kind": "profile", "file": "p.csv"}
+    assert read.data_file == made.data_file == tmp_path / "p.csv"
+    xs = np.linspace(-1, 3, 41)
+    for y in (0.8, -0.8):  # left (+) and right wheel paths: linear interpolation, flat outside
+        z = zl if y > 0 else zr
+        assert np.array_equal(read.path(y).height(xs), np.interp(xs, x, z, left=0.0, right=0.0))
+        assert np.array_equal(read.path(y).height(xs), made.path(y).height(xs))
+    assert read.path(0.8).height(1.75) == pytest.approx(0.02 + 0.75 / 1.5 * (-0.03))
