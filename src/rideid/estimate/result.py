@@ -213,6 +213,9 @@ class IdentificationResult:
     roads: dict | None = None
     #: the estimated roads (in memory; written as road/<run>.csv): run id -> (x (n,), z (n, 2) left, right)
     road_profiles: dict | None = field(default=None, repr=False)
+    #: the dataset's ``[vehicle]`` table (m: wheelbase, tracks, tire_radius, cg_height when given), so that the
+    #: identified car can leave without its dataset (rideid export, SPEC §10); None in results written before
+    vehicle: dict | None = None
 
     # SciPy/SPEC §4 names for the same numbers
     @property
@@ -297,6 +300,7 @@ class IdentificationResult:
             **({"dampers": self.dampers} if self.dampers else {}),
             **({"bump_stops": self.bump_stops} if self.bump_stops else {}),
             **({"roads": self.roads} if self.roads else {}),
+            **({"vehicle": self.vehicle} if self.vehicle else {}),
             "dataset": str(Path(self.dataset).resolve()) if self.dataset else "",
             "sensitivity": _maps_to_json(self.maps),
             "history_file": "history.csv",
@@ -348,7 +352,8 @@ def load(path) -> IdentificationResult:
         maps=_maps_from_json(doc.get("sensitivity"), rpath), rng_state=doc.get("rng_state"),
         model=doc.get("model"), adequacy=doc.get("adequacy"), correlation=doc.get("correlation"),
         checks=list(doc.get("checks") or []), dampers=doc.get("dampers"), bump_stops=doc.get("bump_stops"),
-        roads=doc.get("roads"), road_profiles=_read_roads(doc.get("roads"), rpath.parent))
+        roads=doc.get("roads"), road_profiles=_read_roads(doc.get("roads"), rpath.parent),
+        vehicle=doc.get("vehicle"))
 
 
 def _read_roads(roads, folder):
