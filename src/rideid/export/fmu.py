@@ -28,6 +28,7 @@ import os
 import shlex
 import shutil
 import subprocess
+import sys
 import uuid
 import zipfile
 from importlib import resources
@@ -52,12 +53,13 @@ NO_STOP = 1e6
 
 def platform_folder() -> str:
     """FMI 2.0 binaries folder of this platform (``linux64``, ``darwin64``, ``win64``)."""
-    import platform
-    import sys
     bits = "64" if sys.maxsize > 2 ** 32 else "32"
-    osname = {"linux": "linux", "darwin": "darwin", "win32": "win"}.get(sys.platform, sys.platform)
-    del platform
-    return f"{osname}{bits}"
+    return {"linux": "linux", "darwin": "darwin", "win32": "win"}.get(sys.platform, sys.platform) + bits
+
+
+def binary_suffix() -> str:
+    """The shared library's file suffix on this platform."""
+    return {"darwin": ".dylib", "win32": ".dll"}.get(sys.platform, ".so")
 
 
 def _parameters(car: Car):
@@ -222,7 +224,7 @@ def write_fmu(car: Car, path, compiler="auto", workdir=None) -> bool:
     if cc:
         bdir = build / "binaries" / platform_folder()
         bdir.mkdir(parents=True, exist_ok=True)
-        binary = bdir / f"{MODEL_IDENTIFIER}.so"
+        binary = bdir / f"{MODEL_IDENTIFIER}{binary_suffix()}"
         cmd = [*cc, "-shared", "-fPIC", "-O2", "-fvisibility=hidden", "-o", str(binary), str(src / "model.c"), "-lm"]
         proc = subprocess.run(cmd, capture_output=True, text=True)
         if proc.returncode != 0:
