@@ -14,6 +14,8 @@ Public API (SPEC §5)::
     rideid.study("study.toml", "out")         # many identifications on Dask (SPEC §7)
     x, zl, zr = rideid.iso8608_profile("B", 500.0, rng)   # an ISO 8608 road (SPEC §9)
     rideid.iso8608_class(x, zl)               # -> ("B", Gd(n0) in m^3)
+    rideid.export(res, "car")                 # car.toml, car.csv, car.fmu (SPEC §10)
+    res.to_frame(); res.plot_fit("W_L")       # a notebook's table and figures
 """
 
 from importlib.metadata import PackageNotFoundError, version
@@ -36,6 +38,8 @@ from .data.scenario import default_scenario, default_scenario_path, load_scenari
 from .model.roads import iso8608_class, iso8608_profile
 from .model.tracks import Track
 from .studies import StudyResult, load_study, study
+from .export import ExportResult
+from .export import export  # noqa: E402  (the function; the subpackage stays importable as rideid.export.*)
 
 try:
     __version__ = version("rideid")
@@ -50,5 +54,5 @@ __all__ = [
     "load_truth", "modal_summary", "plan", "PlanResult", "simulate_manifest", "write_dataset", "__version__",
     "History", "SensitivityMaps", "load_result", "score", "sensitivity_maps",
     "ALL_NAMES", "EXT_NAMES", "GROUPS", "Scenario", "DatasetManifest",
-    "StudyResult", "load_study", "study", "iso8608_class", "iso8608_profile",
+    "StudyResult", "load_study", "study", "iso8608_class", "iso8608_profile", "export", "ExportResult",
 ]

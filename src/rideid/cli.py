@@ -32,6 +32,7 @@ EXAMPLES = {
             "  rideid plan scenario.toml --out plan --noise-psd sensor_noise_psd.csv",
     "report": "example:\n  rideid report fit\n  rideid identify sim --out fit-fixed --weights fixed --no-report\n"
               "  rideid report fit --compare fit-fixed",
+    "export": "example:\n  rideid export fit --out car\n  rideid export fit --out car --format fmu",
     "study": "example:\n  rideid study monte_carlo.toml --out mc\n"
              "  rideid study fleet.toml --out fleet --scheduler tcp://10.0.0.5:8786\n"
              "a killed study resumes: run the same command again (finished tasks are kept in DIR/tasks)",
@@ -231,6 +232,13 @@ def _parser() -> argparse.ArgumentParser:
     s = add("score", "compare an identification result with the truth")
     s.add_argument("result", metavar="RESULT.json", help="an identification's result.json (or its folder)")
     s.add_argument("truth", metavar="TRUTH.toml", help="the truth, e.g. the truth.toml rideid simulate writes")
+
+    s = add("export", "the identified car as a parameter card (car.toml, car.csv) and an FMI 2.0 FMU (car.fmu)")
+    s.add_argument("fit", metavar="FIT_DIR", help="an identification folder (result.json)")
+    s.add_argument("--out", required=True, metavar="DIR", help="output folder: car.toml, car.csv, car.fmu")
+    s.add_argument("--format", default="all", metavar="card|fmu|all",
+                   help="card: car.toml (scenario-ready) and car.csv; fmu: car.fmu (FMI 2.0 co-simulation, "
+                        "C sources and a binary for this platform); all: both (default)")
 
     s = add("demo", "the whole job on the built-in car and tracks: simulate (1 % noise), identify, score")
     s.add_argument("--out", default="rideid-demo", metavar="DIR",
@@ -518,6 +526,17 @@ def cmd_report(args, out=None):
     return 0
 
 
+def cmd_export(args, out=None):
+    out = out or sys.stdout
+    from .export import export
+
+    res = export(args.fit, args.out, format=args.format)
+    print(f"written to {args.out}: {', '.join(p.name for p in res.files)}", file=out)
+    if res.note:
+        print(f"note: {res.note}", file=out)
+    return 0
+
+
 def cmd_study(args, out=None):
     out = out or sys.stdout
     from .studies import load_study, study
@@ -539,7 +558,7 @@ def cmd_study(args, out=None):
 
 
 COMMANDS = {"plan": cmd_plan, "report": cmd_report, "simulate": cmd_simulate, "identify": cmd_identify, "sensitivity": cmd_sensitivity,
-            "score": cmd_score, "demo": cmd_demo, "study": cmd_study}
+            "score": cmd_score, "demo": cmd_demo, "study": cmd_study, "export": cmd_export}
 
 
 def _compile(quiet: bool):

@@ -54,8 +54,12 @@ class Dataset:
         model = "none ([model] absent: identify chooses auto)" if ext is None else " + ".join(ext) or "base"
         unknown = len(self.unknown_road_runs)
         roads = f" ({unknown} on unknown roads)" if unknown else ""
-        return (f"Dataset(name={self.name!r}, path='{self.path}', runs={len(ids)}{roads} [{shown}], "
-                f"tracks=[{', '.join(self.manifest.tracks)}], known={dict(self.known)}, model={model})")
+        parts = [f"runs={len(ids)}{roads} [{shown}]", f"tracks=[{', '.join(self.manifest.tracks)}]",
+                 f"known={dict(self.known)}", f"model={model}"]
+        import textwrap  # a few lines of at most 100 columns (the path may be longer: it is shown whole)
+        body = textwrap.wrap(", ".join(parts) + ")", 98, initial_indent="  ", subsequent_indent="  ",
+                             break_on_hyphens=False)
+        return "\n".join([f"Dataset(name={self.name!r},", f"  path='{self.path}',", *body])
 
     @property
     def geometry(self) -> Geometry:

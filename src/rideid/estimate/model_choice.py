@@ -39,6 +39,7 @@ import numpy as np
 from scipy import special
 
 from ..model.params import GROUPS
+from ..data.schema.manifest import vehicle_table
 from .adequacy import MIN_IMPROVEMENT, advise
 from .identify import identify as identify_model
 from .identify import warn_bounds
@@ -482,5 +483,6 @@ def identify(ds, *args, model=None, cost=None, **kw):
         res = identify_auto(ds, **kw)
     else:
         res = identify_model(ds, *args, model=model, cost=cost, **kw)
+    res.vehicle = vehicle_table(ds.geometry)  # the geometry travels with the car (rideid export)
     warn_bounds(res)
     return res

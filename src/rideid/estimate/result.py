@@ -213,6 +213,9 @@ class IdentificationResult:
     roads: dict | None = None
     #: the estimated roads (in memory; written as road/<run>.csv): run id -> (x (n,), z (n, 2) left, right)
     road_profiles: dict | None = field(default=None, repr=False)
+    #: the dataset's ``[vehicle]`` table (m: wheelbase, tracks, tire_radius, cg_height when given), so that the
+    #: identified car can leave without its dataset (rideid export, SPEC §10); None in results written before
+    vehicle: dict | None = None
 
     # SciPy/SPEC §4 names for the same numbers
     @property
@@ -237,7 +240,7 @@ class IdentificationResult:
         model = "" if ext is None else f" model={' + '.join(ext) or 'base'!r},"
         adequate = (self.adequacy or {}).get("adequate")
         lines = [f"IdentificationResult(success={self.success}, stop={self.stop!r}, fun={self.fun:.4g}, "
-                 f"nit={self.nit}, nfev={self.nfev},{model} adequate={adequate},"]
+                 f"nit={self.nit}, nfev={self.nfev},", f" {model} adequate={adequate},"]
         for n, d in self.details.items():
             if n.startswith("F_") and self.dampers:
                 continue  # the curves' table below
@@ -247,15 +250,48 @@ class IdentificationResult:
                 note = " (not reached — not a number to trust)"
             err = f" ± {std:.3g} (robust)" if std not in (None, 0.0) else ""
             lines.append(f"  {n}={d['value']:.6g}{err} {d['unit']}{note}")
-        if self.dampers:
-            from .dampers import format_dampers
-            lines += ["  " + ln for ln in format_dampers(self.dampers).splitlines()]
+        if self.dampers:  # one line: the table is format_dampers(result.dampers), the forces to_frame()
+            v = [x for x in self.dampers["velocity"] if x > 0]
+            lines.append(f"  damper curves: {len(self.dampers['velocity'])} knots per axle up to "
+                         f"{max(v, default=0):g} m/s (forces: result.to_frame(), result.dampers)")
         if self.bump_stops:
             from .bumps import format_bump_stops
             lines += ["  " + ln for ln in format_bump_stops(self.bump_stops).splitlines()]
         if adequate is False:
             lines.append("  not adequate: the residuals carry structure the model misses (adequacy)")
         return "\n".join(lines) + ")"
+
+    # -- a notebook's view ----------------------------------------------------
+    def to_frame(self):
+        """Every parameter as a ``pandas.DataFrame`` (needs pandas), indexed by ``parameter``.
+
+        Columns ``value``, ``unit``, ``std``, ``std_robust`` (NaN where none was computed), ``fixed``
+        (a known value), ``derived`` (computed from the others, e.g. ``m_s`` from ``total_mass``).
+        With damper curves the knot forces ``F_f1 ..`` are rows too (N).
+        """
+        import pandas as pd
+        rows = [{"parameter": n, "value": float(d["value"]), "unit": d.get("unit", ""),
+                 "std": np.nan if d.get("std") is None else float(d["std"]),
+                 "std_robust": np.nan if d.get("std_robust") is None else float(d["std_robust"]),
+                 "fixed": bool(d.get("fixed", False)), "derived": bool(d.get("derived", False))}
+                for n, d in self.details.items()]
+        return pd.DataFrame(rows).set_index("parameter")
+
+    def plot_fit(self, run: str, dataset=None, channels=None):
+        """One run's measured channels against the identified car: a ``matplotlib.figure.Figure``
+        (:func:`rideid.report.figures.fit_figure`; ``dataset`` defaults to the one the result names)."""
+        from ..report.figures import fit_figure
+        return fit_figure(self, run, dataset=dataset, channels=channels)
+
+    def plot_parameters(self):
+        """Each parameter's ±2 std_robust (and std) in % of its value: a ``matplotlib.figure.Figure``."""
+        from ..report.figures import parameters_figure
+        return parameters_figure(self)
+
+    def plot_dampers(self):
+        """The damper curves with their ±2 std_robust bands: a ``matplotlib.figure.Figure`` (curve models only)."""
+        from ..report.figures import dampers_figure
+        return dampers_figure(self)
 
     def start_values(self) -> dict[str, float]:
         """Run id -> start (file time, s) of every run the identification settled,
@@ -297,6 +333,7 @@ class IdentificationResult:
             **({"dampers": self.dampers} if self.dampers else {}),
             **({"bump_stops": self.bump_stops} if self.bump_stops else {}),
             **({"roads": self.roads} if self.roads else {}),
+            **({"vehicle": self.vehicle} if self.vehicle else {}),
             "dataset": str(Path(self.dataset).resolve()) if self.dataset else "",
             "sensitivity": _maps_to_json(self.maps),
             "history_file": "history.csv",
@@ -348,7 +385,8 @@ def load(path) -> IdentificationResult:
         maps=_maps_from_json(doc.get("sensitivity"), rpath), rng_state=doc.get("rng_state"),
         model=doc.get("model"), adequacy=doc.get("adequacy"), correlation=doc.get("correlation"),
         checks=list(doc.get("checks") or []), dampers=doc.get("dampers"), bump_stops=doc.get("bump_stops"),
-        roads=doc.get("roads"), road_profiles=_read_roads(doc.get("roads"), rpath.parent))
+        roads=doc.get("roads"), road_profiles=_read_roads(doc.get("roads"), rpath.parent),
+        vehicle=doc.get("vehicle"))
 
 
 def _read_roads(roads, folder):

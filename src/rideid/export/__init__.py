@@ -1,0 +1,121 @@
+"""Taking the identified car elsewhere (SPEC §10): the parameter card and the FMI 2.0 FMU.
+
+    rideid.export("fit", "out")                     # car.toml, car.csv, car.fmu
+    rideid.export(result, "out", format="card")     # an IdentificationResult works too
+
+Everything is written into a temporary folder beside ``out`` and moved in
+at the end: bad input leaves nothing behind.
+"""
+
+from __future__ import annotations
+
+import os
+import shutil
+import tempfile
+from dataclasses import dataclass
+from pathlib import Path
+
+from ..errors import ArgumentError, DataError
+from .car import Car, car_from_result, car_from_scenario
+from .card import write_card
+from .fmu import find_compiler, write_fmu
+
+FORMATS = ("card", "fmu", "all")
+#: the files each format writes
+FILES = {"card": ("car.toml", "car.csv"), "fmu": ("car.fmu",), "all": ("car.toml", "car.csv", "car.fmu")}
+
+
+@dataclass(frozen=True)
+class ExportResult:
+    """What :func:`export` wrote: the folder, the files, and whether the FMU carries a binary."""
+
+    out: Path
+    files: tuple
+    compiled: bool | None  # None: no FMU written
+
+    @property
+    def note(self) -> str | None:
+        """One line when the FMU holds sources only (no C compiler found), else None."""
+        if self.compiled is False:
+            return ("no C compiler found (set CC or install cc): car.fmu carries its C sources only; "
+                    "build it with your FMI tool or rerun export where a compiler exists")
+        return None
+
+
+def _load(source):
+    """A result (object), a fit folder or its result.json -> (Car, label)."""
+    from ..estimate.result import IdentificationResult, load
+    if isinstance(source, Car):
+        return source, "car"
+    if isinstance(source, IdentificationResult):
+        return car_from_result(source), "result"
+    p = Path(source)
+    rj = p if p.suffix == ".json" else p / "result.json"
+    if not rj.is_file():
+        raise DataError(f"{rj}: not found (export needs an identification folder with result.json)")
+    return car_from_result(load(rj), str(rj)), str(p)
+
+
+def export(result_or_fit_dir, out, format: str = "all", *, compiler="auto") -> ExportResult:
+    """Write the identified car as a parameter card and/or an FMI 2.0 FMU (SPEC §10).
+
+    Parameters
+    ----------
+    result_or_fit_dir : IdentificationResult, Car, str or Path
+        A result, or an identification folder (or its ``result.json``).
+    out : str or Path
+        Output folder (created; files of the same names there are replaced, others kept).
+    format : {"card", "fmu", "all"}
+        ``card``: ``car.toml`` + ``car.csv``; ``fmu``: ``car.fmu``; ``all``: both.
+    compiler : "auto", None or list of str
+        C compiler command for the FMU's binary (``"auto"``: ``$CC``, else ``cc``; None: sources only).
+
+    Returns
+    -------
+    ExportResult
+        ``.files`` the paths written, ``.compiled`` whether the FMU has a binary, ``.note`` the one line
+        to show when it has none.
+
+    Raises
+    ------
+    ArgumentError
+        An unknown format.
+    DataError
+        No result.json, a result without geometry, an output folder that cannot be written.
+    """
+    if format not in FORMATS:
+        raise ArgumentError(f"--format must be one of {', '.join(FORMATS)}, got {format!r}")
+    car, label = _load(result_or_fit_dir)
+    out = Path(out)
+    if out.exists() and not out.is_dir():
+        raise DataError(f"{out}: exists and is not a folder")
+    parent = out.resolve().parent
+    try:
+        parent.mkdir(parents=True, exist_ok=True)
+        tmp = Path(tempfile.mkdtemp(prefix=f".{out.name}.tmp-", dir=parent))
+        mask = os.umask(0)
+        os.umask(mask)
+        tmp.chmod(0o777 & ~mask)  # a folder as mkdir makes it: it may become ``out``
+    except OSError as e:
+        raise DataError(f"{out}: cannot write the output folder: {e.strerror or e}") from None
+    compiled = None
+    try:
+        if format in ("card", "all"):
+            write_card(car, tmp, source=label)
+        if format in ("fmu", "all"):
+            compiled = write_fmu(car, tmp / "car.fmu", compiler=compiler, workdir=tmp)
+        try:
+            if not out.exists():
+                tmp.rename(out)  # the whole folder at once
+            else:
+                for name in FILES[format]:
+                    (tmp / name).replace(out / name)
+        except OSError as e:
+            raise DataError(f"{out}: cannot write the output folder: {e.strerror or e}") from None
+    finally:
+        shutil.rmtree(tmp, ignore_errors=True)
+    return ExportResult(out, tuple(out / n for n in FILES[format]), compiled)
+
+
+__all__ = ["export", "ExportResult", "Car", "car_from_result", "car_from_scenario", "write_card", "write_fmu",
+           "find_compiler", "FORMATS"]

@@ -1,0 +1,241 @@
+"""``car.fmu``: the identified car as an FMI 2.0 co-simulation FMU (SPEC §10).
+
+The FMU is generated C (``c/model.c.in``, the FMI 2.0 API declared in
+``c/fmi2_api.h``) with the car's numbers as the parameters' start values,
+compiled with the system C compiler into ``binaries/<platform>/car.so``.
+It always carries its sources (``sources/``, listed in
+``modelDescription.xml``), so another platform's tool can build it.
+
+Variables (value references):
+
+* inputs ``r_fl, r_fr, r_rl, r_rr`` (0-3; road input under each wheel, m:
+  the tire envelope of SPEC §2) and ``rdot_fl ... rdot_rr`` (4-7; their
+  rates, m/s, which drive the tire dampers of SPEC §6);
+* outputs the ten channels of SPEC §1 by name (8-17);
+* Real parameters from 100: the sixteen of SPEC §1/§6, the geometry
+  (``wheelbase``, ``track_front``, ``track_rear``, ``cg_height``), ``gravity``,
+  the bump stops (``bs_clear_*``, ``bs_rate_*``; rate 0 without stops),
+  ``max_step`` (the longest RK4 sub-step, s) and with damper curves the knots
+  ``damper_v1..K`` (m/s) and the forces ``F_f1..K``, ``F_r1..K`` (N);
+* Boolean parameter ``lift_off`` (0): the tires push but never pull (true
+  for a car with damper curves or bump stops, as ``rideid simulate`` has it).
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import shlex
+import shutil
+import subprocess
+import sys
+import uuid
+import zipfile
+from importlib import resources
+from pathlib import Path
+from xml.sax.saxutils import escape
+
+from ..model.equations import CHANNELS, CHANNEL_UNITS
+from ..model.params import ALL_NAMES, DESCRIPTIONS, GRAVITY
+from ..model.nonlinear import NonlinearLayout, substeps
+from .car import CARD_UNITS, Car
+
+#: the FMU's model identifier (the binary's and the FMU's name)
+MODEL_IDENTIFIER = "car"
+#: RK4 sub-step bound: ``max_step * max|eig|`` of the stiffest linearised car (spring plus bump-stop rate,
+#: the steepest damper segment); 0.01 keeps the FMU within 1e-5 of rideid's own simulation (tests/test_export.py)
+RHO = 0.01
+INPUTS = ("r_fl", "r_fr", "r_rl", "r_rr", "rdot_fl", "rdot_fr", "rdot_rl", "rdot_rr")
+VR_OUTPUT0, VR_PAR0 = 8, 100
+#: the big clearance standing for "no bump stop" (m); with rate 0 it is never reached anyway
+NO_STOP = 1e6
+
+
+def platform_folder() -> str:
+    """FMI 2.0 binaries folder of this platform (``linux64``, ``darwin64``, ``win64``)."""
+    bits = "64" if sys.maxsize > 2 ** 32 else "32"
+    return {"linux": "linux", "darwin": "darwin", "win32": "win"}.get(sys.platform, sys.platform) + bits
+
+
+def binary_suffix() -> str:
+    """The shared library's file suffix on this platform."""
+    return {"darwin": ".dylib", "win32": ".dll"}.get(sys.platform, ".so")
+
+
+def _parameters(car: Car):
+    """``[(name, value, unit, description, variability), ...]`` in value-reference order."""
+    v, g = car.values, car.geometry
+    out = [(n, v[n], CARD_UNITS[n], DESCRIPTIONS[n], "tunable") for n in ALL_NAMES]
+    out += [("wheelbase", g.wheelbase, "m", "wheelbase", "fixed"),
+            ("track_front", g.track_front, "m", "front track", "fixed"),
+            ("track_rear", g.track_rear, "m", "rear track", "fixed"),
+            ("cg_height", g.cg_height, "m", "sprung-mass CG above the wheel centres", "fixed"),
+            ("gravity", GRAVITY, "m/s2", "gravity (CG height terms, static loads for lift-off)", "fixed")]
+    bs = car.bump_stops
+    for ax, axle in (("f", "front"), ("r", "rear")):
+        clear = bs.get(f"bs_clear_{ax}", NO_STOP)
+        out.append((f"bs_clear_{ax}", clear if math.isfinite(clear) else NO_STOP, "m",
+                    f"bump-stop clearance, {axle} (compression from static ride height)", "tunable"))
+    for ax, axle in (("f", "front"), ("r", "rear")):
+        out.append((f"bs_rate_{ax}", bs.get(f"bs_rate_{ax}", 0.0), "N/m", f"bump-stop rate, {axle}", "tunable"))
+    out.append(("max_step", max_step(car), "s", "longest RK4 sub-step within a communication step", "fixed"))
+    if car.dampers is not None:
+        d = car.dampers
+        out += [(f"damper_v{k + 1}", x, "m/s", "damper curve knot velocity (compression +)", "fixed")
+                for k, x in enumerate(d.velocity)]
+        out += [(f"F_f{k + 1}", F, "N", f"front damper force at damper_v{k + 1}", "tunable")
+                for k, F in enumerate(d.front)]
+        out += [(f"F_r{k + 1}", F, "N", f"rear damper force at damper_v{k + 1}", "tunable")
+                for k, F in enumerate(d.rear)]
+    return out
+
+
+def max_step(car: Car, rho: float = RHO) -> float:
+    """Longest RK4 sub-step (s): ``rho / max|eig|`` of the stiffest linearised car (:func:`rideid.model.nonlinear.substeps`)."""
+    import numpy as np
+    layout = NonlinearLayout(knots=None if car.dampers is None else car.dampers.velocity,
+                             bump_stops=bool(car.bump_stops))
+    row = [car.values[n] for n in ALL_NAMES]
+    if car.bump_stops:
+        bs = car.bump_stops
+        row += [bs.get("bs_clear_f", 1.0), bs.get("bs_clear_r", 1.0), bs.get("bs_rate_f", 0.0),
+                bs.get("bs_rate_r", 0.0)]
+        row[-4:-2] = [c if math.isfinite(c) else 1.0 for c in row[-4:-2]]
+    if car.dampers is not None:
+        row += list(car.dampers.front) + list(car.dampers.rear)
+    m = substeps(np.array(row)[None], car.geometry, layout, 1.0, rho=rho)
+    return 1.0 / m
+
+
+def _num(x: float) -> str:
+    return repr(float(x))
+
+
+def c_source(car: Car, guid: str) -> str:
+    """``model.c``: the template with this car's parameter table."""
+    pars = _parameters(car)
+    defines = [f"#define P_{n} {i}" for i, (n, *_rest) in enumerate(pars)
+               if not (n.startswith("damper_v") or n.startswith("F_"))]
+    K = 0 if car.dampers is None else len(car.dampers.velocity)
+    if K:
+        names = [p[0] for p in pars]
+        defines += [f"#define P_V0 {names.index('damper_v1')}", f"#define P_FF0 {names.index('F_f1')}",
+                    f"#define P_FR0 {names.index('F_r1')}"]
+    text = (resources.files(__package__) / "c" / "model.c.in").read_text()
+    subs = {"@GUID@": guid, "@N_PAR@": str(len(pars)), "@N_KNOTS@": str(K), "@PARAM_DEFINES@": "\n".join(defines),
+            "@DEFAULTS@": ",\n".join(f"    {_num(p[1])} /* {p[0]} */" for p in pars),
+            "@LIFT_OFF@": "1" if car.nonlinear else "0"}
+    for k, s in subs.items():
+        text = text.replace(k, s)
+    return text
+
+
+def model_description(car: Car, guid: str) -> str:
+    """``modelDescription.xml`` (FMI 2.0, co-simulation)."""
+    pars = _parameters(car)
+    units = sorted({p[2] for p in pars} | set(CHANNEL_UNITS.values()) | {"m", "m/s"})
+    units = [u for u in units if u]
+    lines = ['<?xml version="1.0" encoding="UTF-8"?>',
+             '<fmiModelDescription fmiVersion="2.0" modelName="rideid car" '
+             f'guid="{guid}" description="7-DOF ride model of the identified car (rideid, SPEC 1, 6, 8)" '
+             'generationTool="rideid export" variableNamingConvention="flat" numberOfEventIndicators="0">',
+             f'  <CoSimulation modelIdentifier="{MODEL_IDENTIFIER}" canHandleVariableCommunicationStepSize="true" '
+             'canInterpolateInputs="true" maxOutputDerivativeOrder="0" canBeInstantiatedOnlyOncePerProcess="false" '
+             'canNotUseMemoryManagementFunctions="true">',
+             '    <SourceFiles>', '      <File name="model.c"/>', '    </SourceFiles>',
+             '  </CoSimulation>', '  <UnitDefinitions>']
+    lines += [f'    <Unit name="{escape(u)}"/>' for u in units]
+    lines += ['  </UnitDefinitions>', '  <DefaultExperiment startTime="0.0" stopTime="10.0"/>',
+              '  <ModelVariables>']
+    idx = 0
+
+    def var(name, vr, causality, variability, description, inner):
+        nonlocal idx
+        idx += 1
+        lines.append(f'    <ScalarVariable name="{name}" valueReference="{vr}" causality="{causality}" '
+                     f'variability="{variability}" description="{escape(description)}">')
+        lines.append(f'      {inner}')
+        lines.append('    </ScalarVariable>')
+        return idx
+
+    for k, n in enumerate(INPUTS):
+        corner = n.split("_")[1]
+        desc = (f"road input under wheel {corner} (tire envelope), m" if k < 4
+                else f"rate of the road input under wheel {corner}, m/s")
+        var(n, k, "input", "continuous", desc, f'<Real unit="{"m" if k < 4 else "m/s"}" start="0.0"/>')
+    outputs = [var(c, VR_OUTPUT0 + k, "output", "continuous", f"SPEC channel {c}",
+                   f'<Real unit="{CHANNEL_UNITS[c]}"/>') for k, c in enumerate(CHANNELS)]
+    for k, (n, v, unit, desc, variability) in enumerate(pars):
+        u = f' unit="{escape(unit)}"' if unit else ""
+        var(n, VR_PAR0 + k, "parameter", variability, desc, f'<Real{u} start="{_num(v)}"/>')
+    var("lift_off", 0, "parameter", "fixed", "tires push but never pull (the nonlinear car of SPEC 8)",
+        f'<Boolean start="{"true" if car.nonlinear else "false"}"/>')
+    lines += ['  </ModelVariables>', '  <ModelStructure>', '    <Outputs>']
+    lines += [f'      <Unknown index="{i}"/>' for i in outputs]
+    lines += ['    </Outputs>', '    <InitialUnknowns>']
+    lines += [f'      <Unknown index="{i}"/>' for i in outputs]
+    lines += ['    </InitialUnknowns>', '  </ModelStructure>', '</fmiModelDescription>']
+    return "\n".join(lines) + "\n"
+
+
+def find_compiler() -> list[str] | None:
+    """The C compiler: ``$CC`` (with its flags) if set, else ``cc`` on the PATH; None without one."""
+    cc = os.environ.get("CC")
+    if cc:
+        args = shlex.split(cc)
+        return args if args and shutil.which(args[0]) else None
+    found = shutil.which("cc")
+    return [found] if found else None
+
+
+def write_fmu(car: Car, path, compiler="auto", workdir=None) -> bool:
+    """Write ``car.fmu`` at ``path``.
+
+    Parameters
+    ----------
+    car : Car
+    path : Path
+        The FMU file to write.
+    compiler : "auto", None or list of str
+        ``"auto"``: :func:`find_compiler`; None: write a source-only FMU.
+    workdir : Path, optional
+        Scratch folder for the build (default: beside ``path``).
+
+    Returns
+    -------
+    bool
+        Whether the FMU carries a binary (False: sources only).
+
+    Raises
+    ------
+    RuntimeError
+        The compiler failed (its first error line), a bug in the generated C.
+    """
+    path = Path(path)
+    guid = "{" + str(uuid.uuid4()) + "}"
+    build = Path(workdir or path.parent) / "fmu-build"
+    src = build / "sources"
+    src.mkdir(parents=True, exist_ok=True)
+    (src / "model.c").write_text(c_source(car, guid))
+    (src / "fmi2_api.h").write_text((resources.files(__package__) / "c" / "fmi2_api.h").read_text())
+    (build / "modelDescription.xml").write_text(model_description(car, guid))
+    cc = find_compiler() if compiler == "auto" else compiler
+    binary = None
+    if cc:
+        bdir = build / "binaries" / platform_folder()
+        bdir.mkdir(parents=True, exist_ok=True)
+        binary = bdir / f"{MODEL_IDENTIFIER}{binary_suffix()}"
+        cmd = [*cc, "-shared", "-fPIC", "-O2", "-fvisibility=hidden", "-o", str(binary), str(src / "model.c"), "-lm"]
+        proc = subprocess.run(cmd, capture_output=True, text=True)
+        if proc.returncode != 0:
+            first = (proc.stderr.strip().splitlines() or ["(no message)"])[0]
+            raise RuntimeError(f"compiling the FMU failed: {first}")
+    with zipfile.ZipFile(path, "w", zipfile.ZIP_DEFLATED) as z:
+        for f in sorted(build.rglob("*")):
+            if f.is_file():
+                z.write(f, f.relative_to(build).as_posix())
+    shutil.rmtree(build, ignore_errors=True)
+    return binary is not None
+
+
+__all__ = ["write_fmu", "model_description", "c_source", "find_compiler", "max_step", "INPUTS", "MODEL_IDENTIFIER"]

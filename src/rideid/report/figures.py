@@ -1,0 +1,169 @@
+"""Figures for a notebook: built on :class:`matplotlib.figure.Figure` directly.
+
+Never pyplot, never ``matplotlib.use``: the caller's backend (Jupyter's
+inline one, a GUI, Agg in a script) stays as it was. A notebook shows a
+returned figure as it shows any; a script saves it with ``fig.savefig``.
+:class:`rideid.IdentificationResult` delegates ``plot_fit``,
+``plot_parameters`` and ``plot_dampers`` here.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from ..errors import ArgumentError, DataError
+from ..model.equations import CHANNELS
+
+#: channel groups of the fit figure: title, unit, channel indices
+GROUPS = (("body accelerations", "m/s²", (0, 1, 2, 3)), ("axle accelerations", "m/s²", (4, 5, 6, 7)),
+          ("rates", "rad/s", (8, 9)))
+
+
+def _figure(width, height):
+    from matplotlib.figure import Figure
+    return Figure(figsize=(width, height), layout="constrained")
+
+
+def result_dataset(result, dataset=None):
+    """The dataset a result identified: ``dataset`` (a Dataset or a folder) or the folder the result names."""
+    from ..data.dataset import Dataset, load_dataset
+    if isinstance(dataset, Dataset):
+        return dataset
+    path = dataset if dataset is not None else result.dataset
+    if not path:
+        raise DataError("the result names no dataset; pass dataset= (a Dataset or its folder)")
+    return load_dataset(path, starts=result.start_values())
+
+
+def responses(result, dataset) -> dict:
+    """The identified car's channels on every run of ``dataset``: run id -> ``(n_time, 10)``.
+
+    The response kept in memory by :func:`rideid.identify`, else simulated as the report does (the
+    curve model's car for a result with damper curves, the linear car otherwise).
+    """
+    from .html import curve_responses, simulate_runs
+    from ..model.params import ALL_NAMES
+    run_ids = [r.id for r in dataset.runs]
+    sims = result.response
+    if sims is not None and set(run_ids) <= set(sims):
+        return sims
+    if getattr(result, "dampers", None):
+        return curve_responses(result, dataset)
+    return simulate_runs(dataset, {n: result.parameters[n] for n in ALL_NAMES if n in result.details})
+
+
+def fit_figure(result, run: str, dataset=None, channels=None):
+    """Measured (colour) against the identified car (dashed, black) for one run.
+
+    Parameters
+    ----------
+    result : IdentificationResult
+    run : str
+        A run id of the dataset.
+    dataset : Dataset or path, optional
+        Default: the dataset the result names.
+    channels : sequence of str, optional
+        The channels to draw (default: every channel the run has).
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+        One axes per channel group (body, axle, rates) that has a channel to draw; time in s.
+    """
+    ds = result_dataset(result, dataset)
+    ids = [r.id for r in ds.runs]
+    if run not in ids:
+        raise ArgumentError(f"run {run!r} is not in the dataset; its runs: {', '.join(ids)}")
+    unknown = [c for c in (channels or ()) if c not in CHANNELS]
+    if unknown:
+        raise ArgumentError(f"unknown channel {unknown[0]!r}; channels: {', '.join(CHANNELS)}")
+    t = ds.data[run].time
+    Y = ds.data[run].matrix()
+    Ysim = responses(result, ds)[run]
+    want = set(CHANNELS) if channels is None else set(channels)
+    rows = [(title, unit, [i for i in idx if CHANNELS[i] in want and not np.all(np.isnan(Y[:, i]))])
+            for title, unit, idx in GROUPS]
+    rows = [r for r in rows if r[2]]
+    fig = _figure(9.0, 2.2 * max(len(rows), 1))
+    axes = fig.subplots(max(len(rows), 1), 1, sharex=True, squeeze=False)[:, 0]
+    for ax, (title, unit, idx) in zip(axes, rows):
+        for k, i in enumerate(idx):
+            ax.plot(t, Y[:, i], lw=0.8, color=f"C{k}", label=CHANNELS[i])
+            ax.plot(t, Ysim[:, i], lw=0.8, ls="--", color="k", alpha=0.7)
+        ax.set_ylabel(f"{title}\n[{unit}]")
+        ax.grid(alpha=0.3)
+        ax.legend(fontsize=7, loc="upper right", ncol=len(idx))
+    axes[-1].set_xlabel("time [s]")
+    axes[0].set_title(f"run {run}: measured (colour) vs identified car (dashed)")
+    return fig
+
+
+def _relative(std, value) -> float:
+    """``2 std / |value|`` in % (NaN without a std or a value)."""
+    return math.nan if std is None or not value else 200.0 * abs(std / value)
+
+
+def parameters_figure(result):
+    """Each estimated parameter's relative standard error: ±2 ``std_robust`` (and ±2 ``std``) in % of its value.
+
+    Known and derived parameters are listed with no bar. Returns a ``matplotlib.figure.Figure``.
+    """
+    names, white, robust, notes = [], [], [], []
+    for n, d in result.details.items():
+        if n.startswith("F_"):
+            continue  # the curves: plot_dampers
+        names.append(n)
+        white.append(_relative(d.get("std"), d.get("value")))
+        robust.append(_relative(d.get("std_robust"), d.get("value")))
+        notes.append("known" if d.get("fixed") else ("derived" if d.get("derived") else ""))
+    fig = _figure(7.0, 0.3 * len(names) + 1.2)
+    ax = fig.subplots()
+    y = np.arange(len(names))
+    ax.barh(y + 0.2, np.nan_to_num(robust), height=0.4, color="C0", label="±2 std_robust")
+    ax.barh(y - 0.2, np.nan_to_num(white), height=0.4, color="C1", alpha=0.7, label="±2 std (white residuals)")
+    ax.set_yticks(y, [f"{n} ({note})" if note else n for n, note in zip(names, notes)])
+    ax.invert_yaxis()
+    ax.set_xlabel("relative standard error ×2 [% of the value]")
+    ax.set_title("parameters: how well the data fix them")
+    ax.grid(alpha=0.3, axis="x")
+    ax.legend(fontsize=7, loc="lower right")
+    return fig
+
+
+def dampers_figure(result):
+    """The identified damper curves with ±2 ``std_robust`` bands (knots not excited marked ×).
+
+    Raises
+    ------
+    ArgumentError
+        The result has no damper curves.
+    """
+    d = result.dampers
+    if not d:
+        raise ArgumentError("the result has no damper curves (fit the damper_curves model to get them)")
+    v = np.array(d["velocity"], dtype=float)
+    j0 = int(np.searchsorted(v, 0.0))
+    fig = _figure(7.0, 4.0)
+    ax = fig.subplots()
+    for k, axle in enumerate(("front", "rear")):
+        F = np.array(d[axle]["force"], dtype=float)
+        s = np.array([np.nan if x is None else x for x in d[axle].get("std_robust", [None] * v.size)], dtype=float)
+        exc = np.array(d[axle].get("excited", [True] * v.size), dtype=bool)
+        vv, FF, ss = np.insert(v, j0, 0.0), np.insert(F, j0, 0.0), np.insert(s, j0, 0.0)
+        ax.plot(vv, FF, "-o", ms=3, color=f"C{k}", label=axle)
+        ax.fill_between(vv, FF - 2 * np.nan_to_num(ss), FF + 2 * np.nan_to_num(ss), color=f"C{k}", alpha=0.2)
+        if not exc.all():
+            ax.plot(v[~exc], F[~exc], "x", color="k", ms=7)
+    ax.axhline(0, color="0.5", lw=0.5)
+    ax.axvline(0, color="0.5", lw=0.5)
+    ax.set_xlabel("suspension velocity [m/s] (compression +)")
+    ax.set_ylabel("damper force at the wheel [N]")
+    ax.set_title("damper curves (±2 std_robust; × not excited)")
+    ax.grid(alpha=0.3)
+    ax.legend(fontsize=8)
+    return fig
+
+
+__all__ = ["fit_figure", "parameters_figure", "dampers_figure", "responses", "result_dataset"]
