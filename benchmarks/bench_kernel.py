@@ -30,7 +30,7 @@ import numba
 import numpy as np
 
 import rideid
-from rideid.data.scenario import simulate_manifest, write_dataset
+from rideid.synth.scenario import simulate_manifest, write_dataset
 from rideid.estimate.cost import CostFunction
 from rideid.model import kernel
 from rideid.model.batch import single_threaded_blas

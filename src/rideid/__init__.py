@@ -19,7 +19,8 @@ Public API (SPEC §5)::
 from importlib.metadata import PackageNotFoundError, version
 
 from .estimate.cost import CostFunction, ParameterSpace
-from .data.dataset import Dataset, load_dataset
+from .data.dataset import Dataset
+from .conditioning.load import load_dataset
 from .design import PlanResult, plan
 from .errors import ArgumentError, DataError, DataWarning, ModelValidityWarning, RideidError, ScaleError
 from .data.schema import DatasetManifest, Manifest, Scenario, load_truth
@@ -32,7 +33,8 @@ from .estimate.jade import JadeSolver, jade
 from .model.equations import CHANNELS, modal_summary
 from .model.params import DEFAULT_CAR, DEFAULT_GEOMETRY, NAMES, UNITS, Geometry
 from .model.params import ALL_NAMES, EXT_NAMES, GROUPS
-from .data.scenario import default_scenario, default_scenario_path, load_scenario, simulate_manifest, write_dataset
+from .data.scenario import default_scenario, default_scenario_path, load_scenario
+from .synth.scenario import simulate_manifest, write_dataset
 from .model.roads import iso8608_class, iso8608_profile
 from .model.tracks import Track
 from .studies import StudyResult, load_study, study

@@ -244,7 +244,8 @@ def _parser() -> argparse.ArgumentParser:
 def cmd_simulate(args, out=None):
     out = out or sys.stdout
     from .model.equations import format_modal_summary, modal_summary
-    from .data.scenario import load_scenario, simulate_manifest, write_dataset
+    from .data.scenario import load_scenario
+    from .synth.scenario import simulate_manifest, write_dataset
 
     sc = load_scenario(args.scenario)
     prog = Progress(args.quiet)
@@ -470,7 +471,8 @@ def cmd_demo(args, out=None):
     from .data.schema import load_truth
     from .estimate.score import score
     from .model.equations import format_modal_summary, modal_summary
-    from .data.scenario import default_scenario, simulate_manifest, write_dataset
+    from .data.scenario import default_scenario
+    from .synth.scenario import simulate_manifest, write_dataset
 
     root = Path(args.out)
     sc = default_scenario()

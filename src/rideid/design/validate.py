@@ -12,9 +12,9 @@ from pathlib import Path
 
 import numpy as np
 
-from ..data.dataset import load_dataset
+from ..conditioning.load import load_dataset
 from ..estimate.identify import identify
-from ..data.scenario import simulate_manifest, write_dataset
+from ..synth.scenario import simulate_manifest, write_dataset
 
 
 def sub_scenario(sc, run_ids):

@@ -65,7 +65,7 @@ from scipy.optimize import OptimizeResult, least_squares
 
 from ..data.checks import bound_findings
 from ..data.dataset import Dataset
-from ..data.measured import estimate_start, simulate_response
+from ..conditioning.starts import estimate_start, simulate_response
 from ..errors import ArgumentError, DataWarning
 from ..model.batch import single_threaded_blas
 from ..model.equations import modal_summary

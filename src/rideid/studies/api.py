@@ -6,8 +6,10 @@ Not from the package root: ``rideid/__init__`` imports the studies, so
 
 from importlib.metadata import PackageNotFoundError, version
 
-from ..data.dataset import Dataset, load_dataset
-from ..data.scenario import default_scenario, default_scenario_path, load_scenario, simulate_manifest, write_dataset
+from ..data.dataset import Dataset
+from ..conditioning.load import load_dataset
+from ..data.scenario import default_scenario, default_scenario_path, load_scenario
+from ..synth.scenario import simulate_manifest, write_dataset
 from ..data.schema import Scenario, load_truth
 from ..design import plan
 from ..errors import DataError, RideidError
