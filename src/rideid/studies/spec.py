@@ -132,7 +132,7 @@ def dataset_content_hash(folder: Path) -> str:
 
 
 def scenario_content_hash(path) -> str:
-    from . import api as rideid
+    import rideid
     p = rideid.default_scenario_path() if path == BUILTIN else Path(path)
     h = hashlib.sha256()
     _hash_files(h, [p])
@@ -149,7 +149,7 @@ def task_key(options: dict, content: str) -> str:
 
 def identify_accepts(name: str) -> bool:
     """Whether the installed :func:`rideid.identify` takes keyword ``name``."""
-    from . import api as rideid
+    import rideid
     return name in inspect.signature(rideid.identify).parameters
 
 
@@ -255,7 +255,7 @@ def _parse_data(tab, where, base):
     sc = tab["scenario"]
     if not isinstance(sc, str) or not sc:
         raise _err(w, f"expected a scenario file (relative to the study file) or \"builtin\", got {sc!r}")
-    from . import api as rideid
+    import rideid
     if sc == BUILTIN:
         sc_path, label = BUILTIN, BUILTIN
     else:
@@ -336,7 +336,7 @@ def parse_study(doc: dict, path: Path | None = None, base: Path | None = None) -
     axes = _parse_identify(idt, where)
     sc_runs = None
     if scenario is not None:
-        from . import api as rideid
+        import rideid
         sc = rideid.default_scenario() if scenario == BUILTIN else rideid.load_scenario(scenario)
         sc_runs = [r.id for r in sc.runs]
     subsets = _parse_subsets(doc["subsets"], where, sc_runs) if "subsets" in doc else [(None, None)]
