@@ -37,6 +37,7 @@ import numpy as np
 
 from ..estimate.dampers import MIN_SAMPLES, knot_counts, suspension_velocities_by_run
 from ..model.nonlinear import DEFAULT_KNOTS, curve_names, damper_force
+from ..data.scenario import LIFT_OFF_RHO
 
 CURVES = "damper_curves"
 AXLES = ("front", "rear")
@@ -68,7 +69,6 @@ def nominal_forces(sc, layout) -> np.ndarray:
 def run_counts(space, sim, P0, rho: float | None = None) -> np.ndarray:
     """Per run and axle the samples beyond the previous knot, ``(n_runs, 2, K)``, of car ``P0`` (a full row)."""
     if rho is None:
-        from ..data.scenario import LIFT_OFF_RHO
         rho = LIFT_OFF_RHO
     cf = SimpleNamespace(space=space, sim=sim)
     knots = space.layout.knots

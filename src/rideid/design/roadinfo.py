@@ -61,6 +61,7 @@ from ..model.equations import CHANNEL_KIND, CHANNELS
 from ..model.simulate import prepare_run, simulate_reference
 from .colour import ar1_psd
 from .fisher import SILENT
+from ..data.scenario import generate_road, lead_in, road_seed, run_times
 
 #: roads generated per unknown-road candidate (their information averaged); 1 for a run with a road_seed
 ROADS = 2
@@ -88,7 +89,6 @@ class RoadRunInformation:
 
 def road_seeds(run, index: int, seed: int) -> list:
     """Seeds of the :data:`ROADS` roads of candidate ``run`` (position ``index``) for the plan's ``seed``."""
-    from ..data.scenario import road_seed
     if run.road.seed is not None:
         return [int(run.road.seed)]
     out = [road_seed(run, index, seed)]
@@ -100,7 +100,6 @@ def road_seeds(run, index: int, seed: int) -> list:
 def road_outputs(sc, run, road_seed_value: int, P) -> np.ndarray:
     """Noise-free channels (n, 10) of cars ``P`` (n_cars, 16) on the generated road of ``run`` with seed
     ``road_seed_value``, simulated as ``rideid simulate`` does (moving start after the lead-in)."""
-    from ..data.scenario import generate_road, lead_in, run_times
     r = replace(run, road=replace(run.road, seed=int(road_seed_value)))
     road = generate_road(sc, r, 0)
     t = run_times(r)

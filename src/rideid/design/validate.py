@@ -15,6 +15,8 @@ import numpy as np
 from ..conditioning.load import load_dataset
 from ..estimate.identify import identify
 from ..synth.scenario import simulate_manifest, write_dataset
+from ..estimate.cost import CostFunction, channel_weights
+from ..data.noise import sensor_noise
 
 
 def sub_scenario(sc, run_ids):
@@ -29,7 +31,6 @@ def gauss_newton_from_truth(ds, names, x0, step: float = 1e-5) -> np.ndarray:
     At small noise identify's least-squares polish converges to this point:
     the linearised estimator whose spread the plan predicts.
     """
-    from ..estimate.cost import CostFunction
     cf = CostFunction(ds)
     if list(cf.names) != list(names):
         raise ValueError(f"free parameters differ: {cf.names} vs {names}")
@@ -99,8 +100,6 @@ def linearised_monte_carlo(sc, run_ids, names, noise: float, seeds, step: float 
         The same numbers as ``monte_carlo(..., linearised=True)[1]`` (to
         round-off and the 12 significant digits of the run files).
     """
-    from ..data.noise import sensor_noise
-    from ..estimate.cost import CostFunction, channel_weights
     sub = sub_scenario(sc, run_ids)
     with tempfile.TemporaryDirectory() as tmp:
         with warnings.catch_warnings():

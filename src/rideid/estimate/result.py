@@ -27,6 +27,8 @@ import numpy as np
 from ..data.schema.result import read_result_json
 from ..errors import DataError
 from .sensitivity import SensitivityMaps
+from .dampers import format_dampers
+from .bumps import format_bump_stops
 
 COST_DEFINITION = ("equal-weight sum over runs of the per-channel energy-normalised squared error "
                    "(see rideid.cost)")
@@ -248,10 +250,8 @@ class IdentificationResult:
             err = f" ± {std:.3g} (robust)" if std not in (None, 0.0) else ""
             lines.append(f"  {n}={d['value']:.6g}{err} {d['unit']}{note}")
         if self.dampers:
-            from .dampers import format_dampers
             lines += ["  " + ln for ln in format_dampers(self.dampers).splitlines()]
         if self.bump_stops:
-            from .bumps import format_bump_stops
             lines += ["  " + ln for ln in format_bump_stops(self.bump_stops).splitlines()]
         if adequate is False:
             lines.append("  not adequate: the residuals carry structure the model misses (adequacy)")

@@ -36,6 +36,7 @@ import numpy as np
 
 from .kernel_ir import run_chunks
 from .kernel_layout import LANES, N_COEF, N_MAX_K, OFFSETS, PER_TERM
+from .contact import lattice_max
 
 #: Candidates per chunk (the kernel pads a population to whole chunks).
 CHUNK = LANES
@@ -158,7 +159,6 @@ def compile_kernels() -> float:
     says so when it takes long, rather than hiding it in the first
     generation.
     """
-    from .contact import lattice_max
 
     t = time.perf_counter()
     _kernel()

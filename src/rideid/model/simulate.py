@@ -19,7 +19,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .contact import wheel_input, wheel_input_slope
+from .contact import envelope, wheel_input, wheel_input_slope
 from .discretize import N_MAX, Discretized, gauss_nodes, moment_weights
 from .equations import (CHANNELS, CORNER_TO_DECOMPOSED, DECOMPOSED_TO_COORDS, RATE_COORDS, output_map,
                         state_space, static_state)
@@ -269,7 +269,6 @@ def simulate_lsim(P, geom: Geometry, track: Track, speed: float, t, upsample: in
     """
     import scipy.signal
 
-    from .contact import envelope
 
     t = np.asarray(t, dtype=float)
     h = t[1] - t[0]
