@@ -33,7 +33,8 @@ each recorded in :attr:`MeasuredRun.record` (and in ``result.json``):
    runs) it is estimated by correlating the samples with the response of a
    nominal car (the built-in car on this geometry; the absolute scale does
    not matter for accelerations) over all lags at the sample rate, to a
-   fraction of a sample by a parabola through the correlation peak.
+   fraction of a sample by a parabola through the correlation peak
+   (:mod:`rideid.conditioning.starts`, which runs the model; this module does not).
    :func:`rideid.identify` estimates it again with the parameters. **The
    model moves, the data never do**: a start ``s`` puts the model's time
    axis at ``t = T_k - s`` for the fixed samples ``T_k``; the data are never

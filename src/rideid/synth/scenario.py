@@ -132,7 +132,7 @@ def simulate_manifest(sc: Scenario, noise: float = 0.0, seed: int | None = None,
     """Simulate every run of a scenario with its ``[truth]`` parameters.
 
     ``engine``: ``"rideid"`` (the exact 7-DOF response) or ``"mujoco"`` (the
-    independent multibody car of :mod:`rideid.hifi` with the scenario's
+    independent multibody car of :mod:`rideid.verify.hifi` with the scenario's
     ``[hifi]`` properties, RK4 at 1 ms; lift-off is then what happened in
     MuJoCo: a tire contact carrying no load).
 
@@ -250,8 +250,8 @@ def write_dataset(sc: Scenario, data: dict, out_dir, comment: str | None = None,
 
     ``raw``: the runs are raw MuJoCo sensor readings (:func:`simulate_manifest`
     with ``raw=True``); the dataset then maps the logger-style columns
-    (:data:`rideid.hifi.RAW_NAMES`) to the SPEC channels and tells
-    :mod:`rideid.measured` that gravity is included, with the stationary
+    (:data:`rideid.verify.hifi.RAW_NAMES`) to the SPEC channels and tells
+    :mod:`rideid.data.measured` that gravity is included, with the stationary
     lead-in and the start time.
     """
     roads = getattr(data, "roads", {})
