@@ -223,12 +223,14 @@ def heatmap_figure(m: SensitivityMaps, kind: str):
     cell: a map has up to ~120 cells, and laying out a text each costs more
     than the rest of the figure.
     """
-    from matplotlib.figure import Figure  # a plain figure: no pyplot, the caller's backend untouched
+    from matplotlib.backends.backend_agg import FigureCanvasAgg  # a plain figure on its own Agg canvas:
+    from matplotlib.figure import Figure  # no pyplot, the caller's backend untouched
 
     attr, row_attr, col_attr, title, th = HEATMAPS[kind]
     data, rows, cols = getattr(m, attr), getattr(m, row_attr), getattr(m, col_attr)
     scale = len(m.runs) if kind == "param_track" else 1.0  # shares per run: 1/runs is "average"
     fig = Figure(figsize=(1.0 + 0.75 * len(cols), 1.2 + 0.38 * len(rows)), dpi=110)
+    FigureCanvasAgg(fig)  # callers may read its pixels (buffer_rgba)
     ax = fig.subplots()
     im = ax.imshow(data, aspect="auto", cmap="viridis")
     ax.grid(False)
