@@ -17,7 +17,6 @@ Public API (SPEC §5)::
 """
 
 from importlib import import_module
-from importlib.metadata import PackageNotFoundError, version
 
 #: public name -> (defining module, its name there); imported on first use (PEP 562), so that
 #: ``import rideid`` (and the command line's ``--help``) loads neither NumPy nor the compiled kernels
@@ -70,16 +69,23 @@ _COMMAND_LINE = {
 _SUBPACKAGES = ("conditioning", "csvio", "data", "design", "errors", "estimate", "model", "report", "studies", "synth",
                 "verify")
 
-try:
-    __version__ = version("rideid")
-except PackageNotFoundError:  # pragma: no cover
-    __version__ = "0+unknown"
+
+def _version() -> str:
+    from importlib.metadata import PackageNotFoundError, version  # 0.1 s to import: only when asked
+
+    try:
+        return version("rideid")
+    except PackageNotFoundError:  # pragma: no cover
+        return "0+unknown"
 
 
 def __getattr__(name: str):
     """A public name (:data:`__all__`), imported from its defining module on first use and then cached."""
     if name in _SUBPACKAGES:
         return import_module(f"rideid.{name}")
+    if name == "__version__":  # the package metadata, read on first use (it costs more than the rest of the import)
+        globals()[name] = value = _version()
+        return value
     try:
         module, attr = _PUBLIC[name] if name in _PUBLIC else _COMMAND_LINE[name]
     except KeyError:

@@ -37,6 +37,15 @@ EXAMPLES = {
 }
 
 
+class _Version(argparse.Action):
+    """``--version``: the installed version, looked up only when asked (reading the package metadata costs
+    more than building the whole parser)."""
+
+    def __call__(self, parser, namespace, values, option_string=None):
+        print(f"rideid {rideid.__version__}")  # on stdout, as argparse's own version action
+        parser.exit()
+
+
 class Progress:
     """A live progress line on stderr (only on a terminal, unless quiet).
 
@@ -116,7 +125,7 @@ def _parser() -> argparse.ArgumentParser:
         epilog="exit codes: 0 ok, 2 bad input, 1 internal error\n"
                "example:\n  rideid demo\n  rideid simulate scenario.toml --out sim && rideid identify sim --out fit",
         formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("--version", action="version", version=f"rideid {rideid.__version__}")
+    p.add_argument("--version", action=_Version, nargs=0, help="show the version and exit")
     sub = p.add_subparsers(dest="command", metavar="COMMAND")
 
     def add(name, help_):
