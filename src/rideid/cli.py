@@ -258,7 +258,8 @@ def cmd_simulate(args, out=None):
     prog.done()
     engine = args.engine
     if engine == "mujoco":
-        engine += f"; MuJoCo car: {rideid.scenario_properties(sc).describe()}" + ("; raw sensor readings" if args.raw else "")
+        engine += (f"; MuJoCo car: {rideid.scenario_properties(sc).describe()}"
+                   + ("; raw sensor readings" if args.raw else ""))
     if sc.dampers is not None:
         engine += "; [dampers] curves"
     if sc.bump_stops:

@@ -18,7 +18,8 @@ import numba
 import numpy as np
 
 from ..data.checks import (ERROR, MATCH_MIN, PLAUSIBLE, WARNING, Finding, axle_amplitude_findings, check_coverage,
-                           corrected, describe_fix, fix_entries, match_finding, speed_candidates, unit_findings, wiring_fix)
+                           corrected, describe_fix, fix_entries, match_finding, speed_candidates, unit_findings,
+                           wiring_fix)
 from ..data.measured import Distance, RelativeDistance
 from ..data.schema.channels import SI, UNITS, quantity
 from ..model.batch import thread_map

@@ -18,7 +18,8 @@ from .measured import load_measured_run
 @dataclass(frozen=True, repr=False)
 class Dataset:
     """A dataset (SPEC §3): manifest and the data of every run. Immutable: the steps that
-    change a dataset (:func:`rideid.conditioning.load.align_starts`, :meth:`with_starts`, :meth:`with_data`) return a new one.
+    change a dataset (:func:`rideid.conditioning.load.align_starts`, :meth:`with_starts`, :meth:`with_data`)
+    return a new one.
 
     Attributes
     ----------

@@ -19,7 +19,8 @@ import numpy as np
 
 from ..data.noise import sensor_noise
 from ..data.scenario import LIFT_OFF_RHO, generate_road, lead_in, road_record, run_times, write_road_csv
-from ..data.schema import BUMP_NAMES, ChannelEntry, DatasetManifest, RunSpec, Scenario, atomic_output, write_run_csv, write_toml
+from ..data.schema import (BUMP_NAMES, ChannelEntry, DatasetManifest, RunSpec, Scenario, atomic_output, write_run_csv,
+                           write_toml)
 from ..errors import ArgumentError, DataWarning, ModelValidityWarning
 from ..model.equations import CHANNELS, static_corner_loads
 from ..model.nonlinear import NonlinearLayout, simulate_nonlinear, simulate_numpy, substeps
