@@ -26,7 +26,7 @@ from ..model.batch import thread_map
 from ..model.contact import envelope_grid
 from ..model.equations import CHANNELS
 from ..model.params import nominal_car
-from ..model.simulate import _PREPARED_MAX, ENVELOPE_DX, prepare_run
+from ..model.simulate import ENVELOPE_DX, PREPARED_MAX, prepare_run
 from .starts import correlation_score, estimate_start, simulate_response
 
 #: a moving run's nominal response starts at rest this long (s) before the first sample: the nominal car's
@@ -121,7 +121,7 @@ def _prefetch_inputs(ds) -> None:
     again, with its message, in the checks.
     """
     man, geom = ds.manifest, ds.geometry
-    runs = [r for r in man.runs[:_PREPARED_MAX] if r.road_known]  # what the cache of prepared runs holds
+    runs = [r for r in man.runs[:PREPARED_MAX] if r.road_known]  # what the cache of prepared runs holds
     if min(numba.get_num_threads(), len(runs)) < 2:
         return
     paths = {}

@@ -14,7 +14,7 @@ import os
 import warnings
 
 from ..errors import DataError
-from .kernel import _kernel
+from .kernel import compiled_kernel
 from .kernel_nl import compile_kernel
 
 #: environment variable naming the backend
@@ -37,7 +37,7 @@ def use_numpy() -> bool:
 
 def _builders():
     def linear():
-        _kernel()
+        compiled_kernel()
 
     def nonlinear():
         compile_kernel()

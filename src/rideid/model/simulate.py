@@ -87,7 +87,7 @@ class RunInput:
 #: the last few prepared runs: loading a dataset (its physics checks) and identifying it
 #: prepare the same runs, and the envelope quadrature is most of both (0.1 s per run)
 _PREPARED: list = []
-_PREPARED_MAX = 12  # a dataset's runs; ~1 MB per 1000 samples
+PREPARED_MAX = 12  # a dataset's runs; ~1 MB per 1000 samples
 
 
 def prepare_run(track: Track, geom: Geometry, speed: float | None, t, quad_order: int = 2,
@@ -109,7 +109,7 @@ def prepare_run(track: Track, geom: Geometry, speed: float | None, t, quad_order
     for arr in (res.t, res.u, res.ud, res.mu, res.rate, res.rated):
         arr.flags.writeable = False  # shared by every caller with the same arguments
     _PREPARED.append((track, geom, speed, t.copy(), quad_order, distance, res))
-    del _PREPARED[:-_PREPARED_MAX]
+    del _PREPARED[:-PREPARED_MAX]
     return res
 
 
