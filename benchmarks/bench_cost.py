@@ -31,7 +31,8 @@ from rideid.model.contact import envelope
 from rideid.estimate.cost import CostFunction
 from rideid.model.batch import BatchSimulator, single_threaded_blas
 from rideid.model.equations import state_space, static_state
-from rideid.data.scenario import run_times, simulate_manifest, write_dataset
+from rideid.data.scenario import run_times
+from rideid.synth.scenario import simulate_manifest, write_dataset
 from rideid.model.simulate import corner_positions, prepare_run, simulate_lsim
 
 

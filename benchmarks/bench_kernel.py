@@ -30,7 +30,7 @@ import numba
 import numpy as np
 
 import rideid
-from rideid.data.scenario import simulate_manifest, write_dataset
+from rideid.synth.scenario import simulate_manifest, write_dataset
 from rideid.estimate.cost import CostFunction
 from rideid.model import kernel
 from rideid.model.batch import single_threaded_blas
@@ -62,7 +62,7 @@ def dataset(d):
 
 
 COLD = ("import time, json; t = time.perf_counter(); from rideid.model import kernel; "
-        "fn = kernel._kernel(); dt = time.perf_counter() - t; "
+        "fn = kernel.compiled_kernel(); dt = time.perf_counter() - t; "
         "print(json.dumps({'seconds': dt, **kernel.vectorised()}))")
 
 
@@ -128,7 +128,7 @@ def main(out=sys.stdout):
     say("\n(the population's ms include the discretisation: matrix exponentials and packing, NumPy)")
 
     # where the time goes: series-length sweep on one thread, kernel only
-    fn = kernel._kernel()
+    fn = kernel.compiled_kernel()
     n_chunks = n // kernel.LANES
 
     def run(N_terms):

@@ -64,7 +64,8 @@ os.environ.setdefault("NUMBA_NUM_THREADS", "1")
 import numpy as np
 
 import rideid
-from rideid.data.scenario import run_times, simulate_manifest
+from rideid.data.scenario import run_times
+from rideid.synth.scenario import simulate_manifest
 from rideid.data.schema import HifiProperties, parse_scenario, read_toml
 from rideid.model.equations import CHANNELS, static_corner_loads
 from rideid.model.params import CORNERS, GRAVITY, NAMES, as_vector

@@ -41,7 +41,8 @@ import rideid
 from rideid.verify.hifi import HifiProperties, hifi_curve, simulate_mujoco
 from rideid.estimate.cost import ParameterSpace
 from rideid.model.params import EXT_NAMES, GROUPS, NAMES, as_vector
-from rideid.data.scenario import run_times, write_dataset
+from rideid.data.scenario import run_times
+from rideid.synth.scenario import write_dataset
 
 #: the realistic car: a saloon's CG about 0.55 m above the ground (0.25 m above the wheel centres), a 16-17"
 #: wheel and tire (spin inertia 1.0 kg m^2), dampers with 2:1 rebound:compression and a digressive knee at

@@ -8,7 +8,7 @@ import warnings
 import numpy as np
 
 import rideid
-from rideid.data.scenario import simulate_manifest, write_dataset
+from rideid.synth.scenario import simulate_manifest, write_dataset
 
 #: a 2.05 t SUV: longer, wider, taller tires and stiffer rates than the built-in car
 SUV_VEHICLE = {"wheelbase": 2.85, "track_front": 1.62, "track_rear": 1.62, "tire_radius": 0.36}

@@ -28,7 +28,7 @@ def sim_dataset(tmp_path_factory, default_scenario):
     """The built-in scenario simulated noise-free, written as a dataset."""
     import warnings
 
-    from rideid.data.scenario import simulate_manifest, write_dataset
+    from rideid.synth.scenario import simulate_manifest, write_dataset
     out = tmp_path_factory.mktemp("ds") / "clean"
     with warnings.catch_warnings():
         warnings.simplefilter("error")  # the built-in runs must not lift a wheel

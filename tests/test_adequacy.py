@@ -96,7 +96,7 @@ def suv(tmp_path_factory):
 def _polished_verdict(sc, data, folder):
     """Base-model polish from the true twelve, then the adequacy of the fitted car."""
     from cars import SUV_TRUTH
-    from rideid.data.scenario import write_dataset
+    from rideid.synth.scenario import write_dataset
     from rideid.estimate.adequacy import assess_fit
     from rideid.estimate.cost import CostFunction
     from rideid.estimate.identify import _polish

@@ -3,7 +3,7 @@
 The car: the built-in one with asymmetric digressive dampers (2:1 rebound:compression, slope x 0.4
 above a 0.15 m/s knee), given as a scenario's ``[dampers]`` table; bump stops from ``[truth]``; the CG
 height from ``[vehicle]``. Both engines run from the same scenario through
-:func:`rideid.data.scenario.simulate_manifest`. Reference: the *linear* reduced car agrees with MuJoCo
+:func:`rideid.synth.scenario.simulate_manifest`. Reference: the *linear* reduced car agrees with MuJoCo
 within 0.1-0.4 % of each channel's RMS on these runs (tests/test_hifi.py holds it to 1 %); the nonlinear
 car agrees within 0.6 % on the built-in runs' realistic amplitudes (1 % held here) and within 1.7 % on the
 80 mm twist (2 % held), where both engines are converged (kernel sub-steps x4, MuJoCo at 0.25 ms: < 0.1 %)
@@ -20,7 +20,7 @@ import tomli_w
 pytest.importorskip("mujoco")
 
 import rideid  # noqa: E402
-from rideid.data.scenario import simulate_manifest  # noqa: E402
+from rideid.synth.scenario import simulate_manifest  # noqa: E402
 from rideid.data.schema import parse_scenario, read_toml  # noqa: E402
 from rideid.model.equations import CHANNEL_KIND, CHANNELS  # noqa: E402
 from rideid.verify.hifi import damper_force  # noqa: E402
@@ -115,7 +115,7 @@ def test_engines_agree_with_damper_curves_on_the_high_twist():
 
 def test_engines_agree_with_bump_stops_reached():
     """Stops at 25 mm (T_LL compresses 33-38 mm) or 50 mm (T_HL, 75 mm): measured 0.7 % and 1.7 %."""
-    from rideid.data.scenario import nonlinear_car, nonlinear_states
+    from rideid.synth.scenario import nonlinear_car, nonlinear_states
     from rideid.model.simulate import prepare_run
     for rid, clear, tol in (("T_LL", 0.025, 0.01), ("T_HL", 0.05, 0.02)):
         sc = _scenario([rid], truth=dict(bs_clear_f=clear, bs_clear_r=clear, bs_rate_f=5e4, bs_rate_r=5e4))

@@ -26,8 +26,8 @@ from fmpy import extract, read_model_description  # noqa: E402
 from fmpy.fmi2 import FMU2Slave  # noqa: E402
 from fmpy.validation import validate_fmu  # noqa: E402
 
-from rideid.export import car_from_scenario, export  # noqa: E402
-from rideid.export.fmu import INPUTS, find_compiler  # noqa: E402
+from rideid.exporter import car_from_scenario, export  # noqa: E402
+from rideid.exporter.fmu import INPUTS, find_compiler  # noqa: E402
 
 needs_cc = pytest.mark.skipif(find_compiler() is None, reason="no C compiler")
 ROOT = Path(__file__).resolve().parents[1]

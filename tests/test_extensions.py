@@ -269,7 +269,7 @@ def test_wheel_velocities_are_the_physical_ones():
 
 
 def test_lift_off_uses_the_full_tire_force():
-    from rideid.data.scenario import lift_offs
+    from rideid.synth.scenario import lift_offs
     from rideid.model.equations import static_corner_loads
     from rideid.model.simulate import wheel_displacements, wheel_velocities
     tr = track_from_table(dict(id="t", kind="chassis_twist", start=2.0, height=0.12, bump_length=1.0, spacing=4.0,
@@ -425,7 +425,7 @@ def test_extended_model_recovers_a_car_with_bars_and_tire_damping(tmp_path):
 
     import rideid
     from conftest import van_scenario
-    from rideid.data.scenario import simulate_manifest, write_dataset
+    from rideid.synth.scenario import simulate_manifest, write_dataset
     sc = van_scenario(tmp_path)
     truth_ext = {"k_arf": 22000.0, "k_arr": 9000.0, "c_tf": 250.0, "c_tr": 300.0}
     sc = dataclasses.replace(sc, truth={**sc.truth, **truth_ext}, extensions=tuple(GROUPS))

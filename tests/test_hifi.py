@@ -271,7 +271,7 @@ def test_lift_off_exactly_when_the_seven_dof_model_warns(default_scenario):
     import warnings
 
     from rideid.errors import ModelValidityWarning
-    from rideid.data.scenario import lift_offs
+    from rideid.synth.scenario import lift_offs
     from rideid.model.tracks import Track
     sc = default_scenario
     P, geom, run = as_vector(sc.truth), sc.geometry, sc.run("W_H")
@@ -316,7 +316,7 @@ def test_lift_off_exactly_when_the_seven_dof_model_warns(default_scenario):
         else:
             assert mj.tire_load_min.min() > 0
     # and `simulate_manifest` with the MuJoCo engine warns from MuJoCo's own contact
-    from rideid.data.scenario import simulate_manifest
+    from rideid.synth.scenario import simulate_manifest
     sc2 = dataclasses.replace(sc, runs=[run], tracks={base.id: track(critical * 1.02)})
     with warnings.catch_warnings(record=True) as rec:
         warnings.simplefilter("always")

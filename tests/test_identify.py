@@ -10,7 +10,7 @@ import pytest
 import rideid
 from rideid.estimate.cost import ParameterSpace, channel_weights
 from rideid.model.params import DEFAULT_CAR, NAMES
-from rideid.data.scenario import simulate_manifest, write_dataset
+from rideid.synth.scenario import simulate_manifest, write_dataset
 from rideid.estimate.sensitivity import compute_maps
 from rideid.estimate.weighting import adaptive_weights, normalised_spread
 

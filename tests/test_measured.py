@@ -361,7 +361,8 @@ def test_negative_speed_channel_is_refused(tmp_path, default_scenario, raw):
 
 def test_reading_and_start_estimation_are_separate_steps(tmp_path, default_scenario, raw):
     """read_dataset only reads and conditions; align_starts estimates the starts, on a new dataset."""
-    from rideid.data.dataset import align_starts, read_dataset
+    from rideid.data.dataset import read_dataset
+    from rideid.conditioning.load import align_starts
     path = _one_run(tmp_path, default_scenario, raw, rid="T_LL")
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", DataWarning)

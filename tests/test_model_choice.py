@@ -69,7 +69,7 @@ def test_unknown_model_value_is_one_line_exit_2(sim_dataset, tmp_path, capsys):
 
 def _full_polish_criteria(sc, data, folder, truth_ext):
     from cars import SUV_TRUTH
-    from rideid.data.scenario import write_dataset
+    from rideid.synth.scenario import write_dataset
     from rideid.estimate.identify import _polish
     from rideid.model.batch import single_threaded_blas
 
@@ -114,7 +114,7 @@ def test_criterion_adds_both_groups_on_a_car_with_bars_and_tire_damping(suv, tmp
 @pytest.mark.parametrize("groups", [(), ("anti_roll_bars",), ("tire_damping",), BOTH])
 def test_identify_auto_picks_exactly_the_groups_the_car_has(groups, tmp_path, capsys):
     from cars import SUV_BARS, SUV_TIRE_DAMPING, add_noise, simulate_car, suv_scenario
-    from rideid.data.scenario import write_dataset
+    from rideid.synth.scenario import write_dataset
 
     sc = suv_scenario(tmp_path)
     ext = {**(SUV_BARS if "anti_roll_bars" in groups else {}), **(SUV_TIRE_DAMPING if "tire_damping" in groups else {})}
@@ -140,7 +140,7 @@ def test_identify_auto_picks_exactly_the_groups_the_car_has(groups, tmp_path, ca
 @pytest.mark.expensive
 def test_base_model_on_a_real_car_says_not_adequate_in_terminal_and_report(tmp_path, capsys):
     from cars import SUV_BARS, SUV_TIRE_DAMPING, add_noise, simulate_car, suv_scenario
-    from rideid.data.scenario import write_dataset
+    from rideid.synth.scenario import write_dataset
 
     sc = suv_scenario(tmp_path)
     write_dataset(sc, add_noise(simulate_car(sc, {**SUV_BARS, **SUV_TIRE_DAMPING}), 0.02, 0.0, seed=50),

@@ -74,7 +74,7 @@ def test_to_frame(fitted, tmp_path):
 def test_figures_are_figures_and_leave_the_backend_alone(fitted, tmp_path):
     ds, res = fitted
     backend = matplotlib.get_backend()
-    fig = res.plot_fit("W_L", dataset=ds)
+    fig = rideid.plot_fit(res, "W_L", dataset=ds)
     assert isinstance(fig, Figure) and len(fig.axes) == 3
     body = fig.axes[0]
     # measured and identified car for each of the four body channels
@@ -82,18 +82,18 @@ def test_figures_are_figures_and_leave_the_backend_alone(fitted, tmp_path):
     y_meas = ds.data["W_L"].matrix()[:, 0]
     assert np.array_equal(body.lines[0].get_ydata(), y_meas)
     assert np.allclose(body.lines[1].get_ydata(), y_meas, atol=1e-3 * np.abs(y_meas).max())
-    only = res.plot_fit("W_L", dataset=ds, channels=["pitch_rate"])
+    only = rideid.plot_fit(res, "W_L", dataset=ds, channels=["pitch_rate"])
     assert len(only.axes) == 1 and len(only.axes[0].lines) == 2
     # a result read back finds its dataset itself and simulates the car again
     res.save(tmp_path / "fit")
-    again = rideid.load_result(tmp_path / "fit").plot_fit("W_L")
+    again = rideid.plot_fit(rideid.load_result(tmp_path / "fit"), "W_L")
     assert np.allclose(again.axes[0].lines[1].get_ydata(), body.lines[1].get_ydata(), rtol=0, atol=1e-9)
-    par = res.plot_parameters()
+    par = rideid.plot_parameters(res)
     assert isinstance(par, Figure) and len(par.axes[0].patches) == 2 * len(res.details)
     with pytest.raises(rideid.ArgumentError, match="no damper curves"):
-        res.plot_dampers()
+        rideid.plot_dampers(res)
     with pytest.raises(rideid.ArgumentError, match="its runs: T_LL"):
-        res.plot_fit("nope", dataset=ds)
+        rideid.plot_fit(res, "nope", dataset=ds)
     assert matplotlib.get_backend() == backend
 
 

@@ -16,8 +16,8 @@ import rideid
 from cars import SUV_TOTAL_MASS, SUV_TRUTH, SUV_VEHICLE
 from rideid.cli import main
 from rideid.data.dataset import MIN_ROAD_RUN_S, MIN_ROAD_RUN_SAMPLES
-from rideid.data.scenario import (ROAD_DX, ROAD_MARGIN, generate_road, lead_in, settle_time, simulate_manifest,
-                                  write_dataset)
+from rideid.data.scenario import ROAD_DX, ROAD_MARGIN, generate_road, lead_in, settle_time
+from rideid.synth.scenario import simulate_manifest, write_dataset
 from rideid.data.schema import UNKNOWN_ROAD, RoadSpec, parse_dataset_manifest, parse_scenario, read_run_csv
 from rideid.errors import ArgumentError, DataError
 from rideid.model.equations import CHANNELS, modal_summary

@@ -228,7 +228,7 @@ def test_monte_carlo_on_a_local_cluster(folder, reference):
 
 def test_summary_takes_the_crlb_from_rideid_plan(folder, reference, monkeypatch):
     """The CRLB columns come from rideid.plan's plan.json layout (SPEC §7)."""
-    from rideid.studies import api, summary
+    from rideid.studies import summary
 
     calls = []
 
@@ -238,7 +238,7 @@ def test_summary_takes_the_crlb_from_rideid_plan(folder, reference, monkeypatch)
                              "identify_std": {"k_sf": {"std": 6.0}},
                              "derived": {"m_s": {"std": 0.1, "std_identify": 0.2}}}}
 
-    monkeypatch.setattr(api, "plan", fake_plan)
+    monkeypatch.setattr(summary, "plan", fake_plan)
     monkeypatch.setattr(summary, "_PLANS", {})
     spec = load_study(folder / "mc.toml")
     stats, notes = summary.group_stats(spec, pq.read_table(reference.results).to_pylist())

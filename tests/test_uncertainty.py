@@ -148,7 +148,7 @@ def test_polish_std_robust_on_coloured_noise(tmp_path):
     optimum, without the search). std_robust is several times std, as the coloured noise demands,
     and covers the truth where std does not."""
     from cars import SUV_TRUTH, add_noise, suv_scenario
-    from rideid.data.scenario import simulate_manifest, write_dataset
+    from rideid.synth.scenario import simulate_manifest, write_dataset
     from rideid.estimate.cost import CostFunction
     from rideid.estimate.identify import _polish
     from rideid.model.batch import single_threaded_blas
@@ -177,7 +177,7 @@ def test_std_robust_covers_the_truth_under_coloured_noise(tmp_path):
     """rideid.identify (search + polish) on the SUV over 6 seeds of AR(1) noise at 2 % of RMS:
     72 estimates (11 free + the derived m_s per seed)."""
     from cars import SUV_TRUTH, add_noise, suv_scenario
-    from rideid.data.scenario import simulate_manifest, write_dataset
+    from rideid.synth.scenario import simulate_manifest, write_dataset
 
     sc = suv_scenario(tmp_path)
     clean, _ = simulate_manifest(sc)

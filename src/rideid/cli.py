@@ -15,8 +15,7 @@ import traceback
 import warnings
 from pathlib import Path
 
-from . import __version__
-from .errors import ArgumentError, DataError, RideidError
+import rideid
 
 EXAMPLES = {
     "simulate": "example:\n  rideid simulate scenario.toml --out sim --noise 0.02 --seed 1",
@@ -37,6 +36,15 @@ EXAMPLES = {
              "  rideid study fleet.toml --out fleet --scheduler tcp://10.0.0.5:8786\n"
              "a killed study resumes: run the same command again (finished tasks are kept in DIR/tasks)",
 }
+
+
+class _Version(argparse.Action):
+    """``--version``: the installed version, looked up only when asked (reading the package metadata costs
+    more than building the whole parser)."""
+
+    def __call__(self, parser, namespace, values, option_string=None):
+        print(f"rideid {rideid.__version__}")  # on stdout, as argparse's own version action
+        parser.exit()
 
 
 class Progress:
@@ -118,7 +126,7 @@ def _parser() -> argparse.ArgumentParser:
         epilog="exit codes: 0 ok, 2 bad input, 1 internal error\n"
                "example:\n  rideid demo\n  rideid simulate scenario.toml --out sim && rideid identify sim --out fit",
         formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("--version", action="version", version=f"rideid {__version__}")
+    p.add_argument("--version", action=_Version, nargs=0, help="show the version and exit")
     sub = p.add_subparsers(dest="command", metavar="COMMAND")
 
     def add(name, help_):
@@ -251,31 +259,28 @@ def _parser() -> argparse.ArgumentParser:
 
 def cmd_simulate(args, out=None):
     out = out or sys.stdout
-    from .model.equations import format_modal_summary, modal_summary
-    from .data.scenario import load_scenario, simulate_manifest, write_dataset
-
-    sc = load_scenario(args.scenario)
+    sc = rideid.load_scenario(args.scenario)
     prog = Progress(args.quiet)
-    data, lifts = simulate_manifest(sc, noise=args.noise, seed=args.seed, engine=args.engine, raw=args.raw,
+    data, lifts = rideid.simulate_manifest(sc, noise=args.noise, seed=args.seed, engine=args.engine, raw=args.raw,
                                     noise_ar1=args.noise_ar1, progress=lambda i, n, rid: prog.steps(i, n, "simulating run"))
     prog.done()
     engine = args.engine
     if engine == "mujoco":
-        from .verify.hifi import scenario_properties
-        engine += f"; MuJoCo car: {scenario_properties(sc).describe()}" + ("; raw sensor readings" if args.raw else "")
+        engine += (f"; MuJoCo car: {rideid.scenario_properties(sc).describe()}"
+                   + ("; raw sensor readings" if args.raw else ""))
     if sc.dampers is not None:
         engine += "; [dampers] curves"
     if sc.bump_stops:
         engine += "; bump stops"
-    write_dataset(sc, data, args.out, raw=args.raw,
-                  comment=f"simulated by rideid {__version__} from {Path(args.scenario).name}"
-                          f" (engine {engine}, noise {args.noise}"
-                          + (f" AR(1) {args.noise_ar1}" if args.noise_ar1 else "") + f", seed {args.seed})")
+    rideid.write_dataset(sc, data, args.out, raw=args.raw,
+                         comment=f"simulated by rideid {rideid.__version__} from {Path(args.scenario).name}"
+                                 f" (engine {engine}, noise {args.noise}"
+                                 + (f" AR(1) {args.noise_ar1}" if args.noise_ar1 else "") + f", seed {args.seed})")
     print(f"dataset written to {args.out} ({len(sc.runs)} runs)", file=out)
     for lo in lifts:  # a nonlinear car's wheel leaving the road: physics, not a warning (SPEC §8)
         if lo.physics:
             print(f"note: {lo.message()}", file=out)
-    print(format_modal_summary(modal_summary(sc.truth, sc.geometry)), file=out)
+    print(rideid.format_modal_summary(rideid.modal_summary(sc.truth, sc.geometry)), file=out)
     return 0
 
 
@@ -295,11 +300,9 @@ def _summary_table(res) -> str:
         rob = "" if d.get("std_robust") in (None, 0.0) else f"{d['std_robust']:.3g}"
         lines.append(f"{n:<10} {d['value']:>14.6g} {std:>11} {rob:>11}  {d['unit']:<8} {note}")
     if res.dampers:
-        from .estimate.dampers import format_dampers
-        lines.append(format_dampers(res.dampers))
+        lines.append(rideid.format_dampers(res.dampers))
     if res.bump_stops:
-        from .estimate.bumps import format_bump_stops
-        lines.append(format_bump_stops(res.bump_stops))
+        lines.append(rideid.format_bump_stops(res.bump_stops))
     if res.roads:
         lines.append(_roads_table(res))
     return "\n".join(lines)
@@ -344,36 +347,30 @@ IDENTIFY_OUTPUTS = ("result.json", "history.csv", "report.html", "figures", "roa
 def run_identify(ds_path, out_dir, *, seed, population=None, generations=None, weights="adaptive",
                  polish=True, quiet=False, out=None, report=True, model=None):
     out = out or sys.stdout
-    import rideid
-    from .data.schema import atomic_output
-    from .estimate.identify import DEFAULT_GENERATIONS, DEFAULT_POPULATION, MODELS
-
     if model is not None:
-        from .estimate.identify import parse_model_arg
-        model = parse_model_arg(model)  # base|full|auto, or groups: damper_curves,anti_roll_bars
+        model = rideid.parse_model_arg(model)  # base|full|auto, or groups: damper_curves,anti_roll_bars
     ds = rideid.load_dataset(ds_path)
     prog = Progress(quiet)
-    kw = {"population": population or DEFAULT_POPULATION, "generations": generations or DEFAULT_GENERATIONS}
+    kw = {"population": population or rideid.DEFAULT_POPULATION,
+          "generations": generations or rideid.DEFAULT_GENERATIONS}
     if kw["population"] < 4:
-        raise ArgumentError(f"--population must be at least 4, got {kw['population']}")
+        raise rideid.ArgumentError(f"--population must be at least 4, got {kw['population']}")
     if kw["generations"] < 1:
-        raise ArgumentError(f"--generations must be at least 1, got {kw['generations']}")
+        raise rideid.ArgumentError(f"--generations must be at least 1, got {kw['generations']}")
     # the model as rideid.identify chooses it (SPEC §5 amended): --model, else the dataset's [model], else auto
     res = rideid.identify(ds, rng=seed, weights=weights, polish=polish, callback=prog.identify, model=model, **kw)
     prog.done()
-    with atomic_output(out_dir, replaces=IDENTIFY_OUTPUTS) as tmp:
+    with rideid.atomic_output(out_dir, replaces=IDENTIFY_OUTPUTS) as tmp:
         res.save(tmp)
         if report:
-            from .report.html import write_report
             if not quiet:
                 prog.line("writing the report ...", force=True)
-            write_report(res, ds.with_starts(res.starts), tmp)
+            rideid.write_report(res, ds.with_starts(res.starts), tmp)
             prog.done()
     print(_summary_table(res), file=out)
     if res.model.get("candidates"):
         print(_candidates_table(res.model), file=out)
-    from .estimate.adequacy import verdict_paragraph
-    para = verdict_paragraph(res.adequacy)
+    para = rideid.verdict_paragraph(res.adequacy)
     if para:
         print("\n" + textwrap.fill(para, 100) + "\n", file=out)
     elif res.adequacy:
@@ -394,23 +391,17 @@ def cmd_identify(args, out=None):
 
 def cmd_sensitivity(args, out=None):
     out = out or sys.stdout
-    import rideid
-    from .data.dataset import refuse_unknown_roads
-    from .data.scenario import BUILTIN
-    from .data.schema import atomic_output, read_toml
-    from .estimate.sensitivity import heatmaps, tables_markdown, write_csvs
-
     src = Path(args.source)
-    is_scenario = args.source == BUILTIN or (src.is_file() and "truth" in read_toml(src))
+    is_scenario = args.source == rideid.BUILTIN or (src.is_file() and "truth" in rideid.read_toml(src))
     source = rideid.load_scenario(src) if is_scenario else rideid.load_dataset(src)
-    refuse_unknown_roads(source, "rideid sensitivity")
+    rideid.refuse_unknown_roads(source, "rideid sensitivity")
     prog = Progress(args.quiet)
     prog.line("simulating the baseline car and +25 % per parameter ...", force=True)
     maps = rideid.sensitivity_maps(source)
-    with atomic_output(args.out) as tmp:
-        write_csvs(maps, tmp)
-        (tmp / "tables.md").write_text(tables_markdown(maps))
-        heatmaps(maps, tmp)
+    with rideid.atomic_output(args.out) as tmp:
+        rideid.write_sensitivity_csvs(maps, tmp)
+        (tmp / "tables.md").write_text(rideid.sensitivity_tables_markdown(maps))
+        rideid.sensitivity_heatmaps(maps, tmp)
     prog.done()
     print(f"sensitivity maps written to {args.out} (tables.md, 3 CSV, 3 PNG)", file=out)
     return 0
@@ -418,24 +409,20 @@ def cmd_sensitivity(args, out=None):
 
 def cmd_plan(args, out=None):
     out = out or sys.stdout
-    from . import plan
-    from .design import parse_target
-    from .data.schema import atomic_output
-
     targets = {}
     for t in args.target:
-        n, v = parse_target(t)
+        n, v = rideid.parse_target(t)
         targets[n] = v
     kw = {} if args.within is None else {"within": args.within}
     prog = Progress(args.quiet)
     prog.line("simulating the candidate runs and their sensitivities ...", force=True)
-    res = plan(args.scenario, noise=args.noise, accel_density=args.accel_noise_density,
+    res = rideid.plan(args.scenario, noise=args.noise, accel_density=args.accel_noise_density,
                gyro_density=args.gyro_noise_density, bandwidth=args.bandwidth, noise_ar1=args.noise_ar1,
                noise_psd=args.noise_psd, budget_runs=args.budget_runs,
                budget_time=args.budget_time, overhead=args.overhead, criterion=args.criterion, targets=targets,
                robust=args.robust, seed=args.seed, **kw)
     prog.done()
-    with atomic_output(args.out) as tmp:
+    with rideid.atomic_output(args.out) as tmp:
         res.save(tmp)
     print(res.summary(), file=out)
     print(f"plan written to {args.out} (plan.json, plan.md, crlb.csv, path.csv, correlation.csv, "
@@ -464,10 +451,7 @@ def score_table(scored: dict) -> str:
 
 def cmd_score(args, out=None):
     out = out or sys.stdout
-    import rideid
-    from .estimate.result import read_result_json
-
-    res = read_result_json(args.result)
+    res = rideid.read_result_json(args.result)
     truth = rideid.load_truth(args.truth)
     print(score_table(rideid.score(res, truth)), file=out)
     return 0
@@ -475,26 +459,21 @@ def cmd_score(args, out=None):
 
 def cmd_demo(args, out=None):
     out = out or sys.stdout
-    from .data.schema import load_truth
-    from .estimate.score import score
-    from .model.equations import format_modal_summary, modal_summary
-    from .data.scenario import default_scenario, simulate_manifest, write_dataset
-
     root = Path(args.out)
-    sc = default_scenario()
+    sc = rideid.default_scenario()
     print("rideid demo: the built-in car (CommonRoad BMW 320i) on the paper's ten runs", file=out)
-    print(format_modal_summary(modal_summary(sc.truth, sc.geometry)), file=out)
+    print(rideid.format_modal_summary(rideid.modal_summary(sc.truth, sc.geometry)), file=out)
     prog = Progress(args.quiet)
-    data, _ = simulate_manifest(sc, noise=0.01, seed=args.seed,
-                                progress=lambda i, n, rid: prog.steps(i, n, "simulating run"))
+    data, _ = rideid.simulate_manifest(sc, noise=0.01, seed=args.seed,
+                                       progress=lambda i, n, rid: prog.steps(i, n, "simulating run"))
     prog.done()
-    write_dataset(sc, data, root / "dataset", comment="rideid demo: built-in scenario, 1 % noise")
+    rideid.write_dataset(sc, data, root / "dataset", comment="rideid demo: built-in scenario, 1 % noise")
     print(f"\n1. simulated {len(sc.runs)} runs with 1 % noise -> {root / 'dataset'}", file=out)
     print(f"2. identifying (total mass {sc.known['total_mass']} kg known) ...", file=out)
     res = run_identify(root / "dataset", root / "identify", seed=args.seed, quiet=args.quiet, out=out)
-    truth = load_truth(root / "dataset" / "truth.toml", sc.geometry)
+    truth = rideid.load_truth(root / "dataset" / "truth.toml", sc.geometry)
     print("\n3. score against the truth", file=out)
-    print(score_table(score(res, truth)), file=out)
+    print(score_table(rideid.score(res, truth)), file=out)
     report = root / "identify" / "report.html"
     if report.is_file():
         print(f"\nreport: {report}", file=out)
@@ -503,9 +482,6 @@ def cmd_demo(args, out=None):
 
 def cmd_report(args, out=None):
     out = out or sys.stdout
-    import rideid
-    from .report.html import write_report
-
     folder = Path(args.result_dir)
     res = rideid.load_result(folder)
     other = None
@@ -513,14 +489,14 @@ def cmd_report(args, out=None):
         compare = Path(args.compare)
         other = rideid.load_result(compare)
         if not other.history or not res.history:
-            raise DataError(f"{compare}: history.csv missing or empty; nothing to compare")
+            raise rideid.DataError(f"{compare}: history.csv missing or empty; nothing to compare")
         if other.dataset != res.dataset:
-            raise DataError(f"{compare}: identifies another dataset ({other.dataset}) than {folder} ({res.dataset})")
+            raise rideid.DataError(f"{compare}: identifies another dataset ({other.dataset}) than {folder} ({res.dataset})")
     if not res.dataset or not Path(res.dataset).exists():
-        raise DataError(f"{folder / 'result.json'}: the dataset it names ({res.dataset!r}) is not found; "
+        raise rideid.DataError(f"{folder / 'result.json'}: the dataset it names ({res.dataset!r}) is not found; "
                         "the report needs it")
     ds = rideid.load_dataset(res.dataset, starts=res.start_values())
-    path = write_report(res, ds, folder, compare=other,
+    path = rideid.write_report(res, ds, folder, compare=other,
                         compare_label=None if other is None else f"{other.weights_mode} ({Path(args.compare).name})")
     print(f"report written to {path}", file=out)
     return 0
@@ -528,9 +504,7 @@ def cmd_report(args, out=None):
 
 def cmd_export(args, out=None):
     out = out or sys.stdout
-    from .export import export
-
-    res = export(args.fit, args.out, format=args.format)
+    res = rideid.export(args.fit, args.out, format=args.format)
     print(f"written to {args.out}: {', '.join(p.name for p in res.files)}", file=out)
     if res.note:
         print(f"note: {res.note}", file=out)
@@ -539,12 +513,10 @@ def cmd_export(args, out=None):
 
 def cmd_study(args, out=None):
     out = out or sys.stdout
-    from .studies import load_study, study
-
-    spec = load_study(args.study)  # a bad study file stops here, before DIR is created
+    spec = rideid.load_study(args.study)  # a bad study file stops here, before DIR is created
     prog = Progress(args.quiet)
     try:
-        res = study(spec, args.out, scheduler=args.scheduler, progress=prog.study)
+        res = rideid.study(spec, args.out, scheduler=args.scheduler, progress=prog.study)
     except KeyboardInterrupt:
         prog.done()
         say(f"rideid: the finished tasks are kept in {Path(args.out) / 'tasks'}; run the same command again "
@@ -563,10 +535,9 @@ COMMANDS = {"plan": cmd_plan, "report": cmd_report, "simulate": cmd_simulate, "i
 
 def _compile(quiet: bool):
     """Compile or load the kernels up front, and say so when it is slow."""
-    from .model.kernel import compile_kernels
     prog = Progress(quiet)
     prog.line("loading the compiled simulation kernel (compiles once after install, a few seconds) ...", force=True)
-    dt = compile_kernels()
+    dt = rideid.compile_kernels()
     prog.done()
     if dt > 1.0 and not quiet:
         say(f"rideid: compiled the simulation kernel in {dt:.0f} s (cached for later runs)")
@@ -583,7 +554,7 @@ def main(argv=None) -> int:
         if args.command in ("simulate", "identify", "sensitivity", "demo", "report", "plan", "study"):
             _compile(getattr(args, "quiet", False))
         return COMMANDS[args.command](args)
-    except RideidError as e:
+    except rideid.RideidError as e:
         msg = str(e).replace("\n", " ")
         say(f"rideid: error: {msg}")
         return 2

@@ -5,8 +5,8 @@ a run's model times, its ``(n, 10)`` channel matrix in SPEC channel order,
 the geometry, the track and the speed) and returns :class:`Finding` objects:
 a severity, the run and channel concerned, a plain message that names the
 likely cause, and, for wiring mistakes, the ``[channels]`` entries that fix
-it. The data layer calls them from one place (:func:`rideid.data.dataset.load_dataset`,
-after each run has been conditioned), the identification once more after
+it. Loading a dataset calls them from one place (:func:`rideid.conditioning.checks.check_dataset`,
+which simulates the nominal car they compare the data with), the identification once more after
 the fit (:func:`bound_findings`).
 
 The checks, and why they can tell:
@@ -57,13 +57,15 @@ from __future__ import annotations
 import functools
 import itertools
 import math
+import warnings
 from dataclasses import asdict, dataclass
 
 import numpy as np
 
+from ..errors import DataError, DataWarning
 from ..model.equations import CHANNELS
 from ..model.params import EXT_NAMES
-from .schema.channels import SI, UNITS, gravity_unit_factor, quantity
+from .schema.channels import UNITS, gravity_unit_factor, quantity
 
 G0 = 9.80665
 DEG = 180.0 / math.pi
@@ -81,10 +83,6 @@ RIGID_BAD = 0.15
 ASSIGN_MARGIN = 0.6
 #: estimates within this fraction of the search range of a bound are flagged
 BOUND_FRACTION = 0.01
-#: a moving run's nominal response starts at rest this long (s) before the first sample: the nominal car's
-#: slowest mode decays to 1e-3 in 2.4-2.7 s on the built-in car, the SUV and the van of the tests
-#: (rideid.data.scenario.settle_time)
-NOMINAL_LEAD_IN = 5.0
 
 
 @dataclass(frozen=True)
@@ -651,7 +649,7 @@ def unit_findings(run_id: str, entries: dict, record: dict) -> list[Finding]:
     ----------
     run_id : str
     entries : dict
-        SPEC channel -> map entry the run was read with (:func:`_map_entries`).
+        SPEC channel -> map entry the run was read with (:func:`rideid.conditioning.checks._map_entries`).
     record : dict
         SPEC channel -> its preprocessing record (``removed``: the lead-in
         mean subtracted, ``removed_as``: ``"gravity and bias"`` when gravity
@@ -771,29 +769,6 @@ def speed_candidates(speed: float) -> list[tuple[float, str]]:
             (speed * 0.44704, f"{speed:g} is mph"), (speed / 2.0, "half the speed"), (speed * 2.0, "twice the speed")]
 
 
-# ---------------------------------------------------------------------------
-# The hook: every conditioned run of a dataset
-
-def _map_entries(ds, rid) -> dict:
-    """SPEC channel -> {name, unit, sign, scale} as the run was read."""
-    mr = ds.measured.get(rid)
-    if mr is not None:
-        return {c: dict(name=e["source"], unit=e["unit"], sign=e["sign"], scale=e["scale"], file_unit=e.get("file_unit"))
-                for c, e in mr.record["channels"].items() if c in CHANNELS}
-    return {c: dict(name=c, unit=SI[quantity(c)], sign=1, scale=1.0) for c in ds.data[rid].channels}
-
-
-def _entry_factors(entries: dict) -> np.ndarray:
-    """(10,) factor (unit x sign x scale) each SPEC channel was read with (1 where missing)."""
-    F = np.ones(len(CHANNELS))
-    for i, c in enumerate(CHANNELS):
-        e = entries.get(c)
-        if e is not None:
-            u = UNITS[quantity(c)].get(str(e["unit"]).strip().replace(" ", "").lower(), 1.0)
-            F[i] = u * e["sign"] * e["scale"]
-    return F
-
-
 def fix_entries(fix: dict, entries: dict) -> list[str]:
     """``[channels]`` lines (TOML) that apply a wiring fix to the map the run was read with."""
     lines = []
@@ -833,212 +808,8 @@ def fix_entries(fix: dict, entries: dict) -> list[str]:
     return lines
 
 
-def _level(ds, rid, check) -> str:
-    lv = dict(getattr(ds.manifest, "checks", {}) or {})
-    run = ds.manifest.run(rid)
-    lv.update(getattr(run, "checks", {}) or {})
-    return lv.get(check, "error")
-
-
-def _nominal_response(P, geom, track, t, speed, distance, moving: bool = False):
-    from .measured import simulate_response
-    return simulate_response(P, geom, track, t, speed, distance, lead_in=NOMINAL_LEAD_IN if moving else 0.0)
-
-
-def _score(Y, Yhat):
-    from .measured import correlation_score as score
-    cols = [i for i in range(len(CHANNELS)) if not np.all(np.isnan(Y[:, i]))]
-    return score(Yhat, np.nan_to_num(Y, nan=0.0), cols)
-
-
-def _alternatives(ds, rid, P, rho_now):
-    """(description, correlation) of the run under other speeds and the dataset's other tracks."""
-    import dataclasses
-
-    from .measured import Distance, estimate_start
-    man, geom = ds.manifest, ds.geometry
-    run = man.run(rid)
-    mr = ds.measured.get(rid)
-    rd = ds.data[rid]
-    out = []
-
-    def try_it(track, speed, factor=None):
-        if mr is not None and mr.auto_start:
-            dist = mr.distance
-            if factor is not None:
-                dist = Distance(dist.t, dist.d * factor)
-            alt = dataclasses.replace(mr, speed=speed, distance=dist, window=None, start=None, warnings=[])
-            try:
-                _, r = estimate_start(alt, P, geom, track)
-            except Exception:  # a candidate that cannot even be aligned does not fit
-                return -1.0
-            return r
-        dist = rd.distance
-        if factor is not None and dist is not None:
-            from .measured import RelativeDistance
-            dist = RelativeDistance(Distance(dist.dist.t, dist.dist.d * factor), dist.start)
-        return _score(rd.matrix(), _nominal_response(P, geom, track, rd.time, speed, dist, moving=run.moving))
-
-    track = man.tracks[run.track]
-    if run.speed is not None:
-        for v, why in speed_candidates(run.speed):
-            if PLAUSIBLE["speed"][0] <= v <= PLAUSIBLE["speed"][1]:
-                out.append((f"speed = {v:.4g} m/s ({why})", try_it(track, v)))
-    elif mr is not None and mr.distance is not None:
-        for f, why in ((1 / 3.6, "km/h mapped as m/s"), (3.6, "m/s mapped as km/h"), (0.44704, "mph mapped as m/s")):
-            out.append((f"the speed channel x {f:.4g} ({why}; fix its unit in the channel map)", try_it(track, None, f)))
-    for tid, tr in man.tracks.items():
-        if tid != run.track:
-            out.append((f"track = \"{tid}\"", try_it(tr, run.speed)))
-    return out
-
-
-def _prefetch_inputs(ds) -> None:
-    """Tabulate every wheel path's envelope and every run's inputs on parallel threads.
-
-    The checks (and then the identification) take them from the caches of
-    :func:`rideid.model.contact.envelope_grid` and
-    :func:`rideid.model.simulate.prepare_run` one run at a time; most of the
-    work is NumPy and compiled loops that release the GIL, so the cores
-    share it (:func:`rideid.model.batch.thread_map`; with one thread, as in
-    a study's workers, nothing is done ahead). A run that fails here fails
-    again, with its message, in the checks.
-    """
-    import numba
-
-    from ..model.batch import thread_map
-    from ..model.contact import envelope_grid
-    from ..model.simulate import _PREPARED_MAX, ENVELOPE_DX, prepare_run
-
-    man, geom = ds.manifest, ds.geometry
-    runs = [r for r in man.runs[:_PREPARED_MAX] if r.road_known]  # what the cache of prepared runs holds
-    if min(numba.get_num_threads(), len(runs)) < 2:
-        return
-    paths = {}
-    for r in runs:
-        for y in geom.corner_y:
-            p = man.tracks[r.track].path(y)
-            if p.extent is not None:
-                paths[id(p)] = p
-
-    def envelope(p):
-        envelope_grid(p, geom.tire_radius, ENVELOPE_DX)
-
-    def inputs(r):
-        rd = ds.data[r.id]
-        try:
-            prepare_run(man.tracks[r.track], geom, r.speed, rd.time, distance=rd.distance)
-        except Exception:  # noqa: BLE001 - reported by the checks themselves
-            pass
-
-    thread_map(envelope, sorted(paths.values(), key=lambda p: -(p.extent[1] - p.extent[0])), "rideid-inputs")
-    thread_map(inputs, runs, "rideid-inputs")
-
-
-def check_dataset(ds) -> list[Finding]:
-    """Run the data checks on every run of a loaded dataset.
-
-    Coverage, wiring (rigid body and road assignment), and the match of
-    each run with its track and speed. Returns every finding; the caller
-    raises on errors (:func:`enforce`).
-
-    A run on an unknown road (SPEC §9) has no road to simulate: coverage,
-    the road assignment of the channels, the axle-amplitude units and the
-    track-and-speed match are skipped; the units seen in a logger's
-    lead-in and the rigid-body identities of the body accelerometers and
-    the gyro still run. A moving run (SPEC §9) may have track features
-    under its wheels at the start; its nominal response is simulated from
-    rest a lead-in before the first sample, on the road before x = 0.
-    """
-    from ..model.params import nominal_car
-
-    man, geom = ds.manifest, ds.geometry
-    P = nominal_car(geom)
-    out: list[Finding] = []
-    _prefetch_inputs(ds)
-    for r in man.runs:
-        rid = r.id
-        rd = ds.data[rid]
-        # a run on an unknown road (SPEC §9): no coverage, no nominal response, no track match; units and the
-        # rigid-body identities need no road and still run
-        track = man.tracks[r.track] if r.road_known else None
-        t = rd.time
-        if track is not None:
-            x_of = (lambda tt: r.speed * tt) if rd.distance is None else rd.distance
-            x_end = float(np.asarray(x_of(np.array([t[-1]])))[0])
-            x_begin = float(np.asarray(x_of(np.array([min(t[0], 0.0)])))[0])
-            cov = check_coverage(rid, track, geom, x_end, x_begin, moving=r.moving)
-            out += cov
-            if any(f.severity == ERROR for f in cov):
-                continue
-        entries = _map_entries(ds, rid)
-        wiring = _level(ds, rid, "wiring")
-        mr = ds.measured.get(rid)
-        # an acceleration in the wrong unit, seen in its lead-in; a re-wiring below that explains it says it better
-        units = (unit_findings(rid, entries, mr.record["channels"])
-                 if mr is not None and wiring != "off" else [])
-        if wiring == "warn":
-            units = [Finding(WARNING, f.check, f.message, f.run, f.channel, f.fix) for f in units]
-        Y = rd.matrix()
-        Yhat = None
-        if track is not None:
-            Yhat = _nominal_response(P, geom, track, t, r.speed, rd.distance, moving=r.moving)
-            if not np.any(Yhat):
-                out += units
-                continue  # a flat road excites nothing: nothing to check the data against
-        wire = (wiring_fix(Y, Yhat, rd.fs, geom, _entry_factors(entries))
-                if wiring != "off" else None)
-        Yc = Y
-        if wire and wire["fix"]:
-            units = [f for f in units if f.channel not in wire["fix"]]
-            Yc = corrected(Y, wire["fix"])
-            sev = ERROR if wiring == "error" else WARNING
-            lines = fix_entries(wire["fix"], entries)
-            how = []
-            if "rigid" in wire:
-                how.append(f"the body accelerometers and the gyro then agree as one rigid body (residual "
-                           f"{wire['rigid'][0]:.0%} -> {wire['rigid'][1]:.1%})")
-            if "axle" in wire:
-                how.append(f"the axle channels then follow their own wheel paths (summed correlation with the "
-                           f"road {wire['axle'][0]:.2f} -> {wire['axle'][1]:.2f} of 4)")
-            alts = ""
-            if wire.get("alternatives"):
-                alts = ("; without a known road this cannot be told from " +
-                        " or from ".join(describe_fix(a) for a in wire["alternatives"][:2]) + ": check which")
-            msg = (f"run '{rid}': the channels look wired differently from the map: {describe_fix(wire['fix'])}; "
-                   f"{' and '.join(how)}{alts}. Fix the channel map: {'; '.join(lines)}"
-                   " (or set [checks] wiring = \"warn\" if the map is right)")
-            out.append(Finding(sev, "wiring", msg, rid, next(iter(wire["fix"])), wire["fix"]))
-        elif wire and "rigid_inconsistent" in wire:
-            e_id, _ = wire["rigid_inconsistent"]
-            out.append(Finding(WARNING, "wiring", f"run '{rid}': the body accelerometers and the gyro do not agree as "
-                               f"one rigid body (residual {e_id:.0%}) and no swap, sign or unit explains it: check "
-                               "the sensors' positions (at the spring/damper top mounts), units and the map", rid))
-        if wiring != "off" and Yhat is not None and not (wire and wire["fix"]):
-            amp = axle_amplitude_findings(rid, entries, Y, Yhat, skip={f.channel for f in units})
-            if wiring == "warn":
-                amp = [Finding(WARNING, f.check, f.message, f.run, f.channel, f.fix) for f in amp]
-            units += amp
-        out += units
-        if track is None or _level(ds, rid, "track") == "off":
-            continue
-        rho = _score(Yc, Yhat)
-        if rho < MATCH_MIN:
-            f = match_finding(rid, r.track, r.speed, rho, _alternatives(ds, rid, P, rho))
-            if _level(ds, rid, "track") == "warn":
-                f = Finding(WARNING, f.check, f.message + " ([checks] track = \"warn\")", f.run, f.channel)
-            else:
-                f = Finding(f.severity, f.check, f.message + " (set [checks] track = \"warn\" to go on anyway)",
-                            f.run, f.channel)
-            out.append(f)
-    return out
-
-
 def enforce(findings: list[Finding], where: str = ""):
     """Raise :class:`rideid.DataError` with the first error (one line); warn of the rest."""
-    import warnings
-
-    from ..errors import DataError, DataWarning
     errors = [f for f in findings if f.severity == ERROR]
     for f in findings:
         if f.severity == WARNING:
@@ -1076,6 +847,6 @@ def bound_findings(details: dict, fraction: float = BOUND_FRACTION) -> list[Find
     return out
 
 
-__all__ = ["Finding", "check_dataset", "enforce", "unit_findings", "axle_amplitude_findings", "check_reach", "check_numbers", "check_coverage", "rigid_body_scores", "assignment", "wiring_fix",
+__all__ = ["Finding", "enforce", "unit_findings", "axle_amplitude_findings", "check_reach", "check_numbers", "check_coverage", "rigid_body_scores", "assignment", "wiring_fix",
            "corrected", "describe_fix", "match_finding", "speed_candidates", "bound_findings", "PLAUSIBLE",
            "MATCH_MIN"]

@@ -10,13 +10,16 @@ from pathlib import Path
 from . import checks
 from ..errors import DataError, ScaleError
 from .schema import DatasetManifest, ReadOnlyDict, RunData, load_manifest, read_run_csv
-from ..model.params import CORNERS, EXT_NAMES, EXTRA_KNOWN, MASS_COUNT, NAMES, Geometry, nominal_car, total_mass
+from ..model.params import CORNERS, EXT_NAMES, EXTRA_KNOWN, MASS_COUNT, NAMES, Geometry, total_mass
+from ..model.simulate import prepare_run
+from .measured import load_measured_run
 
 
 @dataclass(frozen=True, repr=False)
 class Dataset:
     """A dataset (SPEC §3): manifest and the data of every run. Immutable: the steps that
-    change a dataset (:func:`align_starts`, :meth:`with_starts`, :meth:`with_data`) return a new one.
+    change a dataset (:func:`rideid.conditioning.load.align_starts`, :meth:`with_starts`, :meth:`with_data`)
+    return a new one.
 
     Attributes
     ----------
@@ -141,43 +144,12 @@ class Dataset:
         return [r.id for r in self.runs if not r.road_known]
 
 
-def load_dataset(path, starts: dict[str, float] | None = None) -> Dataset:
-    """Load and validate a dataset folder (or its ``dataset.toml``), ready to identify.
-
-    Two steps, each available on its own: :func:`read_dataset` (formats and
-    conditioning: SPEC §3 CSVs taken as they are, logger files through
-    :mod:`rideid.data.measured`) and :func:`align_starts` (the start of every
-    measured run whose start is not given, estimated with a nominal car).
-    ``Dataset.preprocessing()`` says what was done.
-
-    Parameters
-    ----------
-    path : str or Path
-        The dataset folder, or its ``dataset.toml``.
-    starts : dict, optional
-        Run id -> start (file time, s) to use instead of estimating it, e.g.
-        the starts a previous identification settled on (``result.json``).
-
-    Returns
-    -------
-    Dataset
-
-    Raises
-    ------
-    DataError
-        Naming the file, key or column at fault.
-    """
-    return align_starts(read_dataset(path), starts)
-
-
 def read_dataset(path) -> Dataset:
     """Read and condition every run of a dataset; no simulation.
 
     Measured runs come back without a start (``Dataset.data`` lacks them)
-    until :func:`align_starts` fixes one.
+    until :func:`rideid.conditioning.load.align_starts` fixes one.
     """
-    from .measured import load_measured_run
-
     man = load_manifest(path)
     checks.enforce(checks.check_numbers(man))
     data, measured = {}, {}
@@ -221,59 +193,12 @@ def check_unknown_road_run(man, run, channels, duration: float, samples: int) ->
                         f"least {MIN_ROAD_RUN_S:g} s and {MIN_ROAD_RUN_SAMPLES} samples")
 
 
-def align_starts(ds: Dataset, starts: dict[str, float] | None = None) -> Dataset:
-    """The estimation step of loading: fix the start of every measured run.
-
-    A start given in ``starts`` or in the run's ``[preprocess] start`` is
-    taken; otherwise it is estimated by correlating the run with the response
-    of the nominal car (:func:`rideid.model.params.nominal_car`; the record
-    keeps the estimate and its correlation). Returns a new dataset; ``ds``
-    is not changed.
-    """
-    from .measured import estimate_start
-
-    man = ds.manifest
-    data, measured = dict(ds.data), {}
-    for rid, mr0 in ds.measured.items():
-        mr = replace(mr0, record=dict(mr0.record), window=None, start=None)
-        run = man.run(rid)
-        if starts and rid in starts:
-            s = float(starts[rid])
-            mr.record["start"] = {"source": "given (from a previous identification)"}
-        elif not mr.auto_start:
-            s = mr.options["start"]
-            mr.record["start"] = {"source": "given"}
-        elif not run.road_known:
-            # no road to align with: x = 0 is where the front axle is at the first sample (of the window)
-            s = max(mr.t_first, mr.options.get("window", (-math.inf, math.inf))[0])
-            mr.record["start"] = {"source": "unknown road (SPEC §9): x = 0 at the first sample"}
-        else:
-            track = man.tracks[run.track]
-            longest = (mr.speed * (mr.t_last - mr.t_first) if mr.distance is None
-                       else float(mr.distance.d[-1] - mr.distance.d[0]))
-            checks.enforce(checks.check_reach(rid, track, man.geometry, longest), f"{man.path}: ")
-            s, rho = estimate_start(mr, nominal_car(man.geometry), man.geometry, track)
-            mr.record["start"] = {"source": "estimated (nominal car)", "nominal_estimate": s,
-                                  "correlation": rho}
-        mr.make_grid(s)
-        mr.start = float(s)
-        measured[rid] = mr
-        data[rid] = mr.run_data(s)
-    ds = Dataset(man, {r.id: data[r.id] for r in man.runs}, measured)
-    # the one hook for the physics checks (rideid.data.checks): every run conditioned and aligned
-    findings = checks.check_dataset(ds)
-    checks.enforce(findings, f"{man.path}: ")
-    return replace(ds, findings=findings)
-
-
 def prepare_inputs(ds: Dataset) -> list:
     """:class:`rideid.simulate.RunInput` of every run (wheel inputs and their moments).
 
     Every run must be on a known track: a run on an unknown road (SPEC §9)
     has no wheel inputs to tabulate (:class:`DataError`).
     """
-    from ..model.simulate import prepare_run
-
     refuse_unknown_roads(ds, "rideid.CostFunction (the known-road fit of rideid identify)")
     out = []
     for r in ds.runs:
@@ -317,5 +242,5 @@ def check_known_consistent(known: dict[str, float]):
                                 f"2 m_ur = {tm}")
 
 
-__all__ = ["Dataset", "load_dataset", "read_dataset", "align_starts", "scale_anchor", "check_unknown_road_run",
+__all__ = ["Dataset", "read_dataset", "scale_anchor", "check_unknown_road_run",
            "refuse_unknown_roads", "MIN_ROAD_RUN_S", "MIN_ROAD_RUN_SAMPLES"]

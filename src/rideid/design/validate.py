@@ -12,11 +12,11 @@ from pathlib import Path
 
 import numpy as np
 
-from ..data.dataset import load_dataset
-from ..data.noise import sensor_noise
-from ..data.scenario import simulate_manifest, write_dataset
-from ..estimate.cost import CostFunction, channel_weights
+from ..conditioning.load import load_dataset
 from ..estimate.identify import identify
+from ..synth.scenario import simulate_manifest, write_dataset
+from ..estimate.cost import CostFunction, channel_weights
+from ..data.noise import sensor_noise
 
 
 def sub_scenario(sc, run_ids):

@@ -46,6 +46,8 @@ import numpy as np
 from scipy import special  # the two tail probabilities; scipy.stats takes 0.5 s to import
 
 from ..model.params import GROUPS
+from ..model.batch import single_threaded_blas, thread_map
+from ..model.equations import CHANNELS
 
 #: lags (samples) of the road inputs and rates regressed on the residual
 LAGS = (0, 1, 2, 3, 4, 6, 8, 12, 16, 24, 32)
@@ -262,14 +264,12 @@ def assess(runs: dict, channels, *, alpha: float = ALPHA, min_explained: float =
         ``{"adequate", "reasons", "advice", "method", "alpha", "min_explained", "runs":
         {run: {channel: figures}}}``; JSON-ready.
     """
-    from ..model.batch import single_threaded_blas
 
     with single_threaded_blas():  # many small SVDs: BLAS threads only contend
         return _assess(runs, channels, alpha, min_explained)
 
 
 def _assess(runs, channels, alpha, min_explained):
-    from ..model.batch import thread_map
 
     pairs = [(rid, c) for rid, (E, _, _) in runs.items() for c in range(E.shape[1]) if not np.all(np.isnan(E[:, c]))]
     alpha_each = alpha / max(len(pairs), 1)
@@ -340,7 +340,6 @@ def assess_fit(cf, P, sims=None) -> dict:
     inputs are the four wheel inputs and their rates of each run. ``sims``:
     ``cf.simulate(P)`` when the caller has it already.
     """
-    from ..model.equations import CHANNELS
 
     sims = cf.simulate(P) if sims is None else sims
     runs = {}

@@ -55,11 +55,12 @@ from ..model.roads import iso8608_class
 from . import roadfit
 from .adequacy import advise, assess_fit
 from .cost import CostFunction, ParameterSpace, refuse_unsupported_groups
-from .identify import DEFAULT_GENERATIONS, DEFAULT_POPULATION, relative_spread, model_extensions, parameter_detail
-from .identify import identify as identify_model
+from .identify import (DEFAULT_GENERATIONS, DEFAULT_POPULATION, identify as identify_model, model_extensions,
+                       parameter_detail, relative_spread)
 from .jade import JadeSolver, make_rng, stop_requested
 from .result import History, IdentificationResult
 from .uncertainty import andrews_bandwidth, estimate_covariance, long_run_covariance, run_scores
+from ..data.dataset import Dataset
 
 #: an unknown-road run's speed may vary by this fraction of its mean (the delay is taken as constant)
 SPEED_TOLERANCE = 0.02
@@ -104,7 +105,6 @@ def prepare_road_runs(ds) -> list:
 
 def _sub_dataset(ds, runs):
     """``ds`` with only ``runs`` (same manifest otherwise)."""
-    from ..data.dataset import Dataset
     ids = {r.id for r in runs}
     man = replace(ds.manifest, runs=tuple(r for r in ds.runs if r.id in ids))
     return Dataset(man, {k: v for k, v in ds.data.items() if k in ids},

@@ -51,6 +51,7 @@ from ..model.nonlinear import (BUMP_STOP_NAMES, DEFAULT_KNOTS, NonlinearLayout, 
                                damper_force, make_simulator, substeps)
 from ..model.params import (ALL_NAMES, EXT_NAMES, GROUPS, INDEX, MASS_COUNT, NAMES, default_bounds, nominal_car,
                             total_mass)
+from ..data.schema import NONLINEAR_GROUPS
 
 ENERGY_FLOOR = 0.01
 
@@ -77,7 +78,6 @@ MEAN_SLOPE_VELOCITY = 0.1
 def refuse_unsupported_groups(groups, where: str = "model"):
     """The bump stops of SPEC §8 are simulated but not identified yet: one clear :class:`ArgumentError`
     rather than a fit that silently leaves them out (damper curves are identified)."""
-    from ..data.schema import NONLINEAR_GROUPS
     bad = [g for g in groups if g in NONLINEAR_GROUPS and g not in IDENTIFIABLE_GROUPS]
     if bad:
         raise ArgumentError(f"{where}: {' and '.join(repr(g) for g in bad)} (SPEC §8) cannot be identified by this "

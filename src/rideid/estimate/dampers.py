@@ -25,6 +25,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..model.nonlinear import check_nonlinear, curve_names, simulate_nonlinear, simulate_numpy, substeps
+from ..data.scenario import LIFT_OFF_RHO
 
 #: samples (both corners of the axle, all runs) beyond the previous knot that make a knot excited
 MIN_SAMPLES = 20
@@ -96,7 +97,6 @@ def knot_excitation(cf, P, min_samples: int = MIN_SAMPLES) -> dict:
     out = {"counts": {}, "excited": {}, "frozen": [],
            "rule": f"a knot is excited when at least {min_samples} samples (both corners of the axle, all runs, "
                    "the car of the global search) go beyond the previous knot on its side"}
-    from ..data.scenario import LIFT_OFF_RHO  # counting samples needs no more than lift-off does
 
     for a, (axle, v) in enumerate(zip(("front", "rear"), suspension_velocities(cf, P, rho=LIFT_OFF_RHO))):
         counts = knot_counts(knots, v)

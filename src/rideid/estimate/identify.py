@@ -63,17 +63,17 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.optimize import OptimizeResult, least_squares
 
-from ..data.checks import bound_findings
+from ..data.checks import bound_findings, feature_span
 from ..data.dataset import Dataset
-from ..data.measured import estimate_start, simulate_response
+from ..conditioning.starts import estimate_start, simulate_response
 from ..errors import ArgumentError, DataWarning
 from ..model.batch import single_threaded_blas
 from ..model.equations import modal_summary
 from ..data.schema import NONLINEAR_GROUPS
 from ..model.nonlinear import BUMP_STOP_NAMES
 from ..model.params import ALL_NAMES, GROUPS, UNITS
-from .bumps import bump_block
-from .dampers import dampers_block
+from .bumps import bump_block, frozen_values, reach, scan_start
+from .dampers import dampers_block, knot_excitation
 from .cost import BUMP_UNITS, IDENTIFIABLE_GROUPS, CostFunction, ParameterSpace, refuse_unsupported_groups
 from .jade import JadeSolver, make_rng, stop_requested
 from .adequacy import advise, assess_fit
@@ -273,8 +273,6 @@ def _curve_start(cf: CostFunction, cf_search: CostFunction, x):
 
     Returns ``(cost function on that space with its sub-steps pinned, start row, excitation, bump record)``.
     """
-    from .bumps import frozen_values, reach, scan_start
-    from .dampers import knot_excitation
 
     space = cf.space
     if cf_search is not cf:
@@ -317,7 +315,6 @@ def _curve_start(cf: CostFunction, cf_search: CostFunction, x):
 def _bump_recheck(ds, fit, bumps):
     """After the polish: a stop the polished car no longer reaches (fewer than ``MIN_SAMPLES`` samples beyond
     its clearance) is held as not reached and the polish repeated (at most twice)."""
-    from .bumps import frozen_values, reach
 
     for _ in range(2):
         cf = fit.cost
@@ -710,7 +707,6 @@ def _start_std(ds, rid, std_fit) -> dict:
     (Jacobian) standard error, which assumes the distance exact. A speed
     channel's calibration error is not included.
     """
-    from ..data.checks import feature_span
     mr = ds.measured[rid]
     out = {"std": std_fit, "std_fit": std_fit}
     sp = mr.record.get("speed", {})

@@ -40,10 +40,13 @@ from scipy import special
 
 from ..model.params import GROUPS
 from ..data.schema.manifest import vehicle_table
-from .adequacy import MIN_IMPROVEMENT, advise
-from .identify import identify as identify_model
-from .identify import warn_bounds
+from .adequacy import MIN_IMPROVEMENT, advise, assess_fit
+from .identify import identify as identify_model, warn_bounds
 from .anyroad import identify_any_road, unknown_road_runs
+from ..model.batch import single_threaded_blas, thread_map
+from .cost import CostFunction, ParameterSpace, refuse_unsupported_groups
+from ..model.nonlinear import curve_names
+from ..data.checks import bound_findings
 
 #: per free extension parameter: a group of two enters at the 99.9 % point of chi-square(2)
 PENALTY = float(special.chdtri(2, 0.001) / 2)
@@ -104,9 +107,6 @@ def criteria(names, theta, cov, candidates, free_ext) -> list[dict]:
 def _own_adequacy(ds, cf, res):
     """The adequacy verdict of a candidate at its own final state: its parameters, and the model's time
     axes at the starts its own polish settled (a nested cost function still has the starts it began from)."""
-    from ..model.batch import single_threaded_blas
-    from .adequacy import assess_fit
-    from .cost import CostFunction
 
     space = cf.space
     cf = CostFunction(ds.with_starts(res.starts), space=space) if res.starts else cf
@@ -157,8 +157,6 @@ def identify_auto(ds, *, rng=None, seed=None, callback=None, maps=None, **kw):
     ``criterion``, ``wald``, ``adequate``, ``parameters``, ``std_robust``).
     Its ``evaluations`` and ``wall_time_s`` cover all candidates.
     """
-    from .cost import CostFunction
-    from ..model.batch import single_threaded_blas, thread_map
 
     t0 = time.perf_counter()
     cf_full = CostFunction(ds, extensions=tuple(GROUPS))
@@ -302,7 +300,6 @@ def curve_departure(names, theta, cov, space) -> tuple[float, int]:
     (R F)^T (R Cov R^T)^+ (R F)`` over both axles (robust covariance, cross terms kept); the degrees of
     freedom are the free knots less one slope per axle.
     """
-    from ..model.nonlinear import curve_names
 
     K = space.layout.n_knots
     kv = dict(zip(curve_names(K), space.knot_velocities()))
@@ -361,7 +358,6 @@ def curve_candidate(ds, lin, chosen, lin_crit, *, rng=None, seed=None, maps=None
     enter when their departure from straight lines is significant at the same per-parameter price as
     any group (:data:`CURVE_CRITERION`).
     """
-    from .cost import CostFunction, ParameterSpace
 
     if CURVES_GROUP in chosen or any(n in ds.known for n in ("c_sf", "c_sr")) or lin_crit.get("criterion") is None:
         return None
@@ -403,7 +399,6 @@ def bump_candidate(ds, prev, chosen, prev_crit, *, rng=None, seed=None, maps=Non
     already. The entry's criterion is ``prev_crit``'s plus :data:`PENALTY` per free stop parameter of
     the axles reached, None (never chosen) when no stop is reached (:data:`BUMP_CRITERION`).
     """
-    from .cost import CostFunction, ParameterSpace
 
     if BUMPS_GROUP in chosen:
         return None
@@ -419,7 +414,6 @@ def bump_candidate(ds, prev, chosen, prev_crit, *, rng=None, seed=None, maps=Non
         lin_space = ParameterSpace(ds.known, ds.geometry, ds.manifest.bounds, extensions=chosen)
         x0 = np.array([prev.parameters[n] for n in lin_space.names])
     r = identify_model(ds, rng=rng, seed=seed, cost=cf, maps=maps, start=x0, assess=False, **kw)
-    from ..data.checks import bound_findings
 
     stops = r.bump_stops or {}
     reached = [ax for ax in ("front", "rear") if (stops.get(ax) or {}).get("reached")]
@@ -443,7 +437,6 @@ def _nested_cost(cf_full, ds, extensions):
     Saves re-tabulating every run's road input for each candidate.
     """
 
-    from .cost import ParameterSpace
 
     space = ParameterSpace(ds.known, ds.geometry, ds.manifest.bounds, extensions=extensions)
     cf = cf_full.copy()
@@ -460,7 +453,6 @@ def default_model(ds, model=None):
     if model is None:
         if ds.manifest.extensions is None:
             return "auto"
-        from .cost import refuse_unsupported_groups
         refuse_unsupported_groups(ds.manifest.extensions, f"{ds.manifest.path}: [model] extensions")
         return tuple(ds.manifest.extensions)
     return model

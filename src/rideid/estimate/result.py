@@ -27,6 +27,8 @@ import numpy as np
 from ..data.schema.result import read_result_json
 from ..errors import DataError
 from .sensitivity import SensitivityMaps
+from .dampers import format_dampers
+from .bumps import format_bump_stops
 
 COST_DEFINITION = ("equal-weight sum over runs of the per-channel energy-normalised squared error "
                    "(see rideid.cost)")
@@ -255,7 +257,6 @@ class IdentificationResult:
             lines.append(f"  damper curves: {len(self.dampers['velocity'])} knots per axle up to "
                          f"{max(v, default=0):g} m/s (forces: result.to_frame(), result.dampers)")
         if self.bump_stops:
-            from .bumps import format_bump_stops
             lines += ["  " + ln for ln in format_bump_stops(self.bump_stops).splitlines()]
         if adequate is False:
             lines.append("  not adequate: the residuals carry structure the model misses (adequacy)")
@@ -276,22 +277,6 @@ class IdentificationResult:
                  "fixed": bool(d.get("fixed", False)), "derived": bool(d.get("derived", False))}
                 for n, d in self.details.items()]
         return pd.DataFrame(rows).set_index("parameter")
-
-    def plot_fit(self, run: str, dataset=None, channels=None):
-        """One run's measured channels against the identified car: a ``matplotlib.figure.Figure``
-        (:func:`rideid.report.figures.fit_figure`; ``dataset`` defaults to the one the result names)."""
-        from ..report.figures import fit_figure
-        return fit_figure(self, run, dataset=dataset, channels=channels)
-
-    def plot_parameters(self):
-        """Each parameter's ±2 std_robust (and std) in % of its value: a ``matplotlib.figure.Figure``."""
-        from ..report.figures import parameters_figure
-        return parameters_figure(self)
-
-    def plot_dampers(self):
-        """The damper curves with their ±2 std_robust bands: a ``matplotlib.figure.Figure`` (curve models only)."""
-        from ..report.figures import dampers_figure
-        return dampers_figure(self)
 
     def start_values(self) -> dict[str, float]:
         """Run id -> start (file time, s) of every run the identification settled,

@@ -24,13 +24,18 @@ Star ratings (documented thresholds):
 from __future__ import annotations
 
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 
+from ..data.dataset import Dataset
+from ..data.scenario import run_times
 from ..errors import ArgumentError
 from ..model.batch import BatchSimulator
 from ..model.equations import CHANNEL_KIND, CHANNELS
-from ..model.params import ALL_NAMES, Geometry
+from ..model.params import ALL_NAMES, Geometry, as_vector
+from ..model.simulate import prepare_run
+from .cost import CostFunction
 
 STEP = 0.25
 P2R_STARS = (1.0, 5.0, 15.0)
@@ -119,12 +124,6 @@ def sensitivity_maps(source, *, cost=None) -> SensitivityMaps:
     -------
     SensitivityMaps
     """
-    from ..data.dataset import Dataset
-    from ..data.scenario import run_times
-    from ..model.params import as_vector
-    from ..model.simulate import prepare_run
-    from .cost import CostFunction
-
     if isinstance(source, Dataset) or cost is not None:
         cf = cost if cost is not None else CostFunction(source)
         return compute_maps(cf.sim, cf.space.geometry, cf.space.nominal(), cf.run_ids, cf.W > 0)
@@ -224,14 +223,15 @@ def heatmap_figure(m: SensitivityMaps, kind: str):
     cell: a map has up to ~120 cells, and laying out a text each costs more
     than the rest of the figure.
     """
-    import matplotlib
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    from matplotlib.backends.backend_agg import FigureCanvasAgg  # a plain figure on its own Agg canvas:
+    from matplotlib.figure import Figure  # no pyplot, the caller's backend untouched
 
     attr, row_attr, col_attr, title, th = HEATMAPS[kind]
     data, rows, cols = getattr(m, attr), getattr(m, row_attr), getattr(m, col_attr)
     scale = len(m.runs) if kind == "param_track" else 1.0  # shares per run: 1/runs is "average"
-    fig, ax = plt.subplots(figsize=(1.0 + 0.75 * len(cols), 1.2 + 0.38 * len(rows)), dpi=110)
+    fig = Figure(figsize=(1.0 + 0.75 * len(cols), 1.2 + 0.38 * len(rows)), dpi=110)
+    FigureCanvasAgg(fig)  # callers may read its pixels (buffer_rgba)
+    ax = fig.subplots()
     im = ax.imshow(data, aspect="auto", cmap="viridis")
     ax.grid(False)
     ax.set_xticks(range(len(cols)), cols, rotation=45, ha="right", fontsize=8)
@@ -253,15 +253,10 @@ def heatmap_figure(m: SensitivityMaps, kind: str):
 
 def heatmaps(m: SensitivityMaps, out_dir) -> list:
     """The three heatmap PNGs (:func:`heatmap_figure`); returns their paths."""
-    from pathlib import Path
-
-    import matplotlib.pyplot as plt
-
     files = []
     for kind in HEATMAPS:
         fig = heatmap_figure(m, kind)
         fig.savefig(Path(out_dir) / f"{kind}.png", dpi=110)
-        plt.close(fig)
         files.append(Path(out_dir) / f"{kind}.png")
     return files
 

@@ -14,6 +14,8 @@ import os
 import warnings
 
 from ..errors import DataError
+from .kernel import compiled_kernel
+from .kernel_nl import compile_kernel
 
 #: environment variable naming the backend
 ENV = "RIDEID_KERNEL"
@@ -35,11 +37,9 @@ def use_numpy() -> bool:
 
 def _builders():
     def linear():
-        from .kernel import _kernel
-        _kernel()
+        compiled_kernel()
 
     def nonlinear():
-        from .kernel_nl import compile_kernel
         compile_kernel()
 
     return {"linear": linear, "nonlinear": nonlinear}

@@ -36,6 +36,7 @@ import numpy as np
 
 from .kernel_ir import run_chunks
 from .kernel_layout import LANES, N_COEF, N_MAX_K, OFFSETS, PER_TERM
+from .contact import lattice_max
 
 #: Candidates per chunk (the kernel pads a population to whole chunks).
 CHUNK = LANES
@@ -44,7 +45,8 @@ __all__ = ["CHUNK", "LANES", "N_MAX_K", "N_COEF", "pack_coefficients", "run_kern
            "vectorised"]
 
 
-def _kernel():
+def compiled_kernel():
+    """The compiled linear kernel (:func:`rideid.model.kernel_ir.run_chunks`), built for its signature once."""
     fn = run_chunks
     if not fn.signatures:
         fn.compile(_SIGNATURE)
@@ -97,7 +99,8 @@ def pack_coefficients(blocks: dict, n: int) -> np.ndarray:
 _POOL: ThreadPoolExecutor | None = None
 
 
-def _pool(threads: int) -> ThreadPoolExecutor:
+def thread_pool(threads: int) -> ThreadPoolExecutor:
+    """The kernels' shared pool of at least ``threads`` threads (grown, never shrunk)."""
     global _POOL
     if _POOL is None or _POOL._max_workers < threads:
         _POOL = ThreadPoolExecutor(max_workers=threads, thread_name_prefix="rideid-kernel")
@@ -115,7 +118,7 @@ def run_kernel(CO, nterms, hf, hr, X0, run_start, run_group, UD, RD, MU, Y, W, m
     M) input moments, Y (T, 10), W (r, 10) channel weights (0 for a missing
     channel). mode 1 also writes the simulated channels into OUT (T, 10, n).
     """
-    fn = _kernel()
+    fn = compiled_kernel()
     n = X0.shape[2]
     n_chunks = n // LANES
     err = np.zeros((run_group.size, n))
@@ -126,7 +129,7 @@ def run_kernel(CO, nterms, hf, hr, X0, run_start, run_group, UD, RD, MU, Y, W, m
         fn(0, n_chunks, *args)
         return err
     bounds = np.linspace(0, n_chunks, threads + 1).round().astype(int)
-    futures = [_pool(threads).submit(fn, int(a), int(b), *args) for a, b in zip(bounds[:-1], bounds[1:])]
+    futures = [thread_pool(threads).submit(fn, int(a), int(b), *args) for a, b in zip(bounds[:-1], bounds[1:])]
     for f in futures:
         f.result()
     return err
@@ -141,7 +144,7 @@ def vectorised() -> dict:
     import re
     import warnings
 
-    fn = _kernel()
+    fn = compiled_kernel()
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         asm = fn.inspect_asm(fn.signatures[0])
@@ -158,9 +161,8 @@ def compile_kernels() -> float:
     says so when it takes long, rather than hiding it in the first
     generation.
     """
-    from .contact import lattice_max
 
     t = time.perf_counter()
-    _kernel()
+    compiled_kernel()
     lattice_max(np.zeros(4), np.zeros(2))
     return time.perf_counter() - t

@@ -32,6 +32,7 @@ import numba
 import numpy as np
 
 from .nl_coef import CI, COEF
+from .kernel import thread_pool
 
 _NC = len(COEF)
 _I_MS, _I_IYY, _I_IXX, _I_TOP, _I_KF, _I_KR = (CI[n] for n in ("inv_ms", "inv_Iyy", "inv_Ixx", "topple",
@@ -375,7 +376,6 @@ def run(co, xk, Fk, Sk, curves, X0, run_start, h, ms, fines, Y, W, mode, split=T
     -------
     err : (r, n); out : (n, T, 10) with mode 1, else None
     """
-    from .kernel import _pool
 
     n = co.shape[0]
     n_runs = len(fines)
@@ -399,7 +399,8 @@ def run(co, xk, Fk, Sk, curves, X0, run_start, h, ms, fines, Y, W, mode, split=T
         run_range(0, n, *args)
     else:
         bounds = np.linspace(0, n, threads + 1).round().astype(int)
-        futures = [_pool(threads).submit(run_range, int(a), int(b), *args) for a, b in zip(bounds[:-1], bounds[1:])]
+        futures = [thread_pool(threads).submit(run_range, int(a), int(b), *args)
+                   for a, b in zip(bounds[:-1], bounds[1:])]
         for f in futures:
             f.result()
     return err, (out if mode == 1 else None)

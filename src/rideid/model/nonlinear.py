@@ -143,11 +143,12 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..errors import DataError
-from . import backend
+from . import backend, kernel_nl
 from .equations import CHANNELS, mck, blocks as blocks_of, static_corner_loads
 from .params import ALL_NAMES, GRAVITY, INDEX, Geometry, check_parameters, full_rows
 from .nl_coef import CI, COEF
 from .simulate import RunInput
+from .batch import BatchSimulator
 
 #: Default damper velocity knots (m/s), SPEC §8.
 DEFAULT_KNOTS: tuple[float, ...] = (-0.4, -0.2, -0.1, -0.05, -0.025, 0.025, 0.05, 0.1, 0.2, 0.4)
@@ -698,7 +699,6 @@ class NonlinearSimulator:
         return _errors_of(outs, self.run_start, Y, W)
 
     def _compiled(self, P, Y, W, mode):
-        from . import kernel_nl
 
         P = self.layout.rows(P)
         ms = self.substeps(P)
@@ -742,7 +742,6 @@ def make_simulator(geom: Geometry, runs: list[RunInput], layout: NonlinearLayout
     """A :class:`rideid.model.batch.BatchSimulator` for a linear layout (``None``, or no
     curves and no bump stops), else a :class:`NonlinearSimulator`."""
     if layout is None or layout.linear:
-        from .batch import BatchSimulator
         return BatchSimulator(geom, runs)
     return NonlinearSimulator(geom, runs, layout)
 

@@ -19,7 +19,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .contact import wheel_input, wheel_input_slope
+from .contact import envelope, wheel_input, wheel_input_slope
 from .discretize import N_MAX, Discretized, gauss_nodes, moment_weights
 from .equations import (CHANNELS, CORNER_TO_DECOMPOSED, DECOMPOSED_TO_COORDS, RATE_COORDS, output_map,
                         state_space, static_state)
@@ -87,7 +87,7 @@ class RunInput:
 #: the last few prepared runs: loading a dataset (its physics checks) and identifying it
 #: prepare the same runs, and the envelope quadrature is most of both (0.1 s per run)
 _PREPARED: list = []
-_PREPARED_MAX = 12  # a dataset's runs; ~1 MB per 1000 samples
+PREPARED_MAX = 12  # a dataset's runs; ~1 MB per 1000 samples
 
 
 def prepare_run(track: Track, geom: Geometry, speed: float | None, t, quad_order: int = 2,
@@ -109,7 +109,7 @@ def prepare_run(track: Track, geom: Geometry, speed: float | None, t, quad_order
     for arr in (res.t, res.u, res.ud, res.mu, res.rate, res.rated):
         arr.flags.writeable = False  # shared by every caller with the same arguments
     _PREPARED.append((track, geom, speed, t.copy(), quad_order, distance, res))
-    del _PREPARED[:-_PREPARED_MAX]
+    del _PREPARED[:-PREPARED_MAX]
     return res
 
 
@@ -269,7 +269,6 @@ def simulate_lsim(P, geom: Geometry, track: Track, speed: float, t, upsample: in
     """
     import scipy.signal
 
-    from .contact import envelope
 
     t = np.asarray(t, dtype=float)
     h = t[1] - t[0]

@@ -3,8 +3,9 @@
 Never pyplot, never ``matplotlib.use``: the caller's backend (Jupyter's
 inline one, a GUI, Agg in a script) stays as it was. A notebook shows a
 returned figure as it shows any; a script saves it with ``fig.savefig``.
-:class:`rideid.IdentificationResult` delegates ``plot_fit``,
-``plot_parameters`` and ``plot_dampers`` here.
+They are public as ``rideid.plot_fit``, ``rideid.plot_parameters`` and
+``rideid.plot_dampers`` (functions of the result, not its methods: the
+result belongs to the estimate layer, which never imports the report).
 """
 
 from __future__ import annotations
@@ -13,8 +14,12 @@ import math
 
 import numpy as np
 
+from ..conditioning.load import load_dataset
+from ..data.dataset import Dataset
 from ..errors import ArgumentError, DataError
 from ..model.equations import CHANNELS
+from ..model.params import ALL_NAMES
+from .html import curve_responses, simulate_runs
 
 #: channel groups of the fit figure: title, unit, channel indices
 GROUPS = (("body accelerations", "m/s²", (0, 1, 2, 3)), ("axle accelerations", "m/s²", (4, 5, 6, 7)),
@@ -28,7 +33,6 @@ def _figure(width, height):
 
 def result_dataset(result, dataset=None):
     """The dataset a result identified: ``dataset`` (a Dataset or a folder) or the folder the result names."""
-    from ..data.dataset import Dataset, load_dataset
     if isinstance(dataset, Dataset):
         return dataset
     path = dataset if dataset is not None else result.dataset
@@ -43,8 +47,6 @@ def responses(result, dataset) -> dict:
     The response kept in memory by :func:`rideid.identify`, else simulated as the report does (the
     curve model's car for a result with damper curves, the linear car otherwise).
     """
-    from .html import curve_responses, simulate_runs
-    from ..model.params import ALL_NAMES
     run_ids = [r.id for r in dataset.runs]
     sims = result.response
     if sims is not None and set(run_ids) <= set(sims):

@@ -28,8 +28,10 @@ import time
 from dataclasses import dataclass
 from pathlib import Path
 
+from ..data.scenario import default_scenario, load_scenario
 from ..errors import ArgumentError, DataError
 from .spec import BUILTIN, Study, load_study
+from .summary import write_outputs
 from .task import run_task, write_atomic
 
 
@@ -196,7 +198,6 @@ def study(study_file_or_spec, out_dir, *, scheduler: str | None = None, progress
         if cluster is not None:
             cluster.close()
 
-    from .summary import write_outputs
     ordered = [(t, records.get(t.key)) for t in spec.tasks]
     html = write_outputs(spec, ordered, out)
     done = sum(1 for _, r in ordered if r is not None and r["status"] == "done")
@@ -222,14 +223,13 @@ def _connect(scheduler, n_workers):
 
 
 def _compute(client, spec, todo, tasks_dir, records, state, progress, t0):
-    from . import api as rideid
     from distributed import as_completed
 
     sc = None
     if spec.scenario is not None:
         # a few kB: it travels inside every task. Scattered data would be lost with the worker holding
         # it (Dask cannot recompute it), while a task's own arguments survive any worker's death.
-        sc = rideid.default_scenario() if spec.scenario == BUILTIN else rideid.load_scenario(spec.scenario)
+        sc = default_scenario() if spec.scenario == BUILTIN else load_scenario(spec.scenario)
     futures = {}
     for t in todo:
         f = client.submit(run_task, t.options, t.dataset_path, sc, key=f"rideid-study-{t.key}", retries=0)

@@ -23,11 +23,11 @@ import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from ..data.scenario import BUILTIN
+from ..data.scenario import BUILTIN, default_scenario, default_scenario_path, load_scenario
 from ..data.schema import Key, Messages, Section, read_toml
 from ..errors import DataError
 from ..estimate.identify import DEFAULT_GENERATIONS, DEFAULT_POPULATION
-from . import api as rideid
+from ..estimate.model_choice import identify
 
 TOP_KEYS = ("name", "data", "identify", "subsets")
 DATA_KEYS = ("datasets", "scenario", "noise", "noise_seeds")
@@ -138,7 +138,7 @@ def dataset_content_hash(folder: Path) -> str:
 
 
 def scenario_content_hash(path) -> str:
-    p = rideid.default_scenario_path() if path == BUILTIN else Path(path)
+    p = default_scenario_path() if path == BUILTIN else Path(path)
     h = hashlib.sha256()
     _hash_files(h, [p])
     doc = tomllib.loads(p.read_text())
@@ -154,7 +154,7 @@ def task_key(options: dict, content: str) -> str:
 
 def identify_accepts(name: str) -> bool:
     """Whether the installed :func:`rideid.identify` takes keyword ``name``."""
-    return name in inspect.signature(rideid.identify).parameters
+    return name in inspect.signature(identify).parameters
 
 
 # ---------------------------------------------------------------------------
@@ -266,7 +266,7 @@ def _parse_data(tab, where, base):
         if not p.is_file():
             raise _err(w, f"scenario file not found: {p}")
         sc_path, label = str(p.resolve()), sc
-    rideid.default_scenario() if sc_path == BUILTIN else rideid.load_scenario(sc_path)  # validate now
+    default_scenario() if sc_path == BUILTIN else load_scenario(sc_path)  # validate now
     if "noise" not in tab:
         raise _err(where, "[data] missing key 'noise' (fraction of each channel's RMS, e.g. 0.01; a list is an axis)")
     noises = []
@@ -339,7 +339,7 @@ def parse_study(doc: dict, path: Path | None = None, base: Path | None = None) -
     axes = _parse_identify(idt, where)
     sc_runs = None
     if scenario is not None:
-        sc = rideid.default_scenario() if scenario == BUILTIN else rideid.load_scenario(scenario)
+        sc = default_scenario() if scenario == BUILTIN else load_scenario(scenario)
         sc_runs = [r.id for r in sc.runs]
     subsets = _parse_subsets(doc["subsets"], where, sc_runs) if "subsets" in doc else [(None, None)]
     keys = [k for k in IDENTIFY_KEYS if k in axes]

@@ -15,6 +15,8 @@ from pathlib import Path
 
 import numpy as np
 
+from ..data.scenario import default_scenario, load_scenario
+from ..design import plan
 from .task import write_atomic
 from .spec import BUILTIN, IDENTIFY_KEYS
 
@@ -100,8 +102,6 @@ def crlb_for(spec, row) -> tuple[dict | None, str]:
     -------
     ({name: (crlb std, expected identify std)}, note), or (None, why not).
     """
-    from . import api as rideid
-
     if spec.scenario is None:
         return None, "CRLB: only for scenario studies (the truth and the noise level must be known)"
     if not row.get("noise"):
@@ -109,11 +109,11 @@ def crlb_for(spec, row) -> tuple[dict | None, str]:
     key = (spec.scenario, row["noise"], row.get("runs"))
     if key not in _PLANS:
         try:
-            sc = rideid.default_scenario() if spec.scenario == BUILTIN else rideid.load_scenario(spec.scenario)
+            sc = default_scenario() if spec.scenario == BUILTIN else load_scenario(spec.scenario)
             if row.get("runs"):
                 keep = set(row["runs"].split(","))
                 sc = dataclasses.replace(sc, runs=[r for r in sc.runs if r.id in keep])
-            res = rideid.plan(sc, noise=row["noise"])
+            res = plan(sc, noise=row["noise"])
             d = (res.to_dict() if hasattr(res, "to_dict") else res)["all_runs"]
             out = {n: (v.get("std"), d.get("identify_std", {}).get(n, {}).get("std")) for n, v in d["crlb"].items()}
             for n, v in d.get("derived", {}).items():
@@ -239,9 +239,7 @@ def _tables(spec, rows, stats, notes):
 
 
 def _figures(rows, stats, out: Path) -> list[tuple[str, str]]:
-    import matplotlib
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    from matplotlib.figure import Figure  # plain figures: no pyplot, the caller's backend untouched
     from matplotlib.ticker import MaxNLocator
 
     figs = []
@@ -259,12 +257,12 @@ def _figures(rows, stats, out: Path) -> list[tuple[str, str]]:
     def save(fig, name, caption):
         tmp = fdir / f".{name}.tmp.png"
         fig.savefig(tmp, dpi=90)
-        plt.close(fig)
         tmp.replace(fdir / name)
         figs.append((f"figures/{name}", caption))
 
     if all(r.get(f"{n}_error") is not None for r in done for n in names):
-        fig, axs = plt.subplots(nrow, ncol, figsize=(3.2 * ncol, 2.6 * nrow), squeeze=False)
+        fig = Figure(figsize=(3.2 * ncol, 2.6 * nrow))
+        axs = fig.subplots(nrow, ncol, squeeze=False)
         for ax, n in zip(axs.flat, names):
             data = [[100 * r[f"{n}_error"] for r in done if _label(r, gcols) == g] for g in labels]
             ax.boxplot(data, showfliers=False)
@@ -282,7 +280,8 @@ def _figures(rows, stats, out: Path) -> list[tuple[str, str]]:
 
     multi = [s for s in stats if s["n"] > 1 and s.get("spread") is not None]
     if multi:
-        fig, axs = plt.subplots(len(labels), 1, figsize=(11, 2.8 * len(labels)), squeeze=False)
+        fig = Figure(figsize=(11, 2.8 * len(labels)))
+        axs = fig.subplots(len(labels), 1, squeeze=False)
         for ax, g in zip(axs[:, 0], labels):
             ss = [s for s in multi if s["group"] == g]
             x = np.arange(len(ss))
@@ -303,8 +302,8 @@ def _figures(rows, stats, out: Path) -> list[tuple[str, str]]:
              "(and the CRLB where available), relative to the mean estimate")
 
     tcols = _varying(rows, OPTION_COLUMNS)
-    fig, axs = plt.subplots(nrow, ncol, figsize=(3.2 * ncol, max(2.6, 0.18 * len(done) + 1.2) * nrow),
-                            squeeze=False)
+    fig = Figure(figsize=(3.2 * ncol, max(2.6, 0.18 * len(done) + 1.2) * nrow))
+    axs = fig.subplots(nrow, ncol, squeeze=False)
     y = np.arange(len(done))
     for ax, n in zip(axs.flat, names):
         v = np.array([r[n] for r in done])

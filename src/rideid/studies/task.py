@@ -16,9 +16,21 @@ import os
 import tempfile
 import time
 import warnings
+from importlib.metadata import PackageNotFoundError, version
 from pathlib import Path
 
+from ..conditioning.load import load_dataset
+from ..data.dataset import Dataset
+from ..data.schema import load_truth
+from ..errors import DataError, RideidError
+from ..estimate.model_choice import identify
 from ..estimate.result import jsonable
+from ..synth.scenario import simulate_manifest, write_dataset
+
+try:
+    __version__ = version("rideid")
+except PackageNotFoundError:  # pragma: no cover
+    __version__ = "0+unknown"
 
 
 def write_atomic(path: Path, text: str):
@@ -48,16 +60,14 @@ def one_core():
 
 def subset_dataset(ds, run_ids, subset):
     """The dataset restricted to ``run_ids`` (manifest order kept)."""
-    from . import api as rideid
-
     have = [r.id for r in ds.runs]
     bad = [r for r in run_ids if r not in have]
     if bad:
-        raise rideid.DataError(f"subset '{subset}': run '{bad[0]}' is not in dataset {ds.path} "
+        raise DataError(f"subset '{subset}': run '{bad[0]}' is not in dataset {ds.path} "
                                f"(its runs: {', '.join(have)})")
     keep = set(run_ids)
     man = dataclasses.replace(ds.manifest, runs=[r for r in ds.runs if r.id in keep])
-    return rideid.Dataset(man, {k: v for k, v in ds.data.items() if k in keep},
+    return Dataset(man, {k: v for k, v in ds.data.items() if k in keep},
                           {k: v for k, v in ds.measured.items() if k in keep})
 
 
@@ -88,11 +98,9 @@ def run_task(options: dict, dataset_path: str | None = None, scenario=None) -> d
         known, cost, generations, wall times) and ``result`` (the
         identification's result.json content).
     """
-    from . import api as rideid
-
     t0 = time.perf_counter()
     rec = {"status": "failed", "final": True, "error": None, "warnings": [], "row": {}, "result": None,
-           "rideid_version": rideid.__version__}
+           "rideid_version": __version__}
     with warnings.catch_warnings(record=True) as caught, one_core(), tempfile.TemporaryDirectory() as tmp:
         warnings.simplefilter("always")
         try:
@@ -100,7 +108,7 @@ def run_task(options: dict, dataset_path: str | None = None, scenario=None) -> d
             rec["row"] = result_row(res.to_dict(), truth)
             rec["result"] = jsonable(res.to_dict())
             rec["status"] = "done"
-        except rideid.RideidError as e:
+        except RideidError as e:
             rec["error"] = _one_line(e)
         except Exception as e:  # a bug or a resource problem: recorded, retried when the study is resumed
             rec["error"] = f"internal error: {type(e).__name__}: {_one_line(e)}"
@@ -116,24 +124,22 @@ def run_task(options: dict, dataset_path: str | None = None, scenario=None) -> d
 
 
 def _identify(options, dataset_path, scenario, tmp: Path):
-    from . import api as rideid
-
     data = options["data"]
     if "scenario" in data:
         if scenario is None:
             raise ValueError("scenario task without its scenario")
         # through the files, exactly as `rideid simulate --noise N --seed S` then `rideid identify`
-        sim, _ = rideid.simulate_manifest(scenario, noise=data["noise"], seed=data["noise_seed"])
-        rideid.write_dataset(scenario, sim, tmp / "dataset")
-        ds = rideid.load_dataset(tmp / "dataset")
+        sim, _ = simulate_manifest(scenario, noise=data["noise"], seed=data["noise_seed"])
+        write_dataset(scenario, sim, tmp / "dataset")
+        ds = load_dataset(tmp / "dataset")
         truth = dict(scenario.truth)
     else:
-        ds = rideid.load_dataset(dataset_path)
+        ds = load_dataset(dataset_path)
         tp = Path(dataset_path) / "truth.toml"
-        truth = rideid.load_truth(tp, ds.geometry) if tp.is_file() else None
+        truth = load_truth(tp, ds.geometry) if tp.is_file() else None
     if options["runs"] is not None:
         ds = subset_dataset(ds, options["runs"], options["subset"])
-    return rideid.identify(ds, **options["identify"]), truth
+    return identify(ds, **options["identify"]), truth
 
 
 def result_row(result: dict, truth: dict | None) -> dict:

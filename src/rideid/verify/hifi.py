@@ -79,6 +79,7 @@ from ..data.schema.hifi import HIFI_KEYS, HifiProperties, parse_hifi, tire_dampi
 from ..errors import DataError
 from ..model.equations import CHANNELS, static_corner_loads
 from ..model.params import CORNERS, GRAVITY, INDEX, NAMES, Geometry, full_rows
+from ..model.simulate import corner_inputs
 
 #: contact impedance (solimp dmin = dmax): tiny, so the contact adds no normal "mass"
 IMPEDANCE = 1e-3
@@ -397,7 +398,6 @@ def simulate_mujoco(P, geom: Geometry, track, speed, t, distance=None, hifi: Hif
     lift-off times and suspension travel as well; ``dampers``: SPEC §8 damper
     curves (:class:`MujocoCar`).
     """
-    from ..model.simulate import corner_inputs
 
     car = MujocoCar(P, geom, hifi, dampers=dampers, **kw)
     mj, m, d = car.mj, car.model, car.data

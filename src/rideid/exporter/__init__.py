@@ -16,6 +16,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from ..errors import ArgumentError, DataError
+from ..estimate.result import IdentificationResult, load
 from .car import Car, car_from_result, car_from_scenario
 from .card import write_card
 from .fmu import find_compiler, write_fmu
@@ -44,7 +45,6 @@ class ExportResult:
 
 def _load(source):
     """A result (object), a fit folder or its result.json -> (Car, label)."""
-    from ..estimate.result import IdentificationResult, load
     if isinstance(source, Car):
         return source, "car"
     if isinstance(source, IdentificationResult):

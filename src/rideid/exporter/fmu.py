@@ -35,6 +35,8 @@ from importlib import resources
 from pathlib import Path
 from xml.sax.saxutils import escape
 
+import numpy as np
+
 from ..model.equations import CHANNELS, CHANNEL_UNITS
 from ..model.params import ALL_NAMES, DESCRIPTIONS, GRAVITY
 from ..model.nonlinear import NonlinearLayout, substeps
@@ -92,7 +94,6 @@ def _parameters(car: Car):
 
 def max_step(car: Car, rho: float = RHO) -> float:
     """Longest RK4 sub-step (s): ``rho / max|eig|`` of the stiffest linearised car (:func:`rideid.model.nonlinear.substeps`)."""
-    import numpy as np
     layout = NonlinearLayout(knots=None if car.dampers is None else car.dampers.velocity,
                              bump_stops=bool(car.bump_stops))
     row = [car.values[n] for n in ALL_NAMES]

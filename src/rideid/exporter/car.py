@@ -2,8 +2,8 @@
 
 :class:`Car` is built from an identification result (:func:`car_from_result`)
 or from a scenario's ``[truth]`` (:func:`car_from_scenario`, the car
-``rideid simulate`` drives); the card (:mod:`rideid.export.card`) and the
-FMU (:mod:`rideid.export.fmu`) are written from it.
+``rideid simulate`` drives); the card (:mod:`rideid.exporter.card`) and the
+FMU (:mod:`rideid.exporter.fmu`) are written from it.
 """
 
 from __future__ import annotations

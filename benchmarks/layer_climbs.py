@@ -1,0 +1,127 @@
+"""How often loading a dataset climbs back up a layer: ``python benchmarks/layer_climbs.py [DATASET]``.
+
+``rideid.load_dataset(DATASET)`` (default: the built-in scenario simulated
+with 1 % noise, written to a temporary folder) runs under a profiler hook
+that records which function each call enters and each return comes back to.
+Every rideid function has the layer of its package (``LAYERS``, as
+``tests/test_layers.py`` orders them). Counted:
+
+* **climbs**: the distinct places (caller function, the lower-layer package
+  it called into) where the call path comes back up a layer: a function
+  called code of a lower layer and carries on afterwards. A loader whose
+  layers each call only downwards, once per job, climbs little.
+  Counted apart: those below the loader's own layer (code under the
+  orchestrator that waits on a lower layer and carries on), those in the
+  data layer, and the functions of the data layer that run the model's
+  simulation (:data:`SIMULATION`).
+* **layer path**: the layers the executing code visits, in time order,
+  repeats merged, with the number of upward steps along it.
+
+Module-level code run by first imports is left out (the loader's calls only).
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import tempfile
+from pathlib import Path
+
+import rideid
+
+#: the layers, lowest first (tests/test_layers.py checks the import graph against the same order)
+LAYERS = [
+    ("rideid.errors", "rideid.csvio"), ("rideid.model",), ("rideid.data",), ("rideid.conditioning",),
+    ("rideid.verify",), ("rideid.synth",), ("rideid.estimate",), ("rideid.design", "rideid.report", "rideid.studies"),
+    ("rideid",), ("rideid.cli", "rideid.__main__"),
+]
+
+
+def layer_of(module: str) -> int | None:
+    best, where = -1, None
+    for i, prefixes in enumerate(LAYERS):
+        for p in prefixes:
+            if (module == p or module.startswith(p + ".")) and len(p) > best:
+                best, where = len(p), i
+    return where
+
+
+#: the model's simulation: what running the model means
+SIMULATION = ("rideid.model.batch", "rideid.model.kernel", "rideid.model.kernel_nl", "rideid.model.simulate",
+              "rideid.model.nonlinear", "rideid.model.contact")
+
+
+def trace(path):
+    """``(climbs, path, upward steps, simulation callers)``: climbs {(caller, lower package): count}; path: the
+    layer names visited in order; simulation callers: the functions outside rideid.model that entered it."""
+    stack, visits, climbs, sim_callers = [], [], {}, set()
+
+    def where(frame):
+        mod = frame.f_globals.get("__name__", "")
+        if frame.f_code.co_name == "<module>":
+            return None
+        lay = layer_of(mod)
+        return None if lay is None else (lay, mod, f"{mod}.{frame.f_code.co_qualname}")
+
+    def hook(frame, event, arg):
+        if event == "call":
+            w = where(frame)
+            if w is not None and w[1] in SIMULATION:
+                caller = next((s for s in reversed(stack) if s is not None and not s[1].startswith("rideid.model")),
+                              None)
+                if caller is not None:
+                    sim_callers.add(caller[2])
+            stack.append(w)
+            if w is not None:
+                visits.append(w)
+        elif event == "return" and stack:
+            w = stack.pop()
+            up = next((s for s in reversed(stack) if s is not None), None)
+            if w is not None and up is not None and w[0] < up[0]:
+                pkg = ".".join(w[1].split(".")[:2])
+                climbs[(up[2], pkg)] = climbs.get((up[2], pkg), 0) + 1
+            if up is not None:
+                visits.append(up)
+
+    sys.setprofile(hook)
+    try:
+        rideid.load_dataset(path)
+    finally:
+        sys.setprofile(None)
+    names = {i: "/".join(p.split(".")[-1] for p in prefixes) for i, prefixes in enumerate(LAYERS)}
+    seq = []
+    for lay, _, _ in visits:
+        if not seq or seq[-1] != lay:
+            seq.append(lay)
+    return climbs, [names[i] for i in seq], sum(1 for a, b in zip(seq, seq[1:]) if b > a), sim_callers
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("dataset", nargs="?", help="dataset folder (default: the built-in scenario, simulated)")
+    args = ap.parse_args(argv)
+    path = args.dataset
+    if path is None:
+        tmp = tempfile.mkdtemp(prefix="rideid-climbs-")
+        sc = rideid.default_scenario()
+        data, _ = rideid.simulate_manifest(sc, noise=0.01, seed=1)
+        path = rideid.write_dataset(sc, data, Path(tmp) / "dataset")
+    rideid.load_dataset(path)  # first imports and compiled kernels out of the way
+    climbs, seq, ups, sim_callers = trace(path)
+    own = layer_of(rideid.load_dataset.__module__)
+    below = {k: n for k, n in climbs.items() if layer_of(k[0]) < own}
+    print(f"load_dataset ({rideid.load_dataset.__module__}) on {path}: climbs back up a layer at {len(climbs)} "
+          f"places, {len(below)} of them below the loader's layer")
+    for (caller, pkg), n in sorted(climbs.items()):
+        print(f"  {caller} (after calling into {pkg}, {n}x){'  [below the loader]' if (caller, pkg) in below else ''}")
+    data = layer_of("rideid.data")
+    in_data = [k for k in climbs if layer_of(k[0]) == data]
+    print(f"climbs in the data layer: {len(in_data)}")
+    ran = sorted(f for f in sim_callers if layer_of(f) == data)
+    print(f"functions of rideid.data that ran the model's simulation: {', '.join(ran) or 'none'}")
+    print(f"layer path ({ups} upward steps): {' > '.join(seq[:40])}{' ...' if len(seq) > 40 else ''}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,94 @@
+"""Loading a dataset: read it (the data layer), then align every measured run and check it against a nominal car.
+
+:func:`load_dataset` is the orchestrator behind :func:`rideid.load_dataset`:
+:func:`rideid.data.dataset.read_dataset` reads and conditions the files (no
+simulation), :func:`align_starts` fixes the start of every measured run
+(:mod:`rideid.conditioning.starts`) and runs the physics checks
+(:func:`rideid.conditioning.checks.check_dataset`).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import replace
+
+from ..data import checks
+from ..data.dataset import Dataset, read_dataset
+from ..model.params import nominal_car
+from .checks import check_dataset
+from .starts import estimate_start
+
+
+def load_dataset(path, starts: dict[str, float] | None = None) -> Dataset:
+    """Load and validate a dataset folder (or its ``dataset.toml``), ready to identify.
+
+    Two steps, each available on its own: :func:`rideid.data.dataset.read_dataset` (formats and
+    conditioning: SPEC §3 CSVs taken as they are, logger files through
+    :mod:`rideid.data.measured`) and :func:`align_starts` (the start of every
+    measured run whose start is not given, estimated with a nominal car).
+    ``Dataset.preprocessing()`` says what was done.
+
+    Parameters
+    ----------
+    path : str or Path
+        The dataset folder, or its ``dataset.toml``.
+    starts : dict, optional
+        Run id -> start (file time, s) to use instead of estimating it, e.g.
+        the starts a previous identification settled on (``result.json``).
+
+    Returns
+    -------
+    Dataset
+
+    Raises
+    ------
+    DataError
+        Naming the file, key or column at fault.
+    """
+    return align_starts(read_dataset(path), starts)
+
+
+def align_starts(ds: Dataset, starts: dict[str, float] | None = None) -> Dataset:
+    """The estimation step of loading: fix the start of every measured run.
+
+    A start given in ``starts`` or in the run's ``[preprocess] start`` is
+    taken; otherwise it is estimated by correlating the run with the response
+    of the nominal car (:func:`rideid.model.params.nominal_car`; the record
+    keeps the estimate and its correlation). Returns a new dataset; ``ds``
+    is not changed.
+    """
+    man = ds.manifest
+    data, measured = dict(ds.data), {}
+    for rid, mr0 in ds.measured.items():
+        mr = replace(mr0, record=dict(mr0.record), window=None, start=None)
+        run = man.run(rid)
+        if starts and rid in starts:
+            s = float(starts[rid])
+            mr.record["start"] = {"source": "given (from a previous identification)"}
+        elif not mr.auto_start:
+            s = mr.options["start"]
+            mr.record["start"] = {"source": "given"}
+        elif not run.road_known:
+            # no road to align with: x = 0 is where the front axle is at the first sample (of the window)
+            s = max(mr.t_first, mr.options.get("window", (-math.inf, math.inf))[0])
+            mr.record["start"] = {"source": "unknown road (SPEC §9): x = 0 at the first sample"}
+        else:
+            track = man.tracks[run.track]
+            longest = (mr.speed * (mr.t_last - mr.t_first) if mr.distance is None
+                       else float(mr.distance.d[-1] - mr.distance.d[0]))
+            checks.enforce(checks.check_reach(rid, track, man.geometry, longest), f"{man.path}: ")
+            s, rho = estimate_start(mr, nominal_car(man.geometry), man.geometry, track)
+            mr.record["start"] = {"source": "estimated (nominal car)", "nominal_estimate": s,
+                                  "correlation": rho}
+        mr.make_grid(s)
+        mr.start = float(s)
+        measured[rid] = mr
+        data[rid] = mr.run_data(s)
+    ds = Dataset(man, {r.id: data[r.id] for r in man.runs}, measured)
+    # the one hook for the physics checks (rideid.conditioning.checks): every run conditioned and aligned
+    findings = check_dataset(ds)
+    checks.enforce(findings, f"{man.path}: ")
+    return replace(ds, findings=findings)
+
+
+__all__ = ["align_starts", "load_dataset"]

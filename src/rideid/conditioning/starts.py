@@ -1,0 +1,164 @@
+"""Start alignment of measured runs: the start that lines a run up with a car's response on its track.
+
+Step 6 of conditioning a measured run (:mod:`rideid.data.measured`): the
+file time at which the front axle reaches ``x = 0`` (SPEC §2), estimated by
+correlating the run's samples with the response of a car (the nominal car
+when a dataset is loaded, :func:`rideid.conditioning.load.align_starts`; the
+fitted one in :func:`rideid.identify`). It runs the model, so it sits above
+the data layer.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..data.measured import DEFAULT_PRE_ROLL, MeasuredRun, RelativeDistance
+from ..errors import DataError
+from ..model.batch import BatchSimulator
+from ..model.equations import CHANNELS
+from ..model.simulate import prepare_run
+
+
+def _feature_end(track, geom) -> float:
+    """Distance (front axle) at which the rear wheels leave the last feature."""
+    ends = []
+    for y in geom.corner_y:
+        ext = track.path(y).extent
+        if ext is not None:
+            ends.append(ext[1])
+    return (max(ends) if ends else 0.0) + geom.wheelbase
+
+
+def simulate_response(P, geom, track, t, speed, distance, lead_in: float = 0.0):
+    """Response ``(n, 10)`` of the car ``P`` at the model times ``t`` (uniform), at rest at ``t[0]``;
+    with ``lead_in`` (s, a moving start, SPEC §9) at rest that long before, on the road before."""
+    t = np.asarray(t, dtype=float)
+    k = int(np.ceil(lead_in / (t[1] - t[0]) - 1e-9)) if lead_in > 0 else 0
+    if k:
+        t = np.concatenate([t[0] + (t[1] - t[0]) * np.arange(-k, 0), t])
+    ri = prepare_run(track, geom, speed, t, distance=distance)
+    return BatchSimulator(geom, [ri]).outputs(np.atleast_2d(P))[0][0][k:]
+
+
+def correlation_score(Yhat, Y, cols):
+    """Mean normalised correlation over the channels ``cols`` that are not zero."""
+    s, n = 0.0, 0
+    for i in cols:
+        a, b = Yhat[:, i], Y[:, i]
+        na, nb = np.linalg.norm(a), np.linalg.norm(b)
+        if na > 0 and nb > 0:
+            s += float(a @ b) / (na * nb)
+            n += 1
+    return s / max(n, 1)
+
+
+def _long_grid(mr: MeasuredRun, track, geom, v):
+    """Model times covering the whole feature passage (and settling) at speed ``v``, or the recording."""
+    h = 1.0 / mr.fs
+    pre = mr.options.get("pre_roll", DEFAULT_PRE_ROLL)
+    T = min(_feature_end(track, geom) / v + 2.0, mr.t_last - mr.t_first + pre)
+    return -pre + h * np.arange(int((T + pre) / h) + 1)
+
+
+def _correlation(mr: MeasuredRun, Yhat, tm, tau=None):
+    """Mean normalised cross-correlation over channels; returns (starts, values) for every lag.
+
+    ``tau``: the file times at which the measurement is read (default: the
+    run's own samples :attr:`MeasuredRun.times`); ``Yhat`` at model times
+    ``tm`` is then compared with the measurement at ``tau[k + lag]``.
+    """
+    from scipy.signal import correlate
+
+    Y = mr.values if tau is None else mr.measured_at(tau)
+    total, n = None, 0
+    for i, c in enumerate(CHANNELS):
+        if c not in mr.channels:
+            continue
+        a, b = Yhat[:, i], Y[:, i]
+        na, nb = np.linalg.norm(a), np.linalg.norm(b)
+        if na == 0 or nb == 0:
+            continue
+        cc = correlate(b, a, mode="full", method="fft") / (na * nb)
+        total = cc if total is None else total + cc
+        n += 1
+    if total is None:
+        raise DataError(f"{mr.path}: cannot estimate the start: the nominal car's response or the measurement "
+                        "is zero on every channel; give start in seconds")
+    lags = np.arange(total.size) - (tm.size - 1)
+    return lags, total / n
+
+
+def _peaks(values, k):
+    """Indices of the ``k`` highest local maxima."""
+    inner = np.nonzero((values[1:-1] >= values[:-2]) & (values[1:-1] > values[2:]))[0] + 1
+    return inner[np.argsort(values[inner])[::-1][:k]]
+
+
+def _vertex(values, j) -> tuple[float, float]:
+    """Sub-sample peak of ``values`` near its local maximum ``j``: ``(offset, height)`` of the
+    parabola through ``j - 1, j, j + 1`` (offset within ±0.5; 0 at an end)."""
+    if j <= 0 or j >= values.size - 1:
+        return 0.0, float(values[j])
+    ym, y0, yp = (float(v) for v in values[j - 1:j + 2])
+    den = ym - 2.0 * y0 + yp
+    if den >= 0:
+        return 0.0, y0
+    off = float(np.clip(0.5 * (ym - yp) / den, -0.5, 0.5))
+    return off, y0 - 0.25 * (ym - yp) * off
+
+
+def estimate_start(mr: MeasuredRun, P, geom, track):
+    """``(start, correlation)``: the run's start (file time when the front axle reaches x = 0) for
+    the car ``P``, by cross-correlation over all lags, to a fraction of a sample.
+
+    The run's samples are correlated with the car's response at the sample
+    rate; the peak lag is refined by a parabola through the correlation at
+    it and its neighbours. Constant speed: the model's response only shifts
+    with the start, so the highest correlation wins. With a speed channel
+    the response depends on the start; each of the best few correlation
+    peaks (on a periodic track: the neighbouring cycles) is re-simulated
+    with its own distance profile and scored at its own start, and the best
+    self-consistent one wins. The correlation returned is the mean normalised
+    correlation over the channels that are not zero, at the peak. Only the
+    car's response is simulated; the run's samples are read as they are.
+    """
+    h = 1.0 / mr.fs
+    if mr.distance is None:
+        tm = _long_grid(mr, track, geom, mr.speed)
+        lags, corr = _correlation(mr, simulate_response(P, geom, track, tm, mr.speed, None), tm)
+        # y_hat at model time tm[k] matches the measurement at t_first + (k + lag) h
+        j = int(np.argmax(corr))
+        off, peak = _vertex(corr, j)
+        return float(mr.t_first + (lags[j] + off) * h - tm[0]), peak
+    # varying speed: correlate over distance (the road is fixed in x), with the response at the mean speed
+    vmean = max(mr.distance.speed_range()[1], 0.1)
+    tm = _long_grid(mr, track, geom, vmean)
+    dist = mr.distance
+    x_all = dist.d
+    xs = x_all[0] + vmean * h * np.arange(int((x_all[-1] - x_all[0]) / (vmean * h)) + 1)
+    keep = np.concatenate([[True], np.diff(x_all) > 0])
+    tau = np.interp(xs, x_all[keep], dist.t[keep])
+    lags, corr = _correlation(mr, simulate_response(P, geom, track, tm, vmean, None), tm, tau)
+    # model x = vmean tm[k] matches the road at distance xs[k + lag]: x = 0 is at xs[lag] - vmean tm[0]
+    cand = [float(np.interp(xs[0] + (lags[i] * vmean * h) - vmean * tm[0], x_all[keep], dist.t[keep]))
+            for i in _peaks(corr, 5)]
+    best, best_score = None, -np.inf
+    for s in cand:
+        score = -np.inf
+        for _ in range(8):  # fixed point: simulate with this start's distance profile, re-pick the lag nearby
+            Yhat = simulate_response(P, geom, track, tm, None, RelativeDistance(dist, s))
+            lg, cc = _correlation(mr, Yhat, tm)
+            st = mr.t_first + lg * h - tm[0]
+            near = np.abs(st - s) <= 3.0 * h
+            j = int(np.argmax(np.where(near, cc, -np.inf)))
+            off, peak = _vertex(cc, j)
+            moved = abs(st[j] + off * h - s) > 1e-3 * h
+            s, score = float(st[j] + off * h), peak
+            if not moved:
+                break
+        if score > best_score:
+            best, best_score = s, score
+    return best, best_score
+
+
+__all__ = ["correlation_score", "estimate_start", "simulate_response"]
