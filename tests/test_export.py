@@ -17,7 +17,7 @@ import pytest
 
 import rideid
 from rideid.cli import main
-from rideid.data.scenario import simulate_manifest, write_dataset
+from rideid.synth.scenario import simulate_manifest, write_dataset
 from rideid.model.equations import CHANNELS
 from rideid.model.simulate import prepare_run
 

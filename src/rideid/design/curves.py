@@ -38,7 +38,6 @@ import numpy as np
 from ..data.scenario import LIFT_OFF_RHO
 from ..estimate.dampers import MIN_SAMPLES, knot_counts, suspension_velocities_by_run
 from ..model.nonlinear import DEFAULT_KNOTS, curve_names, damper_force
-from ..data.scenario import LIFT_OFF_RHO
 
 CURVES = "damper_curves"
 AXLES = ("front", "rear")

@@ -62,7 +62,6 @@ from ..model.equations import CHANNEL_KIND, CHANNELS
 from ..model.simulate import prepare_run, simulate_reference
 from .colour import ar1_psd
 from .fisher import SILENT
-from ..data.scenario import generate_road, lead_in, road_seed, run_times
 
 #: roads generated per unknown-road candidate (their information averaged); 1 for a run with a road_seed
 ROADS = 2

@@ -27,7 +27,6 @@ import numpy as np
 from ..data.schema.result import read_result_json
 from ..errors import DataError
 from .sensitivity import SensitivityMaps
-from .dampers import format_dampers
 from .bumps import format_bump_stops
 
 COST_DEFINITION = ("equal-weight sum over runs of the per-channel energy-normalised squared error "
