@@ -187,7 +187,7 @@ def main(out=sys.stdout):
     with single_threaded_blas():
         for n in (1, 8, 32, 64, 128, 256, 512):
             Xn = np.resize(X, (n, X.shape[1]))
-            t = timeit(lambda: cf.run_errors(Xn), repeat=3)
+            t = timeit(lambda Xn=Xn: cf.run_errors(Xn), repeat=3)
             say(f"| {n} | {t * 1e3:.1f} | {t / n * 1e6:.0f} |")
 
     # scaling with run length
@@ -202,7 +202,7 @@ def main(out=sys.stdout):
             sim = BatchSimulator(geom, [prepare_run(wb, geom, 10.0, t)])
             Y = np.zeros((t.size, 10))
             W = np.ones((1, 10))
-            tt = timeit(lambda: sim.errors(Pp, Y, W), repeat=3)
+            tt = timeit(lambda sim=sim, Y=Y, W=W: sim.errors(Pp, Y, W), repeat=3)
             say(f"| {t.size} | {tt * 1e3:.1f} | {tt / 64 / t.size * 1e9:.1f} |")
 
 

@@ -34,7 +34,6 @@ from rideid.synth.scenario import simulate_manifest, write_dataset
 from rideid.estimate.cost import CostFunction
 from rideid.model import kernel
 from rideid.model.batch import single_threaded_blas
-from rideid.model.discretize import N_MAX
 from rideid.model.simulate import simulate_lsim
 
 sys.path.insert(0, str(Path(__file__).parent))

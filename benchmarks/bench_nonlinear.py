@@ -93,7 +93,7 @@ def main(out=sys.stdout):
         numba.set_num_threads(th)
         tl = best(lambda: lin.errors(P, Y, W)) / N_POP
         for name, sim in sims.items():
-            tn = best(lambda: sim.errors(Pn, Y, W)) / N_POP
+            tn = best(lambda sim=sim: sim.errors(Pn, Y, W)) / N_POP
             res[(th, name)] = tn / tl
             out.write(f"| {th} | {tl * 1e6:.0f} | {name} | {tn * 1e6:.0f} | {sorted(set(sim.last_substeps))} "
                       f"| {tn / tl:.1f}x |\n")

@@ -71,8 +71,8 @@ def iso_road(gd: float, length: float, rng, dx: float = 0.01, band=(0.01, 3.0)):
         return amp * np.exp(2j * np.pi * rng.uniform(size=f.size))
 
     rho = np.exp(-f / COHERENCE_N)
-    c, l, r = part(), part(), part()
-    zl = np.fft.irfft(np.sqrt(rho) * c + np.sqrt(1 - rho) * l, nfft)[:n]
+    c, lf, r = part(), part(), part()
+    zl = np.fft.irfft(np.sqrt(rho) * c + np.sqrt(1 - rho) * lf, nfft)[:n]
     zr = np.fft.irfft(np.sqrt(rho) * c + np.sqrt(1 - rho) * r, nfft)[:n]
     return np.arange(n) * dx, zl, zr
 

@@ -9,7 +9,6 @@ import numpy as np
 import pytest
 import tomli_w
 
-import rideid
 from rideid.cli import main
 from rideid.data.schema import read_toml
 from rideid.estimate.bumps import spring_share

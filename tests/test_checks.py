@@ -401,7 +401,7 @@ def test_start_std_includes_a_noisy_speed_channel(tmp_path):
         warnings.simplefilter("ignore", DataWarning)
         res = rideid.identify(rideid.load_dataset(path), seed=1, generations=60, model="base")
     ratios = []
-    for rid, rec in res.preprocessing.items():
+    for rec in res.preprocessing.values():
         st = rec["start"]
         assert st["std"] > 30 * st["std_fit"]  # the speed channel dominates
         ratios.append(abs(st["value"] - OFFSET) / st["std"])

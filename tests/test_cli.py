@@ -411,7 +411,7 @@ def test_every_message_is_on_its_own_line(monkeypatch):
     monkeypatch.setattr(warnings, "showwarning", _warning_line)
     prog = Progress()
     prog.line("generation 35/400  best 1.1e+00", force=True)
-    warnings.warn("k_sf = 8000 ended at its lower search bound 8000", UserWarning)
+    warnings.warn("k_sf = 8000 ended at its lower search bound 8000", UserWarning, stacklevel=1)
     prog.line("generation 36/400  best 1.0e+00", force=True)
     say("rideid: compiled the simulation kernel in 1 s (cached for later runs)")
     prog.done()

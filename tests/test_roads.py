@@ -50,7 +50,7 @@ def test_coherency_is_the_isotropic_surface_integral(w):
     # independent method: integrate the isotropic 2-D spectrum S2(k) ~ k^-(w+1) along the lateral wavenumber m,
     # cross-spectrum of two lines B apart over the spectrum of one (quad with a cosine weight, to infinity)
     for n in (0.02, 0.1, 0.3):
-        def s2(m):
+        def s2(m, n=n):
             return (n * n + m * m) ** (-(w + 1) / 2)
         cross = integrate.quad(s2, 0, np.inf, weight="cos", wvar=2 * np.pi * B, limlst=200)[0]
         auto = integrate.quad(s2, 0, np.inf)[0]

@@ -7,7 +7,7 @@ import tomli_w
 
 import rideid
 from rideid.data.schema import DamperCurves, parse_scenario, read_toml
-from rideid.errors import ArgumentError, DataError
+from rideid.errors import DataError
 
 #: asymmetric (2:1 rebound:compression) digressive dampers, knee at 0.15 m/s
 DAMPERS = {"velocity": [-0.6, -0.15, -0.05, 0.05, 0.15, 0.6],

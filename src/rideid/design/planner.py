@@ -112,7 +112,7 @@ class PlanResult:
                                                                       if self.selected.identifiable[self.names.index(n)]
                                                                       else None)}
                               for n, t in self.targets.items()}
-            for n, v in sel["targets"].items():
+            for _n, v in sel["targets"].items():
                 v["met"] = v["expected_identify"] is not None and v["expected_identify"] <= v["target"] * (1 + 1e-9)
         return {
             "scenario": self.scenario,

@@ -142,7 +142,7 @@ def scan_start(cf, x) -> tuple[np.ndarray, dict, dict]:
         Pq[space.col[f"bs_rate_{a}"]] = 0.0
     dq = dict(zip((a for _, a in AXLES), compressions(cf, Pq)))
     rows, tags = [x0], [None]
-    for axle, a in AXLES:
+    for _axle, a in AXLES:
         c_name, r_name = f"bs_clear_{a}", f"bs_rate_{a}"
         if c_name not in names and r_name not in names:
             continue

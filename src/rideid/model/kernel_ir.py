@@ -181,7 +181,7 @@ def generate_ir(opaque: bool | None = None) -> str:
     # -- the moment terms over [k, k + 1], one loop per block
     pred = "next"
     acc_end = {}
-    for blk, S, R, xo, uo in BLOCKS:
+    for blk, S, _R, xo, uo in BLOCKS:
         lab = f"terms_{blk}"
         w(f"{lab}:")
         w(f"  %t_{blk} = phi i64 [ 0, %{pred} ], [ %t_{blk}1, %{lab} ]")
@@ -207,7 +207,7 @@ def generate_ir(opaque: bool | None = None) -> str:
         acc_end.update({xo + i: f"%vn{xo + i}" for i in range(S)})
     # -- the transition over [k, k + 1]
     w("update:")
-    for blk, S, R, xo, uo in BLOCKS:
+    for blk, S, _R, xo, _uo in BLOCKS:
         for i in range(S):
             acc = acc_end[xo + i]
             for j in range(S):

@@ -211,7 +211,7 @@ def _tables(spec, rows, stats, notes):
     for label, rs in groups.items():
         ok = [r for r in rs if r["status"] == "done"]
 
-        def med(k, scale=1.0):
+        def med(k, scale=1.0, ok=ok):
             v = [r[k] for r in ok if r.get(k) is not None]
             return _fmt(float(np.median(v)) * scale) if v else ""
         body.append([label, len(rs), len(ok), med("evaluations"), med("generations_run"), med("cost"),
