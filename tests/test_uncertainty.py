@@ -126,7 +126,6 @@ RHO = 0.9
 
 def _estimates(ds, x, info):
     """(names, estimate, std, std_robust) of the free parameters and the derived mass."""
-    from rideid.estimate.cost import CostFunction
     from rideid.estimate.uncertainty import estimate_covariance
 
     space = ds.space
