@@ -232,12 +232,12 @@ def identify(ds: Dataset, *, rng=None, seed=None, population: int = DEFAULT_POPU
                                spread_tol=spread_tol, callback=callback, t0=t0)
         # a start of the curve model's own width: its knot forces as given (not a linear car's F = c v)
         own = start is not None and nonlinear and len(start) == len(cf.names) != len(cf_search.names)
-        if start is not None:
-            search.x, search.stop = np.asarray(start, dtype=float), "start"
+        x0 = search.x if start is None else np.asarray(start, dtype=float)
         excitation = bumps = None
         if nonlinear:
-            cf, search.x, excitation, bumps = _curve_start(cf, cf if own else cf_search, search.x)
-        fit = polish_fit(ds, cf, search.x) if polish else None
+            cf, x0, excitation, bumps = _curve_start(cf, cf if own else cf_search, x0)
+        search = OptimizeResult(dict(search, x=x0, stop=search.stop if start is None else "start"))
+        fit = polish_fit(ds, cf, x0) if polish else None
         if fit is not None and cf.space.bump:
             fit, bumps = _bump_recheck(ds, fit, bumps)
         if fit is not None and nonlinear:
@@ -307,7 +307,9 @@ def _curve_start(cf: CostFunction, cf_search: CostFunction, x):
 
 def _bump_recheck(ds, fit, bumps):
     """After the polish: a stop the polished car no longer reaches (fewer than ``MIN_SAMPLES`` samples beyond
-    its clearance) is held as not reached and the polish repeated (at most twice)."""
+    its clearance) is held as not reached and the polish repeated (at most twice).
+
+    Returns the fit and a new bump record (``bumps`` is not changed)."""
     from .bumps import frozen_values, reach
 
     for _ in range(2):
@@ -316,14 +318,13 @@ def _bump_recheck(ds, fit, bumps):
         P = space.full(fit.x[None])[0]
         r = reach(cf, P)
         add = {}
+        bumps = dict(bumps)
         for axle, a in (("front", "f"), ("rear", "r")):
-            bumps.setdefault(axle, {}).update(r[axle])
             free = any(f"bs_{k}_{a}" in space.names for k in ("clear", "rate"))
+            held = (free and not r[axle]["reached"]) or f"bs_clear_{a}" in space.bump_frozen
+            bumps[axle] = {**bumps.get(axle, {}), **r[axle], **({"reached": False} if held else {})}
             if free and not r[axle]["reached"]:
                 add.update(frozen_values(space, a, r[axle]["max_compression"]))
-                bumps[axle]["reached"] = False
-            elif f"bs_clear_{a}" in space.bump_frozen:
-                bumps[axle]["reached"] = False
         if not add:
             break
         new = space.with_bump_frozen({**space.bump_frozen, **add})
