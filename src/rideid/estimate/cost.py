@@ -375,7 +375,13 @@ class ParameterSpace:
 
 class EvaluationCounter:
     """How many candidates (rows) were evaluated: one count that several cost functions of one
-    identification share (:meth:`CostFunction.with_space`), so no caller adds counts up by hand."""
+    identification share (:meth:`CostFunction.with_space`), so no caller adds counts up by hand.
+
+    Parameters
+    ----------
+    n : int
+        The count to start from.
+    """
 
     def __init__(self, n: int = 0):
         self._n = int(n)
@@ -385,6 +391,7 @@ class EvaluationCounter:
         return self._n
 
     def add(self, k: int):
+        """Count ``k`` more evaluated candidates."""
         self._n += int(k)
 
 
