@@ -216,7 +216,7 @@ def test_identify_leaves_its_inputs_untouched(sim_dataset):
     Y, W, w = cost.Y.copy(), cost.W.copy(), cost.weights.copy()
     cost.set_weights(np.arange(1.0, len(cost.run_ids) + 1))
     w = cost.weights.copy()
-    cost.nfev = 17
+    cost.counter.add(17)  # evaluations counted before (nfev is read-only: the shared counter's)
     res = rideid.identify(ds, seed=4, generations=3, population=8, cost=cost)
     assert {rid: id(rd) for rid, rd in ds.data.items()} == data_ids
     for rid, (t, ch) in before.items():
@@ -345,3 +345,63 @@ def test_save_creates_the_folder(sim_dataset, tmp_path):
                           model="base")
     res.save(tmp_path / "new" / "fit")
     assert rideid.load_result(tmp_path / "new" / "fit").parameters == res.parameters
+
+
+def test_with_space_shares_the_prepared_data_and_its_own_count(sim_dataset):
+    from rideid.errors import ArgumentError
+    from rideid.estimate.cost import EvaluationCounter, ParameterSpace
+    ds = rideid.load_dataset(sim_dataset)
+    cf = rideid.CostFunction(ds, extensions=("anti_roll_bars", "tire_damping"))
+    names = list(cf.names)
+    base = ParameterSpace(ds.known, ds.geometry, ds.manifest.bounds, extensions=())
+    small = cf.with_space(base)
+    assert small.Y is cf.Y and small.W is cf.W and small.sim is cf.sim  # shared, not copied
+    assert small.names == list(base.names) and small.space is base and cf.names == names  # cf unchanged
+    # the same costs as a cost function built from scratch on that space
+    fresh = rideid.CostFunction(ds, space=base)
+    X = np.array([[DEFAULT_CAR[n] * f for n in base.names] for f in (1.0, 1.02)])
+    np.testing.assert_array_equal(small(X), fresh(X))
+    assert small.nfev == 2 and cf.nfev == 0  # its own count
+    shared = cf.with_space(base, counter=cf.counter)
+    shared(X)
+    assert cf.nfev == shared.nfev == 2 and small.nfev == 2
+    counter = EvaluationCounter(5)
+    assert rideid.CostFunction(ds, space=base, counter=counter).nfev == 5
+    with pytest.raises(AttributeError):
+        cf.nfev = 0  # read-only: the counter's
+    curves = ParameterSpace(ds.known, ds.geometry, ds.manifest.bounds, extensions=("damper_curves",))
+    with pytest.raises(ArgumentError, match="another simulator"):
+        cf.with_space(curves)
+
+
+def test_the_result_is_frozen(sim_dataset):
+    import dataclasses
+    ds = rideid.load_dataset(sim_dataset)
+    res = rideid.identify(ds, seed=1, generations=2, population=8, polish=False, model="base", assess=False)
+    with pytest.raises(dataclasses.FrozenInstanceError):
+        res.nfev = 0
+    with pytest.raises(dataclasses.FrozenInstanceError):
+        res.adequacy = {}
+    new = dataclasses.replace(res, nfev=res.nfev + 1)
+    assert new.nfev == res.nfev + 1 and new.parameters == res.parameters
+
+
+def test_cycle_check_returns_new_dicts(monkeypatch):
+    from types import SimpleNamespace
+
+    from rideid.estimate import identify as ident
+    fs = 100.0
+    runs = {rid: SimpleNamespace(distance=None, fs=fs, run_data=lambda s, rid=rid: (rid, s))
+            for rid in ("a", "b", "c")}
+    ds = SimpleNamespace(measured=runs, geometry=None, manifest=SimpleNamespace(
+        tracks={"t": None}, run=lambda rid: SimpleNamespace(track="t")))
+    found = {"a": 1.0 + 5 / fs, "b": 2.0 + 1 / fs, "c": 3.0}  # a slips five samples, b one (kept), c none
+    monkeypatch.setattr(ident, "estimate_start", lambda mr, P, geom, track: (
+        found[next(k for k, v in runs.items() if v is mr)], None))
+    starts = {"a": 1.0, "b": 2.0, "c": 3.0}
+    data = {"a": "A", "b": "B", "c": "C"}
+    slipped, starts2, data2 = ident._cycle_check(ds, None, starts, data)
+    assert starts == {"a": 1.0, "b": 2.0, "c": 3.0} and data == {"a": "A", "b": "B", "c": "C"}  # unchanged
+    assert slipped == {"a": pytest.approx(5 / fs)}
+    assert starts2 == {"a": found["a"], "b": 2.0, "c": 3.0}
+    assert data2 == {"a": ("a", found["a"]), "b": "B", "c": "C"}

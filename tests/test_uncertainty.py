@@ -193,3 +193,78 @@ def test_std_robust_covers_the_truth_under_coloured_noise(tmp_path):
     assert cov_r >= 0.90
     assert cov_w <= 0.75
     assert 0.5 < np.std(z_r) < 1.2
+
+
+def _jacobian_with(s, seed=0, m=60):
+    """A Jacobian ``U diag(s) V^T`` of known singular values and right vectors, and its exact ``(J^T J)^+``."""
+    rng = np.random.default_rng(seed)
+    n = len(s)
+    U, _ = np.linalg.qr(rng.standard_normal((m, n)))
+    V, _ = np.linalg.qr(rng.standard_normal((n, n)))
+    s = np.asarray(s, dtype=float)
+    return (U * s) @ V.T, V, s
+
+
+def test_white_covariance_of_an_ill_conditioned_jacobian_matches_the_closed_form():
+    from rideid.estimate.uncertainty import normal_inverse
+    # cond(J) = 1e9: J^T J has condition 1e18, beyond double precision
+    J, V, s = _jacobian_with([1.0, 0.3, 1e-3, 1e-6, 1e-9])
+    exact = (V / s ** 2) @ V.T
+    inv = normal_inverse(J)
+    assert inv.rank == 5 and not inv.unidentified.any()
+    assert np.max(np.abs(inv.matrix - exact)) / np.max(np.abs(exact)) < 1e-6
+    assert np.allclose(np.diag(inv.matrix), np.diag(exact), rtol=1e-6)
+    # the normal matrix's inverse (the method it replaces) loses most digits here, or fails outright
+    try:
+        naive = np.linalg.inv(J.T @ J)
+        assert np.max(np.abs(naive - exact)) / np.max(np.abs(exact)) > 1e-3
+    except np.linalg.LinAlgError:
+        pass
+    # at cond(J) = 1e7 it still returns numbers, wrong in the third digit or worse
+    J7, V7, s7 = _jacobian_with([1.0, 0.3, 1e-3, 1e-5, 1e-7], seed=3)
+    exact7 = (V7 / s7 ** 2) @ V7.T
+    assert np.max(np.abs(np.linalg.inv(J7.T @ J7) - exact7)) / np.max(np.abs(exact7)) > 1e-4
+    assert np.max(np.abs(normal_inverse(J7).matrix - exact7)) / np.max(np.abs(exact7)) < 1e-8
+    # white_covariance: s^2 (J^T J)^+ with s^2 = RSS / (m - n)
+    e = np.random.default_rng(5).standard_normal(J.shape[0])
+    s2 = e @ e / (J.shape[0] - 5)
+    assert np.allclose(white_covariance(J, e), s2 * exact, rtol=1e-6, atol=1e-6 * s2 * np.abs(exact).max())
+
+
+def test_a_rank_deficient_jacobian_reports_the_unidentified_parameter_as_infinite():
+    from rideid.estimate.uncertainty import normal_inverse
+    rng = np.random.default_rng(2)
+    A = rng.standard_normal((50, 2))
+    # parameter 3 has no information; parameters 4 and 5 enter only as their sum
+    c = rng.standard_normal(50)
+    J = np.column_stack([A, np.zeros(50), c, c])
+    inv = normal_inverse(J)
+    assert inv.rank == 3
+    assert inv.unidentified.tolist() == [False, False, True, True, True]
+    e = rng.standard_normal(50)
+    cov = white_covariance(J, e)
+    assert np.isinf(cov[2, 2]) and np.isinf(cov[3, 3]) and np.isinf(cov[4, 4])
+    assert np.isnan(cov[0, 2]) and np.isnan(cov[3, 4])
+    # the identified parameters: exactly the fit without the unidentified columns (sum of 4 and 5 as one)
+    Jr = np.column_stack([A, c])
+    s2 = e @ e / (50 - 5)
+    assert np.allclose(cov[:2, :2], s2 * np.linalg.inv(Jr.T @ Jr)[:2, :2], rtol=1e-10)
+    # the robust covariance marks the same parameters
+    rob = hac_covariance(J, e, [(50, 1)], bandwidth=2.0).cov
+    assert np.isinf(np.diag(rob)[2:]).all() and np.isfinite(rob[:2, :2]).all()
+
+
+def test_an_unidentified_parameter_has_no_standard_error_in_the_details():
+    from types import SimpleNamespace
+
+    from rideid.estimate.identify import NOT_IDENTIFIED, parameter_detail
+    from rideid.estimate.uncertainty import EstimateCovariance
+    space = SimpleNamespace(col={"k_sf": 0, "k_sr": 1}, fixed={}, names=["k_sf", "k_sr"], derived=None,
+                            bounds=np.array([[1e4, 1e5], [1e4, 1e5]]), derived_names=lambda: [])
+    cov = np.array([[4.0, np.nan], [np.nan, np.inf]])
+    robust = EstimateCovariance(["k_sf", "k_sr"], cov, cov)
+    P = np.array([3e4, 5e4])
+    std = np.sqrt(np.diag(cov))
+    ok, bad = (parameter_detail(space, P, n, std, cov, robust) for n in ("k_sf", "k_sr"))
+    assert ok["std"] == 2.0 and ok["std_robust"] == 2.0 and "note" not in ok
+    assert bad["std"] is None and bad["std_robust"] is None and bad["note"] == NOT_IDENTIFIED

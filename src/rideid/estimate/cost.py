@@ -373,6 +373,28 @@ class ParameterSpace:
         return self.full(x)[0]
 
 
+class EvaluationCounter:
+    """How many candidates (rows) were evaluated: one count that several cost functions of one
+    identification share (:meth:`CostFunction.with_space`), so no caller adds counts up by hand.
+
+    Parameters
+    ----------
+    n : int
+        The count to start from.
+    """
+
+    def __init__(self, n: int = 0):
+        self._n = int(n)
+
+    @property
+    def n(self) -> int:
+        return self._n
+
+    def add(self, k: int):
+        """Count ``k`` more evaluated candidates."""
+        self._n += int(k)
+
+
 class CostFunction:
     """``J(X)`` for a batch of free-parameter rows (see module docstring).
 
@@ -396,51 +418,81 @@ class CostFunction:
         The free parameter names, in column order.
     bounds : ndarray, shape (d, 2)
     run_ids : list of str
+    nfev : int
+        Candidates evaluated, counted by :attr:`counter` (an :class:`EvaluationCounter`, shared with the
+        cost functions built with it: ``counter`` argument, :meth:`with_space`).
     """
 
     def __init__(self, ds: Dataset, weights=None, use_kernel: bool = True, space: ParameterSpace | None = None,
-                 extensions=None):
+                 extensions=None, counter: "EvaluationCounter | None" = None):
         unaligned = [r.id for r in ds.runs if r.id not in ds.data]
         if unaligned:
             raise ArgumentError(f"runs {', '.join(unaligned)} have no start yet: load the dataset with "
                                 "rideid.load_dataset (or pass it through rideid.data.dataset.align_starts)")
-        self.ds = ds
         if space is None:
             if extensions is None:  # the dataset's [model], else the twelve
                 extensions = ds.manifest.extensions or ()
                 refuse_unsupported_groups(extensions, f"{ds.manifest.path}: [model] extensions")
             space = ParameterSpace(ds.known, ds.geometry, ds.manifest.bounds, extensions=extensions,
                                    damper_knots=ds.manifest.damper_knots)
-        self.space = space
-        self.names = list(self.space.names)
-        self.bounds = self.space.bounds
-        self.run_ids = [r.id for r in ds.runs]
         runs, Ys, Ws = prepare_inputs(ds), [], []
         for r in ds.runs:
             Y = ds.data[r.id].matrix()
             Ws.append(channel_weights(Y))
             Ys.append(np.nan_to_num(Y, nan=0.0))
         # the linear BatchSimulator unless the model has damper curves (rideid.model.nonlinear)
-        self.sim = make_simulator(ds.geometry, runs, space.layout) if space.layout is None else \
+        sim = make_simulator(ds.geometry, runs, space.layout) if space.layout is None else \
             CurveSimulator(ds.geometry, runs, space.layout)
-        self.Y = np.ascontiguousarray(np.concatenate(Ys))
-        self.W = np.array(Ws)
+        self._build(ds, space, sim, np.ascontiguousarray(np.concatenate(Ys)), np.array(Ws), use_kernel, weights,
+                    counter)
+
+    def _build(self, ds, space, sim, Y, W, use_kernel, weights, counter):
+        """Every attribute, set once: the prepared data (``sim``, ``Y``, ``W``) shared by copies."""
+        self.ds = ds
+        self.space = space
+        self.names = list(space.names)
+        self.bounds = space.bounds
+        self.run_ids = [r.id for r in ds.runs]
+        self.sim = sim
+        self.Y = Y
+        self.W = W
         self.use_kernel = use_kernel
-        self.weights = np.full(len(runs), 1.0 / len(runs))
+        self.weights = np.full(len(self.run_ids), 1.0 / len(self.run_ids))
         if weights is not None:
             self.set_weights(weights)
-        self.nfev = 0
+        self.counter = EvaluationCounter() if counter is None else counter
+
+    @property
+    def nfev(self) -> int:
+        """Candidates evaluated (rows simulated) through this cost function and those sharing its
+        :attr:`counter`."""
+        return self.counter.n
+
+    def with_space(self, space: ParameterSpace, weights=None, counter: "EvaluationCounter | None" = None
+                   ) -> "CostFunction":
+        """A new cost function on ``space`` (a parameter space of the same simulator layout), sharing the
+        prepared runs and data (not copied).
+
+        Parameters
+        ----------
+        space : ParameterSpace
+        weights : array_like, shape (n_runs,), optional
+            Run weights (default equal).
+        counter : EvaluationCounter, optional
+            Share an evaluation count (e.g. this one's :attr:`counter`, to count on); default a new one (0).
+        """
+        if (space.layout is None) != (self.space.layout is None) or (
+                space.layout is not None and space.layout != self.space.layout):
+            raise ArgumentError("with_space: the new parameter space needs another simulator "
+                                "(damper curves or bump stops differ); build a CostFunction instead")
+        new = CostFunction.__new__(CostFunction)
+        new._build(self.ds, space, self.sim, self.Y, self.W, self.use_kernel, weights, counter)
+        return new
 
     def copy(self, weights=None) -> "CostFunction":
         """A copy sharing the prepared runs and data, with its own weights
         (equal unless given) and its own evaluation count (0)."""
-        new = object.__new__(CostFunction)
-        new.__dict__.update(self.__dict__)
-        new.weights = np.full(len(self.run_ids), 1.0 / len(self.run_ids))
-        if weights is not None:
-            new.set_weights(weights)
-        new.nfev = 0
-        return new
+        return self.with_space(self.space, weights)
 
     def set_weights(self, w):
         w = np.asarray(w, dtype=float)
@@ -463,7 +515,7 @@ class CostFunction:
                     E[:, idx[group]] = fn(P[idx[group]], self.Y, self.W)
             else:
                 E[:, ok] = fn(P[ok], self.Y, self.W)
-        self.nfev += P.shape[0]
+        self.counter.add(P.shape[0])
         return E
 
     def combine(self, E, weights=None) -> np.ndarray:
@@ -491,7 +543,7 @@ class CostFunction:
             cols, sc = self.residual_scale(ri, w)
             d = (outs[ri][:, :, cols] - Y[None, s:e, cols]) * sc
             parts.append(d.reshape(P.shape[0], -1))
-        self.nfev += P.shape[0]
+        self.counter.add(P.shape[0])
         return np.concatenate(parts, axis=1)
 
     def residual_scale(self, ri, weights):

@@ -27,7 +27,8 @@
    (at most 8 rounds). The caller's dataset is never changed; the starts
    and their standard errors come back in ``result.starts``. Without the
    polish the nominal alignment stands.
-7. Standard errors: ``std`` from ``cov = s^2 (J^T J)^-1`` at the optimum with
+7. Standard errors: ``std`` from ``cov = s^2 (J^T J)^+`` (through the SVD of ``J``:
+   :func:`rideid.estimate.uncertainty.normal_inverse`) at the optimum with
    ``s^2 = RSS / (m - d)``, assuming white residuals (an optimistic lower
    bound when residuals are correlated or the model is wrong), and
    ``std_robust`` from the HAC sandwich of :mod:`rideid.estimate.uncertainty`
@@ -58,7 +59,7 @@ from __future__ import annotations
 import math
 import time
 import warnings
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 from scipy.optimize import OptimizeResult, least_squares
@@ -78,7 +79,7 @@ from .cost import BUMP_UNITS, IDENTIFIABLE_GROUPS, CostFunction, ParameterSpace,
 from .jade import JadeSolver, make_rng, stop_requested
 from .adequacy import advise, assess_fit
 from .result import History, IdentificationResult
-from .uncertainty import estimate_covariance, hac_covariance
+from .uncertainty import estimate_covariance, hac_covariance, white_covariance
 from .sensitivity import SensitivityMaps, sensitivity_maps
 from .weighting import TrackWeighting, coefficient_of_variation
 
@@ -231,21 +232,18 @@ def identify(ds: Dataset, *, rng=None, seed=None, population: int = DEFAULT_POPU
                                spread_tol=spread_tol, callback=callback, t0=t0)
         # a start of the curve model's own width: its knot forces as given (not a linear car's F = c v)
         own = start is not None and nonlinear and len(start) == len(cf.names) != len(cf_search.names)
-        if start is not None:
-            search.x, search.stop = np.asarray(start, dtype=float), "start"
+        x0 = search.x if start is None else np.asarray(start, dtype=float)
         excitation = bumps = None
         if nonlinear:
-            cf, search.x, excitation, bumps = _curve_start(cf, cf if own else cf_search, search.x)
-            cf.nfev += cf_search.nfev if cf_search is not cf else 0
-        fit = polish_fit(ds, cf, search.x) if polish else None
+            cf, x0, excitation, bumps = _curve_start(cf, cf if own else cf_search, x0)
+        search = OptimizeResult(dict(search, x=x0, stop=search.stop if start is None else "start"))
+        fit = polish_fit(ds, cf, x0) if polish else None
         if fit is not None and cf.space.bump:
             fit, bumps = _bump_recheck(ds, fit, bumps)
         if fit is not None and nonlinear:
             fit.cost.sim.pin_at(None)
-        res = _result(ds, cf if fit is None else fit.cost, search, fit, weighting, maps, rng_record,
-                      time.perf_counter() - t0, assess, excitation, bumps)
-        res.wall_time_s = time.perf_counter() - t0
-        return res
+        return _result(ds, cf if fit is None else fit.cost, search, fit, weighting, maps, rng_record, t0, assess,
+                       excitation, bumps)
 
 
 def _linear_cost(ds, cf: CostFunction) -> CostFunction:
@@ -256,14 +254,7 @@ def _linear_cost(ds, cf: CostFunction) -> CostFunction:
                            {k: v for k, v in sp._bounds_arg.items()
                             if not k.startswith("F_") and k not in BUMP_STOP_NAMES},
                            extensions=[g for g in sp.extensions if g not in NONLINEAR_GROUPS])
-    return CostFunction(cf.ds, space=space)
-
-
-def _with_space(cf: CostFunction, space) -> CostFunction:
-    """A copy of ``cf`` on another parameter space of the same layout (shares the simulator)."""
-    cf2 = cf.copy()
-    cf2.space, cf2.names, cf2.bounds, cf2.nfev = space, list(space.names), space.bounds, cf.nfev
-    return cf2
+    return CostFunction(cf.ds, space=space, counter=cf.counter)  # one count of evaluations
 
 
 def _curve_start(cf: CostFunction, cf_search: CostFunction, x):
@@ -293,7 +284,7 @@ def _curve_start(cf: CostFunction, cf_search: CostFunction, x):
         excitation = knot_excitation(cf, P)
         new = space.with_frozen(excitation["frozen"])
         x = space.reduce(x, new)
-        cf, space = _with_space(cf, new), new
+        cf, space = cf.with_space(new, counter=cf.counter), new
     if space.bump:
         rates = [x[space.names.index(n)] for n in ("bs_rate_f", "bs_rate_r") if n in space.names]
         if cf_search is not cf or (rates and not any(rates)):  # a linear car's start, or a start without stops
@@ -305,8 +296,8 @@ def _curve_start(cf: CostFunction, cf_search: CostFunction, x):
                     bump_frozen.update(frozen_values(space, a, bumps[axle]["max_compression"]))
         new = space.with_bump_frozen(bump_frozen)
         x = space.reduce(x, new)
-        cf, space = _with_space(cf, new), new
-    cf2 = _with_space(cf, space)
+        cf, space = cf.with_space(new, counter=cf.counter), new
+    cf2 = cf.with_space(space, counter=cf.counter)
     P = space.full(np.asarray(x, dtype=float)[None])[0]
     cf2.sim.pin_at(P[None])
     return cf2, x, excitation, bumps
@@ -314,7 +305,9 @@ def _curve_start(cf: CostFunction, cf_search: CostFunction, x):
 
 def _bump_recheck(ds, fit, bumps):
     """After the polish: a stop the polished car no longer reaches (fewer than ``MIN_SAMPLES`` samples beyond
-    its clearance) is held as not reached and the polish repeated (at most twice)."""
+    its clearance) is held as not reached and the polish repeated (at most twice).
+
+    Returns the fit and a new bump record (``bumps`` is not changed)."""
 
     for _ in range(2):
         cf = fit.cost
@@ -322,19 +315,18 @@ def _bump_recheck(ds, fit, bumps):
         P = space.full(fit.x[None])[0]
         r = reach(cf, P)
         add = {}
+        bumps = dict(bumps)
         for axle, a in (("front", "f"), ("rear", "r")):
-            bumps.setdefault(axle, {}).update(r[axle])
             free = any(f"bs_{k}_{a}" in space.names for k in ("clear", "rate"))
+            held = (free and not r[axle]["reached"]) or f"bs_clear_{a}" in space.bump_frozen
+            bumps[axle] = {**bumps.get(axle, {}), **r[axle], **({"reached": False} if held else {})}
             if free and not r[axle]["reached"]:
                 add.update(frozen_values(space, a, r[axle]["max_compression"]))
-                bumps[axle]["reached"] = False
-            elif f"bs_clear_{a}" in space.bump_frozen:
-                bumps[axle]["reached"] = False
         if not add:
             break
         new = space.with_bump_frozen({**space.bump_frozen, **add})
         x = space.reduce(fit.x, new)
-        cf2 = _with_space(cf, new)
+        cf2 = cf.with_space(new, counter=cf.counter)
         cf2.sim.pin_at(new.full(x[None]))
         fit = polish_fit(ds, cf2, x)
     return fit, bumps
@@ -437,8 +429,10 @@ def polish_fit(ds: Dataset, cf: CostFunction, x0) -> OptimizeResult:
     return OptimizeResult(x=x, std=std, info=info, cost=cf, starts=starts)
 
 
-def _result(ds, cf, search, fit, weighting, maps, rng_record, wall, assess=True,
+def _result(ds, cf, search, fit, weighting, maps, rng_record, t0, assess=True,
             excitation=None, bumps=None) -> IdentificationResult:
+    """The result, built once: the estimate, its uncertainty, details, adequacy and modes, each a function
+    of the fit; ``wall_time_s`` from ``t0`` (``time.perf_counter``) to the end."""
     space = cf.space
     x = search.x if fit is None else fit.x
     d = len(cf.names)
@@ -448,6 +442,34 @@ def _result(ds, cf, search, fit, weighting, maps, rng_record, wall, assess=True,
     final_E = cf.run_errors(x[None])[:, 0]
     P = space.full(x[None])[0]
     robust = estimate_covariance(info, space, x)
+    details, findings = _details(ds, space, P, std, cov, robust, bumps)
+    starts = {} if fit is None else fit.starts
+    finite = bool(np.all(np.isfinite(x)) and np.isfinite(final_E).all())
+    success = finite and (info is None or bool(info["success"]))
+    message = MESSAGES[search.stop] + ("" if info is None else f" Polish: {info['message']}")
+    response = cf.simulate(P)
+    nfev = int(cf.nfev)  # the fit's evaluations (the adequacy's simulations are not the fit's)
+    model = {"extensions": list(space.extensions)}
+    adequacy = advise(assess_fit(cf, P, response), model) if assess else None
+    dampers = None if not space.curves else dampers_block(space, P, robust.white, robust.robust, robust.names,
+                                                          excitation)
+    stops = None if not space.bump else bump_block(space, P, robust.white, robust.robust, robust.names, bumps)
+    return IdentificationResult(
+        x=np.asarray(x, dtype=float), names=list(cf.names), std=np.asarray(std, dtype=float), covariance=cov,
+        fun=float(np.full(final_E.size, 1.0 / final_E.size) @ final_E), success=success, message=message, stop=search.stop,
+        nit=int(search.nit), nfev=nfev, parameters={n: float(P[space.col[n]]) for n in space.reported_names},
+        details=details, known=dict(ds.known), seed=rng_record["seed"],
+        rng_state=rng_record["rng_state"], track_weights=search.track_weights, weights_mode=weighting.name,
+        polish=info, history=History(search.history), starts=starts, preprocessing=_preprocessing(ds, starts),
+        modal=modal_summary(P[:len(ALL_NAMES)], ds.geometry), dataset=str(ds.path), maps=maps,
+        model=model, response=response, correlation=robust.correlation_dict(), adequacy=adequacy,
+        checks=[f.to_dict() for f in findings], dampers=dampers, bump_stops=stops,
+        wall_time_s=time.perf_counter() - t0)
+
+
+def _details(ds, space, P, std, cov, robust, bumps):
+    """``details`` (name -> :func:`parameter_detail`, with the knots not excited, the stops not reached and
+    the estimates at a bound marked) and the findings of the data and bound checks."""
     details = {}
     for n in space.reported_names:
         e = parameter_detail(space, P, n, std, cov, robust)
@@ -470,29 +492,20 @@ def _result(ds, cf, search, fit, weighting, maps, rng_record, wall, assess=True,
     for f in findings:
         if f.check == "bounds":
             details[f.channel]["at_bound"] = True
-    starts = {} if fit is None else fit.starts
+    return details, findings
+
+
+def _preprocessing(ds, starts) -> dict:
+    """The dataset's preprocessing record with the starts the fit settled."""
     pre = ds.preprocessing()
     for rid, st in starts.items():
         pre[rid]["start"] = dict(pre[rid].get("start", {}), **st)
-    finite = bool(np.all(np.isfinite(x)) and np.isfinite(final_E).all())
-    success = finite and (info is None or bool(info["success"]))
-    message = MESSAGES[search.stop] + ("" if info is None else f" Polish: {info['message']}")
-    response = cf.simulate(P)
-    return IdentificationResult(
-        x=np.asarray(x, dtype=float), names=list(cf.names), std=np.asarray(std, dtype=float), covariance=cov,
-        fun=float(np.full(final_E.size, 1.0 / final_E.size) @ final_E), success=success, message=message, stop=search.stop,
-        nit=int(search.nit), nfev=int(cf.nfev), parameters={n: float(P[space.col[n]]) for n in space.reported_names},
-        details=details, known=dict(ds.known), wall_time_s=wall, seed=rng_record["seed"],
-        rng_state=rng_record["rng_state"], track_weights=search.track_weights, weights_mode=weighting.name,
-        polish=info, history=History(search.history), starts=starts, preprocessing=pre,
-        modal=modal_summary(P[:len(ALL_NAMES)], ds.geometry), dataset=str(ds.path), maps=maps,
-        model={"extensions": list(space.extensions)}, response=response, correlation=robust.correlation_dict(),
-        adequacy=advise(assess_fit(cf, P, response), {"extensions": list(space.extensions)}) if assess else None,
-        checks=[f.to_dict() for f in findings],
-        dampers=None if not space.curves else dampers_block(space, P, robust.white, robust.robust, robust.names,
-                                                            excitation),
-        bump_stops=None if not space.bump else bump_block(space, P, robust.white, robust.robust, robust.names,
-                                                          bumps))
+    return pre
+
+
+#: the note of a free parameter the polish's Jacobian does not determine (rideid.estimate.uncertainty)
+NOT_IDENTIFIED = ("not identified: the data determine it only in combination with other parameters, or not at "
+                  "all (a singular value of the Jacobian below RANK_RTOL of the largest); no standard error")
 
 
 def parameter_detail(space, P, n: str, std, cov, robust) -> dict:
@@ -505,6 +518,8 @@ def parameter_detail(space, P, n: str, std, cov, robust) -> dict:
         j = space.names.index(n)
         e["lower"], e["upper"] = float(space.bounds[j, 0]), float(space.bounds[j, 1])
         e["std"] = None if not np.isfinite(std[j]) else float(std[j])
+        if np.isinf(std[j]):
+            e["note"] = NOT_IDENTIFIED
     elif n == space.derived:
         e["std"] = _derived_std(space, cov)
         e["lower"] = e["upper"] = None  # follows from the anchor: never searched
@@ -537,87 +552,152 @@ def _polish(cf: CostFunction, x0, weights, align=None):
     ``D = dy/d(start)`` from :func:`_start_derivative` (its Jacobian column).
     The linearisation is centred again by :func:`_polish_aligned` until the
     starts settle, so at the end it is exact.
+
+    Returns ``(x, info, std)``: the free parameters, the ``polish`` block of result.json and the
+    parameters' white standard errors (:class:`_Polish`).
     """
-    lo, hi = cf.bounds[:, 0], cf.bounds[:, 1]
-    span = hi - lo
-    d = len(cf.names)
-    align = align or []
+    prob = _Polish(cf, np.asarray(weights, dtype=float), tuple(align or ()))
+    sol = prob.solve(x0)
+    info, std = prob.info(sol, x0)
+    return prob.to_x(sol.x[:prob.d]), info, std
 
-    def to_x(z):
-        return lo + span * z
 
-    def start_of(v, k):
-        return align[k].start + v[d + k] / align[k].fs
+@dataclass(frozen=True)
+class _Polish:
+    """The polish's least-squares problem in bound-normalised coordinates ``v = (z, start shifts)``.
 
-    def measured(v):
-        if not align:
+    ``z`` in ``[0, 1]`` per free parameter (``x = lo + span z``), then one shift per run of ``align``
+    (samples, ``[-5, 5]``). The residuals are the cost function's at ``weights``; the measured data of an
+    aligned run move by ``delta D`` (the start's linearisation, :func:`_polish`).
+    """
+
+    cf: CostFunction
+    weights: np.ndarray
+    align: tuple = ()
+    #: the residuals of the last :meth:`residuals` call: least_squares asks for the Jacobian where it just
+    #: evaluated (a memo, not state of the problem)
+    _last: dict = field(default_factory=dict, repr=False, compare=False)
+
+    @property
+    def d(self) -> int:
+        return len(self.cf.names)
+
+    @property
+    def lo(self) -> np.ndarray:
+        return self.cf.bounds[:, 0]
+
+    @property
+    def span(self) -> np.ndarray:
+        return self.cf.bounds[:, 1] - self.cf.bounds[:, 0]
+
+    def to_x(self, z) -> np.ndarray:
+        """Bound-normalised ``z`` -> parameters ``x``."""
+        return self.lo + self.span * z
+
+    def start_of(self, v, k) -> float:
+        """The start (file time, s) of ``align[k]`` at ``v``."""
+        return self.align[k].start + v[self.d + k] / self.align[k].fs
+
+    def measured(self, v):
+        """The measured data with each aligned run moved by its shift's linearisation (None: no shift)."""
+        if not self.align:
             return None
+        cf, d = self.cf, self.d
         Y = cf.Y.copy()
-        for k, sh in enumerate(align):
+        for k, sh in enumerate(self.align):
             a, b = cf.sim.run_start[sh.index], cf.sim.run_start[sh.index + 1]
             Y[a:b] -= (v[d + k] / sh.fs) * sh.D  # y_model + delta D - y  ==  y_model - (y - delta D)
         return Y
 
-    last = {}  # the residuals of the last fun call: least_squares asks for the Jacobian where it just evaluated
-
-    def fun(v):
-        r = cf.residuals(to_x(v[:d])[None], weights, Y=measured(v))[0]
-        last["v"], last["r"] = v.copy(), r
+    def residuals(self, v) -> np.ndarray:
+        """Stacked weighted residuals ``(m,)`` at ``v``."""
+        r = self.cf.residuals(self.to_x(v[:self.d])[None], self.weights, Y=self.measured(v))[0]
+        self._last["v"], self._last["r"] = v.copy(), r
         return r
 
-    def jac(v):
-        h = 1e-7
-        z = v[:d]
-        steps = np.where(z + h <= 1, h, -h)
-        Z = np.tile(z, (d, 1))
-        Z[np.arange(d), np.arange(d)] += steps
-        Yv = measured(v)
-        R = cf.residuals(to_x(Z), weights, Y=Yv)
-        r0 = last["r"] if "v" in last and np.array_equal(last["v"], v) else cf.residuals(
-            to_x(z[None]), weights, Y=Yv)[0]
-        J = np.zeros((R.shape[1], v.size))
-        J[:, :d] = ((R - r0) / steps[:, None]).T
-        offsets = np.cumsum([0] + [(e - s) * cf.residual_scale(ri, weights)[0].size
-                                   for ri, (s, e) in enumerate(zip(cf.sim.run_start[:-1], cf.sim.run_start[1:]))])
-        for k, sh in enumerate(align):
-            cols, sc = cf.residual_scale(sh.index, weights)
+    def jacobian(self, v) -> np.ndarray:
+        """``(m, d + len(align))``: forward differences (step 1e-7 in ``z``) as one batch, the shifts' columns
+        from their ``D``."""
+        d, cf = self.d, self.cf
+        D = self._differences(v)
+        J = np.zeros((D.shape[0], v.size))
+        J[:, :d] = D
+        offsets = self._run_offsets()
+        for k, sh in enumerate(self.align):
+            cols, sc = cf.residual_scale(sh.index, self.weights)
             J[offsets[sh.index]:offsets[sh.index + 1], d + k] = (sh.D[:, cols] * sc / sh.fs).ravel()
         return J
 
-    z0 = np.clip((x0 - lo) / span, 0, 1)
-    v0 = np.concatenate([z0, np.zeros(len(align))])
-    blo = np.concatenate([np.zeros(d), np.full(len(align), -5.0)])
-    bhi = np.concatenate([np.ones(d), np.full(len(align), 5.0)])
-    sol = least_squares(fun, v0, jac=jac, bounds=(blo, bhi), method="trf", x_scale="jac",
-                        ftol=1e-15, xtol=1e-12, gtol=1e-15, max_nfev=100)
-    J = sol.jac
-    m, n = J.shape
-    rss = float(sol.fun @ sol.fun)
-    s2 = rss / max(m - n, 1)
-    scale = np.concatenate([span, [1.0 / sh.fs for sh in align]])
-    try:
-        cov_all = s2 * np.linalg.inv(J.T @ J) * np.outer(scale, scale)
-        std_all = np.sqrt(np.clip(np.diag(cov_all), 0, None))
-    except np.linalg.LinAlgError:
-        cov_all = np.full((n, n), np.nan)
-        std_all = np.full(n, np.nan)
-    # robust (HAC) covariance: runs as independent blocks of samples, see rideid.estimate.uncertainty
-    blocks = [(int(e - s), int(np.count_nonzero(cf.W[ri] > 0)))
-              for ri, (s, e) in enumerate(zip(cf.sim.run_start[:-1], cf.sim.run_start[1:]))]
-    hac = hac_covariance(J, sol.fun, blocks)
-    cov_rob = hac.cov * np.outer(scale, scale)
-    std_rob = np.sqrt(np.clip(np.diag(cov_rob), 0, None))
-    x = to_x(sol.x[:d])
-    info = {"success": bool(sol.success), "message": sol.message, "nfev": int(sol.nfev),
-            "cost_before": float(np.sum(fun(v0) ** 2)), "cost_after": 2 * float(sol.cost),
-            "covariance": cov_all[:d, :d].tolist(), "names": list(cf.names),
-            "covariance_robust": cov_rob[:d, :d].tolist(),
-            "hac_bandwidths": {rid: float(b) for rid, b in zip(cf.run_ids, hac.bandwidths)}}
-    if align:
-        info["starts"] = {sh.run_id: {"value": start_of(sol.x, k), "std": float(std_all[d + k]),
-                                      "std_robust": float(std_rob[d + k])}
-                          for k, sh in enumerate(align)}
-    return x, info, std_all[:d]
+    def _differences(self, v) -> np.ndarray:
+        """The parameters' forward-difference columns ``(m, d)`` at ``v`` (the last residuals reused)."""
+        h = 1e-7
+        z = v[:self.d]
+        steps = np.where(z + h <= 1, h, -h)
+        Z = np.tile(z, (self.d, 1))
+        Z[np.arange(self.d), np.arange(self.d)] += steps
+        Yv = self.measured(v)
+        R = self.cf.residuals(self.to_x(Z), self.weights, Y=Yv)
+        last = self._last
+        r0 = last["r"] if "v" in last and np.array_equal(last["v"], v) else self.cf.residuals(
+            self.to_x(z[None]), self.weights, Y=Yv)[0]
+        return ((R - r0) / steps[:, None]).T
+
+    def _run_offsets(self) -> np.ndarray:
+        """Row where each run's residuals start in the stacked vector (and the end)."""
+        cf = self.cf
+        return np.cumsum([0] + [(e - s) * cf.residual_scale(ri, self.weights)[0].size
+                                for ri, (s, e) in enumerate(zip(cf.sim.run_start[:-1], cf.sim.run_start[1:]))])
+
+    def solve(self, x0) -> OptimizeResult:
+        """Trust-region reflective least squares from ``x0`` (shifts from 0)."""
+        d, n_al = self.d, len(self.align)
+        z0 = np.clip((x0 - self.lo) / self.span, 0, 1)
+        v0 = np.concatenate([z0, np.zeros(n_al)])
+        blo = np.concatenate([np.zeros(d), np.full(n_al, -5.0)])
+        bhi = np.concatenate([np.ones(d), np.full(n_al, 5.0)])
+        return least_squares(self.residuals, v0, jac=self.jacobian, bounds=(blo, bhi), method="trf",
+                             x_scale="jac", ftol=1e-15, xtol=1e-12, gtol=1e-15, max_nfev=100)
+
+    def scale(self) -> np.ndarray:
+        """``dx/dv`` of every unknown: the bounds' spans, then one sample interval per shift."""
+        return np.concatenate([self.span, [1.0 / sh.fs for sh in self.align]])
+
+    def covariance(self, sol):
+        """White covariance ``s^2 (J^T J)^+`` of every unknown in its own units, and its standard errors
+        (:func:`rideid.estimate.uncertainty.white_covariance`: SVD, unidentified directions inf/NaN)."""
+        sc = self.scale()
+        cov = white_covariance(sol.jac, sol.fun) * np.outer(sc, sc)
+        with np.errstate(invalid="ignore"):
+            return cov, np.sqrt(np.clip(np.diag(cov), 0, None))
+
+    def robust(self, sol):
+        """HAC covariance of every unknown in its own units (runs as independent blocks of samples, see
+        :mod:`rideid.estimate.uncertainty`) and the runs' bandwidths."""
+        cf = self.cf
+        blocks = [(int(e - s), int(np.count_nonzero(cf.W[ri] > 0)))
+                  for ri, (s, e) in enumerate(zip(cf.sim.run_start[:-1], cf.sim.run_start[1:]))]
+        hac = hac_covariance(sol.jac, sol.fun, blocks)
+        return hac.cov * np.outer(self.scale(), self.scale()), hac.bandwidths
+
+    def info(self, sol, x0):
+        """The ``polish`` block of result.json (the starts of ``align`` under ``starts``) and the free
+        parameters' white standard errors ``(d,)``."""
+        d, cf = self.d, self.cf
+        v0 = np.concatenate([np.clip((x0 - self.lo) / self.span, 0, 1), np.zeros(len(self.align))])
+        cov_all, std_all = self.covariance(sol)
+        cov_rob, bandwidths = self.robust(sol)
+        with np.errstate(invalid="ignore"):
+            std_rob = np.sqrt(np.clip(np.diag(cov_rob), 0, None))
+        info = {"success": bool(sol.success), "message": sol.message, "nfev": int(sol.nfev),
+                "cost_before": float(np.sum(self.residuals(v0) ** 2)), "cost_after": 2 * float(sol.cost),
+                "covariance": cov_all[:d, :d].tolist(), "names": list(cf.names),
+                "covariance_robust": cov_rob[:d, :d].tolist(),
+                "hac_bandwidths": {rid: float(b) for rid, b in zip(cf.run_ids, bandwidths)}}
+        if self.align:
+            info["starts"] = {sh.run_id: {"value": self.start_of(sol.x, k), "std": float(std_all[d + k]),
+                                          "std_robust": float(std_rob[d + k])}
+                              for k, sh in enumerate(self.align)}
+        return info, std_all[:d]
 
 
 #: re-estimate the starts until none moves by more than this fraction of a sample interval
@@ -663,35 +743,30 @@ def _polish_aligned(ds, cf, x_best, equal):
     Works on its own copy of the run data: ``ds`` is not changed.
     """
     starts = {rid: ds.measured[rid].start for rid in ds.auto_start_runs()}
-    records = {rid: {} for rid in starts}
     data = dict(ds.data)
     rounds = []
     for _ in range(REALIGN_MAX):
-        P = cf.space.full(x_best[None])[0]
-        align = [_Shift(cf.run_ids.index(rid), rid, ds.measured[rid].fs, starts[rid],
-                        _start_derivative(ds, rid, P, starts[rid])) for rid in starts]
-        x_best, info, std = _polish(cf, x_best, equal, align)
-        changes = {}
-        for rid, st in info["starts"].items():
-            changes[rid] = st["value"] - starts[rid]
-            starts[rid] = st["value"]
-            data[rid] = ds.measured[rid].run_data(st["value"])
-            records[rid] = {"source": "estimated with the parameters (least squares)",
-                            **_start_std(ds, rid, st["std"]), "std_robust": st["std_robust"]}
-        worst = max(abs(v) * ds.measured[rid].fs for rid, v in changes.items())
-        rounds.append({"max_change_samples": worst})
-        slipped = _cycle_check(ds, cf.space.full(x_best[None])[0], starts, data)
-        if slipped:
-            rounds[-1]["cycle_slips"] = slipped
+        x_best, info, std = _polish(cf, x_best, equal, _shifts(ds, cf, x_best, starts))
+        fitted = {rid: st["value"] for rid, st in info["starts"].items()}
+        worst = max(abs(v - starts[rid]) * ds.measured[rid].fs for rid, v in fitted.items())
+        data = {**data, **{rid: ds.measured[rid].run_data(v) for rid, v in fitted.items()}}
+        slipped, starts, data = _cycle_check(ds, cf.space.full(x_best[None])[0], {**starts, **fitted}, data)
+        rounds.append({"max_change_samples": worst, **({"cycle_slips": slipped} if slipped else {})})
         # the model's time axes moved with the starts: the cost function on them
-        nfev = cf.nfev
-        cf = CostFunction(ds.with_data(data), space=cf.space)
-        cf.nfev = nfev
+        cf = CostFunction(ds.with_data(data), space=cf.space, counter=cf.counter)
         if not slipped and worst < REALIGN_TOL:
             break
-    info["alignment_rounds"] = rounds
-    out = {rid: {"value": float(starts[rid]), **records[rid]} for rid in starts}
-    return x_best, info, std, cf, out
+    out = {rid: {"value": float(starts[rid]), "source": "estimated with the parameters (least squares)",
+                 **_start_std(ds, rid, info["starts"][rid]["std"]), "std_robust": info["starts"][rid]["std_robust"]}
+           for rid in starts}
+    return x_best, dict(info, alignment_rounds=rounds), std, cf, out
+
+
+def _shifts(ds, cf, x, starts) -> list:
+    """The :class:`_Shift` of each run in ``starts`` at the free parameters ``x``."""
+    P = cf.space.full(x[None])[0]
+    return [_Shift(cf.run_ids.index(rid), rid, ds.measured[rid].fs, starts[rid],
+                   _start_derivative(ds, rid, P, starts[rid])) for rid in starts]
 
 
 def _start_std(ds, rid, std_fit) -> dict:
@@ -722,16 +797,24 @@ def _start_std(ds, rid, std_fit) -> dict:
     return out
 
 
-def _cycle_check(ds, P, starts, data) -> dict:
+def _cycle_check(ds, P, starts, data):
     """Constant-speed auto runs: redo the all-lags correlation with the identified car.
 
     On a periodic track the nominal car may have picked a neighbouring cycle
     (the polish only moves a start by a few samples). Where the identified
-    car's correlation peaks more than two samples away, take its start
-    (updating ``starts`` and ``data``, the caller's working copies).
+    car's correlation peaks more than two samples away, its start is taken.
+
+    Returns
+    -------
+    slipped : dict
+        Run id -> the start's change (s), for the runs that slipped a cycle.
+    starts, data : dict
+        New dicts: ``starts`` and ``data`` with those runs' starts and run data replaced (the arguments
+        are not changed).
     """
     slipped = {}
-    for rid in starts:
+    starts, data = dict(starts), dict(data)
+    for rid in list(starts):
         mr = ds.measured[rid]
         if mr.distance is not None:
             continue
@@ -740,7 +823,7 @@ def _cycle_check(ds, P, starts, data) -> dict:
             slipped[rid] = s - starts[rid]
             starts[rid] = s
             data[rid] = mr.run_data(s)
-    return slipped
+    return slipped, starts, data
 
 
 def _derived_std(space, cov):

@@ -34,6 +34,7 @@ from __future__ import annotations
 import functools
 import itertools
 import time
+from dataclasses import replace
 
 import numpy as np
 from scipy import special
@@ -202,8 +203,7 @@ def identify_auto(ds, *, rng=None, seed=None, callback=None, maps=None, **kw):
     # damper curves on top of the linear choice: one more polish, kept when warranted (curve_candidate);
     # tried only when the linear choice is not adequate: an adequate linear model leaves no road-driven
     # structure in the residuals for curves to explain (and the extra polish costs as much as the search)
-    lin = results[chosen]
-    lin.adequacy = _own_adequacy(ds, costs[chosen], lin)
+    lin = results[chosen] = replace(results[chosen], adequacy=_own_adequacy(ds, costs[chosen], results[chosen]))
     curves_tried = bool(lin.adequacy) and not lin.adequacy.get("adequate", True)
     curve = (curve_candidate(ds, lin, chosen, best, rng=rng, seed=seed, maps=full.maps, **kw_nested)
              if curves_tried else None)
@@ -248,7 +248,7 @@ def identify_auto(ds, *, rng=None, seed=None, callback=None, maps=None, **kw):
     # bump stops on top of what is chosen, when that is still not adequate: one more polish (bump_candidate)
     now = results[chosen]
     if now.adequacy is None:
-        now.adequacy = _own_adequacy(ds, costs[chosen], now)
+        now = results[chosen] = replace(now, adequacy=_own_adequacy(ds, costs[chosen], now))
     bump = None
     if curves_tried and not now.adequacy.get("adequate", True):
         bump = bump_candidate(ds, now, chosen, best, rng=rng, seed=seed, maps=full.maps, **kw_nested)
@@ -262,7 +262,7 @@ def identify_auto(ds, *, rng=None, seed=None, callback=None, maps=None, **kw):
             best, chosen = e_b, bkey
     res = results[chosen]
     if res.adequacy is None:
-        res.adequacy = _own_adequacy(ds, costs[chosen], res)
+        res = results[chosen] = replace(res, adequacy=_own_adequacy(ds, costs[chosen], res))
     table = []
     for c in crit:
         r = results[tuple(c["extensions"])]
@@ -274,22 +274,20 @@ def identify_auto(ds, *, rng=None, seed=None, callback=None, maps=None, **kw):
             "parameters": dict(r.parameters),
             "std_robust": {n: d.get("std_robust") for n, d in r.details.items() if not d.get("fixed")},
         })
-    res.model = {"extensions": list(chosen), "selection": "auto", "criterion": CRITERION, "candidates": table}
+    model = {"extensions": list(chosen), "selection": "auto", "criterion": CRITERION, "candidates": table}
     if not curves_tried:
-        res.model["curves"] = ("not tried: the linear model is adequate (its residuals carry no road-driven "
+        model["curves"] = ("not tried: the linear model is adequate (its residuals carry no road-driven "
                                "structure for damper curves to explain)")
     if bump is not None:
-        res.model["bump_criterion"] = BUMP_CRITERION
+        model["bump_criterion"] = BUMP_CRITERION
     if curve is not None:
-        res.model["curve_criterion"] = CURVE_CRITERION
-        res.model["curve_departure_wald"] = curve[3]["curve_departure_wald"]
-    res.adequacy = advise(res.adequacy, res.model)  # what to try, now that the candidates have been weighed
-    if res is not full:  # the search was the full model's: its history and counts belong to this result
-        res.history, res.nit, res.stop, res.message = full.history, full.nit, full.stop, full.message
-        res.track_weights = full.track_weights
-    res.nfev = evaluations
-    res.wall_time_s = time.perf_counter() - t0
-    return res
+        model["curve_criterion"] = CURVE_CRITERION
+        model["curve_departure_wald"] = curve[3]["curve_departure_wald"]
+    # the search was the full model's: its history and counts belong to the result returned
+    search = {} if chosen == full_key else {"history": full.history, "nit": full.nit, "stop": full.stop,
+                                            "message": full.message, "track_weights": full.track_weights}
+    return replace(res, model=model, adequacy=advise(res.adequacy, model),  # advice, the candidates weighed
+                   nfev=evaluations, wall_time_s=time.perf_counter() - t0, **search)
 
 
 def curve_departure(names, theta, cov, space) -> tuple[float, int]:
@@ -439,9 +437,7 @@ def _nested_cost(cf_full, ds, extensions):
 
 
     space = ParameterSpace(ds.known, ds.geometry, ds.manifest.bounds, extensions=extensions)
-    cf = cf_full.copy()
-    cf.space, cf.names, cf.bounds, cf.nfev = space, list(space.names), space.bounds, 0
-    return cf
+    return cf_full.with_space(space)  # its own count of evaluations
 
 
 def default_model(ds, model=None):
@@ -475,6 +471,6 @@ def identify(ds, *args, model=None, cost=None, **kw):
         res = identify_auto(ds, **kw)
     else:
         res = identify_model(ds, *args, model=model, cost=cost, **kw)
-    res.vehicle = vehicle_table(ds.geometry)  # the geometry travels with the car (rideid export)
+    res = replace(res, vehicle=vehicle_table(ds.geometry))  # the geometry travels with the car (rideid export)
     warn_bounds(res)
     return res

@@ -136,9 +136,12 @@ def _maps_from_json(d, where):
         raise DataError(f"{where}: sensitivity: malformed ({e})") from None
 
 
-@dataclass(repr=False)
+@dataclass(repr=False, frozen=True)
 class IdentificationResult:
     """What :func:`rideid.identify` returns (see the module docstring).
+
+    Frozen: built once by the fit; a changed result is a new one
+    (``dataclasses.replace``), as the model choice builds its own.
 
     Attributes
     ----------

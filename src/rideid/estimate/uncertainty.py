@@ -36,6 +36,16 @@ residual blocks needs one refit (a polish: seconds) per replicate and a
 block length chosen by the same kind of rule as ``L_r``; its linearised
 one-step version is the HAC estimate with a flat kernel. HAC costs one pass
 over the residuals.
+
+``(J^T J)^-1`` is never formed by inverting ``J^T J`` (that squares the
+Jacobian's condition number: at ``cond(J) = 1e8`` nothing is left): it is
+``V diag(1/s^2) V^T`` from the SVD ``J = U diag(s) V^T``
+(:func:`normal_inverse`). Singular values below ``RANK_RTOL * max(s)`` carry
+no information and are dropped; a parameter with a share in those directions
+(the data determine only a combination of it with others, or nothing) is
+*not identified*: its variance is reported as ``inf`` (``std`` None in
+result.json, with a note) and its covariances as NaN, never a huge number
+that looks like a measurement.
 """
 
 from __future__ import annotations
@@ -48,6 +58,12 @@ import numpy as np
 ANDREWS_BARTLETT = 1.1447
 #: first-order autocorrelations are clipped to this in the plug-in rule (a unit root has no finite bandwidth)
 RHO_MAX = 0.97
+
+#: singular values of a Jacobian below this fraction of its largest are taken as zero (no information):
+#: a little above the rounding floor of an SVD of a Jacobian with 1e5 rows (~1e-13 of the largest)
+RANK_RTOL = 1e-12
+#: a parameter whose unit vector has more than this squared share in the dropped directions is not identified
+NULL_SHARE = 1e-8
 
 #: the two arguments every estimator here takes, written once (``{residual_parameters}`` in their docstrings)
 RESIDUAL_PARAMETERS = """J : ndarray, shape (m, n)
@@ -74,14 +90,71 @@ def white_covariance(J, e) -> np.ndarray:
     Returns
     -------
     ndarray, shape (n, n)
-        NaN-filled when ``J^T J`` is singular.
+        An unidentified parameter's variance ``inf``, its covariances NaN (:class:`NormalInverse`).
     """
     J = np.asarray(J, dtype=float)
     e = np.asarray(e, dtype=float)
     m, n = J.shape
     s2 = float(e @ e) / max(m - n, 1)
-    Hinv = _inverse(J.T @ J)
-    return s2 * Hinv
+    inv = normal_inverse(J)
+    return inv.mark(s2 * inv.matrix)
+
+
+@dataclass(frozen=True)
+class NormalInverse:
+    """``(J^T J)^+`` from the SVD of ``J`` and the parameters it leaves undetermined.
+
+    Attributes
+    ----------
+    matrix : ndarray, shape (n, n)
+        ``V diag(1/s^2) V^T`` over the singular values kept (``s > RANK_RTOL max(s)``).
+    rank : int
+        Singular values kept.
+    unidentified : ndarray of bool, shape (n,)
+        Parameters with a squared share above :data:`NULL_SHARE` in the dropped directions.
+    """
+
+    matrix: np.ndarray
+    rank: int
+    unidentified: np.ndarray
+
+    def mark(self, cov) -> np.ndarray:
+        """``cov`` (n, n) with the unidentified parameters' variances ``inf`` and their covariances NaN."""
+        cov = np.array(cov, dtype=float)
+        bad = self.unidentified
+        if bad.any():
+            cov[bad, :] = np.nan
+            cov[:, bad] = np.nan
+            cov[bad, bad] = np.inf
+        return cov
+
+
+def normal_inverse(J, rtol: float = RANK_RTOL) -> NormalInverse:
+    """Pseudo-inverse of ``J^T J`` through the SVD of ``J`` (module docstring).
+
+    Parameters
+    ----------
+    J : ndarray, shape (m, n)
+        Jacobian of the residuals.
+    rtol : float
+        Singular values below ``rtol * max(s)`` are dropped.
+
+    Returns
+    -------
+    NormalInverse
+        All parameters unidentified (and ``matrix`` NaN) when ``J`` is not finite.
+    """
+    J = np.asarray(J, dtype=float)
+    n = J.shape[1]
+    if not np.all(np.isfinite(J)):
+        return NormalInverse(np.full((n, n), np.nan), 0, np.ones(n, dtype=bool))
+    _, s, Vt = np.linalg.svd(J, full_matrices=False)
+    keep = s > rtol * (s[0] if s.size else 0.0)
+    V = Vt[keep].T
+    Hinv = (V / s[keep] ** 2) @ V.T
+    # each parameter's squared share outside the kept directions (the dropped ones, and with m < n the rest)
+    share = 1.0 - np.sum(V ** 2, axis=1)
+    return NormalInverse(0.5 * (Hinv + Hinv.T), int(keep.sum()), share > NULL_SHARE)
 
 
 def andrews_bandwidth(G) -> float:
@@ -207,7 +280,8 @@ def hac_covariance(J, e, blocks, bandwidth: float | None = None) -> RobustCovari
     -------
     RobustCovariance
         ``cov`` is multiplied by ``m / (m - n)`` as the white estimate's
-        ``s^2`` is; NaN-filled when ``J^T J`` is singular.
+        ``s^2`` is; an unidentified parameter's variance ``inf``, its covariances NaN
+        (:class:`NormalInverse`).
     """
     J = np.asarray(J, dtype=float)
     m, n = J.shape
@@ -217,9 +291,10 @@ def hac_covariance(J, e, blocks, bandwidth: float | None = None) -> RobustCovari
         L = andrews_bandwidth(G) if bandwidth is None else float(bandwidth)
         bws.append(L)
         S += long_run_covariance(G, L)
-    Hinv = _inverse(J.T @ J)
+    inv = normal_inverse(J)
+    Hinv = inv.matrix
     cov = Hinv @ S @ Hinv * (m / max(m - n, 1))
-    return RobustCovariance(cov=0.5 * (cov + cov.T), bandwidths=bws)
+    return RobustCovariance(cov=inv.mark(0.5 * (cov + cov.T)), bandwidths=bws)
 
 
 def correlation(cov) -> np.ndarray:
@@ -253,13 +328,6 @@ def with_derived(cov, gradient) -> np.ndarray:
     out[:n, n] = out[n, :n] = cov @ g
     out[n, n] = g @ cov @ g
     return out
-
-
-def _inverse(H):
-    try:
-        return np.linalg.inv(H)
-    except np.linalg.LinAlgError:
-        return np.full(H.shape, np.nan)
 
 
 @dataclass
