@@ -62,7 +62,8 @@ def main(out=sys.stdout):
                              ("--model base --no-report", ["--model", "base", "--no-report"]),
                              ("default: --model auto (report)", []),
                              ("--model auto --no-report", ["--no-report"]),
-                             ("--model base --no-polish --no-report", ["--model", "base", "--no-polish", "--no-report"])):
+                             ("--model base --no-polish --no-report",
+                             ["--model", "base", "--no-polish", "--no-report"])):
             o = d / "".join(ch if ch.isalnum() else "_" for ch in label)
             wall, cpu, rss = cli(["identify", d / "ds", "--out", o, "--seed", "1", "--quiet"] + extra, repeat=3)
             res = json.loads((o / "result.json").read_text())

@@ -120,8 +120,8 @@ def main(out=sys.stdout):
     say(f"| scipy.signal.lsim at the data rate, one candidate at a time | 1 | {cs / lsim_rate * 1e3:.0f} | "
         f"{lsim_rate / 1e6:.2f} | | 1 |")
     for threads, t_old, t_new in rows:
-        say(f"| former kernel (loops, candidates innermost) | {threads} | {t_old * 1e3:.1f} | {cs / t_old / 1e6:.1f} | 1 "
-            f"| {cs / t_old / lsim_rate:.0f}x |")
+        say(f"| former kernel (loops, candidates innermost) | {threads} | {t_old * 1e3:.1f} | "
+            f"{cs / t_old / 1e6:.1f} | 1 | {cs / t_old / lsim_rate:.0f}x |")
         say(f"| current kernel (4-lane vectors, LLVM IR) | {threads} | {t_new * 1e3:.1f} | {cs / t_new / 1e6:.1f} | "
             f"**{t_old / t_new:.2f}x** | {cs / t_new / lsim_rate:.0f}x |")
     say("\n(the population's ms include the discretisation: matrix exponentials and packing, NumPy)")

@@ -147,7 +147,8 @@ def road(sc):
     def f(tt):
         eps = 1e-5
         x = run.speed * np.asarray(tt, dtype=float)
-        rd = (corner_inputs(track, geom, x + run.speed * eps) - corner_inputs(track, geom, x - run.speed * eps)) / (2 * eps)
+        rd = (corner_inputs(track, geom, x + run.speed * eps)
+              - corner_inputs(track, geom, x - run.speed * eps)) / (2 * eps)
         return corner_inputs(track, geom, x), rd
     return f
 
@@ -288,7 +289,8 @@ class ExactCar:
 
             def body_points(Q):
                 Z, t_, p_ = Q[..., :1], Q[..., 1:2], Q[..., 2:3]
-                return np.concatenate([kin.x * np.cos(t_) + np.sin(t_) * kin.y * np.sin(p_), kin.y * np.cos(p_) + 0 * t_,
+                return np.concatenate([kin.x * np.cos(t_) + np.sin(t_) * kin.y * np.sin(p_),
+                                       kin.y * np.cos(p_) + 0 * t_,
                                        Z - kin.x * np.sin(t_) + np.cos(t_) * kin.y * np.sin(p_)], -1)
             J, quad = _jac_quad(body_points, q, qd)
             y[:4] = zs @ (J @ qdd + quad).reshape(3, 4)
@@ -343,7 +345,8 @@ def main(argv=None):
     ap.add_argument("--cg", type=float, default=REALISTIC["cg_height"], help="CG above the wheel centres, m")
     ap.add_argument("--dt", type=float, default=2.5e-4, help="RK4 step of the exact equations, s")
     a = ap.parse_args(argv)
-    head = "| | axle fl | axle fr | axle rl | axle rr | body (largest) | pitch rate | roll rate |\n|---|---|---|---|---|---|---|---|"
+    head = ("| | axle fl | axle fr | axle rl | axle rr | body (largest) | pitch rate | roll rate |\n"
+            "|---|---|---|---|---|---|---|---|")
     for hmm in a.heights:
         t0 = time.perf_counter()
         sc7, scm, hifi = scenarios(hmm / 1000, a.run, a.cg)
@@ -371,10 +374,12 @@ def main(argv=None):
                   + " | ".join(f"{x:.2f}" for x in 100 * np.sqrt(np.mean(v ** 2, axis=0)) / rms) + " | | | |")
         print("\nThe exact equations (this module) with the named groups exact, the others small-angle: against "
               "the 7-DOF model and against MuJoCo, % of each channel's RMS:\n")
-        print("| exact groups | against | axle fl | axle fr | axle rl | axle rr | body (largest) | pitch rate | roll rate |\n"
+        print("| exact groups | against | axle fl | axle fr | axle rl | axle rr | body (largest) | pitch rate | "
+              "roll rate |\n"
               "|---|---|---|---|---|---|---|---|---|")
         configs = [("none (the 7-DOF model)", ())] + [(g, (g,)) for g in GROUPS] \
-            + [(f"all but {g}", tuple(x for x in GROUPS if x != g)) for g in GROUPS] + [("all (the MuJoCo car)", GROUPS)]
+            + [(f"all but {g}", tuple(x for x in GROUPS if x != g)) for g in GROUPS] \
+            + [("all (the MuJoCo car)", GROUPS)]
         for label, ex in configs:
             y = ExactCar(sc7, hifi, ex).simulate(road(sc7), t, a.dt)
             for against, ref in (("7-DOF", y7), ("MuJoCo", yM)):

@@ -43,7 +43,8 @@ def weights_study(out=sys.stdout):
 def main():
     out = Path("bench-out")
     out.mkdir(exist_ok=True)
-    for name, mod, kw in (("kernel", bench_kernel, {}), ("nonlinear", bench_nonlinear, {}), ("cost", bench_cost, {}), ("identify", bench_identify, {}), ("jade", bench_jade, {}),
+    for name, mod, kw in (("kernel", bench_kernel, {}), ("nonlinear", bench_nonlinear, {}), ("cost", bench_cost, {}),
+                          ("identify", bench_identify, {}), ("jade", bench_jade, {}),
                           ("model_auto", bench_model_auto, {}), ("search", bench_search, {}),
                           ("study", bench_study, {"argv": []})):
         with open(out / f"{name}.md", "w") as f:

@@ -66,7 +66,8 @@ def main(argv=None):
     print(f"\nidentify vs its linearised estimate, seeds 1-{a.seeds}: largest gap "
           f"{(np.abs(est - lin).max(0) / c.std_identify).max():.4f} predicted sd")
     print(f"PSD file vs --noise-ar1: largest relative difference identify "
-          f"{np.abs(q.rel_identify / c.rel_identify - 1).max():.4f}, CRLB {np.abs(q.rel_crlb / c.rel_crlb - 1).max():.4f}")
+          f"{np.abs(q.rel_identify / c.rel_identify - 1).max():.4f}, "
+          f"CRLB {np.abs(q.rel_crlb / c.rel_crlb - 1).max():.4f}")
     print(f"time: identify {t1 - t0:.0f} s, linearised {t2 - t1:.0f} s")
 
 

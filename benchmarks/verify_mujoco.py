@@ -305,7 +305,8 @@ def tables(rows) -> str:
             bars, td = _ext(f)
             name = m if m != "auto" else f"auto → {'+'.join(f['extensions']) or 'base'}"
             lines.append(f"| {r['config']} | {name} | {p['mass, inertia, CG']:.2f} | {p['suspension']:.2f} | "
-                         f"{p['tires']:.2f} | {f['largest_error_pct']:.2f} ({f['largest_error_vs_effective_pct']:.2f}) | "
+                         f"{p['tires']:.2f} | {f['largest_error_pct']:.2f} "
+                         f"({f['largest_error_vs_effective_pct']:.2f}) | "
                          f"{bars} | {td} | {'yes' if f['adequate'] else 'no'} | "
                          f"{f['covered_std']}/{f['estimated']} | {f['covered_std_robust']}/{f['estimated']} | "
                          f"{_median_z(f, 'z_std'):.1f}, {_median_z(f, 'z_std_robust'):.1f} |")

@@ -122,5 +122,6 @@ def test_an_unknown_road_needs_a_steady_speed():
     ds = SimpleNamespace(data={"R1": steady})
     assert anyroad.run_speed(ds, run) == pytest.approx(10.0, rel=1e-3)
     ds.data["R1"] = SimpleNamespace(time=t, distance=lambda tt: 8.0 * tt + 0.1 * tt ** 2)  # 8 -> 12 m/s
-    with pytest.raises(DataError, match=r"run 'R1': an unknown-road run needs a constant speed .* from 8\.00 to 12\.00"):
+    with pytest.raises(DataError,
+                       match=r"run 'R1': an unknown-road run needs a constant speed .* from 8\.00 to 12\.00"):
         anyroad.run_speed(ds, run)

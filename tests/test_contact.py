@@ -56,7 +56,8 @@ def test_profile_track(tmp_path):
     (dict(id="w", kind="washboard", start=1, amplitude=0.01, wavelength=0.5), "missing key 'cycles'"),
     (dict(id="w", kind="washboard", start=1, amplitude=0.01, wavelength=0.5, cycles=3, angle=3),
      "unknown key 'angle'"),
-    (dict(id="w", kind="washboard", start=1, amplitude=0.01, wavelength=-0.5, cycles=3), "'wavelength' must be positive"),
+    (dict(id="w", kind="washboard", start=1, amplitude=0.01, wavelength=-0.5, cycles=3),
+     "'wavelength' must be positive"),
     (dict(id="w", kind="profile", file="nope.csv"), "profile file not found"),
 ])
 def test_track_bad_input(table, msg):

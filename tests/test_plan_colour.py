@@ -211,8 +211,10 @@ GOOD_HEAD = "frequency,psd\n0,1e-4\n100,1e-4\n"
     (["--noise-psd", "frequency,psd\n0,1\n50,1\n50,1\n100,1\n"], "column frequency is not strictly increasing"),
     (["--noise-psd", "frequency,psd\n-1,1\n100,1\n"], "column frequency: negative frequency"),
     (["--noise-psd", "frequency,psd\n0,1\n100,0\n"], "column psd, row 3: the PSD must be positive"),
-    (["--noise-psd", "frequency,accel\n0,1\n100,1\n"], "no PSD for channel pitch_rate: give a column pitch_rate, gyro or psd"),
-    (["--noise-psd", "frequency,psd\n0,1\n80,1\n"], "column frequency ends at 80 Hz, below the Nyquist frequency 100 Hz"),
+    (["--noise-psd", "frequency,accel\n0,1\n100,1\n"],
+     "no PSD for channel pitch_rate: give a column pitch_rate, gyro or psd"),
+    (["--noise-psd", "frequency,psd\n0,1\n80,1\n"],
+     "column frequency ends at 80 Hz, below the Nyquist frequency 100 Hz"),
     (["--noise-psd", "frequency,accel,gyro,psd\n0,1,1,1\n100,1,1,1\n"], "column psd is not used"),
     (["--noise-psd", "frequency,psd,psd\n0,1,1\n100,1,1\n"], "column psd appears twice"),
 ])

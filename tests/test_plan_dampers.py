@@ -134,7 +134,8 @@ def test_knot_crlb_is_the_inverse_fisher_diagonal_of_the_simulator(tmp_path):
     assert off == d["candidates"][0]["dampers"]["not_excited"] and len(off) >= 14
     # the excitation, independently: the car's suspension velocities on the run (kernel's sub-steps)
     keep, F, base, sc, ri = _independent_fisher(sc_path, "G", d["free"], off)
-    _, X = simulate_nonlinear([base[n] if n != "m_s" else sc.truth["m_s"] for n in NonlinearLayout(DEFAULT_KNOTS).names],
+    _, X = simulate_nonlinear([base[n] if n != "m_s" else sc.truth["m_s"]
+                               for n in NonlinearLayout(DEFAULT_KNOTS).names],
                               sc.geometry, ri, NonlinearLayout(knots=DEFAULT_KNOTS), return_states=True)
     x, y = sc.geometry.corner_xy(np.array([base["a"]]))
     qd = X[0, :, 7:]

@@ -140,7 +140,8 @@ def test_a_dataset_manifest_round_trips_through_its_toml_document(default_scenar
                                                          "roll_rate": {"name": "gx", "unit": "deg/s", "sign": -1}},
                                                         "test"),
                           preprocess={"gravity_included": True, "lead_in": (0.0, 1.0)},
-                          csv_options=CsvOptions(delimiter=";", decimal=","), csv_table={"delimiter": ";", "decimal": ","},
+                          csv_options=CsvOptions(delimiter=";", decimal=","),
+                          csv_table={"delimiter": ";", "decimal": ","},
                           checks={"wiring": "warn"})
     doc = tomllib.loads(tomli_w.dumps(man.to_dataset_doc()))  # plain TOML, nothing read-only leaks into it
     back = parse_dataset_manifest(doc, man.path)
@@ -185,7 +186,8 @@ def _scenario_doc():
     (lambda d: d["vehicle"].update(wheel_base=2.7), "sc.toml: [vehicle]: unknown key 'wheel_base'; allowed: "
      "wheelbase, track_front, track_rear, tire_radius, cg_height"),
     (lambda d: d["vehicle"].pop("track_rear"), "sc.toml: [vehicle]: missing key 'track_rear'"),
-    (lambda d: d["vehicle"].update(wheelbase="2.7"), "sc.toml: [vehicle] wheelbase: expected a finite number, got '2.7'"),
+    (lambda d: d["vehicle"].update(wheelbase="2.7"),
+     "sc.toml: [vehicle] wheelbase: expected a finite number, got '2.7'"),
     (lambda d: d["vehicle"].update(wheelbase=True), "sc.toml: [vehicle] wheelbase: expected a finite number, got True"),
     (lambda d: d["vehicle"].update(tire_radius=0), "sc.toml: [vehicle] tire_radius: must be positive, got 0"),
     (lambda d: d["runs"][0].update(fs=-200), "sc.toml: runs[0] (id 'T_LL'): fs: must be positive, got -200"),

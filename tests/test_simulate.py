@@ -161,7 +161,8 @@ def assert_kernel_matches_reference(runs, P, rng):
 def test_kernel_outputs_are_the_output_map_of_the_continuous_model(rng):
     """Kernel channels = Omega (A x + B u)[7:] and the gyro rows = theta', phi' at the reference states."""
     from rideid.model.equations import DECOMPOSED_TO_COORDS, output_map, state_space
-    run = prepare_run(track_from_table(TRACKS["chassis_twist"][0], "t"), G, TRACKS["chassis_twist"][1], np.arange(301) / FS)
+    run = prepare_run(track_from_table(TRACKS["chassis_twist"][0], "t"), G, TRACKS["chassis_twist"][1],
+                      np.arange(301) / FS)
     P = P0 * np.exp(rng.normal(0, 0.2, (3, 12)))
     y_k = BatchSimulator(G, [run]).outputs(P)[0]
     _, X = simulate_reference(P, G, run, return_states=True)

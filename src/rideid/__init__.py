@@ -49,7 +49,8 @@ _PUBLIC = {
     "Track": ("rideid.model.tracks", None),
     "StudyResult": ("rideid.studies", None), "load_study": ("rideid.studies", None), "study": ("rideid.studies", None),
     "export": ("rideid.exporter", None), "ExportResult": ("rideid.exporter", None),
-    "plot_fit": ("rideid.report.figures", "fit_figure"), "plot_parameters": ("rideid.report.figures", "parameters_figure"),
+    "plot_fit": ("rideid.report.figures", "fit_figure"),
+    "plot_parameters": ("rideid.report.figures", "parameters_figure"),
     "plot_dampers": ("rideid.report.figures", "dampers_figure"),
 }
 

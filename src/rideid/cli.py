@@ -157,7 +157,8 @@ def _parser() -> argparse.ArgumentParser:
                    help="with --engine mujoco: write the sensors' own readings (gravity included, "
                         "1 s standing still first) as a logger would, mapped for the measured-data pipeline")
 
-    s = add("identify", "estimate the ride parameters of a dataset (the twelve, plus anti-roll bars, tire damping, damper curves and bump stops when the model has them)")
+    s = add("identify", "estimate the ride parameters of a dataset (the twelve, plus anti-roll bars, tire damping, "
+                        "damper curves and bump stops when the model has them)")
     s.add_argument("dataset", metavar="DATASET_DIR", help="dataset folder (or its dataset.toml)")
     s.add_argument("--out", required=True, metavar="DIR",
                    help="output folder: result.json, history.csv, report.html, figures/ (rideid's files from "
@@ -173,7 +174,8 @@ def _parser() -> argparse.ArgumentParser:
     s.add_argument("--model", default=None, metavar="MODEL",
                    help="base: the twelve parameters; full: with anti-roll bars (k_arf, k_arr) and tire damping "
                         "(c_tf, c_tr); auto: fit the candidates and keep what the data support (docs/model-choice.md); "
-                        "or groups joined by ',': anti_roll_bars, tire_damping, damper_curves (SPEC §8: a force-velocity "
+                        "or groups joined by ',': anti_roll_bars, tire_damping, "
+                        "damper_curves (SPEC §8: a force-velocity "
                         "curve per axle at the [model] damper_knots), bump_stops (clearance and rate per axle) "
                         "(default: the dataset's [model] extensions, else auto)")
     s.add_argument("--no-report", action="store_true", help="write result.json and history.csv only")
@@ -262,7 +264,8 @@ def cmd_simulate(args, out=None):
     sc = rideid.load_scenario(args.scenario)
     prog = Progress(args.quiet)
     data, lifts = rideid.simulate_manifest(sc, noise=args.noise, seed=args.seed, engine=args.engine, raw=args.raw,
-                                    noise_ar1=args.noise_ar1, progress=lambda i, n, rid: prog.steps(i, n, "simulating run"))
+                                    noise_ar1=args.noise_ar1,
+                                    progress=lambda i, n, rid: prog.steps(i, n, "simulating run"))
     prog.done()
     engine = args.engine
     if engine == "mujoco":
@@ -491,7 +494,8 @@ def cmd_report(args, out=None):
         if not other.history or not res.history:
             raise rideid.DataError(f"{compare}: history.csv missing or empty; nothing to compare")
         if other.dataset != res.dataset:
-            raise rideid.DataError(f"{compare}: identifies another dataset ({other.dataset}) than {folder} ({res.dataset})")
+            raise rideid.DataError(f"{compare}: identifies another dataset ({other.dataset}) than {folder} "
+                                   f"({res.dataset})")
     if not res.dataset or not Path(res.dataset).exists():
         raise rideid.DataError(f"{folder / 'result.json'}: the dataset it names ({res.dataset!r}) is not found; "
                         "the report needs it")
@@ -529,8 +533,9 @@ def cmd_study(args, out=None):
     return 0
 
 
-COMMANDS = {"plan": cmd_plan, "report": cmd_report, "simulate": cmd_simulate, "identify": cmd_identify, "sensitivity": cmd_sensitivity,
-            "score": cmd_score, "demo": cmd_demo, "study": cmd_study, "export": cmd_export}
+COMMANDS = {"plan": cmd_plan, "report": cmd_report, "simulate": cmd_simulate, "identify": cmd_identify,
+            "sensitivity": cmd_sensitivity, "score": cmd_score, "demo": cmd_demo, "study": cmd_study,
+            "export": cmd_export}
 
 
 def _compile(quiet: bool):

@@ -210,8 +210,8 @@ class _ColumnFile(SignalFile):
         for col in (name, tname):
             row = getattr(self, "nan_rows", {}).get(col)
             if row is not None:
-                raise DataError(f"{self.path}: column '{col}' ({where}): NaN at {self._row_name(row)}; a sample must be "
-                                "a number (an empty cell or a null means 'not sampled')")
+                raise DataError(f"{self.path}: column '{col}' ({where}): NaN at {self._row_name(row)}; "
+                                "a sample must be a number (an empty cell or a null means 'not sampled')")
         if np.isnan(t).any():
             raise DataError(f"{self.path}: time column '{tname}' has an empty or non-numeric cell "
                             f"(row {int(np.argmax(np.isnan(t))) + 1})")

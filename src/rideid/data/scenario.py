@@ -188,9 +188,9 @@ def generate_road(sc: Scenario, run: RunSpec, index: int, seed: int | None = Non
     return GeneratedRoad(run.id, run.road.road_class, s, run.road.coherence, x, zl, zr, float(x_truth))
 
 
-#: sub-step bound of the states :func:`rideid.synth.scenario.nonlinear_states` computes to find lift-off, by plain RK4 sub-steps (the
-#: kernel splits its sub-steps at the kinks; at this bound the plain ones are within 0.02-0.3 % of its outputs,
-#: ample to find when a tire unloads, at less cost)
+#: sub-step bound of the states :func:`rideid.synth.scenario.nonlinear_states` computes to find lift-off, by plain
+#: RK4 sub-steps (the kernel splits its sub-steps at the kinks; at this bound the plain ones are within 0.02-0.3 %
+#: of its outputs, ample to find when a tire unloads, at less cost)
 LIFT_OFF_RHO = 0.25
 
 

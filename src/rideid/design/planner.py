@@ -22,7 +22,8 @@ from ..model.params import ALL_NAMES, EXT_NAMES, GROUPS, NAMES
 from ..report.plan_files import pct as _pct, plan_markdown, write_plan
 from . import roadinfo
 from .colour import load_noise_psd
-from .curves import AXLES, CURVES, Excitation, mask_information, nominal_forces, not_excited_names, plan_knots, run_counts
+from .curves import (AXLES, CURVES, Excitation, mask_information, nominal_forces, not_excited_names, plan_knots,
+                     run_counts)
 from .fisher import (STEP, NoiseModel, Precision, RunInformation, messages, precision, run_information, simulator,
                      subset_precision)
 from .select import Selector
@@ -108,9 +109,10 @@ class PlanResult:
             sel["robust_worst_relative"] = {n: (float(v) if np.isfinite(v) else None)
                                             for n, v in zip(self.names, self.robust_worst)}
         if self.targets:
-            sel["targets"] = {n: {"target": t, "expected_identify": (float(self.selected.rel_identify[self.names.index(n)])
-                                                                      if self.selected.identifiable[self.names.index(n)]
-                                                                      else None)}
+            sel["targets"] = {n: {"target": t,
+                                  "expected_identify": (float(self.selected.rel_identify[self.names.index(n)])
+                                                        if self.selected.identifiable[self.names.index(n)]
+                                                        else None)}
                               for n, t in self.targets.items()}
             for _n, v in sel["targets"].items():
                 v["met"] = v["expected_identify"] is not None and v["expected_identify"] <= v["target"] * (1 + 1e-9)
@@ -159,7 +161,8 @@ class PlanResult:
         """Terminal text: the chosen runs and the precision they buy."""
         cand = {c["id"]: c for c in self.candidates}
         t = sum(cand[r]["time_cost_s"] for r in self.selected_runs)
-        lines = [f"plan ({self.criterion}-optimal{', robust over ' + str(self.robust['cars']) + ' cars' if self.robust['cars'] > 1 else ''}): "
+        lines = [f"plan ({self.criterion}-optimal"
+                 f"{', robust over ' + str(self.robust['cars']) + ' cars' if self.robust['cars'] > 1 else ''}): "
                  f"drive {len(self.selected_runs)} of {len(self.candidates)} runs, {t:.0f} s of track time: "
                  + ", ".join(self.label(r) for r in self.selected_runs),
                  f"noise: {self.noise_text}",
@@ -177,7 +180,8 @@ class PlanResult:
         if self.dampers:
             for c in self.candidates:
                 ne = c["dampers"]["not_excited"]
-                lines.append(f"damper knots run {c['id']}: " + (f"not excited {', '.join(ne)}" if ne else "all excited"))
+                lines.append(f"damper knots run {c['id']}: "
+                             + (f"not excited {', '.join(ne)}" if ne else "all excited"))
         lines += self.messages_selected + self.notes
         return "\n".join(lines)
 
@@ -390,7 +394,8 @@ def _check_budget(budget_runs, budget_time, overhead, robust, within) -> None:
 
 
 def plan(scenario, *, noise=None, accel_density: float = 0.0, gyro_density: float = 0.0,
-         bandwidth: float | None = None, noise_ar1: float = 0.0, noise_psd=None, budget_runs: int | None = None, budget_time: float | None = None,
+         bandwidth: float | None = None, noise_ar1: float = 0.0, noise_psd=None, budget_runs: int | None = None,
+         budget_time: float | None = None,
          overhead: float = 0.0, criterion: str | None = None, targets: dict | None = None, robust: int = 1,
          robust_spread: float = DEFAULT_ROBUST_SPREAD, seed: int = 0, within: float = DEFAULT_WITHIN,
          step: float = STEP, extensions=None) -> PlanResult:

@@ -93,7 +93,8 @@ def _parameters(car: Car):
 
 
 def max_step(car: Car, rho: float = RHO) -> float:
-    """Longest RK4 sub-step (s): ``rho / max|eig|`` of the stiffest linearised car (:func:`rideid.model.nonlinear.substeps`)."""
+    """Longest RK4 sub-step (s): ``rho / max|eig|`` of the stiffest linearised car
+    (:func:`rideid.model.nonlinear.substeps`)."""
     layout = NonlinearLayout(knots=None if car.dampers is None else car.dampers.velocity,
                              bump_stops=bool(car.bump_stops))
     row = [car.values[n] for n in ALL_NAMES]

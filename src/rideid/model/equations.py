@@ -390,5 +390,5 @@ def format_modal_summary(summary) -> str:
     return "\n".join(lines)
 
 
-__all__ = ["CHANNELS", "mck", "output_map", "rate_input", "state_space", "blocks", "modal_summary", "static_corner_loads",
-           "static_state", "INDEX"]
+__all__ = ["CHANNELS", "mck", "output_map", "rate_input", "state_space", "blocks", "modal_summary",
+           "static_corner_loads", "static_state", "INDEX"]

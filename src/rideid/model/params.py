@@ -253,7 +253,8 @@ def check_parameters(P, geometry: Geometry, where: str = "parameters") -> np.nda
         elif n == "a":
             if np.any(col <= 0) or np.any(col >= geometry.wheelbase):
                 raise DataError(
-                    f"{where}: a must satisfy 0 < a < wheelbase ({geometry.wheelbase} m), got {col.min():g}..{col.max():g}")
+                    f"{where}: a must satisfy 0 < a < wheelbase ({geometry.wheelbase} m), "
+                    f"got {col.min():g}..{col.max():g}")
         elif np.any(col <= 0):
             raise DataError(f"{where}: {n} must be positive, got {col.min():g}")
     return P

@@ -808,7 +808,8 @@ def data_tables(pre: dict):
             speed = f"{sp['source']}: {sp.get('min', 0):.2f}..{sp.get('max', 0):.2f} m/s"
         rows.append({"run": rid, "file": Path(rec.get("file", "")).name, "format": rec.get("format", ""),
                      "samples": rec.get("samples"), "fs": rec.get("fs", float("nan")), "start": st.get("value"),
-                     "start_std": st.get("std_robust", st.get("std")), "start_source": st.get("source", ""), "speed": speed})
+                     "start_std": st.get("std_robust", st.get("std")), "start_source": st.get("source", ""),
+                     "speed": speed})
         ch = rec.get("channels")
         if ch:
             key = [(c, {k: v for k, v in d.items() if k not in ("removed", "samples")}) for c, d in ch.items()]

@@ -65,7 +65,8 @@ def _md_candidates(res, d: dict) -> list:
 def _md_precision(res) -> list:
     """plan.md's table of the precision per parameter, and the identifiability messages."""
     out = ["",
-           "| parameter | nominal | unit | selected CRLB ± | selected identify ± | all runs CRLB ± | all runs identify ± |",
+           "| parameter | nominal | unit | selected CRLB ± | selected identify ± | all runs CRLB ± | "
+           "all runs identify ± |",
            "|---|---|---|---|---|---|---|"]
     for j, n in enumerate(res.names):
         out.append(f"| {n} | {res.nominal[n]:.6g} | {UNITS.get(n, '')} | {pct(res.selected.rel_crlb[j])} | "

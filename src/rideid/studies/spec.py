@@ -45,7 +45,8 @@ def _section(keys, what: str) -> Section:
 
 #: The declarative key tables of a study file: section -> :class:`rideid.data.schema.Section`
 SECTIONS = {"study": _section(TOP_KEYS, "the study file"), "data": _section(DATA_KEYS, "[data]"),
-            "identify": _section(IDENTIFY_KEYS, "[identify]"), "noise_seeds": _section(("first", "count"), "noise_seeds")}
+            "identify": _section(IDENTIFY_KEYS, "[identify]"),
+            "noise_seeds": _section(("first", "count"), "noise_seeds")}
 
 
 @dataclass(frozen=True)

@@ -107,7 +107,8 @@ def gravity_unit_factor(lead_mean: float) -> float | None:
 def parse_channel_map(tab, where: str) -> dict[str, ChannelEntry]:
     """``[channels]`` (or a run's ``channels``): SPEC target -> :class:`ChannelEntry`."""
     out = {}
-    for target, v, w in checked_items(tab, where, TARGETS, ": SPEC channel = \"file channel\" or { name, unit, sign, scale }",
+    for target, v, w in checked_items(tab, where, TARGETS,
+                                      ": SPEC channel = \"file channel\" or { name, unit, sign, scale }",
                                       "unknown channel '{key}'; map file channels to {allowed}"):
         if isinstance(v, str):
             v = {"name": v}

@@ -138,7 +138,8 @@ def parse_dampers(tab, where: str) -> DamperCurves:
 
 
 def parse_bump_stops(tab: dict, where: str) -> dict[str, float]:
-    """The bump-stop names of a ``[truth]`` table, validated: clearance > 0 (m), rate >= 0 (N/m), per axle both or neither."""
+    """The bump-stop names of a ``[truth]`` table, validated: clearance > 0 (m), rate >= 0 (N/m), per axle both or
+    neither."""
     out = {}
     for ax, axle in (("f", "front"), ("r", "rear")):
         c, r = f"bs_clear_{ax}", f"bs_rate_{ax}"

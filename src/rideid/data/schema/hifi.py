@@ -95,7 +95,8 @@ def parse_hifi(tab, where: str) -> HifiProperties:
             pair = (x, x)
         need = {"bumpstop_clearance": "a positive compression travel in m (inf: none)",
                 "damper_rebound_ratio": "a positive finite ratio",
-                "damper_knee_velocity": "a positive velocity in m/s (inf: no knee)"}.get(k, "a finite non-negative number")
+                "damper_knee_velocity": "a positive velocity in m/s (inf: no knee)"}.get(
+                    k, "a finite non-negative number")
         for x in pair:
             if k in ("bumpstop_clearance", "damper_knee_velocity"):
                 ok = x > 0

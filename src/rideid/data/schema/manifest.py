@@ -392,7 +392,8 @@ def parse_checks(tab, where: str) -> dict:
 
 
 def parse_truth(tab: dict, where: str, geom: Geometry | None) -> dict[str, float]:
-    """The twelve parameters, any of the four extensions (SPEC §6; absent means 0, not stored) and the bump stops (SPEC §8)."""
+    """The twelve parameters, any of the four extensions (SPEC §6; absent means 0, not stored) and the bump stops
+    (SPEC §8)."""
     for k in tab:
         if k not in NAMES and k not in EXT_NAMES and k not in BUMP_NAMES:
             raise DataError(f"{where}: unknown parameter '{k}'; expected the twelve: {', '.join(NAMES)} "
@@ -682,7 +683,7 @@ def load_truth_dampers(path) -> DamperCurves | None:
 
 
 __all__ = ["Manifest", "Scenario", "DatasetManifest", "RunSpec", "RoadSpec", "UNKNOWN_ROAD", "ChannelEntry",
-           "parse_scenario", "parse_dataset_manifest", "parse_model", "parse_model_table", "parse_checks", "parse_truth",
-           "load_manifest", "load_truth", "load_truth_dampers", "load_truth_roads", "model_table", "vehicle_table",
-           "MODEL_GROUPS", "CHECK_NAMES", "CHECK_LEVELS", "TOP_KEYS_SCENARIO", "TOP_KEYS_DATASET", "RUN_KEYS_SCENARIO",
-           "RUN_KEYS_DATASET", "ROAD_KEYS", "SECTIONS"]
+           "parse_scenario", "parse_dataset_manifest", "parse_model", "parse_model_table", "parse_checks",
+           "parse_truth", "load_manifest", "load_truth", "load_truth_dampers", "load_truth_roads", "model_table",
+           "vehicle_table", "MODEL_GROUPS", "CHECK_NAMES", "CHECK_LEVELS", "TOP_KEYS_SCENARIO", "TOP_KEYS_DATASET",
+           "RUN_KEYS_SCENARIO", "RUN_KEYS_DATASET", "ROAD_KEYS", "SECTIONS"]
