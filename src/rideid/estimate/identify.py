@@ -649,13 +649,16 @@ class _Polish:
                                 for ri, (s, e) in enumerate(zip(cf.sim.run_start[:-1], cf.sim.run_start[1:]))])
 
     def solve(self, x0) -> OptimizeResult:
-        """Trust-region reflective least squares from ``x0`` (shifts from 0)."""
+        """Bounded least squares (dogbox) from ``x0`` (shifts from 0)."""
         d, n_al = self.d, len(self.align)
         z0 = np.clip((x0 - self.lo) / self.span, 0, 1)
         v0 = np.concatenate([z0, np.zeros(n_al)])
         blo = np.concatenate([np.zeros(d), np.full(n_al, -5.0)])
         bhi = np.concatenate([np.ones(d), np.full(n_al, 5.0)])
-        return least_squares(self.residuals, v0, jac=self.jacobian, bounds=(blo, bhi), method="trf",
+        # dogbox, not trf: an extension whose true value is its bound (an anti-roll bar or tire damping of 0)
+        # is held on the bound in one step, where trf's reflective scaling only halves the distance to it each
+        # iteration (28 iterations instead of 8 on the built-in car, the same answer to 1e-13)
+        return least_squares(self.residuals, v0, jac=self.jacobian, bounds=(blo, bhi), method="dogbox",
                              x_scale="jac", ftol=1e-15, xtol=1e-12, gtol=1e-15, max_nfev=100)
 
     def scale(self) -> np.ndarray:
