@@ -117,7 +117,8 @@ def fit_ar(e, max_order: int = AR_MAX) -> np.ndarray:
         except np.linalg.LinAlgError:
             a, *_ = np.linalg.lstsq(Gp[1:, 1:], Gp[1:, 0], rcond=None)
         y = e[p:]
-        r = y - sum(a[k - 1] * e[p - k:T - k] for k in range(1, p + 1))  # the true residual, not a normal-equation estimate
+        # the true residual, not a normal-equation estimate
+        r = y - sum(a[k - 1] * e[p - k:T - k] for k in range(1, p + 1))
         rss = float(r @ r)
         bic = y.size * np.log(max(rss / y.size, 1e-300)) + p * np.log(y.size)
         if bic < best_bic:

@@ -44,7 +44,6 @@ from __future__ import annotations
 import numpy as np
 
 from ..data.dataset import Dataset, check_known_consistent, prepare_inputs, scale_anchor
-from ..model.batch import BatchSimulator
 from ..errors import ArgumentError, DataError
 from ..model.equations import CHANNEL_KIND, CHANNELS
 from ..model.nonlinear import (BUMP_STOP_NAMES, DEFAULT_KNOTS, NonlinearLayout, NonlinearSimulator, curve_names,
@@ -225,7 +224,8 @@ class ParameterSpace:
             # the mean slope over [-V, V] is linear in the knot forces: c = F @ w
             eye = np.eye(self.layout.n_knots)
             V = MEAN_SLOPE_VELOCITY
-            self._slope_w = (damper_force(self.layout.knots, eye, V) - damper_force(self.layout.knots, eye, -V)) / (2 * V)
+            knots = self.layout.knots
+            self._slope_w = (damper_force(knots, eye, V) - damper_force(knots, eye, -V)) / (2 * V)
 
     def knot_velocities(self) -> np.ndarray:
         """Velocity (m/s) of each knot-force column, ``F_f1 .. F_fK, F_r1 .. F_rK`` (empty without curves)."""

@@ -456,7 +456,8 @@ def _result(ds, cf, search, fit, weighting, maps, rng_record, t0, assess=True,
     stops = None if not space.bump else bump_block(space, P, robust.white, robust.robust, robust.names, bumps)
     return IdentificationResult(
         x=np.asarray(x, dtype=float), names=list(cf.names), std=np.asarray(std, dtype=float), covariance=cov,
-        fun=float(np.full(final_E.size, 1.0 / final_E.size) @ final_E), success=success, message=message, stop=search.stop,
+        fun=float(np.full(final_E.size, 1.0 / final_E.size) @ final_E), success=success, message=message,
+        stop=search.stop,
         nit=int(search.nit), nfev=nfev, parameters={n: float(P[space.col[n]]) for n in space.reported_names},
         details=details, known=dict(ds.known), seed=rng_record["seed"],
         rng_state=rng_record["rng_state"], track_weights=search.track_weights, weights_mode=weighting.name,

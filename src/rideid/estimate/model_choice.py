@@ -122,8 +122,8 @@ IDENTIFIABLE_ORDER = tuple(GROUPS) + (CURVES_GROUP,)
 CURVE_CRITERION = ("damper curves: one more polish, the chosen linear groups plus damper_curves, started from the "
                    "linear car's curves F = c v; W_curves = Wald statistic (std_robust) of the curve forces' "
                    "departure from a straight line per axle; the curves are kept when they fit better and "
-                   "W_curves > {:.2f} per extra free parameter (free knots less the 2 linear rates); with the curves in, the "
-                   "linear groups are weighed again from the curve fit (the same Wald criterion)"
+                   "W_curves > {:.2f} per extra free parameter (free knots less the 2 linear rates); with the curves "
+                   "in, the linear groups are weighed again from the curve fit (the same Wald criterion)"
                    ).format(PENALTY)
 
 
