@@ -10,6 +10,7 @@ import argparse
 import os
 import sys
 import textwrap
+import threading
 import time
 import traceback
 import warnings
@@ -347,11 +348,29 @@ def _candidates_table(model: dict) -> str:
 IDENTIFY_OUTPUTS = ("result.json", "history.csv", "report.html", "figures", "road")
 
 
+def _import_ahead(name: str) -> None:
+    """Resolve ``rideid.<name>`` (and import its modules) on a background thread.
+
+    The report's modules (Matplotlib, Jinja2: about 0.3 s) load while the
+    identification runs, mostly in compiled kernels that release the GIL.
+    An import error is left for the main thread to meet and report.
+    """
+    def resolve():
+        try:
+            getattr(rideid, name)
+        except Exception:  # noqa: BLE001  (raised again, and reported, where the main thread needs the name)
+            pass
+
+    threading.Thread(target=resolve, name=f"rideid-import-{name}", daemon=True).start()
+
+
 def run_identify(ds_path, out_dir, *, seed, population=None, generations=None, weights="adaptive",
                  polish=True, quiet=False, out=None, report=True, model=None):
     out = out or sys.stdout
     if model is not None:
         model = rideid.parse_model_arg(model)  # base|full|auto, or groups: damper_curves,anti_roll_bars
+    if report:
+        _import_ahead("write_report")
     ds = rideid.load_dataset(ds_path)
     prog = Progress(quiet)
     kw = {"population": population or rideid.DEFAULT_POPULATION,
