@@ -16,6 +16,11 @@ Every rideid function has the layer of its package (``LAYERS``, as
   simulation (:data:`SIMULATION`).
 * **layer path**: the layers the executing code visits, in time order,
   repeats merged, with the number of upward steps along it.
+* **static**: the rideid functions the loader's source reaches (calls by
+  name, ``module.function`` included; methods left out), followed
+  depth-first in source order, each once, and the number of times the next
+  one lives in a higher layer than the one before it (``--static``: this
+  count alone, nothing run).
 
 Module-level code run by first imports is left out (the loader's calls only).
 """
@@ -23,6 +28,7 @@ Module-level code run by first imports is left out (the loader's calls only).
 from __future__ import annotations
 
 import argparse
+import ast
 import sys
 import tempfile
 from pathlib import Path
@@ -96,10 +102,112 @@ def trace(path):
     return climbs, [names[i] for i in seq], sum(1 for a, b in zip(seq, seq[1:]) if b > a), sim_callers
 
 
+# ---------------------------------------------------------------------------
+# The static measure: the functions reached from the loader, depth-first in source order
+
+SRC = Path(rideid.__file__).resolve().parents[1]
+
+
+def _modules() -> dict[str, tuple[Path, bool]]:
+    out = {}
+    for p in sorted((SRC / "rideid").rglob("*.py")):
+        parts = list(p.relative_to(SRC).with_suffix("").parts)
+        pkg = parts[-1] == "__init__"
+        out[".".join(parts[:-1] if pkg else parts)] = (p, pkg)
+    return out
+
+
+class _Source:
+    """Every rideid module's top-level functions and the names its imports bind."""
+
+    def __init__(self):
+        self.modules = _modules()
+        self.defs, self.names = {}, {}
+        for mod, (p, pkg) in self.modules.items():
+            tree = ast.parse(p.read_text(), str(p))
+            self.defs[mod] = {n.name: n for n in tree.body if isinstance(n, (ast.FunctionDef, ast.AsyncFunctionDef))}
+            names = {}
+            for node in ast.walk(tree):
+                if isinstance(node, ast.ImportFrom):
+                    if node.level:
+                        base = mod.split(".") if pkg else mod.split(".")[:-1]
+                        base = base[:len(base) - (node.level - 1)] + ([node.module] if node.module else [])
+                        base = ".".join(base)
+                    else:
+                        base = node.module or ""
+                    for a in node.names:
+                        full = f"{base}.{a.name}"
+                        names[a.asname or a.name] = ("module", full) if full in self.modules else ("attr", base, a.name)
+                elif isinstance(node, ast.Import):
+                    for a in node.names:
+                        if a.asname and a.name in self.modules:
+                            names[a.asname] = ("module", a.name)
+            self.names[mod] = names
+
+    def resolve(self, mod: str, name: str, depth: int = 0):
+        """``(module, function)`` the name ``name`` of ``mod`` calls, or None (not a rideid function)."""
+        if depth > 5 or mod not in self.modules:
+            return None
+        if name in self.defs[mod]:
+            return mod, name
+        b = self.names[mod].get(name)
+        if b is None or b[0] == "module":
+            return None
+        return self.resolve(b[1], b[2], depth + 1)
+
+    def callees(self, mod: str, fn: str):
+        """The rideid functions ``fn`` calls (nested functions included), in source order."""
+        calls = sorted((n for n in ast.walk(self.defs[mod][fn]) if isinstance(n, ast.Call)),
+                       key=lambda n: (n.lineno, n.col_offset))
+        out = []
+        for c in calls:
+            f, hit = c.func, None
+            if isinstance(f, ast.Name):
+                hit = self.resolve(mod, f.id)
+            elif isinstance(f, ast.Attribute) and isinstance(f.value, ast.Name):
+                b = self.names[mod].get(f.value.id)
+                if b is not None and b[0] == "module":
+                    hit = self.resolve(b[1], f.attr)
+            if hit is not None:
+                out.append(hit)
+        return out
+
+
+def static_path(mod: str, fn: str):
+    """``(functions, upward steps)``: the rideid functions reached from ``mod.fn``, depth-first in source order
+    (each once), and how often the next one lives in a higher layer than the one before it."""
+    src, seen, order = _Source(), set(), []
+
+    def visit(key):
+        if key in seen:
+            return
+        seen.add(key)
+        order.append(key)
+        for k in src.callees(*key):
+            visit(k)
+
+    visit((mod, fn))
+    lays = [layer_of(m) for m, _ in order]
+    return order, sum(1 for a, b in zip(lays, lays[1:]) if b > a)
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("dataset", nargs="?", help="dataset folder (default: the built-in scenario, simulated)")
+    ap.add_argument("--static", action="store_true", help="the static count only (nothing is run)")
     args = ap.parse_args(argv)
+    order, steps = static_path(rideid.load_dataset.__module__, rideid.load_dataset.__name__)
+    names = {i: "/".join(p.split(".")[-1] for p in prefixes) for i, prefixes in enumerate(LAYERS)}
+    print(f"static: {len(order)} functions reached from load_dataset, depth-first in source order; "
+          f"{steps} upward steps between consecutive ones")
+    seq = []
+    for m, f in order:
+        lay = names[layer_of(m)]
+        if not seq or seq[-1][0] != lay:
+            seq.append((lay, m.split(".")[-1]))
+    print(f"  static layer path: {' > '.join(f'{lay}({m})' for lay, m in seq)}")
+    if args.static:
+        return 0
     path = args.dataset
     if path is None:
         tmp = tempfile.mkdtemp(prefix="rideid-climbs-")

@@ -19,6 +19,7 @@ import pytest
 import tomli_w
 
 import rideid
+from rideid.conditioning import wiring
 from rideid.data import checks
 from rideid.errors import DataError, DataWarning
 
@@ -280,12 +281,12 @@ def test_rigid_body_identities_hold_for_the_van(tmp_path):
     from conftest import van_scenario
     sc = van_scenario(tmp_path)
     t, Y = simulate_raw(sc, offset=0.5, fs=200.0, runs={"T_HL"})["T_HL"]
-    hyps, e = checks.rigid_body_scores(Y, 200.0, sc.geometry)
+    hyps, e = wiring.rigid_body_scores(Y, 200.0, sc.geometry)
     assert hyps[0][:2] == ((0, 1, 2, 3), (1.0, 1.0, 1.0, 1.0)) and e[0] < 1e-3
     # a unit factor on the gyro is the best explanation of gyro / 57.3
     Z = Y.copy()
     Z[:, 8:] /= 180 / math.pi
-    hyps, e = checks.rigid_body_scores(Z, 200.0, sc.geometry)
+    hyps, e = wiring.rigid_body_scores(Z, 200.0, sc.geometry)
     best = hyps[int(np.argmin(e))]
     assert best[2] == pytest.approx(180 / math.pi) and e.min() < 1e-3 < 0.1 < e[0]
 
@@ -303,7 +304,7 @@ def test_lowpass_gram_equals_the_gram_of_scipys_zero_phase_butterworth():
     X *= np.sin(np.pi * np.arange(n) / (n - 1)) ** 2
     Xf = sosfiltfilt(butter(4, 10.0, fs=fs, output="sos"), X, axis=-1)
     G_ref = Xf @ Xf.T
-    G = checks.lowpass_gram(X, fs)
+    G = wiring.lowpass_gram(X, fs)
     scale = np.sqrt(np.outer(np.diag(G_ref), np.diag(G_ref)))
     assert np.abs(G - G_ref).max() / scale.max() < 2e-4  # the bilinear warp of the digital filter: ~3e-4
     assert np.allclose(np.diag(G), np.diag(G_ref), rtol=1e-3)
@@ -313,7 +314,7 @@ def test_lowpass_gram_equals_the_gram_of_scipys_zero_phase_butterworth():
 
 def test_best_assignment_on_a_known_matrix():
     C = np.array([[0.1, 0.9], [-0.95, 0.0]])  # channel 0 is model 1, channel 1 is minus model 0
-    perm, signs, score, ident = checks.best_assignment(C)
+    perm, signs, score, ident = wiring.best_assignment(C)
     assert perm == (1, 0) and signs == (-1.0, 1.0) and score == pytest.approx(1.85) and ident == pytest.approx(0.1)
 
 

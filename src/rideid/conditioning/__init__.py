@@ -2,7 +2,9 @@
 
 Between the data layer (:mod:`rideid.data`: schemas, readers, the Dataset; no
 simulation) and the estimation: :mod:`.starts` (the start of every measured
-run, by correlation with a car's response), :mod:`.checks` (wiring, units and
-track checks against a nominal car), :mod:`.load` (:func:`load_dataset`, the
-orchestrator).
+run, by correlation with a car's response), :mod:`.checks` (coverage, wiring,
+units and track checks against a nominal car), :mod:`.wiring` (the wiring and
+unit checks' pure math: rigid-body identities, assignment to the road),
+:mod:`.load` (:func:`load_dataset`, the orchestrator: read, then align and
+check).
 """

@@ -2,12 +2,23 @@
 
 :func:`check_dataset` is the one hook, called once every run of a dataset is
 conditioned and aligned (:func:`rideid.conditioning.load.align_starts`):
-coverage of the track, the wiring of the channels (rigid body and road
-assignment, :func:`rideid.data.checks.wiring_fix`), the units seen in a
-logger's lead-in or in the axle amplitudes, and the match of each run with its
-track and speed. The checks themselves are pure functions over numbers and
-arrays (:mod:`rideid.data.checks`); this module simulates the nominal car
-they compare the data with (:func:`rideid.model.params.nominal_car`).
+
+* **Coverage** (:func:`check_coverage`): the car starts at rest on flat road
+  (SPEC §2), so no feature may lie under a wheel at the start; the run must
+  reach its track and, ideally, leave it (:func:`check_reach`: before its
+  start is estimated).
+* **Wiring and units** (:mod:`rideid.conditioning.wiring`): rigid body and
+  road assignment (:func:`rideid.conditioning.wiring.wiring_fix`), the units
+  seen in a logger's lead-in or in the axle amplitudes.
+* **Track and speed** (:func:`match_finding`): the measurement must
+  correlate with the response to the stated track at the stated speed.
+  Otherwise the speed (km/h typed as m/s) or the track is wrong; the checks
+  re-try other speeds and the manifest's other tracks and the message names
+  the one that fits.
+
+This module simulates the nominal car the checks compare the data with
+(:func:`rideid.model.params.nominal_car`); the comparisons themselves are pure
+functions over numbers and arrays.
 """
 
 from __future__ import annotations
@@ -17,9 +28,7 @@ import dataclasses
 import numba
 import numpy as np
 
-from ..data.checks import (ERROR, MATCH_MIN, PLAUSIBLE, WARNING, Finding, axle_amplitude_findings, check_coverage,
-                           corrected, describe_fix, fix_entries, match_finding, speed_candidates, unit_findings,
-                           wiring_fix)
+from ..data.checks import ERROR, PLAUSIBLE, WARNING, Finding
 from ..data.measured import Distance, RelativeDistance
 from ..data.schema.channels import SI, UNITS, quantity
 from ..model.batch import thread_map
@@ -28,11 +37,120 @@ from ..model.equations import CHANNELS
 from ..model.params import nominal_car
 from ..model.simulate import ENVELOPE_DX, PREPARED_MAX, prepare_run
 from .starts import correlation_score, estimate_start, simulate_response
+from .wiring import axle_amplitude_findings, corrected, describe_fix, fix_entries, unit_findings, wiring_fix
 
 #: a moving run's nominal response starts at rest this long (s) before the first sample: the nominal car's
 #: slowest mode decays to 1e-3 in 2.4-2.7 s on the built-in car, the SUV and the van of the tests
 #: (rideid.data.scenario.settle_time)
 NOMINAL_LEAD_IN = 5.0
+#: correlation with the nominal car below which a run does not match its track and speed
+MATCH_MIN = 0.5
+
+
+# ---------------------------------------------------------------------------
+# Coverage: the car starts at rest on flat road, reaches the track and leaves it
+
+def feature_span(track, geom) -> tuple[float, float] | None:
+    """(first, last) x of the track's features over the four wheel paths, or None (flat)."""
+    lo, hi = [], []
+    for y in (geom.track_front / 2, -geom.track_front / 2, geom.track_rear / 2, -geom.track_rear / 2):
+        ext = track.path(y).extent
+        if ext is not None and ext[1] > ext[0]:
+            lo.append(ext[0])
+            hi.append(ext[1])
+    if not lo:
+        return None
+    return min(lo), max(hi)
+
+
+def check_coverage(run_id: str, track, geom, x_end: float, x_begin: float = 0.0, where: str = "",
+                   moving: bool = False) -> list[Finding]:
+    """Does the run start at rest on flat road, reach the track, and leave it?
+
+    A ``moving`` run (SPEC §9) need not start on flat road: the track may begin under its wheels (a ``profile``
+    at x = 0).
+
+    Parameters
+    ----------
+    run_id : str
+    track : rideid.model.tracks.Track
+    geom : Geometry
+    x_end : float
+        Front-axle distance (m) past x = 0 at the run's last sample.
+    x_begin : float
+        Front-axle distance (m) at the run's first sample (negative with a pre-roll).
+    """
+    span = feature_span(track, geom)
+    w = f"{where}run '{run_id}'"
+    if span is None:
+        return []
+    lo, hi = span
+    R = geom.tire_radius
+    out = []
+    # the rigid wheel touches a feature up to R ahead of its centre; the rear axle is a wheelbase behind
+    if lo - R < min(x_begin, 0.0) and not moving:
+        out.append(Finding(ERROR, "coverage", f"{w}: track '{track.id}' has features from x = {lo:g} m, under or "
+                           f"within a tire radius ({R:g} m) of the front wheels at the start: the car must start at "
+                           f"rest on flat road (SPEC §2); move the track's start to at least {R + max(0.0, -x_begin):g} m",
+                           run_id, "start"))
+    elif x_end < lo - R:
+        out.append(Finding(ERROR, "coverage", f"{w}: never reaches track '{track.id}': the front axle travels "
+                           f"{x_end:.3g} m but the first feature is at x = {lo:g} m (check the track's start, the "
+                           "run's speed and the recording's length)", run_id, "speed"))
+    elif x_end < hi + geom.wheelbase + R:
+        out.append(Finding(WARNING, "coverage", f"{w}: ends before the rear wheels leave track '{track.id}' "
+                           f"(front axle at {x_end:.3g} m, the rear wheels clear the last feature at "
+                           f"{hi + geom.wheelbase + R:.3g} m): a longer recording fits better", run_id, "duration"))
+    return out
+
+
+def check_reach(run_id: str, track, geom, max_distance: float, where: str = "") -> list[Finding]:
+    """Before a start is estimated: can the recording reach the track at all?
+
+    ``max_distance``: the most the front axle can travel during the whole
+    recording (constant speed x its length, or the distance channel's range).
+    """
+    return [f for f in check_coverage(run_id, track, geom, max_distance, 0.0, where)
+            if f.severity == ERROR and f.channel == "speed"]
+
+
+# ---------------------------------------------------------------------------
+# Track and speed
+
+def match_finding(run_id: str, track_id: str, speed, rho: float, alternatives: list, where: str = "") -> Finding | None:
+    """A finding when the run does not match its track and speed.
+
+    Parameters
+    ----------
+    rho : float
+        Mean normalised correlation of the measurement with a nominal car's
+        response on the stated track at the stated speed (1 = same shape).
+    alternatives : list of (description, correlation)
+        Other speeds and tracks tried; the best one is named if it fits.
+    """
+    if rho >= MATCH_MIN:
+        return None
+    what = f"speed {speed:g} m/s" if speed is not None else "its speed channel"
+    msg = (f"{where}run '{run_id}' does not match track '{track_id}' at {what}: correlation {rho:.2f} with a "
+           f"nominal car's response (a matching run gives 0.8 or more)")
+    good = [a for a in alternatives if a[1] >= MATCH_MIN]
+    if good:
+        desc, r = max(good, key=lambda a: a[1])
+        msg += f"; {desc} fits (correlation {r:.2f})"
+    else:
+        msg += ("; no other speed or track of the dataset fits either: check the run's track, its speed, its file "
+                "and the channel map")
+    return Finding(ERROR, "track", msg, run_id, "speed" if good and "speed" in good[0][0] else "track")
+
+
+def speed_candidates(speed: float) -> list[tuple[float, str]]:
+    """Speeds a typing slip makes of the true one: (candidate m/s, how the slip happens)."""
+    return [(speed / 3.6, f"{speed:g} is km/h"), (speed * 3.6, f"{speed:g} m/s was meant as km/h the other way"),
+            (speed * 0.44704, f"{speed:g} is mph"), (speed / 2.0, "half the speed"), (speed * 2.0, "twice the speed")]
+
+
+# ---------------------------------------------------------------------------
+# Every run of a dataset against the nominal car
 
 
 def _map_entries(ds, rid) -> dict:
@@ -145,7 +263,7 @@ def _prefetch_inputs(ds) -> None:
     thread_map(inputs, runs, "rideid-inputs")
 
 
-def check_dataset(ds) -> list[Finding]:
+def check_dataset(ds, car=None) -> list[Finding]:
     """Run the data checks on every run of a loaded dataset.
 
     Coverage, wiring (rigid body and road assignment), and the match of
@@ -159,9 +277,16 @@ def check_dataset(ds) -> list[Finding]:
     the gyro still run. A moving run (SPEC §9) may have track features
     under its wheels at the start; its nominal response is simulated from
     rest a lead-in before the first sample, on the road before x = 0.
+
+    Parameters
+    ----------
+    ds : Dataset
+        Every run conditioned and aligned.
+    car : (12,) array, optional
+        The nominal car's parameter vector (default ``nominal_car(ds.geometry)``).
     """
     man, geom = ds.manifest, ds.geometry
-    P = nominal_car(geom)
+    P = nominal_car(geom) if car is None else car
     out: list[Finding] = []
     _prefetch_inputs(ds)
     for r in man.runs:
@@ -242,4 +367,5 @@ def check_dataset(ds) -> list[Finding]:
     return out
 
 
-__all__ = ["NOMINAL_LEAD_IN", "check_dataset"]
+__all__ = ["MATCH_MIN", "NOMINAL_LEAD_IN", "check_coverage", "check_dataset", "check_reach", "feature_span",
+           "match_finding", "speed_candidates"]

@@ -12,20 +12,22 @@ from __future__ import annotations
 import math
 from dataclasses import replace
 
-from ..data import checks
+from ..data.checks import enforce
 from ..data.dataset import Dataset, read_dataset
 from ..model.params import nominal_car
-from .checks import check_dataset
+from .checks import check_dataset, check_reach
 from .starts import estimate_start
 
 
 def load_dataset(path, starts: dict[str, float] | None = None) -> Dataset:
     """Load and validate a dataset folder (or its ``dataset.toml``), ready to identify.
 
-    Two steps, each available on its own: :func:`rideid.data.dataset.read_dataset` (formats and
+    Two steps, each available on its own, top-down: :func:`rideid.data.dataset.read_dataset` (formats and
     conditioning: SPEC §3 CSVs taken as they are, logger files through
-    :mod:`rideid.data.measured`) and :func:`align_starts` (the start of every
-    measured run whose start is not given, estimated with a nominal car).
+    :mod:`rideid.data.measured`), then :func:`align_starts` (the start of every
+    measured run whose start is not given, estimated with the nominal car
+    :func:`rideid.model.params.nominal_car`, made once, which the checks
+    compare the data with too).
     ``Dataset.preprocessing()`` says what was done.
 
     Parameters
@@ -45,10 +47,12 @@ def load_dataset(path, starts: dict[str, float] | None = None) -> Dataset:
     DataError
         Naming the file, key or column at fault.
     """
-    return align_starts(read_dataset(path), starts)
+    ds = read_dataset(path)
+    car = nominal_car(ds.geometry)
+    return align_starts(ds, starts, car)
 
 
-def align_starts(ds: Dataset, starts: dict[str, float] | None = None) -> Dataset:
+def align_starts(ds: Dataset, starts: dict[str, float] | None = None, car=None) -> Dataset:
     """The estimation step of loading: fix the start of every measured run.
 
     A start given in ``starts`` or in the run's ``[preprocess] start`` is
@@ -56,8 +60,20 @@ def align_starts(ds: Dataset, starts: dict[str, float] | None = None) -> Dataset
     of the nominal car (:func:`rideid.model.params.nominal_car`; the record
     keeps the estimate and its correlation). Returns a new dataset; ``ds``
     is not changed.
+
+    Parameters
+    ----------
+    ds : Dataset
+        As read (:func:`rideid.data.dataset.read_dataset`).
+    starts : dict, optional
+        Run id -> start (file time, s), as in :func:`load_dataset`.
+    car : (12,) array, optional
+        The nominal car's parameter vector (default
+        ``nominal_car(ds.geometry)``): the car the starts are estimated with
+        and the checks compare the data with.
     """
     man = ds.manifest
+    P = nominal_car(man.geometry) if car is None else car
     data, measured = dict(ds.data), {}
     for rid, mr0 in ds.measured.items():
         mr = replace(mr0, record=dict(mr0.record), window=None, start=None)
@@ -76,8 +92,9 @@ def align_starts(ds: Dataset, starts: dict[str, float] | None = None) -> Dataset
             track = man.tracks[run.track]
             longest = (mr.speed * (mr.t_last - mr.t_first) if mr.distance is None
                        else float(mr.distance.d[-1] - mr.distance.d[0]))
-            checks.enforce(checks.check_reach(rid, track, man.geometry, longest), f"{man.path}: ")
-            s, rho = estimate_start(mr, nominal_car(man.geometry), man.geometry, track)
+            reach = check_reach(rid, track, man.geometry, longest)
+            enforce(reach, f"{man.path}: ")
+            s, rho = estimate_start(mr, P, man.geometry, track)
             mr.record["start"] = {"source": "estimated (nominal car)", "nominal_estimate": s,
                                   "correlation": rho}
         mr.make_grid(s)
@@ -86,8 +103,8 @@ def align_starts(ds: Dataset, starts: dict[str, float] | None = None) -> Dataset
         data[rid] = mr.run_data(s)
     ds = Dataset(man, {r.id: data[r.id] for r in man.runs}, measured)
     # the one hook for the physics checks (rideid.conditioning.checks): every run conditioned and aligned
-    findings = check_dataset(ds)
-    checks.enforce(findings, f"{man.path}: ")
+    findings = check_dataset(ds, P)
+    enforce(findings, f"{man.path}: ")
     return replace(ds, findings=findings)
 
 

@@ -378,7 +378,7 @@ def _read_si(targets: dict, sf, time_name, time_scale: float, opts: dict, path: 
                          f"t = {sig.time[k]:.6g} s (sample interval {med:.4g} s); bridged by interpolation", _STAGE)
         if c in CHANNELS:
             if not _plausibility(c, v, unit, opts, f"{path}: {w}", warns):
-                rec_ch[c]["flat_lined"] = True  # a dead channel: no unit to check (rideid.data.checks.unit_findings)
+                rec_ch[c]["flat_lined"] = True  # a dead channel: no unit to check (rideid.conditioning.wiring.unit_findings)
     return raw, rec_ch
 
 
@@ -481,7 +481,7 @@ def _remove_gravity_bias(raw: dict, rec_ch: dict, measured: list, lead, grav: bo
                             f"{c} (its time runs {s.time[0]:.6g} .. {s.time[-1]:.6g} s)")
         seg = s.values[in_lead]
         m = float(np.mean(seg))
-        # a mean that is g in another unit is an error of the data checks (rideid.data.checks.unit_findings)
+        # a mean that is g in another unit is an error of the data checks (rideid.conditioning.wiring.unit_findings)
         if grav and is_acc and not (0.8 * GRAVITY < m < 1.2 * GRAVITY) and gravity_unit_factor(m) is None:
             if -1.2 * GRAVITY < m < -0.8 * GRAVITY:
                 _warn(warns, f"{path}: {c}: reads {m:.3g} m/s^2 at rest (gravity included): mounted upside down? "

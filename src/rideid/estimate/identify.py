@@ -64,7 +64,8 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.optimize import OptimizeResult, least_squares
 
-from ..data.checks import bound_findings, feature_span
+from ..conditioning.checks import feature_span
+from ..data.checks import bound_findings
 from ..data.dataset import Dataset
 from ..conditioning.starts import estimate_start, simulate_response
 from ..errors import ArgumentError, DataWarning
