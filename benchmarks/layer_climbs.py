@@ -201,7 +201,7 @@ def main(argv=None) -> int:
     print(f"static: {len(order)} functions reached from load_dataset, depth-first in source order; "
           f"{steps} upward steps between consecutive ones")
     seq = []
-    for m, f in order:
+    for m, _f in order:
         lay = names[layer_of(m)]
         if not seq or seq[-1][0] != lay:
             seq.append((lay, m.split(".")[-1]))

@@ -128,7 +128,8 @@ MISTAKES = {
     "gyro in rad/s mapped as deg/s, file without a unit": (
         "T_HH", dict(mutate=gyro_in_rad_s_without_unit),
         ["pitch_rate reads 57.3x too small (rad/s mapped as deg/s?)",
-         'pitch_rate = { name = "Gyro_Y", unit = "rad/s", sign = -1 }', 'roll_rate = { name = "Gyro_X", unit = "rad/s" }']),
+         'pitch_rate = { name = "Gyro_Y", unit = "rad/s", sign = -1 }',
+         'roll_rate = { name = "Gyro_X", unit = "rad/s" }']),
     "run speed typed in km/h (21.6 for 6.0)": (
         "W_L", dict(edit=set_run(speed=21.6)),
         ["run 'W_L' does not match track 'washboard' at speed 21.6 m/s", "speed = 6 m/s (21.6 is km/h) fits"]),
@@ -147,7 +148,8 @@ MISTAKES = {
         ["pitch_rate has its sign flipped", 'pitch_rate = { name = "Gyro_Y", unit = "deg/s", sign = -1 }']),
     "one body accelerometer in g mapped as m/s^2": (
         "W_L", dict(cmap={**channel_map(), "body_az_rl": {"name": "AccZ_Body_RL", "unit": "m/s^2"}}),
-        ["body_az_rl reads 9.81x too small (g mapped as m/s^2?)", 'body_az_rl = { name = "AccZ_Body_RL", unit = "g" }']),
+        ["body_az_rl reads 9.81x too small (g mapped as m/s^2?)",
+         'body_az_rl = { name = "AccZ_Body_RL", unit = "g" }']),
     "one hub accelerometer in g mapped as m/s^2": (
         "W_L", dict(cmap={**channel_map(), "axle_az_rl": {"name": "AccZ_Hub_RL", "unit": "m/s^2"}}),
         ["run 'W_L': axle_az_rl reads 9.81x too small (g mapped as m/s^2?)", "its lead-in reads 1",
@@ -159,7 +161,8 @@ MISTAKES = {
     "every hub accelerometer in g mapped as m/s^2": (
         "H_HL", dict(cmap={**channel_map(), **{c: {"name": n, "unit": "m/s^2"} for c, n in (
             ("axle_az_fl", "AccZ_Hub_FL"), ("axle_az_fr", "AccZ_Hub_FR"))},
-            **{c: {"name": n, "unit": "m/s^2"} for c, n in (("axle_az_rl", "AccZ_Hub_RL"), ("axle_az_rr", "AccZ_Hub_RR"))}},
+            **{c: {"name": n, "unit": "m/s^2"} for c, n in (
+                ("axle_az_rl", "AccZ_Hub_RL"), ("axle_az_rr", "AccZ_Hub_RR"))}},
             mutate=lambda chans: chans.update({n: (chans[n][0], chans[n][1] / 9.80665, "g") for n in (
                 "AccZ_Hub_FL", "AccZ_Hub_FR")})),
         ["axle_az_fl reads 9.81x too small (g mapped as m/s^2?)", 'axle_az_fl = { name = "AccZ_Hub_FL", unit = "g" }',
@@ -180,7 +183,8 @@ MISTAKES = {
                 "AccZ_Hub_FL", "AccZ_Hub_FR")})),
         ["axle_az_fl reads 9.81x too small (g mapped as m/s^2?)", 'axle_az_fl = { name = "AccZ_Hub_FL", unit = "g" }',
          "(3 more error(s) of this kind)"]),
-    "speed = 1e308": ("W_L", dict(edit=set_run(speed=1e308)), ["run 'W_L': speed = 1e+308 m/s is not physically plausible"]),
+    "speed = 1e308": ("W_L", dict(edit=set_run(speed=1e308)),
+                      ["run 'W_L': speed = 1e+308 m/s is not physically plausible"]),
     "total_mass = 1e308": ("W_L", dict(edit=lambda d: d["known"].update(total_mass=1e308)),
                            ["[known]: total_mass = 1e+308 kg is not physically plausible"]),
     "track start = 1e308 (never reached)": ("W_L", dict(edit=set_track("start", 1e308)),

@@ -91,7 +91,8 @@ def check_coverage(run_id: str, track, geom, x_end: float, x_begin: float = 0.0,
     if lo - R < min(x_begin, 0.0) and not moving:
         out.append(Finding(ERROR, "coverage", f"{w}: track '{track.id}' has features from x = {lo:g} m, under or "
                            f"within a tire radius ({R:g} m) of the front wheels at the start: the car must start at "
-                           f"rest on flat road (SPEC §2); move the track's start to at least {R + max(0.0, -x_begin):g} m",
+                           f"rest on flat road (SPEC §2); move the track's start to at least "
+                           f"{R + max(0.0, -x_begin):g} m",
                            run_id, "start"))
     elif x_end < lo - R:
         out.append(Finding(ERROR, "coverage", f"{w}: never reaches track '{track.id}': the front axle travels "
@@ -157,7 +158,8 @@ def _map_entries(ds, rid) -> dict:
     """SPEC channel -> {name, unit, sign, scale} as the run was read."""
     mr = ds.measured.get(rid)
     if mr is not None:
-        return {c: dict(name=e["source"], unit=e["unit"], sign=e["sign"], scale=e["scale"], file_unit=e.get("file_unit"))
+        return {c: dict(name=e["source"], unit=e["unit"], sign=e["sign"], scale=e["scale"],
+                        file_unit=e.get("file_unit"))
                 for c, e in mr.record["channels"].items() if c in CHANNELS}
     return {c: dict(name=c, unit=SI[quantity(c)], sign=1, scale=1.0) for c in ds.data[rid].channels}
 
@@ -220,7 +222,8 @@ def _alternatives(ds, rid, P, rho_now):
                 out.append((f"speed = {v:.4g} m/s ({why})", try_it(track, v)))
     elif mr is not None and mr.distance is not None:
         for f, why in ((1 / 3.6, "km/h mapped as m/s"), (3.6, "m/s mapped as km/h"), (0.44704, "mph mapped as m/s")):
-            out.append((f"the speed channel x {f:.4g} ({why}; fix its unit in the channel map)", try_it(track, None, f)))
+            out.append((f"the speed channel x {f:.4g} ({why}; fix its unit in the channel map)",
+                        try_it(track, None, f)))
     for tid, tr in man.tracks.items():
         if tid != run.track:
             out.append((f"track = \"{tid}\"", try_it(tr, run.speed)))
@@ -297,7 +300,7 @@ def check_dataset(ds, car=None) -> list[Finding]:
         track = man.tracks[r.track] if r.road_known else None
         t = rd.time
         if track is not None:
-            x_of = (lambda tt: r.speed * tt) if rd.distance is None else rd.distance
+            x_of = (lambda tt, r=r: r.speed * tt) if rd.distance is None else rd.distance
             x_end = float(np.asarray(x_of(np.array([t[-1]])))[0])
             x_begin = float(np.asarray(x_of(np.array([min(t[0], 0.0)])))[0])
             cov = check_coverage(rid, track, geom, x_end, x_begin, moving=r.moving)

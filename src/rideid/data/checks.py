@@ -120,7 +120,8 @@ def check_numbers(man) -> list[Finding]:
         out.append(_range_finding(f"{where}: [vehicle]", k, getattr(g, k), *PLAUSIBLE[k]))
     if g.tire_radius >= 0.5 * g.wheelbase:
         out.append(Finding(ERROR, "numbers", f"{where}: [vehicle] tire_radius = {g.tire_radius:g} m is not less "
-                           f"than half the wheelbase ({g.wheelbase:g} m): the wheels would overlap", channel="tire_radius"))
+                           f"than half the wheelbase ({g.wheelbase:g} m): the wheels would overlap",
+                           channel="tire_radius"))
     for k, v in man.known.items():
         if k in PLAUSIBLE:
             out.append(_range_finding(f"{where}: [known]", k, v, *PLAUSIBLE[k]))

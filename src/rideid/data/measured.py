@@ -378,7 +378,8 @@ def _read_si(targets: dict, sf, time_name, time_scale: float, opts: dict, path: 
                          f"t = {sig.time[k]:.6g} s (sample interval {med:.4g} s); bridged by interpolation", _STAGE)
         if c in CHANNELS:
             if not _plausibility(c, v, unit, opts, f"{path}: {w}", warns):
-                rec_ch[c]["flat_lined"] = True  # a dead channel: no unit to check (rideid.conditioning.wiring.unit_findings)
+                # a dead channel: no unit to check (rideid.conditioning.wiring.unit_findings)
+                rec_ch[c]["flat_lined"] = True
     return raw, rec_ch
 
 
