@@ -80,3 +80,26 @@ def add_noise(data, noise, rho, seed):
 
 def truth_vector(names, truth):
     return np.array([truth[n] for n in names])
+
+
+def bump_tracks(amplitude, *, wavelength, height, bump_length, spacing, twist_speed):
+    """The washboard and herringbone (both of ``amplitude``; the herringbone's ``wavelength``) and the chassis
+    twist (two bumps of ``height`` and ``bump_length``, ``spacing`` apart, driven at ``twist_speed``) as
+    ``{kind: (track table, speed)}``: the tracks the simulation tests drive."""
+    return {
+        "washboard": (dict(id="w", kind="washboard", start=2.0, amplitude=amplitude, wavelength=0.8, cycles=6), 10.0),
+        "herringbone": (dict(id="h", kind="herringbone", start=2.0, amplitude=amplitude, wavelength=wavelength,
+                             cycles=8, angle=30.0), 8.0),
+        "chassis_twist": (dict(id="t", kind="chassis_twist", start=2.0, height=height, bump_length=bump_length,
+                               spacing=spacing, bumps=2), twist_speed),
+    }
+
+
+def write_profile_road(folder, left, right):
+    """``folder/road.csv``: a measured-road profile from x = 2 to 6 m, windowed sines of amplitude ``left``
+    (wavelength 0.7 m) and ``right`` (1.1 m) under the two wheel tracks, for a ``kind = "profile"`` track."""
+    x = np.linspace(2.0, 6.0, 401)
+    zl = left * np.sin(2 * np.pi * (x - 2) / 0.7) * np.hanning(x.size)
+    zr = right * np.sin(2 * np.pi * (x - 2) / 1.1) * np.hanning(x.size) ** 0.5
+    np.savetxt(folder / "road.csv", np.column_stack([x, zl, zr]), delimiter=",", header="x,z_left,z_right",
+               comments="")

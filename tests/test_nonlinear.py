@@ -17,6 +17,8 @@ from rideid.model.params import ALL_NAMES, DEFAULT_CAR, DEFAULT_GEOMETRY, GRAVIT
 from rideid.model.simulate import prepare_run, simulate_reference
 from rideid.data.schema.tracks import track_from_table
 
+from cars import bump_tracks, write_profile_road
+
 G0 = DEFAULT_GEOMETRY
 GH = Geometry(G0.wheelbase, G0.track_front, G0.track_rear, G0.tire_radius, cg_height=0.25)
 FS = 200.0
@@ -25,11 +27,7 @@ FULL = NonlinearLayout(knots=DEFAULT_KNOTS, bump_stops=True)
 
 # severe runs: every one reaches the bump stops and lifts a wheel (checked)
 TRACKS = {
-    "washboard": (dict(id="w", kind="washboard", start=2.0, amplitude=0.011, wavelength=0.8, cycles=6), 10.0),
-    "herringbone": (dict(id="h", kind="herringbone", start=2.0, amplitude=0.011, wavelength=0.7, cycles=8,
-                         angle=30.0), 8.0),
-    "chassis_twist": (dict(id="t", kind="chassis_twist", start=2.0, height=0.07, bump_length=1.2, spacing=3.0,
-                           bumps=2), 6.0),
+    **bump_tracks(0.011, wavelength=0.7, height=0.07, bump_length=1.2, spacing=3.0, twist_speed=6.0),
     "profile": (dict(id="p", kind="profile", file="road.csv"), 8.0),
     "flat": (dict(id="f", kind="flat"), 8.0),
 }
@@ -46,10 +44,7 @@ def nasty_row(P16=None):
 @pytest.fixture(scope="module")
 def road_dir(tmp_path_factory):
     d = tmp_path_factory.mktemp("road")
-    x = np.linspace(2.0, 6.0, 401)
-    zl = 0.03 * np.sin(2 * np.pi * (x - 2) / 0.7) * np.hanning(x.size)
-    zr = 0.012 * np.sin(2 * np.pi * (x - 2) / 1.1) * np.hanning(x.size) ** 0.5
-    np.savetxt(d / "road.csv", np.column_stack([x, zl, zr]), delimiter=",", header="x,z_left,z_right", comments="")
+    write_profile_road(d, 0.03, 0.012)
     return d
 
 

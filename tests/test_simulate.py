@@ -10,17 +10,13 @@ from rideid.model.params import DEFAULT_CAR, DEFAULT_GEOMETRY, INDEX, as_vector
 from rideid.model.simulate import prepare_run, simulate_lsim, simulate_reference
 from rideid.data.schema.tracks import track_from_table
 
+from cars import bump_tracks, write_profile_road
+
 G = DEFAULT_GEOMETRY
 P0 = as_vector(DEFAULT_CAR)
 FS = 200.0
 
-TRACKS = {
-    "washboard": (dict(id="w", kind="washboard", start=2.0, amplitude=0.008, wavelength=0.8, cycles=6), 10.0),
-    "herringbone": (dict(id="h", kind="herringbone", start=2.0, amplitude=0.008, wavelength=0.5, cycles=8,
-                         angle=30.0), 8.0),
-    "chassis_twist": (dict(id="t", kind="chassis_twist", start=2.0, height=0.06, bump_length=1.6, spacing=4.0,
-                           bumps=2), 5.0),
-}
+TRACKS = bump_tracks(0.008, wavelength=0.5, height=0.06, bump_length=1.6, spacing=4.0, twist_speed=5.0)
 
 
 def rel_rms(a, b):
@@ -30,11 +26,7 @@ def rel_rms(a, b):
 @pytest.fixture(scope="module")
 def profile_track(tmp_path_factory):
     d = tmp_path_factory.mktemp("prof")
-    x = np.linspace(2.0, 6.0, 401)
-    zl = 0.01 * np.sin(2 * np.pi * (x - 2) / 0.7) * np.hanning(x.size)
-    zr = 0.006 * np.sin(2 * np.pi * (x - 2) / 1.1) * np.hanning(x.size) ** 0.5
-    np.savetxt(d / "road.csv", np.column_stack([x, zl, zr]), delimiter=",", header="x,z_left,z_right",
-               comments="")
+    write_profile_road(d, 0.01, 0.006)
     return track_from_table(dict(id="p", kind="profile", file="road.csv"), "t", base_dir=d)
 
 

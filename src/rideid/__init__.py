@@ -20,56 +20,51 @@ Public API (SPEC §5)::
 
 from importlib import import_module
 
+def _by_name(modules: dict, aliases: dict) -> dict:
+    """Name -> (defining module, its name there; None: the same) of the names in ``modules`` (module -> names)
+    and of the ``aliases`` (name -> (module, its name there))."""
+    return {**{name: (module, None) for module, names in modules.items() for name in names}, **aliases}
+
+
 #: public name -> (defining module, its name there); imported on first use (PEP 562), so that
 #: ``import rideid`` (and the command line's ``--help``) loads neither NumPy nor the compiled kernels
-_PUBLIC = {
-    "CostFunction": ("rideid.estimate.cost", None), "ParameterSpace": ("rideid.estimate.cost", None),
-    "Dataset": ("rideid.data.dataset", None), "load_dataset": ("rideid.conditioning.load", None),
-    "PlanResult": ("rideid.design", None), "plan": ("rideid.design", None),
-    "ArgumentError": ("rideid.errors", None), "DataError": ("rideid.errors", None),
-    "DataWarning": ("rideid.errors", None), "ModelValidityWarning": ("rideid.errors", None),
-    "RideidError": ("rideid.errors", None), "ScaleError": ("rideid.errors", None),
-    "DatasetManifest": ("rideid.data.schema", None), "Manifest": ("rideid.data.schema", None),
-    "Scenario": ("rideid.data.schema", None), "load_truth": ("rideid.data.schema", None),
-    "identify": ("rideid.estimate.model_choice", None),
-    "History": ("rideid.estimate.result", None), "IdentificationResult": ("rideid.estimate.result", None),
-    "load_result": ("rideid.estimate.result", "load"),
-    "score": ("rideid.estimate.score", None),
-    "SensitivityMaps": ("rideid.estimate.sensitivity", None), "sensitivity_maps": ("rideid.estimate.sensitivity", None),
-    "JadeSolver": ("rideid.estimate.jade", None), "jade": ("rideid.estimate.jade", None),
-    "CHANNELS": ("rideid.model.equations", None), "modal_summary": ("rideid.model.equations", None),
-    "DEFAULT_CAR": ("rideid.model.params", None), "DEFAULT_GEOMETRY": ("rideid.model.params", None),
-    "NAMES": ("rideid.model.params", None), "UNITS": ("rideid.model.params", None),
-    "Geometry": ("rideid.model.params", None), "ALL_NAMES": ("rideid.model.params", None),
-    "EXT_NAMES": ("rideid.model.params", None), "GROUPS": ("rideid.model.params", None),
-    "default_scenario": ("rideid.data.scenario", None), "default_scenario_path": ("rideid.data.scenario", None),
-    "load_scenario": ("rideid.data.scenario", None),
-    "simulate_manifest": ("rideid.synth.scenario", None), "write_dataset": ("rideid.synth.scenario", None),
-    "iso8608_class": ("rideid.model.roads", None), "iso8608_profile": ("rideid.model.roads", None),
-    "Track": ("rideid.model.tracks", None),
-    "StudyResult": ("rideid.studies", None), "load_study": ("rideid.studies", None), "study": ("rideid.studies", None),
-    "export": ("rideid.exporter", None), "ExportResult": ("rideid.exporter", None),
-    "plot_fit": ("rideid.report.figures", "fit_figure"),
+_PUBLIC = _by_name({
+    "rideid.estimate.cost": ("CostFunction", "ParameterSpace"), "rideid.data.dataset": ("Dataset",),
+    "rideid.conditioning.load": ("load_dataset",), "rideid.design": ("PlanResult", "plan"),
+    "rideid.errors": ("ArgumentError", "DataError", "DataWarning", "ModelValidityWarning", "RideidError",
+                      "ScaleError"),
+    "rideid.data.schema": ("DatasetManifest", "Manifest", "Scenario", "load_truth"),
+    "rideid.estimate.model_choice": ("identify",), "rideid.estimate.result": ("History", "IdentificationResult"),
+    "rideid.estimate.score": ("score",), "rideid.estimate.sensitivity": ("SensitivityMaps", "sensitivity_maps"),
+    "rideid.estimate.jade": ("JadeSolver", "jade"), "rideid.model.equations": ("CHANNELS", "modal_summary"),
+    "rideid.model.params": ("DEFAULT_CAR", "DEFAULT_GEOMETRY", "NAMES", "UNITS", "Geometry", "ALL_NAMES",
+                            "EXT_NAMES", "GROUPS"),
+    "rideid.data.scenario": ("default_scenario", "default_scenario_path", "load_scenario"),
+    "rideid.synth.scenario": ("simulate_manifest", "write_dataset"),
+    "rideid.model.roads": ("iso8608_class", "iso8608_profile"), "rideid.model.tracks": ("Track",),
+    "rideid.studies": ("StudyResult", "load_study", "study"), "rideid.exporter": ("export", "ExportResult"),
+}, {
+    "load_result": ("rideid.estimate.result", "load"), "plot_fit": ("rideid.report.figures", "fit_figure"),
     "plot_parameters": ("rideid.report.figures", "parameters_figure"),
     "plot_dampers": ("rideid.report.figures", "dampers_figure"),
-}
+})
 
 #: what the command line (:mod:`rideid.cli`) uses beyond SPEC §5, reached the same lazy way so that the command
 #: line imports nothing but ``rideid``; not in ``__all__`` (not part of the stable API)
-_COMMAND_LINE = {
-    "BUILTIN": ("rideid.data.scenario", None), "atomic_output": ("rideid.data.schema", None),
-    "read_toml": ("rideid.data.schema", None), "read_result_json": ("rideid.data.schema", None),
-    "refuse_unknown_roads": ("rideid.data.dataset", None),
-    "format_modal_summary": ("rideid.model.equations", None), "compile_kernels": ("rideid.model.kernel", None),
-    "scenario_properties": ("rideid.verify.hifi", None),
-    "DEFAULT_GENERATIONS": ("rideid.estimate.identify", None), "DEFAULT_POPULATION": ("rideid.estimate.identify", None),
-    "parse_model_arg": ("rideid.estimate.identify", None), "verdict_paragraph": ("rideid.estimate.adequacy", None),
-    "format_dampers": ("rideid.estimate.dampers", None), "format_bump_stops": ("rideid.estimate.bumps", None),
+_COMMAND_LINE = _by_name({
+    "rideid.data.scenario": ("BUILTIN",), "rideid.data.schema": ("atomic_output", "read_toml", "read_result_json"),
+    "rideid.data.dataset": ("refuse_unknown_roads",), "rideid.model.equations": ("format_modal_summary",),
+    "rideid.model.kernel": ("compile_kernels",), "rideid.verify.hifi": ("scenario_properties",),
+    "rideid.estimate.identify": ("DEFAULT_GENERATIONS", "DEFAULT_POPULATION", "parse_model_arg"),
+    "rideid.estimate.adequacy": ("verdict_paragraph",), "rideid.estimate.dampers": ("format_dampers",),
+    "rideid.estimate.bumps": ("format_bump_stops",), "rideid.design": ("parse_target",),
+    "rideid.report.html": ("write_report",),
+}, {
     "write_sensitivity_csvs": ("rideid.estimate.sensitivity", "write_csvs"),
     "sensitivity_tables_markdown": ("rideid.estimate.sensitivity", "tables_markdown"),
     "sensitivity_heatmaps": ("rideid.estimate.sensitivity", "heatmaps"),
-    "parse_target": ("rideid.design", None), "write_report": ("rideid.report.html", None),
-}
+})
+del _by_name  # the module's namespace (and dir(rideid)) holds the two tables only
 
 #: the subpackages, reachable as attributes (``rideid.model.params``) after a plain ``import rideid`` as before
 _SUBPACKAGES = ("conditioning", "csvio", "data", "design", "errors", "estimate", "exporter", "model", "report",

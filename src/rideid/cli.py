@@ -130,19 +130,24 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--version", action=_Version, nargs=0, help="show the version and exit")
     sub = p.add_subparsers(dest="command", metavar="COMMAND")
 
-    def add(name, help_):
+    def add(name, help_, source=None, out=None):
+        """Subcommand ``name`` with --quiet, its input ``source`` = (argument, metavar, help) and a required
+        ``--out DIR`` (help ``out``) when given."""
         # help_ as printed: the command list's help is %-formatted by argparse, the description is not
         s = sub.add_parser(name, help=help_.replace("%", "%%"), description=help_, epilog=EXAMPLES[name],
                            formatter_class=argparse.RawDescriptionHelpFormatter)
         s.add_argument("--quiet", action="store_true", help="no progress line and no compile notice")
+        if source is not None:
+            argument, metavar, source_help = source
+            s.add_argument(argument, metavar=metavar, help=source_help)
+        if out is not None:
+            s.add_argument("--out", required=True, metavar="DIR", help=out)
         return s
 
-    s = add("simulate", "simulate a scenario (truth + tracks + runs) into a dataset folder")
-    s.add_argument("scenario", metavar="SCENARIO.toml",
-                   help="the scenario: [truth], [vehicle], [known], tracks and runs with fs and duration; "
-                        "'builtin' for the built-in car and the paper's ten runs")
-    s.add_argument("--out", required=True, metavar="DIR",
-                   help="dataset folder to write (dataset.toml, runs/*.csv, truth.toml)")
+    s = add("simulate", "simulate a scenario (truth + tracks + runs) into a dataset folder",
+            ("scenario", "SCENARIO.toml", "the scenario: [truth], [vehicle], [known], tracks and runs with fs and "
+                                          "duration; 'builtin' for the built-in car and the paper's ten runs"),
+            out="dataset folder to write (dataset.toml, runs/*.csv, truth.toml)")
     s.add_argument("--noise", type=float, default=0.0, metavar="FRACTION",
                    help="white Gaussian noise, standard deviation as a fraction of each channel's RMS")
     s.add_argument("--noise-ar1", type=float, default=0.0, metavar="RHO",
@@ -159,11 +164,10 @@ def _parser() -> argparse.ArgumentParser:
                         "1 s standing still first) as a logger would, mapped for the measured-data pipeline")
 
     s = add("identify", "estimate the ride parameters of a dataset (the twelve, plus anti-roll bars, tire damping, "
-                        "damper curves and bump stops when the model has them)")
-    s.add_argument("dataset", metavar="DATASET_DIR", help="dataset folder (or its dataset.toml)")
-    s.add_argument("--out", required=True, metavar="DIR",
-                   help="output folder: result.json, history.csv, report.html, figures/ (rideid's files from "
-                        "an earlier identification there are replaced; other files stay)")
+                        "damper curves and bump stops when the model has them)",
+            ("dataset", "DATASET_DIR", "dataset folder (or its dataset.toml)"),
+            out="output folder: result.json, history.csv, report.html, figures/ (rideid's files from "
+                "an earlier identification there are replaced; other files stay)")
     s.add_argument("--seed", type=int, default=None, metavar="N",
                    help="seed of the search (same seed, same result; default: a fresh one each time)")
     s.add_argument("--population", type=int, default=None, metavar="NP", help="JADE population (default 32)")
@@ -186,28 +190,23 @@ def _parser() -> argparse.ArgumentParser:
     s.add_argument("--compare", metavar="OTHER_DIR",
                    help="another identification of the same dataset (e.g. --weights fixed) to overlay")
 
-    s = add("sensitivity", "parameter/response/track sensitivity maps (paper Tables 4-7) as CSV, Markdown, PNG")
-    s.add_argument("source", metavar="DATASET_OR_SCENARIO",
-                   help="a dataset folder or a scenario file ('builtin': the built-in scenario)")
-    s.add_argument("--out", required=True, metavar="DIR",
-                   help="output folder: tables.md, three CSV and three PNG maps")
+    s = add("sensitivity", "parameter/response/track sensitivity maps (paper Tables 4-7) as CSV, Markdown, PNG",
+            ("source", "DATASET_OR_SCENARIO", "a dataset folder or a scenario file ('builtin': the built-in scenario)"),
+            out="output folder: tables.md, three CSV and three PNG maps")
 
-    s = add("study", "many identifications (Monte Carlo, fleet, run subsets) on Dask; resumable")
-    s.add_argument("study", metavar="STUDY.toml",
-                   help="the study: its data, identify options and axes (docs/studies.md; examples/studies/)")
-    s.add_argument("--out", required=True, metavar="DIR",
-                   help="output folder (tasks/, results.parquet, summary.md/.csv/.html); tasks already "
-                        "there are not recomputed")
+    s = add("study", "many identifications (Monte Carlo, fleet, run subsets) on Dask; resumable",
+            ("study", "STUDY.toml",
+             "the study: its data, identify options and axes (docs/studies.md; examples/studies/)"),
+            out="output folder (tasks/, results.parquet, summary.md/.csv/.html); tasks already "
+                "there are not recomputed")
     s.add_argument("--scheduler", metavar="ADDRESS", default=None,
                    help="a running Dask scheduler, e.g. tcp://host:8786 (default: a local cluster, "
                         "one single-threaded worker process per core)")
 
-    s = add("plan", "plan a test: the precision (CRLB) each candidate run buys, and which runs to drive")
-    s.add_argument("scenario", metavar="SCENARIO.toml",
-                   help="[truth] = the nominal car, [[runs]] = the candidate runs, [known] = the scale anchor "
-                        "('builtin': the built-in scenario)")
-    s.add_argument("--out", required=True, metavar="DIR",
-                   help="output folder: plan.json, plan.md, crlb.csv, path.csv, correlation.csv, precision_path.png")
+    s = add("plan", "plan a test: the precision (CRLB) each candidate run buys, and which runs to drive",
+            ("scenario", "SCENARIO.toml", "[truth] = the nominal car, [[runs]] = the candidate runs, [known] = the "
+                                          "scale anchor ('builtin': the built-in scenario)"),
+            out="output folder: plan.json, plan.md, crlb.csv, path.csv, correlation.csv, precision_path.png")
     s.add_argument("--noise", type=float, default=None, metavar="FRACTION",
                    help="noise sd as a fraction of each channel's RMS, per run (as simulate --noise; "
                         "default 0.01, or 0 when a noise density or --noise-psd is given)")
@@ -244,9 +243,9 @@ def _parser() -> argparse.ArgumentParser:
     s.add_argument("result", metavar="RESULT.json", help="an identification's result.json (or its folder)")
     s.add_argument("truth", metavar="TRUTH.toml", help="the truth, e.g. the truth.toml rideid simulate writes")
 
-    s = add("export", "the identified car as a parameter card (car.toml, car.csv) and an FMI 2.0 FMU (car.fmu)")
-    s.add_argument("fit", metavar="FIT_DIR", help="an identification folder (result.json)")
-    s.add_argument("--out", required=True, metavar="DIR", help="output folder: car.toml, car.csv, car.fmu")
+    s = add("export", "the identified car as a parameter card (car.toml, car.csv) and an FMI 2.0 FMU (car.fmu)",
+            ("fit", "FIT_DIR", "an identification folder (result.json)"),
+            out="output folder: car.toml, car.csv, car.fmu")
     s.add_argument("--format", default="all", metavar="card|fmu|all",
                    help="card: car.toml (scenario-ready) and car.csv; fmu: car.fmu (FMI 2.0 co-simulation, "
                         "C sources and a binary for this platform); all: both (default)")

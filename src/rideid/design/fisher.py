@@ -181,36 +181,50 @@ class NoiseModel:
 
 
 @dataclass
-class RunInformation:
-    """Information of every candidate run about the free parameters of one car.
-
-    All matrices are in relative coordinates ``u = x / x0``.
+class Information:
+    """The information matrices of candidate runs and the channels they come from.
 
     Attributes
     ----------
-    names : list of str
-        Free parameter names (d).
-    x0 : ndarray (d,)
-        The car (free parameters).
-    P0 : ndarray (n_params,)
-        The full parameter vector of the car.
-    F : ndarray (n_runs, d, d)
-        Fisher information per run.
-    A, B : ndarray (n_runs, d, d)
-        Identify's weighted normal matrix and its noise term per run (sandwich).
-    sigma, rms, used : ndarray (n_runs, 10)
+    F : ndarray (..., d, d)
+        Fisher information.
+    A, B : ndarray (..., d, d)
+        Identify's weighted normal matrix and its noise term (sandwich).
+    sigma, rms, used : ndarray (..., 10)
         Noise sd, noise-free RMS, channels used.
     """
 
-    names: list
-    x0: np.ndarray
-    P0: np.ndarray
     F: np.ndarray
     A: np.ndarray
     B: np.ndarray
     sigma: np.ndarray
     rms: np.ndarray
     used: np.ndarray
+
+
+@dataclass
+class RunInformation(Information):
+    """Information of every candidate run about the free parameters of one car.
+
+    All matrices are in relative coordinates ``u = x / x0``.
+
+    Attributes
+    ----------
+    F, A, B : ndarray (n_runs, d, d)
+        Per run, as :class:`Information`.
+    sigma, rms, used : ndarray (n_runs, 10)
+        Per run, as :class:`Information`.
+    names : list of str
+        Free parameter names (d).
+    x0 : ndarray (d,)
+        The car (free parameters).
+    P0 : ndarray (n_params,)
+        The full parameter vector of the car.
+    """
+
+    names: list
+    x0: np.ndarray
+    P0: np.ndarray
 
 
 def simulator(sc) -> BatchSimulator:
@@ -299,7 +313,7 @@ def run_information(sim: BatchSimulator, space: ParameterSpace, x0, noise: Noise
         A[r] = np.einsum("c,cij->ij", W * live, G)
         B[r] = np.einsum("c,cij->ij", (W * live) ** 2 * s ** 2, Gc)
         sig[r], rmss[r], used[r] = s, rms, live
-    return RunInformation(list(space.names), x0, space.full(x0[None])[0], F, A, B, sig, rmss, used)
+    return RunInformation(F, A, B, sig, rmss, used, names=list(space.names), x0=x0, P0=space.full(x0[None])[0])
 
 
 # ---------------------------------------------------------------------------

@@ -707,8 +707,8 @@ def _information(sc, sim, space, cars, nm, seed, step):
             ri = road[sc.runs[k].id]
             F[k], A[k], B[k] = ri.F[i], c * ri.A[i], c * c * ri.B[i]
             sig[k], rms[k], used[k] = ri.sigma, ri.rms, ri.used
-        out.append(RunInformation(list(space.names), np.asarray(x, float), space.full(np.asarray(x)[None])[0],
-                                  F, A, B, sig, rms, used))
+        out.append(RunInformation(F, A, B, sig, rms, used, names=list(space.names), x0=np.asarray(x, float),
+                                  P0=space.full(np.asarray(x)[None])[0]))
     return out, road
 
 

@@ -61,7 +61,7 @@ from ..estimate import roadfit
 from ..model.equations import CHANNEL_KIND, CHANNELS
 from ..model.simulate import prepare_run, simulate_reference
 from .colour import ar1_psd
-from .fisher import SILENT
+from .fisher import SILENT, Information
 
 #: roads generated per unknown-road candidate (their information averaged); 1 for a run with a road_seed
 ROADS = 2
@@ -71,19 +71,13 @@ ROAD_STEP = 1e-4
 
 
 @dataclass
-class RoadRunInformation:
+class RoadRunInformation(Information):
     """One unknown-road candidate's information about the free parameters, per car.
 
     ``F``, ``A``, ``B`` (n_cars, d, d) in relative coordinates; ``A`` and ``B`` already divided by the
     block's mean component variance ``vbar`` and ``vbar^2`` (module docstring); ``sigma``, ``rms``, ``used`` (10,)
     of the first road and car; ``seeds`` the roads' seeds."""
 
-    F: np.ndarray
-    A: np.ndarray
-    B: np.ndarray
-    sigma: np.ndarray
-    rms: np.ndarray
-    used: np.ndarray
     seeds: list
 
 

@@ -515,11 +515,7 @@ def hermite_root(s0, s1, m0, m1):
     with np.errstate(divide="ignore", invalid="ignore"):
         t = s0 / (s0 - s1)
         for _ in range(2):
-            t2 = t * t
-            t3 = t2 * t
-            val = (2.0 * t3 - 3.0 * t2 + 1.0) * s0 + (t3 - 2.0 * t2 + t) * m0 + (3.0 * t2 - 2.0 * t3) * s1 \
-                + (t3 - t2) * m1
-            der = (6.0 * t2 - 6.0 * t) * (s0 - s1) + (3.0 * t2 - 4.0 * t + 1.0) * m0 + (3.0 * t2 - 2.0 * t) * m1
+            val, der = kernel_nl.hermite_value_slope(t, s0, s1, m0, m1)
             t = np.where(der != 0.0, t - val / np.where(der != 0.0, der, 1.0), t)
             t = np.minimum(np.maximum(t, 0.0), 1.0)
     return t
