@@ -428,7 +428,7 @@ class CostFunction:
         unaligned = [r.id for r in ds.runs if r.id not in ds.data]
         if unaligned:
             raise ArgumentError(f"runs {', '.join(unaligned)} have no start yet: load the dataset with "
-                                "rideid.load_dataset (or pass it through rideid.data.dataset.align_starts)")
+                                "rideid.load_dataset (or pass it through rideid.conditioning.load.align_starts)")
         if space is None:
             if extensions is None:  # the dataset's [model], else the twelve
                 extensions = ds.manifest.extensions or ()
