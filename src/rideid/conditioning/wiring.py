@@ -233,7 +233,8 @@ def rigid_body_scores(Y: np.ndarray, fs: float, geom, F=None):
     if F is not None:
         extra = _rename_hypotheses(np.asarray(F, float), has_gyro)
         hyps += extra
-        scores = np.concatenate([scores, _relative_residuals(np.matmul(_constraints(*geo)[None], _transforms(extra)), G)])
+        scores = np.concatenate([scores, _relative_residuals(np.matmul(_constraints(*geo)[None], _transforms(extra)),
+                                                             G)])
     return hyps, scores
 
 
@@ -411,7 +412,8 @@ def describe_fix(fix: dict) -> str:
                 parts.append(f"{c} takes the file channel mapped to {src}")
                 done.add(c)
             continue
-        if src != c and other and other["source"] == c and abs(abs(f) - 1) < 1e-9 and abs(abs(other["factor"]) - 1) < 1e-9:
+        if (src != c and other and other["source"] == c and abs(abs(f) - 1) < 1e-9
+                and abs(abs(other["factor"]) - 1) < 1e-9):
             s = "" if f > 0 and other["factor"] > 0 else " (and a sign)"
             parts.append(f"{c} and {src} swapped{s}")
             done |= {c, src}
