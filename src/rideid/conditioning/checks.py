@@ -254,11 +254,12 @@ def check_dataset(ds, car=None) -> list[Finding]:
     car : (12,) array, optional
         The nominal car's parameter vector (default ``nominal_car(ds.geometry)``).
     """
-    return run_steps(_all_runs(ds), ds.geometry, car)
+    return run_steps(check_steps(ds), ds.geometry, car)
 
 
-def _all_runs(ds):
-    """The step checking every run of the dataset, side by side: returns the findings, run by run."""
+def check_steps(ds):
+    """The step of :func:`check_dataset` (:mod:`rideid.conditioning.nominal`): every run checked side by
+    side; returns the findings, run by run."""
     found = yield from gather([_check_run(ds, r) for r in ds.manifest.runs])
     return [f for fs in found for f in fs]
 
@@ -344,5 +345,5 @@ def _check_run(ds, r):
     return out
 
 
-__all__ = ["MATCH_MIN", "NOMINAL_LEAD_IN", "check_coverage", "check_dataset", "check_reach", "feature_span",
-           "match_finding", "speed_candidates"]
+__all__ = ["MATCH_MIN", "NOMINAL_LEAD_IN", "check_coverage", "check_dataset", "check_reach", "check_steps",
+           "feature_span", "match_finding", "speed_candidates"]

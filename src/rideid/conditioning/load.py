@@ -14,7 +14,7 @@ from dataclasses import replace
 
 from ..data.checks import enforce
 from ..data.dataset import Dataset, read_dataset
-from .checks import check_dataset, check_reach
+from .checks import check_reach, check_steps
 from .nominal import gather, run_steps
 from .starts import start_steps
 
@@ -71,10 +71,18 @@ def align_starts(ds: Dataset, starts: dict[str, float] | None = None, car=None) 
         ``nominal_car(ds.geometry)``): the car the starts are estimated with
         and the checks compare the data with.
     """
+    # the starts, then the checks, as one step: the nominal car is simulated a round at a time, every run's
+    # requests of a round in one batch (rideid.conditioning.nominal)
+    step = _aligned(ds, starts)
+    ds, findings = run_steps(step, ds.geometry, car)
+    enforce(findings, f"{ds.manifest.path}: ")
+    return replace(ds, findings=findings)
+
+
+def _aligned(ds: Dataset, starts: dict[str, float] | None):
+    """The step of :func:`align_starts`: returns ``(dataset aligned, findings of the checks)``."""
     man = ds.manifest
-    # every run's start, the estimated ones side by side: the nominal car simulated a round at a time for all
-    step = gather(_start_of(ds, rid, starts) for rid in ds.measured)
-    found = run_steps(step, man.geometry, car)
+    found = yield from gather(_start_of(ds, rid, starts) for rid in ds.measured)
     data, measured = dict(ds.data), {}
     for (rid, mr0), (s, record) in zip(ds.measured.items(), found):
         mr = replace(mr0, record=dict(mr0.record), window=None, start=None)
@@ -85,9 +93,8 @@ def align_starts(ds: Dataset, starts: dict[str, float] | None = None, car=None) 
         data[rid] = mr.run_data(s)
     ds = Dataset(man, {r.id: data[r.id] for r in man.runs}, measured)
     # the one hook for the physics checks (rideid.conditioning.checks): every run conditioned and aligned
-    findings = check_dataset(ds, car)
-    enforce(findings, f"{man.path}: ")
-    return replace(ds, findings=findings)
+    findings = yield from check_steps(ds)
+    return ds, findings
 
 
 def _start_of(ds: Dataset, rid: str, starts: dict[str, float] | None):
