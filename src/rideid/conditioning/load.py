@@ -26,8 +26,11 @@ def load_dataset(path, starts: dict[str, float] | None = None) -> Dataset:
     conditioning: SPEC §3 CSVs taken as they are, logger files through
     :mod:`rideid.data.measured`), then :func:`align_starts` (the start of every
     measured run whose start is not given, estimated with the nominal car
-    :func:`rideid.model.params.nominal_car`, made once, which the checks
-    compare the data with too).
+    :func:`rideid.model.params.nominal_car`, which the checks compare the
+    data with too). The starts and the checks are one step
+    (:mod:`rideid.conditioning.nominal`): they analyse, and ask for the
+    nominal car's responses, simulated a round at a time for every run in one
+    batch.
     ``Dataset.preprocessing()`` says what was done.
 
     Parameters

@@ -4,8 +4,10 @@ Step 6 of conditioning a measured run (:mod:`rideid.data.measured`): the
 file time at which the front axle reaches ``x = 0`` (SPEC §2), estimated by
 correlating the run's samples with the response of a car (the nominal car
 when a dataset is loaded, :func:`rideid.conditioning.load.align_starts`; the
-fitted one in :func:`rideid.identify`). It runs the model, so it sits above
-the data layer.
+fitted one in :func:`rideid.identify`). The estimate is a step
+(:func:`start_steps`, :mod:`rideid.conditioning.nominal`): it asks for the
+responses it correlates with and never runs the model itself; loading runs
+the steps of every run side by side, each round of simulations in one batch.
 """
 
 from __future__ import annotations
