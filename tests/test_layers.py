@@ -120,7 +120,7 @@ def test_every_module_is_in_a_layer_and_the_graph_is_read():
     for m in MODULES:
         _layer(m)
     # the graph is really read: known edges of each kind are there
-    assert "rideid.model.simulate" in EDGES["rideid.conditioning.starts"]
+    assert "rideid.model.simulate" in EDGES["rideid.conditioning.nominal"]
     assert "rideid.data.dataset" in EDGES["rideid.conditioning.load"]
     assert "rideid.verify.hifi" in EDGES["rideid.synth.scenario"]
     assert "rideid.conditioning.load" in EDGES["rideid"]  # through the lazy table

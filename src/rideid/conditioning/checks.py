@@ -16,8 +16,10 @@ conditioned and aligned (:func:`rideid.conditioning.load.align_starts`):
   re-try other speeds and the manifest's other tracks and the message names
   the one that fits.
 
-This module simulates the nominal car the checks compare the data with
-(:func:`rideid.model.params.nominal_car`); the comparisons themselves are pure
+The checks are steps (:mod:`rideid.conditioning.nominal`): they ask for the
+nominal car's responses (:func:`rideid.model.params.nominal_car`) on every
+run's time grid, every run in one batch, and, for a run that does not match,
+for its alternatives in a later one; the comparisons themselves are pure
 functions over numbers and arrays.
 """
 
@@ -25,18 +27,14 @@ from __future__ import annotations
 
 import dataclasses
 
-import numba
 import numpy as np
 
 from ..data.checks import ERROR, PLAUSIBLE, WARNING, Finding
 from ..data.measured import Distance, RelativeDistance
 from ..data.schema.channels import SI, UNITS, quantity
-from ..model.batch import thread_map
-from ..model.contact import envelope_grid
 from ..model.equations import CHANNELS
-from ..model.params import nominal_car
-from ..model.simulate import ENVELOPE_DX, PREPARED_MAX, prepare_run
-from .starts import correlation_score, estimate_start, simulate_response
+from .nominal import Job, gather, responses, run_steps
+from .starts import correlation_score, start_steps
 from .wiring import axle_amplitude_findings, corrected, describe_fix, fix_entries, unit_findings, wiring_fix
 
 #: a moving run's nominal response starts at rest this long (s) before the first sample: the nominal car's
@@ -91,7 +89,7 @@ def check_coverage(run_id: str, track, geom, x_end: float, x_begin: float = 0.0,
     if lo - R < min(x_begin, 0.0) and not moving:
         out.append(Finding(ERROR, "coverage", f"{w}: track '{track.id}' has features from x = {lo:g} m, under or "
                            f"within a tire radius ({R:g} m) of the front wheels at the start: the car must start at "
-                           f"rest on flat road (SPEC §2); move the track's start to at least "
+                           "rest on flat road (SPEC §2); move the track's start to at least "
                            f"{R + max(0.0, -x_begin):g} m",
                            run_id, "start"))
     elif x_end < lo - R:
@@ -182,8 +180,9 @@ def _level(ds, rid, check) -> str:
     return lv.get(check, "error")
 
 
-def _nominal_response(P, geom, track, t, speed, distance, moving: bool = False):
-    return simulate_response(P, geom, track, t, speed, distance, lead_in=NOMINAL_LEAD_IN if moving else 0.0)
+def _nominal_job(track, t, speed, distance, moving: bool = False) -> Job:
+    """The simulation of the nominal car on the run's own time grid (a moving run from rest a lead-in before)."""
+    return Job(track, t, speed, distance, NOMINAL_LEAD_IN if moving else 0.0)
 
 
 def _score(Y, Yhat):
@@ -191,13 +190,14 @@ def _score(Y, Yhat):
     return correlation_score(Yhat, np.nan_to_num(Y, nan=0.0), cols)
 
 
-def _alternatives(ds, rid, P, rho_now):
-    """(description, correlation) of the run under other speeds and the dataset's other tracks."""
+def _alternatives(ds, rid):
+    """The step giving (description, correlation) of the run under other speeds and the dataset's other
+    tracks (:mod:`rideid.conditioning.nominal`: every alternative simulated in the same rounds)."""
     man, geom = ds.manifest, ds.geometry
     run = man.run(rid)
     mr = ds.measured.get(rid)
     rd = ds.data[rid]
-    out = []
+    tries = []
 
     def try_it(track, speed, factor=None):
         if mr is not None and mr.auto_start:
@@ -206,64 +206,30 @@ def _alternatives(ds, rid, P, rho_now):
                 dist = Distance(dist.t, dist.d * factor)
             alt = dataclasses.replace(mr, speed=speed, distance=dist, window=None, start=None, warnings=[])
             try:
-                _, r = estimate_start(alt, P, geom, track)
+                _, r = yield from start_steps(alt, geom, track)
             except Exception:  # a candidate that cannot even be aligned does not fit
                 return -1.0
             return r
         dist = rd.distance
         if factor is not None and dist is not None:
             dist = RelativeDistance(Distance(dist.dist.t, dist.dist.d * factor), dist.start)
-        return _score(rd.matrix(), _nominal_response(P, geom, track, rd.time, speed, dist, moving=run.moving))
+        (Yhat,) = responses((yield [_nominal_job(track, rd.time, speed, dist, moving=run.moving)]))
+        return _score(rd.matrix(), Yhat)
 
     track = man.tracks[run.track]
     if run.speed is not None:
         for v, why in speed_candidates(run.speed):
             if PLAUSIBLE["speed"][0] <= v <= PLAUSIBLE["speed"][1]:
-                out.append((f"speed = {v:.4g} m/s ({why})", try_it(track, v)))
+                tries.append((f"speed = {v:.4g} m/s ({why})", try_it(track, v)))
     elif mr is not None and mr.distance is not None:
         for f, why in ((1 / 3.6, "km/h mapped as m/s"), (3.6, "m/s mapped as km/h"), (0.44704, "mph mapped as m/s")):
-            out.append((f"the speed channel x {f:.4g} ({why}; fix its unit in the channel map)",
-                        try_it(track, None, f)))
+            tries.append((f"the speed channel x {f:.4g} ({why}; fix its unit in the channel map)",
+                          try_it(track, None, f)))
     for tid, tr in man.tracks.items():
         if tid != run.track:
-            out.append((f"track = \"{tid}\"", try_it(tr, run.speed)))
-    return out
-
-
-def _prefetch_inputs(ds) -> None:
-    """Tabulate every wheel path's envelope and every run's inputs on parallel threads.
-
-    The checks (and then the identification) take them from the caches of
-    :func:`rideid.model.contact.envelope_grid` and
-    :func:`rideid.model.simulate.prepare_run` one run at a time; most of the
-    work is NumPy and compiled loops that release the GIL, so the cores
-    share it (:func:`rideid.model.batch.thread_map`; with one thread, as in
-    a study's workers, nothing is done ahead). A run that fails here fails
-    again, with its message, in the checks.
-    """
-    man, geom = ds.manifest, ds.geometry
-    runs = [r for r in man.runs[:PREPARED_MAX] if r.road_known]  # what the cache of prepared runs holds
-    if min(numba.get_num_threads(), len(runs)) < 2:
-        return
-    paths = {}
-    for r in runs:
-        for y in geom.corner_y:
-            p = man.tracks[r.track].path(y)
-            if p.extent is not None:
-                paths[id(p)] = p
-
-    def envelope(p):
-        envelope_grid(p, geom.tire_radius, ENVELOPE_DX)
-
-    def inputs(r):
-        rd = ds.data[r.id]
-        try:
-            prepare_run(man.tracks[r.track], geom, r.speed, rd.time, distance=rd.distance)
-        except Exception:  # noqa: BLE001 - reported by the checks themselves
-            pass
-
-    thread_map(envelope, sorted(paths.values(), key=lambda p: -(p.extent[1] - p.extent[0])), "rideid-inputs")
-    thread_map(inputs, runs, "rideid-inputs")
+            tries.append((f"track = \"{tid}\"", try_it(tr, run.speed)))
+    rhos = yield from gather([step for _, step in tries])
+    return [(desc, r) for (desc, _), r in zip(tries, rhos)]
 
 
 def check_dataset(ds, car=None) -> list[Finding]:
@@ -288,87 +254,96 @@ def check_dataset(ds, car=None) -> list[Finding]:
     car : (12,) array, optional
         The nominal car's parameter vector (default ``nominal_car(ds.geometry)``).
     """
+    return run_steps(check_steps(ds), ds.geometry, car)
+
+
+def check_steps(ds):
+    """The step of :func:`check_dataset` (:mod:`rideid.conditioning.nominal`): every run checked side by
+    side; returns the findings, run by run."""
+    found = yield from gather([_check_run(ds, r) for r in ds.manifest.runs])
+    return [f for fs in found for f in fs]
+
+
+def _check_run(ds, r):
+    """The step checking one run (:func:`check_dataset`): returns its findings."""
     man, geom = ds.manifest, ds.geometry
-    P = nominal_car(geom) if car is None else car
     out: list[Finding] = []
-    _prefetch_inputs(ds)
-    for r in man.runs:
-        rid = r.id
-        rd = ds.data[rid]
-        # a run on an unknown road (SPEC §9): no coverage, no nominal response, no track match; units and the
-        # rigid-body identities need no road and still run
-        track = man.tracks[r.track] if r.road_known else None
-        t = rd.time
-        if track is not None:
-            x_of = (lambda tt, r=r: r.speed * tt) if rd.distance is None else rd.distance
-            x_end = float(np.asarray(x_of(np.array([t[-1]])))[0])
-            x_begin = float(np.asarray(x_of(np.array([min(t[0], 0.0)])))[0])
-            cov = check_coverage(rid, track, geom, x_end, x_begin, moving=r.moving)
-            out += cov
-            if any(f.severity == ERROR for f in cov):
-                continue
-        entries = _map_entries(ds, rid)
-        wiring = _level(ds, rid, "wiring")
-        mr = ds.measured.get(rid)
-        # an acceleration in the wrong unit, seen in its lead-in; a re-wiring below that explains it says it better
-        units = (unit_findings(rid, entries, mr.record["channels"])
-                 if mr is not None and wiring != "off" else [])
+    rid = r.id
+    rd = ds.data[rid]
+    # a run on an unknown road (SPEC §9): no coverage, no nominal response, no track match; units and the
+    # rigid-body identities need no road and still run
+    track = man.tracks[r.track] if r.road_known else None
+    t = rd.time
+    if track is not None:
+        x_of = (lambda tt: r.speed * tt) if rd.distance is None else rd.distance
+        x_end = float(np.asarray(x_of(np.array([t[-1]])))[0])
+        x_begin = float(np.asarray(x_of(np.array([min(t[0], 0.0)])))[0])
+        cov = check_coverage(rid, track, geom, x_end, x_begin, moving=r.moving)
+        out += cov
+        if any(f.severity == ERROR for f in cov):
+            return out
+    entries = _map_entries(ds, rid)
+    wiring = _level(ds, rid, "wiring")
+    mr = ds.measured.get(rid)
+    # an acceleration in the wrong unit, seen in its lead-in; a re-wiring below that explains it says it better
+    units = (unit_findings(rid, entries, mr.record["channels"])
+             if mr is not None and wiring != "off" else [])
+    if wiring == "warn":
+        units = [Finding(WARNING, f.check, f.message, f.run, f.channel, f.fix) for f in units]
+    Y = rd.matrix()
+    Yhat = None
+    if track is not None:
+        (Yhat,) = responses((yield [_nominal_job(track, t, r.speed, rd.distance, moving=r.moving)]))
+        if not np.any(Yhat):
+            out += units
+            return out  # a flat road excites nothing: nothing to check the data against
+    wire = (wiring_fix(Y, Yhat, rd.fs, geom, _entry_factors(entries))
+            if wiring != "off" else None)
+    Yc = Y
+    if wire and wire["fix"]:
+        units = [f for f in units if f.channel not in wire["fix"]]
+        Yc = corrected(Y, wire["fix"])
+        sev = ERROR if wiring == "error" else WARNING
+        lines = fix_entries(wire["fix"], entries)
+        how = []
+        if "rigid" in wire:
+            how.append(f"the body accelerometers and the gyro then agree as one rigid body (residual "
+                       f"{wire['rigid'][0]:.0%} -> {wire['rigid'][1]:.1%})")
+        if "axle" in wire:
+            how.append(f"the axle channels then follow their own wheel paths (summed correlation with the "
+                       f"road {wire['axle'][0]:.2f} -> {wire['axle'][1]:.2f} of 4)")
+        alts = ""
+        if wire.get("alternatives"):
+            alts = ("; without a known road this cannot be told from " +
+                    " or from ".join(describe_fix(a) for a in wire["alternatives"][:2]) + ": check which")
+        msg = (f"run '{rid}': the channels look wired differently from the map: {describe_fix(wire['fix'])}; "
+               f"{' and '.join(how)}{alts}. Fix the channel map: {'; '.join(lines)}"
+               " (or set [checks] wiring = \"warn\" if the map is right)")
+        out.append(Finding(sev, "wiring", msg, rid, next(iter(wire["fix"])), wire["fix"]))
+    elif wire and "rigid_inconsistent" in wire:
+        e_id, _ = wire["rigid_inconsistent"]
+        out.append(Finding(WARNING, "wiring", f"run '{rid}': the body accelerometers and the gyro do not agree as "
+                           f"one rigid body (residual {e_id:.0%}) and no swap, sign or unit explains it: check "
+                           "the sensors' positions (at the spring/damper top mounts), units and the map", rid))
+    if wiring != "off" and Yhat is not None and not (wire and wire["fix"]):
+        amp = axle_amplitude_findings(rid, entries, Y, Yhat, skip={f.channel for f in units})
         if wiring == "warn":
-            units = [Finding(WARNING, f.check, f.message, f.run, f.channel, f.fix) for f in units]
-        Y = rd.matrix()
-        Yhat = None
-        if track is not None:
-            Yhat = _nominal_response(P, geom, track, t, r.speed, rd.distance, moving=r.moving)
-            if not np.any(Yhat):
-                out += units
-                continue  # a flat road excites nothing: nothing to check the data against
-        wire = (wiring_fix(Y, Yhat, rd.fs, geom, _entry_factors(entries))
-                if wiring != "off" else None)
-        Yc = Y
-        if wire and wire["fix"]:
-            units = [f for f in units if f.channel not in wire["fix"]]
-            Yc = corrected(Y, wire["fix"])
-            sev = ERROR if wiring == "error" else WARNING
-            lines = fix_entries(wire["fix"], entries)
-            how = []
-            if "rigid" in wire:
-                how.append(f"the body accelerometers and the gyro then agree as one rigid body (residual "
-                           f"{wire['rigid'][0]:.0%} -> {wire['rigid'][1]:.1%})")
-            if "axle" in wire:
-                how.append(f"the axle channels then follow their own wheel paths (summed correlation with the "
-                           f"road {wire['axle'][0]:.2f} -> {wire['axle'][1]:.2f} of 4)")
-            alts = ""
-            if wire.get("alternatives"):
-                alts = ("; without a known road this cannot be told from " +
-                        " or from ".join(describe_fix(a) for a in wire["alternatives"][:2]) + ": check which")
-            msg = (f"run '{rid}': the channels look wired differently from the map: {describe_fix(wire['fix'])}; "
-                   f"{' and '.join(how)}{alts}. Fix the channel map: {'; '.join(lines)}"
-                   " (or set [checks] wiring = \"warn\" if the map is right)")
-            out.append(Finding(sev, "wiring", msg, rid, next(iter(wire["fix"])), wire["fix"]))
-        elif wire and "rigid_inconsistent" in wire:
-            e_id, _ = wire["rigid_inconsistent"]
-            out.append(Finding(WARNING, "wiring", f"run '{rid}': the body accelerometers and the gyro do not agree as "
-                               f"one rigid body (residual {e_id:.0%}) and no swap, sign or unit explains it: check "
-                               "the sensors' positions (at the spring/damper top mounts), units and the map", rid))
-        if wiring != "off" and Yhat is not None and not (wire and wire["fix"]):
-            amp = axle_amplitude_findings(rid, entries, Y, Yhat, skip={f.channel for f in units})
-            if wiring == "warn":
-                amp = [Finding(WARNING, f.check, f.message, f.run, f.channel, f.fix) for f in amp]
-            units += amp
-        out += units
-        if track is None or _level(ds, rid, "track") == "off":
-            continue
-        rho = _score(Yc, Yhat)
-        if rho < MATCH_MIN:
-            f = match_finding(rid, r.track, r.speed, rho, _alternatives(ds, rid, P, rho))
-            if _level(ds, rid, "track") == "warn":
-                f = Finding(WARNING, f.check, f.message + " ([checks] track = \"warn\")", f.run, f.channel)
-            else:
-                f = Finding(f.severity, f.check, f.message + " (set [checks] track = \"warn\" to go on anyway)",
-                            f.run, f.channel)
-            out.append(f)
+            amp = [Finding(WARNING, f.check, f.message, f.run, f.channel, f.fix) for f in amp]
+        units += amp
+    out += units
+    if track is None or _level(ds, rid, "track") == "off":
+        return out
+    rho = _score(Yc, Yhat)
+    if rho < MATCH_MIN:
+        f = match_finding(rid, r.track, r.speed, rho, (yield from _alternatives(ds, rid)))
+        if _level(ds, rid, "track") == "warn":
+            f = Finding(WARNING, f.check, f.message + " ([checks] track = \"warn\")", f.run, f.channel)
+        else:
+            f = Finding(f.severity, f.check, f.message + " (set [checks] track = \"warn\" to go on anyway)",
+                        f.run, f.channel)
+        out.append(f)
     return out
 
 
-__all__ = ["MATCH_MIN", "NOMINAL_LEAD_IN", "check_coverage", "check_dataset", "check_reach", "feature_span",
-           "match_finding", "speed_candidates"]
+__all__ = ["MATCH_MIN", "NOMINAL_LEAD_IN", "check_coverage", "check_dataset", "check_reach", "check_steps",
+           "feature_span", "match_finding", "speed_candidates"]

@@ -14,9 +14,9 @@ from dataclasses import replace
 
 from ..data.checks import enforce
 from ..data.dataset import Dataset, read_dataset
-from ..model.params import nominal_car
-from .checks import check_dataset, check_reach
-from .starts import estimate_start
+from .checks import check_reach, check_steps
+from .nominal import gather, run_steps
+from .starts import start_steps
 
 
 def load_dataset(path, starts: dict[str, float] | None = None) -> Dataset:
@@ -26,8 +26,11 @@ def load_dataset(path, starts: dict[str, float] | None = None) -> Dataset:
     conditioning: SPEC §3 CSVs taken as they are, logger files through
     :mod:`rideid.data.measured`), then :func:`align_starts` (the start of every
     measured run whose start is not given, estimated with the nominal car
-    :func:`rideid.model.params.nominal_car`, made once, which the checks
-    compare the data with too).
+    :func:`rideid.model.params.nominal_car`, which the checks compare the
+    data with too). The starts and the checks are one step
+    (:mod:`rideid.conditioning.nominal`): they analyse, and ask for the
+    nominal car's responses, simulated a round at a time for every run in one
+    batch.
     ``Dataset.preprocessing()`` says what was done.
 
     Parameters
@@ -48,8 +51,7 @@ def load_dataset(path, starts: dict[str, float] | None = None) -> Dataset:
         Naming the file, key or column at fault.
     """
     ds = read_dataset(path)
-    car = nominal_car(ds.geometry)
-    return align_starts(ds, starts, car)
+    return align_starts(ds, starts)
 
 
 def align_starts(ds: Dataset, starts: dict[str, float] | None = None, car=None) -> Dataset:
@@ -72,40 +74,54 @@ def align_starts(ds: Dataset, starts: dict[str, float] | None = None, car=None) 
         ``nominal_car(ds.geometry)``): the car the starts are estimated with
         and the checks compare the data with.
     """
+    # the starts, then the checks, as one step: the nominal car is simulated a round at a time, every run's
+    # requests of a round in one batch (rideid.conditioning.nominal)
+    step = _aligned(ds, starts)
+    ds, findings = run_steps(step, ds.geometry, car)
+    enforce(findings, f"{ds.manifest.path}: ")
+    return replace(ds, findings=findings)
+
+
+def _aligned(ds: Dataset, starts: dict[str, float] | None):
+    """The step of :func:`align_starts`: returns ``(dataset aligned, findings of the checks)``."""
     man = ds.manifest
-    P = nominal_car(man.geometry) if car is None else car
+    found = yield from gather(_start_of(ds, rid, starts) for rid in ds.measured)
     data, measured = dict(ds.data), {}
-    for rid, mr0 in ds.measured.items():
+    for (rid, mr0), (s, record) in zip(ds.measured.items(), found):
         mr = replace(mr0, record=dict(mr0.record), window=None, start=None)
-        run = man.run(rid)
-        if starts and rid in starts:
-            s = float(starts[rid])
-            mr.record["start"] = {"source": "given (from a previous identification)"}
-        elif not mr.auto_start:
-            s = mr.options["start"]
-            mr.record["start"] = {"source": "given"}
-        elif not run.road_known:
-            # no road to align with: x = 0 is where the front axle is at the first sample (of the window)
-            s = max(mr.t_first, mr.options.get("window", (-math.inf, math.inf))[0])
-            mr.record["start"] = {"source": "unknown road (SPEC §9): x = 0 at the first sample"}
-        else:
-            track = man.tracks[run.track]
-            longest = (mr.speed * (mr.t_last - mr.t_first) if mr.distance is None
-                       else float(mr.distance.d[-1] - mr.distance.d[0]))
-            reach = check_reach(rid, track, man.geometry, longest)
-            enforce(reach, f"{man.path}: ")
-            s, rho = estimate_start(mr, P, man.geometry, track)
-            mr.record["start"] = {"source": "estimated (nominal car)", "nominal_estimate": s,
-                                  "correlation": rho}
+        mr.record["start"] = record
         mr.make_grid(s)
         mr.start = float(s)
         measured[rid] = mr
         data[rid] = mr.run_data(s)
     ds = Dataset(man, {r.id: data[r.id] for r in man.runs}, measured)
     # the one hook for the physics checks (rideid.conditioning.checks): every run conditioned and aligned
-    findings = check_dataset(ds, P)
-    enforce(findings, f"{man.path}: ")
-    return replace(ds, findings=findings)
+    findings = yield from check_steps(ds)
+    return ds, findings
+
+
+def _start_of(ds: Dataset, rid: str, starts: dict[str, float] | None):
+    """The step (:mod:`rideid.conditioning.nominal`) giving the start of the measured run ``rid`` and how it
+    was found: ``(start, record)``."""
+    man = ds.manifest
+    mr = ds.measured[rid]
+    run = man.run(rid)
+    if starts and rid in starts:
+        return float(starts[rid]), {"source": "given (from a previous identification)"}
+    if not mr.auto_start:
+        return mr.options["start"], {"source": "given"}
+    if not run.road_known:
+        # no road to align with: x = 0 is where the front axle is at the first sample (of the window)
+        return (max(mr.t_first, mr.options.get("window", (-math.inf, math.inf))[0]),
+                {"source": "unknown road (SPEC §9): x = 0 at the first sample"})
+    track = man.tracks[run.track]
+    longest = (mr.speed * (mr.t_last - mr.t_first) if mr.distance is None
+               else float(mr.distance.d[-1] - mr.distance.d[0]))
+    reach = check_reach(rid, track, man.geometry, longest)
+    enforce(reach, f"{man.path}: ")
+    # the run as read, unaligned (window and start dropped), as the estimate sees it
+    s, rho = yield from start_steps(replace(mr, window=None, start=None), man.geometry, track)
+    return s, {"source": "estimated (nominal car)", "nominal_estimate": s, "correlation": rho}
 
 
 __all__ = ["align_starts", "load_dataset"]

@@ -4,8 +4,10 @@ Step 6 of conditioning a measured run (:mod:`rideid.data.measured`): the
 file time at which the front axle reaches ``x = 0`` (SPEC §2), estimated by
 correlating the run's samples with the response of a car (the nominal car
 when a dataset is loaded, :func:`rideid.conditioning.load.align_starts`; the
-fitted one in :func:`rideid.identify`). It runs the model, so it sits above
-the data layer.
+fitted one in :func:`rideid.identify`). The estimate is a step
+(:func:`start_steps`, :mod:`rideid.conditioning.nominal`): it asks for the
+responses it correlates with and never runs the model itself; loading runs
+the steps of every run side by side, each round of simulations in one batch.
 """
 
 from __future__ import annotations
@@ -14,9 +16,8 @@ import numpy as np
 
 from ..data.measured import DEFAULT_PRE_ROLL, MeasuredRun, RelativeDistance
 from ..errors import DataError
-from ..model.batch import BatchSimulator
 from ..model.equations import CHANNELS
-from ..model.simulate import prepare_run
+from .nominal import Job, gather, responses, run_steps, simulate_response
 
 
 def _feature_end(track, geom) -> float:
@@ -27,17 +28,6 @@ def _feature_end(track, geom) -> float:
         if ext is not None:
             ends.append(ext[1])
     return (max(ends) if ends else 0.0) + geom.wheelbase
-
-
-def simulate_response(P, geom, track, t, speed, distance, lead_in: float = 0.0):
-    """Response ``(n, 10)`` of the car ``P`` at the model times ``t`` (uniform), at rest at ``t[0]``;
-    with ``lead_in`` (s, a moving start, SPEC §9) at rest that long before, on the road before."""
-    t = np.asarray(t, dtype=float)
-    k = int(np.ceil(lead_in / (t[1] - t[0]) - 1e-9)) if lead_in > 0 else 0
-    if k:
-        t = np.concatenate([t[0] + (t[1] - t[0]) * np.arange(-k, 0), t])
-    ri = prepare_run(track, geom, speed, t, distance=distance)
-    return BatchSimulator(geom, [ri]).outputs(np.atleast_2d(P))[0][0][k:]
 
 
 def correlation_score(Yhat, Y, cols):
@@ -107,6 +97,59 @@ def _vertex(values, j) -> tuple[float, float]:
     return off, y0 - 0.25 * (ym - yp) * off
 
 
+def start_steps(mr: MeasuredRun, geom, track):
+    """The step (:mod:`rideid.conditioning.nominal`) that estimates the run's start: returns
+    ``(start, correlation)``, as :func:`estimate_start` describes, asking for the car's responses it
+    correlates with (the long grid first; with a speed channel, every candidate's fixed point a round at a
+    time, the candidates side by side)."""
+    h = 1.0 / mr.fs
+    if mr.distance is None:
+        tm = _long_grid(mr, track, geom, mr.speed)
+        (Yhat,) = responses((yield [Job(track, tm, mr.speed)]))
+        lags, corr = _correlation(mr, Yhat, tm)
+        # y_hat at model time tm[k] matches the measurement at t_first + (k + lag) h
+        j = int(np.argmax(corr))
+        off, peak = _vertex(corr, j)
+        return float(mr.t_first + (lags[j] + off) * h - tm[0]), peak
+    # varying speed: correlate over distance (the road is fixed in x), with the response at the mean speed
+    vmean = max(mr.distance.speed_range()[1], 0.1)
+    tm = _long_grid(mr, track, geom, vmean)
+    dist = mr.distance
+    x_all = dist.d
+    xs = x_all[0] + vmean * h * np.arange(int((x_all[-1] - x_all[0]) / (vmean * h)) + 1)
+    keep = np.concatenate([[True], np.diff(x_all) > 0])
+    tau = np.interp(xs, x_all[keep], dist.t[keep])
+    (Yv,) = responses((yield [Job(track, tm, vmean)]))
+    lags, corr = _correlation(mr, Yv, tm, tau)
+    # model x = vmean tm[k] matches the road at distance xs[k + lag]: x = 0 is at xs[lag] - vmean tm[0]
+    cand = [float(np.interp(xs[0] + (lags[i] * vmean * h) - vmean * tm[0], x_all[keep], dist.t[keep]))
+            for i in _peaks(corr, 5)]
+    best, best_score = None, -np.inf
+    for s, score in (yield from gather([_fixed_point(mr, track, tm, s) for s in cand])):
+        if score > best_score:
+            best, best_score = s, score
+    return best, best_score
+
+
+def _fixed_point(mr: MeasuredRun, track, tm, s):
+    """The step of one start candidate of a run with a speed channel: ``(start, correlation)`` where the
+    response simulated with the start's own distance profile peaks near the start itself."""
+    h = 1.0 / mr.fs
+    score = -np.inf
+    for _ in range(8):  # fixed point: simulate with this start's distance profile, re-pick the lag nearby
+        (Yhat,) = responses((yield [Job(track, tm, None, RelativeDistance(mr.distance, s))]))
+        lg, cc = _correlation(mr, Yhat, tm)
+        st = mr.t_first + lg * h - tm[0]
+        near = np.abs(st - s) <= 3.0 * h
+        j = int(np.argmax(np.where(near, cc, -np.inf)))
+        off, peak = _vertex(cc, j)
+        moved = abs(st[j] + off * h - s) > 1e-3 * h
+        s, score = float(st[j] + off * h), peak
+        if not moved:
+            break
+    return s, score
+
+
 def estimate_start(mr: MeasuredRun, P, geom, track):
     """``(start, correlation)``: the run's start (file time when the front axle reaches x = 0) for
     the car ``P``, by cross-correlation over all lags, to a fraction of a sample.
@@ -120,45 +163,10 @@ def estimate_start(mr: MeasuredRun, P, geom, track):
     with its own distance profile and scored at its own start, and the best
     self-consistent one wins. The correlation returned is the mean normalised
     correlation over the channels that are not zero, at the peak. Only the
-    car's response is simulated; the run's samples are read as they are.
+    car's response is simulated; the run's samples are read as they are
+    (:func:`start_steps`, run by :func:`rideid.conditioning.nominal.run_steps`).
     """
-    h = 1.0 / mr.fs
-    if mr.distance is None:
-        tm = _long_grid(mr, track, geom, mr.speed)
-        lags, corr = _correlation(mr, simulate_response(P, geom, track, tm, mr.speed, None), tm)
-        # y_hat at model time tm[k] matches the measurement at t_first + (k + lag) h
-        j = int(np.argmax(corr))
-        off, peak = _vertex(corr, j)
-        return float(mr.t_first + (lags[j] + off) * h - tm[0]), peak
-    # varying speed: correlate over distance (the road is fixed in x), with the response at the mean speed
-    vmean = max(mr.distance.speed_range()[1], 0.1)
-    tm = _long_grid(mr, track, geom, vmean)
-    dist = mr.distance
-    x_all = dist.d
-    xs = x_all[0] + vmean * h * np.arange(int((x_all[-1] - x_all[0]) / (vmean * h)) + 1)
-    keep = np.concatenate([[True], np.diff(x_all) > 0])
-    tau = np.interp(xs, x_all[keep], dist.t[keep])
-    lags, corr = _correlation(mr, simulate_response(P, geom, track, tm, vmean, None), tm, tau)
-    # model x = vmean tm[k] matches the road at distance xs[k + lag]: x = 0 is at xs[lag] - vmean tm[0]
-    cand = [float(np.interp(xs[0] + (lags[i] * vmean * h) - vmean * tm[0], x_all[keep], dist.t[keep]))
-            for i in _peaks(corr, 5)]
-    best, best_score = None, -np.inf
-    for s in cand:
-        score = -np.inf
-        for _ in range(8):  # fixed point: simulate with this start's distance profile, re-pick the lag nearby
-            Yhat = simulate_response(P, geom, track, tm, None, RelativeDistance(dist, s))
-            lg, cc = _correlation(mr, Yhat, tm)
-            st = mr.t_first + lg * h - tm[0]
-            near = np.abs(st - s) <= 3.0 * h
-            j = int(np.argmax(np.where(near, cc, -np.inf)))
-            off, peak = _vertex(cc, j)
-            moved = abs(st[j] + off * h - s) > 1e-3 * h
-            s, score = float(st[j] + off * h), peak
-            if not moved:
-                break
-        if score > best_score:
-            best, best_score = s, score
-    return best, best_score
+    return run_steps(start_steps(mr, geom, track), geom, P)
 
 
-__all__ = ["correlation_score", "estimate_start", "simulate_response"]
+__all__ = ["correlation_score", "estimate_start", "simulate_response", "start_steps"]

@@ -233,8 +233,8 @@ def rigid_body_scores(Y: np.ndarray, fs: float, geom, F=None):
     if F is not None:
         extra = _rename_hypotheses(np.asarray(F, float), has_gyro)
         hyps += extra
-        scores = np.concatenate([scores,
-                                 _relative_residuals(np.matmul(_constraints(*geo)[None], _transforms(extra)), G)])
+        scores = np.concatenate([scores, _relative_residuals(np.matmul(_constraints(*geo)[None], _transforms(extra)),
+                                                             G)])
     return hyps, scores
 
 
