@@ -368,9 +368,9 @@ def run_identify(ds_path, out_dir, *, seed, population=None, generations=None, w
     out = out or sys.stdout
     if model is not None:
         model = rideid.parse_model_arg(model)  # base|full|auto, or groups: damper_curves,anti_roll_bars
-    if report:
-        _import_ahead("write_report")
     ds = rideid.load_dataset(ds_path)
+    if report:  # after loading: an import on another thread slows this thread's imports (the GIL)
+        _import_ahead("write_report")
     prog = Progress(quiet)
     kw = {"population": population or rideid.DEFAULT_POPULATION,
           "generations": generations or rideid.DEFAULT_GENERATIONS}
