@@ -357,7 +357,7 @@ def _import_ahead(name: str) -> None:
     def resolve():
         try:
             getattr(rideid, name)
-        except Exception:  # noqa: BLE001  (raised again, and reported, where the main thread needs the name)
+        except Exception:  # raised again, and reported, where the main thread needs the name
             pass
 
     threading.Thread(target=resolve, name=f"rideid-import-{name}", daemon=True).start()
