@@ -44,7 +44,7 @@ import math
 import numpy as np
 
 from ..data.checks import ERROR, Finding
-from ..data.schema.channels import UNITS, gravity_unit_factor, quantity
+from ..data.schema.channels import UNITS, quantity
 from ..model.equations import CHANNELS
 
 G0 = 9.80665
@@ -451,7 +451,11 @@ def unit_findings(run_id: str, entries: dict, record: dict) -> list[Finding]:
     record : dict
         SPEC channel -> its preprocessing record (``removed``: the lead-in
         mean subtracted, ``removed_as``: ``"gravity and bias"`` when gravity
-        was included; a ``flat_lined`` channel is dead, not in a wrong unit).
+        was included, ``gravity_unit_factor``: the factor that makes that
+        mean gravity when a unit mistake explains it,
+        :func:`rideid.data.schema.channels.gravity_unit_factor`, recorded
+        when the run was read; a ``flat_lined`` channel is dead, not in a
+        wrong unit).
 
     Returns
     -------
@@ -461,7 +465,7 @@ def unit_findings(run_id: str, entries: dict, record: dict) -> list[Finding]:
     for c, rec in record.items():
         if c not in CHANNELS or rec.get("removed_as") != "gravity and bias" or rec.get("flat_lined"):
             continue
-        f = gravity_unit_factor(rec["removed"])
+        f = rec.get("gravity_unit_factor")
         if f is None:
             continue
         fix = {c: {"source": c, "factor": f}}

@@ -239,19 +239,6 @@ class MeasuredRun:
         chans = {c: Y[i0:i1, i].copy() for i, c in enumerate(CHANNELS) if c in self.channels}
         return RunData(self.times[i0:i1] - start, chans, distance=self.relative_distance(start))
 
-    def measured_at(self, times) -> np.ndarray:
-        """(n, 10) measurement at file ``times``, NaN for missing channels.
-
-        Interpolated: for looking at the recording between its samples (the
-        coarse alignment of a run with a speed channel), never for a fit.
-        """
-        times = np.asarray(times, dtype=float)
-        Y = np.full((times.size, len(CHANNELS)), np.nan)
-        for i, c in enumerate(CHANNELS):
-            if c in self.channels:
-                Y[:, i] = self.channels[c](times)
-        return Y
-
 
 def _warn(mr_warnings: list, msg: str, stacklevel: int = 3):
     mr_warnings.append(msg)
@@ -276,10 +263,8 @@ def load_measured_run(run, man) -> MeasuredRun:
     path = Path(run.file)
     if not path.is_absolute():
         path = man.base_dir / path
-    opts = dict(man.preprocess)
-    opts.update(run.options)
-    cmap = dict(man.channel_map)
-    cmap.update(run.channels)
+    opts = {**man.preprocess, **run.options}
+    cmap = {**man.channel_map, **run.channels}
     where_map = f"{man.path}: run '{run.id}'"
     sf = open_signals(path, man.csv_options)
     warns: list[str] = []
@@ -482,8 +467,10 @@ def _remove_gravity_bias(raw: dict, rec_ch: dict, measured: list, lead, grav: bo
                             f"{c} (its time runs {s.time[0]:.6g} .. {s.time[-1]:.6g} s)")
         seg = s.values[in_lead]
         m = float(np.mean(seg))
-        # a mean that is g in another unit is an error of the data checks (rideid.conditioning.wiring.unit_findings)
-        if grav and is_acc and not (0.8 * GRAVITY < m < 1.2 * GRAVITY) and gravity_unit_factor(m) is None:
+        # a mean that is g in another unit is an error of the data checks (rideid.conditioning.wiring.unit_findings
+        # reads the factor recorded here)
+        unit_seen = gravity_unit_factor(m) if grav and is_acc else None
+        if grav and is_acc and not (0.8 * GRAVITY < m < 1.2 * GRAVITY) and unit_seen is None:
             if -1.2 * GRAVITY < m < -0.8 * GRAVITY:
                 _warn(warns, f"{path}: {c}: reads {m:.3g} m/s^2 at rest (gravity included): mounted upside down? "
                              "set sign = -1 in its channel map", _STAGE)
@@ -499,6 +486,8 @@ def _remove_gravity_bias(raw: dict, rec_ch: dict, measured: list, lead, grav: bo
         raw[c] = Signal(s.time, s.values - m, s.unit)
         rec_ch[c]["removed"] = m
         rec_ch[c]["removed_as"] = "gravity and bias" if (grav and is_acc) else "bias"
+        if unit_seen is not None:
+            rec_ch[c]["gravity_unit_factor"] = unit_seen
 
 
 def _filter_resample(raw: dict, rec_ch: dict, measured: list, fs: float, anti_alias: bool | None = None) -> dict:
