@@ -386,22 +386,21 @@ def test_the_result_is_frozen(sim_dataset):
     assert new.nfev == res.nfev + 1 and new.parameters == res.parameters
 
 
-def test_cycle_check_returns_new_dicts(monkeypatch):
+def test_cycle_slips_returns_a_new_dict(monkeypatch):
     from types import SimpleNamespace
 
-    from rideid.estimate import identify as ident
+    from rideid.conditioning import starts as st
     fs = 100.0
     runs = {rid: SimpleNamespace(distance=None, fs=fs, run_data=lambda s, rid=rid: (rid, s))
             for rid in ("a", "b", "c")}
     ds = SimpleNamespace(measured=runs, geometry=None, manifest=SimpleNamespace(
         tracks={"t": None}, run=lambda rid: SimpleNamespace(track="t")))
     found = {"a": 1.0 + 5 / fs, "b": 2.0 + 1 / fs, "c": 3.0}  # a slips five samples, b one (kept), c none
-    monkeypatch.setattr(ident, "estimate_start", lambda mr, P, geom, track: (
+    monkeypatch.setattr(st, "estimate_start", lambda mr, P, geom, track: (
         found[next(k for k, v in runs.items() if v is mr)], None))
     starts = {"a": 1.0, "b": 2.0, "c": 3.0}
-    data = {"a": "A", "b": "B", "c": "C"}
-    slipped, starts2, data2 = ident._cycle_check(ds, None, starts, data)
-    assert starts == {"a": 1.0, "b": 2.0, "c": 3.0} and data == {"a": "A", "b": "B", "c": "C"}  # unchanged
-    assert slipped == {"a": pytest.approx(5 / fs)}
-    assert starts2 == {"a": found["a"], "b": 2.0, "c": 3.0}
-    assert data2 == {"a": ("a", found["a"]), "b": "B", "c": "C"}
+    moved = st.cycle_slips(ds, None, starts)
+    assert starts == {"a": 1.0, "b": 2.0, "c": 3.0}  # unchanged
+    assert moved == {"a": found["a"]}
+    assert moved["a"] - starts["a"] == pytest.approx(5 / fs)
+    assert {**starts, **moved} == {"a": found["a"], "b": 2.0, "c": 3.0}

@@ -316,7 +316,7 @@ def test_measured_unknown_road_run_starts_at_its_first_sample(road_sim, tmp_path
     assert ds.preprocessing()["B"]["start"]["source"].startswith("unknown road (SPEC §9)")
     assert np.allclose(ds.data["B"].time, rd.time) and np.allclose(ds.data["B"].channels["axle_az_fl"],
                                                                    rd.channels["axle_az_fl"])
-    assert "B" not in ds.auto_start_runs()
+    assert "B" not in ds.auto_start_runs
 
 
 def test_commands_that_need_a_known_road_refuse_unknown_road_runs(road_sim, tmp_path, capsys):

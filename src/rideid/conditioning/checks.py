@@ -34,7 +34,7 @@ from ..data.measured import Distance, RelativeDistance
 from ..data.schema.channels import SI, UNITS, quantity
 from ..model.equations import CHANNELS
 from .nominal import Job, gather, responses, run_steps
-from .starts import correlation_score, start_steps
+from .starts import correlation_score, feature_span, start_steps
 from .wiring import axle_amplitude_findings, corrected, describe_fix, fix_entries, unit_findings, wiring_fix
 
 #: a moving run's nominal response starts at rest this long (s) before the first sample: the nominal car's
@@ -47,19 +47,6 @@ MATCH_MIN = 0.5
 
 # ---------------------------------------------------------------------------
 # Coverage: the car starts at rest on flat road, reaches the track and leaves it
-
-def feature_span(track, geom) -> tuple[float, float] | None:
-    """(first, last) x of the track's features over the four wheel paths, or None (flat)."""
-    lo, hi = [], []
-    for y in (geom.track_front / 2, -geom.track_front / 2, geom.track_rear / 2, -geom.track_rear / 2):
-        ext = track.path(y).extent
-        if ext is not None and ext[1] > ext[0]:
-            lo.append(ext[0])
-            hi.append(ext[1])
-    if not lo:
-        return None
-    return min(lo), max(hi)
-
 
 def check_coverage(run_id: str, track, geom, x_end: float, x_begin: float = 0.0, where: str = "",
                    moving: bool = False) -> list[Finding]:

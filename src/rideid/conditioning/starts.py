@@ -8,9 +8,17 @@ fitted one in :func:`rideid.identify`). The estimate is a step
 (:func:`start_steps`, :mod:`rideid.conditioning.nominal`): it asks for the
 responses it correlates with and never runs the model itself; loading runs
 the steps of every run side by side, each round of simulations in one batch.
+
+The identification's polish estimates the starts together with the
+parameters and asks this module for what it needs of the runs: each start's
+derivative (:func:`start_derivative`), the runs that slipped a cycle of a
+periodic track with the polished car (:func:`cycle_slips`), and each start's
+standard error with a noisy speed channel (:func:`start_uncertainty`).
 """
 
 from __future__ import annotations
+
+import math
 
 import numpy as np
 
@@ -18,6 +26,19 @@ from ..data.measured import DEFAULT_PRE_ROLL, MeasuredRun, RelativeDistance
 from ..errors import DataError
 from ..model.equations import CHANNELS
 from .nominal import Job, gather, responses, run_steps, simulate_response
+
+
+def feature_span(track, geom) -> tuple[float, float] | None:
+    """(first, last) x of the track's features over the four wheel paths, or None (flat)."""
+    lo, hi = [], []
+    for y in (geom.track_front / 2, -geom.track_front / 2, geom.track_rear / 2, -geom.track_rear / 2):
+        ext = track.path(y).extent
+        if ext is not None and ext[1] > ext[0]:
+            lo.append(ext[0])
+            hi.append(ext[1])
+    if not lo:
+        return None
+    return min(lo), max(hi)
 
 
 def _feature_end(track, geom) -> float:
@@ -50,6 +71,19 @@ def _long_grid(mr: MeasuredRun, track, geom, v):
     return -pre + h * np.arange(int((T + pre) / h) + 1)
 
 
+def _measured_at(mr: MeasuredRun, times) -> np.ndarray:
+    """(n, 10) measurement at file ``times``, NaN for missing channels.
+
+    Interpolated: for looking at the recording between its samples (the
+    coarse alignment of a run with a speed channel), never for a fit.
+    """
+    Y = np.full((len(times), len(CHANNELS)), np.nan)
+    for i, c in enumerate(CHANNELS):
+        if c in mr.channels:
+            Y[:, i] = mr.channels[c](times)
+    return Y
+
+
 def _correlation(mr: MeasuredRun, Yhat, tm, tau=None):
     """Mean normalised cross-correlation over channels; returns (starts, values) for every lag.
 
@@ -59,7 +93,7 @@ def _correlation(mr: MeasuredRun, Yhat, tm, tau=None):
     """
     from scipy.signal import correlate
 
-    Y = mr.values if tau is None else mr.measured_at(tau)
+    Y = mr.values if tau is None else _measured_at(mr, tau)
     total, n = None, 0
     for i, c in enumerate(CHANNELS):
         if c not in mr.channels:
@@ -166,7 +200,90 @@ def estimate_start(mr: MeasuredRun, P, geom, track):
     car's response is simulated; the run's samples are read as they are
     (:func:`start_steps`, run by :func:`rideid.conditioning.nominal.run_steps`).
     """
-    return run_steps(start_steps(mr, geom, track), geom, P)
+    steps = start_steps(mr, geom, track)
+    return run_steps(steps, geom, P)
 
 
-__all__ = ["correlation_score", "estimate_start", "simulate_response", "start_steps"]
+# ---------------------------------------------------------------------------
+# Starts estimated together with the parameters (rideid.estimate.identify's polish)
+
+#: the start derivative's central difference step, in sample intervals
+SHIFT_STEP = 0.1
+
+
+def start_derivative(ds, rid: str, P, start: float) -> np.ndarray:
+    """``(n, 10)`` derivative of car ``P``'s response at run ``rid``'s fixed samples with respect to its start.
+
+    A central difference of two simulations whose time axes (and, with a
+    speed channel, distance profiles) belong to ``start -/+ SHIFT_STEP``
+    samples: the model moves, the samples stay.
+    """
+    mr = ds.measured[rid]
+    track = ds.manifest.tracks[ds.manifest.run(rid).track]
+    eps = SHIFT_STEP / mr.fs
+    y = []
+    for s in (start - eps, start + eps):
+        rd = mr.run_data(s)
+        y.append(simulate_response(P, ds.geometry, track, rd.time, mr.speed, rd.distance))
+    return (y[1] - y[0]) / (2 * eps)
+
+
+def cycle_slips(ds, P, starts: dict) -> dict:
+    """The constant-speed runs of ``starts`` whose all-lags correlation with car ``P`` peaks a cycle away.
+
+    On a periodic track the nominal car may have picked a neighbouring cycle
+    (the polish only moves a start by a few samples). Where car ``P``'s
+    correlation (:func:`estimate_start`) peaks more than two samples from the
+    run's start in ``starts``, that start is the new one.
+
+    Returns
+    -------
+    dict
+        Run id -> its new start (s), for the runs that slipped a cycle (``starts`` is not changed).
+    """
+    moved = {}
+    for rid, s0 in starts.items():
+        mr = ds.measured[rid]
+        if mr.distance is not None:
+            continue
+        s, _ = estimate_start(mr, P, ds.geometry, ds.manifest.tracks[ds.manifest.run(rid).track])
+        if abs(s - s0) > 2.0 / mr.fs:
+            moved[rid] = s
+    return moved
+
+
+def start_uncertainty(ds, rid: str, std_fit) -> dict:
+    """A start's standard error: the fit's, and the drift of an integrated noisy speed channel.
+
+    The model drives along ``x(t) = d(start + t) - d(start)``. White noise of
+    standard deviation ``sigma_v`` on a speed channel sampled every ``dt``
+    makes the integrated distance a random walk, ``sigma_x(T) = sigma_v
+    sqrt(T dt)`` after ``T`` seconds; the start is fixed by the road
+    features, met about ``T_mid`` (front axle at the middle of the features,
+    half a wheelbase on) after it, so the distance error there moves the
+    start by ``sigma_x(T_mid) / v_mean``. Added in quadrature to the fit's
+    (Jacobian) standard error, which assumes the distance exact. A speed
+    channel's calibration error is not included.
+
+    Returns
+    -------
+    dict
+        ``std``, ``std_fit`` and, with a noisy speed channel, ``std_speed_channel`` (s).
+    """
+    mr = ds.measured[rid]
+    out = {"std": std_fit, "std_fit": std_fit}
+    sp = mr.record.get("speed", {})
+    if "noise_std" not in sp or not sp.get("mean"):
+        return out
+    span = feature_span(ds.manifest.tracks[ds.manifest.run(rid).track], ds.geometry)
+    x_mid = (0.0 if span is None else 0.5 * (span[0] + span[1])) + 0.5 * ds.geometry.wheelbase
+    v = max(float(sp["mean"]), 1e-6)
+    s_speed = float(sp["noise_std"]) * math.sqrt(max(x_mid / v, 0.0) * float(sp["noise_interval"])) / v
+    out["std_speed_channel"] = s_speed
+    if std_fit is not None and np.isfinite(std_fit):
+        out["std"] = float(math.hypot(std_fit, s_speed))
+    return out
+
+
+__all__ = ["SHIFT_STEP", "correlation_score", "cycle_slips", "estimate_start", "feature_span", "simulate_response",
+           "start_derivative", "start_steps", "start_uncertainty"]

@@ -127,7 +127,9 @@ class Dataset:
             data[rid] = measured[rid].run_data(s)
         return Dataset(self.manifest, data, measured)
 
+    @property
     def auto_start_runs(self) -> list[str]:
+        """The measured runs on known tracks whose start is estimated (SPEC §3: ``start`` not given)."""
         return [rid for rid, mr in self.measured.items() if mr.auto_start and self.manifest.run(rid).road_known]
 
     def road_known(self, run_id: str) -> bool:

@@ -56,7 +56,6 @@
 
 from __future__ import annotations
 
-import math
 import time
 import warnings
 from dataclasses import dataclass, field
@@ -64,10 +63,9 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.optimize import OptimizeResult, least_squares
 
-from ..conditioning.checks import feature_span
 from ..data.checks import bound_findings
 from ..data.dataset import Dataset
-from ..conditioning.starts import estimate_start, simulate_response
+from ..conditioning.starts import cycle_slips, start_derivative, start_uncertainty
 from ..errors import ArgumentError, DataWarning
 from ..model.batch import single_threaded_blas
 from ..model.equations import modal_summary
@@ -81,7 +79,7 @@ from .jade import JadeSolver, make_rng, stop_requested
 from .adequacy import advise, assess_fit
 from .result import History, IdentificationResult
 from .uncertainty import estimate_covariance, hac_covariance, white_covariance
-from .sensitivity import SensitivityMaps, sensitivity_maps
+from .sensitivity import SensitivityMaps, cost_maps
 from .weighting import TrackWeighting, coefficient_of_variation
 
 #: JADE's population and its early stop before the polish (every free parameter's spread below 20 %).
@@ -227,7 +225,7 @@ def identify(ds: Dataset, *, rng=None, seed=None, population: int = DEFAULT_POPU
         nonlinear = cf.space.layout is not None
         cf_search = _linear_cost(ds, cf) if nonlinear else cf
         if maps is None:
-            maps = sensitivity_maps(ds, cost=cf_search)
+            maps = cost_maps(cf_search)
         search = global_search(cf_search, weighting, maps, gen, population=population,
                                generations=generations if start is None else 0,
                                spread_tol=spread_tol, callback=callback, t0=t0)
@@ -273,7 +271,7 @@ def _curve_start(cf: CostFunction, cf_search: CostFunction, x):
         if space.curves:
             v = space.knot_velocities()
             K = space.layout.n_knots
-            for j, n in enumerate(space.layout.names[len(space.layout.names) - 2 * K:]):
+            for j, n in enumerate(space.knot_names):
                 vals[n] = (vals["c_sf"] if j < K else vals["c_sr"]) * v[j]
         for n in BUMP_STOP_NAMES:  # no stop yet: the scan sets the start
             vals.setdefault(n, 0.0 if n.startswith("bs_rate") else 0.15)
@@ -423,7 +421,7 @@ def polish_fit(ds: Dataset, cf: CostFunction, x0) -> OptimizeResult:
         start record, for runs whose start was estimated).
     """
     equal = np.full(len(cf.run_ids), 1.0 / len(cf.run_ids))
-    if ds.auto_start_runs():
+    if ds.auto_start_runs:
         x, info, std, cf, starts = _polish_aligned(ds, cf, x0, equal)
     else:
         (x, info, std), starts = _polish(cf, x0, equal), {}
@@ -455,6 +453,10 @@ def _result(ds, cf, search, fit, weighting, maps, rng_record, t0, assess=True,
     dampers = None if not space.curves else dampers_block(space, P, robust.white, robust.robust, robust.names,
                                                           excitation)
     stops = None if not space.bump else bump_block(space, P, robust.white, robust.robust, robust.names, bumps)
+    correlation, history = robust.correlation_dict(), History(search.history)
+    # what the data were and what the car's modes are: records beside the fit
+    preprocessing = _preprocessing(ds, starts)
+    modal = modal_summary(P[:len(ALL_NAMES)], ds.geometry)
     return IdentificationResult(
         x=np.asarray(x, dtype=float), names=list(cf.names), std=np.asarray(std, dtype=float), covariance=cov,
         fun=float(np.full(final_E.size, 1.0 / final_E.size) @ final_E), success=success, message=message,
@@ -462,9 +464,9 @@ def _result(ds, cf, search, fit, weighting, maps, rng_record, t0, assess=True,
         nit=int(search.nit), nfev=nfev, parameters={n: float(P[space.col[n]]) for n in space.reported_names},
         details=details, known=dict(ds.known), seed=rng_record["seed"],
         rng_state=rng_record["rng_state"], track_weights=search.track_weights, weights_mode=weighting.name,
-        polish=info, history=History(search.history), starts=starts, preprocessing=_preprocessing(ds, starts),
-        modal=modal_summary(P[:len(ALL_NAMES)], ds.geometry), dataset=str(ds.path), maps=maps,
-        model=model, response=response, correlation=robust.correlation_dict(), adequacy=adequacy,
+        polish=info, history=history, starts=starts, preprocessing=preprocessing,
+        modal=modal, dataset=str(ds.path), maps=maps,
+        model=model, response=response, correlation=correlation, adequacy=adequacy,
         checks=[f.to_dict() for f in findings], dampers=dampers, bump_stops=stops,
         wall_time_s=time.perf_counter() - t0)
 
@@ -551,7 +553,7 @@ def _polish(cf: CostFunction, x0, weights, align=None):
 
     The model moves, the data never do: a start changed by ``delta`` moves the
     model's time axis, ``y(t - delta)``, linearised as ``y + delta D`` with
-    ``D = dy/d(start)`` from :func:`_start_derivative` (its Jacobian column).
+    ``D = dy/d(start)`` from :func:`rideid.conditioning.starts.start_derivative` (its Jacobian column).
     The linearisation is centred again by :func:`_polish_aligned` until the
     starts settle, so at the end it is exact.
 
@@ -607,7 +609,7 @@ class _Polish:
         cf, d = self.cf, self.d
         Y = cf.Y.copy()
         for k, sh in enumerate(self.align):
-            a, b = cf.sim.run_start[sh.index], cf.sim.run_start[sh.index + 1]
+            a, b = cf.sim.run_start[sh.run_index], cf.sim.run_start[sh.run_index + 1]
             Y[a:b] -= (v[d + k] / sh.fs) * sh.D  # y_model + delta D - y  ==  y_model - (y - delta D)
         return Y
 
@@ -626,8 +628,8 @@ class _Polish:
         J[:, :d] = D
         offsets = self._run_offsets()
         for k, sh in enumerate(self.align):
-            cols, sc = cf.residual_scale(sh.index, self.weights)
-            J[offsets[sh.index]:offsets[sh.index + 1], d + k] = (sh.D[:, cols] * sc / sh.fs).ravel()
+            cols, sc = cf.residual_scale(sh.run_index, self.weights)
+            J[offsets[sh.run_index]:offsets[sh.run_index + 1], d + k] = (sh.D[:, cols] * sc / sh.fs).ravel()
         return J
 
     def _differences(self, v) -> np.ndarray:
@@ -708,127 +710,50 @@ class _Polish:
 #: re-estimate the starts until none moves by more than this fraction of a sample interval
 REALIGN_TOL = 1e-3
 REALIGN_MAX = 8
-#: the start derivative's central difference step, in sample intervals
-SHIFT_STEP = 0.1
 
 
 @dataclass(frozen=True)
 class _Shift:
     """A run whose start joins the polish: its index in the cost, id, rate, start and ``D = dy/d(start)``."""
 
-    index: int
+    run_index: int
     run_id: str
     fs: float
     start: float
     D: np.ndarray
 
 
-def _start_derivative(ds, rid, P, start) -> np.ndarray:
-    """``(n, 10)`` derivative of the car's response at the run's fixed samples with respect to its start.
-
-    A central difference of two simulations whose time axes (and, with a
-    speed channel, distance profiles) belong to ``start -/+ SHIFT_STEP``
-    samples: the model moves, the samples stay.
-    """
-    mr = ds.measured[rid]
-    track = ds.manifest.tracks[ds.manifest.run(rid).track]
-    eps = SHIFT_STEP / mr.fs
-    y = []
-    for s in (start - eps, start + eps):
-        rd = mr.run_data(s)
-        y.append(simulate_response(P, ds.geometry, track, rd.time, mr.speed, rd.distance))
-    return (y[1] - y[0]) / (2 * eps)
-
-
 def _polish_aligned(ds, cf, x_best, equal):
     """Polish the parameters and the estimated starts together, centring the starts' linearisation
     again (new model time axes, the same samples) until no start moves by more than
-    ``REALIGN_TOL`` of a sample interval.
+    ``REALIGN_TOL`` of a sample interval; a constant-speed run whose correlation with the polished car
+    peaks a cycle away (:func:`rideid.conditioning.starts.cycle_slips`) is moved there.
 
     Works on its own copy of the run data: ``ds`` is not changed.
     """
-    starts = {rid: ds.measured[rid].start for rid in ds.auto_start_runs()}
-    data = dict(ds.data)
+    starts = {rid: ds.measured[rid].start for rid in ds.auto_start_runs}
     rounds = []
     for _ in range(REALIGN_MAX):
-        x_best, info, std = _polish(cf, x_best, equal, _shifts(ds, cf, x_best, starts))
+        P = cf.space.full(x_best[None])[0]
+        shifts = [_Shift(cf.run_ids.index(rid), rid, ds.measured[rid].fs, s, start_derivative(ds, rid, P, s))
+                  for rid, s in starts.items()]
+        x_best, info, std = _polish(cf, x_best, equal, shifts)
         fitted = {rid: st["value"] for rid, st in info["starts"].items()}
         worst = max(abs(v - starts[rid]) * ds.measured[rid].fs for rid, v in fitted.items())
-        data = {**data, **{rid: ds.measured[rid].run_data(v) for rid, v in fitted.items()}}
-        slipped, starts, data = _cycle_check(ds, cf.space.full(x_best[None])[0], {**starts, **fitted}, data)
+        moved = cycle_slips(ds, cf.space.full(x_best[None])[0], fitted)
+        slipped = {rid: s - fitted[rid] for rid, s in moved.items()}
+        starts = {**fitted, **moved}
         rounds.append({"max_change_samples": worst, **({"cycle_slips": slipped} if slipped else {})})
         # the model's time axes moved with the starts: the cost function on them
+        data = {**ds.data, **{rid: ds.measured[rid].run_data(s) for rid, s in starts.items()}}
         cf = CostFunction(ds.with_data(data), space=cf.space, counter=cf.counter)
         if not slipped and worst < REALIGN_TOL:
             break
     out = {rid: {"value": float(starts[rid]), "source": "estimated with the parameters (least squares)",
-                 **_start_std(ds, rid, info["starts"][rid]["std"]), "std_robust": info["starts"][rid]["std_robust"]}
+                 **start_uncertainty(ds, rid, info["starts"][rid]["std"]),
+                 "std_robust": info["starts"][rid]["std_robust"]}
            for rid in starts}
     return x_best, dict(info, alignment_rounds=rounds), std, cf, out
-
-
-def _shifts(ds, cf, x, starts) -> list:
-    """The :class:`_Shift` of each run in ``starts`` at the free parameters ``x``."""
-    P = cf.space.full(x[None])[0]
-    return [_Shift(cf.run_ids.index(rid), rid, ds.measured[rid].fs, starts[rid],
-                   _start_derivative(ds, rid, P, starts[rid])) for rid in starts]
-
-
-def _start_std(ds, rid, std_fit) -> dict:
-    """A start's standard error: the fit's, and the drift of an integrated noisy speed channel.
-
-    The model drives along ``x(t) = d(start + t) - d(start)``. White noise of
-    standard deviation ``sigma_v`` on a speed channel sampled every ``dt``
-    makes the integrated distance a random walk, ``sigma_x(T) = sigma_v
-    sqrt(T dt)`` after ``T`` seconds; the start is fixed by the road
-    features, met about ``T_mid`` (front axle at the middle of the features,
-    half a wheelbase on) after it, so the distance error there moves the
-    start by ``sigma_x(T_mid) / v_mean``. Added in quadrature to the fit's
-    (Jacobian) standard error, which assumes the distance exact. A speed
-    channel's calibration error is not included.
-    """
-    mr = ds.measured[rid]
-    out = {"std": std_fit, "std_fit": std_fit}
-    sp = mr.record.get("speed", {})
-    if "noise_std" not in sp or not sp.get("mean"):
-        return out
-    span = feature_span(ds.manifest.tracks[ds.manifest.run(rid).track], ds.geometry)
-    x_mid = (0.0 if span is None else 0.5 * (span[0] + span[1])) + 0.5 * ds.geometry.wheelbase
-    v = max(float(sp["mean"]), 1e-6)
-    s_speed = float(sp["noise_std"]) * math.sqrt(max(x_mid / v, 0.0) * float(sp["noise_interval"])) / v
-    out["std_speed_channel"] = s_speed
-    if std_fit is not None and np.isfinite(std_fit):
-        out["std"] = float(math.hypot(std_fit, s_speed))
-    return out
-
-
-def _cycle_check(ds, P, starts, data):
-    """Constant-speed auto runs: redo the all-lags correlation with the identified car.
-
-    On a periodic track the nominal car may have picked a neighbouring cycle
-    (the polish only moves a start by a few samples). Where the identified
-    car's correlation peaks more than two samples away, its start is taken.
-
-    Returns
-    -------
-    slipped : dict
-        Run id -> the start's change (s), for the runs that slipped a cycle.
-    starts, data : dict
-        New dicts: ``starts`` and ``data`` with those runs' starts and run data replaced (the arguments
-        are not changed).
-    """
-    slipped = {}
-    starts, data = dict(starts), dict(data)
-    for rid in list(starts):
-        mr = ds.measured[rid]
-        if mr.distance is not None:
-            continue
-        s, _ = estimate_start(mr, P, ds.geometry, ds.manifest.tracks[ds.manifest.run(rid).track])
-        if abs(s - starts[rid]) > 2.0 / mr.fs:
-            slipped[rid] = s - starts[rid]
-            starts[rid] = s
-            data[rid] = mr.run_data(s)
-    return slipped, starts, data
 
 
 def _derived_std(space, cov):
