@@ -271,7 +271,7 @@ def test_scale_invariance(road_dir):
     P = nasty_row()
     Q = P * 3.0
     Q[INDEX["a"]] = P[INDEX["a"]]
-    i = FULL.index
+    i = FULL.column
     Q[i["bs_clear_f"]], Q[i["bs_clear_r"]] = P[i["bs_clear_f"]], P[i["bs_clear_r"]]
     sim = NonlinearSimulator(G0, [run], FULL)
     y = sim.outputs(np.stack([P, Q]))[0]
@@ -282,7 +282,7 @@ def test_stiff_bump_stop_holds(road_dir):
     """A very stiff stop: the compression beyond the clearance stays below F / rate, F the largest stop force
     an impact could bring (ten times the car's weight); ten times the rate, about sqrt(10) less (an impact)."""
     run = make_run("chassis_twist", road_dir, geom=G0, duration=1.0)
-    i = FULL.index
+    i = FULL.column
     total = (CAR["m_s"] + 2 * CAR["m_uf"] + 2 * CAR["m_ur"]) * GRAVITY
     overs = []
     for rate in (1e6, 1e7):
@@ -335,7 +335,7 @@ def test_split_scheme_cost_is_smooth_in_the_parameters(road_dir):
     Y = sim.outputs(population(1, seed=3))[0][0]
     W = np.ones((1, 10))
     t = np.linspace(-1.0, 1.0, 41) * 1e-4
-    for col in (INDEX["k_sf"], FULL.index["F_f8"], FULL.index["bs_clear_r"]):
+    for col in (INDEX["k_sf"], FULL.column["F_f8"], FULL.column["bs_clear_r"]):
         Q = np.repeat(base[None], t.size, 0)
         Q[:, col] *= 1.0 + t
         e = sim.errors(Q, Y, W)[0]

@@ -135,6 +135,8 @@ class ParameterSpace:
 
     Attributes
     ----------
+    anchor : str
+        The known value that fixes the absolute scale (SPEC §1), normally ``total_mass``.
     width : int
         Columns of the full rows :meth:`full` returns: 12, or 16 when the
         model has an extension group or an extension value is known; with
@@ -146,6 +148,8 @@ class ParameterSpace:
         Name -> column of the full rows.
     layout : NonlinearLayout or None
         The simulator's row layout with damper curves (None: the linear model).
+    knot_names : tuple of str
+        The knot-force columns ``F_f1 .. F_fK, F_r1 .. F_rK`` (empty without damper curves).
     reported_names : tuple of str
         The twelve, the model's extension parameters and known extensions
         (an extension neither in the model nor known is 0 and not reported),
@@ -154,7 +158,8 @@ class ParameterSpace:
 
     def __init__(self, known: dict[str, float], geometry, bounds: dict | None = None, extensions=(),
                  damper_knots=None, frozen=(), bump_frozen=None):
-        scale_anchor(known)
+        #: the known value that fixes the absolute scale (:func:`rideid.data.dataset.scale_anchor`)
+        self.anchor = scale_anchor(known)
         check_known_consistent(known)
         self.known = dict(known)
         self.geometry = geometry
@@ -170,6 +175,8 @@ class ParameterSpace:
         self.layout = NonlinearLayout(knots=curve_knots(damper_knots) if self.curves else None,
                                       bump_stops=self.bump) if (self.curves or self.bump) else None
         knot_names = curve_names(self.layout.n_knots) if self.curves else ()
+        #: the knot-force columns, ``F_f1 .. F_fK, F_r1 .. F_rK`` (empty without curves)
+        self.knot_names = tuple(knot_names)
         self.frozen = tuple(n for n in knot_names if n in set(frozen))
         #: bump-stop columns of axles whose stop no run reaches: held at these values, not free, not measured
         self.bump_frozen = {n: float(v) for n, v in (bump_frozen or {}).items()
@@ -354,9 +361,9 @@ class ParameterSpace:
         """A physically consistent nominal car: the built-in car scaled to the
         anchor, clipped into the bounds (used for sensitivity maps and as a
         reference point, never as a starting guess); with damper curves its
-        linear dampers as curves (``F = c v``)."""
+        linear dampers as curves (``F = c v``). A full row, :attr:`param_names`."""
         base = nominal_car(self.geometry, extensions=True)
-        anchor = scale_anchor(self.known)
+        anchor = self.anchor
         if anchor == "total_mass":
             s = self.known["total_mass"] / total_mass(base)
         else:

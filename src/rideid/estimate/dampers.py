@@ -24,7 +24,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..model.nonlinear import check_nonlinear, curve_names, simulate_nonlinear, simulate_numpy, substeps
+from ..model.nonlinear import check_nonlinear, simulate_nonlinear, simulate_numpy, substeps
 from ..data.scenario import LIFT_OFF_RHO
 
 #: samples (both corners of the axle, all runs) beyond the previous knot that make a knot excited
@@ -93,7 +93,7 @@ def knot_excitation(cf, P, min_samples: int = MIN_SAMPLES) -> dict:
     knots = np.asarray(cf.space.layout.knots)
     K = knots.size
     j0 = int(np.searchsorted(knots, 0.0))
-    names = curve_names(K)
+    names = cf.space.knot_names
     out = {"counts": {}, "excited": {}, "frozen": [],
            "rule": f"a knot is excited when at least {min_samples} samples (both corners of the axle, all runs, "
                    "the car of the global search) go beyond the previous knot on its side"}
@@ -121,7 +121,7 @@ def dampers_block(space, P, cov_white, cov_robust, names, excitation=None) -> di
     ``cov_white``, ``cov_robust``: covariances over ``names`` (free parameters then derived quantities).
     """
     K = space.layout.n_knots
-    knot_names = curve_names(K)
+    knot_names = space.knot_names
     frozen = set(space.frozen)
 
     def sd(cov, n):

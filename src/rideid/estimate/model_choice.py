@@ -46,7 +46,6 @@ from .identify import identify as identify_model, warn_bounds
 from .anyroad import identify_any_road, unknown_road_runs
 from ..model.batch import single_threaded_blas, thread_map
 from .cost import CostFunction, ParameterSpace, refuse_unsupported_groups
-from ..model.nonlinear import curve_names
 from ..data.checks import bound_findings
 
 #: per free extension parameter: a group of two enters at the 99.9 % point of chi-square(2)
@@ -300,9 +299,9 @@ def curve_departure(names, theta, cov, space) -> tuple[float, int]:
     """
 
     K = space.layout.n_knots
-    kv = dict(zip(curve_names(K), space.knot_velocities()))
+    kv = dict(zip(space.knot_names, space.knot_velocities()))
     idx, blocks = [], []
-    for axle in (curve_names(K)[:K], curve_names(K)[K:]):
+    for axle in (space.knot_names[:K], space.knot_names[K:]):
         j = [names.index(n) for n in axle if n in names]
         if not j:
             continue

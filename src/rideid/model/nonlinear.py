@@ -208,7 +208,8 @@ class NonlinearLayout:
         return self.knots is None and not self.bump_stops
 
     @property
-    def index(self) -> dict[str, int]:
+    def column(self) -> dict[str, int]:
+        """Name -> its column in the rows of this layout."""
         return {n: i for i, n in enumerate(self.names)}
 
     def curves(self, P):
@@ -347,7 +348,7 @@ def substeps(P, geom: Geometry, layout: NonlinearLayout, h: float, rho: float = 
     P = layout.rows(P)
     Q = full_rows(P[:, :len(ALL_NAMES)]).copy()
     if layout.bump_stops:
-        ix = layout.index
+        ix = layout.column
         Q[:, INDEX["k_sf"]] += P[:, ix["bs_rate_f"]]
         Q[:, INDEX["k_sr"]] += P[:, ix["bs_rate_r"]]
     if layout.knots is not None:
