@@ -201,7 +201,7 @@ def test_no_library_module_switches_the_matplotlib_backend():
                 calls.append(f"{m}:{node.lineno}")
     assert calls == []
     code = ("import matplotlib, sys, tempfile; matplotlib.use('svg'); import rideid; "
-            "from rideid.estimate.sensitivity import heatmaps; "
+            "from rideid.report.sensitivity_files import heatmaps; "
             "files = heatmaps(rideid.sensitivity_maps(rideid.default_scenario()), tempfile.mkdtemp()); "
             "print(matplotlib.get_backend(), 'matplotlib.pyplot' in sys.modules, "
             "[f.stat().st_size > 1000 for f in files])")

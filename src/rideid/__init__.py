@@ -60,9 +60,9 @@ _COMMAND_LINE = _by_name({
     "rideid.estimate.bumps": ("format_bump_stops",), "rideid.design": ("parse_target",),
     "rideid.report.html": ("write_report",),
 }, {
-    "write_sensitivity_csvs": ("rideid.estimate.sensitivity", "write_csvs"),
-    "sensitivity_tables_markdown": ("rideid.estimate.sensitivity", "tables_markdown"),
-    "sensitivity_heatmaps": ("rideid.estimate.sensitivity", "heatmaps"),
+    "write_sensitivity_csvs": ("rideid.report.sensitivity_files", "write_csvs"),
+    "sensitivity_tables_markdown": ("rideid.report.sensitivity_files", "tables_markdown"),
+    "sensitivity_heatmaps": ("rideid.report.sensitivity_files", "heatmaps"),
 })
 del _by_name  # the module's namespace (and dir(rideid)) holds the two tables only
 

@@ -34,7 +34,8 @@ from ..data.scenario import LIFT_OFF_RHO
 from ..errors import DataError
 from ..estimate.cost import CostFunction, ParameterSpace
 from ..estimate.dampers import suspension_velocities_by_run
-from ..estimate.sensitivity import P2T_STARS, heatmap_figure, stars
+from ..estimate.sensitivity import P2T_STARS, stars
+from .sensitivity_files import heatmap_figure
 from ..model.batch import BatchSimulator
 from ..model.equations import CHANNELS
 from ..model.params import ALL_NAMES, DESCRIPTIONS, as_vector
@@ -425,7 +426,7 @@ HEAT_CAPTIONS = {
 @styled
 def fig_heatmap(kind, maps, out_dir):
     """One sensitivity map with each cell's star rating (``kind``: a key of ``HEAT_CAPTIONS``;
-    drawn by :func:`rideid.estimate.sensitivity.heatmap_figure`)."""
+    drawn by :func:`rideid.report.sensitivity_files.heatmap_figure`)."""
     title = kind.replace("_", " → ").replace("param", "parameter")
     return _save(heatmap_figure(maps, kind), Path(out_dir), kind, title, HEAT_CAPTIONS[kind])
 
