@@ -8,6 +8,7 @@ curves, bump stops and a CG height.
 
 import tomllib
 import warnings
+import tempfile
 import zipfile
 from dataclasses import replace
 from pathlib import Path
@@ -22,53 +23,27 @@ from rideid.model.equations import CHANNELS
 from rideid.model.simulate import prepare_run
 
 fmpy = pytest.importorskip("fmpy")
-from fmpy import extract, read_model_description  # noqa: E402
-from fmpy.fmi2 import FMU2Slave  # noqa: E402
+from fmpy import read_model_description  # noqa: E402
 from fmpy.validation import validate_fmu  # noqa: E402
 
 from rideid.exporter import car_from_scenario, export  # noqa: E402
-from rideid.exporter.fmu import INPUTS, find_compiler  # noqa: E402
+from rideid.exporter.drive import drive_fmu  # noqa: E402
+from rideid.exporter.fmu import INPUTS, NoBinary, find_compiler  # noqa: E402
 
-needs_cc = pytest.mark.skipif(find_compiler() is None, reason="no C compiler")
+
+def _has_cc() -> bool:
+    try:
+        find_compiler()
+    except NoBinary:
+        return False
+    return True
+
+
+needs_cc = pytest.mark.skipif(not _has_cc(), reason="no C compiler")
 ROOT = Path(__file__).resolve().parents[1]
 #: FMU communication steps per sample: the master's inputs (cubic Hermite through r and rdot) between them
 SUB = 16
 RUNS = ("T_LH", "H_LH", "W_L")
-
-
-def drive_fmu(path, t, r, rdot, sub=SUB):
-    """Outputs ``(n, 10)`` of the FMU at the samples ``t`` driven with road inputs ``r``, ``rdot`` ``(n*sub-sub+1, 4)``
-    given at ``sub`` points per sample interval: at each communication point the inputs are set, the outputs
-    read, and the cubic Hermite through the inputs and their rates at both ends of the step handed over as
-    input derivatives (orders 1-3) for the FMU to interpolate within the step."""
-    md = read_model_description(path)
-    unzipped = extract(path)
-    vr = {v.name: v.valueReference for v in md.modelVariables}
-    vin = [vr[n] for n in INPUTS]
-    vout = [vr[c] for c in CHANNELS]
-    s = FMU2Slave(guid=md.guid, unzipDirectory=unzipped, modelIdentifier=md.coSimulation.modelIdentifier,
-                  instanceName="car")
-    s.instantiate()
-    s.setupExperiment(startTime=0.0)
-    s.enterInitializationMode()
-    s.setReal(vin, list(np.r_[r[0], rdot[0]]))
-    s.exitInitializationMode()
-    dt = (t[1] - t[0]) / sub
-    Y = np.empty((t.size, 10))
-    for k in range(r.shape[0]):
-        s.setReal(vin, list(np.r_[r[k], rdot[k]]))
-        if k % sub == 0:
-            Y[k // sub] = s.getReal(vout)
-        if k + 1 < r.shape[0]:
-            dr, d0, d1 = r[k + 1] - r[k], rdot[k], rdot[k + 1]
-            s.setRealInputDerivatives(vin[:4], [1] * 4, list(d0))
-            s.setRealInputDerivatives(vin[:4], [2] * 4, list((6 * dr / dt - 4 * d0 - 2 * d1) / dt))
-            s.setRealInputDerivatives(vin[:4], [3] * 4, list((-12 * dr / dt + 6 * (d0 + d1)) / dt ** 2))
-            s.setRealInputDerivatives(vin[4:], [1] * 4, list((d1 - d0) / dt))
-            s.doStep(k * dt, dt)
-    s.terminate()
-    s.freeInstance()
-    return Y
 
 
 def relative_error(Y, Yref):
@@ -134,6 +109,11 @@ def test_fmu_of_an_identified_linear_car_matches_simulate(fit, tmp_path):
     md = read_model_description(str(fmu))
     assert md.fmiVersion == "2.0" and md.coSimulation.modelIdentifier == "car"
     assert md.coSimulation.canInterpolateInputs
+    # every unit with its SI base units, so a tool can convert (N/m = kg s^-2, m/s^2 = m s^-2)
+    base = {u.name: u.baseUnit for u in md.unitDefinitions}
+    assert all(b is not None for b in base.values()) and {"N/m", "m/s^2", "rad/s", "kg m^2"} <= set(base)
+    assert (base["N/m"].kg, base["N/m"].m, base["N/m"].s) == (1, 0, -2)
+    assert (base["m/s^2"].m, base["m/s^2"].s) == (1, -2) and base["rad/s"].rad == 1
     by = {v.name: v for v in md.modelVariables}
     assert [n for n in by if by[n].causality == "input"] == list(INPUTS)
     assert [n for n in by if by[n].causality == "output"] == list(CHANNELS)
@@ -193,16 +173,26 @@ def test_card_round_trip(fit, tmp_path):
         assert again.parameters[n] == pytest.approx(res.parameters[n], rel=1e-6), n
 
 
-def test_source_only_fmu_and_one_note_without_a_compiler(fit, tmp_path, monkeypatch, capsys):
-    monkeypatch.setenv("CC", "/nonexistent/cc")
+@pytest.mark.parametrize("cc, why", [("/nonexistent/cc", "CC='/nonexistent/cc' is not on the PATH"),
+                                     (None, "no C compiler found (set CC or install cc)"),
+                                     ("false", "the C compiler 'false' failed: exit code 1")])
+def test_source_only_fmu_and_one_note_without_a_working_compiler(cc, why, fit, tmp_path, monkeypatch, capsys):
+    if cc is None:  # no CC, and no cc on the PATH
+        monkeypatch.delenv("CC", raising=False)
+        monkeypatch.setenv("PATH", str(tmp_path))
+    else:
+        monkeypatch.setenv("CC", cc)
     assert main(["export", str(fit), "--out", str(tmp_path / "car"), "--format", "fmu"]) == 0
-    out = capsys.readouterr().out.strip().splitlines()
-    notes = [ln for ln in out if ln.startswith("note:")]
-    assert len(notes) == 1 and "no C compiler" in notes[0] and "sources only" in notes[0]
+    cap = capsys.readouterr()
+    assert cap.out.strip().splitlines() == [f"written to {tmp_path / 'car'}: car.fmu"]
+    notes = cap.err.strip().splitlines()
+    assert len(notes) == 1 and notes[0].startswith("note: ") and why in notes[0], notes
+    assert "car.fmu carries its C sources only" in notes[0]
     with zipfile.ZipFile(tmp_path / "car" / "car.fmu") as z:
         names = z.namelist()
     assert "sources/model.c" in names and not any(n.startswith("binaries/") for n in names)
     assert validate_fmu(str(tmp_path / "car" / "car.fmu")) == []
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["car"]  # no build or temporary folder left
 
 
 @pytest.mark.parametrize("case", ["no result.json", "unknown format", "unwritable folder"])
@@ -234,3 +224,46 @@ def test_export_into_an_existing_folder_keeps_other_files(fit, tmp_path):
     assert res.compiled is None
     assert sorted(p.name for p in (tmp_path / "car").iterdir()) == ["car.csv", "car.toml", "notes.txt"]
     assert sorted(p.name for p in tmp_path.iterdir()) == ["car"]
+
+
+def test_export_into_an_existing_folder_writes_on_its_file_system(fit, tmp_path, monkeypatch):
+    """An existing output folder may be a file system of its own (a mount point): the files are built in a
+    temporary folder inside it, so that moving them in is a rename there; a new folder is built beside."""
+    made = []
+    real = tempfile.mkdtemp
+
+    def mkdtemp(**kw):
+        made.append(Path(kw["dir"]))
+        return real(**kw)
+
+    monkeypatch.setattr(tempfile, "mkdtemp", mkdtemp)
+    (tmp_path / "mounted").mkdir()
+    export(rideid.load_result(fit), tmp_path / "mounted", format="card", compiler=None)
+    export(rideid.load_result(fit), tmp_path / "new", format="card", compiler=None)
+    assert made == [(tmp_path / "mounted").resolve(), tmp_path.resolve()]
+    assert sorted(p.name for p in (tmp_path / "mounted").iterdir()) == ["car.csv", "car.toml"]
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["mounted", "new"]
+
+
+def docs_example(marker: str) -> str:
+    """The ```python block of docs/export.md that contains ``marker``."""
+    text = (ROOT / "docs" / "export.md").read_text()
+    blocks = [b.split("```", 1)[0] for b in text.split("```python\n")[1:]]
+    (block,) = [b for b in blocks if marker in b]
+    return block
+
+
+@needs_cc
+def test_the_docs_fmpy_example_runs_and_matches_simulate(tmp_path, monkeypatch):
+    """docs/export.md's FMPy example, as it stands, on the built-in car's FMU: the channels of
+    ``rideid simulate`` within 1e-4 of their RMS."""
+    sc = rideid.default_scenario()
+    export(car_from_scenario(sc), tmp_path / "car", format="fmu")
+    monkeypatch.chdir(tmp_path)
+    ns = {}
+    exec(compile(docs_example("drive_fmu("), "docs/export.md", "exec"), ns)
+    run = ns["run"]
+    data, _ = simulate_manifest(replace(sc, runs=[run]))
+    t, Yref = data[run.id]
+    assert np.array_equal(ns["t"], t)
+    assert relative_error(ns["Y"], Yref) < 1e-4

@@ -528,8 +528,8 @@ def cmd_export(args, out=None):
     out = out or sys.stdout
     res = rideid.export(args.fit, args.out, format=args.format)
     print(f"written to {args.out}: {', '.join(p.name for p in res.files)}", file=out)
-    if res.note:
-        print(f"note: {res.note}", file=out)
+    if res.note:  # on stderr, beside warnings: the FMU is usable elsewhere but not here as it is
+        say(f"note: {res.note}")
     return 0
 
 

@@ -3,8 +3,10 @@
     rideid.export("fit", "out")                     # car.toml, car.csv, car.fmu
     rideid.export(result, "out", format="card")     # an IdentificationResult works too
 
-Everything is written into a temporary folder beside ``out`` and moved in
-at the end: bad input leaves nothing behind.
+Everything is written into a temporary folder and moved in at the end (a
+new ``out`` is the temporary folder renamed; into an ``out`` that exists the
+files are moved from a temporary folder inside it, on its own file system):
+bad input leaves nothing behind.
 """
 
 from __future__ import annotations
@@ -19,7 +21,8 @@ from ..errors import ArgumentError, DataError
 from ..estimate.result import IdentificationResult, load
 from .car import Car, car_from_result, car_from_scenario
 from .card import write_card
-from .fmu import find_compiler, write_fmu
+from .drive import drive_fmu
+from .fmu import NoBinary, find_compiler, write_fmu
 
 FORMATS = ("card", "fmu", "all")
 #: the files each format writes
@@ -28,18 +31,22 @@ FILES = {"card": ("car.toml", "car.csv"), "fmu": ("car.fmu",), "all": ("car.toml
 
 @dataclass(frozen=True)
 class ExportResult:
-    """What :func:`export` wrote: the folder, the files, and whether the FMU carries a binary."""
+    """What :func:`export` wrote: the folder, the files, and whether the FMU carries a binary.
+
+    ``compiled``: None when no FMU was written; ``no_binary``: why the FMU carries its sources only.
+    """
 
     out: Path
     files: tuple
     compiled: bool | None  # None: no FMU written
+    no_binary: str | None = None
 
     @property
     def note(self) -> str | None:
-        """One line when the FMU holds sources only (no C compiler found), else None."""
+        """One line when the FMU holds sources only (no C compiler, or it failed), else None."""
         if self.compiled is False:
-            return ("no C compiler found (set CC or install cc): car.fmu carries its C sources only; "
-                    "build it with your FMI tool or rerun export where a compiler exists")
+            return (f"{self.no_binary}: car.fmu carries its C sources only; "
+                    "build it with your FMI tool or rerun export where a compiler works")
         return None
 
 
@@ -69,6 +76,8 @@ def export(result_or_fit_dir, out, format: str = "all", *, compiler="auto") -> E
         ``card``: ``car.toml`` + ``car.csv``; ``fmu``: ``car.fmu``; ``all``: both.
     compiler : "auto", None or list of str
         C compiler command for the FMU's binary (``"auto"``: ``$CC``, else ``cc``; None: sources only).
+        Without a compiler, or when it fails, the FMU carries its sources only and
+        :attr:`ExportResult.note` says why.
 
     Returns
     -------
@@ -89,23 +98,27 @@ def export(result_or_fit_dir, out, format: str = "all", *, compiler="auto") -> E
     out = Path(out)
     if out.exists() and not out.is_dir():
         raise DataError(f"{out}: exists and is not a folder")
-    parent = out.resolve().parent
+    existed = out.exists()
+    # on the file system the files end up on, so that moving them in is a rename: inside ``out`` when it exists
+    # (it may be a mount point of its own), else beside it (the folder itself is renamed into place)
+    where = out.resolve() if existed else out.resolve().parent
     try:
-        parent.mkdir(parents=True, exist_ok=True)
-        tmp = Path(tempfile.mkdtemp(prefix=f".{out.name}.tmp-", dir=parent))
+        where.mkdir(parents=True, exist_ok=True)
+        tmp = Path(tempfile.mkdtemp(prefix=f".{out.name}.tmp-", dir=where))
         mask = os.umask(0)
         os.umask(mask)
         tmp.chmod(0o777 & ~mask)  # a folder as mkdir makes it: it may become ``out``
     except OSError as e:
         raise DataError(f"{out}: cannot write the output folder: {e.strerror or e}") from None
-    compiled = None
+    compiled = no_binary = None
     try:
         if format in ("card", "all"):
             write_card(car, tmp, source=label)
         if format in ("fmu", "all"):
-            compiled = write_fmu(car, tmp / "car.fmu", compiler=compiler, workdir=tmp)
+            no_binary = write_fmu(car, tmp / "car.fmu", compiler=compiler, workdir=tmp)
+            compiled = no_binary is None
         try:
-            if not out.exists():
+            if not existed:
                 tmp.rename(out)  # the whole folder at once
             else:
                 for name in FILES[format]:
@@ -114,8 +127,8 @@ def export(result_or_fit_dir, out, format: str = "all", *, compiler="auto") -> E
             raise DataError(f"{out}: cannot write the output folder: {e.strerror or e}") from None
     finally:
         shutil.rmtree(tmp, ignore_errors=True)
-    return ExportResult(out, tuple(out / n for n in FILES[format]), compiled)
+    return ExportResult(out, tuple(out / n for n in FILES[format]), compiled, no_binary)
 
 
 __all__ = ["export", "ExportResult", "Car", "car_from_result", "car_from_scenario", "write_card", "write_fmu",
-           "find_compiler", "FORMATS"]
+           "find_compiler", "FORMATS", "NoBinary", "drive_fmu"]

@@ -49,6 +49,10 @@ MODEL_IDENTIFIER = "car"
 RHO = 0.01
 INPUTS = ("r_fl", "r_fr", "r_rl", "r_rr", "rdot_fl", "rdot_fr", "rdot_rl", "rdot_rr")
 VR_OUTPUT0, VR_PAR0 = 8, 100
+#: SI base-unit exponents of every unit the FMU names (FMI 2.0 ``<BaseUnit>``), so a tool can convert them
+BASE_UNITS = {"m": {"m": 1}, "m/s": {"m": 1, "s": -1}, "m/s^2": {"m": 1, "s": -2}, "rad/s": {"rad": 1, "s": -1},
+              "s": {"s": 1}, "kg": {"kg": 1}, "kg m^2": {"kg": 1, "m": 2}, "N": {"kg": 1, "m": 1, "s": -2},
+              "N/m": {"kg": 1, "s": -2}, "N s/m": {"kg": 1, "s": -1}}
 #: the big clearance standing for "no bump stop" (m); with rate 0 it is never reached anyway
 NO_STOP = 1e6
 
@@ -72,7 +76,7 @@ def _parameters(car: Car):
             ("track_front", g.track_front, "m", "front track", "fixed"),
             ("track_rear", g.track_rear, "m", "rear track", "fixed"),
             ("cg_height", g.cg_height, "m", "sprung-mass CG above the wheel centres", "fixed"),
-            ("gravity", GRAVITY, "m/s2", "gravity (CG height terms, static loads for lift-off)", "fixed")]
+            ("gravity", GRAVITY, "m/s^2", "gravity (CG height terms, static loads for lift-off)", "fixed")]
     bs = car.bump_stops
     for ax, axle in (("f", "front"), ("r", "rear")):
         clear = bs.get(f"bs_clear_{ax}", NO_STOP)
@@ -146,7 +150,9 @@ def model_description(car: Car, guid: str) -> str:
              'canNotUseMemoryManagementFunctions="true">',
              '    <SourceFiles>', '      <File name="model.c"/>', '    </SourceFiles>',
              '  </CoSimulation>', '  <UnitDefinitions>']
-    lines += [f'    <Unit name="{escape(u)}"/>' for u in units]
+    for u in units:
+        base = " ".join(f'{k}="{v}"' for k, v in BASE_UNITS[u].items())
+        lines += [f'    <Unit name="{escape(u)}">', f'      <BaseUnit {base}/>', '    </Unit>']
     lines += ['  </UnitDefinitions>', '  <DefaultExperiment startTime="0.0" stopTime="10.0"/>',
               '  <ModelVariables>']
     idx = 0
@@ -180,17 +186,31 @@ def model_description(car: Car, guid: str) -> str:
     return "\n".join(lines) + "\n"
 
 
-def find_compiler() -> list[str] | None:
-    """The C compiler: ``$CC`` (with its flags) if set, else ``cc`` on the PATH; None without one."""
+class NoBinary(Exception):
+    """Why ``car.fmu`` carries no binary: no C compiler, or the compiler failed (its message)."""
+
+
+def find_compiler() -> list[str]:
+    """The C compiler: ``$CC`` (with its flags) if set, else ``cc`` on the PATH.
+
+    Raises
+    ------
+    NoBinary
+        ``$CC`` names no program on the PATH, or neither is set nor ``cc`` found.
+    """
     cc = os.environ.get("CC")
     if cc:
         args = shlex.split(cc)
-        return args if args and shutil.which(args[0]) else None
+        if not args or not shutil.which(args[0]):
+            raise NoBinary(f"the C compiler CC={cc!r} is not on the PATH")
+        return args
     found = shutil.which("cc")
-    return [found] if found else None
+    if not found:
+        raise NoBinary("no C compiler found (set CC or install cc)")
+    return [found]
 
 
-def write_fmu(car: Car, path, compiler="auto", workdir=None) -> bool:
+def write_fmu(car: Car, path, compiler="auto", workdir=None) -> str | None:
     """Write ``car.fmu`` at ``path``.
 
     Parameters
@@ -205,13 +225,9 @@ def write_fmu(car: Car, path, compiler="auto", workdir=None) -> bool:
 
     Returns
     -------
-    bool
-        Whether the FMU carries a binary (False: sources only).
-
-    Raises
-    ------
-    RuntimeError
-        The compiler failed (its first error line), a bug in the generated C.
+    str or None
+        None when the FMU carries a binary; else why it carries its sources only (no compiler, or the
+        compiler's first error line), one line to show the user.
     """
     path = Path(path)
     guid = "{" + str(uuid.uuid4()) + "}"
@@ -221,23 +237,42 @@ def write_fmu(car: Car, path, compiler="auto", workdir=None) -> bool:
     (src / "model.c").write_text(c_source(car, guid))
     (src / "fmi2_api.h").write_text((resources.files(__package__) / "c" / "fmi2_api.h").read_text())
     (build / "modelDescription.xml").write_text(model_description(car, guid))
-    cc = find_compiler() if compiler == "auto" else compiler
-    binary = None
-    if cc:
-        bdir = build / "binaries" / platform_folder()
-        bdir.mkdir(parents=True, exist_ok=True)
-        binary = bdir / f"{MODEL_IDENTIFIER}{binary_suffix()}"
-        cmd = [*cc, "-shared", "-fPIC", "-O2", "-fvisibility=hidden", "-o", str(binary), str(src / "model.c"), "-lm"]
-        proc = subprocess.run(cmd, capture_output=True, text=True)
-        if proc.returncode != 0:
-            first = (proc.stderr.strip().splitlines() or ["(no message)"])[0]
-            raise RuntimeError(f"compiling the FMU failed: {first}")
+    try:
+        _compile(find_compiler() if compiler == "auto" else compiler, build, src)
+        why = None
+    except NoBinary as e:
+        shutil.rmtree(build / "binaries", ignore_errors=True)
+        why = str(e)
     with zipfile.ZipFile(path, "w", zipfile.ZIP_DEFLATED) as z:
         for f in sorted(build.rglob("*")):
             if f.is_file():
                 z.write(f, f.relative_to(build).as_posix())
     shutil.rmtree(build, ignore_errors=True)
-    return binary is not None
+    return why
 
 
-__all__ = ["write_fmu", "model_description", "c_source", "find_compiler", "max_step", "INPUTS", "MODEL_IDENTIFIER"]
+def _compile(cc, build: Path, src: Path) -> None:
+    """Build ``binaries/<platform>/car.<suffix>`` in ``build`` with compiler command ``cc`` (None: none).
+
+    Raises
+    ------
+    NoBinary
+        No compiler, or the compiler failed to start or to build (its first error line).
+    """
+    if not cc:
+        raise NoBinary("no C compiler asked for")
+    bdir = build / "binaries" / platform_folder()
+    bdir.mkdir(parents=True, exist_ok=True)
+    binary = bdir / f"{MODEL_IDENTIFIER}{binary_suffix()}"
+    cmd = [*cc, "-shared", "-fPIC", "-O2", "-fvisibility=hidden", "-o", str(binary), str(src / "model.c"), "-lm"]
+    try:
+        proc = subprocess.run(cmd, capture_output=True, text=True)
+    except OSError as e:
+        raise NoBinary(f"the C compiler {cc[0]!r} could not be run: {e.strerror or e}") from None
+    if proc.returncode != 0 or not binary.is_file():
+        first = (proc.stderr.strip().splitlines() or [f"exit code {proc.returncode}, no message"])[0]
+        raise NoBinary(f"the C compiler {shlex.join(cc)!r} failed: {first}")
+
+
+__all__ = ["write_fmu", "model_description", "c_source", "find_compiler", "max_step", "INPUTS", "MODEL_IDENTIFIER",
+           "NoBinary"]
