@@ -5,6 +5,7 @@ caller's backend is never changed.
 """
 
 import json
+import shutil
 import sys
 from dataclasses import replace
 from pathlib import Path
@@ -31,8 +32,16 @@ def test_the_notebook_runs_top_to_bottom():
     ns = {"__name__": "__notebook__"}
     cells = code_cells(NOTEBOOK)
     assert len(cells) >= 6
-    for k, src in enumerate(cells):
-        exec(compile(src, f"{NOTEBOOK.name}[cell {k}]", "exec"), ns)
+    try:
+        for k, src in enumerate(cells):
+            exec(compile(src, f"{NOTEBOOK.name}[cell {k}]", "exec"), ns)
+        _check_notebook(ns, backend, pyplot_before)
+    finally:
+        if "work" in ns:
+            shutil.rmtree(ns["work"], ignore_errors=True)  # the notebook's scratch folder
+
+
+def _check_notebook(ns, backend, pyplot_before):
     assert matplotlib.get_backend() == backend
     if not pyplot_before:
         assert "matplotlib.pyplot" not in sys.modules
@@ -94,6 +103,11 @@ def test_figures_are_figures_and_leave_the_backend_alone(fitted, tmp_path):
         rideid.plot_dampers(res)
     with pytest.raises(rideid.ArgumentError, match="its runs: T_LL"):
         rideid.plot_fit(res, "nope", dataset=ds)
+    # a notebook without pyplot or %matplotlib shows the value of a cell through _repr_png_: a PNG of the figure
+    png = fig._repr_png_()
+    assert png[:8] == b"\x89PNG\r\n\x1a\n"
+    width, height = int.from_bytes(png[16:20], "big"), int.from_bytes(png[20:24], "big")
+    assert (width, height) == tuple(round(100 * v) for v in fig.get_size_inches())
     assert matplotlib.get_backend() == backend
 
 

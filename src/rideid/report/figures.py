@@ -1,8 +1,12 @@
 """Figures for a notebook: built on :class:`matplotlib.figure.Figure` directly.
 
 Never pyplot, never ``matplotlib.use``: the caller's backend (Jupyter's
-inline one, a GUI, Agg in a script) stays as it was. A notebook shows a
-returned figure as it shows any; a script saves it with ``fig.savefig``.
+inline one, a GUI, Agg in a script) stays as it was. A script saves a
+figure with ``fig.savefig``. A notebook shows it as the value of a cell:
+Jupyter's own display of Matplotlib figures is only switched on by pyplot
+or ``%matplotlib inline``, so the figures are :class:`NotebookFigure`, which
+also render themselves as PNG (``_repr_png_``) for a notebook that has
+imported neither.
 They are public as ``rideid.plot_fit``, ``rideid.plot_parameters`` and
 ``rideid.plot_dampers`` (functions of the result, not its methods: the
 result belongs to the estimate layer, which never imports the report).
@@ -10,9 +14,11 @@ result belongs to the estimate layer, which never imports the report).
 
 from __future__ import annotations
 
+import io
 import math
 
 import numpy as np
+from matplotlib.figure import Figure
 
 from ..conditioning.load import load_dataset
 from ..data.dataset import Dataset
@@ -27,8 +33,20 @@ GROUPS = (("body accelerations", "m/s²", (0, 1, 2, 3)), ("axle accelerations", 
 
 
 def _figure(width, height):
-    from matplotlib.figure import Figure
-    return Figure(figsize=(width, height), layout="constrained")
+    return NotebookFigure(figsize=(width, height), layout="constrained")
+
+
+class NotebookFigure(Figure):
+    """A :class:`matplotlib.figure.Figure` that a notebook shows as PNG without pyplot.
+
+    IPython displays any object with ``_repr_png_``; where pyplot or ``%matplotlib inline`` has registered
+    Matplotlib's own display of figures, that one is used instead (one image either way).
+    """
+
+    def _repr_png_(self) -> bytes:
+        buf = io.BytesIO()
+        self.savefig(buf, format="png", dpi=100)
+        return buf.getvalue()
 
 
 def result_dataset(result, dataset=None):
