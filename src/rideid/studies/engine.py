@@ -31,7 +31,7 @@ from pathlib import Path
 from ..data.scenario import default_scenario, load_scenario
 from ..errors import ArgumentError, DataError
 from .spec import BUILTIN, Study, load_study
-from .summary import write_outputs
+from ..report.study_files import write_outputs
 from .task import run_task, write_atomic
 
 
