@@ -1,6 +1,8 @@
 """A study's files: results.parquet, summary.md/.csv and summary.html with figures.
 
-The rows and the group statistics come from :mod:`rideid.studies.summary`;
+The rows and the group statistics come from :mod:`rideid.studies.summary`
+(:func:`rideid.studies.summary.write_summary` hands them over with the
+study's option columns);
 the figures are plain :class:`matplotlib.figure.Figure` objects (no pyplot,
 the caller's backend untouched).
 """
@@ -15,9 +17,32 @@ import numpy as np
 from matplotlib.figure import Figure
 from matplotlib.ticker import MaxNLocator
 
-from ..studies.summary import (OPTION_COLUMNS, SEED_COLUMNS, estimated_names, group_label, group_stats, table_rows,
-                               varying_columns)
-from ..studies.task import write_atomic
+from ..data.schema.common import write_atomic
+
+#: the options that only reseed a task: tasks that differ in these alone form a group
+SEED_COLUMNS = ("noise_seed", "seed")
+
+
+def varying_columns(rows, cols) -> list[str]:
+    """The columns of ``cols`` whose value differs between the ``rows`` (dicts)."""
+    return [c for c in cols if len({repr(r.get(c)) for r in rows}) > 1]
+
+
+def group_label(row, cols) -> str:
+    """A row's group, named by its values of ``cols`` (``"all tasks"`` without any)."""
+    if not cols:
+        return "all tasks"
+    return " ".join(f"{c}={row.get(c)}" for c in cols)
+
+
+def estimated_names(rows) -> list[str]:
+    """The parameters the rows estimated (their ``estimated`` lists joined), in order of appearance."""
+    names = []
+    for r in rows:
+        for n in (r.get("estimated") or "").split(","):
+            if n and n not in names:
+                names.append(n)
+    return names
 
 
 def write_parquet(rows, path: Path):
@@ -73,7 +98,7 @@ def _task_label(r, cols):
     return group_label(r, cols) if cols else f"task {r['task']}"
 
 
-def _tables(spec, rows, stats, notes):
+def _tables(spec, rows, stats, notes, option_columns):
     """(title, header, body) of each summary table."""
     names = estimated_names(rows)
     tables = []
@@ -83,9 +108,9 @@ def _tables(spec, rows, stats, notes):
                    [[len(rows), done, len(failed), sum(r["status"] == "missing" for r in rows)]]))
     if failed:
         tables.append(("Failed tasks", ["task", "options", "error"],
-                       [[r["task"], _task_label(r, varying_columns(rows, OPTION_COLUMNS)), r["error"]]
+                       [[r["task"], _task_label(r, varying_columns(rows, option_columns)), r["error"]]
                         for r in failed]))
-    gcols = varying_columns(rows, [c for c in OPTION_COLUMNS if c not in SEED_COLUMNS])
+    gcols = varying_columns(rows, [c for c in option_columns if c not in SEED_COLUMNS])
     groups: dict[str, list] = {}
     for r in rows:
         groups.setdefault(group_label(r, gcols), []).append(r)
@@ -105,7 +130,7 @@ def _tables(spec, rows, stats, notes):
         cols = [c for c in STAT_COLUMNS if any(s.get(c) is not None for s in stats)]
         tables.append(("Groups: spread over seeds, reported standard errors, errors vs truth", cols,
                        [[_fmt(s.get(c)) for c in cols] for s in stats]))
-    tcols = varying_columns(rows, OPTION_COLUMNS)
+    tcols = varying_columns(rows, option_columns)
     body = []
     for r in rows:
         if r["status"] != "done":
@@ -120,7 +145,7 @@ def _tables(spec, rows, stats, notes):
     return tables
 
 
-def _figures(rows, stats, out: Path) -> list[tuple[str, str]]:
+def _figures(rows, stats, out: Path, option_columns) -> list[tuple[str, str]]:
     figs = []
     fdir = out / "figures"
     fdir.mkdir(exist_ok=True)
@@ -128,7 +153,7 @@ def _figures(rows, stats, out: Path) -> list[tuple[str, str]]:
     names = estimated_names(done)
     if not done or not names:
         return figs
-    gcols = varying_columns(rows, [c for c in OPTION_COLUMNS if c not in SEED_COLUMNS])
+    gcols = varying_columns(rows, [c for c in option_columns if c not in SEED_COLUMNS])
     labels = list(dict.fromkeys(group_label(r, gcols) for r in done))
     ncol = 4
     nrow = math.ceil(len(names) / ncol)
@@ -180,7 +205,7 @@ def _figures(rows, stats, out: Path) -> list[tuple[str, str]]:
         save(fig, "spread.png", "Monte Carlo spread over the seeds against the mean reported standard errors "
              "(and the CRLB where available), relative to the mean estimate")
 
-    tcols = varying_columns(rows, OPTION_COLUMNS)
+    tcols = varying_columns(rows, option_columns)
     fig = Figure(figsize=(3.2 * ncol, max(2.6, 0.18 * len(done) + 1.2) * nrow))
     axs = fig.subplots(nrow, ncol, squeeze=False)
     y = np.arange(len(done))
@@ -204,13 +229,25 @@ def _figures(rows, stats, out: Path) -> list[tuple[str, str]]:
     return figs
 
 
-def write_outputs(spec, ordered, out: Path) -> Path:
-    """Write results.parquet, summary.csv, summary.md, summary.html (+ figures); return the HTML path."""
-    rows = table_rows(ordered)
+def write_outputs(spec, rows, stats, notes, out: Path, option_columns) -> Path:
+    """Write results.parquet, summary.csv, summary.md, summary.html (+ figures); return the HTML path.
+
+    Parameters
+    ----------
+    spec : Study
+        Its ``name`` and ``path``.
+    rows : list of dict
+        One per task (:func:`rideid.studies.summary.table_rows`).
+    stats, notes : list
+        The groups' statistics and notes (:func:`rideid.studies.summary.group_stats`).
+    out : Path
+        The study's folder.
+    option_columns : tuple of str
+        The columns of a task's options (the groups are the tasks alike in these but the seeds).
+    """
     write_parquet(rows, out / "results.parquet")
-    stats, notes = group_stats(spec, rows)
     write_atomic(out / "summary.csv", _csv(stats))
-    tables = _tables(spec, rows, stats, notes)
+    tables = _tables(spec, rows, stats, notes, option_columns)
     md = [f"# Study: {spec.name}", ""]
     if spec.path is not None:
         md += [f"Study file: `{spec.path}`", ""]
@@ -224,7 +261,7 @@ def write_outputs(spec, ordered, out: Path) -> Path:
            "Cramér-Rao lower bound of the group's runs at its noise level; plan_identify_std: the spread rideid "
            "plan expects of identify's estimator (both from rideid.plan, where available).", ""]
     write_atomic(out / "summary.md", "\n".join(md))
-    figs = _figures(rows, stats, out)
+    figs = _figures(rows, stats, out, option_columns)
     e = html.escape
     parts = [f"<!doctype html><html><head><meta charset='utf-8'><title>Study: {e(spec.name)}</title>",
              "<style>body{font-family:sans-serif;margin:2em;max-width:1400px}table{border-collapse:collapse;"
@@ -244,4 +281,5 @@ def write_outputs(spec, ordered, out: Path) -> Path:
     return out / "summary.html"
 
 
-__all__ = ["STAT_COLUMNS", "write_outputs", "write_parquet"]
+__all__ = ["SEED_COLUMNS", "STAT_COLUMNS", "estimated_names", "group_label", "varying_columns", "write_outputs",
+           "write_parquet"]

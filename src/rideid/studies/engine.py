@@ -31,8 +31,9 @@ from pathlib import Path
 from ..data.scenario import default_scenario, load_scenario
 from ..errors import ArgumentError, DataError
 from .spec import BUILTIN, Study, load_study
-from ..report.study_files import write_outputs
-from .task import run_task, write_atomic
+from .summary import write_summary
+from ..data.schema.common import write_atomic
+from .task import run_task
 
 
 @dataclass
@@ -199,7 +200,7 @@ def study(study_file_or_spec, out_dir, *, scheduler: str | None = None, progress
             cluster.close()
 
     ordered = [(t, records.get(t.key)) for t in spec.tasks]
-    html = write_outputs(spec, ordered, out)
+    html = write_summary(spec, ordered, out)
     done = sum(1 for _, r in ordered if r is not None and r["status"] == "done")
     failed = sum(1 for _, r in ordered if r is not None and r["status"] == "failed")
     return StudyResult(len(spec.tasks), done, failed, len(todo), out / "results.parquet", html,

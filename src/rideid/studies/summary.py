@@ -12,15 +12,16 @@ from __future__ import annotations
 
 import dataclasses
 import math
+from pathlib import Path
 
 import numpy as np
 
 from ..data.scenario import default_scenario, load_scenario
 from ..design import plan
+from ..report.study_files import SEED_COLUMNS, estimated_names, group_label, varying_columns, write_outputs
 from .spec import BUILTIN, IDENTIFY_KEYS
 
 OPTION_COLUMNS = ("dataset", "scenario", "noise", "noise_seed", "subset", "runs") + IDENTIFY_KEYS
-SEED_COLUMNS = ("noise_seed", "seed")
 
 
 def table_rows(ordered) -> list[dict]:
@@ -43,25 +44,6 @@ def table_rows(ordered) -> list[dict]:
             row.update(rec.get("row", {}))
         rows.append(row)
     return rows
-
-
-def varying_columns(rows, cols):
-    return [c for c in cols if len({repr(r.get(c)) for r in rows}) > 1]
-
-
-def group_label(row, cols):
-    if not cols:
-        return "all tasks"
-    return " ".join(f"{c}={row.get(c)}" for c in cols)
-
-
-def estimated_names(rows):
-    names = []
-    for r in rows:
-        for n in (r.get("estimated") or "").split(","):
-            if n and n not in names:
-                names.append(n)
-    return names
 
 
 _PLANS: dict = {}
@@ -139,5 +121,12 @@ def group_stats(spec, rows):
     return out, notes
 
 
-__all__ = ["OPTION_COLUMNS", "SEED_COLUMNS", "crlb_for", "estimated_names", "group_label", "group_stats",
-           "table_rows", "varying_columns"]
+def write_summary(spec, ordered, out: Path) -> Path:
+    """The study's rows and group statistics written as its files (:func:`rideid.report.study_files.write_outputs`):
+    results.parquet, summary.csv, summary.md, summary.html (+ figures); returns the HTML path."""
+    rows = table_rows(ordered)
+    stats, notes = group_stats(spec, rows)
+    return write_outputs(spec, rows, stats, notes, out, OPTION_COLUMNS)
+
+
+__all__ = ["OPTION_COLUMNS", "crlb_for", "group_stats", "table_rows", "write_summary"]

@@ -12,7 +12,6 @@ from __future__ import annotations
 
 import contextlib
 import dataclasses
-import os
 import tempfile
 import time
 import warnings
@@ -32,12 +31,6 @@ try:
 except PackageNotFoundError:  # pragma: no cover
     __version__ = "0+unknown"
 
-
-def write_atomic(path: Path, text: str):
-    """Write ``text`` to ``path`` through a temporary file and a rename (a reader never sees half)."""
-    tmp = path.with_name(f".{path.name}.tmp-{os.getpid()}")
-    tmp.write_text(text)
-    os.replace(tmp, path)
 
 #: columns of a record that differ between two runs of the same task (excluded when tables are compared)
 TIMING_COLUMNS = ("identify_wall_s", "task_wall_s")

@@ -114,6 +114,14 @@ def in_folder(path, name: str) -> Path:
     return path / name if path.is_dir() else path
 
 
+def write_atomic(path, text: str) -> None:
+    """Write ``text`` to ``path`` through a temporary file and a rename (a reader never sees half)."""
+    path = Path(path)
+    tmp = path.with_name(f".{path.name}.tmp-{os.getpid()}")
+    tmp.write_text(text)
+    os.replace(tmp, path)
+
+
 @contextlib.contextmanager
 def atomic_output(out_dir, replaces=()):
     """Write into a temporary folder beside ``out_dir``; move into place on success.
@@ -163,4 +171,4 @@ def atomic_output(out_dir, replaces=()):
 
 
 __all__ = ["ReadOnlyDict", "read_only", "read_toml", "write_toml", "number", "table", "checked_items", "in_folder",
-           "atomic_output"]
+           "atomic_output", "write_atomic"]
