@@ -232,3 +232,39 @@ def test_section_reads_types_defaults_and_ranges_in_order():
         assert str(e.value) == msg
     with pytest.raises(ValueError, match="Key type 'float'"):
         Key("float")
+
+
+def test_atomic_output_builds_on_the_output_file_system_with_mkdir_permissions(tmp_path, monkeypatch):
+    """A new folder is the temporary one renamed, with the permissions mkdir gives under the umask (not
+    mkdtemp's 0700); into an existing folder (perhaps a mount point of its own) the files move from a
+    temporary folder inside it; what the caller's block raises goes on as it is, and nothing is left."""
+    import os
+    import tempfile
+
+    from rideid.data.schema.common import atomic_output
+    made = []
+    real = tempfile.mkdtemp
+    monkeypatch.setattr(tempfile, "mkdtemp", lambda **kw: made.append(Path(kw["dir"])) or real(**kw))
+    old = os.umask(0o022)
+    try:
+        with atomic_output(tmp_path / "new") as tmp:
+            (tmp / "a.txt").write_text("a")
+    finally:
+        os.umask(old)
+    assert (tmp_path / "new").stat().st_mode & 0o777 == 0o755
+    (tmp_path / "mine").mkdir()
+    (tmp_path / "mine" / "keep.txt").write_text("k")
+    with atomic_output(tmp_path / "mine") as tmp:
+        (tmp / "b.txt").write_text("b")
+    assert made == [tmp_path.resolve(), (tmp_path / "mine").resolve()]
+    assert sorted(p.name for p in (tmp_path / "mine").iterdir()) == ["b.txt", "keep.txt"]
+    with pytest.raises(FileNotFoundError):  # the block's own error, not "cannot write the output folder"
+        with atomic_output(tmp_path / "mine") as tmp:
+            (tmp / "c.txt").write_text("c")
+            open(tmp_path / "no-such-file")
+    assert sorted(p.name for p in (tmp_path / "mine").iterdir()) == ["b.txt", "keep.txt"]
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["mine", "new"]
+    (tmp_path / "a_file").write_text("x")
+    with pytest.raises(rideid.DataError, match="a_file/out: cannot write the output folder"):
+        with atomic_output(tmp_path / "a_file" / "out"):
+            pass

@@ -3,20 +3,17 @@
     rideid.export("fit", "out")                     # car.toml, car.csv, car.fmu
     rideid.export(result, "out", format="card")     # an IdentificationResult works too
 
-Everything is written into a temporary folder and moved in at the end (a
-new ``out`` is the temporary folder renamed; into an ``out`` that exists the
-files are moved from a temporary folder inside it, on its own file system):
-bad input leaves nothing behind.
+Everything is written into a temporary folder and moved in at the end
+(:func:`rideid.data.schema.common.atomic_output`): bad input leaves nothing
+behind.
 """
 
 from __future__ import annotations
 
-import os
-import shutil
-import tempfile
 from dataclasses import dataclass
 from pathlib import Path
 
+from ..data.schema.common import atomic_output
 from ..errors import ArgumentError, DataError
 from ..estimate.result import IdentificationResult, load
 from .car import Car, car_from_result, car_from_scenario
@@ -96,37 +93,13 @@ def export(result_or_fit_dir, out, format: str = "all", *, compiler="auto") -> E
         raise ArgumentError(f"--format must be one of {', '.join(FORMATS)}, got {format!r}")
     car, label = _load(result_or_fit_dir)
     out = Path(out)
-    if out.exists() and not out.is_dir():
-        raise DataError(f"{out}: exists and is not a folder")
-    existed = out.exists()
-    # on the file system the files end up on, so that moving them in is a rename: inside ``out`` when it exists
-    # (it may be a mount point of its own), else beside it (the folder itself is renamed into place)
-    where = out.resolve() if existed else out.resolve().parent
-    try:
-        where.mkdir(parents=True, exist_ok=True)
-        tmp = Path(tempfile.mkdtemp(prefix=f".{out.name}.tmp-", dir=where))
-        mask = os.umask(0)
-        os.umask(mask)
-        tmp.chmod(0o777 & ~mask)  # a folder as mkdir makes it: it may become ``out``
-    except OSError as e:
-        raise DataError(f"{out}: cannot write the output folder: {e.strerror or e}") from None
     compiled = no_binary = None
-    try:
+    with atomic_output(out) as tmp:  # into an existing folder: only these files are replaced
         if format in ("card", "all"):
             write_card(car, tmp, source=label)
         if format in ("fmu", "all"):
             no_binary = write_fmu(car, tmp / "car.fmu", compiler=compiler, workdir=tmp)
             compiled = no_binary is None
-        try:
-            if not existed:
-                tmp.rename(out)  # the whole folder at once
-            else:
-                for name in FILES[format]:
-                    (tmp / name).replace(out / name)
-        except OSError as e:
-            raise DataError(f"{out}: cannot write the output folder: {e.strerror or e}") from None
-    finally:
-        shutil.rmtree(tmp, ignore_errors=True)
     return ExportResult(out, tuple(out / n for n in FILES[format]), compiled, no_binary)
 
 

@@ -124,10 +124,14 @@ def write_atomic(path, text: str) -> None:
 
 @contextlib.contextmanager
 def atomic_output(out_dir, replaces=()):
-    """Write into a temporary folder beside ``out_dir``; move into place on success.
+    """Write into a temporary folder; move into place on success.
 
     On any exception nothing is left in ``out_dir`` (files already there are
-    kept; new files replace old ones only on success).
+    kept; new files replace old ones only on success). A new ``out_dir`` is
+    the temporary folder renamed (made beside it, with the permissions
+    ``mkdir`` gives); into an ``out_dir`` that exists the files are moved
+    from a temporary folder inside it, on its own file system (it may be a
+    mount point).
 
     Parameters
     ----------
@@ -138,22 +142,38 @@ def atomic_output(out_dir, replaces=()):
         removed before the new files move in, so that the folder describes
         one output even when the new one lacks some of them. Anything else
         in ``out_dir`` (the user's files) is kept.
+
+    Raises
+    ------
+    DataError
+        ``out_dir`` is a file, or cannot be created or written.
     """
     out_dir = Path(out_dir)
-    parent = out_dir.resolve().parent
-    try:
-        parent.mkdir(parents=True, exist_ok=True)
-    except OSError as e:
-        raise DataError(f"{out_dir}: cannot create output folder: {e}") from None
     if out_dir.exists() and not out_dir.is_dir():
         raise DataError(f"{out_dir}: exists and is not a folder")
-    tmp = Path(tempfile.mkdtemp(prefix=f".{out_dir.name}.tmp-", dir=parent))
+    existed = out_dir.exists()
+    where = out_dir.resolve() if existed else out_dir.resolve().parent
     try:
-        yield tmp
-    except BaseException:
+        where.mkdir(parents=True, exist_ok=True)
+        tmp = Path(tempfile.mkdtemp(prefix=f".{out_dir.name}.tmp-", dir=where))
+        mask = os.umask(0)
+        os.umask(mask)
+        tmp.chmod(0o777 & ~mask)  # as mkdir makes a folder: it may become ``out_dir``
+    except OSError as e:
+        raise DataError(f"{out_dir}: cannot write the output folder: {e.strerror or e}") from None
+    try:
+        yield tmp  # what the caller raises in its block goes on as it is; the folder is removed
+        try:
+            _move_in(tmp, out_dir, existed, replaces)
+        except OSError as e:
+            raise DataError(f"{out_dir}: cannot write the output folder: {e.strerror or e}") from None
+    finally:
         shutil.rmtree(tmp, ignore_errors=True)
-        raise
-    if not out_dir.exists():
+
+
+def _move_in(tmp: Path, out_dir: Path, existed: bool, replaces) -> None:
+    """:func:`atomic_output`'s last step: ``tmp`` becomes ``out_dir``, or its files move into it."""
+    if not existed:
         os.replace(tmp, out_dir)
         return
     for name in replaces:
@@ -167,7 +187,6 @@ def atomic_output(out_dir, replaces=()):
         (out_dir / rel).mkdir(parents=True, exist_ok=True)
         for f in files:
             os.replace(Path(root) / f, out_dir / rel / f)
-    shutil.rmtree(tmp, ignore_errors=True)
 
 
 __all__ = ["ReadOnlyDict", "read_only", "read_toml", "write_toml", "number", "table", "checked_items", "in_folder",
