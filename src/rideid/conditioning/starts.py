@@ -31,7 +31,7 @@ from .nominal import Job, gather, responses, run_steps, simulate_response
 def feature_span(track, geom) -> tuple[float, float] | None:
     """(first, last) x of the track's features over the four wheel paths, or None (flat)."""
     lo, hi = [], []
-    for y in (geom.track_front / 2, -geom.track_front / 2, geom.track_rear / 2, -geom.track_rear / 2):
+    for y in geom.corner_y:
         ext = track.path(y).extent
         if ext is not None and ext[1] > ext[0]:
             lo.append(ext[0])
@@ -43,12 +43,8 @@ def feature_span(track, geom) -> tuple[float, float] | None:
 
 def _feature_end(track, geom) -> float:
     """Distance (front axle) at which the rear wheels leave the last feature."""
-    ends = []
-    for y in geom.corner_y:
-        ext = track.path(y).extent
-        if ext is not None:
-            ends.append(ext[1])
-    return (max(ends) if ends else 0.0) + geom.wheelbase
+    span = feature_span(track, geom)
+    return (0.0 if span is None else span[1]) + geom.wheelbase
 
 
 def correlation_score(Yhat, Y, cols):
