@@ -423,3 +423,31 @@ def test_an_extension_at_zero_is_no_bound_finding():
     found = bound_findings(details)
     assert sorted(f.channel for f in found) == ["k_arf", "k_sf"]
     assert "upper search bound" in [f for f in found if f.channel == "k_arf"][0].message
+
+
+def test_linearised_starts_read_the_runs_and_difference_the_response(hatch, tmp_path):
+    """linearise_starts (the polish's rounds): the runs read at the starts exactly as Dataset.with_starts
+    reads them, and D the central difference of the car's response on the run read at start -/+ a tenth of
+    a sample, simulated in one batch: the same as two cost functions on those starts. On a constant-speed
+    run the model only moves in time, so D is minus the response's time derivative."""
+    from rideid.conditioning.starts import SHIFT_STEP, linearise_starts
+    from rideid.model.params import as_vector
+    sc, raw = hatch
+    ds = rideid.load_dataset(one_run(tmp_path, sc, raw, "T_HH"))
+    mr = ds.measured["T_HH"]
+    s = mr.start + 0.37 / mr.fs
+    time_before = ds.data["T_HH"].time.copy()
+    P = as_vector(HATCH_TRUTH)
+    moved, D = linearise_starts(ds, P, {"T_HH": s})
+    np.testing.assert_array_equal(moved.data["T_HH"].matrix(), ds.with_starts({"T_HH": s}).data["T_HH"].matrix())
+    np.testing.assert_array_equal(moved.data["T_HH"].time, ds.with_starts({"T_HH": s}).data["T_HH"].time)
+    np.testing.assert_array_equal(ds.data["T_HH"].time, time_before)  # ds is not changed
+    eps = SHIFT_STEP / mr.fs
+    y = {k: rideid.CostFunction(ds.with_starts({"T_HH": s + k * eps})).simulate(P)["T_HH"] for k in (-1, 1)}
+    ref = (y[1] - y[-1]) / (2 * eps)
+    np.testing.assert_allclose(D["T_HH"], ref, rtol=1e-9, atol=1e-9 * np.abs(ref).max())
+    y0 = rideid.CostFunction(moved).simulate(P)["T_HH"]
+    dydt = np.gradient(y0, 1.0 / mr.fs, axis=0)
+    for c in range(y0.shape[1]):
+        assert np.corrcoef(D["T_HH"][:, c], -dydt[:, c])[0, 1] > 0.99
+    assert linearise_starts(ds, P, {"T_HH": s}, derivative=False)[1] == {}

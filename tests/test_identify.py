@@ -404,3 +404,46 @@ def test_cycle_slips_returns_a_new_dict(monkeypatch):
     assert moved == {"a": found["a"]}
     assert moved["a"] - starts["a"] == pytest.approx(5 / fs)
     assert {**starts, **moved} == {"a": found["a"], "b": 2.0, "c": 3.0}
+
+
+def test_a_start_std_adds_the_speed_channel_in_quadrature():
+    """The polish's start std: the fit's and the load record's speed-channel share in quadrature (3-4-5);
+    without a speed channel the fit's alone; an undetermined fit stays undetermined."""
+    from rideid.estimate.identify import _start_std
+    both = _start_std({"std": 3e-4, "std_robust": 6e-4}, {"std_speed_channel": 4e-4, "source": "estimated"})
+    assert both == {"std": pytest.approx(5e-4, rel=1e-15), "std_fit": 3e-4, "std_speed_channel": 4e-4,
+                    "std_robust": 6e-4}
+    assert _start_std({"std": 3e-4, "std_robust": 6e-4}, {}) == {"std": 3e-4, "std_fit": 3e-4, "std_robust": 6e-4}
+    nan = _start_std({"std": float("nan"), "std_robust": 1e-3}, {"std_speed_channel": 4e-4})
+    assert np.isnan(nan["std"]) and nan["std_speed_channel"] == 4e-4
+
+
+def test_the_speed_channel_std_grows_as_a_random_walk():
+    """A noisy speed channel's share of a start's std (a property of the recording, recorded at load):
+    proportional to the noise, to the square root of its sample interval and of the time to the features,
+    none without noise."""
+    from types import SimpleNamespace
+
+    from rideid.conditioning.starts import feature_span, speed_channel_std
+    sc = rideid.default_scenario()
+    geom, track = sc.geometry, sc.tracks["washboard"]
+
+    def std(noise, interval, mean=8.0):
+        mr = SimpleNamespace(record={"speed": {"noise_std": noise, "mean": mean, "noise_interval": interval}})
+        return speed_channel_std(mr, track, geom)
+
+    base = std(0.1, 0.01)
+    assert std(0.2, 0.01) == pytest.approx(2 * base, rel=1e-12)
+    assert std(0.1, 0.04) == pytest.approx(2 * base, rel=1e-12)
+    lo, hi = feature_span(track, geom)
+    t_mid = (0.5 * (lo + hi) + 0.5 * geom.wheelbase) / 8.0  # s from the start to the features' middle
+    assert base == pytest.approx(0.1 * np.sqrt(t_mid * 0.01) / 8.0, rel=1e-12)
+    assert speed_channel_std(SimpleNamespace(record={}), track, geom) is None
+
+
+def test_the_nominal_car_of_a_space_is_a_copy(sim_dataset):
+    ds = rideid.load_dataset(sim_dataset)
+    space = rideid.CostFunction(ds).space
+    P = space.nominal()
+    P[:] = -1.0
+    assert np.all(space.nominal()[:len(NAMES)] > 0)

@@ -16,7 +16,7 @@ from ..data.checks import enforce
 from ..data.dataset import Dataset, read_dataset
 from .checks import check_reach, check_steps
 from .nominal import gather, run_steps
-from .starts import start_steps
+from .starts import speed_channel_std, start_steps
 
 
 def load_dataset(path, starts: dict[str, float] | None = None) -> Dataset:
@@ -121,7 +121,9 @@ def _start_of(ds: Dataset, rid: str, starts: dict[str, float] | None):
     enforce(reach, f"{man.path}: ")
     # the run as read, unaligned (window and start dropped), as the estimate sees it
     s, rho = yield from start_steps(replace(mr, window=None, start=None), man.geometry, track)
-    return s, {"source": "estimated (nominal car)", "nominal_estimate": s, "correlation": rho}
+    s_speed = speed_channel_std(mr, track, man.geometry)
+    return s, {"source": "estimated (nominal car)", "nominal_estimate": s, "correlation": rho,
+               **({} if s_speed is None else {"std_speed_channel": s_speed})}
 
 
 __all__ = ["align_starts", "load_dataset"]

@@ -13,8 +13,9 @@ dataset, every start candidate of a run), so a round simulates what all of
 them need at once; a step whose next simulation depends on a result (the
 response at an estimated start) asks for it in a later round.
 
-A response is the one :func:`simulate_response` gives for the same job, bit
-for bit; only the order and the grouping of the simulations change.
+A response is the one the job simulated alone gives
+(:func:`rideid.model.simulate.prepare_run`, then the batch simulator), bit for
+bit; only the order and the grouping of the simulations change.
 """
 
 from __future__ import annotations
@@ -49,14 +50,6 @@ def _grid(job: Job) -> tuple[np.ndarray, int]:
     if k:
         t = np.concatenate([t[0] + (t[1] - t[0]) * np.arange(-k, 0), t])
     return t, k
-
-
-def simulate_response(P, geom, track, t, speed, distance, lead_in: float = 0.0):
-    """Response ``(n, 10)`` of the car ``P`` at the model times ``t`` (uniform), at rest at ``t[0]``;
-    with ``lead_in`` (s, a moving start, SPEC §9) at rest that long before, on the road before."""
-    t, k = _grid(Job(track, t, speed, distance, lead_in))
-    ri = prepare_run(track, geom, speed, t, distance=distance)
-    return BatchSimulator(geom, [ri]).outputs(np.atleast_2d(P))[0][0][k:]
 
 
 def _prefetch_envelopes(jobs, geom) -> None:
@@ -168,4 +161,4 @@ def run_steps(step, geom, car=None):
         got = simulate_jobs(car, geom, jobs)
 
 
-__all__ = ["Job", "gather", "responses", "run_steps", "simulate_jobs", "simulate_response"]
+__all__ = ["Job", "gather", "responses", "run_steps", "simulate_jobs"]

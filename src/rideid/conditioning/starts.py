@@ -10,10 +10,11 @@ responses it correlates with and never runs the model itself; loading runs
 the steps of every run side by side, each round of simulations in one batch.
 
 The identification's polish estimates the starts together with the
-parameters and asks this module for what it needs of the runs: each start's
-derivative (:func:`start_derivative`), the runs that slipped a cycle of a
-periodic track with the polished car (:func:`cycle_slips`), and each start's
-standard error with a noisy speed channel (:func:`start_uncertainty`).
+parameters and asks this module for what it needs of the runs: the runs read
+at the current starts with each start's derivative (:func:`linearise_starts`)
+and the runs that slipped a cycle of a periodic track with the polished car
+(:func:`cycle_slips`). A noisy speed channel's share of a start's standard
+error (:func:`speed_channel_std`) is recorded when the start is estimated.
 """
 
 from __future__ import annotations
@@ -25,7 +26,9 @@ import numpy as np
 from ..data.measured import DEFAULT_PRE_ROLL, MeasuredRun, RelativeDistance
 from ..errors import DataError
 from ..model.equations import CHANNELS
-from .nominal import Job, gather, responses, run_steps, simulate_response
+from ..model.batch import BatchSimulator
+from ..model.simulate import prepare_run
+from .nominal import Job, gather, responses, run_steps
 
 
 def feature_span(track, geom) -> tuple[float, float] | None:
@@ -207,21 +210,27 @@ def estimate_start(mr: MeasuredRun, P, geom, track):
 SHIFT_STEP = 0.1
 
 
-def start_derivative(ds, rid: str, P, start: float) -> np.ndarray:
-    """``(n, 10)`` derivative of car ``P``'s response at run ``rid``'s fixed samples with respect to its start.
+def linearise_starts(ds, P, starts: dict, derivative: bool = True):
+    """The runs of ``starts`` read at those starts, and car ``P``'s response derivative with respect to each.
 
-    A central difference of two simulations whose time axes (and, with a
-    speed channel, distance profiles) belong to ``start -/+ SHIFT_STEP``
-    samples: the model moves, the samples stay.
+    Returns ``(dataset, D)``: a new dataset whose measured runs of ``starts``
+    are read at their start there (``ds`` is not changed), and run id ->
+    ``(n, 10)`` derivative of ``P``'s response at the run's fixed samples with
+    respect to its start (empty when not ``derivative``): a central
+    difference of two simulations whose time axes (and, with a speed channel,
+    distance profiles) belong to ``start -/+ SHIFT_STEP`` samples, every run's
+    pair in one batch. The model moves, the samples stay.
     """
-    mr = ds.measured[rid]
-    track = ds.manifest.tracks[ds.manifest.run(rid).track]
-    eps = SHIFT_STEP / mr.fs
-    y = []
-    for s in (start - eps, start + eps):
-        rd = mr.run_data(s)
-        y.append(simulate_response(P, ds.geometry, track, rd.time, mr.speed, rd.distance))
-    return (y[1] - y[0]) / (2 * eps)
+    data = {**ds.data, **{rid: ds.measured[rid].run_data(s) for rid, s in starts.items()}}
+    if not derivative:
+        return ds.with_data(data), {}
+    eps = {rid: SHIFT_STEP / ds.measured[rid].fs for rid in starts}
+    grids = [(rid, ds.measured[rid].run_data(s + sign * eps[rid])) for rid, s in starts.items() for sign in (-1, 1)]
+    runs = [prepare_run(ds.manifest.tracks[ds.manifest.run(rid).track], ds.geometry, ds.measured[rid].speed,
+                        rd.time, distance=rd.distance) for rid, rd in grids]
+    outs = BatchSimulator(ds.geometry, runs).outputs(np.atleast_2d(P)) if runs else []
+    D = {rid: (outs[2 * k + 1][0] - outs[2 * k][0]) / (2 * eps[rid]) for k, rid in enumerate(starts)}
+    return ds.with_data(data), D
 
 
 def cycle_slips(ds, P, starts: dict) -> dict:
@@ -248,8 +257,8 @@ def cycle_slips(ds, P, starts: dict) -> dict:
     return moved
 
 
-def start_uncertainty(ds, rid: str, std_fit) -> dict:
-    """A start's standard error: the fit's, and the drift of an integrated noisy speed channel.
+def speed_channel_std(mr: MeasuredRun, track, geom) -> float | None:
+    """A start's standard error (s) from the drift of a noisy speed channel, or None (no speed channel noise).
 
     The model drives along ``x(t) = d(start + t) - d(start)``. White noise of
     standard deviation ``sigma_v`` on a speed channel sampled every ``dt``
@@ -257,29 +266,20 @@ def start_uncertainty(ds, rid: str, std_fit) -> dict:
     sqrt(T dt)`` after ``T`` seconds; the start is fixed by the road
     features, met about ``T_mid`` (front axle at the middle of the features,
     half a wheelbase on) after it, so the distance error there moves the
-    start by ``sigma_x(T_mid) / v_mean``. Added in quadrature to the fit's
-    (Jacobian) standard error, which assumes the distance exact. A speed
-    channel's calibration error is not included.
-
-    Returns
-    -------
-    dict
-        ``std``, ``std_fit`` and, with a noisy speed channel, ``std_speed_channel`` (s).
+    start by ``sigma_x(T_mid) / v_mean``. A property of the recording and the
+    track, recorded with the run's start when it is estimated
+    (:func:`rideid.conditioning.load.align_starts`); the polish adds it in
+    quadrature to the fit's (Jacobian) standard error, which assumes the
+    distance exact. A speed channel's calibration error is not included.
     """
-    mr = ds.measured[rid]
-    out = {"std": std_fit, "std_fit": std_fit}
     sp = mr.record.get("speed", {})
     if "noise_std" not in sp or not sp.get("mean"):
-        return out
-    span = feature_span(ds.manifest.tracks[ds.manifest.run(rid).track], ds.geometry)
-    x_mid = (0.0 if span is None else 0.5 * (span[0] + span[1])) + 0.5 * ds.geometry.wheelbase
+        return None
+    span = feature_span(track, geom)
+    x_mid = (0.0 if span is None else 0.5 * (span[0] + span[1])) + 0.5 * geom.wheelbase
     v = max(float(sp["mean"]), 1e-6)
-    s_speed = float(sp["noise_std"]) * math.sqrt(max(x_mid / v, 0.0) * float(sp["noise_interval"])) / v
-    out["std_speed_channel"] = s_speed
-    if std_fit is not None and np.isfinite(std_fit):
-        out["std"] = float(math.hypot(std_fit, s_speed))
-    return out
+    return float(sp["noise_std"]) * math.sqrt(max(x_mid / v, 0.0) * float(sp["noise_interval"])) / v
 
 
-__all__ = ["SHIFT_STEP", "correlation_score", "cycle_slips", "estimate_start", "feature_span", "simulate_response",
-           "start_derivative", "start_steps", "start_uncertainty"]
+__all__ = ["SHIFT_STEP", "correlation_score", "cycle_slips", "estimate_start", "feature_span", "linearise_starts",
+           "speed_channel_std", "start_steps"]

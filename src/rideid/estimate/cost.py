@@ -233,6 +233,7 @@ class ParameterSpace:
             V = MEAN_SLOPE_VELOCITY
             knots = self.layout.knots
             self._slope_w = (damper_force(knots, eye, V) - damper_force(knots, eye, -V)) / (2 * V)
+        self._nominal = self._nominal_row()
 
     def knot_velocities(self) -> np.ndarray:
         """Velocity (m/s) of each knot-force column, ``F_f1 .. F_fK, F_r1 .. F_rK`` (empty without curves)."""
@@ -361,7 +362,12 @@ class ParameterSpace:
         """A physically consistent nominal car: the built-in car scaled to the
         anchor, clipped into the bounds (used for sensitivity maps and as a
         reference point, never as a starting guess); with damper curves its
-        linear dampers as curves (``F = c v``). A full row, :attr:`param_names`."""
+        linear dampers as curves (``F = c v``). A full row, :attr:`param_names`
+        (a copy of the row the space made when it was built)."""
+        return self._nominal.copy()
+
+    def _nominal_row(self) -> np.ndarray:
+        """:meth:`nominal`, computed once, when the space is built."""
         base = nominal_car(self.geometry, extensions=True)
         anchor = self.anchor
         if anchor == "total_mass":

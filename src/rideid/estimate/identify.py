@@ -56,6 +56,7 @@
 
 from __future__ import annotations
 
+import math
 import time
 import warnings
 from dataclasses import dataclass, field
@@ -65,7 +66,7 @@ from scipy.optimize import OptimizeResult, least_squares
 
 from ..data.checks import bound_findings
 from ..data.dataset import Dataset
-from ..conditioning.starts import cycle_slips, start_derivative, start_uncertainty
+from ..conditioning.starts import cycle_slips, linearise_starts
 from ..errors import ArgumentError, DataWarning
 from ..model.batch import single_threaded_blas
 from ..model.equations import modal_summary
@@ -553,7 +554,7 @@ def _polish(cf: CostFunction, x0, weights, align=None):
 
     The model moves, the data never do: a start changed by ``delta`` moves the
     model's time axis, ``y(t - delta)``, linearised as ``y + delta D`` with
-    ``D = dy/d(start)`` from :func:`rideid.conditioning.starts.start_derivative` (its Jacobian column).
+    ``D = dy/d(start)`` from :func:`rideid.conditioning.starts.linearise_starts` (its Jacobian column).
     The linearisation is centred again by :func:`_polish_aligned` until the
     starts settle, so at the end it is exact.
 
@@ -729,14 +730,21 @@ def _polish_aligned(ds, cf, x_best, equal):
     ``REALIGN_TOL`` of a sample interval; a constant-speed run whose correlation with the polished car
     peaks a cycle away (:func:`rideid.conditioning.starts.cycle_slips`) is moved there.
 
+    Each round reads the runs at the current starts with the derivative of the car's response there
+    (:func:`rideid.conditioning.starts.linearise_starts`) and polishes; once the starts settle, the runs
+    are read at the settled starts (no derivative) and the cost function on them is returned.
     Works on its own copy of the run data: ``ds`` is not changed.
     """
     starts = {rid: ds.measured[rid].start for rid in ds.auto_start_runs}
-    rounds = []
-    for _ in range(REALIGN_MAX):
+    rounds, settled = [], False
+    for _ in range(REALIGN_MAX + 1):
         P = cf.space.full(x_best[None])[0]
-        shifts = [_Shift(cf.run_ids.index(rid), rid, ds.measured[rid].fs, s, start_derivative(ds, rid, P, s))
-                  for rid, s in starts.items()]
+        ds_now, D = linearise_starts(ds, P, starts, derivative=not settled and len(rounds) < REALIGN_MAX)
+        # the model's time axes moved with the starts: the cost function on them
+        cf = CostFunction(ds_now, space=cf.space, counter=cf.counter)
+        if not D:
+            break
+        shifts = [_Shift(cf.run_ids.index(rid), rid, ds.measured[rid].fs, s, D[rid]) for rid, s in starts.items()]
         x_best, info, std = _polish(cf, x_best, equal, shifts)
         fitted = {rid: st["value"] for rid, st in info["starts"].items()}
         worst = max(abs(v - starts[rid]) * ds.measured[rid].fs for rid, v in fitted.items())
@@ -744,16 +752,25 @@ def _polish_aligned(ds, cf, x_best, equal):
         slipped = {rid: s - fitted[rid] for rid, s in moved.items()}
         starts = {**fitted, **moved}
         rounds.append({"max_change_samples": worst, **({"cycle_slips": slipped} if slipped else {})})
-        # the model's time axes moved with the starts: the cost function on them
-        data = {**ds.data, **{rid: ds.measured[rid].run_data(s) for rid, s in starts.items()}}
-        cf = CostFunction(ds.with_data(data), space=cf.space, counter=cf.counter)
-        if not slipped and worst < REALIGN_TOL:
-            break
+        settled = not slipped and worst < REALIGN_TOL
     out = {rid: {"value": float(starts[rid]), "source": "estimated with the parameters (least squares)",
-                 **start_uncertainty(ds, rid, info["starts"][rid]["std"]),
-                 "std_robust": info["starts"][rid]["std_robust"]}
+                 **_start_std(info["starts"][rid], ds.measured[rid].record.get("start", {}))}
            for rid in starts}
     return x_best, dict(info, alignment_rounds=rounds), std, cf, out
+
+
+def _start_std(fitted: dict, record: dict) -> dict:
+    """A start's standard errors: the fit's (``fitted``: the polish's ``std``, ``std_robust``) and, where the
+    start's load ``record`` has one, a noisy speed channel's (:func:`rideid.conditioning.starts.speed_channel_std`)
+    added in quadrature."""
+    std_fit = fitted["std"]
+    out = {"std": std_fit, "std_fit": std_fit}
+    s_speed = record.get("std_speed_channel")
+    if s_speed is not None:
+        out["std_speed_channel"] = s_speed
+        if std_fit is not None and np.isfinite(std_fit):
+            out["std"] = float(math.hypot(std_fit, s_speed))
+    return {**out, "std_robust": fitted["std_robust"]}
 
 
 def _derived_std(space, cov):
