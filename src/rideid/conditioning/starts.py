@@ -213,24 +213,24 @@ SHIFT_STEP = 0.1
 def linearise_starts(ds, P, starts: dict, derivative: bool = True):
     """The runs of ``starts`` read at those starts, and car ``P``'s response derivative with respect to each.
 
-    Returns ``(dataset, D)``: a new dataset whose measured runs of ``starts``
-    are read at their start there (``ds`` is not changed), and run id ->
+    Returns ``(dataset, D)``: ``ds.with_starts(starts)`` (:meth:`rideid.data.dataset.Dataset.with_starts`;
+    ``ds`` is not changed), and run id ->
     ``(n, 10)`` derivative of ``P``'s response at the run's fixed samples with
     respect to its start (empty when not ``derivative``): a central
     difference of two simulations whose time axes (and, with a speed channel,
     distance profiles) belong to ``start -/+ SHIFT_STEP`` samples, every run's
     pair in one batch. The model moves, the samples stay.
     """
-    data = {**ds.data, **{rid: ds.measured[rid].run_data(s) for rid, s in starts.items()}}
+    at = ds.with_starts(starts)
     if not derivative:
-        return ds.with_data(data), {}
+        return at, {}
     eps = {rid: SHIFT_STEP / ds.measured[rid].fs for rid in starts}
     grids = [(rid, ds.measured[rid].run_data(s + sign * eps[rid])) for rid, s in starts.items() for sign in (-1, 1)]
     runs = [prepare_run(ds.manifest.tracks[ds.manifest.run(rid).track], ds.geometry, ds.measured[rid].speed,
                         rd.time, distance=rd.distance) for rid, rd in grids]
     outs = BatchSimulator(ds.geometry, runs).outputs(np.atleast_2d(P)) if runs else []
     D = {rid: (outs[2 * k + 1][0] - outs[2 * k][0]) / (2 * eps[rid]) for k, rid in enumerate(starts)}
-    return ds.with_data(data), D
+    return at, D
 
 
 def cycle_slips(ds, P, starts: dict) -> dict:

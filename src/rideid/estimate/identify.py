@@ -739,10 +739,11 @@ def _polish_aligned(ds, cf, x_best, equal):
     rounds, settled = [], False
     for _ in range(REALIGN_MAX + 1):
         P = cf.space.full(x_best[None])[0]
-        ds_now, D = linearise_starts(ds, P, starts, derivative=not settled and len(rounds) < REALIGN_MAX)
+        last = settled or len(rounds) == REALIGN_MAX
+        ds_now, D = linearise_starts(ds, P, starts, derivative=not last)
         # the model's time axes moved with the starts: the cost function on them
         cf = CostFunction(ds_now, space=cf.space, counter=cf.counter)
-        if not D:
+        if last:
             break
         shifts = [_Shift(cf.run_ids.index(rid), rid, ds.measured[rid].fs, s, D[rid]) for rid, s in starts.items()]
         x_best, info, std = _polish(cf, x_best, equal, shifts)
