@@ -61,8 +61,8 @@ def make_run(kind, road_dir, geom=GH, duration=2.5, scale=1.0):
 def compiled(P, geom, run, layout, m):
     co, xk, Fk, Sk = nl.coefficients(P, geom, layout)
     X0 = nl.shifted(co, nl.initial_state(P, geom, layout, run.u[0]), run.u[0])[None]
-    _, out = kernel_nl.run(co, xk, Fk, Sk, layout.knots is not None, X0, np.array([0, run.n]), [run.h],
-                           np.array([m]), [nl.fine_inputs(run, m)], np.zeros((run.n, 10)), np.zeros((1, 10)), 1)
+    _, out, _ = kernel_nl.run(co, xk, Fk, Sk, layout.knots is not None, X0, np.array([0, run.n]), [run.h],
+                              np.array([m]), [nl.fine_inputs(run, m)], np.zeros((run.n, 10)), np.zeros((1, 10)), 1)
     return out
 
 
@@ -216,6 +216,21 @@ def test_backends_agree(road_dir, monkeypatch):
     monkeypatch.setenv("RIDEID_KERNEL", "fortran")
     with pytest.raises(Exception, match="RIDEID_KERNEL"):
         sim.errors(P, Y, W)
+
+
+def test_compiled_states_equal_the_numpy_states(road_dir):
+    """The kernel's states (mode 2: the suspension travels and velocities behind bump-stop reach and knot
+    excitation) are the NumPy backend's, split at the kinks or plain RK4, and its channels come with them."""
+    runs = [make_run("herringbone", road_dir, duration=0.4), make_run("chassis_twist", road_dir, duration=0.4)]
+    P = population(2, seed=3)
+    for kw in ({}, {"rho": 0.2}, {"rho": 0.1, "split": False}):
+        sim = NonlinearSimulator(GH, runs, FULL, **kw)
+        fast, ref = sim.states(P), sim.states_reference(P)
+        for (y, X), (y_ref, X_ref), out in zip(fast, ref, sim.outputs(P)):
+            assert X.shape == X_ref.shape == (2, y.shape[1], 14)
+            assert np.abs(X - X_ref).max() <= 1e-10 * np.abs(X_ref).max()
+            np.testing.assert_array_equal(y, out)
+            assert np.abs(y - y_ref).max() <= 1e-10 * np.abs(y_ref).max()
 
 
 def test_compile_failure_falls_back_with_one_warning(road_dir, monkeypatch):

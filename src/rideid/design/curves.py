@@ -17,7 +17,7 @@ pinned at the nominal car's for every row of the differences, so the
 differenced outputs come from one integrator.
 
 Excitation follows identify (:mod:`rideid.estimate.dampers`): the nominal
-car's suspension velocities on each run (NumPy states at the looser
+car's suspension velocities on each run (the compiled kernel's states at the looser
 :data:`rideid.data.scenario.LIFT_OFF_RHO`, as the report's histograms);
 per knot, the samples of the axle's two corners beyond the previous knot on
 its side (:func:`rideid.estimate.dampers.knot_counts`). A set of runs

@@ -39,7 +39,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..model.nonlinear import BUMP_STOP_NAMES, check_nonlinear, simulate_numpy, substeps
+from ..model.nonlinear import BUMP_STOP_NAMES, NonlinearSimulator, check_nonlinear
 from .adequacy import MIN_IMPROVEMENT
 
 #: samples (both corners of the axle, all runs) beyond the clearance that make a stop reached
@@ -69,9 +69,7 @@ def compressions(cf, P) -> tuple[np.ndarray, np.ndarray]:
     x, y = geom.corner_xy(np.array([P[cf.space.col["a"]]]))
     x, y = x[0], y[0]
     front, rear = [], []
-    for run in cf.sim.runs:
-        _, X = simulate_numpy(Pn, geom, run, layout, substeps(Pn, geom, layout, run.h, rho=STATE_RHO),
-                              return_states=True)
+    for _, X in NonlinearSimulator(geom, cf.sim.runs, layout, rho=STATE_RHO).states(Pn):
         q = X[0, :, :7]
         d = q[:, 3:] - (q[:, :1] - x * q[:, 1:2] + y * q[:, 2:3])
         front.append(d[:, :2].ravel())

@@ -6,9 +6,8 @@ A knot's force shapes the curve only where a suspension velocity passes the
 knot before it (towards 0): the segment between them, and beyond the
 outermost knot its continuation. After the global search the best car's
 suspension velocities ``v_i = z_i' - z_bi'`` are simulated over every run
-(the nonlinear car's states from the NumPy backend at the lift-off sub-step bound
-:data:`rideid.data.scenario.LIFT_OFF_RHO`: outputs within 0.02 % of their RMS of the kernel's, about 6x
-faster than at the kernel's bound),
+(the nonlinear car's states from the compiled kernel, plain RK4 sub-steps at the lift-off sub-step bound
+:data:`rideid.data.scenario.LIFT_OFF_RHO`: outputs within 0.02 % of their RMS of the split sub-steps'),
 and a knot of an axle counts as **excited** when at least
 :data:`MIN_SAMPLES` samples of the axle's two corners over all runs go beyond
 the previous knot on its side (beyond 0 for the innermost knots, which are
@@ -24,7 +23,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..model.nonlinear import check_nonlinear, simulate_nonlinear, simulate_numpy, substeps
+from ..model.nonlinear import NonlinearSimulator, check_nonlinear
 from ..data.scenario import LIFT_OFF_RHO
 
 #: samples (both corners of the axle, all runs) beyond the previous knot that make a knot excited
@@ -37,21 +36,17 @@ def suspension_velocities_by_run(cf, P, rho: float | None = None) -> list[tuple[
     """Suspension velocities (m/s, compression +) of car ``P`` (a full row of ``cf.space``) on each run
     of ``cf``: per run ``(front, rear)``, the samples of the axle's two corners concatenated.
 
-    ``rho``: the sub-step bound (:func:`rideid.model.nonlinear.substeps`) of the NumPy states; default the
-    kernel's (sub-steps split at the kinks). With ``rho`` plain RK4 sub-steps: the report's histograms take
+    ``rho``: the sub-step bound (:func:`rideid.model.nonlinear.substeps`) of the simulation; default the
+    simulator's (sub-steps split at the kinks). With ``rho`` plain RK4 sub-steps: the report's histograms take
     the lift-off bound (:data:`rideid.data.scenario.LIFT_OFF_RHO`, within 0.02-0.3 % of the kernel's
     outputs)."""
     geom, layout = cf.space.geometry, cf.space.layout
     x, y = geom.corner_xy(np.array([P[cf.space.col["a"]]]))
     x, y = x[0], y[0]
+    sim = NonlinearSimulator(geom, cf.sim.runs, layout) if rho is None else \
+        NonlinearSimulator(geom, cf.sim.runs, layout, rho=rho, split=False)
     out = []
-    for run in cf.sim.runs:
-        if rho is None:
-            _, X = simulate_nonlinear(P, geom, run, layout, return_states=True)
-        else:
-            Pn = check_nonlinear(P, geom, layout)
-            _, X = simulate_numpy(Pn, geom, run, layout, substeps(Pn, geom, layout, run.h, rho=rho),
-                                  return_states=True, split=False)
+    for _, X in sim.states(check_nonlinear(P, geom, layout)):
         qd = X[0, :, 7:]
         v = qd[:, 3:] - (qd[:, :1] - x * qd[:, 1:2] + y * qd[:, 2:3])
         out.append((v[:, :2].ravel(), v[:, 2:].ravel()))

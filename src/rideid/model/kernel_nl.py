@@ -6,7 +6,8 @@ backend (:func:`rideid.model.nonlinear.simulate_numpy`), compiled with
 Numba: one candidate at a time, states in a 14-vector, the forces corner by
 corner (damper curves by a short walk from the zero-velocity segment: most
 velocities are small), squared errors accumulated on the fly (mode 0:
-memory O(states) per candidate) or the channels written (mode 1).
+memory O(states) per candidate), the channels written (mode 1), the states
+(mode 2) or both (mode 3).
 Candidates are shared among ``numba.get_num_threads()`` threads; the
 compiled function releases the GIL.
 
@@ -253,7 +254,7 @@ def _pieces(co, p, xk, j0, Fk, Sk, curves, UF, RF, js, h, th, nc, X, Xt, acc, dX
 
 @numba.njit(cache=True, nogil=True, error_model="numpy")
 def run_range(c0, c1, co, xk, j0, Fk, Sk, curves, split, kink, X0, run_start, hs, ms, fine_start, UF, RF, Y, W, mode,
-              err, out):
+              err, out, states):
     """Candidates ``c0 <= p < c1`` over every run (see :func:`run` for the arguments)."""
     X = np.empty(14)
     Xs = np.empty(14)
@@ -299,10 +300,15 @@ def run_range(c0, c1, co, xk, j0, Fk, Sk, curves, split, kink, X0, run_start, hs
                 y[8] = X[8]
                 y[9] = X[9]
                 row = run_start[r] + k
-                if mode == 1:
+                if mode & 2:  # the states, wheel velocities shifted back (nonlinear.shifted)
+                    for i in range(10):
+                        states[p, row, i] = X[i]
+                    for c in range(4):
+                        states[p, row, 10 + c] = X[10 + c] + co[p, _I_CT + c] * co[p, _I_MU + c] * UF[jf, c]
+                if mode & 1:
                     for q in range(10):
                         out[p, row, q] = y[q]
-                else:
+                elif mode == 0:
                     for q in range(10):
                         dq = y[q] - Y[row, q]
                         e_sum += W[r, q] * dq * dq
@@ -360,7 +366,7 @@ def _dummy_args():
     return (0, 1, co, xk, 0, Fk, Sk, False, True, np.ones((2, 2), dtype=np.int64), X0,
             np.array([0, 2], dtype=np.int64), np.array([0.01]), np.array([1], dtype=np.int64),
             np.array([0, 3], dtype=np.int64), np.zeros((3, 4)), np.zeros((3, 4)), np.zeros((2, 10)),
-            np.zeros((1, 10)), 0, np.zeros((1, n)), np.zeros((n, 2, 10)))
+            np.zeros((1, 10)), 0, np.zeros((1, n)), np.zeros((n, 2, 10)), np.zeros((n, 1, 14)))
 
 
 def compile_kernel() -> None:
@@ -378,14 +384,16 @@ def run(co, xk, Fk, Sk, curves, X0, run_start, h, ms, fines, Y, W, mode, split=T
     X0 : (r, n, 14) initial states; run_start (r + 1,); h (r,) sample intervals; ms (r,) sub-steps
     fines : list over runs of ``(U, R)``, inputs and rates at the sub-step and half-step instants
         (:func:`rideid.model.nonlinear.fine_inputs`)
-    Y : (T, 10), W : (r, 10), mode : 0 errors only, 1 also the channels
+    Y : (T, 10), W : (r, 10), mode : 0 errors only, 1 the channels, 2 the states, 3 both
     split : split the sub-steps at the kinks they cross (False: plain RK4 sub-steps)
     kinks : (2, K + 1) which knots of ``xk`` are kinks, per axle (:func:`rideid.model.nonlinear.kink_mask`;
         None: every interior knot)
 
     Returns
     -------
-    err : (r, n); out : (n, T, 10) with mode 1, else None
+    err : (r, n) (with mode 0); out : (n, T, 10) with mode 1 or 3, else None; states : (n, T, 14) with
+    mode 2 or 3, else None: ``[q, q']`` (deviations from static equilibrium, as
+    :func:`rideid.model.nonlinear.simulate_numpy`'s)
     """
 
     n = co.shape[0]
@@ -400,11 +408,12 @@ def run(co, xk, Fk, Sk, curves, X0, run_start, h, ms, fines, Y, W, mode, split=T
     kinks = np.ones((2, xk.size), dtype=np.int64) if kinks is None else np.ascontiguousarray(kinks, dtype=np.int64)
     err = np.zeros((n_runs, n))
     T = int(run_start[-1])
-    out = np.zeros((n, T, 10)) if mode == 1 else np.zeros((n, 1, 10))
+    out = np.zeros((n, T, 10) if mode & 1 else (n, 1, 10))
+    states = np.zeros((n, T, 14) if mode & 2 else (n, 1, 14))
     args = (np.ascontiguousarray(co), np.ascontiguousarray(xk, dtype=float), j0, np.ascontiguousarray(Fk),
             np.ascontiguousarray(Sk), bool(curves), bool(split), kinks, np.ascontiguousarray(X0),
             np.asarray(run_start, dtype=np.int64), hs, np.asarray(ms, dtype=np.int64), fine_start, UF, RF,
-            np.ascontiguousarray(Y, dtype=float), np.ascontiguousarray(W, dtype=float), int(mode), err, out)
+            np.ascontiguousarray(Y, dtype=float), np.ascontiguousarray(W, dtype=float), int(mode), err, out, states)
     threads = max(1, min(numba.get_num_threads(), n))
     if threads == 1:
         run_range(0, n, *args)
@@ -414,4 +423,4 @@ def run(co, xk, Fk, Sk, curves, X0, run_start, h, ms, fines, Y, W, mode, split=T
                    for a, b in zip(bounds[:-1], bounds[1:])]
         for f in futures:
             f.result()
-    return err, (out if mode == 1 else None)
+    return err, (out if mode & 1 else None), (states if mode & 2 else None)

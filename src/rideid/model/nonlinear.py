@@ -691,6 +691,15 @@ class NonlinearSimulator:
         return [simulate_numpy(P, self.geom, r, self.layout, m, self.fine(i, m), split=self.split, kinks=kinks)
                 for i, (r, m) in enumerate(zip(self.runs, ms))]
 
+    def states_reference(self, P):
+        """As :meth:`states`, by the NumPy backend."""
+        P = self.layout.rows(P)
+        ms = self.substeps(P)
+        self.last_substeps = ms
+        kinks = self.kinks(P)
+        return [simulate_numpy(P, self.geom, r, self.layout, m, self.fine(i, m), return_states=True,
+                               split=self.split, kinks=kinks) for i, (r, m) in enumerate(zip(self.runs, ms))]
+
     def errors_reference(self, P, Y, W):
         outs = self.outputs_reference(P)
         return _errors_of(outs, self.run_start, Y, W)
@@ -714,17 +723,26 @@ class NonlinearSimulator:
         W = np.ascontiguousarray(W, dtype=float)
         if backend.use_numpy() or not backend.compiled_available("nonlinear"):
             return self.errors_reference(P, Y, W)
-        err, _ = self._compiled(P, Y, W, 0)
-        return err
+        return self._compiled(P, Y, W, 0)[0]
 
     def outputs(self, P):
         """Simulated channels: list over runs of ``(n_pop, n_time, 10)``."""
         if backend.use_numpy() or not backend.compiled_available("nonlinear"):
             return self.outputs_reference(P)
-        Y = np.zeros((self.n_samples, 10))
-        W = np.zeros((len(self.runs), 10))
-        _, out = self._compiled(P, Y, W, 1)
-        return [out[:, s:e] for s, e in zip(self.run_start[:-1], self.run_start[1:])]
+        out = self._compiled(P, np.zeros((self.n_samples, 10)), np.zeros((len(self.runs), 10)), 1)[1]
+        return self._per_run(out)
+
+    def states(self, P):
+        """Simulated channels and states: list over runs of ``((n_pop, n_time, 10), (n_pop, n_time, 14))``,
+        the states ``[q, q']`` in :data:`rideid.model.equations.COORDS` order (deviations from static
+        equilibrium)."""
+        if backend.use_numpy() or not backend.compiled_available("nonlinear"):
+            return self.states_reference(P)
+        _, out, X = self._compiled(P, np.zeros((self.n_samples, 10)), np.zeros((len(self.runs), 10)), 3)
+        return list(zip(self._per_run(out), self._per_run(X)))
+
+    def _per_run(self, a):
+        return [a[:, s:e] for s, e in zip(self.run_start[:-1], self.run_start[1:])]
 
 
 def _errors_of(outs, run_start, Y, W):
@@ -779,11 +797,8 @@ def simulate_nonlinear(P, geom: Geometry, run: RunInput, layout: NonlinearLayout
     """
     layout = NonlinearLayout() if layout is None else layout
     P = check_nonlinear(P, geom, layout)
-    m = substeps(P, geom, layout, run.h)
-    if return_states:
-        return simulate_numpy(P, geom, run, layout, m, return_states=True)
     sim = NonlinearSimulator(geom, [run], layout)
-    return sim.outputs(P)[0]
+    return sim.states(P)[0] if return_states else sim.outputs(P)[0]
 
 
 __all__ = ["BUMP_STOP_NAMES", "CHANNELS", "DEFAULT_KNOTS", "NonlinearLayout", "NonlinearSimulator", "RHO_MAX",

@@ -23,7 +23,7 @@ from ..data.schema import (BUMP_NAMES, ChannelEntry, DatasetManifest, RunSpec, S
                            write_toml)
 from ..errors import ArgumentError, DataWarning, ModelValidityWarning
 from ..model.equations import CHANNELS, static_corner_loads
-from ..model.nonlinear import NonlinearLayout, simulate_nonlinear, simulate_numpy, substeps
+from ..model.nonlinear import NonlinearLayout, NonlinearSimulator, simulate_nonlinear
 from ..model.params import ALL_NAMES, CORNERS, EXT_NAMES, INDEX, NAMES, as_vector, full_rows
 from ..model.simulate import prepare_run, simulate_reference, wheel_displacements, wheel_velocities
 from ..verify.hifi import RAW_NAMES, scenario_properties, simulate_mujoco
@@ -118,14 +118,10 @@ def nonlinear_car(sc: Scenario):
 
 
 def nonlinear_states(Pn, geom, run_input, layout):
-    """States ``(n_time, 14)`` (COORDS order, ``[q, q']``) of a nonlinear car, to find lift-off.
-
-    The compiled kernel gives outputs only; its NumPy twin gives states, at a cost that grows with the
-    sub-steps, so this takes the NumPy backend with the looser :data:`LIFT_OFF_RHO`.
-    """
-    Pn = np.atleast_2d(Pn)
-    m = substeps(Pn, geom, layout, run_input.h, rho=LIFT_OFF_RHO)
-    return simulate_numpy(Pn, geom, run_input, layout, m, return_states=True, split=False)[1][0]
+    """States ``(n_time, 14)`` (COORDS order, ``[q, q']``) of a nonlinear car, to find lift-off: plain RK4
+    sub-steps at the looser :data:`LIFT_OFF_RHO`."""
+    sim = NonlinearSimulator(geom, [run_input], layout, rho=LIFT_OFF_RHO, split=False)
+    return sim.states(np.atleast_2d(Pn))[0][1][0]
 
 
 def simulate_manifest(sc: Scenario, noise: float = 0.0, seed: int | None = None, progress=None,
