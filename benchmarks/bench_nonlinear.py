@@ -12,7 +12,10 @@ it) at the ten default knots:
   accuracy the tests prove on severe runs) and, for comparison, with the
   previous one of the same accuracy (plain RK4 sub-steps, ``rho = 0.03``);
 * against SciPy ``solve_ivp`` (DOP853, rtol 1e-8) on the same equations, per
-  candidate (goal >= 100x faster): one run, scaled to all runs by their samples.
+  candidate (goal >= 100x faster): one run, scaled to all runs by their samples;
+* the states of one car over every run (``NonlinearSimulator.states``: what
+  the bump stops' reach, the knots' excitation and the report's velocity
+  histograms read) against the NumPy backend that gave them before.
 
 Run: ``make bench`` (or ``python benchmarks/bench_nonlinear.py``).
 """
@@ -108,6 +111,14 @@ def main(out=sys.stdout):
     out.write(f"\nSciPy solve_ivp (DOP853, rtol 1e-8) on run {runs[ri].t.size} samples: {ts:.2f} s "
               f"({nfev} evaluations), {ts_all:.1f} s per candidate for all runs; compiled kernel on one thread "
               f"{tn1 * 1e3:.2f} ms per candidate: {ts_all / tn1:.0f}x faster\n")
+    # the states of one car over every run (the bump stops' reach, the knots' excitation, the report's
+    # suspension velocities): the compiled kernel against the NumPy backend it replaced there
+    sim = NonlinearSimulator(geom, runs, layout)
+    ts_np = best(lambda: sim.states_reference(Pn[:1]), repeat=1)
+    ts_c = best(lambda: sim.states(Pn[:1]))
+    res["states"] = ts_np / ts_c
+    out.write(f"\nstates of one car over all runs (channels and states): NumPy backend {ts_np:.2f} s, compiled "
+              f"kernel {ts_c * 1e3:.1f} ms: {ts_np / ts_c:.0f}x faster\n")
     return res
 
 

@@ -78,7 +78,6 @@ def test_result_round_trip_keeps_the_stops(stops_fit):
     assert "bump stops" in repr(back) and "bs_clear_f=" in repr(back)
 
 
-@pytest.mark.slow  # an identification each (about 25 s): CI's slow pass runs it
 def test_known_clearance_is_held(stops_fit, tmp_path):
     """A clearance from the drawing in [known]: held, the rate fitted."""
     _, _, _, _, ds = stops_fit
@@ -97,7 +96,6 @@ def test_known_clearance_is_held(stops_fit, tmp_path):
     assert res["bump_stops"]["front"]["known"] == [True, False]
 
 
-@pytest.mark.slow  # an identification each (about 25 s): CI's slow pass runs it
 def test_stops_never_reached(tmp_path, capsys):
     """Stops at 300 mm: no run reaches them. Not reached, held (no std), the other parameters unbiased."""
     ds, truth = simulate(tmp_path, 0.3)
@@ -120,7 +118,6 @@ def test_stops_never_reached(tmp_path, capsys):
     assert back.bump_stops == res["bump_stops"] and "not reached" in repr(back)
 
 
-@pytest.mark.slow
 def test_bump_stops_with_damper_curves(tmp_path):
     """Digressive asymmetric dampers and stops at 30 mm: both groups identified together."""
     dampers = {"velocity": VEL, "front": digressive(1200, 400), "rear": digressive(1100, 370)}

@@ -90,7 +90,6 @@ def test_result_json_round_trip_keeps_the_curves(digressive_fit):
     assert "damper curves" in text and "F_f1=" not in text
 
 
-@pytest.mark.slow  # an identification (about 25 s): CI's slow pass runs it
 def test_linear_dampers_fitted_with_curves_give_F_equal_c_v(tmp_path):
     ds, truth = simulate(tmp_path)
     res = identify_curves(ds, tmp_path / "fit")

@@ -313,7 +313,6 @@ def test_result_round_trip_and_short_repr(sim_dataset, tmp_path):
     assert (again / "result.json").read_text() == (tmp_path / "result.json").read_text()
 
 
-@pytest.mark.slow  # 67 s on one core (two auto identifications): CI's slow pass runs it
 def test_python_chooses_the_model_as_the_command_line(sim_dataset, tmp_path):
     """SPEC §5 amended: rideid.identify(ds) fits the dataset's [model], else auto, as `rideid identify` does."""
     import json
