@@ -76,6 +76,12 @@ _ADVICE_CHECKS = ("check that the track in dataset.toml (kind, start, height, wa
 #: the advice when the model lacks extension groups and --model auto has not weighed them (see :func:`advice`)
 ADVICE = (_ADVICE_HEAD + "Try: `rideid identify --model auto` (or `--model full`) to let anti-roll bars and tire "
           "damping in; " + _ADVICE_CHECKS)
+#: added to the advice when the model has damper curves: where their straight segments miss the real curve
+KNOT_ADVICE = ("The damper curves are straight between their knots: a real curve that bends between two knots "
+               "leaves road-driven structure, so try knots where it bends (`[model] damper_knots` in dataset.toml, "
+               "docs/dampers.md). ")
+#: what the model may lack, by the group that adds it
+_LACKS = (("damper_curves", "nonlinear dampers"), ("bump_stops", "bump stops"))
 
 
 def ljung_box(e, lags: int = WHITENESS_LAGS) -> tuple[float, float]:
@@ -368,10 +374,12 @@ def advice(model: dict | None) -> str:
     str
         :data:`ADVICE` (let the extension groups in) unless they have been
         tried: after ``--model auto`` or with every group fitted it points to
-        the data and to what the linear model lacks instead.
+        the data and to what the model still lacks instead. With damper
+        curves in the model, :data:`KNOT_ADVICE` too (their knots).
     """
     model = model or {}
     ext = model.get("extensions") or []
+    knots = KNOT_ADVICE if "damper_curves" in ext else ""
     if model.get("selection") == "auto":
         tried = (f"`--model auto` has already weighed anti-roll bars and tire damping (it kept "
                  f"{' + '.join(ext) or 'base'}), so the structure comes from elsewhere. ")
@@ -379,9 +387,10 @@ def advice(model: dict | None) -> str:
         tried = ("The model already has anti-roll bars and tire damping (`--model full`), so the structure comes "
                  "from elsewhere. ")
     else:
-        return ADVICE
-    return (_ADVICE_HEAD + tried + "Try: " + _ADVICE_CHECKS + " Or the car has what the linear seven-degree-of-"
-            "freedom model lacks (nonlinear dampers, bump stops, a flexible body).")
+        return ADVICE + (" " + knots.rstrip() if knots else "")
+    lacks = [what for group, what in _LACKS if group not in ext] + ["a flexible body"]
+    return (_ADVICE_HEAD + tried + knots + "Try: " + _ADVICE_CHECKS + " Or the car has what the model lacks ("
+            + ", ".join(lacks) + ").")
 
 
 def advise(adequacy: dict | None, model: dict | None) -> dict | None:
