@@ -183,3 +183,16 @@ def test_damper_curves_extension_without_table_plans_linear_curves(tmp_path):
     c_sf = read_toml(rideid.default_scenario_path())["truth"]["c_sf"]
     assert d["dampers"]["nominal"]["front"] == pytest.approx([c_sf * v for v in DEFAULT_KNOTS])
     assert d["candidates"][0]["dampers"]["not_excited"] == d["dampers"]["selected"]["not_excited"]
+
+
+def test_plan_of_a_car_with_bump_stops_says_it_plans_without_them(tmp_path):
+    """Bump stops in the truth: the plan's model has none, and its note says so and where they are fitted."""
+    from rideid.design.planner import BUMP_STOP_NOTE
+    path = scenario(tmp_path, ["T_HH"])
+    doc = read_toml(path)
+    doc["truth"].update(bs_clear_f=0.05, bs_rate_f=5e4, bs_clear_r=0.05, bs_rate_r=5e4)
+    path.write_text(tomli_w.dumps(doc))
+    res = rideid.plan(path, noise=0.01)
+    assert [n for n in res.notes if "bump stop" in n] == [BUMP_STOP_NOTE]
+    assert "`rideid identify --model bump_stops` fits the stops" in BUMP_STOP_NOTE
+    assert not any(n.startswith("bs_") for n in res.to_dict()["free"])

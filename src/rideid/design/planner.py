@@ -501,6 +501,12 @@ class PlanInformation:
                          self.info.names, self.info.x0)
 
 
+#: the plan's note for a scenario with bump stops: its model has none (the information of the stops' rate and
+#: clearance is not planned; ``rideid identify --model bump_stops`` fits them)
+BUMP_STOP_NOTE = ("bump stops are not in the plan's model (it plans the linear groups and the damper curves; "
+                  "`rideid identify --model bump_stops` fits the stops): planned without them")
+
+
 def gather_information(pb: PlanProblem, opts: PlanOptions) -> PlanInformation:
     """Information of every candidate run for the nominal car and the robust cars."""
     sc, notes = pb.sc, []
@@ -515,7 +521,7 @@ def gather_information(pb: PlanProblem, opts: PlanOptions) -> PlanInformation:
             notes.append("the [dampers] velocities are not symmetric: the plan's car is the truth curve sampled at "
                          "the default knots (set [model] damper_knots to plan other knots)")
         if sc.bump_stops:
-            notes.append("bump stops are not in the plan's model (identify cannot fit them): planned without them")
+            notes.append(BUMP_STOP_NOTE)
     cars = [pb.x0] + _sample_cars(pb.space, pb.x0, sc.bounds, opts.robust - 1, opts.robust_spread, opts.seed)
     infos, road_info = _information(sc, sim, pb.space, cars, opts.noise, opts.seed, opts.step)
     if road_info:
