@@ -48,7 +48,7 @@ from scipy.optimize import OptimizeResult, least_squares
 
 from ..data.schema import NONLINEAR_GROUPS
 from ..errors import ArgumentError, DataError
-from ..model.batch import single_threaded_blas
+from ..model.batch import single_threaded_blas, thread_map, thread_map_rows
 from ..model.equations import modal_summary
 from ..model.params import ALL_NAMES
 from ..model.roads import iso8608_class
@@ -163,12 +163,23 @@ class _Problem:
         return np.where(self.log, self.x(v), self.span)
 
     def blocks(self, z, rruns=None):
+        """The residual blocks at ``z``: the track runs' (with ``cf``), then each road run's, computed on
+        parallel threads (their NumPy and LAPACK work releases the GIL; each block is its own), the
+        track runs and then the longest road runs first."""
         x = self.x(z)
         P = self.space.full(x[None])
         if not self.space.valid(P)[0]:
             return None
-        parts = [] if self.cf is None else [self.cf.residuals(x[None], self.equal)[0]]
-        return parts + [roadfit.residuals(P[0], self.geom, rr) for rr in (rruns or self.rruns)]
+        jobs = ([] if self.cf is None else [None]) + list(rruns or self.rruns)
+        order = sorted(range(len(jobs)), key=lambda i: -np.inf if jobs[i] is None else -jobs[i].fit.size)
+
+        def block(i):
+            if jobs[i] is None:
+                return self.cf.residuals(x[None], self.equal)[0]
+            return roadfit.residuals(P[0], self.geom, jobs[i])
+
+        done = dict(zip(order, thread_map(block, order, "rideid-roads")))
+        return [done[i] for i in range(len(jobs))]
 
     def jacobian(self, v, step: float = 1e-5) -> np.ndarray:
         """Central-difference Jacobian of the residuals at ``v`` (in ``v`` units).
@@ -260,8 +271,8 @@ def _search(space, geom, rruns, gen, population, generations, callback, t0):
         P = space.full(X)
         out = np.full(P.shape[0], np.inf)
         ok = space.valid(P)
-        if ok.any():
-            out[ok] = roadfit.search_costs(P[ok], geom, rruns)
+        if ok.any():  # each row's cost is its own: slices of the population on parallel threads
+            out[ok] = thread_map_rows(lambda Q: roadfit.search_costs(Q, geom, rruns), P[ok], "rideid-search")
         return out
 
     solver = JadeSolver(space.bounds, population, gen)
