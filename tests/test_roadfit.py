@@ -143,3 +143,20 @@ def test_noise_free_recovery_and_the_road(data):
     err = np.sqrt(np.mean((z[inner, 0] - truth[inner]) ** 2) / np.mean(truth[inner] ** 2))
     assert err < 0.05
     assert np.isclose(x[1] - x[0], rr.speed / FS)
+
+
+def test_search_costs_on_thread_slices_equal_one_batch(data, monkeypatch):
+    """The search's population cut into slices, one per thread (model.batch.thread_map_rows): the same
+    costs, bit for bit, as one batch; on one thread a plain call."""
+    import numba
+
+    from rideid.model.batch import thread_map_rows
+    geom, P, _, _, rr = data
+    rows = P[None] * np.random.default_rng(2).uniform(0.9, 1.1, (7, P.size))
+    whole = roadfit.search_costs(rows, geom, [rr])
+    np.testing.assert_array_equal(thread_map_rows(lambda Q: roadfit.search_costs(Q, geom, [rr]), rows), whole)
+    assert np.argmin(whole) != np.argmax(whole)  # the rows differ: a slice mix-up would show
+    calls = []
+    monkeypatch.setattr(numba, "get_num_threads", lambda: 1)
+    np.testing.assert_array_equal(thread_map_rows(lambda Q: calls.append(len(Q)) or Q.sum(1), rows), rows.sum(1))
+    assert calls == [7]
