@@ -126,9 +126,11 @@ def test_envelope_grid_cached_and_flat_outside():
     assert np.all(wheel_input(p, np.array([-5.0, 1.69, 8.31, 20.0]), R) == 0)
 
 
-@pytest.mark.parametrize("road", ["flat", "rough", "sine", "steps"])
-def test_pruned_lattice_search_equals_brute_force(road):
-    """The block-pruned disc search returns the brute-force maxima and first argmaxima, exactly."""
+@pytest.mark.parametrize("road", ["flat", "rough", "sine", "steps", "white", "spikes"])
+def test_lattice_search_equals_brute_force(road):
+    """The divide-and-conquer disc search (monotone argmax) returns the brute-force maxima and first
+    argmaxima, exactly: on smooth, rough, stepped, white-noise and spiked roads (where ties and jumps of
+    the contact point are many)."""
     from numpy.lib.stride_tricks import sliding_window_view
 
     from rideid.model.contact import lattice_max
@@ -141,7 +143,8 @@ def test_pruned_lattice_search_equals_brute_force(road):
     H = {"flat": np.zeros_like(x),
          "rough": np.cumsum(rng.standard_normal(x.size)) * 1e-4,
          "sine": 0.02 * np.sin(2 * np.pi * x / 0.7) * (x > 3) * (x < 7),
-         "steps": 0.03 * np.floor(x / 0.9) % 0.09}[road]
+         "steps": 0.03 * np.floor(x / 0.9) % 0.09, "white": rng.standard_normal(x.size) * 1e-3,
+         "spikes": (rng.random(x.size) < 0.01) * 0.05}[road]
     best, arg = lattice_max(H, circ)
     V = sliding_window_view(H, circ.size) + circ[None, :]  # every disc position, every offset
     ref, ref_arg = V.max(axis=1), V.argmax(axis=1)

@@ -103,66 +103,58 @@ def _refine(h, xs, dj, step, R, t, rows):
     return np.maximum(fk, np.where(ok, fr, -np.inf))
 
 
-#: lattice points per block of the pruned search in :func:`lattice_max`
-LATTICE_BLOCK = 32
-
-
 @numba.njit(cache=True, nogil=True)
 def lattice_max(H, circ):  # pragma: no cover - compiled
     """``max_j H[i + j] + circ[j]`` and its (first) argmax for every i.
 
-    ``circ`` is a disc's height: rising to its peak, then falling (any
-    unimodal profile). The road is searched in blocks of
-    :data:`LATTICE_BLOCK` points: a block whose highest road point plus the
-    disc's highest point over the block cannot reach a value already found
-    (the previous point's contact, moved along) cannot hold the maximum and
-    is skipped. The result is the brute-force search's, exactly; on flat
-    road only the block under the disc's centre is searched. 3-9x faster
-    than the brute force on the built-in tracks, on one thread (a parallel
-    loop gained little and, with another process busy on the second core,
-    OpenMP's spinning barriers made it up to 100x slower).
+    ``circ`` is a disc's height on the lattice: a concave sequence. Then the
+    matrix ``M[i, k] = H[k] + circ[k - i]`` (``-inf`` off the disc) is
+    inverse-Monge (``M[i, k'] + M[i', k] >= M[i, k] + M[i', k']`` for
+    ``i < i'``, ``k' < k``: ``circ``'s inner pair against its outer pair),
+    so the first argmax ``k(i)`` never decreases with ``i``: the row in the
+    middle of a range is searched over its whole column range, the rows
+    above it only up to its argmax, the rows below only from it (divide and
+    conquer, ``O((n + m) log n)`` for ``n`` positions and ``m`` offsets
+    against ``O(n m)``). Rounding cannot reorder the maxima: the inequality
+    holds with a margin of ``circ``'s second difference (``dx^2 / R``, about
+    1e-6 m at the grid's step) against rounding near 1e-16 m. The result is
+    the brute-force search's, exactly (tested on flat, rough, sine, stepped,
+    white and spiked roads). 5x faster than the former block-pruned search
+    on a 1 km random road, and free of its worst case (rough roads, where
+    little could be pruned).
     """
     n = H.size - circ.size + 1
     m = circ.size
-    B = LATTICE_BLOCK
-    nb = (H.size + B - 1) // B
-    HB = np.empty(nb)
-    for b in range(nb):
-        HB[b] = H[b * B:min((b + 1) * B, H.size)].max()
-    peak = 0
-    for j in range(m):
-        if circ[j] > circ[peak]:
-            peak = j
-    best = np.empty(n)
-    arg = np.empty(n, dtype=np.int64)
-    guess = peak
-    for i in range(n):
-        # a lower bound on the maximum: the last contact point moved along, and the disc's peak
-        g = min(max(guess - 1, 0), m - 1)
-        lb = max(H[i + g] + circ[g], H[i + peak] + circ[peak])
+    best = np.empty(max(n, 0))
+    arg = np.empty(max(n, 0), dtype=np.int64)
+    if n <= 0:
+        return best, arg
+    # pending (row lo, row hi, column lo, column hi), inclusive, columns in H; the rows before the middle are
+    # taken next, so at most one range per halving waits (130 rows: ample for any array)
+    stack = np.empty((130, 4), dtype=np.int64)
+    stack[0, 0], stack[0, 1], stack[0, 2], stack[0, 3] = 0, n - 1, 0, H.size - 1
+    top = 1
+    while top > 0:
+        top -= 1
+        ilo, ihi, klo, khi = stack[top, 0], stack[top, 1], stack[top, 2], stack[top, 3]
+        mid = (ilo + ihi) // 2
+        a = max(klo, mid)
+        b = min(khi, mid + m - 1)
         bv = -np.inf
-        bj = 0
-        b0 = i // B
-        b1 = (i + m - 1) // B
-        for b in range(b0, b1 + 1):
-            ja = max(b * B - i, 0)
-            jb = min((b + 1) * B - i, m) - 1
-            if ja <= peak <= jb:
-                cmax = circ[peak]
-            elif jb < peak:
-                cmax = circ[jb]
-            else:
-                cmax = circ[ja]
-            if HB[b] + cmax < lb:
-                continue
-            for j in range(ja, jb + 1):
-                v = H[i + j] + circ[j]
-                if v > bv:
-                    bv = v
-                    bj = j
-        best[i] = bv
-        arg[i] = bj
-        guess = bj
+        bk = a
+        for k in range(a, b + 1):
+            v = H[k] + circ[k - mid]
+            if v > bv:
+                bv = v
+                bk = k
+        best[mid] = bv
+        arg[mid] = bk - mid
+        if mid < ihi:
+            stack[top, 0], stack[top, 1], stack[top, 2], stack[top, 3] = mid + 1, ihi, bk, khi
+            top += 1
+        if ilo < mid:
+            stack[top, 0], stack[top, 1], stack[top, 2], stack[top, 3] = ilo, mid - 1, klo, bk
+            top += 1
     return best, arg
 
 
