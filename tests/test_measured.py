@@ -385,3 +385,19 @@ def test_reading_and_start_estimation_are_separate_steps(tmp_path, default_scena
     assert np.array_equal(moved.data["T_LL"].matrix(), ds.data["T_LL"].matrix())
     shift = OFFSET + 0.02 - ds.measured["T_LL"].start
     np.testing.assert_allclose(moved.data["T_LL"].time, ds.data["T_LL"].time - shift, rtol=0, atol=1e-12)
+
+
+def test_a_clean_read_skips_the_garbage_collection_a_failed_one_runs(mdf_dataset, monkeypatch):
+    """quiet_library collects the garbage (finalising a half-built reader while silenced) only after a
+    failure: ten clean MDF runs took 8.5-11 s to load with a full collection per channel, 2.9 s without."""
+    from rideid.data import readers
+    calls = []
+    monkeypatch.setattr(readers.gc, "collect", lambda *a: calls.append(a) or 0)
+    quiet_load(mdf_dataset)
+    assert calls == []
+    with readers.quiet_library("asammdf") as quiet:
+        quiet.fail()
+    assert calls == [()]
+    with pytest.raises(KeyError), readers.quiet_library("asammdf"):
+        raise KeyError("damaged block")
+    assert calls == [(), ()]
