@@ -18,7 +18,7 @@ venv: $(STAMP)
 demo: $(STAMP)
 	$(VENV)/bin/rideid demo --out demo-out
 
-# lint (ruff, configured in pyproject.toml), then the default suite on every core (pytest-xdist): about 7 minutes
+# lint (ruff, configured in pyproject.toml), then the default suite on every core (pytest-xdist): about 5 minutes
 # on 2 cores
 test: $(STAMP)
 	$(PY) -m ruff check src tests benchmarks

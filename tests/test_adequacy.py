@@ -113,7 +113,7 @@ def _polished_verdict(sc, data, folder):
     return assess_fit(cf, cf.space.full(x[None])[0])
 
 
-@pytest.mark.parametrize("rho", [pytest.param(0.0, marks=pytest.mark.slow), 0.9])
+@pytest.mark.parametrize("rho", [0.0, 0.9])
 def test_base_suv_is_adequate_with_white_and_coloured_noise(suv, tmp_path, rho):
     from cars import add_noise, simulate_car
 

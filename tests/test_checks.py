@@ -380,7 +380,6 @@ def test_recorded_cost_is_at_the_final_parameters_and_starts(hatch, tmp_path):
     assert res.cost == pytest.approx(res.polish["cost_after"], rel=1e-6)
 
 
-@pytest.mark.slow
 def test_start_std_includes_a_noisy_speed_channel(tmp_path):
     """A GPS speed channel with 0.1 m/s of white noise at 100 Hz: the fit's std alone is ~100x too small.
 
