@@ -26,9 +26,7 @@ import numpy as np
 from ..data.measured import DEFAULT_PRE_ROLL, MeasuredRun, RelativeDistance
 from ..errors import DataError
 from ..model.equations import CHANNELS
-from ..model.batch import BatchSimulator
-from ..model.simulate import prepare_run
-from .nominal import Job, gather, responses, run_steps
+from .nominal import Job, gather, responses, run_steps, simulate_jobs
 
 
 def feature_span(track, geom) -> tuple[float, float] | None:
@@ -219,18 +217,21 @@ def linearise_starts(ds, P, starts: dict, derivative: bool = True):
     respect to its start (empty when not ``derivative``): a central
     difference of two simulations whose time axes (and, with a speed channel,
     distance profiles) belong to ``start -/+ SHIFT_STEP`` samples, every run's
-    pair in one batch. The model moves, the samples stay.
+    pair in one batch (:func:`rideid.conditioning.nominal.simulate_jobs`). The
+    model moves, the samples stay.
     """
     at = ds.with_starts(starts)
     if not derivative:
         return at, {}
     eps = {rid: SHIFT_STEP / ds.measured[rid].fs for rid in starts}
-    grids = [(rid, ds.measured[rid].run_data(s + sign * eps[rid])) for rid, s in starts.items() for sign in (-1, 1)]
-    runs = [prepare_run(ds.manifest.tracks[ds.manifest.run(rid).track], ds.geometry, ds.measured[rid].speed,
-                        rd.time, distance=rd.distance) for rid, rd in grids]
-    outs = BatchSimulator(ds.geometry, runs).outputs(np.atleast_2d(P)) if runs else []
-    D = {rid: (outs[2 * k + 1][0] - outs[2 * k][0]) / (2 * eps[rid]) for k, rid in enumerate(starts)}
-    return at, D
+    jobs = []
+    for rid, s in starts.items():
+        mr, track = ds.measured[rid], ds.manifest.tracks[ds.manifest.run(rid).track]
+        for sign in (-1, 1):
+            rd = mr.run_data(s + sign * eps[rid])
+            jobs.append(Job(track, rd.time, mr.speed, rd.distance))
+    y = responses(simulate_jobs(P, ds.geometry, jobs)) if jobs else []
+    return at, {rid: (y[2 * k + 1] - y[2 * k]) / (2 * eps[rid]) for k, rid in enumerate(starts)}
 
 
 def cycle_slips(ds, P, starts: dict) -> dict:
