@@ -50,7 +50,7 @@ def test_transfer_matches_the_state_space_and_the_static_limit(data):
     geom, P, _, _, rr = data
     cols = np.arange(10)
     w = np.array([0.02, 2 * np.pi * 1.3, 2 * np.pi * 11.0])
-    H = roadfit.transfer(P[None], geom, w, cols)[0]
+    H = roadfit.transfer(roadfit.system(P[None], geom), w, cols)[0]
     A, B, Cy, Dy, Br, Dyr = (a[0] for a in state_space(P[None], geom, rate=True))
     for k, wk in enumerate(w):  # the modal form against the explicit inverse (both lose digits as w -> 0)
         s = 1j * wk

@@ -198,22 +198,46 @@ def _modal(A):
     return lam, V, Vi, ok
 
 
-def transfer(P, geom: Geometry, omega, cols) -> np.ndarray:
-    """``H(i omega)`` (n, K, c, 4) of parameter rows ``P`` (n, 16): the used channels' response to the
+@dataclass(frozen=True)
+class System:
+    """The linear car of parameter rows ``P`` (n, 16): its state-space matrices with the road rate terms
+    (:func:`rideid.model.equations.state_space`) and their modal form (eigenvalues ``lam``, eigenvectors
+    ``V`` and their inverse ``Vi``; ``ok`` where they are well conditioned). Built once per car, by
+    :func:`system`, and shared by its transfer functions and transient columns."""
+
+    A: np.ndarray
+    B: np.ndarray
+    Cy: np.ndarray
+    Dy: np.ndarray
+    Br: np.ndarray
+    Dyr: np.ndarray
+    lam: np.ndarray
+    V: np.ndarray
+    Vi: np.ndarray
+    ok: np.ndarray
+
+
+def system(P, geom: Geometry) -> System:
+    """:class:`System` of parameter rows ``P`` (n, 16) (or one row)."""
+    A, B, Cy, Dy, Br, Dyr = state_space(np.atleast_2d(P), geom, rate=True)
+    return System(A, B, Cy, Dy, Br, Dyr, *_modal(A))
+
+
+def transfer(car: System, omega, cols) -> np.ndarray:
+    """``H(i omega)`` (n, K, c, 4) of the cars ``car`` (:func:`system`): the used channels' response to the
     corner inputs fl, fr, rl, rr (road rate terms of tire damping included).
 
     Modal form ``C V diag(1 / (s - lambda)) V^-1 (B + s B_r)`` where the eigenvectors are well
     conditioned, else one linear solve per frequency (tested equal to the explicit inverse)."""
-    A, B, Cy, Dy, Br, Dyr = state_space(np.atleast_2d(P), geom, rate=True)
+    A, B, Cy, Dy, Br, Dyr = car.A, car.B, car.Cy, car.Dy, car.Br, car.Dyr
     s = 1j * np.asarray(omega)
     n = A.shape[0]
-    lam, V, Vi, ok = _modal(A)
     H = np.empty((n, s.size, len(cols), 4), dtype=complex)
     for p in range(n):
-        if ok[p]:
-            CV = Cy[p, cols] @ V[p]
-            g = 1.0 / (s[:, None] - lam[p][None])                                            # (K,14)
-            rhs = (Vi[p] @ B[p])[None] + s[:, None, None] * (Vi[p] @ Br[p])[None]            # (K,14,4)
+        if car.ok[p]:
+            CV = Cy[p, cols] @ car.V[p]
+            g = 1.0 / (s[:, None] - car.lam[p][None])                                        # (K,14)
+            rhs = (car.Vi[p] @ B[p])[None] + s[:, None, None] * (car.Vi[p] @ Br[p])[None]    # (K,14,4)
             H[p] = (CV[None] * g[:, None, :]) @ rhs
         else:
             Ms = s[:, None, None] * np.eye(14) - A[p][None]
@@ -250,9 +274,10 @@ def search_costs(P, geom: Geometry, runs) -> np.ndarray:
     cent of bias, no more than the search needs; the polish uses :func:`residuals`)."""
     P = np.atleast_2d(P)
     cost = np.zeros(P.shape[0])
+    car = system(P, geom)
     for rr in runs:
         w = rr.omega(rr.search)
-        H = transfer(P, geom, w, rr.cols) * rr.scale[None, None, :, None]
+        H = transfer(car, w, rr.cols) * rr.scale[None, None, :, None]
         ks, c = delay_filter(rr.tau, rr.h)
         E = np.exp(-1j * np.outer(w * rr.h, ks)) @ c
         perp, _ = _projector(_road_columns(H, E[None]))
@@ -264,22 +289,23 @@ def search_costs(P, geom: Geometry, runs) -> np.ndarray:
 @dataclass
 class Solution:
     """The projection at one car: residual (K, c) at the fit bins, the global unknowns and what the
-    road solution needs."""
+    road solution needs (the car's :class:`System`, reused by :func:`road`)."""
 
     residual: np.ndarray
     f_state: np.ndarray
     f_lead: np.ndarray
     rr: RoadRun
+    car: System
 
 
-def _discrete_columns(P, geom, omega, cols, h):
-    """Transient columns ``C (I - Phi z^-1)^-1`` (K, c, 14) of the sampled free response, ``Phi = exp(A h)``."""
-    A, B, Cy, Dy = state_space(np.atleast_2d(P), geom)
+def _discrete_columns(car: System, omega, cols, h):
+    """Transient columns ``C (I - Phi z^-1)^-1`` (K, c, 14) of the sampled free response, ``Phi = exp(A h)``,
+    of the one car ``car``."""
+    A, Cy = car.A, car.Cy
     zi = np.exp(-1j * np.asarray(omega) * h)
-    lam, V, Vi, ok = _modal(A)
-    if ok[0]:
-        g = 1.0 / (1.0 - zi[:, None] * np.exp(lam[0] * h)[None])                           # (K,14)
-        return ((Cy[0, cols] @ V[0])[None] * g[:, None, :]) @ Vi[0][None]
+    if car.ok[0]:
+        g = 1.0 / (1.0 - zi[:, None] * np.exp(car.lam[0] * h)[None])                       # (K,14)
+        return ((Cy[0, cols] @ car.V[0])[None] * g[:, None, :]) @ car.Vi[0][None]
     Phi = scipy.linalg.expm(A[0] * h)
     M = np.eye(14)[None] - zi[:, None, None] * Phi[None]
     X = np.linalg.solve(M, np.broadcast_to(np.eye(14), M.shape))
@@ -292,11 +318,12 @@ def solve(P, geom: Geometry, rr: RoadRun, bins=None) -> Solution:
     bins = rr.fit if bins is None else bins
     w = rr.omega(bins)
     h = rr.h
-    H = transfer(P, geom, w, rr.cols)[0] * rr.scale[None, :, None]                           # (K,c,4)
+    car = system(P, geom)
+    H = transfer(car, w, rr.cols)[0] * rr.scale[None, :, None]                               # (K,c,4)
     ks, c = delay_filter(rr.tau, h)
     E = np.exp(-1j * np.outer(w * h, ks)) @ c
     perp, _ = _projector(_road_columns(H, E))
-    S = perp(_discrete_columns(P, geom, w, rr.cols, h) * rr.scale[None, :, None])            # (K,c,14)
+    S = perp(_discrete_columns(car, w, rr.cols, h) * rr.scale[None, :, None])                # (K,c,14)
     aL = perp(H[:, :, 2:3])[..., 0]                                                          # (K,c)
     aR = perp(H[:, :, 3:4])[..., 0]
     r = perp(rr.Y[bins][:, :, None])[..., 0]                                                 # (K,c)
@@ -330,7 +357,7 @@ def solve(P, geom: Geometry, rr: RoadRun, bins=None) -> Solution:
     f = np.linalg.lstsq(G / np.outer(d, d), b / d, rcond=1e-13)[0] / d
     fS, fL, fR = f[:14], f[14:14 + D], f[14 + D:]
     res = r - S @ fS - aL * (en @ fL)[:, None] - aR * (en @ fR)[:, None]
-    return Solution(residual=res, f_state=fS, f_lead=np.stack([fL, fR]), rr=rr)
+    return Solution(residual=res, f_state=fS, f_lead=np.stack([fL, fR]), rr=rr, car=car)
 
 
 def residuals(P, geom: Geometry, rr: RoadRun) -> np.ndarray:
@@ -359,13 +386,13 @@ def road(P, geom: Geometry, rr: RoadRun, sol: Solution | None = None, wavelength
     bins = np.nonzero((f >= lo) & (f <= hi))[0]
     w = rr.omega(bins)
     h = rr.h
-    H = transfer(P, geom, w, rr.cols)[0] * rr.scale[None, :, None]
+    H = transfer(sol.car, w, rr.cols)[0] * rr.scale[None, :, None]
     ks, c = delay_filter(rr.tau, h)
     E = np.exp(-1j * np.outer(w * h, ks)) @ c
     _, road_of = _projector(_road_columns(H, E))
     D = rr.lead_in
     en = np.exp(-1j * np.outer(w * h, np.arange(D)))
-    known = (_discrete_columns(P, geom, w, rr.cols, h) * rr.scale[None, :, None]) @ sol.f_state \
+    known = (_discrete_columns(sol.car, w, rr.cols, h) * rr.scale[None, :, None]) @ sol.f_state \
         + H[:, :, 2] * (en @ sol.f_lead[0])[:, None] + H[:, :, 3] * (en @ sol.f_lead[1])[:, None]
     # the boundary unknowns are fitted in the fit band only: outside it their spectrum is not determined
     # (D free samples have content up to the Nyquist frequency), and subtracting it would add noise there
