@@ -233,6 +233,34 @@ def test_compiled_states_equal_the_numpy_states(road_dir):
             assert np.abs(y - y_ref).max() <= 1e-10 * np.abs(y_ref).max()
 
 
+def test_suspension_travel_closed_form_and_its_rate(road_dir):
+    """The body over its corners is the rigid plate's (heave, pitch nose-down forward of the CG as the
+    model's x, roll up on the left); the travel of the velocities is the time derivative of the travel
+    of the positions on a simulated run: each sample step's change is the trapezoid of the velocities
+    (1.6 % of the largest velocity at 200 Hz on this run's 12 Hz wheel hop; a wrong sign or column
+    is off by 100 % and more)."""
+    x, y = GH.corner_xy(np.array([CAR["a"]]))
+    x, y = x[0], y[0]
+    q = np.zeros((3, 7))
+    q[0, 0] = 0.02                           # heave up: every corner extends by 2 cm
+    q[1, 1] = 0.01                           # pitch: the corners move by -x theta
+    q[2, 2], q[2, 3:] = 0.01, 0.005          # roll, wheels up 5 mm
+    t = nl.suspension_travel(q, x, y)
+    np.testing.assert_allclose(t[0], [-0.02] * 4)
+    np.testing.assert_allclose(t[1], 0.01 * x)
+    np.testing.assert_allclose(t[2], 0.005 - 0.01 * y)
+    assert t[1, 0] == t[1, 1] > 0 > t[1, 2] == t[1, 3]   # front compresses, rear extends
+    assert t[2, 0] < 0.005 < t[2, 1] and t[2, 2] < 0.005 < t[2, 3]   # left extends, right compresses
+    sim = NonlinearSimulator(GH, [make_run("herringbone", road_dir, duration=1.0)], FULL, rho=0.2)
+    P = population(1, seed=5)
+    d = nl.travel_by_run(sim, P, float(P[0, INDEX["a"]]))[0]
+    v = nl.travel_by_run(sim, P, float(P[0, INDEX["a"]]), rates=True)[0]
+    h = sim.runs[0].h
+    step = (d[1:] - d[:-1]) / h
+    assert np.abs(step - 0.5 * (v[1:] + v[:-1])).max() < 0.03 * np.abs(v).max()
+    assert np.abs(v).max() > 0.05           # the run moves the suspension
+
+
 def test_compile_failure_falls_back_with_one_warning(road_dir, monkeypatch):
     run = make_run("chassis_twist", road_dir, duration=0.5)
     monkeypatch.setattr(backend, "_STATUS", {})

@@ -39,7 +39,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..model.nonlinear import BUMP_STOP_NAMES, NonlinearSimulator, check_nonlinear
+from ..model.nonlinear import BUMP_STOP_NAMES, NonlinearSimulator, check_nonlinear, travel_by_run
 from .adequacy import MIN_IMPROVEMENT
 
 #: samples (both corners of the axle, all runs) beyond the clearance that make a stop reached
@@ -65,16 +65,9 @@ def compressions(cf, P) -> tuple[np.ndarray, np.ndarray]:
     """Suspension compressions (m, from static ride height, compression +) of car ``P`` (a full row of
     ``cf.space``) over every run of ``cf``: ``(front, rear)``, both corners of each axle concatenated."""
     geom, layout = cf.space.geometry, cf.space.layout
-    Pn = check_nonlinear(P, geom, layout)
-    x, y = geom.corner_xy(np.array([P[cf.space.col["a"]]]))
-    x, y = x[0], y[0]
-    front, rear = [], []
-    for _, X in NonlinearSimulator(geom, cf.sim.runs, layout, rho=STATE_RHO).states(Pn):
-        q = X[0, :, :7]
-        d = q[:, 3:] - (q[:, :1] - x * q[:, 1:2] + y * q[:, 2:3])
-        front.append(d[:, :2].ravel())
-        rear.append(d[:, 2:].ravel())
-    return np.concatenate(front), np.concatenate(rear)
+    sim = NonlinearSimulator(geom, cf.sim.runs, layout, rho=STATE_RHO)
+    d = travel_by_run(sim, check_nonlinear(P, geom, layout), P[cf.space.col["a"]])
+    return np.concatenate([t[:, :2].ravel() for t in d]), np.concatenate([t[:, 2:].ravel() for t in d])
 
 
 def reach(cf, P) -> dict:

@@ -23,7 +23,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..model.nonlinear import NonlinearSimulator, check_nonlinear
+from ..model.nonlinear import NonlinearSimulator, check_nonlinear, travel_by_run
 from ..data.scenario import LIFT_OFF_RHO
 
 #: samples (both corners of the axle, all runs) beyond the previous knot that make a knot excited
@@ -41,16 +41,10 @@ def suspension_velocities_by_run(cf, P, rho: float | None = None) -> list[tuple[
     the lift-off bound (:data:`rideid.data.scenario.LIFT_OFF_RHO`, within 0.02-0.3 % of the kernel's
     outputs)."""
     geom, layout = cf.space.geometry, cf.space.layout
-    x, y = geom.corner_xy(np.array([P[cf.space.col["a"]]]))
-    x, y = x[0], y[0]
     sim = NonlinearSimulator(geom, cf.sim.runs, layout) if rho is None else \
         NonlinearSimulator(geom, cf.sim.runs, layout, rho=rho, split=False)
-    out = []
-    for _, X in sim.states(check_nonlinear(P, geom, layout)):
-        qd = X[0, :, 7:]
-        v = qd[:, 3:] - (qd[:, :1] - x * qd[:, 1:2] + y * qd[:, 2:3])
-        out.append((v[:, :2].ravel(), v[:, 2:].ravel()))
-    return out
+    v = travel_by_run(sim, check_nonlinear(P, geom, layout), P[cf.space.col["a"]], rates=True)
+    return [(t[:, :2].ravel(), t[:, 2:].ravel()) for t in v]
 
 
 def suspension_velocities(cf, P, rho: float | None = None) -> tuple[np.ndarray, np.ndarray]:

@@ -401,10 +401,8 @@ def accelerations(co, xk, Fk, Sk, curves: bool, X, r, rd):
     ctm = c("ct") * c("inv_mu")
     w = X[:, 10:] + ctm * r  # wheel velocities
     x, y = c("x"), c("y")
-    zb = q[:, :1] - x * q[:, 1:2] + y * q[:, 2:3]
-    dzb = X[:, 7:8] - x * X[:, 8:9] + y * X[:, 9:10]
-    d = q[:, 3:] - zb
-    v = w - dzb
+    d = suspension_travel(q, x, y)
+    v = w - body_corners(X[:, 7:], x, y)
     F = c("ks") * d
     bf = co[:, CI["kar_f"]] * (d[:, 0] - d[:, 1])
     br = co[:, CI["kar_r"]] * (d[:, 2] - d[:, 3])
@@ -426,6 +424,29 @@ def accelerations(co, xk, Fk, Sk, curves: bool, X, r, rd):
     return dX, qdd
 
 
+def body_corners(q, x, y):
+    """The body over the corners fl, fr, rl, rr (n, 4) (``x`` forward of the CG, ``y`` to the left, as
+    :meth:`rideid.model.params.Geometry.corner_xy`) from its heave, pitch and roll in the first three
+    columns of ``q`` (n, >= 3): heights, or their rates or accelerations alike."""
+    return q[:, :1] - x * q[:, 1:2] + y * q[:, 2:3]
+
+
+def suspension_travel(q, x, y):
+    """Suspension travel (n, 4), compression +: each wheel's coordinate (columns 3-6 of ``q`` (n, 7), in
+    :data:`rideid.model.equations.COORDS` order: heights, or their rates or accelerations) less the
+    body's over its corner (:func:`body_corners`)."""
+    return q[:, 3:7] - body_corners(q, x, y)
+
+
+def travel_by_run(sim, P, a: float, rates: bool = False) -> list:
+    """Per run of ``sim`` (a :class:`NonlinearSimulator`), the suspension travel (n_time, 4) of the car
+    ``P`` (a row of ``sim``'s layout) whose CG is ``a`` behind the front axle: of the positions (m), or
+    with ``rates`` of the velocities (m/s); compression +."""
+    x, y = sim.geom.corner_xy(np.array([a]))
+    lo = 7 if rates else 0
+    return [suspension_travel(X[0, :, lo:lo + 7], x[0], y[0]) for _, X in sim.states(P)]
+
+
 def shifted(co, X, r, back: bool = False):
     """States with wheel velocities ``z'`` -> shifted ``p = z' - (c_t/m_u) r`` (``back``: the inverse)."""
     ctm = co[:, _C4["ct"]] * co[:, _C4["inv_mu"]]
@@ -438,7 +459,7 @@ def channels(co, X, qdd):
     """The ten channels ``(n, 10)`` from states and accelerations."""
     x, y = co[:, _C4["x"]], co[:, _C4["y"]]
     out = np.empty((X.shape[0], 10))
-    out[:, :4] = qdd[:, :1] - x * qdd[:, 1:2] + y * qdd[:, 2:3]
+    out[:, :4] = body_corners(qdd, x, y)
     out[:, 4:8] = qdd[:, 3:]
     out[:, 8] = X[:, 8]
     out[:, 9] = X[:, 9]
@@ -502,11 +523,11 @@ def switching(co, X, qdd, r, rd):
     x, y = co[:, _C4["x"]], co[:, _C4["y"]]
     ct = co[:, _C4["ct"]]
     w = X[:, 10:] + ct * co[:, _C4["inv_mu"]] * r
-    d = X[:, 3:7] - (X[:, :1] - x * X[:, 1:2] + y * X[:, 2:3])
-    v = w - (X[:, 7:8] - x * X[:, 8:9] + y * X[:, 9:10])
+    d = suspension_travel(X[:, :7], x, y)
+    v = w - body_corners(X[:, 7:], x, y)
     t0 = co[:, _C4["L"]] + co[:, _C4["kt"]] * (r - X[:, 3:7]) - ct * w
     g = t0 + ct * rd
-    vd = qdd[:, 3:] - (qdd[:, :1] - x * qdd[:, 1:2] + y * qdd[:, 2:3])
+    vd = suspension_travel(qdd, x, y)
     return d, v, g, vd
 
 
