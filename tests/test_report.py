@@ -61,6 +61,23 @@ def test_report_rebuild(fit_dir, capsys):
     assert len(_images(after)) == len(_images(before)) == 16
 
 
+def test_report_relative_error_column_reads_plainly(fit_dir, tmp_path):
+    """The estimates table's ± % column: three decimals below 100 %, whole percent above (an estimate
+    near zero, such as tire damping of 0.6 N s/m with ±6 N s/m, reads 1000, not 1000.004)."""
+    import json
+    d = tmp_path / "fit"
+    shutil.copytree(fit_dir, d)
+    doc = json.loads((d / "result.json").read_text())
+    doc["parameters"]["c_sf"]["std_robust"] = 10.00004 * doc["parameters"]["c_sf"]["value"]
+    doc["parameters"]["k_sf"]["std_robust"] = 0.00123 * doc["parameters"]["k_sf"]["value"]
+    (d / "result.json").write_text(json.dumps(doc))
+    assert main(["report", str(d)]) == 0
+    html = (d / "report.html").read_text()
+    cells = {n: re.search(rf"<td>{n}</td>.*?</td>\s*<td>[^<]*</td><td>([^<]*)</td>", html, re.S).group(1)
+             for n in ("c_sf", "k_sf")}
+    assert cells == {"c_sf": "1000", "k_sf": "0.123"}
+
+
 def test_report_compares_adaptive_and_fixed(fit_dir, sim_dataset, tmp_path, capsys):
     fixed = tmp_path / "fixed"
     assert main(["identify", str(sim_dataset), "--out", str(fixed), "--seed", "1", "--quiet", "--generations", "20",
