@@ -117,3 +117,19 @@ def test_report_renders_in_headless_chromium(fit_dir, tmp_path):
     assert (gray < 0.5).mean() > 0.01           # text and plots drawn
     dark_rows = np.nonzero((gray < 0.5).mean(axis=1) > 0.002)[0]
     assert dark_rows.max() - dark_rows.min() > 800  # content down the page, not just the header
+
+
+def test_figure_pool_returns_the_jobs_order(monkeypatch):
+    """The pool draws the costliest figures first (heat maps, the spread) but hands every figure back in the
+    order of its jobs, with the worker's own result (fork: the workers see these stand-ins)."""
+    import os
+
+    from rideid.report import html
+    for name in ("fig_fit", "fig_heatmap", "fig_spread", "fig_weights"):
+        monkeypatch.setattr(html, name, lambda k, name=name: (name, k, os.getpid()))
+    jobs = [("fig_weights", (0,)), ("fig_fit", (1,)), ("fig_fit", (2,)), ("fig_heatmap", (3,)),
+            ("fig_spread", (4,)), ("fig_heatmap", (5,))]
+    out = html._map_figures(jobs)
+    assert [(n, k) for n, k, _ in out] == [(n, a[0]) for n, a in jobs]
+    if (os.cpu_count() or 1) > 1:
+        assert all(pid != os.getpid() for _, _, pid in out)  # drawn in the workers
