@@ -13,6 +13,7 @@ parameter layout.
 
 from __future__ import annotations
 
+import numba
 import numpy as np
 from threadpoolctl import ThreadpoolController
 
@@ -40,8 +41,6 @@ def thread_map(fn, items, name: str = "rideid") -> list:
     For work that spends its time in NumPy, LAPACK and compiled loops, which
     release the GIL. One thread (a study's workers): a plain loop.
     """
-    import numba
-
     items = list(items)
     threads = min(numba.get_num_threads(), len(items))
     if threads < 2:
@@ -55,8 +54,6 @@ def thread_map_rows(fn, P, name: str = "rideid") -> np.ndarray:
     """``fn(P)`` for a function whose every output row depends on its own row of ``P`` only: ``fn`` of
     consecutive slices of the rows, one per thread (:func:`thread_map`), concatenated. The same numbers as
     ``fn(P)``, row by row."""
-    import numba
-
     P = np.asarray(P)
     slices = np.array_split(np.arange(P.shape[0]), max(1, min(numba.get_num_threads(), P.shape[0])))
     return np.concatenate(thread_map(lambda rows: fn(P[rows]), slices, name))

@@ -705,28 +705,29 @@ class NonlinearSimulator:
     # -- backends -----------------------------------------------------------------------
     def outputs_reference(self, P):
         """As :meth:`outputs`, by the NumPy backend."""
-        P = self.layout.rows(P)
-        ms = self.substeps(P)
-        self.last_substeps = ms
-        kinks = self.kinks(P)
-        return [simulate_numpy(P, self.geom, r, self.layout, m, self.fine(i, m), split=self.split, kinks=kinks)
-                for i, (r, m) in enumerate(zip(self.runs, ms))]
+        return self._reference(P, False)
 
     def states_reference(self, P):
         """As :meth:`states`, by the NumPy backend."""
+        return self._reference(P, True)
+
+    def _reference(self, P, return_states: bool):
         P = self.layout.rows(P)
         ms = self.substeps(P)
         self.last_substeps = ms
         kinks = self.kinks(P)
-        return [simulate_numpy(P, self.geom, r, self.layout, m, self.fine(i, m), return_states=True,
+        return [simulate_numpy(P, self.geom, r, self.layout, m, self.fine(i, m), return_states=return_states,
                                split=self.split, kinks=kinks) for i, (r, m) in enumerate(zip(self.runs, ms))]
 
     def errors_reference(self, P, Y, W):
         outs = self.outputs_reference(P)
         return _errors_of(outs, self.run_start, Y, W)
 
-    def _compiled(self, P, Y, W, mode):
-
+    def _compiled(self, P, mode, Y=None, W=None):
+        """:func:`rideid.model.kernel_nl.run` in ``mode`` (no data ``Y``, ``W``: zeros, for the modes that
+        write channels or states)."""
+        Y = np.zeros((self.n_samples, 10)) if Y is None else Y
+        W = np.zeros((len(self.runs), 10)) if W is None else W
         P = self.layout.rows(P)
         ms = self.substeps(P)
         self.last_substeps = ms
@@ -744,13 +745,13 @@ class NonlinearSimulator:
         W = np.ascontiguousarray(W, dtype=float)
         if backend.use_numpy() or not backend.compiled_available("nonlinear"):
             return self.errors_reference(P, Y, W)
-        return self._compiled(P, Y, W, 0)[0]
+        return self._compiled(P, 0, Y, W)[0]
 
     def outputs(self, P):
         """Simulated channels: list over runs of ``(n_pop, n_time, 10)``."""
         if backend.use_numpy() or not backend.compiled_available("nonlinear"):
             return self.outputs_reference(P)
-        out = self._compiled(P, np.zeros((self.n_samples, 10)), np.zeros((len(self.runs), 10)), 1)[1]
+        out = self._compiled(P, 1)[1]
         return self._per_run(out)
 
     def states(self, P):
@@ -759,7 +760,7 @@ class NonlinearSimulator:
         equilibrium)."""
         if backend.use_numpy() or not backend.compiled_available("nonlinear"):
             return self.states_reference(P)
-        _, out, X = self._compiled(P, np.zeros((self.n_samples, 10)), np.zeros((len(self.runs), 10)), 3)
+        _, out, X = self._compiled(P, 3)
         return list(zip(self._per_run(out), self._per_run(X)))
 
     def _per_run(self, a):
