@@ -90,11 +90,11 @@ def main(out=sys.stdout):
         import os
         env = dict(os.environ, NUMBA_CACHE_DIR=str(d / "cold-cache"))
         t = time.perf_counter()
-        subprocess.run([sys.executable, "-c", "from rideid.model.kernel import compile_kernels; compile_kernels()"],
+        subprocess.run([sys.executable, "-c", "from rideid.model.backend import compile_kernels; compile_kernels()"],
                        env=env, check=True)
         cold = time.perf_counter() - t
         t = time.perf_counter()
-        subprocess.run([sys.executable, "-c", "from rideid.model.kernel import compile_kernels; compile_kernels()"],
+        subprocess.run([sys.executable, "-c", "from rideid.model.backend import compile_kernels; compile_kernels()"],
                        env=env, check=True)
         warm = time.perf_counter() - t
         say(f"\nkernel compilation, first run after install: {cold:.1f} s; later runs (cache): {warm:.1f} s "

@@ -98,7 +98,7 @@ def main(out=sys.stdout):
         for name, sim in sims.items():
             tn = best(lambda sim=sim: sim.errors(Pn, Y, W)) / N_POP
             res[(th, name)] = tn / tl
-            out.write(f"| {th} | {tl * 1e6:.0f} | {name} | {tn * 1e6:.0f} | {sorted(set(sim.last_substeps))} "
+            out.write(f"| {th} | {tl * 1e6:.0f} | {name} | {tn * 1e6:.0f} | {sorted(set(sim.substeps(Pn)))} "
                       f"| {tn / tl:.1f}x |\n")
     numba.set_num_threads(all_threads)
     # SciPy on the shortest run, scaled by samples

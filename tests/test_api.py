@@ -35,3 +35,14 @@ def test_dataset_repr_is_short(sim_dataset):
     assert f"name={ds.name!r}" in text and str(ds.path) in text
     assert f"runs={len(ds.runs)} [{ds.runs[0].id}, {ds.runs[1].id}" in text
     assert "tracks=[" in text and "'total_mass': 1093.3" in text and "model=none" in text
+
+
+def test_identify_is_its_own_function():
+    """rideid.identify documents and checks its own signature (not the single-model fit's borrowed one)."""
+    from rideid.estimate import identify as single
+
+    assert rideid.identify is not single.identify and not hasattr(rideid.identify, "__wrapped__")
+    params = inspect.signature(rideid.identify).parameters
+    assert "model" in params and "simulator" in params
+    assert list(params)[0] == "ds" and all(p.kind == p.KEYWORD_ONLY for n, p in params.items() if n != "ds")
+    assert "rideid identify" in inspect.getdoc(rideid.identify)

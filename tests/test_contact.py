@@ -133,7 +133,7 @@ def test_lattice_search_equals_brute_force(road):
     the contact point are many)."""
     from numpy.lib.stride_tricks import sliding_window_view
 
-    from rideid.model.contact import lattice_max
+    from rideid.model.contact import lattice_max, lattice_max_numpy
     rng = np.random.default_rng(7)
     dx, R = 5e-4, 0.3
     m = int(R / dx)
@@ -150,3 +150,6 @@ def test_lattice_search_equals_brute_force(road):
     ref, ref_arg = V.max(axis=1), V.argmax(axis=1)
     assert np.array_equal(best, ref)
     assert np.array_equal(arg, ref_arg)
+    # the backend without the compiled kernels: the same maxima and argmaxima
+    best_np, arg_np = lattice_max_numpy(H, circ)
+    assert np.array_equal(best_np, ref) and np.array_equal(arg_np, ref_arg)

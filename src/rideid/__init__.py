@@ -54,7 +54,7 @@ _PUBLIC = _by_name({
 _COMMAND_LINE = _by_name({
     "rideid.data.scenario": ("BUILTIN",), "rideid.data.schema": ("atomic_output", "read_toml", "read_result_json"),
     "rideid.data.dataset": ("refuse_unknown_roads",), "rideid.model.equations": ("format_modal_summary",),
-    "rideid.model.kernel": ("compile_kernels",), "rideid.verify.hifi": ("scenario_properties",),
+    "rideid.model.backend": ("compile_kernels",), "rideid.verify.hifi": ("scenario_properties",),
     "rideid.estimate.identify": ("DEFAULT_GENERATIONS", "DEFAULT_POPULATION", "parse_model_arg"),
     "rideid.estimate.adequacy": ("verdict_paragraph",), "rideid.estimate.dampers": ("format_dampers",),
     "rideid.estimate.bumps": ("format_bump_stops",), "rideid.design": ("parse_target",),

@@ -219,7 +219,7 @@ def _alternatives(ds, rid):
     return [(desc, r) for (desc, _), r in zip(tries, rhos)]
 
 
-def check_dataset(ds, car=None) -> list[Finding]:
+def check_dataset(ds, car=None, simulator=None) -> list[Finding]:
     """Run the data checks on every run of a loaded dataset.
 
     Coverage, wiring (rigid body and road assignment), and the match of
@@ -240,8 +240,10 @@ def check_dataset(ds, car=None) -> list[Finding]:
         Every run conditioned and aligned.
     car : (12,) array, optional
         The nominal car's parameter vector (default ``nominal_car(ds.geometry)``).
+    simulator : rideid.model.simulator.Simulator, optional
+        How it is simulated (its linear car; default ``Simulator()``).
     """
-    return run_steps(check_steps(ds), ds.geometry, car)
+    return run_steps(check_steps(ds), ds.geometry, car, None if simulator is None else simulator.linear())
 
 
 def check_steps(ds):

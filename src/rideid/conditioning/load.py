@@ -19,7 +19,7 @@ from .nominal import gather, run_steps
 from .starts import speed_channel_std, start_steps
 
 
-def load_dataset(path, starts: dict[str, float] | None = None) -> Dataset:
+def load_dataset(path, starts: dict[str, float] | None = None, simulator=None) -> Dataset:
     """Load and validate a dataset folder (or its ``dataset.toml``), ready to identify.
 
     Two steps, each available on its own, top-down: :func:`rideid.data.dataset.read_dataset` (formats and
@@ -40,6 +40,9 @@ def load_dataset(path, starts: dict[str, float] | None = None) -> Dataset:
     starts : dict, optional
         Run id -> start (file time, s) to use instead of estimating it, e.g.
         the starts a previous identification settled on (``result.json``).
+    simulator : rideid.model.simulator.Simulator, optional
+        How the nominal car is simulated (backend, integration settings;
+        default ``Simulator()``, the linear car as ``RIDEID_KERNEL`` says).
 
     Returns
     -------
@@ -51,10 +54,10 @@ def load_dataset(path, starts: dict[str, float] | None = None) -> Dataset:
         Naming the file, key or column at fault.
     """
     ds = read_dataset(path)
-    return align_starts(ds, starts)
+    return align_starts(ds, starts, simulator=simulator)
 
 
-def align_starts(ds: Dataset, starts: dict[str, float] | None = None, car=None) -> Dataset:
+def align_starts(ds: Dataset, starts: dict[str, float] | None = None, car=None, simulator=None) -> Dataset:
     """The estimation step of loading: fix the start of every measured run.
 
     A start given in ``starts`` or in the run's ``[preprocess] start`` is
@@ -73,11 +76,14 @@ def align_starts(ds: Dataset, starts: dict[str, float] | None = None, car=None) 
         The nominal car's parameter vector (default
         ``nominal_car(ds.geometry)``): the car the starts are estimated with
         and the checks compare the data with.
+    simulator : rideid.model.simulator.Simulator, optional
+        How it is simulated (default ``Simulator()``: the linear car). The nominal car is linear: the model to
+        fit is not chosen yet, and a start and a wiring check need only the car's main response.
     """
     # the starts, then the checks, as one step: the nominal car is simulated a round at a time, every run's
     # requests of a round in one batch (rideid.conditioning.nominal)
     step = _aligned(ds, starts)
-    ds, findings = run_steps(step, ds.geometry, car)
+    ds, findings = run_steps(step, ds.geometry, car, None if simulator is None else simulator.linear())
     enforce(findings, f"{ds.manifest.path}: ")
     return replace(ds, findings=findings)
 

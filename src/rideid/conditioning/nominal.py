@@ -6,8 +6,8 @@ simulations they need (a list of :class:`Job`) and receive the responses
 back, and return their result. They never run the model themselves.
 :func:`run_steps` is the one place that does: it takes the requests of
 every pending step, simulates them together (the inputs of the jobs
-prepared on parallel threads, then one :class:`rideid.model.batch.BatchSimulator`
-over all of them), hands every step its responses, and goes on until all
+prepared on parallel threads, then the :class:`rideid.model.simulator.Simulator` it is
+given, bound to all of them), hands every step its responses, and goes on until all
 have returned. :func:`gather` runs many steps side by side (every run of a
 dataset, every start candidate of a run), so a round simulates what all of
 them need at once; a step whose next simulation depends on a result (the
@@ -22,13 +22,13 @@ from __future__ import annotations
 
 from typing import NamedTuple
 
-import numba
 import numpy as np
 
-from ..model.batch import BatchSimulator, thread_map
+from ..model import backend
+from ..model.batch import thread_map
 from ..model.contact import envelope_grid
-from ..model.params import nominal_car
 from ..model.simulate import ENVELOPE_DX, prepare_run
+from ..model.simulator import Simulator
 
 
 class Job(NamedTuple):
@@ -55,7 +55,7 @@ def _grid(job: Job) -> tuple[np.ndarray, int]:
 def _prefetch_envelopes(jobs, geom) -> None:
     """Tabulate every wheel path's envelope on parallel threads, the longest first (with one thread: nothing
     ahead; :func:`rideid.model.simulate.prepare_run` tabulates them as it goes)."""
-    if numba.get_num_threads() < 2:
+    if backend.threads() < 2:
         return
     paths = {}
     for job in jobs:
@@ -72,9 +72,10 @@ def _prefetch_envelopes(jobs, geom) -> None:
     thread_map(envelope, sorted(paths.values(), key=lambda p: -(p.extent[1] - p.extent[0])), "rideid-inputs")
 
 
-def simulate_jobs(P, geom, jobs: list[Job]) -> list:
-    """The response ``(n, 10)`` of the car ``P`` (``(12,)``; None: the nominal car
-    :func:`rideid.model.params.nominal_car`) for every job, in one batch.
+def simulate_jobs(P, geom, jobs: list[Job], simulator: Simulator | None = None) -> list:
+    """The response ``(n, 10)`` of the car ``P`` (one row of ``simulator``'s model, or of the linear car;
+    None: the nominal car :meth:`rideid.model.simulator.Simulator.nominal`) for every job, in one batch,
+    simulated by ``simulator`` (default the linear car, ``Simulator()``).
 
     The jobs' inputs are prepared on parallel threads
     (:func:`rideid.model.batch.thread_map`), then simulated together. A job
@@ -94,8 +95,9 @@ def simulate_jobs(P, geom, jobs: list[Job]) -> list:
 
     prepared = thread_map(inputs, range(len(jobs)), "rideid-inputs")
     ok = [p for p in prepared if not isinstance(p, Exception)]
-    car = nominal_car(geom) if P is None else P
-    outs = iter(BatchSimulator(geom, [ri for ri, _ in ok]).outputs(np.atleast_2d(car)) if ok else [])
+    simulator = Simulator() if simulator is None else simulator
+    car = simulator.nominal(geom) if P is None else simulator.row(P)
+    outs = iter(simulator.bind(geom, [ri for ri, _ in ok]).outputs(np.atleast_2d(car)) if ok else [])
     return [p if isinstance(p, Exception) else next(outs)[0][p[1]:] for p in prepared]
 
 
@@ -149,16 +151,17 @@ def gather(steps):
     return results
 
 
-def run_steps(step, geom, car=None):
-    """Run a step to its end, simulating what it asks for with the car ``car`` (``(12,)``; default the
-    nominal car :func:`rideid.model.params.nominal_car`); returns the step's result."""
+def run_steps(step, geom, car=None, simulator: Simulator | None = None):
+    """Run a step to its end, simulating what it asks for with the car ``car`` (one row of ``simulator``'s
+    model, or of the linear car; default the nominal car) by ``simulator`` (default the linear car,
+    ``Simulator()``); returns the step's result."""
     got = None
     while True:
         try:
             jobs = next(step) if got is None else step.send(got)
         except StopIteration as stop:
             return stop.value
-        got = simulate_jobs(car, geom, jobs)
+        got = simulate_jobs(car, geom, jobs, simulator)
 
 
 __all__ = ["Job", "gather", "responses", "run_steps", "simulate_jobs"]

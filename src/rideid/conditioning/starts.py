@@ -181,7 +181,7 @@ def _fixed_point(mr: MeasuredRun, track, tm, s):
     return s, score
 
 
-def estimate_start(mr: MeasuredRun, P, geom, track):
+def estimate_start(mr: MeasuredRun, P, geom, track, simulator=None):
     """``(start, correlation)``: the run's start (file time when the front axle reaches x = 0) for
     the car ``P``, by cross-correlation over all lags, to a fraction of a sample.
 
@@ -195,10 +195,11 @@ def estimate_start(mr: MeasuredRun, P, geom, track):
     self-consistent one wins. The correlation returned is the mean normalised
     correlation over the channels that are not zero, at the peak. Only the
     car's response is simulated; the run's samples are read as they are
-    (:func:`start_steps`, run by :func:`rideid.conditioning.nominal.run_steps`).
+    (:func:`start_steps`, run by :func:`rideid.conditioning.nominal.run_steps` with ``simulator``, a
+    :class:`rideid.model.simulator.Simulator` of ``P``'s model; default the linear car).
     """
     steps = start_steps(mr, geom, track)
-    return run_steps(steps, geom, P)
+    return run_steps(steps, geom, P, simulator)
 
 
 # ---------------------------------------------------------------------------
@@ -208,8 +209,11 @@ def estimate_start(mr: MeasuredRun, P, geom, track):
 SHIFT_STEP = 0.1
 
 
-def linearise_starts(ds, P, starts: dict, derivative: bool = True):
+def linearise_starts(ds, P, starts: dict, simulator=None, derivative: bool = True):
     """The runs of ``starts`` read at those starts, and car ``P``'s response derivative with respect to each.
+
+    ``P`` is one row of ``simulator``'s model (a :class:`rideid.model.simulator.Simulator`; default the
+    linear car): the derivative is the model's that is being fitted, damper curves and bump stops included.
 
     Returns ``(dataset, D)``: ``ds.with_starts(starts)`` (:meth:`rideid.data.dataset.Dataset.with_starts`;
     ``ds`` is not changed), and run id ->
@@ -230,12 +234,13 @@ def linearise_starts(ds, P, starts: dict, derivative: bool = True):
         for sign in (-1, 1):
             rd = mr.run_data(s + sign * eps[rid])
             jobs.append(Job(track, rd.time, mr.speed, rd.distance))
-    y = responses(simulate_jobs(P, ds.geometry, jobs)) if jobs else []
+    y = responses(simulate_jobs(P, ds.geometry, jobs, simulator)) if jobs else []
     return at, {rid: (y[2 * k + 1] - y[2 * k]) / (2 * eps[rid]) for k, rid in enumerate(starts)}
 
 
-def cycle_slips(ds, P, starts: dict) -> dict:
-    """The constant-speed runs of ``starts`` whose all-lags correlation with car ``P`` peaks a cycle away.
+def cycle_slips(ds, P, starts: dict, simulator=None) -> dict:
+    """The constant-speed runs of ``starts`` whose all-lags correlation with car ``P`` (a row of
+    ``simulator``'s model; default the linear car) peaks a cycle away.
 
     On a periodic track the nominal car may have picked a neighbouring cycle
     (the polish only moves a start by a few samples). Where car ``P``'s
@@ -252,7 +257,7 @@ def cycle_slips(ds, P, starts: dict) -> dict:
         mr = ds.measured[rid]
         if mr.distance is not None:
             continue
-        s, _ = estimate_start(mr, P, ds.geometry, ds.manifest.tracks[ds.manifest.run(rid).track])
+        s, _ = estimate_start(mr, P, ds.geometry, ds.manifest.tracks[ds.manifest.run(rid).track], simulator)
         if abs(s - s0) > 2.0 / mr.fs:
             moved[rid] = s
     return moved

@@ -38,6 +38,7 @@ import numpy as np
 from ..data.scenario import LIFT_OFF_RHO
 from ..estimate.dampers import MIN_SAMPLES, knot_counts, suspension_velocities_by_run
 from ..model.nonlinear import DEFAULT_KNOTS, curve_names, damper_force
+from ..model.simulator import Simulator
 
 CURVES = "damper_curves"
 AXLES = ("front", "rear")
@@ -70,7 +71,7 @@ def run_counts(space, sim, P0, rho: float | None = None) -> np.ndarray:
     """Per run and axle the samples beyond the previous knot, ``(n_runs, 2, K)``, of car ``P0`` (a full row)."""
     if rho is None:
         rho = LIFT_OFF_RHO
-    cf = SimpleNamespace(space=space, sim=sim)
+    cf = SimpleNamespace(space=space, sim=sim, simulator=Simulator(space.layout))
     knots = space.layout.knots
     return np.array([[knot_counts(knots, v) for v in pair]
                      for pair in suspension_velocities_by_run(cf, P0, rho=rho)])

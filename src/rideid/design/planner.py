@@ -14,7 +14,9 @@ import numpy as np
 from ..data.scenario import load_scenario
 from ..data.schema import Scenario
 from ..errors import ArgumentError, DataError
-from ..estimate.cost import CurveSimulator, ParameterSpace
+from ..estimate.cost import ParameterSpace
+from ..model.nonlinear import PinnedSimulator
+from ..model.simulator import Simulator
 from ..estimate.sensitivity import compute_maps
 from ..model.equations import CHANNELS
 from ..model.nonlinear import curve_names
@@ -514,8 +516,9 @@ def gather_information(pb: PlanProblem, opts: PlanOptions) -> PlanInformation:
         if len(pb.road_ids) < len(pb.run_ids) else None
     lin_sim, exc = sim, None
     if pb.curves:
-        sim = CurveSimulator(sc.geometry, sim.runs, pb.space.layout)
-        sim.pin_at(pb.P0[None], margin=1.0)  # one integrator for every row of the differences
+        curve_sim = Simulator(pb.space.layout).bind(sc.geometry, sim.runs)
+        # one integrator for every row of the differences
+        sim = PinnedSimulator(curve_sim, curve_sim.pin_at(pb.P0[None], margin=1.0))
         exc = Excitation(pb.space.layout.knots, run_counts(pb.space, sim, pb.P0), pb.names)
         if sc.dampers is not None and pb.knots_from == "default knots (SPEC §8)":
             notes.append("the [dampers] velocities are not symmetric: the plan's car is the truth curve sampled at "
@@ -664,7 +667,7 @@ def _sensitivity_method(pb: PlanProblem, opts: PlanOptions, inf: PlanInformation
     if pb.curves:
         sens["method"] = ("central finite differences through the compiled nonlinear car (damper curves, RK4 with "
                           "its sub-step count pinned at the nominal car's for every row of the differences)")
-        sens["substeps"] = {rid: int(m) for rid, m in zip(pb.run_ids, inf.sim.pin)}
+        sens["substeps"] = {rid: int(m) for rid, m in zip(pb.run_ids, inf.sim.pin.substeps)}
     return sens
 
 

@@ -313,7 +313,8 @@ def identify_any_road(ds, **kw) -> IdentificationResult:
 
 
 def _identify_any_road(ds, *, rng=None, seed=None, population=None, generations=None, model=None,
-                       polish: bool = True, callback=None, assess: bool = True, **_ignored) -> IdentificationResult:
+                       polish: bool = True, callback=None, assess: bool = True, simulator=None,
+                       **_ignored) -> IdentificationResult:
     t0 = time.perf_counter()
     gen, rng_record = make_rng(rng, seed)
     note = None
@@ -342,9 +343,9 @@ def _identify_any_road(ds, *, rng=None, seed=None, population=None, generations=
     if track_runs:
         ds_t = _sub_dataset(ds, track_runs)
         first = identify_model(ds_t, rng=gen, population=population, generations=generations, model=list(ext),
-                               polish=polish, callback=callback, assess=False)
+                               polish=polish, callback=callback, assess=False, simulator=simulator)
         x0 = np.array([first.parameters[n] for n in space.names])
-        cf = CostFunction(ds_t, space=space)
+        cf = CostFunction(ds_t, space=space, simulator=simulator)
         nit, nfev, stop = first.nit, first.nfev, first.stop
         history = list(first.history)
     else:

@@ -37,9 +37,11 @@ limit of the clearance).
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 
-from ..model.nonlinear import BUMP_STOP_NAMES, NonlinearSimulator, check_nonlinear, travel_by_run
+from ..model.nonlinear import BUMP_STOP_NAMES, check_nonlinear, travel_by_run
 from .adequacy import MIN_IMPROVEMENT
 
 #: samples (both corners of the axle, all runs) beyond the clearance that make a stop reached
@@ -65,7 +67,7 @@ def compressions(cf, P) -> tuple[np.ndarray, np.ndarray]:
     """Suspension compressions (m, from static ride height, compression +) of car ``P`` (a full row of
     ``cf.space``) over every run of ``cf``: ``(front, rear)``, both corners of each axle concatenated."""
     geom, layout = cf.space.geometry, cf.space.layout
-    sim = NonlinearSimulator(geom, cf.sim.runs, layout, rho=STATE_RHO)
+    sim = replace(cf.simulator, layout=layout, rho=STATE_RHO).bind(geom, cf.sim.runs)
     d = travel_by_run(sim, check_nonlinear(P, geom, layout), P[cf.space.col["a"]])
     return np.concatenate([t[:, :2].ravel() for t in d]), np.concatenate([t[:, 2:].ravel() for t in d])
 

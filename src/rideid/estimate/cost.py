@@ -29,7 +29,7 @@ free parameters and the forces at the velocity knots join them (names
 knots: the dataset's ``[model] damper_knots`` mirrored into rebound, else
 :data:`rideid.model.nonlinear.DEFAULT_KNOTS`). Full rows then have the
 :class:`~rideid.model.nonlinear.NonlinearLayout` columns (16 + 2K) and the
-cost simulates the nonlinear car (:func:`rideid.model.nonlinear.make_simulator`;
+cost simulates the nonlinear car (:class:`rideid.model.simulator.Simulator` of that layout;
 without curves the linear simulator as before). Every row that reaches the
 simulator is a physical damper (:meth:`ParameterSpace.full`): the forces are
 made monotone outward from 0 (running maximum in compression, running minimum
@@ -41,13 +41,16 @@ in rebound: the identity for a monotone row), knots that no run excites
 
 from __future__ import annotations
 
+import threading
+
 import numpy as np
 
 from ..data.dataset import Dataset, check_known_consistent, prepare_inputs, scale_anchor
 from ..errors import ArgumentError, DataError
 from ..model.equations import CHANNEL_KIND, CHANNELS
-from ..model.nonlinear import (BUMP_STOP_NAMES, DEFAULT_KNOTS, NonlinearLayout, NonlinearSimulator, curve_names,
-                               damper_force, make_simulator, substeps)
+from ..model.nonlinear import (BUMP_STOP_NAMES, DEFAULT_KNOTS, NonlinearLayout, NonlinearSimulator, Pin,
+                               curve_names, damper_force)
+from ..model.simulator import Simulator
 from ..model.params import (ALL_NAMES, EXT_NAMES, GROUPS, INDEX, MASS_COUNT, NAMES, default_bounds, nominal_car,
                             total_mass)
 from ..data.schema import NONLINEAR_GROUPS
@@ -386,6 +389,17 @@ class ParameterSpace:
         return self.full(x)[0]
 
 
+def _measured(ds: Dataset):
+    """The runs' measured channels stacked ``(n_samples, 10)`` (0 where missing) and the channel weights
+    ``(n_runs, 10)`` (:func:`channel_weights`, 0 for a missing channel)."""
+    Ys, Ws = [], []
+    for r in ds.runs:
+        Y = ds.data[r.id].matrix()
+        Ws.append(channel_weights(Y))
+        Ys.append(np.nan_to_num(Y, nan=0.0))
+    return np.ascontiguousarray(np.concatenate(Ys)), np.array(Ws)
+
+
 class EvaluationCounter:
     """How many candidates (rows) were evaluated: one count that several cost functions of one
     identification share (:meth:`CostFunction.with_space`), so no caller adds counts up by hand.
@@ -398,6 +412,7 @@ class EvaluationCounter:
 
     def __init__(self, n: int = 0):
         self._n = int(n)
+        self._lock = threading.Lock()  # threads of one fit may count at once
 
     @property
     def n(self) -> int:
@@ -405,7 +420,8 @@ class EvaluationCounter:
 
     def add(self, k: int):
         """Count ``k`` more evaluated candidates."""
-        self._n += int(k)
+        with self._lock:
+            self._n += int(k)
 
 
 class CostFunction:
@@ -424,6 +440,12 @@ class CostFunction:
     extensions : sequence of str, optional
         Extension groups of the model when ``space`` is not given (default:
         the dataset's ``[model] extensions``, else none: the twelve).
+    counter : EvaluationCounter, optional
+        Count evaluations on an existing count (default a new one).
+    simulator : Simulator, optional
+        How the car is simulated (backend, integration settings;
+        :class:`rideid.model.simulator.Simulator`, default ``Simulator()``),
+        for the space's model (its layout is the space's).
 
     Attributes
     ----------
@@ -434,10 +456,14 @@ class CostFunction:
     nfev : int
         Candidates evaluated, counted by :attr:`counter` (an :class:`EvaluationCounter`, shared with the
         cost functions built with it: ``counter`` argument, :meth:`with_space`).
+    simulator : Simulator
+        The settings it simulates with; ``sim`` the runs bound to them (never changed by an evaluation).
+    pin : Pin or None
+        The nonlinear integrator's floor its evaluations use (:meth:`with_pin`; the polish's), else None.
     """
 
     def __init__(self, ds: Dataset, weights=None, use_kernel: bool = True, space: ParameterSpace | None = None,
-                 extensions=None, counter: "EvaluationCounter | None" = None):
+                 extensions=None, counter: "EvaluationCounter | None" = None, simulator: Simulator | None = None):
         unaligned = [r.id for r in ds.runs if r.id not in ds.data]
         if unaligned:
             raise ArgumentError(f"runs {', '.join(unaligned)} have no start yet: load the dataset with "
@@ -448,25 +474,24 @@ class CostFunction:
                 refuse_unsupported_groups(extensions, f"{ds.manifest.path}: [model] extensions")
             space = ParameterSpace(ds.known, ds.geometry, ds.manifest.bounds, extensions=extensions,
                                    damper_knots=ds.manifest.damper_knots)
-        runs, Ys, Ws = prepare_inputs(ds), [], []
-        for r in ds.runs:
-            Y = ds.data[r.id].matrix()
-            Ws.append(channel_weights(Y))
-            Ys.append(np.nan_to_num(Y, nan=0.0))
-        # the linear BatchSimulator unless the model has damper curves (rideid.model.nonlinear)
-        sim = make_simulator(ds.geometry, runs, space.layout) if space.layout is None else \
-            CurveSimulator(ds.geometry, runs, space.layout)
-        self._build(ds, space, sim, np.ascontiguousarray(np.concatenate(Ys)), np.array(Ws), use_kernel, weights,
-                    counter)
+        # the given settings (backend, integration) for this space's model: the linear car unless it has
+        # damper curves or bump stops (rideid.model.nonlinear)
+        simulator = (Simulator() if simulator is None else simulator).for_layout(space.layout)
+        sim = simulator.bind(ds.geometry, prepare_inputs(ds))
+        Y, W = _measured(ds)
+        self._build(ds, space, simulator, sim, Y, W, use_kernel, weights, counter, None)
 
-    def _build(self, ds, space, sim, Y, W, use_kernel, weights, counter):
-        """Every attribute, set once: the prepared data (``sim``, ``Y``, ``W``) shared by copies."""
+    def _build(self, ds, space, simulator, sim, Y, W, use_kernel, weights, counter, pin):
+        """Every attribute, set once: the prepared data (``sim``, ``Y``, ``W``) shared by copies, none of
+        which is ever changed (a copy that differs, differs by a new value: :meth:`with_pin`)."""
         self.ds = ds
         self.space = space
         self.names = list(space.names)
         self.bounds = space.bounds
         self.run_ids = [r.id for r in ds.runs]
+        self.simulator = simulator
         self.sim = sim
+        self.pin = pin
         self.Y = Y
         self.W = W
         self.use_kernel = use_kernel
@@ -484,7 +509,7 @@ class CostFunction:
     def with_space(self, space: ParameterSpace, weights=None, counter: "EvaluationCounter | None" = None
                    ) -> "CostFunction":
         """A new cost function on ``space`` (a parameter space of the same simulator layout), sharing the
-        prepared runs and data (not copied).
+        prepared runs and data (not copied) and the pin.
 
         Parameters
         ----------
@@ -499,8 +524,30 @@ class CostFunction:
             raise ArgumentError("with_space: the new parameter space needs another simulator "
                                 "(damper curves or bump stops differ); build a CostFunction instead")
         new = CostFunction.__new__(CostFunction)
-        new._build(self.ds, space, self.sim, self.Y, self.W, self.use_kernel, weights, counter)
+        new._build(self.ds, space, self.simulator, self.sim, self.Y, self.W, self.use_kernel, weights, counter,
+                   self.pin)
         return new
+
+    def with_pin(self, pin: Pin | None) -> "CostFunction":
+        """This cost function (same space, data, weights and count) evaluating with the nonlinear
+        integrator's floor ``pin`` (:meth:`rideid.model.nonlinear.NonlinearSimulator.pin_at`; None: none)."""
+        new = CostFunction.__new__(CostFunction)
+        new._build(self.ds, self.space, self.simulator, self.sim, self.Y, self.W, self.use_kernel, self.weights,
+                   self.counter, pin)
+        return new
+
+    def pinned_at(self, P, margin: float = 1.5) -> "CostFunction":
+        """:meth:`with_pin` at the polish's start ``P`` (a full row); the linear car has no sub-steps to pin."""
+        if not isinstance(self.sim, NonlinearSimulator):
+            return self
+        return self.with_pin(self.sim.pin_at(np.atleast_2d(P), margin))
+
+    def with_data(self, ds: Dataset) -> "CostFunction":
+        """The same cost function (space, simulator settings, pin, count; equal weights) on ``ds``, the same
+        runs read anew (e.g. at other starts)."""
+        new = CostFunction(ds, space=self.space, counter=self.counter, simulator=self.simulator,
+                           use_kernel=self.use_kernel)
+        return new.with_pin(self.pin)
 
     def copy(self, weights=None) -> "CostFunction":
         """A copy sharing the prepared runs and data, with its own weights
@@ -520,14 +567,14 @@ class CostFunction:
         E = np.full((len(self.run_ids), P.shape[0]), np.inf)
         if ok.any():
             fn = self.sim.errors if self.use_kernel else self.sim.errors_reference
-            if isinstance(self.sim, CurveSimulator) and self.sim.pin is None:
+            if isinstance(self.sim, NonlinearSimulator) and self.pin is None:
                 # the RK4 sub-step is set by the stiffest candidate of a call: candidates grouped by
                 # their own need, so a few stiff ones of a search population do not slow the rest
                 idx = np.nonzero(ok)[0]
                 for group in self.sim.groups(P[idx]):
                     E[:, idx[group]] = fn(P[idx[group]], self.Y, self.W)
             else:
-                E[:, ok] = fn(P[ok], self.Y, self.W)
+                E[:, ok] = fn(P[ok], self.Y, self.W, pin=self.pin)
         self.counter.add(P.shape[0])
         return E
 
@@ -548,7 +595,7 @@ class CostFunction:
         the run's used channels (``W[r] > 0``) within each sample.
         """
         P = self.space.full(X)
-        outs = self.sim.outputs(P)
+        outs = self.sim.outputs(P, pin=self.pin)
         w = self.weights if weights is None else np.asarray(weights, dtype=float)
         Y = self.Y if Y is None else Y
         parts = []
@@ -568,56 +615,5 @@ class CostFunction:
         """Simulated channels ``(n_time, 10)`` per run for one full parameter vector (12 or 16; with
         damper curves the space's :attr:`ParameterSpace.width`)."""
         P = np.asarray(params, dtype=float).reshape(1, -1)
-        outs = self.sim.outputs(P)
+        outs = self.sim.outputs(P, pin=self.pin)
         return {rid: o[0] for rid, o in zip(self.run_ids, outs)}
-
-
-class CurveSimulator(NonlinearSimulator):
-    """The nonlinear simulator of a damper-curve model, with two controls of its RK4 sub-steps.
-
-    :meth:`groups` splits a population by each candidate's own sub-step count
-    (buckets :data:`SUBSTEP_BUCKETS`): the search evaluates each group in one call. :attr:`pin`
-    (per run, or None) is a floor on the sub-steps: the polish pins them at its start (with a
-    margin), so every residual it differences is computed with the same integrator and the
-    Jacobian sees no jump where the stiffest segment's count would change; it pins the knots where the
-    sub-steps are split as well (every interior knot, whatever the start's curves: the polish bends
-    them), so no difference quotient's curve is split where its neighbour's is not.
-    """
-
-    #: sub-step counts are rounded up to these (groups stay few and large)
-    SUBSTEP_BUCKETS = (1, 2, 3, 4, 6, 8, 12, 16, 24, 32, 48, 64, 96, 128, 256, 512, 1024, 4096)
-
-    def __init__(self, geom, runs, layout):
-        super().__init__(geom, runs, layout)
-        self.pin = None
-        self.pin_kinks = None
-
-    def substeps(self, P) -> list[int]:
-        m = super().substeps(P)
-        return m if self.pin is None else [max(a, b) for a, b in zip(m, self.pin)]
-
-    def kinks(self, P):
-        return super().kinks(P) if self.pin_kinks is None else self.pin_kinks
-
-    def candidate_substeps(self, P) -> np.ndarray:
-        """Largest sub-step count over the runs of each candidate, ``(n,)``."""
-        P = self.layout.rows(P)
-        hs = sorted({r.h for r in self.runs})
-        return np.array([max(substeps(P[i:i + 1], self.geom, self.layout, h) for h in hs)
-                         for i in range(P.shape[0])])
-
-    def groups(self, P) -> list[np.ndarray]:
-        """Indices of ``P``'s rows grouped by their bucketed sub-step count."""
-        m = self.candidate_substeps(P)
-        b = np.searchsorted(np.array(self.SUBSTEP_BUCKETS), m)
-        return [np.nonzero(b == k)[0] for k in np.unique(b)]
-
-    def pin_at(self, P, margin: float = 1.5):
-        """Pin the sub-steps at ``margin`` times those of rows ``P`` (the polish's start); None unpins."""
-        self.pin = None if P is None else [int(np.ceil(margin * m)) for m in super().substeps(P)]
-        if P is None:
-            self.pin_kinks = None
-        else:  # every interior knot: the polish moves the curves, and a bend at a knot its start had not
-            mask = super().kinks(P)  # (a linear start's F = c v bends at none) must still be split (7e-4 unsplit)
-            mask[:, 1:-1] = 1
-            self.pin_kinks = mask

@@ -21,9 +21,11 @@ error: "not excited — not a number to trust").
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 
-from ..model.nonlinear import NonlinearSimulator, check_nonlinear, travel_by_run
+from ..model.nonlinear import check_nonlinear, travel_by_run
 from ..data.scenario import LIFT_OFF_RHO
 
 #: samples (both corners of the axle, all runs) beyond the previous knot that make a knot excited
@@ -41,8 +43,9 @@ def suspension_velocities_by_run(cf, P, rho: float | None = None) -> list[tuple[
     the lift-off bound (:data:`rideid.data.scenario.LIFT_OFF_RHO`, within 0.02-0.3 % of the kernel's
     outputs)."""
     geom, layout = cf.space.geometry, cf.space.layout
-    sim = NonlinearSimulator(geom, cf.sim.runs, layout) if rho is None else \
-        NonlinearSimulator(geom, cf.sim.runs, layout, rho=rho, split=False)
+    settings = cf.simulator.for_layout(layout) if rho is None else replace(cf.simulator, layout=layout, rho=rho,
+                                                                           split=False)
+    sim = settings.bind(geom, cf.sim.runs)
     v = travel_by_run(sim, check_nonlinear(P, geom, layout), P[cf.space.col["a"]], rates=True)
     return [(t[:, :2].ravel(), t[:, 2:].ravel()) for t in v]
 

@@ -73,6 +73,7 @@ from ..model.equations import modal_summary
 from ..data.schema import NONLINEAR_GROUPS
 from ..model.nonlinear import BUMP_STOP_NAMES
 from ..model.params import ALL_NAMES, GROUPS, UNITS
+from ..model.simulator import Simulator
 from .bumps import bump_block, frozen_values, reach, scan_start
 from .dampers import dampers_block, knot_excitation
 from .cost import BUMP_UNITS, IDENTIFIABLE_GROUPS, CostFunction, ParameterSpace, refuse_unsupported_groups
@@ -148,7 +149,7 @@ def identify(ds: Dataset, *, rng=None, seed=None, population: int = DEFAULT_POPU
              generations: int = DEFAULT_GENERATIONS, weights: str = "adaptive", polish: bool = True,
              spread_tol: float | None = None, callback=None, cost: CostFunction | None = None,
              maps: SensitivityMaps | None = None, model=None, start=None,
-             assess: bool = True) -> IdentificationResult:
+             assess: bool = True, simulator: Simulator | None = None) -> IdentificationResult:
     """Estimate the ride parameters of a dataset.
 
     Parameter space -> global search (JADE with track weighting) -> polish
@@ -204,6 +205,10 @@ def identify(ds: Dataset, *, rng=None, seed=None, population: int = DEFAULT_POPU
     assess : bool
         Compute the adequacy verdict (:mod:`rideid.estimate.adequacy`; a few
         seconds); ``False`` leaves ``adequacy`` None.
+    simulator : Simulator, optional
+        How the car is simulated (backend, integration settings:
+        :class:`rideid.model.simulator.Simulator`; default ``Simulator()``),
+        for every stage of the fit. Ignored when ``cost`` is given (its own).
 
     Returns
     -------
@@ -220,7 +225,8 @@ def identify(ds: Dataset, *, rng=None, seed=None, population: int = DEFAULT_POPU
     gen, rng_record = make_rng(rng, seed)
     with single_threaded_blas():
         t0 = time.perf_counter()
-        cf = (cost if cost is not None else CostFunction(ds, extensions=model_extensions(ds, model))).copy()
+        cf = (cost if cost is not None else CostFunction(ds, extensions=model_extensions(ds, model),
+                                                         simulator=simulator)).copy()
         # damper curves, bump stops: the search on the linear model (steps 9, 10 of the module docstring)
         # (a start is then the linear model's row: the curves start as its F = c v)
         nonlinear = cf.space.layout is not None
@@ -240,8 +246,8 @@ def identify(ds: Dataset, *, rng=None, seed=None, population: int = DEFAULT_POPU
         fit = polish_fit(ds, cf, x0) if polish else None
         if fit is not None and cf.space.bump:
             fit, bumps = _bump_recheck(ds, fit, bumps)
-        if fit is not None and nonlinear:
-            fit.cost.sim.pin_at(None)
+        if fit is not None and nonlinear:  # the result's cost function evaluates as any other
+            fit.cost = fit.cost.with_pin(None)
         return _result(ds, cf if fit is None else fit.cost, search, fit, weighting, maps, rng_record, t0, assess,
                        excitation, bumps)
 
@@ -254,7 +260,7 @@ def _linear_cost(ds, cf: CostFunction) -> CostFunction:
                            {k: v for k, v in sp._bounds_arg.items()
                             if not k.startswith("F_") and k not in BUMP_STOP_NAMES},
                            extensions=[g for g in sp.extensions if g not in NONLINEAR_GROUPS])
-    return CostFunction(cf.ds, space=space, counter=cf.counter)  # one count of evaluations
+    return CostFunction(cf.ds, space=space, counter=cf.counter, simulator=cf.simulator)  # one count
 
 
 def _curve_start(cf: CostFunction, cf_search: CostFunction, x):
@@ -297,9 +303,7 @@ def _curve_start(cf: CostFunction, cf_search: CostFunction, x):
         new = space.with_bump_frozen(bump_frozen)
         x = space.reduce(x, new)
         cf, space = cf.with_space(new, counter=cf.counter), new
-    cf2 = cf.with_space(space, counter=cf.counter)
-    P = space.full(np.asarray(x, dtype=float)[None])[0]
-    cf2.sim.pin_at(P[None])
+    cf2 = cf.with_space(space, counter=cf.counter).pinned_at(space.full(np.asarray(x, dtype=float)[None]))
     return cf2, x, excitation, bumps
 
 
@@ -326,8 +330,7 @@ def _bump_recheck(ds, fit, bumps):
             break
         new = space.with_bump_frozen({**space.bump_frozen, **add})
         x = space.reduce(fit.x, new)
-        cf2 = cf.with_space(new, counter=cf.counter)
-        cf2.sim.pin_at(new.full(x[None]))
+        cf2 = cf.with_space(new, counter=cf.counter).with_pin(None).pinned_at(new.full(x[None]))
         fit = polish_fit(ds, cf2, x)
     return fit, bumps
 
@@ -740,16 +743,16 @@ def _polish_aligned(ds, cf, x_best, equal):
     for _ in range(REALIGN_MAX + 1):
         P = cf.space.full(x_best[None])[0]
         last = settled or len(rounds) == REALIGN_MAX
-        ds_now, D = linearise_starts(ds, P, starts, derivative=not last)
-        # the model's time axes moved with the starts: the cost function on them
-        cf = CostFunction(ds_now, space=cf.space, counter=cf.counter)
+        ds_now, D = linearise_starts(ds, P, starts, cf.simulator, derivative=not last)
+        # the model's time axes moved with the starts: the cost function (space, simulator, pin) on them
+        cf = cf.with_data(ds_now)
         if last:
             break
         shifts = [_Shift(cf.run_ids.index(rid), rid, ds.measured[rid].fs, s, D[rid]) for rid, s in starts.items()]
         x_best, info, std = _polish(cf, x_best, equal, shifts)
         fitted = {rid: st["value"] for rid, st in info["starts"].items()}
         worst = max(abs(v - starts[rid]) * ds.measured[rid].fs for rid, v in fitted.items())
-        moved = cycle_slips(ds, cf.space.full(x_best[None])[0], fitted)
+        moved = cycle_slips(ds, cf.space.full(x_best[None])[0], fitted, cf.simulator)
         slipped = {rid: s - fitted[rid] for rid, s in moved.items()}
         starts = {**fitted, **moved}
         rounds.append({"max_change_samples": worst, **({"cycle_slips": slipped} if slipped else {})})

@@ -31,7 +31,6 @@ of 1000 datasets whose noise the robust covariance describes.
 
 from __future__ import annotations
 
-import functools
 import itertools
 import time
 from dataclasses import replace
@@ -42,10 +41,12 @@ from scipy import special
 from ..model.params import GROUPS
 from ..data.schema.manifest import vehicle_table
 from .adequacy import MIN_IMPROVEMENT, advise, assess_fit
-from .identify import identify as identify_model, warn_bounds
+from .identify import DEFAULT_GENERATIONS, DEFAULT_POPULATION, identify as identify_model, warn_bounds
 from .anyroad import identify_any_road, unknown_road_runs
 from ..model.batch import single_threaded_blas, thread_map
 from .cost import CostFunction, ParameterSpace, refuse_unsupported_groups
+from ..errors import ArgumentError
+from ..model.simulator import Simulator
 from ..data.checks import bound_findings
 
 #: per free extension parameter: a group of two enters at the 99.9 % point of chi-square(2)
@@ -109,7 +110,7 @@ def _own_adequacy(ds, cf, res):
     axes at the starts its own polish settled (a nested cost function still has the starts it began from)."""
 
     space = cf.space
-    cf = CostFunction(ds.with_starts(res.starts), space=space) if res.starts else cf
+    cf = cf.with_data(ds.with_starts(res.starts)) if res.starts else cf
     with single_threaded_blas():
         return assess_fit(cf, space.full(np.array([[res.parameters[n] for n in cf.names]]))[0], res.response)
 
@@ -148,7 +149,7 @@ def fits_better(extensions, costs: dict, min_improvement: float = MIN_IMPROVEMEN
     return all(mine <= cost - min_improvement for cand, cost in costs.items() if set(cand) < set(extensions))
 
 
-def identify_auto(ds, *, rng=None, seed=None, callback=None, maps=None, **kw):
+def identify_auto(ds, *, rng=None, seed=None, callback=None, maps=None, simulator=None, **kw):
     """:func:`rideid.identify` with ``model="auto"`` (module docstring).
 
     Returns the chosen candidate's :class:`~rideid.estimate.identify.IdentificationResult`
@@ -159,7 +160,8 @@ def identify_auto(ds, *, rng=None, seed=None, callback=None, maps=None, **kw):
     """
 
     t0 = time.perf_counter()
-    cf_full = CostFunction(ds, extensions=tuple(GROUPS))
+    cf_full = CostFunction(ds, extensions=tuple(GROUPS), simulator=simulator)
+    simulator = cf_full.simulator  # one value for every candidate
     full = identify_model(ds, rng=rng, seed=seed, callback=callback, maps=maps, cost=cf_full, **kw)
     pol = full.polish or {}
     names = list(pol.get("names", []))
@@ -204,7 +206,8 @@ def identify_auto(ds, *, rng=None, seed=None, callback=None, maps=None, **kw):
     # structure in the residuals for curves to explain (and the extra polish costs as much as the search)
     lin = results[chosen] = replace(results[chosen], adequacy=_own_adequacy(ds, costs[chosen], results[chosen]))
     curves_tried = bool(lin.adequacy) and not lin.adequacy.get("adequate", True)
-    curve = (curve_candidate(ds, lin, chosen, best, rng=rng, seed=seed, maps=full.maps, **kw_nested)
+    curve = (curve_candidate(ds, lin, chosen, best, rng=rng, seed=seed, maps=full.maps, simulator=simulator,
+                             **kw_nested)
              if curves_tried else None)
     if curve is not None:
         ckey, cf_c, r_c, c_crit = curve
@@ -227,7 +230,7 @@ def identify_auto(ds, *, rng=None, seed=None, callback=None, maps=None, **kw):
                 base_entry = next(c for c in crit if tuple(c["extensions"]) == sub_key_lin)
                 lin_entry = dict(base_entry, criterion=c_crit["criterion"] - PENALTY * c_crit["curve_dof"])
                 curve2 = curve_candidate(ds, results[sub_key_lin], sub_key_lin, lin_entry, rng=rng, seed=seed,
-                                         maps=full.maps, start_from=r_c, **kw_nested)
+                                         maps=full.maps, start_from=r_c, simulator=simulator, **kw_nested)
                 if curve2 is not None:
                     k2, cf2, r2, e2 = curve2
                     results[k2], costs[k2] = r2, cf2
@@ -250,7 +253,8 @@ def identify_auto(ds, *, rng=None, seed=None, callback=None, maps=None, **kw):
         now = results[chosen] = replace(now, adequacy=_own_adequacy(ds, costs[chosen], now))
     bump = None
     if curves_tried and not now.adequacy.get("adequate", True):
-        bump = bump_candidate(ds, now, chosen, best, rng=rng, seed=seed, maps=full.maps, **kw_nested)
+        bump = bump_candidate(ds, now, chosen, best, rng=rng, seed=seed, maps=full.maps, simulator=simulator,
+                              **kw_nested)
     if bump is not None:
         bkey, cf_b, r_b, e_b = bump
         results[bkey], costs[bkey] = r_b, cf_b
@@ -343,7 +347,8 @@ def _curve_subset(r_c, chosen, c_crit):
     return tuple(g for g in GROUPS if g in best["extensions"]), best["wald"]
 
 
-def curve_candidate(ds, lin, chosen, lin_crit, *, rng=None, seed=None, maps=None, start_from=None, **kw):
+def curve_candidate(ds, lin, chosen, lin_crit, *, rng=None, seed=None, maps=None, start_from=None, simulator=None,
+                    **kw):
     """Fit damper curves on top of the chosen linear model ``chosen`` (result ``lin``, its criterion
     entry ``lin_crit``): one polish on the nonlinear simulator from the linear car's curves ``F = c v``.
 
@@ -361,7 +366,7 @@ def curve_candidate(ds, lin, chosen, lin_crit, *, rng=None, seed=None, maps=None
     key = tuple(g for g in IDENTIFIABLE_ORDER if g in chosen or g == CURVES_GROUP)
     space = ParameterSpace(ds.known, ds.geometry, ds.manifest.bounds, extensions=key,
                            damper_knots=ds.manifest.damper_knots)
-    cf = CostFunction(ds, space=space)
+    cf = CostFunction(ds, space=space, simulator=simulator)
     if start_from is not None:  # a curve fit of a larger model: its values, knot forces included
         x0 = np.array([start_from.parameters[n] for n in space.names])
     else:
@@ -389,7 +394,7 @@ BUMP_CRITERION = ("bump stops: tried when the model chosen so far (damper curves
                   "stop parameter ends at its search bound (the bound's value, not the data's)")
 
 
-def bump_candidate(ds, prev, chosen, prev_crit, *, rng=None, seed=None, maps=None, **kw):
+def bump_candidate(ds, prev, chosen, prev_crit, *, rng=None, seed=None, maps=None, simulator=None, **kw):
     """Fit bump stops on top of the model ``chosen`` (result ``prev``, criterion entry ``prev_crit``).
 
     Returns ``(candidate key, cost function, result, criterion entry)`` or None when the group is in
@@ -402,7 +407,7 @@ def bump_candidate(ds, prev, chosen, prev_crit, *, rng=None, seed=None, maps=Non
     key = tuple(g for g in IDENTIFIABLE_ORDER + (BUMPS_GROUP,) if g in chosen or g == BUMPS_GROUP)
     space = ParameterSpace(ds.known, ds.geometry, ds.manifest.bounds, extensions=key,
                            damper_knots=ds.manifest.damper_knots)
-    cf = CostFunction(ds, space=space)
+    cf = CostFunction(ds, space=space, simulator=simulator)
     if CURVES_GROUP in chosen:  # the curve fit as it is (knot forces too), no stops yet: the scan starts them
         x0 = np.array([prev.parameters[n] if n in prev.parameters else
                        (0.0 if n.startswith("bs_rate") else float(space.bounds[space.names.index(n), 1]))
@@ -453,23 +458,73 @@ def default_model(ds, model=None):
     return model
 
 
-@functools.wraps(identify_model)
-def identify(ds, *args, model=None, cost=None, **kw):
-    # rideid.identify: the model choice for model="auto", else the fitted model as given; without a model
-    # (and without a cost, whose space decides) the command line's default (default_model)
-    # (the dispatch lives here, above both, so that identify and the model choice import one way)
+def identify(ds, *, model=None, rng=None, seed=None, population: int = DEFAULT_POPULATION,
+             generations: int = DEFAULT_GENERATIONS, weights: str = "adaptive", polish: bool = True,
+             spread_tol: float | None = None, callback=None, cost: CostFunction | None = None, maps=None,
+             start=None, assess: bool = True, simulator: Simulator | None = None):
+    """Estimate the ride parameters of a dataset, choosing the model as ``rideid identify`` does (SPEC §5).
+
+    The dispatch of the command line: runs on unknown roads (SPEC §9) are
+    fitted with the road projected out (:mod:`rideid.estimate.anyroad`);
+    ``model="auto"`` fits the candidate models and keeps the one the data
+    support (:func:`identify_auto`); any other model is fitted as given
+    (:func:`rideid.estimate.identify.identify`). The result carries the
+    dataset's vehicle (for ``rideid export``).
+
+    Parameters
+    ----------
+    ds : Dataset
+        From :func:`rideid.load_dataset`.
+    model : {None, "base", "full", "auto"} or sequence of group names
+        The model (SPEC §6, §8): None takes the dataset's ``[model]``, else
+        ``"auto"`` (:func:`default_model`); ignored when ``cost`` is given.
+    rng : int, numpy.random.Generator or None
+        Seed or generator of all randomness (same seed, same result).
+    seed : int, optional
+        The older name of ``rng``.
+    population, generations : int
+        JADE's population and generation limit.
+    weights : {"adaptive", "fixed"}
+        Adaptive track weights (paper eq. 12-13) or equal ones.
+    polish : bool
+        Refine the search's best with least squares (and the estimated starts).
+    spread_tol : float, optional
+        The search's early stop on the population's spread (default: 0.2 with
+        the polish, 1e-5 without).
+    callback : callable, optional
+        ``callback(state)`` after each search generation; True stops the search.
+    cost : CostFunction, optional
+        A cost function of ``ds`` to fit (its parameter space is the model).
+    maps : SensitivityMaps, optional
+        Parameter -> track maps (default: computed around the nominal car).
+    start : array_like, optional
+        A free-parameter row to polish from, skipping the search.
+    assess : bool
+        Compute the adequacy verdict.
+    simulator : Simulator, optional
+        How the car is simulated, for every stage (backend, integration
+        settings; :class:`rideid.model.simulator.Simulator`, default
+        ``Simulator()``).
+
+    Returns
+    -------
+    IdentificationResult
+        ``parameters`` (name -> value), ``details`` (each estimate's ``std``,
+        ``std_robust``), the model kept and the adequacy verdict.
+    """
     if cost is None:
         model = default_model(ds, model)
+    common = dict(rng=rng, seed=seed, population=population, generations=generations, weights=weights,
+                  polish=polish, spread_tol=spread_tol, callback=callback, maps=maps, assess=assess)
     if cost is None and unknown_road_runs(ds):  # SPEC §9: the road projected out (rideid.estimate.anyroad)
-        if args:
-            raise TypeError("identify() takes the dataset as its only positional argument")
-        res = identify_any_road(ds, model=model, **kw)
+        res = identify_any_road(ds, model=model, start=start, simulator=simulator, **common)
     elif isinstance(model, str) and model == "auto" and cost is None:
-        if args:
-            raise TypeError("identify() takes the dataset as its only positional argument")
-        res = identify_auto(ds, **kw)
+        if start is not None:
+            raise ArgumentError("start: the model choice fits every candidate from its own search; "
+                                "give a model to polish from a start")
+        res = identify_auto(ds, simulator=simulator, **common)
     else:
-        res = identify_model(ds, *args, model=model, cost=cost, **kw)
+        res = identify_model(ds, model=model, cost=cost, start=start, simulator=simulator, **common)
     res = replace(res, vehicle=vehicle_table(ds.geometry))  # the geometry travels with the car (rideid export)
     warn_bounds(res)
     return res

@@ -1,25 +1,40 @@
 """Which simulation backend runs: the compiled kernels or the plain NumPy references.
 
+This module alone imports the compiled kernels (Numba, and the LLVM IR of
+:mod:`rideid.model.kernel_ir`): :mod:`rideid.model.kernel` (the linear car),
+:mod:`rideid.model.kernel_nl` (the nonlinear car) and
+:mod:`rideid.model.kernel_contact` (the disc envelope's lattice search),
+each when a compiled evaluation first asks for it. Nothing else in rideid
+imports Numba at the top, so loading a dataset, building a cost function and
+identifying work with the NumPy backends on a machine where the compiled
+kernels cannot be imported (a Numba that moved an internal, a platform
+without it).
+
 ``RIDEID_KERNEL=numpy`` selects the NumPy reference backends of the linear
 (:class:`rideid.model.batch.BatchSimulator`) and the nonlinear
 (:class:`rideid.model.nonlinear.NonlinearSimulator`) simulators; unset (or
-``compiled``) the compiled kernels. If a compiled kernel cannot be built
-(any exception while compiling or loading it), the NumPy backend is used
-instead, with one warning per process.
+``compiled``) the compiled kernels (a :class:`rideid.model.simulator.Simulator`
+value may name its backend instead). If a compiled kernel cannot be imported
+or built (any exception), the NumPy backend is used instead, with one
+warning per process.
 """
 
 from __future__ import annotations
 
+import contextlib
 import os
 import warnings
+from importlib import import_module
 
 from ..errors import DataError
-from .kernel import compiled_kernel
-from .kernel_nl import compile_kernel
 
 #: environment variable naming the backend
 ENV = "RIDEID_KERNEL"
 CHOICES = ("compiled", "numpy")
+
+#: compiled kernel name -> (its module, relative to this package, and the function that builds it)
+KERNELS = {"linear": ("kernel", "compiled_kernel"), "nonlinear": ("kernel_nl", "compile_kernel"),
+           "contact": ("kernel_contact", "compile_kernel")}
 
 _STATUS: dict[str, bool] = {}
 _WARNED = False
@@ -35,27 +50,76 @@ def use_numpy() -> bool:
     raise DataError(f"{ENV}={os.environ.get(ENV)!r}: expected one of {', '.join(CHOICES)}")
 
 
-def _builders():
-    def linear():
-        compiled_kernel()
-
-    def nonlinear():
-        compile_kernel()
-
-    return {"linear": linear, "nonlinear": nonlinear}
+def module(name: str):
+    """The compiled kernel ``name``'s module (:data:`KERNELS`), imported on first use."""
+    return import_module(f"{__package__}.{KERNELS[name][0]}")
 
 
 def compiled_available(name: str) -> bool:
-    """Build the compiled kernel ``name`` ("linear", "nonlinear") once; False (and one warning) if that fails."""
+    """Import and build the compiled kernel ``name`` ("linear", "nonlinear", "contact") once; False (and one
+    warning per process) if that fails."""
     global _WARNED
     if name not in _STATUS:
         try:
-            _builders()[name]()
+            mod = module(name)
+            getattr(mod, KERNELS[name][1])()
             _STATUS[name] = True
-        except Exception as exc:  # noqa: BLE001 - any failure to build means: use NumPy
+        except Exception as exc:  # noqa: BLE001 - any failure to import or build means: use NumPy
             _STATUS[name] = False
             if not _WARNED:
                 _WARNED = True
                 warnings.warn(f"rideid: the compiled {name} kernel could not be built ({type(exc).__name__}: {exc}); "
                               f"using the NumPy backend (slower)", RuntimeWarning, stacklevel=3)
     return _STATUS[name]
+
+
+def _numba():
+    """Numba, or None where it cannot be imported."""
+    try:
+        import numba
+    except Exception:  # noqa: BLE001 - no Numba: one thread per core, the NumPy backends
+        return None
+    return numba
+
+
+def threads() -> int:
+    """Threads the kernels (and the work that runs beside them) use: Numba's thread count, or the cores."""
+    nb = _numba()
+    return int(nb.get_num_threads()) if nb is not None else max(1, os.cpu_count() or 1)
+
+
+@contextlib.contextmanager
+def one_thread():
+    """The kernels (Numba) limited to one thread, restored afterwards (a study's worker process)."""
+    nb = _numba()
+    if nb is None:
+        yield
+        return
+    before = nb.get_num_threads()
+    nb.set_num_threads(1)
+    try:
+        yield
+    finally:
+        nb.set_num_threads(before)
+
+
+def compile_kernels() -> float:
+    """Compile (or load from Numba's on-disk cache) the kernels the default run needs; seconds taken.
+
+    The first call in a fresh install compiles; later processes load the
+    cache in well under a second. The command line calls this first and
+    says so when it takes long, rather than hiding it in the first
+    generation. Nothing (0 s) with ``RIDEID_KERNEL=numpy``.
+    """
+    import time
+
+    if use_numpy():
+        return 0.0
+    t = time.perf_counter()
+    compiled_available("linear")
+    compiled_available("contact")
+    return time.perf_counter() - t
+
+
+__all__ = ["CHOICES", "ENV", "KERNELS", "compile_kernels", "compiled_available", "module", "one_thread", "threads",
+           "use_numpy"]

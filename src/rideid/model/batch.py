@@ -6,18 +6,21 @@
 either to simulated channels or to per-run weighted squared errors, through
 the compiled kernel (:mod:`rideid.kernel`) or the plain NumPy reference
 (:func:`rideid.simulate.simulate_reference`; ``RIDEID_KERNEL=numpy``, see
-:mod:`rideid.model.backend`). :func:`rideid.model.nonlinear.make_simulator` picks this class or the
+:mod:`rideid.model.backend`). :class:`rideid.model.simulator.Simulator` binds this class or the
 nonlinear car's :class:`rideid.model.nonlinear.NonlinearSimulator` by the
 parameter layout.
 """
 
 from __future__ import annotations
 
-import numba
+import contextlib
+import threading
+
 import numpy as np
 from threadpoolctl import ThreadpoolController
 
-from . import backend, kernel
+from . import backend
+from .kernel_layout import LANES, OFFSETS
 from .discretize import N_MAX, Discretized, n_terms, spectral_radius
 from .equations import blocks as blocks_of
 from .params import Geometry, column
@@ -28,21 +31,43 @@ from .simulate import RunInput, initial_states, simulate_reference
 # threads, and OpenBLAS threads keep spinning after each call, taking the
 # cores from the compiled kernel's threads (measured: kernel 2x slower).
 _BLAS = ThreadpoolController()
+_BLAS_LOCK = threading.Lock()
+_BLAS_STATE = {"depth": 0, "limiter": None}
 
 
+@contextlib.contextmanager
 def single_threaded_blas():
-    """Context manager: BLAS limited to one thread."""
-    return _BLAS.limit(limits=1, user_api="blas")
+    """Context manager: BLAS limited to one thread, for as long as any thread is inside one.
+
+    The limit is process-wide: with a plain limit per ``with``, the first of two threads to leave would
+    give the second, still inside, multi-threaded BLAS again (and last-bit different sums). Counted: the
+    first to enter sets it, the last to leave lifts it. Code that fits on threads holds it around them
+    (the model choice): OpenBLAS switched from 2 threads to 1 and back from inside a worker thread gave
+    polished parameters 1e-10 apart from the same fit on the main thread; held around, bit for bit
+    (``tests/test_simulator.py``).
+    """
+    with _BLAS_LOCK:
+        if _BLAS_STATE["depth"] == 0:
+            _BLAS_STATE["limiter"] = _BLAS.limit(limits=1, user_api="blas")
+        _BLAS_STATE["depth"] += 1
+    try:
+        yield
+    finally:
+        with _BLAS_LOCK:
+            _BLAS_STATE["depth"] -= 1
+            if _BLAS_STATE["depth"] == 0:
+                _BLAS_STATE["limiter"].restore_original_limits()
+                _BLAS_STATE["limiter"] = None
 
 
 def thread_map(fn, items, name: str = "rideid") -> list:
-    """``[fn(x) for x in items]``, on as many threads as the kernel uses (``numba.get_num_threads``).
+    """``[fn(x) for x in items]``, on as many threads as the kernel uses (:func:`rideid.model.backend.threads`).
 
     For work that spends its time in NumPy, LAPACK and compiled loops, which
     release the GIL. One thread (a study's workers): a plain loop.
     """
     items = list(items)
-    threads = min(numba.get_num_threads(), len(items))
+    threads = min(backend.threads(), len(items))
     if threads < 2:
         return [fn(x) for x in items]
     from concurrent.futures import ThreadPoolExecutor
@@ -55,7 +80,7 @@ def thread_map_rows(fn, P, name: str = "rideid") -> np.ndarray:
     consecutive slices of the rows, one per thread (:func:`thread_map`), concatenated. The same numbers as
     ``fn(P)``, row by row."""
     P = np.asarray(P)
-    slices = np.array_split(np.arange(P.shape[0]), max(1, min(numba.get_num_threads(), P.shape[0])))
+    slices = np.array_split(np.arange(P.shape[0]), max(1, min(backend.threads(), P.shape[0])))
     return np.concatenate(thread_map(lambda rows: fn(P[rows]), slices, name))
 
 
@@ -66,9 +91,17 @@ class BatchSimulator:
     ----------
     geom : Geometry
     runs : list of RunInput
+    numpy : bool or None
+        The NumPy reference (True), the compiled kernel (False), or as ``RIDEID_KERNEL`` says at each call
+        (None, :mod:`rideid.model.backend`).
+
+    Made by :meth:`rideid.model.simulator.Simulator.bind`; an evaluation never changes it. The ``pin``
+    argument of the evaluations is the nonlinear car's (:class:`rideid.model.nonlinear.Pin`): the exact
+    discretisation has no sub-steps, so it is accepted and has no effect.
     """
 
-    def __init__(self, geom: Geometry, runs: list[RunInput]):
+    def __init__(self, geom: Geometry, runs: list[RunInput], numpy: bool | None = None):
+        self.numpy = numpy
         self.geom = geom
         self.runs = list(runs)
         hs = sorted({round(r.h, 15) for r in self.runs})
@@ -90,10 +123,10 @@ class BatchSimulator:
     def _pack(self, P):
         P = np.atleast_2d(np.asarray(P, dtype=float))
         n = P.shape[0]
-        n_chunks = n // kernel.CHUNK
+        n_chunks = n // LANES
         g = len(self.h_groups)
         nt = np.zeros((g, n_chunks), dtype=np.int64)
-        blocks = {name: [] for name in kernel.OFFSETS}
+        blocks = {name: [] for name in OFFSETS}
         discs = []
         bl = blocks_of(P, self.geom)
         radius = np.maximum(spectral_radius(bl["As"]), spectral_radius(bl["Aa"]))
@@ -109,7 +142,7 @@ class BatchSimulator:
         a = column(P, "a")
         blocks["a"] = [a] * g
         blocks["b"] = [self.geom.wheelbase - a] * g
-        CO = kernel.pack_coefficients(blocks, n)
+        CO = backend.module("linear").pack_coefficients(blocks, n)
         X0 = np.zeros((len(self.runs), 14, n))
         for ri, r in enumerate(self.runs):
             xs, xa = initial_states(discs[self.run_group[ri]], r.ud[0])
@@ -119,31 +152,40 @@ class BatchSimulator:
     def _call(self, P, Y, W, mode):
         P = np.atleast_2d(np.asarray(P, dtype=float))
         n0 = P.shape[0]
-        pad = (-n0) % kernel.CHUNK  # the kernel works on whole chunks: pad with copies
+        pad = (-n0) % LANES  # the kernel works on whole chunks of LANES candidates: pad with copies
         if pad:
             P = np.vstack([P, np.repeat(P[-1:], pad, axis=0)])
         with single_threaded_blas():
             CO, nt, X0 = self._pack(P)
         n = P.shape[0]
         out = np.zeros((self.n_samples, 10, n) if mode == 1 else (1, 10, 1))
-        err = kernel.run_kernel(CO, nt, self.geom.corner_y[0], self.geom.corner_y[2], X0,
+        err = backend.module("linear").run_kernel(CO, nt, self.geom.corner_y[0], self.geom.corner_y[2], X0,
                                 self.run_start, self.run_group, self.UD, self.RD, self.MU, Y, W, mode, out)
         return err[:, :n0], (out[:, :, :n0] if mode == 1 else out)
 
     # -- public ------------------------------------------------------------
-    def errors(self, P, Y, W):
+    def _use_numpy(self) -> bool:
+        if self.numpy is not None:
+            return self.numpy or not backend.compiled_available("linear")
+        return backend.use_numpy() or not backend.compiled_available("linear")
+
+    def errors(self, P, Y, W, pin=None):
         """Per-run weighted squared errors, shape ``(n_runs, n_pop)``.
 
         ``Y`` (n_samples, 10) stacks the measured channels of all runs
         (any value where a channel is missing), ``W`` (n_runs, 10) the channel
         weights (0 for a missing channel).
         """
-        err, _ = self._call(P, np.ascontiguousarray(Y, dtype=float), np.ascontiguousarray(W, dtype=float), 0)
+        Y = np.ascontiguousarray(Y, dtype=float)
+        W = np.ascontiguousarray(W, dtype=float)
+        if self._use_numpy():
+            return self.errors_reference(P, Y, W)
+        err, _ = self._call(P, Y, W, 0)
         return err
 
-    def outputs(self, P):
+    def outputs(self, P, pin=None):
         """Simulated channels: list over runs of ``(n_pop, n_time, 10)``."""
-        if backend.use_numpy() or not backend.compiled_available("linear"):
+        if self._use_numpy():
             return self.outputs_reference(P)
         P = np.atleast_2d(P)
         Y = np.zeros((self.n_samples, 10))
@@ -152,7 +194,7 @@ class BatchSimulator:
         out = np.moveaxis(out, -1, 0)  # (n, T, 10)
         return [out[:, s:e] for s, e in zip(self.run_start[:-1], self.run_start[1:])]
 
-    def outputs_reference(self, P):
+    def outputs_reference(self, P, pin=None):
         """As :meth:`outputs`, by the plain NumPy reference (slow)."""
         P = np.atleast_2d(np.asarray(P, dtype=float))
         res = []
@@ -160,7 +202,7 @@ class BatchSimulator:
             res.append(simulate_reference(P, self.geom, r))
         return res
 
-    def errors_reference(self, P, Y, W):
+    def errors_reference(self, P, Y, W, pin=None):
         outs = self.outputs_reference(P)
         err = np.empty((len(self.runs), np.atleast_2d(P).shape[0]))
         for ri, (s, e) in enumerate(zip(self.run_start[:-1], self.run_start[1:])):

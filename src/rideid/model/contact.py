@@ -33,10 +33,10 @@ Two independent methods (SPEC §2, paper §4.2):
 
 from __future__ import annotations
 
-import numba
 import numpy as np
 
 from ..errors import RideidError
+from . import backend
 from .tracks import WheelPath
 
 
@@ -103,58 +103,32 @@ def _refine(h, xs, dj, step, R, t, rows):
     return np.maximum(fk, np.where(ok, fr, -np.inf))
 
 
-@numba.njit(cache=True, nogil=True)
-def lattice_max(H, circ):  # pragma: no cover - compiled
-    """``max_j H[i + j] + circ[j]`` and its (first) argmax for every i.
+def lattice_max(H, circ):
+    """``max_j H[i + j] + circ[j]`` and its (first) argmax for every ``i`` (``circ`` a disc's height on the
+    lattice, a concave sequence): the compiled divide-and-conquer search
+    (:func:`rideid.model.kernel_contact.lattice_max`) where it can be built, else the same maxima by
+    :func:`lattice_max_numpy` (exactly: both are the brute-force search's)."""
+    if backend.compiled_available("contact"):
+        return backend.module("contact").lattice_max(H, circ)
+    return lattice_max_numpy(H, circ)
 
-    ``circ`` is a disc's height on the lattice: a concave sequence. Then the
-    matrix ``M[i, k] = H[k] + circ[k - i]`` (``-inf`` off the disc) is
-    inverse-Monge (``M[i, k'] + M[i', k] >= M[i, k] + M[i', k']`` for
-    ``i < i'``, ``k' < k``: ``circ``'s inner pair against its outer pair),
-    so the first argmax ``k(i)`` never decreases with ``i``: the row in the
-    middle of a range is searched over its whole column range, the rows
-    above it only up to its argmax, the rows below only from it (divide and
-    conquer, ``O((n + m) log n)`` for ``n`` positions and ``m`` offsets
-    against ``O(n m)``). Rounding cannot reorder the maxima: the inequality
-    holds with a margin of ``circ``'s second difference (``dx^2 / R``, about
-    1e-6 m at the grid's step) against rounding near 1e-16 m. The result is
-    the brute-force search's, exactly (tested on flat, rough, sine, stepped,
-    white and spiked roads). 5x faster than the former block-pruned search
-    on a 1 km random road, and free of its worst case (rough roads, where
-    little could be pruned).
-    """
-    n = H.size - circ.size + 1
-    m = circ.size
+
+def lattice_max_numpy(H, circ, rows: int = 2048):
+    """:func:`lattice_max` by brute force in NumPy (blocks of ``rows`` positions): ``O(n m)``, the backend
+    without the compiled kernels."""
+    H = np.asarray(H, dtype=float)
+    circ = np.asarray(circ, dtype=float)
+    n, m = H.size - circ.size + 1, circ.size
     best = np.empty(max(n, 0))
     arg = np.empty(max(n, 0), dtype=np.int64)
     if n <= 0:
         return best, arg
-    # pending (row lo, row hi, column lo, column hi), inclusive, columns in H; the rows before the middle are
-    # taken next, so at most one range per halving waits (130 rows: ample for any array)
-    stack = np.empty((130, 4), dtype=np.int64)
-    stack[0, 0], stack[0, 1], stack[0, 2], stack[0, 3] = 0, n - 1, 0, H.size - 1
-    top = 1
-    while top > 0:
-        top -= 1
-        ilo, ihi, klo, khi = stack[top, 0], stack[top, 1], stack[top, 2], stack[top, 3]
-        mid = (ilo + ihi) // 2
-        a = max(klo, mid)
-        b = min(khi, mid + m - 1)
-        bv = -np.inf
-        bk = a
-        for k in range(a, b + 1):
-            v = H[k] + circ[k - mid]
-            if v > bv:
-                bv = v
-                bk = k
-        best[mid] = bv
-        arg[mid] = bk - mid
-        if mid < ihi:
-            stack[top, 0], stack[top, 1], stack[top, 2], stack[top, 3] = mid + 1, ihi, bk, khi
-            top += 1
-        if ilo < mid:
-            stack[top, 0], stack[top, 1], stack[top, 2], stack[top, 3] = ilo, mid - 1, klo, bk
-            top += 1
+    win = np.lib.stride_tricks.sliding_window_view(H, m)
+    for lo in range(0, n, rows):
+        block = win[lo:lo + rows] + circ[None, :]
+        k = np.argmax(block, axis=1)
+        arg[lo:lo + rows] = k
+        best[lo:lo + rows] = block[np.arange(k.size), k]
     return best, arg
 
 

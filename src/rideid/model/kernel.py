@@ -28,7 +28,6 @@ channels 12, errors 20: ``210 + 28 N``.
 
 from __future__ import annotations
 
-import time
 from concurrent.futures import ThreadPoolExecutor
 
 import numba
@@ -36,13 +35,11 @@ import numpy as np
 
 from .kernel_ir import run_chunks
 from .kernel_layout import LANES, N_COEF, N_MAX_K, OFFSETS, PER_TERM
-from .contact import lattice_max
 
 #: Candidates per chunk (the kernel pads a population to whole chunks).
 CHUNK = LANES
 
-__all__ = ["CHUNK", "LANES", "N_MAX_K", "N_COEF", "pack_coefficients", "run_kernel", "compile_kernels",
-           "vectorised"]
+__all__ = ["CHUNK", "LANES", "N_MAX_K", "N_COEF", "pack_coefficients", "run_kernel", "vectorised"]
 
 
 def compiled_kernel():
@@ -151,18 +148,3 @@ def vectorised() -> dict:
     if not asm or "vfmadd" not in asm and "mulsd" not in asm:
         return {}
     return {"packed": len(re.findall(r"\bvfmadd\d+pd\b", asm)), "scalar": len(re.findall(r"\bvfmadd\d+sd\b", asm))}
-
-
-def compile_kernels() -> float:
-    """Compile (or load from Numba's on-disk cache) the kernels; seconds taken.
-
-    The first call in a fresh install compiles; later processes load the
-    cache in well under a second. The command line calls this first and
-    says so when it takes long, rather than hiding it in the first
-    generation.
-    """
-
-    t = time.perf_counter()
-    compiled_kernel()
-    lattice_max(np.zeros(4), np.zeros(2))
-    return time.perf_counter() - t

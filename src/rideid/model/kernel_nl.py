@@ -32,7 +32,7 @@ from __future__ import annotations
 import numba
 import numpy as np
 
-from .nl_coef import CI, COEF
+from .nl_coef import CI, COEF, hermite_value_slope
 from .kernel import thread_pool
 
 _NC = len(COEF)
@@ -124,18 +124,6 @@ def _accel(co, p, xk, j0, Fk, Sk, curves, X, u, ud, dX, qdd, d, v, g, vd, seg, e
     if ends:
         for c in range(4):
             vd[c] = qdd[3 + c] - (qdd[0] - co[p, _I_X + c] * qdd[1] + co[p, _I_Y + c] * qdd[2])
-
-
-def hermite_value_slope(t, s0, s1, m0, m1):
-    """Value and derivative at ``theta = t`` of the cubic Hermite with values ``s0, s1`` and slopes ``m0, m1``
-    (per unit ``theta``) at 0 and 1. Plain arithmetic: the same operations on scalars in the compiled kernel
-    (:func:`_hermite_value_slope`) and on arrays in :func:`rideid.model.nonlinear.hermite_root`."""
-    t2 = t * t
-    t3 = t2 * t
-    val = (2.0 * t3 - 3.0 * t2 + 1.0) * s0 + (t3 - 2.0 * t2 + t) * m0 + (3.0 * t2 - 2.0 * t3) * s1 \
-        + (t3 - t2) * m1
-    der = (6.0 * t2 - 6.0 * t) * (s0 - s1) + (3.0 * t2 - 4.0 * t + 1.0) * m0 + (3.0 * t2 - 2.0 * t) * m1
-    return val, der
 
 
 _hermite_value_slope = numba.njit(cache=True, nogil=True, error_model="numpy", inline="always")(hermite_value_slope)

@@ -138,17 +138,17 @@ the NumPy backend is used with one warning (:mod:`rideid.model.backend`).
 from __future__ import annotations
 
 import math
+import threading
 from dataclasses import dataclass
 
 import numpy as np
 
 from ..errors import DataError
-from . import backend, kernel_nl
+from . import backend
 from .equations import CHANNELS, mck, blocks as blocks_of, static_corner_loads
 from .params import ALL_NAMES, GRAVITY, INDEX, Geometry, check_parameters, full_rows
-from .nl_coef import CI, COEF
+from .nl_coef import CI, COEF, hermite_value_slope
 from .simulate import RunInput
-from .batch import BatchSimulator
 
 #: Default damper velocity knots (m/s), SPEC §8.
 DEFAULT_KNOTS: tuple[float, ...] = (-0.4, -0.2, -0.1, -0.05, -0.025, 0.025, 0.05, 0.1, 0.2, 0.4)
@@ -537,7 +537,7 @@ def hermite_root(s0, s1, m0, m1):
     with np.errstate(divide="ignore", invalid="ignore"):
         t = s0 / (s0 - s1)
         for _ in range(2):
-            val, der = kernel_nl.hermite_value_slope(t, s0, s1, m0, m1)
+            val, der = hermite_value_slope(t, s0, s1, m0, m1)
             t = np.where(der != 0.0, t - val / np.where(der != 0.0, der, 1.0), t)
             t = np.minimum(np.maximum(t, 0.0), 1.0)
     return t
@@ -653,9 +653,26 @@ def simulate_numpy(P, geom, run: RunInput, layout: NonlinearLayout, m: int, fine
 # the simulator
 
 
+@dataclass(frozen=True, eq=False)
+class Pin:
+    """A floor on the nonlinear integrator, passed to an evaluation (never stored in a simulator).
+
+    ``substeps`` (per run) is a floor on the RK4 sub-steps per sample; ``kinks`` (``(2, K + 1)``, or None)
+    the knots where every sub-step is split. The polish pins both at its start (with a margin,
+    :meth:`NonlinearSimulator.pin_at`), so every residual it differences is computed with the same
+    integrator and the Jacobian sees no jump where the stiffest segment's count would change.
+    """
+
+    substeps: tuple[int, ...]
+    kinks: np.ndarray | None = None
+
+
 class NonlinearSimulator:
     """Simulate populations of nonlinear cars over fixed runs (the interface of
-    :class:`rideid.model.batch.BatchSimulator`).
+    :class:`rideid.model.batch.BatchSimulator`); made by :meth:`rideid.model.simulator.Simulator.bind`.
+
+    An evaluation never changes the simulator: the sub-step floor of the polish is a :class:`Pin`
+    argument, so one simulator serves many cost functions and threads at once.
 
     Parameters
     ----------
@@ -669,12 +686,19 @@ class NonlinearSimulator:
     split : bool
         Split the sub-steps at the kinks they cross (default); False: plain RK4 sub-steps (which then need
         a much smaller ``rho``, e.g. 0.03, for the same accuracy; kept for comparison).
+    numpy : bool or None
+        The NumPy backend (True), the compiled kernel (False), or as ``RIDEID_KERNEL`` says at each call
+        (None, :mod:`rideid.model.backend`).
     """
 
+    #: sub-step counts of a search population are rounded up to these (:meth:`groups`: few, large groups)
+    SUBSTEP_BUCKETS = (1, 2, 3, 4, 6, 8, 12, 16, 24, 32, 48, 64, 96, 128, 256, 512, 1024, 4096)
+
     def __init__(self, geom: Geometry, runs: list[RunInput], layout: NonlinearLayout, rho: float = RHO_MAX,
-                 split: bool = True):
+                 split: bool = True, numpy: bool | None = None):
         self.rho = float(rho)
         self.split = bool(split)
+        self.numpy = numpy
         self.geom = geom
         self.runs = list(runs)
         self.layout = layout
@@ -682,89 +706,148 @@ class NonlinearSimulator:
         self.run_start = np.concatenate([[0], np.cumsum(lens)]).astype(np.int64)
         self.n_samples = int(self.run_start[-1])
         self._fine: dict = {}
-        #: sub-steps per sample of the last call, per run
-        self.last_substeps: list[int] = []
+        self._fine_lock = threading.Lock()
 
     # -- parameter-independent tables ----------------------------------------------------
     def fine(self, ri: int, m: int):
+        """Run ``ri``'s inputs at ``m`` sub-steps per sample (:func:`fine_inputs`), tabulated once (a cache
+        of the prepared data, safe across threads; it never changes a result)."""
         key = (ri, m)
-        if key not in self._fine:
-            if len(self._fine) > 4 * max(1, len(self.runs)):
-                self._fine.clear()
-            self._fine[key] = fine_inputs(self.runs[ri], m)
-        return self._fine[key]
+        with self._fine_lock:
+            got = self._fine.get(key)
+        if got is None:
+            got = fine_inputs(self.runs[ri], m)
+            with self._fine_lock:
+                if len(self._fine) > 4 * max(1, len(self.runs)):
+                    self._fine.clear()
+                self._fine[key] = got
+        return got
 
-    def substeps(self, P) -> list[int]:
-        """Sub-steps per sample interval of every run for population ``P`` (one per sample rate)."""
-        return [substeps(P, self.geom, self.layout, r.h, self.rho) for r in self.runs]
+    def substeps(self, P, pin: Pin | None = None) -> list[int]:
+        """Sub-steps per sample interval of every run for population ``P`` (one per sample rate), at least
+        ``pin``'s."""
+        m = [substeps(P, self.geom, self.layout, r.h, self.rho) for r in self.runs]
+        return m if pin is None else [max(a, b) for a, b in zip(m, pin.substeps)]
 
-    def kinks(self, P) -> np.ndarray:
-        """The knots where the sub-steps are split, for population ``P`` (:func:`kink_mask`)."""
+    def kinks(self, P, pin: Pin | None = None) -> np.ndarray:
+        """The knots where the sub-steps are split, for population ``P`` (:func:`kink_mask`; ``pin``'s if
+        it gives them)."""
+        if pin is not None and pin.kinks is not None:
+            return pin.kinks
         return kink_mask(coefficients(P, self.geom, self.layout)[3])
 
-    # -- backends -----------------------------------------------------------------------
-    def outputs_reference(self, P):
-        """As :meth:`outputs`, by the NumPy backend."""
-        return self._reference(P, False)
+    def pin_at(self, P, margin: float = 1.5) -> Pin:
+        """The :class:`Pin` of the polish's start ``P``: ``margin`` times its sub-steps, and with curves every
+        interior knot split (the polish moves the curves, and a bend at a knot the start had not — a linear
+        start's ``F = c v`` bends at none — must still be split: 7e-4 unsplit)."""
+        m = [int(np.ceil(margin * k)) for k in self.substeps(P)]
+        mask = self.kinks(P)
+        mask[:, 1:-1] = 1
+        return Pin(tuple(m), mask)
 
-    def states_reference(self, P):
-        """As :meth:`states`, by the NumPy backend."""
-        return self._reference(P, True)
-
-    def _reference(self, P, return_states: bool):
+    def candidate_substeps(self, P) -> np.ndarray:
+        """Largest sub-step count over the runs of each candidate, ``(n,)``."""
         P = self.layout.rows(P)
-        ms = self.substeps(P)
-        self.last_substeps = ms
-        kinks = self.kinks(P)
+        hs = sorted({r.h for r in self.runs})
+        return np.array([max(substeps(P[i:i + 1], self.geom, self.layout, h, self.rho) for h in hs)
+                         for i in range(P.shape[0])])
+
+    def groups(self, P) -> list[np.ndarray]:
+        """Indices of ``P``'s rows grouped by their bucketed sub-step count (the sub-step is set by the
+        stiffest candidate of a call: a search evaluates each group in one call, so a few stiff candidates
+        do not slow the rest)."""
+        m = self.candidate_substeps(P)
+        b = np.searchsorted(np.array(self.SUBSTEP_BUCKETS), m)
+        return [np.nonzero(b == k)[0] for k in np.unique(b)]
+
+    def _use_numpy(self) -> bool:
+        if self.numpy is not None:
+            return self.numpy or not backend.compiled_available("nonlinear")
+        return backend.use_numpy() or not backend.compiled_available("nonlinear")
+
+    # -- backends -----------------------------------------------------------------------
+    def outputs_reference(self, P, pin: Pin | None = None):
+        """As :meth:`outputs`, by the NumPy backend."""
+        return self._reference(P, False, pin)
+
+    def states_reference(self, P, pin: Pin | None = None):
+        """As :meth:`states`, by the NumPy backend."""
+        return self._reference(P, True, pin)
+
+    def _reference(self, P, return_states: bool, pin: Pin | None):
+        P = self.layout.rows(P)
+        ms = self.substeps(P, pin)
+        kinks = self.kinks(P, pin)
         return [simulate_numpy(P, self.geom, r, self.layout, m, self.fine(i, m), return_states=return_states,
                                split=self.split, kinks=kinks) for i, (r, m) in enumerate(zip(self.runs, ms))]
 
-    def errors_reference(self, P, Y, W):
-        outs = self.outputs_reference(P)
+    def errors_reference(self, P, Y, W, pin: Pin | None = None):
+        outs = self.outputs_reference(P, pin)
         return _errors_of(outs, self.run_start, Y, W)
 
-    def _compiled(self, P, mode, Y=None, W=None):
+    def _compiled(self, P, mode, Y=None, W=None, pin: Pin | None = None):
         """:func:`rideid.model.kernel_nl.run` in ``mode`` (no data ``Y``, ``W``: zeros, for the modes that
         write channels or states)."""
         Y = np.zeros((self.n_samples, 10)) if Y is None else Y
         W = np.zeros((len(self.runs), 10)) if W is None else W
         P = self.layout.rows(P)
-        ms = self.substeps(P)
-        self.last_substeps = ms
+        ms = self.substeps(P, pin)
         co, xk, Fk, Sk = coefficients(P, self.geom, self.layout)
         fines = [self.fine(i, m) for i, m in enumerate(ms)]
         X0 = np.stack([shifted(co, initial_state(P, self.geom, self.layout, r.u[0]), r.u[0]) for r in self.runs])
-        return kernel_nl.run(co, xk, Fk, Sk, self.layout.knots is not None, X0, self.run_start,
+        return backend.module("nonlinear").run(co, xk, Fk, Sk, self.layout.knots is not None, X0, self.run_start,
                              np.array([r.h for r in self.runs]), np.array(ms, dtype=np.int64), fines, Y, W, mode,
-                             split=self.split, kinks=self.kinks(P))
+                             split=self.split, kinks=self.kinks(P, pin))
 
     # -- public -------------------------------------------------------------------------
-    def errors(self, P, Y, W):
+    def errors(self, P, Y, W, pin: Pin | None = None):
         """Per-run weighted squared errors, shape ``(n_runs, n_pop)`` (as :meth:`BatchSimulator.errors`)."""
         Y = np.ascontiguousarray(Y, dtype=float)
         W = np.ascontiguousarray(W, dtype=float)
-        if backend.use_numpy() or not backend.compiled_available("nonlinear"):
-            return self.errors_reference(P, Y, W)
-        return self._compiled(P, 0, Y, W)[0]
+        if self._use_numpy():
+            return self.errors_reference(P, Y, W, pin)
+        return self._compiled(P, 0, Y, W, pin)[0]
 
-    def outputs(self, P):
+    def outputs(self, P, pin: Pin | None = None):
         """Simulated channels: list over runs of ``(n_pop, n_time, 10)``."""
-        if backend.use_numpy() or not backend.compiled_available("nonlinear"):
-            return self.outputs_reference(P)
-        out = self._compiled(P, 1)[1]
+        if self._use_numpy():
+            return self.outputs_reference(P, pin)
+        out = self._compiled(P, 1, pin=pin)[1]
         return self._per_run(out)
 
-    def states(self, P):
+    def states(self, P, pin: Pin | None = None):
         """Simulated channels and states: list over runs of ``((n_pop, n_time, 10), (n_pop, n_time, 14))``,
         the states ``[q, q']`` in :data:`rideid.model.equations.COORDS` order (deviations from static
         equilibrium)."""
-        if backend.use_numpy() or not backend.compiled_available("nonlinear"):
-            return self.states_reference(P)
-        _, out, X = self._compiled(P, 3)
+        if self._use_numpy():
+            return self.states_reference(P, pin)
+        _, out, X = self._compiled(P, 3, pin=pin)
         return list(zip(self._per_run(out), self._per_run(X)))
 
     def _per_run(self, a):
         return [a[:, s:e] for s, e in zip(self.run_start[:-1], self.run_start[1:])]
+
+
+@dataclass(frozen=True)
+class PinnedSimulator:
+    """A bound nonlinear simulator and a :class:`Pin`, as one value: every evaluation uses that pin (for code
+    that differences many rows with one integrator, e.g. the planner's sensitivities). Everything else is the
+    simulator's."""
+
+    sim: NonlinearSimulator
+    pin: Pin
+
+    def __getattr__(self, name):
+        return getattr(self.sim, name)
+
+    def errors(self, P, Y, W, pin: Pin | None = None):
+        return self.sim.errors(P, Y, W, self.pin if pin is None else pin)
+
+    def outputs(self, P, pin: Pin | None = None):
+        return self.sim.outputs(P, self.pin if pin is None else pin)
+
+    def states(self, P, pin: Pin | None = None):
+        return self.sim.states(P, self.pin if pin is None else pin)
 
 
 def _errors_of(outs, run_start, Y, W):
@@ -773,14 +856,6 @@ def _errors_of(outs, run_start, Y, W):
         d = outs[ri] - Y[None, s:e]
         err[ri] = np.einsum("ntq,q->n", d * d, W[ri])
     return err
-
-
-def make_simulator(geom: Geometry, runs: list[RunInput], layout: NonlinearLayout | None = None):
-    """A :class:`rideid.model.batch.BatchSimulator` for a linear layout (``None``, or no
-    curves and no bump stops), else a :class:`NonlinearSimulator`."""
-    if layout is None or layout.linear:
-        return BatchSimulator(geom, runs)
-    return NonlinearSimulator(geom, runs, layout)
 
 
 def check_nonlinear(P, geom: Geometry, layout: NonlinearLayout, where: str = "parameters") -> np.ndarray:
@@ -823,6 +898,6 @@ def simulate_nonlinear(P, geom: Geometry, run: RunInput, layout: NonlinearLayout
     return sim.states(P)[0] if return_states else sim.outputs(P)[0]
 
 
-__all__ = ["BUMP_STOP_NAMES", "CHANNELS", "DEFAULT_KNOTS", "NonlinearLayout", "NonlinearSimulator", "RHO_MAX",
-           "curve_names", "damper_force", "kink_mask", "linear_curve", "make_simulator", "simulate_nonlinear",
-           "substeps"]
+__all__ = ["BUMP_STOP_NAMES", "CHANNELS", "DEFAULT_KNOTS", "NonlinearLayout", "NonlinearSimulator", "Pin",
+           "PinnedSimulator", "RHO_MAX", "curve_names", "damper_force", "kink_mask", "linear_curve",
+           "simulate_nonlinear", "substeps"]

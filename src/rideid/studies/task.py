@@ -38,17 +38,13 @@ TIMING_COLUMNS = ("identify_wall_s", "task_wall_s")
 
 @contextlib.contextmanager
 def one_core():
-    """Numba and BLAS limited to one thread (restored afterwards)."""
-    import numba
+    """The kernels and BLAS limited to one thread (restored afterwards)."""
     from threadpoolctl import threadpool_limits
 
-    before = numba.get_num_threads()
-    numba.set_num_threads(1)
-    try:
-        with threadpool_limits(limits=1):
-            yield
-    finally:
-        numba.set_num_threads(before)
+    from ..model.backend import one_thread
+
+    with one_thread(), threadpool_limits(limits=1):
+        yield
 
 
 def subset_dataset(ds, run_ids, subset):
