@@ -1,5 +1,8 @@
 """How often loading a dataset climbs back up a layer: ``python benchmarks/layer_climbs.py [DATASET]``.
 
+``--legs``: the dataset walked through each leg of an identification (:data:`LEGS`, :func:`walk_path`),
+read from the source: loading (its path), the single-model fit and the model choice (the dataset).
+
 ``rideid.load_dataset(DATASET)`` (default: the built-in scenario simulated
 with 1 % noise, written to a temporary folder) runs under a profiler hook
 that records which function each call enters and each return comes back to.
@@ -173,6 +176,52 @@ class _Source:
         return out
 
 
+def _passes(node, name: str) -> bool:
+    return any(isinstance(n, ast.Name) and n.id == name for n in ast.walk(node))
+
+
+def walk_path(mod: str, fn: str, param: str):
+    """``(steps, upward steps)``: be the parameter ``param`` of ``mod.fn`` and follow the calls that pass it
+    on (as any part of a positional or keyword argument, to the rideid function the call resolves to, under
+    that function's own name for it), depth-first in source order, each (function, parameter) once; the
+    upward steps are those where the next function lives in a higher layer than the one before it."""
+    src, seen, order = _Source(), set(), []
+
+    def params(m, f):
+        a = src.defs[m][f].args
+        return [x.arg for x in a.posonlyargs + a.args], {x.arg for x in a.posonlyargs + a.args + a.kwonlyargs}
+
+    def visit(key):
+        if key in seen:
+            return
+        seen.add(key)
+        order.append(key)
+        m, f, name = key
+        calls = sorted((n for n in ast.walk(src.defs[m][f]) if isinstance(n, ast.Call)),
+                       key=lambda n: (n.lineno, n.col_offset))
+        for c in calls:
+            hit = None
+            if isinstance(c.func, ast.Name):
+                hit = src.resolve(m, c.func.id)
+            elif isinstance(c.func, ast.Attribute) and isinstance(c.func.value, ast.Name):
+                b = src.names[m].get(c.func.value.id)
+                if b is not None and b[0] == "module":
+                    hit = src.resolve(b[1], c.func.attr)
+            if hit is None:
+                continue
+            pos, every = params(*hit)
+            for i, a in enumerate(c.args):
+                if i < len(pos) and _passes(a, name):
+                    visit((*hit, pos[i]))
+            for kw in c.keywords:
+                if kw.arg in every and _passes(kw.value, name):
+                    visit((*hit, kw.arg))
+
+    visit((mod, fn, param))
+    lays = [layer_of(m) for m, _, _ in order]
+    return order, sum(1 for a, b in zip(lays, lays[1:]) if b > a)
+
+
 def static_path(mod: str, fn: str):
     """``(functions, upward steps)``: the rideid functions reached from ``mod.fn``, depth-first in source order
     (each once), and how often the next one lives in a higher layer than the one before it."""
@@ -191,11 +240,24 @@ def static_path(mod: str, fn: str):
     return order, sum(1 for a, b in zip(lays, lays[1:]) if b > a)
 
 
+#: the legs of an identification, walked by ``--legs`` (the dataset's path, then the dataset itself): loading,
+#: the single-model fit, the model choice
+LEGS = (("rideid.conditioning.load", "load_dataset", "path"), ("rideid.estimate.identify", "identify", "ds"),
+        ("rideid.estimate.model_choice", "identify", "ds"))
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("dataset", nargs="?", help="dataset folder (default: the built-in scenario, simulated)")
     ap.add_argument("--static", action="store_true", help="the static count only (nothing is run)")
+    ap.add_argument("--legs", action="store_true",
+                    help="walk the dataset through every leg of an identification (LEGS): upward steps per leg")
     args = ap.parse_args(argv)
+    if args.legs:
+        for mod, fn, param in LEGS:
+            order, steps = walk_path(mod, fn, param)
+            print(f"{mod}:{fn}:{param}: {len(order)} steps, climbs back up a layer {steps} times")
+        return 0
     order, steps = static_path(rideid.load_dataset.__module__, rideid.load_dataset.__name__)
     names = {i: "/".join(p.split(".")[-1] for p in prefixes) for i, prefixes in enumerate(LAYERS)}
     print(f"static: {len(order)} functions reached from load_dataset, depth-first in source order; "
