@@ -155,6 +155,7 @@ def test_report_draws_the_curves_and_the_velocities_reached(digressive_fit):
     """The report of a curve result has the "Damper curves" section: both figures, and per run a histogram
     holding every sample of both corners of each axle (a linear result has none: tests/test_report.py)."""
     import rideid as _r
+    from rideid.estimate import responses as R
     from rideid.report import html as H
 
     _, res, out = digressive_fit
@@ -166,7 +167,7 @@ def test_report_draws_the_curves_and_the_velocities_reached(digressive_fit):
         assert (out / "figures" / f"{f}.png").stat().st_size > 5000
     result = load(out)
     ds = _r.load_dataset(result.dataset, starts=result.start_values())
-    vels = H.result_suspension_velocities(result, ds)
+    vels = R.result_suspension_velocities(result, ds)
     edges, hists = H.velocity_histograms(vels)
     assert list(hists) == [r.id for r in ds.runs]
     for r in ds.runs:
@@ -175,7 +176,7 @@ def test_report_draws_the_curves_and_the_velocities_reached(digressive_fit):
     # reached: the built-in runs' suspension velocities pass the outermost knots on both sides
     assert edges[0] < -0.4 and edges[-1] > 0.4
     # the rebuilt report's fits are the curves' car (a linear car with the derived c_s misses by 50 %)
-    sims = H.curve_responses(result, ds)
+    sims = R.curve_responses(result, ds)
     for r in ds.runs:
         assert max(H.fit_statistics(ds.data[r.id].matrix(), sims[r.id]).values()) < 0.05, r.id
 

@@ -61,6 +61,7 @@ _COMMAND_LINE = _by_name({
     "rideid.report.html": ("write_report",),
 }, {
     "write_sensitivity_csvs": ("rideid.report.sensitivity_files", "write_csvs"),
+    "complete_result": ("rideid.estimate.responses", "complete"),
     "sensitivity_tables_markdown": ("rideid.report.sensitivity_files", "tables_markdown"),
     "sensitivity_heatmaps": ("rideid.report.sensitivity_files", "heatmaps"),
 })

@@ -518,6 +518,7 @@ def cmd_report(args, out=None):
         raise rideid.DataError(f"{folder / 'result.json'}: the dataset it names ({res.dataset!r}) is not found; "
                         "the report needs it")
     ds = rideid.load_dataset(res.dataset, starts=res.start_values())
+    res = rideid.complete_result(res, ds)  # the car's response on the runs: the report draws it, never simulates
     path = rideid.write_report(res, ds, folder, compare=other,
                         compare_label=None if other is None else f"{other.weights_mode} ({Path(args.compare).name})")
     print(f"report written to {path}", file=out)

@@ -76,6 +76,7 @@ from ..model.params import ALL_NAMES, GROUPS, UNITS
 from ..model.simulator import Simulator
 from .bumps import bump_block, frozen_values, reach, scan_start
 from .dampers import dampers_block, knot_excitation
+from .responses import suspension_velocities
 from .cost import BUMP_UNITS, IDENTIFIABLE_GROUPS, CostFunction, ParameterSpace, refuse_unsupported_groups
 from .jade import JadeSolver, make_rng, stop_requested
 from .adequacy import advise, assess_fit
@@ -456,6 +457,7 @@ def _result(ds, cf, search, fit, weighting, maps, rng_record, t0, assess=True,
     adequacy = advise(assess_fit(cf, P, response), model) if assess else None
     dampers = None if not space.curves else dampers_block(space, P, robust.white, robust.robust, robust.names,
                                                           excitation)
+    velocities = suspension_velocities(cf, P) if space.curves else None
     stops = None if not space.bump else bump_block(space, P, robust.white, robust.robust, robust.names, bumps)
     correlation, history = robust.correlation_dict(), History(search.history)
     # what the data were and what the car's modes are: records beside the fit
@@ -470,7 +472,7 @@ def _result(ds, cf, search, fit, weighting, maps, rng_record, t0, assess=True,
         rng_state=rng_record["rng_state"], track_weights=search.track_weights, weights_mode=weighting.name,
         polish=info, history=history, starts=starts, preprocessing=preprocessing,
         modal=modal, dataset=str(ds.path), maps=maps,
-        model=model, response=response, correlation=correlation, adequacy=adequacy,
+        model=model, response=response, velocities=velocities, correlation=correlation, adequacy=adequacy,
         checks=[f.to_dict() for f in findings], dampers=dampers, bump_stops=stops,
         wall_time_s=time.perf_counter() - t0)
 

@@ -205,6 +205,9 @@ class IdentificationResult:
     correlation: dict | None = None
     #: the identified car's channels per run on the final data (in memory only, for the report)
     response: dict | None = None
+    #: with damper curves: run id -> (front, rear) suspension velocities of the identified car (in memory
+    #: only, the report's histograms; rideid.estimate.responses)
+    velocities: dict | None = None
     #: findings of the data checks and of the bound check (rideid.data.checks), as dicts
     checks: list = field(default_factory=list)
     #: SPEC §8 damper curves when the model has them: {"velocity", "front": {"force", "std", "std_robust",

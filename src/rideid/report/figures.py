@@ -21,11 +21,10 @@ import numpy as np
 from matplotlib.figure import Figure
 
 from ..conditioning.load import load_dataset
+from ..estimate.responses import complete
 from ..data.dataset import Dataset
 from ..errors import ArgumentError, DataError
 from ..model.equations import CHANNELS
-from ..model.params import ALL_NAMES
-from .html import curve_responses, simulate_runs
 
 #: channel groups of the fit figure: title, unit, channel indices
 GROUPS = (("body accelerations", "m/s²", (0, 1, 2, 3)), ("axle accelerations", "m/s²", (4, 5, 6, 7)),
@@ -62,16 +61,10 @@ def result_dataset(result, dataset=None):
 def responses(result, dataset) -> dict:
     """The identified car's channels on every run of ``dataset``: run id -> ``(n_time, 10)``.
 
-    The response kept in memory by :func:`rideid.identify`, else simulated as the report does (the
-    curve model's car for a result with damper curves, the linear car otherwise).
+    The response kept in memory by :func:`rideid.identify`, else simulated with the result's model
+    (:func:`rideid.estimate.responses.complete`: the curves' car for a result with damper curves).
     """
-    run_ids = [r.id for r in dataset.runs]
-    sims = result.response
-    if sims is not None and set(run_ids) <= set(sims):
-        return sims
-    if getattr(result, "dampers", None):
-        return curve_responses(result, dataset)
-    return simulate_runs(dataset, {n: result.parameters[n] for n in ALL_NAMES if n in result.details})
+    return complete(result, dataset).response
 
 
 def fit_figure(result, run: str, dataset=None, channels=None):

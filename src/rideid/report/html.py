@@ -29,16 +29,11 @@ from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure as MplFigure
 from PIL import Image
 
-from ..data.dataset import prepare_inputs
-from ..data.scenario import LIFT_OFF_RHO
 from ..errors import DataError
-from ..estimate.cost import CostFunction, ParameterSpace
-from ..estimate.dampers import suspension_velocities_by_run
 from ..estimate.sensitivity import P2T_STARS, stars
 from .sensitivity_files import heatmap_figure
-from ..model.batch import BatchSimulator
 from ..model.equations import CHANNELS
-from ..model.params import ALL_NAMES, DESCRIPTIONS, as_vector
+from ..model.params import ALL_NAMES, DESCRIPTIONS
 from ..model.roads import iso8608_psd
 from .estimate_sections import estimate_context
 
@@ -435,32 +430,6 @@ def fig_heatmap(kind, maps, out_dir):
 NOT_EXCITED_LABEL = "not excited — not to be trusted"
 
 
-def _curve_car(result, dataset):
-    """A cost function of ``dataset`` on the curve model of ``result`` and the identified car's full row."""
-    knots = [v for v in result.dampers["velocity"] if v > 0]
-    ext = (result.model or {}).get("extensions") or ["damper_curves"]
-    space = ParameterSpace(dataset.known, dataset.geometry, dataset.manifest.bounds, extensions=ext,
-                           damper_knots=knots)
-    cf = CostFunction(dataset, space=space)
-    return cf, space.full(np.array([[result.parameters[n] for n in space.names]]))[0]
-
-
-def curve_responses(result, dataset) -> dict:
-    """The response of the identified car with damper curves (the nonlinear simulator) on every run:
-    run id -> (n_time, 10); what :func:`simulate_runs` gives a linear result."""
-    cf, P = _curve_car(result, dataset)
-    return {r.id: o[0] for r, o in zip(dataset.runs, cf.sim.outputs(P[None]))}
-
-
-def result_suspension_velocities(result, dataset) -> dict:
-    """Run id -> ``(front, rear)`` suspension velocities (m/s, compression +, both corners of the axle)
-    of the identified car with damper curves, simulated on each run of ``dataset``
-    (:func:`rideid.estimate.dampers.suspension_velocities_by_run`, the excitation check's, at the looser
-    sub-step bound :data:`rideid.data.scenario.LIFT_OFF_RHO`: a histogram needs no more)."""
-    cf, P = _curve_car(result, dataset)
-    return {r.id: v for r, v in zip(dataset.runs, suspension_velocities_by_run(cf, P, rho=LIFT_OFF_RHO))}
-
-
 def velocity_histograms(vels: dict, n_bins: int = 60):
     """Common bin edges over every run and axle, and per run the counts ``(front, rear)``: every sample
     falls in a bin (the edges span the smallest to the largest velocity)."""
@@ -666,12 +635,13 @@ def _parameter_names(result) -> list:
 
 
 def _responses(result, dataset) -> dict:
-    """The identified car's response on every run, run id -> (n_time, 10): the result's own, or simulated."""
+    """The identified car's response on every run, run id -> (n_time, 10): the result's own (the report never
+    simulates: a result read back is completed first, :func:`rideid.estimate.responses.complete`)."""
     sims = result.response
-    if sims is None or set(sims) != {r.id for r in dataset.runs}:
-        # (a rebuilt report of a curve result: the curves' car, not a linear car with the derived c_s)
-        sims = curve_responses(result, dataset) if getattr(result, "dampers", None) else \
-            simulate_runs(dataset, {n: result.parameters[n] for n in _parameter_names(result)})
+    if sims is None or set(sims) != {r.id for r in dataset.runs} or any(
+            len(sims[r.id]) != len(dataset.data[r.id].time) for r in dataset.runs):
+        raise DataError("the result carries no response of these runs: pass it through "
+                        "rideid.estimate.responses.complete(result, dataset) before writing its report")
     return sims
 
 
@@ -716,7 +686,10 @@ def damper_section(result, dataset, out_dir) -> list:
     """The damper curves and the suspension velocities reached (a result with damper curves; else none)."""
     if not getattr(result, "dampers", None):
         return []
-    edges, hists = velocity_histograms(result_suspension_velocities(result, dataset))
+    if getattr(result, "velocities", None) is None:
+        raise DataError("the result carries no suspension velocities: pass it through "
+                        "rideid.estimate.responses.complete(result, dataset) before writing its report")
+    edges, hists = velocity_histograms(result.velocities)
     slopes = {a: result.parameters.get(n) for a, n in (("front", "c_sf"), ("rear", "c_sr"))}
     return [fig_damper_curves(result.dampers, slopes, out_dir),
             fig_damper_velocities(edges, hists, result.dampers["velocity"], out_dir)]
@@ -793,13 +766,6 @@ def render(context: dict) -> str:
     env = jinja2.Environment(loader=jinja2.FileSystemLoader(str(resources.files("rideid.report") / "templates")),
                              autoescape=jinja2.select_autoescape(["html", "j2"]))
     return env.get_template("report.html.j2").render(**context)
-
-
-def simulate_runs(dataset, parameters: dict) -> dict:
-    """The response of the car ``parameters`` on every run of ``dataset``: run id -> (n_time, 10)."""
-    sim = BatchSimulator(dataset.geometry, prepare_inputs(dataset))
-    outs = sim.outputs(as_vector(parameters)[None])
-    return {r.id: o[0] for r, o in zip(dataset.runs, outs)}
 
 
 def data_tables(pre: dict):

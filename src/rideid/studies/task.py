@@ -22,6 +22,7 @@ from ..conditioning.load import load_dataset
 from ..data.dataset import Dataset
 from ..data.schema import load_truth
 from ..errors import DataError, RideidError
+from ..model.backend import one_thread
 from ..estimate.model_choice import identify
 from ..estimate.result import jsonable
 from ..synth.scenario import simulate_manifest, write_dataset
@@ -40,8 +41,6 @@ TIMING_COLUMNS = ("identify_wall_s", "task_wall_s")
 def one_core():
     """The kernels and BLAS limited to one thread (restored afterwards)."""
     from threadpoolctl import threadpool_limits
-
-    from ..model.backend import one_thread
 
     with one_thread(), threadpool_limits(limits=1):
         yield
