@@ -9,7 +9,8 @@ sample, and a dataset.toml whose runs give no start, so rideid estimates it.
 The true start of every run is ``LEAD`` s of file time.
 
 ``suv_scenario`` is a 2.1 t SUV with anti-roll bars on a chassis twist, a
-herringbone and a washboard (five runs; the car of a user's report).
+herringbone and a washboard (five runs; the car of a user's report), or the
+same SUV without bars.
 """
 
 from __future__ import annotations
@@ -82,14 +83,17 @@ SUV_RUNS = [("TW3", "twist", 3.0, 8.0), ("TW5", "twist", 5.0, 5.5), ("HB6", "her
             ("HB10", "herring", 10.0, 3.2), ("WB8", "wash", 8.0, 3.8)]
 
 
-def suv_scenario(folder, fs=200.0, extensions=("anti_roll_bars",)):
+def suv_scenario(folder, fs=200.0, extensions=("anti_roll_bars",), bars=True):
     """Write the SUV scenario (runs at ``fs``) to ``folder/scenario.toml`` and load it.
 
     ``extensions``: its ``[model]`` table; None leaves the table out (the model is then chosen).
+    ``bars``: False gives the truth no anti-roll bars (every extension truly 0).
     """
     model = "" if extensions is None else \
         "[model]\nextensions = [" + ", ".join(f'"{e}"' for e in extensions) + "]\n"
     text = SUV.replace('[model]\nextensions = ["anti_roll_bars"]\n', model)
+    if not bars:
+        text = text.replace("k_arf = 18000.0\nk_arr = 8000.0\n", "")
     for rid, track, v, dur in SUV_RUNS:
         text += f'[[runs]]\nid = "{rid}"\ntrack = "{track}"\nspeed = {v}\nfs = {fs}\nduration = {dur}\n'
     folder.mkdir(parents=True, exist_ok=True)

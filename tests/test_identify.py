@@ -446,3 +446,22 @@ def test_the_nominal_car_of_a_space_is_a_copy(sim_dataset):
     P = space.nominal()
     P[:] = -1.0
     assert np.all(space.nominal()[:len(NAMES)] > 0)
+
+
+def test_the_polish_does_not_stop_beside_a_bound(sim_dataset):
+    """An extension a rounding error above its bound of 0 (where a Gauss-Newton step leaves a truly-zero
+    one) stopped dogbox after two evaluations on ``xtol``, 2 % from the truth; the polish puts it on the
+    bound and converges (and continues with trf where dogbox ends beside a bound itself)."""
+    from rideid.estimate.cost import CostFunction
+    from rideid.estimate.identify import _polish
+    ds = rideid.load_dataset(sim_dataset)
+    cf = CostFunction(ds, extensions=("anti_roll_bars", "tire_damping"))
+    truth = np.array([DEFAULT_CAR.get(n, 0.0) for n in cf.names])
+    j = cf.names.index("c_tf")
+    x0 = 0.98 * truth
+    x0[j] = 5e-15 * (cf.bounds[j, 1] - cf.bounds[j, 0])
+    x, info, _ = _polish(cf, x0, np.full(len(cf.run_ids), 1 / len(cf.run_ids)))
+    assert info["nfev"] > 2 and info["cost_after"] < 1e-15 * info["cost_before"], info["message"]
+    twelve = [i for i, n in enumerate(cf.names) if n in NAMES]
+    np.testing.assert_allclose(x[twelve], truth[twelve], rtol=1e-6)
+    assert np.all(x[[cf.names.index(n) for n in ("k_arf", "k_arr", "c_tf", "c_tr")]] < 1e-6)
