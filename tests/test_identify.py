@@ -395,7 +395,7 @@ def test_cycle_slips_returns_a_new_dict(monkeypatch):
     ds = SimpleNamespace(measured=runs, geometry=None, manifest=SimpleNamespace(
         tracks={"t": None}, run=lambda rid: SimpleNamespace(track="t")))
     found = {"a": 1.0 + 5 / fs, "b": 2.0 + 1 / fs, "c": 3.0}  # a slips five samples, b one (kept), c none
-    monkeypatch.setattr(st, "estimate_start", lambda mr, P, geom, track: (
+    monkeypatch.setattr(st, "estimate_start", lambda mr, P, geom, track, simulator=None: (
         found[next(k for k, v in runs.items() if v is mr)], None))
     starts = {"a": 1.0, "b": 2.0, "c": 3.0}
     moved = st.cycle_slips(ds, None, starts)
