@@ -517,7 +517,7 @@ def cmd_report(args, out=None):
     if not res.dataset or not Path(res.dataset).exists():
         raise rideid.DataError(f"{folder / 'result.json'}: the dataset it names ({res.dataset!r}) is not found; "
                         "the report needs it")
-    ds = rideid.load_dataset(res.dataset, starts=res.start_values())
+    ds = rideid.load_dataset(res.dataset, starts=res.start_records())
     path = rideid.write_report(res, ds, folder, compare=other,
                         compare_label=None if other is None else f"{other.weights_mode} ({Path(args.compare).name})")
     print(f"report written to {path}", file=out)

@@ -230,6 +230,26 @@ class MeasuredRun:
         self.window = (i0, i1)
         return self.times[i0:i1] - start
 
+    def keep_window(self, start: float, model_time) -> bool:
+        """Take the samples an earlier reading used: those from ``start + model_time[0]`` to
+        ``start + model_time[1]`` (file time; ``model_time`` as ``result.json``'s preprocessing records it), when
+        both ends fall on samples of this recording (within a tenth of a sample; else the window stays as it is).
+
+        Returns
+        -------
+        bool
+            Whether the window was set.
+        """
+        ends = np.asarray(model_time, dtype=float) + start
+        if ends.shape != (2,) or not np.all(np.isfinite(ends)):
+            return False
+        k = np.rint((ends - self.t_first) * self.fs)
+        if np.any(np.abs(k - (ends - self.t_first) * self.fs) > 0.1) or k[0] < 0 or k[1] >= self.times.size \
+                or k[1] - k[0] < 2:
+            return False
+        self.window = (int(k[0]), int(k[1]) + 1)
+        return True
+
     def run_data(self, start: float):
         """:class:`RunData` of the window's samples, on the model's time axis for this start."""
         if self.window is None:

@@ -56,18 +56,18 @@ def result_dataset(result, dataset=None):
     path = dataset if dataset is not None else result.dataset
     if not path:
         raise DataError("the result names no dataset; pass dataset= (a Dataset or its folder)")
-    return load_dataset(path, starts=result.start_values())
+    return load_dataset(path, starts=result.start_records())
 
 
 def responses(result, dataset) -> dict:
     """The identified car's channels on every run of ``dataset``: run id -> ``(n_time, 10)``.
 
-    The response kept in memory by :func:`rideid.identify`, else simulated as the report does (the
-    curve model's car for a result with damper curves, the linear car otherwise).
+    The response kept in memory by :func:`rideid.identify` where it has the dataset's samples, else simulated
+    as the report does (the curve model's car for a result with damper curves, the linear car otherwise).
     """
-    run_ids = [r.id for r in dataset.runs]
     sims = result.response
-    if sims is not None and set(run_ids) <= set(sims):
+    if sims is not None and all(r.id in sims and sims[r.id].shape == (dataset.data[r.id].time.size, len(CHANNELS))
+                                for r in dataset.runs):
         return sims
     if getattr(result, "dampers", None):
         return curve_responses(result, dataset)
