@@ -461,8 +461,11 @@ def score_table(scored: dict) -> str:
                          + (" (not in the model)" if r["status"] == "not in the model" else ""))
             continue
         note = "" if r["status"] == "estimated" else f" {r['status']}"
+        if "velocity" in r:  # a damper curve's knot
+            note = f" at {r['velocity']:+.3f} m/s" + note
         lines.append(f"{n:<10} {r['estimate']:>14.6g} {r['truth']:>14.6g} {r['error_percent']:>9.4f} "
                      f"{covers:>16}{note}")
+    lines += scored.get("notes", [])
     if scored["coverable"]:
         lines.append(f"±2 std_robust covers the truth for {scored['covered']} of {scored['coverable']} estimates "
                      "(about 95 % expected)")
@@ -474,7 +477,8 @@ def cmd_score(args, out=None):
     out = out or sys.stdout
     res = rideid.read_result_json(args.result)
     truth = rideid.load_truth(args.truth)
-    print(score_table(rideid.score(res, truth)), file=out)
+    curves = rideid.load_truth_dampers(args.truth)
+    print(score_table(rideid.score(res, truth, dampers=curves)), file=out)
     return 0
 
 
