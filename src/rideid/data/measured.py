@@ -474,7 +474,7 @@ def _remove_gravity_bias(raw: dict, rec_ch: dict, measured: list, lead, grav: bo
                          where_map: str, warns: list) -> None:
     """Subtract the lead-in mean (gravity and bias) from ``raw`` in place and note it in ``rec_ch``.
 
-    Warns when the lead-in is not stationary (:func:`lead_in_moving`).
+    Warns when the lead-in is not stationary (:func:`lead_in_moving`), except on a channel flat-lined.
     """
     for c in measured:
         s = raw[c]
@@ -500,7 +500,8 @@ def _remove_gravity_bias(raw: dict, rec_ch: dict, measured: list, lead, grav: bo
         whole = s.values - np.mean(s.values)
         rms_all = float(np.sqrt(np.mean(whole ** 2)))
         rms_lead = float(np.std(seg))
-        if lead_in_moving(rms_lead, rms_all, quietest_rms(s.values, seg.size)):
+        # a flat-lined channel (warned of already) has no motion to find: its lead-in's "RMS" is rounding
+        if not rec_ch[c].get("flat_lined") and lead_in_moving(rms_lead, rms_all, quietest_rms(s.values, seg.size)):
             _warn(warns, f"{path}: {c}: the lead-in [{lead[0]:g}, {lead[1]:g}] s is not stationary (RMS "
                          f"{rms_lead:.3g} vs {rms_all:.3g} over the run); set lead_in to a part at rest", _STAGE)
         raw[c] = Signal(s.time, s.values - m, s.unit)
