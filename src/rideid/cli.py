@@ -317,6 +317,8 @@ def _roads_table(res) -> str:
     for rid, r in res.roads.items():
         lines.append(f"{rid:<12} {r['iso8608_class']:>5} {r['gd_n0']:>11.3g} {r['speed']:>10.4g}  {r['file']} "
                      f"({r['wavelengths_m'][0]:g}-{r['wavelengths_m'][1]:g} m wavelengths)")
+    for rid, r in res.roads.items():
+        lines += [f"{rid}: {c} {why}" for c, why in (r.get("channels_left_out") or {}).items()]
     if not res.adequacy:
         lines.append("ADEQUACY NOT ASSESSED: every run is on an unknown road, where rideid has no residual test yet; "
                      "the error bars hold only if the linear model describes the car (add a known-track run to "

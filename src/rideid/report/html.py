@@ -325,11 +325,13 @@ def spectra_limits(runs) -> tuple:
         f, res, top = _fit_spectra(t, Y, Ysim, present)
         fmax = max(fmax, f[-1])
         for row, (_, _, idx) in enumerate(GROUPS):
-            curves = [top[row]] + [res[i] for i in idx if i in present]
-            lo[row] = min(lo[row], min(float(np.nanmin(c)) for c in curves))
-            hi[row] = max(hi[row], max(float(np.nanmax(c)) for c in curves))
+            # a channel the fit left out has no model response: its residual spectrum is NaN throughout
+            curves = [c for c in [top[row]] + [res[i] for i in idx if i in present] if not np.all(np.isnan(c))]
+            if curves:
+                lo[row] = min(lo[row], min(float(np.nanmin(c)) for c in curves))
+                hi[row] = max(hi[row], max(float(np.nanmax(c)) for c in curves))
     pad = lambda a, b: (a - 0.05 * (b - a), b + 0.05 * (b - a)) if b > a else (a - 1.0, b + 1.0)  # noqa: E731
-    return pad(0.0, fmax), tuple(pad(a, b) for a, b in zip(lo, hi))
+    return pad(0.0, fmax), tuple(pad(a, b) if np.isfinite(a) else (-1.0, 1.0) for a, b in zip(lo, hi))
 
 
 @styled
@@ -724,15 +726,17 @@ def damper_section(result, dataset, out_dir) -> list:
 
 def road_section(result, out_dir) -> dict:
     """Template context of the unknown-road runs (SPEC §9): their rows, figures and wavelength band."""
-    road_figs, road_rows = [], []
+    road_figs, road_rows, road_notes = [], [], []
     for rid, rec in (getattr(result, "roads", None) or {}).items():
         road_rows.append({"run": rid, "cls": rec["iso8608_class"], "gd": rec["gd_n0"], "speed": rec["speed"],
                           "file": rec["file"]})
+        road_notes += [f"{rid}: {c} {why}" for c, why in (rec.get("channels_left_out") or {}).items()]
         if result.road_profiles and rid in result.road_profiles:
             x, z = result.road_profiles[rid]
             road_figs.append(fig_road(rid, x, z, rec, out_dir))
     band = next(iter((result.roads or {}).values()), {}).get("wavelengths_m", (0.5, 20))
-    return {"road_figures": road_figs, "road_rows": road_rows, "road_band": "{:g}-{:g} m".format(*band)}
+    return {"road_figures": road_figs, "road_rows": road_rows, "road_notes": road_notes,
+            "road_band": "{:g}-{:g} m".format(*band)}
 
 
 def fit_section(result, dataset, sims) -> dict:
