@@ -83,6 +83,22 @@ def test_the_roads_and_their_classes(road_fit):
     assert (fit / "report.html").is_file() and (fit / "figures" / "road_B40.png").is_file()
 
 
+def test_the_cost_of_an_unknown_road_fit_means_what_it_means_on_a_track(road_fit):
+    """result.json's cost (and the terminal's "cost ...") was the polish's own objective, about 1 by
+    construction ("cost 1"). It is now rideid.cost's E_r on every run: each channel's squared error over its
+    energy. With white noise of 2 % of each channel's RMS, the fit band's share of it stays in the residual but
+    for what the two wheel paths' road absorbs (2 of the 10 channels at each frequency): E_r = 0.02^2 x (band
+    bins / all bins) x (1 - 2/10), 7.9e-5 here."""
+    _, sim, fit = road_fit
+    doc = json.loads((fit / "result.json").read_text())
+    ds = rideid.load_dataset(sim)
+    expected = []
+    for rr in anyroad.prepare_road_runs(ds):
+        assert len(rr.cols) == 10 and not rr.left_out
+        expected.append(0.02 ** 2 * rr.fit.size / (rr.n / 2) * (1 - 2 / 10))
+    assert doc["cost"] == pytest.approx(np.mean(expected), rel=0.05), (doc["cost"], expected)
+
+
 def test_a_dataset_mixing_a_track_and_a_road(tmp_path):
     sim = simulate(tmp_path, [RUNS[0], {"id": "T", "track": "tw", "speed": 4.0, "fs": 200.0, "duration": 8.0}],
                    [TWIST], noise=0.01)
@@ -125,3 +141,38 @@ def test_an_unknown_road_needs_a_steady_speed():
     with pytest.raises(DataError,
                        match=r"run 'R1': an unknown-road run needs a constant speed .* from 8\.00 to 12\.00"):
         anyroad.run_speed(ds, run)
+
+
+def test_a_channel_the_road_run_does_not_excite_is_left_out_with_a_note(tmp_path):
+    """A channel that carries rounding only (a roll rate on a washboard declared an unknown road, its bias
+    removed: RMS 1e-19 rad/s) was weighted by 1 / its RMS and poisoned the fit ("costs contain NaN"). It is
+    left out with a note naming it, and the fit is the fit without that column, exactly."""
+    import shutil
+
+    sim = simulate(tmp_path, [{"id": "C25", "road_class": "C", "speed": 7.0, "fs": 100.0, "duration": 8.0}])
+    f = sim / "runs" / "C25.csv"
+    head, *rows = f.read_text().splitlines()
+    cols = head.split(",")
+    k = cols.index("roll_rate")
+    Y = np.array([[float(v) for v in r.split(",")] for r in rows])
+    Y[:, k] = 1e-19 * np.random.default_rng(5).standard_normal(len(rows))
+    np.savetxt(f, Y, delimiter=",", header=head, comments="", fmt="%.17g")
+    absent = tmp_path / "absent"
+    shutil.copytree(sim, absent)
+    np.savetxt(absent / "runs" / "C25.csv", np.delete(Y, k, axis=1), delimiter=",",
+               header=",".join(c for c in cols if c != "roll_rate"), comments="", fmt="%.17g")
+    fits = [rideid.identify(rideid.load_dataset(d), seed=1, model="base", population=10, generations=5,
+                            polish=False) for d in (sim, absent)]
+    left_out = fits[0].roads["C25"]["channels_left_out"]
+    assert list(left_out) == ["roll_rate"] and "RMS 1e-19" in left_out["roll_rate"], left_out
+    assert "not excited by this run, or its sensor is dead" in left_out["roll_rate"]
+    assert "channels_left_out" not in fits[1].roads["C25"]  # an absent channel is not a left-out one
+    assert fits[0].parameters == fits[1].parameters
+    assert np.isfinite(fits[0].cost) and fits[0].cost == fits[1].cost
+    # the report draws the run without the channel's model response, and says nothing about NaN
+    import warnings
+    ds = rideid.load_dataset(sim)  # (the data checks warn that the gyro and the body disagree: the roll is gone)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        rideid.write_report(fits[0], ds, tmp_path / "report")
+    assert "roll_rate left out: RMS 1e-19" in (tmp_path / "report" / "report.html").read_text()

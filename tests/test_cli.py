@@ -5,6 +5,7 @@ import shutil
 import subprocess
 import sys
 import tomllib
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -418,3 +419,62 @@ def test_every_message_is_on_its_own_line(monkeypatch):
     prog.done()
     assert term.lines() == ["rideid: warning: k_sf = 8000 ended at its lower search bound 8000",
                             "rideid: compiled the simulation kernel in 1 s (cached for later runs)", ""]
+
+
+def test_score_judges_damper_curves_and_bump_stops_against_truth_toml(tmp_path, capsys):
+    """truth.toml with [dampers] and bump stops (examples/dampers/real_dampers.toml's car): score reads the true
+    curves at the result's knots (piecewise linear through (0, 0), the last slope beyond) and compares the stops;
+    a knot no run excited and a stop not reached are shown but neither judged nor counted (before, score
+    listed the sixteen parameters only)."""
+    import rideid
+    from rideid.data.schema import load_truth_dampers, write_toml
+    example = Path(__file__).resolve().parents[1] / "examples" / "dampers" / "real_dampers.toml"
+    src = tomllib.loads(example.read_text())
+    # as rideid simulate writes it: c_sf, c_sr the curves' mean slopes between -0.1 and 0.1 m/s
+    write_toml(tmp_path / "truth.toml", {"truth": {**src["truth"], "c_sf": 1786.0, "c_sr": 1649.0},
+                                         "dampers": src["dampers"]})
+    truth = rideid.load_truth(tmp_path / "truth.toml")
+    knots = [-0.4, -0.2, -0.1, -0.05, -0.025, 0.025, 0.05, 0.1, 0.2, 0.4]
+    # the true front curve at the knots, by hand: 0.1 lies halfway between 0.05 (59.5 N) and 0.15 (178.6 N);
+    # 0.025 halfway from (0, 0) to 0.05; -0.4 one third of the way from -0.3 (-500.1 N) to -0.6 (-785.8 N)
+    true_f = {0.1: (59.5 + 178.6) / 2, 0.025: 59.5 / 2, -0.4: -500.1 + (-785.8 + 500.1) / 3}
+    true_r = {v: load_truth_dampers(tmp_path / "truth.toml").force("rear", v) for v in knots}
+    front = [true_f.get(v, 0.0) for v in knots]
+    front[knots.index(0.1)] *= 1.015      # 1.5 % off, std_robust 1 %: covered
+    front[knots.index(0.025)] *= 1.04     # 4 % off, std_robust 1 %: not covered
+    front[knots.index(-0.4)] *= 1.5       # 50 % off but not excited: shown, not judged
+    excited = [v in true_f and v != -0.4 for v in knots]
+    dampers = {"velocity": knots,
+               "front": {"force": front, "std_robust": [abs(f) * 0.01 if e else None for f, e in zip(front, excited)],
+                         "excited": excited},
+               "rear": {"force": [true_r[v] for v in knots], "std_robust": [None] * 10, "excited": [False] * 10}}
+    bumps = {"front": {"reached": True, "clearance": 0.051, "rate": 45000.0, "std_robust": [0.001, 2000.0],
+                       "known": [False, False]},
+             "rear": {"reached": False, "clearance": 0.08, "rate": 1000.0, "std_robust": [None, None],
+                      "known": [False, False]}}
+    pars = {n: {"value": truth[n], "fixed": False, "derived": n in ("m_s", "c_sf", "c_sr"),
+                "std_robust": 0.01 * truth[n]} for n in rideid.NAMES}
+    (tmp_path / "result.json").write_text(json.dumps({"parameters": pars, "dampers": dampers, "bump_stops": bumps}))
+    rc, stdout, err = run_cli(["score", tmp_path / "result.json", tmp_path / "truth.toml"], capsys)
+    assert rc == 0, err
+    rows = {ln.split()[0]: ln.split() for ln in stdout.splitlines()[1:] if ln.split()}
+    k = knots.index(0.1) + 1
+    assert float(rows[f"F_f{k}"][2]) == pytest.approx(119.05) and float(rows[f"F_f{k}"][3]) == pytest.approx(1.5)
+    assert rows[f"F_f{k}"][4] == "yes" and rows[f"F_f{k}"][5:7] == ["at", "+0.100"]
+    k = knots.index(0.025) + 1
+    assert float(rows[f"F_f{k}"][3]) == pytest.approx(4.0) and rows[f"F_f{k}"][4] == "NO"
+    k = knots.index(-0.4) + 1
+    assert float(rows[f"F_f{k}"][2]) == pytest.approx(-595.333, abs=1e-3)
+    assert float(rows[f"F_f{k}"][3]) == pytest.approx(50.0) and rows[f"F_f{k}"][-2:] == ["not", "excited"]
+    assert float(rows["bs_clear_f"][3]) == pytest.approx(2.0) and rows["bs_clear_f"][4] == "yes"
+    assert float(rows["bs_rate_f"][3]) == pytest.approx(-10.0) and rows["bs_rate_f"][4] == "NO"
+    assert rows["bs_rate_r"][-2:] == ["not", "reached"] and rows["bs_rate_r"][4] == "-"
+    # judged: the 12 parameters, the two excited front knots, the front stop's two numbers
+    assert "±2 std_robust covers the truth for 14 of 16 estimates" in stdout
+    # the largest error is the front stop's rate (10 %): not the knot nobody excited (50 %)
+    assert stdout.strip().splitlines()[-1] == "largest error of the estimated parameters: 10.0000 %"
+    # a linear model against a truth with curves: c_sf compared with the curves' mean slope, and said so
+    (tmp_path / "result.json").write_text(json.dumps({"parameters": pars}))
+    rc, stdout, err = run_cli(["score", tmp_path / "result.json", tmp_path / "truth.toml"], capsys)
+    assert rc == 0 and "the truth has damper curves and the model linear dampers" in stdout
+    assert stdout.count("not in the model") == 2  # both stops' rates: the model has none

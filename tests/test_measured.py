@@ -304,6 +304,17 @@ def test_a_channel_without_signal_has_a_stationary_lead_in(tmp_path, default_sce
     assert not [m for m in moving if "not stationary" in m and "roll_rate" in m], moving
 
 
+def test_a_dead_gyro_is_flat_lined_and_nothing_else(tmp_path, default_scenario, raw):
+    """A gyro that reads one value throughout (the washboard run of docs' van case: its roll rate is identically
+    zero, the logger adds a bias): one warning, "flat-lined"; the lead-in's rounding (RMS 1.7e-18 against 0)
+    is no motion (it was "lead-in not stationary (RMS 1.73e-18 vs 0)")."""
+    dead = _set("Gyro_X", lambda t, v, u: (t, np.full_like(v, -0.0520937), u))
+    msgs = _warnings_of(_one_run(tmp_path, default_scenario, raw, rid="W_L", mutate=dead,
+                                 preprocess={"gravity_included": True, "remove_bias": True}))
+    # -0.0520937 deg/s = -0.000909207 rad/s
+    assert len(msgs) == 1 and "Gyro_X' mapped to roll_rate: flat-lined (every sample is -0.000909207)" in msgs[0], msgs
+
+
 # ---------------------------------------------------------------------------
 # Bad input: one line naming the file, key or channel; exit 2; nothing written
 

@@ -122,3 +122,40 @@ def test_reprs_fit_on_a_screen(fitted):
     text = repr(replace(res, dampers=curves, details=details))
     assert "damper curves: 10 knots per axle up to 0.4 m/s" in text and "F_f1=" not in text
     assert len(text.splitlines()) <= 20
+
+
+def test_plot_fit_of_a_logger_result_straight_from_identify(tmp_path):
+    """A logger dataset whose starts identify() refines: the run's samples are fixed at the first estimate of
+    its start, and a dataset read again at the final start chose them anew (one sample more: plot_fit raised
+    "x and y must have same first dimension (1200,) vs (1199,)"). The result's records now read the runs as the
+    identification read them: plot_fit draws the fitted samples with the response identify() kept, and a
+    result read back draws the same samples and the same car."""
+    sys.path.insert(0, str(Path(__file__).parent))
+    from logger_case import suv_scenario, write_logger
+    sc = suv_scenario(tmp_path / "sc", fs=100.0)
+    sc = replace(sc, runs=[r for r in sc.runs if r.id == "TW5"])
+    write_logger(sc, tmp_path / "log", noise=0.02, seed=1)
+    ds = rideid.load_dataset(tmp_path / "log")
+    res = rideid.identify(ds, seed=1, population=10, generations=4, model="base", assess=False)
+    fig = rideid.plot_fit(res, "TW5")
+    n = res.response["TW5"].shape[0]
+    assert res.preprocessing["TW5"]["samples"] == n
+    body = fig.axes[0].lines
+    assert body[0].get_xdata().size == n
+    assert np.array_equal(body[1].get_ydata(), res.response["TW5"][:, 0])
+    # the samples' model times at the final start, as result.json records them
+    start = res.starts["TW5"]["value"]
+    first, last = res.preprocessing["TW5"]["model_time"]
+    assert body[0].get_xdata()[0] == pytest.approx(first, abs=1e-9)
+    assert body[0].get_xdata()[-1] == pytest.approx(last, abs=1e-9)
+    assert abs(start - 2.0) < 5e-3  # LEAD: a start estimated, not given
+    res.save(tmp_path / "fit")
+    again = rideid.plot_fit(rideid.load_result(tmp_path / "fit"), "TW5")
+    for a, b in zip(again.axes[0].lines, body):
+        assert np.array_equal(a.get_xdata(), b.get_xdata())
+        assert np.allclose(a.get_ydata(), b.get_ydata(), rtol=0, atol=1e-9 * np.abs(b.get_ydata()).max())
+    # a dataset read at the final start alone (its samples chosen anew): the car simulated on it, no crash
+    other = rideid.load_dataset(tmp_path / "log", starts=res.start_values())
+    m = other.data["TW5"].time.size
+    assert m != n
+    assert rideid.plot_fit(res, "TW5", dataset=other).axes[0].lines[1].get_ydata().size == m

@@ -133,3 +133,50 @@ def test_figure_pool_returns_the_jobs_order(monkeypatch):
     assert [(n, k) for n, k, _ in out] == [(n, a[0]) for n, a in jobs]
     if (os.cpu_count() or 1) > 1:
         assert all(pid != os.getpid() for _, _, pid in out)  # drawn in the workers
+
+
+def test_report_opens_on_a_summary_and_its_correlation_table_fits_the_page(fit_dir, tmp_path):
+    """A person reads the summary first (verdict, car, error bars, fit, data, each with a link) and jumps to
+    the sections from it and from the bar; with damper curves (twenty knot forces more: a 36 x 36 matrix
+    overflowed the page) the matrix holds the other parameters and the strongest pairs are listed, knots too;
+    every wide table scrolls in its own box."""
+    import json
+    d = tmp_path / "fit"
+    shutil.copytree(fit_dir, d)
+    doc = json.loads((d / "result.json").read_text())
+    names = [n for n in doc["correlation"]["names"]]
+    names += [f"F_{a}{k}" for a in "fr" for k in range(1, 11)] + ["bs_clear_f", "bs_clear_r", "bs_rate_f", "bs_rate_r"]
+    M = np.eye(len(names))
+    pairs = {("F_f3", "F_f4"): 0.97, ("k_sf", "c_sf"): -0.85, ("F_r1", "bs_rate_r"): 0.5}
+    for (a, b), r in pairs.items():
+        M[names.index(a), names.index(b)] = M[names.index(b), names.index(a)] = r
+    doc["correlation"] = {"names": names, "matrix": M.tolist(), "basis": "robust"}
+    (d / "result.json").write_text(json.dumps(doc))
+    assert main(["report", str(d)]) == 0
+    html = (d / "report.html").read_text()
+    matrix = re.search(r'<table class="small" id="correlation">(.*?)</table>', html, re.S).group(1)
+    header = re.findall(r"<th>([^<]*)</th>", matrix.split("</tr>")[0])
+    assert header == [""] + [n for n in names if not n.startswith("F_")] and len(header) - 1 <= 16
+    listed = re.findall(r"<tr><td>([^<]*)</td><td[^>]*>([^<]*)</td><td[^>]*>([^<]*)</td></tr>",
+                        re.search(r'id="correlation-pairs">(.*?)</table>', html, re.S).group(1))
+    assert listed == [("F_f3", "F_f4", "+0.97"), ("k_sf", "c_sf", "-0.85")]  # strongest first; not |r| < 0.8
+    assert "knot forces (20) are not\n in the matrix" in html
+    # every table of more than six columns scrolls in its own box
+    for m in re.finditer(r"(<div class=\"scroll\">\s*)?<table[^>]*>(.*?)</table>", html, re.S):
+        cols = len(re.findall(r"<t[hd][ >]", m.group(2).split("</tr>")[0]))
+        assert cols <= 6 or m.group(1), m.group(2)[:200]
+    # the summary comes first, and every link of the bar and the summary lands on a section of the page
+    assert html.index('<section id="summary">') < html.index('id="verdict"') < html.index('<section id="estimates">')
+    ids = set(re.findall(r'id="([^"]+)"', html))
+    links = re.findall(r'href="#([^"]+)"', html)
+    assert {"estimates", "adequacy", "fits", "data", "maps"} <= set(links) and set(links) <= ids, set(links) - ids
+    summary = re.search(r'<section id="summary">(.*?)</section>', html, re.S).group(1)
+    rows = dict(re.findall(r"<tr><th>([^<]*)</th><td>([^<]*)<a", summary))
+    assert set(rows) == {"Verdict", "Car", "Estimates", "Fit", "Data"}
+    assert rows["Verdict"].startswith("model adequate: ") and "total_mass = 1093.3" in rows["Car"]
+    rel = {n: 200 * p["std_robust"] / abs(p["value"]) for n, p in doc["parameters"].items()
+           if not p.get("fixed") and not p.get("derived") and p.get("std_robust")}
+    lo, hi = min(rel, key=rel.get), max(rel, key=rel.get)
+    assert rows["Estimates"].strip() == (f"{len(rel)} estimated; ±2 std_robust from {rel[lo]:.2g} % ({lo}) to "
+                                         f"{rel[hi]:.2g} % ({hi})")
+    assert rows["Fit"].startswith(f"cost {doc['cost']:.3g}; ") and rows["Data"].startswith("10 runs; ")

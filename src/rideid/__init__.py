@@ -52,7 +52,8 @@ _PUBLIC = _by_name({
 #: what the command line (:mod:`rideid.cli`) uses beyond SPEC §5, reached the same lazy way so that the command
 #: line imports nothing but ``rideid``; not in ``__all__`` (not part of the stable API)
 _COMMAND_LINE = _by_name({
-    "rideid.data.scenario": ("BUILTIN",), "rideid.data.schema": ("atomic_output", "read_toml", "read_result_json"),
+    "rideid.data.scenario": ("BUILTIN",),
+    "rideid.data.schema": ("atomic_output", "read_toml", "read_result_json", "load_truth_dampers"),
     "rideid.data.dataset": ("refuse_unknown_roads",), "rideid.model.equations": ("format_modal_summary",),
     "rideid.model.backend": ("compile_kernels",), "rideid.verify.hifi": ("scenario_properties",),
     "rideid.estimate.identify": ("DEFAULT_GENERATIONS", "DEFAULT_POPULATION", "parse_model_arg"),

@@ -317,6 +317,8 @@ def _roads_table(res) -> str:
     for rid, r in res.roads.items():
         lines.append(f"{rid:<12} {r['iso8608_class']:>5} {r['gd_n0']:>11.3g} {r['speed']:>10.4g}  {r['file']} "
                      f"({r['wavelengths_m'][0]:g}-{r['wavelengths_m'][1]:g} m wavelengths)")
+    for rid, r in res.roads.items():
+        lines += [f"{rid}: {c} {why}" for c, why in (r.get("channels_left_out") or {}).items()]
     if not res.adequacy:
         lines.append("ADEQUACY NOT ASSESSED: every run is on an unknown road, where rideid has no residual test yet; "
                      "the error bars hold only if the linear model describes the car (add a known-track run to "
@@ -461,8 +463,11 @@ def score_table(scored: dict) -> str:
                          + (" (not in the model)" if r["status"] == "not in the model" else ""))
             continue
         note = "" if r["status"] == "estimated" else f" {r['status']}"
+        if "velocity" in r:  # a damper curve's knot
+            note = f" at {r['velocity']:+.3f} m/s" + note
         lines.append(f"{n:<10} {r['estimate']:>14.6g} {r['truth']:>14.6g} {r['error_percent']:>9.4f} "
                      f"{covers:>16}{note}")
+    lines += scored.get("notes", [])
     if scored["coverable"]:
         lines.append(f"±2 std_robust covers the truth for {scored['covered']} of {scored['coverable']} estimates "
                      "(about 95 % expected)")
@@ -474,7 +479,8 @@ def cmd_score(args, out=None):
     out = out or sys.stdout
     res = rideid.read_result_json(args.result)
     truth = rideid.load_truth(args.truth)
-    print(score_table(rideid.score(res, truth)), file=out)
+    curves = rideid.load_truth_dampers(args.truth)
+    print(score_table(rideid.score(res, truth, dampers=curves)), file=out)
     return 0
 
 
@@ -517,7 +523,7 @@ def cmd_report(args, out=None):
     if not res.dataset or not Path(res.dataset).exists():
         raise rideid.DataError(f"{folder / 'result.json'}: the dataset it names ({res.dataset!r}) is not found; "
                         "the report needs it")
-    ds = rideid.load_dataset(res.dataset, starts=res.start_values())
+    ds = rideid.load_dataset(res.dataset, starts=res.start_records())
     res = rideid.complete_result(res, ds)  # the car's response on the runs: the report draws it, never simulates
     path = rideid.write_report(res, ds, folder, compare=other,
                         compare_label=None if other is None else f"{other.weights_mode} ({Path(args.compare).name})")

@@ -19,7 +19,7 @@ from .nominal import gather, run_steps
 from .starts import speed_channel_std, start_steps
 
 
-def load_dataset(path, starts: dict[str, float] | None = None, simulator=None) -> Dataset:
+def load_dataset(path, starts: dict[str, float | dict] | None = None, simulator=None) -> Dataset:
     """Load and validate a dataset folder (or its ``dataset.toml``), ready to identify.
 
     Two steps, each available on its own, top-down: :func:`rideid.data.dataset.read_dataset` (formats and
@@ -39,7 +39,13 @@ def load_dataset(path, starts: dict[str, float] | None = None, simulator=None) -
         The dataset folder, or its ``dataset.toml``.
     starts : dict, optional
         Run id -> start (file time, s) to use instead of estimating it, e.g.
-        the starts a previous identification settled on (``result.json``).
+        the starts a previous identification settled on (``result.json``;
+        :meth:`rideid.IdentificationResult.start_values`). A value may also be a
+        record ``{"value": start, "model_time": [first, last]}``
+        (:meth:`rideid.IdentificationResult.start_records`): the run then has
+        the samples that identification fitted, from ``start + first`` to
+        ``start + last`` of file time, rather than a window chosen anew at
+        ``start`` (which may take one sample more or fewer).
     simulator : rideid.model.simulator.Simulator, optional
         How the nominal car is simulated (backend, integration settings;
         default ``Simulator()``, the linear car as ``RIDEID_KERNEL`` says).
@@ -57,7 +63,7 @@ def load_dataset(path, starts: dict[str, float] | None = None, simulator=None) -
     return align_starts(ds, starts, simulator=simulator)
 
 
-def align_starts(ds: Dataset, starts: dict[str, float] | None = None, car=None, simulator=None) -> Dataset:
+def align_starts(ds: Dataset, starts: dict[str, float | dict] | None = None, car=None, simulator=None) -> Dataset:
     """The estimation step of loading: fix the start of every measured run.
 
     A start given in ``starts`` or in the run's ``[preprocess] start`` is
@@ -71,7 +77,7 @@ def align_starts(ds: Dataset, starts: dict[str, float] | None = None, car=None, 
     ds : Dataset
         As read (:func:`rideid.data.dataset.read_dataset`).
     starts : dict, optional
-        Run id -> start (file time, s), as in :func:`load_dataset`.
+        Run id -> start (file time, s) or start record, as in :func:`load_dataset`.
     car : (12,) array, optional
         The nominal car's parameter vector (default
         ``nominal_car(ds.geometry)``): the car the starts are estimated with
@@ -88,7 +94,7 @@ def align_starts(ds: Dataset, starts: dict[str, float] | None = None, car=None, 
     return replace(ds, findings=findings)
 
 
-def _aligned(ds: Dataset, starts: dict[str, float] | None):
+def _aligned(ds: Dataset, starts: dict[str, float | dict] | None):
     """The step of :func:`align_starts`: returns ``(dataset aligned, findings of the checks)``."""
     man = ds.manifest
     found = yield from gather(_start_of(ds, rid, starts) for rid in ds.measured)
@@ -96,7 +102,10 @@ def _aligned(ds: Dataset, starts: dict[str, float] | None):
     for (rid, mr0), (s, record) in zip(ds.measured.items(), found):
         mr = replace(mr0, record=dict(mr0.record), window=None, start=None)
         mr.record["start"] = record
-        mr.make_grid(s)
+        given = (starts or {}).get(rid)
+        if not (isinstance(given, dict) and given.get("model_time") is not None
+                and mr.keep_window(s, given["model_time"])):
+            mr.make_grid(s)
         mr.start = float(s)
         measured[rid] = mr
         data[rid] = mr.run_data(s)
@@ -106,14 +115,16 @@ def _aligned(ds: Dataset, starts: dict[str, float] | None):
     return ds, findings
 
 
-def _start_of(ds: Dataset, rid: str, starts: dict[str, float] | None):
+def _start_of(ds: Dataset, rid: str, starts: dict[str, float | dict] | None):
     """The step (:mod:`rideid.conditioning.nominal`) giving the start of the measured run ``rid`` and how it
     was found: ``(start, record)``."""
     man = ds.manifest
     mr = ds.measured[rid]
     run = man.run(rid)
     if starts and rid in starts:
-        return float(starts[rid]), {"source": "given (from a previous identification)"}
+        given = starts[rid]
+        return float(given["value"] if isinstance(given, dict) else given), \
+            {"source": "given (from a previous identification)"}
     if not mr.auto_start:
         return mr.options["start"], {"source": "given"}
     if not run.road_known:

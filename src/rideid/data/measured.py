@@ -230,6 +230,26 @@ class MeasuredRun:
         self.window = (i0, i1)
         return self.times[i0:i1] - start
 
+    def keep_window(self, start: float, model_time) -> bool:
+        """Take the samples an earlier reading used: those from ``start + model_time[0]`` to
+        ``start + model_time[1]`` (file time; ``model_time`` as ``result.json``'s preprocessing records it), when
+        both ends fall on samples of this recording (within a tenth of a sample; else the window stays as it is).
+
+        Returns
+        -------
+        bool
+            Whether the window was set.
+        """
+        ends = np.asarray(model_time, dtype=float) + start
+        if ends.shape != (2,) or not np.all(np.isfinite(ends)):
+            return False
+        k = np.rint((ends - self.t_first) * self.fs)
+        if np.any(np.abs(k - (ends - self.t_first) * self.fs) > 0.1) or k[0] < 0 or k[1] >= self.times.size \
+                or k[1] - k[0] < 2:
+            return False
+        self.window = (int(k[0]), int(k[1]) + 1)
+        return True
+
     def run_data(self, start: float):
         """:class:`RunData` of the window's samples, on the model's time axis for this start."""
         if self.window is None:
@@ -454,7 +474,7 @@ def _remove_gravity_bias(raw: dict, rec_ch: dict, measured: list, lead, grav: bo
                          where_map: str, warns: list) -> None:
     """Subtract the lead-in mean (gravity and bias) from ``raw`` in place and note it in ``rec_ch``.
 
-    Warns when the lead-in is not stationary (:func:`lead_in_moving`).
+    Warns when the lead-in is not stationary (:func:`lead_in_moving`), except on a channel flat-lined.
     """
     for c in measured:
         s = raw[c]
@@ -480,7 +500,8 @@ def _remove_gravity_bias(raw: dict, rec_ch: dict, measured: list, lead, grav: bo
         whole = s.values - np.mean(s.values)
         rms_all = float(np.sqrt(np.mean(whole ** 2)))
         rms_lead = float(np.std(seg))
-        if lead_in_moving(rms_lead, rms_all, quietest_rms(s.values, seg.size)):
+        # a flat-lined channel (warned of already) has no motion to find: its lead-in's "RMS" is rounding
+        if not rec_ch[c].get("flat_lined") and lead_in_moving(rms_lead, rms_all, quietest_rms(s.values, seg.size)):
             _warn(warns, f"{path}: {c}: the lead-in [{lead[0]:g}, {lead[1]:g}] s is not stationary (RMS "
                          f"{rms_lead:.3g} vs {rms_all:.3g} over the run); set lead_in to a part at rest", _STAGE)
         raw[c] = Signal(s.time, s.values - m, s.unit)

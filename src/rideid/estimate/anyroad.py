@@ -25,6 +25,10 @@ steps:
    ``std_robust`` with ``B`` the gradient's spread over clusters, each road
    run's DFT bin one cluster and the track runs' HAC long-run covariance
    (:mod:`rideid.estimate.uncertainty`).
+   A channel without signal on a run (RMS below :data:`rideid.estimate.roadfit.SIGNAL_FLOOR` of its kind's
+   largest: a roll rate on a washboard, a dead sensor) is left out of that run's fit and named in
+   ``roads.<run>.channels_left_out``: the fit weights each channel by 1 / its RMS, and rounding must not
+   become the heaviest channel.
 4. *Road.* Each road run's road under both wheel paths
    (:func:`rideid.estimate.roadfit.road`), written as ``road/<run>.csv``,
    and its ISO 8608 class (:func:`rideid.model.roads.iso8608_class`).
@@ -35,7 +39,9 @@ car: such a model with an unknown-road run is refused. ``auto`` fits the
 twelve plus the dataset's ``[model]`` groups (model choice is not run on
 unknown roads) and says so in ``result.json`` (``model.note``). The
 adequacy verdict covers the track runs only; road runs are listed as not
-assessed.
+assessed. The result's cost is the one of :mod:`rideid.estimate.cost` on every run, equal weights: on a
+road run each used channel's squared error at the estimated road over its measured energy
+(:func:`road_run_error`).
 """
 
 from __future__ import annotations
@@ -54,7 +60,7 @@ from ..model.params import ALL_NAMES
 from ..model.roads import iso8608_class
 from . import roadfit
 from .adequacy import advise, assess_fit
-from .cost import CostFunction, ParameterSpace, refuse_unsupported_groups
+from .cost import CostFunction, ParameterSpace, channel_weights, refuse_unsupported_groups
 from .identify import (DEFAULT_GENERATIONS, DEFAULT_POPULATION, identify as identify_model, model_extensions,
                        parameter_detail, relative_spread)
 from .jade import JadeSolver, make_rng, stop_requested
@@ -101,6 +107,18 @@ def prepare_road_runs(ds) -> list:
         rd = ds.data[r.id]
         out.append(roadfit.prepare_road_run(r.id, rd.matrix(), rd.fs, run_speed(ds, r), ds.geometry))
     return out
+
+
+def road_run_error(rr, y, fitted) -> float:
+    """``E_r`` of :mod:`rideid.estimate.cost` for an unknown-road run: each used channel's squared error at
+    the estimated road (:func:`rideid.estimate.roadfit.fitted_channels`) over its measured energy (floored as
+    there), averaged over the channels the fit used; so the result's cost has the one meaning on every run
+    (the polish's own objective, each block weighted by its noise, is about 1 by construction)."""
+    ym = np.full(np.shape(y), np.nan)
+    ym[:, rr.cols] = np.asarray(y, dtype=float)[:, rr.cols]
+    W = channel_weights(ym)
+    d = np.where(np.isnan(ym), 0.0, np.asarray(fitted, dtype=float) - ym)
+    return float(W @ np.sum(d * d, axis=0))
 
 
 def _sub_dataset(ds, runs):
@@ -413,10 +431,14 @@ def _identify_any_road(ds, *, rng=None, seed=None, population=None, generations=
             roads[rr.run_id]["note"] = (f"moving at its first sample on the known track '{run.track}': fitted as a "
                                         "road run (its state at the first sample and its road estimated; the "
                                         "track's profile not used); " + roads[rr.run_id]["note"])
+        if rr.left_out:
+            roads[rr.run_id]["channels_left_out"] = dict(rr.left_out)
         profiles[rr.run_id] = (xr, zr)
         response[rr.run_id] = roadfit.fitted_channels(P, geom, rr, ds.data[rr.run_id].matrix(), sol_r)
     adequacy = None
+    errors = [road_run_error(rr, ds.data[rr.run_id].matrix(), response[rr.run_id]) for rr in rruns]
     if cf is not None:
+        errors += list(cf.run_errors(x[None])[:, 0])
         resp_t = cf.simulate(P)
         response.update(resp_t)
         if assess:
@@ -430,7 +452,7 @@ def _identify_any_road(ds, *, rng=None, seed=None, population=None, generations=
     wall = time.perf_counter() - t0
     res = IdentificationResult(
         x=np.asarray(x, dtype=float), names=list(space.names), std=std, covariance=cov,
-        fun=float(np.nan if info is None else info["cost_after"] / max(len(prob(z)), 1)),
+        fun=float(np.mean(errors)),
         success=bool(info is None or info["success"]), message="unknown-road identification" +
         ("" if info is None else f"; polish: {info['message']}"), stop=stop, nit=int(nit), nfev=int(nfev),
         parameters={nme: float(P[space.col[nme]]) for nme in space.reported_names}, details=details,

@@ -507,10 +507,14 @@ def _details(ds, space, P, std, cov, robust, bumps):
 
 
 def _preprocessing(ds, starts) -> dict:
-    """The dataset's preprocessing record with the starts the fit settled."""
+    """The dataset's preprocessing record with the starts the fit settled; ``model_time``, the samples' span of
+    model time, at those starts (the samples stay those read at the first start, their model times move)."""
     pre = ds.preprocessing()
     for rid, st in starts.items():
+        before = pre[rid].get("start", {}).get("value")
         pre[rid]["start"] = dict(pre[rid].get("start", {}), **st)
+        if pre[rid].get("model_time") is not None and before is not None and st.get("value") is not None:
+            pre[rid]["model_time"] = [t + before - st["value"] for t in pre[rid]["model_time"]]
     return pre
 
 

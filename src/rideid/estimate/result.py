@@ -292,6 +292,18 @@ class IdentificationResult:
         out.update({rid: st["value"] for rid, st in self.starts.items()})
         return out
 
+    def start_records(self) -> dict[str, dict]:
+        """Run id -> ``{"value": start, "model_time": [first, last]}``: :meth:`start_values` with the span of
+        model time of the samples the identification fitted (``preprocessing``), for
+        :func:`rideid.load_dataset` to read the runs as the identification read them (no ``model_time``
+        where the record has none)."""
+        out = {}
+        for rid, s in self.start_values().items():
+            rec = self.preprocessing.get(rid)
+            span = rec.get("model_time") if isinstance(rec, dict) else None
+            out[rid] = {"value": s, **({"model_time": list(span)} if span is not None else {})}
+        return out
+
     # -- formats -------------------------------------------------------------
     def to_dict(self) -> dict:
         """``result.json`` as a dict (docs/formats.md)."""

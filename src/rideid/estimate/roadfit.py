@@ -84,12 +84,12 @@ Hessian, not ``J^T J``: the projected residual is linear in the data, so
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 import scipy.linalg
 
-from ..model.equations import state_space
+from ..model.equations import CHANNEL_KIND, CHANNEL_UNITS, CHANNELS, state_space
 from ..model.params import Geometry
 
 #: the fit band (Hz): below, the accelerations carry little of the road; above, the road between
@@ -101,6 +101,33 @@ DELAY_ORDER = 8
 ROAD_WAVELENGTHS = (0.5, 20.0)
 #: the search's cost uses every STRIDE-th bin of a Hann-windowed DFT
 SEARCH_BINS = 400
+#: a channel whose RMS (about its mean) is below this share of the largest RMS among the run's channels of the
+#: same kind (body, axle, rate) carries rounding or a dead sensor, not the car: the fit, which weights each
+#: channel by 1 / its RMS, leaves it out (a roll rate on a washboard: 1e-19 against 1e-2 rad/s)
+SIGNAL_FLOOR = 1e-6
+
+
+def used_channels(y) -> tuple[np.ndarray, dict]:
+    """The channels of ``y`` (n, 10; NaN columns absent) the road fit uses, and those it leaves out: name ->
+    why (:data:`SIGNAL_FLOOR`)."""
+    y = np.asarray(y, dtype=float)
+    present = np.isfinite(y).all(axis=0)
+    rms = np.where(present, np.sqrt(np.mean((np.where(present, y, 0.0) - np.where(present, y, 0.0).mean(axis=0))
+                                            ** 2, axis=0)), 0.0)
+    cols, left = [], {}
+    for i, c in enumerate(CHANNELS):
+        if not present[i]:
+            continue
+        same = [j for j, c2 in enumerate(CHANNELS) if CHANNEL_KIND[c2] == CHANNEL_KIND[c] and present[j]]
+        top = max(rms[j] for j in same)
+        if rms[i] > SIGNAL_FLOOR * top and rms[i] > 0:
+            cols.append(i)
+            continue
+        against = max(same, key=lambda j: rms[j])
+        share = "" if top == 0 else f", {rms[i] / top:.1g} of {CHANNELS[against]}'s"
+        left[c] = (f"left out: RMS {rms[i]:.1g} {CHANNEL_UNITS[c]}{share}, no signal: not excited by this run, "
+                   "or its sensor is dead")
+    return np.array(cols, dtype=int), left
 
 
 @dataclass(frozen=True)
@@ -126,6 +153,8 @@ class RoadRun:
         The search's bins and its Hann-windowed DFT there.
     tau : float
         Rear wheels' delay (s).
+    left_out : dict
+        Channels the run has but the fit leaves out (:data:`SIGNAL_FLOOR`): name -> why, one line.
     """
 
     run_id: str
@@ -139,6 +168,7 @@ class RoadRun:
     search: np.ndarray
     Ys: np.ndarray
     tau: float
+    left_out: dict = field(default_factory=dict)
 
     @property
     def h(self) -> float:
@@ -155,10 +185,14 @@ class RoadRun:
 
 def prepare_road_run(run_id: str, y, fs: float, speed: float, geom: Geometry, cols=None,
                      band=BAND) -> RoadRun:
-    """Prepare a run's channels ``y`` (n, 10; NaN columns unused) for :func:`residuals` and :func:`search_costs`."""
+    """Prepare a run's channels ``y`` (n, 10; NaN columns unused) for :func:`residuals` and :func:`search_costs`.
+
+    ``cols``: the channels to use; default those :func:`used_channels` keeps (a channel without signal is left
+    out and named in ``left_out``)."""
     y = np.asarray(y, dtype=float)
+    left = {}
     if cols is None:
-        cols = np.nonzero(np.isfinite(y).all(axis=0) & (np.nanstd(y, axis=0) > 0))[0]
+        cols, left = used_channels(y)
     cols = np.asarray(cols, dtype=int)
     yc = y[:, cols]
     yc = yc - yc.mean(axis=0)
@@ -171,7 +205,7 @@ def prepare_road_run(run_id: str, y, fs: float, speed: float, geom: Geometry, co
     search = fit[::stride]
     Ys = np.fft.rfft(yc * scale * np.hanning(n)[:, None], axis=0)[search]
     return RoadRun(run_id=run_id, fs=float(fs), speed=float(speed), n=n, cols=cols, scale=scale, Y=Y, fit=fit,
-                   search=search, Ys=Ys, tau=geom.wheelbase / float(speed))
+                   search=search, Ys=Ys, tau=geom.wheelbase / float(speed), left_out=left)
 
 
 def delay_filter(tau: float, h: float, order: int = DELAY_ORDER):

@@ -6,18 +6,35 @@ from ..model.params import ALL_NAMES, EXT_NAMES
 
 #: an estimate covers the truth when it lies within this many robust standard errors (about 95 %, SPEC §6)
 COVERAGE_K = 2.0
+AXLES = (("front", "f", "c_sf"), ("rear", "r", "c_sr"))
 
 
-def score(result, truth: dict) -> dict:
-    """Relative error of every parameter of ``result`` against ``truth``.
+def _get(result, key):
+    return getattr(result, key, None) if hasattr(result, "details") else result.get(key)
+
+
+def _row(est, tr, status, rob, **extra) -> dict:
+    """One row of the score: relative error (None for a zero or unknown truth), coverage by ±2 ``rob``."""
+    err = None if not tr else 100.0 * (est - tr) / tr
+    judged = status in ("estimated", "derived")
+    rob = float(rob) if judged and rob else None  # 0 or null: no standard error to judge by
+    return {"estimate": est, "truth": tr, "error_percent": err, "status": status, "std_robust": rob,
+            "covered": None if rob is None or tr is None else bool(abs(est - tr) <= COVERAGE_K * rob), **extra}
+
+
+def score(result, truth: dict, dampers=None) -> dict:
+    """Relative error of every parameter of ``result`` against ``truth``, the damper curves and bump stops too.
 
     Parameters
     ----------
     result : IdentificationResult or dict
         A result, or ``result.json`` read as a dict (``parameters`` ->
-        name -> ``{"value", "fixed", "derived"}``).
+        name -> ``{"value", "fixed", "derived"}``; ``dampers``, ``bump_stops``).
     truth : dict
-        Parameter name -> true value (SI), e.g. :func:`rideid.load_truth`.
+        Parameter name -> true value (SI), e.g. :func:`rideid.load_truth` (the bump stops ``bs_*`` with it).
+    dampers : DamperCurves, optional
+        The true damper curves (``truth.toml``'s ``[dampers]``,
+        :func:`rideid.data.schema.load_truth_dampers`); None: the truth's dampers are linear (``c_sf``, ``c_sr``).
 
     Returns
     -------
@@ -26,15 +43,21 @@ def score(result, truth: dict) -> dict:
         "status", "std_robust", "covered"}}, "worst_percent": largest |error|
         over the estimated (not fixed) parameters, "covered": how many
         estimates ±2 ``std_robust`` covers the truth of, "coverable": of how
-        many (those with a ``std_robust``)}``; ``status`` is
+        many (those with a ``std_robust``), "notes": [lines]}``; ``status`` is
         ``"estimated"``, ``"known"``, ``"derived"`` or ``"not in the model"``
-        (an extension of the truth the model lacks: estimate 0);
+        (an extension of the truth the model lacks: estimate 0), for a knot force ``"not excited"`` (no run
+        reached it: its force is not trusted, not judged), for a bump stop ``"not reached"`` (likewise);
         ``error_percent`` is None for a zero truth; ``covered`` (``|estimate
         - truth| <= 2 std_robust``) is None without a ``std_robust`` (known
         values, no polish).
+
+        With damper curves in the result, ``F_f1 ..``, ``F_r1 ..`` are the forces at its knots (each row has
+        its ``velocity``), the truth there read off the true curves (SPEC §8: piecewise linear through (0, 0),
+        continued with the last slope), or ``c_s v`` when the truth's dampers are linear. With bump stops in
+        the result or the truth, ``bs_clear_*`` and ``bs_rate_*``; a stop the truth lacks has rate 0.
     """
     details = result.details if hasattr(result, "details") else result["parameters"]
-    rows, worst = {}, 0.0
+    rows, notes = {}, []
     for n in ALL_NAMES:
         if n in EXT_NAMES and n not in details and n not in truth:
             continue
@@ -43,16 +66,40 @@ def score(result, truth: dict) -> dict:
         tr = float(truth.get(n, 0.0))  # an extension absent from the truth is 0
         status = ("not in the model" if n not in details else "known" if d.get("fixed")
                   else "derived" if d.get("derived") else "estimated")
-        err = None if tr == 0 else 100.0 * (est - tr) / tr  # no relative error of a zero truth
-        if err is not None and status in ("estimated", "derived"):
-            worst = max(worst, abs(err))
-        rob = d.get("std_robust") if status in ("estimated", "derived") else None
-        rob = float(rob) if rob else None  # 0 or null: no standard error to judge by
-        covered = None if rob is None else bool(abs(est - tr) <= COVERAGE_K * rob)
-        rows[n] = {"estimate": est, "truth": tr, "error_percent": err, "status": status, "std_robust": rob,
-                   "covered": covered}
-    judged = [r["covered"] for r in rows.values() if r["covered"] is not None]
-    return {"parameters": rows, "worst_percent": worst, "covered": sum(judged), "coverable": len(judged)}
+        rows[n] = _row(est, tr, status, d.get("std_robust"))
+    curves = _get(result, "dampers")
+    if curves:
+        for axle, a, c in AXLES:
+            ax = curves[axle]
+            for j, v in enumerate(curves["velocity"]):
+                tr = dampers.force(axle, v) if dampers is not None else float(truth[c]) * v
+                excited = ax.get("excited", [True] * len(ax["force"]))[j]
+                rob = (ax.get("std_robust") or [None] * len(ax["force"]))[j]
+                rows[f"F_{a}{j + 1}"] = _row(float(ax["force"][j]), tr, "estimated" if excited else "not excited",
+                                             rob, velocity=float(v))
+    elif dampers is not None:
+        notes.append("the truth has damper curves and the model linear dampers: c_sf and c_sr are compared with "
+                     "the curves' mean slope between -0.1 and 0.1 m/s")
+    stops = _get(result, "bump_stops")
+    for axle, a, _ in AXLES:
+        c, r = f"bs_clear_{a}", f"bs_rate_{a}"
+        if stops:
+            e = stops[axle]
+            known = e.get("known", [False, False])
+            rob = e.get("std_robust") or [None, None]
+            for k, n in enumerate((c, r)):
+                status = "known" if known[k] else "estimated" if e.get("reached", True) else "not reached"
+                if n == c and c not in truth:
+                    continue  # the truth has no stop on this axle: no clearance to compare
+                rows[n] = _row(float(e["clearance" if n == c else "rate"]), float(truth.get(n, 0.0)), status,
+                               rob[k])
+        elif r in truth:
+            rows[r] = _row(0.0, float(truth[r]), "not in the model", None)
+    worst = max((abs(x["error_percent"]) for x in rows.values()
+                 if x["error_percent"] is not None and x["status"] in ("estimated", "derived")), default=0.0)
+    judged = [x["covered"] for x in rows.values() if x["covered"] is not None]
+    return {"parameters": rows, "worst_percent": worst, "covered": sum(judged), "coverable": len(judged),
+            "notes": notes}
 
 
 __all__ = ["score"]

@@ -8,28 +8,46 @@ from __future__ import annotations
 import math
 
 
-def correlation_rows(res: dict) -> dict | None:
-    """The estimates' correlation matrix as table rows with a colour per cell.
+#: the correlation matrix shows at most this many parameters as columns; beyond (a model with damper curves:
+#: twenty knot forces more) the knot forces leave the matrix and their strong correlations are listed as pairs
+MATRIX_MAX = 16
+#: pairs listed: |r| at least this, at most PAIRS_MAX of them, strongest first
+PAIR_R, PAIRS_MAX = 0.8, 20
 
-    Returns ``{"names": [...], "rows": [{"name", "cells": [(text, css)]}]}``
-    or ``None`` when result.json has none.
+
+def _cell(v) -> tuple:
+    if v is None or not math.isfinite(v):
+        return ("–", "")
+    # strong correlations (|r| > 0.9) mean the data fix a combination better than each parameter
+    alpha = min(abs(v), 1.0) * 0.6
+    colour = f"rgba(220,38,38,{alpha:.2f})" if v > 0 else f"rgba(37,99,235,{alpha:.2f})"
+    return (f"{v:+.2f}", f"background:{colour}")
+
+
+def correlation_rows(res: dict) -> dict | None:
+    """The estimates' correlation matrix as table rows with a colour per cell, and its strongest pairs.
+
+    With more than :data:`MATRIX_MAX` parameters the damper curves' knot forces (``F_*``) leave the matrix
+    (it would overflow the page): the matrix then holds the other parameters, and ``pairs`` lists the
+    strongest correlations of all (``|r| >= PAIR_R``, at most ``PAIRS_MAX``).
+
+    Returns ``{"names": [...], "rows": [{"name", "cells": [(text, css)]}], "pairs": [(a, b, text, css)],
+    "left_out": [names not in the matrix]}`` or ``None`` when result.json has none.
     """
     cor = res.get("correlation")
     if not cor:
         return None
-    rows = []
-    for name, row in zip(cor["names"], cor["matrix"]):
-        cells = []
-        for v in row:
-            if v is None or not math.isfinite(v):
-                cells.append(("–", ""))
-                continue
-            # strong correlations (|r| > 0.9) mean the data fix a combination better than each parameter
-            alpha = min(abs(v), 1.0) * 0.6
-            colour = f"rgba(220,38,38,{alpha:.2f})" if v > 0 else f"rgba(37,99,235,{alpha:.2f})"
-            cells.append((f"{v:+.2f}", f"background:{colour}"))
-        rows.append({"name": name, "cells": cells})
-    return {"names": cor["names"], "rows": rows}
+    names, M = list(cor["names"]), cor["matrix"]
+    shown = list(range(len(names)))
+    if len(names) > MATRIX_MAX:
+        shown = [i for i, n in enumerate(names) if not n.startswith("F_")]
+    rows = [{"name": names[i], "cells": [_cell(M[i][j]) for j in shown]} for i in shown]
+    pairs = sorted(((abs(M[i][j]), i, j) for i in range(len(names)) for j in range(i)
+                    if M[i][j] is not None and math.isfinite(M[i][j]) and abs(M[i][j]) >= PAIR_R), reverse=True)
+    return {"names": [names[i] for i in shown], "rows": rows,
+            "pairs": [(names[j], names[i], *_cell(M[i][j])) for _, i, j in pairs[:PAIRS_MAX]],
+            "more_pairs": max(len(pairs) - PAIRS_MAX, 0),
+            "left_out": [n for k, n in enumerate(names) if k not in shown]}
 
 
 def adequacy_rows(res: dict) -> dict | None:

@@ -320,11 +320,13 @@ def spectra_limits(runs) -> tuple:
         f, res, top = _fit_spectra(t, Y, Ysim, present)
         fmax = max(fmax, f[-1])
         for row, (_, _, idx) in enumerate(GROUPS):
-            curves = [top[row]] + [res[i] for i in idx if i in present]
-            lo[row] = min(lo[row], min(float(np.nanmin(c)) for c in curves))
-            hi[row] = max(hi[row], max(float(np.nanmax(c)) for c in curves))
+            # a channel the fit left out has no model response: its residual spectrum is NaN throughout
+            curves = [c for c in [top[row]] + [res[i] for i in idx if i in present] if not np.all(np.isnan(c))]
+            if curves:
+                lo[row] = min(lo[row], min(float(np.nanmin(c)) for c in curves))
+                hi[row] = max(hi[row], max(float(np.nanmax(c)) for c in curves))
     pad = lambda a, b: (a - 0.05 * (b - a), b + 0.05 * (b - a)) if b > a else (a - 1.0, b + 1.0)  # noqa: E731
-    return pad(0.0, fmax), tuple(pad(a, b) for a, b in zip(lo, hi))
+    return pad(0.0, fmax), tuple(pad(a, b) if np.isfinite(a) else (-1.0, 1.0) for a, b in zip(lo, hi))
 
 
 @styled
@@ -624,6 +626,7 @@ def write_report(result, dataset, out_dir, *, compare=None, compare_label: str |
     context = {**figure_sections(result, dataset, sims, out_dir, compare, compare_label),
                **road_section(result, out_dir), **fit_section(result, dataset, sims), **data_section(result, dataset),
                **estimate_section(result, dataset)}
+    context.update(summary_section(result, context))
     out = out_dir / "report.html"
     out.write_text(render(context))
     return out
@@ -697,15 +700,17 @@ def damper_section(result, dataset, out_dir) -> list:
 
 def road_section(result, out_dir) -> dict:
     """Template context of the unknown-road runs (SPEC §9): their rows, figures and wavelength band."""
-    road_figs, road_rows = [], []
+    road_figs, road_rows, road_notes = [], [], []
     for rid, rec in (getattr(result, "roads", None) or {}).items():
         road_rows.append({"run": rid, "cls": rec["iso8608_class"], "gd": rec["gd_n0"], "speed": rec["speed"],
                           "file": rec["file"]})
+        road_notes += [f"{rid}: {c} {why}" for c, why in (rec.get("channels_left_out") or {}).items()]
         if result.road_profiles and rid in result.road_profiles:
             x, z = result.road_profiles[rid]
             road_figs.append(fig_road(rid, x, z, rec, out_dir))
     band = next(iter((result.roads or {}).values()), {}).get("wavelengths_m", (0.5, 20))
-    return {"road_figures": road_figs, "road_rows": road_rows, "road_band": "{:g}-{:g} m".format(*band)}
+    return {"road_figures": road_figs, "road_rows": road_rows, "road_notes": road_notes,
+            "road_band": "{:g}-{:g} m".format(*band)}
 
 
 def fit_section(result, dataset, sims) -> dict:
@@ -728,6 +733,83 @@ def data_section(result, dataset) -> dict:
                                      if isinstance(c, dict) and "message" in c]
     return {"dataset": str(dataset.path), "data_rows": data_rows, "channel_rows": channel_rows,
             "data_warnings": data_warnings, "n_runs": len(dataset.runs)}
+
+
+#: the report's sections in page order: id, title, what it answers (the summary's list of sections and the
+#: navigation bar show those the report has)
+TOC = (("summary", "Summary", "what to read first"),
+       ("verdict", "Verdict", "is the model adequate for these data"),
+       ("estimates", "Estimates", "every parameter with its error bar, and how they correlate"),
+       ("model", "Model choice", "the candidate models side by side (--model auto)"),
+       ("adequacy", "Adequacy", "per run: do the residuals look like sensor noise"),
+       ("modal", "Modes", "natural frequencies and damping ratios of the identified car"),
+       ("dampers", "Damper curves", "the curves with their bands, and the velocities each run reached"),
+       ("roads", "Roads", "the estimated roads of the runs on unknown roads and their ISO 8608 classes"),
+       ("convergence", "Convergence", "cost per generation of the search"),
+       ("spread", "Spread", "how fast each parameter settled in the search"),
+       ("weights", "Track weights", "the runs' weights per generation"),
+       ("compare", "Comparison", "this identification against the other one given"),
+       ("data", "Data", "what was done to each run, channel maps, warnings on the data"),
+       ("fits", "Fits", "measured against the identified car, run by run"),
+       ("maps", "Sensitivity maps", "which track excites which parameter"))
+
+
+def summary_section(result, context: dict) -> dict:
+    """Template context of the summary a person reads first (the verdict, the car, its error bars, the fit, the
+    data, in a few lines) and of the list of sections to jump to (``toc``: those the report has)."""
+    res = context["res"]
+    adq = context.get("adequacy")
+    lines = []
+    if adq:
+        lines.append(("Verdict", ("model adequate: " if adq["adequate"] else "MODEL NOT ADEQUATE: ")
+                      + adq["reasons"][0], "adequacy"))
+    elif getattr(result, "roads", None):
+        lines.append(("Verdict", "adequacy not assessed: rideid has no residual test on unknown roads yet; the "
+                                 "error bars hold only if the linear model describes the car", "roads"))
+    else:
+        lines.append(("Verdict", "adequacy not assessed (no polish)", "estimates"))
+    ext = (res.get("model") or {}).get("extensions") or []
+    known = ", ".join(f"{k} = {v:g}" for k, v in context["known"].items())
+    lines.append(("Car", f"model {' + '.join(ext) if ext else 'base (the twelve parameters)'}; anchored on "
+                         f"{known} (every mass, inertia, stiffness and damping scales with it)", "estimates"))
+    est = [p for p in context["params"] if p["status"] in ("estimated", "AT A SEARCH BOUND")
+           and p["rel_std_robust"] is not None]
+    if est:
+        lo, hi = min(est, key=lambda p: p["rel_std_robust"]), max(est, key=lambda p: p["rel_std_robust"])
+        text = (f"{len(est)} estimated; ±2 std_robust from {2 * lo['rel_std_robust']:.2g} % ({lo['name']}) to "
+                f"{2 * hi['rel_std_robust']:.2g} % ({hi['name']})")
+        bound = [p["name"] for p in context["params"] if p["status"] == "AT A SEARCH BOUND"]
+        if bound:
+            text += f"; AT A SEARCH BOUND: {', '.join(bound)}"
+        lines.append(("Estimates", text, "estimates"))
+    if getattr(result, "dampers", None):
+        d = result.dampers
+        idle = sum(not e for axle in ("front", "rear") for e in d[axle]["excited"])
+        lines.append(("Damper curves", f"{len(d['velocity'])} knots per axle up to {max(d['velocity']):g} m/s"
+                      + (f"; {idle} knot force(s) not excited: not to be trusted" if idle else
+                         "; every knot excited"), "dampers"))
+    rows = [r for r in context["fit_rows"] if r["median"] == r["median"]]
+    if rows:
+        worst = max(rows, key=lambda r: r["worst"])
+        lines.append(("Fit", f"cost {res['cost']:.3g}; median channel NRMSE per run "
+                             f"{min(r['median'] for r in rows):.2g} – {max(r['median'] for r in rows):.2g}; "
+                             f"worst channel {worst['worst']:.2g} (run {worst['run']})", "fits"))
+    roads = getattr(result, "roads", None) or {}
+    n_road = len(roads)
+    text = f"{context['n_runs']} runs" + (f" ({n_road} on unknown roads)" if n_road else "")
+    nw = len(context["data_warnings"])
+    text += f"; {nw} warning{'s' if nw != 1 else ''} on the data" if nw else "; no warning on the data"
+    left = sum(len(r.get("channels_left_out") or {}) for r in roads.values())
+    if left:
+        text += f"; {left} channel(s) left out of a road run's fit (no signal)"
+    lines.append(("Data", text, "data"))
+    present = {"summary", "estimates", "modal", "data", "fits", "maps"}
+    present |= {"verdict", "adequacy"} if adq else set()
+    present |= {"model"} if context.get("model_choice") else set()
+    present |= {"dampers"} if context.get("damper_figures") else set()
+    present |= {"roads"} if context.get("road_figures") else set()
+    present |= {f.id for f in context.get("figures", [])}
+    return {"summary": lines, "toc": [t for t in TOC if t[0] in present]}
 
 
 def parameter_rows(result) -> list:
@@ -798,4 +880,4 @@ def data_tables(pre: dict):
     return rows, chans, warns
 
 
-SECTIONS = ("estimates", "adequacy", "modal", "convergence", "spread", "weights", "data", "fits", "maps")
+SECTIONS = ("summary", "estimates", "adequacy", "modal", "convergence", "spread", "weights", "data", "fits", "maps")

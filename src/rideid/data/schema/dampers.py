@@ -70,6 +70,10 @@ class DamperCurves:
         """``front`` (axle "f" or "front") or ``rear``."""
         return self.front if axle in ("f", "front", 0) else self.rear
 
+    def force(self, axle: str, v: float) -> float:
+        """The axle's force (N) at suspension velocity ``v`` (m/s): the curve of SPEC §8."""
+        return _interp(v, self.velocity, self.curve(axle))
+
     def slope_between(self, axle: str, v: float = 0.1) -> float:
         """Mean slope (N s/m) of an axle's curve between -v and +v (SPEC §8: the linear user's c_s)."""
         return (_interp(v, self.velocity, self.curve(axle)) - _interp(-v, self.velocity, self.curve(axle))) / (2 * v)
