@@ -347,8 +347,8 @@ def _identify_any_road(ds, *, rng=None, seed=None, population=None, generations=
     road_ids = [r.id for r in unknown_road_runs(ds)]
     if bad:
         raise ArgumentError(f"{', '.join(bad)}: a nonlinear model cannot be fitted with runs on unknown roads "
-                            f"({', '.join(road_ids)}): the road is projected out of a linear car (docs/roads.md); "
-                            f"fit the linear model, or the curves on known tracks only")
+                            f"({', '.join(road_ids)}): the road is projected out of a linear car (docs/any-road.md); "
+                            f"fit the linear model, or {' and '.join(bad)} on known tracks only")
     refuse_unsupported_groups(ext, "model")
     geom = ds.geometry
     space = ParameterSpace(ds.known, geom, ds.manifest.bounds, extensions=ext)

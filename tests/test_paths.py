@@ -1,0 +1,295 @@
+"""Every model group on every data path (SPEC §11, issue 37): one car, each group in turn, end to end.
+
+The car is the SUV of :mod:`logger_case` (2.1 t), given in turn each model group of SPEC §6 and §8: the twelve
+alone, anti-roll bars, tire damping, damper curves (digressive, twice as stiff in rebound) and bump stops that the
+chassis twist reaches. Each car is simulated noise-free and brought to ``rideid.identify`` by each data path:
+
+* ``csv``: SPEC §3 run files (``rideid simulate``'s), the car at rest at the first sample;
+* ``logger``: the same runs as a logger writes them (g with gravity and biases, deg/s, the logger's column names,
+  a standing lead-in, no start given: rideid estimates every start; :func:`logger_case.write_logger`);
+* ``moving``: runs that begin moving (SPEC §9 ``moving = true``) on a ``profile`` track, already under the wheels
+  at the first sample;
+* ``unknown``: runs on roads nobody measured (SPEC §9: ISO 8608 class B and C roads), where SPEC §9 allows the
+  linear groups only: a nonlinear group is refused in one clear line.
+
+Every fitted parameter is checked against the truth, not only that the fit ran. Before 37ef398 damper curves on
+logger files crashed ("parameter rows must have 12 columns ... got 36"); this matrix is there to catch such holes.
+
+Tolerances. The data are noise-free and every path's model is exact, so what is left is the solvers' stopping
+and, on the road-projected paths (moving, unknown), the road between the samples. Measured: the twelve, the bars,
+the tire damping and the stops within 0.04 % on every path (tire damping on unknown roads aside, below), the knot
+forces within 0.01 %. ``TOL`` (0.25 %) leaves six times that margin and stays four times below the 1 % bar of
+the noisy tests, so a path that feeds the fit something systematically wrong (a start, a model, a unit) shows.
+``KNOT_TOL`` (0.5 %) for the knot forces at excited knots (and the ``c_sf``, ``c_sr`` derived from them).
+``TIRE_DAMPING_ROAD_TOL`` (3 %) for ``c_tf``, ``c_tr`` on unknown roads: the tire damper is driven by the road's
+rate, and the rate of a road interpolated linearly between samples jumps at every sample, texture the rear wheels
+meet between the front wheels' samples (tests/test_roadfit.py: the true car then fits to 1e-6 of the signal, not
+1e-9). The damper's force is a few per cent of the tire's, so that texture moves it: by 1.4 % on the generated
+roads (rideid simulate's 1 cm grid); on the moving path's profile by 2.7 % on a 1 cm grid, by 0.08 % on the
+2.5 mm grid it is written on (the rest of the car within 0.04 % either way).
+
+Cost (2 cores shared with other work, pytest --durations): the default part (the SPEC CSV cells, the refusals on
+unknown roads, the polish's regression test) about 28 s; the slow part CI runs (logger files, one road fit per
+road path, the moving path's nonlinear cells) about 100 s, 32 s of it the damper curves on logger files; the
+expensive rest (four more road fits, 11-29 s each) about 90 s.
+"""
+
+from __future__ import annotations
+
+import tomllib
+import warnings
+
+import numpy as np
+import pytest
+import tomli_w
+
+import rideid
+from cars import SUV_TIRE_DAMPING, simulated
+from logger_case import SUV, SUV_RUNS, write_logger
+from rideid.data.scenario import write_road_csv
+from rideid.errors import ArgumentError
+from rideid.estimate.anyroad import _sub_dataset
+from rideid.estimate.identify import _polish
+from rideid.model.roads import iso8608_profile
+from rideid.model.tracks import Track
+from test_damper_curves import VEL, digressive
+
+GROUPS = ("base", "anti_roll_bars", "tire_damping", "damper_curves", "bump_stops")
+NONLINEAR = ("damper_curves", "bump_stops")
+PATHS = ("csv", "logger", "moving", "unknown")
+#: the track runs' rate: 100 Hz keeps the cases small (the herringbone's 17 Hz and the wheel hop's 12 Hz inside)
+FS = 100.0
+TOL = 0.0025
+KNOT_TOL = 0.005
+TIRE_DAMPING_ROAD_TOL = 0.03
+#: JADE's population: the search need only find the optimum's basin, the polish (kept) does the rest; half the
+#: default halves the search (at the default 32 the damper curves on logger files found the polish's stall that
+#: test_polish_leaves_a_knot_hidden_by_the_monotone_repair pins down)
+POPULATION = 16
+
+#: the SUV of tests/logger_case.py without its [model] table and its bars: the twelve
+CAR = tomllib.loads(SUV)
+BARS = {n: CAR["truth"].pop(n) for n in ("k_arf", "k_arr")}
+del CAR["model"]
+#: each group's part of the car (SPEC §6, §8): the SUV's bars, tire damping of tests/cars.py, digressive dampers
+#: (mean slopes over +-0.1 m/s 2550 and 2475 N s/m, near the twelve's c_sf, c_sr), stops 30 mm from ride height
+#: (the twist compresses the suspension up to 38 mm front, 46 mm rear: 102 and 165 samples beyond at 100 Hz)
+DAMPERS = {"velocity": VEL, "front": digressive(1700, 570), "rear": digressive(1650, 550)}
+STOPS = {"bs_clear_f": 0.03, "bs_clear_r": 0.03, "bs_rate_f": 8.0e4, "bs_rate_r": 8.0e4}
+EXTRA = {"base": {}, "anti_roll_bars": BARS, "tire_damping": dict(SUV_TIRE_DAMPING), "damper_curves": {},
+         "bump_stops": STOPS}
+
+#: the moving and unknown paths: two runs of 6 s (the road fit's floor is 5 s) at 7 and 11 m/s, at 200 Hz: at
+#: 100 Hz (speed / fs 7 and 11 cm, inside docs/any-road.md's 15 cm) the road fit's unsprung masses and tires come
+#: out 0.3 % off on noise-free data (road between the samples); at 200 Hz within 0.03 %
+ROAD_RUNS = (("7", "C", 7.0), ("11", "B", 11.0))
+ROAD_DURATION = 6.0
+ROAD_FS = 200.0
+#: the moving path's profile: an ISO 8608 class C road from 60 m before x = 0 (the car settles over it), faded out
+#: (raised cosine, the last PROFILE_FADE m) where the slower run's rear wheels leave it, with a chassis twist like
+#: the SUV's on it from x = 8 m. (A road that ends in a step within the runs biased the unsprung masses by 2 %.)
+PROFILE_X = (-60.0, 38.0)
+PROFILE_FADE = 8.0
+PROFILE_DX = 0.0025
+TWIST = {"start": 8.0, "height": 0.04, "bump_length": 1.8, "spacing": 4.0, "bumps": 3, "first": "left"}
+
+
+def car_doc(group: str) -> dict:
+    """The scenario document of the SUV with ``group`` (tracks and runs still the logger case's)."""
+    doc = {k: (dict(v) if isinstance(v, dict) else v) for k, v in CAR.items()}
+    doc["truth"] = {**CAR["truth"], **EXTRA[group]}
+    if group == "damper_curves":
+        doc["dampers"] = DAMPERS
+        del doc["truth"]["c_sf"], doc["truth"]["c_sr"]  # the curves' mean slopes, written by the scenario
+    return doc
+
+
+def write_profile(folder):
+    """``folder/road.csv``: the moving path's profile (:data:`PROFILE_X`, :data:`TWIST`, :data:`PROFILE_DX`)."""
+    g = CAR["vehicle"]
+    x0, x1 = PROFILE_X
+    x, zl, zr = iso8608_profile("C", x1 - x0, np.random.default_rng(7), dx=PROFILE_DX, x0=x0,
+                                track_width=0.5 * (g["track_front"] + g["track_rear"]))
+    fade = 0.5 + 0.5 * np.cos(np.pi * np.clip((x - (x1 - PROFILE_FADE)) / PROFILE_FADE, 0.0, 1.0))
+    twist = Track("twist", "chassis_twist", TWIST)
+    zl = zl * fade + twist.path(+0.5 * g["track_front"]).height(x)
+    zr = zr * fade + twist.path(-0.5 * g["track_front"]).height(x)
+    write_road_csv(folder / "road.csv", x, zl, zr)
+
+
+def scenario(folder, group: str, path: str):
+    """The scenario of one cell, written to ``folder/scenario.toml`` and loaded."""
+    doc = car_doc(group)
+    if path in ("csv", "logger"):
+        doc["runs"] = [dict(id=rid, track=tr, speed=v, fs=FS, duration=d) for rid, tr, v, d in SUV_RUNS]
+    elif path == "moving":
+        write_profile(folder)
+        doc["tracks"] = [{"id": "road", "kind": "profile", "file": "road.csv"}]
+        doc["runs"] = [dict(id=f"P{v}", track="road", speed=speed, fs=ROAD_FS, duration=ROAD_DURATION, moving=True)
+                       for v, _, speed in ROAD_RUNS]
+    else:
+        del doc["tracks"]
+        doc["runs"] = [dict(id=f"{cls}{v}", road_class=cls, speed=speed, fs=ROAD_FS, duration=ROAD_DURATION)
+                       for v, cls, speed in ROAD_RUNS]
+    (folder / "scenario.toml").write_text(tomli_w.dumps(doc))
+    return rideid.load_scenario(folder / "scenario.toml")
+
+
+def dataset(tmp_path, group: str, path: str):
+    """The cell's scenario and its data loaded by the path (noise-free)."""
+    sc = scenario(tmp_path, group, path)
+    if path == "logger":
+        folder = write_logger(sc, tmp_path / "logger", noise=0.0, seed=1)
+        with warnings.catch_warnings():
+            # noise-free: the washboard's roll gyro reads its bias alone ("flat-lined"), the lead-in exactly 0
+            warnings.simplefilter("ignore", rideid.DataWarning)
+            return sc, rideid.load_dataset(folder)
+    if group in NONLINEAR:  # its tires push but never pull: a lift-off would be physics, not a model violation
+        from rideid.synth.scenario import simulate_manifest, write_dataset
+        data, _ = simulate_manifest(sc, noise=0.0, seed=1)
+        write_dataset(sc, data, tmp_path / "ds")
+        return sc, rideid.load_dataset(tmp_path / "ds")
+    return sc, simulated(sc, tmp_path / "ds", noise=0.0)  # no wheel lifts (the linear model's assumption)
+
+
+def fit(ds, group: str, **kw):
+    return rideid.identify(ds, model="base" if group == "base" else [group], seed=1, population=POPULATION, **kw)
+
+
+@pytest.fixture(scope="module")
+def cases(tmp_path_factory):
+    """``cases(group, path)``: the cell's scenario and dataset, built once per module run."""
+    made = {}
+
+    def get(group: str, path: str):
+        if (group, path) not in made:
+            made[group, path] = dataset(tmp_path_factory.mktemp(f"{group}-{path}"), group, path)
+        return made[group, path]
+    return get
+
+
+def truth_of(sc) -> dict:
+    """Every parameter a result reports, true: the scenario's [truth] (with curves c_sf, c_sr their mean slopes),
+    the knot forces ``F_f1 ..`` of [dampers]."""
+    out = dict(sc.truth)
+    if sc.dampers is not None:
+        for prefix, F in (("F_f", sc.dampers.front), ("F_r", sc.dampers.rear)):
+            out.update({f"{prefix}{j + 1}": f for j, f in enumerate(F)})
+    return out
+
+
+def errors(res, sc, group: str, path: str) -> dict:
+    """Relative error of every fitted parameter (free or derived; knots not excited left out), and the checks of
+    what makes the numbers mean something: the model fitted, the knots excited, the stops reached."""
+    assert res.model["extensions"] == ([] if group == "base" else [group])
+    truth = truth_of(sc)
+    if group == "damper_curves":
+        for axle in ("front", "rear"):
+            assert sum(res.dampers[axle]["excited"]) >= 8, (axle, res.dampers[axle]["excited"])
+    if group == "bump_stops":
+        for axle in ("front", "rear"):
+            assert res.bump_stops[axle]["reached"] and res.bump_stops[axle]["samples_beyond_clearance"] >= 20, axle
+    out = {}
+    for n, v in res.parameters.items():
+        d = res.details[n]
+        if d.get("fixed") or d.get("excited") is False:
+            continue
+        assert n in truth, n  # every fitted parameter has a true value: nothing reported that the car lacks
+        out[n] = v / truth[n] - 1.0
+    assert set(res.names) <= set(out)
+    return out
+
+
+def tolerance(name: str, group: str, path: str) -> float:
+    """The tolerance of one parameter (module docstring)."""
+    if name.startswith("F_") or (group == "damper_curves" and name in ("c_sf", "c_sr")):
+        return KNOT_TOL  # the knot forces and the mean slopes derived from them
+    if name in ("c_tf", "c_tr") and path == "unknown":
+        return TIRE_DAMPING_ROAD_TOL
+    return TOL
+
+
+def check(res, sc, group: str, path: str):
+    err = errors(res, sc, group, path)
+    tol = {n: tolerance(n, group, path) for n in err}
+    worst = max(err, key=lambda n: abs(err[n]))
+    print(f"\n{group} x {path}: largest error {worst} {100 * err[worst]:+.4f} % "
+          f"(of its tolerance: {max(abs(err[n]) / tol[n] for n in err):.2f})")
+    bad = {n: f"{100 * e:+.3f} %" for n, e in err.items() if abs(e) > tol[n]}
+    assert not bad, bad
+
+
+# the moving path's refusal of a nonlinear group: a hole (SPEC §11 says every group works on moving starts)
+MOVING_NONLINEAR = pytest.mark.xfail(
+    strict=True, raises=ArgumentError,
+    reason="a run that begins moving on a known (profile) track is fitted with its road projected out "
+           "(rideid.estimate.anyroad.unknown_road_runs takes every moving run), and that projection needs a linear "
+           "car: identify refuses damper_curves and bump_stops there ('a nonlinear model cannot be fitted with runs "
+           "on unknown roads (P7, P11)'), against SPEC §11 (every model group on every path, moving starts "
+           "included). Fitting them needs the track fit to leave out a moving run's settling time (SPEC §9), a "
+           "per-sample weight the cost kernels do not have")
+
+
+#: the road-projected cells CI runs (slow, not expensive): one per path, each with the twelve and a linear group;
+#: the others (the same fits with base or the other group) are expensive
+ROAD_CELLS_IN_CI = (("anti_roll_bars", "moving"), ("tire_damping", "unknown"))
+
+
+def cell(group: str, path: str):
+    """A ``pytest.param`` of one cell with its marks: the SPEC CSV cells by default, the logger files and the
+    road-projected fits slow, four of those expensive (module docstring, "Cost")."""
+    marks = []
+    if path == "logger":
+        marks.append(pytest.mark.slow)
+    if path in ("moving", "unknown") and group not in NONLINEAR:  # the road fit: 11-29 s each
+        marks.append(pytest.mark.slow)
+        if (group, path) not in ROAD_CELLS_IN_CI:
+            marks.append(pytest.mark.expensive)
+    if path == "moving" and group in NONLINEAR:
+        marks += [pytest.mark.slow, MOVING_NONLINEAR]
+    return pytest.param(group, path, marks=marks, id=f"{group}-{path}")
+
+
+@pytest.mark.parametrize("group, path", [cell(g, p) for p in PATHS for g in GROUPS
+                                         if not (p == "unknown" and g in NONLINEAR)])
+def test_group_on_path(group, path, cases):
+    sc, ds = cases(group, path)
+    check(fit(ds, group), sc, group, path)
+
+
+@pytest.mark.parametrize("group", NONLINEAR)
+def test_nonlinear_group_is_refused_on_unknown_roads(group, cases):
+    """SPEC §9: on an unknown road the road is projected out of a linear car; a nonlinear group is refused
+    before any fit, in one line that names the group, the runs and what to do instead."""
+    _, ds = cases(group, "unknown")
+    with pytest.raises(ArgumentError) as e:
+        fit(ds, group)
+    msg = str(e.value)
+    assert "\n" not in msg
+    assert msg == (f"{group}: a nonlinear model cannot be fitted with runs on unknown roads (C7, B11): the road is "
+                   f"projected out of a linear car (docs/any-road.md); fit the linear model, or {group} on known "
+                   "tracks only"), msg
+
+
+POLISH_RUNS = ("TW5", "HB10")  # the two shortest runs: the stall within a 5 s polish
+
+
+def test_polish_leaves_a_knot_hidden_by_the_monotone_repair(cases):
+    """The stall the matrix found (damper curves on the SUV's logger files at 100 Hz, at the default population):
+    mid-polish the free F_f7 fell below F_f6, where the monotone repair (ParameterSpace.full) hides it, so its
+    gradient was 0 and the polish ended with F_f6 between the two true forces, 57 % off, at a cost 1e6 times the
+    true car's. From such a row the polish now solves again from the physical row, the forces the simulator saw
+    (rideid.estimate.identify.REPAIR_RESTARTS), and finds the car. (identify's own start is always physical:
+    the stall arises inside the polish, so the polish is called here directly.)"""
+    sc, ds = cases("damper_curves", "csv")
+    truth = truth_of(sc)
+    ds = _sub_dataset(ds, [r for r in ds.runs if r.id in POLISH_RUNS])
+    cf = rideid.CostFunction(ds, extensions=["damper_curves"])
+    x0 = np.array([truth[n] for n in cf.names])
+    j6, j7 = cf.names.index("F_f6"), cf.names.index("F_f7")
+    x0[j6], x0[j7] = 0.5 * (truth["F_f6"] + truth["F_f7"]), 0.5 * truth["F_f6"]  # F_f7 hidden below F_f6
+    assert cf.space.full(x0[None])[0, cf.space.col["F_f7"]] == x0[j6]  # the simulator sees F_f7 = F_f6
+    x, _, _ = _polish(cf, x0, np.full(len(cf.run_ids), 1.0 / len(cf.run_ids)))
+    P = cf.space.full(x[None])[0]
+    err = {n: P[cf.space.col[n]] / truth[n] - 1.0 for n in cf.names}
+    assert max(abs(e) for e in err.values()) < KNOT_TOL, {n: f"{100 * e:+.3f} %" for n, e in err.items()}
