@@ -77,6 +77,7 @@ N_SC = len(SEG) * 4
 END = "rideid_nl_end"
 STEP = "rideid_nl_step"
 PIECES = "rideid_nl_pieces"
+ERR = "rideid_nl_err"
 
 #: common leading arguments: coefficients, curve tables (intercepts then slopes, ``[corner][segment][lane]``),
 #: interior knots then inf (nk + 1), kink flags (2 axles x nk, 1.0 or 0.0), interior knot count, segments per
@@ -90,7 +91,8 @@ ARGS = {
                       ("TH", "ptr"), ("np", "i64"), ("u0", "ptr"), ("r0", "ptr"), ("u1", "ptr"), ("r1", "ptr"),
                       ("u2", "ptr"), ("r2", "ptr"), ("h", "double"), ("mask", "i64")),
 }
-RETURNS = {END: "void", STEP: "i64", PIECES: "void"}
+ARGS[ERR] = (("cf", "ptr"), ("X", "ptr"), ("Q", "ptr"), ("Y", "ptr"), ("W", "ptr"), ("E", "ptr"))
+RETURNS = {END: "void", STEP: "i64", PIECES: "void", ERR: "void"}
 #: the right-hand side's variants: (inputs as table rows to broadcast, switching quantities)
 RHS = {(True, False): "rideid_nl_rhs_row", (True, True): "rideid_nl_rhs_row_end",
        (False, False): "rideid_nl_rhs_vec"}
@@ -116,6 +118,7 @@ class _W:
         self.opaque = opaque
         self.block = "entry"
         self.labels = 0
+        self.invariant = False  # loads marked !invariant.load (memory that the function does not write)
 
     def __call__(self, line):
         self.lines.append(line)
@@ -138,7 +141,8 @@ class _W:
         self(f"  store {V} {value}, {self.vp} {self.vptr(p)}, align 8")
 
     def vload(self, base, offset):
-        return self.tmp(f"load {V}, {self.vp} {self.vptr(self.ptr(base, offset))}, align 8")
+        inv = ", !invariant.load !1" if self.invariant else ""
+        return self.tmp(f"load {V}, {self.vp} {self.vptr(self.ptr(base, offset))}, align 8{inv}")
 
     def coef(self, base, index):
         """The lanes of coefficient ``index`` of a lane-innermost block."""
@@ -146,7 +150,8 @@ class _W:
 
     def bcast(self, base, offset):
         """The double ``offset`` after ``base`` in every lane."""
-        return self.splat(self.tmp(f"load double, {self.dp} {self.ptr(base, offset)}, align 8"))
+        inv = ", !invariant.load !1" if self.invariant else ""
+        return self.splat(self.tmp(f"load double, {self.dp} {self.ptr(base, offset)}, align 8{inv}"))
 
     def splat(self, s):
         """The double value ``s`` in every lane."""
@@ -190,6 +195,10 @@ class _W:
     def fsub(self, a, b):
         return self.tmp(f"fsub {FL} {V} {a}, {b}")
 
+    def xop(self, op, a, b):
+        """``a op b`` rounded on its own (never fused)."""
+        return self.tmp(f"{op} {V} {a}, {b}")
+
     def madd(self, a, b, c):
         """``a * b + c`` (contracted to one fused multiply-add)."""
         return self.fadd(self.fmul(a, b), c)
@@ -207,131 +216,126 @@ class _W:
         self(f"  call fastcc void @{RHS[row, ends]}({', '.join(args)})")
 
 
-def _damper(w: _W, v):
-    """Damper forces ``A + S v`` (4 vectors) at velocities ``v``, through the segment cache ``%SC``."""
-    out = []
-    for c in range(4):
-        lo, hi = w.at("%SC", 4 * SEG.index("lo") + c), w.at("%SC", 4 * SEG.index("hi") + c)
-        A0, S0 = w.at("%SC", 4 * SEG.index("A") + c), w.at("%SC", 4 * SEG.index("S") + c)
-        inside = w.tmp(f"and {VB} {w.cmp('oge', v[c], lo)}, {w.cmp('olt', v[c], hi)}")
-        bits = w.tmp(f"bitcast {VB} {inside} to i{LANES}")
-        hit = w.tmp(f"icmp eq i{LANES} {bits}, -1")
-        pre = w.block
-        miss, loop, found, join = (w.label(n) for n in ("seg_miss", "seg_loop", "seg_found", "seg_join"))
-        w(f"  br i1 {hit}, label %{join}, label %{miss}, !prof !0")
-        w.start(miss)
-        row0 = w.tmp(f"mul i64 %ns, {c * LANES}")
-        init = {"lo": w.c(-float("inf")), "hi": w.bcast("%xk", 0), "A": w.vload("%tb", row0),
-                "S": w.vload("%tbs", row0), "kap": w.c(0.0)}
-        w(f"  br i1 {w.tmp('icmp sgt i64 %nk, 0')}, label %{loop}, label %{found}")
-        w.start(loop)
-        i = w.tmp(f"phi i64 [ 0, %{miss} ], [ %{loop}_i1, %{loop} ]")
-        cur = {k: w.tmp(f"phi {V} [ {init[k]}, %{miss} ], [ %{loop}_{k}, %{loop} ]") for k in SEG}
-        i1 = f"%{loop}_i1"
-        w(f"  {i1} = add i64 {i}, 1")
-        xi = w.bcast("%xk", i)
-        m = w.cmp("oge", v[c], xi)
-        row = w.tmp(f"add i64 {row0}, {w.tmp(f'mul i64 {i1}, {LANES}')}")
-        kf = w.bcast("%kf", w.tmp(f"add i64 {w.tmp(f'mul i64 %nk, {c // 2}')}, {i}"))
-        new = {"lo": xi, "hi": w.bcast("%xk", i1), "A": w.vload("%tb", row), "S": w.vload("%tbs", row),
-               "kap": w.fadd(cur["kap"], kf)}
-        for k in SEG:
-            w(f"  %{loop}_{k} = select {VB} {m}, {V} {new[k]}, {V} {cur[k]}")
-        w(f"  br i1 {w.tmp(f'icmp slt i64 {i1}, %nk')}, label %{loop}, label %{found}")
-        w.start(found)
-        res = {k: w.tmp(f"phi {V} [ {init[k]}, %{miss} ], [ %{loop}_{k}, %{loop} ]") for k in SEG}
-        for j, k in enumerate(SEG):
-            w.put(res[k], "%SC", 4 * j + c)
-        w(f"  br label %{join}")
-        w.start(join)
-        A = w.tmp(f"phi {V} [ {A0}, %{pre} ], [ {res['A']}, %{found} ]")
-        S = w.tmp(f"phi {V} [ {S0}, %{pre} ], [ {res['S']}, %{found} ]")
-        out.append(w.madd(S, v[c], A))
-    return out
-
-
-def _rhs_body(w: _W, X, u, r, ends: bool):
-    """The right-hand side at states ``X`` (14 vectors) with inputs ``u`` and rates ``r`` (4 vectors):
-    ``dX`` (14 vectors) and with ``ends`` also ``qdd`` (7) and the switching quantities ``{name: [4 corners]}``
-    (as :func:`rideid.model.nonlinear.accelerations` and ``switching``)."""
-    z, th, ph = X[0], X[1], X[2]
-    dz, dth, dph = X[7], X[8], X[9]
-    d, v, wv = [], [], []
-    for c in range(4):
-        xc, yc = w.e(f"x{c}"), w.e(f"y{c}")
-        wc = w.madd(w.e(f"ctm{c}"), u[c], X[10 + c])
-        wv.append(wc)
-        zb = w.madd(yc, ph, w.fsub(z, w.fmul(xc, th)))
-        d.append(w.fsub(X[3 + c], zb))
-        vb = w.madd(yc, dph, w.fsub(dz, w.fmul(w.e(f"x{c}"), dth)))
-        v.append(w.fsub(wc, vb))
-    damp = _damper(w, v)
-    bf = w.fmul(w.e("kar_f"), w.fsub(d[0], d[1]))
-    br = w.fmul(w.e("kar_r"), w.fsub(d[2], d[3]))
-    zero = "zeroinitializer"
-    sf = sx = sy = None
-    dp, g = [], []
-    for c in range(4):
-        f = w.fmul(w.e(f"ks{c}"), d[c])
-        bar = bf if c < 2 else br
-        f = w.fadd(f, bar) if c % 2 == 0 else w.fsub(f, bar)
-        f = w.fadd(f, damp[c])
-        e = w.fsub(d[c], w.e(f"bs_clear{c}"))
-        f = w.sel(w.cmp("ogt", e, zero), w.madd(w.e(f"bs_rate{c}"), e, f), f)
-        L, ct = w.e(f"L{c}"), w.e(f"ct{c}")
-        t0 = w.fsub(w.madd(w.e(f"kt{c}"), w.fsub(u[c], X[3 + c]), L), w.fmul(ct, wv[c]))
-        crd = w.fmul(ct, r[c])
-        gc = w.fadd(t0, crd)
-        g.append(gc)
-        a_on = w.fsub(w.fsub(t0, w.e(f"L{c}")), f)
-        a_off = w.fsub(w.fsub(w.e(f"neg_L{c}"), f), crd)
-        dp.append(w.fmul(w.sel(w.cmp("oge", gc, zero), a_on, a_off), w.e(f"inv_mu{c}")))
-        # the moments' products rounded one by one (not fused): a symmetric car's left and right cancel
-        # exactly, and it does not roll
-        sf = f if sf is None else w.fadd(sf, f)
-        px = w.tmp(f"fmul {V} {w.e(f'x{c}')}, {f}")
-        py = w.tmp(f"fmul {V} {w.e(f'y{c}')}, {f}")
-        sx = px if sx is None else w.tmp(f"fadd {V} {sx}, {px}")
-        sy = py if sy is None else w.tmp(f"fadd {V} {sy}, {py}")
-    top = w.e("topple")
-    q0 = w.fmul(sf, w.e("inv_ms"))
-    q1 = w.fmul(w.madd(top, th, w.tmp(f"fneg {V} {sx}")), w.e("inv_Iyy"))
-    q2 = w.fmul(w.madd(w.e("topple"), ph, sy), w.e("inv_Ixx"))
-    dX = [dz, dth, dph, *wv, q0, q1, q2, *dp]
-    if not ends:
-        return dX, None, None
-    qw = [w.madd(w.e(f"ctm{c}"), r[c], dp[c]) for c in range(4)]
-    vd = []
-    for c in range(4):
-        body = w.madd(w.e(f"y{c}"), q2, w.fsub(q0, w.fmul(w.e(f"x{c}"), q1)))
-        vd.append(w.fsub(qw[c], body))
-    kap = [w.at("%SC", 4 * SEG.index("kap") + c) for c in range(4)]
-    return dX, [q0, q1, q2, *qw], {"d": d, "v": v, "g": g, "vd": vd, "kap": kap}
+def _damper(w: _W, c, v):
+    """Damper force ``A + S v`` of corner ``c`` at velocities ``v``, through the segment cache ``%SC``."""
+    lo, hi = w.at("%SC", 4 * SEG.index("lo") + c), w.at("%SC", 4 * SEG.index("hi") + c)
+    A0, S0 = w.at("%SC", 4 * SEG.index("A") + c), w.at("%SC", 4 * SEG.index("S") + c)
+    inside = w.tmp(f"and {VB} {w.cmp('oge', v, lo)}, {w.cmp('olt', v, hi)}")
+    bits = w.tmp(f"bitcast {VB} {inside} to i{LANES}")
+    hit = w.tmp(f"icmp eq i{LANES} {bits}, -1")
+    pre = w.block
+    miss, loop, found, join = (w.label(n) for n in ("seg_miss", "seg_loop", "seg_found", "seg_join"))
+    w(f"  br i1 {hit}, label %{join}, label %{miss}, !prof !0")
+    w.start(miss)
+    row0 = w.tmp(f"mul i64 %ns, {c * LANES}")
+    init = {"lo": w.c(-float("inf")), "hi": w.bcast("%xk", 0), "A": w.vload("%tb", row0),
+            "S": w.vload("%tbs", row0), "kap": w.c(0.0)}
+    w(f"  br i1 {w.tmp('icmp sgt i64 %nk, 0')}, label %{loop}, label %{found}")
+    w.start(loop)
+    i = w.tmp(f"phi i64 [ 0, %{miss} ], [ %{loop}_i1, %{loop} ]")
+    cur = {k: w.tmp(f"phi {V} [ {init[k]}, %{miss} ], [ %{loop}_{k}, %{loop} ]") for k in SEG}
+    i1 = f"%{loop}_i1"
+    w(f"  {i1} = add i64 {i}, 1")
+    xi = w.bcast("%xk", i)
+    m = w.cmp("oge", v, xi)
+    row = w.tmp(f"add i64 {row0}, {w.tmp(f'mul i64 {i1}, {LANES}')}")
+    kf = w.bcast("%kf", w.tmp(f"add i64 {w.tmp(f'mul i64 %nk, {c // 2}')}, {i}"))
+    new = {"lo": xi, "hi": w.bcast("%xk", i1), "A": w.vload("%tb", row), "S": w.vload("%tbs", row),
+           "kap": w.fadd(cur["kap"], kf)}
+    for k in SEG:
+        w(f"  %{loop}_{k} = select {VB} {m}, {V} {new[k]}, {V} {cur[k]}")
+    w(f"  br i1 {w.tmp(f'icmp slt i64 {i1}, %nk')}, label %{loop}, label %{found}")
+    w.start(found)
+    res = {k: w.tmp(f"phi {V} [ {init[k]}, %{miss} ], [ %{loop}_{k}, %{loop} ]") for k in SEG}
+    for j, k in enumerate(SEG):
+        w.put(res[k], "%SC", 4 * j + c)
+    w(f"  br label %{join}")
+    w.start(join)
+    A = w.tmp(f"phi {V} [ {A0}, %{pre} ], [ {res['A']}, %{found} ]")
+    S = w.tmp(f"phi {V} [ {S0}, %{pre} ], [ {res['S']}, %{found} ]")
+    return w.madd(S, v, A)
 
 
 def _gen_rhs(w: _W, row: bool, ends: bool):
-    """The internal function :data:`RHS` ``[row, ends]``: states ``X``, inputs ``u`` and rates ``r`` (four
-    doubles of a table row to broadcast, or four vectors), the derivative into ``D`` and with ``ends``
-    the accelerations into ``Q`` and the switching quantities into ``SW``."""
+    """The internal function :data:`RHS` ``[row, ends]``: the right-hand side at states ``X`` with inputs
+    ``u`` and rates ``r`` (four doubles of a table row to broadcast, or four vectors): the derivative into
+    ``D``, and with ``ends`` the accelerations into ``Q`` and the switching quantities into ``SW`` (as
+    :func:`rideid.model.nonlinear.accelerations` and ``switching``). Axle by axle, every result stored
+    as soon as it is known, the loads of inputs and coefficients marked invariant: few values live at once
+    (16 vector registers), so few spills."""
     dp = w.dp
-    params = [f"{dp} noalias %{p}" if p not in ("nk", "ns") else f"i64 %{p}" for p in _RHS_PARAMS]
-    params += [f"{dp} noalias %{p}" for p in ("X", "u", "r", "D") + (("Q", "SW") if ends else ())]
+    nb = 8 * LANES
+    size = {"cf": nb * len(ENTRIES), "X": nb * 14, "u": 32 if row else nb * 4, "r": 32 if row else nb * 4}
+    params = []
+    for p in _RHS_PARAMS + ("X", "u", "r", "D") + (("Q", "SW") if ends else ()):
+        if p in ("nk", "ns"):
+            params.append(f"i64 %{p}")
+        else:
+            params.append(f"{dp} noalias {f'dereferenceable({size[p]}) ' if p in size else ''}%{p}")
     w(f"define {_LINKAGE} fastcc void @{RHS[row, ends]}({', '.join(params)}) noinline nounwind {{")
     w.start("entry")
-    X = [w.at("%X", i) for i in range(14)]
+    w.invariant = True
+    X = lambda i: w.at("%X", i)  # noqa: E731
     if row:
-        u, r = [w.bcast("%u", c) for c in range(4)], [w.bcast("%r", c) for c in range(4)]
+        u, r = (lambda c: w.bcast("%u", c)), (lambda c: w.bcast("%r", c))
     else:
-        u, r = [w.at("%u", c) for c in range(4)], [w.at("%r", c) for c in range(4)]
-    dX, qdd, sw = _rhs_body(w, X, u, r, ends)
-    for i in range(14):
-        w.put(dX[i], "%D", i)
+        u, r = (lambda c: w.at("%u", c)), (lambda c: w.at("%r", c))
+    zero = "zeroinitializer"
+    sf = sx = sy = None
+    for ax in range(2):
+        d, v, wv = {}, {}, {}
+        for c in (2 * ax, 2 * ax + 1):
+            xc, yc = w.e(f"x{c}"), w.e(f"y{c}")
+            wv[c] = w.madd(w.e(f"ctm{c}"), u(c), X(10 + c))
+            w.put(wv[c], "%D", 3 + c)
+            zb = w.madd(yc, X(2), w.fsub(X(0), w.fmul(xc, X(1))))
+            d[c] = w.fsub(X(3 + c), zb)
+            vb = w.madd(w.e(f"y{c}"), X(9), w.fsub(X(7), w.fmul(w.e(f"x{c}"), X(8))))
+            v[c] = w.fsub(wv[c], vb)
+        bar = w.fmul(w.e(f"kar_{'fr'[ax]}"), w.fsub(d[2 * ax], d[2 * ax + 1]))
+        for c in (2 * ax, 2 * ax + 1):
+            w.invariant = False
+            damp = _damper(w, c, v[c])
+            w.invariant = True
+            f = w.fmul(w.e(f"ks{c}"), d[c])
+            f = w.fadd(f, bar) if c % 2 == 0 else w.fsub(f, bar)
+            f = w.fadd(f, damp)
+            e = w.fsub(d[c], w.e(f"bs_clear{c}"))
+            f = w.sel(w.cmp("ogt", e, zero), w.madd(w.e(f"bs_rate{c}"), e, f), f)
+            L, ct = w.e(f"L{c}"), w.e(f"ct{c}")
+            t0 = w.fsub(w.madd(w.e(f"kt{c}"), w.fsub(u(c), X(3 + c)), L), w.fmul(ct, wv[c]))
+            crd = w.fmul(w.e(f"ct{c}"), r(c))
+            gc = w.fadd(t0, crd)
+            a_on = w.fsub(w.fsub(t0, w.e(f"L{c}")), f)
+            a_off = w.fsub(w.fsub(w.e(f"neg_L{c}"), f), crd)
+            dpc = w.fmul(w.sel(w.cmp("oge", gc, zero), a_on, a_off), w.e(f"inv_mu{c}"))
+            w.put(dpc, "%D", 10 + c)
+            if ends:
+                for n, val in (("d", d[c]), ("v", v[c]), ("g", gc)):
+                    w.put(val, "%SW", 4 * SWQ.index(n) + c)
+                w.put(w.madd(w.e(f"ctm{c}"), r(c), dpc), "%Q", 3 + c)
+            # the moments' products rounded one by one (not fused): a symmetric car's left and right
+            # cancel exactly, and it does not roll
+            sf = f if sf is None else w.fadd(sf, f)
+            px, py = w.xop("fmul", w.e(f"x{c}"), f), w.xop("fmul", w.e(f"y{c}"), f)
+            sx = px if sx is None else w.xop("fadd", sx, px)
+            sy = py if sy is None else w.xop("fadd", sy, py)
+    q0 = w.fmul(sf, w.e("inv_ms"))
+    q1 = w.fmul(w.madd(w.e("topple"), X(1), w.tmp(f"fneg {V} {sx}")), w.e("inv_Iyy"))
+    q2 = w.fmul(w.madd(w.e("topple"), X(2), sy), w.e("inv_Ixx"))
+    for i, val in enumerate((X(7), X(8), X(9))):
+        w.put(val, "%D", i)
+    for i, val in enumerate((q0, q1, q2)):
+        w.put(val, "%D", 7 + i)
     if ends:
-        for i in range(7):
-            w.put(qdd[i], "%Q", i)
-        for k, name in enumerate(SWQ):
-            for c in range(4):
-                w.put(sw[name][c], "%SW", 4 * k + c)
+        for i, val in enumerate((q0, q1, q2)):
+            w.put(val, "%Q", i)
+        w.invariant = False
+        for c in range(4):
+            body = w.madd(w.e(f"y{c}"), q2, w.fsub(q0, w.fmul(w.e(f"x{c}"), q1)))
+            w.put(w.fsub(w.at("%Q", 3 + c), body), "%SW", 4 * SWQ.index("vd") + c)
+            w.put(w.at("%SC", 4 * SEG.index("kap") + c), "%SW", 4 * SWQ.index("kap") + c)
+    w.invariant = False
     w("  ret void")
     w("}")
 
@@ -369,6 +373,30 @@ def _rk4(w: _W, X, k1, h, mid, end, T, K, Xout):
     for i in range(14):
         w.put(Xn[i], Xout, i)
     return Xn
+
+
+def _gen_err(w: _W):
+    """:data:`ERR`: the ten channels of the states ``X`` and accelerations ``Q`` (as
+    :func:`rideid.model.nonlinear.channels`), their squared errors against the sample's measurements ``Y``
+    (10 doubles) weighted by ``W`` (10) added to the lanes' sums ``E``."""
+    args = ARGS[ERR]
+    w(f"define void @{ERR}({', '.join(f'i64 %i{a}' for a, _ in args)}) nounwind {{")
+    w.start("entry")
+    for a, _ in args:
+        w(f"  %{a} = inttoptr i64 %i{a} to {w.dp}")
+    q = [w.at("%Q", i) for i in range(7)]
+    ys = []
+    for c in range(4):
+        t = w.xop("fsub", q[0], w.xop("fmul", w.e(f"x{c}"), q[1]))
+        ys.append(w.xop("fadd", t, w.xop("fmul", w.e(f"y{c}"), q[2])))
+    ys += q[3:] + [w.at("%X", 8), w.at("%X", 9)]
+    e = w.at("%E", 0)
+    for i, y in enumerate(ys):
+        dq = w.xop("fsub", y, w.bcast("%Y", i))
+        e = w.xop("fadd", e, w.xop("fmul", w.xop("fmul", w.bcast("%W", i), dq), dq))
+    w.put(e, "%E", 0)
+    w("  ret void")
+    w("}")
 
 
 def _gen_end(w: _W):
@@ -441,7 +469,7 @@ def _gen_pieces(w: _W):
     positive length starts from ``Da``, later ones re-evaluate at their start (as the scalar kernel did)."""
     _prologue(w, PIECES)
     T, K, P = w.stack(14), w.stack(14), w.stack(14)
-    UA, RA, UM, RM, UE, RE = (w.stack(4) for _ in range(6))
+    UM, RM, UE, RE = (w.stack(4) for _ in range(4))
     rows = (("%u0", "%r0"), ("%u1", "%r1"), ("%u2", "%r2"))
     h = w.splat("%h")
     hh = w.fmul(w.c(0.5), h)
@@ -466,8 +494,7 @@ def _gen_pieces(w: _W):
     # the first stage: the start's derivative while the lane is fresh, else re-evaluated at the piece's start
     w(f"  br i1 {w.tmp(f'icmp eq i64 {q}, 0')}, label %{body}_k0, label %{body}_kn")
     w.start(f"{body}_kn")
-    _inputs_at(w, a, rows, hh, UA, RA)
-    w.call_rhs(False, False, P, UA, RA, K)
+    w.call_rhs(False, False, P, UE, RE, K)  # the previous piece's end inputs: this one's start
     w(f"  br label %{body}_k0")
     w.start(f"{body}_k0")
     first = w.tmp(f"phi {VB} [ {TRUE}, %{body} ], [ {fresh}, %{body}_kn ]")
@@ -502,9 +529,10 @@ def generate_ir(opaque: bool | None = None) -> str:
     w = _W(opaque)
     for row, ends in RHS:
         _gen_rhs(w, row, ends)
-    for gen in (_gen_end, _gen_step, _gen_pieces):
+    for gen in (_gen_end, _gen_step, _gen_pieces, _gen_err):
         gen(w)
     w('!0 = !{!"branch_weights", i32 1000, i32 1}')
+    w("!1 = !{}")
     return "\n".join(w.lines) + "\n"
 
 
@@ -553,6 +581,12 @@ def call_end(typingctx, cf, tb, xk, kf, nk, ns, SC, X, u, r, D, Q, SW):
 
 
 @intrinsic
+def call_err(typingctx, cf, X, Q, Y, W, E):
+    """:data:`ERR` (arguments: :data:`ARGS`)."""
+    return _sig(ERR), _codegen(ERR)
+
+
+@intrinsic
 def call_step(typingctx, cf, tb, xk, kf, nk, ns, SC, Xa, Da, SWa, Xb, Db, Qb, SWb, u1, r1, u2, r2, h):
     """:data:`STEP` (arguments: :data:`ARGS`); the lanes that crossed a kink, as bits."""
     return _sig(STEP), _codegen(STEP)
@@ -573,7 +607,7 @@ def call_pieces(typingctx, cf, tb, xk, kf, nk, ns, SC, Xa, Da, Xb, Db, Qb, SWb, 
 _EX, _EY, _ECT, _EMU, _EBC = (E[f"{n}0"] for n in ("x", "y", "ct", "inv_mu", "bs_clear"))
 _CSTRIDE = len(CORNER)
 #: rows of the switching quantities in the SW arrays
-_SD, _SV, _SG, _SVD = (4 * SWQ.index(n) for n in ("d", "v", "g", "vd"))
+_SD, _SV, _SG, _SVD, _SK = (4 * SWQ.index(n) for n in SWQ)
 
 
 def hermite_value_slope(t, s0, s1, m0, m1):
@@ -623,7 +657,7 @@ def _lane_crossings(XK, KF, nk, CF, ch, lane, h, S0, S1, th):
         ma = h * S0[_SVD + c, lane]
         mb = h * S1[_SVD + c, lane]
         ax = c // 2
-        for i in range(nk):
+        for i in range(nk if S0[_SK + c, lane] != S1[_SK + c, lane] else 0):
             kn = XK[i]
             if KF[ax * nk + i] != 0 and (va < kn) != (vb < kn):
                 th[nc] = _root(va - kn, vb - kn, ma, mb)
@@ -669,6 +703,7 @@ def run_chunks(ch0, ch1, n, CF, TB, XK, KF, nk, ns, split, X0, run_start, hs, ms
     pxk, pkf, puf, prf = XK.ctypes.data, KF.ctypes.data, UF.ctypes.data, RF.ctypes.data
     px, pd, psw = XB.ctypes.data, DB.ctypes.data, SB.ctypes.data
     pq, pth, psc = Q.ctypes.data, TH.ctypes.data, SC.ctypes.data
+    py, pw, pe = Y.ctypes.data, W.ctypes.data, e_sum.ctypes.data
     bx = 8 * 14 * LANES  # bytes per buffer of X and D
     bs = 8 * N_SW * LANES
     row4 = 8 * 4  # bytes per row of UF, RF
@@ -692,7 +727,11 @@ def run_chunks(ch0, ch1, n, CF, TB, XK, KF, nk, ns, split, X0, run_start, hs, ms
             for k in range(nrow):
                 jf = f0 + 2 * m * k
                 row = run_start[r] + k
+                if mode == 0:
+                    call_err(pcf, px + bx * cur, pq, py + 8 * 10 * row, pw + 8 * 10 * r, pe)
                 for lane in range(LANES):
+                    if mode == 0:
+                        break
                     p = ch * LANES + lane
                     if p >= n:
                         break
@@ -713,12 +752,6 @@ def run_chunks(ch0, ch1, n, CF, TB, XK, KF, nk, ns, split, X0, run_start, hs, ms
                     if mode & 1:
                         for q in range(10):
                             out[p, row, q] = y[q]
-                    elif mode == 0:
-                        es = e_sum[lane]
-                        for q in range(10):
-                            dq = y[q] - Y[row, q]
-                            es += W[r, q] * dq * dq
-                        e_sum[lane] = es
                 if k + 1 == nrow:
                     break
                 for s in range(m):
