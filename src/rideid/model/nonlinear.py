@@ -696,7 +696,8 @@ class NonlinearSimulator:
 
     def substeps(self, P) -> list[int]:
         """Sub-steps per sample interval of every run for population ``P`` (one per sample rate)."""
-        return [substeps(P, self.geom, self.layout, r.h, self.rho) for r in self.runs]
+        by_h = {h: substeps(P, self.geom, self.layout, h, self.rho) for h in {r.h for r in self.runs}}
+        return [by_h[r.h] for r in self.runs]
 
     def kinks(self, P) -> np.ndarray:
         """The knots where the sub-steps are split, for population ``P`` (:func:`kink_mask`)."""
