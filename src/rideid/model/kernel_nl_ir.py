@@ -69,10 +69,10 @@ E = {n: i for i, n in enumerate(ENTRIES)}
 #: the switching quantities per corner, in the SW arrays ``[quantity][corner][lane]``
 SWQ = ("d", "v", "g", "vd", "kap")
 N_SW = len(SWQ) * 4
-#: the damper segment cache per corner, ``SC[quantity][corner][lane]``: bounds ``[lo, hi)``, intercept,
-#: slope, kink count
+#: the damper segment cache, two entries per corner, ``SC[entry][quantity][corner][lane]``: bounds
+#: ``[lo, hi)``, intercept, slope, kink count
 SEG = ("lo", "hi", "A", "S", "kap")
-N_SC = len(SEG) * 4
+N_SC = 2 * len(SEG) * 4
 
 END = "rideid_nl_end"
 STEP = "rideid_nl_step"
@@ -216,16 +216,36 @@ class _W:
         self(f"  call fastcc void @{RHS[row, ends]}({', '.join(args)})")
 
 
+def _seg_at(entry, k, c):
+    """Row of the segment cache ``%SC`` holding quantity ``k`` of corner ``c`` in cache entry ``entry``."""
+    return 4 * (len(SEG) * entry + SEG.index(k)) + c
+
+
 def _damper(w: _W, c, v):
-    """Damper force ``A + S v`` of corner ``c`` at velocities ``v``, through the segment cache ``%SC``."""
-    lo, hi = w.at("%SC", 4 * SEG.index("lo") + c), w.at("%SC", 4 * SEG.index("hi") + c)
-    A0, S0 = w.at("%SC", 4 * SEG.index("A") + c), w.at("%SC", 4 * SEG.index("S") + c)
-    inside = w.tmp(f"and {VB} {w.cmp('oge', v, lo)}, {w.cmp('olt', v, hi)}")
-    bits = w.tmp(f"bitcast {VB} {inside} to i{LANES}")
-    hit = w.tmp(f"icmp eq i{LANES} {bits}, -1")
+    """Damper force ``A + S v`` of corner ``c`` at velocities ``v``, through the segment cache ``%SC``: two
+    entries per lane (the last segment first; a sub-step redone in pieces goes back and forth across a
+    kink), the knots scanned only when a lane is in neither."""
+    e1 = {k: w.at("%SC", _seg_at(0, k, c)) for k in ("lo", "hi", "A", "S")}
+    in1 = w.tmp(f"and {VB} {w.cmp('oge', v, e1['lo'])}, {w.cmp('olt', v, e1['hi'])}")
+    hit = w.tmp(f"icmp eq i{LANES} {w.tmp(f'bitcast {VB} {in1} to i{LANES}')}, -1")
     pre = w.block
-    miss, loop, found, join = (w.label(n) for n in ("seg_miss", "seg_loop", "seg_found", "seg_join"))
-    w(f"  br i1 {hit}, label %{join}, label %{miss}, !prof !0")
+    second, swap, miss, loop, found, join = (w.label(n) for n in ("seg_second", "seg_swap", "seg_miss",
+                                                                    "seg_loop", "seg_found", "seg_join"))
+    w(f"  br i1 {hit}, label %{join}, label %{second}, !prof !0")
+    # a lane outside its last segment: the entry before it, lane by lane
+    w.start(second)
+    old = [{k: w.at("%SC", _seg_at(j, k, c)) for k in SEG} for j in range(2)]
+    in2 = w.tmp(f"and {VB} {w.cmp('oge', v, old[1]['lo'])}, {w.cmp('olt', v, old[1]['hi'])}")
+    either = w.tmp(f"or {VB} {in1}, {in2}")
+    hit2 = w.tmp(f"icmp eq i{LANES} {w.tmp(f'bitcast {VB} {either} to i{LANES}')}, -1")
+    w(f"  br i1 {hit2}, label %{swap}, label %{miss}")
+    w.start(swap)
+    for k in SEG:  # the entry a lane is in goes first
+        w.put(w.sel(in1, old[0][k], old[1][k]), "%SC", _seg_at(0, k, c))
+        w.put(w.sel(in1, old[1][k], old[0][k]), "%SC", _seg_at(1, k, c))
+    sw_A, sw_S = w.sel(in1, old[0]["A"], old[1]["A"]), w.sel(in1, old[0]["S"], old[1]["S"])
+    w(f"  br label %{join}")
+    # else every lane's segment from the knots: one compare and select per knot
     w.start(miss)
     row0 = w.tmp(f"mul i64 %ns, {c * LANES}")
     init = {"lo": w.c(-float("inf")), "hi": w.bcast("%xk", 0), "A": w.vload("%tb", row0),
@@ -247,12 +267,13 @@ def _damper(w: _W, c, v):
     w(f"  br i1 {w.tmp(f'icmp slt i64 {i1}, %nk')}, label %{loop}, label %{found}")
     w.start(found)
     res = {k: w.tmp(f"phi {V} [ {init[k]}, %{miss} ], [ %{loop}_{k}, %{loop} ]") for k in SEG}
-    for j, k in enumerate(SEG):
-        w.put(res[k], "%SC", 4 * j + c)
+    for k in SEG:  # the lanes that had moved keep their last segment second
+        w.put(res[k], "%SC", _seg_at(0, k, c))
+        w.put(w.sel(in1, old[1][k], old[0][k]), "%SC", _seg_at(1, k, c))
     w(f"  br label %{join}")
     w.start(join)
-    A = w.tmp(f"phi {V} [ {A0}, %{pre} ], [ {res['A']}, %{found} ]")
-    S = w.tmp(f"phi {V} [ {S0}, %{pre} ], [ {res['S']}, %{found} ]")
+    A = w.tmp(f"phi {V} [ {e1['A']}, %{pre} ], [ {sw_A}, %{swap} ], [ {res['A']}, %{found} ]")
+    S = w.tmp(f"phi {V} [ {e1['S']}, %{pre} ], [ {sw_S}, %{swap} ], [ {res['S']}, %{found} ]")
     return w.madd(S, v, A)
 
 
@@ -334,7 +355,7 @@ def _gen_rhs(w: _W, row: bool, ends: bool):
         for c in range(4):
             body = w.madd(w.e(f"y{c}"), q2, w.fsub(q0, w.fmul(w.e(f"x{c}"), q1)))
             w.put(w.fsub(w.at("%Q", 3 + c), body), "%SW", 4 * SWQ.index("vd") + c)
-            w.put(w.at("%SC", 4 * SEG.index("kap") + c), "%SW", 4 * SWQ.index("kap") + c)
+            w.put(w.at("%SC", _seg_at(0, "kap", c)), "%SW", 4 * SWQ.index("kap") + c)
     w.invariant = False
     w("  ret void")
     w("}")
@@ -352,11 +373,12 @@ def _prologue(w: _W, name):
     w(f"  %tbs = getelementptr inbounds double, {w.dp} %tb, i64 {w.tmp(f'mul i64 %ns, {4 * LANES}')}")
 
 
-def _rk4(w: _W, X, k1, h, mid, end, T, K, Xout):
-    """One RK4 step of length ``h`` (a vector) from states ``X`` with first stage ``k1`` (14 vectors each),
+def _rk4(w: _W, Xp, k1, h, mid, end, T, K, Xout=None):
+    """One RK4 step of length ``h`` (a vector) from the states at ``Xp`` (read again after each call of the
+    right-hand side rather than kept live across it: no spills) with first stage ``k1`` (14 vectors),
     inputs ``mid`` and ``end`` (``(row, u, r)``: pointers, table rows or vectors), through the stack arrays
     ``T`` (stage states) and ``K`` (stage derivatives): the new states (as the scalar kernel: the stages
-    summed into ``acc``, then ``X + (h / 6) (acc + k4)``), stored into ``Xout`` too."""
+    summed into ``acc``, then ``X + (h / 6) (acc + k4)``), stored into ``Xout`` too if given."""
     hh = w.fmul(w.c(0.5), h)
     two = w.c(2.0)
     acc = list(k1)
@@ -365,13 +387,14 @@ def _rk4(w: _W, X, k1, h, mid, end, T, K, Xout):
         if stage:
             acc = [w.madd(two, k[i], acc[i]) for i in range(14)]
         for i in range(14):
-            w.put(w.madd(hs, k[i], X[i]), T, i)
+            w.put(w.madd(hs, k[i], w.at(Xp, i)), T, i)
         w.call_rhs(inp[0], False, T, inp[1], inp[2], K)
     k4 = [w.at(K, i) for i in range(14)]
     h6 = w.tmp(f"fdiv {FL} {V} {h}, {w.c(6.0)}")
-    Xn = [w.madd(h6, w.fadd(acc[i], k4[i]), X[i]) for i in range(14)]
-    for i in range(14):
-        w.put(Xn[i], Xout, i)
+    Xn = [w.madd(h6, w.fadd(acc[i], k4[i]), w.at(Xp, i)) for i in range(14)]
+    if Xout is not None:
+        for i in range(14):
+            w.put(Xn[i], Xout, i)
     return Xn
 
 
@@ -427,9 +450,8 @@ def _crossed(w: _W):
 def _gen_step(w: _W):
     _prologue(w, STEP)
     T, K = w.stack(14), w.stack(14)
-    X = [w.at("%Xa", i) for i in range(14)]
     k1 = [w.at("%Da", i) for i in range(14)]
-    _rk4(w, X, k1, w.splat("%h"), (True, "%u1", "%r1"), (True, "%u2", "%r2"), T, K, "%Xb")
+    _rk4(w, "%Xa", k1, w.splat("%h"), (True, "%u1", "%r1"), (True, "%u2", "%r2"), T, K, "%Xb")
     w.call_rhs(True, True, "%Xb", "%u2", "%r2", "%Db", "%Qb", "%SWb")
     w(f"  ret i64 {_crossed(w)}")
     w("}")
@@ -498,15 +520,12 @@ def _gen_pieces(w: _W):
     w(f"  br label %{body}_k0")
     w.start(f"{body}_k0")
     first = w.tmp(f"phi {VB} [ {TRUE}, %{body} ], [ {fresh}, %{body}_kn ]")
-    D0 = [w.at("%Da", i) for i in range(14)]
-    Xp = [w.at(P, i) for i in range(14)]
-    kn = [w.at(K, i) for i in range(14)]
-    k1 = [w.sel(first, D0[i], kn[i]) for i in range(14)]
+    k1 = [w.sel(first, w.at("%Da", i), w.at(K, i)) for i in range(14)]
     _inputs_at(w, w.fmul(w.c(0.5), w.fadd(a, b)), rows, hh, UM, RM)
     _inputs_at(w, b, rows, hh, UE, RE)
-    Xn = _rk4(w, Xp, k1, hp, (False, UM, RM), (False, UE, RE), T, K, T)
+    Xn = _rk4(w, P, k1, hp, (False, UM, RM), (False, UE, RE), T, K)
     for i in range(14):
-        w.put(w.sel(active, Xn[i], Xp[i]), P, i)
+        w.put(w.sel(active, Xn[i], w.at(P, i)), P, i)
     w(f"  %{body}_fresh = and {VB} {fresh}, {w.tmp(f'xor {VB} {active}, {TRUE}')}")
     w(f"  %{body}_q1 = add i64 {q}, 1")
     w(f"  br label %{loop}")
@@ -710,8 +729,9 @@ def run_chunks(ch0, ch1, n, CF, TB, XK, KF, nk, ns, split, X0, run_start, hs, ms
     for ch in range(ch0, ch1):
         pcf = CF.ctypes.data + 8 * ch * CF.shape[1]
         ptb = TB.ctypes.data + 8 * ch * TB.shape[1]
-        SC[:4] = np.inf  # no damper segment known yet: bounds [inf, -inf)
-        SC[4:8] = -np.inf
+        for j in range(2):  # no damper segment known yet: bounds [inf, -inf)
+            SC[j * N_SC // 2:j * N_SC // 2 + 4] = np.inf
+            SC[j * N_SC // 2 + 4:j * N_SC // 2 + 8] = -np.inf
         for r in range(n_runs):
             cur = 0
             for lane in range(LANES):
