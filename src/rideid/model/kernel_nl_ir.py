@@ -4,8 +4,10 @@ Four candidates are integrated side by side, one per lane, as the linear
 kernel does (:mod:`rideid.model.kernel_ir`): every state, derivative and
 switching quantity is one vector, every per-candidate coefficient one
 vector load from the chunk's lane-innermost block (:data:`ENTRIES`), the
-road inputs are broadcast. Three functions, called by the Numba driver
-:func:`rideid.model.kernel_nl.run_chunks`:
+road inputs are broadcast. Four functions, called by the Numba driver
+:func:`run_chunks` (here, beside the IR: Numba's disk cache follows the
+source file of the function it compiles, so an edit of the IR renews the
+driver's cache):
 
 * :data:`END` evaluates the right-hand side at a state (derivative,
   accelerations and the switching quantities: deflections, damper
@@ -19,7 +21,9 @@ road inputs are broadcast. Three functions, called by the Numba driver
   every lane its own pieces (``theta``, found and sorted by the driver,
   padded with 1): a lane's piece of zero length leaves it unchanged, and
   only the lanes asked for take the result, so no lane's numbers depend on
-  its neighbours'.
+  its neighbours';
+* :data:`ERR` adds a sample's weighted squared errors of the ten channels
+  to the lanes' sums.
 
 The right-hand side is one internal function (three variants: road inputs
 broadcast from a table row or a vector per lane, with or without the
@@ -27,18 +31,22 @@ switching quantities) that loads its own coefficients: inlined four times
 into a sub-step, LLVM kept every coefficient of every stage live across the
 step and spilled most of them.
 
-The damper curves: each lane keeps its corners' last curve segments
+The damper curves: each lane keeps its corners' last two curve segments
 (bounds ``[lo, hi)``, intercept ``A``, slope ``S``, kink count; the
-segment cache ``SC``); a corner whose four lanes all stay inside theirs
-takes them as they are (``D(v) = A + S v``), else the segments are found
-again by one compare and select per interior knot (the same table entries
-either way, so the numbers do not depend on the cache). Segment ``j`` is
+segment cache ``SC``); a corner whose four lanes all stay inside their
+last takes them as they are (``D(v) = A + S v``), one whose lanes are each
+inside one of their two takes those (a sub-step redone in pieces goes back
+and forth across a kink), else the segments are found again by one compare
+and select per interior knot (the same table entries either way, so the
+numbers do not depend on the cache). Segment ``j`` is
 the count of interior knots at or below the velocity; ``A_j = F_j - S_j v_j``.
 Without curves the table has one segment, ``A = 0``, ``S = c_s``.
 
 Floating-point operations carry only the ``contract`` flag (fused
 multiply-adds): no reassociation, and infinities and NaNs keep their IEEE
-meaning (a car without bump stops has an infinite clearance).
+meaning (a car without bump stops has an infinite clearance). The moments'
+products are not fused, so a symmetric car's left and right cancel exactly
+(it does not roll).
 
 All pointers are passed as 64-bit integers; each array is laid out
 ``[entry][lane]`` (four doubles per entry).
