@@ -724,9 +724,10 @@ class NonlinearSimulator:
         return got
 
     def substeps(self, P, pin: Pin | None = None) -> list[int]:
-        """Sub-steps per sample interval of every run for population ``P`` (one per sample rate), at least
-        ``pin``'s."""
-        m = [substeps(P, self.geom, self.layout, r.h, self.rho) for r in self.runs]
+        """Sub-steps per sample interval of every run for population ``P`` (the step bound once per sample
+        rate), at least ``pin``'s."""
+        by_h = {h: substeps(P, self.geom, self.layout, h, self.rho) for h in {r.h for r in self.runs}}
+        m = [by_h[r.h] for r in self.runs]
         return m if pin is None else [max(a, b) for a, b in zip(m, pin.substeps)]
 
     def kinks(self, P, pin: Pin | None = None) -> np.ndarray:
