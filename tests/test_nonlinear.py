@@ -402,3 +402,22 @@ def test_kink_mask_marks_only_the_knots_where_the_slope_changes():
     P[1, -3] *= 1.01  # the rear curve's third-last knot force: the knots either side of it bend
     mask = nl.kink_mask(nl.coefficients(P, GH, lin)[3])
     assert not mask[0].any() and [float(x) for x in xk[mask[1] == 1]] == [0.05, 0.1, 0.2]
+
+
+def test_each_candidates_substeps_in_one_batch_equal_one_by_one():
+    """substeps_each (one batched eigenvalue problem) gives every candidate the count substeps gives it
+    alone, and the population's count is their largest, at two sample rates; stiffer tires need more."""
+    from rideid.model.simulator import Simulator
+
+    lay = NonlinearLayout(knots=tuple(DEFAULT_KNOTS), bump_stops=True)
+    rng = np.random.default_rng(1)
+    P = np.repeat(Simulator(lay).row(as_vector(DEFAULT_CAR)), 12, 0)
+    P[:, INDEX["k_tf"]] *= np.geomspace(1.0, 30.0, 12)
+    P *= 1 + 0.1 * rng.random(P.shape)
+    for h in (1 / 200, 1 / 100):
+        each = nl.substeps_each(P, DEFAULT_GEOMETRY, lay, [h])
+        alone = [nl.substeps(P[i:i + 1], DEFAULT_GEOMETRY, lay, h) for i in range(len(P))]
+        assert each.tolist() == alone and nl.substeps(P, DEFAULT_GEOMETRY, lay, h) == max(alone)
+        assert alone[-1] > alone[0]
+    both = nl.substeps_each(P, DEFAULT_GEOMETRY, lay, [1 / 200, 1 / 100])
+    assert both.tolist() == nl.substeps_each(P, DEFAULT_GEOMETRY, lay, [1 / 100]).tolist()

@@ -80,14 +80,15 @@ state. Alternatives considered:
   (:func:`kink_mask`: the knots where some candidate's curve bends; a
   digressive curve is straight through the knots below and above its knee,
   which then cost nothing; the polish pins the set with the sub-steps,
-  :class:`rideid.estimate.cost.CurveSimulator`). On the built-in scenario
+  :class:`Pin`). On the built-in scenario
   15-35 % of the sub-steps cross a knot, fewer a kink (0.2-1 knot
   crossings per sub-step, the fast runs the most), each such
   sub-step costing its plain step (the trial that finds the crossings) plus
-  one RK4 step per piece. Measured (``benchmarks/bench_nonlinear.py``, 64
-  candidates with digressive curves, one thread): 5.2 ms per candidate at
-  2 sub-steps, against 16.8 ms for plain RK4 at the 13 sub-steps of the
-  same accuracy; the linear kernel 0.17 ms on the same runs (30x).
+  one RK4 step per piece. Four candidates run side by side in the lanes of
+  a vector (:mod:`rideid.model.kernel_nl_ir`); ``benchmarks/bench_nonlinear.py``
+  measures the cost per candidate-sample against the linear kernel's on the
+  same runs (64 digressive cars, one thread, CPU time): 4.7-5.7x, from
+  21-24x with one candidate at a time.
 
 ``m`` is set per call by the fastest mode of the linearised car at its
 stiffest (spring plus bump-stop rate, the steepest damper segment, tires
@@ -345,6 +346,22 @@ def coefficients(P, geom: Geometry, layout: NonlinearLayout):
 
 def substeps(P, geom: Geometry, layout: NonlinearLayout, h: float, rho: float = RHO_MAX) -> int:
     """Sub-steps per sample interval ``h``: ``h/m * max|eig| <= rho`` for the stiffest linearised car."""
+    return int(_substeps_of(_spectral_radii(P, geom, layout).max(), h, rho))
+
+
+def substeps_each(P, geom: Geometry, layout: NonlinearLayout, hs, rho: float = RHO_MAX) -> np.ndarray:
+    """Each candidate's own :func:`substeps`, the largest over the sample intervals ``hs``: ``(n,)`` int (one
+    batched eigenvalue problem for the population, not one per candidate)."""
+    lam = _spectral_radii(P, geom, layout)
+    return np.max([_substeps_of(lam, h, rho) for h in hs], axis=0)
+
+
+def _substeps_of(lam, h: float, rho: float):
+    return np.minimum(M_MAX, np.maximum(1, np.ceil(np.asarray(lam) * h / rho - 1e-9))).astype(np.int64)
+
+
+def _spectral_radii(P, geom: Geometry, layout: NonlinearLayout) -> np.ndarray:
+    """``(n,)``: the largest |eigenvalue| of each candidate's linearised car (its stiffest segments)."""
     P = layout.rows(P)
     Q = full_rows(P[:, :len(ALL_NAMES)]).copy()
     if layout.bump_stops:
@@ -357,8 +374,8 @@ def substeps(P, geom: Geometry, layout: NonlinearLayout, h: float, rho: float = 
     Q[:, INDEX["c_sf"]] = np.maximum(Q[:, INDEX["c_sf"]], 0.0)
     Q[:, INDEX["c_sr"]] = np.maximum(Q[:, INDEX["c_sr"]], 0.0)
     bl = blocks_of(Q, geom)
-    lam = max(float(np.abs(np.linalg.eigvals(bl["As"])).max()), float(np.abs(np.linalg.eigvals(bl["Aa"])).max()))
-    return int(min(M_MAX, max(1, math.ceil(lam * h / rho - 1e-9))))
+    return np.maximum(np.abs(np.linalg.eigvals(bl["As"])).max(axis=-1),
+                      np.abs(np.linalg.eigvals(bl["Aa"])).max(axis=-1))
 
 
 def initial_state(P, geom: Geometry, layout: NonlinearLayout, u0) -> np.ndarray:
@@ -748,10 +765,7 @@ class NonlinearSimulator:
 
     def candidate_substeps(self, P) -> np.ndarray:
         """Largest sub-step count over the runs of each candidate, ``(n,)``."""
-        P = self.layout.rows(P)
-        hs = sorted({r.h for r in self.runs})
-        return np.array([max(substeps(P[i:i + 1], self.geom, self.layout, h, self.rho) for h in hs)
-                         for i in range(P.shape[0])])
+        return substeps_each(P, self.geom, self.layout, sorted({r.h for r in self.runs}), self.rho)
 
     def groups(self, P) -> list[np.ndarray]:
         """Indices of ``P``'s rows grouped by their bucketed sub-step count (the sub-step is set by the
