@@ -227,18 +227,24 @@ def generate_ir(opaque: bool | None = None) -> str:
 _LIBRARY = {}
 
 
-def _library(context):
-    """The IR module, optimised and finalised once per process, to link into the driver's library."""
+def ir_library(context, name: str, generate, cache: dict):
+    """The IR module ``generate()`` returns as text, optimised and finalised once per process (and code
+    generator, the key into ``cache``) as the library ``name``, to link into a driver's library."""
     codegen = context.codegen()
-    if id(codegen) not in _LIBRARY:
+    if id(codegen) not in cache:
         import llvmlite.binding as llvm
-        lib = codegen.create_library("rideid_kernel_ir")
-        mod = llvm.parse_assembly(generate_ir())
+        lib = codegen.create_library(name)
+        mod = llvm.parse_assembly(generate())
         mod.verify()
         lib.add_llvm_module(mod)
         lib.finalize()
-        _LIBRARY[id(codegen)] = lib
-    return _LIBRARY[id(codegen)]
+        cache[id(codegen)] = lib
+    return cache[id(codegen)]
+
+
+def _library(context):
+    """This kernel's IR module, to link into the driver's library (:func:`ir_library`)."""
+    return ir_library(context, "rideid_kernel_ir", generate_ir, _LIBRARY)
 
 
 _ARG_TYPES = [types.float64 if kind == "double" else types.int64 for _, kind in ARGS]

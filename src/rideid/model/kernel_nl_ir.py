@@ -62,6 +62,7 @@ from llvmlite import ir
 from numba.core import cgutils, types
 from numba.extending import intrinsic
 
+from .kernel_ir import _Writer, ir_library
 from .nl_coef import hermite_value_slope
 
 #: candidates per vector: two AVX2 registers of doubles (LLVM splits each operation in two)
@@ -115,48 +116,20 @@ def _dconst(x: float) -> str:
     return "0x%016X" % struct.unpack("<Q", struct.pack("<d", float(x)))[0]
 
 
-class _W:
+class _W(_Writer):
     """IR lines with numbered temporaries (as :class:`rideid.model.kernel_ir._Writer`, over vectors of
     :data:`LANES`); ``opaque``: LLVM's opaque pointers (LLVM >= 17), else typed ones. Tracks the current
     basic block (for phi nodes)."""
 
     def __init__(self, opaque: bool = True):
-        self.lines = []
-        self.n = 0
-        self.dp = "ptr" if opaque else "double*"  # a pointer to doubles
-        self.vp = "ptr" if opaque else f"{V}*"  # a pointer to a vector
-        self.opaque = opaque
+        super().__init__(opaque)
         self.block = "entry"
         self.labels = 0
         self.invariant = False  # loads marked !invariant.load (memory that the function does not write)
 
-    def __call__(self, line):
-        self.lines.append(line)
-
-    def tmp(self, expr):
-        self.n += 1
-        name = f"%t{self.n}"
-        self.lines.append(f"  {name} = {expr}")
-        return name
-
-    def ptr(self, base, offset):
-        """A pointer ``offset`` doubles after ``base`` (a constant or an i64 value)."""
-        return self.tmp(f"getelementptr inbounds double, {self.dp} {base}, i64 {offset}")
-
-    def vptr(self, p):
-        """``p`` (a pointer to doubles) as a pointer to a vector."""
-        return p if self.opaque else self.tmp(f"bitcast double* {p} to {V}*")
-
-    def vstore(self, value, p):
-        self(f"  store {V} {value}, {self.vp} {self.vptr(p)}, align 8")
-
     def vload(self, base, offset):
         inv = ", !invariant.load !1" if self.invariant else ""
         return self.tmp(f"load {V}, {self.vp} {self.vptr(self.ptr(base, offset))}, align 8{inv}")
-
-    def coef(self, base, index):
-        """The lanes of coefficient ``index`` of a lane-innermost block."""
-        return self.vload(base, index * LANES)
 
     def bcast(self, base, offset):
         """The double ``offset`` after ``base`` in every lane."""
@@ -569,17 +542,9 @@ _LIBRARY = {}
 
 
 def _library(context):
-    """The IR module, optimised and finalised once per process, to link into the driver's library."""
-    codegen = context.codegen()
-    if id(codegen) not in _LIBRARY:
-        import llvmlite.binding as llvm
-        lib = codegen.create_library("rideid_kernel_nl_ir")
-        mod = llvm.parse_assembly(generate_ir())
-        mod.verify()
-        lib.add_llvm_module(mod)
-        lib.finalize()
-        _LIBRARY[id(codegen)] = lib
-    return _LIBRARY[id(codegen)]
+    """This kernel's IR module, to link into the driver's library
+    (:func:`rideid.model.kernel_ir.ir_library`)."""
+    return ir_library(context, "rideid_kernel_nl_ir", generate_ir, _LIBRARY)
 
 
 def _codegen(name):
