@@ -272,6 +272,7 @@ def test_resume_after_sigkill_recomputes_only_unfinished_tasks(folder, reference
     assert table(res.results) == table(reference.results)
 
 
+@pytest.mark.slow  # 25-40 s: CI's slow pass runs it (make test stays under 10 minutes on 2 cores)
 def test_worker_killed_mid_task(folder, reference, cluster):
     from distributed import Client
 
@@ -303,6 +304,7 @@ def _free_port():
         return s.getsockname()[1]
 
 
+@pytest.mark.slow  # 25-40 s: CI's slow pass runs it (make test stays under 10 minutes on 2 cores)
 def test_external_scheduler_and_worker(folder, reference):
     port = _free_port()
     addr = f"tcp://127.0.0.1:{port}"

@@ -49,7 +49,7 @@ V = f"<{LANES} x double>"
 BLOCKS = (("s", 8, 4, 0, 0), ("a", 6, 3, 8, 2))
 
 
-class _Writer:
+class IRWriter:
     """IR lines with numbered temporaries; ``opaque``: LLVM's opaque pointers (LLVM >= 17), else typed ones."""
 
     def __init__(self, opaque: bool = True):
@@ -112,7 +112,7 @@ def generate_ir(opaque: bool | None = None) -> str:
     if opaque is None:
         import llvmlite.binding as llvm
         opaque = llvm.llvm_version_info[0] >= 17
-    w = _Writer(opaque)
+    w = IRWriter(opaque)
     args = ", ".join(f"i64 %i{a}" if kind == "ptr" else f"{kind} %{a}" for a, kind in ARGS)
     w(f"define void @{NAME}({args}) nounwind {{")
     w("entry:")

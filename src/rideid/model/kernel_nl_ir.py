@@ -62,7 +62,7 @@ from llvmlite import ir
 from numba.core import cgutils, types
 from numba.extending import intrinsic
 
-from .kernel_ir import _Writer, ir_library
+from .kernel_ir import IRWriter, ir_library
 from .nl_coef import hermite_value_slope
 
 #: candidates per vector: two AVX2 registers of doubles (LLVM splits each operation in two)
@@ -116,8 +116,8 @@ def _dconst(x: float) -> str:
     return "0x%016X" % struct.unpack("<Q", struct.pack("<d", float(x)))[0]
 
 
-class _W(_Writer):
-    """IR lines with numbered temporaries (as :class:`rideid.model.kernel_ir._Writer`, over vectors of
+class _W(IRWriter):
+    """IR lines with numbered temporaries (as :class:`rideid.model.kernel_ir.IRWriter`, over vectors of
     :data:`LANES`); ``opaque``: LLVM's opaque pointers (LLVM >= 17), else typed ones. Tracks the current
     basic block (for phi nodes)."""
 
