@@ -18,9 +18,9 @@ venv: $(STAMP)
 demo: $(STAMP)
 	$(VENV)/bin/rideid demo --out demo-out
 
-# lint (ruff, configured in pyproject.toml), then the default suite on every core (pytest-xdist). It costs about
-# 18 minutes of CPU time (user + sys, measured: 17.5), so about 9 minutes on two otherwise idle cores; it takes
-# longer when other jobs share the cores (30 minutes measured on two cores at a load average of 7)
+# lint (ruff, configured in pyproject.toml), then the default suite on every core (pytest-xdist). Measured on a
+# fresh clone of two otherwise idle cores: 9.0 minutes in all, 7.5 of them the tests (15.7 minutes of CPU time,
+# user + sys), the rest making .venv; it takes longer when other jobs share the cores (30 minutes at a load of 7)
 test: $(STAMP)
 	$(PY) -m ruff check src tests benchmarks
 	$(PY) -m pytest -q -n auto
