@@ -50,6 +50,13 @@ def use_numpy() -> bool:
     raise DataError(f"{ENV}={os.environ.get(ENV)!r}: expected one of {', '.join(CHOICES)}")
 
 
+def runs_numpy(name: str, numpy: bool | None = None) -> bool:
+    """The NumPy backend runs for the kernel ``name``: asked for (``numpy`` True; None: as ``RIDEID_KERNEL``
+    says, :func:`use_numpy`), or the compiled kernel cannot be built (:func:`compiled_available`)."""
+    wanted = use_numpy() if numpy is None else bool(numpy)
+    return wanted or not compiled_available(name)
+
+
 def module(name: str):
     """The compiled kernel ``name``'s module (:data:`KERNELS`), imported on first use."""
     return import_module(f"{__package__}.{KERNELS[name][0]}")
@@ -121,5 +128,5 @@ def compile_kernels() -> float:
     return time.perf_counter() - t
 
 
-__all__ = ["CHOICES", "ENV", "KERNELS", "compile_kernels", "compiled_available", "module", "one_thread", "threads",
-           "use_numpy"]
+__all__ = ["CHOICES", "ENV", "KERNELS", "compile_kernels", "compiled_available", "module", "one_thread", "runs_numpy",
+           "threads", "use_numpy"]

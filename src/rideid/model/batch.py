@@ -165,9 +165,7 @@ class BatchSimulator:
 
     # -- public ------------------------------------------------------------
     def _use_numpy(self) -> bool:
-        if self.numpy is not None:
-            return self.numpy or not backend.compiled_available("linear")
-        return backend.use_numpy() or not backend.compiled_available("linear")
+        return backend.runs_numpy("linear", self.numpy)
 
     def errors(self, P, Y, W, pin=None):
         """Per-run weighted squared errors, shape ``(n_runs, n_pop)``.

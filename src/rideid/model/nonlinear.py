@@ -776,9 +776,7 @@ class NonlinearSimulator:
         return [np.nonzero(b == k)[0] for k in np.unique(b)]
 
     def _use_numpy(self) -> bool:
-        if self.numpy is not None:
-            return self.numpy or not backend.compiled_available("nonlinear")
-        return backend.use_numpy() or not backend.compiled_available("nonlinear")
+        return backend.runs_numpy("nonlinear", self.numpy)
 
     # -- backends -----------------------------------------------------------------------
     def outputs_reference(self, P, pin: Pin | None = None):
