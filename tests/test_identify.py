@@ -465,3 +465,31 @@ def test_the_polish_does_not_stop_beside_a_bound(sim_dataset):
     twelve = [i for i, n in enumerate(cf.names) if n in NAMES]
     np.testing.assert_allclose(x[twelve], truth[twelve], rtol=1e-6)
     assert np.all(x[[cf.names.index(n) for n in ("k_arf", "k_arr", "c_tf", "c_tr")]] < 1e-6)
+
+
+def test_a_distance_warp_is_a_random_walk_anchored_at_the_start():
+    """DistanceWarp: piecewise linear between knots, 0 at the anchor, flat beyond the ends; its prior rows are
+    the increments between neighbouring knots over the random walk's std sigma_v sqrt(dt Delta)."""
+    from types import SimpleNamespace
+
+    from rideid.conditioning.starts import WARP_SPACING, DistanceWarp, distance_warp
+    w = DistanceWarp(np.array([9.6, 9.8, 10.0, 10.2, 10.4]), np.zeros(5), 2, 0.01)
+    assert list(w.free) == [0, 1, 3, 4]
+    w = w.with_free([0.004, -0.002, 0.003, 0.009])
+    assert w.values[2] == 0.0
+    assert w.at([9.7, 10.1, 10.5, 9.0]) == pytest.approx([0.001, 0.0015, 0.009, 0.004], abs=1e-15)
+    A, sigma = w.prior()
+    assert sigma == pytest.approx(np.full(4, 0.01 * np.sqrt(0.2)), rel=1e-12)
+    assert A @ w.values[w.free] == pytest.approx(np.diff(w.values), abs=1e-15)
+    rec = w.record(std=[1e-3, 2e-3, 3e-3, 4e-3])
+    assert rec["std_m"] == [1e-3, 2e-3, 0.0, 3e-3, 4e-3] and rec["max_abs_m"] == pytest.approx(0.009)
+    # from a run's record: none without speed noise (a distance channel, a clean speed channel)
+    rd = SimpleNamespace(time=np.linspace(-0.5, 3.0, 351))
+    run = SimpleNamespace(distance=object(), run_data=lambda s: rd,
+                          record={"speed": {"noise_std": 0.03, "noise_interval": 0.1}})
+    got = distance_warp(run, 5.0)
+    assert got.knots[got.anchor] == 5.0 and got.knots[0] <= 4.5 and got.knots[-1] >= 8.0
+    assert np.diff(got.knots) == pytest.approx(np.full(got.knots.size - 1, WARP_SPACING))
+    assert got.rate_std == pytest.approx(0.03 * np.sqrt(0.1))
+    assert distance_warp(SimpleNamespace(distance=object(), run_data=lambda s: rd, record={"speed": {}}), 5.0) is None
+    assert distance_warp(SimpleNamespace(distance=None, run_data=lambda s: rd, record=run.record), 5.0) is None

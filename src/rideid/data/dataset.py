@@ -112,7 +112,9 @@ class Dataset:
 
         ``starts``: run id -> start (file time, s) or a start record
         ``{"value", ...}`` such as :attr:`rideid.IdentificationResult.starts`;
-        the record's other keys (source, std) join the run's preprocessing record.
+        the record's other keys (source, std) join the run's preprocessing record; its
+        ``distance_correction`` (a noisy speed channel's, :attr:`rideid.IdentificationResult.starts`) drives the
+        run along the corrected distance.
         """
         measured, data = dict(self.measured), dict(self.data)
         for rid, st in starts.items():
@@ -123,6 +125,9 @@ class Dataset:
             mr = self.measured[rid]
             record = dict(mr.record, start={**mr.record.get("start", {}),
                                             **{k: v for k, v in rec.items() if k != "value"}})
+            dc = rec.get("distance_correction")
+            if dc is not None and mr.distance is not None:  # a noisy speed channel's, estimated with the start
+                mr = mr.with_distance_correction(dc["knots_s"], dc["values_m"])
             measured[rid] = replace(mr, start=s, record=record)
             data[rid] = measured[rid].run_data(s)
         return Dataset(self.manifest, data, measured)

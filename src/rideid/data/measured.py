@@ -54,7 +54,7 @@ from __future__ import annotations
 
 import math
 import warnings
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
@@ -188,6 +188,20 @@ class MeasuredRun:
     values: np.ndarray | None = None
     #: the model's samples: index range ``[i0, i1)`` into :attr:`times`, fixed at the first start
     window: tuple | None = None
+    #: the distance as the speed channel gave it, when :attr:`distance` carries a correction
+    #: (:meth:`with_distance_correction`)
+    channel_distance: Distance | None = None
+
+    def with_distance_correction(self, knots, values) -> "MeasuredRun":
+        """This run driven along its channel's distance plus ``delta`` (piecewise linear through ``values`` m at
+        file times ``knots``, constant beyond them): a noisy speed channel's correction
+        (:class:`rideid.conditioning.starts.DistanceWarp`). Always from the channel's own distance, so a
+        correction replaces an earlier one."""
+        base = self.channel_distance if self.channel_distance is not None else self.distance
+        if base is None:
+            raise ValueError(f"run '{self.run_id}' has no distance profile to correct")
+        warped = Distance(base.t, base.d + np.interp(base.t, np.asarray(knots, float), np.asarray(values, float)))
+        return replace(self, distance=warped, channel_distance=base)
 
     def __post_init__(self):
         if self.times is None:

@@ -536,6 +536,17 @@ class CostFunction:
                    self.counter, pin)
         return new
 
+    def without_pairs(self, pairs) -> "CostFunction":
+        """This cost function (space, simulator, pin, weights; a new count) with the run/channel ``pairs``
+        (``(run id, channel name)``) left out: their channel weights 0 (the materiality refit)."""
+        W = self.W.copy()
+        for rid, ch in pairs:
+            W[self.run_ids.index(rid), CHANNELS.index(ch)] = 0.0
+        new = CostFunction.__new__(CostFunction)
+        new._build(self.ds, self.space, self.simulator, self.sim, self.Y, W, self.use_kernel, self.weights, None,
+                   self.pin)
+        return new
+
     def pinned_at(self, P, margin: float = 1.5) -> "CostFunction":
         """:meth:`with_pin` at the polish's start ``P`` (a full row); the linear car has no sub-steps to pin."""
         if not isinstance(self.sim, NonlinearSimulator):

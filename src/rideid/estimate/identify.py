@@ -60,14 +60,14 @@ from __future__ import annotations
 import math
 import time
 import warnings
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 from scipy.optimize import OptimizeResult, least_squares
 
 from ..data.checks import bound_findings
 from ..data.dataset import Dataset
-from ..conditioning.starts import cycle_slips, linearise_starts
+from ..conditioning.starts import cycle_slips, distance_warp, linearise_starts, warped
 from ..errors import ArgumentError, DataWarning
 from ..model.batch import single_threaded_blas
 from ..model.equations import modal_summary
@@ -82,7 +82,7 @@ from .cost import BUMP_UNITS, IDENTIFIABLE_GROUPS, CostFunction, ParameterSpace,
 from .jade import JadeSolver, make_rng, stop_requested
 from .adequacy import advise, assess_fit
 from .result import History, IdentificationResult
-from .uncertainty import estimate_covariance, hac_covariance, white_covariance
+from .uncertainty import jackknife_runs, estimate_covariance, hac_covariance, white_covariance
 from .sensitivity import SensitivityMaps, cost_maps
 from .weighting import TrackWeighting, coefficient_of_variation
 
@@ -544,6 +544,10 @@ def parameter_detail(space, P, n: str, std, cov, robust) -> dict:
     else:
         e["std"] = 0.0
     e["std_robust"] = robust.std_robust(n) if n not in space.fixed else 0.0
+    if n not in space.fixed and robust.jackknife is not None:
+        # the runs' disagreement beyond their noise (docs/uncertainty.md "Between runs")
+        e["std_jackknife"] = robust.std_jackknife(n)
+        e["std_between_runs"] = robust.std_between_runs(n)
     return e
 
 
@@ -582,6 +586,11 @@ def _polish(cf: CostFunction, x0, weights, align=None):
     parameters' white standard errors (:class:`_Polish`).
     """
     prob = _Polish(cf, np.asarray(weights, dtype=float), tuple(align or ()))
+    if prob.has_warps:
+        # the prior rows weigh a knot's increment against the data at the data's residual level
+        v0 = np.concatenate([np.clip((x0 - prob.lo) / prob.span, 0, 1), np.zeros(prob.n_unknowns - prob.d)])
+        r0 = cf.residuals(x0[None], prob.weights, Y=prob.measured(v0))[0]
+        prob = replace(prob, prior_scale=float(np.sqrt(np.mean(r0 ** 2))))
     sol = prob.solve(x0)
     for _ in range(REPAIR_RESTARTS if cf.space.curves else 0):
         x = prob.to_x(sol.x[:prob.d])
@@ -599,6 +608,8 @@ def _polish(cf: CostFunction, x0, weights, align=None):
 POLISH_MAX_NFEV = 100
 DOGBOX_MAX_NFEV = 30
 BOUND_SNAP = 1e-9
+#: a distance correction's knots stay within this many metres of the speed channel's integral in one polish
+WARP_BOUND = 0.5
 #: dogbox's first-order optimality (the largest gradient component of the free variables, bound-normalised;
 #: the cost is a normalised mean square) above which an end beside a bound is a stall, not convergence:
 #: converged polishes end at 1e-13 (noise-free) to 1e-11, the stall on damper-van-logger at 7e-3
@@ -617,6 +628,8 @@ class _Polish:
     cf: CostFunction
     weights: np.ndarray
     align: tuple = ()
+    #: the residual noise level the distance corrections' prior rows are scaled to (:meth:`prior_rows`)
+    prior_scale: float = 1.0
     #: the residuals of the last :meth:`residuals` call: least_squares asks for the Jacobian where it just
     #: evaluated (a memo, not state of the problem)
     _last: dict = field(default_factory=dict, repr=False, compare=False)
@@ -641,22 +654,63 @@ class _Polish:
         """The start (file time, s) of ``align[k]`` at ``v``."""
         return self.align[k].start + v[self.d + k] / self.align[k].fs
 
+    @property
+    def warp_slices(self) -> list:
+        """Per run of ``align``: the slice of ``v`` holding its distance correction's free knots (or None)."""
+        out, i = [], self.d + len(self.align)
+        for sh in self.align:
+            if sh.warp is None:
+                out.append(None)
+            else:
+                n = sh.warp.free.size
+                out.append(slice(i, i + n))
+                i += n
+        return out
+
+    @property
+    def n_unknowns(self) -> int:
+        return self.d + len(self.align) + sum(sh.warp.free.size for sh in self.align if sh.warp is not None)
+
+    def prior_rows(self, v):
+        """The distance corrections' prior residuals ``s A (w + dw) / sigma`` (the random walk's increments,
+        :meth:`rideid.conditioning.starts.DistanceWarp.prior`, scaled to the data's residual level ``s``) and
+        their Jacobian ``(rows, v.size)``."""
+        rows, jac = [], []
+        for sh, sl in zip(self.align, self.warp_slices):
+            if sl is None:
+                continue
+            A, sigma = sh.warp.prior()
+            M = self.prior_scale * A / sigma[:, None]
+            rows.append(M @ (sh.warp.values[sh.warp.free] + v[sl]))
+            Jp = np.zeros((A.shape[0], v.size))
+            Jp[:, sl] = M
+            jac.append(Jp)
+        if not rows:
+            return np.zeros(0), np.zeros((0, v.size))
+        return np.concatenate(rows), np.vstack(jac)
+
     def measured(self, v):
         """The measured data with each aligned run moved by its shift's linearisation (None: no shift)."""
         if not self.align:
             return None
         cf, d = self.cf, self.d
         Y = cf.Y.copy()
-        for k, sh in enumerate(self.align):
+        for k, (sh, sl) in enumerate(zip(self.align, self.warp_slices)):
             a, b = cf.sim.run_start[sh.run_index], cf.sim.run_start[sh.run_index + 1]
             Y[a:b] -= (v[d + k] / sh.fs) * sh.D  # y_model + delta D - y  ==  y_model - (y - delta D)
+            if sl is not None:
+                Y[a:b] -= np.tensordot(v[sl], sh.Dw, axes=1)
         return Y
 
     def residuals(self, v) -> np.ndarray:
-        """Stacked weighted residuals ``(m,)`` at ``v``."""
+        """Stacked weighted residuals ``(m,)`` at ``v``, the distance corrections' prior rows last."""
         r = self.cf.residuals(self.to_x(v[:self.d])[None], self.weights, Y=self.measured(v))[0]
         self._last["v"], self._last["r"] = v.copy(), r
-        return r
+        return np.concatenate([r, self.prior_rows(v)[0]]) if self.has_warps else r
+
+    @property
+    def has_warps(self) -> bool:
+        return any(sh.warp is not None for sh in self.align)
 
     def jacobian(self, v) -> np.ndarray:
         """``(m, d + len(align))``: forward differences (step 1e-7 in ``z``) as one batch, the shifts' columns
@@ -666,10 +720,13 @@ class _Polish:
         J = np.zeros((D.shape[0], v.size))
         J[:, :d] = D
         offsets = self._run_offsets()
-        for k, sh in enumerate(self.align):
+        for k, (sh, sl) in enumerate(zip(self.align, self.warp_slices)):
             cols, sc = cf.residual_scale(sh.run_index, self.weights)
-            J[offsets[sh.run_index]:offsets[sh.run_index + 1], d + k] = (sh.D[:, cols] * sc / sh.fs).ravel()
-        return J
+            rows = slice(offsets[sh.run_index], offsets[sh.run_index + 1])
+            J[rows, d + k] = (sh.D[:, cols] * sc / sh.fs).ravel()
+            if sl is not None:
+                J[rows, sl] = (sh.Dw[:, :, cols] * sc).reshape(sh.Dw.shape[0], -1).T
+        return np.vstack([J, self.prior_rows(v)[1]]) if self.has_warps else J
 
     def _differences(self, v) -> np.ndarray:
         """The parameters' forward-difference columns ``(m, d)`` at ``v`` (the last residuals reused)."""
@@ -710,10 +767,11 @@ class _Polish:
         within the polish's :data:`POLISH_MAX_NFEV` in all (the lower cost of the two is the result).
         """
         d, n_al = self.d, len(self.align)
+        n_w = self.n_unknowns - d - n_al
         z0 = np.clip((x0 - self.lo) / self.span, 0, 1)
-        v0 = np.concatenate([z0, np.zeros(n_al) if shifts is None else np.asarray(shifts, dtype=float)])
-        blo = np.concatenate([np.zeros(d), np.full(n_al, -5.0)])
-        bhi = np.concatenate([np.ones(d), np.full(n_al, 5.0)])
+        v0 = np.concatenate([z0, np.zeros(n_al + n_w) if shifts is None else np.asarray(shifts, dtype=float)])
+        blo = np.concatenate([np.zeros(d), np.full(n_al, -5.0), np.full(n_w, -WARP_BOUND)])
+        bhi = np.concatenate([np.ones(d), np.full(n_al, 5.0), np.full(n_w, WARP_BOUND)])
         near = BOUND_SNAP * (bhi - blo)
         v0 = np.where(v0 - blo < near, blo, np.where(bhi - v0 < near, bhi, v0))
         sol = self._least_squares(v0, (blo, bhi), "dogbox", DOGBOX_MAX_NFEV)
@@ -731,8 +789,9 @@ class _Polish:
                              x_scale="jac", ftol=1e-15, xtol=1e-12, gtol=1e-15, max_nfev=max_nfev)
 
     def scale(self) -> np.ndarray:
-        """``dx/dv`` of every unknown: the bounds' spans, then one sample interval per shift."""
-        return np.concatenate([self.span, [1.0 / sh.fs for sh in self.align]])
+        """``dx/dv`` of every unknown: the bounds' spans, one sample interval per shift, 1 per knot (m)."""
+        return np.concatenate([self.span, [1.0 / sh.fs for sh in self.align],
+                               np.ones(self.n_unknowns - self.d - len(self.align))])
 
     def covariance(self, sol):
         """White covariance ``s^2 (J^T J)^+`` of every unknown in its own units, and its standard errors
@@ -748,27 +807,46 @@ class _Polish:
         cf = self.cf
         blocks = [(int(e - s), int(np.count_nonzero(cf.W[ri] > 0)))
                   for ri, (s, e) in enumerate(zip(cf.sim.run_start[:-1], cf.sim.run_start[1:]))]
+        n_prior = sol.fun.size - sum(t * c for t, c in blocks)
+        if n_prior:  # the distance corrections' prior rows: independent pseudo-observations, one block
+            blocks.append((n_prior, 1))
         hac = hac_covariance(sol.jac, sol.fun, blocks)
-        return hac.cov * np.outer(self.scale(), self.scale()), hac.bandwidths
+        return hac.cov * np.outer(self.scale(), self.scale()), hac.bandwidths[:len(cf.run_ids)]
+
+    def jackknife(self, sol):
+        """The delete-one-run jackknife covariance of every unknown in its own units and its number of runs
+        (:func:`rideid.estimate.uncertainty.jackknife_runs`; None with fewer than 3 runs to leave out)."""
+        cf = self.cf
+        blocks = [(int(e - s), int(np.count_nonzero(cf.W[ri] > 0)))
+                  for ri, (s, e) in enumerate(zip(cf.sim.run_start[:-1], cf.sim.run_start[1:]))]
+        cov, k = jackknife_runs(sol.jac, sol.fun, blocks, n_checked=self.d)
+        return (None if cov is None else cov * np.outer(self.scale(), self.scale())), k
 
     def info(self, sol, x0):
         """The ``polish`` block of result.json (the starts of ``align`` under ``starts``) and the free
         parameters' white standard errors ``(d,)``."""
         d, cf = self.d, self.cf
-        v0 = np.concatenate([np.clip((x0 - self.lo) / self.span, 0, 1), np.zeros(len(self.align))])
+        v0 = np.concatenate([np.clip((x0 - self.lo) / self.span, 0, 1), np.zeros(self.n_unknowns - self.d)])
         cov_all, std_all = self.covariance(sol)
         cov_rob, bandwidths = self.robust(sol)
+        cov_jack, k_jack = self.jackknife(sol)
         with np.errstate(invalid="ignore"):
             std_rob = np.sqrt(np.clip(np.diag(cov_rob), 0, None))
         info = {"success": bool(sol.success), "message": sol.message, "nfev": int(sol.nfev),
                 "cost_before": float(np.sum(self.residuals(v0) ** 2)), "cost_after": 2 * float(sol.cost),
                 "covariance": cov_all[:d, :d].tolist(), "names": list(cf.names),
                 "covariance_robust": cov_rob[:d, :d].tolist(),
+                "covariance_jackknife": None if cov_jack is None else cov_jack[:d, :d].tolist(),
+                "jackknife_runs": k_jack,
                 "hac_bandwidths": {rid: float(b) for rid, b in zip(cf.run_ids, bandwidths)}}
         if self.align:
             info["starts"] = {sh.run_id: {"value": self.start_of(sol.x, k), "std": float(std_all[d + k]),
                                           "std_robust": float(std_rob[d + k])}
                               for k, sh in enumerate(self.align)}
+            for sh, sl in zip(self.align, self.warp_slices):
+                if sl is not None:
+                    w = sh.warp.with_free(sh.warp.values[sh.warp.free] + sol.x[sl])
+                    info["starts"][sh.run_id]["distance_correction"] = w.record(std_all[sl])
         return info, std_all[:d]
 
 
@@ -786,6 +864,10 @@ class _Shift:
     fs: float
     start: float
     D: np.ndarray
+    #: a noisy speed channel's distance correction (:class:`rideid.conditioning.starts.DistanceWarp`, as the
+    #: runs are read now) and the response's derivative with respect to its free knots ``(K, n, 10)``
+    warp: object = None
+    Dw: np.ndarray | None = None
 
 
 def _polish_aligned(ds, cf, x_best, equal):
@@ -800,38 +882,50 @@ def _polish_aligned(ds, cf, x_best, equal):
     Works on its own copy of the run data: ``ds`` is not changed.
     """
     starts = {rid: ds.measured[rid].start for rid in ds.auto_start_runs}
+    warps = {rid: w for rid in starts if (w := distance_warp(ds.measured[rid], starts[rid])) is not None}
     rounds, settled = [], False
     for _ in range(REALIGN_MAX + 1):
         P = cf.space.full(x_best[None])[0]
         last = settled or len(rounds) == REALIGN_MAX
-        ds_now, D = linearise_starts(ds, P, starts, cf.simulator, derivative=not last)
+        ds_now, D, Dw = linearise_starts(warped(ds, warps), P, starts, cf.simulator, derivative=not last,
+                                         warps=warps)
         # the model's time axes moved with the starts: the cost function (space, simulator, pin) on them
         cf = cf.with_data(ds_now)
         if last:
             break
-        shifts = [_Shift(cf.run_ids.index(rid), rid, ds.measured[rid].fs, s, D[rid]) for rid, s in starts.items()]
+        shifts = [_Shift(cf.run_ids.index(rid), rid, ds.measured[rid].fs, s, D[rid], warps.get(rid), Dw.get(rid))
+                  for rid, s in starts.items()]
         x_best, info, std = _polish(cf, x_best, equal, shifts)
         fitted = {rid: st["value"] for rid, st in info["starts"].items()}
         worst = max(abs(v - starts[rid]) * ds.measured[rid].fs for rid, v in fitted.items())
+        # a distance correction's largest change, in sample intervals at the run's mean speed
+        for rid, w in warps.items():
+            new = np.asarray(info["starts"][rid]["distance_correction"]["values_m"])
+            v_mean = max(float(ds.measured[rid].record.get("speed", {}).get("mean") or 1.0), 1e-3)
+            worst = max(worst, float(np.max(np.abs(new - w.values))) * ds.measured[rid].fs / v_mean)
+            warps[rid] = replace(w, values=new)
         moved = cycle_slips(ds, cf.space.full(x_best[None])[0], fitted, cf.simulator)
         slipped = {rid: s - fitted[rid] for rid, s in moved.items()}
         starts = {**fitted, **moved}
         rounds.append({"max_change_samples": worst, **({"cycle_slips": slipped} if slipped else {})})
         settled = not slipped and worst < REALIGN_TOL
     out = {rid: {"value": float(starts[rid]), "source": "estimated with the parameters (least squares)",
-                 **_start_std(info["starts"][rid], ds.measured[rid].record.get("start", {}))}
+                 **_start_std(info["starts"][rid], ds.measured[rid].record.get("start", {}), rid in warps)}
            for rid in starts}
+    for rid in warps:
+        out[rid]["distance_correction"] = info["starts"][rid]["distance_correction"]
     return x_best, dict(info, alignment_rounds=rounds), std, cf, out
 
 
-def _start_std(fitted: dict, record: dict) -> dict:
+def _start_std(fitted: dict, record: dict, warped_run: bool = False) -> dict:
     """A start's standard errors: the fit's (``fitted``: the polish's ``std``, ``std_robust``) and, where the
     start's load ``record`` has one, a noisy speed channel's (:func:`rideid.conditioning.starts.speed_channel_std`)
-    added in quadrature."""
+    added in quadrature (not for a ``warped_run``: its distance correction was estimated with it, so the
+    fit's standard error holds the channel's noise already)."""
     std_fit = fitted["std"]
     out = {"std": std_fit, "std_fit": std_fit}
     s_speed = record.get("std_speed_channel")
-    if s_speed is not None:
+    if s_speed is not None and not warped_run:
         out["std_speed_channel"] = s_speed
         if std_fit is not None and np.isfinite(std_fit):
             out["std"] = float(math.hypot(std_fit, s_speed))

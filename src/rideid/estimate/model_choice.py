@@ -41,6 +41,7 @@ from scipy import special
 from ..model.params import GROUPS
 from ..data.schema.manifest import vehicle_table
 from .adequacy import MIN_IMPROVEMENT, advise, assess_fit
+from .materiality import weigh_result
 from .identify import DEFAULT_GENERATIONS, DEFAULT_POPULATION, identify as identify_model, warn_bounds
 from .anyroad import identify_any_road, unknown_road_runs
 from ..model.batch import single_threaded_blas, thread_map
@@ -525,6 +526,8 @@ def identify(ds, *, model=None, rng=None, seed=None, population: int = DEFAULT_P
         res = identify_auto(ds, simulator=simulator, **common)
     else:
         res = identify_model(ds, model=model, cost=cost, start=start, simulator=simulator, **common)
+    if assess and not unknown_road_runs(ds):  # SPEC §12: does the structure the residual test found matter?
+        res = weigh_result(ds, res, simulator)
     res = replace(res, vehicle=vehicle_table(ds.geometry))  # the geometry travels with the car (rideid export)
     warn_bounds(res)
     return res

@@ -53,6 +53,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+from scipy import special
 
 #: Andrews (1991) constant of the Bartlett kernel's optimal bandwidth
 ANDREWS_BARTLETT = 1.1447
@@ -297,6 +298,80 @@ def hac_covariance(J, e, blocks, bandwidth: float | None = None) -> RobustCovari
     return RobustCovariance(cov=inv.mark(0.5 * (cov + cov.T)), bandwidths=bws)
 
 
+def jackknife_runs(J, e, blocks, rtol: float = RANK_RTOL, n_checked: int | None = None):
+    """Delete-one-run jackknife covariance of the estimate, linearised at the optimum.
+
+    Leaving run ``r`` out moves a least-squares optimum by ``(H - H_r)^+ g_r``
+    to first order (``H = J^T J``, ``H_r`` and ``g_r = J_r^T e_r`` the run's
+    share of the Hessian and of the gradient, which sums to 0 over the runs at
+    the optimum): no new fit. The jackknife covariance is ``(k - 1) / k sum_r
+    (d_r - mean d)(d_r - mean d)^T`` over the ``k`` runs whose removal leaves
+    every parameter determined (a run that alone measures a parameter is not
+    left out). With the model right it estimates the same sampling covariance
+    as the robust (HAC) one; where the model errs differently on different
+    runs (a nonlinearity one track excites more than another), the estimates
+    of the runs disagree by more than their noise and it is larger
+    (:func:`between_runs_variance`).
+
+    Parameters
+    ----------
+    J, e : the stacked residuals' Jacobian ``(m, n)`` and residuals ``(m,)``; rows beyond the runs' blocks
+        (prior pseudo-observations) stay in every fit.
+    blocks : sequence of (int, int)
+        ``(n_time, n_channel)`` of each run.
+    n_checked : int, optional
+        Only the first ``n_checked`` unknowns must stay determined (the parameters; a run's own start
+        shift goes with the run).
+
+    Returns
+    -------
+    (ndarray (n, n) or None, int)
+        The covariance (None with fewer than 3 runs to leave out) and ``k``.
+    """
+    J = np.asarray(J, dtype=float)
+    e = np.asarray(e, dtype=float)
+    if not (np.all(np.isfinite(J)) and np.all(np.isfinite(e))):
+        return None, 0
+    H = J.T @ J
+    deltas, i = [], 0
+    for T, C in blocks:
+        size = int(T) * int(C)
+        Jr, er = J[i:i + size], e[i:i + size]
+        i += size
+        if size == 0:
+            continue
+        lam, V = np.linalg.eigh(H - Jr.T @ Jr)
+        sv = np.sqrt(np.clip(lam, 0, None))
+        keep = sv > rtol * sv.max() if sv.size and sv.max() > 0 else np.zeros(lam.size, dtype=bool)
+        Vk = V[:, keep]
+        if np.any((1.0 - np.sum(Vk ** 2, axis=1))[:n_checked] > NULL_SHARE):
+            continue  # this run alone determines a parameter: it cannot be left out
+        deltas.append((Vk / lam[keep]) @ (Vk.T @ (Jr.T @ er)))
+    k = len(deltas)
+    if k < 3:
+        return None, k
+    D = np.array(deltas)
+    D -= D.mean(axis=0)
+    return (k - 1) / k * (D.T @ D), k
+
+
+#: the Birge ratio's quantile: the runs disagree beyond their noise when the jackknife variance exceeds the
+#: robust one by more than the chi-square(k - 1) quantile at this probability over k - 1
+BIRGE_P = 0.99
+
+
+def between_runs_variance(v_jack: float, v_robust: float, k: int) -> float:
+    """The variance the runs' disagreement adds to an estimate (0 when it is within their noise).
+
+    The Birge ratio ``R^2 = v_jack / v_robust`` is about chi-square(k - 1) / (k - 1) when the runs agree
+    within their noise; above its :data:`BIRGE_P` quantile the excess ``v_jack - v_robust`` is model error
+    that differs between runs (dark uncertainty), and is returned."""
+    if not (np.isfinite(v_jack) and np.isfinite(v_robust)) or v_robust <= 0 or k < 3:
+        return 0.0
+    limit = 2.0 * special.gammaincinv(0.5 * (k - 1), BIRGE_P) / (k - 1)
+    return float(v_jack - v_robust) if v_jack / v_robust > limit else 0.0
+
+
 def correlation(cov) -> np.ndarray:
     """Correlation matrix of a covariance (NaN where a variance is not positive)."""
     cov = np.asarray(cov, dtype=float)
@@ -346,6 +421,10 @@ class EstimateCovariance:
     names: list
     white: np.ndarray | None
     robust: np.ndarray | None
+    #: the delete-one-run jackknife covariance (:func:`jackknife_runs`) and its number of runs, when the
+    #: polish recorded one
+    jackknife: np.ndarray | None = None
+    jackknife_runs: int = 0
 
     @classmethod
     def from_polish(cls, info: dict | None, space, x=None) -> "EstimateCovariance":
@@ -362,16 +441,20 @@ class EstimateCovariance:
                 return cls(names, None, None)
             g = space.derived_gradient()
             mats = []
-            for key in ("covariance", "covariance_robust"):
+            for key in ("covariance", "covariance_robust", "covariance_jackknife"):
+                if info.get(key) is None:
+                    mats.append(None)
+                    continue
                 C = np.array(info[key], dtype=float)
                 mats.append(with_derived(C, g) if space.derived is not None else C)
-            return cls(names, *mats)
+            return cls(names, *mats, int(info.get("jackknife_runs", 0)))
         names = list(space.names) + space.derived_names()
         if info is None or "covariance_robust" not in info:
             return cls(names, None, None)
         A = np.vstack([np.eye(len(space.names)), space.derived_jacobian(x)])
-        mats = [A @ np.array(info[key], dtype=float) @ A.T for key in ("covariance", "covariance_robust")]
-        return cls(names, *mats)
+        mats = [None if info.get(key) is None else A @ np.array(info[key], dtype=float) @ A.T
+                for key in ("covariance", "covariance_robust", "covariance_jackknife")]
+        return cls(names, *mats, int(info.get("jackknife_runs", 0)))
 
     def std_white(self, name: str) -> float | None:
         """White (Jacobian) standard error of one estimated or derived parameter (``None`` if unavailable)."""
@@ -386,6 +469,21 @@ class EstimateCovariance:
             return None
         v = self.robust[self.names.index(name)][self.names.index(name)]
         return float(np.sqrt(v)) if np.isfinite(v) and v >= 0 else None
+
+    def std_jackknife(self, name: str) -> float | None:
+        """The delete-one-run jackknife standard error of one parameter (``None`` if unavailable)."""
+        if self.jackknife is None or name not in self.names:
+            return None
+        v = self.jackknife[self.names.index(name)][self.names.index(name)]
+        return float(np.sqrt(v)) if np.isfinite(v) and v >= 0 else None
+
+    def std_between_runs(self, name: str) -> float | None:
+        """The standard uncertainty the runs' disagreement adds (:func:`between_runs_variance`; 0 when they
+        agree within their noise, ``None`` without a jackknife)."""
+        sj, sr = self.std_jackknife(name), self.std_robust(name)
+        if sj is None or sr is None:
+            return None
+        return float(np.sqrt(between_runs_variance(sj ** 2, sr ** 2, self.jackknife_runs)))
 
     def correlation_dict(self) -> dict | None:
         """``{"names", "matrix", "basis"}`` for result.json: the estimates' correlations (robust covariance)."""
