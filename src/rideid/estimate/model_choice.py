@@ -40,6 +40,7 @@ from scipy import special
 
 from ..model.params import GROUPS
 from ..data.schema.manifest import vehicle_table
+from .budget import with_budget
 from .adequacy import MIN_IMPROVEMENT, advise, assess_fit
 from .identify import DEFAULT_GENERATIONS, DEFAULT_POPULATION, identify as identify_model, warn_bounds
 from .anyroad import identify_any_road, unknown_road_runs
@@ -526,5 +527,7 @@ def identify(ds, *, model=None, rng=None, seed=None, population: int = DEFAULT_P
     else:
         res = identify_model(ds, model=model, cost=cost, start=start, simulator=simulator, **common)
     res = replace(res, vehicle=vehicle_table(ds.geometry))  # the geometry travels with the car (rideid export)
+    # SPEC §12: every declared uncertainty propagated to the estimates (std_total, budget)
+    res = with_budget(ds, res, simulator, cost)
     warn_bounds(res)
     return res
