@@ -53,8 +53,9 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from ..data.dataset import Dataset
+from ..data.dataset import Dataset, scale_anchor
 from ..errors import ArgumentError, DataError
+from ..model.equations import CHANNELS
 from ..model.params import EXTRA_KNOWN, MASS_COUNT, UNITS
 from .cost import BUMP_UNITS, CostFunction, ParameterSpace
 from .uncertainty import normal_inverse
@@ -124,7 +125,6 @@ def declared_inputs(manifest) -> list[DeclaredInput]:
 
 def anchor_name(known: dict) -> str | None:
     """The known value that fixes the scale (:func:`rideid.data.dataset.scale_anchor`), None if none."""
-    from ..data.dataset import scale_anchor
     try:
         return scale_anchor(known)
     except DataError:
@@ -188,7 +188,6 @@ def residual_jacobian(cf: CostFunction, x, weights) -> tuple[np.ndarray, np.ndar
 def _sensor_column(cf: CostFunction, channel: str, weights) -> np.ndarray:
     """``dr/d eps`` of a relative gain error ``eps`` of ``channel`` (data ``(1 + eps) Y``): ``-Y_c`` on that
     channel's rows, scaled as the residuals (layout of :meth:`CostFunction.residuals`)."""
-    from ..model.equations import CHANNELS
     c = CHANNELS.index(channel)
     parts = []
     for ri, (s, e) in enumerate(zip(cf.sim.run_start[:-1], cf.sim.run_start[1:])):
