@@ -109,7 +109,7 @@ def declared_inputs(manifest) -> list[DeclaredInput]:
     """The inputs of a manifest with a positive declared std: ``[known]``, ``[vehicle]``, then the sensors."""
     out = []
     declared = getattr(manifest, "declared", {}) or {}
-    for k, std in declared.items():
+    for k, std in sorted(declared.items(), key=lambda kv: kv[0] not in manifest.known):  # [known] first
         if not std > 0:
             continue
         if k in manifest.known:
