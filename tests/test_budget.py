@@ -30,6 +30,7 @@ from rideid.data.schema.runfiles import RunData
 from rideid.estimate.budget import declared_inputs, propagate
 from rideid.estimate.cost import CostFunction
 from rideid.estimate.identify import polish_fit
+from rideid.estimate.redundancy import BODY, GYROS, gain_notes, rigid_body_gains
 
 
 
@@ -321,3 +322,30 @@ def test_plan_adds_the_declared_anchor_in_quadrature(tmp_path):
         extra = 0.0 if n == "a" else 0.01
         assert e["relative_total"] == pytest.approx(np.hypot(e["relative"], extra), rel=1e-12), n
     assert doc["selected"]["crlb"]["k_sf"].get("relative_total") is None  # the CRLB stays the data's alone
+
+
+# -- what the data tell of the gains themselves (rigid-body redundancy) ---------------------------------------
+
+def _gained(ds, gains):
+    data = {r.id: RunData(ds.data[r.id].time, {c: v * gains.get(c, 1.0) for c, v in ds.data[r.id].channels.items()},
+                          ds.data[r.id].distance) for r in ds.runs}
+    return ds.with_data(data)
+
+
+def test_rigid_body_redundancy_finds_relative_gains_but_not_the_common_one(sim_dataset):
+    """Four body accelerometers and two gyros over three body motions: their gains relative to each other
+    follow from the data alone; one gain common to all six (and any axle accelerometer's) does not."""
+    ds = rideid.load_dataset(sim_dataset)
+    gains = {"body_az_fl": 1.02, "body_az_fr": 0.97, "body_az_rl": 1.01, "body_az_rr": 0.995, "pitch_rate": 1.015,
+             "roll_rate": 0.985, "axle_az_fl": 1.05}
+    block = rigid_body_gains(_gained(ds, gains))
+    mean = np.mean([gains[c] for c in BODY])
+    assert block["runs"] == len(ds.runs) and set(block["gains"]) == set(BODY + GYROS)
+    for c, e in block["gains"].items():
+        assert e["relative_gain"] == pytest.approx(gains[c] / mean, rel=5e-4), c
+    flagged = [n.split()[0] for n in gain_notes(block, {})]
+    assert flagged == ["body_az_fl", "body_az_fr", "body_az_rl", "pitch_rate", "roll_rate"]  # rr: 0.4 % off
+    assert gain_notes(block, {c: 0.03 for c in BODY + GYROS}) == []  # within twice a declared 3 %
+    common = rigid_body_gains(_gained(ds, {c: 1.03 for c in BODY + GYROS}))
+    for c, e in common["gains"].items():
+        assert e["relative_gain"] == pytest.approx(1.0, abs=5e-4), c

@@ -58,6 +58,7 @@ from ..errors import ArgumentError, DataError
 from ..model.equations import CHANNELS
 from ..model.params import EXTRA_KNOWN, MASS_COUNT, UNITS
 from .cost import BUMP_UNITS, CostFunction, ParameterSpace
+from .redundancy import gain_notes, rigid_body_gains
 from .uncertainty import normal_inverse
 
 #: the budget's entry for ``std_robust`` (the sensor noise, through the HAC sandwich)
@@ -335,7 +336,9 @@ def fit_cost(ds: Dataset, res, simulator=None, cost: CostFunction | None = None)
 
 
 def with_budget(ds: Dataset, res, simulator=None, cost: CostFunction | None = None):
-    """``res`` with ``std_total`` and ``budget`` on every parameter and the ``uncertainty`` block (SPEC §12).
+    """``res`` with ``std_total`` and ``budget`` on every parameter and the ``uncertainty`` block (SPEC §12):
+    what was declared, the anchor (and whether it is taken as exact), how it was propagated, what was not,
+    the body sensors' relative gains from rigid-body redundancy (:func:`rigid_body_gains`) and the notes.
 
     With nothing declared ``std_total`` is ``std_robust`` exactly and nothing is simulated.
     """
@@ -367,6 +370,10 @@ def with_budget(ds: Dataset, res, simulator=None, cost: CostFunction | None = No
                                "propagation: runs on unknown roads)")
             notes.append("std_total omits " + ", ".join(block["not_propagated"]) + ": not propagated on this "
                          "fit, so std_total is optimistic about them")
+    # what the data tell of the body sensors' gains themselves (rideid.estimate.redundancy): reported, and
+    # a sensor that reads off by more than its declared sensitivity allows is named
+    block["rigid_body"] = rigid_body_gains(ds)
+    notes += gain_notes(block["rigid_body"], dict(getattr(ds.manifest, "sensitivity_std", {}) or {}))
     block["notes"] = notes
     details = budget_entries(res.details, names, gradients, inputs)
     return replace(res, details=details, uncertainty=block)
