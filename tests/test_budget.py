@@ -285,9 +285,12 @@ def test_monte_carlo_over_declared_sensitivities_matches_std_total(tmp_path):
     ds, truth = make_dataset(tmp_path / "ds", 1, gains=draw_gains(1), sensitivity=sensor_stds())
     res = _fit(ds, truth)
     draws = 40
-    mc = monte_carlo(ds, res, draws, seed=7)
+    mc, lin = monte_carlo(ds, res, draws, seed=7)
     ratios = np.array([np.hypot(res.details[n]["std_robust"], np.std(mc[n], ddof=1)) / res.details[n]["std_total"]
                        for n in rideid.NAMES])
+    same = np.array([np.std(mc[n], ddof=1) / np.std(lin[n], ddof=1) for n in rideid.NAMES])
+    # the re-fits against the first-order prediction of the same draws: the linearisation alone
+    assert np.all(np.abs(same - 1) < 0.05), same
     # a std from 40 draws has a sampling sd of 11 %: the median within 15 %, each within 35 %
     assert abs(np.median(ratios) - 1) < 0.15, ratios
     assert np.all(np.abs(ratios - 1) < 0.35), ratios
