@@ -107,7 +107,12 @@ def rigid_body_gains(ds: Dataset) -> dict | None:
     runs = _runs(ds)
     if len(runs) < 2:
         return None
+    stacked = np.vstack([A for _, A, _ in runs])
+    if not np.all(np.isfinite(stacked)) or np.any(np.sqrt(np.mean(stacked ** 2, axis=0)) == 0):
+        return None  # a flat or broken body channel: nothing to compare (the data checks name it)
     g = _gains(runs, ds.geometry)
+    if not np.all(np.isfinite(g[:len(BODY)])):
+        return None
     n = len(runs)
     std = np.full(g.size, np.nan)
     if n >= 3:

@@ -261,8 +261,8 @@ class IdentificationResult:
                 note = " (not reached — not a number to trust)"
             err = f" ± {std:.3g} ({'total' if total else 'robust'})" if std not in (None, 0.0) else ""
             lines.append(f"  {n}={d['value']:.6g}{err} {d['unit']}{note}")
-        for note in (self.uncertainty or {}).get("notes", []):
-            lines.append(f"  {note}")
+        for note in (self.uncertainty or {}).get("notes", []):  # the first clause; the whole in .uncertainty
+            lines.append(f"  {note.split(':')[0]} (result.uncertainty['notes'])")
         if self.dampers:  # one line: the table is format_dampers(result.dampers), the forces to_frame()
             v = [x for x in self.dampers["velocity"] if x > 0]
             lines.append(f"  damper curves: {len(self.dampers['velocity'])} knots per axle up to "
