@@ -27,7 +27,7 @@ from rideid.cli import main
 from rideid.data.dataset import Dataset
 from rideid.data.schema import parse_dataset_manifest
 from rideid.data.schema.runfiles import RunData
-from rideid.estimate.budget import declared_inputs, propagate
+from rideid.estimate.budget import declared_inputs, propagate, with_budget
 from rideid.estimate.cost import CostFunction
 from rideid.estimate.identify import polish_fit
 from rideid.estimate.redundancy import BODY, GYROS, gain_notes, rigid_body_gains
@@ -202,6 +202,24 @@ def test_total_mass_contributes_exactly_its_relative_std(declared):
         assert list(d["budget"])[0] == "statistical"
         parts = np.array(list(d["budget"].values()))
         assert d["std_total"] == pytest.approx(np.sqrt(np.sum(parts ** 2)), rel=1e-12)
+
+
+def test_a_fit_without_a_jacobian_gets_the_anchors_closed_form_and_says_what_it_omits(declared):
+    """Without the polish (or on unknown roads) only the scale anchor is propagated, by its closed form;
+    every other declared input is named as left out, and std_total called optimistic about it."""
+    ds, _, res = declared
+    fallback = with_budget(ds, replace(res, polish=None))
+    unc = fallback.uncertainty
+    assert unc["not_propagated"] == ["wheelbase", "sensitivity body_az_fl", "sensitivity axle_az_rr",
+                                     "sensitivity pitch_rate"]
+    assert unc["method"].startswith("closed form of the scale anchor only (no polish")
+    assert any(n.startswith("std_total omits wheelbase") and "optimistic" in n for n in unc["notes"])
+    for n in rideid.NAMES:
+        d, full = fallback.details[n], res.details[n]
+        assert set(d["budget"]) == {"statistical", "total_mass"}
+        # the closed form and the propagation through the Jacobian agree
+        assert d["budget"]["total_mass"] == pytest.approx(full["budget"]["total_mass"], rel=2e-4,
+                                                          abs=1e-6 * abs(full["value"]))
 
 
 def _refit(ds, cf, x0):

@@ -355,19 +355,25 @@ def with_budget(ds: Dataset, res, simulator=None, cost: CostFunction | None = No
         notes.append(anchor_note(anchor))
     gradients, names = {}, list(res.details)
     usable = inputs and bool(res.polish) and np.all(np.isfinite(np.asarray(res.x, dtype=float)))
-    cf = fit_cost(ds, res, simulator, cost) if usable else None
-    if cf is not None:
-        gradients = propagate(cf, res.x, inputs)
-        names = list(cf.space.param_names)
-    elif inputs:
+    cf = None
+    why = ("no polish: no Jacobian to propagate through" if not res.polish else
+           "this fit is not rebuilt for the propagation: runs on unknown roads")
+    if usable:
+        try:
+            cf = fit_cost(ds, res, simulator, cost)
+            if cf is not None:
+                gradients = propagate(cf, res.x, inputs)
+                names = list(cf.space.param_names)
+        except (DataError, ArgumentError, ValueError, np.linalg.LinAlgError) as e:  # the estimate stands
+            cf, why = None, f"the fit could not be rebuilt for the propagation ({e})"
+    if cf is None and inputs:
         values = {n: float(d["value"]) for n, d in res.details.items()}
         anchors = [i for i in inputs if i.kind == "known" and i.key == anchor]
         if anchors:
             gradients = scale_gradients(names, values, anchors[0])
         block["not_propagated"] = [i.name for i in inputs if i.name not in gradients]
         if block["not_propagated"]:
-            block["method"] = ("closed form of the scale anchor only (this fit is not rebuilt for the "
-                               "propagation: runs on unknown roads)")
+            block["method"] = f"closed form of the scale anchor only ({why})"
             notes.append("std_total omits " + ", ".join(block["not_propagated"]) + ": not propagated on this "
                          "fit, so std_total is optimistic about them")
     # what the data tell of the body sensors' gains themselves (rideid.estimate.redundancy): reported, and
