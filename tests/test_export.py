@@ -158,13 +158,14 @@ def test_card_round_trip(fit, tmp_path):
     assert not (tmp_path / "car" / "car.fmu").exists()
     res = rideid.load_result(fit)
     rows = (tmp_path / "car" / "car.csv").read_text().splitlines()
-    assert rows[0] == "parameter,value,unit,std,std_robust,fixed,derived"
+    assert rows[0] == "parameter,value,unit,std,std_robust,std_total,fixed,derived"
     table = {ln.split(",")[0]: ln.split(",") for ln in rows[1:]}
     assert set(table) == set(res.details)
     for n, d in res.details.items():
         assert float(table[n][1]) == d["value"] and table[n][2] == d["unit"]
         if d.get("std_robust") is not None:
             assert float(table[n][4]) == d["std_robust"]
+            assert float(table[n][5]) == d["std_total"]  # nothing declared: std_total is std_robust
     sc = card_scenario(tmp_path / "car" / "car.toml", rideid.default_scenario_path(), RUNS, tmp_path)
     assert sc.known == res.known and sc.extensions == ()
     data, _ = simulate_manifest(sc, noise=0.0, seed=2)

@@ -280,9 +280,12 @@ def test_result_round_trip_and_short_repr(sim_dataset, tmp_path):
     res = rideid.identify(ds, seed=1, generations=6, population=16, model="base")
     text = repr(res)
     assert len(text) < 1000 and "k_sf=" in text
-    # the standard error to quote and the verdict, not the white-noise std alone
+    # the standard error to quote (std_total: std_robust, nothing being declared) and the verdict, not the
+    # white-noise std alone; the anchor given as a plain number is said to be taken as exact
     d = res.details["k_sf"]
-    assert f"k_sf={d['value']:.6g} ± {d['std_robust']:.3g} (robust) N/m" in text
+    assert d["std_total"] == d["std_robust"]
+    assert f"k_sf={d['value']:.6g} ± {d['std_total']:.3g} (total) N/m" in text
+    assert "total mass taken as exact" in text
     assert f"{d['std']:.3g}" not in text.split("k_sf=")[1].splitlines()[0]
     assert f"adequate={res.adequacy['adequate']}" in text and "model='base'" in text
     # OptimizeResult-shaped: x/names/std/covariance agree with parameters/details
@@ -297,7 +300,8 @@ def test_result_round_trip_and_short_repr(sim_dataset, tmp_path):
     res.save(tmp_path)
     back = rideid.load_result(tmp_path)
     for k in ("names", "parameters", "details", "known", "seed", "track_weights", "weights_mode", "stop", "nit",
-              "nfev", "fun", "success", "message", "modal", "preprocessing", "starts", "rng_state", "model"):
+              "nfev", "fun", "success", "message", "modal", "preprocessing", "starts", "rng_state", "model",
+              "uncertainty"):
         assert getattr(back, k) == getattr(res, k), k
     np.testing.assert_array_equal(back.x, res.x)
     np.testing.assert_array_equal(back.std, res.std)

@@ -49,7 +49,7 @@ def _check_notebook(ns, backend, pyplot_before):
     for name in ("car.toml", "car.csv", "car.fmu"):
         assert (work / "car" / name).is_file(), name
     table = ns["table"]
-    assert list(table.columns[:6]) == ["value", "unit", "std", "std_robust", "fixed", "derived"]
+    assert list(table.columns[:7]) == ["value", "unit", "std_total", "std", "std_robust", "fixed", "derived"]
     assert isinstance(ns["fig"], Figure)
     # 1 % noise: the identified car is the built-in one within its error bars
     truth = rideid.default_scenario().truth
@@ -69,7 +69,7 @@ def test_to_frame(fitted, tmp_path):
     ds, res = fitted
     df = res.to_frame()
     assert df.index.name == "parameter" and list(df.index) == list(res.details)
-    assert list(df.columns) == ["value", "unit", "std", "std_robust", "fixed", "derived"]
+    assert list(df.columns) == ["value", "unit", "std_total", "std", "std_robust", "fixed", "derived"]
     for n, d in res.details.items():
         assert df.loc[n, "value"] == d["value"] and df.loc[n, "unit"] == d["unit"]
         assert bool(df.loc[n, "fixed"]) == bool(d.get("fixed")) and bool(df.loc[n, "derived"]) == bool(d.get("derived"))

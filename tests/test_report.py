@@ -29,8 +29,8 @@ def test_report_has_every_section_and_nonempty_figures(fit_dir):
         assert f'id="{s}"' in html, s
     assert 'id="dampers"' not in html and "<h2>Damper curves</h2>" not in html  # linear dampers: no curve section
     imgs = _images(html)
-    # convergence, spread, weights, 10 fits, 3 maps
-    assert len(imgs) == 16
+    # convergence, spread, weights, 10 fits, 3 maps, the uncertainty budget
+    assert len(imgs) == 17
     import base64
     import io
 
@@ -58,18 +58,19 @@ def test_report_rebuild(fit_dir, capsys):
     assert "report written" in capsys.readouterr().out
     strip = lambda h: re.sub(r"data:image/png;base64,[A-Za-z0-9+/=]+", "IMG", h)  # noqa: E731
     assert strip(after) == strip(before)
-    assert len(_images(after)) == len(_images(before)) == 16
+    assert len(_images(after)) == len(_images(before)) == 17
 
 
 def test_report_relative_error_column_reads_plainly(fit_dir, tmp_path):
-    """The estimates table's ± % column: three decimals below 100 %, whole percent above (an estimate
-    near zero, such as tire damping of 0.6 N s/m with ±6 N s/m, reads 1000, not 1000.004)."""
+    """The estimates table's ± % column (of std_total, the first error column): three decimals below 100 %,
+    whole percent above (an estimate near zero, such as tire damping of 0.6 N s/m with ±6 N s/m, reads 1000,
+    not 1000.004)."""
     import json
     d = tmp_path / "fit"
     shutil.copytree(fit_dir, d)
     doc = json.loads((d / "result.json").read_text())
-    doc["parameters"]["c_sf"]["std_robust"] = 10.00004 * doc["parameters"]["c_sf"]["value"]
-    doc["parameters"]["k_sf"]["std_robust"] = 0.00123 * doc["parameters"]["k_sf"]["value"]
+    doc["parameters"]["c_sf"]["std_total"] = 10.00004 * doc["parameters"]["c_sf"]["value"]
+    doc["parameters"]["k_sf"]["std_total"] = 0.00123 * doc["parameters"]["k_sf"]["value"]
     (d / "result.json").write_text(json.dumps(doc))
     assert main(["report", str(d)]) == 0
     html = (d / "report.html").read_text()
@@ -86,7 +87,7 @@ def test_report_compares_adaptive_and_fixed(fit_dir, sim_dataset, tmp_path, caps
     assert main(["report", str(fit_dir), "--compare", str(fixed)]) == 0
     html = (fit_dir / "report.html").read_text()
     assert 'id="compare"' in html and "adaptive (this) vs fixed (fixed)" in html
-    assert len(_images(html)) == 17
+    assert len(_images(html)) == 18
     assert (fit_dir / "figures" / "compare.png").stat().st_size > 5000
     # comparing with a folder that is not an identification is bad input
     assert main(["report", str(fit_dir), "--compare", str(tmp_path)]) == 2
@@ -174,9 +175,10 @@ def test_report_opens_on_a_summary_and_its_correlation_table_fits_the_page(fit_d
     rows = dict(re.findall(r"<tr><th>([^<]*)</th><td>([^<]*)<a", summary))
     assert set(rows) == {"Verdict", "Car", "Estimates", "Fit", "Data"}
     assert rows["Verdict"].startswith("model adequate: ") and "total_mass = 1093.3" in rows["Car"]
-    rel = {n: 200 * p["std_robust"] / abs(p["value"]) for n, p in doc["parameters"].items()
-           if not p.get("fixed") and not p.get("derived") and p.get("std_robust")}
+    rel = {n: 200 * p["std_total"] / abs(p["value"]) for n, p in doc["parameters"].items()
+           if not p.get("fixed") and not p.get("derived") and p.get("std_total")}
     lo, hi = min(rel, key=rel.get), max(rel, key=rel.get)
-    assert rows["Estimates"].strip() == (f"{len(rel)} estimated; ±2 std_robust from {rel[lo]:.2g} % ({lo}) to "
-                                         f"{rel[hi]:.2g} % ({hi})")
+    # the error bars are ±2 std_total (SPEC §12); the total mass given as a plain number is said to be exact
+    assert rows["Estimates"].strip() == (f"{len(rel)} estimated; ±2 std_total from {rel[lo]:.2g} % ({lo}) to "
+                                         f"{rel[hi]:.2g} % ({hi}); TOTAL MASS TAKEN AS EXACT")
     assert rows["Fit"].startswith(f"cost {doc['cost']:.3g}; ") and rows["Data"].startswith("10 runs; ")

@@ -47,6 +47,7 @@ _PUBLIC = _by_name({
     "load_result": ("rideid.estimate.result", "load"), "plot_fit": ("rideid.report.figures", "fit_figure"),
     "plot_parameters": ("rideid.report.figures", "parameters_figure"),
     "plot_dampers": ("rideid.report.figures", "dampers_figure"),
+    "plot_budget": ("rideid.report.figures", "budget_figure"),
 })
 
 #: what the command line (:mod:`rideid.cli`) uses beyond SPEC §5, reached the same lazy way so that the command
@@ -112,5 +113,5 @@ __all__ = [
     "History", "SensitivityMaps", "load_result", "score", "sensitivity_maps",
     "ALL_NAMES", "EXT_NAMES", "GROUPS", "Scenario", "DatasetManifest",
     "StudyResult", "load_study", "study", "iso8608_class", "iso8608_profile", "export", "ExportResult",
-    "plot_fit", "plot_parameters", "plot_dampers",
+    "plot_fit", "plot_parameters", "plot_dampers", "plot_budget",
 ]

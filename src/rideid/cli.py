@@ -288,7 +288,7 @@ def cmd_simulate(args, out=None):
 
 
 def _summary_table(res) -> str:
-    lines = [f"{'parameter':<10} {'estimate':>14} {'± std':>11} {'± robust':>11}  {'unit':<8} note"]
+    lines = [f"{'parameter':<10} {'estimate':>14} {'± std_total':>12} {'± robust':>11} {'± std':>11}  {'unit':<8} note"]
     for n, d in res.details.items():
         if n.startswith("F_") and res.dampers:
             continue  # the curves' table below
@@ -301,7 +301,10 @@ def _summary_table(res) -> str:
             note = "AT A SEARCH BOUND: set by the bound, not the data"
         std = "" if d.get("std") in (None, 0.0) else f"{d['std']:.3g}"
         rob = "" if d.get("std_robust") in (None, 0.0) else f"{d['std_robust']:.3g}"
-        lines.append(f"{n:<10} {d['value']:>14.6g} {std:>11} {rob:>11}  {d['unit']:<8} {note}")
+        tot = d.get("std_total", d.get("std_robust"))
+        tot = "" if tot in (None, 0.0) else f"{tot:.3g}"
+        lines.append(f"{n:<10} {d['value']:>14.6g} {tot:>12} {rob:>11} {std:>11}  {d['unit']:<8} {note}")
+    lines += _budget_lines(res)
     if res.dampers:
         lines.append(rideid.format_dampers(res.dampers))
     if res.bump_stops:
@@ -309,6 +312,17 @@ def _summary_table(res) -> str:
     if res.roads:
         lines.append(_roads_table(res))
     return "\n".join(lines)
+
+
+def _budget_lines(res) -> list[str]:
+    """Under the table (SPEC §12): what std_total holds, the anchor taken as exact, what was not propagated."""
+    unc = res.uncertainty or {}
+    declared = list(unc.get("declared") or {})
+    out = []
+    if declared:
+        out.append("std_total: std_robust with the declared uncertainties of " + ", ".join(declared)
+                   + " (each estimate's budget in result.json)")
+    return out + [f"NOTE: {n}" for n in unc.get("notes", [])]
 
 
 def _roads_table(res) -> str:
@@ -454,8 +468,11 @@ def cmd_plan(args, out=None):
 
 
 def score_table(scored: dict) -> str:
-    """The text table of :func:`rideid.score`: error and whether ±2 ``std_robust`` covers the truth."""
-    lines = [f"{'parameter':<10} {'estimate':>14} {'truth':>14} {'error %':>9} {'±2 robust covers':>16}"]
+    """The text table of :func:`rideid.score`: error and whether ±2 ``std_total`` (``std_robust`` in a result
+    written before SPEC §12) covers the truth."""
+    basis = scored.get("basis", "std_robust")
+    head = "±2 total covers" if basis == "std_total" else "±2 robust covers"
+    lines = [f"{'parameter':<10} {'estimate':>14} {'truth':>14} {'error %':>9} {head:>16}"]
     for n, r in scored["parameters"].items():
         covers = {True: "yes", False: "NO", None: "-"}[r["covered"]]
         if r["error_percent"] is None:  # no relative error of a zero truth: the estimate in its unit
@@ -469,7 +486,7 @@ def score_table(scored: dict) -> str:
                      f"{covers:>16}{note}")
     lines += scored.get("notes", [])
     if scored["coverable"]:
-        lines.append(f"±2 std_robust covers the truth for {scored['covered']} of {scored['coverable']} estimates "
+        lines.append(f"±2 {basis} covers the truth for {scored['covered']} of {scored['coverable']} estimates "
                      "(about 95 % expected)")
     lines.append(f"largest error of the estimated parameters: {scored['worst_percent']:.4f} %")
     return "\n".join(lines)

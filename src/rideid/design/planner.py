@@ -14,6 +14,7 @@ import numpy as np
 from ..data.scenario import load_scenario
 from ..data.schema import Scenario
 from ..errors import ArgumentError, DataError
+from ..estimate.budget import LENGTHS
 from ..estimate.cost import ParameterSpace
 from ..model.nonlinear import PinnedSimulator
 from ..model.simulator import Simulator
@@ -68,6 +69,16 @@ class PlanResult:
     comparison: dict = field(default_factory=dict)
     noise_text: str = ""
     dampers: dict | None = None    # with damper curves: knots, excitation, CRLB per knot
+    #: SPEC §12: the scenario's declared uncertainties (key -> std) and the anchor's relative std added to every
+    #: scale parameter's predicted std in quadrature (:func:`declared_relative`)
+    declared: dict = field(default_factory=dict)
+
+    def declared_relative(self, name: str) -> float:
+        """The declared inputs' relative contribution to parameter ``name`` (0 when none is declared): the
+        scale anchor's relative std for every mass, inertia, stiffness and damping (SPEC §1: they scale with
+        it), 0 for the lengths (``a``); other declared inputs are not predicted (plan.json says so)."""
+        rel = (self.declared.get("anchor") or {}).get("relative", 0.0)
+        return 0.0 if name in LENGTHS else rel
 
     # -- dictionaries ---------------------------------------------------------
     def _crlb(self, p: Precision, which="crlb") -> dict:
@@ -77,6 +88,10 @@ class PlanResult:
             ok = np.isfinite(rel[j])
             out[n] = {"std": float(rel[j] * abs(p.x0[j])) if ok else None,
                       "relative": float(rel[j]) if ok else None}
+            if which != "crlb" and self.declared.get("anchor"):
+                tot = float(np.hypot(rel[j], self.declared_relative(n))) if ok else None
+                out[n]["relative_total"] = tot
+                out[n]["std_total"] = None if tot is None else tot * abs(float(p.x0[j]))
             if which == "crlb":
                 out[n]["identifiable"] = bool(ok)
         return out
@@ -131,6 +146,7 @@ class PlanResult:
             "targets": self.targets,
             "robust": self.robust,
             "sensitivities": self.sensitivity,
+            "declared": self.declared,
             "precision_definitions": {
                 "crlb": "Cramér-Rao lower bound (J^T Sigma^-1 J)^-1 at the nominal car for the Gaussian noise "
                         "of the noise model (coloured noise: the whitened problem, the best any unbiased "
@@ -175,10 +191,20 @@ class PlanResult:
         def cell(v, n, off, width):
             return f"{'not excited' if n in off else _pct(v):>{width}s}"
 
+        anchor = self.declared.get("anchor")
+        if anchor:
+            lines[-1] += f" {'+ declared':>10s}"
         for j, n in enumerate(self.names):
+            total = np.hypot(self.selected.rel_identify[j], self.declared_relative(n))
             lines.append(f"{n:10s} {self.nominal[n]:12.6g} {cell(self.selected.rel_crlb[j], n, off_sel, 12)} "
                          f"{cell(self.selected.rel_identify[j], n, off_sel, 10)} "
-                         f"{cell(self.all_runs.rel_crlb[j], n, off_all, 10)}")
+                         f"{cell(self.all_runs.rel_crlb[j], n, off_all, 10)}"
+                         + (f" {cell(total, n, off_sel, 10)}" if anchor else ""))
+        if anchor:
+            lines.append(f"+ declared: identify's expected spread with {anchor['key']}'s declared std "
+                         f"({100 * anchor['relative']:.3g} %) added in quadrature to every scale parameter")
+        if self.declared.get("not_predicted"):
+            lines.append("declared but not in the prediction: " + ", ".join(self.declared["not_predicted"]))
         if self.dampers:
             for c in self.candidates:
                 ne = c["dampers"]["not_excited"]
@@ -628,7 +654,8 @@ def assemble(pb: PlanProblem, opts: PlanOptions, inf: PlanInformation, chosen: S
         messages_all=_messages(inf.info, inf.exc, range(R), None, all_p),
         messages_selected=_messages(inf.info, inf.exc, S, [pb.run_ids[j] for j in S], sel_p), notes=notes,
         derived_grad=None if space.derived is None else space.derived_gradient() * pb.x0,  # d(derived)/du, u = x/x0
-        robust_worst=chosen.selector.rel_std(S).max(0) if opts.robust > 1 else None)
+        robust_worst=chosen.selector.rel_std(S).max(0) if opts.robust > 1 else None,
+        declared=_declared_block(pb.sc, space))
     if inf.exc is not None:
         res.dampers = _dampers_block(inf.exc, space, pb.x0, names, all_p, sel_p, S, R, pb.knots_from)
     tk = [k for k, r in enumerate(pb.sc.runs) if r.road_known]
@@ -639,6 +666,23 @@ def assemble(pb: PlanProblem, opts: PlanOptions, inf: PlanInformation, chosen: S
                                        replace(inf.info, F=inf.info.F[tk]), names,
                                        [pb.run_ids[j] for j in chosen.order], opts.criterion)
     return res
+
+
+def _declared_block(sc, space) -> dict:
+    """plan.json's ``declared`` (SPEC §12): the scenario's declared stds, the anchor's relative one (added in
+    quadrature to the identify spread of every scale parameter), and the inputs the plan does not predict."""
+    declared = dict(getattr(sc, "declared", {}) or {})
+    if not declared:
+        return {}
+    out = {"stds": declared, "method": "the scale anchor's relative std added in quadrature to the expected "
+                                       "identify spread of every mass, inertia, stiffness and damping (exact by the "
+                                       "scale invariance of SPEC §1); 0 for a"}
+    anchor = space.anchor
+    if declared.get(anchor, 0) > 0:
+        out["anchor"] = {"key": anchor, "std": declared[anchor],
+                         "relative": declared[anchor] / abs(sc.known[anchor])}
+    out["not_predicted"] = [k for k, v in declared.items() if v > 0 and k != anchor]
+    return out
 
 
 def _identify_note(sel_p: Precision, names, nm: NoiseModel) -> list:

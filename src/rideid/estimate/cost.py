@@ -605,7 +605,12 @@ class CostFunction:
         data re-read at other start times. The layout: run by run, time-major,
         the run's used channels (``W[r] > 0``) within each sample.
         """
-        P = self.space.full(X)
+        return self.row_residuals(self.space.full(X), weights, Y)
+
+    def row_residuals(self, P, weights=None, Y=None) -> np.ndarray:
+        """:meth:`residuals` of full rows ``P`` ``(n, width)`` (:attr:`ParameterSpace.param_names`): known and
+        derived columns as given, not as the space fills them (the uncertainty budget moves a known value)."""
+        P = np.atleast_2d(np.asarray(P, dtype=float))
         outs = self.sim.outputs(P, pin=self.pin)
         w = self.weights if weights is None else np.asarray(weights, dtype=float)
         Y = self.Y if Y is None else Y

@@ -40,6 +40,7 @@ from scipy import special
 
 from ..model.params import GROUPS
 from ..data.schema.manifest import vehicle_table
+from .budget import with_budget
 from .adequacy import MIN_IMPROVEMENT, advise, assess_fit
 from .materiality import weigh_result
 from .identify import DEFAULT_GENERATIONS, DEFAULT_POPULATION, identify as identify_model, warn_bounds
@@ -529,5 +530,7 @@ def identify(ds, *, model=None, rng=None, seed=None, population: int = DEFAULT_P
     if assess and not unknown_road_runs(ds):  # SPEC §12: does the structure the residual test found matter?
         res = weigh_result(ds, res, simulator)
     res = replace(res, vehicle=vehicle_table(ds.geometry))  # the geometry travels with the car (rideid export)
+    # SPEC §12: every declared uncertainty propagated to the estimates (std_total, budget)
+    res = with_budget(ds, res, simulator, cost)
     warn_bounds(res)
     return res

@@ -223,6 +223,9 @@ class IdentificationResult:
     #: the dataset's ``[vehicle]`` table (m: wheelbase, tracks, tire_radius, cg_height when given), so that the
     #: identified car can leave without its dataset (rideid export, SPEC §10); None in results written before
     vehicle: dict | None = None
+    #: SPEC §12: what was declared uncertain and how it was propagated: {"declared", "anchor", "anchor_exact",
+    #: "method", "not_propagated", "notes"} (rideid.estimate.budget.with_budget); None in results written before
+    uncertainty: dict | None = None
 
     # SciPy/SPEC §4 names for the same numbers
     @property
@@ -238,10 +241,10 @@ class IdentificationResult:
         return self.nfev
 
     def __repr__(self):
-        """Short: the search's outcome, the model and its adequacy verdict, each parameter ± ``std_robust``.
+        """Short: the search's outcome, the model and its adequacy verdict, each parameter ± ``std_total``
+        (SPEC §12: ``std_robust`` with every declared uncertainty; ``std_robust`` in results without it).
 
-        ``std_robust`` is the standard error to quote (``std`` assumes white
-        residuals: ``details`` has both).
+        ``std`` assumes white residuals (``details`` has every standard error and each ``budget``).
         """
         ext = (self.model or {}).get("extensions")
         model = "" if ext is None else f" model={' + '.join(ext) or 'base'!r},"
@@ -251,12 +254,15 @@ class IdentificationResult:
         for n, d in self.details.items():
             if n.startswith("F_") and self.dampers:
                 continue  # the curves' table below
-            std = d.get("std_robust")
+            total = "std_total" in d
+            std = d.get("std_total") if total else d.get("std_robust")
             note = " (known)" if d.get("fixed") else (" (derived)" if d.get("derived") else "")
             if d.get("reached") is False and not d.get("fixed"):
                 note = " (not reached — not a number to trust)"
-            err = f" ± {std:.3g} (robust)" if std not in (None, 0.0) else ""
+            err = f" ± {std:.3g} ({'total' if total else 'robust'})" if std not in (None, 0.0) else ""
             lines.append(f"  {n}={d['value']:.6g}{err} {d['unit']}{note}")
+        for note in (self.uncertainty or {}).get("notes", []):  # the first clause; the whole in .uncertainty
+            lines.append(f"  {note.split(':')[0]} (result.uncertainty['notes'])")
         if self.dampers:  # one line: the table is format_dampers(result.dampers), the forces to_frame()
             v = [x for x in self.dampers["velocity"] if x > 0]
             lines.append(f"  damper curves: {len(self.dampers['velocity'])} knots per axle up to "
@@ -271,12 +277,15 @@ class IdentificationResult:
     def to_frame(self):
         """Every parameter as a ``pandas.DataFrame`` (needs pandas), indexed by ``parameter``.
 
-        Columns ``value``, ``unit``, ``std``, ``std_robust`` (NaN where none was computed), ``fixed``
+        Columns ``value``, ``unit``, ``std_total`` (SPEC §12: ``std_robust`` with every declared uncertainty),
+        ``std``, ``std_robust`` (NaN where none was computed), ``fixed``
         (a known value), ``derived`` (computed from the others, e.g. ``m_s`` from ``total_mass``).
         With damper curves the knot forces ``F_f1 ..`` are rows too (N).
         """
         import pandas as pd
         rows = [{"parameter": n, "value": float(d["value"]), "unit": d.get("unit", ""),
+                 "std_total": np.nan if d.get("std_total", d.get("std_robust")) is None
+                 else float(d.get("std_total", d.get("std_robust"))),
                  "std": np.nan if d.get("std") is None else float(d["std"]),
                  "std_robust": np.nan if d.get("std_robust") is None else float(d["std_robust"]),
                  "fixed": bool(d.get("fixed", False)), "derived": bool(d.get("derived", False))}
@@ -336,6 +345,7 @@ class IdentificationResult:
             **({"bump_stops": self.bump_stops} if self.bump_stops else {}),
             **({"roads": self.roads} if self.roads else {}),
             **({"vehicle": self.vehicle} if self.vehicle else {}),
+            **({"uncertainty": self.uncertainty} if self.uncertainty else {}),
             "dataset": str(Path(self.dataset).resolve()) if self.dataset else "",
             "sensitivity": _maps_to_json(self.maps),
             "history_file": "history.csv",
@@ -388,7 +398,7 @@ def load(path) -> IdentificationResult:
         model=doc.get("model"), adequacy=doc.get("adequacy"), correlation=doc.get("correlation"),
         checks=list(doc.get("checks") or []), dampers=doc.get("dampers"), bump_stops=doc.get("bump_stops"),
         roads=doc.get("roads"), road_profiles=_read_roads(doc.get("roads"), rpath.parent),
-        vehicle=doc.get("vehicle"))
+        vehicle=doc.get("vehicle"), uncertainty=doc.get("uncertainty"))
 
 
 def _read_roads(roads, folder):

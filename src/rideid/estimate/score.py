@@ -4,7 +4,8 @@ from __future__ import annotations
 
 from ..model.params import ALL_NAMES, EXT_NAMES
 
-#: an estimate covers the truth when it lies within this many robust standard errors (about 95 %, SPEC §6)
+#: an estimate covers the truth when it lies within this many standard errors (about 95 %, SPEC §6): ``std_total``
+#: (SPEC §12: std_robust with every declared uncertainty), ``std_robust`` in results written before it
 COVERAGE_K = 2.0
 AXLES = (("front", "f", "c_sf"), ("rear", "r", "c_sr"))
 
@@ -13,13 +14,18 @@ def _get(result, key):
     return getattr(result, key, None) if hasattr(result, "details") else result.get(key)
 
 
-def _row(est, tr, status, rob, **extra) -> dict:
-    """One row of the score: relative error (None for a zero or unknown truth), coverage by ±2 ``rob``."""
+def _row(est, tr, status, rob, total=None, **extra) -> dict:
+    """One row of the score: relative error (None for a zero or unknown truth), coverage by ±2 ``total``
+    (``std_total``) where given, else by ±2 ``rob`` (``std_robust``); ``covered_robust`` by ±2 ``rob``."""
     err = None if not tr else 100.0 * (est - tr) / tr
     judged = status in ("estimated", "derived")
     rob = float(rob) if judged and rob else None  # 0 or null: no standard error to judge by
+    total = float(total) if judged and total else rob
+
+    def covers(s):
+        return None if s is None or tr is None else bool(abs(est - tr) <= COVERAGE_K * s)
     return {"estimate": est, "truth": tr, "error_percent": err, "status": status, "std_robust": rob,
-            "covered": None if rob is None or tr is None else bool(abs(est - tr) <= COVERAGE_K * rob), **extra}
+            "std_total": total, "covered": covers(total), "covered_robust": covers(rob), **extra}
 
 
 def score(result, truth: dict, dampers=None) -> dict:
@@ -40,15 +46,18 @@ def score(result, truth: dict, dampers=None) -> dict:
     -------
     dict
         ``{"parameters": {name: {"estimate", "truth", "error_percent",
-        "status", "std_robust", "covered"}}, "worst_percent": largest |error|
-        over the estimated (not fixed) parameters, "covered": how many
-        estimates ±2 ``std_robust`` covers the truth of, "coverable": of how
-        many (those with a ``std_robust``), "notes": [lines]}``; ``status`` is
+        "status", "std_robust", "std_total", "covered", "covered_robust"}},
+        "worst_percent": largest |error| over the estimated (not fixed)
+        parameters, "covered": how many estimates ±2 ``std_total`` covers
+        the truth of (``std_robust`` in a result without ``std_total``),
+        "coverable": of how many (those with a standard error),
+        "covered_robust": how many ±2 ``std_robust`` covers, "basis":
+        "std_total" or "std_robust", "notes": [lines]}``; ``status`` is
         ``"estimated"``, ``"known"``, ``"derived"`` or ``"not in the model"``
         (an extension of the truth the model lacks: estimate 0), for a knot force ``"not excited"`` (no run
         reached it: its force is not trusted, not judged), for a bump stop ``"not reached"`` (likewise);
         ``error_percent`` is None for a zero truth; ``covered`` (``|estimate
-        - truth| <= 2 std_robust``) is None without a ``std_robust`` (known
+        - truth| <= 2 std_total``) is None without a standard error (known
         values, no polish).
 
         With damper curves in the result, ``F_f1 ..``, ``F_r1 ..`` are the forces at its knots (each row has
@@ -66,7 +75,7 @@ def score(result, truth: dict, dampers=None) -> dict:
         tr = float(truth.get(n, 0.0))  # an extension absent from the truth is 0
         status = ("not in the model" if n not in details else "known" if d.get("fixed")
                   else "derived" if d.get("derived") else "estimated")
-        rows[n] = _row(est, tr, status, d.get("std_robust"))
+        rows[n] = _row(est, tr, status, d.get("std_robust"), d.get("std_total"))
     curves = _get(result, "dampers")
     if curves:
         for axle, a, c in AXLES:
@@ -98,7 +107,9 @@ def score(result, truth: dict, dampers=None) -> dict:
     worst = max((abs(x["error_percent"]) for x in rows.values()
                  if x["error_percent"] is not None and x["status"] in ("estimated", "derived")), default=0.0)
     judged = [x["covered"] for x in rows.values() if x["covered"] is not None]
+    basis = "std_total" if any(isinstance(d, dict) and "std_total" in d for d in details.values()) else "std_robust"
     return {"parameters": rows, "worst_percent": worst, "covered": sum(judged), "coverable": len(judged),
+            "covered_robust": sum(bool(x["covered_robust"]) for x in rows.values()), "basis": basis,
             "notes": notes}
 
 

@@ -105,6 +105,7 @@ def car_from_result(res, where: str = "result") -> Car:
     for n, d in res.details.items():
         rows.append({"parameter": n, "value": float(d["value"]), "unit": d.get("unit", CARD_UNITS.get(n, "")),
                      "std": _num(d.get("std")), "std_robust": _num(d.get("std_robust")),
+                     "std_total": _num(d.get("std_total", d.get("std_robust"))),
                      "fixed": bool(d.get("fixed", False)), "derived": bool(d.get("derived", False))})
     ext = list((res.model or {}).get("extensions") or [])
     return Car(_geometry_of(res, where), values, dampers, bumps, dict(res.known), ext, rows)
@@ -115,7 +116,7 @@ def car_from_scenario(sc) -> Car:
     values = {n: float(sc.truth.get(n, 0.0)) for n in ALL_NAMES}
     bumps = {n: float(sc.truth[n]) for n in BUMP_NAMES if n in sc.truth}
     rows = [{"parameter": n, "value": v, "unit": CARD_UNITS[n], "std": math.nan, "std_robust": math.nan,
-             "fixed": n in sc.known, "derived": False} for n, v in {**values, **bumps}.items()]
+             "std_total": math.nan, "fixed": n in sc.known, "derived": False} for n, v in {**values, **bumps}.items()]
     ext = list(sc.extensions or [])
     return Car(sc.geometry, values, sc.dampers, bumps, dict(sc.known), ext, rows)
 

@@ -7,8 +7,9 @@ identified with, and the damper knots), so that ``rideid simulate`` drives
 the identified car once ``[[tracks]]`` and ``[[runs]]`` are added, and
 ``rideid identify`` of that simulation fits the same model.
 ``car.csv`` lists every parameter: ``parameter, value, unit, std,
-std_robust, fixed, derived`` (std and std_robust empty where none was
-computed: known and derived values, a card made from a scenario).
+std_robust, std_total, fixed, derived`` (the standard errors empty where
+none was computed: a card made from a scenario; ``std_total`` is
+``std_robust`` with every uncertainty the dataset declared, SPEC §12).
 """
 
 from __future__ import annotations
@@ -22,7 +23,7 @@ from ..data.schema.manifest import vehicle_table
 from ..model.params import EXT_NAMES, GROUPS, NAMES
 from .car import Car
 
-CSV_COLUMNS = ("parameter", "value", "unit", "std", "std_robust", "fixed", "derived")
+CSV_COLUMNS = ("parameter", "value", "unit", "std", "std_robust", "std_total", "fixed", "derived")
 
 #: appended to car.toml: what to add before ``rideid simulate`` takes it
 RUNS_HINT = """
@@ -90,6 +91,7 @@ def write_card(car: Car, folder, name: str = "identified car", source: str | Non
             w.writerow([r["parameter"], repr(float(r["value"])), r["unit"],
                         "" if math.isnan(r["std"]) else repr(r["std"]),
                         "" if math.isnan(r["std_robust"]) else repr(r["std_robust"]),
+                        "" if math.isnan(r.get("std_total", math.nan)) else repr(r["std_total"]),
                         str(bool(r["fixed"])).lower(), str(bool(r["derived"])).lower()])
     return toml_path, csv_path
 

@@ -7,8 +7,8 @@ Jupyter's own display of Matplotlib figures is only switched on by pyplot
 or ``%matplotlib inline``, so the figures are :class:`NotebookFigure`, which
 also render themselves as PNG (``_repr_png_``) for a notebook that has
 imported neither.
-They are public as ``rideid.plot_fit``, ``rideid.plot_parameters`` and
-``rideid.plot_dampers`` (functions of the result, not its methods: the
+They are public as ``rideid.plot_fit``, ``rideid.plot_parameters``,
+``rideid.plot_budget`` and ``rideid.plot_dampers`` (functions of the result, not its methods: the
 result belongs to the estimate layer, which never imports the report).
 """
 
@@ -142,6 +142,48 @@ def parameters_figure(result):
     ax.set_title("parameters: how well the data fix them")
     ax.grid(alpha=0.3, axis="x")
     ax.legend(fontsize=7, loc="lower right")
+    return fig
+
+
+#: colours of the budget's sources: the statistical part first, then the declared inputs in their order
+BUDGET_COLOURS = ("0.55", "C0", "C1", "C2", "C3", "C4", "C5", "C6", "C8", "C9", "C7")
+
+
+def budget_figure(result):
+    """Each estimate's uncertainty budget (SPEC §12): a horizontal bar of ±2 ``std_total`` in % of the value,
+    cut into one segment per source in proportion to its share of the variance (``statistical`` =
+    ``std_robust``, then each declared input), so the longest segment is what to improve first.
+
+    Parameters without a budget (known, not identified) are left out. Returns a ``matplotlib.figure.Figure``.
+    """
+    rows = [(n, d) for n, d in result.details.items() if d.get("budget") and not d.get("fixed")
+            and d.get("std_total") and d.get("value")]
+    sources = []
+    for _, d in rows:
+        sources += [k for k in d["budget"] if k not in sources]
+    fig = _figure(7.5, 0.3 * max(len(rows), 1) + 1.6)
+    ax = fig.subplots()
+    y = np.arange(len(rows))
+    left = np.zeros(len(rows))
+    total = np.array([200.0 * d["std_total"] / abs(d["value"]) for _, d in rows])
+    for i, src in enumerate(sources):
+        var = np.array([(d["budget"].get(src) or 0.0) ** 2 for _, d in rows])
+        share = var / np.array([d["std_total"] ** 2 for _, d in rows])
+        width = total * share
+        ax.barh(y, width, left=left, height=0.6, color=BUDGET_COLOURS[i % len(BUDGET_COLOURS)], label=src)
+        left += width
+    for k, t in enumerate(total):
+        ax.annotate(f"{t:.2g} %", (t, k), xytext=(3, 0), textcoords="offset points", va="center", fontsize=7)
+    ax.set_yticks(y, [n for n, _ in rows])
+    ax.invert_yaxis()
+    ax.set_xlabel("±2 std_total [% of the value], each source's segment its share of the variance")
+    note = (result.uncertainty or {}).get("notes") or []
+    ax.set_title("uncertainty budget" + (" (total mass taken as exact)" if any("taken as exact" in n for n in note)
+                                         else ""))
+    ax.grid(alpha=0.3, axis="x")
+    if rows:
+        ax.set_xlim(0, 1.15 * max(total))
+        ax.legend(fontsize=7, loc="lower right")
     return fig
 
 

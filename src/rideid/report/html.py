@@ -36,6 +36,7 @@ from ..model.equations import CHANNELS
 from ..model.params import ALL_NAMES, DESCRIPTIONS
 from ..model.roads import iso8608_psd
 from .estimate_sections import estimate_context
+from .figures import budget_figure
 
 FIG_DPI = 90
 #: the report's Matplotlib style, applied around each figure's drawing (never to the user's global rcParams);
@@ -682,7 +683,22 @@ def figure_sections(result, dataset, sims, out_dir, compare=None, compare_label=
     compare_figs = [done.pop()] if other is not None else []
     heat_figs = [done.pop() for _ in heat_kinds][::-1]
     return {"figures": (done[:3] if hist else []) + compare_figs, "fit_figures": done[3:] if hist else done,
-            "heat_figures": heat_figs, "damper_figures": damper_section(result, dataset, out_dir)}
+            "heat_figures": heat_figs, "damper_figures": damper_section(result, dataset, out_dir),
+            "budget_figure": fig_budget(result, out_dir)}
+
+
+@styled
+def fig_budget(result, out_dir):
+    """Each estimate's uncertainty budget (SPEC §12), :func:`rideid.report.figures.budget_figure`; None for a
+    result without budgets (written before them)."""
+    if not any(d.get("budget") for d in result.details.values()):
+        return None
+    declared = list((result.uncertainty or {}).get("declared") or {})
+    what = ("the declared uncertainties of " + ", ".join(declared)) if declared else "nothing declared"
+    return _save(budget_figure(result), Path(out_dir), "budget", "Uncertainty budget",
+                 "Each estimate's ±2 std_total in % of its value, cut into its sources in proportion to their share "
+                 "of the variance: statistical (std_robust: the sensor noise) and each declared input, propagated "
+                 f"to first order (GUM; docs/uncertainty.md). Here: {what}.")
 
 
 def damper_section(result, dataset, out_dir) -> list:
@@ -773,11 +789,13 @@ def summary_section(result, context: dict) -> dict:
     lines.append(("Car", f"model {' + '.join(ext) if ext else 'base (the twelve parameters)'}; anchored on "
                          f"{known} (every mass, inertia, stiffness and damping scales with it)", "estimates"))
     est = [p for p in context["params"] if p["status"] in ("estimated", "AT A SEARCH BOUND")
-           and p["rel_std_robust"] is not None]
+           and p["rel_std_total"] is not None]
     if est:
-        lo, hi = min(est, key=lambda p: p["rel_std_robust"]), max(est, key=lambda p: p["rel_std_robust"])
-        text = (f"{len(est)} estimated; ±2 std_robust from {2 * lo['rel_std_robust']:.2g} % ({lo['name']}) to "
-                f"{2 * hi['rel_std_robust']:.2g} % ({hi['name']})")
+        lo, hi = min(est, key=lambda p: p["rel_std_total"]), max(est, key=lambda p: p["rel_std_total"])
+        text = (f"{len(est)} estimated; ±2 std_total from {2 * lo['rel_std_total']:.2g} % ({lo['name']}) to "
+                f"{2 * hi['rel_std_total']:.2g} % ({hi['name']})")
+        for note in (getattr(result, "uncertainty", None) or {}).get("notes", []):
+            text += f"; {note.split(':')[0].upper()}"
         bound = [p["name"] for p in context["params"] if p["status"] == "AT A SEARCH BOUND"]
         if bound:
             text += f"; AT A SEARCH BOUND: {', '.join(bound)}"
@@ -819,11 +837,14 @@ def parameter_rows(result) -> list:
         d = result.details[n]
         std = d.get("std")
         rob = d.get("std_robust")
+        tot = d.get("std_total", rob)
         params.append({
             "name": n, "meaning": DESCRIPTIONS[n], "value": d["value"], "unit": d["unit"],
             "std": std, "rel_std": (100 * std / abs(d["value"])) if std not in (None, 0.0) and d["value"] else None,
             "std_robust": rob,
             "rel_std_robust": (100 * rob / abs(d["value"])) if rob not in (None, 0.0) and d["value"] else None,
+            "std_total": tot,
+            "rel_std_total": (100 * tot / abs(d["value"])) if tot not in (None, 0.0) and d["value"] else None,
             "lower": d.get("lower"), "upper": d.get("upper"),
             "status": "known" if d.get("fixed") else ("derived" if d.get("derived") else
                                                       ("AT A SEARCH BOUND" if d.get("at_bound") else "estimated")),
@@ -838,8 +859,9 @@ def estimate_section(result, dataset) -> dict:
     p2t = [] if maps is None else [
         {"param": p, "cells": [(f"{maps.M[i, r]:.2f}", stars(maps.M[i, r] * len(maps.runs), P2T_STARS))
                                for r in range(len(maps.runs))]} for i, p in enumerate(maps.params)]
+    unc = result.uncertainty or {}
     return {"title": f"rideid identification: {html.escape(dataset.name)}", "res": res,
-            "params": parameter_rows(result), "modal": result.modal or {},
+            "params": parameter_rows(result), "uncertainty": unc, "modal": result.modal or {},
             "runs": [] if maps is None else maps.runs, "p2t": p2t, "known": result.known, **estimate_context(res)}
 
 

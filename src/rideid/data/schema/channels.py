@@ -116,7 +116,9 @@ def parse_channel_map(tab, where: str) -> dict[str, ChannelEntry]:
             raise DataError(f"{w}: expected a file channel name or a table {{ name, unit, sign, scale }}")
         for k in v:
             if k not in CHANNEL_KEYS:
-                raise DataError(f"{w}: unknown key '{k}'; allowed: {', '.join(CHANNEL_KEYS)}")
+                hint = (" (a sensor's sensitivity_std is declared once, in the dataset's [channels] table)"
+                        if k == "sensitivity_std" else "")
+                raise DataError(f"{w}: unknown key '{k}'{hint}; allowed: {', '.join(CHANNEL_KEYS)}")
         name = v.get("name")
         if not isinstance(name, str) or not name:
             raise DataError(f"{w}: missing key 'name' (the channel's name in the file)")

@@ -26,6 +26,7 @@ from ...model.tracks import Track
 from .channels import (RUN_PREPROCESS_KEYS, ChannelEntry, CsvOptions, parse_channel_map, parse_csv_options,
                        parse_preprocess)
 from .common import ReadOnlyDict, in_folder, number, read_only, read_toml, table
+from .declared import check_std, declared_table, refuse_declared, split_declared, split_sensitivity
 from .dampers import (BUMP_NAMES, NONLINEAR_GROUPS, DamperCurves, bump_stop_pairs, parse_bump_stops,
                       parse_damper_knots, parse_dampers)
 from .hifi import HifiProperties, parse_hifi, tire_damping_of
@@ -199,6 +200,9 @@ class Manifest:
     damper_knots : tuple of float or None
         ``[model] damper_knots`` (SPEC §8): the positive knot velocities (m/s) of damper curves to
         identify; None: not given (the default knots of SPEC §8).
+    declared : mapping key -> float
+        The standard uncertainties declared in ``[known]`` and ``[vehicle]`` (SPEC §12: a value written
+        ``{ value, std }``), in the value's unit; a key absent here is exact.
     """
 
     path: Path
@@ -210,10 +214,11 @@ class Manifest:
     runs: tuple
     extensions: tuple[str, ...] | None = None
     damper_knots: tuple[float, ...] | None = None
+    declared: ReadOnlyDict = field(default_factory=ReadOnlyDict)
 
     def __post_init__(self):
         object.__setattr__(self, "path", Path(self.path))
-        for k in ("known", "bounds", "tracks"):
+        for k in ("known", "bounds", "tracks", "declared"):
             object.__setattr__(self, k, read_only(getattr(self, k)))
         object.__setattr__(self, "runs", tuple(self.runs))
         if self.extensions is not None:
@@ -280,10 +285,12 @@ class DatasetManifest(Manifest):
     csv_table: ReadOnlyDict = field(default_factory=ReadOnlyDict)
     #: ``[checks]``: check name -> "error" | "warn" | "off" (rideid.data.checks)
     checks: ReadOnlyDict = field(default_factory=ReadOnlyDict)
+    #: ``[channels]`` ``sensitivity_std`` (SPEC §12): channel -> relative standard uncertainty of its sensitivity
+    sensitivity_std: ReadOnlyDict = field(default_factory=ReadOnlyDict)
 
     def __post_init__(self):
         super().__post_init__()
-        for k in ("channel_map", "preprocess", "csv_table", "checks"):
+        for k in ("channel_map", "preprocess", "csv_table", "checks", "sensitivity_std"):
             object.__setattr__(self, k, read_only(getattr(self, k)))
 
     def is_measured(self, run: RunSpec) -> bool:
@@ -293,16 +300,18 @@ class DatasetManifest(Manifest):
 
     def to_dataset_doc(self) -> dict:
         """The ``dataset.toml`` document (plain dicts and lists, ready for TOML)."""
-        doc = {"name": self.name, "vehicle": vehicle_table(self.geometry)}
+        doc = {"name": self.name, "vehicle": vehicle_table(self.geometry, self.declared)}
         if self.known:
-            doc["known"] = dict(self.known)
+            doc["known"] = {k: declared_table(v, self.declared.get(k)) for k, v in self.known.items()}
         if self.bounds:
             doc["bounds"] = {k: list(v) for k, v in self.bounds.items()}
         model = model_table(self)
         if model is not None:
             doc["model"] = model
-        if self.channel_map:
+        if self.channel_map or self.sensitivity_std:
             doc["channels"] = {k: e.to_table() for k, e in self.channel_map.items()}
+            for k, s in self.sensitivity_std.items():
+                doc["channels"][k] = {**doc["channels"].get(k, {}), "sensitivity_std": s}
         if self.preprocess:
             doc["preprocess"] = {k: list(v) if isinstance(v, tuple) else v for k, v in self.preprocess.items()}
         if self.csv_table:
@@ -369,13 +378,15 @@ def model_table(man: Manifest) -> dict | None:
     return out
 
 
-def vehicle_table(geom: Geometry) -> dict:
-    """The ``[vehicle]`` table of a geometry (``cg_height`` only when not 0)."""
-    out = {k: getattr(geom, k) for k in Geometry.KEYS}
+def vehicle_table(geom: Geometry, declared: dict | None = None) -> dict:
+    """The ``[vehicle]`` table of a geometry (``cg_height`` only when not 0); a key with a std in
+    ``declared`` (SPEC §12) is written ``{ value, std }``."""
+    declared = declared or {}
+    out = {k: declared_table(getattr(geom, k), declared.get(k)) for k in Geometry.KEYS}
     for k in OPTIONAL_VEHICLE_KEYS:
         v = getattr(geom, k)
         if v != Geometry.OPTIONAL_KEYS[k]:
-            out[k] = v
+            out[k] = declared_table(v, declared.get(k))
     return out
 
 
@@ -408,8 +419,24 @@ def parse_truth(tab: dict, where: str, geom: Geometry | None) -> dict[str, float
     return vals
 
 
-def _parse_geometry(doc: dict, where: str) -> Geometry:
-    kw = SECTIONS["vehicle"].read(table(doc, "vehicle", where), where)
+def _split_declared(tab: dict, where: str, section: str) -> tuple[dict, dict]:
+    """A ``[known]`` or ``[vehicle]`` table as plain values, and the stds declared in it (SPEC §12)."""
+    values, stds = {}, {}
+    for k, v in tab.items():
+        values[k], std = split_declared(v, f"{where}: [{section}] {k}")
+        if std is not None:
+            stds[k] = std
+    return values, stds
+
+
+def _parse_geometry(doc: dict, where: str, declared: dict | None = None) -> Geometry:
+    tab, stds = _split_declared(table(doc, "vehicle", where), where, "vehicle")
+    kw = SECTIONS["vehicle"].read(tab, where)
+    for k, std in stds.items():
+        if k in kw:
+            check_std(kw[k], std, f"{where}: [vehicle] {k}")
+            if declared is not None:
+                declared[k] = std
     if "cg_height" in kw:
         h = kw.pop("cg_height")
         if h < 0:
@@ -420,9 +447,10 @@ def _parse_geometry(doc: dict, where: str) -> Geometry:
     return Geometry(**kw)
 
 
-def _parse_known(doc: dict, where: str, geom: Geometry) -> dict[str, float]:
+def _parse_known(doc: dict, where: str, geom: Geometry, declared: dict | None = None) -> dict[str, float]:
     known = {}
-    for k, v in table(doc, "known", where, required=False).items():
+    tab, stds = _split_declared(table(doc, "known", where, required=False), where, "known")
+    for k, v in tab.items():
         if k not in NAMES and k not in EXT_NAMES and k not in EXTRA_KNOWN and k not in BUMP_NAMES:
             raise DataError(f"{where}: [known]: unknown key '{k}'; allowed: total_mass or one of "
                             f"{', '.join(NAMES + EXT_NAMES + BUMP_NAMES)}")
@@ -430,6 +458,10 @@ def _parse_known(doc: dict, where: str, geom: Geometry) -> dict[str, float]:
                     else _param_value(v, k, f"{where}: [known] {k}"))
         if k == "a" and not known[k] < geom.wheelbase:
             raise DataError(f"{where}: [known] a = {known[k]} must be less than the wheelbase {geom.wheelbase}")
+        if k in stds:
+            check_std(known[k], stds[k], f"{where}: [known] {k}")
+            if declared is not None:
+                declared[k] = stds[k]
     return known
 
 
@@ -565,12 +597,31 @@ def _parse_shared(doc: dict, path: Path, scenario: bool) -> dict:
     name = doc.get("name", path.parent.name if not scenario else path.stem)
     if not isinstance(name, str):
         raise DataError(f"{where}: key 'name' must be a string")
-    geom = _parse_geometry(doc, where)
-    known = _parse_known(doc, where, geom)
+    declared = {}
+    geom = _parse_geometry(doc, where, declared)
+    known = _parse_known(doc, where, geom, declared)
+    _refuse_declared_elsewhere(doc, where)
     bounds = _parse_bounds(doc, where, geom, known)
     tracks = _parse_tracks(doc, where, path.parent)
     runs = _parse_runs(doc, where, tracks, scenario)
-    return dict(path=path, name=name, geometry=geom, known=known, bounds=bounds, tracks=tracks, runs=runs)
+    return dict(path=path, name=name, geometry=geom, known=known, bounds=bounds, tracks=tracks, runs=runs,
+                declared=declared)
+
+
+def _refuse_declared_elsewhere(doc: dict, where: str) -> None:
+    """A ``{ value, std }`` in ``[bounds]``, a track or a run: one line naming the key (SPEC §12 declares
+    uncertainties in ``[known]`` and ``[vehicle]`` only)."""
+    if isinstance(doc.get("bounds"), dict):
+        for k, v in doc["bounds"].items():
+            refuse_declared(v, f"{where}: [bounds] {k}")
+    for section in ("tracks", "runs"):
+        items = doc.get(section)
+        if isinstance(items, list):
+            for i, t in enumerate(items):
+                if isinstance(t, dict):
+                    label = f" (id '{t['id']}')" if isinstance(t.get("id"), str) else ""
+                    for k, v in t.items():
+                        refuse_declared(v, f"{where}: {section}[{i}]{label} {k}")
 
 
 # ---------------------------------------------------------------------------
@@ -631,7 +682,8 @@ def parse_dataset_manifest(doc: dict, path) -> DatasetManifest:
     extensions, knots = parse_model_table(doc["model"], where) if "model" in doc else (None, None)
     extra = {}
     if "channels" in doc:
-        extra["channel_map"] = parse_channel_map(doc["channels"], f"{where}: [channels]")
+        tab, extra["sensitivity_std"] = split_sensitivity(doc["channels"], f"{where}: [channels]")
+        extra["channel_map"] = parse_channel_map(tab, f"{where}: [channels]")
     if "preprocess" in doc:
         extra["preprocess"] = parse_preprocess(doc["preprocess"], f"{where}: [preprocess]")
     if "csv" in doc:
