@@ -63,6 +63,8 @@ from .uncertainty import normal_inverse
 
 #: the budget's entry for ``std_robust`` (the sensor noise, through the HAC sandwich)
 STATISTICAL = "statistical"
+#: the budget's name of the runs' disagreement beyond their noise (part of std_robust)
+BETWEEN_RUNS = "between runs"
 #: prefix of a sensor's entry: ``"sensitivity body_az_fl"``
 SENSITIVITY = "sensitivity"
 #: parameters that do not scale with the anchor (lengths): the anchor's closed form gives them 0
@@ -296,11 +298,16 @@ def budget_entries(details: dict, names, gradients: dict, inputs) -> dict:
             e["std_total"] = None
             e["budget"] = None
         else:
-            parts = {STATISTICAL: float(stat)}
+            # the runs' disagreement beyond their noise is in std_robust (rideid.estimate.uncertainty
+            # between_runs_variance): shown as its own contribution
+            between = float(e.get("std_between_runs") or 0.0)
+            parts = {STATISTICAL: float(np.sqrt(max(stat ** 2 - between ** 2, 0.0)))}
+            if between > 0:
+                parts[BETWEEN_RUNS] = between
             for name, g in gradients.items():
                 if n in col:
                     parts[name] = float(abs(g[col[n]]) * std_of[name])
-            extra = [v for k, v in parts.items() if k != STATISTICAL]
+            extra = [v for k, v in parts.items() if k not in (STATISTICAL, BETWEEN_RUNS)]
             e["std_total"] = float(stat) if not extra else float(np.sqrt(stat ** 2 + sum(v * v for v in extra)))
             e["budget"] = parts
         out[n] = e

@@ -545,9 +545,13 @@ def parameter_detail(space, P, n: str, std, cov, robust) -> dict:
         e["std"] = 0.0
     e["std_robust"] = robust.std_robust(n) if n not in space.fixed else 0.0
     if n not in space.fixed and robust.jackknife is not None:
-        # the runs' disagreement beyond their noise (docs/uncertainty.md "Between runs")
+        # the runs' disagreement beyond their noise (docs/uncertainty.md "Between runs") is part of the robust
+        # standard error: the HAC sandwich's share is std_hac
         e["std_jackknife"] = robust.std_jackknife(n)
-        e["std_between_runs"] = robust.std_between_runs(n)
+        e["std_between_runs"] = between = robust.std_between_runs(n)
+        if between and e["std_robust"] is not None:
+            e["std_hac"] = e["std_robust"]
+            e["std_robust"] = float(math.hypot(e["std_robust"], between))
     return e
 
 

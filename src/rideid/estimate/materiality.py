@@ -135,14 +135,16 @@ def weigh_result(ds, res, simulator=None):
     test found structure; unchanged otherwise (adequate, not assessed). ``ds``: the dataset as loaded."""
     from dataclasses import replace
 
+    from .budget import fit_cost
     from .identify import _polish
-    from .responses import result_cost
 
     ad = res.adequacy
     if not ad or ad.get("adequate", True) or not flagged_pairs(ad):
         return res
-    cf, P = result_cost(res, ds.with_starts(res.starts) if res.starts else ds, simulator)
-    x = np.array([res.parameters[n] for n in cf.names])
+    cf = fit_cost(ds, res, simulator)
+    if cf is None:
+        return res
+    x = np.asarray(res.x, dtype=float)
     equal = np.full(len(cf.run_ids), 1.0 / len(cf.run_ids))
 
     def polish(c, x0):

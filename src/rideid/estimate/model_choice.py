@@ -527,10 +527,10 @@ def identify(ds, *, model=None, rng=None, seed=None, population: int = DEFAULT_P
         res = identify_auto(ds, simulator=simulator, **common)
     else:
         res = identify_model(ds, model=model, cost=cost, start=start, simulator=simulator, **common)
-    if assess and not unknown_road_runs(ds):  # SPEC §12: does the structure the residual test found matter?
-        res = weigh_result(ds, res, simulator)
     res = replace(res, vehicle=vehicle_table(ds.geometry))  # the geometry travels with the car (rideid export)
     # SPEC §12: every declared uncertainty propagated to the estimates (std_total, budget)
     res = with_budget(ds, res, simulator, cost)
+    if assess and not unknown_road_runs(ds):  # SPEC §12: does the structure the residual test found matter?
+        res = weigh_result(ds, res, simulator)
     warn_bounds(res)
     return res

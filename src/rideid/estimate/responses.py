@@ -40,17 +40,6 @@ def curve_car(result, dataset, simulator: Simulator | None = None):
     return cf, space.full(np.array([[result.parameters[n] for n in space.names]]))[0]
 
 
-def result_cost(result, dataset, simulator: Simulator | None = None):
-    """A cost function of ``dataset`` on the model of ``result`` (its groups; with damper curves its knots)
-    and the identified car's full row."""
-    if getattr(result, "dampers", None):
-        return curve_car(result, dataset, simulator)
-    ext = (result.model or {}).get("extensions") or []
-    space = ParameterSpace(dataset.known, dataset.geometry, dataset.manifest.bounds, extensions=ext)
-    cf = CostFunction(dataset, space=space, simulator=simulator)
-    return cf, space.full(np.array([[result.parameters[n] for n in space.names]]))[0]
-
-
 def curve_responses(result, dataset, simulator: Simulator | None = None) -> dict:
     """The response of the identified car with damper curves (the nonlinear simulator) on every run:
     run id -> (n_time, 10); what :func:`simulate_runs` gives a linear result."""
