@@ -26,6 +26,7 @@ import numpy as np
 from ..data.measured import DEFAULT_PRE_ROLL, MeasuredRun, RelativeDistance
 from ..errors import DataError
 from ..model.equations import CHANNELS
+from ..model.sensors import SensorChain
 from .nominal import Job, gather, responses, run_steps, simulate_jobs
 
 
@@ -235,7 +236,17 @@ def linearise_starts(ds, P, starts: dict, simulator=None, derivative: bool = Tru
             rd = mr.run_data(s + sign * eps[rid])
             jobs.append(Job(track, rd.time, mr.speed, rd.distance))
     y = responses(simulate_jobs(P, ds.geometry, jobs, simulator)) if jobs else []
-    return at, {rid: (y[2 * k + 1] - y[2 * k]) / (2 * eps[rid]) for k, rid in enumerate(starts)}
+    D = {}
+    for k, rid in enumerate(starts):
+        d = (y[2 * k + 1] - y[2 * k]) / (2 * eps[rid])
+        # as the sensors record it (SPEC §11): the chain is linear, so the recorded derivative is the
+        # derivative filtered; a sample left out of the fit moves nothing
+        chain = SensorChain(at.sensor_filters(rid), 1.0 / ds.measured[rid].fs)
+        if chain.active:
+            d = chain.apply(d)
+        clipped = at.clipped(rid)
+        D[rid] = d if clipped is None else np.where(clipped, 0.0, d)
+    return at, D
 
 
 def cycle_slips(ds, P, starts: dict, simulator=None) -> dict:
