@@ -261,4 +261,5 @@ def unfiltered(n_channels: int = 10) -> tuple:
     return ((),) * n_channels
 
 
-__all__ = ["AnalogFilter", "DiscreteFilter", "KINDS", "ORDERS", "SensorChain", "SensorSimulator", "discretise", "unfiltered"]
+__all__ = ["AnalogFilter", "DiscreteFilter", "KINDS", "ORDERS", "SensorChain", "SensorSimulator", "discretise",
+           "unfiltered"]
