@@ -185,7 +185,7 @@ def test_cost_with_a_chain_is_the_sum_over_filtered_outputs(sim_dataset, tmp_pat
     E = cf.run_errors(X)
     outs = plain.sim.outputs(cf.space.full(X))
     hp, lp = AnalogFilter("highpass", 0.5, 2), AnalogFilter("lowpass", 60.0, 1)
-    for ri, rid in enumerate(cf.run_ids):
+    for ri in range(len(cf.run_ids)):
         s, e = cf.sim.run_start[ri], cf.sim.run_start[ri + 1]
         o = outs[ri].copy()
         from scipy.signal import cont2discrete, lfilter
@@ -235,3 +235,31 @@ def test_bad_sensor_keys(case, sim_dataset, tmp_path, capsys):
     assert len(lines) == 1 and lines[0].startswith("rideid: error: "), err
     assert msg in lines[0], lines[0]
     assert "Traceback" not in err and not out.exists()
+
+
+def test_quality_table_replaces_the_per_run_warnings(sim_dataset, tmp_path, capsys):
+    """A hub sensor declared with a range its signal reaches: the terminal shows one data-quality table (the
+    clipped share per channel) and no per-run clipping line; result.json keeps the table and the fit leaves
+    those samples out."""
+    import json
+
+    from rideid.cli import main
+    d = _logger_dataset(sim_dataset, tmp_path, {"axle_az_fl": {"range": 30.0}, "axle_az_rr": {"highpass": 0.5}})
+    out = tmp_path / "fit"
+    rc = main(["identify", str(d), "--out", str(out), "--quiet", "--no-report", "--generations", "2",
+               "--population", "8", "--no-polish", "--model", "base"])
+    stdout, err = capsys.readouterr()
+    assert rc == 0, err
+    assert "clipped:" not in err and "data quality (10 runs):" in stdout
+    row = next(line for line in stdout.splitlines() if line.startswith("axle_az_fl"))
+    doc = json.loads((out / "result.json").read_text())
+    q = doc["data_quality"]["channels"]
+    share = q["axle_az_fl"]["clipped_share"]
+    print(stdout)
+    assert 0 < share < 0.5 and f"{100 * share:.2f}%" in row
+    assert q["axle_az_rr"]["filters"] == ["high-pass 0.5 Hz, order 1"] and not q["axle_az_rr"]["clipped_runs"]
+    # the same share from the data themselves: the SPEC CSV's samples at |a| >= 30 m/s^2
+    import rideid
+    ds = rideid.load_dataset(d)
+    worst = max(float(np.mean(np.abs(ds.data[r.id].channels["axle_az_fl"]) >= 30.0)) for r in ds.runs)
+    assert share == pytest.approx(worst, abs=1e-12)

@@ -223,6 +223,9 @@ class IdentificationResult:
     #: the dataset's ``[vehicle]`` table (m: wheelbase, tracks, tire_radius, cg_height when given), so that the
     #: identified car can leave without its dataset (rideid export, SPEC §10); None in results written before
     vehicle: dict | None = None
+    #: per channel over the runs: clipped share, gaps bridged, noise level, sensor chain
+    #: (:func:`rideid.data.quality.data_quality`); None in results written before
+    data_quality: dict | None = None
 
     # SciPy/SPEC §4 names for the same numbers
     @property
@@ -336,6 +339,7 @@ class IdentificationResult:
             **({"bump_stops": self.bump_stops} if self.bump_stops else {}),
             **({"roads": self.roads} if self.roads else {}),
             **({"vehicle": self.vehicle} if self.vehicle else {}),
+            **({"data_quality": self.data_quality} if self.data_quality else {}),
             "dataset": str(Path(self.dataset).resolve()) if self.dataset else "",
             "sensitivity": _maps_to_json(self.maps),
             "history_file": "history.csv",
@@ -388,7 +392,7 @@ def load(path) -> IdentificationResult:
         model=doc.get("model"), adequacy=doc.get("adequacy"), correlation=doc.get("correlation"),
         checks=list(doc.get("checks") or []), dampers=doc.get("dampers"), bump_stops=doc.get("bump_stops"),
         roads=doc.get("roads"), road_profiles=_read_roads(doc.get("roads"), rpath.parent),
-        vehicle=doc.get("vehicle"))
+        vehicle=doc.get("vehicle"), data_quality=doc.get("data_quality"))
 
 
 def _read_roads(roads, folder):
