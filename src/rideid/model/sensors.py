@@ -118,19 +118,35 @@ class DiscreteFilter:
     c: np.ndarray
     d: float
 
-    def apply(self, x, axis: int = -1, u0=None) -> np.ndarray:
+    def real_sections(self) -> list:
+        """The modes as real recursions ``(b, a)`` for :func:`scipy.signal.lfilter`: a real mode alone
+        (``r / (z - lam)``, residue ``r = c g``), a conjugate pair as one second-order section (the sum of
+        the two, real)."""
+        lam, r = np.asarray(self.lam), np.asarray(self.c) * np.asarray(self.g)
+        secs, used = [], np.zeros(lam.size, dtype=bool)
+        for i in range(lam.size):
+            if used[i]:
+                continue
+            used[i] = True
+            if abs(lam[i].imag) <= 1e-12 * max(1.0, abs(lam[i])):
+                secs.append((np.array([0.0, r[i].real]), np.array([1.0, -lam[i].real])))
+                continue
+            j = min((j for j in range(lam.size) if not used[j]), key=lambda j: abs(lam[j] - np.conj(lam[i])))
+            used[j] = True
+            secs.append((np.array([0.0, 2 * r[i].real, -2 * (r[i] * np.conj(lam[i])).real]),
+                         np.array([1.0, -2 * lam[i].real, abs(lam[i]) ** 2])))
+        return secs
+
+    def apply(self, x, axis: int = -1, u0=None, sections=None) -> np.ndarray:
         """Filter ``x`` along ``axis``; the state at the first sample the steady state of ``u0`` held
-        forever (default: the first sample's value)."""
-        from scipy.signal import lfilter
+        forever (default: the first sample's value). ``sections``: :meth:`real_sections`, computed once."""
+        from scipy.signal import lfilter, lfilter_zi
         x = np.moveaxis(np.asarray(x, dtype=float), axis, -1)
         u0 = x[..., 0] if u0 is None else np.asarray(u0, dtype=float)
         y = self.d * x
-        acc = np.zeros(x.shape, dtype=complex)
-        for lam, g, c in zip(self.lam, self.g, self.c):
-            z0 = (g / (1.0 - lam)) * u0  # the mode's steady state for a constant input u0
-            z, _ = lfilter(np.array([0.0, g]), np.array([1.0, -lam]), x, axis=-1, zi=z0[..., None])
-            acc += c * z
-        y = y + acc.real
+        for b, a in (self.real_sections() if sections is None else sections):
+            zi = lfilter_zi(b, a)  # the state of a unit step held forever
+            y += lfilter(b, a, x, axis=-1, zi=u0[..., None] * zi)[0]
         return np.moveaxis(y, -1, axis)
 
 
@@ -167,10 +183,18 @@ class SensorChain:
         return any(self.filters)
 
     def sections(self) -> list:
-        """Per channel its filters discretised (:func:`discretise`; an empty list: unfiltered)."""
-        return [[discretise(f, self.h) for f in fs] for fs in self.filters]
+        """Per channel its filters discretised, each with its real sections
+        (``[(DiscreteFilter, sections), ...]``; an empty list: unfiltered)."""
+        out = []
+        for fs in self.filters:
+            chain = []
+            for f in fs:
+                d = discretise(f, self.h)
+                chain.append((d, d.real_sections()))
+            out.append(chain)
+        return out
 
-    def apply(self, Y, sections=None) -> np.ndarray:
+    def apply(self, Y, sections=None, out=None) -> np.ndarray:
         """The channels ``Y`` as recorded through this chain.
 
         Parameters
@@ -180,18 +204,27 @@ class SensorChain:
             in front).
         sections : list, optional
             :meth:`sections` computed once (default: computed here).
+        out : ndarray, optional
+            Where to write (may be ``Y`` itself: filtered in place); default a copy of ``Y``.
 
         Returns
         -------
         ndarray, same shape: filtered along time, the filters' state at the first sample the steady
         state of that sample's value (module docstring); unfiltered channels returned as they are.
+        Channels with the same filters are filtered together (one call per section for all of them).
         """
         Y = np.asarray(Y, dtype=float)
-        out = Y.copy()
+        out = Y.copy() if out is None else out
         sections = self.sections() if sections is None else sections
-        for c, chain in enumerate(sections):
-            for filt in chain:
-                out[..., c] = filt.apply(out[..., c], axis=-1)
+        groups: dict = {}
+        for c, fs in enumerate(self.filters):
+            if fs:
+                groups.setdefault(fs, []).append(c)
+        for cols in groups.values():
+            x = np.moveaxis(Y[..., cols], -1, -2)  # (..., k, n_time)
+            for filt, secs in sections[cols[0]]:
+                x = filt.apply(x, axis=-1, sections=secs)
+            out[..., cols] = np.moveaxis(x, -2, -1)
         return out
 
 
@@ -228,7 +261,8 @@ class SensorSimulator:
 
     def record(self, outs) -> list:
         """Per-run outputs ``(n, T, 10)`` as the sensor chains record them."""
-        return [o if sec is None else ch.apply(o, sec) for o, ch, sec in zip(outs, self.chains, self._sections)]
+        # the outputs are the simulator's fresh arrays: filtered in place
+        return [o if sec is None else ch.apply(o, sec, out=o) for o, ch, sec in zip(outs, self.chains, self._sections)]
 
     def outputs(self, P, pin=None):
         """Simulated channels as recorded: list over runs of ``(n_pop, n_time, 10)``."""
