@@ -30,7 +30,7 @@ from ..model.sensors import AnalogFilter, SensorChain
 #: first-order high-pass corners (Hz) tried on the identified car's channels
 HINT_CORNERS = (0.1, 0.2, 0.3, 0.5, 0.7, 1.0, 1.5, 2.0)
 #: the least share by which a corner must cut the channel's residual sum of squares to be named
-HINT_REDUCTION = 0.3
+HINT_REDUCTION = 0.5
 
 
 def coupling_hints(cf, response: dict) -> list[dict]:
