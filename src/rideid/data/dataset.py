@@ -116,6 +116,9 @@ class Dataset:
         if mr is None or mr.window is None or not mr.clipped.any():
             return None
         M = mr.window_clipped()
+        rd = self.data.get(run_id)
+        if rd is None or rd.time.size != M.shape[0]:  # data not read from the measured run's window
+            return None
         return M if M.any() else None
 
     def with_data(self, data: dict) -> "Dataset":

@@ -459,7 +459,7 @@ def _result(ds, cf, search, fit, weighting, maps, rng_record, t0, assess=True,
     model = {"extensions": list(space.extensions)}
     adequacy = advise(assess_fit(cf, P, response), model) if assess else None
     if adequacy is not None:
-        adequacy = _sensor_notes(ds, cf, response, adequacy)
+        adequacy = sensor_notes(ds, cf, response, adequacy)
     dampers = None if not space.curves else dampers_block(space, P, robust.white, robust.robust, robust.names,
                                                           excitation)
     velocities = suspension_velocities(cf, P) if space.curves else None
@@ -482,10 +482,14 @@ def _result(ds, cf, search, fit, weighting, maps, rng_record, t0, assess=True,
         data_quality=data_quality(cf.ds), wall_time_s=time.perf_counter() - t0)
 
 
-def _sensor_notes(ds, cf, response, adequacy: dict) -> dict:
+def sensor_notes(ds, cf, response, adequacy: dict | None) -> dict | None:
     """``adequacy`` with ``sensor_hints`` (channels that look AC-coupled without a declared ``highpass``,
     :func:`rideid.estimate.sensor_check.coupling_hints`) and, when not adequate, advice that names them and
-    the clipped channels among the flagged pairs first (:func:`rideid.estimate.sensor_check.clipping_advice`)."""
+    the clipped channels among the flagged pairs first (:func:`rideid.estimate.sensor_check.clipping_advice`);
+    None when the adequacy was not assessed. ``cf`` and ``response``: the fit's cost function at its final starts
+    and the identified car's channels."""
+    if adequacy is None:
+        return None
     hints = coupling_hints(cf, response)
     out = {**adequacy, "sensor_hints": hints}
     if not adequacy.get("adequate", True):
