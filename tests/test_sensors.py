@@ -342,3 +342,22 @@ def test_clipping_hub_sensor_is_left_out(tmp_path):
     for rid, share in q["clipped_runs"].items():
         y = ds.data[rid].channels["axle_az_fl"]
         assert share == pytest.approx(float(np.mean(np.abs(y) >= 5.0 * 9.80665 * (1 - 1e-9))), abs=1e-12)
+
+
+def test_clipping_advice_names_the_clipped_flagged_pairs():
+    """The not-adequate advice names the flagged run/channel pairs whose channel clipped, with their shares;
+    nothing when the flagged pairs did not clip or the model is adequate."""
+    from types import SimpleNamespace
+
+    from rideid.estimate.sensor_check import clipping_advice
+    rec = {"channels": {"axle_az_fl": {"clipped": {"samples": 41, "share": 0.041}}, "body_az_fl": {}}}
+    ds = SimpleNamespace(measured={"W_H": SimpleNamespace(record=rec)})
+    flagged = {"adequate": False, "runs": {"W_H": {"axle_az_fl": {"structure": True},
+                                                   "body_az_fl": {"structure": True}}}}
+    text = clipping_advice(ds, flagged)
+    assert text.startswith("Flagged pairs whose sensor clipped: W_H/axle_az_fl (4.1 % of its samples at the range).")
+    assert "body_az_fl" not in text
+    other = {"adequate": False, "runs": {"W_H": {"axle_az_fl": {"structure": False},
+                                                 "body_az_fl": {"structure": True}}}}
+    assert clipping_advice(ds, other) is None
+    assert clipping_advice(ds, {**flagged, "adequate": True}) is None
