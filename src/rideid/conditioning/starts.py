@@ -87,10 +87,14 @@ def _correlation(mr: MeasuredRun, Yhat, tm, tau=None):
 
     ``tau``: the file times at which the measurement is read (default: the
     run's own samples :attr:`MeasuredRun.times`); ``Yhat`` at model times
-    ``tm`` is then compared with the measurement at ``tau[k + lag]``.
+    ``tm`` is then compared with the measurement at ``tau[k + lag]``. ``Yhat``
+    (at rest at ``tm[0]``) passes the run's declared sensor chain first.
     """
     from scipy.signal import correlate
 
+    chain = SensorChain(mr.chain_filters(), 1.0 / mr.fs)
+    if chain.active:  # the response as the run's declared sensors record it (SPEC §11)
+        Yhat = chain.apply(Yhat)
     Y = mr.values if tau is None else _measured_at(mr, tau)
     total, n = None, 0
     for i, c in enumerate(CHANNELS):

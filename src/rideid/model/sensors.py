@@ -48,6 +48,7 @@ so leave five of them out of a moving start's window.
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass
 
@@ -152,9 +153,11 @@ class DiscreteFilter:
         return np.moveaxis(y, -1, axis)
 
 
+@functools.lru_cache(maxsize=256)
 def discretise(filt: AnalogFilter, h: float) -> DiscreteFilter:
     """``filt`` discretised by first-order hold at the sample interval ``h`` (s), in modal form
-    (module docstring)."""
+    (module docstring). Cached: a filter and a rate give one discrete filter (a few ms to make, the
+    matrix exponential), made once for every run, candidate and call."""
     from scipy.signal import cont2discrete
     A, B, C, D = filt.analog_ss()
     Ad, Bd, Cd, Dd, _ = cont2discrete((A, B, C, D), h, method="foh")
