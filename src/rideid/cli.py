@@ -379,12 +379,31 @@ def _import_ahead(name: str) -> None:
     threading.Thread(target=resolve, name=f"rideid-import-{name}", daemon=True).start()
 
 
+def _load_with_quality(ds_path, out):
+    """``rideid.load_dataset``, its per-run warnings on clipping, gaps and flat lines replaced by one
+    data-quality table (:func:`rideid.data.quality.quality_table`; printed when a channel has any of them or
+    a declared sensor chain); every other warning shown as before."""
+    with warnings.catch_warnings(record=True) as caught:
+        ds = rideid.load_dataset(ds_path)
+    summary = [w for w in caught
+               if issubclass(w.category, rideid.DataWarning) and rideid.summarised_warning(str(w.message))]
+    for w in caught:
+        if w not in summary:
+            warnings.showwarning(w.message, w.category, w.filename, w.lineno)
+    if ds.unknown_road_runs and len(ds.unknown_road_runs) == len(ds.runs):
+        return ds
+    quality = rideid.data_quality(ds)
+    if summary or any(e["filters"] for e in quality["channels"].values()):
+        print("data quality (" + str(len(ds.runs)) + " runs):\n" + rideid.quality_table(quality), file=out)
+    return ds
+
+
 def run_identify(ds_path, out_dir, *, seed, population=None, generations=None, weights="adaptive",
                  polish=True, quiet=False, out=None, report=True, model=None):
     out = out or sys.stdout
     if model is not None:
         model = rideid.parse_model_arg(model)  # base|full|auto, or groups: damper_curves,anti_roll_bars
-    ds = rideid.load_dataset(ds_path)
+    ds = _load_with_quality(ds_path, out)
     if report:  # after loading: an import on another thread slows this thread's imports (the GIL)
         _import_ahead("write_report")
     prog = Progress(quiet)
@@ -407,6 +426,8 @@ def run_identify(ds_path, out_dir, *, seed, population=None, generations=None, w
     print(_summary_table(res), file=out)
     if res.model.get("candidates"):
         print(_candidates_table(res.model), file=out)
+    for hint in (res.adequacy or {}).get("sensor_hints") or []:
+        print("hint: " + hint["message"], file=out)
     para = rideid.verdict_paragraph(res.adequacy)
     if para:
         print("\n" + textwrap.fill(para, 100) + "\n", file=out)

@@ -28,6 +28,7 @@ from ..data.dataset import Dataset
 from ..data.measured import DEFAULT_PRE_ROLL, MeasuredRun, RelativeDistance
 from ..errors import DataError
 from ..model.equations import CHANNELS
+from ..model.sensors import SensorChain
 from .nominal import Job, gather, responses, run_steps, simulate_jobs
 
 
@@ -88,10 +89,14 @@ def _correlation(mr: MeasuredRun, Yhat, tm, tau=None):
 
     ``tau``: the file times at which the measurement is read (default: the
     run's own samples :attr:`MeasuredRun.times`); ``Yhat`` at model times
-    ``tm`` is then compared with the measurement at ``tau[k + lag]``.
+    ``tm`` is then compared with the measurement at ``tau[k + lag]``. ``Yhat``
+    (at rest at ``tm[0]``) passes the run's declared sensor chain first.
     """
     from scipy.signal import correlate
 
+    chain = SensorChain(mr.chain_filters(), 1.0 / mr.fs)
+    if chain.active:  # the response as the run's declared sensors record it (SPEC §11)
+        Yhat = chain.apply(Yhat)
     Y = mr.values if tau is None else _measured_at(mr, tau)
     total, n = None, 0
     for i, c in enumerate(CHANNELS):
@@ -362,14 +367,26 @@ def linearise_starts(ds, P, starts: dict, simulator=None, derivative: bool = Tru
                 jobs.append(Job(track, t, mr.speed, RelativeDistance(mk.distance, starts[rid])))
             order.append((rid, k))
     y = responses(simulate_jobs(P, ds.geometry, jobs, simulator)) if jobs else []
-    D = {rid: (y[2 * k + 1] - y[2 * k]) / (2 * eps[rid]) for k, rid in enumerate(starts)}
+    D = {}
+    for k, rid in enumerate(starts):
+        D[rid] = _recorded(at, rid, (y[2 * k + 1] - y[2 * k]) / (2 * eps[rid]))
     if warps is None:
         return at, D
     Dw = {rid: np.empty((w.free.size, at.data[rid].time.size, len(CHANNELS))) for rid, w in warps.items()}
     for j, (rid, k) in enumerate(order):
         a, b = y[n_start + 2 * j], y[n_start + 2 * j + 1]
-        Dw[rid][k] = (b - a) / (2 * WARP_STEP)
+        Dw[rid][k] = _recorded(at, rid, (b - a) / (2 * WARP_STEP))
     return at, D, Dw
+
+
+def _recorded(ds, rid, d):
+    """A derivative of the model's channels on run ``rid`` as the sensors record it (SPEC §11): the chain is
+    linear, so the recorded derivative is the derivative filtered; a sample left out of the fit moves nothing."""
+    chain = SensorChain(ds.sensor_filters(rid), 1.0 / ds.measured[rid].fs)
+    if chain.active:
+        d = chain.apply(d)
+    clipped = ds.clipped(rid)
+    return d if clipped is None else np.where(clipped, 0.0, d)
 
 
 def cycle_slips(ds, P, starts: dict, simulator=None) -> dict:

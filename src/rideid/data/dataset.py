@@ -103,6 +103,24 @@ class Dataset:
                 out[r.id] = rec
         return out
 
+    def sensor_filters(self, run_id: str) -> tuple:
+        """Per SPEC channel (CHANNELS order) the analog filters of its sensor chain in run ``run_id``
+        (SPEC §11 ``highpass``, ``lowpass``; empty tuples for a SPEC CSV taken as it is)."""
+        mr = self.measured.get(run_id)
+        return mr.chain_filters() if mr is not None else ((),) * 10
+
+    def clipped(self, run_id: str):
+        """``(n, 10)`` bool over run ``run_id``'s model samples: where a channel sat at its range (SPEC §11),
+        left out of the fit; None when no sample of the run is."""
+        mr = self.measured.get(run_id)
+        if mr is None or mr.window is None or not mr.clipped.any():
+            return None
+        M = mr.window_clipped()
+        rd = self.data.get(run_id)
+        if rd is None or rd.time.size != M.shape[0]:  # data not read from the measured run's window
+            return None
+        return M if M.any() else None
+
     def with_data(self, data: dict) -> "Dataset":
         """A new dataset with other run data (same manifest and measured runs)."""
         return Dataset(self.manifest, {r.id: data[r.id] for r in self.runs}, self.measured)

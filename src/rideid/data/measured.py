@@ -188,6 +188,14 @@ class MeasuredRun:
     values: np.ndarray | None = None
     #: the model's samples: index range ``[i0, i1)`` into :attr:`times`, fixed at the first start
     window: tuple | None = None
+    #: SPEC channel -> ``(times, interval)``: the file samples (file time, s) where that channel sat at its
+    #: range (SPEC §11: declared ``range``, or detected as clipped) and the channel's sample interval (s);
+    #: only channels with such samples
+    clipped_times: dict = field(default_factory=dict)
+    #: SPEC channel -> its sensor chain's analog filters (:class:`rideid.model.sensors.AnalogFilter`)
+    filters: dict = field(default_factory=dict)
+    #: ``(n, 10)`` bool at :attr:`times`: samples left out of the fit (a channel at its range)
+    clipped: np.ndarray | None = None
     #: the distance as the speed channel gave it, when :attr:`distance` carries a correction
     #: (:meth:`with_distance_correction`)
     channel_distance: Distance | None = None
@@ -213,6 +221,21 @@ class MeasuredRun:
                     Y[:, i] = self.channels[c].samples(self.t_first, self.fs, n)
             Y.flags.writeable = False
             self.values = Y
+        if self.clipped is None:
+            M = np.zeros((self.times.size, len(CHANNELS)), dtype=bool)
+            for c, (tc, h_file) in self.clipped_times.items():
+                M[:, CHANNELS.index(c)] = clipped_samples(self.times, tc, h_file)
+            M.flags.writeable = False
+            self.clipped = M
+
+    def window_clipped(self) -> np.ndarray:
+        """``(n, 10)`` bool: the window's samples left out of the fit (:attr:`clipped`)."""
+        i0, i1 = self.window
+        return self.clipped[i0:i1]
+
+    def chain_filters(self) -> tuple:
+        """Per SPEC channel (CHANNELS order) the tuple of its sensor chain's filters."""
+        return tuple(tuple(self.filters.get(c, ())) for c in CHANNELS)
 
     @property
     def auto_start(self) -> bool:
@@ -320,7 +343,27 @@ def load_measured_run(run, man) -> MeasuredRun:
         record["lead_in"] = list(lead)
     if sf.format == "csv":
         record["csv"] = {"delimiter": sf.delimiter, "decimal": sf.decimal}
-    return MeasuredRun(run.id, path, fs, channels, t_first, t_last, run.speed, distance, opts, record, warns)
+    clipped = {c: (rec_ch[c].pop("_clipped_times"), 1.0 / rec_ch[c]["rate_hz"]) for c in measured
+               if "_clipped_times" in rec_ch[c]}
+    filters = {c: targets[c].filters for c in measured if targets[c].filters}
+    for c, fs_c in filters.items():
+        rec_ch[c]["sensor_filters"] = [f.describe() for f in fs_c]
+    return MeasuredRun(run.id, path, fs, channels, t_first, t_last, run.speed, distance, opts, record, warns,
+                       clipped_times=clipped, filters=filters)
+
+
+def clipped_samples(times, clipped_times, h_channel: float) -> np.ndarray:
+    """Which of ``times`` (file time, s) a clipped file sample reaches: a time on a clipped sample, or
+    strictly between a clipped sample and its neighbour (the read-off interpolates it), within a
+    millionth of the channel's interval ``h_channel``."""
+    tc = np.asarray(clipped_times, dtype=float)
+    if tc.size == 0:
+        return np.zeros(np.shape(times), dtype=bool)
+    t = np.asarray(times, dtype=float)
+    k = np.searchsorted(tc, t)
+    left = np.abs(t - tc[np.clip(k - 1, 0, tc.size - 1)])
+    right = np.abs(tc[np.clip(k, 0, tc.size - 1)] - t)
+    return np.minimum(left, right) < h_channel * (1 - 1e-6)
 
 
 def _map_channels(run, cmap: dict, sf, path: Path, where_map: str):
@@ -399,7 +442,32 @@ def _read_si(targets: dict, sf, time_name, time_scale: float, opts: dict, path: 
             if not _plausibility(c, v, unit, opts, f"{path}: {w}", warns):
                 # a dead channel: no unit to check (rideid.conditioning.wiring.unit_findings)
                 rec_ch[c]["flat_lined"] = True
+            else:
+                at = at_range(sig.values, e.range)
+                if at.any():
+                    rec_ch[c]["_clipped_times"] = sig.time[at] * 1.0
+                    rec_ch[c]["clipped"] = {"samples": int(at.sum()), "share": float(at.mean()),
+                                            "how": (f"at the declared range +-{e.range:g} {unit}"
+                                                    if e.range is not None else
+                                                    "detected: 3 or more consecutive samples at the extreme")}
+        if gap.any():
+            rec_ch[c]["gaps"] = {"count": int(gap.sum()), "longest_s": float(dt.max())}
     return raw, rec_ch
+
+
+def at_range(values, full_scale: float | None = None) -> np.ndarray:
+    """The samples of a channel at its range: ``|value| >= full_scale`` (in the file's unit, less a
+    part in 1e9) when the range is declared; else, as detected, every sample equal to an extreme that
+    the channel holds for 3 or more consecutive samples (a sensor or logger at its rail)."""
+    v = np.asarray(values, dtype=float)
+    if full_scale is not None:
+        return np.abs(v) >= full_scale * (1 - 1e-9)
+    out = np.zeros(v.shape, dtype=bool)
+    if v.size and np.ptp(v) > 0:
+        for val in (v.max(), v.min()):
+            if _longest_run(v == val) >= 3:
+                out |= v == val
+    return out
 
 
 def _channel_unit(c: str, e: ChannelEntry, sig: Signal, path: Path, w: str, warns: list):

@@ -356,7 +356,11 @@ def assess_fit(cf, P, sims=None) -> dict:
         Y[:, cf.W[ri] <= 0] = np.nan
         run = cf.sim.runs[ri]
         U = np.concatenate([run.u, run.rate], axis=1)
-        runs[rid] = (Y - sims[rid], Y, U)
+        E = Y - sims[rid]
+        keep = getattr(cf, "keep", None)
+        if keep is not None:  # samples at a channel's range are left out of the fit (SPEC §11): residual 0
+            E = np.where(keep[s:e] > 0, E, 0.0)
+        runs[rid] = (E, Y, U)
     return assess(runs, CHANNELS)
 
 

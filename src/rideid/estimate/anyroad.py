@@ -350,6 +350,11 @@ def _identify_any_road(ds, *, rng=None, seed=None, population=None, generations=
                             f"({', '.join(road_ids)}): the road is projected out of a linear car (docs/any-road.md); "
                             f"fit the linear model, or {' and '.join(bad)} on known tracks only")
     refuse_unsupported_groups(ext, "model")
+    filtered = [rid for rid in road_ids if any(ds.sensor_filters(rid))]
+    if filtered:  # the road's projection is of the car alone: a sensor chain would be silently ignored
+        raise ArgumentError(f"runs {', '.join(filtered)} on unknown roads have a declared highpass or lowpass "
+                            "([channels], SPEC §11): this version fits sensor chains on known tracks only; leave "
+                            "those runs out or their filters undeclared")
     geom = ds.geometry
     space = ParameterSpace(ds.known, geom, ds.manifest.bounds, extensions=ext)
     rruns = prepare_road_runs(ds)

@@ -50,6 +50,7 @@ from ..errors import ArgumentError, DataError
 from ..model.equations import CHANNEL_KIND, CHANNELS
 from ..model.nonlinear import (BUMP_STOP_NAMES, DEFAULT_KNOTS, NonlinearLayout, NonlinearSimulator, Pin,
                                curve_names, damper_force)
+from ..model.sensors import SensorChain, SensorSimulator
 from ..model.simulator import Simulator
 from ..model.params import (ALL_NAMES, EXT_NAMES, GROUPS, INDEX, MASS_COUNT, NAMES, default_bounds, nominal_car,
                             total_mass)
@@ -390,14 +391,33 @@ class ParameterSpace:
 
 
 def _measured(ds: Dataset):
-    """The runs' measured channels stacked ``(n_samples, 10)`` (0 where missing) and the channel weights
-    ``(n_runs, 10)`` (:func:`channel_weights`, 0 for a missing channel)."""
-    Ys, Ws = [], []
+    """The runs' measured channels stacked ``(n_samples, 10)`` (0 where missing or left out), the channel
+    weights ``(n_runs, 10)`` (:func:`channel_weights`, 0 for a missing channel; a channel's energy over its
+    kept samples) and the kept samples ``(n_samples, 10)`` (1 kept, 0 at the channel's range, SPEC §11;
+    None when every sample is kept)."""
+    Ys, Ws, Ks = [], [], []
     for r in ds.runs:
         Y = ds.data[r.id].matrix()
+        clipped = ds.clipped(r.id)
+        keep = np.ones(Y.shape)
+        if clipped is not None:
+            keep[clipped] = 0.0
+            Y = np.where(clipped, np.nan, Y)
         Ws.append(channel_weights(Y))
         Ys.append(np.nan_to_num(Y, nan=0.0))
-    return np.ascontiguousarray(np.concatenate(Ys)), np.array(Ws)
+        Ks.append(keep)
+    K = np.concatenate(Ks)
+    return np.ascontiguousarray(np.concatenate(Ys)), np.array(Ws), (None if K.all() else K)
+
+
+def sensor_simulator(sim, ds: Dataset, keep=None):
+    """``sim`` recording through the runs' sensor chains (SPEC §11) and comparing only the kept samples
+    (:class:`rideid.model.sensors.SensorSimulator`); ``sim`` itself when no run has a filter and every
+    sample is kept (the kernels' fast path, unchanged)."""
+    chains = [SensorChain(ds.sensor_filters(r.id), run.h) for r, run in zip(ds.runs, sim.runs)]
+    if keep is None and not any(ch.active for ch in chains):
+        return sim
+    return SensorSimulator(sim, chains, keep)
 
 
 class EvaluationCounter:
@@ -477,8 +497,8 @@ class CostFunction:
         # the given settings (backend, integration) for this space's model: the linear car unless it has
         # damper curves or bump stops (rideid.model.nonlinear)
         simulator = (Simulator() if simulator is None else simulator).for_layout(space.layout)
-        sim = simulator.bind(ds.geometry, prepare_inputs(ds))
-        Y, W = _measured(ds)
+        Y, W, keep = _measured(ds)
+        sim = sensor_simulator(simulator.bind(ds.geometry, prepare_inputs(ds)), ds, keep)
         self._build(ds, space, simulator, sim, Y, W, use_kernel, weights, counter, None)
 
     def _build(self, ds, space, simulator, sim, Y, W, use_kernel, weights, counter, pin):
@@ -494,11 +514,18 @@ class CostFunction:
         self.pin = pin
         self.Y = Y
         self.W = W
+        #: ``(n_samples, 10)``: 1 where a sample is compared, 0 where it is left out (SPEC §11); None: all
+        self.keep = getattr(sim, "keep", None)
         self.use_kernel = use_kernel
         self.weights = np.full(len(self.run_ids), 1.0 / len(self.run_ids))
         if weights is not None:
             self.set_weights(weights)
         self.counter = EvaluationCounter() if counter is None else counter
+
+    @property
+    def core_sim(self):
+        """The bound simulator of the car, without the sensor chains (:attr:`sim` records through them)."""
+        return getattr(self.sim, "inner", self.sim)
 
     @property
     def nfev(self) -> int:
@@ -549,7 +576,7 @@ class CostFunction:
 
     def pinned_at(self, P, margin: float = 1.5) -> "CostFunction":
         """:meth:`with_pin` at the polish's start ``P`` (a full row); the linear car has no sub-steps to pin."""
-        if not isinstance(self.sim, NonlinearSimulator):
+        if not isinstance(self.core_sim, NonlinearSimulator):
             return self
         return self.with_pin(self.sim.pin_at(np.atleast_2d(P), margin))
 
@@ -578,7 +605,7 @@ class CostFunction:
         E = np.full((len(self.run_ids), P.shape[0]), np.inf)
         if ok.any():
             fn = self.sim.errors if self.use_kernel else self.sim.errors_reference
-            if isinstance(self.sim, NonlinearSimulator) and self.pin is None:
+            if isinstance(self.core_sim, NonlinearSimulator) and self.pin is None:
                 # the RK4 sub-step is set by the stiffest candidate of a call: candidates grouped by
                 # their own need, so a few stiff ones of a search population do not slow the rest
                 idx = np.nonzero(ok)[0]
@@ -618,6 +645,8 @@ class CostFunction:
         for ri, (s, e) in enumerate(zip(self.sim.run_start[:-1], self.sim.run_start[1:])):
             cols, sc = self.residual_scale(ri, w)
             d = (outs[ri][:, :, cols] - Y[None, s:e, cols]) * sc
+            if self.keep is not None:  # a left-out sample's residual is 0: it moves nothing
+                d = d * self.keep[None, s:e, cols]
             parts.append(d.reshape(P.shape[0], -1))
         self.counter.add(P.shape[0])
         return np.concatenate(parts, axis=1)

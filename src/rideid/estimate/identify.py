@@ -67,6 +67,7 @@ from scipy.optimize import OptimizeResult, least_squares
 
 from ..data.checks import bound_findings
 from ..data.dataset import Dataset
+from ..data.quality import data_quality
 from ..conditioning.starts import cycle_slips, distance_warp, linearise_starts, warped
 from ..errors import ArgumentError, DataWarning
 from ..model.batch import single_threaded_blas
@@ -81,6 +82,7 @@ from .responses import suspension_velocities
 from .cost import BUMP_UNITS, IDENTIFIABLE_GROUPS, CostFunction, ParameterSpace, refuse_unsupported_groups
 from .jade import JadeSolver, make_rng, stop_requested
 from .adequacy import advise, assess_fit
+from .sensor_check import clipping_advice, coupling_hints
 from .result import History, IdentificationResult
 from .uncertainty import jackknife_runs, estimate_covariance, hac_covariance, white_covariance
 from .sensitivity import SensitivityMaps, cost_maps
@@ -456,6 +458,8 @@ def _result(ds, cf, search, fit, weighting, maps, rng_record, t0, assess=True,
     nfev = int(cf.nfev)  # the fit's evaluations (the adequacy's simulations are not the fit's)
     model = {"extensions": list(space.extensions)}
     adequacy = advise(assess_fit(cf, P, response), model) if assess else None
+    if adequacy is not None:
+        adequacy = sensor_notes(ds, cf, response, adequacy)
     dampers = None if not space.curves else dampers_block(space, P, robust.white, robust.robust, robust.names,
                                                           excitation)
     velocities = suspension_velocities(cf, P) if space.curves else None
@@ -475,7 +479,27 @@ def _result(ds, cf, search, fit, weighting, maps, rng_record, t0, assess=True,
         modal=modal, dataset=str(ds.path), maps=maps,
         model=model, response=response, velocities=velocities, correlation=correlation, adequacy=adequacy,
         checks=[f.to_dict() for f in findings], dampers=dampers, bump_stops=stops,
-        wall_time_s=time.perf_counter() - t0)
+        data_quality=data_quality(cf.ds), wall_time_s=time.perf_counter() - t0)
+
+
+def sensor_notes(ds, cf, response, adequacy: dict | None) -> dict | None:
+    """``adequacy`` with ``sensor_hints`` (channels that look AC-coupled without a declared ``highpass``,
+    :func:`rideid.estimate.sensor_check.coupling_hints`) and, when not adequate, advice that names them and
+    the clipped channels among the flagged pairs first (:func:`rideid.estimate.sensor_check.clipping_advice`);
+    None when the adequacy was not assessed. ``cf`` and ``response``: the fit's cost function at its final starts
+    and the identified car's channels."""
+    if adequacy is None:
+        return None
+    hints = coupling_hints(cf, response)
+    out = {**adequacy, "sensor_hints": hints}
+    if not adequacy.get("adequate", True):
+        first = [h["message"] + "." for h in hints[:4]]
+        clip = clipping_advice(ds, adequacy)
+        if clip:
+            first.append(clip)
+        if first:
+            out["advice"] = " ".join(first) + " " + (adequacy.get("advice") or "")
+    return out
 
 
 def _details(ds, space, P, std, cov, robust, bumps):

@@ -43,7 +43,7 @@ from ..data.schema.manifest import vehicle_table
 from .budget import with_budget
 from .adequacy import MIN_IMPROVEMENT, advise, assess_fit
 from .materiality import weigh_result
-from .identify import DEFAULT_GENERATIONS, DEFAULT_POPULATION, identify as identify_model, warn_bounds
+from .identify import DEFAULT_GENERATIONS, DEFAULT_POPULATION, identify as identify_model, sensor_notes, warn_bounds
 from .anyroad import identify_any_road, unknown_road_runs
 from ..model.batch import single_threaded_blas, thread_map
 from .cost import CostFunction, ParameterSpace, refuse_unsupported_groups
@@ -291,7 +291,10 @@ def identify_auto(ds, *, rng=None, seed=None, callback=None, maps=None, simulato
     # the search was the full model's: its history and counts belong to the result returned
     search = {} if chosen == full_key else {"history": full.history, "nit": full.nit, "stop": full.stop,
                                             "message": full.message, "track_weights": full.track_weights}
-    return replace(res, model=model, adequacy=advise(res.adequacy, model),  # advice, the candidates weighed
+    cf = costs[chosen].with_data(ds.with_starts(res.starts)) if res.starts else costs[chosen]
+    adequacy = sensor_notes(ds, cf, res.response, advise(res.adequacy, model)) if res.response else \
+        advise(res.adequacy, model)
+    return replace(res, model=model, adequacy=adequacy,  # advice, the candidates weighed
                    nfev=evaluations, wall_time_s=time.perf_counter() - t0, **search)
 
 

@@ -226,6 +226,9 @@ class IdentificationResult:
     #: SPEC §12: what was declared uncertain and how it was propagated: {"declared", "anchor", "anchor_exact",
     #: "method", "not_propagated", "notes"} (rideid.estimate.budget.with_budget); None in results written before
     uncertainty: dict | None = None
+    #: per channel over the runs: clipped share, gaps bridged, noise level, sensor chain
+    #: (:func:`rideid.data.quality.data_quality`); None in results written before
+    data_quality: dict | None = None
 
     # SciPy/SPEC §4 names for the same numbers
     @property
@@ -346,6 +349,7 @@ class IdentificationResult:
             **({"roads": self.roads} if self.roads else {}),
             **({"vehicle": self.vehicle} if self.vehicle else {}),
             **({"uncertainty": self.uncertainty} if self.uncertainty else {}),
+            **({"data_quality": self.data_quality} if self.data_quality else {}),
             "dataset": str(Path(self.dataset).resolve()) if self.dataset else "",
             "sensitivity": _maps_to_json(self.maps),
             "history_file": "history.csv",
@@ -398,7 +402,7 @@ def load(path) -> IdentificationResult:
         model=doc.get("model"), adequacy=doc.get("adequacy"), correlation=doc.get("correlation"),
         checks=list(doc.get("checks") or []), dampers=doc.get("dampers"), bump_stops=doc.get("bump_stops"),
         roads=doc.get("roads"), road_profiles=_read_roads(doc.get("roads"), rpath.parent),
-        vehicle=doc.get("vehicle"), uncertainty=doc.get("uncertainty"))
+        vehicle=doc.get("vehicle"), uncertainty=doc.get("uncertainty"), data_quality=doc.get("data_quality"))
 
 
 def _read_roads(roads, folder):

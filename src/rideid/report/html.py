@@ -29,6 +29,7 @@ from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure as MplFigure
 from PIL import Image
 
+from ..data.quality import summarised_warning
 from ..errors import DataError
 from ..estimate.sensitivity import P2T_STARS, stars
 from .sensitivity_files import heatmap_figure
@@ -747,8 +748,31 @@ def data_section(result, dataset) -> dict:
     # the data checks' and the bound check's findings (rideid.data.checks)
     data_warnings = data_warnings + [c["message"] for c in (getattr(result, "checks", None) or [])
                                      if isinstance(c, dict) and "message" in c]
+    quality = quality_rows(getattr(result, "data_quality", None))
+    if quality:  # the table stands for the per-run lines on clipping, gaps and flat lines
+        data_warnings = [w for w in data_warnings if not summarised_warning(w)]
     return {"dataset": str(dataset.path), "data_rows": data_rows, "channel_rows": channel_rows,
-            "data_warnings": data_warnings, "n_runs": len(dataset.runs)}
+            "data_warnings": data_warnings, "n_runs": len(dataset.runs), "quality_rows": quality}
+
+
+def quality_rows(quality: dict | None) -> list:
+    """Rows of the report's data-quality table from ``result.json``'s ``data_quality``
+    (:func:`rideid.data.quality.data_quality`); empty when the result has none."""
+    rows = []
+    for name, e in ((quality or {}).get("channels") or {}).items():
+        notes = []
+        if e.get("clipped_runs"):
+            notes.append("clipped in " + ", ".join(f"{r} ({100 * v:.2f} %)" for r, v in e["clipped_runs"].items()))
+        if e.get("flat_lined"):
+            notes.append("flat-lined in " + ", ".join(e["flat_lined"]))
+        if e.get("filters"):
+            notes.append("sensor " + "; ".join(e["filters"]))
+        rows.append({"channel": name, "runs": e.get("runs"),
+                     "clipped": f"{100 * e['clipped_share']:.2f} %" if e.get("clipped_runs") else "-",
+                     "gaps": e.get("gaps", 0),
+                     "noise": "-" if e.get("noise") is None else f"{e['noise']:.3g} {e.get('unit', '')}",
+                     "notes": "; ".join(notes)})
+    return rows
 
 
 #: the report's sections in page order: id, title, what it answers (the summary's list of sections and the

@@ -14,6 +14,7 @@ from dataclasses import dataclass
 from ...errors import DataError
 from ...model.equations import CHANNEL_KIND, CHANNELS
 from ...model.params import GRAVITY
+from ...model.sensors import ORDERS, AnalogFilter
 from .common import checked_items
 
 #: accepted units (lower case, spaces removed) -> factor to SI, per quantity
@@ -34,7 +35,9 @@ PREPROCESS_KEYS = ("gravity_included", "remove_bias", "lead_in", "fs", "start", 
 #: keys a run may set for itself (the rest are dataset-wide)
 RUN_PREPROCESS_KEYS = ("gravity_included", "remove_bias", "lead_in", "start", "window", "pre_roll")
 CSV_KEYS = ("delimiter", "decimal", "skip_rows")
-CHANNEL_KEYS = ("name", "unit", "sign", "scale")
+CHANNEL_KEYS = ("name", "unit", "sign", "scale", "highpass", "lowpass", "range")
+#: keys of a measured channel's sensor chain (SPEC §11 "Sensors as wired"), not for time, speed or distance
+SENSOR_KEYS = ("highpass", "lowpass", "range")
 
 
 def quantity(target: str) -> str:
@@ -62,6 +65,16 @@ class ChannelEntry:
     unit: str | None = None
     sign: float = 1.0
     scale: float = 1.0
+    #: the analog filters the sensor chain applies before a value is recorded (SPEC §11)
+    highpass: AnalogFilter | None = None
+    lowpass: AnalogFilter | None = None
+    #: the sensor's full scale, +- this value in the channel's unit (file unit, before scale and sign)
+    range: float | None = None
+
+    @property
+    def filters(self) -> tuple:
+        """The chain's filters, high-pass first (:class:`rideid.model.sensors.AnalogFilter`)."""
+        return tuple(f for f in (self.highpass, self.lowpass) if f is not None)
 
     def to_table(self):
         d = {"name": self.name}
@@ -71,6 +84,11 @@ class ChannelEntry:
             d["sign"] = int(self.sign)
         if self.scale != 1:
             d["scale"] = self.scale
+        for k in ("highpass", "lowpass"):
+            if getattr(self, k) is not None:
+                d[k] = getattr(self, k).to_table()
+        if self.range is not None:
+            d["range"] = self.range
         return d
 
 
@@ -108,18 +126,20 @@ def parse_channel_map(tab, where: str) -> dict[str, ChannelEntry]:
     """``[channels]`` (or a run's ``channels``): SPEC target -> :class:`ChannelEntry`."""
     out = {}
     for target, v, w in checked_items(tab, where, TARGETS,
-                                      ": SPEC channel = \"file channel\" or { name, unit, sign, scale }",
+                                      ": SPEC channel = \"file channel\" or { name, unit, sign, scale, highpass, "
+                                      "lowpass, range }",
                                       "unknown channel '{key}'; map file channels to {allowed}"):
         if isinstance(v, str):
             v = {"name": v}
         if not isinstance(v, dict):
-            raise DataError(f"{w}: expected a file channel name or a table {{ name, unit, sign, scale }}")
+            raise DataError(f"{w}: expected a file channel name or a table {{ name, unit, sign, scale, highpass, "
+                            "lowpass, range }}")
         for k in v:
             if k not in CHANNEL_KEYS:
                 hint = (" (a sensor's sensitivity_std is declared once, in the dataset's [channels] table)"
                         if k == "sensitivity_std" else "")
                 raise DataError(f"{w}: unknown key '{k}'{hint}; allowed: {', '.join(CHANNEL_KEYS)}")
-        name = v.get("name")
+        name = v.get("name", target if target in CHANNELS and any(k in v for k in SENSOR_KEYS) else None)
         if not isinstance(name, str) or not name:
             raise DataError(f"{w}: missing key 'name' (the channel's name in the file)")
         unit = v.get("unit")
@@ -135,8 +155,42 @@ def parse_channel_map(tab, where: str) -> dict[str, ChannelEntry]:
             raise DataError(f"{w}: scale must be a finite non-zero number, got {scale!r}")
         if target in ("time", "distance", "speed") and sign != 1:
             raise DataError(f"{w}: sign is for measured channels only")
-        out[target] = ChannelEntry(name, unit, float(sign), float(scale))
+        sensor = {}
+        for k in SENSOR_KEYS:
+            if k in v and target not in CHANNELS:
+                raise DataError(f"{w} {k}: {k} is for measured channels only (SPEC §11), not {target}")
+        for k in ("highpass", "lowpass"):
+            if k in v:
+                sensor[k] = parse_filter(v[k], k, f"{w} {k}")
+        if "range" in v:
+            rng = v["range"]
+            if isinstance(rng, bool) or not isinstance(rng, (int, float)) or not math.isfinite(rng) or rng <= 0:
+                raise DataError(f"{w} range: expected the sensor's full scale, a positive number in the "
+                                f"channel's unit (range = 5.0 for +-5 g), got {rng!r}")
+            sensor["range"] = float(rng)
+        out[target] = ChannelEntry(name, unit, float(sign), float(scale), **sensor)
     return out
+
+
+def parse_filter(v, kind: str, where: str) -> AnalogFilter:
+    """A ``highpass`` or ``lowpass`` value: a corner frequency (Hz, first order) or ``{ hz, order }``
+    (an analog Butterworth of that order, 1 to 8); :class:`DataError` at ``where`` otherwise."""
+    how = (f"expected a corner frequency in Hz (a positive number, first order) or {{ hz = 0.5, order = 2 }} "
+           f"(an analog Butterworth of order {ORDERS[0]} to {ORDERS[1]})")
+    order = 1
+    if isinstance(v, dict):
+        for k in v:
+            if k not in ("hz", "order"):
+                raise DataError(f"{where}: unknown key '{k}'; allowed: hz, order")
+        if "hz" not in v:
+            raise DataError(f"{where}: missing key 'hz'; {how}")
+        order = v.get("order", 1)
+        if isinstance(order, bool) or not isinstance(order, int) or not ORDERS[0] <= order <= ORDERS[1]:
+            raise DataError(f"{where} order: expected an integer from {ORDERS[0]} to {ORDERS[1]}, got {order!r}")
+        v = v["hz"]
+    if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) or v <= 0:
+        raise DataError(f"{where}: {how}, got {v!r}")
+    return AnalogFilter(kind, float(v), order)
 
 
 def _window(v, w):
@@ -193,4 +247,4 @@ def parse_csv_options(tab, where: str) -> CsvOptions:
 
 __all__ = ["UNITS", "SI", "TARGETS", "EXTRA_TARGETS", "PREPROCESS_KEYS", "RUN_PREPROCESS_KEYS", "CSV_KEYS",
            "CHANNEL_KEYS", "ChannelEntry", "CsvOptions", "quantity", "unit_factor", "gravity_unit_factor",
-           "ACC_FACTORS", "parse_channel_map", "parse_preprocess", "parse_csv_options"]
+           "ACC_FACTORS", "SENSOR_KEYS", "parse_channel_map", "parse_filter", "parse_preprocess", "parse_csv_options"]

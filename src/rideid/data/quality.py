@@ -1,0 +1,92 @@
+"""A dataset's data quality in one table: per channel, over every run, what the sensors and the logger did.
+
+Per SPEC channel: the share of samples at the channel's range (left out of
+the fit, SPEC §11) and in which runs, the gaps in its time bridged by
+interpolation, its noise level (the RMS of the quietest quarter second of
+each run's model window about its mean, :func:`rideid.data.measured.quietest_rms`,
+the median over the runs: the sensor noise where the car stood or rolled on
+flat road), the runs where it flat-lined, and its declared sensor chain.
+The terminal prints this table instead of one warning per run and channel;
+``result.json`` keeps it under ``data_quality`` and the report shows it.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..model.equations import CHANNEL_KIND, CHANNELS
+from .measured import quietest_rms
+
+#: the stretch (s) whose RMS is a channel's noise level
+NOISE_WINDOW_S = 0.25
+#: warnings the table replaces (the per-run lines about these are not printed one by one)
+SUMMARISED = (": clipped: ", "gap(s) in time", ": flat-lined ")
+
+
+def data_quality(ds) -> dict:
+    """``{"channels": {name: {...}}, "runs": n}`` (module docstring); JSON-ready.
+
+    Each channel's entry: ``clipped_share`` (the largest share of a run's model samples at the range),
+    ``clipped_runs`` (run -> share, runs with any), ``gaps`` (gaps bridged, over all runs), ``noise``
+    (median noise level, SI) and ``unit``, ``flat_lined`` (runs), ``filters`` (the declared chain, as
+    described), ``runs`` (how many runs measure it).
+    """
+    out = {}
+    for i, name in enumerate(CHANNELS):
+        entry = {"runs": 0, "clipped_share": 0.0, "clipped_runs": {}, "gaps": 0, "noise": None,
+                 "unit": "rad/s" if CHANNEL_KIND[name] == "rate" else "m/s^2", "flat_lined": [], "filters": []}
+        noise = []
+        for r in ds.runs:
+            rd = ds.data.get(r.id)
+            if rd is None or name not in rd.channels:
+                continue
+            entry["runs"] += 1
+            v = np.asarray(rd.channels[name], dtype=float)
+            fs = 1.0 / float(rd.time[1] - rd.time[0])
+            clipped = ds.clipped(r.id)
+            if clipped is not None and clipped[:, i].any():
+                share = float(clipped[:, i].mean())
+                entry["clipped_runs"][r.id] = share
+                entry["clipped_share"] = max(entry["clipped_share"], share)
+            mr = ds.measured.get(r.id)
+            rec = (mr.record.get("channels", {}).get(name, {}) if mr is not None else {})
+            entry["gaps"] += int(rec.get("gaps", {}).get("count", 0))
+            if rec.get("flat_lined") or np.ptp(v) == 0:
+                entry["flat_lined"].append(r.id)
+            else:
+                noise.append(quietest_rms(v, int(round(NOISE_WINDOW_S * fs))))
+            for f in ds.sensor_filters(r.id)[i]:
+                if f.describe() not in entry["filters"]:
+                    entry["filters"].append(f.describe())
+        if entry["runs"]:
+            entry["noise"] = float(np.median(noise)) if noise else None
+            out[name] = entry
+    return {"channels": out, "runs": len(ds.runs)}
+
+
+def quality_table(quality: dict) -> str:
+    """The terminal's data-quality table: one line per channel."""
+    lines = [f"{'channel':<12} {'runs':>4} {'clipped':>8}  {'gaps':>4} {'noise':>10}  {'unit':<6} notes"]
+    for name, e in quality["channels"].items():
+        clip = f"{100 * e['clipped_share']:.2f}%" if e["clipped_runs"] else "-"
+        noise = "-" if e["noise"] is None else f"{e['noise']:.3g}"
+        notes = []
+        if e["clipped_runs"]:
+            notes.append("clipped in " + ", ".join(e["clipped_runs"]) + " (left out of the fit)")
+        if e["flat_lined"]:
+            notes.append("flat-lined in " + ", ".join(e["flat_lined"]))
+        if e["filters"]:
+            notes.append("sensor " + "; ".join(e["filters"]))
+        lines.append(f"{name:<12} {e['runs']:>4} {clip:>8}  {e['gaps']:>4} {noise:>10}  {e['unit']:<6} "
+                     + "; ".join(notes))
+    lines.append("clipped: the largest share of a run's samples at the channel's range; gaps: bridged by "
+                 "interpolation; noise: RMS of the quietest 0.25 s (median over runs)")
+    return "\n".join(lines)
+
+
+def summarised_warning(message: str) -> bool:
+    """Whether a data warning is one the quality table stands for (clipping, gaps, flat lines)."""
+    return any(s in message for s in SUMMARISED)
+
+
+__all__ = ["NOISE_WINDOW_S", "data_quality", "quality_table", "summarised_warning"]

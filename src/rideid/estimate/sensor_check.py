@@ -1,0 +1,109 @@
+"""What the sensor chain may have done that the dataset does not say (SPEC §11 "Sensors as wired").
+
+**An undeclared AC coupling.** An IEPE accelerometer is AC-coupled: it
+records the channel high-passed at about 0.5 Hz. A dataset that does not
+declare it (``[channels] <name> highpass = ...``) is fitted by a car whose
+parameters absorb the coupling (measured on the built-in car with its four
+hub sensors coupled at 0.5 Hz: unsprung masses and tire rates off by several
+per cent, with error bars that do not cover it). Its signature in the fit:
+the identified car's channel, passed through a first-order high-pass of some
+corner between 0.1 and 2 Hz, matches the data markedly better than the
+channel itself. :func:`coupling_hints` tries those corners on every channel
+without a declared high-pass, over all runs at once, and names a channel
+whose residual sum of squares falls by at least :data:`HINT_REDUCTION`; a
+car fitted to data that are not coupled loses by any such filter (it removes
+the body's low-frequency motion the data hold).
+
+**Clipping.** Samples at a channel's range are left out of the fit; when
+the model is still not adequate on the channels that clipped,
+:func:`clipping_advice` says so (a sensor near its range also distorts, and
+the detected rail may not be the only one).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..model.equations import CHANNELS
+from ..model.sensors import AnalogFilter, SensorChain
+
+#: first-order high-pass corners (Hz) tried on the identified car's channels
+HINT_CORNERS = (0.1, 0.2, 0.3, 0.5, 0.7, 1.0, 1.5, 2.0)
+#: the least share by which a corner must cut the channel's residual sum of squares to be named
+HINT_REDUCTION = 0.5
+
+
+def coupling_hints(cf, response: dict) -> list[dict]:
+    """Channels whose data look AC-coupled without a declared ``highpass`` (module docstring).
+
+    Parameters
+    ----------
+    cf : CostFunction
+        The fit's cost function (its data, channel weights and kept samples).
+    response : dict
+        run id -> ``(n_time, 10)``: the identified car's channels as the declared chain records them
+        (:meth:`CostFunction.simulate`).
+
+    Returns
+    -------
+    list of dict
+        ``{"channel", "highpass_hz", "rss_reduction", "message"}`` per channel named, largest reduction first.
+    """
+    ds = cf.ds
+    hints = []
+    for c, name in enumerate(CHANNELS):
+        rows = []
+        for ri, rid in enumerate(cf.run_ids):
+            if cf.W[ri, c] <= 0 or any(f.kind == "highpass" for f in ds.sensor_filters(rid)[c]):
+                continue
+            s, e = cf.sim.run_start[ri], cf.sim.run_start[ri + 1]
+            keep = np.ones(e - s) if cf.keep is None else cf.keep[s:e, c]
+            rows.append((ri, rid, cf.Y[s:e, c], response[rid][:, c], keep, cf.W[ri, c]))
+        if not rows:
+            continue
+        rss0 = sum(w * np.sum(k * (yh - y) ** 2) for _, _, y, yh, k, w in rows)
+        if not rss0 > 0:
+            continue
+        best = (0.0, None)
+        for hz in HINT_CORNERS:
+            rss = 0.0
+            for ri, _rid, y, yh, k, w in rows:
+                chain = SensorChain(((AnalogFilter("highpass", hz),),), cf.sim.runs[ri].h)
+                yf = chain.apply(yh[:, None])[:, 0]
+                rss += w * np.sum(k * (yf - y) ** 2)
+            red = 1.0 - rss / rss0
+            if red > best[0]:
+                best = (red, hz)
+        red, hz = best
+        if hz is not None and red >= HINT_REDUCTION:
+            hints.append({"channel": name, "highpass_hz": hz, "rss_reduction": float(red),
+                          "message": (f"{name}: the data look AC-coupled (an IEPE sensor?): the fit of this channel "
+                                      f"improves {100 * red:.0f} % when the model's channel passes a {hz:g} Hz "
+                                      f"high-pass; declare the sensor's coupling, `[channels] {name} = {{ ..., "
+                                      f"highpass = {hz:g} }}` (its data sheet's corner), and identify again")})
+    hints.sort(key=lambda h: -h["rss_reduction"])
+    return hints
+
+
+def clipping_advice(ds, adequacy: dict | None) -> str | None:
+    """One sentence when the not-adequate verdict's flagged run/channel pairs are channels that reached their
+    range (the preprocessing records clipped samples there); None otherwise."""
+    if not adequacy or adequacy.get("adequate", True):
+        return None
+    clipped = []
+    for rid, rec in (adequacy.get("runs") or {}).items():
+        mr = ds.measured.get(rid)
+        if mr is None:
+            continue
+        for name, fig in rec.items():
+            info = mr.record.get("channels", {}).get(name, {}).get("clipped")
+            if fig.get("structure") and info:
+                clipped.append(f"{rid}/{name} ({100 * info['share']:.1f} % of its samples at the range)")
+    if not clipped:
+        return None
+    return ("Flagged pairs whose sensor clipped: " + ", ".join(clipped[:6]) + ". Samples at the range are left out "
+            "of the fit, but a sensor driven to its range distorts near it too: declare the sensor's full scale "
+            "(`[channels] <name> range = ...`), use a sensor with a larger range, or leave those runs out.")
+
+
+__all__ = ["HINT_CORNERS", "HINT_REDUCTION", "clipping_advice", "coupling_hints"]
