@@ -161,7 +161,7 @@ def _whitener(Acol, D, mode):
         return (lambda X: X), np.zeros(K)
     if mode == "free":
         perp, _ = roadfit._projector(Acol)
-        return perp, np.zeros(K)
+        return (lambda X: perp(X[..., None])[..., 0] if np.ndim(X) == 2 else perp(X)), np.zeros(K)
     AH = np.conj(np.swapaxes(Acol, -1, -2))
     G = (AH @ Acol) * D[:, None, None]                                      # D A^H A, (K, 2, 2) Hermitian
     ev, V = np.linalg.eigh(G)
