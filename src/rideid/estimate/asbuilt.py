@@ -64,6 +64,8 @@ from . import roadfit
 MODES = ("prior", "amplitude", "free")
 #: the unevenness power is averaged over this many bins either side (and both wheel paths)
 SMOOTH_BINS = 5
+#: a bin whose deviation from the drawing exceeds this many times the unevenness background gets its own variance
+OPEN_FACTOR = 4.0
 #: the unevenness variance is at least this share of what the sensor noise puts into the free road estimate
 PRIOR_FLOOR = 1e-3
 #: the diagonal load of the boundary unknowns' normal equations (unit diagonal; :func:`_normal_solve`)
@@ -273,6 +275,15 @@ def _smooth(v, half: int):
     return (c[hi] - c[lo]) / (hi - lo).reshape((-1,) + (1,) * (v.ndim - 1))
 
 
+def _running_median(raw, half: int):
+    """Median of ``raw`` (K, 2) over ``2 half + 1`` bins (fewer at the ends) and both columns."""
+    K = raw.shape[0]
+    out = np.empty(K)
+    for k in range(K):
+        out[k] = np.median(raw[max(0, k - half):k + half + 1])
+    return out
+
+
 def estimate_prior(P, geom, tr: TrackRun) -> Prior:
     """The noise and unevenness levels of run ``tr`` at the car ``P`` (module docstring): the road projected
     out, the free road regressed on the drawn one for the amplitude factor, the rest's power less the noise's
@@ -300,10 +311,16 @@ def estimate_prior(P, geom, tr: TrackRun) -> Prior:
     wt = 1.0 / np.maximum(v, 1e-300)
     den = float(np.sum(wt * np.abs(Uf) ** 2))
     alpha = float(np.sum(wt * np.real(np.conj(Uf) * R)) / den) if den > 0 else 1.0
-    dev = np.abs(R - alpha * Uf) ** 2 - v
-    sd2 = _smooth(np.mean(dev, axis=1), SMOOTH_BINS)
+    raw = np.abs(R - alpha * Uf) ** 2                                                       # (K, 2)
+    # the spectrum's background: a running median (robust to the few bins where the drawing itself is off), over
+    # ln 2 (the median of an exponential variable, |complex Gaussian|^2, is ln 2 of its mean), less the noise
+    background = _running_median(raw, SMOOTH_BINS) / np.log(2.0) - _smooth(np.mean(v, axis=1), SMOOTH_BINS)
     floor = PRIOR_FLOOR * _smooth(np.mean(v, axis=1), SMOOTH_BINS)
-    sd2 = np.maximum(sd2, floor)
+    background = np.maximum(background, floor)
+    # a bin whose deviation is far above the background is where the road departs from the drawing times a
+    # factor (the disc's envelope of a taller bump, a feature off its drawn place): the prior opens there
+    local = np.max(raw - v, axis=1)
+    sd2 = np.where(local > OPEN_FACTOR * background, local, background)
     return Prior(noise=noise, D=sd2 / noise, unevenness=sd2, alpha=alpha)
 
 
