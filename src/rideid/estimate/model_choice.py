@@ -534,8 +534,12 @@ def identify(ds, *, model=None, rng=None, seed=None, population: int = DEFAULT_P
     else:
         res = identify_model(ds, model=model, cost=cost, start=start, simulator=simulator, **common)
     chosen = tuple((res.model or {}).get("extensions") or ())
-    if cost is None and polish and not unknown_road_runs(ds) and as_built_runs(ds, chosen, tracks)[0]:
-        # SPEC §11: the tracks as built, from the car fitted on them as drawn (rideid.estimate.asbuilt)
+    drawn_fits = bool((res.adequacy or {}).get("adequate"))
+    if cost is None and polish and not drawn_fits and not unknown_road_runs(ds) \
+            and as_built_runs(ds, chosen, tracks)[0]:
+        # SPEC §11: the tracks as built, from the car fitted on them as drawn (rideid.estimate.asbuilt), when the
+        # drawing taken as exact leaves structure in the residuals (a drawing the data do not fault is kept: on an
+        # exact track the as-built stage would only cost time)
         res = identify_any_road(ds, start_result=res, simulator=simulator, tracks=tracks, **common)
     res = replace(res, vehicle=vehicle_table(ds.geometry))  # the geometry travels with the car (rideid export)
     warn_bounds(res)
