@@ -326,7 +326,9 @@ def _tracks_table(res) -> str:
                 lines.append(f"{tid:<18} {rid:<10} {r['amplitude_factor']:>9.4f} {1e3 * r['unevenness_rms_m']:>18.2f}")
             else:
                 lines.append(f"{tid:<18} {rid:<10} {r['fitted']}")
-    lines.append("error bars with tracks as built: measured up to 2x optimistic (docs/tracks-as-built.md)")
+    rejected = next((rec["rejected"] for rec in res.tracks.values() if rec.get("rejected")), None)
+    lines.append("tracks as built REJECTED, the estimates are the tracks' as drawn: " + rejected if rejected else
+                 "error bars with tracks as built: measured up to 2x optimistic (docs/tracks-as-built.md)")
     return "\n".join(lines)
 
 

@@ -561,6 +561,7 @@ def _identify_any_road(ds, *, rng=None, seed=None, population=None, generations=
                             as_built_note="runs on tracks as built: the residual at the estimated road, over the fit "
                                           f"band {roadfit.BAND[0]}-{roadfit.BAND[1]} Hz")
     tracks_block = _tracks_block(ds, trs, skipped, P, geom) if trs else None
+    odd = []
     if tracks_block and adequacy is not None:
         # a road can explain what the car lacks (a missing anti-roll bar, as unevenness left and right): what the
         # tracks as built needed must be what a track carries, else the verdict says so
@@ -580,6 +581,16 @@ def _identify_any_road(ds, *, rng=None, seed=None, population=None, generations=
     if note:
         model_block["note"] = note
     wall = time.perf_counter() - t0
+    if start_result is not None and odd:
+        # the road is not the explanation: the as-drawn result stands, with its verdict and what the road needed
+        why = adequacy["reasons"][0]
+        ad = dict(start_result.adequacy or {})
+        if ad:
+            ad["reasons"] = [f"tracks as built rejected: {why}"] + list(ad.get("reasons", []))
+        for rec in tracks_block.values():
+            rec["rejected"] = why
+        return replace(start_result, adequacy=ad or start_result.adequacy, tracks=tracks_block,
+                       wall_time_s=start_result.wall_time_s + wall)
     if start_result is not None:
         # the as-drawn identification's search, weights, maps and starts stand; the estimate is the as-built fit's
         return replace(start_result, x=np.asarray(x, dtype=float), names=list(space.names), std=std, covariance=cov,
