@@ -183,6 +183,10 @@ def _parser() -> argparse.ArgumentParser:
                         "damper_curves (SPEC §8: a force-velocity "
                         "curve per axle at the [model] damper_knots), bump_stops (clearance and rate per axle) "
                         "(default: the dataset's [model] extensions, else auto)")
+    s.add_argument("--tracks", choices=("as-built", "as-drawn"), default="as-built",
+                   help="as-built (default): each [[tracks]] entry is the nominal shape, its amplitude factor and "
+                        "unevenness fitted with the car (SPEC §11, docs/tracks-as-built.md); as-drawn: every track "
+                        "exactly as declared")
     s.add_argument("--no-report", action="store_true", help="write result.json and history.csv only")
 
     s = add("report", "(re)build report.html in an identification folder")
@@ -311,6 +315,23 @@ def _summary_table(res) -> str:
         lines.append(rideid.format_bump_stops(res.bump_stops))
     if res.roads:
         lines.append(_roads_table(res))
+    if res.tracks:
+        lines.append(_tracks_table(res))
+    return "\n".join(lines)
+
+
+def _tracks_table(res) -> str:
+    """The tracks as built (SPEC §11): each track's amplitude factor and unevenness, per run."""
+    lines = [f"{'track as built':<18} {'run':<10} {'amplitude':>9} {'unevenness mm RMS':>18}"]
+    for tid, rec in res.tracks.items():
+        for rid, r in rec.get("runs", {}).items():
+            if "amplitude_factor" in r:
+                lines.append(f"{tid:<18} {rid:<10} {r['amplitude_factor']:>9.4f} {1e3 * r['unevenness_rms_m']:>18.2f}")
+            else:
+                lines.append(f"{tid:<18} {rid:<10} {r['fitted']}")
+    rejected = next((rec["rejected"] for rec in res.tracks.values() if rec.get("rejected")), None)
+    lines.append("tracks as built REJECTED, the estimates are the tracks' as drawn: " + rejected if rejected else
+                 "error bars with tracks as built: measured up to 2x optimistic (docs/tracks-as-built.md)")
     return "\n".join(lines)
 
 
@@ -399,7 +420,7 @@ def _load_with_quality(ds_path, out):
 
 
 def run_identify(ds_path, out_dir, *, seed, population=None, generations=None, weights="adaptive",
-                 polish=True, quiet=False, out=None, report=True, model=None):
+                 polish=True, quiet=False, out=None, report=True, model=None, tracks="as-built"):
     out = out or sys.stdout
     if model is not None:
         model = rideid.parse_model_arg(model)  # base|full|auto, or groups: damper_curves,anti_roll_bars
@@ -414,7 +435,8 @@ def run_identify(ds_path, out_dir, *, seed, population=None, generations=None, w
     if kw["generations"] < 1:
         raise rideid.ArgumentError(f"--generations must be at least 1, got {kw['generations']}")
     # the model as rideid.identify chooses it (SPEC §5 amended): --model, else the dataset's [model], else auto
-    res = rideid.identify(ds, rng=seed, weights=weights, polish=polish, callback=prog.identify, model=model, **kw)
+    res = rideid.identify(ds, rng=seed, weights=weights, polish=polish, callback=prog.identify, model=model,
+                          tracks=tracks, **kw)
     prog.done()
     with rideid.atomic_output(out_dir, replaces=IDENTIFY_OUTPUTS) as tmp:
         res.save(tmp)
@@ -443,7 +465,7 @@ def cmd_identify(args, out=None):
     out = out or sys.stdout
     run_identify(args.dataset, args.out, seed=args.seed, population=args.population,
                  generations=args.generations, weights=args.weights, polish=not args.no_polish,
-                 quiet=args.quiet, out=out, report=not args.no_report, model=args.model)
+                 quiet=args.quiet, out=out, report=not args.no_report, model=args.model, tracks=args.tracks)
     return 0
 
 

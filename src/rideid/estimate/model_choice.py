@@ -44,7 +44,7 @@ from .budget import with_budget
 from .adequacy import MIN_IMPROVEMENT, advise, assess_fit
 from .materiality import weigh_result
 from .identify import DEFAULT_GENERATIONS, DEFAULT_POPULATION, identify as identify_model, sensor_notes, warn_bounds
-from .anyroad import identify_any_road, unknown_road_runs
+from .anyroad import TRACK_OPTIONS, as_built_runs, identify_any_road, unknown_road_runs
 from ..model.batch import single_threaded_blas, thread_map
 from .cost import CostFunction, ParameterSpace, refuse_unsupported_groups
 from ..errors import ArgumentError
@@ -466,7 +466,7 @@ def default_model(ds, model=None):
 def identify(ds, *, model=None, rng=None, seed=None, population: int = DEFAULT_POPULATION,
              generations: int = DEFAULT_GENERATIONS, weights: str = "adaptive", polish: bool = True,
              spread_tol: float | None = None, callback=None, cost: CostFunction | None = None, maps=None,
-             start=None, assess: bool = True, simulator: Simulator | None = None):
+             start=None, assess: bool = True, simulator: Simulator | None = None, tracks: str = "as-built"):
     """Estimate the ride parameters of a dataset, choosing the model as ``rideid identify`` does (SPEC §5).
 
     The dispatch of the command line: runs on unknown roads (SPEC §9) are
@@ -510,6 +510,12 @@ def identify(ds, *, model=None, rng=None, seed=None, population: int = DEFAULT_P
         How the car is simulated, for every stage (backend, integration
         settings; :class:`rideid.model.simulator.Simulator`, default
         ``Simulator()``).
+    tracks : {"as-built", "as-drawn"}
+        SPEC §11: each declared track is the nominal shape of the road the
+        car rolled over, its amplitude factor and unevenness fitted with the
+        car (:mod:`rideid.estimate.asbuilt`; a linear car with the eight
+        accelerometers at a constant speed, else the track is taken as
+        drawn), or every track exactly as drawn.
 
     Returns
     -------
@@ -521,8 +527,10 @@ def identify(ds, *, model=None, rng=None, seed=None, population: int = DEFAULT_P
         model = default_model(ds, model)
     common = dict(rng=rng, seed=seed, population=population, generations=generations, weights=weights,
                   polish=polish, spread_tol=spread_tol, callback=callback, maps=maps, assess=assess)
+    if tracks not in TRACK_OPTIONS:
+        raise ArgumentError(f"tracks: expected one of {', '.join(TRACK_OPTIONS)}, got {tracks!r}")
     if cost is None and unknown_road_runs(ds):  # SPEC §9: the road projected out (rideid.estimate.anyroad)
-        res = identify_any_road(ds, model=model, start=start, simulator=simulator, **common)
+        res = identify_any_road(ds, model=model, start=start, simulator=simulator, tracks=tracks, **common)
     elif isinstance(model, str) and model == "auto" and cost is None:
         if start is not None:
             raise ArgumentError("start: the model choice fits every candidate from its own search; "
@@ -530,6 +538,14 @@ def identify(ds, *, model=None, rng=None, seed=None, population: int = DEFAULT_P
         res = identify_auto(ds, simulator=simulator, **common)
     else:
         res = identify_model(ds, model=model, cost=cost, start=start, simulator=simulator, **common)
+    chosen = tuple((res.model or {}).get("extensions") or ())
+    drawn_fits = bool((res.adequacy or {}).get("adequate"))
+    if cost is None and polish and not drawn_fits and not unknown_road_runs(ds) \
+            and as_built_runs(ds, chosen, tracks)[0]:
+        # SPEC §11: the tracks as built, from the car fitted on them as drawn (rideid.estimate.asbuilt), when the
+        # drawing taken as exact leaves structure in the residuals (a drawing the data do not fault is kept: on an
+        # exact track the as-built stage would only cost time)
+        res = identify_any_road(ds, start_result=res, simulator=simulator, tracks=tracks, **common)
     res = replace(res, vehicle=vehicle_table(ds.geometry))  # the geometry travels with the car (rideid export)
     # SPEC §12: every declared uncertainty propagated to the estimates (std_total, budget)
     res = with_budget(ds, res, simulator, cost)

@@ -220,6 +220,9 @@ class IdentificationResult:
     roads: dict | None = None
     #: the estimated roads (in memory; written as road/<run>.csv): run id -> (x (n,), z (n, 2) left, right)
     road_profiles: dict | None = field(default=None, repr=False)
+    #: SPEC §11 tracks as built: track id -> what was learnt about it ("amplitude_factor", "unevenness_rms_m",
+    #: per run, ...; rideid.estimate.asbuilt); None when every track was taken as drawn
+    tracks: dict | None = None
     #: the dataset's ``[vehicle]`` table (m: wheelbase, tracks, tire_radius, cg_height when given), so that the
     #: identified car can leave without its dataset (rideid export, SPEC §10); None in results written before
     vehicle: dict | None = None
@@ -347,6 +350,7 @@ class IdentificationResult:
             **({"dampers": self.dampers} if self.dampers else {}),
             **({"bump_stops": self.bump_stops} if self.bump_stops else {}),
             **({"roads": self.roads} if self.roads else {}),
+            **({"tracks": self.tracks} if self.tracks else {}),
             **({"vehicle": self.vehicle} if self.vehicle else {}),
             **({"uncertainty": self.uncertainty} if self.uncertainty else {}),
             **({"data_quality": self.data_quality} if self.data_quality else {}),
@@ -401,7 +405,7 @@ def load(path) -> IdentificationResult:
         maps=_maps_from_json(doc.get("sensitivity"), rpath), rng_state=doc.get("rng_state"),
         model=doc.get("model"), adequacy=doc.get("adequacy"), correlation=doc.get("correlation"),
         checks=list(doc.get("checks") or []), dampers=doc.get("dampers"), bump_stops=doc.get("bump_stops"),
-        roads=doc.get("roads"), road_profiles=_read_roads(doc.get("roads"), rpath.parent),
+        roads=doc.get("roads"), road_profiles=_read_roads(doc.get("roads"), rpath.parent), tracks=doc.get("tracks"),
         vehicle=doc.get("vehicle"), uncertainty=doc.get("uncertainty"), data_quality=doc.get("data_quality"))
 
 

@@ -1,0 +1,369 @@
+"""Tracks as built (SPEC §11): the declared track is the nominal shape, the road under each wheel path is what
+the car rolled over.
+
+The model
+---------
+A proving-ground track is never its drawing: its amplitudes are a few per
+cent off and it carries 1-2 mm RMS of unevenness. A run on such a track is
+fitted like a run on an unknown road (:mod:`rideid.estimate.roadfit`: the
+channels' DFT, 0.2-25 Hz, the car linear, the state at the first sample and
+the rear wheels' lead-in as free boundary unknowns), except that the road
+is not free: at each frequency ``omega`` of the run's DFT
+
+    Y = alpha H U + A delta + (boundary terms) + noise,
+
+``U`` (4,) the DFT of the drawn track's four corner inputs (the rigid-disc
+envelope of SPEC §2), ``alpha`` the track's amplitude factor (one real
+unknown per run), ``A`` (c x 2) the left and right wheel paths' columns of
+:mod:`rideid.estimate.roadfit` (rear through the delay) and ``delta`` the
+unevenness under the front wheels, a complex Gaussian with variance
+``sigma_d^2(omega)`` per path, independent of the sensor noise (variance
+``sigma_n^2(omega)`` per weighted channel). Integrating ``delta`` out, each
+bin's data ``x = Y - alpha H U - boundary`` is Gaussian with covariance
+``sigma_n^2 M``, ``M = I + A D A^H``, ``D = sigma_d^2 / sigma_n^2``, and the
+negative log-likelihood is, per bin,
+
+    x^H M^-1 x / sigma_n^2 + log det M.
+
+The residual the least squares see is ``M^(-1/2) x / sigma_n`` (``M^(-1/2)``
+from the eigen-decomposition of the 2 x 2 matrix ``D A^H A``) followed by
+``sqrt(log det M)``: without that log-determinant the fit would prefer cars
+whose ``A`` is large (more of the data explained as road) and be biased.
+The boundary unknowns and ``alpha`` enter linearly and are solved at every
+trial car (variable projection), as on an unknown road.
+
+The unevenness spectrum is estimated from the data (empirical Bayes,
+:func:`estimate_prior`), at the start car and again at the first solution:
+the road is projected out (an unknown road's fit), the free road estimate
+``R`` is regressed on the drawn front road for ``alpha``, and the deviation's
+power ``|R - alpha U_front|^2``, less the part the sensor noise puts into
+``R`` (``sigma_n^2 (A^H A)^-1``), averaged over both paths and
+:data:`SMOOTH_BINS` neighbouring bins, is ``sigma_d^2``, floored at
+:data:`PRIOR_FLOOR` of that noise part. On an exact track ``sigma_d`` comes
+out near that floor and the fit is the known-road fit; where the track
+carries unevenness the prior widens and the road there is learnt.
+
+Limits (between the two limits of the prior): ``D = 0`` is the drawn track
+with an amplitude factor (:data:`MODES` "amplitude"), ``D`` infinite the
+unknown road ("free", the road projected out; no log-determinant). Both
+are kept for comparison (benchmarks/bench_tracks.py, docs/tracks-as-built.md).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+import scipy.linalg
+
+from ..model.simulate import prepare_run
+from . import roadfit
+
+#: the prior's variants: "prior" (the default, an estimated unevenness spectrum), "amplitude" (no
+#: unevenness: the drawn track times a fitted amplitude factor), "free" (the road projected out)
+MODES = ("prior", "amplitude", "free")
+#: the unevenness power is averaged over this many bins either side (and both wheel paths)
+SMOOTH_BINS = 5
+#: a bin whose deviation from the drawing exceeds this many times the unevenness background gets its own variance
+OPEN_FACTOR = 4.0
+#: the unevenness variance is at least this share of what the sensor noise puts into the free road estimate
+PRIOR_FLOOR = 1e-3
+#: the diagonal load of the boundary unknowns' normal equations (unit diagonal; :func:`_normal_solve`)
+NORMAL_RIDGE = 1e-12
+#: neighbouring DFT bins per cluster of the error bars' sandwich (:func:`meat`)
+CLUSTER_BINS = 1
+#: the sensor-noise power per bin is averaged over this many bins either side
+NOISE_BINS = 10
+
+
+@dataclass
+class Prior:
+    """A run's noise and unevenness levels per fit bin: ``noise`` (K,) ``sigma_n^2`` (weighted channels, per
+    bin), ``D`` (K,) ``sigma_d^2 / sigma_n^2`` (m^2 per unit of weighted channel^2), ``unevenness`` (K,)
+    ``sigma_d^2`` (m^2 per bin of the DFT), ``alpha`` the amplitude factor it was estimated with."""
+
+    noise: np.ndarray
+    D: np.ndarray
+    unevenness: np.ndarray
+    alpha: float
+
+
+@dataclass
+class TrackRun:
+    """One run on a declared track, prepared for the as-built fit.
+
+    Attributes
+    ----------
+    rr : roadfit.RoadRun
+        The run's channels as an unknown-road run (weights, DFT, fit bins, delay).
+    track : str
+        The ``[[tracks]]`` id.
+    U : (nbins, 4) complex
+        DFT of the drawn track's corner inputs fl, fr, rl, rr (m), every bin.
+    mode : str
+        One of :data:`MODES`.
+    prior : Prior or None
+        Set by :func:`estimate_prior` (needed in mode "prior"; the noise level in every mode).
+    """
+
+    rr: roadfit.RoadRun
+    track: str
+    U: np.ndarray
+    mode: str = "prior"
+    prior: Prior | None = field(default=None, repr=False)
+
+    @property
+    def run_id(self) -> str:
+        return self.rr.run_id
+
+    @property
+    def fit(self) -> np.ndarray:
+        return self.rr.fit
+
+    @property
+    def per_bin(self) -> int:
+        """Residual entries per DFT bin (real and imaginary part of each channel, and the log-determinant)."""
+        return 2 * len(self.rr.cols) + (self.mode == "prior")
+
+
+def nominal_inputs(ds, run):
+    """The drawn track's corner inputs of ``run`` (:class:`rideid.model.simulate.RunInput`), as the fit of the
+    track as drawn tabulates them."""
+    rd = ds.data[run.id]
+    return prepare_run(ds.manifest.tracks[run.track], ds.geometry, float(run.speed), rd.time)
+
+
+def prepare_track_run(ds, run, mode: str = "prior") -> TrackRun:
+    """:class:`TrackRun` of ``run`` (a run on a declared track with all eight accelerometers, constant speed)."""
+    if mode not in MODES:
+        raise ValueError(f"mode must be one of {', '.join(MODES)}, got {mode!r}")
+    rd = ds.data[run.id]
+    rr = roadfit.prepare_road_run(run.id, rd.matrix(), rd.fs, float(run.speed), ds.geometry)
+    ri = nominal_inputs(ds, run)
+    return TrackRun(rr=rr, track=run.track, U=np.fft.rfft(np.asarray(ri.u, dtype=float), axis=0), mode=mode)
+
+
+@dataclass
+class Fit:
+    """The as-built fit of one run at one car: ``residual`` (K, c) whitened (``M^(-1/2) x / sigma_n``),
+    ``logdet`` (K,), ``plain`` (K, c) the data less the model at the estimated road (weighted channels),
+    ``alpha``, the boundary unknowns ``f_state`` (14,) and ``f_lead`` (2, D)."""
+
+    residual: np.ndarray
+    logdet: np.ndarray
+    plain: np.ndarray
+    alpha: float
+    f_state: np.ndarray
+    f_lead: np.ndarray
+
+
+def _whitener(Acol, D, mode):
+    """``x -> M^(-1/2) x`` at each bin and ``log det M`` (K,); ``M = I + A D A^H`` (mode "prior"), ``I``
+    ("amplitude") or the projector's limit ("free": the road's directions removed, no log-determinant)."""
+    K = Acol.shape[0]
+    if mode == "amplitude":
+        return (lambda X: X), np.zeros(K)
+    if mode == "free":
+        perp, _ = roadfit._projector(Acol)
+        return (lambda X: perp(X[..., None])[..., 0] if np.ndim(X) == 2 else perp(X)), np.zeros(K)
+    AH = np.conj(np.swapaxes(Acol, -1, -2))
+    G = (AH @ Acol) * D[:, None, None]                                      # D A^H A, (K, 2, 2) Hermitian
+    ev, V = np.linalg.eigh(G)
+    ev = np.clip(ev, 0.0, None)
+    # U = A sqrt(D) V / sqrt(ev): orthonormal columns of the road's directions; shrink (1 - g) along them
+    with np.errstate(divide="ignore", invalid="ignore"):
+        U = (Acol @ V) * np.where(ev > 0, np.sqrt(D[:, None] / ev), 0.0)[:, None, :]
+    shrink = 1.0 - 1.0 / np.sqrt(1.0 + ev)                                  # (K, 2)
+    UH = np.conj(np.swapaxes(U, -1, -2))
+
+    def white(X):
+        X = np.asarray(X)
+        squeeze = X.ndim == 2
+        Xb = X[..., None] if squeeze else X
+        out = Xb - U @ (shrink[..., None] * (UH @ Xb))
+        return out[..., 0] if squeeze else out
+
+    return white, np.sum(np.log1p(ev), axis=1)
+
+
+def _normal_solve(G, b):
+    """``G^-1 b`` for the normal matrix ``G`` (unit diagonal), regularised by :data:`NORMAL_RIDGE` on the
+    diagonal: some of the rear lead-in's samples and the start's state explain the same thing, so ``G`` is
+    singular to rounding; the ridge picks the smallest of the equivalent solutions (the residual the same to
+    1e-9) and lets a Cholesky factor solve it (30 times faster than LAPACK's SVD least squares at the 400
+    unknowns of a slow run's lead-in)."""
+    A = G + NORMAL_RIDGE * np.eye(G.shape[0])
+    try:
+        return scipy.linalg.cho_solve(scipy.linalg.cho_factor(A, check_finite=False), b, check_finite=False)
+    except np.linalg.LinAlgError:
+        return np.linalg.lstsq(G, b, rcond=1e-13)[0]
+
+
+def solve(P, geom, tr: TrackRun, car=None) -> Fit:
+    """The as-built fit of run ``tr`` at the car ``P`` (16,): the amplitude factor and the boundary unknowns
+    solved by least squares on the whitened bins (module docstring)."""
+    rr = tr.rr
+    bins = rr.fit
+    w = rr.omega(bins)
+    h = rr.h
+    car = roadfit.system(P, geom) if car is None else car
+    H = roadfit.transfer(car, w, rr.cols)[0] * rr.scale[None, :, None]                     # (K,c,4)
+    ks, c = roadfit.delay_filter(rr.tau, h)
+    E = np.exp(-1j * np.outer(w * h, ks)) @ c
+    Acol = roadfit._road_columns(H, E)
+    pr = tr.prior
+    D = pr.D if pr is not None else np.zeros(bins.size)
+    white, logdet = _whitener(Acol, D, tr.mode)
+    N = H @ tr.U[bins][:, :, None]                                                          # (K,c,1)
+    cols = [white(N)[..., 0]]                                                               # alpha
+    S = white(roadfit._discrete_columns(car, w, rr.cols, h) * rr.scale[None, :, None])      # (K,c,14)
+    aL = white(H[:, :, 2:3])[..., 0]
+    aR = white(H[:, :, 3:4])[..., 0]
+    r = white(rr.Y[bins][:, :, None])[..., 0]
+    # each bin's whitened columns and data divided by its noise level
+    sn = np.sqrt(pr.noise) if pr is not None else np.ones(bins.size)
+    aN, S, aL, aR, r = cols[0] / sn[:, None], S / sn[:, None, None], aL / sn[:, None], aR / sn[:, None], r / sn[:, None]
+    Dn = rr.lead_in
+    lags = np.arange(-(Dn - 1), Dn)
+    ph = np.exp(1j * np.outer(w * h, lags))
+    idx = np.arange(Dn)[:, None] - np.arange(Dn)[None, :] + (Dn - 1)
+
+    def toeplitz(q):
+        return (q @ ph).real[idx]
+
+    en = np.exp(-1j * np.outer(w * h, np.arange(Dn)))                                      # (K, Dn)
+    g = np.concatenate([aN[:, :, None], S], axis=2)                                        # (K,c,15)
+    gf = g.reshape(-1, 15)
+    gr = np.concatenate([gf.real, gf.imag])
+    m = 15 + 2 * Dn
+    G = np.zeros((m, m))
+    b = np.zeros(m)
+    G[:15, :15] = gr.T @ gr
+    b[:15] = gr.T @ np.concatenate([r.real.ravel(), r.imag.ravel()])
+    gH = np.conj(np.swapaxes(g, 1, 2))                                                     # (K,15,c)
+    for j, a in enumerate((aL, aR)):
+        sl = slice(15 + j * Dn, 15 + (j + 1) * Dn)
+        G[:15, sl] = ((gH @ a[:, :, None])[..., 0].T @ en).real
+        G[sl, :15] = G[:15, sl].T
+        b[sl] = (np.sum(np.conj(a) * r, axis=1) @ np.conj(en)).real
+        for i, a2 in enumerate((aL, aR)):
+            sl2 = slice(15 + i * Dn, 15 + (i + 1) * Dn)
+            G[sl, sl2] = toeplitz(np.sum(np.conj(a) * a2, axis=1))
+    d = np.sqrt(np.clip(np.diag(G), 1e-300, None))
+    f = _normal_solve(G / np.outer(d, d), b / d) / d
+    alpha, fS, fL, fR = f[0], f[1:15], f[15:15 + Dn], f[15 + Dn:]
+    res = r - aN * alpha - S @ fS - aL * (en @ fL)[:, None] - aR * (en @ fR)[:, None]
+    # the data less the model at the estimated road: M^-1 x = M^(-1/2) (M^(-1/2) x) (weighted channels)
+    plain = white(res[:, :, None])[..., 0] * sn[:, None] if tr.mode != "amplitude" else res * sn[:, None]
+    return Fit(residual=res, logdet=logdet, plain=plain, alpha=float(alpha), f_state=fS, f_lead=np.stack([fL, fR]))
+
+
+def residuals(P, geom, tr: TrackRun) -> np.ndarray:
+    """Real residual vector of run ``tr`` at the car ``P``: per bin the real and imaginary parts of the whitened
+    residual, then (mode "prior") ``sqrt(log det M)``; its squared sum is the negative log-likelihood up to a
+    constant."""
+    fit = solve(P, geom, tr)
+    parts = [fit.residual.real, fit.residual.imag]
+    if tr.mode == "prior":
+        parts.append(np.sqrt(np.clip(fit.logdet, 0.0, None))[:, None])
+    return np.concatenate(parts, axis=1).ravel()
+
+
+def meat(J, e, tr: TrackRun) -> np.ndarray:
+    """The sandwich's meat of run ``tr``'s residual block (``e`` (m,), its Jacobian ``J`` (m, d)): the gradient's
+    spread over clusters of :data:`CLUSTER_BINS` neighbouring DFT bins (one, as on an unknown road: clusters of
+    8 or 16 bins, which would hold the correlation of a deviation local in time, gave the same error bars on
+    the SUV's tracks as built, measured)."""
+    g = (J * e[:, None]).reshape(-1, tr.per_bin, J.shape[1]).sum(axis=1)           # per bin
+    K = g.shape[0]
+    groups = np.arange(K) // max(1, CLUSTER_BINS)
+    G = np.zeros((groups[-1] + 1, J.shape[1]))
+    np.add.at(G, groups, g)
+    return G.T @ G
+
+
+def _smooth(v, half: int):
+    """Moving mean of ``v`` (K, ...) over ``2 half + 1`` bins (fewer at the ends)."""
+    c = np.cumsum(np.concatenate([np.zeros((1,) + v.shape[1:]), v]), axis=0)
+    k = np.arange(v.shape[0])
+    lo, hi = np.clip(k - half, 0, v.shape[0]), np.clip(k + half + 1, 0, v.shape[0])
+    return (c[hi] - c[lo]) / (hi - lo).reshape((-1,) + (1,) * (v.ndim - 1))
+
+
+def _running_median(raw, half: int):
+    """Median of ``raw`` (K, 2) over ``2 half + 1`` bins (fewer at the ends) and both columns."""
+    K = raw.shape[0]
+    out = np.empty(K)
+    for k in range(K):
+        out[k] = np.median(raw[max(0, k - half):k + half + 1])
+    return out
+
+
+def estimate_prior(P, geom, tr: TrackRun) -> Prior:
+    """The noise and unevenness levels of run ``tr`` at the car ``P`` (module docstring): the road projected
+    out, the free road regressed on the drawn one for the amplitude factor, the rest's power less the noise's
+    share in it, smoothed."""
+    rr = tr.rr
+    sol = roadfit.solve(P, geom, rr)
+    K, c = sol.residual.shape
+    # each bin keeps c - 2 of its c complex channels after the road's two; the boundary unknowns (14 + 2 D real)
+    # take their share of the rest (14 % on a slow run: an under-stated noise over-weights the quadratic form
+    # against the log-determinant, a bias towards cars that explain more as road)
+    kept = 2 * K * max(c - 2, 1)
+    dof = kept / max(kept - 14 - 2 * rr.lead_in, 1)
+    noise = _smooth(np.sum(np.abs(sol.residual) ** 2, axis=1) / max(c - 2, 1), NOISE_BINS) * dof
+    noise = np.maximum(noise, 1e-30 * max(float(np.mean(np.abs(rr.Y[rr.fit]) ** 2)), 1e-300))
+    w = rr.omega(rr.fit)
+    h = rr.h
+    H = roadfit.transfer(sol.car, w, rr.cols)[0] * rr.scale[None, :, None]
+    ks, cc = roadfit.delay_filter(rr.tau, h)
+    E = np.exp(-1j * np.outer(w * h, ks)) @ cc
+    Acol = roadfit._road_columns(H, E)
+    _, road_of = roadfit._projector(Acol)
+    en = np.exp(-1j * np.outer(w * h, np.arange(rr.lead_in)))
+    known = (roadfit._discrete_columns(sol.car, w, rr.cols, h) * rr.scale[None, :, None]) @ sol.f_state \
+        + H[:, :, 2] * (en @ sol.f_lead[0])[:, None] + H[:, :, 3] * (en @ sol.f_lead[1])[:, None]
+    R = road_of((rr.Y[rr.fit] - known)[:, :, None])[..., 0]                                 # (K, 2) m
+    AH = np.conj(np.swapaxes(Acol, -1, -2))
+    Ginv = np.linalg.inv(AH @ Acol)
+    v = noise[:, None] * np.real(np.stack([Ginv[:, 0, 0], Ginv[:, 1, 1]], axis=1))          # (K, 2) m^2
+    Uf = tr.U[rr.fit][:, :2]
+    wt = 1.0 / np.maximum(v, 1e-300)
+    den = float(np.sum(wt * np.abs(Uf) ** 2))
+    alpha = float(np.sum(wt * np.real(np.conj(Uf) * R)) / den) if den > 0 else 1.0
+    raw = np.abs(R - alpha * Uf) ** 2                                                       # (K, 2)
+    # the spectrum's background: a running median (robust to the few bins where the drawing itself is off), over
+    # ln 2 (the median of an exponential variable, |complex Gaussian|^2, is ln 2 of its mean), less the noise
+    background = _running_median(raw, SMOOTH_BINS) / np.log(2.0) - _smooth(np.mean(v, axis=1), SMOOTH_BINS)
+    floor = PRIOR_FLOOR * _smooth(np.mean(v, axis=1), SMOOTH_BINS)
+    background = np.maximum(background, floor)
+    # a bin whose deviation is far above the background is where the road departs from the drawing times a
+    # factor (the disc's envelope of a taller bump, a feature off its drawn place): the prior opens there
+    local = np.max(raw - v, axis=1)
+    sd2 = np.where(local > OPEN_FACTOR * background, local, background)
+    return Prior(noise=noise, D=sd2 / noise, unevenness=sd2, alpha=alpha)
+
+
+def unevenness_rms(tr: TrackRun) -> float:
+    """RMS (m) of the unevenness the prior found, one wheel path, over the fit band's wavelengths (Parseval on
+    the run's DFT)."""
+    if tr.prior is None:
+        return float("nan")
+    return float(np.sqrt(2.0 * np.sum(tr.prior.unevenness)) / tr.rr.n)
+
+
+def fitted_channels(P, geom, tr: TrackRun, y, fit: Fit | None = None) -> np.ndarray:
+    """The model's channels (n, 10) at the estimated road: the measured ones less the fit band's residual (NaN
+    for unused channels), as :func:`rideid.estimate.roadfit.fitted_channels`."""
+    fit = solve(P, geom, tr) if fit is None else fit
+    rr = tr.rr
+    full = np.zeros(rr.Y.shape, dtype=complex)
+    full[rr.fit] = fit.plain
+    e = np.fft.irfft(full, n=rr.n, axis=0) / rr.scale
+    out = np.full((rr.n, 10), np.nan)
+    out[:, rr.cols] = np.asarray(y, dtype=float)[:, rr.cols] - e
+    return out
+
+
+__all__ = ["MODES", "Prior", "TrackRun", "Fit", "nominal_inputs", "prepare_track_run", "solve", "residuals",
+           "estimate_prior", "unevenness_rms", "fitted_channels"]

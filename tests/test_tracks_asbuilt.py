@@ -1,0 +1,132 @@
+"""Tracks as built (SPEC §11, rideid.estimate.asbuilt): the drawing is the nominal shape, the road is what the car
+rolled over. The data come from the independent simulator of tests/asbuilt_tracks.py (SciPy lsim of a 7-DOF car
+written from SPEC §1, brute-force disc envelope), driving the drawing times 1.04 plus 1.5 mm RMS of unevenness."""
+
+import json
+
+import numpy as np
+import pytest
+
+import rideid
+from asbuilt_tracks import RUNS, write_dataset
+from cars import SUV_TRUTH
+from rideid.cli import main
+from rideid.errors import ArgumentError
+from rideid.estimate import asbuilt
+from rideid.estimate.cost import ParameterSpace
+
+
+def _truth_row(ds):
+    space = ParameterSpace(ds.known, ds.geometry, ds.manifest.bounds, extensions=())
+    return space, space.full(np.array([[SUV_TRUTH[n] for n in space.names]]))[0]
+
+
+@pytest.fixture(scope="module")
+def as_built(tmp_path_factory):
+    return rideid.load_dataset(write_dataset(tmp_path_factory.mktemp("asbuilt") / "ds", seed=4))
+
+
+def test_the_independent_simulator_drives_the_drawing_as_rideid_does(tmp_path):
+    """Two independent simulations of the exact drawing (SciPy lsim of a state space written from SPEC §1 with a
+    brute-force envelope, and rideid's exact discretisation with its tabulated envelope) agree to 2e-4 of each
+    channel's RMS (cost = mean squared error over channel energy)."""
+    ds = rideid.load_dataset(write_dataset(tmp_path / "exact", amplitude=1.0, rms=0.0, noise=0.0, runs=RUNS[1:3]))
+    cf = rideid.CostFunction(ds)
+    assert cf(np.array([[SUV_TRUTH[n] for n in cf.names]]))[0] < 4e-8
+
+
+def test_the_whitened_residual_is_the_gaussian_likelihood():
+    """Per bin ``|M^(-1/2) x|^2 + log det M`` with ``M = I + A D A^H`` equals the dense ``x^H M^-1 x + log det M``,
+    and the limits: D = 0 the identity, 'free' the projector off A's columns."""
+    rng = np.random.default_rng(7)
+    K, c = 6, 10
+    A = rng.standard_normal((K, c, 2)) + 1j * rng.standard_normal((K, c, 2))
+    D = rng.uniform(0.01, 5.0, K)
+    x = rng.standard_normal((K, c)) + 1j * rng.standard_normal((K, c))
+    white, logdet = asbuilt._whitener(A, D, "prior")
+    got = np.sum(np.abs(white(x)) ** 2, axis=1) + logdet
+    for k in range(K):
+        M = np.eye(c) + D[k] * A[k] @ A[k].conj().T
+        want = np.real(x[k].conj() @ np.linalg.solve(M, x[k])) + np.linalg.slogdet(M)[1]
+        assert got[k] == pytest.approx(want, rel=1e-10)
+    ident, ld0 = asbuilt._whitener(A, D, "amplitude")
+    assert np.array_equal(ident(x), x) and not ld0.any()
+    perp, _ = asbuilt._whitener(A, D, "free")
+    Q, _ = np.linalg.qr(A[0])
+    assert np.allclose(perp(x)[0], x[0] - Q @ (Q.conj().T @ x[0]), atol=1e-12)
+
+
+def test_the_amplitude_factor_of_a_track_without_unevenness(tmp_path):
+    """Runs on the twist and the washboard 4 % above their drawing, no unevenness, 1 % noise: at the true car the
+    fit finds each run's factor to 0.3 % (the disc's envelope of a 4 % taller bump is not exactly 4 % taller),
+    and the drawing as it is gives 1 to 1e-3. (Without noise the bins' noise levels are rounding, and their
+    weights arbitrary: the twist's factor then came out 1.055.)"""
+    runs = [RUNS[1], RUNS[4]]
+    for amp, tol in ((1.04, 0.003), (1.0, 1e-3)):
+        ds = rideid.load_dataset(write_dataset(tmp_path / f"a{amp}", amplitude=amp, rms=0.0, runs=runs))
+        _, P = _truth_row(ds)
+        for run in ds.runs:
+            tr = asbuilt.prepare_track_run(ds, run, "amplitude")
+            tr.prior = asbuilt.estimate_prior(P, ds.geometry, tr)
+            assert asbuilt.solve(P, ds.geometry, tr).alpha == pytest.approx(amp, abs=tol), run.id
+
+
+def test_the_unevenness_found(as_built):
+    """At the true car the prior finds each run's unevenness: 1.5 mm RMS in the simulation (0.5-10 m waves, inside
+    every run's fit band) plus what the envelope adds; between 1.2 and 3.5 mm on every run, and a factor near
+    1.04 on the twist."""
+    _, P = _truth_row(as_built)
+    for run in as_built.runs:
+        tr = asbuilt.prepare_track_run(as_built, run)
+        tr.prior = asbuilt.estimate_prior(P, as_built.geometry, tr)
+        assert 1.2e-3 < asbuilt.unevenness_rms(tr) < 3.5e-3, run.id
+        if run.track == "twist_high":
+            assert asbuilt.solve(P, as_built.geometry, tr).alpha == pytest.approx(1.04, abs=0.01)
+
+
+def test_the_car_on_tracks_as_built_from_a_start(as_built):
+    """The default path from a start 3 % off the truth (the search skipped, the polish and the as-built stage
+    as rideid identify runs them): the twelve within 1 %, every error within 3 std_robust (measured: 2.5 at most,
+    9 of 12 within 2: the error bars are optimistic here, docs/tracks-as-built.md), the verdict adequate, and
+    the tracks block in result.json with the twist's factor near 1.04."""
+    space, _ = _truth_row(as_built)
+    rng = np.random.default_rng(3)
+    start = np.array([SUV_TRUTH[n] for n in space.names]) * (1 + 0.03 * rng.choice([-1, 1], len(space.names)))
+    res = rideid.identify(as_built, start=start, model="base", rng=1)
+    errs = {n: res.parameters[n] / v - 1 for n, v in SUV_TRUTH.items()}
+    assert max(abs(e) for e in errs.values()) < 0.01, errs
+    z = {n: (res.parameters[n] - v) / res.details[n]["std_robust"] for n, v in SUV_TRUTH.items()}
+    assert max(abs(v) for v in z.values()) < 3.0, z
+    assert res.adequacy["adequate"] is True
+    assert res.adequacy["as_built"] == sorted(r[0] for r in RUNS)
+    tw = res.tracks["twist_high"]
+    assert tw["amplitude_factor"] == pytest.approx(1.04, abs=0.015)
+    assert set(tw["runs"]) == {"T_HL", "T_HH"}
+    doc = json.loads(json.dumps(res.to_dict()))
+    assert 1e-3 < doc["tracks"]["washboard"]["runs"]["W_H"]["unevenness_rms_m"] < 4e-3
+
+
+def test_as_drawn_keeps_the_drawing_and_a_bad_option_is_refused(as_built):
+    with pytest.raises(ArgumentError, match="tracks: expected one of as-built, as-drawn, got 'exact'"):
+        rideid.identify(as_built, tracks="exact")
+
+
+@pytest.mark.slow
+def test_rideid_identify_on_tracks_as_built_and_exact(tmp_path, capsys):
+    """The command line with its defaults, seed 1: on the tracks as built the twelve within 1 %, at least 10 of 12
+    covered, adequate; on the exact drawing no error above 0.5 %; as-built time at most twice the as-drawn's."""
+    truth = {"m_s": 1850.0, **SUV_TRUTH}
+    folder = write_dataset(tmp_path / "ab", seed=1)
+    assert main(["identify", str(folder), "--out", str(tmp_path / "fit"), "--seed", "1", "--no-report",
+                 "--quiet"]) == 0
+    doc = json.loads((tmp_path / "fit" / "result.json").read_text())
+    p = doc["parameters"]
+    assert max(abs(p[n]["value"] / v - 1) for n, v in truth.items()) < 0.01
+    assert sum(abs(p[n]["value"] - v) <= 2 * p[n]["std_robust"] for n, v in truth.items()) >= 10
+    assert doc["adequacy"]["adequate"] is True
+    assert doc["tracks"]["twist_high"]["amplitude_factor"] == pytest.approx(1.04, abs=0.015)
+    exact = write_dataset(tmp_path / "ex", amplitude=1.0, rms=0.0, seed=1)
+    assert main(["identify", str(exact), "--out", str(tmp_path / "fx"), "--seed", "1", "--no-report",
+                 "--quiet"]) == 0
+    doc = json.loads((tmp_path / "fx" / "result.json").read_text())
+    assert max(abs(doc["parameters"][n]["value"] / v - 1) for n, v in truth.items()) < 0.005
