@@ -1,12 +1,15 @@
 """Batched simulation of many candidate cars over many runs.
 
 :class:`BatchSimulator` owns the parameter-independent data of a set of runs
-(packed once) and evaluates a population ``P`` of shape ``(n_pop, 12)`` or
-``(n_pop, 16)`` (with the extensions of SPEC §6)
+(packed once) and evaluates a population ``P`` of shape ``(n_pop, 12)``,
+``(n_pop, 16)`` (with the extensions of SPEC §6) or ``(n_pop, 23)`` (and the
+powertrain of SPEC §11)
 either to simulated channels or to per-run weighted squared errors, through
 the compiled kernel (:mod:`rideid.kernel`) or the plain NumPy reference
 (:func:`rideid.simulate.simulate_reference`; ``RIDEID_KERNEL=numpy``, see
-:mod:`rideid.model.backend`). :class:`rideid.model.simulator.Simulator` binds this class or the
+:mod:`rideid.model.backend`). The compiled kernel integrates the symmetric
+block of 8 states only: a population with a powertrain on mounts (12 states
+there) always runs the NumPy reference. :class:`rideid.model.simulator.Simulator` binds this class or the
 nonlinear car's :class:`rideid.model.nonlinear.NonlinearSimulator` by the
 parameter layout.
 """
@@ -23,7 +26,7 @@ from . import backend
 from .kernel_layout import LANES, OFFSETS
 from .discretize import N_MAX, Discretized, n_terms, spectral_radius
 from .equations import blocks as blocks_of
-from .params import Geometry, column
+from .params import Geometry, column, has_powertrain
 from .simulate import RunInput, initial_states, simulate_reference
 
 
@@ -176,14 +179,14 @@ class BatchSimulator:
         """
         Y = np.ascontiguousarray(Y, dtype=float)
         W = np.ascontiguousarray(W, dtype=float)
-        if self._use_numpy():
+        if self._use_numpy() or has_powertrain(P):
             return self.errors_reference(P, Y, W)
         err, _ = self._call(P, Y, W, 0)
         return err
 
     def outputs(self, P, pin=None):
         """Simulated channels: list over runs of ``(n_pop, n_time, 10)``."""
-        if self._use_numpy():
+        if self._use_numpy() or has_powertrain(P):
             return self.outputs_reference(P)
         P = np.atleast_2d(P)
         Y = np.zeros((self.n_samples, 10))

@@ -196,7 +196,7 @@ def simulate_reference(P, geom: Geometry, run: RunInput, disc: Discretized | Non
 
     Parameters
     ----------
-    P : (n_pop, 12) or (n_pop, 16)
+    P : (n_pop, 12), (n_pop, 16) or (n_pop, 23)
     geom : Geometry
     run : RunInput
 
@@ -205,8 +205,8 @@ def simulate_reference(P, geom: Geometry, run: RunInput, disc: Discretized | Non
     y : (n_pop, n_time, 10) in :data:`rideid.model.CHANNELS` order.
     states : (n_pop, n_time, 14) in decomposed order
         ``[z, theta, zf_s, zr_s, rates(4), phi, zf_a, zr_a, rates(3)]``
-        (the physical states ``x``, not the shifted ones), only with
-        ``return_states``.
+        (the physical states ``x``, not the shifted ones; a powertrain's
+        relative motion is not among them), only with ``return_states``.
     """
     P = np.atleast_2d(np.asarray(P, dtype=float))
     if disc is None:
@@ -216,7 +216,8 @@ def simulate_reference(P, geom: Geometry, run: RunInput, disc: Discretized | Non
     n = run.n
     gs = np.empty((P.shape[0], n, 4))
     ga = np.empty((P.shape[0], n, 3))
-    Xs = np.empty((P.shape[0], n, 8))
+    ns = disc.Phi_s.shape[-1] // 2  # 4 coordinates, 6 with a powertrain (SPEC §11)
+    Xs = np.empty((P.shape[0], n, 2 * ns))
     Xa = np.empty((P.shape[0], n, 6))
     for k in range(n):
         Xs[:, k], Xa[:, k] = xs, xa
@@ -229,12 +230,13 @@ def simulate_reference(P, geom: Geometry, run: RunInput, disc: Discretized | Non
             xs = np.einsum("pij,pj->pi", disc.Phi_s, xs) + np.einsum("npij,jn->pi", disc.G_s, mus)
             xa = np.einsum("pij,pj->pi", disc.Phi_a, xa) + np.einsum("npij,jn->pi", disc.G_a, mua)
     # generalised velocities: decomposed rates -> COORDS
-    rates = np.concatenate([Xs[:, :, 4:], Xa[:, :, 3:]], axis=-1) @ DECOMPOSED_TO_COORDS.T
+    rates = np.concatenate([Xs[:, :, ns:ns + 4], Xa[:, :, 3:]], axis=-1) @ DECOMPOSED_TO_COORDS.T
     y = assemble_channels(P, geom, gs, ga, rates)
     if return_states:
         Xs = Xs + np.einsum("pij,tj->pti", disc.Brs, run.ud[:, :2])  # x = xi + Br u
         Xa = Xa + np.einsum("pij,tj->pti", disc.Bra, run.ud[:, 2:])
-        return y, np.concatenate([Xs, Xa], axis=-1)
+        car = np.r_[0:4, ns:ns + 4]  # the car's states; a powertrain's relative motion left out
+        return y, np.concatenate([Xs[:, :, car], Xa], axis=-1)
     return y
 
 
