@@ -45,7 +45,7 @@ from __future__ import annotations
 import numpy as np
 from scipy import special  # the two tail probabilities; scipy.stats takes 0.5 s to import
 
-from ..model.params import GROUPS
+from ..model.params import SUSPENSION_GROUPS as GROUPS
 from ..model.batch import single_threaded_blas, thread_map
 from ..model.equations import CHANNELS
 

@@ -51,14 +51,16 @@ from ..model.equations import CHANNEL_KIND, CHANNELS
 from ..model.nonlinear import (BUMP_STOP_NAMES, DEFAULT_KNOTS, NonlinearLayout, NonlinearSimulator, Pin,
                                curve_names, damper_force)
 from ..model.simulator import Simulator
-from ..model.params import (ALL_NAMES, EXT_NAMES, GROUPS, INDEX, MASS_COUNT, NAMES, default_bounds, nominal_car,
-                            total_mass)
+from ..model.params import (ALL_NAMES, EXT_NAMES, GROUPS, INDEX, MASS_COUNT, NAMES, SCALE_FREE, SIGNED, default_bounds,
+                            nominal_car, powertrain_fits, total_mass)
 from ..data.schema import NONLINEAR_GROUPS
 
 ENERGY_FLOOR = 0.01
 
 #: the SPEC §8 groups this version identifies
 CURVES = "damper_curves"
+#: SPEC §11's powertrain on mounts (a linear group, :data:`rideid.model.params.GROUPS`)
+POWERTRAIN = "powertrain"
 BUMP = "bump_stops"
 #: the groups a model may have, canonical order: SPEC §6's linear ones, then the damper curves, the bump stops
 IDENTIFIABLE_GROUPS: tuple[str, ...] = tuple(GROUPS) + (CURVES, BUMP)
@@ -80,6 +82,11 @@ MEAN_SLOPE_VELOCITY = 0.1
 def refuse_unsupported_groups(groups, where: str = "model"):
     """The bump stops of SPEC §8 are simulated but not identified yet: one clear :class:`ArgumentError`
     rather than a fit that silently leaves them out (damper curves are identified)."""
+    if POWERTRAIN in groups and any(g in NONLINEAR_GROUPS for g in groups):
+        raise ArgumentError(f"{where}: 'powertrain' (SPEC §11) together with "
+                            f"{' and '.join(repr(g) for g in groups if g in NONLINEAR_GROUPS)} (SPEC §8): this "
+                            "version of rideid simulates a powertrain on mounts in the linear car only; fit one or "
+                            "the other")
     bad = [g for g in groups if g in NONLINEAR_GROUPS and g not in IDENTIFIABLE_GROUPS]
     if bad:
         raise ArgumentError(f"{where}: {' and '.join(repr(g) for g in bad)} (SPEC §8) cannot be identified by this "
@@ -355,7 +362,14 @@ class ParameterSpace:
             col = P[:, INDEX[n]]
             ok &= (col > 0) & ((col < self.geometry.wheelbase) if n == "a" else True)
         if P.shape[1] > len(NAMES):
-            ok &= np.all(P[:, len(NAMES):len(ALL_NAMES)] >= 0, axis=1)
+            ext = [INDEX[n] for n in ALL_NAMES[len(NAMES):P.shape[1]] if n not in SIGNED]
+            ok &= np.all(P[:, ext] >= 0, axis=1)
+        if P.shape[1] == len(ALL_NAMES) or self.layout is not None:
+            # a powertrain leaves the rest of the body a positive mass and inertia, its pitch inertia > 0
+            with np.errstate(invalid="ignore"):
+                ok &= powertrain_fits(np.where(np.isfinite(P[:, :len(ALL_NAMES)]), P[:, :len(ALL_NAMES)], 0.0))
+            on = P[:, INDEX["m_p"]] > 0
+            ok &= ~on | ((P[:, INDEX["I_p"]] > 0) & (P[:, INDEX["f_pb"]] > 0) & (P[:, INDEX["f_pp"]] > 0))
         if self.bump:
             for n in BUMP_STOP_NAMES:
                 ok &= (P[:, self.col[n]] > 0) if n.startswith("bs_clear") else (P[:, self.col[n]] >= 0)
@@ -377,7 +391,7 @@ class ParameterSpace:
             s = self.known["total_mass"] / total_mass(base)
         else:
             s = self.known[anchor] / base[INDEX[anchor]]
-        P = base * np.where(np.array(ALL_NAMES) == "a", 1.0, s)
+        P = base * np.where(np.isin(np.array(ALL_NAMES), SCALE_FREE), 1.0, s)
         if self.bump:  # stops at 50 mm, 50 kN/m scaled with the car
             P = np.concatenate([P, [0.05, 0.05, 5.0e4 * s, 5.0e4 * s]])
         if self.curves:

@@ -73,7 +73,7 @@ from ..model.batch import single_threaded_blas
 from ..model.equations import modal_summary
 from ..data.schema import NONLINEAR_GROUPS
 from ..model.nonlinear import BUMP_STOP_NAMES
-from ..model.params import ALL_NAMES, GROUPS, UNITS
+from ..model.params import ALL_NAMES, SUSPENSION_GROUPS, UNITS
 from ..model.simulator import Simulator
 from .bumps import bump_block, frozen_values, reach, scan_start
 from .dampers import dampers_block, knot_excitation
@@ -111,8 +111,8 @@ def model_extensions(ds: Dataset, model=None) -> tuple[str, ...]:
     """Extension groups of the model to fit.
 
     ``model``: ``None`` (the dataset's ``[model] extensions``, else the
-    twelve), ``"base"`` (the twelve), ``"full"`` (every group), or a sequence
-    of group names.
+    twelve), ``"base"`` (the twelve), ``"full"`` (SPEC §6's groups:
+    anti-roll bars and tire damping), or a sequence of group names.
     """
     if model is None:
         refuse_unsupported_groups(ds.manifest.extensions or (), f"{ds.manifest.path}: [model] extensions")
@@ -121,7 +121,7 @@ def model_extensions(ds: Dataset, model=None) -> tuple[str, ...]:
         if model == "base":
             return ()
         if model == "full":
-            return tuple(GROUPS)
+            return tuple(SUSPENSION_GROUPS)
         if model in MODELS:
             raise ArgumentError(f"model {model!r} is not one fitted model")
         model = parse_model_arg(model)

@@ -38,7 +38,7 @@ from dataclasses import replace
 import numpy as np
 from scipy import special
 
-from ..model.params import GROUPS
+from ..model.params import SUSPENSION_GROUPS as GROUPS
 from ..data.schema.manifest import vehicle_table
 from .adequacy import MIN_IMPROVEMENT, advise, assess_fit
 from .identify import DEFAULT_GENERATIONS, DEFAULT_POPULATION, identify as identify_model, warn_bounds

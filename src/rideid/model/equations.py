@@ -479,5 +479,6 @@ def format_modal_summary(summary) -> str:
     return "\n".join(lines)
 
 
-__all__ = ["CHANNELS", "POWERTRAIN_COORDS", "POWERTRAIN_MODES", "n_coords", "mck", "output_map", "rate_input", "state_space", "blocks", "modal_summary",
+__all__ = ["CHANNELS", "POWERTRAIN_COORDS", "POWERTRAIN_MODES", "n_coords",
+           "mck", "output_map", "rate_input", "state_space", "blocks", "modal_summary",
            "static_corner_loads", "static_state", "INDEX"]

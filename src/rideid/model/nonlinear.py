@@ -147,7 +147,7 @@ import numpy as np
 from ..errors import DataError
 from . import backend
 from .equations import CHANNELS, mck, blocks as blocks_of, static_corner_loads
-from .params import ALL_NAMES, GRAVITY, INDEX, Geometry, check_parameters, full_rows
+from .params import ALL_NAMES, GRAVITY, INDEX, ROW_WIDTHS, Geometry, check_parameters, full_rows, has_powertrain
 from .nl_coef import CI, COEF, hermite_value_slope
 from .simulate import RunInput
 
@@ -174,8 +174,9 @@ class NonlinearLayout:
 
     ``knots``: damper velocity knots (m/s, strictly increasing, nonzero;
     ``None``: linear dampers ``c_sf``, ``c_sr``); ``bump_stops``: the four
-    :data:`BUMP_STOP_NAMES` columns are present. Rows are the sixteen
-    :data:`rideid.model.params.ALL_NAMES`, then the bump stops, then the
+    :data:`BUMP_STOP_NAMES` columns are present. Rows are the
+    :data:`rideid.model.params.ALL_NAMES` (a powertrain's columns 0: the
+    nonlinear car has none), then the bump stops, then the
     front and rear curve forces (:func:`curve_names`).
     """
 
@@ -225,7 +226,7 @@ class NonlinearLayout:
     def rows(self, P) -> np.ndarray:
         """Rows ``P`` as a float array ``(n, n_columns)``; for a linear layout 12 columns are accepted too."""
         P = np.atleast_2d(np.asarray(P, dtype=float))
-        if self.linear and P.shape[-1] in (12, 16):
+        if self.linear and P.shape[-1] in ROW_WIDTHS:
             return full_rows(P)
         if P.shape[-1] != self.n_columns:
             raise DataError(f"nonlinear parameter rows must have {self.n_columns} columns "
@@ -879,6 +880,9 @@ def check_nonlinear(P, geom: Geometry, layout: NonlinearLayout, where: str = "pa
     if layout.knots is not None:
         base[:, [INDEX["c_sf"], INDEX["c_sr"]]] = 1.0
     check_parameters(base, geom, where)
+    if has_powertrain(base):
+        raise DataError(f"{where}: the nonlinear car (damper curves, bump stops) has no powertrain on mounts in "
+                        "this version of rideid: give m_p = 0 or linear dampers without bump stops")
     for i, nm in enumerate(layout.names[len(ALL_NAMES):], start=len(ALL_NAMES)):
         col = P[:, i]
         if not np.all(np.isfinite(col)):

@@ -32,6 +32,9 @@ GROUPS: dict[str, tuple[str, ...]] = {
     # SPEC §11: a rigid powertrain on mounts inside the sprung mass, in bounce and pitch
     "powertrain": ("m_p", "x_p", "I_p", "f_pb", "zeta_pb", "f_pp", "zeta_pp"),
 }
+#: SPEC §6's groups: the ones ``--model full`` fits and ``--model auto`` weighs in its one search (the
+#: powertrain, whose model runs the NumPy backend, is weighed after it, when the car needs more).
+SUSPENSION_GROUPS: dict[str, tuple[str, ...]] = {g: GROUPS[g] for g in ("anti_roll_bars", "tire_damping")}
 #: The extension names, in column order after the twelve.
 EXT_NAMES: tuple[str, ...] = tuple(n for g in GROUPS.values() for n in g)
 #: All names: full parameter rows have these columns (23).
