@@ -81,7 +81,8 @@ KNOT_ADVICE = ("The damper curves are straight between their knots: a real curve
                "leaves road-driven structure, so try knots where it bends (`[model] damper_knots` in dataset.toml, "
                "docs/dampers.md). ")
 #: what the model may lack, by the group that adds it
-_LACKS = (("damper_curves", "nonlinear dampers"), ("bump_stops", "bump stops"))
+_LACKS = (("damper_curves", "nonlinear dampers"), ("bump_stops", "bump stops"),
+          ("powertrain", "a powertrain on mounts: `--model powertrain`"))
 
 
 def ljung_box(e, lags: int = WHITENESS_LAGS) -> tuple[float, float]:
