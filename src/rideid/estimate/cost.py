@@ -51,8 +51,8 @@ from ..model.equations import CHANNEL_KIND, CHANNELS
 from ..model.nonlinear import (BUMP_STOP_NAMES, DEFAULT_KNOTS, NonlinearLayout, NonlinearSimulator, Pin,
                                curve_names, damper_force)
 from ..model.simulator import Simulator
-from ..model.params import (ALL_NAMES, EXT_NAMES, GROUPS, INDEX, MASS_COUNT, NAMES, SCALE_FREE, SIGNED, default_bounds,
-                            nominal_car, powertrain_fits, total_mass)
+from ..model.params import (ALL_NAMES, EXT_NAMES, GROUPS, INDEX, MASS_COUNT, NAMES, POWERTRAIN_NAMES, SCALE_FREE, SIGNED,
+                            default_bounds, nominal_car, powertrain_fits, total_mass)
 from ..data.schema import NONLINEAR_GROUPS
 
 ENERGY_FLOOR = 0.01
@@ -149,9 +149,9 @@ class ParameterSpace:
         The known value that fixes the absolute scale (SPEC §1), normally ``total_mass``.
     width : int
         Columns of the full rows :meth:`full` returns: 12, or 16 when the
-        model has an extension group or an extension value is known; with
-        damper curves the :class:`~rideid.model.nonlinear.NonlinearLayout`'s
-        16 + 2K.
+        model has a group of SPEC §6 or such a value is known, 23 with the
+        powertrain (SPEC §11); with damper curves the
+        :class:`~rideid.model.nonlinear.NonlinearLayout`'s 23 + 2K.
     param_names : tuple of str
         The names of those columns.
     col : dict
@@ -214,7 +214,13 @@ class ParameterSpace:
         if self.layout is not None:
             self.param_names = self.layout.names
         else:
-            width = len(ALL_NAMES) if (model_ext or any(n in self.fixed for n in EXT_NAMES)) else len(NAMES)
+            # 12 columns, 16 with SPEC §6's groups, 23 with the powertrain (the narrowest row of the model)
+            if any(n in POWERTRAIN_NAMES for n in model_ext) or any(n in self.fixed for n in POWERTRAIN_NAMES):
+                width = len(ALL_NAMES)
+            elif model_ext or any(n in self.fixed for n in EXT_NAMES):
+                width = len(NAMES) + 4
+            else:
+                width = len(NAMES)
             self.param_names = ALL_NAMES[:width]
         self.width = len(self.param_names)
         self.col = {n: i for i, n in enumerate(self.param_names)}
@@ -392,6 +398,8 @@ class ParameterSpace:
         else:
             s = self.known[anchor] / base[INDEX[anchor]]
         P = base * np.where(np.isin(np.array(ALL_NAMES), SCALE_FREE), 1.0, s)
+        if self.layout is None:
+            P = P[:self.width]
         if self.bump:  # stops at 50 mm, 50 kN/m scaled with the car
             P = np.concatenate([P, [0.05, 0.05, 5.0e4 * s, 5.0e4 * s]])
         if self.curves:
