@@ -51,8 +51,8 @@ from ..model.equations import CHANNEL_KIND, CHANNELS
 from ..model.nonlinear import (BUMP_STOP_NAMES, DEFAULT_KNOTS, NonlinearLayout, NonlinearSimulator, Pin,
                                curve_names, damper_force)
 from ..model.simulator import Simulator
-from ..model.params import (ALL_NAMES, EXT_NAMES, GROUPS, INDEX, MASS_COUNT, NAMES, POWERTRAIN_NAMES, SCALE_FREE, SIGNED,
-                            default_bounds, nominal_car, powertrain_fits, total_mass)
+from ..model.params import (ALL_NAMES, EXT_NAMES, GROUPS, INDEX, MASS_COUNT, NAMES, POWERTRAIN_NAMES, SCALE_FREE,
+                            SIGNED, default_bounds, nominal_car, powertrain_fits, total_mass)
 from ..data.schema import NONLINEAR_GROUPS
 
 ENERGY_FLOOR = 0.01
