@@ -52,7 +52,7 @@ from ..model.nonlinear import (BUMP_STOP_NAMES, DEFAULT_KNOTS, NonlinearLayout, 
                                curve_names, damper_force)
 from ..model.simulator import Simulator
 from ..model.params import (ALL_NAMES, EXT_NAMES, GROUPS, INDEX, MASS_COUNT, NAMES, POWERTRAIN_NAMES, SCALE_FREE,
-                            SIGNED, default_bounds, nominal_car, powertrain_fits, total_mass)
+                            SIGNED, SUSPENSION_NAMES, default_bounds, nominal_car, powertrain_fits, total_mass)
 from ..data.schema import NONLINEAR_GROUPS
 
 ENERGY_FLOOR = 0.01
@@ -151,7 +151,7 @@ class ParameterSpace:
         Columns of the full rows :meth:`full` returns: 12, or 16 when the
         model has a group of SPEC §6 or such a value is known, 23 with the
         powertrain (SPEC §11); with damper curves the
-        :class:`~rideid.model.nonlinear.NonlinearLayout`'s 23 + 2K.
+        :class:`~rideid.model.nonlinear.NonlinearLayout`'s 16 + 2K.
     param_names : tuple of str
         The names of those columns.
     col : dict
@@ -206,6 +206,11 @@ class ParameterSpace:
                     break
         # a known bump stop is used by a model with the group bump_stops (without it the car has no stops)
         self.fixed = {n: v for n, v in known.items() if n in ALL_NAMES or n in bump_names}
+        if self.layout is not None:
+            if any(self.fixed.get(n, 0.0) for n in POWERTRAIN_NAMES):
+                raise ArgumentError("[known] gives a powertrain (SPEC §11), which the nonlinear car (damper curves, "
+                                    "bump stops) does not have in this version: fit a linear model")
+            self.fixed = {n: v for n, v in self.fixed.items() if n not in POWERTRAIN_NAMES}
         model_ext = [n for g in self.extensions if g in GROUPS for n in GROUPS[g]]
         base = [n for n in NAMES if not (self.curves and n in ("c_sf", "c_sr"))]
         self.names = [n for n in base + model_ext if n not in self.fixed and n != self.derived] + \
@@ -368,9 +373,10 @@ class ParameterSpace:
             col = P[:, INDEX[n]]
             ok &= (col > 0) & ((col < self.geometry.wheelbase) if n == "a" else True)
         if P.shape[1] > len(NAMES):
-            ext = [INDEX[n] for n in ALL_NAMES[len(NAMES):P.shape[1]] if n not in SIGNED]
+            car = len(SUSPENSION_NAMES) if self.layout is not None else P.shape[1]  # the car's columns
+            ext = [INDEX[n] for n in ALL_NAMES[len(NAMES):car] if n not in SIGNED]
             ok &= np.all(P[:, ext] >= 0, axis=1)
-        if P.shape[1] == len(ALL_NAMES) or self.layout is not None:
+        if self.layout is None and P.shape[1] == len(ALL_NAMES):
             # a powertrain leaves the rest of the body a positive mass and inertia, its pitch inertia > 0
             with np.errstate(invalid="ignore"):
                 ok &= powertrain_fits(np.where(np.isfinite(P[:, :len(ALL_NAMES)]), P[:, :len(ALL_NAMES)], 0.0))
@@ -398,8 +404,7 @@ class ParameterSpace:
         else:
             s = self.known[anchor] / base[INDEX[anchor]]
         P = base * np.where(np.isin(np.array(ALL_NAMES), SCALE_FREE), 1.0, s)
-        if self.layout is None:
-            P = P[:self.width]
+        P = P[:self.width] if self.layout is None else P[:len(SUSPENSION_NAMES)]  # the nonlinear car: 16
         if self.bump:  # stops at 50 mm, 50 kN/m scaled with the car
             P = np.concatenate([P, [0.05, 0.05, 5.0e4 * s, 5.0e4 * s]])
         if self.curves:
