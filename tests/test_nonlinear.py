@@ -14,7 +14,7 @@ from rideid.model.nonlinear import (DEFAULT_KNOTS, NonlinearLayout, NonlinearSim
                                     linear_curve, simulate_nonlinear)
 from rideid.model.simulator import make_simulator
 from rideid.verify.hifi import hifi_curve
-from rideid.model.params import ALL_NAMES, DEFAULT_CAR, DEFAULT_GEOMETRY, GRAVITY, INDEX, Geometry, as_vector
+from rideid.model.params import DEFAULT_CAR, DEFAULT_GEOMETRY, GRAVITY, INDEX, Geometry, SUSPENSION_NAMES, as_vector
 from rideid.model.simulate import prepare_run, simulate_reference
 from rideid.data.schema.tracks import track_from_table
 
@@ -357,7 +357,7 @@ def test_damper_force_curves():
 
 def test_layout_and_factory(road_dir):
     lay = NonlinearLayout(knots=(-0.2, 0.1, 0.3), bump_stops=True)
-    assert lay.names == ALL_NAMES + ("bs_clear_f", "bs_clear_r", "bs_rate_f", "bs_rate_r",
+    assert lay.names == SUSPENSION_NAMES + ("bs_clear_f", "bs_clear_r", "bs_rate_f", "bs_rate_r",
                                      "F_f1", "F_f2", "F_f3", "F_r1", "F_r2", "F_r3")
     assert lay.n_columns == 26 and not lay.linear and NonlinearLayout().linear
     with pytest.raises(Exception, match="knots"):
