@@ -216,3 +216,45 @@ def test_auto_selects_the_powertrain_only_on_a_car_with_one(tmp_path):
     ds = rideid.load_dataset(tmp_path / "rigid")
     res = rideid.identify(ds, model="auto", seed=1)
     assert res.model["extensions"] == []
+
+
+def test_card_carries_the_powertrain_and_the_fmu_refuses_it(tmp_path, scenario):
+    """``rideid export``: the card's [truth] holds the seven and ``rideid simulate`` takes it back; the FMU
+    (whose C equations are the 7-DOF car's) is refused in one line, nothing written."""
+    import tomllib
+
+    from rideid.exporter import car_from_scenario, export
+    car = car_from_scenario(dataclasses.replace(scenario, truth=_car(scenario), extensions=("powertrain",)))
+    export(car, tmp_path / "card", format="card")
+    doc = tomllib.loads((tmp_path / "card" / "car.toml").read_text())
+    assert {n: doc["truth"][n] for n in ENGINE} == ENGINE and doc["model"]["extensions"] == ["powertrain"]
+    doc["tracks"] = tomllib.loads(rideid.default_scenario_path().read_text())["tracks"]
+    doc["runs"] = [{"id": "H", "track": "herringbone_low", "speed": 5.0, "fs": 200.0, "duration": 2.0}]
+    import tomli_w
+    (tmp_path / "card" / "car.toml").write_text(tomli_w.dumps(doc))
+    sc = rideid.load_scenario(tmp_path / "card" / "car.toml")
+    assert sc.truth["f_pb"] == ENGINE["f_pb"]
+    with pytest.raises(ArgumentError, match="powertrain on mounts.*FMU"):
+        export(car, tmp_path / "fmu", format="fmu", compiler=None)
+    assert not (tmp_path / "fmu").exists()
+
+
+@pytest.mark.slow  # the plan of a powertrain car runs the NumPy backend: 45 s on two busy cores
+def test_plan_knows_the_powertrain(tmp_path):
+    """``rideid plan`` of a scenario with a powertrain plans the group's seven too; its CRLB of the weak pitch
+    pair (I_p, zeta_pp: 2.5-3 %) is what identify's std_robust measured (2.8 %, 2.6 %: docs/powertrain.md)."""
+    import json
+    import tomllib
+
+    import tomli_w
+
+    from rideid.cli import main
+    doc = tomllib.loads(rideid.default_scenario_path().read_text())
+    doc["truth"].update(ENGINE)
+    (tmp_path / "sc.toml").write_text(tomli_w.dumps(doc))
+    assert main(["plan", str(tmp_path / "sc.toml"), "--out", str(tmp_path / "plan"), "--noise", "0.02"]) == 0
+    crlb = json.loads((tmp_path / "plan" / "plan.json").read_text())["all_runs"]["crlb"]
+    assert set(ENGINE) <= set(crlb)
+    for n in ("I_p", "zeta_pp"):
+        assert 0.01 < crlb[n]["relative"] < 0.05
+    assert crlb["f_pb"]["relative"] < 0.001
