@@ -27,6 +27,12 @@ at rounding level, this keeps groups estimated at rounding-level values out.
 parameters enters when its Wald statistic exceeds 13.8, i.e. a test at
 0.1 % per group, so a twelve-parameter car keeps the base model in about 999
 of 1000 datasets whose noise the robust covariance describes.
+
+The candidates above are SPEC §6's groups (``rideid.model.params.SUSPENSION_GROUPS``).
+When the model chosen is not adequate, damper curves (:func:`curve_candidate`),
+bump stops (:func:`bump_candidate`) and last a powertrain on mounts
+(:func:`powertrain_candidate`, SPEC §11: one more search, its Wald statistic
+of ``m_p = 0`` at the same price per parameter) are weighed on top.
 """
 
 from __future__ import annotations
