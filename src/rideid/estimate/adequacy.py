@@ -82,7 +82,7 @@ KNOT_ADVICE = ("The damper curves are straight between their knots: a real curve
                "docs/dampers.md). ")
 #: what the model may lack, by the group that adds it
 _LACKS = (("damper_curves", "nonlinear dampers"), ("bump_stops", "bump stops"),
-          ("powertrain", "a powertrain on mounts: `--model powertrain`"))
+          ("powertrain", "a powertrain on mounts"))
 
 
 def ljung_box(e, lags: int = WHITENESS_LAGS) -> tuple[float, float]:
