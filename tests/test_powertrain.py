@@ -239,7 +239,7 @@ def test_card_carries_the_powertrain_and_the_fmu_refuses_it(tmp_path, scenario):
     assert not (tmp_path / "fmu").exists()
 
 
-@pytest.mark.slow  # the plan of a powertrain car runs the NumPy backend: 45 s on two busy cores
+@pytest.mark.slow  # the plan of a powertrain car runs the NumPy backend: 10-45 s on two shared cores
 def test_plan_knows_the_powertrain(tmp_path):
     """``rideid plan`` of a scenario with a powertrain plans the group's seven too; its CRLB of the weak pitch
     pair (I_p, zeta_pp: 2.5-3 %) is what identify's std_robust measured (2.8 %, 2.6 %: docs/powertrain.md)."""
