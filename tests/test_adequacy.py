@@ -155,9 +155,10 @@ def test_advice_follows_the_model_option_used():
     assert para.startswith("MODEL NOT ADEQUATE") and "it kept anti_roll_bars + tire_damping" in para
     assert advise({"adequate": True, "advice": None}, {"extensions": []})["advice"] is None
     # what the model still lacks follows what it has; with damper curves, their knots come first
-    assert auto.endswith("Or the car has what the model lacks (nonlinear dampers, bump stops, a flexible body).")
+    assert auto.endswith("Or the car has what the model lacks (nonlinear dampers, bump stops, a powertrain on mounts, "
+                         "a flexible body).")
     kept = advice({"extensions": ["damper_curves", "bump_stops"], "selection": "auto"})
-    assert kept.endswith("Or the car has what the model lacks (a flexible body).")
+    assert kept.endswith("Or the car has what the model lacks (a powertrain on mounts, a flexible body).")
     assert kept.index("knots where it bends (`[model] damper_knots`") < kept.index("Try: check that the track")
     given = advice({"extensions": ["damper_curves"]})
     assert given.startswith(ADVICE) and "`[model] damper_knots`" in given

@@ -12,30 +12,39 @@ from rideid.model.batch import BatchSimulator
 from rideid.model.discretize import gauss_nodes, moment_weights, N_MAX
 from rideid.model.equations import (CHANNELS, CORNER_TO_DECOMPOSED, blocks, decomposed_mck, mck, modal_summary,
                                     state_space)
-from rideid.model.params import (ALL_NAMES, DEFAULT_CAR, DEFAULT_GEOMETRY, EXT_NAMES, GROUPS, INDEX, NAMES,
-                                 as_vector, check_parameters, full_rows)
+from rideid.model import params
+from rideid.model.params import DEFAULT_CAR, DEFAULT_GEOMETRY, INDEX, NAMES, as_vector, check_parameters, full_rows
 from rideid.model.simulate import RunInput, prepare_run, simulate_reference
 from rideid.data.schema.tracks import track_from_table
 from test_model import assert_blocks_have_the_full_eigenvalues
 # the same three tracks, error measure and cross-checks as the base model's
 from test_simulate import FS, TRACKS, assert_kernel_matches_reference, assert_scale_invariant, lsim_error, rel_rms
 
+#: this file's subject: SPEC §6's groups (the powertrain of SPEC §11 has tests/test_powertrain.py)
+GROUPS = params.SUSPENSION_GROUPS
+EXT_NAMES = tuple(n for ns in GROUPS.values() for n in ns)
+ALL_NAMES = NAMES + EXT_NAMES
+
 G = DEFAULT_GEOMETRY
 #: the built-in car with an SUV-like set of extensions
 EXT = {"k_arf": 15600.0, "k_arr": 6000.0, "c_tf": 180.0, "c_tr": 200.0}
 P0 = as_vector(DEFAULT_CAR)
-PX = as_vector({**DEFAULT_CAR, **EXT})
+PX = as_vector({**DEFAULT_CAR, **EXT})[:16]
 
 
 # ---------------------------------------------------------------------------
 # parameter vectors
 
 def test_names_groups_and_padding():
-    assert ALL_NAMES[:12] == NAMES and ALL_NAMES[12:] == EXT_NAMES == ("k_arf", "k_arr", "c_tf", "c_tr")
-    assert GROUPS == {"anti_roll_bars": ("k_arf", "k_arr"), "tire_damping": ("c_tf", "c_tr")}
-    assert as_vector(DEFAULT_CAR).size == 12 and as_vector(DEFAULT_CAR, extended=True).size == 16
-    np.testing.assert_array_equal(full_rows(P0)[0], np.concatenate([P0, np.zeros(4)]))
-    # absent extensions are zero: the 12- and 16-column forms are the same car
+    pt = ("m_p", "x_p", "I_p", "f_pb", "zeta_pb", "f_pp", "zeta_pp")
+    assert params.ALL_NAMES[:12] == NAMES
+    assert params.ALL_NAMES[12:] == params.EXT_NAMES == ("k_arf", "k_arr", "c_tf", "c_tr") + pt
+    assert params.GROUPS == {"anti_roll_bars": ("k_arf", "k_arr"), "tire_damping": ("c_tf", "c_tr"),
+                             "powertrain": pt}
+    assert as_vector(DEFAULT_CAR).size == 12 and as_vector(DEFAULT_CAR, extended=True).size == 23
+    np.testing.assert_array_equal(full_rows(P0)[0], np.concatenate([P0, np.zeros(11)]))
+    np.testing.assert_array_equal(full_rows(P0)[0], full_rows(full_rows(P0)[0, :16])[0])
+    # absent extensions are zero: the 12-, 16- and 23-column forms are the same car
     for X, Y in zip(mck(P0[None], G), mck(full_rows(P0), G)):
         np.testing.assert_array_equal(X, Y)
     from rideid.errors import DataError
@@ -296,7 +305,7 @@ def test_sensitivity_maps_include_the_extensions():
     from rideid.model.params import NOMINAL_EXTENSIONS
     runs = [prepare_run(track_from_table(table, "t"), G, V, np.arange(401) / FS) for table, V in TRACKS.values()]
     sim = BatchSimulator(G, runs)
-    base = as_vector({**DEFAULT_CAR, **NOMINAL_EXTENSIONS})
+    base = as_vector({**DEFAULT_CAR, **NOMINAL_EXTENSIONS})[:16]
     maps = compute_maps(sim, G, base, list(TRACKS))
     assert maps.params == list(ALL_NAMES) and maps.S.shape[0] == 16
     i, j = maps.params.index("k_arf"), maps.params.index("c_tf")

@@ -14,7 +14,7 @@ from rideid.model.nonlinear import (DEFAULT_KNOTS, NonlinearLayout, NonlinearSim
                                     linear_curve, simulate_nonlinear)
 from rideid.model.simulator import make_simulator
 from rideid.verify.hifi import hifi_curve
-from rideid.model.params import ALL_NAMES, DEFAULT_CAR, DEFAULT_GEOMETRY, GRAVITY, INDEX, Geometry, as_vector
+from rideid.model.params import DEFAULT_CAR, DEFAULT_GEOMETRY, GRAVITY, INDEX, Geometry, SUSPENSION_NAMES, as_vector
 from rideid.model.simulate import prepare_run, simulate_reference
 from rideid.data.schema.tracks import track_from_table
 
@@ -36,7 +36,7 @@ TRACKS = {
 
 def nasty_row(P16=None):
     """Asymmetric digressive dampers (2:1 and 1.6:1, knee 0.1 m/s), bars, tire damping, bump stops."""
-    P16 = as_vector(CAR, extended=True) if P16 is None else P16
+    P16 = as_vector(CAR, extended=True)[:16] if P16 is None else P16
     Ff = hifi_curve(CAR["c_sf"], DEFAULT_KNOTS, 2.0, 0.1, 0.4)
     Fr = hifi_curve(CAR["c_sr"], DEFAULT_KNOTS, 1.6, 0.1, 0.5)
     return np.concatenate([P16, [0.02, 0.025, 60000.0, 50000.0], Ff, Fr])
@@ -285,7 +285,7 @@ def test_compile_failure_falls_back_with_one_warning(road_dir, monkeypatch):
 def test_linear_curves_equal_the_linear_kernel(road_dir):
     """F = c v, no bump stops, no lift-off: the RK4 car equals the exact discretisation (two methods)."""
     layout = NonlinearLayout(knots=DEFAULT_KNOTS)
-    P16 = as_vector(CAR, extended=True)
+    P16 = as_vector(CAR, extended=True)[:16]
     P = np.concatenate([P16, linear_curve(CAR["c_sf"]), linear_curve(CAR["c_sr"])])[None]
     for kind in ("washboard", "herringbone", "chassis_twist"):
         run = make_run(kind, road_dir, scale=0.3)
@@ -357,7 +357,7 @@ def test_damper_force_curves():
 
 def test_layout_and_factory(road_dir):
     lay = NonlinearLayout(knots=(-0.2, 0.1, 0.3), bump_stops=True)
-    assert lay.names == ALL_NAMES + ("bs_clear_f", "bs_clear_r", "bs_rate_f", "bs_rate_r",
+    assert lay.names == SUSPENSION_NAMES + ("bs_clear_f", "bs_clear_r", "bs_rate_f", "bs_rate_r",
                                      "F_f1", "F_f2", "F_f3", "F_r1", "F_r2", "F_r3")
     assert lay.n_columns == 26 and not lay.linear and NonlinearLayout().linear
     with pytest.raises(Exception, match="knots"):
@@ -396,7 +396,7 @@ def test_kink_mask_marks_only_the_knots_where_the_slope_changes():
     assert [float(x) for x in xk[mask[0] == 1]] == [-0.1, 0.0, 0.1]
     assert np.array_equal(mask[0], mask[1])
     lin = NonlinearLayout(knots=DEFAULT_KNOTS)
-    P16 = as_vector(CAR, extended=True)
+    P16 = as_vector(CAR, extended=True)[:16]
     P = np.stack([np.concatenate([P16, linear_curve(CAR["c_sf"]), linear_curve(CAR["c_sr"])])] * 2)
     assert not nl.kink_mask(nl.coefficients(P, GH, lin)[3]).any()
     P[1, -3] *= 1.01  # the rear curve's third-last knot force: the knots either side of it bend

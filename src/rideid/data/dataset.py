@@ -10,7 +10,7 @@ from pathlib import Path
 from . import checks
 from ..errors import DataError, ScaleError
 from .schema import DatasetManifest, ReadOnlyDict, RunData, load_manifest, read_run_csv
-from ..model.params import CORNERS, EXT_NAMES, EXTRA_KNOWN, MASS_COUNT, NAMES, Geometry, total_mass
+from ..model.params import CORNERS, EXT_NAMES, EXTRA_KNOWN, MASS_COUNT, NAMES, SCALE_FREE, Geometry, total_mass
 from ..model.simulate import prepare_run
 from .measured import load_measured_run
 
@@ -244,7 +244,7 @@ def refuse_unknown_roads(source, what: str) -> None:
 
 def scale_anchor(known: dict[str, float], where: str = "[known]") -> str:
     """The known value that fixes the absolute scale, or raise :class:`ScaleError`."""
-    for k in ("total_mass",) + tuple(n for n in NAMES if n != "a") + EXT_NAMES:
+    for k in ("total_mass",) + tuple(n for n in NAMES + EXT_NAMES if n not in SCALE_FREE):
         if known.get(k, 0.0) > 0:  # a known zero extension (none fitted) fixes no scale
             return k
     raise ScaleError(

@@ -45,7 +45,7 @@ from __future__ import annotations
 import numpy as np
 from scipy import special  # the two tail probabilities; scipy.stats takes 0.5 s to import
 
-from ..model.params import GROUPS
+from ..model.params import SUSPENSION_GROUPS as GROUPS
 from ..model.batch import single_threaded_blas, thread_map
 from ..model.equations import CHANNELS
 
@@ -81,7 +81,8 @@ KNOT_ADVICE = ("The damper curves are straight between their knots: a real curve
                "leaves road-driven structure, so try knots where it bends (`[model] damper_knots` in dataset.toml, "
                "docs/dampers.md). ")
 #: what the model may lack, by the group that adds it
-_LACKS = (("damper_curves", "nonlinear dampers"), ("bump_stops", "bump stops"))
+_LACKS = (("damper_curves", "nonlinear dampers"), ("bump_stops", "bump stops"),
+          ("powertrain", "a powertrain on mounts"))
 
 
 def ljung_box(e, lags: int = WHITENESS_LAGS) -> tuple[float, float]:

@@ -52,14 +52,16 @@ from ..model.nonlinear import (BUMP_STOP_NAMES, DEFAULT_KNOTS, NonlinearLayout, 
                                curve_names, damper_force)
 from ..model.sensors import SensorChain, SensorSimulator
 from ..model.simulator import Simulator
-from ..model.params import (ALL_NAMES, EXT_NAMES, GROUPS, INDEX, MASS_COUNT, NAMES, default_bounds, nominal_car,
-                            total_mass)
+from ..model.params import (ALL_NAMES, EXT_NAMES, GROUPS, INDEX, MASS_COUNT, NAMES, POWERTRAIN_NAMES, SCALE_FREE,
+                            SIGNED, SUSPENSION_NAMES, default_bounds, nominal_car, powertrain_fits, total_mass)
 from ..data.schema import NONLINEAR_GROUPS
 
 ENERGY_FLOOR = 0.01
 
 #: the SPEC §8 groups this version identifies
 CURVES = "damper_curves"
+#: SPEC §11's powertrain on mounts (a linear group, :data:`rideid.model.params.GROUPS`)
+POWERTRAIN = "powertrain"
 BUMP = "bump_stops"
 #: the groups a model may have, canonical order: SPEC §6's linear ones, then the damper curves, the bump stops
 IDENTIFIABLE_GROUPS: tuple[str, ...] = tuple(GROUPS) + (CURVES, BUMP)
@@ -81,6 +83,11 @@ MEAN_SLOPE_VELOCITY = 0.1
 def refuse_unsupported_groups(groups, where: str = "model"):
     """The bump stops of SPEC §8 are simulated but not identified yet: one clear :class:`ArgumentError`
     rather than a fit that silently leaves them out (damper curves are identified)."""
+    if POWERTRAIN in groups and any(g in NONLINEAR_GROUPS for g in groups):
+        raise ArgumentError(f"{where}: 'powertrain' (SPEC §11) together with "
+                            f"{' and '.join(repr(g) for g in groups if g in NONLINEAR_GROUPS)} (SPEC §8): this "
+                            "version of rideid simulates a powertrain on mounts in the linear car only; fit one or "
+                            "the other")
     bad = [g for g in groups if g in NONLINEAR_GROUPS and g not in IDENTIFIABLE_GROUPS]
     if bad:
         raise ArgumentError(f"{where}: {' and '.join(repr(g) for g in bad)} (SPEC §8) cannot be identified by this "
@@ -143,9 +150,9 @@ class ParameterSpace:
         The known value that fixes the absolute scale (SPEC §1), normally ``total_mass``.
     width : int
         Columns of the full rows :meth:`full` returns: 12, or 16 when the
-        model has an extension group or an extension value is known; with
-        damper curves the :class:`~rideid.model.nonlinear.NonlinearLayout`'s
-        16 + 2K.
+        model has a group of SPEC §6 or such a value is known, 23 with the
+        powertrain (SPEC §11); with damper curves the
+        :class:`~rideid.model.nonlinear.NonlinearLayout`'s 16 + 2K.
     param_names : tuple of str
         The names of those columns.
     col : dict
@@ -200,6 +207,11 @@ class ParameterSpace:
                     break
         # a known bump stop is used by a model with the group bump_stops (without it the car has no stops)
         self.fixed = {n: v for n, v in known.items() if n in ALL_NAMES or n in bump_names}
+        if self.layout is not None:
+            if any(self.fixed.get(n, 0.0) for n in POWERTRAIN_NAMES):
+                raise ArgumentError("[known] gives a powertrain (SPEC §11), which the nonlinear car (damper curves, "
+                                    "bump stops) does not have in this version: fit a linear model")
+            self.fixed = {n: v for n, v in self.fixed.items() if n not in POWERTRAIN_NAMES}
         model_ext = [n for g in self.extensions if g in GROUPS for n in GROUPS[g]]
         base = [n for n in NAMES if not (self.curves and n in ("c_sf", "c_sr"))]
         self.names = [n for n in base + model_ext if n not in self.fixed and n != self.derived] + \
@@ -208,7 +220,13 @@ class ParameterSpace:
         if self.layout is not None:
             self.param_names = self.layout.names
         else:
-            width = len(ALL_NAMES) if (model_ext or any(n in self.fixed for n in EXT_NAMES)) else len(NAMES)
+            # 12 columns, 16 with SPEC §6's groups, 23 with the powertrain (the narrowest row of the model)
+            if any(n in POWERTRAIN_NAMES for n in model_ext) or any(n in self.fixed for n in POWERTRAIN_NAMES):
+                width = len(ALL_NAMES)
+            elif model_ext or any(n in self.fixed for n in EXT_NAMES):
+                width = len(NAMES) + 4
+            else:
+                width = len(NAMES)
             self.param_names = ALL_NAMES[:width]
         self.width = len(self.param_names)
         self.col = {n: i for i, n in enumerate(self.param_names)}
@@ -356,7 +374,15 @@ class ParameterSpace:
             col = P[:, INDEX[n]]
             ok &= (col > 0) & ((col < self.geometry.wheelbase) if n == "a" else True)
         if P.shape[1] > len(NAMES):
-            ok &= np.all(P[:, len(NAMES):len(ALL_NAMES)] >= 0, axis=1)
+            car = len(SUSPENSION_NAMES) if self.layout is not None else P.shape[1]  # the car's columns
+            ext = [INDEX[n] for n in ALL_NAMES[len(NAMES):car] if n not in SIGNED]
+            ok &= np.all(P[:, ext] >= 0, axis=1)
+        if self.layout is None and P.shape[1] == len(ALL_NAMES):
+            # a powertrain leaves the rest of the body a positive mass and inertia, its pitch inertia > 0
+            with np.errstate(invalid="ignore"):
+                ok &= powertrain_fits(np.where(np.isfinite(P[:, :len(ALL_NAMES)]), P[:, :len(ALL_NAMES)], 0.0))
+            on = P[:, INDEX["m_p"]] > 0
+            ok &= ~on | ((P[:, INDEX["I_p"]] > 0) & (P[:, INDEX["f_pb"]] > 0) & (P[:, INDEX["f_pp"]] > 0))
         if self.bump:
             for n in BUMP_STOP_NAMES:
                 ok &= (P[:, self.col[n]] > 0) if n.startswith("bs_clear") else (P[:, self.col[n]] >= 0)
@@ -378,7 +404,8 @@ class ParameterSpace:
             s = self.known["total_mass"] / total_mass(base)
         else:
             s = self.known[anchor] / base[INDEX[anchor]]
-        P = base * np.where(np.array(ALL_NAMES) == "a", 1.0, s)
+        P = base * np.where(np.isin(np.array(ALL_NAMES), SCALE_FREE), 1.0, s)
+        P = P[:self.width] if self.layout is None else P[:len(SUSPENSION_NAMES)]  # the nonlinear car: 16
         if self.bump:  # stops at 50 mm, 50 kN/m scaled with the car
             P = np.concatenate([P, [0.05, 0.05, 5.0e4 * s, 5.0e4 * s]])
         if self.curves:

@@ -74,7 +74,7 @@ from ..model.batch import single_threaded_blas
 from ..model.equations import modal_summary
 from ..data.schema import NONLINEAR_GROUPS
 from ..model.nonlinear import BUMP_STOP_NAMES
-from ..model.params import ALL_NAMES, GROUPS, UNITS
+from ..model.params import ALL_NAMES, SUSPENSION_GROUPS, SUSPENSION_NAMES, UNITS
 from ..model.simulator import Simulator
 from .bumps import bump_block, frozen_values, reach, scan_start
 from .dampers import dampers_block, knot_excitation
@@ -113,8 +113,8 @@ def model_extensions(ds: Dataset, model=None) -> tuple[str, ...]:
     """Extension groups of the model to fit.
 
     ``model``: ``None`` (the dataset's ``[model] extensions``, else the
-    twelve), ``"base"`` (the twelve), ``"full"`` (every group), or a sequence
-    of group names.
+    twelve), ``"base"`` (the twelve), ``"full"`` (SPEC §6's groups:
+    anti-roll bars and tire damping), or a sequence of group names.
     """
     if model is None:
         refuse_unsupported_groups(ds.manifest.extensions or (), f"{ds.manifest.path}: [model] extensions")
@@ -123,7 +123,7 @@ def model_extensions(ds: Dataset, model=None) -> tuple[str, ...]:
         if model == "base":
             return ()
         if model == "full":
-            return tuple(GROUPS)
+            return tuple(SUSPENSION_GROUPS)
         if model in MODELS:
             raise ArgumentError(f"model {model!r} is not one fitted model")
         model = parse_model_arg(model)
@@ -467,7 +467,7 @@ def _result(ds, cf, search, fit, weighting, maps, rng_record, t0, assess=True,
     correlation, history = robust.correlation_dict(), History(search.history)
     # what the data were and what the car's modes are: records beside the fit
     preprocessing = _preprocessing(ds, starts)
-    modal = modal_summary(P[:len(ALL_NAMES)], ds.geometry)
+    modal = modal_summary(P[:len(ALL_NAMES) if space.layout is None else len(SUSPENSION_NAMES)], ds.geometry)
     return IdentificationResult(
         x=np.asarray(x, dtype=float), names=list(cf.names), std=np.asarray(std, dtype=float), covariance=cov,
         fun=float(np.full(final_E.size, 1.0 / final_E.size) @ final_E), success=success, message=message,

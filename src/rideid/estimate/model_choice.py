@@ -27,6 +27,12 @@ at rounding level, this keeps groups estimated at rounding-level values out.
 parameters enters when its Wald statistic exceeds 13.8, i.e. a test at
 0.1 % per group, so a twelve-parameter car keeps the base model in about 999
 of 1000 datasets whose noise the robust covariance describes.
+
+The candidates above are SPEC §6's groups (``rideid.model.params.SUSPENSION_GROUPS``).
+When the model chosen is not adequate, damper curves (:func:`curve_candidate`),
+bump stops (:func:`bump_candidate`) and last a powertrain on mounts
+(:func:`powertrain_candidate`, SPEC §11: one more search, its Wald statistic
+of ``m_p = 0`` at the same price per parameter) are weighed on top.
 """
 
 from __future__ import annotations
@@ -38,7 +44,8 @@ from dataclasses import replace
 import numpy as np
 from scipy import special
 
-from ..model.params import GROUPS
+from ..model.params import POWERTRAIN_NAMES
+from ..model.params import SUSPENSION_GROUPS as GROUPS
 from ..data.schema.manifest import vehicle_table
 from .budget import with_budget
 from .adequacy import MIN_IMPROVEMENT, advise, assess_fit
@@ -207,6 +214,8 @@ def identify_auto(ds, *, rng=None, seed=None, callback=None, maps=None, simulato
     # tried only when the linear choice is not adequate: an adequate linear model leaves no road-driven
     # structure in the residuals for curves to explain (and the extra polish costs as much as the search)
     lin = results[chosen] = replace(results[chosen], adequacy=_own_adequacy(ds, costs[chosen], results[chosen]))
+    lin_key, lin_entry = chosen, best
+    kw_search = {k: v for k, v in kw.items() if k in ("weights", "polish", "population", "generations", "spread_tol")}
     curves_tried = bool(lin.adequacy) and not lin.adequacy.get("adequate", True)
     curve = (curve_candidate(ds, lin, chosen, best, rng=rng, seed=seed, maps=full.maps, simulator=simulator,
                              **kw_nested)
@@ -265,6 +274,24 @@ def identify_auto(ds, *, rng=None, seed=None, callback=None, maps=None, simulato
         crit.append(e_b)
         if e_b["fits_better"] and e_b["criterion"] is not None:
             best, chosen = e_b, bkey
+    # a powertrain on mounts on top of the linear choice, when what is chosen is still not adequate: one more
+    # search (the powertrain's frequencies are not found by a polish from a guess)
+    now = results[chosen]
+    if now.adequacy is None:
+        now = results[chosen] = replace(now, adequacy=_own_adequacy(ds, costs[chosen], now))
+    pt = None
+    if not now.adequacy.get("adequate", True):
+        pt = powertrain_candidate(ds, lin_key, lin_entry, rng=rng, seed=seed, simulator=simulator, **kw_search)
+    if pt is not None:
+        pkey, cf_p, r_p, e_p = pt
+        results[pkey], costs[pkey] = r_p, cf_p
+        evaluations += r_p.nfev
+        e_p["fits_better"] = fits_better(pkey, {cand: r.cost for cand, r in results.items()})
+        crit.append(e_p)
+        W = e_p["powertrain_wald"]
+        if e_p["fits_better"] and e_p["criterion"] is not None and W is not None and np.isfinite(W) \
+                and e_p["criterion"] < best["criterion"] + W:
+            best, chosen = e_p, pkey
     res = results[chosen]
     if res.adequacy is None:
         res = results[chosen] = replace(res, adequacy=_own_adequacy(ds, costs[chosen], res))
@@ -285,6 +312,9 @@ def identify_auto(ds, *, rng=None, seed=None, callback=None, maps=None, simulato
                                "structure for damper curves to explain)")
     if bump is not None:
         model["bump_criterion"] = BUMP_CRITERION
+    if pt is not None:
+        model["powertrain_criterion"] = POWERTRAIN_CRITERION
+        model["powertrain_wald"] = pt[3]["powertrain_wald"]
     if curve is not None:
         model["curve_criterion"] = CURVE_CRITERION
         model["curve_departure_wald"] = curve[3]["curve_departure_wald"]
@@ -435,6 +465,45 @@ def bump_candidate(ds, prev, chosen, prev_crit, *, rng=None, seed=None, maps=Non
     entry = {"extensions": list(key), "wald": 0.0, "k": k, "bump_stops_reached": reached,
              "bump_stops_at_bound": at_bound,
              "criterion": None if not reached or base is None else base + PENALTY * n_free}
+    return key, cf, r, entry
+
+
+POWERTRAIN_GROUP = "powertrain"
+
+POWERTRAIN_CRITERION = (
+    "powertrain on mounts (SPEC §11): tried when the model chosen so far (damper curves and bump stops weighed) is "
+    "still not adequate: one more search, the chosen linear groups plus powertrain; W_powertrain = (m_p / "
+    "std_robust(m_p))^2, the Wald statistic of no powertrain (m_p = 0); kept when it fits materially better than "
+    "every model it contains and its criterion (the linear choice's + {:.2f} per free powertrain parameter) is "
+    "below the chosen model's + W_powertrain").format(PENALTY)
+
+
+def powertrain_candidate(ds, lin_key, lin_crit, *, rng=None, seed=None, simulator=None, **kw):
+    """Fit a powertrain on mounts on top of the linear groups ``lin_key`` (criterion entry ``lin_crit``): one
+    search (JADE and the polish) on the model ``lin_key`` + ``powertrain`` (:data:`POWERTRAIN_CRITERION`).
+
+    Returns ``(candidate key, cost function, result, criterion entry)``, or None when the group is in already,
+    the linear choice has no criterion, or the powertrain is fully known. The entry carries
+    ``powertrain_wald``, the Wald statistic of ``m_p = 0`` from the fit's robust covariance (``nan`` when
+    ``m_p`` is known).
+    """
+    if POWERTRAIN_GROUP in lin_key or lin_crit.get("criterion") is None:
+        return None
+    key = tuple(g for g in GROUPS if g in lin_key) + (POWERTRAIN_GROUP,)
+    space = ParameterSpace(ds.known, ds.geometry, ds.manifest.bounds, extensions=key)
+    free_pt = [n for n in space.names if n in POWERTRAIN_NAMES]
+    if not free_pt:
+        return None
+    cf = CostFunction(ds, space=space, simulator=simulator)
+    r = identify_model(ds, rng=rng, seed=seed, cost=cf, assess=False, **kw)
+    pol = r.polish or {}
+    names = list(pol.get("names", []))
+    W = float("nan")
+    if "covariance_robust" in pol and "m_p" in names:
+        i = names.index("m_p")
+        W = wald(np.array([r.parameters["m_p"]]), np.array(pol["covariance_robust"])[i:i + 1, i:i + 1])
+    entry = {"extensions": list(key), "wald": 0.0, "k": (lin_crit.get("k") or 0) + len(free_pt),
+             "powertrain_wald": W, "criterion": lin_crit["criterion"] + PENALTY * len(free_pt)}
     return key, cf, r, entry
 
 

@@ -85,13 +85,16 @@ def export(result_or_fit_dir, out, format: str = "all", *, compiler="auto") -> E
     Raises
     ------
     ArgumentError
-        An unknown format.
+        An unknown format; an FMU of a car with a powertrain on mounts (not in the FMU's equations yet).
     DataError
         No result.json, a result without geometry, an output folder that cannot be written.
     """
     if format not in FORMATS:
         raise ArgumentError(f"--format must be one of {', '.join(FORMATS)}, got {format!r}")
     car, label = _load(result_or_fit_dir)
+    if format in ("fmu", "all") and car.values.get("m_p", 0.0) > 0:
+        raise ArgumentError(f"{label}: the car has a powertrain on mounts (SPEC §11, m_p = {car.values['m_p']:g} kg), "
+                            "which the FMU's equations do not have in this version; export --format card")
     out = Path(out)
     compiled = no_binary = None
     with atomic_output(out) as tmp:  # into an existing folder: only these files are replaced

@@ -38,7 +38,7 @@ from xml.sax.saxutils import escape
 import numpy as np
 
 from ..model.equations import CHANNELS, CHANNEL_UNITS
-from ..model.params import ALL_NAMES, DESCRIPTIONS, GRAVITY
+from ..model.params import DESCRIPTIONS, GRAVITY, SUSPENSION_NAMES
 from ..model.nonlinear import NonlinearLayout, substeps
 from .car import CARD_UNITS, Car
 
@@ -53,6 +53,8 @@ VR_OUTPUT0, VR_PAR0 = 8, 100
 BASE_UNITS = {"m": {"m": 1}, "m/s": {"m": 1, "s": -1}, "m/s^2": {"m": 1, "s": -2}, "rad/s": {"rad": 1, "s": -1},
               "s": {"s": 1}, "kg": {"kg": 1}, "kg m^2": {"kg": 1, "m": 2}, "N": {"kg": 1, "m": 1, "s": -2},
               "N/m": {"kg": 1, "s": -2}, "N s/m": {"kg": 1, "s": -1}}
+#: the parameters of the FMU's equations: the twelve and SPEC §6's four (not the powertrain of SPEC §11)
+FMU_NAMES = SUSPENSION_NAMES
 #: the big clearance standing for "no bump stop" (m); with rate 0 it is never reached anyway
 NO_STOP = 1e6
 
@@ -71,7 +73,7 @@ def binary_suffix() -> str:
 def _parameters(car: Car):
     """``[(name, value, unit, description, variability), ...]`` in value-reference order."""
     v, g = car.values, car.geometry
-    out = [(n, v[n], CARD_UNITS[n], DESCRIPTIONS[n], "tunable") for n in ALL_NAMES]
+    out = [(n, v[n], CARD_UNITS[n], DESCRIPTIONS[n], "tunable") for n in FMU_NAMES]
     out += [("wheelbase", g.wheelbase, "m", "wheelbase", "fixed"),
             ("track_front", g.track_front, "m", "front track", "fixed"),
             ("track_rear", g.track_rear, "m", "rear track", "fixed"),
@@ -101,7 +103,7 @@ def max_step(car: Car, rho: float = RHO) -> float:
     (:func:`rideid.model.nonlinear.substeps`)."""
     layout = NonlinearLayout(knots=None if car.dampers is None else car.dampers.velocity,
                              bump_stops=bool(car.bump_stops))
-    row = [car.values[n] for n in ALL_NAMES]
+    row = [car.values.get(n, 0.0) for n in FMU_NAMES]
     if car.bump_stops:
         bs = car.bump_stops
         row += [bs.get("bs_clear_f", 1.0), bs.get("bs_clear_r", 1.0), bs.get("bs_rate_f", 0.0),

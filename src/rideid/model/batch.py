@@ -1,12 +1,15 @@
 """Batched simulation of many candidate cars over many runs.
 
 :class:`BatchSimulator` owns the parameter-independent data of a set of runs
-(packed once) and evaluates a population ``P`` of shape ``(n_pop, 12)`` or
-``(n_pop, 16)`` (with the extensions of SPEC §6)
+(packed once) and evaluates a population ``P`` of shape ``(n_pop, 12)``,
+``(n_pop, 16)`` (with the extensions of SPEC §6) or ``(n_pop, 23)`` (and the
+powertrain of SPEC §11)
 either to simulated channels or to per-run weighted squared errors, through
 the compiled kernel (:mod:`rideid.kernel`) or the plain NumPy reference
 (:func:`rideid.simulate.simulate_reference`; ``RIDEID_KERNEL=numpy``, see
-:mod:`rideid.model.backend`). :class:`rideid.model.simulator.Simulator` binds this class or the
+:mod:`rideid.model.backend`). The compiled kernel integrates the symmetric
+block of 8 states only: a population with a powertrain on mounts (12 states
+there) always runs the NumPy reference. :class:`rideid.model.simulator.Simulator` binds this class or the
 nonlinear car's :class:`rideid.model.nonlinear.NonlinearSimulator` by the
 parameter layout.
 """
@@ -23,8 +26,8 @@ from . import backend
 from .kernel_layout import LANES, OFFSETS
 from .discretize import N_MAX, Discretized, n_terms, spectral_radius
 from .equations import blocks as blocks_of
-from .params import Geometry, column
-from .simulate import RunInput, initial_states, simulate_reference
+from .params import Geometry, column, has_powertrain
+from .simulate import RunInput, initial_states, simulate_modal, simulate_reference
 
 
 # The batched small-matrix work (expm, eig, solve) gains nothing from BLAS
@@ -176,6 +179,8 @@ class BatchSimulator:
         """
         Y = np.ascontiguousarray(Y, dtype=float)
         W = np.ascontiguousarray(W, dtype=float)
+        if has_powertrain(P):
+            return self._errors_of(self.outputs_modal(P), P, Y, W)
         if self._use_numpy():
             return self.errors_reference(P, Y, W)
         err, _ = self._call(P, Y, W, 0)
@@ -183,6 +188,8 @@ class BatchSimulator:
 
     def outputs(self, P, pin=None):
         """Simulated channels: list over runs of ``(n_pop, n_time, 10)``."""
+        if has_powertrain(P):
+            return self.outputs_modal(P)
         if self._use_numpy():
             return self.outputs_reference(P)
         P = np.atleast_2d(P)
@@ -200,8 +207,22 @@ class BatchSimulator:
             res.append(simulate_reference(P, self.geom, r))
         return res
 
+    def outputs_modal(self, P, pin=None):
+        """As :meth:`outputs`, by the modal recursion of :func:`rideid.model.simulate.simulate_modal` (NumPy,
+        any block size: the one backend of a car with a powertrain on mounts, SPEC §11)."""
+        P = np.atleast_2d(np.asarray(P, dtype=float))
+        with single_threaded_blas():
+            bl = blocks_of(P, self.geom)
+            radius = np.maximum(spectral_radius(bl["As"]), spectral_radius(bl["Aa"]))
+            discs = [Discretized(P, self.geom, h, nterms=n_terms(float(radius.max()) * h / 2), blocks=bl)
+                     for h in self.h_groups]
+            return [simulate_modal(P, self.geom, r, discs[g]) for r, g in zip(self.runs, self.run_group)]
+
     def errors_reference(self, P, Y, W, pin=None):
-        outs = self.outputs_reference(P)
+        return self._errors_of(self.outputs_reference(P), P, Y, W)
+
+    def _errors_of(self, outs, P, Y, W):
+        """Per-run weighted squared errors ``(n_runs, n_pop)`` of simulated channels ``outs`` (per run)."""
         err = np.empty((len(self.runs), np.atleast_2d(P).shape[0]))
         for ri, (s, e) in enumerate(zip(self.run_start[:-1], self.run_start[1:])):
             d = outs[ri] - Y[None, s:e]

@@ -113,7 +113,8 @@ class Discretized:
     ---------------------------------
     Phi_s (n, 8, 8), G_s (N, n, 8, 2), Ca_s (n, 4, 8), Da_s (n, 4, 2), Dr_s (n, 4, 2):
         symmetric block; the accelerations ``[z'', theta'', zf_s'', zr_s'']``
-        are ``Ca_s xi + Da_s u + Dr_s u'``.
+        are ``Ca_s xi + Da_s u + Dr_s u'``. With a powertrain (SPEC §11) the
+        block has 12 states (``Phi_s`` (n, 12, 12), ``Ca_s`` (n, 4, 12), ...).
     Phi_a (n, 6, 6), G_a (N, n, 6, 2), Ca_a (n, 3, 6), Da_a (n, 3, 2), Dr_a (n, 3, 2):
         antisymmetric block; accelerations ``[phi'', zf_a'', zr_a'']``.
     Bt_s, Bt_a : the input matrices ``A Br + B`` of the shifted states;
@@ -136,9 +137,12 @@ class Discretized:
         self.N = nterms
         self.Phi_s, self.G_s, _ = discretize_block(self.As, self.Bt_s, h, nterms)
         self.Phi_a, self.G_a, _ = discretize_block(self.Aa, self.Bt_a, h, nterms)
-        self.Ca_s, self.Ca_a = self.As[:, 4:, :], self.Aa[:, 3:, :]
-        self.Da_s, self.Da_a = self.Bt_s[:, 4:, :], self.Bt_a[:, 3:, :]  # = Ca Br + Da (Br has no position rows)
-        self.Dr_s, self.Dr_a = self.Brs[:, 4:, :], self.Bra[:, 3:, :]
+        # the accelerations of [z, theta, zf_s, zr_s] (a powertrain's two more coordinates are not read)
+        ns = self.As.shape[-1] // 2
+        self.Ca_s, self.Ca_a = self.As[:, ns:ns + 4, :], self.Aa[:, 3:, :]
+        # = Ca Br + Da (Br has no position rows)
+        self.Da_s, self.Da_a = self.Bt_s[:, ns:ns + 4, :], self.Bt_a[:, 3:, :]
+        self.Dr_s, self.Dr_a = self.Brs[:, ns:ns + 4, :], self.Bra[:, 3:, :]
 
 
 def gauss_nodes(n_panels: int, order: int = 2):

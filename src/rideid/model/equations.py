@@ -30,7 +30,37 @@ the suspension deflection), i.e. ``K += k_ar (e_i - e_j)(e_i - e_j)^T``: heave
 ``(k_s + 2 k_ar) track^2 / 2``. Tire damping ``c_t`` adds ``c_t`` to ``C`` at
 the wheel and the road-rate input ``Bd r'`` (``Bd = diag(c_t)`` on the wheels).
 
-State ``x = [q, q']`` (14), ``x' = A x + B r + Br r'``. Outputs (SPEC channel
+Powertrain on mounts (SPEC §11, group ``powertrain``, present when
+``m_p > 0``): a rigid body of mass ``m_p`` and pitch inertia ``I_p`` (about
+its own CG) inside the sprung mass, its CG ``x_p`` ahead of the whole sprung
+mass's CG, on mounts in bounce and pitch. Two more coordinates
+(:data:`POWERTRAIN_COORDS`): ``u`` its heave relative to the body point
+beneath it (``z_p = z - x_p theta + u``) and ``psi`` its pitch relative to
+the body (``theta_p = theta + psi``). ``m_s``, ``I_yy`` and ``a`` stay the
+whole sprung mass's (powertrain included as if rigid): the kinetic energy
+``1/2 m_b (z' - x_b theta')^2 + 1/2 I_b theta'^2 + 1/2 m_p (z' - x_p theta'
++ u')^2 + 1/2 I_p (theta' + psi')^2`` of the body (``m_b = m_s - m_p``, CG at
+``x_b = -m_p x_p / m_b``, ``I_b`` about its own CG) and the powertrain is,
+with ``m_b x_b + m_p x_p = 0`` and ``I_b + m_b x_b^2 + I_p + m_p x_p^2 =
+I_yy``,
+
+    M[z, z] = m_s, M[theta, theta] = I_yy, M[u, u] = M[z, u] = m_p,
+    M[theta, u] = -m_p x_p, M[psi, psi] = M[theta, psi] = I_p,
+
+so with the mounts locked (``u = psi = 0``) the model of SPEC §1 is
+recovered exactly. The mounts are a spring and damper on each relative
+coordinate, given by the frequencies and damping ratios with the body held
+(``K[u, u] = m_p (2 pi f_pb)^2``, ``C[u, u] = 2 zeta_pb m_p 2 pi f_pb``, and
+in pitch with ``I_p``, ``f_pp``, ``zeta_pp``). The suspension acts on the
+body frame, which ``z``, ``theta`` still describe, so ``K``, ``C`` and the
+outputs are unchanged on the body coordinates and the accelerometers and
+gyros read the body as before. The powertrain coordinates join the
+symmetric block (12 states instead of 8); rows of a batch without a
+powertrain (``m_p = 0``) get a unit-mass dummy there, decoupled from the car.
+The CG height's terms are the whole sprung mass's (the powertrain's small
+relative motion does not change them).
+
+State ``x = [q, q']`` (14; 18 with a powertrain), ``x' = A x + B r + Br r'``. Outputs (SPEC channel
 order, :data:`CHANNELS`) ``y = Cy x + Dy r + Dyr r'`` (:func:`state_space`,
 :func:`rate_input`): the accelerometers read ``Omega q''`` (:func:`output_map`:
 body corner ``i`` reads ``G_i q_b''``, axle ``i`` reads ``z_i''``) and the
@@ -49,7 +79,7 @@ from __future__ import annotations
 import numpy as np
 import scipy.linalg
 
-from .params import ALL_NAMES, GRAVITY, INDEX, NAMES, Geometry, full_rows
+from .params import ALL_NAMES, GRAVITY, INDEX, NAMES, Geometry, full_rows, has_powertrain
 
 CHANNELS: tuple[str, ...] = (
     "body_az_fl", "body_az_fr", "body_az_rl", "body_az_rr",
@@ -68,6 +98,14 @@ COORDS = ("z", "theta", "phi", "z_fl", "z_fr", "z_rl", "z_rr")
 SYM_COORDS = ("z", "theta", "zf_s", "zr_s")
 ANTI_COORDS = ("phi", "zf_a", "zr_a")
 
+#: The powertrain's coordinates (SPEC §11), after :data:`COORDS` and after :data:`SYM_COORDS` in the
+#: symmetric block: its heave relative to the body point beneath it, its pitch relative to the body.
+POWERTRAIN_COORDS = ("u_p", "psi_p")
+#: Frequency (Hz) of the decoupled unit-mass dummy that stands in for the powertrain of a row without one
+#: in a batch with powertrains (its damping ratio 0.5): below the fastest wheel hop, so it never sets the
+#: discretisation's series length.
+DUMMY_HZ = 10.0
+
 #: Coordinate index (in :data:`COORDS`) whose rate each gyro channel reads.
 RATE_COORDS = {"pitch_rate": 1, "roll_rate": 2}
 
@@ -85,6 +123,16 @@ _TR = np.array([[1, 0, 1, 0], [1, 0, -1, 0], [0, 1, 0, 1], [0, 1, 0, -1]], dtype
 CORNER_TO_DECOMPOSED = np.linalg.inv(_TR)
 #: Decomposed coordinates ``[z, theta, zf_s, zr_s, phi, zf_a, zr_a]`` -> :data:`COORDS`.
 DECOMPOSED_TO_COORDS = _T.copy()
+# with a powertrain: q = [COORDS, u, psi], decomposed [z, theta, zf_s, zr_s, u, psi | phi, zf_a, zr_a]
+_T9 = np.zeros((9, 9))
+_T9[:7, :4] = _T[:, :4]
+_T9[:7, 6:] = _T[:, 4:]
+_T9[7, 4] = _T9[8, 5] = 1.0
+
+
+def _transform(nq: int) -> np.ndarray:
+    """``q = T qt`` for ``nq`` coordinates (7, or 9 with a powertrain)."""
+    return _T if nq == 7 else _T9
 
 
 def _cols(P):
@@ -92,11 +140,13 @@ def _cols(P):
     return {n: P[:, i] for i, n in enumerate(ALL_NAMES)}, P.shape[0]
 
 
-def _corner_vectors(P, geom):
-    """Rows ``e_i = [-G_i, unit_i]`` (n, 4, 7): ``d_i = e_i q`` is corner i's deflection
-    (wheel minus body corner motion, both read off the output map)."""
+def _corner_vectors(P, geom, nq: int = 7):
+    """Rows ``e_i = [-G_i, unit_i]`` (n, 4, nq): ``d_i = e_i q`` is corner i's deflection
+    (wheel minus body corner motion, both read off the output map; 0 on the powertrain's coordinates)."""
     Om = output_map(P, geom)
-    return Om[:, 4:] - Om[:, :4]
+    E = np.zeros(Om.shape[:1] + (4, nq))
+    E[:, :, :7] = Om[:, 4:] - Om[:, :4]
+    return E
 
 
 def output_map(P, geom: Geometry) -> np.ndarray:
@@ -127,12 +177,17 @@ def output_map(P, geom: Geometry) -> np.ndarray:
     return Om
 
 
+def n_coords(P) -> int:
+    """Generalised coordinates of the model of rows ``P``: 7, or 9 when any row has a powertrain."""
+    return 9 if has_powertrain(P) else 7
+
+
 def mck(P, geom: Geometry):
     """Mass, damping, stiffness and input matrices for a batch.
 
     Parameters
     ----------
-    P : array_like, shape (n, 12) or (n, 16)
+    P : array_like, shape (n, 12), (n, 16) or (n, 23)
         Parameter rows in :data:`rideid.model.params.NAMES` order, optionally
         followed by the extensions (:data:`rideid.model.params.EXT_NAMES`;
         absent means 0).
@@ -140,17 +195,20 @@ def mck(P, geom: Geometry):
 
     Returns
     -------
-    M, C, K : ndarray, shape (n, 7, 7)
-    Bf : ndarray, shape (n, 7, 4)
+    M, C, K : ndarray, shape (n, nq, nq)
+        ``nq`` = 7, or 9 when a row has a powertrain (:func:`n_coords`:
+        :data:`COORDS` then :data:`POWERTRAIN_COORDS`).
+    Bf : ndarray, shape (n, nq, 4)
         Generalised force per unit road input (tire springs).
     """
+    nq = n_coords(P)
     p, n = _cols(P)
     ks = np.stack([p["k_sf"], p["k_sf"], p["k_sr"], p["k_sr"]], -1)
     cs = np.stack([p["c_sf"], p["c_sf"], p["c_sr"], p["c_sr"]], -1)
     kt = np.stack([p["k_tf"], p["k_tf"], p["k_tr"], p["k_tr"]], -1)
     ct = np.stack([p["c_tf"], p["c_tf"], p["c_tr"], p["c_tr"]], -1)
     mu = np.stack([p["m_uf"], p["m_uf"], p["m_ur"], p["m_ur"]], -1)
-    E = _corner_vectors(P, geom)
+    E = _corner_vectors(P, geom, nq)
     K = np.einsum("nij,ni,nik->njk", E, ks, E)
     C = np.einsum("nij,ni,nik->njk", E, cs, E)
     # anti-roll bars: k_ar (e_i - e_j)(e_i - e_j)^T per axle
@@ -159,7 +217,7 @@ def mck(P, geom: Geometry):
         K += kar[:, None, None] * De[:, :, None] * De[:, None, :]
     K[:, 3 + np.arange(4), 3 + np.arange(4)] += kt
     C[:, 3 + np.arange(4), 3 + np.arange(4)] += ct
-    M = np.zeros((n, 7, 7))
+    M = np.zeros((n, nq, nq))
     M[:, 0, 0] = p["m_s"]
     M[:, 1, 1] = p["I_yy"]
     M[:, 2, 2] = p["I_xx"]
@@ -172,18 +230,37 @@ def mck(P, geom: Geometry):
         topple = p["m_s"] * GRAVITY * h
         K[:, 1, 1] -= topple
         K[:, 2, 2] -= topple
-    Bf = np.zeros((n, 7, 4))
+    if nq == 9:
+        _powertrain(M, C, K, p)
+    Bf = np.zeros((n, nq, 4))
     Bf[:, 3 + np.arange(4), np.arange(4)] = kt
     return M, C, K, Bf
 
 
+def _powertrain(M, C, K, p):
+    """In place: the powertrain's coordinates 7 (``u``) and 8 (``psi``) of ``M``, ``C``, ``K`` (module
+    docstring); a unit-mass dummy (:data:`DUMMY_HZ`, decoupled) where a row has no powertrain."""
+    m_p, x_p, I_p = p["m_p"], p["x_p"], p["I_p"]
+    for j, mass, f, zeta in ((7, m_p, p["f_pb"], p["zeta_pb"]), (8, I_p, p["f_pp"], p["zeta_pp"])):
+        on = (m_p > 0) & (mass > 0)
+        m = np.where(on, mass, 1.0)
+        w = 2 * np.pi * np.where(on, f, DUMMY_HZ)
+        M[:, j, j] = m
+        K[:, j, j] = m * w * w
+        C[:, j, j] = 2 * np.where(on, zeta, 0.5) * m * w
+    on_b = m_p > 0
+    M[:, 0, 7] = M[:, 7, 0] = np.where(on_b, m_p, 0.0)
+    M[:, 1, 7] = M[:, 7, 1] = np.where(on_b, -m_p * x_p, 0.0)
+    M[:, 1, 8] = M[:, 8, 1] = np.where(on_b & (I_p > 0), I_p, 0.0)
+
+
 def rate_input(P, geom: Geometry):
-    """Generalised force per unit road-input rate (tire dampers), shape (n, 7, 4).
+    """Generalised force per unit road-input rate (tire dampers), shape (n, nq, 4) (:func:`n_coords`).
 
     Zero without tire damping.
     """
     p, n = _cols(P)
-    Bd = np.zeros((n, 7, 4))
+    Bd = np.zeros((n, n_coords(P), 4))
     ct = np.stack([p["c_tf"], p["c_tf"], p["c_tr"], p["c_tr"]], -1)
     Bd[:, 3 + np.arange(4), np.arange(4)] = ct
     return Bd
@@ -203,35 +280,38 @@ def _state_space(M, C, K, Bf):
 
 
 def _output_rows(acc, Om):
-    """Ten channels' rows from generalised-acceleration rows ``acc`` (n, 7, k); gyro rows left 0."""
+    """Ten channels' rows from generalised-acceleration rows ``acc`` (n, nq, k) (the first 7, :data:`COORDS`,
+    are read); gyro rows left 0."""
     out = np.zeros((acc.shape[0], 10, acc.shape[-1]))
-    out[:, :8] = Om @ acc
+    out[:, :8] = Om @ acc[:, :7]
     return out
 
 
 def state_space(P, geom: Geometry, rate: bool = False):
-    """Full 14-state model with the ten SPEC output channels.
+    """Full model (14 states; 18 with a powertrain) with the ten SPEC output channels.
 
-    ``x' = A x + B r + Br r'``, ``y = Cy x + Dy r + Dyr r'``.
+    ``x' = A x + B r + Br r'``, ``y = Cy x + Dy r + Dyr r'``; states
+    ``[q, q']``, ``q`` in :data:`COORDS` order then, with a powertrain,
+    :data:`POWERTRAIN_COORDS`.
 
     Returns
     -------
-    A : (n, 14, 14), B : (n, 14, 4), Cy : (n, 10, 14), Dy : (n, 10, 4)
-        and, with ``rate``, also ``Br : (n, 14, 4)``, ``Dyr : (n, 10, 4)``
-        (zero without tire damping).
+    A : (n, 2nq, 2nq), B : (n, 2nq, 4), Cy : (n, 10, 2nq), Dy : (n, 10, 4)
+        and, with ``rate``, also ``Br : (n, 2nq, 4)``, ``Dyr : (n, 10, 4)``
+        (zero without tire damping); ``nq`` = 7 or 9 (:func:`n_coords`).
     """
     M, C, K, Bf = mck(P, geom)
+    nq = M.shape[-1]
     A, B = _state_space(M, C, K, Bf)
-    p, n = _cols(P)
     Om = output_map(P, geom)
-    Cy = _output_rows(A[:, 7:, :], Om)
-    Dy = _output_rows(B[:, 7:, :], Om)
+    Cy = _output_rows(A[:, nq:, :], Om)
+    Dy = _output_rows(B[:, nq:, :], Om)
     for c, k in RATE_COORDS.items():
-        Cy[:, CHANNELS.index(c), 7 + k] = 1.0
+        Cy[:, CHANNELS.index(c), nq + k] = 1.0
     if not rate:
         return A, B, Cy, Dy
     _, Br = _state_space(M, C, K, rate_input(P, geom))
-    Dyr = _output_rows(Br[:, 7:, :], Om)
+    Dyr = _output_rows(Br[:, nq:, :], Om)
     return A, B, Cy, Dy, Br, Dyr
 
 
@@ -243,7 +323,7 @@ def decomposed_mck(P, geom: Geometry, rate: bool = False):
     enter only the antisymmetric block.
     """
     M, C, K, Bf = mck(P, geom)
-    T = _T
+    T = _transform(M.shape[-1])
     f = lambda X: T.T @ X @ T  # noqa: E731
     out = (f(M), f(C), f(K), T.T @ Bf @ _TR)
     if rate:
@@ -258,13 +338,15 @@ def blocks(P, geom: Geometry):
     -------
     dict with
       ``As`` (n, 8, 8), ``Bs`` (n, 8, 2), ``Brs`` (n, 8, 2): states
-      ``[z, theta, zf_s, zr_s, rates]``, inputs ``[rf_s, rr_s]`` and their rates;
+      ``[z, theta, zf_s, zr_s, rates]``, inputs ``[rf_s, rr_s]`` and their rates
+      (with a powertrain 12 states: ``[z, theta, zf_s, zr_s, u, psi, rates]``);
       ``Aa`` (n, 6, 6), ``Ba`` (n, 6, 2), ``Bra`` (n, 6, 2): states
       ``[phi, zf_a, zr_a, rates]``, inputs ``[rf_a, rr_a]`` and their rates.
       ``x' = A x + B u + Br u'``; ``Br`` is zero without tire damping.
     """
     M, C, K, Bf, Bd = decomposed_mck(P, geom, rate=True)
-    s, a = np.arange(4), np.arange(4, 7)
+    ns = M.shape[-1] - 3
+    s, a = np.arange(ns), np.arange(ns, ns + 3)
     sel = lambda X, r, c: X[:, r][:, :, c]  # noqa: E731
     As, Bs = _state_space(sel(M, s, s), sel(C, s, s), sel(K, s, s), sel(Bf, s, np.arange(2)))
     Aa, Ba = _state_space(sel(M, a, a), sel(C, a, a), sel(K, a, a), sel(Bf, a, np.arange(2, 4)))
@@ -298,6 +380,8 @@ def static_corner_loads(P, geom: Geometry, g: float = GRAVITY):
 
 MODES = ("bounce", "pitch", "roll", "front hop (in phase)", "rear hop (in phase)",
          "front hop (anti-phase)", "rear hop (anti-phase)")
+#: The two more modes of a car with a powertrain on mounts (SPEC §11).
+POWERTRAIN_MODES = ("powertrain bounce", "powertrain pitch")
 
 
 def _block_modes(M, C, K, names_by_coord):
@@ -337,31 +421,36 @@ def _block_modes(M, C, K, names_by_coord):
 
 
 def modal_summary(params, geom: Geometry) -> dict[str, dict[str, float]]:
-    """Natural frequency (Hz) and damping ratio of the seven modes of one car.
+    """Natural frequency (Hz) and damping ratio of the seven modes of one car (nine with a powertrain).
 
     Parameters
     ----------
-    params : array_like, shape (12,) or (16,), or dict (absent extensions 0)
+    params : array_like, shape (12,), (16,) or (23,), or dict (absent extensions 0)
     geom : Geometry
 
     Returns
     -------
     dict
-        mode name (:data:`MODES`) -> ``{"frequency_hz", "damping_ratio",
+        mode name (:data:`MODES`, then :data:`POWERTRAIN_MODES` when the car
+        has a powertrain) -> ``{"frequency_hz", "damping_ratio",
         "undamped_frequency_hz"}``. ``frequency_hz`` is the natural frequency
         ``|lambda|/2pi`` of the damped eigenvalue pair, ``damping_ratio``
         ``-Re(lambda)/|lambda|``; for an overdamped mode the undamped
-        frequency and the modal damping estimate are given.
+        frequency and the modal damping estimate are given. The powertrain's
+        modes are those of the whole car (body free), not the mounts' own
+        ``f_pb``, ``f_pp`` (body held).
     """
     if isinstance(params, dict):
         params = [params.get(n, 0.0) if n not in NAMES else params[n] for n in ALL_NAMES]
     P = full_rows(np.asarray(params, dtype=float).reshape(1, -1))
     M, C, K, _ = decomposed_mck(P, geom)
-    s, a = np.arange(4), np.arange(4, 7)
+    ns = M.shape[-1] - 3
+    s, a = np.arange(ns), np.arange(ns, ns + 3)
 
-    sym_modes = MODES[:2] + MODES[3:5]  # bounce, pitch, front/rear hop in phase
+    sym_modes = MODES[:2] + MODES[3:5] + (POWERTRAIN_MODES if ns == 6 else ())
     anti_modes = (MODES[2],) + MODES[5:]  # roll, front/rear hop anti-phase
-    sym_pref = {0: (0, 1), 1: (1, 0), 2: (2, 3), 3: (3, 2)}  # dominant coordinate -> preferred names
+    # dominant coordinate -> preferred names (bounce, pitch, front/rear hop in phase, powertrain bounce, pitch)
+    sym_pref = {0: (0, 1), 1: (1, 0), 2: (2, 3), 3: (3, 2), 4: (4, 5), 5: (5, 4)}
     anti_pref = {0: (0,), 1: (1, 2), 2: (2, 1)}
 
     def namer(block, pref):
@@ -380,7 +469,7 @@ def modal_summary(params, geom: Geometry) -> dict[str, dict[str, float]]:
     res = {}
     res.update(_block_modes(M[0][np.ix_(s, s)], C[0][np.ix_(s, s)], K[0][np.ix_(s, s)], sym_name))
     res.update(_block_modes(M[0][np.ix_(a, a)], C[0][np.ix_(a, a)], K[0][np.ix_(a, a)], anti_name))
-    return {m: res[m] for m in MODES}
+    return {m: res[m] for m in MODES + (POWERTRAIN_MODES if ns == 6 else ())}
 
 
 def format_modal_summary(summary) -> str:
@@ -390,5 +479,6 @@ def format_modal_summary(summary) -> str:
     return "\n".join(lines)
 
 
-__all__ = ["CHANNELS", "mck", "output_map", "rate_input", "state_space", "blocks", "modal_summary",
+__all__ = ["CHANNELS", "POWERTRAIN_COORDS", "POWERTRAIN_MODES", "n_coords",
+           "mck", "output_map", "rate_input", "state_space", "blocks", "modal_summary",
            "static_corner_loads", "static_state", "INDEX"]

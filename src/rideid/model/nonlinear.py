@@ -32,7 +32,7 @@ exact while the bump stops are clear of it and every tire is loaded, e.g.
 on every track's flat lead-in), zero velocities.
 
 Parameter rows (:class:`NonlinearLayout`): the sixteen
-:data:`rideid.model.params.ALL_NAMES`, then with bump stops
+:data:`rideid.model.params.SUSPENSION_NAMES`, then with bump stops
 :data:`BUMP_STOP_NAMES` (``bs_clear_f, bs_clear_r`` m, ``bs_rate_f,
 bs_rate_r`` N/m), then with curves the front forces at the ``K`` knots
 ``F_f1 .. F_fK`` and the rear ones ``F_r1 .. F_rK`` (N, knots in ascending
@@ -147,7 +147,7 @@ import numpy as np
 from ..errors import DataError
 from . import backend
 from .equations import CHANNELS, mck, blocks as blocks_of, static_corner_loads
-from .params import ALL_NAMES, GRAVITY, INDEX, Geometry, check_parameters, full_rows
+from .params import GRAVITY, INDEX, ROW_WIDTHS, SUSPENSION_NAMES, Geometry, check_parameters, full_rows
 from .nl_coef import CI, COEF, hermite_value_slope
 from .simulate import RunInput
 
@@ -175,7 +175,8 @@ class NonlinearLayout:
     ``knots``: damper velocity knots (m/s, strictly increasing, nonzero;
     ``None``: linear dampers ``c_sf``, ``c_sr``); ``bump_stops``: the four
     :data:`BUMP_STOP_NAMES` columns are present. Rows are the sixteen
-    :data:`rideid.model.params.ALL_NAMES`, then the bump stops, then the
+    :data:`rideid.model.params.SUSPENSION_NAMES` (the nonlinear car has no
+    powertrain), then the bump stops, then the
     front and rear curve forces (:func:`curve_names`).
     """
 
@@ -197,7 +198,7 @@ class NonlinearLayout:
 
     @property
     def names(self) -> tuple[str, ...]:
-        return ALL_NAMES + (BUMP_STOP_NAMES if self.bump_stops else ()) + curve_names(self.n_knots)
+        return SUSPENSION_NAMES + (BUMP_STOP_NAMES if self.bump_stops else ()) + curve_names(self.n_knots)
 
     @property
     def n_columns(self) -> int:
@@ -218,14 +219,14 @@ class NonlinearLayout:
         if self.knots is None:
             return None
         P = np.atleast_2d(P)
-        s = len(ALL_NAMES) + (4 if self.bump_stops else 0)
+        s = len(SUSPENSION_NAMES) + (4 if self.bump_stops else 0)
         K = self.n_knots
         return P[:, s:s + K], P[:, s + K:s + 2 * K]
 
     def rows(self, P) -> np.ndarray:
         """Rows ``P`` as a float array ``(n, n_columns)``; for a linear layout 12 columns are accepted too."""
         P = np.atleast_2d(np.asarray(P, dtype=float))
-        if self.linear and P.shape[-1] in (12, 16):
+        if self.linear and P.shape[-1] in ROW_WIDTHS:
             return full_rows(P)
         if P.shape[-1] != self.n_columns:
             raise DataError(f"nonlinear parameter rows must have {self.n_columns} columns "
@@ -313,7 +314,7 @@ def coefficients(P, geom: Geometry, layout: NonlinearLayout):
     co[:, CI["kar_f"]] = p["k_arf"]
     co[:, CI["kar_r"]] = p["k_arr"]
     x, y = geom.corner_xy(p["a"])
-    L = static_corner_loads(P[:, :len(ALL_NAMES)], geom)
+    L = static_corner_loads(P[:, :len(SUSPENSION_NAMES)], geom)
 
     def put(name, vals):
         for c in range(4):
@@ -363,7 +364,7 @@ def _substeps_of(lam, h: float, rho: float):
 def _spectral_radii(P, geom: Geometry, layout: NonlinearLayout) -> np.ndarray:
     """``(n,)``: the largest |eigenvalue| of each candidate's linearised car (its stiffest segments)."""
     P = layout.rows(P)
-    Q = full_rows(P[:, :len(ALL_NAMES)]).copy()
+    Q = full_rows(P[:, :len(SUSPENSION_NAMES)]).copy()
     if layout.bump_stops:
         ix = layout.column
         Q[:, INDEX["k_sf"]] += P[:, ix["bs_rate_f"]]
@@ -385,7 +386,7 @@ def initial_state(P, geom: Geometry, layout: NonlinearLayout, u0) -> np.ndarray:
     X = np.zeros((n, 14))
     u0 = np.asarray(u0, dtype=float)
     if np.any(u0):
-        _, _, K, Bf = mck(P[:, :len(ALL_NAMES)], geom)
+        _, _, K, Bf = mck(P[:, :len(SUSPENSION_NAMES)], geom)
         X[:, :7] = np.linalg.solve(K, (Bf @ u0)[..., None])[..., 0]
     return X
 
@@ -875,11 +876,11 @@ def check_nonlinear(P, geom: Geometry, layout: NonlinearLayout, where: str = "pa
     """Validate rows: the sixteen as :func:`rideid.model.params.check_parameters` (``c_sf``, ``c_sr``
     unused with curves), bump stops ``>= 0``, curve forces finite."""
     P = layout.rows(P)
-    base = P[:, :len(ALL_NAMES)].copy()
+    base = P[:, :len(SUSPENSION_NAMES)].copy()
     if layout.knots is not None:
         base[:, [INDEX["c_sf"], INDEX["c_sr"]]] = 1.0
     check_parameters(base, geom, where)
-    for i, nm in enumerate(layout.names[len(ALL_NAMES):], start=len(ALL_NAMES)):
+    for i, nm in enumerate(layout.names[len(SUSPENSION_NAMES):], start=len(SUSPENSION_NAMES)):
         col = P[:, i]
         if not np.all(np.isfinite(col)):
             raise DataError(f"{where}: {nm} is not finite")

@@ -196,7 +196,7 @@ def simulate_reference(P, geom: Geometry, run: RunInput, disc: Discretized | Non
 
     Parameters
     ----------
-    P : (n_pop, 12) or (n_pop, 16)
+    P : (n_pop, 12), (n_pop, 16) or (n_pop, 23)
     geom : Geometry
     run : RunInput
 
@@ -205,8 +205,8 @@ def simulate_reference(P, geom: Geometry, run: RunInput, disc: Discretized | Non
     y : (n_pop, n_time, 10) in :data:`rideid.model.CHANNELS` order.
     states : (n_pop, n_time, 14) in decomposed order
         ``[z, theta, zf_s, zr_s, rates(4), phi, zf_a, zr_a, rates(3)]``
-        (the physical states ``x``, not the shifted ones), only with
-        ``return_states``.
+        (the physical states ``x``, not the shifted ones; a powertrain's
+        relative motion is not among them), only with ``return_states``.
     """
     P = np.atleast_2d(np.asarray(P, dtype=float))
     if disc is None:
@@ -216,7 +216,8 @@ def simulate_reference(P, geom: Geometry, run: RunInput, disc: Discretized | Non
     n = run.n
     gs = np.empty((P.shape[0], n, 4))
     ga = np.empty((P.shape[0], n, 3))
-    Xs = np.empty((P.shape[0], n, 8))
+    ns = disc.Phi_s.shape[-1] // 2  # 4 coordinates, 6 with a powertrain (SPEC §11)
+    Xs = np.empty((P.shape[0], n, 2 * ns))
     Xa = np.empty((P.shape[0], n, 6))
     for k in range(n):
         Xs[:, k], Xa[:, k] = xs, xa
@@ -229,13 +230,63 @@ def simulate_reference(P, geom: Geometry, run: RunInput, disc: Discretized | Non
             xs = np.einsum("pij,pj->pi", disc.Phi_s, xs) + np.einsum("npij,jn->pi", disc.G_s, mus)
             xa = np.einsum("pij,pj->pi", disc.Phi_a, xa) + np.einsum("npij,jn->pi", disc.G_a, mua)
     # generalised velocities: decomposed rates -> COORDS
-    rates = np.concatenate([Xs[:, :, 4:], Xa[:, :, 3:]], axis=-1) @ DECOMPOSED_TO_COORDS.T
+    rates = np.concatenate([Xs[:, :, ns:ns + 4], Xa[:, :, 3:]], axis=-1) @ DECOMPOSED_TO_COORDS.T
     y = assemble_channels(P, geom, gs, ga, rates)
     if return_states:
         Xs = Xs + np.einsum("pij,tj->pti", disc.Brs, run.ud[:, :2])  # x = xi + Br u
         Xa = Xa + np.einsum("pij,tj->pti", disc.Bra, run.ud[:, 2:])
-        return y, np.concatenate([Xs, Xa], axis=-1)
+        car = np.r_[0:4, ns:ns + 4]  # the car's states; a powertrain's relative motion left out
+        return y, np.concatenate([Xs[:, :, car], Xa], axis=-1)
     return y
+
+
+def _block_response(Phi, G, mu, x0):
+    """States ``(n_pop, m, n_time)`` of ``x_{k+1} = Phi x_k + sum_n G_n mu_{k,n}`` from ``x0``, in modal
+    coordinates: ``Phi = V diag(lam) V^-1``, each mode a first-order recursion, all candidates' modes
+    advanced together (one complex multiply-add per sample); the rest is BLAS."""
+    n_pop, m = x0.shape
+    N = G.shape[0]
+    k = mu.shape[0]
+    # the input over each interval, (n_pop, m, n_time - 1): sum over (input, term) as one matrix product
+    f = np.moveaxis(G, 0, -1).reshape(n_pop, m, -1) @ mu[:, :, :N].reshape(k, -1).T
+    lam, V = np.linalg.eig(Phi)
+    Vinv = np.linalg.inv(V)
+    g = Vinv @ f
+    z0 = (Vinv @ x0[:, :, None])[:, :, 0]
+    z = np.empty((k + 1, n_pop, m), dtype=complex)
+    z[0] = zk = z0
+    gt = np.ascontiguousarray(g.transpose(2, 0, 1))
+    for j in range(k):  # every candidate's every mode at once: one complex multiply-add per sample
+        zk = lam * zk + gt[j]
+        z[j + 1] = zk
+    return (V @ z.transpose(1, 2, 0)).real
+
+
+def simulate_modal(P, geom: Geometry, run: RunInput, disc: Discretized | None = None):
+    """The outputs of :func:`simulate_reference` (the same exact discretisation) by a modal recursion
+    vectorised over the samples: any block size (a powertrain's 12-state symmetric block, SPEC §11).
+
+    Parameters
+    ----------
+    P : (n_pop, 12), (n_pop, 16) or (n_pop, 23)
+    geom : Geometry
+    run : RunInput
+
+    Returns
+    -------
+    y : (n_pop, n_time, 10) in :data:`rideid.model.CHANNELS` order.
+    """
+    P = np.atleast_2d(np.asarray(P, dtype=float))
+    if disc is None:
+        disc = Discretized(P, geom, run.h)
+    xs0, xa0 = initial_states(disc, run.ud[0])
+    Xs = _block_response(disc.Phi_s, disc.G_s, run.mu[:, :2], xs0)  # (n_pop, states, n_time)
+    Xa = _block_response(disc.Phi_a, disc.G_a, run.mu[:, 2:], xa0)
+    gs = disc.Ca_s @ Xs + disc.Da_s @ run.ud[:, :2].T + disc.Dr_s @ run.rated[:, :2].T
+    ga = disc.Ca_a @ Xa + disc.Da_a @ run.ud[:, 2:].T + disc.Dr_a @ run.rated[:, 2:].T
+    ns = disc.Phi_s.shape[-1] // 2
+    rates = np.concatenate([Xs[:, ns:ns + 4], Xa[:, 3:]], axis=1).transpose(0, 2, 1) @ DECOMPOSED_TO_COORDS.T
+    return assemble_channels(P, geom, gs.transpose(0, 2, 1), ga.transpose(0, 2, 1), rates)
 
 
 def wheel_displacements(states):
@@ -292,5 +343,5 @@ def simulate_lsim(P, geom: Geometry, track: Track, speed: float, t, upsample: in
     return y[::upsample]
 
 
-__all__ = ["RunInput", "prepare_run", "simulate_reference", "simulate_lsim", "CHANNELS",
+__all__ = ["RunInput", "prepare_run", "simulate_reference", "simulate_modal", "simulate_lsim", "CHANNELS",
            "corner_inputs", "corner_positions"]

@@ -26,10 +26,10 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from ..errors import ArgumentError
+from ..errors import ArgumentError, DataError
 from .batch import BatchSimulator
 from .nonlinear import RHO_MAX, NonlinearLayout, NonlinearSimulator, Pin, linear_curve
-from .params import INDEX, Geometry, nominal_car
+from .params import INDEX, ROW_WIDTHS, SUSPENSION_NAMES, Geometry, full_rows, has_powertrain, nominal_car
 from .simulate import RunInput
 
 #: backend names a :class:`Simulator` takes (None: ``RIDEID_KERNEL`` decides at each call)
@@ -44,7 +44,7 @@ class Simulator:
     ----------
     layout : NonlinearLayout or None
         The columns of a parameter row and the model they make: ``None`` (or
-        a linear layout) the linear car of SPEC §1/§6 (rows of 12 or 16),
+        a linear layout) the linear car of SPEC §1/§6/§11 (rows of 12, 16 or 23),
         else damper curves and/or bump stops (SPEC §8).
     backend : {None, "compiled", "numpy"}
         The compiled kernels, the NumPy reference, or (None) as
@@ -77,7 +77,7 @@ class Simulator:
 
     @property
     def width(self) -> int | None:
-        """Columns of a parameter row of this model (None: the linear car, 12 or 16)."""
+        """Columns of a parameter row of this model (None: the linear car, 12, 16 or 23)."""
         return None if self.layout is None else self.layout.n_columns
 
     def for_layout(self, layout: NonlinearLayout | None) -> "Simulator":
@@ -97,16 +97,18 @@ class Simulator:
         return NonlinearSimulator(geom, runs, self.layout, rho=self.rho, split=self.split, numpy=numpy)
 
     def row(self, P) -> np.ndarray:
-        """Parameter rows ``P`` of the linear car (12 or 16 columns) or of this model as rows of this
+        """Parameter rows ``P`` of the linear car (12, 16 or 23 columns) or of this model as rows of this
         model: a linear car's dampers become curves ``F = c v``, without bump stops (rates 0)."""
         P = np.atleast_2d(np.asarray(P, dtype=float))
         lay = self.layout
         if lay is None or P.shape[-1] == lay.n_columns:
             return P if lay is None else lay.rows(P)
-        base = np.concatenate([P, np.zeros(P.shape[:-1] + (16 - P.shape[-1],))], axis=-1) \
-            if P.shape[-1] == 12 else P
-        if base.shape[-1] != 16:
+        if P.shape[-1] not in ROW_WIDTHS:
             return lay.rows(P)  # the layout's own message
+        if has_powertrain(P):
+            raise DataError("the nonlinear car (damper curves, bump stops) has no powertrain on mounts in this "
+                            "version of rideid (SPEC §11): give m_p = 0 or fit linear dampers without bump stops")
+        base = full_rows(P)[:, :len(SUSPENSION_NAMES)]
         parts = [base]
         if lay.bump_stops:
             parts.append(np.tile([0.15, 0.15, 0.0, 0.0], (base.shape[0], 1)))

@@ -21,10 +21,11 @@ from ..data.noise import sensor_noise
 from ..data.scenario import LIFT_OFF_RHO, generate_road, lead_in, road_record, run_times, write_road_csv
 from ..data.schema import (BUMP_NAMES, ChannelEntry, DatasetManifest, RunSpec, Scenario, atomic_output, write_run_csv,
                            write_toml)
-from ..errors import ArgumentError, DataWarning, ModelValidityWarning
+from ..errors import ArgumentError, DataError, DataWarning, ModelValidityWarning
 from ..model.equations import CHANNELS, static_corner_loads
 from ..model.nonlinear import NonlinearLayout, NonlinearSimulator, simulate_nonlinear
-from ..model.params import ALL_NAMES, CORNERS, EXT_NAMES, INDEX, NAMES, as_vector, full_rows
+from ..model.params import (CORNERS, EXT_NAMES, INDEX, NAMES, ROW_WIDTHS, SUSPENSION_NAMES, as_vector,
+                            full_rows)
 from ..model.simulate import prepare_run, simulate_reference, wheel_displacements, wheel_velocities
 from ..verify.hifi import RAW_NAMES, scenario_properties, simulate_mujoco
 
@@ -77,10 +78,10 @@ def lift_offs(P, geom, run_id, run_input, states, physics: bool = False, coords:
     (``return_states=True``) or of :func:`rideid.model.nonlinear.simulate_nonlinear`
     (``physics=True``: the wheel is then in the air, its tire carrying nothing; ``coords=True``: states in
     :data:`rideid.model.equations.COORDS` order, ``[q, q']``, as that one returns them);
-    ``P`` 12 or 16 parameters (or a nonlinear row: its first 16 columns).
+    ``P`` 12, 16 or 23 parameters (or a nonlinear row: its first 16 columns).
     """
     P = np.asarray(P, dtype=float).reshape(-1)
-    P = full_rows(P[:len(ALL_NAMES)] if P.size > len(ALL_NAMES) else P)[0]
+    P = full_rows(P if P.size in ROW_WIDTHS else P[:len(SUSPENSION_NAMES)])[0]
     static = static_corner_loads(P[None], geom)[0]
     kt = np.array([P[INDEX["k_tf"]]] * 2 + [P[INDEX["k_tr"]]] * 2)
     ct = np.array([P[INDEX["c_tf"]]] * 2 + [P[INDEX["c_tr"]]] * 2)
@@ -107,7 +108,10 @@ def nonlinear_car(sc: Scenario):
         return None
     dm = sc.dampers
     layout = NonlinearLayout(knots=None if dm is None else tuple(dm.velocity), bump_stops=bool(sc.bump_stops))
-    row = [float(sc.truth.get(n, 0.0)) for n in ALL_NAMES]
+    if sc.truth.get("m_p", 0.0) > 0:
+        raise DataError(f"{sc.path}: [truth] gives a powertrain on mounts (SPEC §11) and the car has [dampers] curves "
+                        "or bump stops (SPEC §8): this version of rideid simulates a powertrain in the linear car only")
+    row = [float(sc.truth.get(n, 0.0)) for n in SUSPENSION_NAMES]
     if sc.bump_stops:
         (cf, cr), (rf, rr) = sc.bump_stop_pairs
         # an axle without a stop: rate 0 (the simulator takes finite clearances only; with rate 0 any will do)

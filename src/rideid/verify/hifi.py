@@ -40,6 +40,16 @@ car has and the 7-DOF model lacks:
     vertical damping of the tire contact (or ``c_tf``/``c_tr`` in
     ``[truth]``, SPEC §6; giving both is refused).
 
+The scenario's ``[truth]`` powertrain (SPEC §11: ``m_p``, ``x_p``, ``I_p``,
+``f_pb``, ``zeta_pb``, ``f_pp``, ``zeta_pp``) is a body of its own inside the
+chassis, at ``x_p`` ahead of the CG, on a vertical slide and a pitch hinge
+(its mounts: spring and damper of each, the slide preloaded by its weight);
+the chassis then carries the rest of the sprung mass (mass ``m_s - m_p`` at
+its own CG ``-m_p x_p / (m_s - m_p)``, pitch inertia by the parallel-axis
+theorem), so the whole is the scenario's ``m_s``, ``I_yy``, ``a``. The
+powertrain's roll and yaw inertia is taken as ``I_p`` and the chassis's roll
+inertia reduced by it (the powertrain turns with the body in roll).
+
 The scenario's ``[truth]`` anti-roll bars (``k_arf``, ``k_arr``, SPEC §6)
 are real bars: per axle a force ``k_ar (d_i - d_j)`` on the two suspension
 slides (``d`` the compression from static ride height), added in MuJoCo's
@@ -177,7 +187,6 @@ def build_mjcf(P, geom: Geometry, hifi: HifiProperties | None = None, dampers=No
     p = dict(zip(NAMES, np.asarray(P, dtype=float)))
     R = geom.tire_radius
     h = hifi.cg_height
-    izz = p["I_xx"] + p["I_yy"]
     tire_loads = static_corner_loads(np.asarray(P, dtype=float)[None], geom, GRAVITY)[0]
     wheels, posts = [], []
     xs, ys = geom.corner_xy(p["a"])
@@ -204,6 +213,7 @@ def build_mjcf(P, geom: Geometry, hifi: HifiProperties | None = None, dampers=No
       <inertial pos="0 0 -0.05" mass="{POST_MASS}" diaginertia="1e4 1e4 1e4"/>
       <geom name="pad_{c}" type="box" size="0.2 0.2 0.05" pos="0 0 -0.05" contype="2" conaffinity="1"/>
     </body>""")
+    body_inertial, engine = _powertrain_mjcf(np.asarray(P, dtype=float), p)
     sites = [f"body_{c}" for c in CORNERS] + [f"axle_{c}" for c in CORNERS]
     sensors = "".join(f'    <accelerometer name="acc_{s}" site="{s}"/>\n'
                       f'    <framezaxis name="zaxis_{s}" objtype="site" objname="{s}"/>\n' for s in sites)
@@ -214,14 +224,43 @@ def build_mjcf(P, geom: Geometry, hifi: HifiProperties | None = None, dampers=No
       <joint name="heave" type="slide" axis="0 0 1"/>
       <joint name="pitch" type="hinge" axis="0 1 0"/>
       <joint name="roll" type="hinge" axis="1 0 0"/>
-      <inertial pos="0 0 0" mass="{p['m_s']}" diaginertia="{p['I_xx']} {p['I_yy']} {izz}"/>
-      <site name="gyro" size="0.01"/>{''.join(wheels)}
+      {body_inertial}
+      <site name="gyro" size="0.01"/>{''.join(wheels)}{engine}
     </body>{''.join(posts)}
   </worldbody>
   <sensor>
 {sensors}    <gyro name="gyro" site="gyro"/>
   </sensor>
 </mujoco>"""
+
+
+def _powertrain_mjcf(P, p) -> tuple[str, str]:
+    """The chassis's ``<inertial>`` and the powertrain's body (empty without one, SPEC §11; module docstring)."""
+    izz = p["I_xx"] + p["I_yy"]
+    row = full_rows(P)[0]
+    m_p = float(row[INDEX["m_p"]])
+    if m_p <= 0:
+        return f'<inertial pos="0 0 0" mass="{p["m_s"]}" diaginertia="{p["I_xx"]} {p["I_yy"]} {izz}"/>', ""
+    x_p, I_p = float(row[INDEX["x_p"]]), float(row[INDEX["I_p"]])
+    m_b = p["m_s"] - m_p
+    x_b = -m_p * x_p / m_b
+    I_b = p["I_yy"] - I_p - m_p * x_p ** 2 - m_b * x_b ** 2
+    I_xb = p["I_xx"] - I_p
+    if I_b <= 0 or I_xb <= 0:
+        raise DataError("MuJoCo engine: the powertrain (m_p, x_p, I_p) leaves the rest of the sprung mass no "
+                        "positive pitch or roll inertia")
+    wb, wt = 2 * np.pi * float(row[INDEX["f_pb"]]), 2 * np.pi * float(row[INDEX["f_pp"]])
+    k_p, c_p = m_p * wb * wb, 2 * float(row[INDEX["zeta_pb"]]) * m_p * wb
+    k_t, c_t = I_p * wt * wt, 2 * float(row[INDEX["zeta_pp"]]) * I_p * wt
+    inertial = (f'<inertial pos="{x_b} 0 0" mass="{m_b}" diaginertia="{I_xb} {I_b} {I_xb + I_b}"/>')
+    engine = f"""
+      <body name="powertrain" pos="{x_p} 0 0">
+        <joint name="mount_bounce" type="slide" axis="0 0 1" stiffness="{k_p}" damping="{c_p}"
+               springref="{m_p * GRAVITY / k_p}"/>
+        <joint name="mount_pitch" type="hinge" axis="0 1 0" stiffness="{k_t}" damping="{c_t}"/>
+        <inertial pos="0 0 0" mass="{m_p}" diaginertia="{I_p} {I_p} {I_p}"/>
+      </body>"""
+    return inertial, engine
 
 
 class MujocoCar:

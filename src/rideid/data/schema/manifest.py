@@ -20,7 +20,8 @@ from dataclasses import dataclass, field, fields
 from pathlib import Path
 
 from ...errors import DataError
-from ...model.params import EXT_NAMES, EXTRA_KNOWN, GROUPS, NAMES, Geometry, check_parameters, total_mass
+from ...model.params import (EXT_NAMES, EXTRA_KNOWN, GROUPS, NAMES, SIGNED, Geometry, as_vector, check_parameters,
+                             total_mass)
 from ...model.roads import ROAD_CLASSES
 from ...model.tracks import Track
 from .channels import (RUN_PREPROCESS_KEYS, ChannelEntry, CsvOptions, parse_channel_map, parse_csv_options,
@@ -330,6 +331,8 @@ class DatasetManifest(Manifest):
 def _param_value(v, name, where):
     """A parameter value: the twelve positive, the extensions (SPEC §6) non-negative."""
     v = number(v, where)
+    if name in SIGNED:  # the powertrain's position: ahead of the CG +, behind it -
+        return v
     if name in EXT_NAMES or name.startswith("bs_rate"):
         if v < 0:
             raise DataError(f"{where}: must not be negative (0 means none), got {v!r}")
@@ -416,6 +419,8 @@ def parse_truth(tab: dict, where: str, geom: Geometry | None) -> dict[str, float
     vals.update(parse_bump_stops(tab, where))
     if geom is not None:
         check_parameters([vals[n] for n in NAMES], geom, where)
+        if vals.get("m_p", 0.0) > 0:
+            check_parameters(as_vector(vals, extended=True), geom, where)
     return vals
 
 
@@ -476,7 +481,7 @@ def _parse_bounds(doc: dict, where: str, geom: Geometry, known: dict) -> dict[st
         lo, hi = number(v[0], w), number(v[1], w)
         if not lo < hi:
             raise DataError(f"{w}: lower bound {lo} must be less than upper bound {hi}")
-        if (k in EXT_NAMES or k.startswith("bs_rate")) and lo < 0:
+        if (k in EXT_NAMES or k.startswith("bs_rate")) and k not in SIGNED and lo < 0:
             raise DataError(f"{w}: lower bound must not be negative, got {lo}")
         if k != "a" and k not in EXT_NAMES and not k.startswith("bs_rate") and lo <= 0:
             raise DataError(f"{w}: lower bound must be positive, got {lo}")
