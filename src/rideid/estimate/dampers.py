@@ -17,6 +17,18 @@ on the noise of those few samples. A knot that is not excited is not free in
 the polish nor in the uncertainty: its force continues the last excited
 segment's slope (derived, reported with ``excited: false`` and no standard
 error: "not excited — not a number to trust").
+
+Knees found by the data
+-----------------------
+Nobody knows where their damper bends before testing it. Without ``[model]
+damper_knots`` the curves are fitted on :data:`KNEE_GRID` instead of the
+default knots: 0.025 m/s apart up to 0.2 m/s (where production dampers bend),
+every default knot among them; the excitation rule above freezes the grid
+knots no run reaches. Where each curve bends is then read off the fitted curve
+(:func:`knees`): per axle and side the one break of a two-segment line
+through the origin fitted to the excited knot forces, its standard error from
+draws of the forces' robust covariance. A dataset's ``damper_knots`` still
+wins (no grid, no second fit).
 """
 
 from __future__ import annotations
@@ -32,6 +44,19 @@ from ..data.scenario import LIFT_OFF_RHO
 MIN_SAMPLES = 20
 #: how the text output marks a knot no run excites
 NOT_EXCITED = "not excited — not a number to trust"
+#: the positive knots (m/s) of the curves fitted without ``[model] damper_knots``, mirrored into rebound:
+#: 0.025 m/s apart to 0.2 m/s, then 0.3 and the default knots' 0.4; every default knot is one of them
+KNEE_GRID: tuple[float, ...] = (0.025, 0.05, 0.075, 0.1, 0.125, 0.15, 0.175, 0.2, 0.3, 0.4)
+#: draws of the knot forces (robust covariance) behind a knee's standard error; their seed (deterministic)
+KNEE_DRAWS = 400
+KNEE_SEED = 20260
+#: a side bends when its slope ratio above/below the knee differs from 1 by more than this many std_robust
+KNEE_SIGNIFICANCE = 3.0
+#: the text of result.json ``dampers.knee_rule``
+KNEE_RULE = ("knee: per axle and side, the break of the two-segment line through the origin (slopes below and "
+             "above it) fitted by least squares to the excited knot forces; std_robust from "
+             f"{KNEE_DRAWS} draws of those forces from their robust covariance; a side bends when its slope ratio "
+             f"differs from 1 by more than {KNEE_SIGNIFICANCE:g} std_robust (else no knee is reported)")
 
 
 def suspension_velocities_by_run(cf, P, rho: float | None = None) -> list[tuple[np.ndarray, np.ndarray]]:
@@ -134,6 +159,15 @@ def dampers_block(space, P, cov_white, cov_robust, names, excitation=None) -> di
     if excitation is not None:
         out["excitation_rule"] = excitation["rule"]
     out["mean_slope_velocity"] = 0.1
+    if space.damper_knots is None:
+        out["knots_from"] = "default knots (SPEC §8)"
+    elif space.damper_knots == KNEE_GRID:
+        out["knots_from"] = ("found: no [model] damper_knots, so the curves were fitted on a grid 0.025 m/s apart "
+                             "to 0.2 m/s and the knees read off them (docs/dampers.md)")
+    else:
+        out["knots_from"] = "[model] damper_knots"
+    out["knees"] = knees(space, P, cov_robust, names)
+    out["knee_rule"] = KNEE_RULE
     return out
 
 
@@ -156,3 +190,83 @@ def format_dampers(dampers: dict) -> str:
     if not all(dampers["front"]["excited"] + dampers["rear"]["excited"]):
         lines.append(f"(not excited: no run reached the knot — {NOT_EXCITED.split(' — ')[1]})")
     return "\n".join(lines)
+
+
+def _two_segments(v, breaks):
+    """Regressors ``(..., n, 2)`` of the two-segment line through the origin with its break at ``breaks``
+    (``(...)``): ``min(v, b)`` and ``max(v - b, 0)`` at the velocities ``v`` (n,)."""
+    b = np.asarray(breaks, dtype=float)[..., None]
+    return np.stack([np.minimum(v, b), np.maximum(v - b, 0.0)], axis=-1)
+
+
+def knee_of(v, F_draws):
+    """Break velocity and slopes of the two-segment line through the origin fitted to each row of
+    ``F_draws`` (values at positive, ascending ``v``; at least 3): arrays ``(knee, slope_below, slope_above)``,
+    each of the rows' length.
+
+    The break is searched on a 0.5 mm/s grid strictly inside ``(v[0], v[-1])``, then placed at the vertex
+    of the parabola through the sum of squares at the best grid point and its neighbours."""
+    v = np.asarray(v, dtype=float)
+    F = np.atleast_2d(np.asarray(F_draws, dtype=float))
+    step = 5e-4
+    breaks = np.arange(v[0], v[-1], step)[1:]
+    B = _two_segments(v, breaks)                                     # (breaks, n, 2)
+    pinv = np.linalg.pinv(B)                                         # (breaks, 2, n)
+    coef = np.einsum("bkn,dn->dbk", pinv, F)                         # (draws, breaks, 2)
+    resid = F[:, None, :] - np.einsum("bnk,dbk->dbn", B, coef)
+    sse = np.einsum("dbn,dbn->db", resid, resid)
+    j = np.clip(np.argmin(sse, axis=1), 1, breaks.size - 2)
+    rows = np.arange(F.shape[0])
+    s0, s1, s2 = sse[rows, j - 1], sse[rows, j], sse[rows, j + 1]
+    curv = s0 - 2 * s1 + s2
+    shift = np.where(curv > 0, 0.5 * (s0 - s2) / np.where(curv > 0, curv, 1.0), 0.0)
+    knee = breaks[j] + step * np.clip(shift, -1.0, 1.0)
+    Bk = _two_segments(v, knee)                                      # (draws, n, 2)
+    c = np.linalg.solve(np.einsum("dnk,dnl->dkl", Bk, Bk), np.einsum("dnk,dn->dk", Bk, F)[..., None])[..., 0]
+    return knee, c[:, 0], c[:, 1]
+
+
+def knees(space, P, cov_robust, names, excitation=None) -> dict:
+    """result.json ``dampers.knees``: per axle (``front``, ``rear``) and side (``compression``, ``rebound``)
+    where the fitted curve bends (:func:`knee_of` on the excited knot forces of full row ``P``) with its
+    ``std_robust`` from draws of those forces (covariance ``cov_robust`` over ``names``; rule: :data:`KNEE_RULE`).
+
+    A side with fewer than 3 excited knots, or whose slope ratio does not differ from 1 by more than
+    :data:`KNEE_SIGNIFICANCE` std_robust, has ``velocity`` None (no bend the data can place)."""
+    knots = np.asarray(space.layout.knots)
+    K = knots.size
+    j0 = int(np.searchsorted(knots, 0.0))
+    frozen = set(space.frozen)
+    rng = np.random.default_rng(KNEE_SEED)
+    out = {}
+    for a, axle in enumerate(("front", "rear")):
+        ns = space.knot_names[a * K:(a + 1) * K]
+        out[axle] = {}
+        for side, idx in (("compression", list(range(j0, K))), ("rebound", list(range(j0 - 1, -1, -1)))):
+            idx = [j for j in idx if ns[j] not in frozen]
+            entry = {"velocity": None, "std_robust": None, "slope_below": None, "slope_above": None,
+                     "slope_ratio": None, "slope_ratio_std_robust": None, "excited_knots": len(idx)}
+            out[axle][side] = entry
+            if len(idx) < 3:
+                entry["note"] = "fewer than 3 excited knots: no knee can be placed"
+                continue
+            v = np.abs(knots[idx])
+            F = np.abs(np.array([P[space.col[ns[j]]] for j in idx]))
+            draws = F[None, :]
+            if cov_robust is not None and all(ns[j] in names for j in idx):
+                sel = [names.index(ns[j]) for j in idx]
+                C = np.asarray(cov_robust, dtype=float)[np.ix_(sel, sel)]
+                if np.all(np.isfinite(C)):
+                    draws = np.vstack([F, rng.multivariate_normal(np.zeros(len(idx)), C, KNEE_DRAWS,
+                                                                  method="eigh") + F])
+            kv, c1, c2 = knee_of(v, draws)
+            ratio = c2 / c1
+            s_k = float(np.std(kv[1:])) if kv.size > 1 else None
+            s_r = float(np.std(ratio[1:])) if kv.size > 1 else None
+            entry.update(slope_below=float(c1[0]), slope_above=float(c2[0]), slope_ratio=float(ratio[0]),
+                         slope_ratio_std_robust=s_r)
+            if s_r is not None and abs(ratio[0] - 1.0) > KNEE_SIGNIFICANCE * s_r:
+                entry.update(velocity=float(kv[0]) * (1 if side == "compression" else -1), std_robust=s_k)
+            else:
+                entry["note"] = "no significant bend: the curve is straight within its error bars"
+    return out
