@@ -47,6 +47,10 @@ NOT_EXCITED = "not excited — not a number to trust"
 #: the positive knots (m/s) of the curves fitted without ``[model] damper_knots``, mirrored into rebound:
 #: 0.025 m/s apart to 0.2 m/s, then 0.3 and the default knots' 0.4; every default knot is one of them
 KNEE_GRID: tuple[float, ...] = (0.025, 0.05, 0.075, 0.1, 0.125, 0.15, 0.175, 0.2, 0.3, 0.4)
+#: what the error bars of curves fitted on the grid leave out (result.json ``dampers.grid_note``)
+GRID_NOTE = ("the error bars are statistical only: a smooth curve is straight between the grid knots here, which "
+             "moves the knot forces and the derived c_s by up to ~0.3 % (measured, docs/dampers.md), more than "
+             "their std_robust at 1 % noise")
 #: draws of the knot forces (robust covariance) behind a knee's standard error; their seed (deterministic)
 KNEE_DRAWS = 400
 KNEE_SEED = 20260
@@ -164,6 +168,7 @@ def dampers_block(space, P, cov_white, cov_robust, names, excitation=None) -> di
     elif space.damper_knots == KNEE_GRID:
         out["knots_from"] = ("found: no [model] damper_knots, so the curves were fitted on a grid 0.025 m/s apart "
                              "to 0.2 m/s and the knees read off them (docs/dampers.md)")
+        out["grid_note"] = GRID_NOTE
     else:
         out["knots_from"] = "[model] damper_knots"
     out["knees"] = knees(space, P, cov_robust, names)
@@ -189,6 +194,16 @@ def format_dampers(dampers: dict) -> str:
         lines.append(f"{v:8.3f}  {cell(dampers['front'], j):>22}  {cell(dampers['rear'], j):>22}")
     if not all(dampers["front"]["excited"] + dampers["rear"]["excited"]):
         lines.append(f"(not excited: no run reached the knot — {NOT_EXCITED.split(' — ')[1]})")
+    for axle in ("front", "rear"):
+        for side in ("compression", "rebound"):
+            k = ((dampers.get("knees") or {}).get(axle) or {}).get(side) or {}
+            if k.get("velocity") is not None:
+                s = k.get("std_robust")
+                lines.append(f"knee {axle} {side}: {k['velocity']:+.4f} m/s"
+                             + (f" ± {2 * s:.2g} (2 std_robust, statistical only)" if s is not None else "")
+                             + f", slope above/below {k['slope_ratio']:.3f}")
+    if dampers.get("knots_from", "").startswith("found"):
+        lines.append(f"knots: {dampers['knots_from']}; {GRID_NOTE}")
     return "\n".join(lines)
 
 
