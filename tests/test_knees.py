@@ -94,7 +94,8 @@ def test_terminal_and_figure_show_the_knees():
     import matplotlib.pyplot as plt
 
     space = _space()
-    P = _row(space, lambda v: np.sign(v) * broken(abs(v), 2400, 700, 0.12), lambda v: np.sign(v) * broken(abs(v), 2000, 500, 0.08))
+    P = _row(space, lambda v: np.sign(v) * broken(abs(v), 2400, 700, 0.12),
+             lambda v: np.sign(v) * broken(abs(v), 2000, 500, 0.08))
     from rideid.estimate.dampers import dampers_block
     names = list(space.names)
     cov = np.diag([1.0] * len(names))

@@ -48,9 +48,10 @@ NOT_EXCITED = "not excited — not a number to trust"
 #: 0.025 m/s apart to 0.2 m/s, then 0.3 and the default knots' 0.4; every default knot is one of them
 KNEE_GRID: tuple[float, ...] = (0.025, 0.05, 0.075, 0.1, 0.125, 0.15, 0.175, 0.2, 0.3, 0.4)
 #: what the error bars of curves fitted on the grid leave out (result.json ``dampers.grid_note``)
-GRID_NOTE = ("the error bars are statistical only: a smooth curve is straight between the grid knots here, which "
-             "moves the knot forces and the derived c_s by up to ~0.3 % (measured, docs/dampers.md), more than "
-             "their std_robust at 1 % noise")
+GRID_NOTE = ("a smooth curve is straight between the grid knots here, which moves the knot forces and the derived "
+             "c_s by ~0.2 % at a knee (more than their statistical error at 1 % noise): std_robust includes that "
+             "approximation error (std_grid, estimated from the fitted curve's bend); the knees' std_robust is "
+             "statistical only")
 #: draws of the knot forces (robust covariance) behind a knee's standard error; their seed (deterministic)
 KNEE_DRAWS = 400
 KNEE_SEED = 20260
@@ -285,3 +286,58 @@ def knees(space, P, cov_robust, names, excitation=None) -> dict:
             else:
                 entry["note"] = "no significant bend: the curve is straight within its error bars"
     return out
+
+
+def grid_std(space, P) -> dict:
+    """The approximation error of curves fitted on :data:`KNEE_GRID`, as a standard error per excited knot
+    force and for the derived ``c_sf``, ``c_sr`` (name -> N or N s/m) of full row ``P``.
+
+    A smooth curve is straight between the knots here: the least-squares line through a stretch of local
+    curvature ``f''`` and knots ``h`` apart sits about ``h^2 |f''| / 12`` off the curve (the mean of the
+    chord's sag ``h^2 |f''| / 8`` over the segment, two thirds of it). ``f''`` is read off the fitted forces
+    (second divided differences over the excited knots and the origin; the outermost knot takes its
+    neighbour's); ``c_s`` (linear in the forces) adds its knots' terms with one sign (a curve that bends
+    one way moves them alike)."""
+    knots = np.asarray(space.layout.knots)
+    K = knots.size
+    j0 = int(np.searchsorted(knots, 0.0))
+    frozen = set(space.frozen)
+    out = {}
+    for a, cname in enumerate(("c_sf", "c_sr")):
+        ns = space.knot_names[a * K:(a + 1) * K]
+        s_knot = np.zeros(K)
+        for side in (list(range(j0, K)), list(range(j0 - 1, -1, -1))):
+            idx = [j for j in side if ns[j] not in frozen]
+            u = np.concatenate([[0.0], np.abs(knots[idx])])
+            G = np.concatenate([[0.0], np.abs([P[space.col[ns[j]]] for j in idx])])
+            s = np.zeros(len(idx))
+            for i in range(1, len(idx)):
+                hm, hp = u[i] - u[i - 1], u[i + 1] - u[i]
+                f2 = 2 * ((G[i + 1] - G[i]) / hp - (G[i] - G[i - 1]) / hm) / (hm + hp)
+                s[i - 1] = abs(f2) * (0.5 * (hm + hp)) ** 2 / 12
+            if len(idx) > 1:
+                s[-1] = s[-2]
+            s_knot[idx] = s
+        for j in range(K):
+            if ns[j] not in frozen:
+                out[ns[j]] = float(s_knot[j])
+        out[cname] = float(np.abs(space._slope_w) @ s_knot)
+    return out
+
+
+def add_grid_std(details: dict, dampers: dict, space, P) -> None:
+    """In place: :func:`grid_std` combined in quadrature into ``std_robust`` of the knot forces and ``c_sf``,
+    ``c_sr`` in ``details`` (result.json ``parameters``) and ``dampers``; each keeps its term as ``std_grid``."""
+    g = grid_std(space, P)
+    for n, s in g.items():
+        e = details.get(n)
+        if e is not None and e.get("std_robust") is not None:
+            e["std_grid"] = s
+            e["std_robust"] = float(np.hypot(e["std_robust"], s))
+    K = space.layout.n_knots
+    for a, axle in enumerate(("front", "rear")):
+        ns = space.knot_names[a * K:(a + 1) * K]
+        d = dampers[axle]
+        d["std_grid"] = [g.get(n) for n in ns]
+        d["std_robust"] = [None if sr is None or g.get(n) is None else float(np.hypot(sr, g[n]))
+                           for sr, n in zip(d["std_robust"], ns)]

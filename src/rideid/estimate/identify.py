@@ -80,7 +80,7 @@ from ..model.nonlinear import BUMP_STOP_NAMES
 from ..model.params import ALL_NAMES, GROUPS, UNITS
 from ..model.simulator import Simulator
 from .bumps import bump_block, frozen_values, reach, scan_start
-from .dampers import KNEE_GRID, dampers_block, knot_excitation
+from .dampers import KNEE_GRID, add_grid_std, dampers_block, knot_excitation
 from .responses import suspension_velocities
 from .cost import BUMP_UNITS, IDENTIFIABLE_GROUPS, CostFunction, ParameterSpace, refuse_unsupported_groups
 from .jade import JadeSolver, make_rng, stop_requested
@@ -480,6 +480,8 @@ def _result(ds, cf, search, fit, weighting, maps, rng_record, t0, assess=True,
     adequacy = advise(assess_fit(cf, P, response), model) if assess else None
     dampers = None if not space.curves else dampers_block(space, P, robust.white, robust.robust, robust.names,
                                                           excitation)
+    if dampers is not None and dampers.get("knots_from", "").startswith("found"):
+        add_grid_std(details, dampers, space, P)  # the grid's approximation error, in std_robust
     velocities = suspension_velocities(cf, P) if space.curves else None
     stops = None if not space.bump else bump_block(space, P, robust.white, robust.robust, robust.names, bumps)
     correlation, history = robust.correlation_dict(), History(search.history)
