@@ -6,6 +6,7 @@ import json
 import shutil
 
 import numpy as np
+from rideid.model.nonlinear import damper_force
 import pytest
 import tomli_w
 
@@ -128,8 +129,9 @@ def test_bump_stops_with_damper_curves(tmp_path):
     for n, v in truth["truth"].items():
         if n not in BS and n not in ("c_sf", "c_sr"):
             assert res["parameters"][n]["value"] == pytest.approx(v, rel=0.01), n
-    for axle in ("front", "rear"):
-        F, F_true = np.array(res["dampers"][axle]["force"]), np.array(truth["dampers"][axle])
+    for axle in ("front", "rear"):  # on the knee grid, which holds the true curve's knots
+        F = np.array(res["dampers"][axle]["force"])
+        F_true = damper_force(VEL, truth["dampers"][axle], np.array(res["dampers"]["velocity"]))
         assert np.all(np.abs(F - F_true) <= 0.03 * np.abs(F_true)), axle
 
 
