@@ -110,3 +110,9 @@ def test_terminal_and_figure_show_the_knees():
         assert xs == pytest.approx([want, want], abs=1e-4)
         assert "knee found (± 2 std_robust)" in [t.get_text() for t in ax.get_legend().get_texts()]
     plt.close(fig)
+    from types import SimpleNamespace
+    from rideid.report.figures import dampers_figure
+    fig = dampers_figure(SimpleNamespace(dampers=dm))  # the notebook's figure: a dotted line per knee
+    xs = sorted(round(ln.get_xdata()[0], 4) for ln in fig.axes[0].get_lines() if ln.get_linestyle() == ":")
+    assert xs == [-0.12, -0.08, 0.08, 0.12]
+    plt.close(fig)
