@@ -116,3 +116,21 @@ def test_terminal_and_figure_show_the_knees():
     xs = sorted(round(ln.get_xdata()[0], 4) for ln in fig.axes[0].get_lines() if ln.get_linestyle() == ":")
     assert xs == [-0.12, -0.08, 0.08, 0.12]
     plt.close(fig)
+
+
+def test_a_curve_that_bends_in_stages_lists_each_bend():
+    """The van's valve opening in three stages (slopes 2400, 2100, 1000, 600 N s/m, bends at 0.05, 0.15,
+    0.3 m/s, grid knots): each bend listed with its slope change; a straight curve lists none."""
+    slopes, at = np.array([2400.0, 2100.0, 1000.0, 600.0]), np.array([0.05, 0.15, 0.3])
+
+    def staged(v):
+        edges = np.concatenate([[0.0], at, [np.inf]])
+        return sum(s * np.clip(v - lo, 0, hi - lo) for s, lo, hi in zip(slopes, edges[:-1], edges[1:]))
+    F = staged(V)
+    cov = np.diag((0.001 * F + 0.2) ** 2)
+    from rideid.estimate.dampers import bends_of
+    got = bends_of(V, F, cov)
+    assert [b["velocity"] for b in got] == pytest.approx(list(at))
+    assert [b["slope_change"] for b in got] == pytest.approx([-300.0, -1100.0, -400.0], rel=1e-9)
+    assert all(b["std_robust"] > 0 for b in got)
+    assert bends_of(V, 1800 * V, cov) == []

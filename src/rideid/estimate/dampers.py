@@ -57,11 +57,16 @@ KNEE_DRAWS = 400
 KNEE_SEED = 20260
 #: a side bends when its slope ratio above/below the knee differs from 1 by more than this many std_robust
 KNEE_SIGNIFICANCE = 3.0
+#: a knot is a bend when its slope change exceeds this share of the side's steepest slope (and
+#: :data:`KNEE_SIGNIFICANCE` std_robust) and no neighbour's is larger
+BEND_SHARE = 0.1
 #: the text of result.json ``dampers.knee_rule``
 KNEE_RULE = ("knee: per axle and side, the break of the two-segment line through the origin (slopes below and "
              "above it) fitted by least squares to the excited knot forces; std_robust from "
              f"{KNEE_DRAWS} draws of those forces from their robust covariance; a side bends when its slope ratio "
-             f"differs from 1 by more than {KNEE_SIGNIFICANCE:g} std_robust (else no knee is reported)")
+             f"differs from 1 by more than {KNEE_SIGNIFICANCE:g} std_robust (else no knee is reported); bends: the "
+             "knots whose slope change is the largest of its neighbours', above "
+             f"{BEND_SHARE:g} of the side's steepest slope and {KNEE_SIGNIFICANCE:g} std_robust")
 
 
 def suspension_velocities_by_run(cf, P, rho: float | None = None) -> list[tuple[np.ndarray, np.ndarray]]:
@@ -200,9 +205,10 @@ def format_dampers(dampers: dict) -> str:
             k = ((dampers.get("knees") or {}).get(axle) or {}).get(side) or {}
             if k.get("velocity") is not None:
                 s = k.get("std_robust")
+                bends = ", ".join(f"{b['velocity']:+.3f}" for b in k.get("bends") or [])
                 lines.append(f"knee {axle} {side}: {k['velocity']:+.4f} m/s"
                              + (f" ± {2 * s:.2g} (2 std_robust, statistical only)" if s is not None else "")
-                             + f", slope above/below {k['slope_ratio']:.3f}")
+                             + f", slope above/below {k['slope_ratio']:.3f}" + (f"; bends at {bends}" if bends else ""))
     if dampers.get("knots_from", "").startswith("found"):
         lines.append(f"knots: {dampers['knots_from']}; {GRID_NOTE}")
     return "\n".join(lines)
@@ -242,6 +248,37 @@ def knee_of(v, F_draws):
     return knee, c[:, 0], c[:, 1]
 
 
+def bends_of(v, F, cov=None) -> list:
+    """The knots where a side's curve bends: ``[{"velocity", "slope_change", "std_robust"}, ...]`` for each
+    interior knot (``v`` positive ascending, ``F`` the forces there, through the origin) whose change of
+    slope is a local maximum in size, larger than :data:`BEND_SHARE` of the steepest slope and than
+    :data:`KNEE_SIGNIFICANCE` of its std_robust (from ``cov``, the forces' covariance; None: not tested).
+    Several bends (a valve that opens in stages) are each listed; a smooth bend shows as its steepest knot."""
+    v = np.asarray(v, dtype=float)
+    n = v.size
+    if n < 3:
+        return []
+    u = np.concatenate([[0.0], v])
+    D = np.zeros((n, n))  # slopes of the n segments from the forces: s = D F
+    for i in range(n):
+        D[i, i] = 1.0 / (u[i + 1] - u[i])
+        if i:
+            D[i, i - 1] = -1.0 / (u[i + 1] - u[i])
+    A = np.diff(D, axis=0)  # (n - 1, n): slope change at knots 1 .. n-1 (0-based: v[0] .. v[n-2])
+    dS = A @ np.asarray(F, dtype=float)
+    sd = np.sqrt(np.clip(np.diag(A @ cov @ A.T), 0, None)) if cov is not None else np.full(n - 1, np.nan)
+    steepest = float(np.max(np.abs(D @ np.asarray(F, dtype=float))))
+    out = []
+    for i in range(n - 1):
+        size = abs(dS[i])
+        local = all(size >= abs(dS[j]) for j in (i - 1, i + 1) if 0 <= j < n - 1)
+        significant = cov is None or size > KNEE_SIGNIFICANCE * sd[i]
+        if local and significant and size > BEND_SHARE * steepest:
+            out.append({"velocity": float(v[i]), "slope_change": float(dS[i]),
+                        "std_robust": None if cov is None else float(sd[i])})
+    return out
+
+
 def knees(space, P, cov_robust, names, excitation=None) -> dict:
     """result.json ``dampers.knees``: per axle (``front``, ``rear``) and side (``compression``, ``rebound``)
     where the fitted curve bends (:func:`knee_of` on the excited knot forces of full row ``P``) with its
@@ -260,7 +297,7 @@ def knees(space, P, cov_robust, names, excitation=None) -> dict:
         out[axle] = {}
         for side, idx in (("compression", list(range(j0, K))), ("rebound", list(range(j0 - 1, -1, -1)))):
             idx = [j for j in idx if ns[j] not in frozen]
-            entry = {"velocity": None, "std_robust": None, "slope_below": None, "slope_above": None,
+            entry = {"velocity": None, "std_robust": None, "bends": [], "slope_below": None, "slope_above": None,
                      "slope_ratio": None, "slope_ratio_std_robust": None, "excited_knots": len(idx)}
             out[axle][side] = entry
             if len(idx) < 3:
@@ -268,13 +305,17 @@ def knees(space, P, cov_robust, names, excitation=None) -> dict:
                 continue
             v = np.abs(knots[idx])
             F = np.abs(np.array([P[space.col[ns[j]]] for j in idx]))
-            draws = F[None, :]
+            draws, C = F[None, :], None
             if cov_robust is not None and all(ns[j] in names for j in idx):
                 sel = [names.index(ns[j]) for j in idx]
                 C = np.asarray(cov_robust, dtype=float)[np.ix_(sel, sel)]
-                if np.all(np.isfinite(C)):
+                if not np.all(np.isfinite(C)):
+                    C = None
+                else:
                     draws = np.vstack([F, rng.multivariate_normal(np.zeros(len(idx)), C, KNEE_DRAWS,
                                                                   method="eigh") + F])
+            sign = 1.0 if side == "compression" else -1.0
+            entry["bends"] = [dict(b, velocity=sign * b["velocity"]) for b in bends_of(v, F, C)]
             kv, c1, c2 = knee_of(v, draws)
             ratio = c2 / c1
             s_k = float(np.std(kv[1:])) if kv.size > 1 else None
