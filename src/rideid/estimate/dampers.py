@@ -65,7 +65,7 @@ KNEE_RULE = ("knee: per axle and side, the break of the two-segment line through
              "above it) fitted by least squares to the excited knot forces; std_robust from "
              f"{KNEE_DRAWS} draws of those forces from their robust covariance; a side bends when its slope ratio "
              f"differs from 1 by more than {KNEE_SIGNIFICANCE:g} std_robust (else no knee is reported); bends: the "
-             "knots whose slope change is the largest of its neighbours', above "
+             "knots whose slope change per stretch of velocity is the largest of its neighbours', above "
              f"{BEND_SHARE:g} of the side's steepest slope and {KNEE_SIGNIFICANCE:g} std_robust")
 
 
@@ -251,9 +251,10 @@ def knee_of(v, F_draws):
 def bends_of(v, F, cov=None) -> list:
     """The knots where a side's curve bends: ``[{"velocity", "slope_change", "std_robust"}, ...]`` for each
     interior knot (``v`` positive ascending, ``F`` the forces there, through the origin) whose change of
-    slope is a local maximum in size, larger than :data:`BEND_SHARE` of the steepest slope and than
-    :data:`KNEE_SIGNIFICANCE` of its std_robust (from ``cov``, the forces' covariance; None: not tested).
-    Several bends (a valve that opens in stages) are each listed; a smooth bend shows as its steepest knot."""
+    slope over its stretch (half the span to its neighbours) is the largest of its neighbours', and whose
+    change is larger than :data:`BEND_SHARE` of the steepest slope and than :data:`KNEE_SIGNIFICANCE` of
+    its std_robust (from ``cov``, the forces' covariance; None: not tested). Several bends (a valve that
+    opens in stages) are each listed; a smooth bend shows at one knot or two close together."""
     v = np.asarray(v, dtype=float)
     n = v.size
     if n < 3:
@@ -268,10 +269,13 @@ def bends_of(v, F, cov=None) -> list:
     dS = A @ np.asarray(F, dtype=float)
     sd = np.sqrt(np.clip(np.diag(A @ cov @ A.T), 0, None)) if cov is not None else np.full(n - 1, np.nan)
     steepest = float(np.max(np.abs(D @ np.asarray(F, dtype=float))))
+    # neighbours compared by curvature (slope change over the knot's stretch): where the knots spread out
+    # (0.2 -> 0.3 m/s) a smooth bend's slope change grows with the stretch, not with the bending
+    curv = np.abs(dS) / (0.5 * (u[2:] - u[:-2]))
     out = []
     for i in range(n - 1):
         size = abs(dS[i])
-        local = all(size >= abs(dS[j]) for j in (i - 1, i + 1) if 0 <= j < n - 1)
+        local = all(curv[i] >= curv[j] for j in (i - 1, i + 1) if 0 <= j < n - 1)
         significant = cov is None or size > KNEE_SIGNIFICANCE * sd[i]
         if local and significant and size > BEND_SHARE * steepest:
             out.append({"velocity": float(v[i]), "slope_change": float(dS[i]),
