@@ -122,12 +122,17 @@ def test_bump_stops_with_damper_curves(tmp_path):
     """Digressive asymmetric dampers and stops at 30 mm: both groups identified together."""
     dampers = {"velocity": VEL, "front": digressive(1200, 400), "rear": digressive(1100, 370)}
     ds, truth = simulate(tmp_path, 0.03, dampers=dampers)
+    # the curves at their own knots (a user's damper_knots win: no knee grid, the stops are what is tested)
+    doc = read_toml(ds / "dataset.toml")
+    doc["model"] = {"damper_knots": [v for v in VEL if v > 0]}
+    (ds / "dataset.toml").write_text(tomli_w.dumps(doc))
     res, _ = identify(ds, tmp_path / "fit", model="damper_curves,bump_stops")
     assert res["model"]["extensions"] == ["damper_curves", "bump_stops"]
     check_stops(res, truth)
     for n, v in truth["truth"].items():
         if n not in BS and n not in ("c_sf", "c_sr"):
             assert res["parameters"][n]["value"] == pytest.approx(v, rel=0.01), n
+    assert res["dampers"]["knots_from"] == "[model] damper_knots"
     for axle in ("front", "rear"):
         F, F_true = np.array(res["dampers"][axle]["force"]), np.array(truth["dampers"][axle])
         assert np.all(np.abs(F - F_true) <= 0.03 * np.abs(F_true)), axle

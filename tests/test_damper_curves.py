@@ -11,7 +11,7 @@ from rideid.errors import ArgumentError
 from rideid.cli import main
 from rideid.data.schema import read_toml
 from rideid.estimate.cost import ParameterSpace
-from rideid.estimate.dampers import knot_counts
+from rideid.estimate.dampers import KNEE_GRID, knot_counts
 from rideid.estimate.result import load
 from rideid.model.nonlinear import DEFAULT_KNOTS, damper_force
 from rideid.model.params import Geometry
@@ -58,10 +58,16 @@ def digressive_fit(tmp_path_factory):
 def test_digressive_asymmetric_curves_are_recovered(digressive_fit):
     truth, res, _ = digressive_fit
     dm = res["dampers"]
-    assert dm["velocity"] == pytest.approx(list(DEFAULT_KNOTS))
+    # no [model] damper_knots: the knee grid, which holds every default knot (so this curve exactly)
+    assert dm["velocity"] == pytest.approx([-k for k in reversed(KNEE_GRID)] + list(KNEE_GRID))
+    assert dm["knots_from"].startswith("found")
     assert res["model"]["extensions"] == ["damper_curves"]
     for axle in ("front", "rear"):
-        F_true = np.array(truth["dampers"][axle])
+        F_true = damper_force(DEFAULT_KNOTS, truth["dampers"][axle], np.array(dm["velocity"]))
+        # the true knee, 0.1 m/s on both sides, found within 4 std_robust (and 2 mm/s)
+        for side, sign in (("compression", 1), ("rebound", -1)):
+            k = dm["knees"][axle][side]
+            assert abs(k["velocity"] - sign * 0.1) <= max(4 * k["std_robust"], 0.002), (axle, side, k)
         got = dm[axle]
         assert all(got["excited"])  # the built-in runs reach 0.4 m/s on both sides
         F, s = np.array(got["force"]), np.array(got["std_robust"])

@@ -40,6 +40,7 @@ import tomllib
 import warnings
 
 import numpy as np
+from rideid.model.nonlinear import damper_force
 import pytest
 import tomli_w
 
@@ -168,12 +169,14 @@ def cases(tmp_path_factory):
     return get
 
 
-def truth_of(sc) -> dict:
+def truth_of(sc, velocity=None) -> dict:
     """Every parameter a result reports, true: the scenario's [truth] (with curves c_sf, c_sr their mean slopes),
-    the knot forces ``F_f1 ..`` of [dampers]."""
+    the knot forces ``F_f1 ..`` of [dampers] (at the knots ``velocity`` when given: the true curve there)."""
     out = dict(sc.truth)
     if sc.dampers is not None:
         for prefix, F in (("F_f", sc.dampers.front), ("F_r", sc.dampers.rear)):
+            if velocity is not None:
+                F = damper_force(sc.dampers.velocity, F, np.asarray(velocity, dtype=float))
             out.update({f"{prefix}{j + 1}": f for j, f in enumerate(F)})
     return out
 
@@ -182,7 +185,7 @@ def errors(res, sc, group: str, path: str) -> dict:
     """Relative error of every fitted parameter (free or derived; knots not excited left out), and the checks of
     what makes the numbers mean something: the model fitted, the knots excited, the stops reached."""
     assert res.model["extensions"] == ([] if group == "base" else [group])
-    truth = truth_of(sc)
+    truth = truth_of(sc, res.dampers["velocity"] if res.dampers else None)
     if group == "damper_curves":
         for axle in ("front", "rear"):
             assert sum(res.dampers[axle]["excited"]) >= 8, (axle, res.dampers[axle]["excited"])

@@ -181,7 +181,8 @@ def _parser() -> argparse.ArgumentParser:
                         "(c_tf, c_tr); auto: fit the candidates and keep what the data support (docs/model-choice.md); "
                         "or groups joined by ',': anti_roll_bars, tire_damping, "
                         "damper_curves (SPEC §8: a force-velocity "
-                        "curve per axle at the [model] damper_knots), bump_stops (clearance and rate per axle) "
+                        "curve per axle at the [model] damper_knots, else on a knee grid with the knees found: "
+                        "docs/dampers.md), bump_stops (clearance and rate per axle) "
                         "(default: the dataset's [model] extensions, else auto)")
     s.add_argument("--tracks", choices=("as-built", "as-drawn"), default="as-built",
                    help="as-built (default): each [[tracks]] entry is the nominal shape, its amplitude factor and "

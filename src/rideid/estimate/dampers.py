@@ -17,6 +17,18 @@ on the noise of those few samples. A knot that is not excited is not free in
 the polish nor in the uncertainty: its force continues the last excited
 segment's slope (derived, reported with ``excited: false`` and no standard
 error: "not excited — not a number to trust").
+
+Knees found by the data
+-----------------------
+Nobody knows where their damper bends before testing it. Without ``[model]
+damper_knots`` the curves are fitted on :data:`KNEE_GRID` instead of the
+default knots: 0.025 m/s apart up to 0.2 m/s (where production dampers bend),
+every default knot among them; the excitation rule above freezes the grid
+knots no run reaches. Where each curve bends is then read off the fitted curve
+(:func:`knees`): per axle and side the one break of a two-segment line
+through the origin fitted to the excited knot forces, its standard error from
+draws of the forces' robust covariance. A dataset's ``damper_knots`` still
+wins (no grid, no second fit).
 """
 
 from __future__ import annotations
@@ -32,6 +44,29 @@ from ..data.scenario import LIFT_OFF_RHO
 MIN_SAMPLES = 20
 #: how the text output marks a knot no run excites
 NOT_EXCITED = "not excited — not a number to trust"
+#: the positive knots (m/s) of the curves fitted without ``[model] damper_knots``, mirrored into rebound:
+#: 0.025 m/s apart to 0.2 m/s, then 0.3 and the default knots' 0.4; every default knot is one of them
+KNEE_GRID: tuple[float, ...] = (0.025, 0.05, 0.075, 0.1, 0.125, 0.15, 0.175, 0.2, 0.3, 0.4)
+#: what the error bars of curves fitted on the grid leave out (result.json ``dampers.grid_note``)
+GRID_NOTE = ("a smooth curve is straight between the grid knots here, which moves the knot forces and the derived "
+             "c_s by ~0.2 % at a knee (more than their statistical error at 1 % noise): std_robust includes that "
+             "approximation error (std_grid, estimated from the fitted curve's bend); the knees' std_robust is "
+             "statistical only")
+#: draws of the knot forces (robust covariance) behind a knee's standard error; their seed (deterministic)
+KNEE_DRAWS = 400
+KNEE_SEED = 20260
+#: a side bends when its slope ratio above/below the knee differs from 1 by more than this many std_robust
+KNEE_SIGNIFICANCE = 3.0
+#: a knot is a bend when its slope change exceeds this share of the side's steepest slope (and
+#: :data:`KNEE_SIGNIFICANCE` std_robust) and no neighbour's is larger
+BEND_SHARE = 0.1
+#: the text of result.json ``dampers.knee_rule``
+KNEE_RULE = ("knee: per axle and side, the break of the two-segment line through the origin (slopes below and "
+             "above it) fitted by least squares to the excited knot forces; std_robust from "
+             f"{KNEE_DRAWS} draws of those forces from their robust covariance; a side bends when its slope ratio "
+             f"differs from 1 by more than {KNEE_SIGNIFICANCE:g} std_robust (else no knee is reported); bends: the "
+             "knots whose slope change per stretch of velocity is the largest of its neighbours', above "
+             f"{BEND_SHARE:g} of the side's steepest slope and {KNEE_SIGNIFICANCE:g} std_robust")
 
 
 def suspension_velocities_by_run(cf, P, rho: float | None = None) -> list[tuple[np.ndarray, np.ndarray]]:
@@ -134,6 +169,16 @@ def dampers_block(space, P, cov_white, cov_robust, names, excitation=None) -> di
     if excitation is not None:
         out["excitation_rule"] = excitation["rule"]
     out["mean_slope_velocity"] = 0.1
+    if space.damper_knots is None:
+        out["knots_from"] = "default knots (SPEC §8)"
+    elif space.damper_knots == KNEE_GRID:
+        out["knots_from"] = ("found: no [model] damper_knots, so the curves were fitted on a grid 0.025 m/s apart "
+                             "to 0.2 m/s and the knees read off them (docs/dampers.md)")
+        out["grid_note"] = GRID_NOTE
+    else:
+        out["knots_from"] = "[model] damper_knots"
+    out["knees"] = knees(space, P, cov_robust, names)
+    out["knee_rule"] = KNEE_RULE
     return out
 
 
@@ -155,4 +200,189 @@ def format_dampers(dampers: dict) -> str:
         lines.append(f"{v:8.3f}  {cell(dampers['front'], j):>22}  {cell(dampers['rear'], j):>22}")
     if not all(dampers["front"]["excited"] + dampers["rear"]["excited"]):
         lines.append(f"(not excited: no run reached the knot — {NOT_EXCITED.split(' — ')[1]})")
+    for axle in ("front", "rear"):
+        for side in ("compression", "rebound"):
+            k = ((dampers.get("knees") or {}).get(axle) or {}).get(side) or {}
+            if k.get("velocity") is not None:
+                s = k.get("std_robust")
+                bends = ", ".join(f"{b['velocity']:+.3f}" for b in k.get("bends") or [])
+                lines.append(f"knee {axle} {side}: {k['velocity']:+.4f} m/s"
+                             + (f" ± {2 * s:.2g} (2 std_robust, statistical only)" if s is not None else "")
+                             + f", slope above/below {k['slope_ratio']:.3f}" + (f"; bends at {bends}" if bends else ""))
+    if dampers.get("knots_from", "").startswith("found"):
+        lines.append(f"knots: {dampers['knots_from']}; {GRID_NOTE}")
     return "\n".join(lines)
+
+
+def _two_segments(v, breaks):
+    """Regressors ``(..., n, 2)`` of the two-segment line through the origin with its break at ``breaks``
+    (``(...)``): ``min(v, b)`` and ``max(v - b, 0)`` at the velocities ``v`` (n,)."""
+    b = np.asarray(breaks, dtype=float)[..., None]
+    return np.stack([np.minimum(v, b), np.maximum(v - b, 0.0)], axis=-1)
+
+
+def knee_of(v, F_draws):
+    """Break velocity and slopes of the two-segment line through the origin fitted to each row of
+    ``F_draws`` (values at positive, ascending ``v``; at least 3): arrays ``(knee, slope_below, slope_above)``,
+    each of the rows' length.
+
+    The break is searched on a 0.5 mm/s grid strictly inside ``(v[0], v[-1])``, then placed at the vertex
+    of the parabola through the sum of squares at the best grid point and its neighbours."""
+    v = np.asarray(v, dtype=float)
+    F = np.atleast_2d(np.asarray(F_draws, dtype=float))
+    step = 5e-4
+    breaks = np.arange(v[0], v[-1], step)[1:]
+    B = _two_segments(v, breaks)                                     # (breaks, n, 2)
+    pinv = np.linalg.pinv(B)                                         # (breaks, 2, n)
+    coef = np.einsum("bkn,dn->dbk", pinv, F)                         # (draws, breaks, 2)
+    resid = F[:, None, :] - np.einsum("bnk,dbk->dbn", B, coef)
+    sse = np.einsum("dbn,dbn->db", resid, resid)
+    j = np.clip(np.argmin(sse, axis=1), 1, breaks.size - 2)
+    rows = np.arange(F.shape[0])
+    s0, s1, s2 = sse[rows, j - 1], sse[rows, j], sse[rows, j + 1]
+    curv = s0 - 2 * s1 + s2
+    shift = np.where(curv > 0, 0.5 * (s0 - s2) / np.where(curv > 0, curv, 1.0), 0.0)
+    knee = breaks[j] + step * np.clip(shift, -1.0, 1.0)
+    Bk = _two_segments(v, knee)                                      # (draws, n, 2)
+    c = np.linalg.solve(np.einsum("dnk,dnl->dkl", Bk, Bk), np.einsum("dnk,dn->dk", Bk, F)[..., None])[..., 0]
+    return knee, c[:, 0], c[:, 1]
+
+
+def bends_of(v, F, cov=None) -> list:
+    """The knots where a side's curve bends: ``[{"velocity", "slope_change", "std_robust"}, ...]`` for each
+    interior knot (``v`` positive ascending, ``F`` the forces there, through the origin) whose change of
+    slope over its stretch (half the span to its neighbours) is the largest of its neighbours', and whose
+    change is larger than :data:`BEND_SHARE` of the steepest slope and than :data:`KNEE_SIGNIFICANCE` of
+    its std_robust (from ``cov``, the forces' covariance; None: not tested). Several bends (a valve that
+    opens in stages) are each listed; a smooth bend shows at one knot or two close together."""
+    v = np.asarray(v, dtype=float)
+    n = v.size
+    if n < 3:
+        return []
+    u = np.concatenate([[0.0], v])
+    D = np.zeros((n, n))  # slopes of the n segments from the forces: s = D F
+    for i in range(n):
+        D[i, i] = 1.0 / (u[i + 1] - u[i])
+        if i:
+            D[i, i - 1] = -1.0 / (u[i + 1] - u[i])
+    A = np.diff(D, axis=0)  # (n - 1, n): slope change at knots 1 .. n-1 (0-based: v[0] .. v[n-2])
+    dS = A @ np.asarray(F, dtype=float)
+    sd = np.sqrt(np.clip(np.diag(A @ cov @ A.T), 0, None)) if cov is not None else np.full(n - 1, np.nan)
+    steepest = float(np.max(np.abs(D @ np.asarray(F, dtype=float))))
+    # neighbours compared by curvature (slope change over the knot's stretch): where the knots spread out
+    # (0.2 -> 0.3 m/s) a smooth bend's slope change grows with the stretch, not with the bending
+    curv = np.abs(dS) / (0.5 * (u[2:] - u[:-2]))
+    out = []
+    for i in range(n - 1):
+        size = abs(dS[i])
+        local = all(curv[i] >= curv[j] for j in (i - 1, i + 1) if 0 <= j < n - 1)
+        significant = cov is None or size > KNEE_SIGNIFICANCE * sd[i]
+        if local and significant and size > BEND_SHARE * steepest:
+            out.append({"velocity": float(v[i]), "slope_change": float(dS[i]),
+                        "std_robust": None if cov is None else float(sd[i])})
+    return out
+
+
+def knees(space, P, cov_robust, names, excitation=None) -> dict:
+    """result.json ``dampers.knees``: per axle (``front``, ``rear``) and side (``compression``, ``rebound``)
+    where the fitted curve bends (:func:`knee_of` on the excited knot forces of full row ``P``) with its
+    ``std_robust`` from draws of those forces (covariance ``cov_robust`` over ``names``; rule: :data:`KNEE_RULE`).
+
+    A side with fewer than 3 excited knots, or whose slope ratio does not differ from 1 by more than
+    :data:`KNEE_SIGNIFICANCE` std_robust, has ``velocity`` None (no bend the data can place)."""
+    knots = np.asarray(space.layout.knots)
+    K = knots.size
+    j0 = int(np.searchsorted(knots, 0.0))
+    frozen = set(space.frozen)
+    rng = np.random.default_rng(KNEE_SEED)
+    out = {}
+    for a, axle in enumerate(("front", "rear")):
+        ns = space.knot_names[a * K:(a + 1) * K]
+        out[axle] = {}
+        for side, idx in (("compression", list(range(j0, K))), ("rebound", list(range(j0 - 1, -1, -1)))):
+            idx = [j for j in idx if ns[j] not in frozen]
+            entry = {"velocity": None, "std_robust": None, "bends": [], "slope_below": None, "slope_above": None,
+                     "slope_ratio": None, "slope_ratio_std_robust": None, "excited_knots": len(idx)}
+            out[axle][side] = entry
+            if len(idx) < 3:
+                entry["note"] = "fewer than 3 excited knots: no knee can be placed"
+                continue
+            v = np.abs(knots[idx])
+            F = np.abs(np.array([P[space.col[ns[j]]] for j in idx]))
+            draws, C = F[None, :], None
+            if cov_robust is not None and all(ns[j] in names for j in idx):
+                sel = [names.index(ns[j]) for j in idx]
+                C = np.asarray(cov_robust, dtype=float)[np.ix_(sel, sel)]
+                if not np.all(np.isfinite(C)):
+                    C = None
+                else:
+                    draws = np.vstack([F, rng.multivariate_normal(np.zeros(len(idx)), C, KNEE_DRAWS,
+                                                                  method="eigh") + F])
+            sign = 1.0 if side == "compression" else -1.0
+            entry["bends"] = [dict(b, velocity=sign * b["velocity"]) for b in bends_of(v, F, C)]
+            kv, c1, c2 = knee_of(v, draws)
+            ratio = c2 / c1
+            s_k = float(np.std(kv[1:])) if kv.size > 1 else None
+            s_r = float(np.std(ratio[1:])) if kv.size > 1 else None
+            entry.update(slope_below=float(c1[0]), slope_above=float(c2[0]), slope_ratio=float(ratio[0]),
+                         slope_ratio_std_robust=s_r)
+            if s_r is not None and abs(ratio[0] - 1.0) > KNEE_SIGNIFICANCE * s_r:
+                entry.update(velocity=float(kv[0]) * (1 if side == "compression" else -1), std_robust=s_k)
+            else:
+                entry["note"] = "no significant bend: the curve is straight within its error bars"
+    return out
+
+
+def grid_std(space, P) -> dict:
+    """The approximation error of curves fitted on :data:`KNEE_GRID`, as a standard error per excited knot
+    force and for the derived ``c_sf``, ``c_sr`` (name -> N or N s/m) of full row ``P``.
+
+    A smooth curve is straight between the knots here: the least-squares line through a stretch of local
+    curvature ``f''`` and knots ``h`` apart sits about ``h^2 |f''| / 12`` off the curve (the mean of the
+    chord's sag ``h^2 |f''| / 8`` over the segment, two thirds of it). ``f''`` is read off the fitted forces
+    (second divided differences over the excited knots and the origin; the outermost knot takes its
+    neighbour's); ``c_s`` (linear in the forces) adds its knots' terms with one sign (a curve that bends
+    one way moves them alike)."""
+    knots = np.asarray(space.layout.knots)
+    K = knots.size
+    j0 = int(np.searchsorted(knots, 0.0))
+    frozen = set(space.frozen)
+    out = {}
+    for a, cname in enumerate(("c_sf", "c_sr")):
+        ns = space.knot_names[a * K:(a + 1) * K]
+        s_knot = np.zeros(K)
+        for side in (list(range(j0, K)), list(range(j0 - 1, -1, -1))):
+            idx = [j for j in side if ns[j] not in frozen]
+            u = np.concatenate([[0.0], np.abs(knots[idx])])
+            G = np.concatenate([[0.0], np.abs([P[space.col[ns[j]]] for j in idx])])
+            s = np.zeros(len(idx))
+            for i in range(1, len(idx)):
+                hm, hp = u[i] - u[i - 1], u[i + 1] - u[i]
+                f2 = 2 * ((G[i + 1] - G[i]) / hp - (G[i] - G[i - 1]) / hm) / (hm + hp)
+                s[i - 1] = abs(f2) * (0.5 * (hm + hp)) ** 2 / 12
+            if len(idx) > 1:
+                s[-1] = s[-2]
+            s_knot[idx] = s
+        for j in range(K):
+            if ns[j] not in frozen:
+                out[ns[j]] = float(s_knot[j])
+        out[cname] = float(np.abs(space._slope_w) @ s_knot)
+    return out
+
+
+def add_grid_std(details: dict, dampers: dict, space, P) -> None:
+    """In place: :func:`grid_std` combined in quadrature into ``std_robust`` of the knot forces and ``c_sf``,
+    ``c_sr`` in ``details`` (result.json ``parameters``) and ``dampers``; each keeps its term as ``std_grid``."""
+    g = grid_std(space, P)
+    for n, s in g.items():
+        e = details.get(n)
+        if e is not None and e.get("std_robust") is not None:
+            e["std_grid"] = s
+            e["std_robust"] = float(np.hypot(e["std_robust"], s))
+    K = space.layout.n_knots
+    for a, axle in enumerate(("front", "rear")):
+        ns = space.knot_names[a * K:(a + 1) * K]
+        d = dampers[axle]
+        d["std_grid"] = [g.get(n) for n in ns]
+        d["std_robust"] = [None if sr is None or g.get(n) is None else float(np.hypot(sr, g[n]))
+                           for sr, n in zip(d["std_robust"], ns)]

@@ -47,6 +47,10 @@
    pinned at its start (so every differenced residual uses one integrator).
    ``c_sf``, ``c_sr`` and frozen knots are derived; their standard errors
    follow by the delta method (they are linear in the knot forces).
+   Without ``[model] damper_knots`` the curves' knots are those of
+   :data:`rideid.estimate.dampers.KNEE_GRID` (:func:`knee_cost`), and where
+   each curve bends is reported with its error bar
+   (:func:`rideid.estimate.dampers.knees`).
 10. Bump stops (SPEC §8, group ``bump_stops``): the search on the linear
     model as in 9; a scan of clearance and rate per axle from its car
     (:mod:`rideid.estimate.bumps`) starts the polish on the nonlinear car;
@@ -77,7 +81,7 @@ from ..model.nonlinear import BUMP_STOP_NAMES
 from ..model.params import ALL_NAMES, SUSPENSION_GROUPS, SUSPENSION_NAMES, UNITS
 from ..model.simulator import Simulator
 from .bumps import bump_block, frozen_values, reach, scan_start
-from .dampers import dampers_block, knot_excitation
+from .dampers import KNEE_GRID, add_grid_std, dampers_block, knot_excitation
 from .responses import suspension_velocities
 from .cost import BUMP_UNITS, IDENTIFIABLE_GROUPS, CostFunction, ParameterSpace, refuse_unsupported_groups
 from .jade import JadeSolver, make_rng, stop_requested
@@ -242,6 +246,8 @@ def identify(ds: Dataset, *, rng=None, seed=None, population: int = DEFAULT_POPU
                                spread_tol=spread_tol, callback=callback, t0=t0)
         # a start of the curve model's own width: its knot forces as given (not a linear car's F = c v)
         own = start is not None and nonlinear and len(start) == len(cf.names) != len(cf_search.names)
+        if finds_knees(cf.space) and not own:  # no [model] damper_knots: the curves on the knee grid
+            cf = knee_cost(cf)
         x0 = search.x if start is None else np.asarray(start, dtype=float)
         excitation = bumps = None
         if nonlinear:
@@ -309,6 +315,22 @@ def _curve_start(cf: CostFunction, cf_search: CostFunction, x):
         cf, space = cf.with_space(new, counter=cf.counter), new
     cf2 = cf.with_space(space, counter=cf.counter).pinned_at(space.full(np.asarray(x, dtype=float)[None]))
     return cf2, x, excitation, bumps
+
+
+def finds_knees(space: ParameterSpace) -> bool:
+    """Whether the curves of ``space`` are fitted again on :data:`~rideid.estimate.dampers.KNEE_GRID`: damper
+    curves at the default knots (no ``[model] damper_knots``) and no ``[bounds]`` of a knot force (a user's
+    knots, or bounds set on the default knots' forces, win)."""
+    return space.curves and space.damper_knots is None and not any(k.startswith("F_") for k in space._bounds_arg)
+
+
+def knee_cost(cf: CostFunction) -> CostFunction:
+    """``cf`` on the same model with its curves' knots on :data:`~rideid.estimate.dampers.KNEE_GRID`
+    (the same data, simulator settings and evaluation count)."""
+    old = cf.space
+    space = ParameterSpace(old.known, old.geometry, old._bounds_arg, old.extensions, damper_knots=KNEE_GRID,
+                           bump_frozen=old.bump_frozen)
+    return CostFunction(cf.ds, space=space, counter=cf.counter, simulator=cf.simulator, use_kernel=cf.use_kernel)
 
 
 def _bump_recheck(ds, fit, bumps):
@@ -462,6 +484,8 @@ def _result(ds, cf, search, fit, weighting, maps, rng_record, t0, assess=True,
         adequacy = sensor_notes(ds, cf, response, adequacy)
     dampers = None if not space.curves else dampers_block(space, P, robust.white, robust.robust, robust.names,
                                                           excitation)
+    if dampers is not None and dampers.get("knots_from", "").startswith("found"):
+        add_grid_std(details, dampers, space, P)  # the grid's approximation error, in std_robust
     velocities = suspension_velocities(cf, P) if space.curves else None
     stops = None if not space.bump else bump_block(space, P, robust.white, robust.robust, robust.names, bumps)
     correlation, history = robust.correlation_dict(), History(search.history)

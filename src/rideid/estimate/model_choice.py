@@ -54,6 +54,7 @@ from .identify import DEFAULT_GENERATIONS, DEFAULT_POPULATION, identify as ident
 from .anyroad import TRACK_OPTIONS, as_built_runs, identify_any_road, unknown_road_runs
 from ..model.batch import single_threaded_blas, thread_map
 from .cost import CostFunction, ParameterSpace, refuse_unsupported_groups
+from .dampers import KNEE_GRID
 from ..errors import ArgumentError
 from ..model.simulator import Simulator
 from ..data.checks import bound_findings
@@ -382,6 +383,14 @@ def _curve_subset(r_c, chosen, c_crit):
     return tuple(g for g in GROUPS if g in best["extensions"]), best["wald"]
 
 
+def knots_like(ds, res=None):
+    """``damper_knots`` of a candidate started from curve result ``res``: the grid its knees were found on
+    (:data:`rideid.estimate.dampers.KNEE_GRID`: its knot forces are then the start's own, no second fit),
+    else the dataset's ``[model] damper_knots``."""
+    found = res is not None and (res.dampers or {}).get("knots_from", "").startswith("found")
+    return KNEE_GRID if found else ds.manifest.damper_knots
+
+
 def curve_candidate(ds, lin, chosen, lin_crit, *, rng=None, seed=None, maps=None, start_from=None, simulator=None,
                     **kw):
     """Fit damper curves on top of the chosen linear model ``chosen`` (result ``lin``, its criterion
@@ -400,7 +409,7 @@ def curve_candidate(ds, lin, chosen, lin_crit, *, rng=None, seed=None, maps=None
         return None
     key = tuple(g for g in IDENTIFIABLE_ORDER if g in chosen or g == CURVES_GROUP)
     space = ParameterSpace(ds.known, ds.geometry, ds.manifest.bounds, extensions=key,
-                           damper_knots=ds.manifest.damper_knots)
+                           damper_knots=knots_like(ds, start_from))
     cf = CostFunction(ds, space=space, simulator=simulator)
     if start_from is not None:  # a curve fit of a larger model: its values, knot forces included
         x0 = np.array([start_from.parameters[n] for n in space.names])
@@ -441,7 +450,7 @@ def bump_candidate(ds, prev, chosen, prev_crit, *, rng=None, seed=None, maps=Non
         return None
     key = tuple(g for g in IDENTIFIABLE_ORDER + (BUMPS_GROUP,) if g in chosen or g == BUMPS_GROUP)
     space = ParameterSpace(ds.known, ds.geometry, ds.manifest.bounds, extensions=key,
-                           damper_knots=ds.manifest.damper_knots)
+                           damper_knots=knots_like(ds, prev if CURVES_GROUP in chosen else None))
     cf = CostFunction(ds, space=space, simulator=simulator)
     if CURVES_GROUP in chosen:  # the curve fit as it is (knot forces too), no stops yet: the scan starts them
         x0 = np.array([prev.parameters[n] if n in prev.parameters else

@@ -211,11 +211,15 @@ def dampers_figure(result):
         ax.fill_between(vv, FF - 2 * np.nan_to_num(ss), FF + 2 * np.nan_to_num(ss), color=f"C{k}", alpha=0.2)
         if not exc.all():
             ax.plot(v[~exc], F[~exc], "x", color="k", ms=7)
+        for side in ("compression", "rebound"):  # the knees found (rideid.estimate.dampers.knees)
+            vk = (((d.get("knees") or {}).get(axle) or {}).get(side) or {}).get("velocity")
+            if vk is not None:
+                ax.axvline(vk, color=f"C{k}", ls=":", lw=1.2)
     ax.axhline(0, color="0.5", lw=0.5)
     ax.axvline(0, color="0.5", lw=0.5)
     ax.set_xlabel("suspension velocity [m/s] (compression +)")
     ax.set_ylabel("damper force at the wheel [N]")
-    ax.set_title("damper curves (±2 std_robust; × not excited)")
+    ax.set_title("damper curves (±2 std_robust; × not excited; dotted: knees found)")
     ax.grid(alpha=0.3)
     ax.legend(fontsize=8)
     return fig

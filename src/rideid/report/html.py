@@ -490,7 +490,9 @@ def fig_damper_curves(dampers: dict, slopes: dict, out_dir):
                  "Identified force–velocity curve per axle (piecewise linear through the origin and the knots), "
                  "with ± 2 std_robust at the knots (shaded band and bars). Red crosses: knots no run excites "
                  f"({NOT_EXCITED_LABEL}: the force continues the last excited segment's slope). Dashed: the "
-                 "derived linear c_s (the curve's mean slope between ±0.1 m/s) for reference.")
+                 "derived linear c_s (the curve's mean slope between ±0.1 m/s) for reference. Green dotted "
+                 "lines: the knees found by the data (where the two-segment line fitted to each side bends), "
+                 "shaded ± 2 std_robust (statistical only).")
 
 
 @styled
@@ -519,6 +521,7 @@ def damper_curves_figure(dampers: dict, slopes: dict):
             for vk, Fk in zip(v[~exc], F[~exc]):
                 ax.annotate("not excited", (vk, Fk), textcoords="offset points", xytext=(0, 8 if vk > 0 else -14),
                             ha="center", fontsize=7, color="tab:red")
+        _mark_knees(ax, (dampers.get("knees") or {}).get(axle) or {})
         c = slopes.get(axle)
         if c is not None:
             ax.plot(v[[0, -1]], c * v[[0, -1]], "--", color="0.45", lw=1,
@@ -531,6 +534,37 @@ def damper_curves_figure(dampers: dict, slopes: dict):
         ax.legend(fontsize=7, loc="upper left")
     fig.subplots_adjust(left=0.08, right=0.985, bottom=0.13, top=0.92, wspace=0.25)
     return fig
+
+
+def knee_summary(dampers: dict) -> str:
+    """``"; knees found: front +0.136 / -0.137 m/s, ..."``: the knees of result.json ``dampers`` (empty
+    without any)."""
+    parts = []
+    for axle in ("front", "rear"):
+        k = (dampers.get("knees") or {}).get(axle) or {}
+        vals = [f"{k[s]['velocity']:+.3f}" + (f" ± {2 * k[s]['std_robust']:.3f}" if k[s].get("std_robust") else "")
+                for s in ("compression", "rebound") if (k.get(s) or {}).get("velocity") is not None]
+        if vals:
+            parts.append(f"{axle} {' / '.join(vals)}")
+    return f"; knees found (± 2 std_robust, m/s): {', '.join(parts)}" if parts else ""
+
+
+def _mark_knees(ax, knees: dict):
+    """The knees found on an axle (result.json ``dampers.knees[axle]``): a dotted line at each, its
+    ± 2 std_robust shaded, labelled with the velocity."""
+    first = True
+    for side in ("compression", "rebound"):
+        k = knees.get(side) or {}
+        vk = k.get("velocity")
+        if vk is None:
+            continue
+        s = k.get("std_robust") or 0.0
+        ax.axvline(vk, color="tab:green", ls=":", lw=1.4, label="knee found (± 2 std_robust)" if first else None)
+        ax.axvspan(vk - 2 * s, vk + 2 * s, color="tab:green", alpha=0.2, lw=0)
+        ax.annotate(f"knee {abs(vk):.3f} m/s", (vk, 0), textcoords="offset points",
+                    xytext=(4 if vk > 0 else -4, -12 if vk > 0 else 6), ha="left" if vk > 0 else "right",
+                    fontsize=7, color="tab:green")
+        first = False
 
 
 @styled
@@ -829,7 +863,7 @@ def summary_section(result, context: dict) -> dict:
         idle = sum(not e for axle in ("front", "rear") for e in d[axle]["excited"])
         lines.append(("Damper curves", f"{len(d['velocity'])} knots per axle up to {max(d['velocity']):g} m/s"
                       + (f"; {idle} knot force(s) not excited: not to be trusted" if idle else
-                         "; every knot excited"), "dampers"))
+                         "; every knot excited") + knee_summary(d), "dampers"))
     rows = [r for r in context["fit_rows"] if r["median"] == r["median"]]
     if rows:
         worst = max(rows, key=lambda r: r["worst"])
