@@ -324,8 +324,10 @@ def fit_cost(ds: Dataset, res, simulator=None, cost: CostFunction | None = None)
         cf = cost
     else:
         ext = tuple((res.model or {}).get("extensions") or ())
-        space = ParameterSpace(ds.known, ds.geometry, ds.manifest.bounds, extensions=ext,
-                               damper_knots=ds.manifest.damper_knots)
+        # the knots the curves were fitted at: the dataset's, or the knee grid (rideid.estimate.dampers.KNEE_GRID)
+        knots = ([v for v in res.dampers["velocity"] if v > 0] if getattr(res, "dampers", None)
+                 else ds.manifest.damper_knots)
+        space = ParameterSpace(ds.known, ds.geometry, ds.manifest.bounds, extensions=ext, damper_knots=knots)
         frozen = [n for n, d in res.details.items() if d.get("excited") is False]
         if frozen:
             space = space.with_frozen(frozen)
