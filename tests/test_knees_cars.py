@@ -82,6 +82,7 @@ def test_knees_between_the_default_knots_spec_csv(tmp_path, car):
     _check(car, _identify(ds, tmp_path / "fit"), truth)
 
 
+@pytest.mark.expensive  # 21 minutes on two busy cores: make test-slow runs it, CI's slow pass does not
 def test_knees_from_logger_files_with_estimated_starts(tmp_path):
     sc_path = tmp_path / "sc.toml"
     sc_path.write_text(tomli_w.dumps(scenario_doc("sedan")))
