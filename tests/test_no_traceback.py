@@ -266,3 +266,21 @@ def test_a_nan_value_is_an_error_in_every_format(fmt, tmp_path):
     # the other channels read, and an empty cell / null (not sampled) is not a NaN: the gyro at 100 Hz
     g = sf.get("Gyro_X", "m", **kw)
     assert np.all(np.isfinite(g.values))
+
+
+def test_a_time_column_in_ms_read_as_seconds_names_the_time_base(tmp_path, capsys):
+    """A logger CSV whose time column is in ms while the map says s: the channels' rate comes out 0.2 Hz. One
+    line names the file, the time column and the unit that fits, exit 2, nothing written (before, the lead-in
+    check failed on '0 .. 10000 s' without naming the time base)."""
+    from logger_case import suv_scenario, write_logger
+    sc = suv_scenario(tmp_path / "sc")
+    ds = write_logger(sc, tmp_path / "ds", noise=0.01, seed=1)
+    for f in (ds / "runs").glob("*.csv"):
+        head, *rows = f.read_text().splitlines()
+        f.write_text("\n".join([head] + [",".join([f"{float(r.split(',')[0]) * 1000:.6f}"] + r.split(",")[1:])
+                                          for r in rows]) + "\n")
+    rc = main(["identify", str(ds), "--out", str(tmp_path / "fit"), "--quiet"])
+    err = capsys.readouterr().err.strip()
+    assert rc == 2 and "\n" not in err and "Traceback" not in err
+    assert "time column 'Time_s'" in err and "0.2 Hz" in err and 'unit = "ms"' in err, err
+    assert not (tmp_path / "fit").exists()

@@ -329,6 +329,7 @@ def load_measured_run(run, man) -> MeasuredRun:
     targets, time_name, time_scale = _map_channels(run, cmap, sf, path, where_map)
     measured = [c for c in targets if c in CHANNELS]
     raw, rec_ch = _read_si(targets, sf, time_name, time_scale, opts, path, where_map, warns)
+    _check_time_base(rec_ch, measured, time_name, time_scale, path)
     t_first, t_last, fs = _span_and_rate(raw, rec_ch, measured, opts.get("fs", None), path, warns)
     lead = opts.get("lead_in", (t_first, t_first + DEFAULT_LEAD_IN))
     grav = opts.get("gravity_included", False)
@@ -492,6 +493,32 @@ def _channel_unit(c: str, e: ChannelEntry, sig: Signal, path: Path, w: str, warn
             _warn(warns, f"{path}: {w}: the file says unit '{sig.unit}' but the map says '{unit}'; "
                          "using the map's", _STAGE + 1)
     return unit, unit_src
+
+
+#: sample rates (Hz) of a ride recording: below, a time column read in too large a unit (ms taken as s); above,
+#: in too small a one (s taken as ms)
+PLAUSIBLE_RATE = (5.0, 200_000.0)
+#: a time column's units and their factors to seconds, for the hint
+_TIME_UNITS = {"s": 1.0, "ms": 1e-3, "us": 1e-6}
+
+
+def _check_time_base(rec_ch: dict, measured: list, time_name, time_scale: float, path: Path) -> None:
+    """One clear error when the measured channels' sample rate is not a ride recording's: the time base is in
+    another unit than read (a time column in ms read as s), naming the time column and the unit that fits."""
+    rates = [rec_ch[c]["rate_hz"] for c in measured if rec_ch.get(c, {}).get("rate_hz")]
+    if not rates:
+        return
+    rate = max(rates)
+    lo, hi = PLAUSIBLE_RATE
+    if lo <= rate <= hi:
+        return
+    # the unit whose factor puts the rate in the middle of the plausible range, as a rate of 50 Hz - 20 kHz
+    fits = [u for u, f in _TIME_UNITS.items() if 50.0 <= rate * time_scale / f <= 20_000.0]
+    where = (f"the time column '{time_name}'" if time_name else "the file's time base")
+    hint = (f"; is it in {fits[0]}? set [channels] time = {{ name = \"{time_name or 'time'}\", unit = \"{fits[0]}\" }}"
+            if fits else "; check the time column's unit and the logger's rate")
+    raise DataError(f"{path}: {where} gives the channels a sample rate of {rate:.3g} Hz, not a ride recording's "
+                    f"({lo:g} Hz - {hi / 1000:g} kHz){hint}")
 
 
 def _span_and_rate(raw: dict, rec_ch: dict, measured: list, fs, path: Path, warns: list):
