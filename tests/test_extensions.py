@@ -411,7 +411,7 @@ def test_identify_model_choice_and_known_extension(sim_dataset, tmp_path, capsys
         assert res["model"]["extensions"] == ([] if model == "base" else list(GROUPS))
         assert [n for n in res["parameters"] if n in EXT_NAMES] == expect
         assert res["parameters"]["c_tf"] == {"value": 150.0, "unit": "N s/m", "fixed": True, "derived": False,
-                                             "std": 0.0, "std_robust": 0.0}
+                                             "std": 0.0, "std_robust": 0.0, "std_total": 0.0, "budget": {}}
         if model == "full":
             assert res["parameters"]["k_arf"]["fixed"] is False
             assert res["parameters"]["k_arf"]["lower"] == 0.0

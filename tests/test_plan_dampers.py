@@ -23,7 +23,7 @@ VEL = [-k for k in reversed(POS)] + list(POS)
 #: keys of plan.json for a linear car (no "dampers")
 LINEAR_KEYS = {"scenario", "free", "nominal", "known", "derived", "model", "noise", "criterion", "budget", "targets",
                "robust", "sensitivities", "precision_definitions", "candidates", "all_runs", "selected",
-               "greedy_path", "sensitivity_map_comparison", "notes"}
+               "greedy_path", "sensitivity_map_comparison", "notes", "declared"}
 
 
 def digressive(c1, c2, knee=0.1, rebound=2.0):

@@ -21,7 +21,7 @@ from ..model.simulator import Simulator
 from ..estimate.sensitivity import compute_maps
 from ..model.equations import CHANNELS
 from ..model.nonlinear import curve_names
-from ..model.params import ALL_NAMES, EXT_NAMES, GROUPS, NAMES
+from ..model.params import ALL_NAMES, EXT_NAMES, GROUPS, NAMES, SUSPENSION_NAMES
 from ..report.plan_files import pct as _pct, plan_markdown, write_plan
 from . import roadinfo
 from .colour import load_noise_psd
@@ -811,7 +811,9 @@ def _dampers_block(exc, space, x0, names, all_p, sel_p, S, n_runs, knots_from) -
 
 def _check_truth(sc, space, P0):
     """The anchor must describe the nominal car: fixed and derived values equal to [truth]."""
-    for k, n in enumerate(ALL_NAMES[:P0.size]):
+    # a nonlinear row is the suspension's 16 columns, then the curves' and stops' (no powertrain)
+    names = SUSPENSION_NAMES if space.layout is not None else ALL_NAMES
+    for k, n in enumerate(names[:P0.size]):
         if space.curves and n in ("c_sf", "c_sr"):  # the curves' mean slopes, not parameters of the plan
             continue
         if abs(P0[k] - sc.truth.get(n, 0.0)) > 1e-6 * max(abs(sc.truth.get(n, 0.0)), 1e-12):

@@ -318,7 +318,8 @@ def fit_cost(ds: Dataset, res, simulator=None, cost: CostFunction | None = None)
     """The cost function of a known-road fit rebuilt at its result (its model, frozen knots, starts), or None
     where it cannot be (runs on unknown roads or tracks fitted as built: the road fit's; a parameter list that
     does not match the result's)."""
-    if ds.unknown_road_runs or getattr(res, "tracks", None):  # the road fit's (unknown roads, tracks as built)
+    as_built = any(not rec.get("rejected") for rec in (getattr(res, "tracks", None) or {}).values())
+    if ds.unknown_road_runs or as_built:  # the road fit's estimate (unknown roads, tracks as built)
         return None
     if cost is not None:
         cf = cost

@@ -32,7 +32,12 @@ polish on the reduced data and one on all of it, from the identified car
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
+
+from .budget import fit_cost
+from .identify import _polish
 
 #: the largest shift (in std_total) the flagged pairs' structure may cause for the model to stay adequate
 MATERIAL_SHIFT = 1.0
@@ -133,11 +138,6 @@ def verdict(adequacy: dict, record: dict) -> dict:
 def weigh_result(ds, res, simulator=None):
     """``res`` with its adequacy weighed for materiality (:func:`weigh`, :func:`verdict`) when the residual
     test found structure; unchanged otherwise (adequate, not assessed). ``ds``: the dataset as loaded."""
-    from dataclasses import replace
-
-    from .budget import fit_cost
-    from .identify import _polish
-
     ad = res.adequacy
     if not ad or ad.get("adequate", True) or not flagged_pairs(ad):
         return res

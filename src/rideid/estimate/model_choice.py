@@ -617,7 +617,8 @@ def identify(ds, *, model=None, rng=None, seed=None, population: int = DEFAULT_P
     else:
         res = identify_model(ds, model=model, cost=cost, start=start, simulator=simulator, **common)
     chosen = tuple((res.model or {}).get("extensions") or ())
-    drawn_fits = bool((res.adequacy or {}).get("adequate"))
+    # not assessed (assess=False): no verdict to fault the drawing, so the tracks stay as drawn
+    drawn_fits = res.adequacy is None or bool(res.adequacy.get("adequate"))
     if cost is None and polish and not drawn_fits and not unknown_road_runs(ds) \
             and as_built_runs(ds, chosen, tracks)[0]:
         # SPEC §11: the tracks as built, from the car fitted on them as drawn (rideid.estimate.asbuilt), when the
