@@ -732,8 +732,9 @@ def fig_budget(result, out_dir):
     what = ("the declared uncertainties of " + ", ".join(declared)) if declared else "nothing declared"
     return _save(budget_figure(result), Path(out_dir), "budget", "Uncertainty budget",
                  "Each estimate's ±2 std_total in % of its value, cut into its sources in proportion to their share "
-                 "of the variance: statistical (std_robust: the sensor noise) and each declared input, propagated "
-                 f"to first order (GUM; docs/uncertainty.md). Here: {what}.")
+                 "of the variance: statistical (the sensor noise), between runs (where the runs disagree beyond their "
+                 "noise: model error that differs from run to run, part of std_robust) and each declared input, "
+                 f"propagated to first order (GUM; docs/uncertainty.md). Here: {what}.")
 
 
 def damper_section(result, dataset, out_dir) -> list:
