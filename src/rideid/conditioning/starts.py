@@ -222,6 +222,9 @@ SHIFT_STEP = 0.1
 WARP_SPACING = 0.2
 #: the central difference step of a knot's derivative, m
 WARP_STEP = 1e-3
+#: a speed channel whose integral drifts less than this (m, one standard deviation over the run's window) is
+#: taken as exact (no distance correction)
+WARP_MIN = 1e-3
 
 
 @dataclass(frozen=True)
@@ -306,6 +309,8 @@ def distance_warp(mr: MeasuredRun, start: float) -> DistanceWarp | None:
         return None
     knots = start + WARP_SPACING * np.arange(k0, k1 + 1)
     rate_std = float(sp["noise_std"]) * math.sqrt(float(sp["noise_interval"]))
+    if rate_std * math.sqrt(knots[-1] - knots[0]) < WARP_MIN:
+        return None  # the channel's drift over the whole run stays below a millimetre: taken as exact
     return DistanceWarp(knots, np.zeros(knots.size), -k0, rate_std)
 
 

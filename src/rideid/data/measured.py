@@ -686,8 +686,9 @@ def _motion(raw: dict, targets: dict, speed: float | None, path: Path):
         from scipy.integrate import cumulative_trapezoid
         d = cumulative_trapezoid(np.clip(s.values, 0, None), s.time, initial=0.0)
         distance = Distance(s.time, d)
-        # white-noise level of the speed channel (differences cancel the smooth speed): its integral drifts
-        noise = float(np.std(np.diff(s.values)) / math.sqrt(2.0)) if s.values.size > 2 else 0.0
+        # white-noise level of the speed channel: second differences cancel a smooth speed (a driver's wander
+        # of a few per cent over seconds leaves 1e-3 of the first differences' share), var = 6 sigma^2
+        noise = float(np.std(np.diff(s.values, 2)) / math.sqrt(6.0)) if s.values.size > 3 else 0.0
         motion_rec = {"source": f"speed channel '{targets['speed'].name}' ({s.unit}), integrated",
                       "noise_std": noise, "noise_interval": float(np.median(np.diff(s.time)))}
     else:

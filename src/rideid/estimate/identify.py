@@ -654,6 +654,12 @@ def _polish(cf: CostFunction, x0, weights, align=None):
     return prob.to_x(sol.x[:prob.d]), info, std
 
 
+def polish_fixed_starts(cf: CostFunction, x0, weights):
+    """The least-squares polish from ``x0`` with the runs as ``cf`` reads them (no start among the unknowns):
+    ``(x, info, std)`` as :func:`_polish` returns them (the materiality refits, rideid.estimate.materiality)."""
+    return _polish(cf, x0, weights)
+
+
 #: the polish's evaluations in all; dogbox's share of them (on the built-in car, SUVs, vans and damper curves
 #: it converges in 6-20, a base model on a car with bars in 30); a variable this share of its range from a
 #: bound (bound-normalised) is on it (see :meth:`_Polish.solve`)

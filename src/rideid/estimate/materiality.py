@@ -37,7 +37,7 @@ from dataclasses import replace
 import numpy as np
 
 from .budget import fit_cost
-from .identify import _polish
+from .identify import polish_fixed_starts
 
 #: the largest shift (in std_total) the flagged pairs' structure may cause for the model to stay adequate
 MATERIAL_SHIFT = 1.0
@@ -149,7 +149,7 @@ def weigh_result(ds, res, simulator=None):
 
     def polish(c, x0):
         c = c.pinned_at(c.space.full(np.asarray(x0, dtype=float)[None]))
-        xs, _, std = _polish(c, np.asarray(x0, dtype=float), equal)
+        xs, _, std = polish_fixed_starts(c, np.asarray(x0, dtype=float), equal)
         return xs, std
 
     record = weigh(cf, x, res.details, ad, polish)
