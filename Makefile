@@ -19,8 +19,9 @@ demo: $(STAMP)
 	$(VENV)/bin/rideid demo --out demo-out
 
 # lint (ruff, configured in pyproject.toml), then the default suite on every core (pytest-xdist). Measured on a
-# fresh clone of two otherwise idle cores: 9.0 minutes in all, 7.5 of them the tests (15.7 minutes of CPU time,
-# user + sys), the rest making .venv; it takes longer when other jobs share the cores (30 minutes at a load of 7)
+# fresh clone of two otherwise idle cores: 10.9 minutes in all, 9.9 of them the tests (19.4 minutes of CPU time,
+# user + sys), the rest making .venv, before three 33-57 s tests moved to CI's slow pass (about a minute less);
+# it takes longer when other jobs share the cores
 test: $(STAMP)
 	$(PY) -m ruff check src tests benchmarks
 	$(PY) -m pytest -q -n auto

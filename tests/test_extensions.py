@@ -424,6 +424,7 @@ def test_identify_model_choice_and_known_extension(sim_dataset, tmp_path, capsys
     assert rideid.CostFunction(ds).names[-2:] == ["k_arf", "k_arr"]
 
 
+@pytest.mark.slow  # 33-57 s: CI's slow pass (make test stays under 10 minutes on 2 cores)
 def test_extended_model_recovers_a_car_with_bars_and_tire_damping(tmp_path):
     """Issue 15 acceptance: the van of the test suite with anti-roll bars and
     tire damping, 2 % white noise, total mass known: the extended model

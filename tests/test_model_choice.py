@@ -135,6 +135,7 @@ def test_identify_auto_picks_exactly_the_groups_the_car_has(groups, tmp_path, ca
         assert res["parameters"][n]["value"] == pytest.approx(v, rel=0.05), n
 
 
+@pytest.mark.slow  # 33-57 s: CI's slow pass (make test stays under 10 minutes on 2 cores)
 def test_base_model_on_a_real_car_says_not_adequate_in_terminal_and_report(tmp_path, capsys):
     from cars import SUV_BARS, SUV_TIRE_DAMPING, add_noise, simulate_car, suv_scenario
     from rideid.synth.scenario import write_dataset
