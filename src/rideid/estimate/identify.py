@@ -863,21 +863,23 @@ class _Polish:
         """HAC covariance of every unknown in its own units (runs as independent blocks of samples, see
         :mod:`rideid.estimate.uncertainty`) and the runs' bandwidths."""
         cf = self.cf
-        blocks = [(int(e - s), int(np.count_nonzero(cf.W[ri] > 0)))
-                  for ri, (s, e) in enumerate(zip(cf.sim.run_start[:-1], cf.sim.run_start[1:]))]
+        blocks = self.run_blocks()
         n_prior = sol.fun.size - sum(t * c for t, c in blocks)
         if n_prior:  # the distance corrections' prior rows: independent pseudo-observations, one block
             blocks.append((n_prior, 1))
         hac = hac_covariance(sol.jac, sol.fun, blocks)
         return hac.cov * np.outer(self.scale(), self.scale()), hac.bandwidths[:len(cf.run_ids)]
 
+    def run_blocks(self) -> list:
+        """``(n_time, n_channel)`` of each run's residuals, in their order (the prior rows not among them)."""
+        cf = self.cf
+        return [(int(e - s), int(np.count_nonzero(cf.W[ri] > 0)))
+                for ri, (s, e) in enumerate(zip(cf.sim.run_start[:-1], cf.sim.run_start[1:]))]
+
     def jackknife(self, sol):
         """The delete-one-run jackknife covariance of every unknown in its own units and its number of runs
         (:func:`rideid.estimate.uncertainty.jackknife_runs`; None with fewer than 3 runs to leave out)."""
-        cf = self.cf
-        blocks = [(int(e - s), int(np.count_nonzero(cf.W[ri] > 0)))
-                  for ri, (s, e) in enumerate(zip(cf.sim.run_start[:-1], cf.sim.run_start[1:]))]
-        cov, k = jackknife_runs(sol.jac, sol.fun, blocks, n_checked=self.d)
+        cov, k = jackknife_runs(sol.jac, sol.fun, self.run_blocks(), n_checked=self.d)
         return (None if cov is None else cov * np.outer(self.scale(), self.scale())), k
 
     def info(self, sol, x0):

@@ -456,26 +456,25 @@ class EstimateCovariance:
                 for key in ("covariance", "covariance_robust", "covariance_jackknife")]
         return cls(names, *mats, int(info.get("jackknife_runs", 0)))
 
+    def _std(self, cov, name: str) -> float | None:
+        """The standard error of ``name`` on the diagonal of ``cov`` (``None`` if unavailable)."""
+        if cov is None or name not in self.names:
+            return None
+        i = self.names.index(name)
+        v = cov[i][i]
+        return float(np.sqrt(v)) if np.isfinite(v) and v >= 0 else None
+
     def std_white(self, name: str) -> float | None:
         """White (Jacobian) standard error of one estimated or derived parameter (``None`` if unavailable)."""
-        if self.white is None or name not in self.names:
-            return None
-        v = self.white[self.names.index(name)][self.names.index(name)]
-        return float(np.sqrt(v)) if np.isfinite(v) and v >= 0 else None
+        return self._std(self.white, name)
 
     def std_robust(self, name: str) -> float | None:
         """Robust standard error of one estimated parameter (``None`` if unavailable)."""
-        if self.robust is None or name not in self.names:
-            return None
-        v = self.robust[self.names.index(name)][self.names.index(name)]
-        return float(np.sqrt(v)) if np.isfinite(v) and v >= 0 else None
+        return self._std(self.robust, name)
 
     def std_jackknife(self, name: str) -> float | None:
         """The delete-one-run jackknife standard error of one parameter (``None`` if unavailable)."""
-        if self.jackknife is None or name not in self.names:
-            return None
-        v = self.jackknife[self.names.index(name)][self.names.index(name)]
-        return float(np.sqrt(v)) if np.isfinite(v) and v >= 0 else None
+        return self._std(self.jackknife, name)
 
     def std_between_runs(self, name: str) -> float | None:
         """The standard uncertainty the runs' disagreement adds (:func:`between_runs_variance`; 0 when they
