@@ -145,12 +145,18 @@ def fit_record(res, truth, extensions):
         cover[n] = {"std": bool(miss <= 2 * d["std"]) if d.get("std") is not None else None,
                     "std_robust": bool(miss <= 2 * d["std_robust"]) if d.get("std_robust") is not None else None,
                     "z_std": float(miss / d["std"]) if d.get("std") else None,
-                    "z_std_robust": float(miss / d["std_robust"]) if d.get("std_robust") else None}
+                    "z_std_robust": float(miss / d["std_robust"]) if d.get("std_robust") else None,
+                    # the sandwich's share alone, without the runs' disagreement (std_between_runs)
+                    "std_hac": (bool(miss <= 2 * d.get("std_hac", d["std_robust"]))
+                                if d.get("std_robust") is not None else None),
+                    "between_runs": bool(d.get("std_between_runs"))}
     part = {g: max(abs(err[n]) for n in ns) for g, ns in PARTS.items()}
     return {"extensions": list(extensions), "error_pct": err, "extension_values": ext,
             "largest_error_pct": max(abs(v) for v in err.values()), "largest_error_by_part_pct": part,
             "covered_std": sum(bool(c["std"]) for c in cover.values()),
             "covered_std_robust": sum(bool(c["std_robust"]) for c in cover.values()),
+            "covered_std_hac": sum(bool(c["std_hac"]) for c in cover.values()),
+            "between_runs": sum(c["between_runs"] for c in cover.values()),
             "estimated": len(cover), "coverage": cover,
             "adequate": (res.adequacy or {}).get("adequate"),
             "dampers": res.dampers, "bump_stops": getattr(res, "bump_stops", None),

@@ -409,9 +409,14 @@ def check_verification_rows(rows, reduced_label, extended_label):
     assert ext["auto"]["largest_error_pct"] == pytest.approx(full["largest_error_pct"], abs=1e-6)
     assert full["adequate"] is True
     # ... while the base model is biased by far more than that (springs > 20 %, unsprung masses > 10 %),
-    # its residuals are flagged, and its error bars do not cover the bias (model structure, not noise)
+    # its residuals are flagged, and the sandwich's error bars do not cover the bias (model structure, not
+    # noise). The runs disagree about such a car (each track bends the missing bars into other parameters
+    # differently): the delete-one-run jackknife finds a between-runs share in most parameters, which widens
+    # std_robust (measured, seed 1: 5 of 11 then cover, the sandwich's share alone 1 of 11); the verdict says
+    # not adequate, so those numbers are not offered as trustworthy
     base = ext["base"]
     assert base["error_pct"]["k_sf"] > 20 and base["error_pct"]["k_sr"] > 15
     assert base["error_pct"]["m_uf"] < -10 and base["error_pct"]["m_ur"] < -10
     assert base["adequate"] is False
-    assert base["covered_std_robust"] <= 2 and base["estimated"] == 11
+    assert base["covered_std_hac"] <= 2 and base["estimated"] == 11
+    assert base["between_runs"] >= 8 and base["covered_std_robust"] < base["estimated"]
