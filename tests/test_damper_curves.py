@@ -200,3 +200,34 @@ def test_damper_figure_marks_knots_not_excited():
     assert any(t.startswith("derived c_sf") for t in labels[0]) and not any("c_sr" in t for t in labels[1])
     import matplotlib.pyplot as plt
     plt.close(fig)
+
+
+def test_knot_forces_carry_std_total_and_the_weighbridge_scales_them(digressive_fit, tmp_path):
+    """SPEC §12 on the curves: with nothing declared each knot force's std_total is its std_robust (and the
+    terminal's table says ± 2 std_total); with a weighbridge of 1 % declared, every force scales with the
+    anchor (SPEC §1), so its std_total is hypot(std_robust, 0.01 F) exactly."""
+    from dataclasses import replace
+    from rideid.estimate.budget import with_budget
+    from rideid.estimate.dampers import format_dampers
+    _, doc, out = digressive_fit
+    for axle in ("front", "rear"):
+        assert doc["dampers"][axle]["std_total"] == doc["dampers"][axle]["std_robust"]
+    assert "± 2 std_total" in format_dampers(doc["dampers"])
+    res = load(out)
+    folder = tmp_path / "ds"
+    folder.mkdir()
+    src = res.dataset if hasattr(res, "dataset") else doc["dataset"]
+    from pathlib import Path
+    man = read_toml(Path(src) / "dataset.toml")
+    m = man["known"]["total_mass"]
+    man["known"]["total_mass"] = {"value": m, "std": 0.01 * m}
+    for f in Path(src).rglob("*.csv"):
+        (folder / f.relative_to(src)).parent.mkdir(parents=True, exist_ok=True)
+        (folder / f.relative_to(src)).write_bytes(f.read_bytes())
+    (folder / "dataset.toml").write_text(tomli_w.dumps(man))
+    ds = rideid.load_dataset(folder)
+    got = with_budget(ds, replace(res, polish=None)).dampers  # the anchor's closed form (no refit needed)
+    for axle in ("front", "rear"):
+        F, s, t = (np.array(got[axle][k], dtype=float) for k in ("force", "std_robust", "std_total"))
+        assert np.allclose(t, np.hypot(s, 0.01 * np.abs(F)), rtol=1e-9), axle
+        assert np.all(t > s)

@@ -393,8 +393,28 @@ def with_budget(ds: Dataset, res, simulator=None, cost: CostFunction | None = No
     notes += gain_notes(block["rigid_body"], dict(getattr(ds.manifest, "sensitivity_std", {}) or {}))
     block["notes"] = notes
     details = budget_entries(res.details, names, gradients, inputs)
-    return replace(res, details=details, uncertainty=block)
+    return replace(res, details=details, uncertainty=block, dampers=dampers_with_totals(res, details))
+
+
+def dampers_with_totals(res, details: dict):
+    """The result's ``dampers`` block with ``std_robust`` and ``std_total`` for each axle's knot forces taken
+    from the knots' own entries of ``details`` (the block is written before the runs' disagreement is folded
+    into std_robust; None where a knot is not excited), or the block as it was (no curves)."""
+    block = getattr(res, "dampers", None)
+    if not block:
+        return block
+    out = dict(block)
+    for a, axle in enumerate(("front", "rear")):
+        if axle not in block:
+            continue
+        prefix = "F_f" if a == 0 else "F_r"
+        ax = dict(block[axle])
+        entries = [details.get(f"{prefix}{j + 1}") or {} for j in range(len(ax.get("std_robust", [])))]
+        ax["std_robust"] = [None if s is None else e.get("std_robust", s) for s, e in zip(ax["std_robust"], entries)]
+        ax["std_total"] = [None if s is None else e.get("std_total", s) for s, e in zip(ax["std_robust"], entries)]
+        out[axle] = ax
+    return out
 
 
 __all__ = ["DeclaredInput", "declared_inputs", "propagate", "budget_entries", "with_budget", "fit_cost",
-           "scale_gradients", "anchor_note", "STATISTICAL", "SENSITIVITY"]
+           "scale_gradients", "anchor_note", "dampers_with_totals", "STATISTICAL", "SENSITIVITY"]

@@ -183,17 +183,19 @@ def dampers_block(space, P, cov_white, cov_robust, names, excitation=None) -> di
 
 
 def format_dampers(dampers: dict) -> str:
-    """The curves as a compact text table: velocity, front and rear force ± 2 std_robust."""
+    """The curves as a compact text table: velocity, front and rear force ± 2 std_total (the budget's, SPEC §12;
+    ± 2 std_robust on a block without it)."""
     if not dampers:
         return ""
-    lines = ["damper curves (force at the wheel, N; ± 2 std_robust; compression +)",
+    key = "std_total" if "std_total" in dampers.get("front", {}) else "std_robust"
+    lines = [f"damper curves (force at the wheel, N; ± 2 {key}; compression +)",
              f"{'v (m/s)':>8}  {'front':>22}  {'rear':>22}"]
 
     def cell(ax, j):
         F = ax["force"][j]
         if not ax["excited"][j]:
             return f"{F:9.0f}  (not excited)"
-        s = ax["std_robust"][j]
+        s = ax[key][j]
         return f"{F:9.1f} ± {2 * s:<9.2g}" if s is not None else f"{F:9.1f}"
 
     for j, v in enumerate(dampers["velocity"]):
