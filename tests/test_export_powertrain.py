@@ -230,3 +230,29 @@ def test_fmu_refuses_a_powertrain_with_damper_curves_or_a_bad_one(engine_car, tm
         export(heavy, tmp_path / "c", format="fmu", compiler=None)
     assert list(tmp_path.iterdir()) == []
     export(curves, tmp_path / "card", format="card")  # the card takes any car
+
+
+def test_the_refusal_on_the_command_line_is_one_line_exit_2_nothing_written(engine_car, tmp_path, monkeypatch,
+                                                                           capsys):
+    """``rideid export FIT --format fmu`` of a fit whose car has a powertrain and bump stops (the fit folder's car
+    stood in for): one line naming the groups, exit 2, no output folder."""
+    import rideid.exporter
+    from rideid.cli import main
+    car = dataclasses.replace(car_from_scenario(engine_car), bump_stops={"bs_clear_f": 0.05, "bs_clear_r": 0.05,
+                                                                         "bs_rate_f": 1e5, "bs_rate_r": 1e5})
+    monkeypatch.setattr(rideid.exporter, "_load", lambda source: (car, str(source)))
+    assert main(["export", str(tmp_path / "fit"), "--out", str(tmp_path / "car"), "--format", "fmu"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith("rideid: error:") and "powertrain" in err[0], err
+    assert "this car has bump stops" in err[0]
+    assert list(tmp_path.iterdir()) == []
+
+
+@needs_cc
+@pytest.mark.parametrize("parameters", [{"m_p": 0.0}, {"m_p": 2000.0}, {"I_p": 1e4}, {"f_pp": 0.0}])
+def test_fmu_refuses_a_powertrain_set_unphysical_at_initialisation(engine_fmu, parameters):
+    """Parameters set through the FMU that leave no powertrain or no body (m_p >= m_s, the body's own pitch
+    inertia negative, a mount frequency 0): fmi2ExitInitializationMode returns an error, one logged line."""
+    t = np.arange(3) * 1e-3
+    with pytest.raises(Exception, match="fmi2ExitInitializationMode"):
+        free_decay(engine_fmu, t, 0.0, parameters)
