@@ -1,11 +1,13 @@
 """The FMU of a car with a powertrain on mounts (SPEC §10, §11): 9 DOF in its C equations.
 
-Three checks: driven over tracks, the FMU gives ``rideid simulate`` of the same car (the ten channels) and the
-independent Newton-Euler simulator of tests/powertrain_car.py (the four powertrain outputs as well); its free
-response after a road step is the modal superposition of the mass and stiffness matrices assembled by hand in
-absolute coordinates (powertrain_car.matrices, not rideid's); and its own outputs obey the mount law that defines
-``f_pb``, ``zeta_pb``, ``f_pp``, ``zeta_pp`` (body held: ``m_p z_p'' = -k_p u_p - c_p u_p'``,
-``I_p theta_p'' = -k_pt psi_p - c_pt psi_p'``), which a least-squares fit of the outputs recovers.
+Driven over tracks (by drive_fmu and by FMPy's simulate_fmu), the FMU gives ``rideid simulate`` of the same car
+(the ten channels) and the independent Newton-Euler simulator of tests/powertrain_car.py (the four powertrain
+outputs as well); its free response after a road step is the modal superposition of the mass and stiffness
+matrices assembled by hand in absolute coordinates (powertrain_car.matrices, not rideid's); and its own outputs
+obey the mount law that defines ``f_pb``, ``zeta_pb``, ``f_pp``, ``zeta_pp`` (body held:
+``m_p z_p'' = -k_p u_p - c_p u_p'``, ``I_p theta_p'' = -k_pt psi_p - c_pt psi_p'``), which a least-squares fit of
+the outputs recovers. The refusals: damper curves or bump stops with a powertrain, an unphysical powertrain (at
+export, and at the FMU's initialisation).
 """
 
 import dataclasses
