@@ -50,10 +50,7 @@ def matrices(car: dict, geom):
         C += cs[i] * np.outer(g, g)
         K[3 + i, 3 + i] += kt[i]
     # mount deflection in bounce: z_p - (z_b - (x_p - x_b) theta); in pitch: theta_p - theta
-    gb = np.zeros(9)
-    gb[[7, 0, 1]] = [1.0, -1.0, x_p - x_b]
-    gt = np.zeros(9)
-    gt[[8, 1]] = [1.0, -1.0]
+    gb, gt = mount_deflections(car)
     K += k_p * np.outer(gb, gb) + k_pt * np.outer(gt, gt)
     C += c_p * np.outer(gb, gb) + c_pt * np.outer(gt, gt)
     Bf = np.zeros((9, 4))
@@ -61,10 +58,12 @@ def matrices(car: dict, geom):
     return M, C, K, Bf, xs, ys
 
 
-def simulate(car: dict, geom, t, road, upsample: int = 20):
+def simulate(car: dict, geom, t, road, upsample: int = 20, powertrain_outputs: bool = False):
     """The ten SPEC channels ``(n_time, 10)`` at ``t`` for corner inputs ``road(times) -> (k, 4)`` (m).
 
-    Starts at rest in static equilibrium for the input at ``t[0]``.
+    Starts at rest in static equilibrium for the input at ``t[0]``. ``powertrain_outputs``: four more columns
+    (``(n_time, 14)``), the FMU's powertrain outputs: the powertrain CG's vertical acceleration and pitch rate, its
+    heave relative to the body point beneath it (the bounce mount's deflection) and its pitch relative to the body.
     """
     M, C, K, Bf, xs, ys = matrices(car, geom)
     Mi = np.linalg.inv(M)
@@ -77,6 +76,10 @@ def simulate(car: dict, geom, t, road, upsample: int = 20):
         Oacc[4 + i, 3 + i] = 1.0
     Cy = np.vstack([Oacc @ A[9:], np.eye(18)[[10, 11]]])
     Dy = np.vstack([Oacc @ B[9:], np.zeros((2, 4))])
+    if powertrain_outputs:
+        mounts = mount_deflections(car)
+        Cy = np.vstack([Cy, A[9 + 7], np.eye(18)[17], np.c_[mounts, np.zeros((2, 9))]])
+        Dy = np.vstack([Dy, B[9 + 7], np.zeros((3, 4))])
     t = np.asarray(t, dtype=float)
     h = t[1] - t[0]
     tf = t[0] + h / upsample * np.arange((t.size - 1) * upsample + 1)
@@ -84,6 +87,17 @@ def simulate(car: dict, geom, t, road, upsample: int = 20):
     x0 = -np.linalg.solve(A, B @ u[0])
     _, y, _ = scipy.signal.lsim(scipy.signal.StateSpace(A, B, Cy, Dy), u, tf, X0=x0, interp=True)
     return y[::upsample]
+
+
+def mount_deflections(car: dict) -> np.ndarray:
+    """Rows ``(2, 9)``: the bounce mount's deflection ``z_p - (z_b - (x_p - x_b) theta)`` and the pitch mount's
+    ``theta_p - theta`` as linear maps of the coordinates (module docstring)."""
+    m_p, x_p = car["m_p"], car["x_p"]
+    x_b = -m_p * x_p / (car["m_s"] - m_p)
+    G = np.zeros((2, 9))
+    G[0, [7, 0, 1]] = [1.0, -1.0, x_p - x_b]
+    G[1, [8, 1]] = [1.0, -1.0]
+    return G
 
 
 def undamped_modes(car: dict, geom):

@@ -218,9 +218,9 @@ def test_auto_selects_the_powertrain_only_on_a_car_with_one(tmp_path):
     assert res.model["extensions"] == []
 
 
-def test_card_carries_the_powertrain_and_the_fmu_refuses_it(tmp_path, scenario):
+def test_card_and_fmu_carry_the_powertrain(tmp_path, scenario):
     """``rideid export``: the card's [truth] holds the seven and ``rideid simulate`` takes it back; the FMU
-    (whose C equations are the 7-DOF car's) is refused in one line, nothing written."""
+    carries them as parameters (its 9-DOF equations: tests/test_export_powertrain.py)."""
     import tomllib
 
     from rideid.exporter import car_from_scenario, export
@@ -234,9 +234,10 @@ def test_card_carries_the_powertrain_and_the_fmu_refuses_it(tmp_path, scenario):
     (tmp_path / "card" / "car.toml").write_text(tomli_w.dumps(doc))
     sc = rideid.load_scenario(tmp_path / "card" / "car.toml")
     assert sc.truth["f_pb"] == ENGINE["f_pb"]
-    with pytest.raises(ArgumentError, match="powertrain on mounts.*FMU"):
-        export(car, tmp_path / "fmu", format="fmu", compiler=None)
-    assert not (tmp_path / "fmu").exists()
+    export(car, tmp_path / "fmu", format="fmu", compiler=None)
+    fmpy = pytest.importorskip("fmpy")
+    by = {v.name: v for v in fmpy.read_model_description(str(tmp_path / "fmu" / "car.fmu")).modelVariables}
+    assert {n: float(by[n].start) for n in ENGINE} == ENGINE
 
 
 @pytest.mark.slow  # the plan of a powertrain car runs the NumPy backend: 10-45 s on two shared cores

@@ -16,6 +16,7 @@ from pathlib import Path
 from ..data.schema.common import atomic_output
 from ..errors import ArgumentError, DataError
 from ..estimate.result import IdentificationResult, load
+from ..model.params import ALL_NAMES, check_parameters
 from .car import Car, car_from_result, car_from_scenario
 from .card import write_card
 from .drive import drive_fmu
@@ -85,16 +86,22 @@ def export(result_or_fit_dir, out, format: str = "all", *, compiler="auto") -> E
     Raises
     ------
     ArgumentError
-        An unknown format; an FMU of a car with a powertrain on mounts (not in the FMU's equations yet).
+        An unknown format; an FMU of a car with a powertrain on mounts (SPEC §11) and damper curves or bump
+        stops (SPEC §8): the FMU's powertrain car is linear in this version, as ``rideid simulate``'s.
     DataError
-        No result.json, a result without geometry, an output folder that cannot be written.
+        No result.json, a result without geometry, an output folder that cannot be written; an FMU of a car
+        whose powertrain leaves the rest of the body no positive mass or pitch inertia.
     """
     if format not in FORMATS:
         raise ArgumentError(f"--format must be one of {', '.join(FORMATS)}, got {format!r}")
     car, label = _load(result_or_fit_dir)
-    if format in ("fmu", "all") and car.values.get("m_p", 0.0) > 0:
-        raise ArgumentError(f"{label}: the car has a powertrain on mounts (SPEC §11, m_p = {car.values['m_p']:g} kg), "
-                            "which the FMU's equations do not have in this version; export --format card")
+    if format in ("fmu", "all") and car.powertrain:
+        if car.nonlinear:  # as rideid simulate: the nonlinear car has no powertrain in this version
+            raise ArgumentError(f"{label}: the FMU of a car with a powertrain on mounts (SPEC §11) has linear dampers "
+                                "and no bump stops in this version, and this car has "
+                                f"{'damper curves' if car.dampers is not None else 'bump stops'}; "
+                                "export --format card")
+        check_parameters([car.values[n] for n in ALL_NAMES], car.geometry, where=label)
     out = Path(out)
     compiled = no_binary = None
     with atomic_output(out) as tmp:  # into an existing folder: only these files are replaced

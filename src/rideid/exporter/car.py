@@ -57,6 +57,11 @@ class Car:
         """Damper curves or bump stops: the tires then push but never pull (SPEC §8)."""
         return self.dampers is not None or bool(self.bump_stops)
 
+    @property
+    def powertrain(self) -> bool:
+        """A powertrain on mounts (SPEC §11, ``m_p > 0``): the FMU's equations then have 9 DOF."""
+        return self.values.get("m_p", 0.0) > 0
+
 
 def _num(v) -> float:
     return math.nan if v is None else float(v)

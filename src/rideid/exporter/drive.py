@@ -25,8 +25,9 @@ from .fmu import INPUTS
 DEFAULT_SUB = 16
 
 
-def drive_fmu(path, t, r, rdot, sub: int = DEFAULT_SUB) -> np.ndarray:
-    """The ten channels of ``car.fmu`` at the samples ``t``, driven with the road inputs ``r``, ``rdot``.
+def drive_fmu(path, t, r, rdot, sub: int = DEFAULT_SUB, outputs=CHANNELS) -> np.ndarray:
+    """The outputs of ``car.fmu`` (default the ten channels) at the samples ``t``, driven with the road inputs
+    ``r``, ``rdot``.
 
     Parameters
     ----------
@@ -40,12 +41,20 @@ def drive_fmu(path, t, r, rdot, sub: int = DEFAULT_SUB) -> np.ndarray:
         at ``tf = t[0] + arange((n - 1) * sub + 1) * (t[1] - t[0]) / sub``.
     sub : int
         Communication points per sample interval.
+    outputs : sequence of str
+        The outputs to read, by name: the ten SPEC channels by default; a car with a powertrain on mounts also
+        has ``powertrain_az, powertrain_pitch_rate, u_p, psi_p`` (:data:`rideid.exporter.fmu.POWERTRAIN_OUTPUTS`).
 
     Returns
     -------
-    ndarray, shape (n, 10)
-        The channels in SPEC order (``body_az_fl ... roll_rate``). The FMU starts at rest on the road of the
-        first point, as ``rideid simulate`` starts.
+    ndarray, shape (n, len(outputs))
+        The outputs in the order asked (default SPEC order, ``body_az_fl ... roll_rate``). The FMU starts at rest
+        on the road of the first point, as ``rideid simulate`` starts.
+
+    Raises
+    ------
+    ArgumentError
+        FMPy missing, inputs of the wrong shape, an output the FMU does not have (named).
     """
     try:
         from fmpy import extract, read_model_description
@@ -61,7 +70,11 @@ def drive_fmu(path, t, r, rdot, sub: int = DEFAULT_SUB) -> np.ndarray:
     unzipped = extract(str(path))
     vr = {v.name: v.valueReference for v in md.modelVariables}
     vin = [vr[n] for n in INPUTS]
-    vout = [vr[c] for c in CHANNELS]
+    unknown = [c for c in outputs if c not in vr]
+    if unknown:
+        shutil.rmtree(unzipped, ignore_errors=True)
+        raise ArgumentError(f"outputs: {path} has no variable {unknown[0]!r}")
+    vout = [vr[c] for c in outputs]
     s = FMU2Slave(guid=md.guid, unzipDirectory=unzipped, modelIdentifier=md.coSimulation.modelIdentifier,
                   instanceName="car")
     s.instantiate()
@@ -71,7 +84,7 @@ def drive_fmu(path, t, r, rdot, sub: int = DEFAULT_SUB) -> np.ndarray:
         s.setReal(vin, list(np.r_[r[0], rdot[0]]))
         s.exitInitializationMode()
         dt = (t[1] - t[0]) / sub
-        Y = np.empty((t.size, len(CHANNELS)))
+        Y = np.empty((t.size, len(vout)))
         for k in range(m):
             s.setReal(vin, list(np.r_[r[k], rdot[k]]))
             if k % sub == 0:

@@ -11,8 +11,12 @@ Variables (value references):
 * inputs ``r_fl, r_fr, r_rl, r_rr`` (0-3; road input under each wheel, m:
   the tire envelope of SPEC §2) and ``rdot_fl ... rdot_rr`` (4-7; their
   rates, m/s, which drive the tire dampers of SPEC §6);
-* outputs the ten channels of SPEC §1 by name (8-17);
-* Real parameters from 100: the sixteen of SPEC §1/§6, the geometry
+* outputs the ten channels of SPEC §1 by name (8-17) and, for a car with a
+  powertrain on mounts (SPEC §11, :data:`POWERTRAIN_OUTPUTS`, 18-21), the
+  powertrain's CG vertical acceleration and pitch rate and its heave and pitch
+  relative to the body (``u_p``, ``psi_p``: the mounts' deflections);
+* Real parameters from 100: the sixteen of SPEC §1/§6 (with a powertrain, its
+  seven after them: ``m_p, x_p, I_p, f_pb, zeta_pb, f_pp, zeta_pp``), the geometry
   (``wheelbase``, ``track_front``, ``track_rear``, ``cg_height``), ``gravity``,
   the bump stops (``bs_clear_*``, ``bs_rate_*``; rate 0 without stops),
   ``max_step`` (the longest RK4 sub-step, s) and with damper curves the knots
@@ -37,9 +41,9 @@ from xml.sax.saxutils import escape
 
 import numpy as np
 
-from ..model.equations import CHANNELS, CHANNEL_UNITS
-from ..model.params import DESCRIPTIONS, GRAVITY, SUSPENSION_NAMES
-from ..model.nonlinear import NonlinearLayout, substeps
+from ..model.equations import CHANNELS, CHANNEL_UNITS, state_space
+from ..model.params import ALL_NAMES, DESCRIPTIONS, GRAVITY, POWERTRAIN_NAMES, SUSPENSION_NAMES
+from ..model.nonlinear import M_MAX, NonlinearLayout, substeps
 from .car import CARD_UNITS, Car
 
 #: the FMU's model identifier (the binary's and the FMU's name)
@@ -52,9 +56,17 @@ VR_OUTPUT0, VR_PAR0 = 8, 100
 #: SI base-unit exponents of every unit the FMU names (FMI 2.0 ``<BaseUnit>``), so a tool can convert them
 BASE_UNITS = {"m": {"m": 1}, "m/s": {"m": 1, "s": -1}, "m/s^2": {"m": 1, "s": -2}, "rad/s": {"rad": 1, "s": -1},
               "s": {"s": 1}, "kg": {"kg": 1}, "kg m^2": {"kg": 1, "m": 2}, "N": {"kg": 1, "m": 1, "s": -2},
-              "N/m": {"kg": 1, "s": -2}, "N s/m": {"kg": 1, "s": -1}}
-#: the parameters of the FMU's equations: the twelve and SPEC §6's four (not the powertrain of SPEC §11)
+              "N/m": {"kg": 1, "s": -2}, "N s/m": {"kg": 1, "s": -1}, "Hz": {"s": -1}, "rad": {"rad": 1}}
+#: the parameters of the FMU's equations: the twelve and SPEC §6's four; a car with a powertrain on mounts
+#: (SPEC §11) has :data:`rideid.model.params.POWERTRAIN_NAMES` after them
 FMU_NAMES = SUSPENSION_NAMES
+#: the outputs a car with a powertrain on mounts adds after the ten channels: name, unit, description
+POWERTRAIN_OUTPUTS = (
+    ("powertrain_az", "m/s^2", "vertical acceleration of the powertrain CG (z'' - x_p theta'' + u_p'')"),
+    ("powertrain_pitch_rate", "rad/s", "powertrain pitch rate (theta' + psi_p', ISO 8855 sign)"),
+    ("u_p", "m", "powertrain heave relative to the body point beneath it (mount deflection)"),
+    ("psi_p", "rad", "powertrain pitch relative to the body (mount deflection)"),
+)
 #: the big clearance standing for "no bump stop" (m); with rate 0 it is never reached anyway
 NO_STOP = 1e6
 
@@ -70,10 +82,18 @@ def binary_suffix() -> str:
     return {"darwin": ".dylib", "win32": ".dll"}.get(sys.platform, ".so")
 
 
+def outputs(car: Car) -> list[tuple[str, str, str]]:
+    """The FMU's outputs in value-reference order: ``[(name, unit, description), ...]``."""
+    out = [(c, CHANNEL_UNITS[c], f"SPEC channel {c}") for c in CHANNELS]
+    return out + (list(POWERTRAIN_OUTPUTS) if car.powertrain else [])
+
+
 def _parameters(car: Car):
     """``[(name, value, unit, description, variability), ...]`` in value-reference order."""
     v, g = car.values, car.geometry
-    out = [(n, v[n], CARD_UNITS[n], DESCRIPTIONS[n], "tunable") for n in FMU_NAMES]
+    names = FMU_NAMES + (POWERTRAIN_NAMES if car.powertrain else ())
+    out = [(n, v[n], "" if CARD_UNITS[n] == "1" else CARD_UNITS[n], DESCRIPTIONS[n], "tunable")  # ratio: no unit
+           for n in names]
     out += [("wheelbase", g.wheelbase, "m", "wheelbase", "fixed"),
             ("track_front", g.track_front, "m", "front track", "fixed"),
             ("track_rear", g.track_rear, "m", "rear track", "fixed"),
@@ -100,7 +120,8 @@ def _parameters(car: Car):
 
 def max_step(car: Car, rho: float = RHO) -> float:
     """Longest RK4 sub-step (s): ``rho / max|eig|`` of the stiffest linearised car
-    (:func:`rideid.model.nonlinear.substeps`)."""
+    (:func:`rideid.model.nonlinear.substeps`: at most ``M_MAX`` sub-steps a second; with a powertrain, of the
+    9-DOF car's state matrix too)."""
     layout = NonlinearLayout(knots=None if car.dampers is None else car.dampers.velocity,
                              bump_stops=bool(car.bump_stops))
     row = [car.values.get(n, 0.0) for n in FMU_NAMES]
@@ -112,6 +133,10 @@ def max_step(car: Car, rho: float = RHO) -> float:
     if car.dampers is not None:
         row += list(car.dampers.front) + list(car.dampers.rear)
     m = substeps(np.array(row)[None], car.geometry, layout, 1.0, rho=rho)
+    if car.powertrain:  # linear (no curves, no stops: refused by rideid.export); the same bound, M_MAX included
+        A = state_space(np.array([[car.values.get(n, 0.0) for n in ALL_NAMES]]), car.geometry)[0][0]
+        lam = float(np.abs(np.linalg.eigvals(A)).max())
+        m = max(m, min(M_MAX, math.ceil(lam / rho - 1e-9)))
     return 1.0 / m
 
 
@@ -132,20 +157,27 @@ def c_source(car: Car, guid: str) -> str:
     text = (resources.files(__package__) / "c" / "model.c.in").read_text()
     subs = {"@GUID@": guid, "@N_PAR@": str(len(pars)), "@N_KNOTS@": str(K), "@PARAM_DEFINES@": "\n".join(defines),
             "@DEFAULTS@": ",\n".join(f"    {_num(p[1])} /* {p[0]} */" for p in pars),
-            "@LIFT_OFF@": "1" if car.nonlinear else "0"}
+            "@LIFT_OFF@": "1" if car.nonlinear else "0", "@POWERTRAIN@": "1" if car.powertrain else "0"}
     for k, s in subs.items():
         text = text.replace(k, s)
     return text
 
 
+def _description(car: Car) -> str:
+    if car.powertrain:
+        return "9-DOF ride model of the identified car, a powertrain on mounts in it (rideid, SPEC 1, 6, 11)"
+    return "7-DOF ride model of the identified car (rideid, SPEC 1, 6, 8)"
+
+
 def model_description(car: Car, guid: str) -> str:
     """``modelDescription.xml`` (FMI 2.0, co-simulation)."""
     pars = _parameters(car)
-    units = sorted({p[2] for p in pars} | set(CHANNEL_UNITS.values()) | {"m", "m/s"})
+    outs = outputs(car)
+    units = sorted({p[2] for p in pars} | {o[1] for o in outs} | {"m", "m/s"})
     units = [u for u in units if u]
     lines = ['<?xml version="1.0" encoding="UTF-8"?>',
              '<fmiModelDescription fmiVersion="2.0" modelName="rideid car" '
-             f'guid="{guid}" description="7-DOF ride model of the identified car (rideid, SPEC 1, 6, 8)" '
+             f'guid="{guid}" description="{_description(car)}" '
              'generationTool="rideid export" variableNamingConvention="flat" numberOfEventIndicators="0">',
              f'  <CoSimulation modelIdentifier="{MODEL_IDENTIFIER}" canHandleVariableCommunicationStepSize="true" '
              'canInterpolateInputs="true" maxOutputDerivativeOrder="0" canBeInstantiatedOnlyOncePerProcess="false" '
@@ -173,17 +205,17 @@ def model_description(car: Car, guid: str) -> str:
         desc = (f"road input under wheel {corner} (tire envelope), m" if k < 4
                 else f"rate of the road input under wheel {corner}, m/s")
         var(n, k, "input", "continuous", desc, f'<Real unit="{"m" if k < 4 else "m/s"}" start="0.0"/>')
-    outputs = [var(c, VR_OUTPUT0 + k, "output", "continuous", f"SPEC channel {c}",
-                   f'<Real unit="{CHANNEL_UNITS[c]}"/>') for k, c in enumerate(CHANNELS)]
+    indices = [var(c, VR_OUTPUT0 + k, "output", "continuous", desc, f'<Real unit="{escape(unit)}"/>')
+               for k, (c, unit, desc) in enumerate(outs)]
     for k, (n, v, unit, desc, variability) in enumerate(pars):
         u = f' unit="{escape(unit)}"' if unit else ""
         var(n, VR_PAR0 + k, "parameter", variability, desc, f'<Real{u} start="{_num(v)}"/>')
     var("lift_off", 0, "parameter", "fixed", "tires push but never pull (the nonlinear car of SPEC 8)",
         f'<Boolean start="{"true" if car.nonlinear else "false"}"/>')
     lines += ['  </ModelVariables>', '  <ModelStructure>', '    <Outputs>']
-    lines += [f'      <Unknown index="{i}"/>' for i in outputs]
+    lines += [f'      <Unknown index="{i}"/>' for i in indices]
     lines += ['    </Outputs>', '    <InitialUnknowns>']
-    lines += [f'      <Unknown index="{i}"/>' for i in outputs]
+    lines += [f'      <Unknown index="{i}"/>' for i in indices]
     lines += ['    </InitialUnknowns>', '  </ModelStructure>', '</fmiModelDescription>']
     return "\n".join(lines) + "\n"
 
@@ -276,5 +308,5 @@ def _compile(cc, build: Path, src: Path) -> None:
         raise NoBinary(f"the C compiler {shlex.join(cc)!r} failed: {first}")
 
 
-__all__ = ["write_fmu", "model_description", "c_source", "find_compiler", "max_step", "INPUTS", "MODEL_IDENTIFIER",
-           "NoBinary"]
+__all__ = ["write_fmu", "model_description", "c_source", "find_compiler", "max_step", "outputs", "INPUTS",
+           "MODEL_IDENTIFIER", "POWERTRAIN_OUTPUTS", "NoBinary"]
