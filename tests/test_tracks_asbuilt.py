@@ -112,12 +112,15 @@ def test_as_drawn_keeps_the_drawing_and_a_bad_option_is_refused(as_built):
 
 
 @pytest.mark.slow
-@pytest.mark.xfail(strict=True, reason="open: the command line's defaults on the tracks as built end with a parameter "
-                   "10.6 % off (seed 1), where the fit started near the truth (test_the_car_on_tracks_as_built_from_"
-                   "a_start) is within 1 %; the cause is not found yet")
 def test_rideid_identify_on_tracks_as_built_and_exact(tmp_path, capsys):
     """The command line with its defaults, seed 1: on the tracks as built the twelve within 1 %, at least 10 of 12
-    covered, adequate; on the exact drawing no error above 0.5 %; as-built time at most twice the as-drawn's."""
+    covered, adequate; on the exact drawing no error above 0.5 %.
+
+    The car is linear. On the tracks as drawn ``--model auto`` keeps damper curves (seed 1: a cost 0.6 % below
+    the base model's, which the drawing's 4 % leaves in every run), and is still not adequate; the tracks as built
+    need a linear car, so the linear part of that pick is fitted on them, is adequate, and is kept
+    (rideid.estimate.model_choice._tracks_before_curves). Before that step the result was the curves' fit on the
+    drawing, the sprung mass's inertias biased and a parameter 10.6 % off on an earlier tree."""
     truth = {"m_s": 1850.0, **SUV_TRUTH}
     folder = write_dataset(tmp_path / "ab", seed=1)
     assert main(["identify", str(folder), "--out", str(tmp_path / "fit"), "--seed", "1", "--no-report",
@@ -127,6 +130,9 @@ def test_rideid_identify_on_tracks_as_built_and_exact(tmp_path, capsys):
     assert max(abs(p[n]["value"] / v - 1) for n, v in truth.items()) < 0.01
     assert sum(abs(p[n]["value"] - v) <= 2 * p[n]["std_robust"] for n, v in truth.items()) >= 10
     assert doc["adequacy"]["adequate"] is True
+    assert doc["model"]["extensions"] == []
+    if doc["model"].get("as_drawn_choice"):  # the curves the drawing asked for, dropped, and the user told
+        assert "the drawing, not the car, was what the model missed" in doc["model"]["note"]
     assert doc["tracks"]["twist_high"]["amplitude_factor"] == pytest.approx(1.04, abs=0.015)
     exact = write_dataset(tmp_path / "ex", amplitude=1.0, rms=0.0, seed=1)
     assert main(["identify", str(exact), "--out", str(tmp_path / "fx"), "--seed", "1", "--no-report",
