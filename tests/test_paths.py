@@ -222,17 +222,6 @@ def check(res, sc, group: str, path: str):
     assert not bad, bad
 
 
-# the moving path's refusal of a nonlinear group: a hole (SPEC §11 says every group works on moving starts)
-MOVING_NONLINEAR = pytest.mark.xfail(
-    strict=True, raises=ArgumentError,
-    reason="a run that begins moving on a known (profile) track is fitted with its road projected out "
-           "(rideid.estimate.anyroad.unknown_road_runs takes every moving run), and that projection needs a linear "
-           "car: identify refuses damper_curves and bump_stops there ('a nonlinear model cannot be fitted with runs "
-           "on unknown roads (P7, P11)'), against SPEC §11 (every model group on every path, moving starts "
-           "included). Fitting them needs the track fit to leave out a moving run's settling time (SPEC §9), a "
-           "per-sample weight the cost kernels do not have")
-
-
 #: the road-projected cells CI runs (slow, not expensive): one per path, each with the twelve and a linear group;
 #: the others (the same fits with base or the other group) are expensive
 ROAD_CELLS_IN_CI = (("anti_roll_bars", "moving"), ("tire_damping", "unknown"))
@@ -249,7 +238,7 @@ def cell(group: str, path: str):
         if (group, path) not in ROAD_CELLS_IN_CI:
             marks.append(pytest.mark.expensive)
     if path == "moving" and group in NONLINEAR:
-        marks += [pytest.mark.slow, MOVING_NONLINEAR]
+        marks.append(pytest.mark.slow)
     return pytest.param(group, path, marks=marks, id=f"{group}-{path}")
 
 
