@@ -227,6 +227,10 @@ def check_unknown_road_run(man, run, channels, duration: float, samples: int) ->
 #: sample (more than the 1e-3 the nominal settle time gives: the car's own damping may be lighter)
 LEAD_IN_SETTLES = 3.0
 
+#: ... and where the road before x = 0 is known for less than that, what its lead-in lacks of this many nominal
+#: settle times is left out of the comparison at the run's start
+LEFT_OUT_SETTLES = 1.0
+
 
 @dataclass(frozen=True)
 class LeadIn:
@@ -273,7 +277,7 @@ def run_lead_in(ds: Dataset, run) -> LeadIn:
     x_known = known_road_before(track, geom)
     if math.isfinite(x_known):  # a profile: known from its first x on, what came before unknown
         T = min(max(0.0, -x_known / speed), LEAD_IN_SETTLES * settle)
-        short = max(0.0, settle - T)
+        short = max(0.0, LEFT_OUT_SETTLES * settle - T)
     else:  # flat outside the features: from rest where every wheel's road is still flat, exactly
         T = min(flat_before(track, geom, speed), LEAD_IN_SETTLES * settle)
         short = 0.0
