@@ -8,7 +8,8 @@ chassis twist reaches. Each car is simulated noise-free and brought to ``rideid.
 * ``logger``: the same runs as a logger writes them (g with gravity and biases, deg/s, the logger's column names,
   a standing lead-in, no start given: rideid estimates every start; :func:`logger_case.write_logger`);
 * ``moving``: runs that begin moving (SPEC §9 ``moving = true``) on a ``profile`` track, already under the wheels
-  at the first sample;
+  at the first sample (a linear model projects their road out; damper curves and bump stops fit them on the
+  profile, simulated from rest a lead-in before the first sample: docs/any-road.md, tests/test_moving_starts.py);
 * ``unknown``: runs on roads nobody measured (SPEC §9: ISO 8608 class B and C roads), where SPEC §9 allows the
   linear groups only: a nonlinear group is refused in one clear line.
 
@@ -18,8 +19,9 @@ logger files crashed ("parameter rows must have 12 columns ... got 36"); this ma
 Tolerances. The data are noise-free and every path's model is exact, so what is left is the solvers' stopping
 and, on the road-projected paths (moving, unknown), the road between the samples. Measured: the twelve, the bars,
 the tire damping and the stops within 0.04 % on every path (tire damping on unknown roads aside, below), the knot
-forces within 0.01 %. ``TOL`` (0.25 %) leaves six times that margin and stays four times below the 1 % bar of
-the noisy tests, so a path that feeds the fit something systematically wrong (a start, a model, a unit) shows.
+forces within 0.01 % (the moving path's damper curves within 0.0025 %, its stops within 0.0006 %). ``TOL``
+(0.25 %) leaves six times that margin and stays four times below the 1 % bar of the noisy tests, so a path
+that feeds the fit something systematically wrong (a start, a model, a unit) shows.
 ``KNOT_TOL`` (0.5 %) for the knot forces at excited knots (and the ``c_sf``, ``c_sr`` derived from them).
 ``TIRE_DAMPING_ROAD_TOL`` (3 %) for ``c_tf``, ``c_tr`` on unknown roads: the tire damper is driven by the road's
 rate, and the rate of a road interpolated linearly between samples jumps at every sample, texture the rear wheels
@@ -30,7 +32,8 @@ roads (rideid simulate's 1 cm grid); on the moving path's profile by 2.7 % on a 
 
 Cost (2 cores shared with other work, pytest --durations): the default part (the SPEC CSV cells, the refusals on
 unknown roads, the polish's regression test) about 28 s; the slow part CI runs (logger files, one road fit per
-road path, the moving path's nonlinear cells) about 100 s, 32 s of it the damper curves on logger files; the
+road path, the moving path's nonlinear cells: 24 s the curves, 9 s the stops) about 130 s, 32 s of it the damper
+curves on logger files; the
 expensive rest (four more road fits, 11-29 s each) about 90 s.
 """
 
