@@ -115,3 +115,6 @@ def test_error_bars_of_a_noisy_moving_run_cover_the_truth(tmp_path):
         assert d["std_robust"] < 5e-3 * abs(truth[n]), (n, d["std_robust"] / truth[n])
         z[n] = err / d["std_robust"]
     assert max(abs(v) for v in z.values()) < 3.0, z
+    # result.json says how each run's start was taken (7 m/s: three settle times; 11 m/s: back to the profile)
+    assert [res.preprocessing[r]["moving_start"]["lead_in_s"] for r in ("P7", "P11")] == [1467 / 200, 1098 / 200]
+    assert [res.preprocessing[r]["moving_start"]["left_out_s"] for r in ("P7", "P11")] == [0.0, 0.0]
