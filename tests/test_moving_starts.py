@@ -24,8 +24,9 @@ import pytest
 import rideid
 import test_paths as paths
 from rideid.data.dataset import LEAD_IN_SETTLES, LEFT_OUT_SETTLES, LeadIn, lead_ins
-from rideid.data.scenario import settle_time
-from rideid.model.params import nominal_car
+from rideid.data.scenario import flat_before, lead_in, settle_time
+from rideid.model.params import as_vector, nominal_car
+from rideid.model.tracks import Track
 from rideid.synth.scenario import simulate_manifest, write_dataset
 
 
@@ -73,6 +74,23 @@ def test_lead_in_reaches_back_on_the_profile_and_leaves_out_what_it_lacks(tmp_pa
     # runs that start at rest (SPEC §2): no lead-in
     (tmp_path / "csv").mkdir()
     assert all(lead == LeadIn() for lead in lead_ins(paths.dataset(tmp_path / "csv", "base", "csv")[1]))
+
+
+def test_rideid_simulate_starts_a_moving_track_run_where_its_road_is_flat(tmp_path):
+    """``rideid simulate``'s lead-in of a moving run on a track: back to where every wheel's road is still flat
+    (the profile's first point less a tire radius), at least the truth's settling time, at most 30 s; a track
+    whose features lie after x = 0 keeps the settling time."""
+    sc = paths.scenario(tmp_path, "base", "moving")
+    g = sc.geometry
+    settle = settle_time(as_vector(sc.truth), g)
+    assert settle == pytest.approx(3.187, abs=1e-3)
+    for run in sc.runs:
+        assert lead_in(sc, run) == pytest.approx((60.0 + g.tire_radius) / run.speed, rel=1e-12)
+    twist = Track("tw", "chassis_twist", paths.TWIST)  # from x = 8 m: flat before x = 0
+    assert flat_before(twist, g, 7.0) == 0.0
+    sc_tw = replace(sc, tracks={"tw": twist}, runs=tuple(replace(r, track="tw") for r in sc.runs))
+    assert [lead_in(sc_tw, r) for r in sc_tw.runs] == [settle, settle]
+    assert lead_in(sc, replace(sc.runs[0], moving=False)) == 0.0
 
 
 def test_the_true_car_fits_a_moving_run_to_the_integration_floor(tmp_path):
