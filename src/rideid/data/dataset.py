@@ -261,9 +261,8 @@ def run_lead_in(ds: Dataset, run) -> LeadIn:
     wheel's road is flat (the car then was exactly at rest, nothing is approximated), on a ``profile`` the time
     back to where the profile begins (:func:`known_road_before`). When that profile gives less than one settle
     time before x = 0, the rest of that settle time is left out of the comparison at the run's start
-    (``settle``). A moving
-    run with a speed or distance channel: no lead-in (the channel does not reach before the first sample), one
-    settle time left out.
+    (``settle``). A moving run with a speed or distance channel: no lead-in (the channel does not reach before
+    the first sample), one settle time left out.
     """
     if not getattr(run, "moving", False) or not run.road_known:
         return LeadIn()
