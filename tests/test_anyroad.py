@@ -113,13 +113,17 @@ def test_a_dataset_mixing_a_track_and_a_road(tmp_path):
 
 
 def test_a_track_run_that_begins_moving_is_fitted_as_a_road_run(tmp_path):
-    """The track fit starts every run at rest; a run declared moving on a known track goes to the road fit,
-    which estimates the state at the first sample (SPEC §9)."""
+    """With a linear model a run declared moving on a known track goes to the road fit, which estimates the state
+    at the first sample (SPEC §9) and does not lean on the track's profile; with damper curves or bump stops,
+    which the road's projection cannot take, it stays on its track, simulated from rest a lead-in before its
+    first sample (tests/test_moving_starts.py)."""
     sim = simulate(tmp_path, [{"id": "T", "track": "tw", "speed": 4.0, "fs": 200.0, "duration": 8.0},
                               {"id": "Tm", "track": "tw", "speed": 5.0, "fs": 200.0, "duration": 8.0,
                                "moving": True}], [TWIST], noise=0.0)
     ds = rideid.load_dataset(sim)
     assert [r.id for r in anyroad.unknown_road_runs(ds)] == ["Tm"]
+    assert [r.id for r in anyroad.unknown_road_runs(ds, ["anti_roll_bars"])] == ["Tm"]
+    assert anyroad.unknown_road_runs(ds, ["damper_curves"]) == anyroad.unknown_road_runs(ds, ["bump_stops"]) == []
     assert ds.moving("Tm") and not ds.moving("T") and ds.road_known("Tm")
 
 

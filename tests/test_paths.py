@@ -8,7 +8,8 @@ chassis twist reaches. Each car is simulated noise-free and brought to ``rideid.
 * ``logger``: the same runs as a logger writes them (g with gravity and biases, deg/s, the logger's column names,
   a standing lead-in, no start given: rideid estimates every start; :func:`logger_case.write_logger`);
 * ``moving``: runs that begin moving (SPEC §9 ``moving = true``) on a ``profile`` track, already under the wheels
-  at the first sample;
+  at the first sample (a linear model projects their road out; damper curves and bump stops fit them on the
+  profile, simulated from rest a lead-in before the first sample: docs/any-road.md, tests/test_moving_starts.py);
 * ``unknown``: runs on roads nobody measured (SPEC §9: ISO 8608 class B and C roads), where SPEC §9 allows the
   linear groups only: a nonlinear group is refused in one clear line.
 
@@ -18,8 +19,9 @@ logger files crashed ("parameter rows must have 12 columns ... got 36"); this ma
 Tolerances. The data are noise-free and every path's model is exact, so what is left is the solvers' stopping
 and, on the road-projected paths (moving, unknown), the road between the samples. Measured: the twelve, the bars,
 the tire damping and the stops within 0.04 % on every path (tire damping on unknown roads aside, below), the knot
-forces within 0.01 %. ``TOL`` (0.25 %) leaves six times that margin and stays four times below the 1 % bar of
-the noisy tests, so a path that feeds the fit something systematically wrong (a start, a model, a unit) shows.
+forces within 0.01 % (the moving path's damper curves within 0.0025 %, its stops within 0.0006 %). ``TOL``
+(0.25 %) leaves six times that margin and stays four times below the 1 % bar of the noisy tests, so a path
+that feeds the fit something systematically wrong (a start, a model, a unit) shows.
 ``KNOT_TOL`` (0.5 %) for the knot forces at excited knots (and the ``c_sf``, ``c_sr`` derived from them).
 ``TIRE_DAMPING_ROAD_TOL`` (3 %) for ``c_tf``, ``c_tr`` on unknown roads: the tire damper is driven by the road's
 rate, and the rate of a road interpolated linearly between samples jumps at every sample, texture the rear wheels
@@ -30,7 +32,8 @@ roads (rideid simulate's 1 cm grid); on the moving path's profile by 2.7 % on a 
 
 Cost (2 cores shared with other work, pytest --durations): the default part (the SPEC CSV cells, the refusals on
 unknown roads, the polish's regression test) about 28 s; the slow part CI runs (logger files, one road fit per
-road path, the moving path's nonlinear cells) about 100 s, 32 s of it the damper curves on logger files; the
+road path, the moving path's nonlinear cells: 24 s the curves, 9 s the stops) about 130 s, 32 s of it the damper
+curves on logger files; the
 expensive rest (four more road fits, 11-29 s each) about 90 s.
 """
 
@@ -222,17 +225,6 @@ def check(res, sc, group: str, path: str):
     assert not bad, bad
 
 
-# the moving path's refusal of a nonlinear group: a hole (SPEC §11 says every group works on moving starts)
-MOVING_NONLINEAR = pytest.mark.xfail(
-    strict=True, raises=ArgumentError,
-    reason="a run that begins moving on a known (profile) track is fitted with its road projected out "
-           "(rideid.estimate.anyroad.unknown_road_runs takes every moving run), and that projection needs a linear "
-           "car: identify refuses damper_curves and bump_stops there ('a nonlinear model cannot be fitted with runs "
-           "on unknown roads (P7, P11)'), against SPEC §11 (every model group on every path, moving starts "
-           "included). Fitting them needs the track fit to leave out a moving run's settling time (SPEC §9), a "
-           "per-sample weight the cost kernels do not have")
-
-
 #: the road-projected cells CI runs (slow, not expensive): one per path, each with the twelve and a linear group;
 #: the others (the same fits with base or the other group) are expensive
 ROAD_CELLS_IN_CI = (("anti_roll_bars", "moving"), ("tire_damping", "unknown"))
@@ -249,7 +241,7 @@ def cell(group: str, path: str):
         if (group, path) not in ROAD_CELLS_IN_CI:
             marks.append(pytest.mark.expensive)
     if path == "moving" and group in NONLINEAR:
-        marks += [pytest.mark.slow, MOVING_NONLINEAR]
+        marks.append(pytest.mark.slow)
     return pytest.param(group, path, marks=marks, id=f"{group}-{path}")
 
 

@@ -6,13 +6,16 @@ import math
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 
+import numpy as np
 
 from . import checks
 from ..errors import DataError, ScaleError
 from .schema import DatasetManifest, ReadOnlyDict, RunData, load_manifest, read_run_csv
-from ..model.params import CORNERS, EXT_NAMES, EXTRA_KNOWN, MASS_COUNT, NAMES, SCALE_FREE, Geometry, total_mass
+from ..model.params import (CORNERS, EXT_NAMES, EXTRA_KNOWN, MASS_COUNT, NAMES, SCALE_FREE, Geometry, nominal_car,
+                            total_mass)
 from ..model.simulate import prepare_run
 from .measured import load_measured_run
+from .scenario import flat_before, settle_time
 
 
 @dataclass(frozen=True, repr=False)
@@ -218,17 +221,90 @@ def check_unknown_road_run(man, run, channels, duration: float, samples: int) ->
                         f"least {MIN_ROAD_RUN_S:g} s and {MIN_ROAD_RUN_SAMPLES} samples")
 
 
-def prepare_inputs(ds: Dataset) -> list:
-    """:class:`rideid.simulate.RunInput` of every run (wheel inputs and their moments).
+#: a moving run on a known track (SPEC §9) is simulated from rest this many of the nominal car's settle times
+#: (:func:`rideid.data.scenario.settle_time`, its slowest mode down to 1e-3) before its first sample, where the
+#: track's road reaches that far back: the start transient then decays to 1e-9 of its size before the first
+#: sample (more than the 1e-3 the nominal settle time gives: the car's own damping may be lighter)
+LEAD_IN_SETTLES = 3.0
+
+#: ... and where the road before x = 0 is known for less than that, what its lead-in lacks of this many nominal
+#: settle times is left out of the comparison at the run's start
+LEFT_OUT_SETTLES = 1.0
+
+
+@dataclass(frozen=True)
+class LeadIn:
+    """How a run's simulation begins (SPEC §9): ``samples`` simulated before its first sample, the car at rest at
+    the first of them, and ``settle`` recorded samples at the run's start simulated but not compared (the road
+    known before x = 0 too short for the start transient to decay). Both 0 for a run that starts at rest."""
+
+    samples: int = 0
+    settle: int = 0
+
+
+def known_road_before(track, geom) -> float:
+    """How far back (m, <= 0) the road of ``track`` is known, as an x of the front axle: -inf for the analytic
+    kinds (flat outside their features, SPEC §2), a ``profile``'s first x less the tire radius (before it
+    nobody measured the road a moving car came over; its disc reaches R ahead)."""
+    if track.kind != "profile":
+        return -math.inf
+    lo = min(track.path(y).extent[0] for y in geom.corner_y)
+    return lo - geom.tire_radius
+
+
+def run_lead_in(ds: Dataset, run) -> LeadIn:
+    """The :class:`LeadIn` of ``run`` of ``ds`` (module docs: docs/any-road.md, "Moving starts on a known track").
+
+    A run at rest at its first sample (SPEC §2): none. A moving run on a known track (``moving = true``) is
+    simulated from rest ``T`` before its first sample on the track's road before x = 0, ``T`` the shorter of
+    :data:`LEAD_IN_SETTLES` nominal settle times and, on an analytic track, the time back to where every
+    wheel's road is flat (the car then was exactly at rest, nothing is approximated), on a ``profile`` the time
+    back to where the profile begins (:func:`known_road_before`). When that profile gives less than one settle
+    time before x = 0, the rest of that settle time is left out of the comparison at the run's start
+    (``settle``). A moving run with a speed or distance channel: no lead-in (the channel does not reach before
+    the first sample), one settle time left out.
+    """
+    if not getattr(run, "moving", False) or not run.road_known:
+        return LeadIn()
+    rd = ds.data[run.id]
+    geom = ds.geometry
+    settle = settle_time(nominal_car(geom), geom)
+    if rd.distance is not None:
+        return LeadIn(0, min(int(math.ceil(settle * rd.fs)), rd.time.size))
+    track = ds.manifest.tracks[run.track]
+    speed = float(run.speed)
+    x_known = known_road_before(track, geom)
+    if math.isfinite(x_known):  # a profile: known from its first x on, what came before unknown
+        T = min(max(0.0, -x_known / speed), LEAD_IN_SETTLES * settle)
+        short = max(0.0, LEFT_OUT_SETTLES * settle - T)
+    else:  # flat outside the features: from rest where every wheel's road is still flat, exactly
+        T = min(flat_before(track, geom, speed), LEAD_IN_SETTLES * settle)
+        short = 0.0
+    return LeadIn(int(math.ceil(T * rd.fs - 1e-9)), min(int(math.ceil(short * rd.fs - 1e-9)), rd.time.size))
+
+
+def lead_ins(ds: Dataset) -> list:
+    """:func:`run_lead_in` of every run of ``ds``, in order."""
+    return [run_lead_in(ds, r) for r in ds.runs]
+
+
+def prepare_inputs(ds: Dataset, leads=None) -> list:
+    """:class:`rideid.simulate.RunInput` of every run (wheel inputs and their moments), a moving run's from
+    the start of its lead-in (``leads``: :func:`lead_ins`, computed here when not given).
 
     Every run must be on a known track: a run on an unknown road (SPEC §9)
     has no wheel inputs to tabulate (:class:`DataError`).
     """
     refuse_unknown_roads(ds, "rideid.CostFunction (the known-road fit of rideid identify)")
+    leads = lead_ins(ds) if leads is None else leads
     out = []
-    for r in ds.runs:
+    for r, lead in zip(ds.runs, leads):
         rd = ds.data[r.id]
-        out.append(prepare_run(ds.manifest.tracks[r.track], ds.geometry, r.speed, rd.time, distance=rd.distance))
+        t = rd.time
+        if lead.samples:
+            h = float(t[1] - t[0])
+            t = np.concatenate([t[0] + h * np.arange(-lead.samples, 0), t])
+        out.append(prepare_run(ds.manifest.tracks[r.track], ds.geometry, r.speed, t, distance=rd.distance))
     return out
 
 
@@ -267,5 +343,6 @@ def check_known_consistent(known: dict[str, float]):
                                 f"2 m_ur = {tm}")
 
 
-__all__ = ["Dataset", "read_dataset", "scale_anchor", "check_unknown_road_run",
+__all__ = ["Dataset", "LEAD_IN_SETTLES", "LeadIn", "read_dataset", "scale_anchor", "check_unknown_road_run",
+           "lead_ins", "prepare_inputs", "run_lead_in",
            "refuse_unknown_roads", "MIN_ROAD_RUN_S", "MIN_ROAD_RUN_SAMPLES"]

@@ -100,12 +100,25 @@ def settle_time(P, geom) -> float:
     return float(np.clip(T, SETTLE_MIN, SETTLE_MAX))
 
 
+def flat_before(track, geom, speed: float) -> float:
+    """Seconds before x = 0 at ``speed`` (m/s) from which every wheel's road of ``track`` is flat up to the front
+    axle's arrival there: the front axle a tire radius before the first feature (0 when none lies before it)."""
+    starts = [e[0] for e in (track.path(y).extent for y in geom.corner_y) if e is not None]
+    if not starts:
+        return 0.0
+    return max(0.0, (geom.tire_radius - min(starts)) / speed)
+
+
 def lead_in(sc: Scenario, run: RunSpec) -> float:
     """Seconds a moving run is simulated before its first sample (0 for a run that starts at rest).
 
     The car starts at rest, ``lead_in`` s before the front axle reaches x = 0.
     On a track: :func:`settle_time` of the truth (the track's own road before
-    x = 0, flat where it has none). On a generated road the road first fades
+    x = 0, flat where it has none), or longer, back to where the road under
+    every wheel is still flat (:func:`flat_before`, at most :data:`SETTLE_MAX`):
+    the car then starts exactly as one that has driven the road from afar, not
+    with a start transient decayed to :data:`SETTLE_FRACTION` only (which a
+    fit of the noise-free data to 0.01 % would see). On a generated road the road first fades
     in from flat (:data:`ROAD_FADE` s of driving), the rear wheels must then
     reach the full road (``(2 R + wheelbase) / speed``), and then
     :func:`settle_time` passes, at least long enough that the fade lies
@@ -115,7 +128,7 @@ def lead_in(sc: Scenario, run: RunSpec) -> float:
         return 0.0
     settle = settle_time(as_vector(sc.truth), sc.geometry)
     if run.road is None:
-        return settle
+        return max(settle, min(flat_before(sc.tracks[run.track], sc.geometry, run.speed), SETTLE_MAX))
     g = sc.geometry
     return ROAD_FADE + (2 * g.tire_radius + g.wheelbase) / run.speed + max(settle, ROAD_MARGIN / run.speed)
 

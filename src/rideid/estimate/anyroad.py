@@ -82,11 +82,16 @@ PLAUSIBLE_RMS = 3.5e-3
 SPREAD_TOL = 0.2
 
 
-def unknown_road_runs(ds) -> list:
-    """The runs of ``ds`` fitted with their road projected out: those on unknown roads (SPEC §9), and those
-    on known tracks that begin moving (``moving = true``: the track fit starts every run at rest; the road
-    fit estimates the state at the first sample, and the road, without using the track's profile)."""
-    return [r for r in ds.runs if not getattr(r, "road_known", True) or getattr(r, "moving", False)]
+def unknown_road_runs(ds, extensions=()) -> list:
+    """The runs of ``ds`` fitted with their road projected out: those on unknown roads (SPEC §9), and, when the
+    model (its ``extensions``) is linear, those on known tracks that begin moving (``moving = true``: the road
+    fit estimates the state at the first sample, and the road, without using the track's profile). With
+    damper curves or bump stops, which the projection cannot take, a moving run on a known track is fitted on
+    its track, simulated from rest a lead-in before its first sample (:func:`rideid.data.dataset.run_lead_in`,
+    docs/any-road.md)."""
+    nonlinear = any(g in NONLINEAR_GROUPS for g in extensions)
+    return [r for r in ds.runs
+            if not getattr(r, "road_known", True) or (getattr(r, "moving", False) and not nonlinear)]
 
 
 def run_speed(ds, run) -> float:
@@ -108,10 +113,11 @@ def run_speed(ds, run) -> float:
     return vm
 
 
-def prepare_road_runs(ds) -> list:
-    """:class:`rideid.estimate.roadfit.RoadRun` of each unknown-road run."""
+def prepare_road_runs(ds, extensions=()) -> list:
+    """:class:`rideid.estimate.roadfit.RoadRun` of each run fitted with its road projected out
+    (:func:`unknown_road_runs` of the model's ``extensions``)."""
     out = []
-    for r in unknown_road_runs(ds):
+    for r in unknown_road_runs(ds, extensions):
         rd = ds.data[r.id]
         out.append(roadfit.prepare_road_run(r.id, rd.matrix(), rd.fs, run_speed(ds, r), ds.geometry))
     return out
@@ -342,7 +348,7 @@ def as_built_runs(ds, ext, tracks: str = "as-built") -> tuple[list, dict]:
     stops), the eight accelerometers and a constant speed; ``tracks="as-drawn"`` takes every track as drawn."""
     if tracks not in TRACK_OPTIONS:
         raise ArgumentError(f"tracks: expected one of {', '.join(TRACK_OPTIONS)}, got {tracks!r}")
-    road_ids = {r.id for r in unknown_road_runs(ds)}
+    road_ids = {r.id for r in unknown_road_runs(ds, ext)}
     runs = [r for r in ds.runs if r.id not in road_ids]
     if tracks == "as-drawn":
         return [], {r.id: "as drawn (tracks = as-drawn)" for r in runs}
@@ -415,7 +421,7 @@ def _identify_any_road(ds, *, rng=None, seed=None, population=None, generations=
     else:
         ext = tuple(model_extensions(ds, model))
     bad = [g for g in ext if g in NONLINEAR_GROUPS]
-    road_ids = [r.id for r in unknown_road_runs(ds)]
+    road_ids = [r.id for r in unknown_road_runs(ds, ext)]
     if bad and road_ids:
         raise ArgumentError(f"{', '.join(bad)}: a nonlinear model cannot be fitted with runs on unknown roads "
                             f"({', '.join(road_ids)}): the road is projected out of a linear car (docs/any-road.md); "
@@ -428,7 +434,7 @@ def _identify_any_road(ds, *, rng=None, seed=None, population=None, generations=
                             "those runs out or their filters undeclared")
     geom = ds.geometry
     space = ParameterSpace(ds.known, geom, ds.manifest.bounds, extensions=ext)
-    rruns = prepare_road_runs(ds)
+    rruns = prepare_road_runs(ds, ext)
     track_runs = [r for r in ds.runs if r.id not in road_ids]
     ab_list, skipped = as_built_runs(ds, ext, tracks if polish else "as-drawn")
     trs = [asbuilt.prepare_track_run(ds, r, as_built_mode) for r in ab_list]

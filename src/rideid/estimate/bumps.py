@@ -67,8 +67,9 @@ def compressions(cf, P) -> tuple[np.ndarray, np.ndarray]:
     """Suspension compressions (m, from static ride height, compression +) of car ``P`` (a full row of
     ``cf.space``) over every run of ``cf``: ``(front, rear)``, both corners of each axle concatenated."""
     geom, layout = cf.space.geometry, cf.space.layout
-    sim = replace(cf.simulator, layout=layout, rho=STATE_RHO).bind(geom, cf.sim.runs)
+    sim = replace(cf.simulator, layout=layout, rho=STATE_RHO).bind(geom, cf.input_runs)
     d = travel_by_run(sim, check_nonlinear(P, geom, layout), P[cf.space.col["a"]])
+    d = [t[k:] for t, k in zip(d, cf.lead)]  # a moving start's recorded samples (SPEC §9)
     return np.concatenate([t[:, :2].ravel() for t in d]), np.concatenate([t[:, 2:].ravel() for t in d])
 
 

@@ -45,7 +45,7 @@ import threading
 
 import numpy as np
 
-from ..data.dataset import Dataset, check_known_consistent, prepare_inputs, scale_anchor
+from ..data.dataset import Dataset, check_known_consistent, lead_ins, prepare_inputs, scale_anchor
 from ..errors import ArgumentError, DataError
 from ..model.equations import CHANNEL_KIND, CHANNELS
 from ..model.nonlinear import (BUMP_STOP_NAMES, DEFAULT_KNOTS, NonlinearLayout, NonlinearSimulator, Pin,
@@ -417,19 +417,20 @@ class ParameterSpace:
         return self.full(x)[0]
 
 
-def _measured(ds: Dataset):
+def _measured(ds: Dataset, leads=None):
     """The runs' measured channels stacked ``(n_samples, 10)`` (0 where missing or left out), the channel
     weights ``(n_runs, 10)`` (:func:`channel_weights`, 0 for a missing channel; a channel's energy over its
-    kept samples) and the kept samples ``(n_samples, 10)`` (1 kept, 0 at the channel's range, SPEC §11;
-    None when every sample is kept)."""
+    kept samples) and the kept samples ``(n_samples, 10)`` (1 kept, 0 at the channel's range, SPEC §11, or in
+    a moving start's settling time, SPEC §9 and :func:`rideid.data.dataset.run_lead_in`; None when every sample
+    is kept)."""
     Ys, Ws, Ks = [], [], []
-    for r in ds.runs:
+    for r, lead in zip(ds.runs, lead_ins(ds) if leads is None else leads):
         Y = ds.data[r.id].matrix()
         clipped = ds.clipped(r.id)
-        keep = np.ones(Y.shape)
-        if clipped is not None:
-            keep[clipped] = 0.0
-            Y = np.where(clipped, np.nan, Y)
+        left_out = np.zeros(Y.shape, dtype=bool) if clipped is None else np.asarray(clipped, dtype=bool).copy()
+        left_out[:lead.settle] = True
+        keep = np.where(left_out, 0.0, 1.0)
+        Y = np.where(left_out, np.nan, Y)
         Ws.append(channel_weights(Y))
         Ys.append(np.nan_to_num(Y, nan=0.0))
         Ks.append(keep)
@@ -437,14 +438,24 @@ def _measured(ds: Dataset):
     return np.ascontiguousarray(np.concatenate(Ys)), np.array(Ws), (None if K.all() else K)
 
 
-def sensor_simulator(sim, ds: Dataset, keep=None):
-    """``sim`` recording through the runs' sensor chains (SPEC §11) and comparing only the kept samples
-    (:class:`rideid.model.sensors.SensorSimulator`); ``sim`` itself when no run has a filter and every
-    sample is kept (the kernels' fast path, unchanged)."""
+def bind_runs(simulator: Simulator, ds: Dataset, keep=None, leads=None):
+    """``simulator`` bound to the runs of ``ds`` (a moving start from the start of its lead-in, SPEC §9),
+    recording through their sensor chains, comparing only the kept samples and giving the recorded samples
+    (:func:`sensor_simulator`)."""
+    leads = lead_ins(ds) if leads is None else leads
+    return sensor_simulator(simulator.bind(ds.geometry, prepare_inputs(ds, leads)), ds, keep,
+                            [lead.samples for lead in leads])
+
+
+def sensor_simulator(sim, ds: Dataset, keep=None, lead=None):
+    """``sim`` recording through the runs' sensor chains (SPEC §11), comparing only the kept samples and cut to
+    the recorded ones (``lead``: per run the samples ``sim`` simulates before them, SPEC §9;
+    :class:`rideid.model.sensors.SensorSimulator`); ``sim`` itself when no run has a filter or a lead-in and
+    every sample is kept (the kernels' fast path, unchanged)."""
     chains = [SensorChain(ds.sensor_filters(r.id), run.h) for r, run in zip(ds.runs, sim.runs)]
-    if keep is None and not any(ch.active for ch in chains):
+    if keep is None and not any(ch.active for ch in chains) and not any(lead or ()):
         return sim
-    return SensorSimulator(sim, chains, keep)
+    return SensorSimulator(sim, chains, keep, lead)
 
 
 class EvaluationCounter:
@@ -524,8 +535,9 @@ class CostFunction:
         # the given settings (backend, integration) for this space's model: the linear car unless it has
         # damper curves or bump stops (rideid.model.nonlinear)
         simulator = (Simulator() if simulator is None else simulator).for_layout(space.layout)
-        Y, W, keep = _measured(ds)
-        sim = sensor_simulator(simulator.bind(ds.geometry, prepare_inputs(ds)), ds, keep)
+        leads = lead_ins(ds)
+        Y, W, keep = _measured(ds, leads)
+        sim = bind_runs(simulator, ds, keep, leads)
         self._build(ds, space, simulator, sim, Y, W, use_kernel, weights, counter, None)
 
     def _build(self, ds, space, simulator, sim, Y, W, use_kernel, weights, counter, pin):
@@ -548,6 +560,17 @@ class CostFunction:
         if weights is not None:
             self.set_weights(weights)
         self.counter = EvaluationCounter() if counter is None else counter
+
+    @property
+    def input_runs(self) -> list:
+        """Each run's inputs as simulated: a moving start's from the start of its lead-in (SPEC §9; the
+        first :attr:`lead` samples of a simulation of them come before the run's first recorded sample)."""
+        return getattr(self.sim, "lead_runs", self.sim.runs)
+
+    @property
+    def lead(self) -> tuple:
+        """Per run, the samples simulated before its first recorded one (0 for a run that starts at rest)."""
+        return getattr(self.sim, "lead", (0,) * len(self.run_ids))
 
     @property
     def core_sim(self):

@@ -80,8 +80,9 @@ def suspension_velocities_by_run(cf, P, rho: float | None = None) -> list[tuple[
     geom, layout = cf.space.geometry, cf.space.layout
     settings = cf.simulator.for_layout(layout) if rho is None else replace(cf.simulator, layout=layout, rho=rho,
                                                                            split=False)
-    sim = settings.bind(geom, cf.sim.runs)
+    sim = settings.bind(geom, cf.input_runs)
     v = travel_by_run(sim, check_nonlinear(P, geom, layout), P[cf.space.col["a"]], rates=True)
+    v = [t[k:] for t, k in zip(v, cf.lead)]  # a moving start's recorded samples (SPEC §9)
     return [(t[:, :2].ravel(), t[:, 2:].ravel()) for t in v]
 
 

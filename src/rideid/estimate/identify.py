@@ -70,7 +70,7 @@ import numpy as np
 from scipy.optimize import OptimizeResult, least_squares
 
 from ..data.checks import bound_findings
-from ..data.dataset import Dataset
+from ..data.dataset import Dataset, lead_ins
 from ..data.quality import data_quality
 from ..conditioning.starts import cycle_slips, distance_warp, linearise_starts, warped
 from ..errors import ArgumentError, DataWarning
@@ -554,10 +554,22 @@ def _details(ds, space, P, std, cov, robust, bumps):
     return details, findings
 
 
+#: ``preprocessing.<run>.moving_start.method`` of a run that begins moving, fitted on its track (SPEC §9)
+MOVING_START_METHOD = ("simulated from rest lead_in_s before the first sample on the track's road before x = 0, "
+                       "compared from the first sample on; the first left_out_s s of the run not compared (the "
+                       "profile known less than a settling time before x = 0); docs/any-road.md")
+
+
 def _preprocessing(ds, starts) -> dict:
     """The dataset's preprocessing record with the starts the fit settled; ``model_time``, the samples' span of
-    model time, at those starts (the samples stay those read at the first start, their model times move)."""
+    model time, at those starts (the samples stay those read at the first start, their model times move); a run
+    that begins moving on its track with its lead-in (``moving_start``, :func:`rideid.data.dataset.run_lead_in`)."""
     pre = ds.preprocessing()
+    for r, lead in zip(ds.runs, lead_ins(ds)):
+        if getattr(r, "moving", False) and r.road_known:
+            fs = float(ds.data[r.id].fs)
+            pre[r.id]["moving_start"] = {"lead_in_s": lead.samples / fs, "left_out_s": lead.settle / fs,
+                                         "method": MOVING_START_METHOD}
     for rid, st in starts.items():
         before = pre[rid].get("start", {}).get("value")
         pre[rid]["start"] = dict(pre[rid].get("start", {}), **st)

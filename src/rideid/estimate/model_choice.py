@@ -50,7 +50,8 @@ from ..data.schema.manifest import vehicle_table
 from .budget import with_budget
 from .adequacy import MIN_IMPROVEMENT, advise, assess_fit
 from .materiality import weigh_result
-from .identify import DEFAULT_GENERATIONS, DEFAULT_POPULATION, identify as identify_model, sensor_notes, warn_bounds
+from .identify import (DEFAULT_GENERATIONS, DEFAULT_POPULATION, identify as identify_model, model_extensions,
+                       sensor_notes, warn_bounds)
 from .anyroad import TRACK_OPTIONS, as_built_runs, identify_any_road, unknown_road_runs
 from ..model.batch import single_threaded_blas, thread_map
 from .cost import CostFunction, ParameterSpace, refuse_unsupported_groups
@@ -608,7 +609,11 @@ def identify(ds, *, model=None, rng=None, seed=None, population: int = DEFAULT_P
                   polish=polish, spread_tol=spread_tol, callback=callback, maps=maps, assess=assess)
     if tracks not in TRACK_OPTIONS:
         raise ArgumentError(f"tracks: expected one of {', '.join(TRACK_OPTIONS)}, got {tracks!r}")
-    if cost is None and unknown_road_runs(ds):  # SPEC §9: the road projected out (rideid.estimate.anyroad)
+    # the model asked for: a nonlinear one fits a moving run on a known track on its track (SPEC §9, a lead-in),
+    # a linear one projects its road out with the unknown roads' (unknown_road_runs)
+    asked = (cost.space.extensions if cost is not None else
+             () if isinstance(model, str) and model == "auto" else model_extensions(ds, model))
+    if cost is None and unknown_road_runs(ds, asked):  # SPEC §9: the road projected out (rideid.estimate.anyroad)
         res = identify_any_road(ds, model=model, start=start, simulator=simulator, tracks=tracks, **common)
     elif isinstance(model, str) and model == "auto" and cost is None:
         if start is not None:
@@ -620,7 +625,7 @@ def identify(ds, *, model=None, rng=None, seed=None, population: int = DEFAULT_P
     chosen = tuple((res.model or {}).get("extensions") or ())
     # not assessed (assess=False): no verdict to fault the drawing, so the tracks stay as drawn
     drawn_fits = res.adequacy is None or bool(res.adequacy.get("adequate"))
-    if cost is None and polish and not drawn_fits and not unknown_road_runs(ds) \
+    if cost is None and polish and not drawn_fits and not unknown_road_runs(ds, chosen) \
             and as_built_runs(ds, chosen, tracks)[0]:
         # SPEC §11: the tracks as built, from the car fitted on them as drawn (rideid.estimate.asbuilt), when the
         # drawing taken as exact leaves structure in the residuals (a drawing the data do not fault is kept: on an
@@ -632,7 +637,7 @@ def identify(ds, *, model=None, rng=None, seed=None, population: int = DEFAULT_P
     res = replace(res, vehicle=vehicle_table(ds.geometry))  # the geometry travels with the car (rideid export)
     # SPEC §12: every declared uncertainty propagated to the estimates (std_total, budget)
     res = with_budget(ds, res, simulator, cost)
-    if assess and not unknown_road_runs(ds):  # SPEC §12: does the structure the residual test found matter?
+    if assess and not unknown_road_runs(ds, chosen):  # SPEC §12: does the structure the residual test found matter?
         res = weigh_result(ds, res, simulator)
     warn_bounds(res)
     return res

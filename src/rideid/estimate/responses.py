@@ -15,19 +15,17 @@ from dataclasses import replace
 
 import numpy as np
 
-from ..data.dataset import prepare_inputs
 from ..data.scenario import LIFT_OFF_RHO
 from ..model.params import ALL_NAMES, as_vector
 from ..model.simulator import Simulator
-from .cost import CostFunction, ParameterSpace, sensor_simulator
+from .cost import CostFunction, ParameterSpace, bind_runs
 from .dampers import suspension_velocities_by_run
 
 
 def simulate_runs(dataset, parameters: dict, simulator: Simulator | None = None) -> dict:
     """The response of the linear car ``parameters`` on every run of ``dataset``, as the runs' declared sensor
     chains record it (SPEC §11): run id -> (n_time, 10)."""
-    sim = (Simulator() if simulator is None else simulator.linear()).bind(dataset.geometry, prepare_inputs(dataset))
-    sim = sensor_simulator(sim, dataset)
+    sim = bind_runs(Simulator() if simulator is None else simulator.linear(), dataset)
     outs = sim.outputs(as_vector(parameters)[None])
     return {r.id: o[0] for r, o in zip(dataset.runs, outs)}
 

@@ -50,7 +50,7 @@ from __future__ import annotations
 
 import functools
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -235,29 +235,46 @@ class SensorChain:
 
 class SensorSimulator:
     """A bound simulator (:meth:`rideid.model.simulator.Simulator.bind`) whose channels are recorded through
-    the runs' sensor chains, and compared only where the data are kept.
+    the runs' sensor chains, compared only where the data are kept, and cut to the recorded samples.
 
     Parameters
     ----------
     sim : BatchSimulator or NonlinearSimulator
-        The bound simulator of the car; every attribute not defined here is its (``run_start``, ``runs``,
-        ``groups``, ``pin_at``, ``states`` ...).
+        The bound simulator of the car; every attribute not defined here is its (``groups``, ``pin_at``,
+        ``states`` ...).
     chains : list of SensorChain
         One per run, in the runs' order.
     keep : ndarray, shape (n_samples, 10), optional
-        1 where a sample is compared, 0 where it is left out (a channel at its range); None: every sample.
+        1 where a sample is compared, 0 where it is left out (a channel at its range, a moving start's settling
+        time); None: every sample. ``n_samples``: the recorded samples of every run.
+    lead : sequence of int, optional
+        Per run, the samples ``sim`` simulates before the run's first recorded one (a moving start's lead-in,
+        SPEC §9; :func:`rideid.data.dataset.run_lead_in`): the car starts at rest there, the sensor chains
+        filter from there, and the outputs begin at the first recorded sample. Default none.
 
     Its ``errors`` simulate the channels (the kernels' ``outputs`` mode), filter them along time
     (:meth:`SensorChain.apply`, vectorised over the candidates) and sum the weighted squared errors in NumPy:
     a run without filters and without left-out samples takes that path too, once any run needs it. A
     dataset with neither never builds this class (today's fast path, the kernels' ``errors`` mode).
+
+    Attributes
+    ----------
+    run_start : ndarray of int
+        Where each run's recorded samples start in the stacked data (and the end).
+    runs : list of RunInput
+        Each run's inputs at its recorded samples (``lead_runs``: from the start of the lead-in, as simulated).
     """
 
-    def __init__(self, sim, chains, keep=None):
+    def __init__(self, sim, chains, keep=None, lead=None):
         self.inner = sim
         self.chains = list(chains)
         self._sections = [ch.sections() if ch.active else None for ch in self.chains]
         self.keep = None if keep is None else np.ascontiguousarray(keep, dtype=float)
+        self.lead = tuple(int(k) for k in (lead if lead is not None else [0] * len(sim.runs)))
+        lens = [int(e - s) - k for s, e, k in zip(sim.run_start[:-1], sim.run_start[1:], self.lead)]
+        self.run_start = np.concatenate([[0], np.cumsum(lens)]).astype(np.int64)
+        self.lead_runs = list(sim.runs)
+        self.runs = [_recorded(r, k) for r, k in zip(sim.runs, self.lead)]
 
     def __getattr__(self, name):
         if name == "inner":  # not set yet (unpickling): no recursion
@@ -265,9 +282,10 @@ class SensorSimulator:
         return getattr(self.inner, name)
 
     def record(self, outs) -> list:
-        """Per-run outputs ``(n, T, 10)`` as the sensor chains record them."""
+        """Per-run outputs ``(n, T, 10)`` as the sensor chains record them, from the first recorded sample."""
         # the outputs are the simulator's fresh arrays: filtered in place
-        return [o if sec is None else ch.apply(o, sec, out=o) for o, ch, sec in zip(outs, self.chains, self._sections)]
+        out = [o if sec is None else ch.apply(o, sec, out=o) for o, ch, sec in zip(outs, self.chains, self._sections)]
+        return [o[:, k:] if k else o for o, k in zip(out, self.lead)]
 
     def outputs(self, P, pin=None):
         """Simulated channels as recorded: list over runs of ``(n_pop, n_time, 10)``."""
@@ -278,7 +296,7 @@ class SensorSimulator:
 
     def _errors(self, outs, Y, W) -> np.ndarray:
         err = np.empty((len(outs), outs[0].shape[0] if outs else 0))
-        starts = self.inner.run_start
+        starts = self.run_start
         for ri, (s, e) in enumerate(zip(starts[:-1], starts[1:])):
             d = outs[ri] - Y[None, s:e]
             if self.keep is not None:
@@ -293,6 +311,14 @@ class SensorSimulator:
     def errors_reference(self, P, Y, W, pin=None):
         return self._errors(self.outputs_reference(P, pin=pin), np.asarray(Y, dtype=float),
                             np.asarray(W, dtype=float))
+
+
+def _recorded(run, k: int):
+    """The inputs of ``run`` from its ``k``-th sample on (a moving start's recorded part)."""
+    if not k:
+        return run
+    return replace(run, t=run.t[k:], u=run.u[k:], ud=run.ud[k:], mu=run.mu[k:], rate=run.rate[k:],
+                   rated=run.rated[k:])
 
 
 def unfiltered(n_channels: int = 10) -> tuple:
