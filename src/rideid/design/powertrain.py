@@ -25,6 +25,7 @@ import numpy as np
 
 from ..model.equations import POWERTRAIN_MODES, modal_summary
 from ..model.params import INDEX, POWERTRAIN_NAMES
+from .fisher import precision
 
 #: the runs that together hold this fraction of the information about f_pb (or f_pp) carry the powertrain's
 CARRY = 0.9
@@ -57,19 +58,18 @@ def input_frequency(track, speed) -> float | None:
 
 def loss_without(F: np.ndarray, idx) -> np.ndarray:
     """(R, len(idx)): the CRLB of parameters ``idx`` from all runs of ``F`` (R, d, d) but run r, over the CRLB
-    from all runs (inf where leaving the run out makes the parameter unidentifiable)."""
-    R = F.shape[0]
-    tot = F.sum(0)
+    from all runs (inf where leaving the run out makes the parameter unidentifiable, NaN where it is not
+    identifiable from all runs; identifiability as :func:`rideid.design.fisher.precision` decides it)."""
+    d = F.shape[1]
 
     def crlb(M):
-        M = 0.5 * (M + M.T)
-        w, V = np.linalg.eigh(M)
-        if w.min() <= 1e-10 * w.max():
-            return np.full(len(idx), np.inf)
-        return np.sqrt(np.diag((V / w) @ V.T)[idx])
+        return precision(M, M, M, [""] * d, np.ones(d)).rel_crlb[idx]
 
-    base = crlb(tot)
-    return np.array([crlb(tot - F[r]) / base for r in range(R)])
+    base = crlb(F.sum(0))
+    with np.errstate(invalid="ignore"):
+        out = np.array([crlb(F.sum(0) - F[r]) / base for r in range(F.shape[0])])
+    out[:, ~np.isfinite(base)] = np.nan
+    return out
 
 
 def powertrain_block(names, P0, geom, F, runs, tracks, speeds, run_ids, selected) -> dict | None:
