@@ -216,3 +216,18 @@ def test_a_powertrain_target_selects_a_run_that_excites_its_modes(engine_plan):
     j = pb.names.index("f_pp")
     alone = {rid: inf.precision([k]).rel_crlb[j] for k, rid in enumerate(pb.run_ids)}
     assert alone["W_H"] < 0.002 < alone["H_LL"] < alone["T_LH"]
+
+
+def test_identify_spread_matches_a_linearised_monte_carlo_of_identify_cost(engine_plan):
+    """The plan's expected spread of identify (the sandwich, identify's equal-run-weight cost) against 400 noise
+    draws (1 % of RMS, white) of a Gauss-Newton step on identify's own cost at the truth
+    (:func:`rideid.design.validate.linearised_monte_carlo`: rideid.CostFunction of the simulated dataset with
+    ``[model] extensions = ["powertrain"]``, weights from each noisy draw): every parameter's sd within 12 %
+    (sampling sd of the ratio 3.5 %; measured 0.93-1.07, the powertrain's seven 0.97-1.07)."""
+    from rideid.design.validate import linearised_monte_carlo, spread_ratio
+    sc, res = engine_plan
+    est = linearised_monte_carlo(dataclasses.replace(sc, extensions=("powertrain",)), list(RUNS), res.names,
+                                 0.01, range(400))
+    r = spread_ratio(est, res.all_runs.x0, res.all_runs.std_identify)
+    assert np.all(np.abs(r["ratio"] - 1) < 0.12), dict(zip(res.names, r["ratio"]))
+    assert np.all(np.abs(r["bias_in_sd"]) < 4)
