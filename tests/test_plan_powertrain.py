@@ -205,7 +205,7 @@ def test_cli_writes_the_powertrain_block(tmp_path, capsys):
 def test_a_powertrain_target_selects_a_run_that_excites_its_modes(engine_plan):
     """``--target f_pp=0.2%``: the plan drives the washboard at 12.5 Hz alone and meets the target. Each run alone
     (every parameter free, that run's Fisher matrix; measured): f_pp ±0.12 % from the washboard, ±0.41 % from the
-    herringbone at 10 Hz, ±5.9 % from the twist."""
+    herringbone at 10 Hz, ±5.9 % from the twist. A one-run budget's plan says what it leaves out."""
     from rideid.design.planner import PlanOptions, PlanProblem, gather_information
     sc, res = engine_plan
     tp = rideid.plan(sc, noise=0.01, targets={"f_pp": 0.002})
@@ -216,6 +216,12 @@ def test_a_powertrain_target_selects_a_run_that_excites_its_modes(engine_plan):
     j = pb.names.index("f_pp")
     alone = {rid: inf.precision([k]).rel_crlb[j] for k, rid in enumerate(pb.run_ids)}
     assert alone["W_H"] < 0.002 < alone["H_LL"] < alone["T_LH"]
+    # a budget of one run (D-optimal: the herringbone, for roll) says what it leaves out
+    one = rideid.plan(sc, noise=0.01, budget_runs=1)
+    assert one.selected_runs == ["H_LL"]
+    note = [m for m in one.notes if m.startswith("powertrain:")]
+    assert len(note) == 1 and "2.68 % (f_pp)" in note[0] and "W_H holds 87.3 %, 97.3 %" in note[0], note
+    assert not [m for m in tp.notes if m.startswith("powertrain:")]  # f_pb 87 %, f_pp 97 % held: nothing to say
 
 
 def test_identify_spread_matches_a_linearised_monte_carlo_of_identify_cost(engine_plan):

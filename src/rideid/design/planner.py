@@ -675,6 +675,7 @@ def assemble(pb: PlanProblem, opts: PlanOptions, inf: PlanInformation, chosen: S
         declared=_declared_block(pb.sc, space))
     if any(n in POWERTRAIN_NAMES for n in names):
         res.powertrain = _powertrain_block(pb, inf, S)
+        res.notes += pt_info.selection_note(res.powertrain, res.selected_runs)
     if inf.exc is not None:
         res.dampers = _dampers_block(inf.exc, space, pb.x0, names, all_p, sel_p, S, R, pb.knots_from)
     tk = [k for k, r in enumerate(pb.sc.runs) if r.road_known]

@@ -126,6 +126,26 @@ def powertrain_block(names, P0, geom, F, runs, tracks, speeds, run_ids, selected
     }
 
 
+#: a note when the selected runs hold less than this share of the candidates' information about f_pb or f_pp
+THIN = 0.5
+
+
+def selection_note(block: dict, selected_ids) -> list:
+    """A note when the selected runs hold under :data:`THIN` of the candidates' information about ``f_pb`` or
+    ``f_pp``, naming the unselected run with the largest share (the budget or criterion left it out)."""
+    if not block:
+        return []
+    thin = [n for n in ("f_pb", "f_pp") if n in block["selected_share"] and block["selected_share"][n] < THIN]
+    if not thin:
+        return []
+    rest = [r for r in block["runs"] if r["id"] not in set(selected_ids)]
+    best = max(rest, key=lambda r: sum(r["share"][n] for n in thin)) if rest else None
+    held = ", ".join(f"{100 * block['selected_share'][n]:.3g} % ({n})" for n in thin)
+    add = (f"; {best['id']} holds " + ", ".join(f"{100 * best['share'][n]:.3g} %" for n in thin)
+           + ": add it, or a run whose road input lies near the powertrain's modes") if best else ""
+    return [f"powertrain: the selected runs hold only {held} of all candidates' information about its mounts{add}"]
+
+
 def _share(v: float) -> str:
     """A share in per cent: one decimal, or three significant digits below 0.1 %."""
     return f"{100 * v:.1f} %" if v >= 1e-3 else f"{100 * v:.2g} %"
