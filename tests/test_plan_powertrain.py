@@ -254,3 +254,12 @@ def test_the_documented_example(capsys):
     assert res.powertrain["carriers"] == ["H_LL", "H_LH", "H_HL", "H_HH", "W_H"]
     rel = dict(zip(res.names, res.selected.rel_crlb))
     assert rel["f_pb"] == pytest.approx(7.14e-5, rel=0.01) and rel["I_p"] == pytest.approx(0.0153, rel=0.01)
+
+
+def test_powertrain_with_bars_and_tire_damping_is_planned(default_scenario):
+    """Every linear group at once (SPEC §6 and §11, 22 free parameters): planned, every CRLB finite, the
+    powertrain's information carried by the same two runs."""
+    sc = _scenario(default_scenario, runs=("H_LL", "W_H"), k_arf=12000.0, k_arr=6000.0, c_tf=150.0, c_tr=150.0)
+    res = rideid.plan(sc, noise=0.01)
+    assert res.extensions == ["anti_roll_bars", "tire_damping", "powertrain"] and len(res.names) == 22
+    assert np.all(np.isfinite(res.all_runs.rel_crlb)) and res.powertrain["carriers"] == ["H_LL", "W_H"]
