@@ -263,3 +263,18 @@ def test_powertrain_with_bars_and_tire_damping_is_planned(default_scenario):
     res = rideid.plan(sc, noise=0.01)
     assert res.extensions == ["anti_roll_bars", "tire_damping", "powertrain"] and len(res.names) == 22
     assert np.all(np.isfinite(res.all_runs.rel_crlb)) and res.powertrain["carriers"] == ["H_LL", "W_H"]
+
+
+def test_declared_anchor_std_leaves_the_scale_free_powertrain_parameters_alone(tmp_path):
+    """SPEC §12: a declared total_mass std (1 %) adds to identify's spread of every parameter that scales with
+    the car (m_p, I_p) in quadrature, and to none of the powertrain's position, frequencies and damping ratios
+    (they do not scale: SPEC §1's invariance multiplies masses, inertias and rates only)."""
+    doc = tomllib.loads(rideid.default_scenario_path().read_text())
+    doc["known"]["total_mass"] = {"value": doc["known"]["total_mass"], "std": 10.933}
+    doc["truth"].update(ENGINE)
+    doc["runs"] = [r for r in doc["runs"] if r["id"] in ("H_LL", "W_H")]
+    (tmp_path / "sc.toml").write_text(tomli_w.dumps(doc))
+    d = rideid.plan(tmp_path / "sc.toml").to_dict()["selected"]["identify_std"]
+    for n in POWERTRAIN_NAMES:
+        extra = 0.01 if n in ("m_p", "I_p") else 0.0
+        assert d[n]["relative_total"] == pytest.approx(np.hypot(d[n]["relative"], extra), rel=1e-9), n
