@@ -21,8 +21,10 @@ from ..model.simulator import Simulator
 from ..estimate.sensitivity import compute_maps
 from ..model.equations import CHANNELS
 from ..model.nonlinear import curve_names
-from ..model.params import ALL_NAMES, EXT_NAMES, GROUPS, NAMES, SUSPENSION_NAMES
+from ..model.params import (ALL_NAMES, EXT_NAMES, GROUPS, NAMES, POWERTRAIN_NAMES, SCALE_FREE, SIGNED,
+                            SUSPENSION_NAMES)
 from ..report.plan_files import pct as _pct, plan_markdown, write_plan
+from . import powertrain as pt_info
 from . import roadinfo
 from .colour import load_noise_psd
 from .curves import (AXLES, CURVES, Excitation, mask_information, nominal_forces, not_excited_names, plan_knots,
@@ -72,13 +74,17 @@ class PlanResult:
     #: SPEC §12: the scenario's declared uncertainties (key -> std) and the anchor's relative std added to every
     #: scale parameter's predicted std in quadrature (:func:`declared_relative`)
     declared: dict = field(default_factory=dict)
+    #: SPEC §11: with a free powertrain, where its information comes from (:func:`rideid.design.powertrain.
+    #: powertrain_block`: the whole car's modes, per run the shares, leave-one-out losses, input frequency)
+    powertrain: dict | None = None
 
     def declared_relative(self, name: str) -> float:
         """The declared inputs' relative contribution to parameter ``name`` (0 when none is declared): the
         scale anchor's relative std for every mass, inertia, stiffness and damping (SPEC §1: they scale with
-        it), 0 for the lengths (``a``); other declared inputs are not predicted (plan.json says so)."""
+        it), 0 for the lengths, frequencies and damping ratios (``a``, the powertrain's ``x_p``, ``f_pb``,
+        ``zeta_pb``, ``f_pp``, ``zeta_pp``); other declared inputs are not predicted (plan.json says so)."""
         rel = (self.declared.get("anchor") or {}).get("relative", 0.0)
-        return 0.0 if name in LENGTHS else rel
+        return 0.0 if name in LENGTHS or name in SCALE_FREE else rel
 
     # -- dictionaries ---------------------------------------------------------
     def _crlb(self, p: Precision, which="crlb") -> dict:
@@ -167,7 +173,8 @@ class PlanResult:
                             for k, (rid, p) in enumerate(self.path)],
             "sensitivity_map_comparison": self.comparison,
             "notes": self.notes,
-        } | ({"dampers": self.dampers} if self.dampers is not None else {})
+        } | ({"dampers": self.dampers} if self.dampers is not None else {}) \
+            | ({"powertrain": self.powertrain} if self.powertrain is not None else {})
 
     def label(self, rid: str) -> str:
         """A run id, with ``(road B)`` for a run on an unknown road of ISO 8608 class B."""
@@ -210,6 +217,7 @@ class PlanResult:
                 ne = c["dampers"]["not_excited"]
                 lines.append(f"damper knots run {c['id']}: "
                              + (f"not excited {', '.join(ne)}" if ne else "all excited"))
+        lines += pt_info.summary_lines(self.powertrain, self.selected_runs)
         lines += self.messages_selected + self.notes
         return "\n".join(lines)
 
@@ -286,6 +294,10 @@ class PlanProblem:
             raise DataError(f"{sc.path}: a plan needs a scenario with a [truth] table (the nominal car)")
         extensions = _extensions(sc, extensions)
         curves = CURVES in extensions
+        if road_ids and any(n in POWERTRAIN_NAMES for g in extensions for n in GROUPS.get(g, ())):
+            raise ArgumentError(f"runs on unknown roads ({', '.join(road_ids)}) cannot be planned with the powertrain "
+                                "group (SPEC §11): the road fit (docs/any-road.md) has no powertrain in this version; "
+                                "plan the powertrain on known tracks")
         if curves and road_ids:
             raise ArgumentError(f"runs on unknown roads ({', '.join(road_ids)}) cannot be planned with damper "
                                 "curves: the road fit projects the road out of a linear car (docs/any-road.md); plan "
@@ -323,7 +335,12 @@ def _nominal_free(sc, space, names, curves) -> np.ndarray:
         Fk = nominal_forces(sc, space.layout)
         all_knots = curve_names(space.layout.n_knots)
         x0[[names.index(n) for n in knot_names]] = [Fk[all_knots.index(n)] for n in knot_names]
-    bad = [n for n, v in zip(names, x0) if (v == 0 if n in knot_names else v <= 0)]
+    zero = [n for n, v in zip(names, x0) if n in SIGNED and v == 0]
+    if zero:  # a signed length (the powertrain's position, behind the CG negative) may be negative, not 0
+        raise DataError(f"{sc.path}: [truth] {', '.join(zero)} = 0: precision is planned relative to the nominal "
+                        f"value, which must not be 0; give the position to the nearest centimetre (e.g. 0.01, "
+                        "behind the CG negative)")
+    bad = [n for n, v in zip(names, x0) if (v == 0 if n in knot_names else v <= 0) and n not in SIGNED]
     if bad:
         raise DataError(f"{sc.path}: [truth] has no positive value for {', '.join(bad)}, a free parameter of the "
                         "model; precision is planned relative to the nominal value, so give one")
@@ -656,6 +673,9 @@ def assemble(pb: PlanProblem, opts: PlanOptions, inf: PlanInformation, chosen: S
         derived_grad=None if space.derived is None else space.derived_gradient() * pb.x0,  # d(derived)/du, u = x/x0
         robust_worst=chosen.selector.rel_std(S).max(0) if opts.robust > 1 else None,
         declared=_declared_block(pb.sc, space))
+    if any(n in POWERTRAIN_NAMES for n in names):
+        res.powertrain = _powertrain_block(pb, inf, S)
+        res.notes += pt_info.selection_note(res.powertrain, res.selected_runs)
     if inf.exc is not None:
         res.dampers = _dampers_block(inf.exc, space, pb.x0, names, all_p, sel_p, S, R, pb.knots_from)
     tk = [k for k, r in enumerate(pb.sc.runs) if r.road_known]
@@ -666,6 +686,17 @@ def assemble(pb: PlanProblem, opts: PlanOptions, inf: PlanInformation, chosen: S
                                        replace(inf.info, F=inf.info.F[tk]), names,
                                        [pb.run_ids[j] for j in chosen.order], opts.criterion)
     return res
+
+
+def _powertrain_block(pb: PlanProblem, inf: PlanInformation, S) -> dict:
+    """plan.json ``"powertrain"`` (:func:`rideid.design.powertrain.powertrain_block`) of the nominal car."""
+    tk = [k for k, r in enumerate(pb.sc.runs) if r.road_known]
+    runs = [None] * len(pb.run_ids)
+    for i, k in enumerate(tk):
+        runs[k] = inf.lin_sim.runs[i]
+    tracks = [pb.sc.tracks[r.track] if r.road_known else None for r in pb.sc.runs]
+    return pt_info.powertrain_block(pb.names, pb.P0, pb.sc.geometry, inf.info.F, runs, tracks,
+                                    [r.speed for r in pb.sc.runs], pb.run_ids, S)
 
 
 def _declared_block(sc, space) -> dict:
@@ -708,6 +739,9 @@ def _nominal(pb: PlanProblem) -> dict:
 def _sensitivity_method(pb: PlanProblem, opts: PlanOptions, inf: PlanInformation) -> dict:
     """plan.json ``"sensitivities"``: how the derivatives were taken."""
     sens = {"method": "central finite differences through the compiled kernel", "relative_step": opts.step}
+    if any(n in POWERTRAIN_NAMES for n in pb.names):
+        sens["method"] = ("central finite differences through the simulator's NumPy modal backend (a car with a "
+                          "powertrain on mounts, SPEC §11: rideid.model.simulate.simulate_modal)")
     if pb.curves:
         sens["method"] = ("central finite differences through the compiled nonlinear car (damper curves, RK4 with "
                           "its sub-step count pinned at the nominal car's for every row of the differences)")

@@ -124,9 +124,36 @@ def _md_dampers(res) -> list:
     return out
 
 
+def _md_powertrain(res) -> list:
+    """plan.md's powertrain section (SPEC §11): the modes and where the information comes from, per run."""
+    pt = res.powertrain
+    if not pt:
+        return []
+    names = list(pt["runs"][0]["share"])
+    modes = ", ".join(f"{m} {v:.2f} Hz" for m, v in pt["modes_hz"].items())
+    lo, hi = pt["band_hz"]
+    out = ["\n## Powertrain on mounts: which runs carry its information\n",
+           f"Whole-car modes: {modes} (mounts, body held: f_pb {pt['mounts_hz']['f_pb']:g} Hz, f_pp "
+           f"{pt['mounts_hz']['f_pp']:g} Hz); band {lo:.2f}-{hi:.2f} Hz. {pt['method']}.\n",
+           "| run | input Hz | band energy | " + " | ".join(f"share {n}" for n in names)
+           + " | CRLB x without it (f_pb, f_pp, m_p) | carries |",
+           "|---|---|---|" + "---|" * len(names) + "---|---|"]
+    for r in pt["runs"]:
+        loss = ", ".join("—" if r["loss_without"].get(n) is None else f"{r['loss_without'][n]:.3g}"
+                         for n in ("f_pb", "f_pp", "m_p") if n in r["loss_without"])
+        out.append(f"| {r['id']} | {'—' if r['input_hz'] is None else format(r['input_hz'], '.3g')} | "
+                   f"{'—' if r['band_energy'] is None else format(100 * r['band_energy'], '.3g') + ' %'} | "
+                   + " | ".join(f"{100 * r['share'][n]:.3g} %" for n in names)
+                   + f" | {loss} | {'yes' if r['carries'] else ''} |")
+    out.append("\nSelected runs' share: " + ", ".join(f"{n} {100 * v:.3g} %" for n, v in pt["selected_share"].items())
+               + "\n")
+    return out
+
+
 def plan_markdown(res) -> str:
     """plan.md of a :class:`rideid.design.PlanResult`."""
-    out = _md_candidates(res, res.to_dict()) + _md_precision(res) + _md_path(res) + _md_dampers(res)
+    out = (_md_candidates(res, res.to_dict()) + _md_precision(res) + _md_path(res) + _md_dampers(res)
+           + _md_powertrain(res))
     if res.notes:
         out.append("## Notes\n")
         out += [f"- {m}" for m in res.notes]
