@@ -61,6 +61,29 @@ def test_the_car_from_two_unknown_roads(road_fit):
     assert "auto" in doc["model"]["selection"] and "not run on unknown roads" in doc["model"]["note"]
 
 
+def test_rideid_report_again_draws_the_fitted_roads_response(road_fit):
+    """The response of a run on an unknown road is the car at the road it estimated, which result.json alone
+    cannot simulate again: identify writes it beside the road (road/<run>.response.csv) and `rideid report`
+    draws it from there. (Before, `rideid report` on such a result stopped: "unknown-road runs ... are not
+    supported by rideid.CostFunction".) The response read back is the fit's: the data minus it is of the size
+    of the 2 % sensor noise in every channel (measured 0.8-1.0 %: the estimated road takes up part of the
+    noise), not the road's whole response."""
+    rc, sim, fit = road_fit
+    assert rc == 0
+    res = rideid.load_result(fit)
+    ds = rideid.load_dataset(sim)
+    assert set(res.response) == {r.id for r in ds.runs}
+    for r in ds.runs:
+        Y = np.column_stack([ds.data[r.id].channels[c] for c in rideid.CHANNELS])
+        Yhat = res.response[r.id]
+        assert Yhat.shape == Y.shape
+        rel = np.sqrt(np.mean((Y - Yhat) ** 2, axis=0) / np.mean(Y ** 2, axis=0))
+        assert np.all((rel > 0.005) & (rel < 0.03)), (r.id, rel)
+    (fit / "report.html").unlink()
+    assert main(["report", str(fit)]) == 0
+    assert (fit / "report.html").is_file()
+
+
 def test_the_roads_and_their_classes(road_fit):
     _, sim, fit = road_fit
     doc = json.loads((fit / "result.json").read_text())

@@ -28,6 +28,7 @@ from ..data.schema.result import read_result_json
 from ..errors import DataError
 from .sensitivity import SensitivityMaps
 from .bumps import format_bump_stops
+from ..model.equations import CHANNELS
 
 COST_DEFINITION = ("equal-weight sum over runs of the per-channel energy-normalised squared error "
                    "(see rideid.cost)")
@@ -372,6 +373,24 @@ class IdentificationResult:
             (out_dir / "road").mkdir(exist_ok=True)
             np.savetxt(out_dir / "road" / f"{rid}.csv", np.column_stack([x, z]), delimiter=",", fmt="%.9g",
                        header="x,z_left,z_right", comments="")
+        # the fitted response of the runs whose road was estimated (unknown roads, tracks as built): the car
+        # driven over that road cannot be simulated again from result.json alone, and `rideid report` draws it
+        for rid in self.estimated_road_runs():
+            Y = (self.response or {}).get(rid)
+            if Y is None:
+                continue
+            (out_dir / "road").mkdir(exist_ok=True)
+            np.savetxt(out_dir / "road" / f"{rid}.response.csv", np.asarray(Y, dtype=float), delimiter=",",
+                       fmt="%.9g", header=",".join(CHANNELS), comments="")
+
+    def estimated_road_runs(self) -> list:
+        """The runs fitted at an estimated road: on unknown roads (``roads``) and on tracks as built (``tracks``,
+        not rejected)."""
+        ids = list(self.roads or {})
+        for rec in (self.tracks or {}).values():
+            if not rec.get("rejected"):
+                ids += [rid for rid in (rec.get("runs") or {}) if rid not in ids]
+        return ids
 
 
 def load(path) -> IdentificationResult:
@@ -406,7 +425,23 @@ def load(path) -> IdentificationResult:
         model=doc.get("model"), adequacy=doc.get("adequacy"), correlation=doc.get("correlation"),
         checks=list(doc.get("checks") or []), dampers=doc.get("dampers"), bump_stops=doc.get("bump_stops"),
         roads=doc.get("roads"), road_profiles=_read_roads(doc.get("roads"), rpath.parent), tracks=doc.get("tracks"),
-        vehicle=doc.get("vehicle"), uncertainty=doc.get("uncertainty"), data_quality=doc.get("data_quality"))
+        vehicle=doc.get("vehicle"), uncertainty=doc.get("uncertainty"), data_quality=doc.get("data_quality"),
+        response=_read_responses(doc, rpath.parent))
+
+
+def _read_responses(doc, folder):
+    """The fitted responses written beside result.json for the runs at an estimated road
+    (road/<run>.response.csv, :meth:`IdentificationResult.save`), those that are there; None without any."""
+    ids = list(doc.get("roads") or {})
+    for rec in (doc.get("tracks") or {}).values():
+        if not rec.get("rejected"):
+            ids += [rid for rid in (rec.get("runs") or {}) if rid not in ids]
+    out = {}
+    for rid in ids:
+        f = folder / "road" / f"{rid}.response.csv"
+        if f.is_file():
+            out[rid] = np.loadtxt(f, delimiter=",", skiprows=1, ndmin=2)
+    return out or None
 
 
 def _read_roads(roads, folder):
