@@ -39,7 +39,10 @@ def test_the_speed_column_drives_rideid_as_the_independent_car(tmp_path):
 def test_a_gps_speed_channel_gives_the_twelve_with_honest_error_bars(tmp_path):
     """The five runs (exact tracks, 1 % sensor noise) with the driver wandering +-3 % and a 10 Hz speed column
     carrying 0.03 m/s of white noise, identified with rideid's defaults (seed 1 of the case): every one of the
-    twelve within 1 %, at least 10 of 12 inside +-2 std_robust and +-2 std_total, and judged adequate."""
+    twelve within 1 %, at least 10 of 12 inside +-2 std_robust and +-2 std_total, and judged adequate, each run
+    with its distance correction. Measured: largest error 0.054 % (k_sf), 11 of 12 covered by both, adequate,
+    corrections 4-27 mm RMS; 35 min on two shared cores. The same data at each run's constant nominal speed
+    (the wander ignored): m_ur 15 % off, 9 of 12 covered, not adequate (docs/real-data.md)."""
     write_case(tmp_path / "ds", seed=1, gps_noise=0.03)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
@@ -49,4 +52,5 @@ def test_a_gps_speed_channel_gives_the_twelve_with_honest_error_bars(tmp_path):
     assert max(abs(e) for e in err.values()) < 0.01, err
     assert cov_r >= 10 and cov_t >= 10, (cov_r, cov_t)
     assert res.adequacy["adequate"]
-    assert all("distance_correction" in st for st in res.starts.values())
+    rms = [st["distance_correction"]["rms_m"] for st in res.starts.values()]
+    assert len(rms) == len(RUNS) and max(rms) < 0.06, rms
