@@ -126,15 +126,21 @@ def state_space(truth: dict, vehicle: dict):
     return A, B, C, D
 
 
-def wheel_inputs(tracks: dict, run, vehicle: dict, amplitude: float, rms: float, rng):
+def wheel_inputs(tracks: dict, run, vehicle: dict, amplitude: float, rms: float, rng, distance=None):
     """The four as-built wheel inputs (n_fine, 4) of ``run`` = (id, track, speed, duration) on the fine time
-    grid, and that grid; and the unevenness under each path over the stretch driven (for the checks)."""
+    grid, and that grid; and the unevenness under each path over the stretch driven (for the checks).
+
+    The front wheels are at ``x(t) = speed * t``, or at ``distance(t)`` (m, a function of the time grid: a
+    speed as driven, x = its integral, may be negative before the start), the rear wheels at ``x - wheelbase``.
+    """
     rid, tid, speed, duration = run
     n = int(round(duration * FS))
     t = np.arange(n * UPSAMPLE + 1) / (FS * UPSAMPLE)
     R = vehicle["tire_radius"]
     wb = vehicle["wheelbase"]
-    s = np.arange(-wb - 2 * R - 0.5, speed * duration + 2 * R + 0.5, DX)
+    x = speed * t if distance is None else np.asarray(distance(t), dtype=float)
+    end = speed * duration if distance is None else float(x.max())
+    s = np.arange(min(0.0, float(x.min())) - wb - 2 * R - 0.5, end + 2 * R + 0.5, DX)
     tr = tracks[tid]
     u = np.empty((t.size, 4))
     bumps = {}
@@ -143,15 +149,17 @@ def wheel_inputs(tracks: dict, run, vehicle: dict, amplitude: float, rms: float,
         bumps[side] = (s, e)
         r = envelope(amplitude * drawn(tr, s, y) + e, R)
         col = 0 if side == "left" else 1
-        u[:, col] = np.interp(speed * t, s, r)
-        u[:, col + 2] = np.interp(speed * t - wb, s, r)
+        u[:, col] = np.interp(x, s, r)
+        u[:, col + 2] = np.interp(x - wb, s, r)
     return t, u, bumps
 
 
-def simulate_run(tracks, run, truth=SUV_TRUTH, vehicle=SUV_VEHICLE, amplitude=1.04, rms=1.5e-3, rng=None):
-    """Noise-free channels (n, 10) at ``FS`` of one run, and the unevenness under each wheel path."""
+def simulate_run(tracks, run, truth=SUV_TRUTH, vehicle=SUV_VEHICLE, amplitude=1.04, rms=1.5e-3, rng=None,
+                 distance=None):
+    """Noise-free channels (n, 10) at ``FS`` of one run, and the unevenness under each wheel path (``distance``:
+    the front axle's x(t), see :func:`wheel_inputs`; default ``speed * t``)."""
     A, B, C, D = state_space(truth, vehicle)
-    t, u, bumps = wheel_inputs(tracks, run, vehicle, amplitude, rms, rng)
+    t, u, bumps = wheel_inputs(tracks, run, vehicle, amplitude, rms, rng, distance)
     x0 = -np.linalg.solve(A, B @ u[0])   # at rest in static equilibrium on the road under the wheels
     _, y, _ = lsim((A, B, C, D), u, t, X0=x0, interp=True)
     return t[::UPSAMPLE], y[::UPSAMPLE], bumps
