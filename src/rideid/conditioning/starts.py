@@ -188,6 +188,34 @@ def _fixed_point(mr: MeasuredRun, track, tm, s):
     return s, score
 
 
+def _score_at(mr: MeasuredRun, track, tm, s: float):
+    """The step giving the all-lags correlation of the run with the car's response at the start ``s`` itself
+    (the same measure :func:`start_steps` maximises), read off between lags by linear interpolation."""
+    h = 1.0 / mr.fs
+    job = (Job(track, tm, mr.speed) if mr.distance is None
+           else Job(track, tm, None, RelativeDistance(mr.distance, s)))
+    (Yhat,) = responses((yield [job]))
+    lags, corr = _correlation(mr, Yhat, tm)
+    return float(np.interp((s + tm[0] - mr.t_first) / h, lags, corr, left=0.0, right=0.0))
+
+
+def start_check_steps(mr: MeasuredRun, geom, track, given: float):
+    """The step checking a given start (:func:`rideid.conditioning.checks.check_dataset`): returns
+    ``(best start, correlation there, correlation at the given start)``.
+
+    ``mr``: the run as read, unaligned (window and start dropped). The best
+    start is the one :func:`start_steps` estimates; the correlation at the
+    given start is the same measure read at that start's lag (with a speed
+    channel, of the response simulated along the given start's own distance
+    profile). A given start a bump or a cycle of the track off correlates
+    markedly worse than the best one, which lies that bump or cycle away.
+    """
+    v = mr.speed if mr.distance is None else max(mr.distance.speed_range()[1], 0.1)
+    tm = _long_grid(mr, track, geom, v)
+    (best, rho_best), rho_given = yield from gather([start_steps(mr, geom, track), _score_at(mr, track, tm, given)])
+    return best, rho_best, rho_given
+
+
 def estimate_start(mr: MeasuredRun, P, geom, track, simulator=None):
     """``(start, correlation)``: the run's start (file time when the front axle reaches x = 0) for
     the car ``P``, by cross-correlation over all lags, to a fraction of a sample.
