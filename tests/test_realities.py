@@ -108,3 +108,27 @@ def test_a_start_a_cycle_off_is_the_one_diagnosis(realities, tmp_path, capsys):
     # the nominal car (no engine) puts the washboard's x = 0 at 2.294 s, 1.1 samples early: 1.1 cycles
     assert "(1.1 x the track's wavelength of 0.8 m)" in line
     assert "wired" not in line and "unit" not in line and np.isfinite(float(line.split(" at x = 0 at ")[1][:6]))
+
+
+@pytest.mark.slow
+def test_identify_runs_on_the_all_realities_case(realities, tmp_path):
+    """End to end through the command line, the powertrain in the model: the checks pass the data as wired,
+    the starts are estimated and polished, and what the fit gives is recorded (printed) against the truth."""
+    import json
+    import subprocess
+    folder, _ = realities
+    out = tmp_path / "fit"
+    env = {**__import__("os").environ, "PYTHONPATH": str(Path(rideid.__file__).parents[1])}
+    proc = subprocess.run([sys.executable, "-m", "rideid", "identify", str(folder), "--out", str(out), "--seed", "1",
+                           "--model", "powertrain", "--no-report", "--quiet"], capture_output=True, text=True,
+                          env=env)
+    assert proc.returncode == 0, proc.stderr
+    res = json.loads((out / "result.json").read_text())
+    assert not [c for c in res.get("checks", []) if c["check"] in ("wiring", "track")]
+    truth = realities_case.truth()
+    errs = {n: res["parameters"][n]["value"] / truth[n] - 1 for n in truth if n in res["parameters"]
+            and not res["parameters"][n].get("fixed") and truth[n] != 0}
+    print({n: f"{100 * e:+.2f} %" for n, e in errs.items()}, res.get("adequacy", {}).get("adequate"))
+    for rid in RUNS:
+        assert abs(res["preprocessing"][rid]["start"]["value"] - realities_case.OFFSET) < 0.01
+    assert max(abs(e) for n, e in errs.items() if n in rideid.NAMES) < 0.5

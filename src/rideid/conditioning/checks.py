@@ -31,6 +31,7 @@ import numpy as np
 
 from ..data.checks import ERROR, PLAUSIBLE, WARNING, Finding
 from ..data.measured import Distance, RelativeDistance
+from ..errors import DataError
 from ..data.schema.channels import SI, UNITS, quantity
 from ..model.equations import CHANNELS
 from .nominal import Job, gather, responses, run_steps
@@ -322,7 +323,7 @@ def _check_run(ds, r):
     # below (the axle channels' assignment and amplitudes, the track and speed) would blame the channels or
     # the speed for it, so the start is named and those comparisons are not made
     start_off = None
-    if (track is not None and mr is not None and _level(ds, rid, "track") != "off"
+    if (track is not None and mr is not None and not r.moving and _level(ds, rid, "track") != "off"
             and mr.record.get("start", {}).get("source") == "given"):
         start_off = yield from _given_start(ds, rid, mr, track)
     # an acceleration in the wrong unit, seen in its lead-in; a re-wiring below that explains it says it better
@@ -398,7 +399,10 @@ def _given_start(ds, rid, mr, track):
     """The step checking a run's given start (:func:`start_finding`): returns the finding or None."""
     run0 = dataclasses.replace(mr, window=None, start=None)  # the run as read, unaligned, as an estimate sees it
     given = float(mr.start)
-    best, rho_best, rho_given = yield from start_check_steps(run0, ds.geometry, track, given, START_SAMPLES)
+    try:
+        best, rho_best, rho_given = yield from start_check_steps(run0, ds.geometry, track, given, START_SAMPLES)
+    except DataError:  # nothing to correlate (a response or a recording all zero): the other checks say so
+        return None
     if mr.distance is None:
         travel = abs(given - best) * mr.speed
     else:
