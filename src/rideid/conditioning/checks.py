@@ -34,6 +34,7 @@ from ..data.measured import Distance, RelativeDistance
 from ..errors import DataError
 from ..data.schema.channels import SI, UNITS, quantity
 from ..model.equations import CHANNELS
+from ..model.sensors import SensorChain
 from .nominal import Job, gather, responses, run_steps
 from .starts import correlation_score, feature_span, start_check_steps, start_steps
 from .wiring import (axle_amplitude_findings, corrected, describe_fix, fix_entries, lead_in_units, unit_findings,
@@ -340,6 +341,7 @@ def _check_run(ds, r):
         if not np.any(Yhat):
             out += units
             return out  # a flat road excites nothing: nothing to check the data against
+        Y, Yhat = _as_recorded(ds, rid, Y, Yhat)
     # with the start off, the rigid-body identities alone (they need no road) judge the wiring
     wire = (wiring_fix(Y, None if start_off is not None else Yhat, rd.fs, geom, _entry_factors(entries),
                        unit_known) if wiring != "off" else None)
@@ -385,6 +387,19 @@ def _check_run(ds, r):
         f = match_finding(rid, r.track, r.speed, rho, (yield from _alternatives(ds, rid)))
         out.append(_at_level(ds, rid, f))
     return out
+
+
+def _as_recorded(ds, rid, Y, Yhat):
+    """The data and the nominal response as the checks compare them (SPEC §11): the response through the
+    run's declared sensor chain (an AC-coupled hub sensor's phase lead on a slow bump is the chain's, not a
+    wiring mistake), and the samples where a channel sat at its range left out of both (0)."""
+    chain = SensorChain(ds.sensor_filters(rid), 1.0 / ds.data[rid].fs)
+    if chain.active:
+        Yhat = chain.apply(Yhat)
+    clipped = ds.clipped(rid)
+    if clipped is not None:
+        Y, Yhat = np.where(clipped, 0.0, Y), np.where(clipped, 0.0, Yhat)
+    return Y, Yhat
 
 
 def _at_level(ds, rid, f: Finding) -> Finding:
