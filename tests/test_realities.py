@@ -113,7 +113,13 @@ def test_a_start_a_cycle_off_is_the_one_diagnosis(realities, tmp_path, capsys):
 @pytest.mark.slow
 def test_identify_runs_on_the_all_realities_case(realities, tmp_path):
     """End to end through the command line, the powertrain in the model: the checks pass the data as wired,
-    the starts are estimated and polished, and what the fit gives is recorded (printed) against the truth."""
+    the starts are estimated and polished, and what the fit gives is recorded (printed) against the truth.
+
+    Measured (seed 1, three runs; 396 s on two cores shared with two other jobs): the twelve within 12.6 %
+    (k_tf +12.6 %, m_uf +11.9 %, m_ur +9.3 %, k_tr +9.8 %, c_sf +5.7 %, a -3.4 %, the rest within 2 %), the
+    engine's mass -5.4 %, its bounce frequency -0.25 %, not adequate: three runs of as-built tracks leave the
+    unsprung side and the engine's pitch (I_p +92 %, zeta_pp at its bound) poorly determined. The issue's
+    "every parameter within 2 %" is not met on this case."""
     import json
     import subprocess
     folder, _ = realities
@@ -131,4 +137,5 @@ def test_identify_runs_on_the_all_realities_case(realities, tmp_path):
     print({n: f"{100 * e:+.2f} %" for n, e in errs.items()}, res.get("adequacy", {}).get("adequate"))
     for rid in RUNS:
         assert abs(res["preprocessing"][rid]["start"]["value"] - realities_case.OFFSET) < 0.01
-    assert max(abs(e) for n, e in errs.items() if n in rideid.NAMES) < 0.5
+    assert max(abs(e) for n, e in errs.items() if n in rideid.NAMES) < 0.2
+    assert abs(errs["m_p"]) < 0.1 and abs(errs["f_pb"]) < 0.02
