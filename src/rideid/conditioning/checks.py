@@ -31,11 +31,14 @@ import numpy as np
 
 from ..data.checks import ERROR, PLAUSIBLE, WARNING, Finding
 from ..data.measured import Distance, RelativeDistance
+from ..errors import DataError
 from ..data.schema.channels import SI, UNITS, quantity
 from ..model.equations import CHANNELS
+from ..model.sensors import SensorChain
 from .nominal import Job, gather, responses, run_steps
-from .starts import correlation_score, feature_span, start_steps
-from .wiring import axle_amplitude_findings, corrected, describe_fix, fix_entries, unit_findings, wiring_fix
+from .starts import correlation_score, feature_span, start_check_steps, start_steps
+from .wiring import (axle_amplitude_findings, corrected, describe_fix, fix_entries, lead_in_units, unit_findings,
+                     wiring_fix)
 
 #: a moving run's nominal response starts at rest this long (s) before the first sample: the nominal car's
 #: slowest mode decays to 1e-3 in 2.4-2.7 s on the built-in car, the SUV and the van of the tests
@@ -43,6 +46,15 @@ from .wiring import axle_amplitude_findings, corrected, describe_fix, fix_entrie
 NOMINAL_LEAD_IN = 5.0
 #: correlation with the nominal car below which a run does not match its track and speed
 MATCH_MIN = 0.5
+#: a given start is a bump or a cycle off when the data correlate with the nominal car by this much better at
+#: another start more than START_SAMPLES samples away than at their best within START_SAMPLES of it
+#: (:func:`rideid.conditioning.starts.start_check_steps`). Measured on the hatchback of tests/test_checks.py
+#: (1 kHz logger files): a start one cycle off peaks 0.050-0.054 below the best start (herringbone, 16 cycles),
+#: 0.11 (washboard), 0.33 (twist, one bump), half a cycle off 0.96-1.7 below; the true start given, 0.000 below
+#: on the hatchback and on the built-in car with an engine on as-built tracks (tests/realities_case.py, twenty
+#: runs), whose best start lies within 1.7 samples of it
+START_MARGIN = 0.025
+START_SAMPLES = 3.0
 
 
 # ---------------------------------------------------------------------------
@@ -133,6 +145,40 @@ def speed_candidates(speed: float) -> list[tuple[float, str]]:
     """Speeds a typing slip makes of the true one: (candidate m/s, how the slip happens)."""
     return [(speed / 3.6, f"{speed:g} is km/h"), (speed * 3.6, f"{speed:g} m/s was meant as km/h the other way"),
             (speed * 0.44704, f"{speed:g} is mph"), (speed / 2.0, "half the speed"), (speed * 2.0, "twice the speed")]
+
+
+def start_finding(run_id: str, track, given: float, best: float, rho_best: float, rho_given: float, fs: float,
+                  travel: float | None = None, where: str = "") -> Finding | None:
+    """A finding when a run's given start is not where its data match the track (a bump or a cycle off).
+
+    Parameters
+    ----------
+    given, best : float
+        The start given (file time, s) and the one the all-lags correlation
+        with the nominal car picks (:func:`rideid.conditioning.starts.start_check_steps`).
+    rho_best, rho_given : float
+        That correlation at the best start, and its highest within START_SAMPLES samples of the given one.
+    fs : float
+        The run's sample rate, Hz.
+    travel : float, optional
+        The distance (m) the car covers between the two starts, to compare
+        with the track's bump spacing or wavelength.
+    """
+    if abs(given - best) <= START_SAMPLES / fs or rho_best < rho_given + START_MARGIN:
+        return None
+    d = given - best
+    period = next((track.keys[k] for k in ("spacing", "wavelength") if k in getattr(track, "keys", {})), None)
+    how = ""
+    if travel is not None:
+        how = f", {travel:.3g} m of travel"
+        if period:
+            name = "bump spacing" if "spacing" in track.keys else "wavelength"
+            how += f" ({travel / period:.2g} x the track's {name} of {period:g} m)"
+    return Finding(ERROR, "track", f"{where}run '{run_id}': its start is off: start = {given:.6g} s is "
+                   f"{abs(d):.3g} s too {'late' if d > 0 else 'early'}{how}: the data match track '{track.id}' "
+                   f"best with the front axle at x = 0 at {best:.6g} s of file time (correlation {rho_best:.2f} "
+                   f"with a nominal car's response there, {rho_given:.2f} at the given start). Set start = "
+                   f"{best:.6g} for run '{run_id}', or remove start to have it estimated", run_id, "start")
 
 
 # ---------------------------------------------------------------------------
@@ -274,9 +320,18 @@ def _check_run(ds, r):
     entries = _map_entries(ds, rid)
     wiring = _level(ds, rid, "wiring")
     mr = ds.measured.get(rid)
+    # a start given a bump or a cycle off moves the model against the data: every road-driven comparison
+    # below (the axle channels' assignment and amplitudes, the track and speed) would blame the channels or
+    # the speed for it, so the start is named and those comparisons are not made
+    start_off = None
+    if (track is not None and mr is not None and not r.moving and _level(ds, rid, "track") != "off"
+            and mr.record.get("start", {}).get("source") == "given"):
+        start_off = yield from _given_start(ds, rid, mr, track)
     # an acceleration in the wrong unit, seen in its lead-in; a re-wiring below that explains it says it better
     units = (unit_findings(rid, entries, mr.record["channels"])
              if mr is not None and wiring != "off" else [])
+    # ... and one whose lead-in read g is in the right unit: no other check may say otherwise
+    unit_known = lead_in_units(mr.record["channels"]) if mr is not None else set()
     if wiring == "warn":
         units = [Finding(WARNING, f.check, f.message, f.run, f.channel, f.fix) for f in units]
     Y = rd.matrix()
@@ -286,8 +341,10 @@ def _check_run(ds, r):
         if not np.any(Yhat):
             out += units
             return out  # a flat road excites nothing: nothing to check the data against
-    wire = (wiring_fix(Y, Yhat, rd.fs, geom, _entry_factors(entries))
-            if wiring != "off" else None)
+        Y, Yhat = _as_recorded(ds, rid, Y, Yhat)
+    # with the start off, the rigid-body identities alone (they need no road) judge the wiring
+    wire = (wiring_fix(Y, None if start_off is not None else Yhat, rd.fs, geom, _entry_factors(entries),
+                       unit_known) if wiring != "off" else None)
     Yc = Y
     if wire and wire["fix"]:
         units = [f for f in units if f.channel not in wire["fix"]]
@@ -314,25 +371,59 @@ def _check_run(ds, r):
         out.append(Finding(WARNING, "wiring", f"run '{rid}': the body accelerometers and the gyro do not agree as "
                            f"one rigid body (residual {e_id:.0%}) and no swap, sign or unit explains it: check "
                            "the sensors' positions (at the spring/damper top mounts), units and the map", rid))
-    if wiring != "off" and Yhat is not None and not (wire and wire["fix"]):
-        amp = axle_amplitude_findings(rid, entries, Y, Yhat, skip={f.channel for f in units})
+    if wiring != "off" and Yhat is not None and start_off is None and not (wire and wire["fix"]):
+        amp = axle_amplitude_findings(rid, entries, Y, Yhat, skip={f.channel for f in units} | unit_known)
         if wiring == "warn":
             amp = [Finding(WARNING, f.check, f.message, f.run, f.channel, f.fix) for f in amp]
         units += amp
     out += units
     if track is None or _level(ds, rid, "track") == "off":
         return out
+    if start_off is not None:
+        out.append(_at_level(ds, rid, start_off))
+        return out
     rho = _score(Yc, Yhat)
     if rho < MATCH_MIN:
         f = match_finding(rid, r.track, r.speed, rho, (yield from _alternatives(ds, rid)))
-        if _level(ds, rid, "track") == "warn":
-            f = Finding(WARNING, f.check, f.message + " ([checks] track = \"warn\")", f.run, f.channel)
-        else:
-            f = Finding(f.severity, f.check, f.message + " (set [checks] track = \"warn\" to go on anyway)",
-                        f.run, f.channel)
-        out.append(f)
+        out.append(_at_level(ds, rid, f))
     return out
 
 
+def _as_recorded(ds, rid, Y, Yhat):
+    """The data and the nominal response as the checks compare them (SPEC §11): the response through the
+    run's declared sensor chain (an AC-coupled hub sensor's phase lead on a slow bump is the chain's, not a
+    wiring mistake), and the samples where a channel sat at its range left out of both (0)."""
+    chain = SensorChain(ds.sensor_filters(rid), 1.0 / ds.data[rid].fs)
+    if chain.active:
+        Yhat = chain.apply(Yhat)
+    clipped = ds.clipped(rid)
+    if clipped is not None:
+        Y, Yhat = np.where(clipped, 0.0, Y), np.where(clipped, 0.0, Yhat)
+    return Y, Yhat
+
+
+def _at_level(ds, rid, f: Finding) -> Finding:
+    """A track finding at the run's ``[checks] track`` level, saying how to relax it."""
+    if _level(ds, rid, "track") == "warn":
+        return Finding(WARNING, f.check, f.message + " ([checks] track = \"warn\")", f.run, f.channel)
+    return Finding(f.severity, f.check, f.message + " (set [checks] track = \"warn\" to go on anyway)",
+                   f.run, f.channel)
+
+
+def _given_start(ds, rid, mr, track):
+    """The step checking a run's given start (:func:`start_finding`): returns the finding or None."""
+    run0 = dataclasses.replace(mr, window=None, start=None)  # the run as read, unaligned, as an estimate sees it
+    given = float(mr.start)
+    try:
+        best, rho_best, rho_given = yield from start_check_steps(run0, ds.geometry, track, given, START_SAMPLES)
+    except DataError:  # nothing to correlate (a response or a recording all zero): the other checks say so
+        return None
+    if mr.distance is None:
+        travel = abs(given - best) * mr.speed
+    else:
+        travel = float(abs(np.diff(mr.distance(np.array([best, given])))[0]))
+    return start_finding(rid, track, given, best, rho_best, rho_given, mr.fs, travel)
+
+
 __all__ = ["MATCH_MIN", "NOMINAL_LEAD_IN", "check_coverage", "check_dataset", "check_reach", "check_steps",
-           "feature_span", "match_finding", "speed_candidates"]
+           "feature_span", "match_finding", "speed_candidates", "start_finding"]

@@ -188,6 +188,43 @@ def _fixed_point(mr: MeasuredRun, track, tm, s):
     return s, score
 
 
+def _peak_near(mr: MeasuredRun, track, tm, s: float, near: float):
+    """The step giving the highest all-lags correlation of the run with the car's response (the measure
+    :func:`start_steps` maximises) within ``near`` samples of the start ``s``."""
+    h = 1.0 / mr.fs
+    job = (Job(track, tm, mr.speed) if mr.distance is None
+           else Job(track, tm, None, RelativeDistance(mr.distance, s)))
+    (Yhat,) = responses((yield [job]))
+    lags, corr = _correlation(mr, Yhat, tm)
+    at = (s + tm[0] - mr.t_first) / h
+    close = np.abs(lags - at) <= near
+    if not close.any():
+        return float(np.interp(at, lags, corr, left=0.0, right=0.0))
+    j = int(np.flatnonzero(close)[np.argmax(corr[close])])
+    return max(_vertex(corr, j)[1], float(corr[j]))
+
+
+def start_check_steps(mr: MeasuredRun, geom, track, given: float, near: float = 3.0):
+    """The step checking a given start (:func:`rideid.conditioning.checks.check_dataset`): returns
+    ``(best start, correlation there, correlation near the given start)``.
+
+    ``mr``: the run as read, unaligned (window and start dropped). The best
+    start is the one :func:`start_steps` estimates; near the given start,
+    the highest of the same measure within ``near`` samples of it (with a
+    speed channel, of the response simulated along the given start's own
+    distance profile): a car unlike the nominal one peaks a sample or two
+    from the true start, and on a fast run the correlation falls steeply
+    within a sample. A given start a bump or a cycle of the track off
+    correlates markedly worse than the best start, which lies that bump or
+    cycle away.
+    """
+    v = mr.speed if mr.distance is None else max(mr.distance.speed_range()[1], 0.1)
+    tm = _long_grid(mr, track, geom, v)
+    (best, rho_best), rho_given = yield from gather([start_steps(mr, geom, track),
+                                                     _peak_near(mr, track, tm, given, near)])
+    return best, rho_best, rho_given
+
+
 def estimate_start(mr: MeasuredRun, P, geom, track, simulator=None):
     """``(start, correlation)``: the run's start (file time when the front axle reaches x = 0) for
     the car ``P``, by cross-correlation over all lags, to a fraction of a sample.
@@ -444,4 +481,5 @@ def speed_channel_std(mr: MeasuredRun, track, geom) -> float | None:
 
 
 __all__ = ["SHIFT_STEP", "WARP_SPACING", "DistanceWarp", "correlation_score", "cycle_slips", "distance_warp",
-           "estimate_start", "feature_span", "linearise_starts", "speed_channel_std", "start_steps", "warped"]
+           "estimate_start", "feature_span", "linearise_starts", "speed_channel_std", "start_check_steps",
+           "start_steps", "warped"]

@@ -321,7 +321,7 @@ def _rigid_fix(hyp) -> dict:
     return fix
 
 
-def wiring_fix(Y: np.ndarray, Yhat: np.ndarray | None, fs: float, geom, F=None):
+def wiring_fix(Y: np.ndarray, Yhat: np.ndarray | None, fs: float, geom, F=None, unit_known=()):
     """The re-wiring the data support, or None when the map is right.
 
     The rigid-body identities pick the consistent hypotheses (and the unit
@@ -335,6 +335,11 @@ def wiring_fix(Y: np.ndarray, Yhat: np.ndarray | None, fs: float, geom, F=None):
     ``"alternatives"`` (a front/rear swap of the body channels and a flipped
     pitch gyro look alike without a road); the axle channels are not checked.
 
+    ``unit_known``: channels whose unit the lead-in has confirmed
+    (:func:`lead_in_units`); no hypothesis puts one of them in another
+    unit, so the wiring check never says "wrong unit" where the lead-in says
+    "unit right".
+
     Returns
     -------
     dict or None
@@ -345,6 +350,10 @@ def wiring_fix(Y: np.ndarray, Yhat: np.ndarray | None, fs: float, geom, F=None):
     info = {}
     A = assignment(Y, Yhat) if Yhat is not None else None
     hyps, scores = rigid_body_scores(Y, fs, geom, F)
+    known = [c for c in range(4) if CHANNELS[c] in unit_known]
+    if hyps is not None and known:
+        scores = np.where([not h[6] and any(abs(abs(h[1][c]) - 1.0) > 1e-9 for c in known) for h in hyps],
+                          np.inf, scores)
     if hyps is not None:
         ident = 0
         e_id = float(scores[ident])
@@ -476,6 +485,18 @@ def unit_findings(run_id: str, entries: dict, record: dict) -> list[Finding]:
     return out
 
 
+def lead_in_units(record: dict) -> set:
+    """The acceleration channels whose unit the lead-in confirms: with gravity included it read about ±g.
+
+    ``record``: SPEC channel -> its preprocessing record (as :func:`unit_findings`). A channel whose lead-in
+    mean lies within ±20 % of g (upside down or not) is in the unit it was mapped with; the checks then name
+    no unit mistake on it (a swapped cable or a start off explains what else looks wrong).
+    """
+    return {c for c, rec in record.items()
+            if c in CHANNELS and rec.get("removed_as") == "gravity and bias" and not rec.get("flat_lined")
+            and 0.8 * G0 < abs(float(rec.get("removed", 0.0))) < 1.2 * G0}
+
+
 #: an axle channel's amplitude against the road's (nominal car) may differ from its siblings' by this
 #: factor either way before a unit is blamed: real cars differ from the nominal one by far less than g
 AMPLITUDE_BAND = 2.5
@@ -576,4 +597,4 @@ def fix_entries(fix: dict, entries: dict) -> list[str]:
 
 
 __all__ = ["assignment", "axle_amplitude_findings", "best_assignment", "corrected", "describe_fix", "fix_entries",
-           "lowpass_gram", "rigid_body_scores", "unit_findings", "wiring_fix"]
+           "lead_in_units", "lowpass_gram", "rigid_body_scores", "unit_findings", "wiring_fix"]

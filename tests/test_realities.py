@@ -1,0 +1,141 @@
+"""Diagnoses on a car with every reality of SPEC §11 at once (issue 39, item 5): tracks 4 % off their drawing
+with 1.5 mm RMS of unevenness, the four hub accelerometers AC-coupled at 0.5 Hz, one clipping at ±5 g, a noisy
+10 Hz GPS speed channel, an engine on mounts (tests/realities_case.py, independent simulators). The wiring
+check must leave the channels as wired, a start given right must pass, and a start given a cycle off must be
+named as the start, nothing else.
+"""
+
+import sys
+import tomllib
+import warnings
+from pathlib import Path
+
+import numpy as np
+import pytest
+import tomli_w
+
+import rideid
+from rideid.conditioning import checks, wiring
+from rideid.conditioning.nominal import responses, run_steps
+from rideid.errors import DataWarning
+
+sys.path.insert(0, str(Path(__file__).parent))
+import realities_case  # noqa: E402
+
+#: the twist, and the two runs on which axle_az_fl clips (2.5 % and 7.8 % of their file samples, seed 1)
+RUNS = ("T_HH", "H_HH", "W_H")
+
+
+@pytest.fixture(scope="module")
+def realities(tmp_path_factory):
+    folder = tmp_path_factory.mktemp("realities")
+    clipped = realities_case.write_dataset(folder, seed=1, runs=RUNS)
+    return folder, clipped
+
+
+def _load(path):
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", DataWarning)
+        return rideid.load_dataset(path)
+
+
+def _nominal(ds, rid):
+    """The nominal car's response on the run as loaded (what the checks compare the data with)."""
+    rd = ds.data[rid]
+    track = ds.manifest.tracks[ds.manifest.run(rid).track]
+
+    def step():
+        (Yhat,) = responses((yield [checks._nominal_job(track, rd.time, None, rd.distance)]))
+        return Yhat
+    return run_steps(step(), ds.geometry, None, None)
+
+
+def test_the_wiring_check_leaves_the_channels_as_wired(realities):
+    """No finding; the rigid body as wired holds to 4e-4 (a proposal needs 0.05 and a tenfold gain), and the
+    channels as wired are the best assignment to the road of the body, the hubs and the gyro (a re-wiring
+    needs to beat it by 0.6 of summed correlation). Measured on the built-in car's ten runs, seeds 1-3: rigid
+    residual as wired at most 4.3e-4, hubs as wired 2.41-3.65 of 4 and never beaten (the washboard's
+    left/right swap ties: its road is the same under both wheels)."""
+    folder, clipped = realities
+    assert clipped["W_H"] > 0.01 and clipped["H_HH"] > 0.001  # the hub sensor clips
+    ds = _load(folder)
+    assert [f for f in ds.findings if f.check in ("wiring", "track")] == []
+    for rid in RUNS:
+        Y = ds.data[rid].matrix()
+        hyps, scores = wiring.rigid_body_scores(Y, ds.data[rid].fs, ds.geometry)
+        assert scores[0] < 1e-3, (rid, scores[0])
+        A = wiring.assignment(Y, _nominal(ds, rid))
+        for group in ("body", "axle", "gyro"):
+            idx, perm, signs, score, ident, C = A[group]
+            assert score - ident < 1e-6, (rid, group, perm, signs)
+        assert A["axle"][4] > 2.0 and A["body"][4] > 2.5, rid
+        assert abs(ds.measured[rid].start - realities_case.OFFSET) < 0.01  # estimated within two samples
+
+
+def _with_starts(folder, tmp_path, starts):
+    doc = tomllib.loads((folder / "dataset.toml").read_text())
+    for r in doc["runs"]:
+        r["file"] = str(folder / r["file"])
+        if r["id"] in starts:
+            r["start"] = starts[r["id"]]
+    out = tmp_path / "ds"
+    out.mkdir()
+    (out / "dataset.toml").write_text(tomli_w.dumps(doc))
+    return out
+
+
+def test_starts_given_right_pass(realities, tmp_path):
+    """The true starts given: the start check (and every other) finds nothing."""
+    folder, _ = realities
+    ds = _load(_with_starts(folder, tmp_path, {rid: realities_case.OFFSET for rid in RUNS}))
+    assert [f for f in ds.findings if f.check in ("wiring", "track")] == []
+
+
+def test_a_start_a_cycle_off_is_the_one_diagnosis(realities, tmp_path, capsys):
+    """W_H's start given one washboard cycle late (0.8 m at 10 m/s): one line naming the start, exit 2."""
+    from rideid.cli import main
+    folder, _ = realities
+    given = realities_case.OFFSET + 0.08
+    path = _with_starts(folder, tmp_path, {"W_H": given})
+    out = tmp_path / "out"
+    code = main(["identify", str(path), "--out", str(out), "--quiet", "--generations", "1", "--population", "8",
+                 "--no-polish", "--no-report"])
+    errors = [ln for ln in capsys.readouterr().err.splitlines() if not ln.startswith("rideid: warning:")]
+    assert code == 2 and not out.exists()
+    assert len(errors) == 1, errors
+    line = errors[0]
+    assert "run 'W_H': its start is off: start = 2.38 s is 0.0857 s too late" in line, line
+    # the nominal car (no engine) puts the washboard's x = 0 at 2.294 s, 1.1 samples early: 1.1 cycles
+    assert "(1.1 x the track's wavelength of 0.8 m)" in line
+    assert "wired" not in line and "unit" not in line and np.isfinite(float(line.split(" at x = 0 at ")[1][:6]))
+
+
+@pytest.mark.slow
+def test_identify_runs_on_the_all_realities_case(realities, tmp_path):
+    """End to end through the command line, the powertrain in the model: the checks pass the data as wired,
+    the starts are estimated and polished, and what the fit gives is recorded (printed) against the truth.
+
+    Measured (seed 1, three runs; 396 s on two cores shared with two other jobs): the twelve within 12.6 %
+    (k_tf +12.6 %, m_uf +11.9 %, m_ur +9.3 %, k_tr +9.8 %, c_sf +5.7 %, a -3.4 %, the rest within 2 %), the
+    engine's mass -5.4 %, its bounce frequency -0.25 %, not adequate: three runs of as-built tracks leave the
+    unsprung side and the engine's pitch (I_p +92 %, zeta_pp at its bound) poorly determined. The issue's
+    "every parameter within 2 %" is not met on this case."""
+    import json
+    import subprocess
+    folder, _ = realities
+    out = tmp_path / "fit"
+    env = {**__import__("os").environ, "PYTHONPATH": str(Path(rideid.__file__).parents[1])}
+    proc = subprocess.run([sys.executable, "-m", "rideid", "identify", str(folder), "--out", str(out), "--seed", "1",
+                           "--model", "powertrain", "--no-report", "--quiet"], capture_output=True, text=True,
+                          env=env)
+    assert proc.returncode == 0, proc.stderr
+    res = json.loads((out / "result.json").read_text())
+    assert not [c for c in res.get("checks", []) if c["check"] in ("wiring", "track")]
+    truth = realities_case.truth()
+    errs = {n: res["parameters"][n]["value"] / truth[n] - 1 for n in truth if n in res["parameters"]
+            and not res["parameters"][n].get("fixed") and truth[n] != 0}
+    print({n: f"{100 * e:+.2f} %" for n, e in errs.items()}, res.get("adequacy", {}).get("adequate"))
+    for rid in RUNS:
+        assert abs(res["preprocessing"][rid]["start"]["value"] - realities_case.OFFSET) < 0.01
+    assert max(abs(e) for n, e in errs.items() if n in rideid.NAMES) < 0.2
+    assert abs(errs["m_p"]) < 0.1 and abs(errs["f_pb"]) < 0.02
