@@ -71,7 +71,9 @@ def run_counts(space, sim, P0, rho: float | None = None) -> np.ndarray:
     """Per run and axle the samples beyond the previous knot, ``(n_runs, 2, K)``, of car ``P0`` (a full row)."""
     if rho is None:
         rho = LIFT_OFF_RHO
-    cf = SimpleNamespace(space=space, sim=sim, simulator=Simulator(space.layout))
+    # a plan's candidate runs start at rest: no lead-in (rideid.estimate.cost.CostFunction.input_runs, .lead)
+    cf = SimpleNamespace(space=space, sim=sim, simulator=Simulator(space.layout), input_runs=sim.runs,
+                         lead=(0,) * len(sim.runs))
     knots = space.layout.knots
     return np.array([[knot_counts(knots, v) for v in pair]
                      for pair in suspension_velocities_by_run(cf, P0, rho=rho)])
