@@ -46,6 +46,7 @@ def road_fit(tmp_path_factory):
     return rc, sim, d / "fit"
 
 
+@pytest.mark.slow  # moved to CI's slow pass: make test under 10 minutes on two cores
 def test_the_car_from_two_unknown_roads(road_fit):
     rc, sim, fit = road_fit
     assert rc == 0
@@ -61,6 +62,7 @@ def test_the_car_from_two_unknown_roads(road_fit):
     assert "auto" in doc["model"]["selection"] and "not run on unknown roads" in doc["model"]["note"]
 
 
+@pytest.mark.slow  # moved to CI's slow pass: make test under 10 minutes on two cores
 def test_rideid_report_again_draws_the_fitted_roads_response(road_fit):
     """The response of a run on an unknown road is the car at the road it estimated, which result.json alone
     cannot simulate again: identify writes it beside the road (road/<run>.response.csv) and `rideid report`
@@ -84,6 +86,7 @@ def test_rideid_report_again_draws_the_fitted_roads_response(road_fit):
     assert (fit / "report.html").is_file()
 
 
+@pytest.mark.slow  # moved to CI's slow pass: make test under 10 minutes on two cores
 def test_the_roads_and_their_classes(road_fit):
     _, sim, fit = road_fit
     doc = json.loads((fit / "result.json").read_text())
@@ -106,6 +109,7 @@ def test_the_roads_and_their_classes(road_fit):
     assert (fit / "report.html").is_file() and (fit / "figures" / "road_B40.png").is_file()
 
 
+@pytest.mark.slow  # moved to CI's slow pass: make test under 10 minutes on two cores
 def test_the_cost_of_an_unknown_road_fit_means_what_it_means_on_a_track(road_fit):
     """result.json's cost (and the terminal's "cost ...") was the polish's own objective, about 1 by
     construction ("cost 1"). It is now rideid.cost's E_r on every run: each channel's squared error over its
@@ -122,6 +126,7 @@ def test_the_cost_of_an_unknown_road_fit_means_what_it_means_on_a_track(road_fit
     assert doc["cost"] == pytest.approx(np.mean(expected), rel=0.05), (doc["cost"], expected)
 
 
+@pytest.mark.slow  # moved to CI's slow pass: make test under 10 minutes on two cores
 def test_a_dataset_mixing_a_track_and_a_road(tmp_path):
     sim = simulate(tmp_path, [RUNS[0], {"id": "T", "track": "tw", "speed": 4.0, "fs": 200.0, "duration": 8.0}],
                    [TWIST], noise=0.01)
@@ -150,6 +155,7 @@ def test_a_track_run_that_begins_moving_is_fitted_as_a_road_run(tmp_path):
     assert ds.moving("Tm") and not ds.moving("T") and ds.road_known("Tm")
 
 
+@pytest.mark.slow  # moved to CI's slow pass: make test under 10 minutes on two cores
 def test_a_nonlinear_model_is_refused_with_road_runs(road_fit, tmp_path, capsys):
     _, sim, _ = road_fit
     rc = main(["identify", str(sim), "--out", str(tmp_path / "f"), "--model", "damper_curves", "--quiet"])

@@ -333,6 +333,7 @@ def test_bound_findings_flag_within_one_percent():
 # ---------------------------------------------------------------------------
 # After the fit: bounds flagged; the recorded cost is the cost at the final parameters and starts
 
+@pytest.mark.slow  # moved to CI's slow pass: make test under 10 minutes on two cores
 def test_estimate_on_a_bound_is_flagged_everywhere(sim_dataset, tmp_path, capsys):
     import json
     import shutil
@@ -380,6 +381,7 @@ def test_recorded_cost_is_at_the_final_parameters_and_starts(hatch, tmp_path):
     assert res.cost == pytest.approx(res.polish["cost_after"], rel=1e-6)
 
 
+@pytest.mark.slow  # moved to CI's slow pass: make test under 10 minutes on two cores
 def test_a_noisy_speed_channel_is_corrected_and_its_noise_is_in_the_error_bars(tmp_path):
     """A GPS speed channel with 0.1 m/s of white noise at 100 Hz: its integral drifts by centimetres, so the
     polish estimates each run's distance correction (knots every WARP_SPACING s, their increments held to

@@ -39,6 +39,7 @@ def information(sc, noise, run=0):
     return roadinfo.road_run_information(sc, space, [x0], sc.runs[run], run, noise, seed=0), space, x0
 
 
+@pytest.mark.slow  # moved to CI's slow pass: make test under 10 minutes on two cores
 def test_road_information_scales_with_noise_and_duration(tmp_path):
     sc = scenario(tmp_path, [ROAD, dict(ROAD, id="B11long", duration=16.0)], tracks_from_builtin=False)
     f1, f2 = 0.01, 0.03
@@ -59,6 +60,7 @@ def test_road_information_scales_with_noise_and_duration(tmp_path):
     assert roadinfo.road_seeds(sc2.runs[0], 0, 0) == [7]
 
 
+@pytest.mark.slow  # moved to CI's slow pass: make test under 10 minutes on two cores
 def test_plan_ranks_road_runs_beside_track_runs(tmp_path, capsys):
     sc = scenario(tmp_path, [ROAD, dict(ROAD, id="C7", road_class="C", speed=7.0)])
     rc = main(["plan", str(sc.path), "--out", str(tmp_path / "plan"), "--budget-runs", "2", "--quiet"])

@@ -192,6 +192,7 @@ def test_api_docstrings():
 
 # -- running ---------------------------------------------------------------
 
+@pytest.mark.slow  # moved to CI's slow pass: make test under 10 minutes on two cores
 def test_monte_carlo_on_a_local_cluster(folder, reference):
     assert (reference.tasks, reference.done, reference.failed, reference.computed) == (4, 4, 0, 4)
     rows = table(reference.results)
@@ -249,6 +250,7 @@ def test_summary_takes_the_crlb_from_rideid_plan(folder, reference, monkeypatch)
     assert by["I_xx"]["crlb_std"] is None and "from rideid.plan" in notes[0]
 
 
+@pytest.mark.slow  # moved to CI's slow pass: make test under 10 minutes on two cores
 def test_resume_after_sigkill_recomputes_only_unfinished_tasks(folder, reference, cluster):
     out = folder / "out-killed"
     addr = cluster.scheduler_address
@@ -333,6 +335,7 @@ def test_external_scheduler_and_worker(folder, reference):
                 q.wait()
 
 
+@pytest.mark.slow  # moved to CI's slow pass: make test under 10 minutes on two cores
 def test_failing_task_is_recorded_and_the_others_finish(tmp_path, folder, cluster):
     sc = rideid.load_scenario(folder / "small.toml")
     data, _ = rideid.simulate_manifest(sc, noise=0.01, seed=7)
