@@ -21,8 +21,9 @@ demo: $(STAMP)
 # lint (ruff, configured in pyproject.toml), then the default suite on every core (pytest-xdist). Measured on a
 # fresh clone of two otherwise idle cores: 10.9 minutes in all, 9.9 of them the tests (19.4 minutes of CPU time,
 # user + sys), the rest making .venv; then 10.6 minutes (9.2 the tests) with three 33-57 s tests moved to CI's
-# slow pass, and two of the three logger round trips (33-42 s each) after them; it takes longer when other jobs
-# share the cores
+# slow pass, and two of the three logger round trips (33-42 s each) after them; with the next wave's new default
+# tests 12.8 minutes (11 the tests), then 8.7 minutes (7.1 the tests) with fifteen 17-48 s tests moved to CI's
+# slow pass; it takes longer when other jobs share the cores
 test: $(STAMP)
 	$(PY) -m ruff check src tests benchmarks
 	$(PY) -m pytest -q -n auto
