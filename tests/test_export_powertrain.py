@@ -31,18 +31,10 @@ from fmpy.validation import validate_fmu  # noqa: E402
 
 from rideid.exporter import car_from_scenario, export  # noqa: E402
 from rideid.exporter.drive import drive_fmu  # noqa: E402
-from rideid.exporter.fmu import INPUTS, POWERTRAIN_OUTPUTS, NoBinary, find_compiler, max_step  # noqa: E402
+from rideid.exporter.fmu import INPUTS, POWERTRAIN_OUTPUTS, max_step  # noqa: E402
+from test_export import needs_cc  # noqa: E402
 
 
-def _has_cc() -> bool:
-    try:
-        find_compiler()
-    except NoBinary:
-        return False
-    return True
-
-
-needs_cc = pytest.mark.skipif(not _has_cc(), reason="no C compiler")
 OUTPUTS = tuple(CHANNELS) + tuple(o[0] for o in POWERTRAIN_OUTPUTS)
 #: FMU communication steps per data sample (the road between samples: the cubic Hermite of drive_fmu)
 SUB = 16

@@ -124,6 +124,13 @@ class Dataset:
             return None
         return M if M.any() else None
 
+    def subset(self, runs) -> "Dataset":
+        """This dataset with only ``runs`` (run specs of it; the manifest otherwise the same)."""
+        ids = {r.id for r in runs}
+        man = replace(self.manifest, runs=tuple(r for r in self.runs if r.id in ids))
+        return Dataset(man, {k: v for k, v in self.data.items() if k in ids},
+                       {k: v for k, v in self.measured.items() if k in ids}, self.findings)
+
     def with_data(self, data: dict) -> "Dataset":
         """A new dataset with other run data (same manifest and measured runs)."""
         return Dataset(self.manifest, {r.id: data[r.id] for r in self.runs}, self.measured)

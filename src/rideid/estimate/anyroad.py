@@ -66,7 +66,6 @@ from .identify import (DEFAULT_GENERATIONS, DEFAULT_POPULATION, identify as iden
 from .jade import JadeSolver, make_rng, stop_requested
 from .result import History, IdentificationResult
 from .uncertainty import andrews_bandwidth, estimate_covariance, long_run_covariance, run_scores
-from ..data.dataset import Dataset
 
 #: an unknown-road run's speed may vary by this fraction of its mean (the delay is taken as constant)
 SPEED_TOLERANCE = 0.02
@@ -137,10 +136,7 @@ def road_run_error(rr, y, fitted) -> float:
 
 def _sub_dataset(ds, runs):
     """``ds`` with only ``runs`` (same manifest otherwise)."""
-    ids = {r.id for r in runs}
-    man = replace(ds.manifest, runs=tuple(r for r in ds.runs if r.id in ids))
-    return Dataset(man, {k: v for k, v in ds.data.items() if k in ids},
-                   {k: v for k, v in ds.measured.items() if k in ids}, ds.findings)
+    return ds.subset(runs)
 
 
 def _pinv(H):

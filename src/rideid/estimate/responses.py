@@ -67,16 +67,6 @@ def _matches(per_run: dict | None, dataset, rows: bool = True) -> bool:
     return not rows or all(len(per_run[r.id]) == len(dataset.data[r.id].time) for r in dataset.runs)
 
 
-def _only(dataset, runs):
-    """``dataset`` with only ``runs`` (None for none)."""
-    if not runs:
-        return None
-    ids = {r.id for r in runs}
-    man = replace(dataset.manifest, runs=tuple(r for r in dataset.runs if r.id in ids))
-    return type(dataset)(man, {k: v for k, v in dataset.data.items() if k in ids},
-                         {k: v for k, v in dataset.measured.items() if k in ids}, dataset.findings)
-
-
 def complete(result, dataset, simulator: Simulator | None = None):
     """``result`` with its response (and with damper curves its suspension velocities) on ``dataset``'s runs:
     the result's own where it has them for exactly these runs and samples, else simulated here.
@@ -89,7 +79,8 @@ def complete(result, dataset, simulator: Simulator | None = None):
         # from road/<run>.response.csv), the rest simulated
         own = {r.id: response[r.id] for r in dataset.runs if response and r.id in response
                and len(response[r.id]) == len(dataset.data[r.id].time)}
-        rest = dataset if not own else _only(dataset, [r for r in dataset.runs if r.id not in own])
+        missing = [r for r in dataset.runs if r.id not in own]
+        rest = dataset if not own else (dataset.subset(missing) if missing else None)
         sim = {} if rest is None else (curve_responses(result, rest, simulator) if curves else simulate_runs(
             rest, {n: result.parameters[n] for n in ALL_NAMES if n in result.details}, simulator))
         response = {r.id: own[r.id] if r.id in own else sim[r.id] for r in dataset.runs}
