@@ -160,3 +160,26 @@ def test_search_costs_on_thread_slices_equal_one_batch(data, monkeypatch):
     monkeypatch.setattr(numba, "get_num_threads", lambda: 1)
     np.testing.assert_array_equal(thread_map_rows(lambda Q: calls.append(len(Q)) or Q.sum(1), rows), rows.sum(1))
     assert calls == [7]
+
+
+def test_the_projection_is_exact_for_a_powertrain_on_mounts(tmp_path):
+    """SPEC §11: a powertrain on mounts adds two coordinates (18 states): the boundary unknowns and the transient
+    columns follow the car's state count (they were 14 fixed, and the unknown-road path crashed)."""
+    from powertrain_car import ENGINE
+    from rideid.model.params import POWERTRAIN_NAMES, ROW_WIDTHS
+
+    geom, P16 = car()
+    P = np.zeros(max(ROW_WIDTHS))
+    P[:P16.size] = P16
+    for n in POWERTRAIN_NAMES:
+        P[INDEX[n]] = ENGINE[n]
+    y, _ = road_run(tmp_path, P, geom, T=10.0)
+    rr = roadfit.prepare_road_run("R", y, FS, 12.0, geom)
+    sol = roadfit.solve(P, geom, rr)
+    assert sol.f_state.shape == (18,)
+    r = roadfit.residuals(P, geom, rr)
+    signal = np.sum(np.abs(rr.Y[rr.fit]) ** 2)
+    assert r @ r / signal < 1e-7
+    # the rigid car (no powertrain) misses what the engine's modes do to the body: many times the residual
+    r0 = roadfit.residuals(P16, geom, rr)
+    assert r0 @ r0 > 1e3 * (r @ r)

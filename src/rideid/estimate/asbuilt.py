@@ -306,11 +306,12 @@ def estimate_prior(P, geom, tr: TrackRun) -> Prior:
     rr = tr.rr
     sol = roadfit.solve(P, geom, rr)
     K, c = sol.residual.shape
-    # each bin keeps c - 2 of its c complex channels after the road's two; the boundary unknowns (14 + 2 D real)
-    # take their share of the rest (14 % on a slow run: an under-stated noise over-weights the quadratic form
-    # against the log-determinant, a bias towards cars that explain more as road)
+    # each bin keeps c - 2 of its c complex channels after the road's two; the boundary unknowns (the states,
+    # 14 or 18 with a powertrain, + 2 D real) take their share of the rest (14 % on a slow run: an under-stated
+    # noise over-weights the quadratic form against the log-determinant, a bias towards cars that explain more
+    # as road)
     kept = 2 * K * max(c - 2, 1)
-    dof = kept / max(kept - 14 - 2 * rr.lead_in, 1)
+    dof = kept / max(kept - sol.f_state.size - 2 * rr.lead_in, 1)
     noise = _smooth(np.sum(np.abs(sol.residual) ** 2, axis=1) / max(c - 2, 1), NOISE_BINS) * dof
     noise = np.maximum(noise, 1e-30 * max(float(np.mean(np.abs(rr.Y[rr.fit]) ** 2)), 1e-300))
     w = rr.omega(rr.fit)

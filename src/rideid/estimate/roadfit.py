@@ -49,7 +49,7 @@ unsprung masses by several per cent):
   response's DFT is ``C (I - Phi z^-1)^-1 f`` with ``Phi = exp(A h)``,
   ``z = exp(i omega h)`` and ``f = (I - Phi^N) x_0`` one real 14-vector per
   run; it is unknown (the car may start moving, SPEC §9) and joins the
-  projection as 14 real unknowns;
+  projection as 14 real unknowns (18 with a powertrain on mounts);
 * the *rear wheels' lead-in*: during the first ``tau`` the rear wheels roll
   over road the front wheels crossed before the record began, not over the
   record's wrapped end. The rear input there is free: ``D`` real unknowns
@@ -274,7 +274,7 @@ def transfer(car: System, omega, cols) -> np.ndarray:
             rhs = (car.Vi[p] @ B[p])[None] + s[:, None, None] * (car.Vi[p] @ Br[p])[None]    # (K,14,4)
             H[p] = (CV[None] * g[:, None, :]) @ rhs
         else:
-            Ms = s[:, None, None] * np.eye(14) - A[p][None]
+            Ms = s[:, None, None] * np.eye(A.shape[-1]) - A[p][None]
             X = np.linalg.solve(Ms, B[p][None] + s[:, None, None] * Br[p][None])
             H[p] = Cy[p, cols][None] @ X
         H[p] += Dy[p, cols][None] + s[:, None, None] * Dyr[p, cols][None]
@@ -341,8 +341,9 @@ def _discrete_columns(car: System, omega, cols, h):
         g = 1.0 / (1.0 - zi[:, None] * np.exp(car.lam[0] * h)[None])                       # (K,14)
         return ((Cy[0, cols] @ car.V[0])[None] * g[:, None, :]) @ car.Vi[0][None]
     Phi = scipy.linalg.expm(A[0] * h)
-    M = np.eye(14)[None] - zi[:, None, None] * Phi[None]
-    X = np.linalg.solve(M, np.broadcast_to(np.eye(14), M.shape))
+    n = A.shape[-1]
+    M = np.eye(n)[None] - zi[:, None, None] * Phi[None]
+    X = np.linalg.solve(M, np.broadcast_to(np.eye(n), M.shape))
     return Cy[0, cols][None] @ X
 
 
@@ -371,25 +372,26 @@ def solve(P, geom: Geometry, rr: RoadRun, bins=None) -> Solution:
         return g[idx]
 
     en = np.exp(-1j * np.outer(w * h, np.arange(D)))                                         # (K, D)
-    Sf = S.reshape(-1, 14)
-    SH = np.conj(np.swapaxes(S, 1, 2))                                                        # (K,14,c)
-    G = np.zeros((14 + 2 * D, 14 + 2 * D))
-    b = np.zeros(14 + 2 * D)
+    ns = S.shape[-1]  # the car's states: 14, 18 with a powertrain on mounts (SPEC §11)
+    Sf = S.reshape(-1, ns)
+    SH = np.conj(np.swapaxes(S, 1, 2))                                                        # (K,ns,c)
+    G = np.zeros((ns + 2 * D, ns + 2 * D))
+    b = np.zeros(ns + 2 * D)
     Sr = np.concatenate([Sf.real, Sf.imag])
-    G[:14, :14] = Sr.T @ Sr
-    b[:14] = Sr.T @ np.concatenate([r.real.ravel(), r.imag.ravel()])
+    G[:ns, :ns] = Sr.T @ Sr
+    b[:ns] = Sr.T @ np.concatenate([r.real.ravel(), r.imag.ravel()])
     for j, a in enumerate((aL, aR)):
-        sl = slice(14 + j * D, 14 + (j + 1) * D)
-        G[:14, sl] = ((SH @ a[:, :, None])[..., 0].T @ en).real
-        G[sl, :14] = G[:14, sl].T
+        sl = slice(ns + j * D, ns + (j + 1) * D)
+        G[:ns, sl] = ((SH @ a[:, :, None])[..., 0].T @ en).real
+        G[sl, :ns] = G[:ns, sl].T
         b[sl] = (np.sum(np.conj(a) * r, axis=1) @ np.conj(en)).real
         for i, a2 in enumerate((aL, aR)):
-            sl2 = slice(14 + i * D, 14 + (i + 1) * D)
+            sl2 = slice(ns + i * D, ns + (i + 1) * D)
             # (n, m): sum_k conj(a e^{-iwnh}) a2 e^{-iwmh} = sum_k conj(a) a2 e^{iw(n-m)h}
             G[sl, sl2] = toeplitz(np.sum(np.conj(a) * a2, axis=1))
     d = np.sqrt(np.clip(np.diag(G), 1e-300, None))
     f = np.linalg.lstsq(G / np.outer(d, d), b / d, rcond=1e-13)[0] / d
-    fS, fL, fR = f[:14], f[14:14 + D], f[14 + D:]
+    fS, fL, fR = f[:ns], f[ns:ns + D], f[ns + D:]
     res = r - S @ fS - aL * (en @ fL)[:, None] - aR * (en @ fR)[:, None]
     return Solution(residual=res, f_state=fS, f_lead=np.stack([fL, fR]), rr=rr, car=car)
 
