@@ -294,10 +294,6 @@ class PlanProblem:
             raise DataError(f"{sc.path}: a plan needs a scenario with a [truth] table (the nominal car)")
         extensions = _extensions(sc, extensions)
         curves = CURVES in extensions
-        if road_ids and any(n in POWERTRAIN_NAMES for g in extensions for n in GROUPS.get(g, ())):
-            raise ArgumentError(f"runs on unknown roads ({', '.join(road_ids)}) cannot be planned with the powertrain "
-                                "group (SPEC §11): the road fit (docs/any-road.md) has no powertrain in this version; "
-                                "plan the powertrain on known tracks")
         if curves and road_ids:
             raise ArgumentError(f"runs on unknown roads ({', '.join(road_ids)}) cannot be planned with damper "
                                 "curves: the road fit projects the road out of a linear car (docs/any-road.md); plan "

@@ -95,9 +95,9 @@ def compute_maps(sim: BatchSimulator, geom: Geometry, baseline, run_ids, channel
     with np.errstate(divide="ignore", invalid="ignore"):
         S = 100.0 * (peaks[1:] - peaks[0][None]) / peaks[0][None]
     S = np.where(excited[None], S, np.nan)
-    with np.errstate(invalid="ignore"):
-        S_bar = np.nanmean(np.abs(S), axis=2)
-    S_bar = np.nan_to_num(S_bar, nan=0.0)
+    # mean over the runs that excite the channel; 0 where none does (one run whose channel stays still: no warning)
+    n_exc = np.sum(~np.isnan(S), axis=2)
+    S_bar = np.nansum(np.abs(S), axis=2) / np.maximum(n_exc, 1)
     rms = np.where(excited, rms, 0.0)
     mx = rms.max(axis=1, keepdims=True)
     R = np.divide(rms, mx, out=np.zeros_like(rms), where=mx > 0)
