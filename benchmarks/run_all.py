@@ -12,6 +12,7 @@ import bench_jade  # noqa: E402
 import bench_kernel  # noqa: E402
 import bench_model_auto  # noqa: E402
 import bench_nonlinear  # noqa: E402
+import bench_powertrain  # noqa: E402
 import bench_search  # noqa: E402
 import bench_study  # noqa: E402
 
@@ -43,7 +44,8 @@ def weights_study(out=sys.stdout):
 def main():
     out = Path("bench-out")
     out.mkdir(exist_ok=True)
-    for name, mod, kw in (("kernel", bench_kernel, {}), ("nonlinear", bench_nonlinear, {}), ("cost", bench_cost, {}),
+    for name, mod, kw in (("kernel", bench_kernel, {}), ("nonlinear", bench_nonlinear, {}),
+                          ("powertrain", bench_powertrain, {}), ("cost", bench_cost, {}),
                           ("identify", bench_identify, {}), ("jade", bench_jade, {}),
                           ("model_auto", bench_model_auto, {}), ("search", bench_search, {}),
                           ("study", bench_study, {"argv": []})):

@@ -201,7 +201,7 @@ def test_cli_writes_the_powertrain_block(tmp_path, capsys):
     assert main(["plan", str(_write(tmp_path, runs=("T_LH", "W_H"))), "--out", str(out), "--quiet"]) == 0
     d = json.loads((out / "plan.json").read_text())
     assert set(POWERTRAIN_NAMES) <= set(d["all_runs"]["crlb"]) and d["model"]["extensions"] == ["powertrain"]
-    assert d["powertrain"]["carriers"] == ["W_H"] and "NumPy modal backend" in d["sensitivities"]["method"]
+    assert d["powertrain"]["carriers"] == ["W_H"] and "12-state" in d["sensitivities"]["method"]
     assert "## Powertrain on mounts" in (out / "plan.md").read_text()
 
 

@@ -182,7 +182,7 @@ def test_mujoco_car_with_an_engine_agrees(scenario):
 
 
 # ---------------------------------------------------------------------------
-# identification (the NumPy backend: minutes, slow pass)
+# identification (slow pass)
 
 def _check_fit(res, truth, geom):
     for n in rideid.NAMES:
@@ -195,7 +195,7 @@ def _check_fit(res, truth, geom):
         assert res.parameters[n] == pytest.approx(truth[n], rel=0.02)
 
 
-@pytest.mark.slow  # one identification on the NumPy backend: 2-4 minutes on two busy cores
+@pytest.mark.slow  # one identification: 20-30 s on two busy cores (2-4 minutes when it ran the NumPy backend)
 def test_identify_a_car_with_an_engine_on_mounts(tmp_path):
     truth = write_dataset(tmp_path / "ds", noise=0.02, seed=3)
     ds = rideid.load_dataset(tmp_path / "ds")
@@ -240,7 +240,7 @@ def test_card_and_fmu_carry_the_powertrain(tmp_path, scenario):
     assert {n: float(by[n].start) for n in ENGINE} == ENGINE
 
 
-@pytest.mark.slow  # the plan of a powertrain car runs the NumPy backend: 10-45 s on two shared cores
+@pytest.mark.slow  # the plan of a powertrain car: 5-10 s on two shared cores (10-45 s on the NumPy backend)
 def test_plan_knows_the_powertrain(tmp_path):
     """``rideid plan`` of a scenario with a powertrain plans the group's seven too; its CRLB of the weak pitch
     pair (I_p, zeta_pp: 2.5-3 %) is what identify's std_robust measured (2.8 %, 2.6 %: docs/powertrain.md)."""

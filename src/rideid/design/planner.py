@@ -736,8 +736,8 @@ def _sensitivity_method(pb: PlanProblem, opts: PlanOptions, inf: PlanInformation
     """plan.json ``"sensitivities"``: how the derivatives were taken."""
     sens = {"method": "central finite differences through the compiled kernel", "relative_step": opts.step}
     if any(n in POWERTRAIN_NAMES for n in pb.names):
-        sens["method"] = ("central finite differences through the simulator's NumPy modal backend (a car with a "
-                          "powertrain on mounts, SPEC §11: rideid.model.simulate.simulate_modal)")
+        sens["method"] = ("central finite differences through the compiled kernel's 12-state specialisation (a car "
+                          "with a powertrain on mounts, SPEC §11)")
     if pb.curves:
         sens["method"] = ("central finite differences through the compiled nonlinear car (damper curves, RK4 with "
                           "its sub-step count pinned at the nominal car's for every row of the differences)")

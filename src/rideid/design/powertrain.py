@@ -1,7 +1,7 @@
 """Which candidate runs carry the information about a powertrain on mounts (SPEC §11, group ``powertrain``).
 
 The plan's precision table covers the powertrain's seven parameters like any other free parameter (the Fisher
-information of :mod:`rideid.design.fisher`, sensitivities through the simulator's NumPy modal backend). This module
+information of :mod:`rideid.design.fisher`, sensitivities through the simulator). This module
 says where that information comes from, per candidate run:
 
 - ``share``: the run's share of the candidates' Fisher information about each powertrain parameter alone

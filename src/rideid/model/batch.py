@@ -7,9 +7,11 @@ powertrain of SPEC §11)
 either to simulated channels or to per-run weighted squared errors, through
 the compiled kernel (:mod:`rideid.kernel`) or the plain NumPy reference
 (:func:`rideid.simulate.simulate_reference`; ``RIDEID_KERNEL=numpy``, see
-:mod:`rideid.model.backend`). The compiled kernel integrates the symmetric
-block of 8 states only: a population with a powertrain on mounts (12 states
-there) always runs the NumPy reference. :class:`rideid.model.simulator.Simulator` binds this class or the
+:mod:`rideid.model.backend`). A population with a powertrain on mounts (a
+symmetric block of 12 states, SPEC §11) runs the kernel's 12-state
+specialisation; its NumPy backend is the modal recursion
+(:meth:`BatchSimulator.outputs_modal`), the reference loop being too slow
+for it. :class:`rideid.model.simulator.Simulator` binds this class or the
 nonlinear car's :class:`rideid.model.nonlinear.NonlinearSimulator` by the
 parameter layout.
 """
@@ -23,7 +25,7 @@ import numpy as np
 from threadpoolctl import ThreadpoolController
 
 from . import backend
-from .kernel_layout import LANES, OFFSETS
+from .kernel_layout import LANES, LAYOUTS
 from .discretize import N_MAX, Discretized, n_terms, spectral_radius
 from .equations import blocks as blocks_of
 from .params import Geometry, column, has_powertrain
@@ -129,9 +131,10 @@ class BatchSimulator:
         n_chunks = n // LANES
         g = len(self.h_groups)
         nt = np.zeros((g, n_chunks), dtype=np.int64)
-        blocks = {name: [] for name in OFFSETS}
-        discs = []
         bl = blocks_of(P, self.geom)
+        ns = bl["As"].shape[-1]  # 8, or 12 with a powertrain
+        blocks = {name: [] for name in LAYOUTS[ns][0]}
+        discs = []
         radius = np.maximum(spectral_radius(bl["As"]), spectral_radius(bl["Aa"]))
         for gi, h in enumerate(self.h_groups):
             # one series length for the whole call, set by its fastest car: the truncation is then a
@@ -146,10 +149,10 @@ class BatchSimulator:
         blocks["a"] = [a] * g
         blocks["b"] = [self.geom.wheelbase - a] * g
         CO = backend.module("linear").pack_coefficients(blocks, n)
-        X0 = np.zeros((len(self.runs), 14, n))
+        X0 = np.zeros((len(self.runs), ns + 6, n))
         for ri, r in enumerate(self.runs):
             xs, xa = initial_states(discs[self.run_group[ri]], r.ud[0])
-            X0[ri, :8], X0[ri, 8:] = xs.T, xa.T
+            X0[ri, :ns], X0[ri, ns:] = xs.T, xa.T
         return CO, nt, X0
 
     def _call(self, P, Y, W, mode):
@@ -179,19 +182,17 @@ class BatchSimulator:
         """
         Y = np.ascontiguousarray(Y, dtype=float)
         W = np.ascontiguousarray(W, dtype=float)
-        if has_powertrain(P):
-            return self._errors_of(self.outputs_modal(P), P, Y, W)
         if self._use_numpy():
+            if has_powertrain(P):
+                return self._errors_of(self.outputs_modal(P), P, Y, W)
             return self.errors_reference(P, Y, W)
         err, _ = self._call(P, Y, W, 0)
         return err
 
     def outputs(self, P, pin=None):
         """Simulated channels: list over runs of ``(n_pop, n_time, 10)``."""
-        if has_powertrain(P):
-            return self.outputs_modal(P)
         if self._use_numpy():
-            return self.outputs_reference(P)
+            return self.outputs_modal(P) if has_powertrain(P) else self.outputs_reference(P)
         P = np.atleast_2d(P)
         Y = np.zeros((self.n_samples, 10))
         W = np.zeros((len(self.runs), 10))
@@ -209,7 +210,7 @@ class BatchSimulator:
 
     def outputs_modal(self, P, pin=None):
         """As :meth:`outputs`, by the modal recursion of :func:`rideid.model.simulate.simulate_modal` (NumPy,
-        any block size: the one backend of a car with a powertrain on mounts, SPEC §11)."""
+        any block size: the NumPy backend of a car with a powertrain on mounts, SPEC §11)."""
         P = np.atleast_2d(np.asarray(P, dtype=float))
         with single_threaded_blas():
             bl = blocks_of(P, self.geom)

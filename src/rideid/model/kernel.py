@@ -12,7 +12,10 @@ The same exact discretisation as :func:`rideid.model.simulate.simulate_reference
 * chunks of candidates are shared among threads (the compiled function
   releases the GIL; thread count = ``numba.get_num_threads()``);
 * the model is integrated as its symmetric (8 states, 2 inputs) and
-  antisymmetric (6 states, 2 inputs) blocks;
+  antisymmetric (6 states, 2 inputs) blocks; with a powertrain on mounts
+  (SPEC §11) the symmetric block has 12 states, integrated by a second
+  specialisation of the same IR (:func:`rideid.model.kernel_ir.generate_ir`
+  with ``ns=12``, chosen by the initial states' count);
 * road inputs enter through precomputed, parameter-independent moments;
   with tire damping the states are shifted (``xi = x - Br u``, see
   :mod:`rideid.model.discretize`) and the input rates enter the
@@ -23,7 +26,9 @@ The same exact discretisation as :func:`rideid.model.simulate.simulate_reference
 Multiply-adds per sample and candidate, with ``N`` moment terms:
 state update ``8*8 + 6*6 = 100``, inputs ``(8*2 + 6*2) N = 28 N``,
 accelerations ``4*8 + 3*6 + (4 + 3)*2*2 = 78`` (with the rate feedthrough),
-channels 12, errors 20: ``210 + 28 N``.
+channels 12, errors 20: ``210 + 28 N``. With a powertrain (12 symmetric
+states): ``12*12 + 6*6 = 180``, ``(12*2 + 6*2) N = 36 N``, ``4*12 + 3*6 +
+28 = 94``, 12 and 20: ``306 + 36 N``.
 """
 
 from __future__ import annotations
@@ -34,7 +39,7 @@ import numba
 import numpy as np
 
 from .kernel_ir import run_chunks
-from .kernel_layout import LANES, N_COEF, N_MAX_K, OFFSETS, PER_TERM
+from .kernel_layout import LANES, LAYOUTS, N_COEF, N_MAX_K, n_coef
 
 #: Candidates per chunk (the kernel pads a population to whole chunks).
 CHUNK = LANES
@@ -65,18 +70,22 @@ def pack_coefficients(blocks: dict, n: int) -> np.ndarray:
         Per sample-rate group ``g`` lists of arrays with the candidate axis
         first: ``blocks[name][g]`` of shape ``(n, *shape)`` for the fixed
         blocks of :data:`rideid.model.kernel_layout.FIXED_BLOCKS` and
-        ``(N, n, *shape)`` for ``G_s``/``G_a`` (``N <= N_MAX_K`` terms).
+        ``(N, n, *shape)`` for ``G_s``/``G_a`` (``N <= N_MAX_K`` terms). The symmetric block's size
+        (8, or 12 with a powertrain) is read off ``Phi_s`` and sets the layout
+        (:data:`rideid.model.kernel_layout.LAYOUTS`).
     n : int
         Candidates, a multiple of :data:`LANES`.
 
     Returns
     -------
-    CO : (n_groups * n_chunks * N_COEF * LANES,) float64
+    CO : (n_groups * n_chunks * n_coef(ns) * LANES,) float64
     """
     n_groups = len(blocks["Phi_s"])
     n_chunks = n // LANES
-    co = np.zeros((n_groups, n, N_COEF))
-    for name, (off, shape) in OFFSETS.items():
+    ns = blocks["Phi_s"][0].shape[-1]
+    offsets, _, per_term = LAYOUTS[ns]
+    co = np.zeros((n_groups, n, n_coef(ns)))
+    for name, (off, shape) in offsets.items():
         size = int(np.prod(shape, dtype=int))
         for g in range(n_groups):
             arr = blocks[name][g]
@@ -84,12 +93,12 @@ def pack_coefficients(blocks: dict, n: int) -> np.ndarray:
                 nt = arr.shape[0]
                 # (N, n, ...) -> (n, N, size) into the per-term slots
                 v = np.moveaxis(arr.reshape(nt, n, size), 0, 1)
-                idx = off + PER_TERM * np.arange(nt)[:, None] + np.arange(size)[None, :]
+                idx = off + per_term * np.arange(nt)[:, None] + np.arange(size)[None, :]
                 co[g][:, idx] = v
             else:
                 co[g, :, off:off + size] = arr.reshape(n, size)
     # (g, n, C) -> (g, chunk, C, lane)
-    co = co.reshape(n_groups, n_chunks, LANES, N_COEF).transpose(0, 1, 3, 2)
+    co = co.reshape(n_groups, n_chunks, LANES, n_coef(ns)).transpose(0, 1, 3, 2)
     return np.ascontiguousarray(co).ravel()
 
 
@@ -110,7 +119,8 @@ def run_kernel(CO, nterms, hf, hr, X0, run_start, run_group, UD, RD, MU, Y, W, m
     Shapes (``n`` candidates, a multiple of :data:`LANES`; ``g`` sample-rate
     groups, ``r`` runs, ``T`` samples over all runs): CO from
     :func:`pack_coefficients`, nterms (g, n_chunks) int, X0 (r, 14, n)
-    initial shifted states (symmetric block then antisymmetric), run_start
+    initial shifted states (symmetric block then antisymmetric; (r, 18, n) with a powertrain, whose
+    12-state symmetric block the coefficients must then hold), run_start
     (r + 1,), run_group (r,), UD/RD (T, 4) inputs and their rates, MU (T, 4,
     M) input moments, Y (T, 10), W (r, 10) channel weights (0 for a missing
     channel). mode 1 also writes the simulated channels into OUT (T, 10, n).

@@ -37,7 +37,7 @@ from llvmlite import ir
 from numba.core import cgutils, types
 from numba.extending import intrinsic
 
-from .kernel_layout import FIXED, LANES, N_MAX_K, PER_TERM, flat_index as _flat
+from .kernel_layout import LANES, LAYOUTS, flat_index, n_coef
 
 NAME = "rideid_kernel_run"
 #: the function's arguments in order: pointers (passed as 64-bit integers), counts and the two half-tracks
@@ -45,8 +45,20 @@ ARGS = (("cf", "ptr"), ("ct", "ptr"), ("N", "i64"), ("k0", "i64"), ("k1", "i64")
         ("MU", "ptr"), ("M", "i64"), ("Y", "ptr"), ("W", "ptr"), ("hf", "double"), ("hr", "double"),
         ("X0", "ptr"), ("n", "i64"), ("mode", "i64"), ("OUT", "ptr"), ("ERR", "ptr"))
 V = f"<{LANES} x double>"
-#: (block, states, accelerations, first state, first input)
-BLOCKS = (("s", 8, 4, 0, 0), ("a", 6, 3, 8, 2))
+
+
+def kernel_name(ns: int = 8) -> str:
+    """The IR function's name for a symmetric block of ``ns`` states (:data:`NAME` for the 8-state car)."""
+    return NAME if ns == 8 else f"{NAME}_{ns}"
+
+
+def blocks(ns: int = 8):
+    """(block, states, accelerations, first state, first input) of the two blocks, for a symmetric block of
+    ``ns`` states (8; 12 with a powertrain on mounts, SPEC §11)."""
+    return (("s", ns, 4, 0, 0), ("a", 6, 3, ns, 2))
+
+
+BLOCKS = blocks(8)
 
 
 class IRWriter:
@@ -106,15 +118,27 @@ class IRWriter:
         return self.tmp(f"fsub fast {V} {a}, {b}")
 
 
-def generate_ir(opaque: bool | None = None) -> str:
-    """LLVM IR (textual) of :data:`NAME`; pointers opaque (LLVM >= 17) or typed (older LLVM), as the
-    installed llvmlite's LLVM reads them (``opaque=None``)."""
+def generate_ir(opaque: bool | None = None, ns: int = 8) -> str:
+    """LLVM IR (textual) of :func:`kernel_name` ``(ns)`` for a symmetric block of ``ns`` states (8, or 12
+    with a powertrain on mounts; the antisymmetric block has 6); pointers opaque (LLVM >= 17) or typed
+    (older LLVM), as the installed llvmlite's LLVM reads them (``opaque=None``).
+
+    The states are ``ns + 6`` vectors: the symmetric block's (positions, then rates from ``ns / 2``) then
+    the antisymmetric block's; the gyros read the pitch rate (state ``ns / 2 + 1``) and the roll rate
+    (state ``ns + 3``). A powertrain's two more coordinates enter the state update and the accelerations
+    (its columns of ``Ca_s``) and nothing else."""
     if opaque is None:
         import llvmlite.binding as llvm
         opaque = llvm.llvm_version_info[0] >= 17
     w = IRWriter(opaque)
+    nx = ns + 6
+
+    def _flat(name, *ij):
+        return flat_index(name, *ij, ns=ns)
+
+    fixed, per_term = LAYOUTS[ns][1], LAYOUTS[ns][2]
     args = ", ".join(f"i64 %i{a}" if kind == "ptr" else f"{kind} %{a}" for a, kind in ARGS)
-    w(f"define void @{NAME}({args}) nounwind {{")
+    w(f"define void @{kernel_name(ns)}({args}) nounwind {{")
     w("entry:")
     for a, kind in ARGS:
         if kind == "ptr":
@@ -124,7 +148,7 @@ def generate_ir(opaque: bool | None = None) -> str:
     hf = w.splat("%hf")
     hr = w.splat("%hr")
     x0 = []
-    for i in range(14):
+    for i in range(nx):
         off = w.tmp(f"mul i64 %n, {i}")
         x0.append(w.vload("%X0", off))
     w("  %any = icmp slt i64 %k0, %k1")
@@ -132,14 +156,14 @@ def generate_ir(opaque: bool | None = None) -> str:
 
     # -- one sample: accelerations, channels, errors
     w("sample:")
-    xs = [f"%x{i}" for i in range(14)]
+    xs = [f"%x{i}" for i in range(nx)]
     w("  %k = phi i64 [ %k0, %entry ], [ %knext, %update ]")
-    for i in range(14):
+    for i in range(nx):
         w(f"  %x{i} = phi {V} [ {x0[i]}, %entry ], [ %nx{i}, %update ]")
     w(f"  %e = phi {V} [ zeroinitializer, %entry ], [ %enew, %update ]")
     k4 = w.tmp("mul i64 %k, 4")
     g = {}
-    for blk, S, R, xo, uo in BLOCKS:
+    for blk, S, R, xo, uo in blocks(ns):
         u = [w.bcast("%UD", w.tmp(f"add i64 {k4}, {uo + c}")) for c in range(2)]
         r = [w.bcast("%RD", w.tmp(f"add i64 {k4}, {uo + c}")) for c in range(2)]
         for i in range(R):
@@ -157,7 +181,7 @@ def generate_ir(opaque: bool | None = None) -> str:
     hra = w.tmp(f"fmul fast {V} {hr}, {g['a', 0]}")
     ys = [w.add(fa, hfa), w.sub(fa, hfa), w.add(ra, hra), w.sub(ra, hra),
           w.add(g["s", 2], g["a", 1]), w.sub(g["s", 2], g["a", 1]),
-          w.add(g["s", 3], g["a", 2]), w.sub(g["s", 3], g["a", 2]), xs[5], xs[11]]
+          w.add(g["s", 3], g["a", 2]), w.sub(g["s", 3], g["a", 2]), xs[ns // 2 + 1], xs[ns + 3]]
     k10 = w.tmp("mul i64 %k, 10")
     e = "%e"
     for q, y in enumerate(ys):
@@ -181,13 +205,13 @@ def generate_ir(opaque: bool | None = None) -> str:
     # -- the moment terms over [k, k + 1], one loop per block
     pred = "next"
     acc_end = {}
-    for blk, S, _R, xo, uo in BLOCKS:
+    for blk, S, _R, xo, uo in blocks(ns):
         lab = f"terms_{blk}"
         w(f"{lab}:")
         w(f"  %t_{blk} = phi i64 [ 0, %{pred} ], [ %t_{blk}1, %{lab} ]")
         for i in range(S):
             w(f"  %v{xo + i} = phi {V} [ zeroinitializer, %{pred} ], [ %vn{xo + i}, %{lab} ]")
-        base = w.tmp(f"mul i64 %t_{blk}, {PER_TERM * LANES}")
+        base = w.tmp(f"mul i64 %t_{blk}, {per_term * LANES}")
         tb = w.ptr("%ct", base)
         m = []
         for c in range(2):
@@ -197,7 +221,7 @@ def generate_ir(opaque: bool | None = None) -> str:
         for i in range(S):
             acc = f"%v{xo + i}"
             for c in range(2):
-                acc = w.fma(acc, w.coef(tb, _flat("G_" + blk, i, c) - FIXED), m[c])
+                acc = w.fma(acc, w.coef(tb, _flat("G_" + blk, i, c) - fixed), m[c])
             w(f"  %vn{xo + i} = fadd fast {V} {acc}, zeroinitializer")
         w(f"  %t_{blk}1 = add i64 %t_{blk}, 1")
         w(f"  %more_{blk} = icmp slt i64 %t_{blk}1, %N")
@@ -207,7 +231,7 @@ def generate_ir(opaque: bool | None = None) -> str:
         acc_end.update({xo + i: f"%vn{xo + i}" for i in range(S)})
     # -- the transition over [k, k + 1]
     w("update:")
-    for blk, S, _R, xo, _uo in BLOCKS:
+    for blk, S, _R, xo, _uo in blocks(ns):
         for i in range(S):
             acc = acc_end[xo + i]
             for j in range(S):
@@ -242,47 +266,70 @@ def ir_library(context, name: str, generate, cache: dict):
     return cache[id(codegen)]
 
 
-def _library(context):
-    """This kernel's IR module, to link into the driver's library (:func:`ir_library`)."""
-    return ir_library(context, "rideid_kernel_ir", generate_ir, _LIBRARY)
+def _library(context, ns: int = 8):
+    """This kernel's IR module for a symmetric block of ``ns`` states, to link into the driver's library
+    (:func:`ir_library`)."""
+    cache = _LIBRARY.setdefault(ns, {})
+    return ir_library(context, f"rideid_kernel_ir_{ns}" if ns != 8 else "rideid_kernel_ir",
+                      lambda: generate_ir(ns=ns), cache)
 
 
 _ARG_TYPES = [types.float64 if kind == "double" else types.int64 for _, kind in ARGS]
-#: doubles per chunk's coefficient block
-_COEF = (FIXED + PER_TERM * N_MAX_K) * LANES
-_FIXED_L = FIXED * LANES
 
 
-@intrinsic
-def _run_block(typingctx, cf, ct, N, k0, k1, UD, RD, MU, M, Y, W, hf, hr, X0, n, mode, OUT, ERR):
-    """A call of :data:`NAME`, whose IR module is linked into the caller's library."""
-    sig = types.void(*_ARG_TYPES)
+def _run_block_intrinsic(ns: int):
+    """The intrinsic calling :func:`kernel_name` ``(ns)``, whose IR module is linked into the caller's
+    library."""
+    name = kernel_name(ns)
 
-    def codegen(context, builder, signature, args):
-        context.add_linking_libs([_library(context)])
-        fnty = ir.FunctionType(ir.VoidType(), [ir.DoubleType() if kind == "double" else ir.IntType(64)
-                                               for _, kind in ARGS])
-        fn = cgutils.get_or_insert_function(builder.module, fnty, NAME)
-        builder.call(fn, args)
-        return context.get_dummy_value()
+    def run_block(typingctx, cf, ct, N, k0, k1, UD, RD, MU, M, Y, W, hf, hr, X0, n, mode, OUT, ERR):
+        sig = types.void(*_ARG_TYPES)
 
-    return sig, codegen
+        def codegen(context, builder, signature, args):
+            context.add_linking_libs([_library(context, ns)])
+            fnty = ir.FunctionType(ir.VoidType(), [ir.DoubleType() if kind == "double" else ir.IntType(64)
+                                                   for _, kind in ARGS])
+            fn = cgutils.get_or_insert_function(builder.module, fnty, name)
+            builder.call(fn, args)
+            return context.get_dummy_value()
+
+        return sig, codegen
+
+    run_block.__name__ = run_block.__qualname__ = f"_run_block_{ns}"
+    return intrinsic(run_block)
+
+
+#: a call of :data:`NAME` (the 8-state car) and of its 12-state specialisation (a powertrain on mounts)
+_run_block = _run_block_intrinsic(8)
+_run_block_12 = _run_block_intrinsic(12)
+#: doubles per chunk's coefficient block, and before its first moment term, per symmetric block size
+_COEF = n_coef(8) * LANES
+_FIXED_L = LAYOUTS[8][1] * LANES
+_COEF_12 = n_coef(12) * LANES
+_FIXED_L_12 = LAYOUTS[12][1] * LANES
 
 
 @numba.njit(cache=True, nogil=True)
 def run_chunks(ch0, ch1, CO, n_chunks, nterms, hf, hr, X0, run_start, run_group, UD, RD, MU, Y, W,
                mode, ERR, OUT):  # pragma: no cover - compiled
     """Integrate chunks ``ch0 <= ch < ch1`` of LANES candidates over every run (arguments: see
-    :func:`rideid.model.kernel.run_kernel`), one :data:`NAME` call per chunk and run."""
+    :func:`rideid.model.kernel.run_kernel`), one :data:`NAME` call per chunk and run; its 12-state
+    specialisation when ``X0`` holds 18 states (a powertrain on mounts), else the 8-state car's."""
     n = X0.shape[2]
+    nx = X0.shape[1]
     M = MU.shape[2]
+    coef, fixed = (_COEF_12, _FIXED_L_12) if nx == 18 else (_COEF, _FIXED_L)
     pco, pud, prd, pmu, py = CO.ctypes.data, UD.ctypes.data, RD.ctypes.data, MU.ctypes.data, Y.ctypes.data
     pw, px0, pout, perr = W.ctypes.data, X0.ctypes.data, OUT.ctypes.data, ERR.ctypes.data
     for ch in range(ch0, ch1):
         c0 = ch * LANES
         for r in range(run_group.size):
             g = run_group[r]
-            cb = pco + 8 * (g * n_chunks + ch) * _COEF
-            _run_block(cb, cb + 8 * _FIXED_L, nterms[g, ch], run_start[r], run_start[r + 1], pud, prd, pmu,
-                       M, py, pw + 8 * 10 * r, hf, hr, px0 + 8 * (r * 14 * n + c0), n, mode, pout + 8 * c0,
-                       perr + 8 * (r * n + c0))
+            cb = pco + 8 * (g * n_chunks + ch) * coef
+            ct, x0, w, err = cb + 8 * fixed, px0 + 8 * (r * nx * n + c0), pw + 8 * 10 * r, perr + 8 * (r * n + c0)
+            if nx == 18:
+                _run_block_12(cb, ct, nterms[g, ch], run_start[r], run_start[r + 1], pud, prd, pmu, M, py, w,
+                              hf, hr, x0, n, mode, pout + 8 * c0, err)
+            else:
+                _run_block(cb, ct, nterms[g, ch], run_start[r], run_start[r + 1], pud, prd, pmu, M, py, w,
+                           hf, hr, x0, n, mode, pout + 8 * c0, err)

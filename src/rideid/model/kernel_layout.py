@@ -9,6 +9,12 @@ Coefficient block of one chunk: :data:`FIXED` entries, then
 :data:`PER_TERM` entries per moment term ``t`` (``G_s[t]`` then
 ``G_a[t]``), see :func:`coefficient_layout`; each entry is :data:`LANES`
 doubles.
+
+The symmetric block has :data:`SYM_STATES` states: 8, or 12 with a
+powertrain on mounts (SPEC §11: its heave and pitch relative to the body).
+The kernel is compiled once per size; :data:`LAYOUTS` holds each size's
+layout, and the module-level :data:`OFFSETS`, :data:`FIXED`,
+:data:`PER_TERM` and :data:`N_COEF` are the 8-state car's.
 """
 
 from __future__ import annotations
@@ -18,11 +24,25 @@ LANES = 4
 #: Largest number of moment terms the kernel accepts (= rideid.model.discretize.N_MAX).
 N_MAX_K = 24
 
-#: (name, shape) of the parameter-dependent blocks, in the order of the coefficient block.
-FIXED_BLOCKS = (("Phi_s", (8, 8)), ("Ca_s", (4, 8)), ("Da_s", (4, 2)), ("Dr_s", (4, 2)),
-                ("Phi_a", (6, 6)), ("Ca_a", (3, 6)), ("Da_a", (3, 2)), ("Dr_a", (3, 2)),
-                ("a", ()), ("b", ()))
-TERM_BLOCKS = (("G_s", (8, 2)), ("G_a", (6, 2)))
+#: Sizes of the symmetric block the kernel is compiled for: the car, and the car with a powertrain on mounts.
+SYM_STATES = (8, 12)
+
+
+def fixed_blocks(ns: int = 8):
+    """(name, shape) of the parameter-dependent blocks, in the order of the coefficient block, for a
+    symmetric block of ``ns`` states."""
+    return (("Phi_s", (ns, ns)), ("Ca_s", (4, ns)), ("Da_s", (4, 2)), ("Dr_s", (4, 2)),
+            ("Phi_a", (6, 6)), ("Ca_a", (3, 6)), ("Da_a", (3, 2)), ("Dr_a", (3, 2)),
+            ("a", ()), ("b", ()))
+
+
+def term_blocks(ns: int = 8):
+    """(name, shape) of the blocks of one moment term, for a symmetric block of ``ns`` states."""
+    return (("G_s", (ns, 2)), ("G_a", (6, 2)))
+
+
+FIXED_BLOCKS = fixed_blocks(8)
+TERM_BLOCKS = term_blocks(8)
 
 
 def _size(shape):
@@ -32,8 +52,9 @@ def _size(shape):
     return s
 
 
-def coefficient_layout():
-    """Offsets (in entries per lane) of every block: ``{name: (offset, shape)}``, and the sizes.
+def coefficient_layout(ns: int = 8):
+    """Offsets (in entries per lane) of every block: ``{name: (offset, shape)}``, and the sizes, for a
+    symmetric block of ``ns`` states.
 
     Returns
     -------
@@ -44,24 +65,35 @@ def coefficient_layout():
         Entries per moment term.
     """
     off, pos = {}, 0
-    for name, shape in FIXED_BLOCKS:
+    for name, shape in fixed_blocks(ns):
         off[name] = (pos, shape)
         pos += _size(shape)
     fixed, tpos = pos, 0
-    for name, shape in TERM_BLOCKS:
+    for name, shape in term_blocks(ns):
         off[name] = (fixed + tpos, shape)
         tpos += _size(shape)
     return off, fixed, tpos
 
 
-OFFSETS, FIXED, PER_TERM = coefficient_layout()
-#: Entries per lane of a full coefficient block.
-N_COEF = FIXED + PER_TERM * N_MAX_K
+#: symmetric block size -> (offsets, fixed, per_term) of :func:`coefficient_layout`
+LAYOUTS = {ns: coefficient_layout(ns) for ns in SYM_STATES}
+OFFSETS, FIXED, PER_TERM = LAYOUTS[8]
 
 
-def flat_index(name: str, *ij) -> int:
-    """Entry (per lane) of element ``ij`` of block ``name`` in a chunk's coefficient block."""
-    off, shape = OFFSETS[name]
+def n_coef(ns: int = 8) -> int:
+    """Entries per lane of a full coefficient block, for a symmetric block of ``ns`` states."""
+    _, fixed, per_term = LAYOUTS[ns]
+    return fixed + per_term * N_MAX_K
+
+
+#: Entries per lane of a full coefficient block (the 8-state car).
+N_COEF = n_coef(8)
+
+
+def flat_index(name: str, *ij, ns: int = 8) -> int:
+    """Entry (per lane) of element ``ij`` of block ``name`` in a chunk's coefficient block (symmetric block
+    of ``ns`` states)."""
+    off, shape = LAYOUTS[ns][0][name]
     flat = 0
     for i, d in zip(ij, shape):
         flat = flat * d + i

@@ -33,7 +33,7 @@ GROUPS: dict[str, tuple[str, ...]] = {
     "powertrain": ("m_p", "x_p", "I_p", "f_pb", "zeta_pb", "f_pp", "zeta_pp"),
 }
 #: SPEC §6's groups: the ones ``--model full`` fits and ``--model auto`` weighs in its one search (the
-#: powertrain, whose model runs the NumPy backend, is weighed after it, when the car needs more).
+#: powertrain is weighed after it, when the car needs more).
 SUSPENSION_GROUPS: dict[str, tuple[str, ...]] = {g: GROUPS[g] for g in ("anti_roll_bars", "tire_damping")}
 #: The twelve and SPEC §6's four: the parameter columns of the nonlinear car (which has no powertrain) and the
 #: FMU's first sixteen parameters (a powertrain's seven follow them there).
