@@ -277,6 +277,21 @@ def identify_auto(ds, *, rng=None, seed=None, callback=None, maps=None, simulato
         crit.append(e_b)
         if e_b["fits_better"] and e_b["criterion"] is not None:
             best, chosen = e_b, bkey
+            # with the stops in, a linear group kept for what the stops explain may be spurious (a bar of
+            # nothing against the springs): the linear groups weighed again from the stop fit's covariance
+            again = _linear_groups_again(ds, r_b, chosen, e_b, rng=rng, seed=seed, maps=full.maps,
+                                         simulator=simulator, **kw_nested)
+            if again is not None:
+                k2, cf2, r2, e2 = again
+                results[k2], costs[k2] = r2, cf2
+                evaluations += r2.nfev
+                e2["fits_better"] = fits_better(k2, {cand: r.cost for cand, r in results.items()})
+                e_b["fits_better"] = fits_better(bkey, {cand: r.cost for cand, r in results.items()})
+                crit.append(e2)
+                live = [c for c in (e_b, e2) if c["fits_better"] and c["criterion"] is not None]
+                if live:
+                    best = min(live, key=lambda c: (c["criterion"], c["k"]))
+                    chosen = tuple(best["extensions"])
     # a powertrain on mounts on top of the linear choice, when what is chosen is still not adequate: one more
     # search (the powertrain's frequencies are not found by a polish from a guess)
     now = results[chosen]
@@ -476,6 +491,32 @@ def bump_candidate(ds, prev, chosen, prev_crit, *, rng=None, seed=None, maps=Non
     entry = {"extensions": list(key), "wald": 0.0, "k": k, "bump_stops_reached": reached,
              "bump_stops_at_bound": at_bound,
              "criterion": None if not reached or base is None else base + PENALTY * n_free}
+    return key, cf, r, entry
+
+
+def _linear_groups_again(ds, r_big, chosen, big_crit, *, rng=None, seed=None, maps=None, simulator=None, **kw):
+    """The linear groups of ``chosen`` weighed again from the robust covariance of its fit ``r_big`` (criterion
+    entry ``big_crit``), as :func:`_curve_subset` does when the curves come in; when a smaller set is preferred,
+    that candidate (its nonlinear groups kept) polished from ``r_big``'s values. Returns ``(candidate key, cost
+    function, result, criterion entry)`` or None when ``chosen``'s linear groups stand."""
+    sub = _curve_subset(r_big, chosen, big_crit)
+    if sub is None or big_crit.get("criterion") is None:
+        return None
+    lin, W_sub = sub
+    key = tuple(g for g in IDENTIFIABLE_ORDER + (BUMPS_GROUP,) if g in lin or (g in chosen and g not in GROUPS))
+    space = ParameterSpace(ds.known, ds.geometry, ds.manifest.bounds, extensions=key,
+                           damper_knots=knots_like(ds, r_big if CURVES_GROUP in key else None))
+    cf = CostFunction(ds, space=space, simulator=simulator)
+    x0 = np.array([r_big.parameters[n] for n in space.names])
+    r = identify_model(ds, rng=rng, seed=seed, cost=cf, maps=maps, start=x0, assess=False, **kw)
+    free = set((r_big.polish or {}).get("names", ()))
+    n_left = sum(1 for g in chosen if g in GROUPS and g not in lin for n in GROUPS[g] if n in free)
+    k = (big_crit.get("k") or 0) - n_left
+    entry = {"extensions": list(key), "wald": W_sub, "k": k,
+             "criterion": big_crit["criterion"] - PENALTY * n_left + W_sub}
+    for extra in ("bump_stops_reached", "bump_stops_at_bound"):
+        if extra in big_crit:
+            entry[extra] = big_crit[extra]
     return key, cf, r, entry
 
 
