@@ -84,13 +84,14 @@ def test_knees_between_the_default_knots_spec_csv(tmp_path, car):
 
 
 @pytest.mark.expensive  # 21 minutes on two busy cores: make test-slow runs it, CI's slow pass does not
-def test_knees_from_logger_files_with_estimated_starts(tmp_path):
+@pytest.mark.parametrize("car", list(CARS))
+def test_knees_from_logger_files_with_estimated_starts(tmp_path, car):
     sc_path = tmp_path / "sc.toml"
-    sc_path.write_text(tomli_w.dumps(scenario_doc("sedan")))
+    sc_path.write_text(tomli_w.dumps(scenario_doc(car)))
     sc = rideid.load_scenario(sc_path)
     ds = write_logger(sc, tmp_path / "log", noise=0.01, seed=2)
     res = _identify(ds, tmp_path / "fit")
-    _check("sedan", res, read_toml(sc_path)["truth"])  # the twelve less c_sf, c_sr (the curves are checked)
+    _check(car, res, read_toml(sc_path)["truth"])  # the twelve less c_sf, c_sr (the curves are checked)
     for rid, st in res["preprocessing"].items():
         assert st["start"]["value"] == pytest.approx(2.0, abs=0.5 / 200), rid
 

@@ -32,7 +32,11 @@ The candidates above are SPEC §6's groups (``rideid.model.params.SUSPENSION_GRO
 When the model chosen is not adequate, damper curves (:func:`curve_candidate`),
 bump stops (:func:`bump_candidate`) and last a powertrain on mounts
 (:func:`powertrain_candidate`, SPEC §11: one more search, its Wald statistic
-of ``m_p = 0`` at the same price per parameter) are weighed on top.
+of ``m_p = 0`` at the same price per parameter) are weighed on top. Once the
+curves, and again once the stops, are in, the chosen linear groups are
+weighed again from that fit's covariance (:func:`_curve_subset`,
+:func:`_linear_groups_again`): a group the linear model needed for what the
+nonlinear one explains is dropped when the criterion prefers fewer groups.
 """
 
 from __future__ import annotations
