@@ -181,6 +181,7 @@ def test_cli_bad_powertrain_is_one_line(tmp_path, capsys, truth, needle):
     assert not out.exists()
 
 
+@pytest.mark.slow  # the road fit's information over two generated roads: 30-100 s on two shared cores
 def test_unknown_road_candidate_with_powertrain_is_planned(tmp_path):
     """An unknown-road candidate is planned with the powertrain (the road fit projects the road out of the 18-state
     car; it was refused while the road fit knew 14 states only): finite precision for all 18, and the road run
