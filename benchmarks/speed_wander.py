@@ -119,8 +119,8 @@ def main(argv=None):
             for seed in args.seeds:
                 got = measure(CASES[case](Path(tmp) / f"{case}{seed}", seed))
                 for rid, s in got.items():
-                    print(f"| {case} | {seed} | {rid} | {[round(100 * x, 2) for x in s['deviation']]} | "
-                          f"{[round(100 * x, 2) for x in s['std']]} | {100 * s['beyond']:.2f} | "
+                    print(f"| {case} | {seed} | {rid} | {[round(100 * float(x), 2) for x in s['deviation']]} | "
+                          f"{[round(100 * float(x), 2) for x in s['std']]} | {100 * s['beyond']:.2f} | "
                           f"{100 * s['mean']:+.2f} | {s['lag_ms']} | {s['correlation']} |", flush=True)
                 worst = max((max(-s["low"], s["high"]) for s in got.values()), default=0.0)
                 z = max((float(np.max(np.abs(s["deviation"]) / s["std"])) for s in got.values()), default=0.0)

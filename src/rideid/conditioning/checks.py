@@ -15,6 +15,11 @@ conditioned and aligned (:func:`rideid.conditioning.load.align_starts`):
   Otherwise the speed (km/h typed as m/s) or the track is wrong; the checks
   re-try other speeds and the manifest's other tracks and the message names
   the one that fits.
+* **Speed held** (:func:`speed_held`, SPEC §11): a run at a constant
+  declared speed without a speed or distance channel must have held it;
+  the lags of its data against the same nominal response, window by window
+  along the track (:mod:`rideid.conditioning.speed`), refuse a run whose
+  speed wandered or was steadily another.
 
 The checks are steps (:mod:`rideid.conditioning.nominal`): they ask for the
 nominal car's responses (:func:`rideid.model.params.nominal_car`) on every

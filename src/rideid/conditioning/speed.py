@@ -44,9 +44,9 @@ from ..data.checks import ERROR, Finding
 
 #: windows over the stretch where the wheels are on the track's features
 WINDOWS = 4
-#: largest relative deviation of the speed from the declared one (between two windows) a run may show. Measured
-#: (docs/real-data.md, "A speed that wanders"): runs held at their speed show at most 0.X %, a driver wandering
-#: +-3 % 2.X % or more
+#: largest relative deviation of the speed from the declared one (the mean speed between two windows) a run may
+#: show beyond its uncertainty. Measured (docs/real-data.md, "A speed that wanders"; benchmarks/speed_wander.py):
+#: no run held at its speed shows one beyond its uncertainty, each dataset of a +-3 % driver 1.7-2.3 %
 WANDER_MAX = 0.01
 #: a run off its declared speed whose speed departs from its own mean by at most this fraction of the limit is
 #: called steady, and the speed the data show is named
