@@ -29,30 +29,32 @@ SPEED_FS = 10.0
 WANDER = 0.015
 
 
-def speed_profile(rng, v0: float):
-    """A driver's speed ``v(T)`` (m/s) around ``v0`` at file time ``T`` and the front axle's distance ``x(T)``
-    (its exact integral, 0 at ``T = OFFSET``)."""
+def speed_profile(rng, v0: float, wander: float = WANDER):
+    """A driver's speed ``v(T)`` (m/s) around ``v0`` at file time ``T`` (two sines of ``wander`` x ``v0``
+    each) and the front axle's distance ``x(T)`` (its exact integral, 0 at ``T = OFFSET``)."""
     periods, phases = rng.uniform(2.0, 6.0, 2), rng.uniform(0.0, 2 * np.pi, 2)
 
     def v(T):
         T = np.asarray(T, dtype=float)
-        return v0 * (1 + WANDER * sum(np.sin(2 * np.pi * T / p + f) for p, f in zip(periods, phases)))
+        return v0 * (1 + wander * sum(np.sin(2 * np.pi * T / p + f) for p, f in zip(periods, phases)))
 
     def integral(T):
         T = np.asarray(T, dtype=float)
-        return v0 * (T - WANDER * sum(p / (2 * np.pi) * np.cos(2 * np.pi * T / p + f)
+        return v0 * (T - wander * sum(p / (2 * np.pi) * np.cos(2 * np.pi * T / p + f)
                                       for p, f in zip(periods, phases)))
 
     x0 = float(integral(OFFSET))
     return v, (lambda T: integral(T) - x0)
 
 
-def write_case(folder, *, seed=1, gps_noise=0.03, noise=0.01, speed_channel=True, runs=RUNS, tracks=TRACKS):
+def write_case(folder, *, seed=1, gps_noise=0.03, noise=0.01, speed_channel=True, speed_column=True,
+               wander=WANDER, runs=RUNS, tracks=TRACKS):
     """Write the case as a rideid dataset in ``folder``: each run's CSV carries the ``speed`` column (10 Hz,
-    white noise of ``gps_noise`` m/s), mapped in ``[channels]`` when ``speed_channel``; otherwise each run
-    declares its constant nominal ``speed`` (the wander ignored). The same ``seed`` gives the same wander and
-    sensor noise whatever ``gps_noise`` and ``speed_channel`` are. Returns ``{run id: (v, x)}``, the speed and
-    distance as driven (functions of file time)."""
+    white noise of ``gps_noise`` m/s; left out when not ``speed_column``), mapped in ``[channels]`` when
+    ``speed_channel``; otherwise each run declares its constant nominal ``speed`` (the wander ignored). The
+    driver wanders by two sines of ``wander`` each (0: the speed held). The same ``seed`` gives the same wander
+    and sensor noise whatever ``gps_noise``, ``speed_channel`` and ``speed_column`` are. Returns ``{run id:
+    (v, x)}``, the speed and distance as driven (functions of file time)."""
     rng = np.random.default_rng(seed)
     folder.mkdir(parents=True, exist_ok=True)
     (folder / "runs").mkdir(exist_ok=True)
@@ -65,7 +67,7 @@ def write_case(folder, *, seed=1, gps_noise=0.03, noise=0.01, speed_channel=True
     driven = {}
     every = int(round(FS / SPEED_FS))
     for rid, tid, v0, duration in runs:
-        v, x = speed_profile(rng, v0)
+        v, x = speed_profile(rng, v0, wander)
         driven[rid] = (v, x)
         t, y, _ = simulate_run(by_id, (rid, tid, v0, OFFSET + duration), amplitude=1.0, rms=0.0, rng=rng,
                                distance=x)
@@ -74,13 +76,13 @@ def write_case(folder, *, seed=1, gps_noise=0.03, noise=0.01, speed_channel=True
         gps = v(t[k10]) + gps_noise * rng.standard_normal(k10.size)
         with open(folder / "runs" / f"{rid}.csv", "w", newline="") as fh:
             w = csv.writer(fh)
-            w.writerow(("time",) + CHANNELS + ("speed",))
+            w.writerow(("time",) + CHANNELS + (("speed",) if speed_column else ()))
             j = 0
             for k in range(t.size):
                 cell = ""
                 if j < k10.size and k10[j] == k:
                     cell, j = f"{gps[j]:.6f}", j + 1
-                w.writerow([f"{t[k]:.6f}"] + [f"{val:.9e}" for val in y[k]] + [cell])
+                w.writerow([f"{t[k]:.6f}"] + [f"{val:.9e}" for val in y[k]] + ([cell] if speed_column else []))
         entry = {"id": rid, "track": tid, "file": f"runs/{rid}.csv"}
         if not speed_channel:
             entry["speed"] = v0

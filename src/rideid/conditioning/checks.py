@@ -15,6 +15,11 @@ conditioned and aligned (:func:`rideid.conditioning.load.align_starts`):
   Otherwise the speed (km/h typed as m/s) or the track is wrong; the checks
   re-try other speeds and the manifest's other tracks and the message names
   the one that fits.
+* **Speed held** (:func:`speed_held`, SPEC §11): a run at a constant
+  declared speed without a speed or distance channel must have held it;
+  the lags of its data against the same nominal response, window by window
+  along the track (:mod:`rideid.conditioning.speed`), refuse a run whose
+  speed wandered or was steadily another.
 
 The checks are steps (:mod:`rideid.conditioning.nominal`): they ask for the
 nominal car's responses (:func:`rideid.model.params.nominal_car`) on every
@@ -36,6 +41,7 @@ from ..data.schema.channels import SI, UNITS, quantity
 from ..model.equations import CHANNELS
 from ..model.sensors import SensorChain
 from .nominal import Job, gather, responses, run_steps
+from .speed import speed_finding, speed_summary, window_lags
 from .starts import correlation_score, feature_span, start_check_steps, start_steps
 from .wiring import (axle_amplitude_findings, corrected, describe_fix, fix_entries, lead_in_units, unit_findings,
                      wiring_fix)
@@ -386,7 +392,58 @@ def _check_run(ds, r):
     if rho < MATCH_MIN:
         f = match_finding(rid, r.track, r.speed, rho, (yield from _alternatives(ds, rid)))
         out.append(_at_level(ds, rid, f))
+    elif rd.distance is None and not r.moving and r.speed:
+        f = speed_held(ds, rid, Yc, Yhat)
+        if f is not None:
+            out.append(_at_level(ds, rid, f))
     return out
+
+
+def speed_lags(ds, rid, Y, Yhat) -> dict | None:
+    """The lags of a constant-speed run's data ``Y`` against the nominal response ``Yhat`` at its declared speed
+    over the stretch where its wheels are on the track's features (:func:`rideid.conditioning.speed.window_lags`),
+    or None (too short a stretch)."""
+    geom, r = ds.geometry, ds.manifest.run(rid)
+    span = feature_span(ds.manifest.tracks[r.track], geom)
+    if span is None:
+        return None
+    R, v = geom.tire_radius, float(r.speed)
+    rd = ds.data[rid]
+    return window_lags(Y, Yhat, rd.time, ((span[0] - R) / v, (span[1] + geom.wheelbase + R) / v), rd.fs)
+
+
+def speed_summaries(ds, car=None, simulator=None) -> dict:
+    """Run id -> what the lags say of its speed (:func:`rideid.conditioning.speed.speed_summary`), for every run
+    of a loaded dataset that the speed check looks at: on a known track, at a constant declared speed, from
+    rest. The nominal car (or ``car``) simulated as :func:`check_dataset` does."""
+    rids = [r.id for r in ds.manifest.runs
+            if r.road_known and not r.moving and r.speed and ds.data[r.id].distance is None]
+
+    def step():
+        jobs = [_nominal_job(ds.manifest.tracks[ds.manifest.run(rid).track], ds.data[rid].time,
+                             ds.manifest.run(rid).speed, None) for rid in rids]
+        out = {}
+        for rid, Yhat in zip(rids, responses((yield jobs))):
+            Y, Yhat = _as_recorded(ds, rid, ds.data[rid].matrix(), Yhat)
+            w = speed_lags(ds, rid, Y, Yhat)
+            summary = None if w is None else speed_summary(w)
+            if summary is not None:
+                out[rid] = summary
+        return out
+
+    return run_steps(step(), ds.geometry, car, None if simulator is None else simulator.linear())
+
+
+def speed_held(ds, rid, Y, Yhat) -> Finding | None:
+    """SPEC §11, speed as driven: the error refusing a run without a speed channel whose speed wanders (or
+    differs from the declared one), as its lags against the nominal response show (:mod:`rideid.conditioning.speed`)."""
+    w = speed_lags(ds, rid, Y, Yhat)
+    summary = None if w is None else speed_summary(w)
+    if summary is None:
+        return None
+    r = ds.manifest.run(rid)
+    file = getattr(r, "file", None)
+    return speed_finding(rid, f" ({file})" if file else "", float(r.speed), summary)
 
 
 def _as_recorded(ds, rid, Y, Yhat):
@@ -426,4 +483,4 @@ def _given_start(ds, rid, mr, track):
 
 
 __all__ = ["MATCH_MIN", "NOMINAL_LEAD_IN", "check_coverage", "check_dataset", "check_reach", "check_steps",
-           "feature_span", "match_finding", "speed_candidates", "start_finding"]
+           "feature_span", "match_finding", "speed_candidates", "speed_summaries", "start_finding"]
