@@ -10,7 +10,7 @@ weightless mass was left on the wheel, posts holding their velocity over a
 step); each ``before + X`` changes one thing of it (time step halved,
 integrator, joint armature, contact impedance, the tire as an explicit
 spring instead of MuJoCo's soft contact, the contact's mass compensated, the
-posts accelerating over the step, the road amplitude divided by 10); ``as
+posts accelerating over the step, the road amplitude scaled, ``amplitude x F``); ``as
 is`` is the present car. With ``--fit``, rideid's base model is fitted to the
 ten noise-free runs of each (polished from the truth, seed 1) to see the
 parameter bias directly. docs/verification.md has the numbers.
@@ -165,7 +165,7 @@ def mujoco_option(option: str):
                 ProbeCar.compensate = True
             elif opt == "quadratic posts":
                 ProbeCar.quadratic = True
-            elif opt not in ("as is", "amplitude / 10", "numpy 7-DOF"):
+            elif opt not in ("as is", "numpy 7-DOF") and not opt.startswith("amplitude x "):
                 raise ValueError(opt)
         yield
     finally:
@@ -175,8 +175,7 @@ def mujoco_option(option: str):
 
 def engine(option, P, geom, track, speed, t):
     """The option's channels: MuJoCo's (patched) or, for ``numpy 7-DOF``, the independent linear model's."""
-    if "amplitude / 10" in option:
-        track = scaled(track, 0.1)
+    track = scaled(track, amplitude(option))
     if "numpy 7-DOF" in option:
         return simulate_7dof(P, geom, track, speed, t)
     return hifi_mod.simulate_mujoco(P, geom, track, speed, t)
@@ -198,7 +197,7 @@ def channels(sc, option, runs):
             t = run_times(run)
             track = sc.tracks[run.track]
             y_mj = engine(option, P, sc.geometry, track, run.speed, t)
-            y_np = simulate_7dof(P, sc.geometry, scaled(track, 0.1) if "amplitude / 10" in option else track,
+            y_np = simulate_7dof(P, sc.geometry, scaled(track, amplitude(option)),
                                  run.speed, t)
             out[run.id] = (t, y_mj, y_np)
     return out
@@ -219,8 +218,8 @@ def fit(sc, option):
         for run in sc.runs:
             t = run_times(run)
             data[run.id] = (t, engine(option, P, sc.geometry, sc.tracks[run.track], run.speed, t))
-    if "amplitude / 10" in option:
-        sc = _scaled_scenario(sc)
+    if amplitude(option) != 1.0:
+        sc = _scaled_scenario(sc, amplitude(option))
     with tempfile.TemporaryDirectory() as tmp:
         write_dataset(sc, data, Path(tmp) / "ds")
         ds = rideid.load_dataset(Path(tmp) / "ds")
@@ -232,17 +231,25 @@ def fit(sc, option):
     return {n: 100 * (res.parameters[n] / sc.truth[n] - 1) for n in NAMES}
 
 
-def _scaled_scenario(sc):
+def _scaled_scenario(sc, factor):
     import dataclasses
-    return dataclasses.replace(sc, tracks={k: scaled(v, 0.1) for k, v in sc.tracks.items()})
+    return dataclasses.replace(sc, tracks={k: scaled(v, factor) for k, v in sc.tracks.items()})
+
+
+def amplitude(option):
+    """The road amplitude factor of an option (``amplitude x F``; 1 without)."""
+    for opt in option.split(" + "):
+        if opt.startswith("amplitude x "):
+            return float(opt.split()[2])
+    return 1.0
 
 
 #: "before" is the previous MJCF (contact impedance 1e-3 not compensated, posts holding their velocity over a
 #: step); each option changes one thing of it; "as is" is the present one
 OPTIONS = ("before", "before + timestep 0.5", "before + integrator Euler", "before + integrator implicitfast",
            "before + armature 0.1", "before + impedance 1e-4", "before + spring tire", "before + compensated",
-           "before + quadratic posts", "before + amplitude / 10", "as is", "as is + timestep 0.5",
-           "as is + amplitude / 10", "numpy 7-DOF")
+           "before + quadratic posts", "before + amplitude x 0.1", "as is", "as is + timestep 0.5",
+           "as is + amplitude x 0.5", "as is + amplitude x 0.25", "as is + amplitude x 0.1", "numpy 7-DOF")
 
 
 def main(argv=None, out=sys.stdout):
@@ -260,7 +267,7 @@ def main(argv=None, out=sys.stdout):
     say("option | run | " + " | ".join(CHANNELS))
     for option in a.options:
         t0 = time.perf_counter()
-        for rid, (t, y_mj, y_np) in channels(sc, option, a.runs).items():
+        for rid, (_t, y_mj, y_np) in channels(sc, option, a.runs).items():
             say(f"{option} | {rid} | " + " | ".join(f"{v:.3f}" for v in rel_rms(y_mj, y_np)))
         if a.fit:
             err = fit(sc, option)

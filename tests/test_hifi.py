@@ -452,18 +452,22 @@ def check_verification_rows(rows, reduced_label, extended_label):
     """The findings docs/verification.md states for these two rows (1 % white noise, seed 1)."""
     rows = {r["config"]: r["fits"] for r in rows}
     reduced, ext = rows[reduced_label], rows[extended_label]
-    # the 7-DOF physics in another engine: every model recovers the twelve within 0.5 %, auto keeps the
-    # base model, and the residuals are adequate
+    # the 7-DOF physics in another engine: every model recovers the twelve within 0.15 % (0.10-0.12 %, the
+    # twist runs' second-order kinematics; 0.37-0.40 % while the contact's weightless mass rode on the
+    # wheels), auto keeps the base model, and the residuals are adequate; +-2 std_robust covers 6 of 11
+    # (2-3 then)
     for m in ("base", "full", "auto"):
-        assert reduced[m]["largest_error_pct"] < 0.5, m
+        assert reduced[m]["largest_error_pct"] < 0.15, m
     assert reduced["auto"]["extensions"] == []
     assert reduced["base"]["adequate"] is True
-    # bars (15/6 kN/m) and tire damping (150 N s/m): the full model removes the bias (twelve within 1 %,
-    # the four extensions within 3 %), auto picks exactly both groups, the fit is adequate ...
+    assert reduced["base"]["covered_std_robust"] >= 5
+    # bars (15/6 kN/m) and tire damping (150 N s/m): the full model removes the bias (twelve within 0.15 %,
+    # the four extensions within 1 %; measured 0.10 % and 0.35 %), auto picks exactly both groups, the fit
+    # is adequate ...
     full = ext["full"]
-    assert full["largest_error_pct"] < 1.0
+    assert full["largest_error_pct"] < 0.15
     for n, v in full["extension_values"].items():
-        assert v["estimate"] == pytest.approx(v["truth"], rel=0.03), n
+        assert v["estimate"] == pytest.approx(v["truth"], rel=0.01), n
     assert sorted(ext["auto"]["extensions"]) == ["anti_roll_bars", "tire_damping"]
     assert ext["auto"]["largest_error_pct"] == pytest.approx(full["largest_error_pct"], abs=1e-6)
     assert full["adequate"] is True
