@@ -120,13 +120,14 @@ def mujoco_run(scm, hifi):
     sub = int(round((t[1] - t[0]) / TIMESTEP))
     tf = t[0] + TIMESTEP * np.arange((t.size - 1) * sub + 1)
     r, rd = road(scm)(tf)
+    rdd = 2 * (road(scm)(tf + TIMESTEP)[0] - r - rd * TIMESTEP) / TIMESTEP ** 2  # the posts' uniform acceleration
     sid = [mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_SITE, f"axle_{c}") for c in CORNERS]
     y = np.empty((t.size, len(CHANNELS)))
     acc, zax = np.empty((t.size, 4, 3)), np.empty((t.size, 4, 3))
     res = np.zeros(6)
     with car.active():
         for j in range(tf.size):
-            car.set_road(r[j], rd[j])
+            car.set_road(r[j], rd[j], rdd[j])
             if j % sub == 0:  # the state at the sample (mj_step's own forward pass gives the same)
                 k = j // sub
                 mujoco.mj_forward(m, d)

@@ -47,6 +47,65 @@ def test_mujoco_matches_the_seven_dof_model(rid, default_scenario):
             assert err[i] < 1e-2 * max(rms[i], 1e-3 * rms[8]), (c, err[i] / rms[i])
 
 
+def _independent_seven_dof(P, geom, track, speed, t, dt=1e-4):
+    """SPEC channels of the 7-DOF car of SPEC §1 assembled here from its equations (not rideid's): mass,
+    stiffness and damping matrices of q = [z, theta, phi, z_fl, z_fr, z_rl, z_rr], the rigid-wheel envelope
+    as the road, scipy.signal.lsim with the road at ``dt``."""
+    from scipy.signal import lsim
+
+    from rideid.model.params import NAMES
+    from rideid.model.simulate import corner_inputs
+    p = dict(zip(NAMES, P))
+    b = geom.wheelbase - p["a"]
+    x = np.array([p["a"], p["a"], -b, -b])
+    y = np.array([1, -1, 0, 0]) * geom.track_front / 2 + np.array([0, 0, 1, -1]) * geom.track_rear / 2
+    per_axle = lambda f, r: np.array([p[f], p[f], p[r], p[r]])  # noqa: E731
+    T = np.column_stack([np.ones(4), -x, y])  # body heave at the corners: z - x theta + y phi
+    D = np.hstack([-T, np.eye(4)])  # suspension deflection z_i - z_bi
+    M = np.diag(np.concatenate([[p["m_s"], p["I_yy"], p["I_xx"]], per_axle("m_uf", "m_ur")]))
+    K = D.T @ np.diag(per_axle("k_sf", "k_sr")) @ D + np.diag(np.r_[np.zeros(3), per_axle("k_tf", "k_tr")])
+    C = D.T @ np.diag(per_axle("c_sf", "c_sr")) @ D
+    E = np.vstack([np.zeros((3, 4)), np.diag(per_axle("k_tf", "k_tr"))])
+    Mi = np.linalg.inv(M)
+    A = np.block([[np.zeros((7, 7)), np.eye(7)], [-Mi @ K, -Mi @ C]])
+    B = np.vstack([np.zeros((7, 4)), Mi @ E])
+    S = np.zeros((8, 7))
+    S[:4, :3], S[4:, 3:] = T, np.eye(4)
+    rates = np.zeros((2, 14))
+    rates[0, 8] = rates[1, 9] = 1.0  # pitch rate, roll rate
+    Cy = np.vstack([S @ A[7:], rates])
+    Dy = np.vstack([S @ B[7:], np.zeros((2, 4))])
+    tf = np.arange(int(round(t[-1] / dt)) + 1) * dt
+    _, yf, _ = lsim((A, B, Cy, Dy), corner_inputs(track, geom, speed * tf), tf)
+    return yf[np.rint(t / dt).astype(int)]
+
+
+@pytest.mark.parametrize("rid, amplitude, tol", [("H_LH", 1.0, 3e-4), ("W_H", 1.0, 3e-4), ("T_HL", 0.1, 5e-4)])
+def test_mujoco_equals_an_independent_linear_seven_dof(rid, amplitude, tol, default_scenario):
+    """The reduced car, noise-free, against the 7-DOF assembled from SPEC §1 alone: every channel within
+    0.03 % of the RMS of its kind (accelerations, rates) on the herringbone and the washboard (0.023 % and
+    0.010 %; they were 0.26 % and 0.42 % while the soft contact's weightless mass, 0.3 % of m_u, rode on the
+    wheels and the posts held their velocity over a step). On the twist the body rolls far enough for the
+    small-angle model to miss by 0.28 % (T_HL): with the bumps at a tenth of their height, 0.030 % (0.12 %
+    before)."""
+    from rideid.model.tracks import Track
+    sc = default_scenario
+    P, geom, run = as_vector(sc.truth), sc.geometry, sc.run(rid)
+    track = sc.tracks[run.track]
+    key = "height" if track.kind == "chassis_twist" else "amplitude"
+    track = Track(track.id, track.kind, dict(track.keys, **{key: amplitude * track.keys[key]}))
+    t = np.arange(int(run.duration * 200) + 1) / 200
+    y = simulate_mujoco(P, geom, track, run.speed, t)
+    yi = _independent_seven_dof(P, geom, track, run.speed, t)
+    rms = np.sqrt(np.mean(yi ** 2, axis=0))
+    kind = np.array([CHANNEL_KIND[c] for c in CHANNELS])
+    # each channel's error against the RMS of the liveliest channel of its kind (the herringbone hardly
+    # pitches the car, the washboard does not roll it)
+    scale = np.array([rms[kind == k].max() for k in kind])
+    rel = np.sqrt(np.mean((y - yi) ** 2, axis=0)) / scale
+    assert np.max(rel) < tol, rel
+
+
 @pytest.mark.parametrize("raw", [False, True], ids=["spec", "raw"])
 def test_simulate_engine_mujoco_from_the_command_line(raw, tmp_path, default_scenario):
     """`rideid simulate --engine mujoco` writes a dataset that the 7-DOF model fits to within 1 %.
@@ -151,11 +210,11 @@ def test_linearised_frequencies_equal_the_seven_dof_ones(default_scenario):
     P, geom = as_vector(default_scenario.truth), default_scenario.geometry
     mj = _linearised_eigenvalues(P, geom, None)
     seven = _sorted_modes(np.linalg.eigvals(state_space(P[None], geom)[0][0]))
-    # |lambda| (natural frequency) and damping ratio of every mode
-    np.testing.assert_allclose(np.abs(mj), np.abs(seven), rtol=2e-3)
-    np.testing.assert_allclose(-mj.real / np.abs(mj), -seven.real / np.abs(seven), rtol=3e-3)
-    # the body modes exactly (the wheel-hop ones carry the contact's 1e-3 impedance)
-    np.testing.assert_allclose(mj[:3], seven[:3], rtol=1e-4)
+    # |lambda| (natural frequency) and damping ratio of every mode, the wheel hop's too (the soft contact's
+    # weightless mass taken out of the wheel; it put the hop 0.2-0.3 % off): 1e-8 here
+    np.testing.assert_allclose(np.abs(mj), np.abs(seven), rtol=1e-6)
+    np.testing.assert_allclose(-mj.real / np.abs(mj), -seven.real / np.abs(seven), rtol=1e-6)
+    np.testing.assert_allclose(mj, seven, rtol=1e-6)
 
 
 def test_raised_cg_wheel_inertia_and_tire_damping_match_closed_form(default_scenario):
@@ -393,18 +452,22 @@ def check_verification_rows(rows, reduced_label, extended_label):
     """The findings docs/verification.md states for these two rows (1 % white noise, seed 1)."""
     rows = {r["config"]: r["fits"] for r in rows}
     reduced, ext = rows[reduced_label], rows[extended_label]
-    # the 7-DOF physics in another engine: every model recovers the twelve within 0.5 %, auto keeps the
-    # base model, and the residuals are adequate
+    # the 7-DOF physics in another engine: every model recovers the twelve within 0.15 % (0.10-0.12 %, the
+    # twist runs' second-order kinematics; 0.37-0.40 % while the contact's weightless mass rode on the
+    # wheels), auto keeps the base model, and the residuals are adequate; +-2 std_robust covers 6 of 11
+    # (2-3 then)
     for m in ("base", "full", "auto"):
-        assert reduced[m]["largest_error_pct"] < 0.5, m
+        assert reduced[m]["largest_error_pct"] < 0.15, m
     assert reduced["auto"]["extensions"] == []
     assert reduced["base"]["adequate"] is True
-    # bars (15/6 kN/m) and tire damping (150 N s/m): the full model removes the bias (twelve within 1 %,
-    # the four extensions within 3 %), auto picks exactly both groups, the fit is adequate ...
+    assert reduced["base"]["covered_std_robust"] >= 5
+    # bars (15/6 kN/m) and tire damping (150 N s/m): the full model removes the bias (twelve within 0.15 %,
+    # the four extensions within 1 %; measured 0.10 % and 0.35 %), auto picks exactly both groups, the fit
+    # is adequate ...
     full = ext["full"]
-    assert full["largest_error_pct"] < 1.0
+    assert full["largest_error_pct"] < 0.15
     for n, v in full["extension_values"].items():
-        assert v["estimate"] == pytest.approx(v["truth"], rel=0.03), n
+        assert v["estimate"] == pytest.approx(v["truth"], rel=0.01), n
     assert sorted(ext["auto"]["extensions"]) == ["anti_roll_bars", "tire_damping"]
     assert ext["auto"]["largest_error_pct"] == pytest.approx(full["largest_error_pct"], abs=1e-6)
     assert full["adequate"] is True

@@ -8,11 +8,17 @@ The car: a sprung body with heave, pitch and roll joints at its CG; four
 wheels on vertical slides in the body frame (suspension spring and damper on
 the slide, preloaded through ``springref`` so the car starts in static
 equilibrium); each tire resting on a heavy post whose position and velocity
-are set every step to the rigid-wheel envelope (SPEC §2) under that wheel.
-The tire's vertical stiffness is MuJoCo's soft contact with a tiny constant
-impedance and a direct (negative) ``solref`` scaled by the wheel's
-``body_invweight0``; the contact can push but never pull, so a wheel really
-leaves the road. Integration: RK4 at 1 ms.
+are set every step to the rigid-wheel envelope (SPEC §2) under that wheel,
+and which accelerates uniformly over the step so that it reaches the road
+height of the step's end (the road followed to third order in the step).
+The tire's vertical stiffness is MuJoCo's soft contact with MuJoCo's
+smallest constant impedance and a direct (negative) ``solref`` scaled by the
+contact's ``body_invweight0``; the contact can push but never pull, so a
+wheel really leaves the road. A soft contact also adds a weightless mass
+d / ((1 - d) A) to the wheel (its force depends on the contact's own
+acceleration): the wheel body carries m_u less that mass, with its weight
+put back, so a wheel on the road has the 7-DOF model's mass and weight
+(:attr:`MujocoCar.contact_mass`). Integration: RK4 at 1 ms.
 
 With the default :class:`HifiProperties` (the ``[hifi]`` table's keys,
 defaults and validation live in :mod:`rideid.data.schema.hifi`) this is the physics of SPEC §1 in
@@ -91,8 +97,11 @@ from ..model.equations import CHANNELS, static_corner_loads
 from ..model.params import CORNERS, GRAVITY, INDEX, NAMES, Geometry, full_rows
 from ..model.simulate import corner_inputs
 
-#: contact impedance (solimp dmin = dmax): tiny, so the contact adds no normal "mass"
-IMPEDANCE = 1e-3
+#: contact impedance (solimp dmin = dmax): MuJoCo's smallest (mjMINIMP). A soft contact's force depends on
+#: the contact's own acceleration a as well, -d / ((1 - d) A) a with A the contact's diagonal inverse mass
+#: (``body_invweight0``): a weightless mass on the wheel (0.096 kg, 0.3 % of m_u at d = 1e-3; 0.01 kg at this
+#: d), which :class:`MujocoCar` takes out of the wheel's own mass (:attr:`MujocoCar.contact_mass`)
+IMPEDANCE = 1e-4
 POST_MASS = 1e6
 TIMESTEP = 1e-3
 
@@ -302,14 +311,29 @@ class MujocoCar:
         def jid(name):
             return mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_JOINT, name)
 
-        self._tire_ids = []
-        for c in CORNERS:
+        self._tire_ids, self._wheel_ids = [], []
+        #: per corner, the weightless mass the soft contact adds to the wheel (IMPEDANCE), kg
+        self.contact_mass = np.zeros(4)
+        for i, c in enumerate(CORNERS):
             ax = 0 if c.startswith("f") else 1
             gid = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_GEOM, f"tire_{c}")
-            A = m.body_invweight0[m.geom_bodyid[gid], 0]
+            wheel = m.geom_bodyid[gid]
+            post = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_BODY, f"post_{c}")
+            # the contact's diagonal inverse mass as MuJoCo approximates it (its regulariser R = (1 - d) / d A)
+            A = m.body_invweight0[wheel, 0] + m.body_invweight0[post, 0]
             K = p["k_tf"] if ax == 0 else p["k_tr"]
             m.geom_solref[gid] = (-K * (1 - d_imp) * A, -self.tire_damping[ax] * (1 - d_imp) * A)
             self._tire_ids.append(gid)
+            self._wheel_ids.append(wheel)
+            # the contact force is K pen + c pen' - m_c a (a the wheel's acceleration into the road, the post's
+            # taken out, simulate_mujoco): m_c moves with the wheel but has no weight. The wheel body carries
+            # m_u - m_c, and its weight m_c g is put back (a negative gravity compensation), so the wheel in
+            # contact has the mass m_u and the weight m_u g of the 7-DOF model
+            m_c = d_imp / ((1 - d_imp) * A)
+            m_u = m.body_mass[wheel]
+            m.body_mass[wheel] = m_u - m_c
+            m.body_gravcomp[wheel] = -m_c / (m_u - m_c)
+            self.contact_mass[i] = m_c
         self.data = mujoco.MjData(m)
         self._post_q = np.array([m.jnt_qposadr[jid(f"post_{c}")] for c in CORNERS])
         self._post_v = np.array([m.jnt_dofadr[jid(f"post_{c}")] for c in CORNERS])
@@ -385,9 +409,18 @@ class MujocoCar:
             self.mj.set_mjcb_passive(previous)
 
     # -- road, sensors, loads ---------------------------------------------------------------
-    def set_road(self, r, rdot):
-        self.data.qpos[self._post_q] = r
-        self.data.qvel[self._post_v] = rdot
+    def set_road(self, r, rdot, rddot=None):
+        """Posts at the road heights ``r`` with velocities ``rdot``, accelerating at ``rddot`` over the step.
+
+        The contact's weightless mass (:attr:`contact_mass`) feels the post's acceleration too: a force
+        ``m_c rddot`` on each wheel in contact, taken out here (``xfrc_applied``)."""
+        d = self.data
+        d.qpos[self._post_q] = r
+        d.qvel[self._post_v] = rdot
+        if rddot is not None:
+            d.qfrc_applied[self._post_v] = POST_MASS * np.asarray(rddot)
+            touching = np.isin(self._tire_ids, d.contact.geom[:d.ncon].ravel()) if d.ncon < 4 else np.ones(4, bool)
+            d.xfrc_applied[self._wheel_ids, 2] = np.where(touching, -self.contact_mass * rddot, 0.0)
 
     def outputs(self, raw: bool = False) -> np.ndarray:
         """The ten SPEC channels from the sensors (``raw``: specific force along each sensor's z, with gravity)."""
@@ -450,6 +483,10 @@ def simulate_mujoco(P, geom: Geometry, track, speed, t, distance=None, hifi: Hif
     eps = 1e-5
     r = corner_inputs(track, geom, x_of(tf))
     rdot = (corner_inputs(track, geom, x_of(tf + eps)) - corner_inputs(track, geom, x_of(tf - eps))) / (2 * eps)
+    # over each step the posts accelerate uniformly from (r, rdot) to the road height at the step's end:
+    # the road followed to third order in the step (holding rdot, the posts would miss by rddot dt^2 / 2)
+    r_next = corner_inputs(track, geom, x_of(tf + TIMESTEP))
+    rddot = 2 * (r_next - r - rdot * TIMESTEP) / TIMESTEP ** 2
     out = np.empty((t.size, len(CHANNELS)))
     load_min = np.full(4, np.inf)
     lift = np.full(4, np.nan)
@@ -457,7 +494,7 @@ def simulate_mujoco(P, geom: Geometry, track, speed, t, distance=None, hifi: Hif
     work, v2 = np.zeros(4), np.zeros(4)
     with car.active():
         for j in range(tf.size):
-            car.set_road(r[j], rdot[j])
+            car.set_road(r[j], rdot[j], rddot[j])
             mj.mj_step(m, d)  # sensordata now describe the start of this step, time tf[j]
             if j % sub == 0:
                 out[j // sub] = car.outputs(raw)
