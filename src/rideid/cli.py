@@ -453,6 +453,9 @@ def run_identify(ds_path, out_dir, *, seed, population=None, generations=None, w
         print(_candidates_table(res.model), file=out)
     for hint in (res.adequacy or {}).get("sensor_hints") or []:
         print("hint: " + hint["message"], file=out)
+    small = ((res.adequacy or {}).get("small_angle") or {}).get("note")
+    if small:
+        print(textwrap.fill("note: " + small, 100, subsequent_indent="  "), file=out)
     para = rideid.verdict_paragraph(res.adequacy)
     if para:
         print("\n" + textwrap.fill(para, 100) + "\n", file=out)

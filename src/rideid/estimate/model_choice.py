@@ -54,6 +54,7 @@ from ..data.schema.manifest import vehicle_table
 from .budget import with_budget
 from .adequacy import MIN_IMPROVEMENT, advise, assess_fit
 from .materiality import weigh_result
+from .small_angle import small_angle
 from .identify import (DEFAULT_GENERATIONS, DEFAULT_POPULATION, identify as identify_model, model_extensions,
                        sensor_notes, warn_bounds)
 from .anyroad import TRACK_OPTIONS, as_built_runs, identify_any_road, unknown_road_runs
@@ -684,6 +685,12 @@ def identify(ds, *, model=None, rng=None, seed=None, population: int = DEFAULT_P
     res = with_budget(ds, res, simulator, cost)
     if assess and not unknown_road_runs(ds, chosen):  # SPEC §12: does the structure the residual test found matter?
         res = weigh_result(ds, res, simulator)
+    if res.adequacy is not None:  # SPEC §1 is small-angle: a body that turned degrees says which error bars to doubt
+        fs = {r.id: 1.0 / float(ds.data[r.id].time[1] - ds.data[r.id].time[0]) for r in ds.runs
+              if r.id in ds.data and len(ds.data[r.id].time) > 1}
+        sa = small_angle(res, fs)
+        if sa is not None:
+            res = replace(res, adequacy={**res.adequacy, "small_angle": sa})
     warn_bounds(res)
     return res
 
