@@ -86,7 +86,7 @@ def small_angle(res, fs: dict) -> dict | None:
     out["note"] = (f"small angles (SPEC §1): the fitted body rolls up to {roll:.1f} deg ({roll_run}) and pitches up "
                    f"to {pitch:.1f} deg ({pitch_run}); the kinematics a small-angle model leaves out moved the "
                    f"estimates by 0.12 % at 2.3 deg on an independent simulator (docs/verification.md), so expect "
-                   f"about {100 * bias:.2f} % here, not in std_total{named}")
+                   f"up to about {100 * bias:.2f} % here, not in std_total{named}")
     return out
 
 

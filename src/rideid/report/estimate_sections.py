@@ -66,7 +66,7 @@ def adequacy_rows(res: dict) -> dict | None:
                      "structure": [c for c, f in rec.items() if f["structure"]],
                      "white": sum(f["white"] for f in rec.values()), "channels": len(rec)})
     return {"adequate": adq["adequate"], "reasons": adq["reasons"], "advice": adq.get("advice"),
-            "method": adq.get("method", ""), "rows": rows}
+            "method": adq.get("method", ""), "rows": rows, "small_angle": adq.get("small_angle")}
 
 
 def model_rows(res: dict) -> dict | None:

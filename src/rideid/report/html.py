@@ -859,6 +859,9 @@ def summary_section(result, context: dict) -> dict:
         if bound:
             text += f"; AT A SEARCH BOUND: {', '.join(bound)}"
         lines.append(("Estimates", text, "estimates"))
+    small = ((adq or {}).get("small_angle") or {}).get("note")
+    if small:  # SPEC §1 is small-angle: which error bars a body that turned degrees makes optimistic
+        lines.append(("Small angles", small.split(": ", 1)[-1], "estimates"))
     if getattr(result, "dampers", None):
         d = result.dampers
         idle = sum(not e for axle in ("front", "rear") for e in d[axle]["excited"])
