@@ -251,21 +251,13 @@ def identify_auto(ds, *, rng=None, seed=None, callback=None, maps=None, simulato
                 curve2 = curve_candidate(ds, results[sub_key_lin], sub_key_lin, lin_entry, rng=rng, seed=seed,
                                          maps=full.maps, start_from=r_c, simulator=simulator, **kw_nested)
                 if curve2 is not None:
-                    k2, cf2, r2, e2 = curve2
-                    results[k2], costs[k2] = r2, cf2
-                    evaluations += r2.nfev
+                    e2 = curve2[3]
                     if e2["criterion"] is not None:
                         # the linear groups left out: their Wald in the larger curve fit (k counts them no more)
                         e2["criterion"] = (c_crit["criterion"] - PENALTY * (c_crit["k"] - e2["k"])) + W_sub
                         e2["wald"] = W_sub
-                    e2["fits_better"] = fits_better(k2, {cand: r.cost for cand, r in results.items()})
-                    # the larger curve model must now fit better than this one too
-                    c_crit["fits_better"] = fits_better(ckey, {cand: r.cost for cand, r in results.items()})
-                    crit.append(e2)
-                    live = [c for c in (c_crit, e2) if c["fits_better"] and c["criterion"] is not None]
-                    if live:
-                        best = min(live, key=lambda c: (c["criterion"], c["k"]))
-                        chosen = tuple(best["extensions"])
+                    evaluations += _weigh_smaller(curve2, ckey, c_crit, results, costs, crit)
+                    best, chosen = _best_of(c_crit, e2, best, chosen)
     # bump stops on top of what is chosen, when that is still not adequate: one more polish (bump_candidate)
     now = results[chosen]
     if now.adequacy is None:
@@ -287,16 +279,8 @@ def identify_auto(ds, *, rng=None, seed=None, callback=None, maps=None, simulato
             again = _linear_groups_again(ds, r_b, chosen, e_b, rng=rng, seed=seed, maps=full.maps,
                                          simulator=simulator, **kw_nested)
             if again is not None:
-                k2, cf2, r2, e2 = again
-                results[k2], costs[k2] = r2, cf2
-                evaluations += r2.nfev
-                e2["fits_better"] = fits_better(k2, {cand: r.cost for cand, r in results.items()})
-                e_b["fits_better"] = fits_better(bkey, {cand: r.cost for cand, r in results.items()})
-                crit.append(e2)
-                live = [c for c in (e_b, e2) if c["fits_better"] and c["criterion"] is not None]
-                if live:
-                    best = min(live, key=lambda c: (c["criterion"], c["k"]))
-                    chosen = tuple(best["extensions"])
+                evaluations += _weigh_smaller(again, bkey, e_b, results, costs, crit)
+                best, chosen = _best_of(e_b, again[3], best, chosen)
     # a powertrain on mounts on top of the linear choice, when what is chosen is still not adequate: one more
     # search (the powertrain's frequencies are not found by a polish from a guess)
     now = results[chosen]
@@ -497,6 +481,27 @@ def bump_candidate(ds, prev, chosen, prev_crit, *, rng=None, seed=None, maps=Non
              "bump_stops_at_bound": at_bound,
              "criterion": None if not reached or base is None else base + PENALTY * n_free}
     return key, cf, r, entry
+
+
+def _weigh_smaller(small, big_key, big_entry, results, costs, crit) -> int:
+    """Record the candidate ``small`` = ``(key, cost function, result, criterion entry)``, a model with fewer
+    linear groups than ``big_key`` (criterion entry ``big_entry``) polished from its fit: its ``fits_better``, and
+    the larger model's again (it must now fit better than this one too). Returns its evaluations."""
+    key, cf, r, entry = small
+    results[key], costs[key] = r, cf
+    entry["fits_better"] = fits_better(key, {cand: res.cost for cand, res in results.items()})
+    big_entry["fits_better"] = fits_better(big_key, {cand: res.cost for cand, res in results.items()})
+    crit.append(entry)
+    return r.nfev
+
+
+def _best_of(big_entry, small_entry, best, chosen):
+    """``(best entry, chosen key)``: the lower criterion of the two entries still eligible, else as they were."""
+    live = [c for c in (big_entry, small_entry) if c["fits_better"] and c["criterion"] is not None]
+    if not live:
+        return best, chosen
+    best = min(live, key=lambda c: (c["criterion"], c["k"]))
+    return best, tuple(best["extensions"])
 
 
 def _linear_groups_again(ds, r_big, chosen, big_crit, *, rng=None, seed=None, maps=None, simulator=None, **kw):
