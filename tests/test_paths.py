@@ -55,7 +55,6 @@ from logger_case import SUV, SUV_RUNS, write_logger
 from powertrain_car import ENGINE
 from rideid.data.scenario import write_road_csv
 from rideid.errors import ArgumentError
-from rideid.estimate.anyroad import _sub_dataset
 from rideid.estimate.identify import _polish
 from rideid.model.params import POWERTRAIN_NAMES
 from rideid.model.roads import iso8608_profile
@@ -292,7 +291,7 @@ def test_polish_leaves_a_knot_hidden_by_the_monotone_repair(cases):
     the stall arises inside the polish, so the polish is called here directly.)"""
     sc, ds = cases("damper_curves", "csv")
     truth = truth_of(sc)
-    ds = _sub_dataset(ds, [r for r in ds.runs if r.id in POLISH_RUNS])
+    ds = ds.subset([r for r in ds.runs if r.id in POLISH_RUNS])
     cf = rideid.CostFunction(ds, extensions=["damper_curves"])
     x0 = np.array([truth[n] for n in cf.names])
     j6, j7 = cf.names.index("F_f6"), cf.names.index("F_f7")

@@ -111,28 +111,28 @@ def test_a_steady_speed_other_than_the_declared_one_names_the_speed_the_data_sho
     assert float(m.group(2)) == pytest.approx(100 * (10.0 / 9.8 - 1), abs=0.3)
 
 
+def _held(s, of_limit, of_std):
+    """Every run of the SUV's five checked and passed: each deviation within ``of_limit`` of the limit and
+    ``of_std`` of its uncertainty, none beyond it."""
+    assert sorted(s) == sorted(BY_ID)
+    worst = max(max(abs(v["low"]), abs(v["high"])) for v in s.values())
+    assert 0.0 < worst < of_limit * speed_check.WANDER_MAX
+    assert max(np.max(np.abs(v["deviation"]) / v["std"]) for v in s.values()) < of_std
+    assert all(v["beyond"] == 0.0 for v in s.values())
+
+
 def test_runs_held_at_their_speed_pass_with_margin(tmp_path):
     """The five runs held exactly, 1 % noise: every deviation within 0.3 % (a third of the limit) and a quarter
     of its uncertainty."""
     folder = tmp_path / "held"
     write_case(folder, seed=1, speed_channel=False, speed_column=False, wander=0.0)
-    s = speed_summaries(_load(folder))
-    assert sorted(s) == sorted(BY_ID)
-    worst = max(max(abs(v["low"]), abs(v["high"])) for v in s.values())
-    assert 0.0 < worst < 0.3 * speed_check.WANDER_MAX
-    assert max(np.max(np.abs(v["deviation"]) / v["std"]) for v in s.values()) < 0.25
-    assert all(v["beyond"] == 0.0 for v in s.values())
+    _held(speed_summaries(_load(folder)), 0.3, 0.25)
 
 
 def test_tracks_as_built_pass_with_margin(tmp_path):
     """The SUV on tracks 4 % off their drawing with 1.5 mm RMS unevenness: every deviation within 0.6 % (the
     limit is 1 %) and a fifth of its uncertainty."""
-    s = speed_summaries(_load(write_asbuilt(tmp_path / "asbuilt", seed=3)))
-    assert sorted(s) == sorted(BY_ID)
-    worst = max(max(abs(v["low"]), abs(v["high"])) for v in s.values())
-    assert 0.0 < worst < 0.6 * speed_check.WANDER_MAX
-    assert max(np.max(np.abs(v["deviation"]) / v["std"]) for v in s.values()) < 0.2
-    assert all(v["beyond"] == 0.0 for v in s.values())
+    _held(speed_summaries(_load(write_asbuilt(tmp_path / "asbuilt", seed=3))), 0.6, 0.2)
 
 
 def test_the_built_in_cars_runs_pass(sim_dataset):

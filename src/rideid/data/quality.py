@@ -42,7 +42,7 @@ def data_quality(ds) -> dict:
                 continue
             entry["runs"] += 1
             v = np.asarray(rd.channels[name], dtype=float)
-            fs = 1.0 / float(rd.time[1] - rd.time[0])
+            fs = rd.fs
             clipped = ds.clipped(r.id)
             if clipped is not None and clipped[:, i].any():
                 share = float(clipped[:, i].mean())

@@ -134,11 +134,6 @@ def road_run_error(rr, y, fitted) -> float:
     return float(W @ np.sum(d * d, axis=0))
 
 
-def _sub_dataset(ds, runs):
-    """``ds`` with only ``runs`` (same manifest otherwise)."""
-    return ds.subset(runs)
-
-
 def _pinv(H):
     """SVD pseudo-inverse of a symmetric positive semi-definite matrix (never squares a condition number
     beyond the Jacobian's own)."""
@@ -446,7 +441,7 @@ def _identify_any_road(ds, *, rng=None, seed=None, population=None, generations=
         history = list(start_result.history)
     elif track_runs:
         # the start: the usual identification of every track run, each track taken as drawn
-        ds_t = _sub_dataset(ds, track_runs)
+        ds_t = ds.subset(track_runs)
         first = identify_model(ds_t, rng=gen, population=population, generations=generations, model=list(ext),
                                polish=polish, callback=callback, assess=False, simulator=simulator)
         x0 = np.array([first.parameters[n] for n in space.names])
@@ -455,7 +450,7 @@ def _identify_any_road(ds, *, rng=None, seed=None, population=None, generations=
     else:
         x0, nit, nfev, stop, history = _search(space, geom, rruns, gen, population, generations, callback, t0)
     if drawn:
-        cf = CostFunction(_sub_dataset(ds, drawn), space=space, simulator=simulator)
+        cf = CostFunction(ds.subset(drawn), space=space, simulator=simulator)
     runs = list(rruns) + trs
     prob = _Problem(space, geom, runs, cf)
     z0 = prob.v(x0)

@@ -691,9 +691,7 @@ def identify(ds, *, model=None, rng=None, seed=None, population: int = DEFAULT_P
     if assess and not unknown_road_runs(ds, chosen):  # SPEC §12: does the structure the residual test found matter?
         res = weigh_result(ds, res, simulator)
     if res.adequacy is not None:  # SPEC §1 is small-angle: a body that turned degrees says which error bars to doubt
-        fs = {r.id: 1.0 / float(ds.data[r.id].time[1] - ds.data[r.id].time[0]) for r in ds.runs
-              if r.id in ds.data and len(ds.data[r.id].time) > 1}
-        sa = small_angle(res, fs)
+        sa = small_angle(res, {r.id: ds.data[r.id].fs for r in ds.runs if r.id in ds.data})
         if sa is not None:
             res = replace(res, adequacy={**res.adequacy, "small_angle": sa})
     warn_bounds(res)

@@ -69,7 +69,7 @@ def pack_coefficients(blocks: dict, n: int) -> np.ndarray:
     blocks : dict
         Per sample-rate group ``g`` lists of arrays with the candidate axis
         first: ``blocks[name][g]`` of shape ``(n, *shape)`` for the fixed
-        blocks of :data:`rideid.model.kernel_layout.FIXED_BLOCKS` and
+        blocks of :func:`rideid.model.kernel_layout.fixed_blocks` and
         ``(N, n, *shape)`` for ``G_s``/``G_a`` (``N <= N_MAX_K`` terms). The symmetric block's size
         (8, or 12 with a powertrain) is read off ``Phi_s`` and sets the layout
         (:data:`rideid.model.kernel_layout.LAYOUTS`).

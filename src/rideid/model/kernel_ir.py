@@ -58,8 +58,6 @@ def blocks(ns: int = 8):
     return (("s", ns, 4, 0, 0), ("a", 6, 3, ns, 2))
 
 
-BLOCKS = blocks(8)
-
 
 class IRWriter:
     """IR lines with numbered temporaries; ``opaque``: LLVM's opaque pointers (LLVM >= 17), else typed ones."""

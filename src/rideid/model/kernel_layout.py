@@ -5,16 +5,15 @@ lane of a ``<4 x double>`` vector. Every parameter-dependent coefficient is
 stored for the four candidates of a chunk next to each other (lane index
 innermost), so that one unaligned vector load fetches it for all four.
 
-Coefficient block of one chunk: :data:`FIXED` entries, then
-:data:`PER_TERM` entries per moment term ``t`` (``G_s[t]`` then
-``G_a[t]``), see :func:`coefficient_layout`; each entry is :data:`LANES`
-doubles.
+Coefficient block of one chunk: a fixed part, then a part per moment term
+``t`` (``G_s[t]`` then ``G_a[t]``), see :func:`coefficient_layout`; each
+entry is :data:`LANES` doubles.
 
 The symmetric block has :data:`SYM_STATES` states: 8, or 12 with a
 powertrain on mounts (SPEC §11: its heave and pitch relative to the body).
 The kernel is compiled once per size; :data:`LAYOUTS` holds each size's
-layout, and the module-level :data:`OFFSETS`, :data:`FIXED`,
-:data:`PER_TERM` and :data:`N_COEF` are the 8-state car's.
+layout, :func:`n_coef` its block's length (:data:`N_COEF` the 8-state
+car's).
 """
 
 from __future__ import annotations
@@ -39,10 +38,6 @@ def fixed_blocks(ns: int = 8):
 def term_blocks(ns: int = 8):
     """(name, shape) of the blocks of one moment term, for a symmetric block of ``ns`` states."""
     return (("G_s", (ns, 2)), ("G_a", (6, 2)))
-
-
-FIXED_BLOCKS = fixed_blocks(8)
-TERM_BLOCKS = term_blocks(8)
 
 
 def _size(shape):
@@ -77,7 +72,6 @@ def coefficient_layout(ns: int = 8):
 
 #: symmetric block size -> (offsets, fixed, per_term) of :func:`coefficient_layout`
 LAYOUTS = {ns: coefficient_layout(ns) for ns in SYM_STATES}
-OFFSETS, FIXED, PER_TERM = LAYOUTS[8]
 
 
 def n_coef(ns: int = 8) -> int:
