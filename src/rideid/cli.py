@@ -164,7 +164,7 @@ def _parser() -> argparse.ArgumentParser:
                         "1 s standing still first) as a logger would, mapped for the measured-data pipeline")
 
     s = add("identify", "estimate the ride parameters of a dataset (the twelve, plus anti-roll bars, tire damping, "
-                        "damper curves and bump stops when the model has them)",
+                        "damper curves, bump stops and a powertrain on mounts when the model has them)",
             ("dataset", "DATASET_DIR", "dataset folder (or its dataset.toml)"),
             out="output folder: result.json, history.csv, report.html, figures/ (rideid's files from "
                 "an earlier identification there are replaced; other files stay)")
