@@ -419,3 +419,37 @@ def test_forty_task_monte_carlo_killed_twice_and_resumed(tmp_path):
     ref = rideid.study(tmp_path / "mc.toml", tmp_path / "ref")
     assert ref.computed == 40
     assert table(out / "results.parquet") == table(ref.results)
+
+
+def test_ctrl_c_while_waiting_is_a_flag_the_loop_turns_into_keyboard_interrupt():
+    """SIGINT during the wait sets the flag (no exception where the main thread happens to be, e.g. inside a
+    finaliser that would drop it); the loop over completions then raises KeyboardInterrupt before the next
+    task, and the previous handler is back afterwards."""
+    from rideid.studies import engine
+
+    class Ready:  # a stand-in for distributed.as_completed: three finished futures
+        def __init__(self):
+            self.q = [1, 2, 3]
+
+        def has_ready(self):
+            return bool(self.q)
+
+        def is_empty(self):
+            return not self.q
+
+        def __next__(self):
+            return self.q.pop(0)
+
+    before = signal.getsignal(signal.SIGINT)
+    seen = []
+    with pytest.raises(KeyboardInterrupt):
+        with engine._interrupt_flag() as stop:
+            for fut in engine._completions(Ready(), stop):
+                seen.append(fut)
+                if fut == 1:
+                    os.kill(os.getpid(), signal.SIGINT)
+                    assert stop.wait(5.0)
+    assert seen == [1]
+    assert signal.getsignal(signal.SIGINT) is before
+    with engine._interrupt_flag() as stop:  # nothing pending: the loop ends
+        assert list(engine._completions(Ready(), stop)) == [1, 2, 3]
