@@ -189,6 +189,10 @@ def test_identify_score_and_exit_codes(sim_dataset, tmp_path, capsys):
     assert rc == 0
     worst = float(stdout.strip().splitlines()[-1].split(":")[1].split("%")[0])
     assert worst < 0.1
+    # the folders, as a user types them: the fit's and the simulated dataset's (its truth.toml)
+    rc, again, err = run_cli(["score", out, sim_dataset], capsys)
+    assert rc == 0, err
+    assert again == stdout
 
 
 def test_sensitivity_command(scenario_file, sim_dataset, tmp_path, capsys):

@@ -708,8 +708,9 @@ def load_manifest(path) -> DatasetManifest:
 
 
 def load_truth(path, geom: Geometry | None = None) -> dict[str, float]:
-    """``truth.toml`` (a ``[truth]`` table alone), as written beside a simulated dataset."""
-    path = Path(path)
+    """``truth.toml`` (a ``[truth]`` table alone), as written beside a simulated dataset (the file, or the
+    folder that holds it)."""
+    path = in_folder(path, "truth.toml")
     doc = read_toml(path)
     for k in doc:
         if k not in ("truth", "dampers", "roads"):
@@ -724,7 +725,7 @@ def load_truth(path, geom: Geometry | None = None) -> dict[str, float]:
 def load_truth_roads(path) -> dict[str, dict]:
     """The ``[roads]`` table of a ``truth.toml``: run id -> how its generated road was made (SPEC §9:
     ``road_class``, ``road_seed``, ``coherence``, and the class its road_truth fits); empty without one."""
-    path = Path(path)
+    path = in_folder(path, "truth.toml")
     roads = read_toml(path).get("roads", {})
     if not isinstance(roads, dict) or not all(isinstance(v, dict) and isinstance(v.get("road_class"), str)
                                               for v in roads.values()):
@@ -734,7 +735,7 @@ def load_truth_roads(path) -> dict[str, dict]:
 
 def load_truth_dampers(path) -> DamperCurves | None:
     """The ``[dampers]`` table of a ``truth.toml`` (SPEC §8: the simulated car's damper curves), or None."""
-    path = Path(path)
+    path = in_folder(path, "truth.toml")
     doc = read_toml(path)
     return parse_dampers(doc["dampers"], f"{path}: [dampers]") if "dampers" in doc else None
 
