@@ -10,6 +10,7 @@ SUV's five runs (tracks 4 % off their drawing, 1.5 mm RMS unevenness, hubs coupl
 
 import json
 import tomllib
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
@@ -127,3 +128,22 @@ def test_rideid_identify_on_unknown_roads_through_coupled_hubs(coupled_roads, tm
         assert abs(d["value"] / t - 1) < 0.005, (n, d["value"], t)
         assert abs(d["value"] - t) < 3 * d["std_robust"], (n, (d["value"] - t) / d["std_robust"])
     assert {k: v["iso8608_class"] for k, v in doc["roads"].items()} == {"B40": "B", "C25": "C"}
+
+
+def test_the_as_built_result_keeps_the_as_drawn_hints_and_says_so():
+    """The coupling hints are computed in the time domain on the tracks as drawn
+    (rideid.estimate.sensor_check.coupling_hints); the as-built stage's verdict is new, and used to drop them.
+    Now they are kept with a note saying where they come from, and lead the advice of a verdict that is not
+    adequate; without an as-drawn fit (unknown roads) no hint is made up."""
+    hint = {"channel": "axle_az_fl", "highpass_hz": 0.3, "rss_reduction": 0.74,
+            "message": "axle_az_fl: the data look AC-coupled"}
+    start = SimpleNamespace(adequacy={"adequate": False, "sensor_hints": [hint]})
+    bad = {"adequate": False, "reasons": ["structure"], "advice": "Add a model group."}
+    out = anyroad._carry_sensor_hints(bad, start)
+    assert out["sensor_hints"] == [hint] and "tracks as drawn" in out["sensor_hints_note"]
+    assert out["advice"] == "axle_az_fl: the data look AC-coupled. Add a model group."
+    good = anyroad._carry_sensor_hints({"adequate": True, "advice": None}, start)
+    assert good["advice"] is None and good["sensor_hints"] == [hint]
+    assert anyroad._carry_sensor_hints(bad, None) == bad          # unknown roads: nothing carried
+    assert anyroad._carry_sensor_hints(None, start) is None       # not assessed
+    assert "sensor_hints" not in anyroad._carry_sensor_hints(bad, SimpleNamespace(adequacy=None))
