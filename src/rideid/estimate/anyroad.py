@@ -33,6 +33,12 @@ steps:
    (:func:`rideid.estimate.roadfit.road`), written as ``road/<run>.csv``,
    and its ISO 8608 class (:func:`rideid.model.roads.iso8608_class`).
 
+Declared sensor filters (SPEC §11 ``highpass``, ``lowpass``) pass into the projection: each filtered channel
+times its filter's response, the filters' states at the first sample estimated with the car's
+(:func:`rideid.estimate.roadfit.with_sensors`; module docstring there). A coupling that is not declared gets
+no hint on an unknown road (:func:`rideid.estimate.sensor_check.coupling_hints` compares a simulation in the
+time domain); on tracks as built the hints of the fit on the tracks as drawn are kept, with a note.
+
 The model: linear (the twelve, anti-roll bars, tire damping, CG height).
 Damper curves and bump stops are nonlinear and the projection needs a linear
 car: such a model with an unknown-road run is refused. ``auto`` fits the

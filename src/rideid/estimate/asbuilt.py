@@ -43,6 +43,11 @@ power ``|R - alpha U_front|^2``, less the part the sensor noise puts into
 out near that floor and the fit is the known-road fit; where the track
 carries unevenness the prior widens and the road there is learnt.
 
+Sensors as wired (SPEC §11): a channel with a declared ``highpass`` or ``lowpass`` is compared as its sensor
+records it: ``H`` (the drawing's response included) and the boundary columns through the filter's
+first-order-hold response, the filters' states at the first sample among the boundary unknowns
+(:func:`rideid.estimate.roadfit.recorded_columns`).
+
 Limits (between the two limits of the prior): ``D = 0`` is the drawn track
 with an amplitude factor (:data:`MODES` "amplitude"), ``D`` infinite the
 unknown road ("free", the road projected out; no log-determinant). Both
