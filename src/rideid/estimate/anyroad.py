@@ -33,6 +33,12 @@ steps:
    (:func:`rideid.estimate.roadfit.road`), written as ``road/<run>.csv``,
    and its ISO 8608 class (:func:`rideid.model.roads.iso8608_class`).
 
+Declared sensor filters (SPEC §11 ``highpass``, ``lowpass``) pass into the projection: each filtered channel
+times its filter's response, the filters' states at the first sample estimated with the car's
+(:func:`rideid.estimate.roadfit.with_sensors`; module docstring there). A coupling that is not declared gets
+no hint on an unknown road (:func:`rideid.estimate.sensor_check.coupling_hints` compares a simulation in the
+time domain); on tracks as built the hints of the fit on the tracks as drawn are kept, with a note.
+
 The model: linear (the twelve, anti-roll bars, tire damping, CG height).
 Damper curves and bump stops are nonlinear and the projection needs a linear
 car: such a model with an unknown-road run is refused. ``auto`` fits the
@@ -118,7 +124,8 @@ def prepare_road_runs(ds, extensions=()) -> list:
     out = []
     for r in unknown_road_runs(ds, extensions):
         rd = ds.data[r.id]
-        out.append(roadfit.prepare_road_run(r.id, rd.matrix(), rd.fs, run_speed(ds, r), ds.geometry))
+        rr = roadfit.prepare_road_run(r.id, rd.matrix(), rd.fs, run_speed(ds, r), ds.geometry)
+        out.append(roadfit.with_sensors(rr, ds.sensor_filters(r.id)))  # the channels as wired (SPEC §11)
     return out
 
 
@@ -366,6 +373,22 @@ def identify_any_road(ds, **kw) -> IdentificationResult:
         return _identify_any_road(ds, **kw)
 
 
+def _carry_sensor_hints(adequacy, start_result):
+    """``adequacy`` of the as-built stage with the hints of an undeclared AC coupling that the fit on the tracks as
+    drawn gave (:func:`rideid.estimate.identify.sensor_notes`: a time-domain comparison of the car's channel,
+    high-passed, with the data), said to be from there, and, when not adequate, first in the advice. They are
+    not computed again at the estimated road: there the model's channels are the data less the fit band's
+    residual, and high-passing them says nothing about the sensor. Runs on unknown roads get no hint."""
+    hints = ((start_result.adequacy or {}).get("sensor_hints") if start_result is not None else None)
+    if adequacy is None or hints is None:
+        return adequacy
+    out = dict(adequacy, sensor_hints=list(hints),
+               sensor_hints_note="from the fit on the tracks as drawn (time domain), before the tracks as built")
+    if hints and not out.get("adequate", True):
+        out["advice"] = " ".join(h["message"] + "." for h in hints[:4]) + " " + (out.get("advice") or "")
+    return out
+
+
 def _tracks_block(ds, trs, skipped, P, geom):
     """result.json ``tracks``: per track what the as-built fit learnt (amplitude factor, unevenness RMS), per
     run and over the track's runs; a run taken as drawn says why."""
@@ -418,11 +441,6 @@ def _identify_any_road(ds, *, rng=None, seed=None, population=None, generations=
                             f"({', '.join(road_ids)}): the road is projected out of a linear car (docs/any-road.md); "
                             f"fit the linear model, or {' and '.join(bad)} on known tracks only")
     refuse_unsupported_groups(ext, "model")
-    filtered = [rid for rid in road_ids if any(ds.sensor_filters(rid))]
-    if filtered:  # the road's projection is of the car alone: a sensor chain would be silently ignored
-        raise ArgumentError(f"runs {', '.join(filtered)} on unknown roads have a declared highpass or lowpass "
-                            "([channels], SPEC §11): this version fits sensor chains on known tracks only; leave "
-                            "those runs out or their filters undeclared")
     geom = ds.geometry
     space = ParameterSpace(ds.known, geom, ds.manifest.bounds, extensions=ext)
     rruns = prepare_road_runs(ds, ext)
@@ -575,6 +593,7 @@ def _identify_any_road(ds, *, rng=None, seed=None, population=None, generations=
                             reasons=[f"the tracks as built needed more than a track carries ({'; '.join(odd)}; at most "
                                      f"±{100 * PLAUSIBLE_FACTOR:.0f} % and {1e3 * PLAUSIBLE_RMS:.1f} mm RMS): the "
                                      "road is explaining what the model misses"] + list(adequacy["reasons"]))
+    adequacy = _carry_sensor_hints(adequacy, start_result)
     if start_result is not None and start_result.model:
         model_block = dict(start_result.model)
     else:

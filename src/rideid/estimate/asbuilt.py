@@ -43,6 +43,11 @@ power ``|R - alpha U_front|^2``, less the part the sensor noise puts into
 out near that floor and the fit is the known-road fit; where the track
 carries unevenness the prior widens and the road there is learnt.
 
+Sensors as wired (SPEC §11): a channel with a declared ``highpass`` or ``lowpass`` is compared as its sensor
+records it: ``H`` (the drawing's response included) and the boundary columns through the filter's
+first-order-hold response, the filters' states at the first sample among the boundary unknowns
+(:func:`rideid.estimate.roadfit.recorded_columns`).
+
 Limits (between the two limits of the prior): ``D = 0`` is the drawn track
 with an amplitude factor (:data:`MODES` "amplitude"), ``D`` infinite the
 unknown road ("free", the road projected out; no log-determinant). Both
@@ -139,6 +144,7 @@ def prepare_track_run(ds, run, mode: str = "prior") -> TrackRun:
         raise ValueError(f"mode must be one of {', '.join(MODES)}, got {mode!r}")
     rd = ds.data[run.id]
     rr = roadfit.prepare_road_run(run.id, rd.matrix(), rd.fs, float(run.speed), ds.geometry)
+    rr = roadfit.with_sensors(rr, ds.sensor_filters(run.id))  # the channels as wired (SPEC §11)
     ri = nominal_inputs(ds, run)
     return TrackRun(rr=rr, track=run.track, U=np.fft.rfft(np.asarray(ri.u, dtype=float), axis=0), mode=mode)
 
@@ -147,7 +153,8 @@ def prepare_track_run(ds, run, mode: str = "prior") -> TrackRun:
 class Fit:
     """The as-built fit of one run at one car: ``residual`` (K, c) whitened (``M^(-1/2) x / sigma_n``),
     ``logdet`` (K,), ``plain`` (K, c) the data less the model at the estimated road (weighted channels),
-    ``alpha``, the boundary unknowns ``f_state`` (14,) and ``f_lead`` (2, D)."""
+    ``alpha``, the boundary unknowns ``f_state`` (14, 18 with a powertrain, + the sensor filters' modes) and
+    ``f_lead`` (2, D)."""
 
     residual: np.ndarray
     logdet: np.ndarray
@@ -207,7 +214,7 @@ def solve(P, geom, tr: TrackRun, car=None) -> Fit:
     w = rr.omega(bins)
     h = rr.h
     car = roadfit.system(P, geom) if car is None else car
-    H = roadfit.transfer(car, w, rr.cols)[0] * rr.scale[None, :, None]                     # (K,c,4)
+    H, S = roadfit.recorded_columns(car, rr, w)            # (K,c,4), (K,c,ns): through the sensors (SPEC §11)
     ks, c = roadfit.delay_filter(rr.tau, h)
     E = np.exp(-1j * np.outer(w * h, ks)) @ c
     Acol = roadfit._road_columns(H, E)
@@ -216,7 +223,7 @@ def solve(P, geom, tr: TrackRun, car=None) -> Fit:
     white, logdet = _whitener(Acol, D, tr.mode)
     N = H @ tr.U[bins][:, :, None]                                                          # (K,c,1)
     cols = [white(N)[..., 0]]                                                               # alpha
-    S = white(roadfit._discrete_columns(car, w, rr.cols, h) * rr.scale[None, :, None])      # (K,c,14)
+    S = white(S)                                                                            # (K,c,ns)
     aL = white(H[:, :, 2:3])[..., 0]
     aR = white(H[:, :, 3:4])[..., 0]
     r = white(rr.Y[bins][:, :, None])[..., 0]
@@ -232,26 +239,27 @@ def solve(P, geom, tr: TrackRun, car=None) -> Fit:
         return (q @ ph).real[idx]
 
     en = np.exp(-1j * np.outer(w * h, np.arange(Dn)))                                      # (K, Dn)
-    g = np.concatenate([aN[:, :, None], S], axis=2)                                        # (K,c,15)
-    gf = g.reshape(-1, 15)
+    g = np.concatenate([aN[:, :, None], S], axis=2)                                        # (K,c,nb)
+    nb = g.shape[-1]  # alpha, the car's states (14, 18 with a powertrain) and the sensor filters' (SPEC §11)
+    gf = g.reshape(-1, nb)
     gr = np.concatenate([gf.real, gf.imag])
-    m = 15 + 2 * Dn
+    m = nb + 2 * Dn
     G = np.zeros((m, m))
     b = np.zeros(m)
-    G[:15, :15] = gr.T @ gr
-    b[:15] = gr.T @ np.concatenate([r.real.ravel(), r.imag.ravel()])
-    gH = np.conj(np.swapaxes(g, 1, 2))                                                     # (K,15,c)
+    G[:nb, :nb] = gr.T @ gr
+    b[:nb] = gr.T @ np.concatenate([r.real.ravel(), r.imag.ravel()])
+    gH = np.conj(np.swapaxes(g, 1, 2))                                                     # (K,nb,c)
     for j, a in enumerate((aL, aR)):
-        sl = slice(15 + j * Dn, 15 + (j + 1) * Dn)
-        G[:15, sl] = ((gH @ a[:, :, None])[..., 0].T @ en).real
-        G[sl, :15] = G[:15, sl].T
+        sl = slice(nb + j * Dn, nb + (j + 1) * Dn)
+        G[:nb, sl] = ((gH @ a[:, :, None])[..., 0].T @ en).real
+        G[sl, :nb] = G[:nb, sl].T
         b[sl] = (np.sum(np.conj(a) * r, axis=1) @ np.conj(en)).real
         for i, a2 in enumerate((aL, aR)):
-            sl2 = slice(15 + i * Dn, 15 + (i + 1) * Dn)
+            sl2 = slice(nb + i * Dn, nb + (i + 1) * Dn)
             G[sl, sl2] = toeplitz(np.sum(np.conj(a) * a2, axis=1))
     d = np.sqrt(np.clip(np.diag(G), 1e-300, None))
     f = _normal_solve(G / np.outer(d, d), b / d) / d
-    alpha, fS, fL, fR = f[0], f[1:15], f[15:15 + Dn], f[15 + Dn:]
+    alpha, fS, fL, fR = f[0], f[1:nb], f[nb:nb + Dn], f[nb + Dn:]
     res = r - aN * alpha - S @ fS - aL * (en @ fL)[:, None] - aR * (en @ fR)[:, None]
     # the data less the model at the estimated road: M^-1 x = M^(-1/2) (M^(-1/2) x) (weighted channels)
     plain = white(res[:, :, None])[..., 0] * sn[:, None] if tr.mode != "amplitude" else res * sn[:, None]
@@ -316,13 +324,13 @@ def estimate_prior(P, geom, tr: TrackRun) -> Prior:
     noise = np.maximum(noise, 1e-30 * max(float(np.mean(np.abs(rr.Y[rr.fit]) ** 2)), 1e-300))
     w = rr.omega(rr.fit)
     h = rr.h
-    H = roadfit.transfer(sol.car, w, rr.cols)[0] * rr.scale[None, :, None]
+    H, S = roadfit.recorded_columns(sol.car, rr, w)
     ks, cc = roadfit.delay_filter(rr.tau, h)
     E = np.exp(-1j * np.outer(w * h, ks)) @ cc
     Acol = roadfit._road_columns(H, E)
     _, road_of = roadfit._projector(Acol)
     en = np.exp(-1j * np.outer(w * h, np.arange(rr.lead_in)))
-    known = (roadfit._discrete_columns(sol.car, w, rr.cols, h) * rr.scale[None, :, None]) @ sol.f_state \
+    known = S @ sol.f_state \
         + H[:, :, 2] * (en @ sol.f_lead[0])[:, None] + H[:, :, 3] * (en @ sol.f_lead[1])[:, None]
     R = road_of((rr.Y[rr.fit] - known)[:, :, None])[..., 0]                                 # (K, 2) m
     AH = np.conj(np.swapaxes(Acol, -1, -2))

@@ -44,6 +44,14 @@ passes through the same filter). A real high-pass sensor's state at the
 record start is unknown for a car already moving: what the choice gets wrong
 decays with the filter's time constant ``1 / (2 pi f)`` (0.32 s for 0.5 Hz),
 so leave five of them out of a moving start's window.
+
+**In the frequency domain.** Where the road is fitted per DFT bin (unknown
+roads, tracks as built: :mod:`rideid.estimate.roadfit`,
+:mod:`rideid.estimate.asbuilt`) the same discrete filter enters as its
+response at ``z = exp(i omega h)`` (``d + sum c g / (z - lam)`` of
+:class:`DiscreteFilter`), and its state at the first sample is not chosen
+but estimated with the car's (the modes' free responses are boundary
+unknowns): a moving start needs nothing left out there.
 """
 
 from __future__ import annotations
