@@ -35,8 +35,8 @@ count. Against the scalar kernel before (one candidate at a time, kept as
 
 Measured (``benchmarks/bench_nonlinear.py --quick``: the built-in runs,
 9470 samples at 200 Hz, m = 2, 64 candidates with digressive curves; one
-thread, CPU time, on a shared 2-core machine under a load average of about
-4): ``NonlinearSimulator.errors`` 267-357 ns per candidate-sample against
+thread, CPU time, on a shared 2-core machine under a load average of
+3-4): ``NonlinearSimulator.errors`` 267-357 ns per candidate-sample against
 ``BatchSimulator.errors``' 41-43 on the same runs, 6.5-8.2x (the scalar
 kernel: 24x; the linear kernel has become faster since the 50-65 ns and
 4.7-5.7x measured with this kernel first); the compiled kernels alone
