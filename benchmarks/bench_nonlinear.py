@@ -47,7 +47,7 @@ from rideid.model import nonlinear as nl
 from rideid.model.batch import BatchSimulator
 from rideid.model.nonlinear import DEFAULT_KNOTS, NonlinearLayout, NonlinearSimulator
 from rideid.verify.hifi import hifi_curve
-from rideid.model.params import ALL_NAMES, as_vector
+from rideid.model.params import ALL_NAMES, SUSPENSION_NAMES, as_vector
 from rideid.model.simulate import prepare_run
 
 sys.path.insert(0, str(Path(__file__).parent))
@@ -84,11 +84,12 @@ def interleaved(fs: dict, repeat=5, clock=time.perf_counter):
 @contextlib.contextmanager
 def kernel_before():
     """The nonlinear simulators use the scalar kernel of before (``kernel_nl_before.py``) meanwhile."""
-    nl.kernel_nl = kernel_nl_before
+    module = nl.backend.module
+    nl.backend.module = lambda name: kernel_nl_before if name == "nonlinear" else module(name)
     try:
         yield
     finally:
-        nl.kernel_nl = kernel_nl
+        nl.backend.module = module
 
 
 COLD = ("import time, json; t = time.perf_counter(); from rideid.model import kernel_nl; "
@@ -121,7 +122,7 @@ def kernel_args(sim, P, Y, W):
 def setup():
     sc = default_scenario()
     runs = [prepare_run(sc.tracks[r.track], sc.geometry, r.speed, run_times(r)) for r in sc.runs]
-    P16 = as_vector({n: sc.truth.get(n, 0.0) for n in ALL_NAMES}, extended=True)
+    P16 = as_vector({n: sc.truth.get(n, 0.0) for n in ALL_NAMES}, extended=True)[:len(SUSPENSION_NAMES)]
     rng = np.random.default_rng(1)
     P = P16 * rng.uniform(0.95, 1.05, (N_POP, P16.size))
     layout = NonlinearLayout(knots=DEFAULT_KNOTS)

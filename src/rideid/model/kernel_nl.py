@@ -33,24 +33,30 @@ count. Against the scalar kernel before (one candidate at a time, kept as
 ``benchmarks/kernel_nl_before.py``) the outputs differ by rounding only
 (3e-14 of the largest).
 
-Measured (``benchmarks/bench_nonlinear.py``: the built-in runs, 9470
-samples at 200 Hz, m = 2, 64 candidates with digressive curves; one thread,
-CPU time, on a shared 2-core machine): ``NonlinearSimulator.errors`` 270-350
-ns per candidate-sample against ``BatchSimulator.errors``' 50-65 on the same
-runs, 4.7-5.7x (the scalar kernel: 21-24x); the compiled kernels alone
-4.7-7x (16-25x). The ratio is bounded by the work, not the lanes: RK4 at two
+Measured (``benchmarks/bench_nonlinear.py --quick``: the built-in runs,
+9470 samples at 200 Hz, m = 2, 64 candidates with digressive curves; one
+thread, CPU time, on a shared 2-core machine under a load average of
+3-4): ``NonlinearSimulator.errors`` 267-357 ns per candidate-sample against
+``BatchSimulator.errors``' 41-43 on the same runs, 6.5-8.2x (the scalar
+kernel: 24x; the linear kernel has become faster since the 50-65 ns and
+4.7-5.7x measured with this kernel first); the compiled kernels alone
+5.3-9.1x. The ratio is bounded by the work, not the lanes: RK4 at two
 sub-steps is eight right-hand sides per sample, each 144 vector arithmetic
 operations on its hot path (kinematics, spring, bar, damper segment check
 and line, bump stop, tire contact and lift-off, moments: about 35 per
-corner), 138 per sub-step to combine the stages, and in the 24 % of vector
-sub-steps where a lane crosses a kink the redo in pieces (2.3 sub-steps'
-work: 8 right-hand sides for one crossing); about 2300 vector operations per
-four candidates and sample against the linear kernel's 406 fused
-multiply-adds (210 + 28 N, N = 7 moment terms) and some 50 others, so about
-5x by arithmetic before the stages' memory traffic. One sub-step per sample
-would halve it, but gives 4e-4 - 8e-4 of RMS on the built-in runs (two:
-3e-5 - 1.2e-4) against the 1e-4 the accuracy tests hold. Cold compile (fresh
-install, empty Numba cache): about 9 s of CPU.
+corner), 138 per sub-step to combine the stages; measured, the plain
+sub-steps cost 158 ns per candidate-sample (3.9x the linear kernel), and
+the splitting 135 more: 23 % of the vector sub-steps have a lane crossing a
+kink (1.4 crossings on average), each such sub-step costing its trial, one
+RK4 step per piece and the crossings' search. One sub-step per sample
+would cost 77 ns plain, 196 split, but gives 4e-4 - 8e-4 of RMS on the
+built-in runs (two: 3e-5 - 1.2e-4) against the 1e-4 the accuracy tests
+hold. An exponential integrator over the candidate's linear car (only the
+curve's residual, the bump stops and the lift-off integrated numerically)
+does not meet it either: 1e-3 - 1.7e-2 at one step per sample (ETDRK4 or
+Lawson RK4, ``benchmarks/study_expint.py``; ``docs/dampers.md``), the
+residual's kinks unsplit. Cold compile (fresh install, empty Numba cache):
+about 9 s of CPU.
 """
 
 from __future__ import annotations

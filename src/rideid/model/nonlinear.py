@@ -49,7 +49,11 @@ state. Alternatives considered:
   integrators): exact for the linear part, but the remainder is not smooth
   either, its quadrature needs the same sub-steps, and the per-candidate
   matrix exponentials and moment matrices (which make the linear kernel
-  cheap) would need refreshing whenever a corner changes segment;
+  cheap) would need refreshing whenever a corner changes segment. Measured
+  (``benchmarks/study_expint.py``: the linear car with the curves' mean
+  slope at zero velocity exact, road forcing included; ETDRK4 or Lawson
+  RK4 on the remainder): 1e-3 - 1.7e-2 of RMS at one step per sample,
+  2.4e-4 - 8.4e-3 at two, on the runs below and the built-in ones;
 * *operator splitting* (linear exact step + nonlinear kick): first or second
   order only, error hard to bound on a stiff bump stop;
 * *implicit schemes* (trapezoidal, Radau): unconditionally stable, but a
@@ -87,8 +91,9 @@ state. Alternatives considered:
   one RK4 step per piece. Four candidates run side by side in the lanes of
   a vector (:mod:`rideid.model.kernel_nl_ir`); ``benchmarks/bench_nonlinear.py``
   measures the cost per candidate-sample against the linear kernel's on the
-  same runs (64 digressive cars, one thread, CPU time): 4.7-5.7x, from
-  21-24x with one candidate at a time.
+  same runs (64 digressive cars, one thread, CPU time): 6.5-8.2x (4.7-5.7x
+  against the linear kernel before it became faster), from 24x with one
+  candidate at a time.
 
 ``m`` is set per call by the fastest mode of the linearised car at its
 stiffest (spring plus bump-stop rate, the steepest damper segment, tires

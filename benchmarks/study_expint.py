@@ -1,0 +1,251 @@
+"""Exponential integrators for the nonlinear car at one step per sample: accuracy study (issue 37, item 3).
+
+The candidate's *linear* car (springs, bars, tires in contact, each damper
+at a reference slope ``c_ref``; shifted states as in
+:mod:`rideid.model.nonlinear`) is integrated exactly over each step,
+``X' = A X + Bt u(t) + N(X, t)``, the road's forcing by fine Gauss
+quadrature of ``e^{A (h - s)} Bt u(t_k + s)`` (the linear kernel's moments,
+written out); only the residual ``N = f(X) - A X - Bt u`` (curve minus the
+reference slope, bump stops, lift-off; nonzero in the seven acceleration
+rows only) is integrated numerically:
+
+* ``etd2``: Cox-Matthews ETD2RK (predictor with ``phi1 N_k``, corrector with
+  ``phi2 (N(a) - N_k)``), two residuals per step, no half-step state;
+* ``etd4``: Cox-Matthews ETDRK4, four residuals per step, the road's forcing
+  over each half step exact too;
+* ``lawson4``: Lawson RK4 (RK4 on ``e^{-A t} X``), four residuals per step.
+
+Each at ``m`` steps per sample. Error: largest over the ten channels of the
+RMS difference relative to the channel's RMS, against the present scheme
+(RK4 split at the kinks) at 64x its sub-steps, as ``tests/test_nonlinear.py``.
+Cases: the tests' severe runs (asymmetric digressive dampers, bump stops that
+are reached, wheels that lift; CG 0.25 m) and the built-in scenario's runs
+with the bench's digressive cars. The reference slope: the mean slope of the
+two curve segments around zero velocity.
+
+Run: ``python benchmarks/study_expint.py [SCHEME ...]`` (about 8 minutes of one core), ``--shapes``: the
+curve shapes' table (ETDRK4 on two runs, about 2 minutes).
+"""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+import numpy as np
+import scipy.linalg
+
+from rideid.data.scenario import default_scenario, run_times
+from rideid.model import kernel_nl
+from rideid.model import nonlinear as nl
+from rideid.model.nonlinear import DEFAULT_KNOTS, NonlinearLayout, NonlinearSimulator
+from rideid.model.params import ALL_NAMES, SUSPENSION_NAMES, as_vector
+from rideid.model.simulate import prepare_run
+from rideid.verify.hifi import hifi_curve
+
+sys.path.insert(0, str(Path(__file__).parents[1] / "tests"))
+
+#: Gauss-Legendre nodes (two per panel) for the road's forcing over a step
+PANELS = 32
+
+
+def reference_slopes(Sk, xk):
+    """Per candidate and axle the reference damper slope ``(n, 2)``: the mean of the two segments at zero."""
+    j0 = int(np.flatnonzero(xk == 0.0)[0])
+    return 0.5 * (Sk[:, :, j0 - 1] + Sk[:, :, j0])
+
+
+def linear_parts(co, xk, Fk, Sk, c_ref):
+    """``A`` (n, 14, 14) and ``Bt`` (n, 14, 4) of the linear car (shifted states), from the nonlinear right-hand
+    side with linear dampers ``c_ref``, no bump stops, every tire loaded (small perturbations of rest)."""
+    n = co.shape[0]
+    cl = co.copy()
+    for c in range(4):
+        cl[:, nl.CI[f"cs{c}"]] = c_ref[:, c // 2]
+        cl[:, nl.CI[f"bs_clear{c}"]] = np.inf
+        cl[:, nl.CI[f"bs_rate{c}"]] = 0.0
+    eps = 1e-5
+    A = np.empty((n, 14, 14))
+    Bt = np.empty((n, 14, 4))
+    z4 = np.zeros(4)
+    for j in range(14):
+        X = np.zeros((n, 14))
+        X[:, j] = eps
+        A[:, :, j] = nl.accelerations(cl, xk, Fk, Sk, False, X, z4, z4)[0] / eps
+    for c in range(4):
+        u = np.zeros(4)
+        u[c] = eps
+        Bt[:, :, c] = nl.accelerations(cl, xk, Fk, Sk, False, np.zeros((n, 14)), u, z4)[0] / eps
+    return A, Bt
+
+
+def phis(A, tau, k=3):
+    """``[e^{A tau}, phi_1, .., phi_k]`` of ``A tau`` (each (n, 14, 14)), from one augmented exponential."""
+    n, s, _ = A.shape
+    M = np.zeros((n, (k + 1) * s, (k + 1) * s))
+    M[:, :s, :s] = A * tau
+    for i in range(k):
+        M[:, i * s:(i + 1) * s, (i + 1) * s:(i + 2) * s] = np.eye(s)
+    E = scipy.linalg.expm(M)
+    return [E[:, :s, i * s:(i + 1) * s] for i in range(k + 1)]
+
+
+def forcing(A, Bt, run, a, b):
+    """``int_a^b e^{A (b - s)} Bt u(t_k + s) ds`` for every interval ``k``: (n, n_int, 14)."""
+    xg, wg = np.polynomial.legendre.leggauss(2)
+    x = ((np.arange(PANELS)[:, None] + 0.5 * (xg[None, :] + 1.0)) / PANELS).ravel()
+    w = np.repeat(wg[None, :] * 0.5 / PANELS, PANELS, 0).ravel()
+    s = a + (b - a) * x
+    Mq = np.stack([scipy.linalg.expm(A * (b - sq)) @ Bt * (wq * (b - a)) for sq, wq in zip(s, w)], 1)
+    t0 = run.t[:-1]
+    uq, _ = run.inputs_at((t0[:, None] + s[None, :]).ravel())
+    uq = uq.reshape(t0.size, s.size, 4)
+    return np.einsum("nqij,kqj->nki", Mq, uq)
+
+
+def simulate_exp(P, geom, run, layout, scheme="etd2", m=1):
+    """Channels (n, n_time, 10) by exponential integrator ``scheme`` at ``m`` steps per sample."""
+    co, xk, Fk, Sk = nl.coefficients(P, geom, layout)
+    curves = layout.knots is not None
+    c_ref = reference_slopes(Sk, xk) if curves else co[:, [nl.CI["cs0"], nl.CI["cs2"]]]
+    A, Bt = linear_parts(co, xk, Fk, Sk, c_ref)
+    if m != 1:
+        sub = run.h / m
+        fine_t = run.t[0] + sub * np.arange(m * (run.n - 1) + 1)
+        run_f = prepare_run_like(run, fine_t)
+    else:
+        run_f = run
+    h = run_f.h
+    E, p1, p2, p3 = phis(A, h)
+    Eh, q1, _, _ = phis(A, h / 2)
+    Ff = forcing(A, Bt, run_f, 0.0, h)
+    Fa = forcing(A, Bt, run_f, 0.0, h / 2)
+    Fb = forcing(A, Bt, run_f, h / 2, h)
+    um, rm = run_f.inputs_at(run_f.t[:-1] + h / 2)
+    U, R = run_f.u, run_f.rate
+    mv = lambda M, x: np.einsum("nij,nj->ni", M, x)  # noqa: E731
+
+    def resid(X, u, r):
+        d, _ = nl.accelerations(co, xk, Fk, Sk, curves, X, u, r)
+        return d - mv(A, X) - np.einsum("nij,j->ni", Bt, u)
+
+    X = nl.shifted(co, nl.initial_state(P, geom, layout, run.u[0]), run.u[0])
+    n = X.shape[0]
+    y = np.empty((n, run.n, 10))
+    f1 = p1 - 3 * p2 + 4 * p3
+    f2 = p2 - 2 * p3
+    f3 = -p2 + 4 * p3
+    for k in range(run_f.n):
+        if k % m == 0:
+            _, qdd = nl.accelerations(co, xk, Fk, Sk, curves, X, U[k], R[k])
+            y[:, k // m] = nl.channels(co, X, qdd)
+        if k + 1 == run_f.n:
+            break
+        Nk = resid(X, U[k], R[k])
+        lin = mv(E, X) + Ff[:, k]
+        if scheme == "etd2":
+            a = lin + h * mv(p1, Nk)
+            X = a + h * mv(p2, resid(a, U[k + 1], R[k + 1]) - Nk)
+        elif scheme == "etd4":
+            half = mv(Eh, X) + Fa[:, k]
+            a = half + (h / 2) * mv(q1, Nk)
+            Na = resid(a, um[k], rm[k])
+            b = half + (h / 2) * mv(q1, Na)
+            Nb = resid(b, um[k], rm[k])
+            c = mv(Eh, a) + Fb[:, k] + (h / 2) * mv(q1, 2 * Nb - Nk)
+            Nc = resid(c, U[k + 1], R[k + 1])
+            X = lin + h * (mv(f1, Nk) + 2 * mv(f2, Na + Nb) + mv(f3, Nc))
+        elif scheme == "lawson4":
+            # RK4 on v = e^{-A s} (X - linear forced response): stages carried to the step's end
+            half = mv(Eh, X) + Fa[:, k]
+            k1 = Nk
+            x2 = half + (h / 2) * mv(Eh, k1)
+            k2 = resid(x2, um[k], rm[k])
+            x3 = half + (h / 2) * k2
+            k3 = resid(x3, um[k], rm[k])
+            x4 = lin + h * mv(Eh, k3)
+            k4 = resid(x4, U[k + 1], R[k + 1])
+            X = lin + (h / 6) * (mv(E, k1) + 2 * mv(Eh, k2 + k3) + k4)
+        else:
+            raise ValueError(scheme)
+    return y
+
+
+def prepare_run_like(run, t):
+    """``run`` at finer sample times ``t`` (the same road model)."""
+    u, r = run.inputs_at(t)
+    return type("R", (), dict(t=t, h=t[1] - t[0], u=u, rate=r, inputs_at=staticmethod(run.inputs_at),
+                              n=t.size))()
+
+
+def reference(P, geom, run, layout, sim):
+    m = sim.substeps(P)[0]
+    co, xk, Fk, Sk = nl.coefficients(P, geom, layout)
+    X0 = nl.shifted(co, nl.initial_state(P, geom, layout, run.u[0]), run.u[0])[None]
+    _, out, _ = kernel_nl.run(co, xk, Fk, Sk, layout.knots is not None, X0, np.array([0, run.n]), [run.h],
+                              np.array([64 * m]), [nl.fine_inputs(run, 64 * m)], np.zeros((run.n, 10)),
+                              np.zeros((1, 10)), 1, kinks=sim.kinks(P))
+    return out, m
+
+
+def rel_rms(y, ref):
+    rms = np.sqrt(np.mean(ref ** 2, axis=-2))
+    err = np.sqrt(np.mean((y - ref) ** 2, axis=-2))
+    ok = rms > 1e-9 * rms.max()
+    return np.where(ok, err / np.where(ok, rms, 1), 0.0).max(axis=-1)
+
+
+def cases():
+    import tempfile
+    from cars import write_profile_road
+    import test_nonlinear as tn
+
+    d = Path(tempfile.mkdtemp())
+    write_profile_road(d, 0.03, 0.012)
+    P = tn.nasty_row()[None]
+    for kind in ("washboard", "herringbone", "chassis_twist", "profile"):
+        yield f"severe {kind}", P, tn.GH, tn.make_run(kind, d), tn.FULL
+    sc = default_scenario()
+    P16 = as_vector({n: sc.truth.get(n, 0.0) for n in ALL_NAMES}, extended=True)[:len(SUSPENSION_NAMES)]
+    rng = np.random.default_rng(1)
+    Pb = P16 * rng.uniform(0.95, 1.05, (4, P16.size))
+    Ff = np.stack([hifi_curve(c, DEFAULT_KNOTS, 2.0, 0.1, 0.4) for c in Pb[:, 8]])
+    Fr = np.stack([hifi_curve(c, DEFAULT_KNOTS, 2.0, 0.1, 0.4) for c in Pb[:, 9]])
+    Pn = np.concatenate([Pb, Ff, Fr], axis=1)
+    for r in sc.runs:
+        run = prepare_run(sc.tracks[r.track], sc.geometry, r.speed, run_times(r))
+        yield f"built-in {r.track} {r.speed:g} m/s", Pn, sc.geometry, run, NonlinearLayout(knots=DEFAULT_KNOTS)
+
+
+def shapes():
+    """What limits the exponential schemes: ETDRK4 on two built-in runs with other curve shapes (rebound ratio,
+    slope above the 0.1 m/s knee): a linear curve leaves only the lift-off residual."""
+    cs = list(cases())
+    print("| case | rebound ratio | slope above knee | RK4 split | etd4 m=1 | etd4 m=2 |")
+    for name, P, geom, run, layout in (cs[4], cs[11]):
+        for ratio, above in ((2.0, 0.4), (1.0, 0.4), (2.0, 1.0), (1.0, 1.0)):
+            Pn = np.concatenate([P[:, :16]] + [np.stack([hifi_curve(c, DEFAULT_KNOTS, ratio, 0.1, above)
+                                                         for c in P[:, col]]) for col in (8, 9)], 1)
+            sim = NonlinearSimulator(geom, [run], layout)
+            ref, _ = reference(Pn, geom, run, layout, sim)
+            errs = [rel_rms(sim.outputs(Pn)[0], ref).max()] + \
+                [rel_rms(simulate_exp(Pn, geom, run, layout, "etd4", m=m), ref).max() for m in (1, 2)]
+            print(f"| {name} | {ratio:g} | {above:g} | " + " | ".join(f"{e:.1e}" for e in errs) + " |", flush=True)
+
+
+def main():
+    if "--shapes" in sys.argv[1:]:
+        return shapes()
+    schemes = [a for a in sys.argv[1:] if not a.startswith("--")] or ["etd2", "etd4", "lawson4"]
+    ms = (1, 2)
+    print("| case | RK4 split (m) | " + " | ".join(f"{s} m={m}" for s in schemes for m in ms) + " |")
+    for name, P, geom, run, layout in cases():
+        sim = NonlinearSimulator(geom, [run], layout)
+        ref, m0 = reference(P, geom, run, layout, sim)
+        base = rel_rms(sim.outputs(P)[0], ref).max()
+        errs = [rel_rms(simulate_exp(P, geom, run, layout, s, m=m), ref).max() for s in schemes for m in ms]
+        print(f"| {name} | {base:.1e} ({m0}) | " + " | ".join(f"{e:.1e}" for e in errs) + " |", flush=True)
+
+
+if __name__ == "__main__":
+    main()
