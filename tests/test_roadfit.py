@@ -83,6 +83,34 @@ def test_the_projection_is_exact_at_the_true_car(data):
     assert r2 @ r2 > 1e3 * (r @ r)
 
 
+def test_a_clipped_channel_leaves_the_run_s_road_fit_whole(data):
+    """SPEC §11: samples at a channel's range leave the fit. The road fit works on the record's DFT, so a clipped
+    channel leaves that run's fit whole and is named; the road is still determined by the other nine channels:
+    the true car fits exactly and a tire 1 % off is still seen."""
+    geom, P, y, _, _ = data
+    fl = CHANNELS.index("axle_az_fl")
+    cut = 0.8 * np.max(np.abs(y[:, fl]))
+    clipped = np.zeros(y.shape, dtype=bool)
+    clipped[:, fl] = np.abs(y[:, fl]) >= cut
+    yc = y.copy()
+    yc[:, fl] = np.clip(y[:, fl], -cut, cut)
+    assert 0 < clipped[:, fl].mean() < 0.01
+    rr = roadfit.prepare_road_run("R", yc, FS, 12.0, geom, clipped=clipped)
+    assert fl not in rr.cols and len(rr.cols) == 9
+    assert rr.left_out["axle_az_fl"].startswith("left out: ") and "range" in rr.left_out["axle_az_fl"]
+    r = roadfit.residuals(P, geom, rr)
+    signal = np.sum(np.abs(rr.Y[rr.fit]) ** 2)
+    assert r @ r / signal < 1e-7
+    P2 = P.copy()
+    P2[INDEX["k_tf"]] *= 1.01
+    r2 = roadfit.residuals(P2, geom, rr)
+    assert r2 @ r2 > 1e3 * (r @ r)
+    # kept, the cut peaks are a misfit of the true car thousands of times the exact one
+    kept = roadfit.prepare_road_run("R", yc, FS, 12.0, geom)
+    rk = roadfit.residuals(P, geom, kept)
+    assert rk @ rk / np.sum(np.abs(kept.Y[kept.fit]) ** 2) > 1e3 * (r @ r / signal)
+
+
 def test_tire_damping_sees_the_road_rate(tmp_path):
     """With tire damping the road's rate drives the wheels: the projection carries it (``i w R``). The true car
     still fits to 1e-6 of the signal (not 1e-9 as without: the rate of a profile interpolated between 1 cm

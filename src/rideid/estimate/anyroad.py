@@ -124,7 +124,8 @@ def prepare_road_runs(ds, extensions=()) -> list:
     out = []
     for r in unknown_road_runs(ds, extensions):
         rd = ds.data[r.id]
-        rr = roadfit.prepare_road_run(r.id, rd.matrix(), rd.fs, run_speed(ds, r), ds.geometry)
+        rr = roadfit.prepare_road_run(r.id, rd.matrix(), rd.fs, run_speed(ds, r), ds.geometry,
+                                      clipped=ds.clipped(r.id))
         out.append(roadfit.with_sensors(rr, ds.sensor_filters(r.id)))  # the channels as wired (SPEC §11)
     return out
 
@@ -399,6 +400,8 @@ def _tracks_block(ds, trs, skipped, P, geom):
         hi = min(roadfit.BAND[1], 0.45 * tr.rr.fs)
         rec["runs"][tr.run_id] = {"amplitude_factor": fit.alpha, "unevenness_rms_m": asbuilt.unevenness_rms(tr),
                                   "wavelengths_m": [tr.rr.speed / hi, tr.rr.speed / roadfit.BAND[0]]}
+        if tr.rr.left_out:  # a channel without signal, or clipped (roadfit.without_clipped)
+            rec["runs"][tr.run_id]["channels_left_out"] = dict(tr.rr.left_out)
     how = {"prior": "the drawing times an amplitude factor plus unevenness whose spectrum is estimated from the data",
            "amplitude": "the drawing times an amplitude factor", "free": "the road projected out, the drawing unused"}
     for rec in out.values():

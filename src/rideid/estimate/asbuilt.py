@@ -143,7 +143,8 @@ def prepare_track_run(ds, run, mode: str = "prior") -> TrackRun:
     if mode not in MODES:
         raise ValueError(f"mode must be one of {', '.join(MODES)}, got {mode!r}")
     rd = ds.data[run.id]
-    rr = roadfit.prepare_road_run(run.id, rd.matrix(), rd.fs, float(run.speed), ds.geometry)
+    rr = roadfit.prepare_road_run(run.id, rd.matrix(), rd.fs, float(run.speed), ds.geometry,
+                                  clipped=ds.clipped(run.id))
     rr = roadfit.with_sensors(rr, ds.sensor_filters(run.id))  # the channels as wired (SPEC §11)
     ri = nominal_inputs(ds, run)
     return TrackRun(rr=rr, track=run.track, U=np.fft.rfft(np.asarray(ri.u, dtype=float), axis=0), mode=mode)

@@ -213,15 +213,17 @@ class RoadRun:
 
 
 def prepare_road_run(run_id: str, y, fs: float, speed: float, geom: Geometry, cols=None,
-                     band=BAND) -> RoadRun:
+                     band=BAND, clipped=None) -> RoadRun:
     """Prepare a run's channels ``y`` (n, 10; NaN columns unused) for :func:`residuals` and :func:`search_costs`.
 
     ``cols``: the channels to use; default those :func:`used_channels` keeps (a channel without signal is left
-    out and named in ``left_out``)."""
-    y = np.asarray(y, dtype=float)
-    left = {}
+    out and named in ``left_out``). ``clipped`` (n, 10) bool, optional: where a channel sat at its range
+    (SPEC §11, :meth:`rideid.data.dataset.Dataset.clipped`); each such channel is left out of this run's fit
+    whole (:func:`without_clipped`) and named in ``left_out``."""
+    y, left = without_clipped(y, clipped)
     if cols is None:
-        cols, left = used_channels(y)
+        cols, quiet = used_channels(y)
+        left.update(quiet)
     cols = np.asarray(cols, dtype=int)
     yc = y[:, cols]
     yc = yc - yc.mean(axis=0)
@@ -235,6 +237,28 @@ def prepare_road_run(run_id: str, y, fs: float, speed: float, geom: Geometry, co
     Ys = np.fft.rfft(yc * scale * np.hanning(n)[:, None], axis=0)[search]
     return RoadRun(run_id=run_id, fs=float(fs), speed=float(speed), n=n, cols=cols, scale=scale, Y=Y, fit=fit,
                    search=search, Ys=Ys, tau=geom.wheelbase / float(speed), left_out=left)
+
+
+def without_clipped(y, clipped=None) -> tuple[np.ndarray, dict]:
+    """``y`` (n, 10) with every channel that has a sample at its range (``clipped``, (n, 10) bool) set to NaN, and
+    those channels: name -> why, one line.
+
+    On a known track the time-domain cost leaves the clipped samples out one by one (SPEC §11). A road fit
+    works on the run's DFT, where one sample cannot be left out: a peak cut flat is a distortion of every
+    bin, which the free road would partly take up and pass on to the car. So the channel is left out of
+    that run's road fit whole; its other runs keep it, and the road stays determined by the other nine
+    (both wheel paths enter every channel)."""
+    y = np.array(y, dtype=float)
+    left = {}
+    if clipped is None:
+        return y, left
+    clipped = np.asarray(clipped, dtype=bool)
+    for i in np.nonzero(clipped.any(axis=0))[0]:
+        if np.isfinite(y[:, i]).all():
+            left[CHANNELS[i]] = (f"left out: {100 * clipped[:, i].mean():.2g} % of its samples at the channel's range "
+                                 "(clipped; the road fit works on the whole record's DFT)")
+            y[:, i] = np.nan
+    return y, left
 
 
 def delay_filter(tau: float, h: float, order: int = DELAY_ORDER):
