@@ -246,7 +246,8 @@ def _parser() -> argparse.ArgumentParser:
 
     s = add("score", "compare an identification result with the truth")
     s.add_argument("result", metavar="RESULT.json", help="an identification's result.json (or its folder)")
-    s.add_argument("truth", metavar="TRUTH.toml", help="the truth, e.g. the truth.toml rideid simulate writes (or the folder that holds it)")
+    s.add_argument("truth", metavar="TRUTH.toml", help="the truth, e.g. the truth.toml rideid simulate writes "
+                                                  "(or the folder that holds it)")
 
     s = add("export", "the identified car as a parameter card (car.toml, car.csv) and an FMI 2.0 FMU (car.fmu)",
             ("fit", "FIT_DIR", "an identification folder (result.json)"),
