@@ -4,8 +4,8 @@ built, logged through real sensor chains, with a noisy GPS speed channel and an 
 Composed of the independent simulators of the tests, none of rideid's equations:
 
 * the road: :mod:`asbuilt_tracks` (the drawing times ``AMPLITUDE`` plus ``UNEVENNESS`` m RMS of band-limited
-  unevenness under each wheel path, rigid-disc envelope on a 1 mm grid), flat before x = 0 so that the car
-  rolls in steady state on flat road during the lead-in;
+  unevenness under each side's wheel path, rigid-disc envelope on a 1 mm grid, each wheel at its own lateral
+  offset: SPEC §2), flat before x = 0 so that the car rolls in steady state on flat road during the lead-in;
 * the car: :mod:`powertrain_car` (Newton-Euler, with the issue's 180 kg engine on 10.5/13 Hz mounts),
   ``scipy.signal.lsim`` on a 4 kHz grid, sampled at 1 kHz: the built-in car on the built-in track set's ten
   runs (``car="builtin"``, the default), or the SUV of tests/cars.py on the five high-severity runs of
@@ -61,14 +61,19 @@ def setup(car: str = "builtin"):
 
 
 def _road(vehicle: dict, track: dict, speed: float, duration: float, rng):
-    """The as-built heights under the left and right wheel paths: (s grid, (2, n) envelopes)."""
+    """The as-built heights under the wheel paths: (s grid, (4, n) envelopes fl, fr, rl, rr). Each wheel rolls on
+    its own lateral offset (SPEC §2: a herringbone's phase depends on it, and the built-in car's rear track is
+    23 mm narrower than its front), the unevenness the same under a side's front and rear wheels (it varies over
+    metres, not the 11.5 mm between them)."""
     R, wb = vehicle["tire_radius"], vehicle["wheelbase"]
     s = np.arange(-wb - speed * OFFSET - 2 * R - 1.0, speed * duration + 2 * R + 1.0, 1e-3)
     ramp = np.clip(s / 1.0, 0.0, 1.0)
     ramp = 0.5 - 0.5 * np.cos(np.pi * ramp)  # flat road before x = 0, the unevenness faded in over 1 m
+    bumps = [ramp * unevenness(rng, s, UNEVENNESS) for _ in range(2)]
     paths = []
-    for y in (vehicle["track_front"] / 2, -vehicle["track_front"] / 2):
-        paths.append(envelope(AMPLITUDE * drawn(track, s, y) + ramp * unevenness(rng, s, UNEVENNESS), R))
+    for axle in ("track_front", "track_rear"):
+        for side, y in enumerate((vehicle[axle] / 2, -vehicle[axle] / 2)):
+            paths.append(envelope(AMPLITUDE * drawn(track, s, y) + bumps[side], R))
     return s, np.array(paths)
 
 
@@ -80,7 +85,7 @@ def simulate_run(vehicle: dict, truth: dict, track: dict, speed: float, duration
     def road(tt):
         x = speed * (tt - OFFSET)
         return np.column_stack([np.interp(x, s, paths[0]), np.interp(x, s, paths[1]),
-                                np.interp(x - wb, s, paths[0]), np.interp(x - wb, s, paths[1])])
+                                np.interp(x - wb, s, paths[2]), np.interp(x - wb, s, paths[3])])
 
     t = np.arange(int(round((OFFSET + duration) * 1000.0)) + 1) / 1000.0
     geom = types.SimpleNamespace(**vehicle)

@@ -221,3 +221,31 @@ def test_auto_picks_curves_for_digressive_asymmetric_dampers(tmp_path):
     F = np.interp(VEL, res["dampers"]["velocity"], res["dampers"]["front"]["force"])
     F_true = np.array(truth["dampers"]["front"])
     assert np.all(np.abs(F - F_true) <= 0.03 * np.abs(F_true))
+
+
+def test_the_tracks_as_drawn_caveat_says_when_the_weighing_cannot_clear_a_drawing():
+    """An adequate verdict that rests on the weighing (structure found, immaterial) while the tracks stayed as
+    drawn carries a caveat when the structure spans two or more runs (a drawing error is common to every run);
+    not when it is local to one run, not when the as-built fit was accepted, not without structure."""
+    from dataclasses import dataclass, field
+
+    from rideid.estimate import model_choice
+
+    @dataclass
+    class Res:
+        adequacy: dict
+        tracks: dict = field(default_factory=dict)
+
+    def ad(pairs, adequate=True, structure=True):
+        return {"adequate": adequate, "structure": structure, "materiality": {"pairs_left_out": pairs}}
+
+    two = ["T_HH/axle_az_fl", "H_HH/body_az_fl", "H_HH/axle_az_rr"]
+    rejected = {"twist": {"rejected": "the tracks as built needed more than a track carries"}}
+    out = model_choice._drawing_caveat(None, Res(ad(two), rejected), (), "as-built")
+    assert "tracks_caveat" in out.adequacy and "as-built fit was rejected" in out.adequacy["tracks_caveat"]
+    assert out.adequacy["adequate"]                               # the verdict stands, with its statement
+    for res in (Res(ad(["T_HH/axle_az_fl", "T_HH/axle_az_fr"]), rejected),   # one run: the weighing judges it
+                Res(ad(two), {"twist": {"amplitude_factor": 1.04}}),        # fitted as built
+                Res(ad(two, adequate=False), rejected),                      # not adequate: said already
+                Res(ad(two, structure=False), rejected)):                    # no structure found
+        assert "tracks_caveat" not in model_choice._drawing_caveat(None, res, (), "as-built").adequacy

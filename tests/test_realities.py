@@ -115,11 +115,15 @@ def test_identify_runs_on_the_all_realities_case(realities, tmp_path):
     """End to end through the command line, the powertrain in the model: the checks pass the data as wired,
     the starts are estimated and polished, and what the fit gives is recorded (printed) against the truth.
 
-    Measured (seed 1, three runs; 396 s on two cores shared with two other jobs): the twelve within 12.6 %
-    (k_tf +12.6 %, m_uf +11.9 %, m_ur +9.3 %, k_tr +9.8 %, c_sf +5.7 %, a -3.4 %, the rest within 2 %), the
-    engine's mass -5.4 %, its bounce frequency -0.25 %, not adequate: three runs of as-built tracks leave the
-    unsprung side and the engine's pitch (I_p +92 %, zeta_pp at its bound) poorly determined. The issue's
-    "every parameter within 2 %" is not met on this case."""
+    Measured (seed 1, three runs, each wheel on its own lateral path; 36 s on two cores): the twelve within
+    12.2 % (k_tf +12.2 %, m_uf +11.2 %, k_tr +9.9 %, m_ur +9.2 %, c_sf +5.4 %, a -2.9 %, the rest within 2 %),
+    the engine's mass -6.4 %, its bounce frequency -0.15 %. The runs follow a GPS speed channel, so the tracks
+    stay as drawn (the as-built fit needs a constant speed), and the drawing's 4 % error is in every run. The
+    residual test flags 13 run/channel pairs; leaving them out moves no estimate by 1 std_total, so the weighing
+    calls the structure immaterial and the verdict adequate, while k_tf is 2.8 std_total off, f_pp 3.4, m_uf and
+    m_s 2.4. The result therefore carries ``adequacy.tracks_caveat`` (and a WARNING line): the tracks taken as
+    drawn while the residuals hold road-driven structure, every estimate possibly off by more than its error
+    bars. The issue's "every parameter within 2 %" is not met on this case."""
     import json
     import subprocess
     folder, _ = realities
@@ -137,5 +141,11 @@ def test_identify_runs_on_the_all_realities_case(realities, tmp_path):
     print({n: f"{100 * e:+.2f} %" for n, e in errs.items()}, res.get("adequacy", {}).get("adequate"))
     for rid in RUNS:
         assert abs(res["preprocessing"][rid]["start"]["value"] - realities_case.OFFSET) < 0.01
-    assert max(abs(e) for n, e in errs.items() if n in rideid.NAMES) < 0.2
-    assert abs(errs["m_p"]) < 0.1 and abs(errs["f_pb"]) < 0.02
+    assert max(abs(e) for n, e in errs.items() if n in rideid.NAMES) < 0.14
+    assert abs(errs["m_p"]) < 0.08 and abs(errs["f_pb"]) < 0.005
+    # weighed adequate with estimates 2.4-3.4 std_total off: the tracks stayed as drawn (the runs follow a speed
+    # channel), and the result says its numbers are not to be trusted beyond their error bars, and why
+    ad = res["adequacy"]
+    off = [n for n in errs if abs(res["parameters"][n]["value"] - truth[n]) > 2 * res["parameters"][n]["std_total"]]
+    assert off and (not ad["adequate"] or "speed channel" in ad["tracks_caveat"]), (off, ad)
+    assert not ad["adequate"] or "WARNING: the tracks were taken as drawn" in proc.stdout

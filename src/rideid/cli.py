@@ -457,6 +457,9 @@ def run_identify(ds_path, out_dir, *, seed, population=None, generations=None, w
     small = ((res.adequacy or {}).get("small_angle") or {}).get("note")
     if small:
         print(textwrap.fill("note: " + small, 100, subsequent_indent="  "), file=out)
+    caveat = (res.adequacy or {}).get("tracks_caveat")
+    if caveat:  # adequate only by the weighing, on tracks as drawn: say which numbers not to trust
+        print(textwrap.fill("WARNING: " + caveat, 100, subsequent_indent="  "), file=out)
     para = rideid.verdict_paragraph(res.adequacy)
     if para:
         print("\n" + textwrap.fill(para, 100) + "\n", file=out)

@@ -859,6 +859,9 @@ def summary_section(result, context: dict) -> dict:
         if bound:
             text += f"; AT A SEARCH BOUND: {', '.join(bound)}"
         lines.append(("Estimates", text, "estimates"))
+    caveat = (adq or {}).get("tracks_caveat")
+    if caveat:  # adequate only by the weighing, on tracks as drawn (rideid.estimate.model_choice._drawing_caveat)
+        lines.append(("Tracks as drawn", "NOT TO BE TRUSTED beyond the error bars: " + caveat, "estimates"))
     small = ((adq or {}).get("small_angle") or {}).get("note")
     if small:  # SPEC §1 is small-angle: which error bars a body that turned degrees makes optimistic
         lines.append(("Small angles", small.split(": ", 1)[-1], "estimates"))
