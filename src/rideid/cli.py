@@ -452,8 +452,8 @@ def run_identify(ds_path, out_dir, *, seed, population=None, generations=None, w
     print(_summary_table(res), file=out)
     if res.model.get("candidates"):
         print(_candidates_table(res.model), file=out)
-    for hint in (res.adequacy or {}).get("sensor_hints") or []:
-        print("hint: " + hint["message"], file=out)
+    for message in dict.fromkeys(h["message"] for h in (res.adequacy or {}).get("sensor_hints") or []):
+        print("hint: " + message, file=out)  # a group of channels shares one message
     small = ((res.adequacy or {}).get("small_angle") or {}).get("note")
     if small:
         print(textwrap.fill("note: " + small, 100, subsequent_indent="  "), file=out)

@@ -131,8 +131,12 @@ def verdict(adequacy: dict, record: dict) -> dict:
     named = ", ".join(pairs[:6]) + (f" and {len(pairs) - 6} more" if len(pairs) > 6 else "")
     first = (f"road-driven structure in {len(pairs)} run/channel pairs ({named}); {record['reason']}")
     reasons = [first] + list(adequacy.get("reasons", [])[1:]) + [adequacy["reasons"][0]]
-    return {**adequacy, "adequate": not record["material"], "structure": True, "reasons": reasons,
-            "materiality": record}
+    if adequacy.get("sensors_suspect"):  # the sensor chain found wrong stays the first reason
+        reasons = [adequacy["reasons"][0], first] + list(adequacy.get("reasons", [])[1:])
+    # structure that does not matter clears the structure, not a sensor chain the road fit found wrong
+    # (rideid.estimate.anyroad: an undeclared AC coupling, ``sensors_suspect``)
+    return {**adequacy, "adequate": not record["material"] and not adequacy.get("sensors_suspect"),
+            "structure": True, "reasons": reasons, "materiality": record}
 
 
 def weigh_result(ds, res, simulator=None):
