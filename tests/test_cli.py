@@ -119,6 +119,7 @@ def run_cli(args, capsys):
     return rc, out, err
 
 
+@pytest.mark.slow  # moved to CI's slow pass: make test under 10 minutes on two cores
 def test_simulate_all_kinds_matches_independent_fine_step(scenario_file, tmp_path, capsys):
     out = tmp_path / "ds"
     rc, stdout, err = run_cli(["simulate", scenario_file, "--out", out, "--seed", "1", "--quiet"], capsys)

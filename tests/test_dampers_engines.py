@@ -163,6 +163,7 @@ def test_cg_height_closed_form_and_mujoco_agree():
     _agree(a, b, 0.01)
 
 
+@pytest.mark.slow  # moved to CI's slow pass: make test under 10 minutes on two cores
 def test_simulate_with_dampers_changes_the_data_as_mujoco_says(tmp_path, capsys):
     """`rideid simulate` of the car with [dampers] against the same car with linear c_sf, c_sr: the
     data change by 21-39 % of the channels' RMS on the 40 mm twist and 20-65 % (pitch rate 169 %) on the

@@ -156,6 +156,7 @@ def test_spec_csv_dataset_is_taken_as_it_is(sim_dataset):
     assert rec["start"]["value"] == 0.0 and "taken as it is" in rec["format"]
 
 
+@pytest.mark.slow  # moved to CI's slow pass: make test under 10 minutes on two cores
 def test_report_shows_the_data_section(tmp_path, default_scenario, raw):
     from rideid.cli import main
     path = write_logger_dataset(default_scenario, {k: raw[k] for k in ("T_HH", "H_HH", "W_H")},
