@@ -23,8 +23,9 @@ demo: $(STAMP)
 # user + sys), the rest making .venv; then 10.6 minutes (9.2 the tests) with three 33-57 s tests moved to CI's
 # slow pass, and two of the three logger round trips (33-42 s each) after them; with the next wave's new default
 # tests 12.8 minutes (11 the tests), then 8.7 minutes (7.1 the tests) with fifteen 17-48 s tests moved to CI's
-# slow pass; now 8.0 minutes (6.7 the tests, 751 of them, the powertrain on the compiled kernel); it takes longer
-# when other jobs share the cores
+# slow pass; 8.0 minutes (6.7 the tests, 751 of them, the powertrain on the compiled kernel); 9.9 minutes (8.2 the
+# tests, 769) with the road fits' sensor tests, then 8.7 minutes (7.1 the tests, 763) with six 12-25 s tests moved
+# to CI's slow pass; it takes longer when other jobs share the cores
 test: $(STAMP)
 	$(PY) -m ruff check src tests benchmarks
 	$(PY) -m pytest -q -n auto
