@@ -115,7 +115,7 @@ import scipy.linalg
 
 from ..model.equations import CHANNEL_KIND, CHANNEL_UNITS, CHANNELS, state_space
 from ..model.params import Geometry
-from ..model.sensors import discretise
+from ..model.sensors import discretise, modal_pairs
 
 #: the fit band (Hz): below, the accelerations carry little of the road; above, the road between
 #: samples (module docstring) and the logger's anti-alias filter take over
@@ -419,17 +419,9 @@ def _free_modes(lam, zi) -> np.ndarray:
     DFT of a real sequence ``w lam_i^k + conj(w lam_i^k)``, ``w`` complex). Their real combinations are every
     free response of the filter whatever its output map (an unobservable mode would only add a free column)."""
     q = 1.0 / (1.0 - zi[:, None] * lam[None])
-    cols, used = [], np.zeros(lam.size, dtype=bool)
-    for i in range(lam.size):
-        if used[i]:
-            continue
-        used[i] = True
-        if abs(lam[i].imag) <= 1e-12 * max(1.0, abs(lam[i])):
-            cols.append(q[:, i])
-            continue
-        j = min((j for j in range(lam.size) if not used[j]), key=lambda j: abs(lam[j] - np.conj(lam[i])))
-        used[j] = True
-        cols += [q[:, i] + q[:, j], 1j * (q[:, i] - q[:, j])]
+    cols = []
+    for i, j in modal_pairs(lam):
+        cols += [q[:, i]] if j is None else [q[:, i] + q[:, j], 1j * (q[:, i] - q[:, j])]
     return np.stack(cols, axis=1)
 
 

@@ -134,18 +134,13 @@ class DiscreteFilter:
         (``r / (z - lam)``, residue ``r = c g``), a conjugate pair as one second-order section (the sum of
         the two, real)."""
         lam, r = np.asarray(self.lam), np.asarray(self.c) * np.asarray(self.g)
-        secs, used = [], np.zeros(lam.size, dtype=bool)
-        for i in range(lam.size):
-            if used[i]:
-                continue
-            used[i] = True
-            if abs(lam[i].imag) <= 1e-12 * max(1.0, abs(lam[i])):
+        secs = []
+        for i, j in modal_pairs(lam):
+            if j is None:
                 secs.append((np.array([0.0, r[i].real]), np.array([1.0, -lam[i].real])))
-                continue
-            j = min((j for j in range(lam.size) if not used[j]), key=lambda j: abs(lam[j] - np.conj(lam[i])))
-            used[j] = True
-            secs.append((np.array([0.0, 2 * r[i].real, -2 * (r[i] * np.conj(lam[i])).real]),
-                         np.array([1.0, -2 * lam[i].real, abs(lam[i]) ** 2])))
+            else:
+                secs.append((np.array([0.0, 2 * r[i].real, -2 * (r[i] * np.conj(lam[i])).real]),
+                             np.array([1.0, -2 * lam[i].real, abs(lam[i]) ** 2])))
         return secs
 
     def apply(self, x, axis: int = -1, u0=None, sections=None) -> np.ndarray:
@@ -159,6 +154,24 @@ class DiscreteFilter:
             zi = lfilter_zi(b, a)  # the state of a unit step held forever
             y += lfilter(b, a, x, axis=-1, zi=u0[..., None] * zi)[0]
         return np.moveaxis(y, -1, axis)
+
+
+def modal_pairs(lam) -> list:
+    """The modes ``lam`` of a real discrete filter as ``(i, None)`` for a real mode and ``(i, j)`` for a conjugate
+    pair (``j`` the mode nearest ``conj(lam[i])``), each mode once, in order of first appearance."""
+    lam = np.asarray(lam)
+    out, used = [], np.zeros(lam.size, dtype=bool)
+    for i in range(lam.size):
+        if used[i]:
+            continue
+        used[i] = True
+        if abs(lam[i].imag) <= 1e-12 * max(1.0, abs(lam[i])):
+            out.append((i, None))
+            continue
+        j = min((j for j in range(lam.size) if not used[j]), key=lambda j: abs(lam[j] - np.conj(lam[i])))
+        used[j] = True
+        out.append((i, j))
+    return out
 
 
 @functools.lru_cache(maxsize=256)
@@ -335,4 +348,4 @@ def unfiltered(n_channels: int = 10) -> tuple:
 
 
 __all__ = ["AnalogFilter", "DiscreteFilter", "KINDS", "ORDERS", "SensorChain", "SensorSimulator", "discretise",
-           "unfiltered"]
+           "modal_pairs", "unfiltered"]
