@@ -585,7 +585,7 @@ def _identify_any_road(ds, *, rng=None, seed=None, population=None, generations=
         y = ds.data[tr.run_id].matrix()
         response[tr.run_id] = asbuilt.fitted_channels(P, geom, tr, y)
         errors.append(road_run_error(tr.rr, y, response[tr.run_id]))
-        ri = asbuilt.nominal_inputs(ds, next(r for r in ds.runs if r.id == tr.run_id))  # the drawing's
+        ri = tr.inputs  # the drawing's, tabulated when the run was prepared (asbuilt.prepare_track_run)
         checked[tr.run_id] = (y - response[tr.run_id], y, np.concatenate([ri.u, ri.rate], axis=1))
     if cf is not None:
         errors += list(cf.run_errors(x[None])[:, 0])

@@ -61,7 +61,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import scipy.linalg
 
-from ..model.simulate import prepare_run
+from ..model.simulate import RunInput, prepare_run
 from . import roadfit
 
 #: the prior's variants: "prior" (the default, an estimated unevenness spectrum), "amplitude" (no
@@ -109,6 +109,9 @@ class TrackRun:
         One of :data:`MODES`.
     prior : Prior or None
         Set by :func:`estimate_prior` (needed in mode "prior"; the noise level in every mode).
+    inputs : rideid.model.simulate.RunInput or None
+        The drawn track's corner inputs and their rates at the run's samples (:func:`nominal_inputs`, tabulated
+        once by :func:`prepare_track_run`; ``U`` is their DFT): what the verdict compares the residual with.
     """
 
     rr: roadfit.RoadRun
@@ -116,6 +119,7 @@ class TrackRun:
     U: np.ndarray
     mode: str = "prior"
     prior: Prior | None = field(default=None, repr=False)
+    inputs: RunInput | None = field(default=None, repr=False)
 
     @property
     def run_id(self) -> str:
@@ -147,7 +151,8 @@ def prepare_track_run(ds, run, mode: str = "prior") -> TrackRun:
                                   clipped=ds.clipped(run.id))
     rr = roadfit.with_sensors(rr, ds.sensor_filters(run.id))  # the channels as wired (SPEC §11)
     ri = nominal_inputs(ds, run)
-    return TrackRun(rr=rr, track=run.track, U=np.fft.rfft(np.asarray(ri.u, dtype=float), axis=0), mode=mode)
+    return TrackRun(rr=rr, track=run.track, U=np.fft.rfft(np.asarray(ri.u, dtype=float), axis=0), mode=mode,
+                    inputs=ri)
 
 
 @dataclass
