@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field, replace
+from functools import cached_property
 from pathlib import Path
 
 import numpy as np
@@ -11,6 +12,7 @@ import numpy as np
 from . import checks
 from ..errors import DataError, ScaleError
 from .schema import DatasetManifest, ReadOnlyDict, RunData, load_manifest, read_run_csv
+from .schema.manifest import vehicle_table
 from ..model.params import (CORNERS, EXT_NAMES, EXTRA_KNOWN, MASS_COUNT, NAMES, SCALE_FREE, Geometry, nominal_car,
                             total_mass)
 from ..model.simulate import prepare_run
@@ -86,6 +88,22 @@ class Dataset:
     @property
     def path(self) -> Path:
         return self.manifest.base_dir
+
+    @cached_property
+    def anchor(self) -> str | None:
+        """The known value that fixes the absolute scale (:func:`scale_anchor` of its ``[known]``), None when
+        none does; worked out once, on first asking (the manifest is frozen)."""
+        try:
+            return scale_anchor(self.known)
+        except ScaleError:
+            return None
+
+    @cached_property
+    def vehicle(self) -> ReadOnlyDict:
+        """The ``[vehicle]`` table of its geometry (:func:`rideid.data.schema.manifest.vehicle_table`, the
+        declared stds left out), as a result carries it so the geometry travels with the car (``rideid
+        export``); worked out once, on first asking."""
+        return ReadOnlyDict(vehicle_table(self.geometry))
 
     def preprocessing(self) -> dict:
         """What was done to each run's file (for ``result.json`` and the report)."""

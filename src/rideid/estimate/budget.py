@@ -53,7 +53,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from ..data.dataset import Dataset, scale_anchor
+from ..data.dataset import Dataset
 from ..errors import ArgumentError, DataError
 from ..model.equations import CHANNELS
 from ..model.params import EXTRA_KNOWN, MASS_COUNT, UNITS
@@ -124,14 +124,6 @@ def declared_inputs(manifest) -> list[DeclaredInput]:
         if s > 0:
             out.append(DeclaredInput(f"{SENSITIVITY} {c}", SENSITIVITY, c, 1.0, float(s), "1"))
     return out
-
-
-def anchor_name(known: dict) -> str | None:
-    """The known value that fixes the scale (:func:`rideid.data.dataset.scale_anchor`), None if none."""
-    try:
-        return scale_anchor(known)
-    except DataError:
-        return None
 
 
 def _spoken(key: str) -> str:
@@ -354,7 +346,7 @@ def with_budget(ds: Dataset, res, simulator=None, cost: CostFunction | None = No
     With nothing declared ``std_total`` is ``std_robust`` exactly and nothing is simulated.
     """
     inputs = declared_inputs(ds.manifest)
-    anchor = anchor_name(dict(ds.known))
+    anchor = ds.anchor  # the dataset's own (rideid.data.dataset.Dataset.anchor)
     block = {"declared": {i.name: i.to_dict() for i in inputs}, "anchor": anchor,
              "anchor_exact": anchor is not None and not any(i.key == anchor and i.kind == "known" for i in inputs),
              "method": "none declared: std_total = std_robust" if not inputs else

@@ -50,7 +50,6 @@ from scipy import special
 
 from ..model.params import POWERTRAIN_NAMES
 from ..model.params import SUSPENSION_GROUPS as GROUPS
-from ..data.schema.manifest import vehicle_table
 from .budget import with_budget
 from .adequacy import MIN_IMPROVEMENT, advise, assess_fit
 from .materiality import weigh_result
@@ -685,7 +684,7 @@ def identify(ds, *, model=None, rng=None, seed=None, population: int = DEFAULT_P
     elif cost is None and polish and not drawn_fits and not unknown_road_runs(ds) \
             and isinstance(model, str) and model == "auto":
         res = _tracks_before_curves(ds, res, chosen, simulator, tracks, common)
-    res = replace(res, vehicle=vehicle_table(ds.geometry))  # the geometry travels with the car (rideid export)
+    res = replace(res, vehicle=dict(ds.vehicle))  # the geometry travels with the car (rideid export)
     # SPEC §12: every declared uncertainty propagated to the estimates (std_total, budget)
     res = with_budget(ds, res, simulator, cost)
     if assess and not unknown_road_runs(ds, chosen):  # SPEC §12: does the structure the residual test found matter?
