@@ -190,6 +190,20 @@ def test_nothing_declared_std_total_is_std_robust_and_the_anchor_is_said_exact(s
     assert frame.loc["k_sf", "std_total"] == doc["parameters"]["k_sf"]["std_total"]
 
 
+def test_the_dataset_knows_its_scale_anchor_and_vehicle_table(sim_dataset):
+    """The anchor the budget names and the vehicle table a result carries are the dataset's own, worked out once:
+    scale_anchor of its [known] (None without one) and the [vehicle] table of its geometry."""
+    from rideid.data.dataset import scale_anchor
+    from rideid.data.schema.manifest import vehicle_table
+    ds = rideid.load_dataset(sim_dataset)
+    assert ds.anchor == scale_anchor(ds.known) == "total_mass" and ds.anchor is ds.anchor
+    assert ds.vehicle == vehicle_table(ds.geometry) and ds.vehicle is ds.vehicle
+    with pytest.raises(TypeError):
+        ds.vehicle["wheelbase"] = 1.0  # read-only: a result gets its own copy
+    unanchored = Dataset(replace(ds.manifest, known={}), ds.data)
+    assert unanchored.anchor is None
+
+
 # -- the propagation ----------------------------------------------------------------------------------------
 
 def test_total_mass_contributes_exactly_its_relative_std(declared):

@@ -84,6 +84,16 @@ def test_the_unevenness_found(as_built):
             assert asbuilt.solve(P, as_built.geometry, tr).alpha == pytest.approx(1.04, abs=0.01)
 
 
+def test_the_prepared_run_holds_the_drawings_inputs(as_built):
+    """A run prepared for the as-built fit keeps the drawn track's corner inputs it tabulated (the verdict reads
+    them there): those of nominal_inputs, and U their DFT."""
+    run = as_built.runs[1]
+    tr = asbuilt.prepare_track_run(as_built, run)
+    ri = asbuilt.nominal_inputs(as_built, run)
+    assert np.array_equal(tr.inputs.u, ri.u) and np.array_equal(tr.inputs.rate, ri.rate)
+    assert np.array_equal(tr.U, np.fft.rfft(np.asarray(ri.u, dtype=float), axis=0))
+
+
 @pytest.mark.slow  # moved to CI's slow pass: make test under 10 minutes on two cores
 def test_the_car_on_tracks_as_built_from_a_start(as_built):
     """The default path from a start 3 % off the truth (the search skipped, the polish and the as-built stage
