@@ -356,8 +356,11 @@ def _roads_table(res) -> str:
                      f"({r['wavelengths_m'][0]:g}-{r['wavelengths_m'][1]:g} m wavelengths)")
     for rid, r in res.roads.items():
         lines += [f"{rid}: {c} {why}" for c, why in (r.get("channels_left_out") or {}).items()]
-    if not res.adequacy:
-        lines.append("ADEQUACY NOT ASSESSED: every run is on an unknown road, where rideid has no residual test yet; "
+    if not res.adequacy or not res.adequacy.get("runs"):
+        lines.append("RESIDUALS NOT ASSESSED: every run is on an unknown road, where rideid has no residual test yet; "
+                     "the error bars hold only if the linear model describes the car (add a known-track run to "
+                     "test it)" if res.adequacy else
+                     "ADEQUACY NOT ASSESSED: every run is on an unknown road, where rideid has no residual test yet; "
                      "the error bars hold only if the linear model describes the car (add a known-track run to "
                      "test it)")
     else:

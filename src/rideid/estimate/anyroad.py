@@ -71,7 +71,7 @@ from .identify import (DEFAULT_GENERATIONS, DEFAULT_POPULATION, identify as iden
                        parameter_detail, relative_spread)
 from .jade import JadeSolver, make_rng, stop_requested
 from .result import History, IdentificationResult
-from .sensor_check import road_coupling_hints
+from .sensor_check import FREE_ROAD_HINT_REDUCTION, road_coupling_hints
 from .uncertainty import andrews_bandwidth, estimate_covariance, long_run_covariance, run_scores
 
 #: an unknown-road run's speed may vary by this fraction of its mean (the delay is taken as constant)
@@ -380,7 +380,8 @@ def _carry_sensor_hints(adequacy, start_result):
     drawn gave (:func:`rideid.estimate.identify.sensor_notes`: a time-domain comparison of the car's channel,
     high-passed, with the data), said to be from there, and, when not adequate, first in the advice. They are
     not computed again at the estimated road: there the model's channels are the data less the fit band's
-    residual, and high-passing them says nothing about the sensor. Runs on unknown roads get no hint."""
+    residual, and high-passing them says nothing about the sensor. Runs on unknown roads get the road fit's own
+    (:func:`_free_road_sensor_hints`)."""
     hints = ((start_result.adequacy or {}).get("sensor_hints") if start_result is not None else None)
     if adequacy is None or hints is None:
         return adequacy
@@ -424,6 +425,7 @@ def _tracks_block(ds, trs, skipped, P, geom):
 
 #: where the road fit's coupling hints come from (adequacy.sensor_hints_note)
 ROAD_HINTS_NOTE = "from the road fit of the runs on tracks as built: the road free, a trial high-pass on the channels"
+FREE_ROAD_HINTS_NOTE = "from the road fit of the runs on unknown roads: a trial high-pass on the channels"
 
 
 def _with_hints(adequacy, hints, note=ROAD_HINTS_NOTE):
@@ -443,6 +445,15 @@ def _road_sensor_hints(P, geom, trs, ds):
     std_total, which the residual test at the estimated road did not see)."""
     return road_coupling_hints(P, geom, [tr.rr for tr in trs], {tr.run_id: ds.sensor_filters(tr.run_id)
                                                                 for tr in trs})
+
+
+def _free_road_sensor_hints(P, geom, rruns, ds):
+    """The coupling hints of the road fit on the runs on unknown roads (no as-drawn fit, no time-domain hint): the
+    road takes up part of a coupling's signature, so a smaller cut names it
+    (:data:`rideid.estimate.sensor_check.FREE_ROAD_HINT_REDUCTION`; the hubs of the built-in car coupled at 0.5 Hz,
+    not declared: m_uf, k_sr +18 % at the fit, the trial cut the residual 35 %)."""
+    return road_coupling_hints(P, geom, rruns, {rr.run_id: ds.sensor_filters(rr.run_id) for rr in rruns},
+                               threshold=FREE_ROAD_HINT_REDUCTION)
 
 
 def _identify_any_road(ds, *, rng=None, seed=None, population=None, generations=None, model=None,
@@ -623,6 +634,13 @@ def _identify_any_road(ds, *, rng=None, seed=None, population=None, generations=
     adequacy = _carry_sensor_hints(adequacy, start_result)
     road_hints = _road_sensor_hints(P, geom, trs, ds) if trs and adequacy is not None \
         and not adequacy.get("sensor_hints") else []
+    hints_note = ROAD_HINTS_NOTE
+    if not road_hints and rruns and assess and polish and not (adequacy or {}).get("sensor_hints"):
+        road_hints, hints_note = _free_road_sensor_hints(P, geom, rruns, ds), FREE_ROAD_HINTS_NOTE
+        if road_hints and adequacy is None:  # unknown roads alone: no residual verdict, but the sensors' is one
+            adequacy = {"adequate": False, "not_assessed": list(roads), "reasons": [], "advice": None,
+                        "note": "runs on unknown roads alone: the residuals are not assessed; the sensor check of "
+                                "the road fit is"}
     if start_result is not None and start_result.model:
         model_block = dict(start_result.model)
     else:
@@ -638,13 +656,13 @@ def _identify_any_road(ds, *, rng=None, seed=None, population=None, generations=
         if ad:
             ad["reasons"] = [f"tracks as built rejected: {why}"] + list(ad.get("reasons", []))
             if road_hints and not ad.get("sensor_hints"):  # what the road fit saw of the sensors
-                ad = _with_hints(ad, road_hints)
+                ad = _with_hints(ad, road_hints, hints_note)
         for rec in tracks_block.values():
             rec["rejected"] = why
         return replace(start_result, adequacy=ad or start_result.adequacy, tracks=tracks_block,
                        wall_time_s=start_result.wall_time_s + wall)
     if road_hints:
-        adequacy = _with_hints(adequacy, road_hints)
+        adequacy = _with_hints(adequacy, road_hints, hints_note)
     if start_result is not None:
         # the as-drawn identification's search, weights, maps and starts stand; the estimate is the as-built fit's
         return replace(start_result, x=np.asarray(x, dtype=float), names=list(space.names), std=std, covariance=cov,
