@@ -150,3 +150,33 @@ def test_rideid_identify_on_tracks_as_built_and_exact(tmp_path, capsys):
                  "--quiet"]) == 0
     doc = json.loads((tmp_path / "fx" / "result.json").read_text())
     assert max(abs(doc["parameters"][n]["value"] / v - 1) for n, v in truth.items()) < 0.005
+
+
+def test_a_run_without_a_roll_rate_is_taken_as_drawn(as_built, tmp_path):
+    """Without the roll gyro a slow road difference between the wheel paths and the body's roll trade off in the
+    free-road fit the as-built prior is estimated from (the SUV's five runs, roll_rate removed: boundary unknowns
+    of 4-79 against 0.03-0.1 with it, "unevenness" of 0.2-3.6 m RMS, every track as built rejected), and a run
+    whose roll rate is dead carries the same. Such a run is taken as drawn with a line saying why; the others
+    stay as built. A missing pitch rate changes nothing (measured) and is not asked for."""
+    import shutil
+
+    from rideid.estimate.anyroad import as_built_runs
+
+    runs, skipped = as_built_runs(as_built, ())
+    assert [r.id for r in runs] == [r[0] for r in RUNS] and skipped == {}
+    folder = tmp_path / "ds"
+    shutil.copytree(as_built.manifest.base_dir, folder)
+    for rid, how in (("W_H", "absent"), ("H_HH", "dead"), ("T_HL", "no pitch")):
+        f = folder / "runs" / f"{rid}.csv"
+        head, *rows = f.read_text().splitlines()
+        cols = head.split(",")
+        Y = np.array([[float(v) for v in r.split(",")] for r in rows])
+        if how == "dead":
+            Y[:, cols.index("roll_rate")] = 0.0
+        else:
+            k = cols.index("roll_rate" if how == "absent" else "pitch_rate")
+            Y, cols = np.delete(Y, k, axis=1), cols[:k] + cols[k + 1:]
+        np.savetxt(f, Y, delimiter=",", header=",".join(cols), comments="", fmt="%.9e")
+    runs, skipped = as_built_runs(rideid.load_dataset(folder), ())
+    assert sorted(skipped) == ["H_HH", "W_H"] and [r.id for r in runs] == ["T_HL", "T_HH", "H_HL"]
+    assert all(why.startswith("as drawn: no roll_rate signal (without the roll gyro") for why in skipped.values())

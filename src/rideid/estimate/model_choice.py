@@ -730,7 +730,7 @@ def _drawing_caveat(ds, res, chosen, tracks):
     caveat = ("the tracks were taken as drawn (" + why + ") while the residuals hold road-driven structure: a track "
               "off its drawing biases every run alike, which leaving the flagged pairs out cannot show, so every "
               "estimate may be off by more than its error bars; fit the tracks as built (SPEC §11: a linear model, "
-              "all eight accelerometers, a constant speed) or check the tracks' drawings")
+              "all eight accelerometers, a roll rate, a constant speed) or check the tracks' drawings")
     return replace(res, adequacy={**ad, "tracks_caveat": caveat})
 
 
