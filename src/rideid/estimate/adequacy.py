@@ -55,6 +55,11 @@ LAGS = (0, 1, 2, 3, 4, 6, 8, 12, 16, 24, 32)
 ALPHA = 0.01
 #: share of the whitened residual variance the road must explain to count as structure
 MIN_EXPLAINED = 0.05
+#: the least share of run/channel pairs (those with a quiet lead-in) whose residual is above 3x the lead-in's noise
+#: floor for an adequate verdict to carry :func:`level_caveat`. Measured on the MuJoCo cars of
+#: docs/verification.md: every right model 2 of 100 (the washboard runs' roll rates, whose lead-in floor is about
+#: zero); the base model forced on the car with anti-roll bars (6 % off, called adequate) 52 of 100
+LOUD_SHARE = 0.25
 #: road-explained residual RMS, as a share of the channel's RMS, below which structure is immaterial
 #: (below the accuracy of any accelerometer or gyro)
 MIN_RELATIVE = 0.005
@@ -335,10 +340,12 @@ def _assess(runs, channels, alpha, min_explained):
     n_white = sum(1 for rec in out_runs.values() for f in rec.values() if f["white"])
     reasons.append(f"{n_white} of {len(pairs)} residuals pass the whiteness test (25 lags, 1 %); coloured sensor "
                    "noise fails it without the model being wrong, so it does not decide")
-    return {"adequate": adequate, "reasons": reasons, "advice": None if adequate else ADVICE,
-            "method": "F-test of the road inputs and rates (lags " + ",".join(map(str, LAGS)) + " samples) on "
-                      "the AR-prewhitened residual of every run and channel; Bonferroni over the pairs",
-            "alpha": alpha, "min_explained": min_explained, "runs": out_runs}
+    out = {"adequate": adequate, "reasons": reasons, "advice": None if adequate else ADVICE,
+           "method": "F-test of the road inputs and rates (lags " + ",".join(map(str, LAGS)) + " samples) on "
+                     "the AR-prewhitened residual of every run and channel; Bonferroni over the pairs",
+           "alpha": alpha, "min_explained": min_explained, "runs": out_runs}
+    caveat = level_caveat(out)
+    return out if caveat is None else dict(out, level_caveat=caveat)
 
 
 def assess_fit(cf, P, sims=None) -> dict:
@@ -363,6 +370,26 @@ def assess_fit(cf, P, sims=None) -> dict:
             E = np.where(keep[s:e] > 0, E, 0.0)
         runs[rid] = (E, Y, U)
     return assess(runs, CHANNELS)
+
+
+def level_caveat(adequacy: dict) -> str | None:
+    """What an adequate verdict must add when the residual is well above the sensor noise in many run/channel
+    pairs (:data:`LOUD_SHARE` of those with a quiet lead-in) though the road-driven test finds nothing: the
+    prewhitening takes away what the residual's own past predicts, so a slow miss (a roll stiffness the model
+    lacks, at the roll mode) passes the F-test and shows only in the level figure, which does not decide
+    (sensor noise may grow while driving). None when not adequate, or when few pairs are loud."""
+    if not adequacy.get("adequate"):
+        return None
+    levels = [f["level"] for rec in adequacy.get("runs", {}).values() for f in rec.values()
+              if f.get("level") is not None]
+    loud = sum(1 for lv in levels if lv > 3)
+    if not levels or loud < LOUD_SHARE * len(levels):
+        return None
+    return (f"the road-driven test finds nothing, but the residual is above 3x the lead-in's noise floor in {loud} "
+            f"of {len(levels)} run/channel pairs: a model that misses slow dynamics (a roll or pitch stiffness, "
+            "which the test on prewhitened residuals cannot see) leaves this, as does sensor noise that grows while "
+            "driving; unless the latter, the estimates may be off by more than their error bars (try `--model "
+            "auto`, and compare)")
 
 
 def advice(model: dict | None) -> str:

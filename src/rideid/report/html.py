@@ -862,6 +862,9 @@ def summary_section(result, context: dict) -> dict:
     caveat = (adq or {}).get("tracks_caveat")
     if caveat:  # adequate only by the weighing, on tracks as drawn (rideid.estimate.model_choice._drawing_caveat)
         lines.append(("Tracks as drawn", "NOT TO BE TRUSTED beyond the error bars: " + caveat, "estimates"))
+    loud = (adq or {}).get("level_caveat")
+    if loud and adq.get("adequate"):  # adequate by the road-driven test, the residual well above the noise
+        lines.append(("Residual level", "MAY NOT BE TRUSTED beyond the error bars: " + loud, "adequacy"))
     small = ((adq or {}).get("small_angle") or {}).get("note")
     if small:  # SPEC §1 is small-angle: which error bars a body that turned degrees makes optimistic
         lines.append(("Small angles", small.split(": ", 1)[-1], "estimates"))
