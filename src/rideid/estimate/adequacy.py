@@ -58,7 +58,8 @@ MIN_EXPLAINED = 0.05
 #: the least share of run/channel pairs (those with a quiet lead-in) whose residual is above 3x the lead-in's noise
 #: floor for an adequate verdict to carry :func:`level_caveat`. Measured on the MuJoCo cars of
 #: docs/verification.md: every right model 2 of 100 (the washboard runs' roll rates, whose lead-in floor is about
-#: zero); the base model forced on the car with anti-roll bars (6 % off, called adequate) 52 of 100
+#: zero); the base model forced on the car with anti-roll bars, 6 % off and called adequate when its washboard runs
+#: were taken as drawn and the rest as built (an intermediate version of the as-built rules), 52 of 100
 LOUD_SHARE = 0.25
 #: road-explained residual RMS, as a share of the channel's RMS, below which structure is immaterial
 #: (below the accuracy of any accelerometer or gyro)
