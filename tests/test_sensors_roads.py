@@ -226,6 +226,7 @@ def _undeclared(folder, dst):
     return dst
 
 
+@pytest.mark.slow  # 40 trial projections per case (10 s each): make test stays under 10 minutes
 @pytest.mark.parametrize("declared", [False, True])
 def test_the_road_fit_names_an_undeclared_coupling_on_unknown_roads(coupled_roads, tmp_path, declared):
     """On unknown roads there is no drawing and no time-domain hint; the road fit's own trial high-passes
