@@ -25,7 +25,8 @@ demo: $(STAMP)
 # tests 12.8 minutes (11 the tests), then 8.7 minutes (7.1 the tests) with fifteen 17-48 s tests moved to CI's
 # slow pass; 8.0 minutes (6.7 the tests, 751 of them, the powertrain on the compiled kernel); 9.9 minutes (8.2 the
 # tests, 769) with the road fits' sensor tests, then 8.7 minutes (7.1 the tests, 763) with six 12-25 s tests moved
-# to CI's slow pass; it takes longer when other jobs share the cores
+# to CI's slow pass; 9.5 minutes (7.8 the tests, 769) with the road fits' new coupling and roll-rate tests, then
+# one 20 s test moved to CI's slow pass; it takes longer when other jobs share the cores
 test: $(STAMP)
 	$(PY) -m ruff check src tests benchmarks
 	$(PY) -m pytest -q -n auto
