@@ -241,7 +241,7 @@ def test_the_road_fit_names_an_undeclared_coupling_on_unknown_roads(coupled_road
     rruns = anyroad.prepare_road_runs(ds)
     sc = rideid.default_scenario()
     P = as_vector({n: sc.truth.get(n, 0.0) for n in ALL_NAMES}, extended=True)
-    hints = anyroad._free_road_sensor_hints(P, ds.geometry, rruns, ds)
+    hints = anyroad._road_sensor_hints(P, ds.geometry, rruns, ds, FREE_ROAD_HINT_REDUCTION)
     assert FREE_ROAD_HINT_REDUCTION == 0.2
     if declared:
         assert hints == []

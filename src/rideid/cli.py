@@ -357,10 +357,8 @@ def _roads_table(res) -> str:
     for rid, r in res.roads.items():
         lines += [f"{rid}: {c} {why}" for c, why in (r.get("channels_left_out") or {}).items()]
     if not res.adequacy or not res.adequacy.get("runs"):
-        lines.append("RESIDUALS NOT ASSESSED: every run is on an unknown road, where rideid has no residual test yet; "
-                     "the error bars hold only if the linear model describes the car (add a known-track run to "
-                     "test it)" if res.adequacy else
-                     "ADEQUACY NOT ASSESSED: every run is on an unknown road, where rideid has no residual test yet; "
+        what = "RESIDUALS" if res.adequacy else "ADEQUACY"  # a verdict from the sensor check alone, or none
+        lines.append(f"{what} NOT ASSESSED: every run is on an unknown road, where rideid has no residual test yet; "
                      "the error bars hold only if the linear model describes the car (add a known-track run to "
                      "test it)")
     else:

@@ -95,7 +95,7 @@ class Dataset:
         none does; worked out once, on first asking (the manifest is frozen)."""
         try:
             return scale_anchor(self.known)
-        except ScaleError:
+        except DataError:  # no anchor, or one that contradicts the fixed masses: none to name
             return None
 
     @cached_property

@@ -71,7 +71,7 @@ from .identify import (DEFAULT_GENERATIONS, DEFAULT_POPULATION, identify as iden
                        parameter_detail, relative_spread)
 from .jade import JadeSolver, make_rng, stop_requested
 from .result import History, IdentificationResult
-from .sensor_check import FREE_ROAD_HINT_REDUCTION, road_coupling_hints
+from .sensor_check import FREE_ROAD_HINT_REDUCTION, HINT_REDUCTION, road_coupling_hints
 from .uncertainty import andrews_bandwidth, estimate_covariance, long_run_covariance, run_scores
 
 #: an unknown-road run's speed may vary by this fraction of its mean (the delay is taken as constant)
@@ -393,7 +393,7 @@ def _carry_sensor_hints(adequacy, start_result):
     high-passed, with the data), said to be from there, and, when not adequate, first in the advice. They are
     not computed again at the estimated road: there the model's channels are the data less the fit band's
     residual, and high-passing them says nothing about the sensor. Runs on unknown roads get the road fit's own
-    (:func:`_free_road_sensor_hints`)."""
+    (:func:`_road_sensor_hints`)."""
     hints = ((start_result.adequacy or {}).get("sensor_hints") if start_result is not None else None)
     if adequacy is None or hints is None:
         return adequacy
@@ -450,22 +450,17 @@ def _with_hints(adequacy, hints, note=ROAD_HINTS_NOTE):
                 + (adequacy.get("advice") or ""))
 
 
-def _road_sensor_hints(P, geom, trs, ds):
-    """The coupling hints of the road fit (:func:`rideid.estimate.sensor_check.road_coupling_hints`) on the runs on
-    tracks as built, asked when the fit on the tracks as drawn gave none: on tracks as built an undeclared coupling
-    is taken up by the road and the springs (the SUV's hubs coupled at 0.5 Hz, not declared: k_sf +21 %, 37
-    std_total, which the residual test at the estimated road did not see)."""
-    return road_coupling_hints(P, geom, [tr.rr for tr in trs], {tr.run_id: ds.sensor_filters(tr.run_id)
-                                                                for tr in trs})
-
-
-def _free_road_sensor_hints(P, geom, rruns, ds):
-    """The coupling hints of the road fit on the runs on unknown roads (no as-drawn fit, no time-domain hint): the
-    road takes up part of a coupling's signature, so a smaller cut names it
-    (:data:`rideid.estimate.sensor_check.FREE_ROAD_HINT_REDUCTION`; the hubs of the built-in car coupled at 0.5 Hz,
-    not declared: m_uf, k_sr +18 % at the fit, the trial cut the residual 35 %)."""
+def _road_sensor_hints(P, geom, rruns, ds, threshold=HINT_REDUCTION):
+    """The coupling hints of the road fit (:func:`rideid.estimate.sensor_check.road_coupling_hints`) on road-fitted
+    runs ``rruns`` (:class:`rideid.estimate.roadfit.RoadRun`). On tracks as built they are asked when the fit on
+    the tracks as drawn gave none: there an undeclared coupling is taken up by the road and the springs (the
+    SUV's hubs coupled at 0.5 Hz, not declared: k_sf +21 %, 37 std_total, which the residual test at the estimated
+    road did not see). On unknown roads (no as-drawn fit, no time-domain hint) the road takes up part of a
+    coupling's signature, so a smaller cut names it (``threshold`` =
+    :data:`rideid.estimate.sensor_check.FREE_ROAD_HINT_REDUCTION`; the hubs of the built-in car coupled at 0.5 Hz,
+    not declared: k_sr +18 % at the fit, the trial cut the residual 35 %)."""
     return road_coupling_hints(P, geom, rruns, {rr.run_id: ds.sensor_filters(rr.run_id) for rr in rruns},
-                               threshold=FREE_ROAD_HINT_REDUCTION)
+                               threshold=threshold)
 
 
 def _identify_any_road(ds, *, rng=None, seed=None, population=None, generations=None, model=None,
@@ -644,11 +639,12 @@ def _identify_any_road(ds, *, rng=None, seed=None, population=None, generations=
                                      f"±{100 * PLAUSIBLE_FACTOR:.0f} % and {1e3 * PLAUSIBLE_RMS:.1f} mm RMS): the "
                                      "road is explaining what the model misses"] + list(adequacy["reasons"]))
     adequacy = _carry_sensor_hints(adequacy, start_result)
-    road_hints = _road_sensor_hints(P, geom, trs, ds) if trs and adequacy is not None \
+    road_hints = _road_sensor_hints(P, geom, [tr.rr for tr in trs], ds) if trs and adequacy is not None \
         and not adequacy.get("sensor_hints") else []
     hints_note = ROAD_HINTS_NOTE
     if not road_hints and rruns and assess and polish and not (adequacy or {}).get("sensor_hints"):
-        road_hints, hints_note = _free_road_sensor_hints(P, geom, rruns, ds), FREE_ROAD_HINTS_NOTE
+        road_hints = _road_sensor_hints(P, geom, rruns, ds, FREE_ROAD_HINT_REDUCTION)
+        hints_note = FREE_ROAD_HINTS_NOTE
         if road_hints and adequacy is None:  # unknown roads alone: no residual verdict, but the sensors' is one
             adequacy = {"adequate": False, "not_assessed": list(roads), "reasons": [], "advice": None,
                         "note": "runs on unknown roads alone: the residuals are not assessed; the sensor check of "
