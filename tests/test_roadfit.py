@@ -89,10 +89,12 @@ def _exact_and_a_tire_seen(P, geom, rr):
     return r @ r / signal
 
 
-def test_a_clipped_channel_leaves_the_run_s_road_fit_whole(data):
-    """SPEC §11: samples at a channel's range leave the fit. The road fit works on the record's DFT, so a clipped
-    channel leaves that run's fit whole and is named; the road is still determined by the other nine channels:
-    the true car fits exactly and a tire 1 % off is still seen."""
+def test_clipped_samples_are_freed_in_the_road_fit(data):
+    """SPEC §11: samples at a channel's range leave the fit. The road fit works on the record's DFT, so each
+    clipped sample is one free unknown (its column exp(-i w n h) on its channel): the true car fits the clipped
+    record to the exact record's level and a tire 1 % off is still seen; kept as recorded, the cut peaks are a
+    misfit of the true car thousands of times that; past CLIP_SHARE of the channel's in-band values the channel
+    leaves the run's fit whole and is named."""
     geom, P, y, _, _ = data
     fl = CHANNELS.index("axle_az_fl")
     cut = 0.8 * np.max(np.abs(y[:, fl]))
@@ -102,13 +104,25 @@ def test_a_clipped_channel_leaves_the_run_s_road_fit_whole(data):
     yc[:, fl] = np.clip(y[:, fl], -cut, cut)
     assert 0 < clipped[:, fl].mean() < 0.01
     rr = roadfit.prepare_road_run("R", yc, FS, 12.0, geom, clipped=clipped)
-    assert fl not in rr.cols and len(rr.cols) == 9
-    assert rr.left_out["axle_az_fl"].startswith("left out: ") and "range" in rr.left_out["axle_az_fl"]
+    assert fl in rr.cols and len(rr.cols) == 10 and not rr.left_out
+    assert rr.clip.shape == (np.count_nonzero(clipped), 2)
+    assert np.array_equal(rr.clip[:, 1], np.nonzero(clipped[:, fl])[0])
     exact = _exact_and_a_tire_seen(P, geom, rr)
-    # kept, the cut peaks are a misfit of the true car thousands of times the exact one
+    # kept, the cut peaks are a misfit of the true car thousands of times the freed one
     kept = roadfit.prepare_road_run("R", yc, FS, 12.0, geom)
     rk = roadfit.residuals(P, geom, kept)
     assert rk @ rk / np.sum(np.abs(kept.Y[kept.fit]) ** 2) > 1e3 * exact
+    # the freed samples come back: the fit's unknowns are the clipped peaks' excess (in the band)
+    sol = roadfit.solve(P, geom, rr)
+    freed = sol.f_state[-rr.clip.shape[0]:]
+    excess = (yc[:, fl] - y[:, fl])[clipped[:, fl]] * rr.scale[list(rr.cols).index(fl)]
+    assert np.corrcoef(freed, excess)[0, 1] > 0.9
+    # a channel clipped on more than CLIP_SHARE of its in-band values leaves the fit whole
+    wide = np.zeros(y.shape, dtype=bool)
+    wide[:, fl] = np.abs(y[:, fl]) >= np.quantile(np.abs(y[:, fl]), 0.5)
+    rw = roadfit.prepare_road_run("R", y, FS, 12.0, geom, clipped=wide)
+    assert fl not in rw.cols and rw.clip.shape == (0, 2)
+    assert rw.left_out["axle_az_fl"].startswith("left out: ") and "range" in rw.left_out["axle_az_fl"]
 
 
 def test_tire_damping_sees_the_road_rate(tmp_path):

@@ -76,6 +76,11 @@ from .uncertainty import andrews_bandwidth, estimate_covariance, long_run_covari
 
 #: an unknown-road run's speed may vary by this fraction of its mean (the delay is taken as constant)
 SPEED_TOLERANCE = 0.02
+#: a run on a declared track with a speed or distance channel is fitted as built when the driver held the speed: the
+#: channel's wander about its mean over the run's window (its spread less the channel's white noise,
+#: :func:`speed_wander`) at most this share of the mean (the rear wheels' delay is taken as constant; a +-3 %
+#: driver wanders 1.5 % RMS)
+HELD_SPEED = 0.005
 #: ``tracks``: each declared track fitted as built (the default: the drawing is the nominal shape, SPEC §11) or
 #: taken exactly as drawn
 TRACK_OPTIONS = ("as-built", "as-drawn")
@@ -342,11 +347,40 @@ def _search(space, geom, rruns, gen, population, generations, callback, t0):
     return solver.x, g, solver.nfev, stop, history
 
 
+def speed_wander(ds, run) -> float | None:
+    """The relative RMS wander (about its mean) of the speed of ``run`` over its window, from its speed or distance
+    channel (None without one): the channel's speed between its samples, its variance less what the channel's
+    white noise (``preprocessing.<run>.speed.noise_std``, a GPS's) puts into a trapezoid's mean of two samples
+    (``sigma^2 / 2``) and twice that estimate's own standard error (``sigma^2 / 2 sqrt(2 / (N - 1))``: a slow
+    run's GPS noise is a per cent of its speed), floored at 0, over the mean speed. Measured on
+    tests/driven_speed.py's five runs, seeds 1-2: a held speed 0-0.35 %, a +-3 % driver 0.7-2.2 %."""
+    mr = ds.measured.get(run.id)
+    dist = getattr(mr, "distance", None) if mr is not None else None
+    if dist is None:
+        return None
+    if mr.window is not None and mr.start is not None:
+        lo, hi = mr.times[mr.window[0]], mr.times[mr.window[1] - 1]
+    else:
+        lo, hi = mr.t_first, mr.t_last
+    t = np.asarray(dist.t, dtype=float)
+    k = np.nonzero((t >= lo) & (t <= hi))[0]
+    if k.size < 4:
+        k = np.arange(t.size)
+    v = np.diff(np.asarray(dist.d, dtype=float)[k]) / np.diff(t[k])
+    vm = float(np.mean(v))
+    if not vm > 0:
+        return float("inf")
+    noise = float(mr.record.get("speed", {}).get("noise_std") or 0.0)
+    excess = float(np.var(v)) - 0.5 * noise ** 2 * (1.0 + 2.0 * np.sqrt(2.0 / max(v.size - 1, 1)))
+    return float(np.sqrt(max(excess, 0.0)) / vm)
+
+
 def as_built_runs(ds, ext, tracks: str = "as-built") -> tuple[list, dict]:
     """The runs on declared tracks fitted as built (SPEC §11, :mod:`rideid.estimate.asbuilt`), and those taken
     as drawn with why: run id -> one line. As built needs a linear car (``ext`` without damper curves or bump
-    stops), the eight accelerometers, the roll rate and a constant speed; ``tracks="as-drawn"`` takes every track
-    as drawn.
+    stops), the eight accelerometers, the roll rate and a speed held (a declared constant speed, or a speed or
+    distance channel that wanders by at most :data:`HELD_SPEED`, :func:`speed_wander`); ``tracks="as-drawn"``
+    takes every track as drawn.
 
     The roll rate: without it a slow road difference between the wheel paths and the body's roll (a free
     state at the first sample) trade off, and the road the prior is estimated from is not determined. Measured
@@ -370,8 +404,10 @@ def as_built_runs(ds, ext, tracks: str = "as-built") -> tuple[list, dict]:
             skipped[r.id] = f"as drawn: the model has {', '.join(bad)} (the as-built road is fitted on a linear car)"
         elif missing:
             skipped[r.id] = f"as drawn: no {', '.join(missing)} (the as-built road needs all eight accelerometers)"
-        elif getattr(rd, "distance", None) is not None:
-            skipped[r.id] = "as drawn: the run has a speed channel (the as-built road needs a constant speed)"
+        elif getattr(rd, "distance", None) is not None and (wander := speed_wander(ds, r) or 0.0) > HELD_SPEED:
+            skipped[r.id] = (f"as drawn: its speed wanders {100 * wander:.1f} % RMS about its mean (the speed "
+                             f"channel less its noise; the as-built road needs the speed held within "
+                             f"{100 * HELD_SPEED:.1f} %: the rear wheels' delay is taken as constant)")
         elif "roll_rate" not in rd.channels:
             skipped[r.id] = ("as drawn: no roll_rate (without the roll gyro the road's slow left-right "
                              "difference cannot be told from the body's roll, and the as-built road is not determined)")
@@ -404,9 +440,10 @@ def _carry_sensor_hints(adequacy, start_result):
     return out
 
 
-def _tracks_block(ds, trs, skipped, P, geom):
+def _tracks_block(ds, trs, skipped, P, geom, motion=None):
     """result.json ``tracks``: per track what the as-built fit learnt (amplitude factor, unevenness RMS), per
-    run and over the track's runs; a run taken as drawn says why."""
+    run and over the track's runs; a run taken as drawn says why; a run along a speed channel its speed and
+    start as fitted (``motion``: run id -> :func:`rideid.estimate.asbuilt.align_motion`'s record)."""
     out = {}
     for tr in trs:
         fit = asbuilt.solve(P, geom, tr)
@@ -416,6 +453,14 @@ def _tracks_block(ds, trs, skipped, P, geom):
                                   "wavelengths_m": [tr.rr.speed / hi, tr.rr.speed / roadfit.BAND[0]]}
         if tr.rr.left_out:  # a channel without signal, or clipped (roadfit.without_clipped)
             rec["runs"][tr.run_id]["channels_left_out"] = dict(tr.rr.left_out)
+        if tr.rr.clip.shape[0]:  # clipped samples freed as unknowns (roadfit: "Clipped samples")
+            pos, count = np.unique(tr.rr.clip[:, 0], return_counts=True)
+            rec["runs"][tr.run_id]["clipped_samples_freed"] = {CHANNELS[tr.rr.cols[j]]: int(k)
+                                                               for j, k in zip(pos, count)}
+        if motion and tr.run_id in motion:
+            rec["runs"][tr.run_id]["motion"] = dict(motion[tr.run_id], note=(
+                "the speed channel's run taken at a constant speed, fitted with its start to the track as built "
+                "(start_shift_s: the start's change from the one read; rideid.estimate.asbuilt.align_motion)"))
     how = {"prior": "the drawing times an amplitude factor plus unevenness whose spectrum is estimated from the data",
            "amplitude": "the drawing times an amplitude factor", "free": "the road projected out, the drawing unused"}
     for rec in out.values():
@@ -492,6 +537,9 @@ def _identify_any_road(ds, *, rng=None, seed=None, population=None, generations=
     track_runs = [r for r in ds.runs if r.id not in road_ids]
     ab_list, skipped = as_built_runs(ds, ext, tracks if polish else "as-drawn")
     trs = [asbuilt.prepare_track_run(ds, r, as_built_mode) for r in ab_list]
+    # runs along a speed channel, their speed held: the constant speed and the start fitted with the track as built
+    along = {i: r for i, r in enumerate(ab_list) if getattr(ds.data[r.id], "distance", None) is not None}
+    motion = {}
     ab_ids = {tr.run_id for tr in trs}
     population = population or DEFAULT_POPULATION
     generations = generations or DEFAULT_GENERATIONS
@@ -527,12 +575,23 @@ def _identify_any_road(ds, *, rng=None, seed=None, population=None, generations=
         for tr, pr in zip(trs, thread_map(lambda tr: asbuilt.estimate_prior(Pz, geom, tr), trs, "rideid-priors")):
             tr.prior = pr
 
+    def align(zz):  # the speed and the start of each run along a speed channel (asbuilt.align_motion)
+        Pz = space.full(prob.x(zz)[None])[0]
+        for i, r in along.items():
+            trs[i], motion[r.id] = asbuilt.align_motion(Pz, geom, trs[i], ds, r)
+            prob.rruns[len(rruns) + i] = trs[i]
+
     if polish:
         priors(z0)
+        if along:
+            align(z0)
+            priors(z0)
         prob.reweight(z0)
         cost_before = float(np.sum(prob(z0) ** 2))
         # one solve at the start's block weights (and priors), both again at its solution, a short second solve
         sol = least_squares(prob, z, bounds=prob.vbounds, method="trf", diff_step=1e-5, max_nfev=100)
+        if along:
+            align(sol.x)
         priors(sol.x)
         prob.reweight(sol.x)
         sol = least_squares(prob, sol.x, bounds=prob.vbounds, method="trf", diff_step=1e-5, max_nfev=50)
@@ -625,7 +684,7 @@ def _identify_any_road(ds, *, rng=None, seed=None, population=None, generations=
             adequacy = dict(adequacy, as_built=sorted(ab_ids),
                             as_built_note="runs on tracks as built: the residual at the estimated road, over the fit "
                                           f"band {roadfit.BAND[0]}-{roadfit.BAND[1]} Hz")
-    tracks_block = _tracks_block(ds, trs, skipped, P, geom) if trs else None
+    tracks_block = _tracks_block(ds, trs, skipped, P, geom, motion) if trs else None
     odd = []
     if tracks_block and adequacy is not None:
         # a road can explain what the car lacks (a missing anti-roll bar, as unevenness left and right): what the

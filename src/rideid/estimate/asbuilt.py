@@ -56,12 +56,13 @@ are kept for comparison (benchmarks/bench_tracks.py, docs/tracks-as-built.md).
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 import scipy.linalg
+from scipy.optimize import least_squares
 
-from ..model.simulate import RunInput, prepare_run
+from ..model.simulate import RunInput, corner_inputs, prepare_run
 from . import roadfit
 
 #: the prior's variants: "prior" (the default, an estimated unevenness spectrum), "amplitude" (no
@@ -135,24 +136,70 @@ class TrackRun:
         return 2 * len(self.rr.cols) + (self.mode == "prior")
 
 
-def nominal_inputs(ds, run):
+def nominal_inputs(ds, run, speed=None, shift: float = 0.0):
     """The drawn track's corner inputs of ``run`` (:class:`rideid.model.simulate.RunInput`), as the fit of the
-    track as drawn tabulates them."""
+    track as drawn tabulates them; ``speed`` (default the run's) and ``shift`` (s): the front axle at
+    ``x = speed (t - shift)`` (a run along a speed channel, :func:`align_motion`)."""
     rd = ds.data[run.id]
-    return prepare_run(ds.manifest.tracks[run.track], ds.geometry, float(run.speed), rd.time)
+    v = float(run.speed) if speed is None else float(speed)
+    return prepare_run(ds.manifest.tracks[run.track], ds.geometry, v, rd.time - shift if shift else rd.time)
+
+
+def held_speed(ds, run) -> float:
+    """The run's constant speed (m/s) as the as-built road starts from: the declared one, or, along a speed or
+    distance channel (a speed held, :func:`rideid.estimate.anyroad.speed_wander`), the channel's mean over the
+    run's samples (refined with the start by :func:`align_motion`)."""
+    rd = ds.data[run.id]
+    dist = getattr(rd, "distance", None)
+    if dist is None:
+        return float(run.speed)
+    x = np.asarray(dist(rd.time[[0, -1]]), dtype=float)
+    return float((x[1] - x[0]) / (rd.time[-1] - rd.time[0]))
 
 
 def prepare_track_run(ds, run, mode: str = "prior") -> TrackRun:
-    """:class:`TrackRun` of ``run`` (a run on a declared track with all eight accelerometers, constant speed)."""
+    """:class:`TrackRun` of ``run`` (a run on a declared track with all eight accelerometers, a speed held): the
+    drawing and the rear wheels' delay at its constant speed (:func:`held_speed`)."""
     if mode not in MODES:
         raise ValueError(f"mode must be one of {', '.join(MODES)}, got {mode!r}")
     rd = ds.data[run.id]
-    rr = roadfit.prepare_road_run(run.id, rd.matrix(), rd.fs, float(run.speed), ds.geometry,
-                                  clipped=ds.clipped(run.id))
+    v = held_speed(ds, run)
+    rr = roadfit.prepare_road_run(run.id, rd.matrix(), rd.fs, v, ds.geometry, clipped=ds.clipped(run.id))
     rr = roadfit.with_sensors(rr, ds.sensor_filters(run.id))  # the channels as wired (SPEC §11)
-    ri = nominal_inputs(ds, run)
+    ri = nominal_inputs(ds, run, v)
     return TrackRun(rr=rr, track=run.track, U=np.fft.rfft(np.asarray(ri.u, dtype=float), axis=0), mode=mode,
                     inputs=ri)
+
+
+#: :func:`align_motion`'s unknowns: the speed's relative change and the start's shift (s), in these units
+MOTION_SCALE = (1e-3, 1e-3)
+
+
+def align_motion(P, geom, tr: TrackRun, ds, run) -> tuple[TrackRun, dict]:
+    """``tr`` of a run along a speed channel, its speed held (:func:`rideid.estimate.anyroad.speed_wander`), with
+    the speed and the start that fit it as built at the car ``P`` (16,): the drawing at ``x = v (t - shift)``,
+    the rear wheels' delay at ``v``; ``v`` and ``shift`` minimise the run's as-built cost (its prior kept), from
+    the channel's mean speed and the start as read. A GPS channel's mean speed is 0.1 % off over a few seconds,
+    4-7 cm of the drawing at the run's end, and the distance the fit on the tracks as drawn corrected it to
+    is 15-29 mm off (the drawing's error is in it; the all-realities case of tests/realities_case.py): the
+    drawing as built needs the track's own features to place it. Returns the new run and the record
+    ``{"speed_m_s", "start_shift_s", "speed_channel_mean_m_s"}``."""
+    track = ds.manifest.tracks[run.track]
+    t = ds.data[run.id].time
+    v0 = tr.rr.speed
+
+    def moved(p):
+        v = v0 * (1.0 + p[0] * MOTION_SCALE[0])
+        u = corner_inputs(track, geom, v * (t - p[1] * MOTION_SCALE[1]))
+        return replace(tr, rr=replace(tr.rr, speed=v, tau=geom.wheelbase / v), U=np.fft.rfft(u, axis=0))
+
+    # steps of 1e-5 relative speed and 1e-5 s (0.1 mm at 10 m/s): above the solve's rounding, far below a feature
+    sol = least_squares(lambda p: residuals(P, geom, moved(p)), np.zeros(2), method="trf", diff_step=1e-2,
+                        x_scale=1.0, max_nfev=40)
+    v, shift = v0 * (1.0 + sol.x[0] * MOTION_SCALE[0]), sol.x[1] * MOTION_SCALE[1]
+    out = moved(sol.x)
+    out = replace(out, inputs=nominal_inputs(ds, run, v, shift))
+    return out, {"speed_m_s": float(v), "start_shift_s": float(shift), "speed_channel_mean_m_s": float(v0)}
 
 
 @dataclass

@@ -644,7 +644,7 @@ def identify(ds, *, model=None, rng=None, seed=None, population: int = DEFAULT_P
         SPEC §11: each declared track is the nominal shape of the road the
         car rolled over, its amplitude factor and unevenness fitted with the
         car (:mod:`rideid.estimate.asbuilt`; a linear car with the eight
-        accelerometers at a constant speed, else the track is taken as
+        accelerometers at a speed held, else the track is taken as
         drawn), or every track exactly as drawn.
 
     Returns
@@ -730,7 +730,7 @@ def _drawing_caveat(ds, res, chosen, tracks):
     caveat = ("the tracks were taken as drawn (" + why + ") while the residuals hold road-driven structure: a track "
               "off its drawing biases every run alike, which leaving the flagged pairs out cannot show, so every "
               "estimate may be off by more than its error bars; fit the tracks as built (SPEC §11: a linear model, "
-              "all eight accelerometers, a roll rate, a constant speed) or check the tracks' drawings")
+              "all eight accelerometers, a roll rate, a speed held) or check the tracks' drawings")
     return replace(res, adequacy={**ad, "tracks_caveat": caveat})
 
 

@@ -92,6 +92,21 @@ at 0.5 Hz (first order), less than the hold's own error in the time domain
 (1.3e-7), against 5.1e-4 with the filter left out and 2.3e-5 without the
 filters' states (``tests/test_roadfit_sensors.py``).
 
+Clipped samples (SPEC §11)
+--------------------------
+A sample at its channel's range is not what the channel saw. The DFT of a
+record cannot drop one sample, but it can free it: each clipped sample ``n``
+of used channel ``j`` is one more real boundary unknown, its column
+``exp(-i omega n h)`` on channel ``j`` alone (the recorded value's error,
+after the sensor's filters: the range is the recorder's), solved with the
+others at every trial car. That is the least-squares fit with the sample
+left out; a clipped peak of several samples in a row is determined in the
+band only in its few combinations the band can hold, and the solve takes
+the shortest of the equivalent solutions. A channel clipped on more than
+:data:`CLIP_SHARE` of its in-band real values, or a run with more than
+:data:`CLIP_MAX` clipped samples, leaves that channel out whole instead
+(:func:`without_clipped`).
+
 The global unknowns' normal equations are assembled in closed form: the
 lead-in columns at one frequency are one projected vector times
 ``exp(-i omega n h)``, so their Gram matrix is a function of ``n - m`` only
@@ -126,6 +141,12 @@ DELAY_ORDER = 8
 ROAD_WAVELENGTHS = (0.5, 20.0)
 #: the search's cost uses every STRIDE-th bin of a Hann-windowed DFT
 SEARCH_BINS = 400
+#: a clipped channel whose samples at the range exceed this share of its in-band real values (2 per fit bin) is
+#: left out of the run's road fit whole; below it each clipped sample is one free unknown (module docstring)
+CLIP_SHARE = 0.5
+#: ... and so is every clipped channel of a run with more than this many clipped samples (the solve's cost grows
+#: with their square)
+CLIP_MAX = 200
 #: a channel whose RMS (about its mean) is below this share of the largest RMS among the run's channels of the
 #: same kind (body, axle, rate) carries rounding or a dead sensor, not the car: the fit, which weights each
 #: channel by 1 / its RMS, leaves it out (a roll rate on a washboard: 1e-19 against 1e-2 rad/s)
@@ -183,6 +204,8 @@ class RoadRun:
     sensors : tuple
         Per used channel (``cols`` order) the analog filters of its sensor chain (SPEC §11, a tuple of
         :class:`rideid.model.sensors.AnalogFilter`); empty: no channel filtered (:func:`with_sensors`).
+    clip : (m, 2) int
+        The clipped samples freed as unknowns (module docstring): position in ``cols``, sample index.
     """
 
     run_id: str
@@ -198,6 +221,7 @@ class RoadRun:
     tau: float
     left_out: dict = field(default_factory=dict)
     sensors: tuple = ()
+    clip: np.ndarray = field(default_factory=lambda: np.zeros((0, 2), dtype=int))
 
     @property
     def h(self) -> float:
@@ -218,9 +242,13 @@ def prepare_road_run(run_id: str, y, fs: float, speed: float, geom: Geometry, co
 
     ``cols``: the channels to use; default those :func:`used_channels` keeps (a channel without signal is left
     out and named in ``left_out``). ``clipped`` (n, 10) bool, optional: where a channel sat at its range
-    (SPEC §11, :meth:`rideid.data.dataset.Dataset.clipped`); each such channel is left out of this run's fit
-    whole (:func:`without_clipped`) and named in ``left_out``."""
-    y, left = without_clipped(y, clipped)
+    (SPEC §11, :meth:`rideid.data.dataset.Dataset.clipped`); each such sample is a free unknown of the fit
+    (``clip``, module docstring), or, past :data:`CLIP_SHARE` or :data:`CLIP_MAX`, its channel is left out of
+    this run's fit whole (:func:`without_clipped`) and named in ``left_out``."""
+    y = np.asarray(y, dtype=float)
+    f = np.fft.rfftfreq(y.shape[0], 1.0 / fs)
+    nfit = int(np.count_nonzero((f >= band[0]) & (f <= min(band[1], 0.45 * fs))))
+    y, left, freed = without_clipped(y, clipped, 2 * nfit)
     if cols is None:
         cols, quiet = used_channels(y)
         left.update(quiet)
@@ -235,30 +263,51 @@ def prepare_road_run(run_id: str, y, fs: float, speed: float, geom: Geometry, co
     stride = max(1, fit.size // SEARCH_BINS)
     search = fit[::stride]
     Ys = np.fft.rfft(yc * scale * np.hanning(n)[:, None], axis=0)[search]
+    pos = {int(ch): k for k, ch in enumerate(cols)}
+    clip = np.array([(pos[ch], n) for ch in sorted(freed) if ch in pos for n in freed[ch]], dtype=int).reshape(-1, 2)
     return RoadRun(run_id=run_id, fs=float(fs), speed=float(speed), n=n, cols=cols, scale=scale, Y=Y, fit=fit,
-                   search=search, Ys=Ys, tau=geom.wheelbase / float(speed), left_out=left)
+                   search=search, Ys=Ys, tau=geom.wheelbase / float(speed), left_out=left, clip=clip)
 
 
-def without_clipped(y, clipped=None) -> tuple[np.ndarray, dict]:
-    """``y`` (n, 10) with every channel that has a sample at its range (``clipped``, (n, 10) bool) set to NaN, and
-    those channels: name -> why, one line.
+def without_clipped(y, clipped=None, values=None) -> tuple[np.ndarray, dict, dict]:
+    """The clipped samples of ``y`` (n, 10) (``clipped``, (n, 10) bool: where a channel sat at its range), as the
+    road fit takes them: ``y`` with the channels left out whole set to NaN, those channels (name -> why, one
+    line), and the others' clipped samples (CHANNELS index -> sample indices), each freed as an unknown.
 
     On a known track the time-domain cost leaves the clipped samples out one by one (SPEC §11). A road fit
-    works on the run's DFT, where one sample cannot be left out: a peak cut flat is a distortion of every
-    bin, which the free road would partly take up and pass on to the car. So the channel is left out of
-    that run's road fit whole; its other runs keep it, and the road stays determined by the other nine
-    (both wheel paths enter every channel)."""
+    works on the run's DFT, where a peak cut flat is a distortion of every bin, which the free road would
+    partly take up and pass on to the car: each clipped sample is freed instead (module docstring). A channel
+    clipped on more than :data:`CLIP_SHARE` of its ``values`` in-band real values (None: no limit), or every
+    clipped channel of a run with more than :data:`CLIP_MAX` clipped samples, is left out of that run's road fit
+    whole; its other runs keep it, and the road stays determined by the other nine (both wheel paths enter
+    every channel)."""
     y = np.array(y, dtype=float)
-    left = {}
+    left, freed = {}, {}
     if clipped is None:
-        return y, left
+        return y, left, freed
     clipped = np.asarray(clipped, dtype=bool)
-    for i in np.nonzero(clipped.any(axis=0))[0]:
-        if np.isfinite(y[:, i]).all():
-            left[CHANNELS[i]] = (f"left out: {100 * clipped[:, i].mean():.2g} % of its samples at the channel's range "
-                                 "(clipped; the road fit works on the whole record's DFT)")
-            y[:, i] = np.nan
-    return y, left
+    chans = [i for i in np.nonzero(clipped.any(axis=0))[0] if np.isfinite(y[:, i]).all()]
+    total = sum(int(np.count_nonzero(clipped[:, i])) for i in chans)
+    for i in chans:
+        k = int(np.count_nonzero(clipped[:, i]))
+        if total <= CLIP_MAX and (values is None or k <= CLIP_SHARE * values):
+            freed[int(i)] = np.nonzero(clipped[:, i])[0]
+            continue
+        why = (f"more than {CLIP_MAX} clipped samples in the run" if total > CLIP_MAX
+               else f"more than {100 * CLIP_SHARE:.0f} % of its {values} in-band values")
+        left[CHANNELS[i]] = (f"left out: {100 * clipped[:, i].mean():.2g} % of its samples at the channel's range "
+                             f"(clipped; {why}: the road fit works on the record's DFT)")
+        y[:, i] = np.nan
+    return y, left, freed
+
+
+def _clip_columns(rr: RoadRun, omega) -> np.ndarray:
+    """The clipped samples' columns (K, c, m) (module docstring): ``exp(-i omega n h)`` on the sample's channel."""
+    m = rr.clip.shape[0]
+    C = np.zeros((len(omega), len(rr.cols), m), dtype=complex)
+    if m:
+        C[:, rr.clip[:, 0], np.arange(m)] = np.exp(-1j * np.outer(np.asarray(omega) * rr.h, rr.clip[:, 1]))
+    return C
 
 
 def delay_filter(tau: float, h: float, order: int = DELAY_ORDER):
@@ -460,7 +509,8 @@ def recorded_columns(car: System, rr: RoadRun, omega):
     the car's transfer function (:func:`transfer`) and ``S`` (K, c, m) the boundary columns: the car's transient
     (:func:`_discrete_columns`), both through each channel's filters (:func:`sensor_response`), then the
     filters' own free responses (their states at the first sample, unknown like the car's). Without filters
-    ``S`` is the car's 14 (18 with a powertrain) transient columns alone. One car (``car`` of one row)."""
+    ``S`` is the car's 14 (18 with a powertrain) transient columns alone; the clipped samples' columns come last
+    (:func:`_clip_columns`, not through the filters). One car (``car`` of one row)."""
     H = transfer(car, omega, rr.cols)[0]
     S = _discrete_columns(car, omega, rr.cols, rr.h)
     sr = sensor_response(rr, omega)
@@ -468,6 +518,8 @@ def recorded_columns(car: System, rr: RoadRun, omega):
         F, T = sr
         H = H * F[:, :, None]
         S = np.concatenate([S * F[:, :, None], T], axis=2)
+    if rr.clip.shape[0]:
+        S = np.concatenate([S, _clip_columns(rr, omega)], axis=2)
     return H * rr.scale[None, :, None], S * rr.scale[None, :, None]
 
 
