@@ -324,11 +324,14 @@ def _summary_table(res) -> str:
 
 def _tracks_table(res) -> str:
     """The tracks as built (SPEC §11): each track's amplitude factor and unevenness, per run."""
-    lines = [f"{'track as built':<18} {'run':<10} {'amplitude':>9} {'unevenness mm RMS':>18}"]
+    lines = [f"{'track as built':<18} {'run':<10} {'amplitude':>9} {'± std':>7} {'unevenness mm RMS':>18} "
+             f"{'(waves <= 10 m)':>15}"]
     for tid, rec in res.tracks.items():
         for rid, r in rec.get("runs", {}).items():
             if "amplitude_factor" in r:
-                lines.append(f"{tid:<18} {rid:<10} {r['amplitude_factor']:>9.4f} {1e3 * r['unevenness_rms_m']:>18.2f}")
+                sa, us = r.get("amplitude_factor_std", float("nan")), r.get("unevenness_rms_surface_m", float("nan"))
+                lines.append(f"{tid:<18} {rid:<10} {r['amplitude_factor']:>9.4f} {sa:>7.4f} "
+                             f"{1e3 * r['unevenness_rms_m']:>18.2f} {1e3 * us:>15.2f}")
             else:
                 lines.append(f"{tid:<18} {rid:<10} {r['fitted']}")
     rejected = next((rec["rejected"] for rec in res.tracks.values() if rec.get("rejected")), None)

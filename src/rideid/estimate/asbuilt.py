@@ -215,6 +215,8 @@ class Fit:
     alpha: float
     f_state: np.ndarray
     f_lead: np.ndarray
+    #: the amplitude factor's standard error at this car (``solve(..., alpha_std=True)``; else NaN)
+    alpha_std: float = float("nan")
 
 
 def _whitener(Acol, D, mode):
@@ -259,9 +261,11 @@ def _normal_solve(G, b):
         return np.linalg.lstsq(G, b, rcond=1e-13)[0]
 
 
-def solve(P, geom, tr: TrackRun, car=None) -> Fit:
+def solve(P, geom, tr: TrackRun, car=None, alpha_std: bool = False) -> Fit:
     """The as-built fit of run ``tr`` at the car ``P`` (16,): the amplitude factor and the boundary unknowns
-    solved by least squares on the whitened bins (module docstring)."""
+    solved by least squares on the whitened bins (module docstring). ``alpha_std``: also the amplitude factor's
+    standard error at this car (the least squares' ``s^2 (G^-1)_00``, the car fixed): large where the prior
+    opened the bins of the track's own lines (a washboard, one line, 4 % off its drawing)."""
     rr = tr.rr
     bins = rr.fit
     w = rr.omega(bins)
@@ -316,7 +320,15 @@ def solve(P, geom, tr: TrackRun, car=None) -> Fit:
     res = r - aN * alpha - S @ fS - aL * (en @ fL)[:, None] - aR * (en @ fR)[:, None]
     # the data less the model at the estimated road: M^-1 x = M^(-1/2) (M^(-1/2) x) (weighted channels)
     plain = white(res[:, :, None])[..., 0] * sn[:, None] if tr.mode != "amplitude" else res * sn[:, None]
-    return Fit(residual=res, logdet=logdet, plain=plain, alpha=float(alpha), f_state=fS, f_lead=np.stack([fL, fR]))
+    sa = float("nan")
+    if alpha_std:
+        e0 = np.zeros(m)
+        e0[0] = 1.0
+        g00 = float(_normal_solve(G / np.outer(d, d), e0)[0]) / d[0] ** 2
+        s2 = 2.0 * float(np.sum(np.abs(res) ** 2)) / max(2 * res.size - m, 1)
+        sa = float(np.sqrt(max(s2 * g00, 0.0)))
+    return Fit(residual=res, logdet=logdet, plain=plain, alpha=float(alpha), f_state=fS, f_lead=np.stack([fL, fR]),
+               alpha_std=sa)
 
 
 def residuals(P, geom, tr: TrackRun) -> np.ndarray:
@@ -406,12 +418,16 @@ def estimate_prior(P, geom, tr: TrackRun) -> Prior:
     return Prior(noise=noise, D=sd2 / noise, unevenness=sd2, alpha=alpha)
 
 
-def unevenness_rms(tr: TrackRun) -> float:
+def unevenness_rms(tr: TrackRun, longest: float | None = None) -> float:
     """RMS (m) of the unevenness the prior found, one wheel path, over the fit band's wavelengths (Parseval on
-    the run's DFT)."""
+    the run's DFT); ``longest`` (m): only over the waves up to that long."""
     if tr.prior is None:
         return float("nan")
-    return float(np.sqrt(2.0 * np.sum(tr.prior.unevenness)) / tr.rr.n)
+    sd2 = tr.prior.unevenness
+    if longest is not None:
+        f = tr.rr.fs * np.asarray(tr.rr.fit) / tr.rr.n
+        sd2 = np.where(f >= tr.rr.speed / longest, sd2, 0.0)
+    return float(np.sqrt(2.0 * np.sum(sd2)) / tr.rr.n)
 
 
 def fitted_channels(P, geom, tr: TrackRun, y, fit: Fit | None = None) -> np.ndarray:
