@@ -859,6 +859,18 @@ def summary_section(result, context: dict) -> dict:
         if bound:
             text += f"; AT A SEARCH BOUND: {', '.join(bound)}"
         lines.append(("Estimates", text, "estimates"))
+    tracks = getattr(result, "tracks", None) or {}
+    built = {tid: rec for tid, rec in tracks.items() if "amplitude_factor" in rec}
+    if built:  # SPEC §11: what the tracks as built needed (rideid.estimate.anyroad._tracks_block)
+        rejected = next((rec["rejected"] for rec in tracks.values() if rec.get("rejected")), None)
+        text = "; ".join(f"{tid} x {rec['amplitude_factor']:.3f}"
+                         + (f" ± {rec['amplitude_factor_std']:.3f}" if rec.get("amplitude_factor_std", 0) > 0.01
+                            else "")
+                         + f", {1e3 * rec.get('unevenness_rms_surface_m', rec['unevenness_rms_m']):.1f} mm RMS"
+                         for tid, rec in built.items())
+        lines.append(("Tracks as built", ("REJECTED, the estimates are the tracks' as drawn: " + rejected)
+                      if rejected else text + " (amplitude factor, unevenness at waves up to 10 m); error bars "
+                      "with tracks as built measured up to 2x optimistic", "estimates"))
     caveat = (adq or {}).get("tracks_caveat")
     if caveat:  # adequate only by the weighing, on tracks as drawn (rideid.estimate.model_choice._drawing_caveat)
         lines.append(("Tracks as drawn", "NOT TO BE TRUSTED beyond the error bars: " + caveat, "estimates"))
