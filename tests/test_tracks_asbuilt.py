@@ -97,9 +97,9 @@ def test_the_prepared_run_holds_the_drawings_inputs(as_built):
 @pytest.mark.slow  # moved to CI's slow pass: make test under 10 minutes on two cores
 def test_the_car_on_tracks_as_built_from_a_start(as_built):
     """The default path from a start 3 % off the truth (the search skipped, the polish and the as-built stage
-    as rideid identify runs them): the twelve within 1 %, every error within 3 std_robust (measured: 2.5 at most,
-    9 of 12 within 2: the error bars are optimistic here, docs/tracks-as-built.md), the verdict adequate, and
-    the tracks block in result.json with the twist's factor near 1.04."""
+    as rideid identify runs them): the twelve within 1 %, every error within 2 std_robust (the white sandwich of
+    the as-built runs, asbuilt.meat; measured 1.3 at most, with the bin-clustered one 2.5 and 9 of 12 within 2),
+    the verdict adequate, and the tracks block in result.json with the twist's factor near 1.04."""
     space, _ = _truth_row(as_built)
     rng = np.random.default_rng(3)
     start = np.array([SUV_TRUTH[n] for n in space.names]) * (1 + 0.03 * rng.choice([-1, 1], len(space.names)))
@@ -107,7 +107,7 @@ def test_the_car_on_tracks_as_built_from_a_start(as_built):
     errs = {n: res.parameters[n] / v - 1 for n, v in SUV_TRUTH.items()}
     assert max(abs(e) for e in errs.values()) < 0.01, errs
     z = {n: (res.parameters[n] - v) / res.details[n]["std_robust"] for n, v in SUV_TRUTH.items()}
-    assert max(abs(v) for v in z.values()) < 3.0, z
+    assert max(abs(v) for v in z.values()) < 2.0, z
     assert res.adequacy["adequate"] is True
     assert res.adequacy["as_built"] == sorted(r[0] for r in RUNS)
     tw = res.tracks["twist_high"]

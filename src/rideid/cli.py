@@ -336,7 +336,8 @@ def _tracks_table(res) -> str:
                 lines.append(f"{tid:<18} {rid:<10} {r['fitted']}")
     rejected = next((rec["rejected"] for rec in res.tracks.values() if rec.get("rejected")), None)
     lines.append("tracks as built REJECTED, the estimates are the tracks' as drawn: " + rejected if rejected else
-                 "error bars with tracks as built: measured up to 2x optimistic (docs/tracks-as-built.md)")
+                 "error bars with tracks as built: the white sandwich of their runs (measured right over five seeds, "
+                 "docs/tracks-as-built.md)")
     return "\n".join(lines)
 
 

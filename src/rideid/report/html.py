@@ -869,8 +869,7 @@ def summary_section(result, context: dict) -> dict:
                          + f", {1e3 * rec.get('unevenness_rms_surface_m', rec['unevenness_rms_m']):.1f} mm RMS"
                          for tid, rec in built.items())
         lines.append(("Tracks as built", ("REJECTED, the estimates are the tracks' as drawn: " + rejected)
-                      if rejected else text + " (amplitude factor, unevenness at waves up to 10 m); error bars "
-                      "with tracks as built measured up to 2x optimistic", "estimates"))
+                      if rejected else text + " (amplitude factor, unevenness at waves up to 10 m)", "estimates"))
     caveat = (adq or {}).get("tracks_caveat")
     if caveat:  # adequate only by the weighing, on tracks as drawn (rideid.estimate.model_choice._drawing_caveat)
         lines.append(("Tracks as drawn", "NOT TO BE TRUSTED beyond the error bars: " + caveat, "estimates"))
