@@ -115,16 +115,14 @@ def test_identify_runs_on_the_all_realities_case(realities, tmp_path):
     """End to end through the command line, the powertrain in the model: the checks pass the data as wired,
     the starts are estimated and polished, and what the fit gives is recorded (printed) against the truth.
 
-    Measured (seed 1, three runs, each wheel on its own lateral path; 105 s on two cores, another job on them):
-    the speed channel holds (its wander 0 % after its noise), so the runs are fitted as built, each at a constant
-    speed fitted with its start (W_H: 9.9953 m/s against the GPS mean 9.9871, the start moved 4.8 ms), the hub's
-    clipped samples freed (26 and 84). The twelve within 1.72 % (m_uf +1.72 %, m_ur +1.36 %, the rest within
-    0.3 %), the engine's mass -0.37 %, its bounce frequency +0.01 %, adequate; the error bars cover badly
-    (before the white meat: m_uf 3.4 std_robust off; the white sandwich puts it at 2.0). The tracks: factors
-    1.037, 1.058 and 1.139 +- 0.038 (the washboard, one spectral line whose bins the prior opens: its factor is
-    ill-determined, and the verdict allows twice its error), surface unevenness (waves up to 10 m) 1.6-1.8 mm
-    where 1.5 mm was laid. Before (the runs along a speed channel taken as drawn): the twelve within 12.2 %
-    (k_tf), adequate with the tracks caveat."""
+    Measured (seed 1, three runs, each wheel on its own lateral path; 73 s on two cores): the speed channel
+    holds (its wander 0 % after its noise), so the runs are fitted as built, each at a constant speed fitted with
+    its start on the drawing, the hub's clipped samples freed (26 and 84). The twelve within 1.01 % (m_uf; the
+    rest within 0.41 %), every one within 1.2 std_robust (the white sandwich of the as-built runs), the engine's
+    mass -0.21 %, its bounce frequency -0.01 %, adequate. The tracks: the washboard is one spectral line whose
+    bins the prior opens, so its factor's error is large and the verdict allows twice it; the surface unevenness
+    (waves up to 10 m) 1.6-1.8 mm where 1.5 mm was laid. Before this stop (the runs along a speed channel taken
+    as drawn): the twelve within 12.2 % (k_tf), k_tf 2.8 std_total off, adequate with the tracks caveat."""
     import json
     import subprocess
     folder, _ = realities
@@ -142,7 +140,7 @@ def test_identify_runs_on_the_all_realities_case(realities, tmp_path):
     print({n: f"{100 * e:+.2f} %" for n, e in errs.items()}, res.get("adequacy", {}).get("adequate"))
     for rid in RUNS:
         assert abs(res["preprocessing"][rid]["start"]["value"] - realities_case.OFFSET) < 0.01
-    assert max(abs(e) for n, e in errs.items() if n in rideid.NAMES) < 0.02
+    assert max(abs(e) for n, e in errs.items() if n in rideid.NAMES) < 0.015
     assert abs(errs["m_p"]) < 0.01 and abs(errs["f_pb"]) < 0.002
     ad = res["adequacy"]
     assert ad["adequate"] and "tracks_caveat" not in ad, ad
@@ -160,4 +158,4 @@ def test_identify_runs_on_the_all_realities_case(realities, tmp_path):
     assert "error bars with tracks as built: the white sandwich of their runs" in proc.stdout
     z = {n: (res["parameters"][n]["value"] - truth[n]) / res["parameters"][n]["std_robust"] for n in rideid.NAMES}
     print({n: f"{v:+.1f}" for n, v in z.items()})
-    assert max(abs(v) for v in z.values()) < 2.5, z
+    assert max(abs(v) for v in z.values()) < 2.0, z
