@@ -5,6 +5,7 @@ independent simulator of tests/driven_speed.py (SciPy lsim of the SUV written fr
 10 Hz GPS column with 0.03 m/s of white noise)."""
 
 import warnings
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -59,22 +60,26 @@ def test_a_held_speed_is_fitted_as_built_and_a_wandering_one_is_not(held, wander
 
 
 def test_the_speed_and_the_start_are_fitted_to_the_track(held):
-    """At the true car the GPS channel's mean speed is off by up to 0.1 % (centimetres of the drawing by the
-    run's end) and the start as read by a sample; fitted to the drawing, the speed comes within 2e-4 of the
-    driven one and the start within a fifth of a sample, and the run's as-built cost falls."""
+    """At the true car the GPS channel's mean speed is off by up to 0.04 % (centimetres of the drawing by the
+    run's end) and the start as read by most of a sample; fitted to the drawing (two passes, as the as-built
+    stage does: the drawing alone, then the prior estimated there), the speed comes within 1e-4 of the driven
+    one and the start within 0.3 of a sample (measured: 0.003 % and 1.0 ms on the washboard, 0 and 0 on the
+    herringbone), and the run's as-built cost falls."""
     space = ParameterSpace(held.known, held.geometry, held.manifest.bounds, extensions=())
     P = space.full(np.array([[SUV_TRUTH[n] for n in space.names]]))[0]
     speeds = {r[0]: r[2] for r in SHORT}
     for run in held.runs:
         tr = asbuilt.prepare_track_run(held, run)
         tr.prior = asbuilt.estimate_prior(P, held.geometry, tr)
-        before = asbuilt.residuals(P, held.geometry, tr)
-        moved, rec = asbuilt.align_motion(P, held.geometry, tr, held, run)
+        moved, rec = asbuilt.align_motion(P, held.geometry, tr, held, run, "amplitude")
+        moved.prior = asbuilt.estimate_prior(P, held.geometry, moved)
+        moved, rec = asbuilt.align_motion(P, held.geometry, moved, held, run, "prior")
         after = asbuilt.residuals(P, held.geometry, moved)
+        before = asbuilt.residuals(P, held.geometry, replace(tr, prior=moved.prior))  # the same prior
         assert after @ after < before @ before
-        assert rec["speed_channel_mean_m_s"] == tr.rr.speed
-        assert abs(rec["speed_m_s"] / speeds[run.id] - 1) < 2e-4, rec
+        assert rec["speed_channel_mean_m_s"] == pytest.approx(tr.rr.speed)
+        assert abs(rec["speed_m_s"] / speeds[run.id] - 1) < 1e-4, rec
         start = held.measured[run.id].start + rec["start_shift_s"]
-        assert abs(start - OFFSET) < 0.2 / held.measured[run.id].fs, (run.id, start, rec)
+        assert abs(start - OFFSET) < 0.3 / held.measured[run.id].fs, (run.id, start, rec)
         assert moved.rr.tau == pytest.approx(held.geometry.wheelbase / rec["speed_m_s"])
-        assert moved.inputs.u.shape == tr.inputs.u.shape
+        assert moved.shift == rec["start_shift_s"] and moved.inputs.u.shape == tr.inputs.u.shape

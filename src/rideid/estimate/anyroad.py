@@ -592,23 +592,25 @@ def _identify_any_road(ds, *, rng=None, seed=None, population=None, generations=
         for tr, pr in zip(trs, thread_map(lambda tr: asbuilt.estimate_prior(Pz, geom, tr), trs, "rideid-priors")):
             tr.prior = pr
 
-    def align(zz):  # the speed and the start of each run along a speed channel (asbuilt.align_motion)
+    def align(zz, mode):  # the speed and the start of each run along a speed channel (asbuilt.align_motion)
         Pz = space.full(prob.x(zz)[None])[0]
         for i, r in along.items():
-            trs[i], motion[r.id] = asbuilt.align_motion(Pz, geom, trs[i], ds, r)
+            trs[i], motion[r.id] = asbuilt.align_motion(Pz, geom, trs[i], ds, r, mode)
             prob.rruns[len(rruns) + i] = trs[i]
 
     if polish:
         priors(z0)
-        if along:
-            align(z0)
+        if along:  # on the drawing alone, then with the prior estimated there (asbuilt.align_motion says why)
+            align(z0, "amplitude")
+            priors(z0)
+            align(z0, "prior")
             priors(z0)
         prob.reweight(z0)
         cost_before = float(np.sum(prob(z0) ** 2))
         # one solve at the start's block weights (and priors), both again at its solution, a short second solve
         sol = least_squares(prob, z, bounds=prob.vbounds, method="trf", diff_step=1e-5, max_nfev=100)
         if along:
-            align(sol.x)
+            align(sol.x, "prior")
         priors(sol.x)
         prob.reweight(sol.x)
         sol = least_squares(prob, sol.x, bounds=prob.vbounds, method="trf", diff_step=1e-5, max_nfev=50)
