@@ -88,7 +88,7 @@ TRACK_OPTIONS = ("as-built", "as-drawn")
 #: the amplitude factor's distance from 1, and the unevenness RMS (m, one wheel path; SPEC §11: a few per cent and
 #: 1-2 mm, plus what the disc's envelope adds on sharp features: 2.6 mm measured on a washboard laid with 1.5 mm).
 #: The factor's limit widens by twice its standard error (``amplitude_factor_std``): a track of one spectral line
-#: (a washboard) whose bins the prior opened leaves its factor ill-determined (1.139 +- ... on the all-realities
+#: (a washboard) whose bins the prior opened leaves its factor ill-determined (1.139 +- 0.038 on the all-realities
 #: case, where the envelope of the 4 % taller washboard is 4.0 % taller)
 PLAUSIBLE_FACTOR = 0.10
 PLAUSIBLE_RMS = 3.5e-3
