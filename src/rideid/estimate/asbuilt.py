@@ -60,6 +60,7 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 import scipy.linalg
+from scipy.optimize import minimize
 
 from ..model.simulate import RunInput, corner_inputs, prepare_run
 from . import roadfit
@@ -199,8 +200,6 @@ def align_motion(P, geom, tr: TrackRun, ds, run, mode: str = "prior") -> tuple[T
     the all-realities case of tests/realities_case.py): the drawing as built needs the track's own features to
     place it. Returns the new run (the prior as it was) and the record ``{"speed_m_s", "start_shift_s",
     "speed_channel_mean_m_s"}`` (``start_shift_s`` from the start as read)."""
-    from scipy.optimize import minimize
-
     track = ds.manifest.tracks[run.track]
     t = ds.data[run.id].time
     v0, s0 = tr.rr.speed, tr.shift
@@ -464,7 +463,7 @@ def unevenness_rms(tr: TrackRun, longest: float | None = None) -> float:
         return float("nan")
     sd2 = tr.prior.unevenness
     if longest is not None:
-        f = tr.rr.fs * np.asarray(tr.rr.fit) / tr.rr.n
+        f = tr.rr.omega(tr.rr.fit) / (2 * np.pi)
         sd2 = np.where(f >= tr.rr.speed / longest, sd2, 0.0)
     return float(np.sqrt(2.0 * np.sum(sd2)) / tr.rr.n)
 

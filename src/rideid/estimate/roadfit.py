@@ -246,9 +246,10 @@ def prepare_road_run(run_id: str, y, fs: float, speed: float, geom: Geometry, co
     (``clip``, module docstring), or, past :data:`CLIP_SHARE` or :data:`CLIP_MAX`, its channel is left out of
     this run's fit whole (:func:`without_clipped`) and named in ``left_out``."""
     y = np.asarray(y, dtype=float)
-    f = np.fft.rfftfreq(y.shape[0], 1.0 / fs)
-    nfit = int(np.count_nonzero((f >= band[0]) & (f <= min(band[1], 0.45 * fs))))
-    y, left, freed = without_clipped(y, clipped, 2 * nfit)
+    n = y.shape[0]
+    f = np.fft.rfftfreq(n, 1.0 / fs)
+    fit = np.nonzero((f >= band[0]) & (f <= min(band[1], 0.45 * fs)))[0]
+    y, left, freed = without_clipped(y, clipped, 2 * fit.size)
     if cols is None:
         cols, quiet = used_channels(y)
         left.update(quiet)
@@ -256,15 +257,12 @@ def prepare_road_run(run_id: str, y, fs: float, speed: float, geom: Geometry, co
     yc = y[:, cols]
     yc = yc - yc.mean(axis=0)
     scale = 1.0 / np.sqrt(np.mean(yc ** 2, axis=0))
-    n = yc.shape[0]
     Y = np.fft.rfft(yc * scale, axis=0)
-    f = np.fft.rfftfreq(n, 1.0 / fs)
-    fit = np.nonzero((f >= band[0]) & (f <= min(band[1], 0.45 * fs)))[0]
     stride = max(1, fit.size // SEARCH_BINS)
     search = fit[::stride]
     Ys = np.fft.rfft(yc * scale * np.hanning(n)[:, None], axis=0)[search]
     pos = {int(ch): k for k, ch in enumerate(cols)}
-    clip = np.array([(pos[ch], n) for ch in sorted(freed) if ch in pos for n in freed[ch]], dtype=int).reshape(-1, 2)
+    clip = np.array([(pos[ch], k) for ch in sorted(freed) if ch in pos for k in freed[ch]], dtype=int).reshape(-1, 2)
     return RoadRun(run_id=run_id, fs=float(fs), speed=float(speed), n=n, cols=cols, scale=scale, Y=Y, fit=fit,
                    search=search, Ys=Ys, tau=geom.wheelbase / float(speed), left_out=left, clip=clip)
 
