@@ -82,4 +82,12 @@ def test_the_speed_and_the_start_are_fitted_to_the_track(held):
         start = held.measured[run.id].start + rec["start_shift_s"]
         assert abs(start - OFFSET) < 0.3 / held.measured[run.id].fs, (run.id, start, rec)
         assert moved.rr.tau == pytest.approx(held.geometry.wheelbase / rec["speed_m_s"])
+        # their standard errors at this car, from the run's motion Jacobian (the columns the identification's
+        # sandwich adds, anyroad._with_motion): the errors within 3 of them (measured over seeds 10-13: within
+        # 0.96 std; the herringbone's start 0.01-0.05 ms, the washboard's tens of ms: a pure sine's start shifts
+        # nothing but its ends)
+        Jm = asbuilt.motion_jacobian(P, held.geometry, moved, held, run)
+        sd = np.sqrt(np.diag(float(after @ after) / after.size * np.linalg.inv(Jm.T @ Jm)))
+        assert abs(rec["speed_m_s"] / speeds[run.id] - 1) < 3 * sd[0] < 1e-4, (run.id, rec, sd)
+        assert abs(start - OFFSET) < 3 * sd[1], (run.id, start, sd)
         assert moved.shift == rec["start_shift_s"] and moved.inputs.u.shape == tr.inputs.u.shape

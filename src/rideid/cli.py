@@ -334,10 +334,19 @@ def _tracks_table(res) -> str:
                              f"{1e3 * r['unevenness_rms_m']:>18.2f} {1e3 * us:>15.2f}")
             else:
                 lines.append(f"{tid:<18} {rid:<10} {r['fitted']}")
+    moving = [(rid, r["motion"]) for rec in res.tracks.values() for rid, r in rec.get("runs", {}).items()
+              if "motion" in r]
+    for rid, m in moving:  # a run along a speed channel: its speed and start as fitted (asbuilt.align_motion)
+        sd = "" if "speed_std_m_s" not in m else f" ± {m['speed_std_m_s']:.4f}"
+        st = "" if "start_shift_std_s" not in m else f" ± {1e3 * m['start_shift_std_s']:.2f}"
+        lines.append(f"{rid}: speed {m['speed_m_s']:.4f}{sd} m/s (the speed channel's mean "
+                     f"{m['speed_channel_mean_m_s']:.4f}), start moved {1e3 * m['start_shift_s']:+.2f}{st} ms")
     rejected = next((rec["rejected"] for rec in res.tracks.values() if rec.get("rejected")), None)
     lines.append("tracks as built REJECTED, the estimates are the tracks' as drawn: " + rejected if rejected else
                  "error bars with tracks as built: the white sandwich of their runs (measured right over five seeds, "
-                 "docs/tracks-as-built.md)")
+                 "docs/tracks-as-built.md)" + ("; the runs' speeds and starts in them (each estimate's budget: "
+                                               "'speed and start')" if any("speed_std_m_s" in m for _, m in moving)
+                                               else ""))
     return "\n".join(lines)
 
 

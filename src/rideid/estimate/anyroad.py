@@ -315,6 +315,43 @@ class _Problem:
         self.size = sum(self.sizes)
 
 
+def _with_motion(prob, z, H, Ja, S, s2, trs, along, ds, geom, cov_rob):
+    """The error bars with the speed and the start of each run along a speed channel (fitted by
+    :func:`rideid.estimate.asbuilt.align_motion`, then held while the car was fitted) as nuisance parameters of
+    the same sandwich: their residual columns (:func:`rideid.estimate.asbuilt.motion_jacobian`) join the car's,
+    the bread ``[[H, Ja^T Jm], [Jm^T Ja, Jm^T Jm]]`` (the car's block the true Hessian, the rest Gauss-Newton:
+    the drawing's inputs are not projected, so ``J^T J`` is their curvature), the meat the runs' white meat over
+    both; the car's block of the inverse is the car's covariance with the motion marginalised.
+
+    Returns the white and robust covariances (car's parameters, x units), the robust one with the motion held
+    (for the budget's share), and per run ``{"speed_std_m_s", "start_shift_std_s"}``."""
+    n = Ja.shape[1]
+    index = {id(rr): k for k, rr in enumerate(prob.rruns)}
+    offs = np.concatenate([[0], np.cumsum(prob.sizes)])
+    first = int(prob.cf is not None)
+    P = prob.space.full(prob.x(z)[None])[0]
+    q = 2 * len(along)
+    Jm = np.zeros((Ja.shape[0], q))
+    for j, (i, r) in enumerate(along.items()):
+        k = index[id(trs[i])] + first
+        Jm[offs[k]:offs[k + 1], 2 * j:2 * j + 2] = asbuilt.motion_jacobian(P, geom, trs[i], ds, r)
+    cross = Ja.T @ Jm
+    Hf = np.block([[H, cross], [cross.T, Jm.T @ Jm]])
+    Sf = np.block([[S, s2 * cross], [s2 * cross.T, s2 * (Jm.T @ Jm)]])  # white meat of the as-built blocks
+    Hinv = _pinv(Hf)
+    D = np.diag(np.concatenate([prob.dxdv(z), np.ones(q)]))
+    Jf = np.concatenate([Ja, Jm], axis=1)
+    m = Ja.shape[0]
+    cov = (D @ Hinv @ (s2 * Jf.T @ Jf) @ Hinv @ D)
+    rob = D @ Hinv @ Sf @ Hinv @ D * (m / max(m - n - q, 1))
+    out = {}
+    for j, (i, r) in enumerate(along.items()):
+        a = 2 * j + n
+        out[r.id] = {"speed_std_m_s": float(trs[i].rr.speed * np.sqrt(max(rob[a, a], 0.0))),
+                     "start_shift_std_s": float(np.sqrt(max(rob[a + 1, a + 1], 0.0)))}
+    return cov[:n, :n], rob[:n, :n], cov_rob, out
+
+
 def _search(space, geom, rruns, gen, population, generations, callback, t0):
     """JADE on the road runs' search cost, stopped by the population spread (:data:`SPREAD_TOL`)."""
     def fun(X):
@@ -490,7 +527,8 @@ def _tracks_block(ds, trs, skipped, P, geom, motion=None):
                        "std_robust with tracks as built from the white sandwich of their runs (measured on the "
                        "SUV on tracks 4 % off with 1.5 mm unevenness over five seeds: error / std_robust RMS 0.92, "
                        "±2 std_robust covering 12 of 12 on each; the bin-clustered sandwich was 1.8x too narrow; "
-                       "docs/tracks-as-built.md); the speed and start fitted along a speed channel are not in them")
+                       "docs/tracks-as-built.md); the speed and start fitted along a speed channel are in them as "
+                       "nuisance parameters (the budget's 'speed and start'; each run's motion has its std)")
     for r in ds.runs:
         if r.id in skipped:
             out.setdefault(r.track, {"runs": {}})["runs"][r.id] = {"fitted": skipped[r.id]}
@@ -639,9 +677,15 @@ def _identify_any_road(ds, *, rng=None, seed=None, population=None, generations=
                     S += _road_meat(Jb, eb, 2 * len(rr.cols))
             off += size
         cov_rob = D @ Hinv @ S @ Hinv @ D * (m / max(m - n, 1))
+        if along:  # the speed and start fitted along a speed channel: nuisances of the same sandwich
+            cov, cov_rob, cov_fixed, motion_std = _with_motion(prob, z, H, Ja, S, s2, trs, along, ds, geom, cov_rob)
+            for rid, sd in motion_std.items():
+                motion[rid].update(sd)
+            std = np.sqrt(np.clip(np.diag(cov), 0, None))
         info = {"success": bool(sol.success), "message": sol.message, "nfev": int(sol.nfev),
                 "cost_before": cost_before, "cost_after": float(e @ e), "covariance": cov.tolist(),
                 "names": list(space.names), "covariance_robust": (0.5 * (cov_rob + cov_rob.T)).tolist(),
+                **({} if not along else {"covariance_robust_motion_fixed": cov_fixed.tolist()}),
                 "method": "joint: " + ", ".join(
                     ([] if not rruns else ["road runs by frequency-domain variable projection "
                                            "(rideid.estimate.roadfit)"])
@@ -652,6 +696,13 @@ def _identify_any_road(ds, *, rng=None, seed=None, population=None, generations=
     P = space.full(x[None])[0]
     robust = estimate_covariance(info, space, x)
     details = {nme: parameter_detail(space, P, nme, std, cov, robust) for nme in space.reported_names}
+    if info is not None and "covariance_robust_motion_fixed" in info:
+        # the speed's and start's share of std_robust (the budget's "speed and start", rideid.estimate.budget)
+        fixed = estimate_covariance(dict(info, covariance_robust=info["covariance_robust_motion_fixed"]), space, x)
+        for nme, d in details.items():
+            a, b = d.get("std_robust"), (None if nme in space.fixed else fixed.std_robust(nme))
+            if a is not None and b is not None and not d.get("fixed"):
+                d["std_motion"] = float(np.sqrt(max(a * a - b * b, 0.0)))
     # the roads, their classes and the fitted channels
     roads, profiles, response = {}, {}, {}
     for rr in rruns:

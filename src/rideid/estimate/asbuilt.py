@@ -181,6 +181,35 @@ MOTION_XTOL = 0.01
 MOTION_MAXFEV = 120
 
 
+def moved(tr: TrackRun, ds, run, p) -> TrackRun:
+    """``tr`` with its drawing moved by ``p`` = (the speed's relative change, the start's shift) in
+    :data:`MOTION_SCALE` units: the drawing at ``x = v (t - shift)``, the rear wheels' delay at ``v`` (the
+    tabulated ``inputs`` as they were: :func:`align_motion` renews them once)."""
+    v = tr.rr.speed * (1.0 + p[0] * MOTION_SCALE[0])
+    shift = tr.shift + p[1] * MOTION_SCALE[1]
+    u = corner_inputs(ds.manifest.tracks[run.track], ds.geometry, v * (ds.data[run.id].time - shift))
+    return replace(tr, rr=replace(tr.rr, speed=v, tau=ds.geometry.wheelbase / v), U=np.fft.rfft(u, axis=0),
+                   shift=shift)
+
+
+#: :func:`motion_jacobian`'s central-difference steps (:data:`MOTION_SCALE` units: 1e-4 of the speed, 0.2 ms):
+#: about the speed's and the start's standard errors on the all-realities case (docs/tracks-as-built.md)
+MOTION_JACOBIAN_STEPS = (0.1, 0.2)
+
+
+def motion_jacobian(P, geom, tr: TrackRun, ds, run) -> np.ndarray:
+    """The Jacobian (m, 2) of :func:`residuals` of ``tr`` (a run along a speed channel, as :func:`align_motion`
+    left it) in its speed (relative) and its start shift (s), by central differences: the columns that put the
+    speed's and the start's uncertainty into the error bars (:func:`rideid.estimate.anyroad`'s sandwich)."""
+    cols = []
+    for j, h in enumerate(MOTION_JACOBIAN_STEPS):
+        p = np.zeros(2)
+        p[j] = h
+        d = residuals(P, geom, moved(tr, ds, run, p)) - residuals(P, geom, moved(tr, ds, run, -p))
+        cols.append(d / (2 * h * MOTION_SCALE[j]))
+    return np.stack(cols, axis=1)
+
+
 def align_motion(P, geom, tr: TrackRun, ds, run, mode: str = "prior") -> tuple[TrackRun, dict]:
     """``tr`` of a run along a speed channel, its speed held (:func:`rideid.estimate.anyroad.speed_wander`), with
     the speed and the start that fit it at the car ``P`` (16,): the drawing at ``x = v (t - shift)``, the rear
@@ -200,27 +229,17 @@ def align_motion(P, geom, tr: TrackRun, ds, run, mode: str = "prior") -> tuple[T
     the all-realities case of tests/realities_case.py): the drawing as built needs the track's own features to
     place it. Returns the new run (the prior as it was) and the record ``{"speed_m_s", "start_shift_s",
     "speed_channel_mean_m_s"}`` (``start_shift_s`` from the start as read)."""
-    track = ds.manifest.tracks[run.track]
-    t = ds.data[run.id].time
-    v0, s0 = tr.rr.speed, tr.shift
     base = replace(tr, mode=mode)
 
-    def moved(p, base):
-        v = v0 * (1.0 + p[0] * MOTION_SCALE[0])
-        shift = s0 + p[1] * MOTION_SCALE[1]
-        u = corner_inputs(track, geom, v * (t - shift))
-        return replace(base, rr=replace(base.rr, speed=v, tau=geom.wheelbase / v), U=np.fft.rfft(u, axis=0),
-                       shift=shift)
-
     def cost(p):
-        return float(np.sum(residuals(P, geom, moved(p, base)) ** 2))
+        return float(np.sum(residuals(P, geom, moved(base, ds, run, p)) ** 2))
 
     c0 = cost(np.zeros(2))
     sol = minimize(cost, np.zeros(2), method="Nelder-Mead",
                    options={"initial_simplex": np.array([[0.0, 0.0], [MOTION_STEPS[0], 0.0], [0.0, MOTION_STEPS[1]]]),
                             "xatol": MOTION_XTOL, "fatol": 1e-9 * c0, "maxfev": MOTION_MAXFEV})
     x = sol.x if sol.fun < c0 else np.zeros(2)
-    out = moved(x, tr)
+    out = moved(tr, ds, run, x)
     out = replace(out, inputs=nominal_inputs(ds, run, out.rr.speed, out.shift))
     return out, {"speed_m_s": float(out.rr.speed), "start_shift_s": float(out.shift),
                  "speed_channel_mean_m_s": held_speed(ds, run)}
@@ -482,4 +501,5 @@ def fitted_channels(P, geom, tr: TrackRun, y, fit: Fit | None = None) -> np.ndar
 
 
 __all__ = ["MODES", "Prior", "TrackRun", "Fit", "nominal_inputs", "prepare_track_run", "solve", "residuals",
-           "estimate_prior", "unevenness_rms", "fitted_channels", "meat", "cluster_meat", "align_motion"]
+           "estimate_prior", "unevenness_rms", "fitted_channels", "meat", "cluster_meat", "align_motion",
+           "moved", "motion_jacobian"]

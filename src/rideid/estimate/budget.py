@@ -65,6 +65,8 @@ from .uncertainty import normal_inverse
 STATISTICAL = "statistical"
 #: the budget's name of the runs' disagreement beyond their noise (part of std_robust)
 BETWEEN_RUNS = "between runs"
+#: the budget's name of the speed and start fitted along a speed channel (part of std_robust: tracks as built)
+MOTION = "speed and start"
 #: prefix of a sensor's entry: ``"sensitivity body_az_fl"``
 SENSITIVITY = "sensitivity"
 #: parameters that do not scale with the anchor (lengths): the anchor's closed form gives them 0
@@ -293,13 +295,17 @@ def budget_entries(details: dict, names, gradients: dict, inputs) -> dict:
             # the runs' disagreement beyond their noise is in std_robust (rideid.estimate.uncertainty
             # between_runs_variance): shown as its own contribution
             between = float(e.get("std_between_runs") or 0.0)
-            parts = {STATISTICAL: float(np.sqrt(max(stat ** 2 - between ** 2, 0.0)))}
+            # the speed and start fitted along a speed channel (rideid.estimate.anyroad) are in std_robust too
+            motion = float(e.get("std_motion") or 0.0)
+            parts = {STATISTICAL: float(np.sqrt(max(stat ** 2 - between ** 2 - motion ** 2, 0.0)))}
             if between > 0:
                 parts[BETWEEN_RUNS] = between
+            if motion > 0:
+                parts[MOTION] = motion
             for name, g in gradients.items():
                 if n in col:
                     parts[name] = float(abs(g[col[n]]) * std_of[name])
-            extra = [v for k, v in parts.items() if k not in (STATISTICAL, BETWEEN_RUNS)]
+            extra = [v for k, v in parts.items() if k not in (STATISTICAL, BETWEEN_RUNS, MOTION)]
             e["std_total"] = float(stat) if not extra else float(np.sqrt(stat ** 2 + sum(v * v for v in extra)))
             e["budget"] = parts
         out[n] = e
@@ -409,4 +415,4 @@ def dampers_with_totals(res, details: dict):
 
 
 __all__ = ["DeclaredInput", "declared_inputs", "propagate", "budget_entries", "with_budget", "fit_cost",
-           "scale_gradients", "anchor_note", "dampers_with_totals", "STATISTICAL", "SENSITIVITY"]
+           "scale_gradients", "anchor_note", "dampers_with_totals", "STATISTICAL", "SENSITIVITY", "MOTION"]
