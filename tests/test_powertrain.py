@@ -259,3 +259,35 @@ def test_plan_knows_the_powertrain(tmp_path):
     for n in ("I_p", "zeta_pp"):
         assert 0.01 < crlb[n]["relative"] < 0.05
     assert crlb["f_pb"]["relative"] < 0.001
+
+
+def test_a_mode_left_at_a_bound_gets_a_second_start(scenario):
+    """rideid.estimate.identify.mode_restart: a powertrain mode with a member at a search bound (switched off: the
+    engine's pitch inertia at 1 kg m^2) is started again from typical values, I_p at the nominal radius of
+    gyration for this engine's mass; the other parameters stay; no second start when nothing is at a bound, when
+    the engine's mass is (no engine to place), or for the bounce mode when only the pitch mode is off. What the
+    second start does on data: tests/test_realities.py (seed 3)."""
+    from rideid.estimate.identify import mode_restart, restart_record
+    from rideid.model.params import NOMINAL_EXTENSIONS
+    space = rideid.ParameterSpace(scenario.known, scenario.geometry, extensions=("powertrain",))
+    names = list(space.names)
+    x = np.array([{**scenario.truth, **ENGINE}[n] for n in names])
+    assert mode_restart(space, x) is None
+    off = x.copy()
+    off[names.index("I_p")] = space.bounds[names.index("I_p"), 0]
+    off[names.index("f_pp")] = 5.6
+    alt, modes = mode_restart(space, off)
+    assert modes == ["the engine's pitch mode"]
+    want = dict(zip(names, off), I_p=ENGINE["m_p"] * NOMINAL_EXTENSIONS["I_p"] / NOMINAL_EXTENSIONS["m_p"],
+                f_pp=NOMINAL_EXTENSIONS["f_pp"], zeta_pp=NOMINAL_EXTENSIONS["zeta_pp"])
+    np.testing.assert_allclose(alt, [want[n] for n in names])
+    both = off.copy()
+    both[names.index("zeta_pb")] = space.bounds[names.index("zeta_pb"), 1]
+    alt, modes = mode_restart(space, both)
+    assert modes == ["the engine's pitch mode", "the engine's bounce mode"]
+    assert alt[names.index("zeta_pb")] == NOMINAL_EXTENSIONS["zeta_pb"]
+    no_engine = off.copy()
+    no_engine[names.index("m_p")] = space.bounds[names.index("m_p"), 0]
+    assert mode_restart(space, no_engine) is None
+    rec = restart_record(modes, 2.0, 1.0, space, off, alt)
+    assert rec["kept"] == "restart" and rec["first"]["I_p"] == off[names.index("I_p")]

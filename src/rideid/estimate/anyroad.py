@@ -58,6 +58,7 @@ from dataclasses import replace
 import numpy as np
 from scipy.optimize import OptimizeResult, least_squares
 
+from ..data.checks import bound_findings
 from ..data.schema import NONLINEAR_GROUPS
 from ..errors import ArgumentError, DataError
 from ..model.batch import single_threaded_blas, thread_map, thread_map_rows
@@ -67,8 +68,8 @@ from ..model.roads import iso8608_class
 from . import asbuilt, roadfit
 from .adequacy import ADVICE, advise, assess as assess_runs
 from .cost import CostFunction, ParameterSpace, channel_weights, refuse_unsupported_groups
-from .identify import (DEFAULT_GENERATIONS, DEFAULT_POPULATION, identify as identify_model, model_extensions,
-                       parameter_detail, relative_spread)
+from .identify import (DEFAULT_GENERATIONS, DEFAULT_POPULATION, identify as identify_model, mode_restart,
+                       model_extensions, parameter_detail, relative_spread, restart_record)
 from .jade import JadeSolver, make_rng, stop_requested
 from .result import History, IdentificationResult
 from .sensor_check import FREE_ROAD_HINT_REDUCTION, HINT_REDUCTION, road_coupling_hints
@@ -653,6 +654,20 @@ def _identify_any_road(ds, *, rng=None, seed=None, population=None, generations=
         prob.reweight(sol.x)
         sol = least_squares(prob, sol.x, bounds=prob.vbounds, method="trf", diff_step=1e-5, max_nfev=50)
         z = sol.x
+        restarted = None
+        restart = mode_restart(space, prob.x(z))
+        if restart is not None:  # a powertrain mode left at a search bound: polished again from typical values
+            alt = least_squares(prob, prob.v(restart[0]), bounds=prob.vbounds, method="trf", diff_step=1e-5,
+                                max_nfev=100)
+            c_first, c_alt = float(np.sum(prob(z) ** 2)), float(np.sum(prob(alt.x) ** 2))  # the same priors
+            restarted = restart_record(restart[1], c_first, c_alt, space, prob.x(z), prob.x(alt.x))
+            if c_alt < c_first:  # its priors, placements and weights at the new car, and a last short solve
+                if along:
+                    align(alt.x, "prior")
+                priors(alt.x)
+                prob.reweight(alt.x)
+                sol = least_squares(prob, alt.x, bounds=prob.vbounds, method="trf", diff_step=1e-5, max_nfev=50)
+                z = sol.x
         # the true Hessian; Newton steps on it to the minimum (module docstring); the sandwich: bread the
         # Hessian, meat the gradient's spread over clusters
         H = prob.hessian(z)
@@ -683,6 +698,7 @@ def _identify_any_road(ds, *, rng=None, seed=None, population=None, generations=
                 motion[rid].update(sd)
             std = np.sqrt(np.clip(np.diag(cov), 0, None))
         info = {"success": bool(sol.success), "message": sol.message, "nfev": int(sol.nfev),
+                **({} if restarted is None else {"mode_restart": restarted}),
                 "cost_before": cost_before, "cost_after": float(e @ e), "covariance": cov.tolist(),
                 "names": list(space.names), "covariance_robust": (0.5 * (cov_rob + cov_rob.T)).tolist(),
                 **({} if not along else {"covariance_robust_motion_fixed": cov_fixed.tolist()}),
@@ -804,8 +820,15 @@ def _identify_any_road(ds, *, rng=None, seed=None, population=None, generations=
     if road_hints:
         adequacy = _with_hints(adequacy, road_hints, hints_note)
     if start_result is not None:
-        # the as-drawn identification's search, weights, maps and starts stand; the estimate is the as-built fit's
-        return replace(start_result, x=np.asarray(x, dtype=float), names=list(space.names), std=std, covariance=cov,
+        # the as-drawn identification's search, weights, maps and starts stand; the estimate is the as-built fit's,
+        # and so are the estimates at a search bound (the as-drawn fit's bound findings replaced)
+        bounds = bound_findings(details)
+        for f in bounds:
+            details[f.channel]["at_bound"] = True
+        checks = [c for c in (start_result.checks or []) if c.get("check") != "bounds"]
+        checks += [f.to_dict() for f in bounds]
+        return replace(start_result, checks=checks, x=np.asarray(x, dtype=float), names=list(space.names),
+                       std=std, covariance=cov,
                        fun=float(np.mean(errors)), success=bool(start_result.success and info["success"]),
                        message=f"{start_result.message}; tracks as built: polish {info['message']}",
                        nfev=int(nfev), parameters={nme: float(P[space.col[nme]]) for nme in space.reported_names},

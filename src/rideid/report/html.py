@@ -733,8 +733,9 @@ def fig_budget(result, out_dir):
     return _save(budget_figure(result), Path(out_dir), "budget", "Uncertainty budget",
                  "Each estimate's ±2 std_total in % of its value, cut into its sources in proportion to their share "
                  "of the variance: statistical (the sensor noise), between runs (where the runs disagree beyond their "
-                 "noise: model error that differs from run to run, part of std_robust), speed and start (of runs on tracks "
-                 "as built along a speed channel, fitted with the car; part of std_robust) and each declared input, "
+                 "noise: model error that differs from run to run, part of std_robust), speed and start (of runs on "
+                 "tracks as built along a speed channel, fitted with the car; part of std_robust) and each declared "
+                 "input, "
                  f"propagated to first order (GUM; docs/uncertainty.md). Here: {what}.")
 
 
