@@ -115,17 +115,17 @@ def test_identify_runs_on_the_all_realities_case(realities, tmp_path):
     """End to end through the command line, the powertrain in the model: the checks pass the data as wired,
     the starts are estimated and polished, and what the fit gives is recorded (printed) against the truth.
 
-    Measured (seed 1, three runs, each wheel on its own lateral path; 77 s on two cores): the speed channel
-    holds (its wander 0 % after its noise), so the runs are fitted as built, each at a constant speed fitted with
-    its start (two passes, asbuilt.align_motion), the hub's clipped samples freed (26 and 84). The twelve within
-    0.76 % (m_ur; m_uf +0.68 %, the rest within 0.28 %), every one within 1.2 std_robust (the white sandwich of
-    the as-built runs), the engine's mass -0.25 %, its bounce frequency -0.00 %, adequate. The tracks: the
-    washboard is one spectral line whose bins the prior opens, so its factor's error is large and the verdict
-    allows twice it; the surface unevenness (waves up to 10 m) 1.6-1.8 mm where 1.5 mm was laid. Seeds 2 and 3
-    of the data (not tested): the twelve within 1.99 % and 2.78 %; on seed 3 the engine's pitch mode ends at its
-    search bounds (I_p, f_pp, zeta_pp; warned) and the unsprung masses are 2.4-2.8 % off. Before this stop (the
-    runs along a speed channel taken as drawn): the twelve within 12.2 % (k_tf), adequate with the tracks
-    caveat."""
+    Measured (seed 1, three runs, each wheel on its own lateral path; 112 s on two cores): the speed channel
+    holds (its wander 0 % after its noise), so the runs are fitted as built, each at a constant speed placed with
+    its start (two passes, asbuilt.align_motion) and then solved with the car (anyroad._joint_solve), the hub's
+    clipped samples freed (26 and 84). The twelve within 0.60 % (m_ur), every one within 1.4 std_robust (the
+    white sandwich of the as-built runs, the speeds and starts in it), the engine's mass -0.24 %, its bounce
+    frequency -0.00 %, adequate. The tracks: the washboard is one spectral line whose bins the prior opens, so
+    its factor's error is large and the verdict allows twice it; the surface unevenness (waves up to 10 m)
+    1.6-1.8 mm where 1.5 mm was laid. Seeds 2-5 of the data (not tested here; seed 3 below): the twelve within
+    0.70, 0.09, 0.67 and 1.29 %, 12 of 12 covered on each (docs/tracks-as-built.md). With the speeds held while
+    the car was fitted, seed 1 gave 0.76 % and seed 5 2.13 % (2.8 std_robust); with the runs along a speed
+    channel taken as drawn, 12.2 % (k_tf), adequate with the tracks caveat."""
     import json
     import subprocess
     folder, _ = realities
@@ -143,7 +143,7 @@ def test_identify_runs_on_the_all_realities_case(realities, tmp_path):
     print({n: f"{100 * e:+.2f} %" for n, e in errs.items()}, res.get("adequacy", {}).get("adequate"))
     for rid in RUNS:
         assert abs(res["preprocessing"][rid]["start"]["value"] - realities_case.OFFSET) < 0.01
-    assert max(abs(e) for n, e in errs.items() if n in rideid.NAMES) < 0.015
+    assert max(abs(e) for n, e in errs.items() if n in rideid.NAMES) < 0.01
     assert abs(errs["m_p"]) < 0.01 and abs(errs["f_pb"]) < 0.002
     ad = res["adequacy"]
     assert ad["adequate"] and "tracks_caveat" not in ad, ad
@@ -156,8 +156,9 @@ def test_identify_runs_on_the_all_realities_case(realities, tmp_path):
     speeds = {"T_HH": 5.0, "H_HH": 10.0, "W_H": 10.0}
     assert sorted(motion) == sorted(RUNS)
     assert all(abs(m["speed_m_s"] / speeds[rid] - 1) < 1e-3 for rid, m in motion.items()), motion
-    # the speed and start are nuisances of the error bars: their own std (measured: speed within 1.75 std, start
-    # within 1.72 std, seed 1) and their share of every estimate's (the budget's "speed and start")
+    # the speed and start are nuisances of the error bars: their own std (measured, solved with the car: speeds
+    # within 0.62 std, starts within 1.3 std, seed 1) and their share of every estimate's (the budget's "speed and
+    # start")
     for rid, m in motion.items():
         start = res["preprocessing"][rid]["start"]["nominal_estimate"] + m["start_shift_s"] - realities_case.OFFSET
         assert abs(m["speed_m_s"] - speeds[rid]) < 3 * m["speed_std_m_s"] < 2e-3 * speeds[rid], (rid, m)
@@ -182,7 +183,8 @@ def test_an_engine_mode_left_at_its_bounds_is_started_again(tmp_path):
     three bound warnings (the as-drawn fit's, though the as-built one had moved f_pp and zeta_pp off them).
     Polished again from the typical mode (rideid.estimate.identify.mode_restart) the tracks-as-drawn cost falls
     (0.20913 to 0.20880) and the mode lands at the truth: measured, the twelve within 0.71 % (m_uf), every one
-    within 1.0 std_robust, f_pp +0.15 %, I_p -1.1 %, no bound warning, adequate (100 s on two cores)."""
+    within 1.0 std_robust, f_pp +0.15 %, I_p -1.1 %, no bound warning, adequate; with the speeds and starts solved
+    with the car (anyroad._joint_solve) within 0.09 %, 0.6 std_robust, f_pp +0.10 % (100 s on two cores)."""
     import json
     import subprocess
     folder = tmp_path / "seed3"
@@ -200,7 +202,7 @@ def test_an_engine_mode_left_at_its_bounds_is_started_again(tmp_path):
     truth = realities_case.truth()
     errs = {n: res["parameters"][n]["value"] / truth[n] - 1 for n in rideid.NAMES if truth[n] != 0}
     print({n: f"{100 * e:+.2f} %" for n, e in errs.items()})
-    assert max(abs(e) for e in errs.values()) < 0.012, errs
+    assert max(abs(e) for e in errs.values()) < 0.01, errs
     assert abs(res["parameters"]["f_pp"]["value"] / truth["f_pp"] - 1) < 0.01
     assert not [c for c in res["checks"] if c["check"] == "bounds"]
     assert "search bound" not in proc.stderr
