@@ -183,7 +183,7 @@ def budget_figure(result):
     ax.grid(alpha=0.3, axis="x")
     if rows:
         ax.set_xlim(0, 1.15 * max(total))
-        ax.legend(fontsize=7, loc="lower right")
+        ax.legend(fontsize=7, loc="best")
     return fig
 
 
