@@ -363,8 +363,9 @@ def _with_motion(prob, z, H, Ja, S, s2, trs, along, ds, geom, cov_rob):
     """The error bars with the speed and the start of each run along a speed channel (placed by
     :func:`rideid.estimate.asbuilt.align_motion`, solved with the car by :func:`_joint_solve`, then held for the
     Newton steps and the Hessian) as nuisance parameters of the same sandwich: their residual columns
-    (:func:`rideid.estimate.asbuilt.motion_jacobian`) join the car's, the bread ``[[H, Ja^T Jm], [Jm^T Ja, Jm^T Jm]]`` (the car's block the true Hessian, the rest Gauss-Newton:
-    the drawing's inputs are not projected, so ``J^T J`` is their curvature), the meat the runs' white meat over
+    (:func:`rideid.estimate.asbuilt.motion_jacobian`) join the car's, the bread
+    ``[[H, Ja^T Jm], [Jm^T Ja, Jm^T Jm]]`` (the car's block the true Hessian, the rest Gauss-Newton: the
+    drawing's inputs are not projected, so ``J^T J`` is their curvature), the meat the runs' white meat over
     both; the car's block of the inverse is the car's covariance with the motion marginalised.
 
     Returns the white and robust covariances (car's parameters, x units), the robust one with the motion held
