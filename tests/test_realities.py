@@ -110,6 +110,19 @@ def test_a_start_a_cycle_off_is_the_one_diagnosis(realities, tmp_path, capsys):
     assert "wired" not in line and "unit" not in line and np.isfinite(float(line.split(" at x = 0 at ")[1][:6]))
 
 
+def _identify_cli(folder, out):
+    """``rideid identify folder --model powertrain --seed 1`` as a user runs it: the process and result.json."""
+    import json
+    import os
+    import subprocess
+    env = {**os.environ, "PYTHONPATH": str(Path(rideid.__file__).parents[1])}
+    proc = subprocess.run([sys.executable, "-m", "rideid", "identify", str(folder), "--out", str(out), "--seed", "1",
+                           "--model", "powertrain", "--no-report", "--quiet"], capture_output=True, text=True,
+                          env=env)
+    assert proc.returncode == 0, proc.stderr
+    return proc, json.loads((out / "result.json").read_text())
+
+
 @pytest.mark.slow
 def test_identify_runs_on_the_all_realities_case(realities, tmp_path):
     """End to end through the command line, the powertrain in the model: the checks pass the data as wired,
@@ -126,16 +139,9 @@ def test_identify_runs_on_the_all_realities_case(realities, tmp_path):
     0.70, 0.09, 0.67 and 1.29 %, 12 of 12 covered on each (docs/tracks-as-built.md). With the speeds held while
     the car was fitted, seed 1 gave 0.76 % and seed 5 2.13 % (2.8 std_robust); with the runs along a speed
     channel taken as drawn, 12.2 % (k_tf), adequate with the tracks caveat."""
-    import json
-    import subprocess
     folder, _ = realities
     out = tmp_path / "fit"
-    env = {**__import__("os").environ, "PYTHONPATH": str(Path(rideid.__file__).parents[1])}
-    proc = subprocess.run([sys.executable, "-m", "rideid", "identify", str(folder), "--out", str(out), "--seed", "1",
-                           "--model", "powertrain", "--no-report", "--quiet"], capture_output=True, text=True,
-                          env=env)
-    assert proc.returncode == 0, proc.stderr
-    res = json.loads((out / "result.json").read_text())
+    proc, res = _identify_cli(folder, out)
     assert not [c for c in res.get("checks", []) if c["check"] in ("wiring", "track")]
     truth = realities_case.truth()
     errs = {n: res["parameters"][n]["value"] / truth[n] - 1 for n in truth if n in res["parameters"]
@@ -185,17 +191,10 @@ def test_an_engine_mode_left_at_its_bounds_is_started_again(tmp_path):
     (0.20913 to 0.20880) and the mode lands at the truth: measured, the twelve within 0.71 % (m_uf), every one
     within 1.0 std_robust, f_pp +0.15 %, I_p -1.1 %, no bound warning, adequate; with the speeds and starts solved
     with the car (anyroad._joint_solve) within 0.09 %, 0.6 std_robust, f_pp +0.10 % (100 s on two cores)."""
-    import json
-    import subprocess
     folder = tmp_path / "seed3"
     realities_case.write_dataset(folder, seed=3, runs=RUNS)
     out = tmp_path / "fit"
-    env = {**__import__("os").environ, "PYTHONPATH": str(Path(rideid.__file__).parents[1])}
-    proc = subprocess.run([sys.executable, "-m", "rideid", "identify", str(folder), "--out", str(out), "--seed", "1",
-                           "--model", "powertrain", "--no-report", "--quiet"], capture_output=True, text=True,
-                          env=env)
-    assert proc.returncode == 0, proc.stderr
-    res = json.loads((out / "result.json").read_text())
+    proc, res = _identify_cli(folder, out)
     restart = res["polish"]["as_drawn"]["mode_restart"]
     assert restart["modes"] == ["the engine's pitch mode"] and restart["first"]["I_p"] == pytest.approx(1.0)
     assert restart["kept"] == "restart" and restart["cost_restart"] < restart["cost"]

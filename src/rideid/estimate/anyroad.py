@@ -58,7 +58,6 @@ from dataclasses import replace
 import numpy as np
 from scipy.optimize import OptimizeResult, least_squares
 
-from ..data.checks import bound_findings
 from ..data.schema import NONLINEAR_GROUPS
 from ..errors import ArgumentError, DataError
 from ..model.batch import single_threaded_blas, thread_map, thread_map_rows
@@ -68,8 +67,8 @@ from ..model.roads import iso8608_class
 from . import asbuilt, roadfit
 from .adequacy import ADVICE, advise, assess as assess_runs
 from .cost import CostFunction, ParameterSpace, channel_weights, refuse_unsupported_groups
-from .identify import (DEFAULT_GENERATIONS, DEFAULT_POPULATION, identify as identify_model, mode_restart,
-                       model_extensions, parameter_detail, relative_spread, restart_record)
+from .identify import (DEFAULT_GENERATIONS, DEFAULT_POPULATION, identify as identify_model, mark_bounds,
+                       mode_restart, model_extensions, parameter_detail, relative_spread, restart_record)
 from .jade import JadeSolver, make_rng, stop_requested
 from .result import History, IdentificationResult
 from .sensor_check import FREE_ROAD_HINT_REDUCTION, HINT_REDUCTION, road_coupling_hints
@@ -359,7 +358,7 @@ def _joint_solve(prob, z, along: dict, ds, max_nfev: int):
     return OptimizeResult(dict(sol, x=sol.x[:d], motion=sol.x[d:])), moved
 
 
-def _with_motion(prob, z, H, Ja, S, s2, trs, along, ds, geom, cov_rob):
+def _with_motion(prob, z, H, Ja, S, s2, trs, along, ds, geom):
     """The error bars with the speed and the start of each run along a speed channel (placed by
     :func:`rideid.estimate.asbuilt.align_motion`, solved with the car by :func:`_joint_solve`, then held for the
     Newton steps and the Hessian) as nuisance parameters of the same sandwich: their residual columns
@@ -368,8 +367,8 @@ def _with_motion(prob, z, H, Ja, S, s2, trs, along, ds, geom, cov_rob):
     drawing's inputs are not projected, so ``J^T J`` is their curvature), the meat the runs' white meat over
     both; the car's block of the inverse is the car's covariance with the motion marginalised.
 
-    Returns the white and robust covariances (car's parameters, x units), the robust one with the motion held
-    (for the budget's share), and per run ``{"speed_std_m_s", "start_shift_std_s"}``."""
+    Returns the white and robust covariances (car's parameters, x units) and per run
+    ``{"speed_std_m_s", "start_shift_std_s"}``."""
     n = Ja.shape[1]
     index = {id(rr): k for k, rr in enumerate(prob.rruns)}
     offs = np.concatenate([[0], np.cumsum(prob.sizes)])
@@ -394,7 +393,7 @@ def _with_motion(prob, z, H, Ja, S, s2, trs, along, ds, geom, cov_rob):
         a = 2 * j + n
         out[r.id] = {"speed_std_m_s": float(trs[i].rr.speed * np.sqrt(max(rob[a, a], 0.0))),
                      "start_shift_std_s": float(np.sqrt(max(rob[a + 1, a + 1], 0.0)))}
-    return cov[:n, :n], rob[:n, :n], cov_rob, out
+    return cov[:n, :n], rob[:n, :n], out
 
 
 def _search(space, geom, rruns, gen, population, generations, callback, t0):
@@ -692,6 +691,13 @@ def _identify_any_road(ds, *, rng=None, seed=None, population=None, generations=
             motion[tr.run_id] = dict(motion[tr.run_id], speed_m_s=float(tr.rr.speed), start_shift_s=float(tr.shift))
         return sol_
 
+    def refine(zz):  # the placements, priors and block weights at the car zz, then a short solve from it
+        if along:
+            align(zz, "prior")
+        priors(zz)
+        prob.reweight(zz)
+        return solve(zz, 50)
+
     if polish:
         priors(z0)
         if along:  # on the drawing alone, then with the prior estimated there (asbuilt.align_motion says why)
@@ -703,11 +709,7 @@ def _identify_any_road(ds, *, rng=None, seed=None, population=None, generations=
         cost_before = float(np.sum(prob(z0) ** 2))
         # one solve at the start's block weights (and priors), both again at its solution, a short second solve
         sol = least_squares(prob, z, bounds=prob.vbounds, method="trf", diff_step=1e-5, max_nfev=100)
-        if along:
-            align(sol.x, "prior")
-        priors(sol.x)
-        prob.reweight(sol.x)
-        sol = solve(sol.x, 50)
+        sol = refine(sol.x)
         z = sol.x
         restarted = None
         restart = mode_restart(space, prob.x(z))
@@ -716,12 +718,8 @@ def _identify_any_road(ds, *, rng=None, seed=None, population=None, generations=
                                 max_nfev=100)
             c_first, c_alt = float(np.sum(prob(z) ** 2)), float(np.sum(prob(alt.x) ** 2))  # the same priors
             restarted = restart_record(restart[1], c_first, c_alt, space, prob.x(z), prob.x(alt.x))
-            if c_alt < c_first:  # its priors, placements and weights at the new car, and a last short solve
-                if along:
-                    align(alt.x, "prior")
-                priors(alt.x)
-                prob.reweight(alt.x)
-                sol = solve(alt.x, 50)
+            if c_alt < c_first:
+                sol = refine(alt.x)
                 z = sol.x
         # the true Hessian; Newton steps on it to the minimum (module docstring); the sandwich: bread the
         # Hessian, meat the gradient's spread over clusters
@@ -748,7 +746,8 @@ def _identify_any_road(ds, *, rng=None, seed=None, population=None, generations=
             off += size
         cov_rob = D @ Hinv @ S @ Hinv @ D * (m / max(m - n, 1))
         if along:  # the speed and start fitted along a speed channel: nuisances of the same sandwich
-            cov, cov_rob, cov_fixed, motion_std = _with_motion(prob, z, H, Ja, S, s2, trs, along, ds, geom, cov_rob)
+            cov_fixed = cov_rob  # the motion held: for the budget's share
+            cov, cov_rob, motion_std = _with_motion(prob, z, H, Ja, S, s2, trs, along, ds, geom)
             for rid, sd in motion_std.items():
                 motion[rid].update(sd)
             std = np.sqrt(np.clip(np.diag(cov), 0, None))
@@ -877,11 +876,8 @@ def _identify_any_road(ds, *, rng=None, seed=None, population=None, generations=
     if start_result is not None:
         # the as-drawn identification's search, weights, maps and starts stand; the estimate is the as-built fit's,
         # and so are the estimates at a search bound (the as-drawn fit's bound findings replaced)
-        bounds = bound_findings(details)
-        for f in bounds:
-            details[f.channel]["at_bound"] = True
         checks = [c for c in (start_result.checks or []) if c.get("check") != "bounds"]
-        checks += [f.to_dict() for f in bounds]
+        checks += [f.to_dict() for f in mark_bounds(details)]
         return replace(start_result, checks=checks, x=np.asarray(x, dtype=float), names=list(space.names),
                        std=std, covariance=cov,
                        fun=float(np.mean(errors)), success=bool(start_result.success and info["success"]),

@@ -618,11 +618,16 @@ def _details(ds, space, P, std, cov, robust, bumps):
         details[n] = e
     # an estimate the bound stopped, not the data (rideid.data.checks); warned of by rideid.identify, once,
     # for the model it returns (warn_bounds), not for every candidate fitted on the way
-    findings = list(getattr(ds, "findings", [])) + bound_findings(details)
-    for f in findings:
-        if f.check == "bounds":
-            details[f.channel]["at_bound"] = True
-    return details, findings
+    return details, list(getattr(ds, "findings", [])) + mark_bounds(details)
+
+
+def mark_bounds(details: dict) -> list:
+    """The findings of the estimates in ``details`` that ended at a search bound
+    (:func:`rideid.data.checks.bound_findings`), each such entry marked ``at_bound``."""
+    found = bound_findings(details)
+    for f in found:
+        details[f.channel]["at_bound"] = True
+    return found
 
 
 #: ``preprocessing.<run>.moving_start.method`` of a run that begins moving, fitted on its track (SPEC §9)
