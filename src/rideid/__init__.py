@@ -62,6 +62,7 @@ _COMMAND_LINE = _by_name({
     "rideid.estimate.bumps": ("format_bump_stops",), "rideid.design": ("parse_target",),
     "rideid.report.html": ("write_report",),
     "rideid.data.quality": ("data_quality", "quality_table", "summarised_warning"),
+    "rideid.profiling": ("Profile",),
 }, {
     "write_sensitivity_csvs": ("rideid.report.sensitivity_files", "write_csvs"),
     "complete_result": ("rideid.estimate.responses", "complete"),
@@ -71,8 +72,8 @@ _COMMAND_LINE = _by_name({
 del _by_name  # the module's namespace (and dir(rideid)) holds the two tables only
 
 #: the subpackages, reachable as attributes (``rideid.model.params``) after a plain ``import rideid`` as before
-_SUBPACKAGES = ("conditioning", "csvio", "data", "design", "errors", "estimate", "exporter", "model", "report",
-                "studies", "synth",
+_SUBPACKAGES = ("conditioning", "csvio", "data", "design", "errors", "estimate", "exporter", "model", "profiling",
+                "report", "studies", "synth",
                 "verify")
 
 

@@ -189,6 +189,8 @@ def _parser() -> argparse.ArgumentParser:
                         "unevenness fitted with the car (SPEC §11, docs/tracks-as-built.md); as-drawn: every track "
                         "exactly as declared")
     s.add_argument("--no-report", action="store_true", help="write result.json and history.csv only")
+    s.add_argument("--profile", action="store_true",
+                   help="print where the time went (each stage's wall and CPU time) and write it to profile.csv")
 
     s = add("report", "(re)build report.html in an identification folder")
     s.add_argument("result_dir", metavar="RESULT_DIR", help="an identification folder (result.json, history.csv)")
@@ -399,7 +401,7 @@ def _candidates_table(model: dict) -> str:
 
 
 #: what ``rideid identify`` writes into its folder: a new identification replaces all of it (the user's files stay)
-IDENTIFY_OUTPUTS = ("result.json", "history.csv", "report.html", "figures", "road")
+IDENTIFY_OUTPUTS = ("result.json", "history.csv", "report.html", "figures", "road", "profile.csv")
 
 
 def _import_ahead(name: str) -> None:
@@ -438,11 +440,21 @@ def _load_with_quality(ds_path, out):
 
 
 def run_identify(ds_path, out_dir, *, seed, population=None, generations=None, weights="adaptive",
-                 polish=True, quiet=False, out=None, report=True, model=None, tracks="as-built"):
+                 polish=True, quiet=False, out=None, report=True, model=None, tracks="as-built", profile=False):
     out = out or sys.stdout
+    if profile:  # every stage below, the loading and the report included (rideid.profiling)
+        with rideid.Profile() as prof:
+            res = run_identify(ds_path, out_dir, seed=seed, population=population, generations=generations,
+                               weights=weights, polish=polish, quiet=quiet, out=out, report=report, model=model,
+                               tracks=tracks)
+        print("where the time went (wall and CPU seconds; CPU counts every thread):\n" + prof.table(), file=out)
+        prof.write_csv(Path(out_dir) / "profile.csv")
+        return res
     if model is not None:
         model = rideid.parse_model_arg(model)  # base|full|auto, or groups: damper_curves,anti_roll_bars
-    ds = _load_with_quality(ds_path, out)
+    stage = rideid.profiling.timing  # a no-op unless --profile
+    with stage("load"):
+        ds = _load_with_quality(ds_path, out)
     if report:  # after loading: an import on another thread slows this thread's imports (the GIL)
         _import_ahead("write_report")
     prog = Progress(quiet)
@@ -453,10 +465,11 @@ def run_identify(ds_path, out_dir, *, seed, population=None, generations=None, w
     if kw["generations"] < 1:
         raise rideid.ArgumentError(f"--generations must be at least 1, got {kw['generations']}")
     # the model as rideid.identify chooses it (SPEC §5 amended): --model, else the dataset's [model], else auto
-    res = rideid.identify(ds, rng=seed, weights=weights, polish=polish, callback=prog.identify, model=model,
-                          tracks=tracks, **kw)
+    with stage("identify"):
+        res = rideid.identify(ds, rng=seed, weights=weights, polish=polish, callback=prog.identify, model=model,
+                              tracks=tracks, **kw)
     prog.done()
-    with rideid.atomic_output(out_dir, replaces=IDENTIFY_OUTPUTS) as tmp:
+    with rideid.atomic_output(out_dir, replaces=IDENTIFY_OUTPUTS) as tmp, stage("save and report"):
         res.save(tmp)
         if report:
             if not quiet:
@@ -490,7 +503,8 @@ def cmd_identify(args, out=None):
     out = out or sys.stdout
     run_identify(args.dataset, args.out, seed=args.seed, population=args.population,
                  generations=args.generations, weights=args.weights, polish=not args.no_polish,
-                 quiet=args.quiet, out=out, report=not args.no_report, model=args.model, tracks=args.tracks)
+                 quiet=args.quiet, out=out, report=not args.no_report, model=args.model, tracks=args.tracks,
+                 profile=args.profile)
     return 0
 
 
