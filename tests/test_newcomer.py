@@ -12,6 +12,9 @@
 from __future__ import annotations
 
 import json
+import os
+import subprocess
+import sys
 import tomllib
 from pathlib import Path
 
@@ -128,3 +131,66 @@ def test_score_table_shows_a_knot_without_truth(tmp_path):
     row = next(ln.split() for ln in text.splitlines() if ln.startswith("F_f1 "))
     assert row[2:5] == ["-", "-", "-"] and row[-3:] == ["(no", "true", "curve)"]
     assert "true damper curves were not given" in text
+
+
+# -- the compile notice --------------------------------------------------------------------------------------
+
+def _python(args, cache: Path):
+    """``python ARGS`` with Numba's cache in ``cache`` and the compiled kernels."""
+    env = {**os.environ, "NUMBA_CACHE_DIR": str(cache)}
+    env.pop("RIDEID_KERNEL", None)
+    return subprocess.run([sys.executable, *map(str, args)], capture_output=True, text=True, env=env, timeout=600)
+
+
+def test_compile_notice_only_when_a_compile_happens(tmp_path):
+    """The notice "compiled the simulation kernel" once, on a cold Numba cache; loading the cache (however long
+    it takes on a busy machine) is silent, and so is --quiet (before: printed whenever the load took over a
+    second, almost every command on a loaded machine). `rideid report` of a missing folder: the kernels are
+    loaded first, then the bad input stops it (exit 2)."""
+    cache = tmp_path / "numba-cache"
+    missing = tmp_path / "no-fit"
+    cold = _python(["-m", "rideid", "report", missing], cache)
+    assert cold.returncode == 2
+    assert "rideid: compiled the simulation kernel in" in cold.stderr, cold.stderr
+    assert any(cache.rglob("*.nbi"))  # Numba wrote its cache there
+    warm = _python(["-m", "rideid", "report", missing], cache)
+    assert warm.returncode == 2 and "compiled" not in warm.stderr, warm.stderr
+    # the library's answer: seconds compiling, 0.0 from the cache (before: the seconds the load took)
+    code = ("import rideid; from rideid.model import backend; dt = rideid.compile_kernels(); "
+            "print(dt, backend.compiled_cold('linear'), backend.compiled_cold('contact'))")
+    out = _python(["-c", code], cache)
+    assert out.stdout.split() == ["0.0", "False", "False"], out.stderr
+
+
+def test_compile_notice_never_with_quiet(monkeypatch, capsys):
+    """--quiet: no notice even when a compile took seconds."""
+    from rideid import cli
+    monkeypatch.setattr(rideid, "compile_kernels", lambda: 7.0)
+    cli._compile(True)
+    assert capsys.readouterr().err == ""
+    cli._compile(False)
+    assert capsys.readouterr().err == "rideid: compiled the simulation kernel in 7.0 s (cached for later runs)\n"
+
+
+# -- a study of a car with damper curves ---------------------------------------------------------------------
+
+def test_study_draws_errors_png_for_a_car_with_damper_curves(tmp_path):
+    """A study of a car with damper curves: its knot forces F_f1 .. have no true value in the task rows (their
+    truth is a curve), which left figures/errors.png out altogether (docs/studies.md lists it). Now it draws
+    the parameters with a truth, one panel each with the tasks' errors, and names the others in its caption."""
+    from matplotlib.image import imread
+
+    from rideid.report.study_files import _figures
+    from rideid.studies.task import result_row
+    truth = dict(rideid.default_scenario().truth)
+    rows = []
+    for task, off in enumerate((0.01, -0.02, 0.03)):
+        pars = {n: {"value": truth[n] * (1 + off), "fixed": False, "std": 0.01 * truth[n]} for n in rideid.NAMES}
+        pars.update({f"F_f{j + 1}": {"value": 100.0 * (j + 1), "fixed": False, "std": 1.0} for j in range(3)})
+        res = {"parameters": pars, "cost": 1e-4, "generations": 10, "evaluations": 100, "wall_time_s": 1.0}
+        rows.append({"task": task, "status": "done", "noise_seed": task, **result_row(res, truth)})
+    figs = _figures(rows, [], tmp_path, ("noise_seed",))
+    caption = dict(figs)["figures/errors.png"]
+    assert caption.endswith("not shown (no true value in the tasks): F_f1, F_f2, F_f3")
+    img = imread(tmp_path / "figures" / "errors.png")
+    assert img.shape[0] == pytest.approx(2.6 * 3 * 90, abs=2)  # 12 panels, 4 a row: 3 rows, no row for the knots
