@@ -194,3 +194,47 @@ def test_study_draws_errors_png_for_a_car_with_damper_curves(tmp_path):
     assert caption.endswith("not shown (no true value in the tasks): F_f1, F_f2, F_f3")
     img = imread(tmp_path / "figures" / "errors.png")
     assert img.shape[0] == pytest.approx(2.6 * 3 * 90, abs=2)  # 12 panels, 4 a row: 3 rows, no row for the knots
+
+
+# -- the budget figure ---------------------------------------------------------------------------------------
+
+def _budget_result(sources: list[str]):
+    """A result whose three estimates each carry a budget of every source (the statistical part first)."""
+    from types import SimpleNamespace
+    details = {}
+    for k, n in enumerate(("k_sf", "k_sr", "I_yy")):
+        budget = {s: 0.5 + 0.1 * ((i + k) % 5) for i, s in enumerate(sources)}
+        details[n] = {"value": 1000.0, "fixed": False, "budget": budget,
+                      "std_total": float(np.sqrt(sum(v * v for v in budget.values())))}
+    return SimpleNamespace(details=details, uncertainty={})
+
+
+@pytest.mark.parametrize("n_sensors", [10, 24])
+def test_budget_figure_gives_every_source_its_own_colour(n_sensors):
+    """Every source of the budget its own colour, told apart by eye (CIE76 distance over 10), the statistical
+    part grey: with the ten sensors, the weighbridge, the tape and the runs' disagreement (16 sources) the
+    eleven colours repeated, and the statistical part's grey and C7 were one grey to the eye; 24 sensors
+    (30 sources) too."""
+    from matplotlib.colors import to_rgb
+
+    def lab(c):  # CIE L*a*b* (D65) of an sRGB colour: CIE76 distances are differences as the eye sees them
+        c = np.asarray(c, dtype=float)
+        c = np.where(c <= 0.04045, c / 12.92, ((c + 0.055) / 1.055) ** 2.4)
+        x, y, z = np.array([[0.4124, 0.3576, 0.1805], [0.2126, 0.7152, 0.0722], [0.0193, 0.1192, 0.9505]]) @ c
+        f = [t ** (1 / 3) if t > (6 / 29) ** 3 else t / (3 * (6 / 29) ** 2) + 4 / 29
+             for t in (x / 0.95047, y, z / 1.08883)]
+        return np.array([116 * f[1] - 16, 500 * (f[0] - f[1]), 200 * (f[1] - f[2])])
+    sensors = [f"sensitivity ch{i}" for i in range(n_sensors)]
+    sources = ["statistical", "between runs", "speed and start", "total_mass", "wheelbase", "track_front",
+               "track_rear"][: 16 - n_sensors if n_sensors == 10 else 7] + sensors
+    fig = rideid.plot_budget(_budget_result(sources))
+    ax = fig.axes[0]
+    by_source = {}
+    for bars in ax.containers:  # one bar container per source, its label the source
+        by_source[bars.get_label()] = {tuple(np.round(p.get_facecolor()[:3], 6)) for p in bars}
+    assert set(by_source) == set(sources) and all(len(c) == 1 for c in by_source.values())
+    rgb = {s: np.array(next(iter(c))) for s, c in by_source.items()}
+    assert np.allclose(rgb["statistical"], to_rgb("0.55"))
+    names = list(rgb)
+    closest = min(np.linalg.norm(lab(rgb[a]) - lab(rgb[b])) for i, a in enumerate(names) for b in names[i + 1:])
+    assert closest > 10.0, closest  # before: 0 (a colour repeated); the statistical grey and C7 5.2 apart
