@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import json
 import os
+import re
 import subprocess
 import sys
 import tomllib
@@ -286,3 +287,18 @@ def test_the_estimated_road_is_the_road_through_the_band_pass():
     row = next(ln for ln in doc.splitlines() if ln.startswith("| estimated road"))
     assert "1.1 %" not in row.split("|")[1]  # the claim is no longer the row's headline
     assert "band_pass" in doc and "10–20 m" in doc and "python benchmarks/road_error.py" in doc
+
+
+# -- printing a standard error ------------------------------------------------------------------------------
+
+def test_knees_print_their_std_not_zero():
+    """A knee found to ±2 std_robust 0.0003 m/s printed "± 0.000" in the report (three decimals); now two
+    significant digits of the std and the knee to as many places as they need; no std: no ±."""
+    from rideid.report.html import knee_summary, plus_minus
+    knees = {"front": {"compression": {"velocity": 0.13641, "std_robust": 0.00015, "slope_ratio": 0.4},
+                       "rebound": {"velocity": -0.1372, "std_robust": 0.0042, "slope_ratio": 0.5}},
+             "rear": {"compression": {"velocity": 0.0801, "std_robust": None, "slope_ratio": 0.6}}}
+    text = knee_summary({"knees": knees})
+    assert not re.search(r"± 0\.0*(?![0-9])", text)  # no std printed as a zero
+    assert "front +0.13641 ± 0.0003 / -0.1372 ± 0.0084" in text and "rear +0.080" in text
+    assert plus_minus(0.5, 0.0) == "+0.500" and plus_minus(1.23456, 2.2e-6) == "+1.2345600 ± 2.2e-06"

@@ -337,8 +337,9 @@ def _tracks_table(res) -> str:
     moving = [(rid, r["motion"]) for rec in res.tracks.values() for rid, r in rec.get("runs", {}).items()
               if "motion" in r]
     for rid, m in moving:  # a run along a speed channel: its speed and start as fitted (asbuilt.align_motion)
-        sd = "" if "speed_std_m_s" not in m else f" ± {m['speed_std_m_s']:.4f}"
-        st = "" if "start_shift_std_s" not in m else f" ± {1e3 * m['start_shift_std_s']:.2f}"
+        # the stds to two significant digits: a small one is not printed as zero
+        sd = "" if "speed_std_m_s" not in m else f" ± {m['speed_std_m_s']:.2g}"
+        st = "" if "start_shift_std_s" not in m else f" ± {1e3 * m['start_shift_std_s']:.2g}"
         lines.append(f"{rid}: speed {m['speed_m_s']:.4f}{sd} m/s (the speed channel's mean "
                      f"{m['speed_channel_mean_m_s']:.4f}), start moved {1e3 * m['start_shift_s']:+.2f}{st} ms")
     rejected = next((rec["rejected"] for rec in res.tracks.values() if rec.get("rejected")), None)
