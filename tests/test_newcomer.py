@@ -302,3 +302,63 @@ def test_knees_print_their_std_not_zero():
     assert not re.search(r"± 0\.0*(?![0-9])", text)  # no std printed as a zero
     assert "front +0.13641 ± 0.0003 / -0.1372 ± 0.0084" in text and "rear +0.080" in text
     assert plus_minus(0.5, 0.0) == "+0.500" and plus_minus(1.23456, 2.2e-6) == "+1.2345600 ± 2.2e-06"
+
+
+# -- the docs ------------------------------------------------------------------------------------------------
+
+def _prose(path: Path) -> str:
+    return re.sub(r"```.*?```", "", path.read_text(), flags=re.S)  # code blocks may repeat a line
+
+
+def test_no_doc_says_the_same_thing_twice():
+    """docs/export.md repeated two sections ("Inputs between communication points", "How close to rideid
+    simulate" with its table) and a paragraph's two sentences: no sentence over 70 characters and no table row
+    over 50 appears twice in one page of docs/ or the README."""
+    for path in sorted((ROOT / "docs").glob("*.md")) + [ROOT / "README.md"]:
+        text = _prose(path)
+        prose = " ".join(" ".join(p.split()) for p in re.split(r"\n\s*\n", text) if not p.lstrip().startswith("|"))
+        sentences = [s for s in re.split(r"(?<=[.;:])\s+", prose) if len(s) > 70]
+        rows = [ln.strip() for ln in text.splitlines()
+                if ln.strip().startswith("|") and len(ln.strip()) > 50 and not set(ln.strip()) <= set("|-: ")]
+        for items in (sentences, rows):
+            twice = sorted({s for s in items if items.count(s) > 1})
+            assert not twice, (path.name, [s[:80] for s in twice])
+
+
+def test_readme_commands_table_lists_every_command():
+    """The README's commands table left out `rideid export`: every command of `rideid --help` has a row."""
+    from rideid.cli import COMMANDS
+    readme = (ROOT / "README.md").read_text()
+    table = readme[readme.index("## Commands"):readme.index("## Make targets")]
+    rows = {m.group(1) for m in re.finditer(r"^\| `rideid (\w+)", table, flags=re.M)}
+    assert rows == set(COMMANDS), set(COMMANDS) ^ rows
+
+
+def test_formats_says_what_repr_shows():
+    """docs/formats.md said repr(res) shows each estimate ± std_robust; it shows ± std_total (SPEC §12), and
+    std_robust only in a result written before it."""
+    from types import SimpleNamespace
+
+    from rideid.estimate.result import IdentificationResult
+    d = {"value": 38000.0, "unit": "N/m", "fixed": False, "std": 10.0, "std_robust": 12.0, "std_total": 40.0}
+    res = SimpleNamespace(model=None, adequacy=None, success=True, stop="polish", fun=1e-4, nit=3, nfev=30,
+                          details={"k_sf": d}, uncertainty=None, dampers=None, bump_stops=None)
+    assert "k_sf=38000 ± 40 (total) N/m" in IdentificationResult.__repr__(res)
+    line = next(ln for ln in (ROOT / "docs" / "formats.md").read_text().splitlines() if ln.startswith("repr(res)"))
+    assert "± std_total" in line and "std_robust" not in line
+
+
+def test_the_budget_keys_are_documented():
+    """The budget's "between runs" (and "speed and start") key was in no doc, and "statistical" was said to
+    be std_robust while it is what is left of it beside those two: docs/uncertainty.md and docs/formats.md
+    name every key rideid.estimate.budget writes, and the three parts add up to std_robust."""
+    from rideid.estimate import budget
+    from rideid.estimate.budget import budget_entries
+    e = budget_entries({"k_sf": {"value": 1.0, "std_robust": 5.0, "std_between_runs": 3.0, "std_motion": 0.0}},
+                       ["k_sf"], {}, [])["k_sf"]
+    assert e["budget"] == {budget.STATISTICAL: 4.0, budget.BETWEEN_RUNS: 3.0} and e["std_total"] == 5.0
+    for doc in ("uncertainty.md", "formats.md"):
+        text = " ".join((ROOT / "docs" / doc).read_text().split())
+        for key in (budget.STATISTICAL, budget.BETWEEN_RUNS, budget.MOTION):
+            assert f'`"{key}"`' in text, (doc, key)
+        assert '`"statistical"` (= `std_robust`)' not in text
