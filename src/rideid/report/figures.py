@@ -204,7 +204,8 @@ def budget_figure(result):
     sources = []
     for _, d in rows:
         sources += [k for k in d["budget"] if k not in sources]
-    fig = _figure(7.5, 0.3 * max(len(rows), 1) + 1.6)
+    # the legend beside the bars (one line per source), so that it hides none of them
+    fig = _figure(9.5, max(0.3 * max(len(rows), 1) + 1.6, 0.2 * len(sources) + 0.8))
     ax = fig.subplots()
     y = np.arange(len(rows))
     left = np.zeros(len(rows))
@@ -227,7 +228,7 @@ def budget_figure(result):
     ax.grid(alpha=0.3, axis="x")
     if rows:
         ax.set_xlim(0, 1.15 * max(total))
-        ax.legend(fontsize=7, loc="best")
+        ax.legend(fontsize=7, loc="upper left", bbox_to_anchor=(1.01, 1.0), borderaxespad=0.0)
     return fig
 
 
