@@ -16,7 +16,7 @@ AXLES = (("front", "f", "c_sf"), ("rear", "r", "c_sr"))
 NO_TRUE_CURVE = "no true curve"
 #: the note of a score whose knot forces were not judged for want of the true curves
 NO_TRUE_CURVE_NOTE = ("the knot forces F_f1 .. are not judged: the true damper curves were not given (dampers=: "
-                      "rideid.load_truth_dampers(truth.toml), or 'linear' for the truth's c_s v; or pass the "
+                      "rideid.data.schema.load_truth_dampers(path), or 'linear' for c_s v; or pass the "
                       "truth.toml path as the truth, which reads them)")
 
 

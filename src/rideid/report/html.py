@@ -538,7 +538,7 @@ def damper_curves_figure(dampers: dict, slopes: dict):
 
 
 def plus_minus(value: float, spread: float | None, decimals: int = 3) -> str:
-    """``"+0.1364 ± 0.00021"``: ``spread`` to two significant digits (never a zero that is not zero) and
+    """``"+0.13640 ± 0.00021"``: ``spread`` to two significant digits (never a zero that is not zero) and
     ``value`` signed, to at least ``decimals`` places and as many as the spread's second digit needs."""
     if not spread:
         return f"{value:+.{decimals}f}"
