@@ -538,17 +538,17 @@ def damper_curves_figure(dampers: dict, slopes: dict):
 
 
 def plus_minus(value: float, spread: float | None, decimals: int = 3) -> str:
-    """``"+0.13640 ± 0.00021"``: ``spread`` to two significant digits (never a zero that is not zero) and
-    ``value`` signed, to at least ``decimals`` places and as many as the spread's second digit needs."""
+    """``"+0.13640 ± 0.00021"``: ``value`` signed and ``spread``, both to at least ``decimals`` places and to as
+    many as the spread's second significant digit needs (never a zero spread that is not zero)."""
     if not spread:
         return f"{value:+.{decimals}f}"
     places = max(decimals, 1 - math.floor(math.log10(abs(spread))))
-    return f"{value:+.{places}f} ± {spread:.2g}"
+    return f"{value:+.{places}f} ± {spread:.{places}f}"
 
 
 def knee_summary(dampers: dict) -> str:
     """``"; knees found: front +0.136 ± 0.0042 / -0.137 ± 0.0051 m/s, ..."``: the knees of result.json
-    ``dampers`` (empty without any), each ± 2 std_robust to two significant digits (:func:`plus_minus`)."""
+    ``dampers`` (empty without any), each ± 2 std_robust to its second significant digit (:func:`plus_minus`)."""
     parts = []
     for axle in ("front", "rear"):
         k = (dampers.get("knees") or {}).get(axle) or {}
