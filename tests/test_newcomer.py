@@ -70,12 +70,23 @@ def _curve_result(truth: dict, front: list, std_robust: float, std_total: float 
 def test_score_judges_knot_forces_by_std_total_as_its_column_says(tmp_path, capsys):
     """A knot force 4 % off with std_robust 1 % and std_total 3 % (the budget's, SPEC §12): ±2 std_total
     covers it (yes), ±2 std_robust does not; the column says "±2 total covers", so the row says yes (before:
-    NO, judged by std_robust)."""
+    NO, judged by std_robust). A bump stop's rate likewise."""
     tp = _truth_toml(tmp_path, curves=True)
     truth = rideid.load_truth(tp)
     curves = rideid.load_truth_dampers(tp)
     front = [curves.force("front", v) * (1.04 if v == 0.1 else 1.0) for v in KNOTS]
-    (tmp_path / "result.json").write_text(json.dumps(_curve_result(truth, front, 0.01, 0.03)))
+    res = _curve_result(truth, front, 0.01, 0.03)
+    # the front bump stop's rate 4 % off, std_robust 1 %, std_total 3 % (its entry in the parameters)
+    rate = 1.04 * truth["bs_rate_f"]
+    res["bump_stops"] = {"front": {"reached": True, "clearance": truth["bs_clear_f"], "rate": rate,
+                                   "std_robust": [0.001 * truth["bs_clear_f"], 0.01 * rate], "known": [False, False]},
+                        "rear": {"reached": False, "clearance": 0.08, "rate": 1000.0, "std_robust": [None, None],
+                                 "known": [False, False]}}
+    res["parameters"]["bs_clear_f"] = {"value": truth["bs_clear_f"], "fixed": False, "derived": False,
+                                       "std_robust": 0.001 * truth["bs_clear_f"], "std_total": 0.002 * truth["bs_clear_f"]}
+    res["parameters"]["bs_rate_f"] = {"value": rate, "fixed": False, "derived": False, "std_robust": 0.01 * rate,
+                                      "std_total": 0.03 * rate}
+    (tmp_path / "result.json").write_text(json.dumps(res))
     rc, stdout, err = run_cli(["score", tmp_path / "result.json", tp], capsys)
     assert rc == 0, err
     assert "±2 total covers" in stdout.splitlines()[0]
@@ -85,8 +96,10 @@ def test_score_judges_knot_forces_by_std_total_as_its_column_says(tmp_path, caps
     r = s["parameters"][f"F_f{KNOTS.index(0.1) + 1}"]
     assert r["std_total"] == pytest.approx(0.03 * front[KNOTS.index(0.1)])
     assert r["covered"] is True and r["covered_robust"] is False
-    # the twelve (std_total twice std_robust: every one covered) and the ten front knots, all covered
-    assert (s["covered"], s["coverable"]) == (22, 22)
+    rs = s["parameters"]["bs_rate_f"]
+    assert rs["covered"] is True and rs["covered_robust"] is False and rs["std_total"] == pytest.approx(0.03 * rate)
+    # the twelve (std_total twice std_robust: every one covered), the ten front knots and the front stop
+    assert (s["covered"], s["coverable"]) == (24, 24)
 
 
 def test_score_without_the_true_curves_does_not_judge_the_knots(tmp_path):

@@ -79,7 +79,8 @@ def score(result, truth, dampers=None) -> dict:
         its ``velocity``), the truth there read off the true curves (SPEC §8: piecewise linear through (0, 0),
         continued with the last slope), or ``c_s v`` when the truth's dampers are linear; judged by the knot's
         ``std_total`` (the result's ``dampers`` block, SPEC §12), ``std_robust`` where it has none. With bump stops in
-        the result or the truth, ``bs_clear_*`` and ``bs_rate_*``; a stop the truth lacks has rate 0.
+        the result or the truth, ``bs_clear_*`` and ``bs_rate_*`` (judged by their ``std_total`` in the
+        parameters likewise); a stop the truth lacks has rate 0.
     """
     if isinstance(truth, (str, Path)):
         if dampers is None:
@@ -126,8 +127,9 @@ def score(result, truth, dampers=None) -> dict:
                 status = "known" if known[k] else "estimated" if e.get("reached", True) else "not reached"
                 if n == c and c not in truth:
                     continue  # the truth has no stop on this axle: no clearance to compare
+                # judged by the parameter's std_total (its entry in the result's parameters, SPEC §12) as the rest
                 rows[n] = _row(float(e["clearance" if n == c else "rate"]), float(truth.get(n, 0.0)), status,
-                               rob[k])
+                               rob[k], (details.get(n) or {}).get("std_total"))
         elif r in truth:
             rows[r] = _row(0.0, float(truth[r]), "not in the model", None)
     worst = max((abs(x["error_percent"]) for x in rows.values()
