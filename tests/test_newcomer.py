@@ -82,8 +82,9 @@ def test_score_judges_knot_forces_by_std_total_as_its_column_says(tmp_path, caps
                                    "std_robust": [0.001 * truth["bs_clear_f"], 0.01 * rate], "known": [False, False]},
                         "rear": {"reached": False, "clearance": 0.08, "rate": 1000.0, "std_robust": [None, None],
                                  "known": [False, False]}}
-    res["parameters"]["bs_clear_f"] = {"value": truth["bs_clear_f"], "fixed": False, "derived": False,
-                                       "std_robust": 0.001 * truth["bs_clear_f"], "std_total": 0.002 * truth["bs_clear_f"]}
+    clear = truth["bs_clear_f"]
+    res["parameters"]["bs_clear_f"] = {"value": clear, "fixed": False, "derived": False,
+                                       "std_robust": 0.001 * clear, "std_total": 0.002 * clear}
     res["parameters"]["bs_rate_f"] = {"value": rate, "fixed": False, "derived": False, "std_robust": 0.01 * rate,
                                       "std_total": 0.03 * rate}
     (tmp_path / "result.json").write_text(json.dumps(res))
