@@ -339,8 +339,9 @@ def _tracks_table(res) -> str:
     moving = [(rid, r["motion"]) for rec in res.tracks.values() for rid, r in rec.get("runs", {}).items()
               if "motion" in r]
     for rid, m in moving:  # a run along a speed channel: its speed and start as fitted (asbuilt.align_motion)
-        sd = "" if "speed_std_m_s" not in m else f" ± {m['speed_std_m_s']:.4f}"
-        st = "" if "start_shift_std_s" not in m else f" ± {1e3 * m['start_shift_std_s']:.2f}"
+        # the stds to two significant digits: a small one is not printed as zero
+        sd = "" if "speed_std_m_s" not in m else f" ± {m['speed_std_m_s']:.2g}"
+        st = "" if "start_shift_std_s" not in m else f" ± {1e3 * m['start_shift_std_s']:.2g}"
         lines.append(f"{rid}: speed {m['speed_m_s']:.4f}{sd} m/s (the speed channel's mean "
                      f"{m['speed_channel_mean_m_s']:.4f}), start moved {1e3 * m['start_shift_s']:+.2f}{st} ms")
     rejected = next((rec["rejected"] for rec in res.tracks.values() if rec.get("rejected")), None)
@@ -557,9 +558,11 @@ def score_table(scored: dict) -> str:
     lines = [f"{'parameter':<10} {'estimate':>14} {'truth':>14} {'error %':>9} {head:>16}"]
     for n, r in scored["parameters"].items():
         covers = {True: "yes", False: "NO", None: "-"}[r["covered"]]
-        if r["error_percent"] is None:  # no relative error of a zero truth: the estimate in its unit
-            lines.append(f"{n:<10} {r['estimate']:>14.6g} {r['truth']:>14.6g} {'-':>9} {covers:>16}"
-                         + (" (not in the model)" if r["status"] == "not in the model" else ""))
+        if r["error_percent"] is None:  # no relative error of a zero or unknown truth: the estimate in its unit
+            truth = "-" if r["truth"] is None else f"{r['truth']:.6g}"
+            at = f" at {r['velocity']:+.3f} m/s" if "velocity" in r else ""
+            lines.append(f"{n:<10} {r['estimate']:>14.6g} {truth:>14} {'-':>9} {covers:>16}{at}"
+                         + (f" ({r['status']})" if r["status"] in ("not in the model", "no true curve") else ""))
             continue
         note = "" if r["status"] == "estimated" else f" {r['status']}"
         if "velocity" in r:  # a damper curve's knot
@@ -577,9 +580,8 @@ def score_table(scored: dict) -> str:
 def cmd_score(args, out=None):
     out = out or sys.stdout
     res = rideid.read_result_json(args.result)
-    truth = rideid.load_truth(args.truth)
-    curves = rideid.load_truth_dampers(args.truth)
-    print(score_table(rideid.score(res, truth, dampers=curves)), file=out)
+    # the path: the truth's [dampers] read with it (without them its dampers are linear)
+    print(score_table(rideid.score(res, args.truth)), file=out)
     return 0
 
 
@@ -597,9 +599,9 @@ def cmd_demo(args, out=None):
     print(f"\n1. simulated {len(sc.runs)} runs with 1 % noise -> {root / 'dataset'}", file=out)
     print(f"2. identifying (total mass {sc.known['total_mass']} kg known) ...", file=out)
     res = run_identify(root / "dataset", root / "identify", seed=args.seed, quiet=args.quiet, out=out)
-    truth = rideid.load_truth(root / "dataset" / "truth.toml", sc.geometry)
+    rideid.load_truth(root / "dataset" / "truth.toml", sc.geometry)  # checked against the car's geometry
     print("\n3. score against the truth", file=out)
-    print(score_table(rideid.score(res, truth)), file=out)
+    print(score_table(rideid.score(res, root / "dataset" / "truth.toml")), file=out)
     report = root / "identify" / "report.html"
     if report.is_file():
         print(f"\nreport: {report}", file=out)
@@ -663,13 +665,14 @@ COMMANDS = {"plan": cmd_plan, "report": cmd_report, "simulate": cmd_simulate, "i
 
 
 def _compile(quiet: bool):
-    """Compile or load the kernels up front, and say so when it is slow."""
+    """Compile or load the kernels up front, and say so when they were compiled (a cold cache: once after
+    install), never when loaded from the cache, never with --quiet."""
     prog = Progress(quiet)
     prog.line("loading the compiled simulation kernel (compiles once after install, a few seconds) ...", force=True)
-    dt = rideid.compile_kernels()
+    dt = rideid.compile_kernels()  # seconds compiling: 0.0 when loaded from the cache
     prog.done()
-    if dt > 1.0 and not quiet:
-        say(f"rideid: compiled the simulation kernel in {dt:.0f} s (cached for later runs)")
+    if dt > 0.0 and not quiet:
+        say(f"rideid: compiled the simulation kernel in {dt:.1f} s (cached for later runs)")
 
 
 def main(argv=None) -> int:

@@ -2,12 +2,22 @@
 
 from __future__ import annotations
 
+from pathlib import Path
+
+from ..data.schema import load_truth, load_truth_dampers
+from ..errors import ArgumentError
 from ..model.params import ALL_NAMES, EXT_NAMES
 
 #: an estimate covers the truth when it lies within this many standard errors (about 95 %, SPEC §6): ``std_total``
 #: (SPEC §12: std_robust with every declared uncertainty), ``std_robust`` in results written before it
 COVERAGE_K = 2.0
 AXLES = (("front", "f", "c_sf"), ("rear", "r", "c_sr"))
+#: a knot force's status when the truth's damper curves were not given: shown, not judged
+NO_TRUE_CURVE = "no true curve"
+#: the note of a score whose knot forces were not judged for want of the true curves
+NO_TRUE_CURVE_NOTE = ("the knot forces F_f1 .. are not judged: the true damper curves were not given (dampers=: "
+                      "rideid.data.schema.load_truth_dampers(path), or 'linear' for c_s v; or pass the "
+                      "truth.toml path as the truth, which reads them)")
 
 
 def _get(result, key):
@@ -17,7 +27,7 @@ def _get(result, key):
 def _row(est, tr, status, rob, total=None, **extra) -> dict:
     """One row of the score: relative error (None for a zero or unknown truth), coverage by ±2 ``total``
     (``std_total``) where given, else by ±2 ``rob`` (``std_robust``); ``covered_robust`` by ±2 ``rob``."""
-    err = None if not tr else 100.0 * (est - tr) / tr
+    err = None if not tr else 100.0 * (est - tr) / tr  # also None for a truth not known (None)
     judged = status in ("estimated", "derived")
     rob = float(rob) if judged and rob else None  # 0 or null: no standard error to judge by
     total = float(total) if judged and total else rob
@@ -28,7 +38,7 @@ def _row(est, tr, status, rob, total=None, **extra) -> dict:
             "std_total": total, "covered": covers(total), "covered_robust": covers(rob), **extra}
 
 
-def score(result, truth: dict, dampers=None) -> dict:
+def score(result, truth, dampers=None) -> dict:
     """Relative error of every parameter of ``result`` against ``truth``, the damper curves and bump stops too.
 
     Parameters
@@ -36,11 +46,15 @@ def score(result, truth: dict, dampers=None) -> dict:
     result : IdentificationResult or dict
         A result, or ``result.json`` read as a dict (``parameters`` ->
         name -> ``{"value", "fixed", "derived"}``; ``dampers``, ``bump_stops``).
-    truth : dict
-        Parameter name -> true value (SI), e.g. :func:`rideid.load_truth` (the bump stops ``bs_*`` with it).
-    dampers : DamperCurves, optional
+    truth : dict or str or Path
+        Parameter name -> true value (SI), e.g. :func:`rideid.load_truth` (the bump stops ``bs_*`` with it);
+        or the path of a ``truth.toml`` (or its folder): its ``[truth]``, and its ``[dampers]`` when
+        ``dampers`` is None (a file without them: the truth's dampers are linear).
+    dampers : DamperCurves or "linear", optional
         The true damper curves (``truth.toml``'s ``[dampers]``,
-        :func:`rideid.data.schema.load_truth_dampers`); None: the truth's dampers are linear (``c_sf``, ``c_sr``).
+        :func:`rideid.data.schema.load_truth_dampers`); ``"linear"``: the truth's dampers are linear
+        (``c_sf``, ``c_sr``: a knot's true force is ``c_s v``). None with a dict ``truth``: not known, so
+        a result's knot forces are shown but not judged (status ``"no true curve"``, a note says why).
 
     Returns
     -------
@@ -55,16 +69,26 @@ def score(result, truth: dict, dampers=None) -> dict:
         "std_total" or "std_robust", "notes": [lines]}``; ``status`` is
         ``"estimated"``, ``"known"``, ``"derived"`` or ``"not in the model"``
         (an extension of the truth the model lacks: estimate 0), for a knot force ``"not excited"`` (no run
-        reached it: its force is not trusted, not judged), for a bump stop ``"not reached"`` (likewise);
-        ``error_percent`` is None for a zero truth; ``covered`` (``|estimate
+        reached it: its force is not trusted, not judged) or ``"no true curve"`` (truth None: the true curves
+        not given), for a bump stop ``"not reached"`` (likewise);
+        ``error_percent`` is None for a zero or unknown truth; ``covered`` (``|estimate
         - truth| <= 2 std_total``) is None without a standard error (known
         values, no polish).
 
         With damper curves in the result, ``F_f1 ..``, ``F_r1 ..`` are the forces at its knots (each row has
         its ``velocity``), the truth there read off the true curves (SPEC §8: piecewise linear through (0, 0),
-        continued with the last slope), or ``c_s v`` when the truth's dampers are linear. With bump stops in
-        the result or the truth, ``bs_clear_*`` and ``bs_rate_*``; a stop the truth lacks has rate 0.
+        continued with the last slope), or ``c_s v`` when the truth's dampers are linear; judged by the knot's
+        ``std_total`` (the result's ``dampers`` block, SPEC §12), ``std_robust`` where it has none. With bump stops in
+        the result or the truth, ``bs_clear_*`` and ``bs_rate_*`` (judged by their ``std_total`` in the
+        parameters likewise); a stop the truth lacks has rate 0.
     """
+    if isinstance(truth, (str, Path)):
+        if dampers is None:
+            dampers = load_truth_dampers(truth) or "linear"
+        truth = load_truth(truth)
+    if isinstance(dampers, str) and dampers != "linear":
+        raise ArgumentError(f"score: dampers={dampers!r}; expected the true DamperCurves, 'linear' or None")
+    linear = isinstance(dampers, str)
     details = result.details if hasattr(result, "details") else result["parameters"]
     rows, notes = {}, []
     for n in ALL_NAMES:
@@ -80,13 +104,16 @@ def score(result, truth: dict, dampers=None) -> dict:
     if curves:
         for axle, a, c in AXLES:
             ax = curves[axle]
+            none = [None] * len(ax["force"])
             for j, v in enumerate(curves["velocity"]):
-                tr = dampers.force(axle, v) if dampers is not None else float(truth[c]) * v
+                tr = (None if dampers is None else float(truth[c]) * v if linear else dampers.force(axle, v))
                 excited = ax.get("excited", [True] * len(ax["force"]))[j]
-                rob = (ax.get("std_robust") or [None] * len(ax["force"]))[j]
-                rows[f"F_{a}{j + 1}"] = _row(float(ax["force"][j]), tr, "estimated" if excited else "not excited",
-                                             rob, velocity=float(v))
-    elif dampers is not None:
+                status = NO_TRUE_CURVE if tr is None else "estimated" if excited else "not excited"
+                rows[f"F_{a}{j + 1}"] = _row(float(ax["force"][j]), tr, status, (ax.get("std_robust") or none)[j],
+                                             (ax.get("std_total") or none)[j], velocity=float(v))
+        if dampers is None:
+            notes.append(NO_TRUE_CURVE_NOTE)
+    elif dampers is not None and not linear:
         notes.append("the truth has damper curves and the model linear dampers: c_sf and c_sr are compared with "
                      "the curves' mean slope between -0.1 and 0.1 m/s")
     stops = _get(result, "bump_stops")
@@ -100,8 +127,9 @@ def score(result, truth: dict, dampers=None) -> dict:
                 status = "known" if known[k] else "estimated" if e.get("reached", True) else "not reached"
                 if n == c and c not in truth:
                     continue  # the truth has no stop on this axle: no clearance to compare
+                # judged by the parameter's std_total (its entry in the result's parameters, SPEC §12) as the rest
                 rows[n] = _row(float(e["clearance" if n == c else "rate"]), float(truth.get(n, 0.0)), status,
-                               rob[k])
+                               rob[k], (details.get(n) or {}).get("std_total"))
         elif r in truth:
             rows[r] = _row(0.0, float(truth[r]), "not in the model", None)
     worst = max((abs(x["error_percent"]) for x in rows.values()

@@ -145,8 +145,51 @@ def parameters_figure(result):
     return fig
 
 
-#: colours of the budget's sources: the statistical part first, then the declared inputs in their order
-BUDGET_COLOURS = ("0.55", "C0", "C1", "C2", "C3", "C4", "C5", "C6", "C8", "C9", "C7")
+#: colour of the budget's statistical part (the sensor noise): grey, which no other source gets
+STATISTICAL_COLOUR = "0.55"
+#: the other sources' first colours: tab10's without its grey; then :func:`budget_palette` adds tab20's,
+#: tab20b's and tab20c's (no greys), each the farthest from those before it, then ``turbo`` past 54
+BUDGET_COLOURS = tuple(f"C{i}" for i in (0, 1, 2, 3, 4, 5, 6, 8, 9))
+
+
+def _lab(rgb) -> np.ndarray:
+    """CIE L*a*b* (D65) of sRGB colours ``(..., 3)`` in 0-1: distances in it are differences as the eye sees them."""
+    c = np.asarray(rgb, dtype=float)
+    c = np.where(c <= 0.04045, c / 12.92, ((c + 0.055) / 1.055) ** 2.4)
+    xyz = c @ np.array([[0.4124, 0.3576, 0.1805], [0.2126, 0.7152, 0.0722], [0.0193, 0.1192, 0.9505]]).T
+    xyz = xyz / np.array([0.95047, 1.0, 1.08883])
+    f = np.where(xyz > (6 / 29) ** 3, np.cbrt(xyz), xyz / (3 * (6 / 29) ** 2) + 4 / 29)
+    return np.stack([116 * f[..., 1] - 16, 500 * (f[..., 0] - f[..., 1]), 200 * (f[..., 1] - f[..., 2])], axis=-1)
+
+
+def budget_palette(n: int) -> list[tuple]:
+    """``n`` RGB colours for the budget's sources other than the statistical part, as far apart as the eye sees
+    (and from its grey) as the tab palettes allow: 30 sources at least 15 CIE76 units apart, 40 at least 12."""
+    from matplotlib import colormaps, colors
+
+    chosen = [colors.to_rgb(c) for c in BUDGET_COLOURS]
+    pool = [tuple(c) for m in ("tab20", "tab20b", "tab20c") for c in colormaps[m].colors
+            if np.ptp(c) > 0.05 and tuple(c) not in chosen]
+    grey = colors.to_rgb(STATISTICAL_COLOUR)
+    while len(chosen) < n and pool:  # the candidate farthest from every colour taken (and the grey) next
+        taken = _lab(np.array(chosen + [grey]))
+        gap = [np.min(np.linalg.norm(taken - _lab(c), axis=1)) for c in pool]
+        chosen.append(pool.pop(int(np.argmax(gap))))
+    if len(chosen) < n:  # more sources than 54: evenly along turbo
+        chosen = [tuple(colormaps["turbo"](x)[:3]) for x in np.linspace(0.05, 0.95, n)]
+    return chosen[:n]
+
+
+def budget_colours(sources) -> dict:
+    """Source name -> RGB colour: ``statistical`` grey, every other source a colour of its own
+    (:func:`budget_palette`)."""
+    from matplotlib import colors
+
+    others = [s for s in sources if s != "statistical"]
+    out = dict(zip(others, budget_palette(len(others))))
+    if "statistical" in sources:
+        out["statistical"] = colors.to_rgb(STATISTICAL_COLOUR)
+    return out
 
 
 def budget_figure(result):
@@ -161,16 +204,18 @@ def budget_figure(result):
     sources = []
     for _, d in rows:
         sources += [k for k in d["budget"] if k not in sources]
-    fig = _figure(7.5, 0.3 * max(len(rows), 1) + 1.6)
+    # the legend beside the bars (one line per source), so that it hides none of them
+    fig = _figure(9.5, max(0.3 * max(len(rows), 1) + 1.6, 0.2 * len(sources) + 0.8))
     ax = fig.subplots()
     y = np.arange(len(rows))
     left = np.zeros(len(rows))
     total = np.array([200.0 * d["std_total"] / abs(d["value"]) for _, d in rows])
-    for i, src in enumerate(sources):
+    colour = budget_colours(sources)
+    for src in sources:
         var = np.array([(d["budget"].get(src) or 0.0) ** 2 for _, d in rows])
         share = var / np.array([d["std_total"] ** 2 for _, d in rows])
         width = total * share
-        ax.barh(y, width, left=left, height=0.6, color=BUDGET_COLOURS[i % len(BUDGET_COLOURS)], label=src)
+        ax.barh(y, width, left=left, height=0.6, color=colour[src], label=src)
         left += width
     for k, t in enumerate(total):
         ax.annotate(f"{t:.2g} %", (t, k), xytext=(3, 0), textcoords="offset points", va="center", fontsize=7)
@@ -183,7 +228,7 @@ def budget_figure(result):
     ax.grid(alpha=0.3, axis="x")
     if rows:
         ax.set_xlim(0, 1.15 * max(total))
-        ax.legend(fontsize=7, loc="best")
+        ax.legend(fontsize=7, loc="upper left", bbox_to_anchor=(1.01, 1.0), borderaxespad=0.0)
     return fig
 
 

@@ -14,6 +14,7 @@ import functools
 import gc
 import html
 import io
+import math
 import multiprocessing as mp
 import os
 import sys
@@ -536,13 +537,22 @@ def damper_curves_figure(dampers: dict, slopes: dict):
     return fig
 
 
+def plus_minus(value: float, spread: float | None, decimals: int = 3) -> str:
+    """``"+0.13640 ± 0.00021"``: ``value`` signed and ``spread``, both to at least ``decimals`` places and to as
+    many as the spread's second significant digit needs (never a zero spread that is not zero)."""
+    if not spread:
+        return f"{value:+.{decimals}f}"
+    places = max(decimals, 1 - math.floor(math.log10(abs(spread))))
+    return f"{value:+.{places}f} ± {spread:.{places}f}"
+
+
 def knee_summary(dampers: dict) -> str:
-    """``"; knees found: front +0.136 / -0.137 m/s, ..."``: the knees of result.json ``dampers`` (empty
-    without any)."""
+    """``"; knees found: front +0.136 ± 0.0042 / -0.137 ± 0.0051 m/s, ..."``: the knees of result.json
+    ``dampers`` (empty without any), each ± 2 std_robust to its second significant digit (:func:`plus_minus`)."""
     parts = []
     for axle in ("front", "rear"):
         k = (dampers.get("knees") or {}).get(axle) or {}
-        vals = [f"{k[s]['velocity']:+.3f}" + (f" ± {2 * k[s]['std_robust']:.3f}" if k[s].get("std_robust") else "")
+        vals = [plus_minus(k[s]["velocity"], 2 * (k[s].get("std_robust") or 0.0))
                 for s in ("compression", "rebound") if (k.get(s) or {}).get("velocity") is not None]
         if vals:
             parts.append(f"{axle} {' / '.join(vals)}")

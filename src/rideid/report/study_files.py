@@ -164,10 +164,14 @@ def _figures(rows, stats, out: Path, option_columns) -> list[tuple[str, str]]:
         tmp.replace(fdir / name)
         figs.append((f"figures/{name}", caption))
 
-    if all(r.get(f"{n}_error") is not None for r in done for n in names):
-        fig = Figure(figsize=(3.2 * ncol, 2.6 * nrow))
-        axs = fig.subplots(nrow, ncol, squeeze=False)
-        for ax, n in zip(axs.flat, names):
+    # the parameters with a truth in every done task; the others (a car's knot forces F_f1 .., whose truth is a
+    # curve, not a value of the scenario's [truth]) are named in the caption, not a reason to draw nothing
+    judged = [n for n in names if all(r.get(f"{n}_error") is not None for r in done)]
+    if judged:
+        erow = math.ceil(len(judged) / ncol)
+        fig = Figure(figsize=(3.2 * ncol, 2.6 * erow))
+        axs = fig.subplots(erow, ncol, squeeze=False)
+        for ax, n in zip(axs.flat, judged):
             data = [[100 * r[f"{n}_error"] for r in done if group_label(r, gcols) == g] for g in labels]
             ax.boxplot(data, showfliers=False)
             for i, d in enumerate(data):
@@ -176,11 +180,13 @@ def _figures(rows, stats, out: Path, option_columns) -> list[tuple[str, str]]:
             ax.set_title(n, fontsize=9)
             ax.set_xticks(range(1, len(labels) + 1), [str(i + 1) for i in range(len(labels))], fontsize=7)
             ax.set_ylabel("error %", fontsize=8)
-        for ax in list(axs.flat)[len(names):]:
+        for ax in list(axs.flat)[len(judged):]:
             ax.axis("off")
         fig.tight_layout()
+        left = [n for n in names if n not in judged]
         save(fig, "errors.png", "Error vs truth per parameter (%); x = group: "
-             + "; ".join(f"{i + 1}: {g}" for i, g in enumerate(labels)))
+             + "; ".join(f"{i + 1}: {g}" for i, g in enumerate(labels))
+             + (f"; not shown (no true value in the tasks): {', '.join(left)}" if left else ""))
 
     multi = [s for s in stats if s["n"] > 1 and s.get("spread") is not None]
     if multi:
