@@ -182,7 +182,8 @@ class Dataset:
     @property
     def auto_start_runs(self) -> list[str]:
         """The measured runs on known tracks whose start is estimated (SPEC §3: ``start`` not given)."""
-        return [rid for rid, mr in self.measured.items() if mr.auto_start and self.manifest.run(rid).road_known]
+        return [rid for rid, mr in self.measured.items()
+                if mr.auto_start and self.manifest.run(rid).track is not None]
 
     def road_known(self, run_id: str) -> bool:
         """Whether run ``run_id`` drives a known track (False: a road nobody measured, SPEC §9)."""
