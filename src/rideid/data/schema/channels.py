@@ -257,7 +257,6 @@ def parse_csv_options(tab, where: str) -> CsvOptions:
     return CsvOptions(**kw)
 
 
-__all__ = ["RIG_TARGETS", "UNITS", "SI", "TARGETS", "EXTRA_TARGETS",
- "PREPROCESS_KEYS", "RUN_PREPROCESS_KEYS", "CSV_KEYS",
-           "CHANNEL_KEYS", "ChannelEntry", "CsvOptions", "quantity", "unit_factor", "gravity_unit_factor",
+__all__ = ["RIG_TARGETS", "UNITS", "SI", "TARGETS", "EXTRA_TARGETS", "PREPROCESS_KEYS", "RUN_PREPROCESS_KEYS",
+           "CSV_KEYS", "CHANNEL_KEYS", "ChannelEntry", "CsvOptions", "quantity", "unit_factor", "gravity_unit_factor",
            "ACC_FACTORS", "SENSOR_KEYS", "parse_channel_map", "parse_filter", "parse_preprocess", "parse_csv_options"]
