@@ -18,7 +18,8 @@ from pathlib import Path
 import numpy as np
 
 from ..data.noise import sensor_noise
-from ..data.scenario import LIFT_OFF_RHO, generate_road, lead_in, road_record, run_times, write_road_csv
+from ..data.scenario import (LIFT_OFF_RHO, generate_road, lead_in, post_function, road_record, run_times,
+                             write_road_csv)
 from ..data.schema import (BUMP_NAMES, ChannelEntry, DatasetManifest, RunSpec, Scenario, atomic_output, write_run_csv,
                            write_toml)
 from ..errors import ArgumentError, DataError, DataWarning, ModelValidityWarning
@@ -255,23 +256,10 @@ def _noisy(y, rng, noise: float, noise_ar1: float, raw: bool):
     return y
 
 
-#: the stream of the random post signals' seeds (with ``--seed`` and the run's position), apart from the noise's
-_POST_STREAM = 1304
-
-
-def post_seed(run: RunSpec, index: int, seed: int | None) -> int:
-    """The seed of a random post signal: the run's ``signal_seed``, else one derived from ``seed`` (``rideid
-    simulate --seed``, None as 0) and the run's position ``index``."""
-    if run.signal_seed is not None:
-        return int(run.signal_seed)
-    ss = np.random.SeedSequence([_POST_STREAM, 0 if seed is None else int(seed), int(index)])
-    return int(ss.generate_state(1, np.uint32)[0])
-
-
 def _simulate_rig(sc: Scenario, run: RunSpec, index: int, seed, P, t, engine: str, raw: bool, nonlinear):
     """A four-post rig run (SPEC §13): ``(y, posts (n, 4), lift-offs)``, the car at rest on its posts at the
     first sample, the posts following the run's signal (:class:`rideid.model.posts.PostSignal`)."""
-    inputs_at = run.signal.function(np.random.default_rng(post_seed(run, index, seed)))
+    inputs_at = post_function(run, index, seed)
     posts = inputs_at(t)[0]
     if engine == "mujoco":
         lead = RAW_LEAD_IN if raw else 0.0
