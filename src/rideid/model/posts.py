@@ -31,6 +31,7 @@ import numpy as np
 
 from .discretize import N_MAX, gauss_nodes, moment_weights
 from .equations import CORNER_TO_DECOMPOSED
+from .simulate import RunInput
 
 #: post channels, in corner order fl, fr, rl, rr (SPEC §13)
 POST_CHANNELS = ("post_fl", "post_fr", "post_rl", "post_rr")
@@ -57,8 +58,6 @@ def _spline(t, z, v=None):
 def prepare_function(t, inputs_at):
     """A :class:`rideid.model.simulate.RunInput` of a run sampled at ``t`` whose four wheel inputs are
     ``inputs_at(times) -> (u (k, 4), rate (k, 4))`` at any times (m, m/s)."""
-    from .simulate import RunInput
-
     t = np.asarray(t, dtype=float)
     h = float(t[1] - t[0])
     u, rate = inputs_at(t)
