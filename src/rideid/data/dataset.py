@@ -113,9 +113,10 @@ class Dataset:
             mr = self.measured.get(r.id)
             if mr is None:
                 rd = self.data[r.id]
+                start = ("SPEC §13: a four-post rig run, time 0 at its first sample, the car at rest" if r.posts
+                         else "SPEC: time 0 is the front axle at x = 0")
                 out[r.id] = {"file": str(r.file), "format": "CSV (SPEC channels, SI units, taken as it is)",
-                             "fs": rd.fs, "samples": int(rd.time.size),
-                             "start": {"value": 0.0, "source": "SPEC: time 0 is the front axle at x = 0"}}
+                             "fs": rd.fs, "samples": int(rd.time.size), "start": {"value": 0.0, "source": start}}
             else:
                 rec = dict(mr.record)
                 rec["samples"] = int(mr.grid.size)
