@@ -63,7 +63,7 @@ from ..errors import DataError, DataWarning
 from ..model.equations import CHANNELS
 from ..model.params import GRAVITY
 from .readers import FORMAT_NAMES, Signal, open_signals
-from ..model.posts import POST_CHANNELS, POST_VEL_CHANNELS
+from ..model.posts import MIN_CHAIN_GAIN, POST_CHANNELS, POST_VEL_CHANNELS, unfilter
 from .schema.channels import RIG_TARGETS, SI, TARGETS, UNITS, ChannelEntry, gravity_unit_factor, quantity, unit_factor
 from .schema.runfiles import RunData
 
@@ -346,6 +346,7 @@ def load_measured_run(run, man) -> MeasuredRun:
     bias = opts.get("remove_bias", False)
     _remove_gravity_bias(raw, rec_ch, measured, lead, grav, bias, path, where_map, warns)
     channels = _filter_resample(raw, rec_ch, measured, fs, opts.get("anti_alias"))
+    _unfilter_posts(raw, rec_ch, targets)
     posts = _filter_resample(raw, rec_ch, [c for c in RIG_TARGETS if c in raw], fs, opts.get("anti_alias"))
     distance, motion_rec = _motion(raw, targets, run.speed, path)
     if run.posts:
@@ -364,6 +365,20 @@ def load_measured_run(run, man) -> MeasuredRun:
         rec_ch[c]["sensor_filters"] = [f.describe() for f in fs_c]
     return MeasuredRun(run.id, path, fs, channels, t_first, t_last, run.speed, distance, opts, record, warns,
                        clipped_times=clipped, filters=filters, posts=posts)
+
+
+def _unfilter_posts(raw: dict, rec_ch: dict, targets: dict) -> None:
+    """A post channel's sensor chain (SPEC §13: ``highpass``, ``lowpass`` like any channel's) divided out of its
+    values (:func:`rideid.model.posts.unfilter`): the posts are the model's input, so the model needs them as
+    the rig moved them, not as the chain recorded them."""
+    for c in RIG_TARGETS:
+        if c in raw and targets[c].filters:
+            s = raw[c]
+            t = s.time[0] + float(np.median(np.diff(s.time))) * np.arange(s.time.size)
+            raw[c] = Signal(s.time, unfilter(t, s.values, targets[c].filters), s.unit)
+            rec_ch[c]["sensor_filters"] = [f.describe() for f in targets[c].filters]
+            rec_ch[c]["unfiltered"] = (f"the chain's response divided out where its gain is at least "
+                                       f"{MIN_CHAIN_GAIN:g} (frequency domain), the rest left out")
 
 
 def clipped_samples(times, clipped_times, h_channel: float) -> np.ndarray:

@@ -130,6 +130,32 @@ def _prepare_posts(t, posts, post_vel):
     return run
 
 
+#: a post channel's sensor chain is divided out where its gain is at least this; where it is less (beyond a
+#: low-pass's corner, below a high-pass's) the recording holds too little of the post to restore: left out
+MIN_CHAIN_GAIN = 0.1
+
+
+def unfilter(t, z, filters, min_gain: float = MIN_CHAIN_GAIN):
+    """The posts before their sensor chain: ``z`` (``(n,)`` or ``(n, k)``, uniform ``t``) divided by the chain's
+    frequency response (:meth:`rideid.model.sensors.AnalogFilter.response` of each of ``filters``) where its gain
+    is at least ``min_gain``, the rest left out. On the even extension of the record, so a run at rest at both
+    ends has no edge to ring; a rig's chain filters far from its drive band (an anti-alias low-pass near the
+    Nyquist frequency) then changes the posts only where they carry the chain's own lag and droop."""
+    z = np.asarray(z, dtype=float)
+    if not filters:
+        return z.copy()
+    n = z.shape[0]
+    ext = np.concatenate([z, z[::-1]], axis=0)
+    f = np.fft.rfftfreq(2 * n, float(t[1] - t[0]))
+    H = np.ones(f.size, dtype=complex)
+    for flt in filters:
+        H = H * flt.response(f)
+    gain = np.abs(H)
+    inv = np.where(gain >= min_gain, 1.0 / np.where(gain > 0, H, 1.0), 0.0)
+    Z = np.fft.rfft(ext, axis=0) * (inv if z.ndim == 1 else inv[:, None])
+    return np.fft.irfft(Z, n=2 * n, axis=0)[:n]
+
+
 @dataclass(frozen=True)
 class PostSignal:
     """A rig's drive signal of the four posts (SPEC §13 scenarios): a function of time with its rate.
@@ -217,5 +243,5 @@ class PostSignal:
         return inputs_at
 
 
-__all__ = ["PATTERNS", "POST_CHANNELS", "POST_VEL_CHANNELS", "PostSignal", "SIGNALS", "prepare_function",
-           "prepare_posts"]
+__all__ = ["MIN_CHAIN_GAIN", "unfilter", "PATTERNS", "POST_CHANNELS", "POST_VEL_CHANNELS", "PostSignal",
+           "SIGNALS", "prepare_function", "prepare_posts"]

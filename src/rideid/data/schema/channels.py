@@ -166,10 +166,10 @@ def parse_channel_map(tab, where: str) -> dict[str, ChannelEntry]:
             raise DataError(f"{w}: sign is for measured channels only")
         sensor = {}
         for k in SENSOR_KEYS:
-            if k in v and target in RIG_TARGETS:
-                raise DataError(f"{w} {k}: a post channel's sensor chain is not modelled (the posts are the model's "
-                                "input, taken as recorded); give the posts without it")
-            if k in v and target not in CHANNELS:
+            if k == "range" and k in v and target in RIG_TARGETS:
+                raise DataError(f"{w} range: a post channel has no range to leave samples out at (the posts are the "
+                                "model's input, every sample of them is needed); leave it out")
+            if k in v and target not in CHANNELS and target not in RIG_TARGETS:
                 raise DataError(f"{w} {k}: {k} is for measured channels only (SPEC §11), not {target}")
         for k in ("highpass", "lowpass"):
             if k in v:
