@@ -366,6 +366,26 @@ def test_bad_rig_input_one_line_exit_2(rig_data, tmp_path, capsys, edit_csv, edi
     assert not (tmp_path / "fit").exists()
 
 
+def test_a_rig_run_that_starts_moving_is_warned_of(rig_data, tmp_path):
+    """A rig recording cut while the posts move (its first second dropped): a DataWarning names the column and
+    says to start where the car stands still; the run as simulated (faded in from rest) gives none."""
+    import warnings
+
+    import rideid
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", rideid.DataWarning)
+        rideid.load_dataset(rig_data)
+
+    def cut(header, data):
+        data = data[200:].copy()
+        data[:, 0] -= data[0, 0]
+        return header, data
+
+    bad = _bad_copy(rig_data, tmp_path, cut)
+    with pytest.warns(rideid.DataWarning, match=r"random.csv: column 'post_\w+' already moves in the first 0.2 s"):
+        rideid.load_dataset(bad)
+
+
 def test_mm_as_m_names_the_column_and_the_fix(rig_data, tmp_path, capsys):
     """Posts in mm declared m: the line names the file, the column, the stroke and the fix."""
     bad = _bad_copy(rig_data, tmp_path, _posts_times(1000.0))

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+import warnings
 from dataclasses import dataclass, field, replace
 from functools import cached_property
 from pathlib import Path
@@ -10,7 +11,7 @@ from pathlib import Path
 import numpy as np
 
 from . import checks
-from ..errors import DataError, ScaleError
+from ..errors import DataError, DataWarning, ScaleError
 from .schema import DatasetManifest, ReadOnlyDict, RunData, load_manifest, read_run_csv
 from .schema.manifest import vehicle_table
 from ..model.params import (CORNERS, EXT_NAMES, EXTRA_KNOWN, MASS_COUNT, NAMES, SCALE_FREE, Geometry, nominal_car,
@@ -350,6 +351,9 @@ MAX_POST_STROKE = 0.3
 POST_UNIT_FACTOR = 20.0
 #: the band (Hz) of that comparison: above the body modes' transmissibility peaks, below every wheel hop
 FOLLOW_BAND = (3.0, 6.0)
+#: a rig run starts at rest (the model starts in static equilibrium on the posts' first position): its posts
+#: over the first :data:`STILL_S` s may move by at most this share of their RMS about that position over the run
+STILL_SHARE, STILL_S = 0.25, 0.2
 
 
 def check_rig_run(run, rd, path) -> None:
@@ -364,6 +368,16 @@ def check_rig_run(run, rd, path) -> None:
         raise DataError(f"{path}: column '{POST_CHANNELS[k]}' moves {stroke[k]:.4g} m peak to peak, beyond any ride "
                         f"rig's stroke ({MAX_POST_STROKE:g} m): post displacements are in m (SPEC §13); is the "
                         "column in mm? convert it, or map it in [channels] with unit = \"mm\"")
+    n0 = max(3, int(round(STILL_S * rd.fs)))
+    dz = z - z[0]
+    rms = np.sqrt(np.mean(dz ** 2, axis=0))
+    lead = np.sqrt(np.mean(dz[:n0] ** 2, axis=0))
+    if rd.time.size > 4 * n0 and np.any(lead > STILL_SHARE * rms):
+        k = int(np.argmax(lead / np.where(rms > 0, rms, np.inf)))
+        warnings.warn(f"{path}: column '{POST_CHANNELS[k]}' already moves in the first {STILL_S:g} s "
+                      f"({lead[k] / rms[k]:.0%} of its RMS over the run): a rig run is simulated from rest on the "
+                      "posts' first position, so the start transient will not fit; start the run (a window, "
+                      "[preprocess] start) where the car stands still", DataWarning, stacklevel=3)
     ratio = post_axle_ratio(rd)
     if ratio is not None and not 1 / POST_UNIT_FACTOR < ratio[1] < POST_UNIT_FACTOR:
         c, r = ratio
