@@ -229,6 +229,23 @@ def test_mixed_rig_and_track_dataset(tmp_path, capsys):
     assert max(abs(e) for e in err.values()) < 3e-3, err
 
 
+def test_plan_and_sensitivity_take_a_rig_scenario(tmp_path, capsys):
+    """`rideid plan` and `rideid sensitivity` on a rig scenario: the posts' signal is the runs' input; every
+    free parameter gets a CRLB (on the rig the tire rates as well as the suspension's: below 0.1 % at 1 % noise),
+    and plan.md lists the runs as on a four-post rig."""
+    (tmp_path / "rig.toml").write_text(tomli_w.dumps(rig_scenario(duration=2.0)))
+    rc, _, err = run_cli(["plan", tmp_path / "rig.toml", "--out", tmp_path / "plan", "--noise", "0.01", "--quiet"],
+                         capsys)
+    assert rc == 0, err
+    plan = json.loads((tmp_path / "plan" / "plan.json").read_text())
+    crlb = plan["all_runs"]["crlb"]
+    assert set(crlb) == set(NAMES) - {"m_s"}
+    assert max(v["relative"] for v in crlb.values()) < 1e-3
+    assert "| sweep_heave | four-post rig (SPEC §13) | - |" in (tmp_path / "plan" / "plan.md").read_text()
+    rc, _, err = run_cli(["sensitivity", tmp_path / "rig.toml", "--out", tmp_path / "maps", "--quiet"], capsys)
+    assert rc == 0, err
+
+
 def test_posts_through_a_channel_map_in_mm(tmp_path, capsys):
     """A rig run as a logger writes it: the posts in mm under their own names, mapped in [channels] with
     unit = "mm" (and the rig's time 0 at the first sample, no start to find): loaded, its posts are the SPEC
