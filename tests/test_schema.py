@@ -194,7 +194,7 @@ def _scenario_doc():
     (lambda d: d["runs"][0].pop("duration"), "sc.toml: runs[0] (id 'T_LL'): missing key 'duration'"),
     (lambda d: d["runs"][0].update(file="w.csv"), "sc.toml: runs[0] (id 'T_LL'): unknown key 'file' (a scenario run "
      "gives 'fs' and 'duration' instead of a file); allowed: id, track, road_class, road_seed, coherence, speed, fs, "
-     "duration, moving"),
+     "duration, moving, input, signal, amplitude, f_low, f_high, pattern, signal_seed"),
     (lambda d: d["model"].update(knots=[0.1]) if "model" in d else d.update(model={"knots": [0.1]}),
      "sc.toml: [model]: unknown key 'knots'; allowed: extensions, damper_knots"),
     (lambda d: d.update(truths={}), "sc.toml: unknown key 'truths'; allowed: name, vehicle, known, bounds, model, "

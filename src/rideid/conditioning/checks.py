@@ -312,8 +312,9 @@ def _check_run(ds, r):
     rid = r.id
     rd = ds.data[rid]
     # a run on an unknown road (SPEC §9): no coverage, no nominal response, no track match; units and the
-    # rigid-body identities need no road and still run
-    track = man.tracks[r.track] if r.road_known else None
+    # rigid-body identities need no road and still run; so on a four-post rig (SPEC §13): no track to cover,
+    # match or check a speed against (its post amplitudes are checked on reading, rideid.data.dataset)
+    track = man.tracks[r.track] if r.track is not None else None
     t = rd.time
     if track is not None:
         x_of = (lambda tt: r.speed * tt) if rd.distance is None else rd.distance

@@ -13,7 +13,7 @@ import math
 from dataclasses import replace
 
 from ..data.checks import enforce
-from ..data.dataset import Dataset, read_dataset
+from ..data.dataset import Dataset, check_rig_run, read_dataset
 from .checks import check_reach, check_steps
 from .nominal import gather, run_steps
 from .starts import speed_channel_std, start_steps
@@ -109,6 +109,8 @@ def _aligned(ds: Dataset, starts: dict[str, float | dict] | None):
         mr.start = float(s)
         measured[rid] = mr
         data[rid] = mr.run_data(s)
+        if man.run(rid).posts:  # SPEC §13: post amplitudes that no rig makes (a column in mm mapped as m)
+            check_rig_run(man.run(rid), data[rid], f"{mr.path} (as mapped in {man.path})")
     ds = Dataset(man, {r.id: data[r.id] for r in man.runs}, measured)
     # the one hook for the physics checks (rideid.conditioning.checks): every run conditioned and aligned
     findings = yield from check_steps(ds)
@@ -127,6 +129,9 @@ def _start_of(ds: Dataset, rid: str, starts: dict[str, float | dict] | None):
             {"source": "given (from a previous identification)"}
     if not mr.auto_start:
         return mr.options["start"], {"source": "given"}
+    if run.posts:  # SPEC §13: no track to align with; the rig's time 0 is the first sample (of the window)
+        return (max(mr.t_first, mr.options.get("window", (-math.inf, math.inf))[0]),
+                {"source": "four-post rig run (SPEC §13): time 0 at the first sample"})
     if not run.road_known:
         # no road to align with: x = 0 is where the front axle is at the first sample (of the window)
         return (max(mr.t_first, mr.options.get("window", (-math.inf, math.inf))[0]),

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+import warnings
 from dataclasses import dataclass, field, replace
 from functools import cached_property
 from pathlib import Path
@@ -10,11 +11,12 @@ from pathlib import Path
 import numpy as np
 
 from . import checks
-from ..errors import DataError, ScaleError
+from ..errors import DataError, DataWarning, ScaleError
 from .schema import DatasetManifest, ReadOnlyDict, RunData, load_manifest, read_run_csv
 from .schema.manifest import vehicle_table
 from ..model.params import (CORNERS, EXT_NAMES, EXTRA_KNOWN, MASS_COUNT, NAMES, SCALE_FREE, Geometry, nominal_car,
                             total_mass)
+from ..model.posts import POST_CHANNELS, prepare_posts
 from ..model.simulate import prepare_run
 from .measured import load_measured_run
 from .scenario import flat_before, settle_time
@@ -112,9 +114,10 @@ class Dataset:
             mr = self.measured.get(r.id)
             if mr is None:
                 rd = self.data[r.id]
+                start = ("SPEC §13: a four-post rig run, time 0 at its first sample, the car at rest" if r.posts
+                         else "SPEC: time 0 is the front axle at x = 0")
                 out[r.id] = {"file": str(r.file), "format": "CSV (SPEC channels, SI units, taken as it is)",
-                             "fs": rd.fs, "samples": int(rd.time.size),
-                             "start": {"value": 0.0, "source": "SPEC: time 0 is the front axle at x = 0"}}
+                             "fs": rd.fs, "samples": int(rd.time.size), "start": {"value": 0.0, "source": start}}
             else:
                 rec = dict(mr.record)
                 rec["samples"] = int(mr.grid.size)
@@ -181,7 +184,8 @@ class Dataset:
     @property
     def auto_start_runs(self) -> list[str]:
         """The measured runs on known tracks whose start is estimated (SPEC §3: ``start`` not given)."""
-        return [rid for rid, mr in self.measured.items() if mr.auto_start and self.manifest.run(rid).road_known]
+        return [rid for rid, mr in self.measured.items()
+                if mr.auto_start and self.manifest.run(rid).track is not None]
 
     def road_known(self, run_id: str) -> bool:
         """Whether run ``run_id`` drives a known track (False: a road nobody measured, SPEC §9)."""
@@ -217,7 +221,9 @@ def read_dataset(path) -> Dataset:
         f = Path(run.file)
         if not f.is_absolute():
             f = man.base_dir / f
-        rd = data[run.id] = read_run_csv(f)
+        rd = data[run.id] = read_run_csv(f, posts=run.posts)
+        if run.posts:
+            check_rig_run(run, rd, f)
         if not run.road_known:
             check_unknown_road_run(man, run, rd.channels, float(rd.time[-1] - rd.time[0]), rd.time.size)
     return Dataset(man, data, measured)
@@ -325,12 +331,88 @@ def prepare_inputs(ds: Dataset, leads=None) -> list:
     out = []
     for r, lead in zip(ds.runs, leads):
         rd = ds.data[r.id]
+        if r.posts:  # SPEC §13: the measured posts are the wheel inputs (no track, speed or envelope)
+            out.append(prepare_posts(rd.time, rd.posts, rd.post_vel))
+            continue
         t = rd.time
         if lead.samples:
             h = float(t[1] - t[0])
             t = np.concatenate([t[0] + h * np.arange(-lead.samples, 0), t])
         out.append(prepare_run(ds.manifest.tracks[r.track], ds.geometry, r.speed, t, distance=rd.distance))
     return out
+
+
+#: the largest post stroke (m, peak to peak) a four-post rig run may show: servo-hydraulic ride rigs stroke
+#: +-75 to +-125 mm; more is a column in mm read as m (SPEC §13 posts are in m)
+MAX_POST_STROKE = 0.3
+#: below the wheel hop the wheel follows its post: the axle's acceleration and the post's (the displacement's
+#: second derivative) agree within a small factor in :data:`FOLLOW_BAND`; when they differ by more than this
+#: factor the posts are in another unit than declared (mm read as m: 1000)
+POST_UNIT_FACTOR = 20.0
+#: the band (Hz) of that comparison: above the body modes' transmissibility peaks, below every wheel hop
+FOLLOW_BAND = (3.0, 6.0)
+#: a rig run starts at rest (the model starts in static equilibrium on the posts' first position): its posts
+#: over the first :data:`STILL_S` s may move by at most this share of their RMS about that position over the run
+STILL_SHARE, STILL_S = 0.25, 0.2
+
+
+def check_rig_run(run, rd, path) -> None:
+    """A four-post rig run (SPEC §13) whose posts cannot be in m: a stroke beyond :data:`MAX_POST_STROKE`, or,
+    with axle accelerometers, post accelerations :data:`POST_UNIT_FACTOR` times above or below the axles' in
+    :data:`FOLLOW_BAND`, where a wheel follows its post. One line naming the file, column and the unit that
+    fits (:class:`DataError`)."""
+    z = np.asarray(rd.posts, dtype=float)
+    stroke = np.ptp(z, axis=0)
+    k = int(np.argmax(stroke))
+    if stroke[k] > MAX_POST_STROKE:
+        raise DataError(f"{path}: column '{POST_CHANNELS[k]}' moves {stroke[k]:.4g} m peak to peak, beyond any ride "
+                        f"rig's stroke ({MAX_POST_STROKE:g} m): post displacements are in m (SPEC §13); is the "
+                        "column in mm? convert it, or map it in [channels] with unit = \"mm\"")
+    n0 = max(3, int(round(STILL_S * rd.fs)))
+    dz = z - z[0]
+    rms = np.sqrt(np.mean(dz ** 2, axis=0))
+    lead = np.sqrt(np.mean(dz[:n0] ** 2, axis=0))
+    if rd.time.size > 4 * n0 and np.any(lead > STILL_SHARE * rms):
+        k = int(np.argmax(lead / np.where(rms > 0, rms, np.inf)))
+        warnings.warn(f"{path}: column '{POST_CHANNELS[k]}' already moves in the first {STILL_S:g} s "
+                      f"({lead[k] / rms[k]:.0%} of its RMS over the run): a rig run is simulated from rest on the "
+                      "posts' first position, so the start transient will not fit; start the run (a window, "
+                      "[preprocess] start) where the car stands still", DataWarning, stacklevel=3)
+    ratio = post_axle_ratio(rd)
+    if ratio is not None and not 1 / POST_UNIT_FACTOR < ratio[1] < POST_UNIT_FACTOR:
+        c, r = ratio
+        unit = " (in mm?)" if 300 < r < 3000 else " (in cm?)" if 30 < r < 300 else ""
+        raise DataError(f"{path}: column '{c}': the post's acceleration between {FOLLOW_BAND[0]:g} and "
+                        f"{FOLLOW_BAND[1]:g} Hz is {r:.3g} times its axle's, where a wheel follows its post (about 1): "
+                        f"the posts are not in m as SPEC §13 says{unit}; convert the post columns to m or map them "
+                        "in [channels] with their unit")
+
+
+def post_axle_ratio(rd):
+    """``(post channel, ratio)``: for the corner whose axle accelerometer the band :data:`FOLLOW_BAND` excites
+    most, the RMS of its post's acceleration over its axle's in that band; None without an axle channel, or
+    with a band the run does not excite (the RMS of each below 1e-6 of the whole signal's)."""
+    t = rd.time
+    if t.size < 16:
+        return None
+    f = np.fft.rfftfreq(t.size, float(t[1] - t[0]))
+    band = (f >= FOLLOW_BAND[0]) & (f <= FOLLOW_BAND[1])
+    if not band.any():
+        return None
+    best = None
+    for i, c in enumerate(CORNERS):
+        a = rd.channels.get(f"axle_az_{c}")
+        if a is None:
+            continue
+        A = np.fft.rfft(a - np.mean(a))
+        z = rd.posts[:, i] - np.polyval(np.polyfit(t - t[0], rd.posts[:, i], 1), t - t[0])  # no drift leaks in
+        Z = np.fft.rfft(z) * (2 * np.pi * f) ** 2
+        ea, ez = float(np.sqrt(np.sum(np.abs(A[band]) ** 2))), float(np.sqrt(np.sum(np.abs(Z[band]) ** 2)))
+        if ea <= 1e-6 * float(np.sqrt(np.sum(np.abs(A) ** 2))) or ez == 0.0:
+            continue
+        if best is None or ea > best[0]:
+            best = (ea, POST_CHANNELS[i], ez / ea)
+    return None if best is None else best[1:]
 
 
 def refuse_unknown_roads(source, what: str) -> None:
@@ -370,4 +452,4 @@ def check_known_consistent(known: dict[str, float]):
 
 __all__ = ["Dataset", "LEAD_IN_SETTLES", "LeadIn", "read_dataset", "scale_anchor", "check_unknown_road_run",
            "lead_ins", "prepare_inputs", "run_lead_in",
-           "refuse_unknown_roads", "MIN_ROAD_RUN_S", "MIN_ROAD_RUN_SAMPLES"]
+           "refuse_unknown_roads", "MIN_ROAD_RUN_S", "MIN_ROAD_RUN_SAMPLES", "check_rig_run", "post_axle_ratio"]

@@ -63,7 +63,8 @@ from ..errors import DataError, DataWarning
 from ..model.equations import CHANNELS
 from ..model.params import GRAVITY
 from .readers import FORMAT_NAMES, Signal, open_signals
-from .schema.channels import SI, TARGETS, UNITS, ChannelEntry, gravity_unit_factor, quantity, unit_factor
+from ..model.posts import MIN_CHAIN_GAIN, POST_CHANNELS, POST_VEL_CHANNELS, unfilter
+from .schema.channels import RIG_TARGETS, SI, TARGETS, UNITS, ChannelEntry, gravity_unit_factor, quantity, unit_factor
 from .schema.runfiles import RunData
 
 
@@ -199,6 +200,8 @@ class MeasuredRun:
     #: the distance as the speed channel gave it, when :attr:`distance` carries a correction
     #: (:meth:`with_distance_correction`)
     channel_distance: Distance | None = None
+    #: a four-post rig run's post channels (SPEC §13), name -> :class:`Resampled` (m, m/s); empty on a road
+    posts: dict = field(default_factory=dict)
 
     def with_distance_correction(self, knots, values) -> "MeasuredRun":
         """This run driven along its channel's distance plus ``delta`` (piecewise linear through ``values`` m at
@@ -294,7 +297,14 @@ class MeasuredRun:
         i0, i1 = self.window
         Y = self.values
         chans = {c: Y[i0:i1, i].copy() for i, c in enumerate(CHANNELS) if c in self.channels}
-        return RunData(self.times[i0:i1] - start, chans, distance=self.relative_distance(start))
+        posts = vel = None
+        if self.posts:  # SPEC §13: the posts read off at the same samples as the channels
+            t0, n = self.times[i0], i1 - i0
+            posts = np.column_stack([self.posts[c].samples(t0, self.fs, n) for c in POST_CHANNELS])
+            if POST_VEL_CHANNELS[0] in self.posts:
+                vel = np.column_stack([self.posts[c].samples(t0, self.fs, n) for c in POST_VEL_CHANNELS])
+        return RunData(self.times[i0:i1] - start, chans, distance=self.relative_distance(start), posts=posts,
+                       post_vel=vel)
 
 
 def _warn(mr_warnings: list, msg: str, stacklevel: int = 3):
@@ -336,7 +346,11 @@ def load_measured_run(run, man) -> MeasuredRun:
     bias = opts.get("remove_bias", False)
     _remove_gravity_bias(raw, rec_ch, measured, lead, grav, bias, path, where_map, warns)
     channels = _filter_resample(raw, rec_ch, measured, fs, opts.get("anti_alias"))
+    _unfilter_posts(raw, rec_ch, targets)
+    posts = _filter_resample(raw, rec_ch, [c for c in RIG_TARGETS if c in raw], fs, opts.get("anti_alias"))
     distance, motion_rec = _motion(raw, targets, run.speed, path)
+    if run.posts:
+        motion_rec = {"source": "none: a four-post rig run (SPEC §13), its wheel inputs the posts"}
 
     record = {"file": str(path), "format": FORMAT_NAMES[sf.format], "channels": rec_ch, "fs": fs,
               "speed": motion_rec, "recording": [t_first, t_last]}
@@ -350,7 +364,21 @@ def load_measured_run(run, man) -> MeasuredRun:
     for c, fs_c in filters.items():
         rec_ch[c]["sensor_filters"] = [f.describe() for f in fs_c]
     return MeasuredRun(run.id, path, fs, channels, t_first, t_last, run.speed, distance, opts, record, warns,
-                       clipped_times=clipped, filters=filters)
+                       clipped_times=clipped, filters=filters, posts=posts)
+
+
+def _unfilter_posts(raw: dict, rec_ch: dict, targets: dict) -> None:
+    """A post channel's sensor chain (SPEC §13: ``highpass``, ``lowpass`` like any channel's) divided out of its
+    values (:func:`rideid.model.posts.unfilter`): the posts are the model's input, so the model needs them as
+    the rig moved them, not as the chain recorded them."""
+    for c in RIG_TARGETS:
+        if c in raw and targets[c].filters:
+            s = raw[c]
+            t = s.time[0] + float(np.median(np.diff(s.time))) * np.arange(s.time.size)
+            raw[c] = Signal(s.time, unfilter(t, s.values, targets[c].filters), s.unit)
+            rec_ch[c]["sensor_filters"] = [f.describe() for f in targets[c].filters]
+            rec_ch[c]["unfiltered"] = (f"the chain's response divided out where its gain is at least "
+                                       f"{MIN_CHAIN_GAIN:g} (frequency domain), the rest left out")
 
 
 def clipped_samples(times, clipped_times, h_channel: float) -> np.ndarray:
@@ -388,14 +416,29 @@ def _map_channels(run, cmap: dict, sf, path: Path, where_map: str):
             continue
         if c in cmap:
             targets[c] = cmap[c]
-        elif c in CHANNELS and sf.has(c):
+        elif (c in CHANNELS or (run.posts and c in RIG_TARGETS)) and sf.has(c):
             targets[c] = ChannelEntry(c)
+    if not run.posts:  # post channels mapped for every run of a mixed dataset: only a rig run's are read
+        targets = {c: e for c, e in targets.items() if c not in RIG_TARGETS}
     if not any(c in CHANNELS for c in targets):
         raise DataError(f"{path}: none of the SPEC channels found; map the file's channels in [channels] "
                         f"(the file has: {', '.join(sf.names()[:12])})")
     if "speed" in targets and "distance" in targets:
         raise DataError(f"{where_map}: map either a speed or a distance channel, not both")
     has_motion = "speed" in targets or "distance" in targets
+    if run.posts:  # SPEC §13: a rig run's road is its four posts; it does not drive
+        missing = [c for c in POST_CHANNELS if c not in targets]
+        if missing:
+            raise DataError(f"{where_map}: a four-post rig run (input = \"posts\") needs the four post "
+                            f"displacements; '{missing[0]}' is neither mapped in [channels] nor a column of {path}")
+        vel = [c for c in POST_VEL_CHANNELS if c in targets]
+        if vel and len(vel) < 4:
+            raise DataError(f"{where_map}: give all four post velocities {', '.join(POST_VEL_CHANNELS)} or none "
+                            f"('{[c for c in POST_VEL_CHANNELS if c not in targets][0]}' is missing)")
+        if has_motion:
+            raise DataError(f"{where_map}: a four-post rig run has no speed or distance channel (a rig does not "
+                            "drive); leave it out of the run's channels")
+        return targets, time_name, time_scale
     if has_motion and run.speed is not None:
         raise DataError(f"{where_map}: give either a constant 'speed' or a speed/distance channel, not both")
     if not has_motion and run.speed is None:

@@ -19,6 +19,8 @@ from ..model.equations import state_space
 from ..model.params import as_vector
 from ..model.roads import ROAD_CLASSES, iso8608_class, iso8608_profile
 from ..model.tracks import ProfileTrack
+from ..model.posts import prepare_function
+from ..model.simulate import prepare_run
 
 
 #: the name that stands for the built-in scenario wherever a scenario file is asked for
@@ -227,3 +229,32 @@ def write_road_csv(path: Path, x, z_left, z_right):
     path.parent.mkdir(parents=True, exist_ok=True)
     np.savetxt(path, np.column_stack([x, z_left, z_right]), delimiter=",", header="x,z_left,z_right",
                comments="", fmt="%.12g")
+
+
+#: the stream of the random post signals' seeds (with ``--seed`` and the run's position), apart from the noise's
+_POST_STREAM = 1304
+
+
+def post_seed(run: RunSpec, index: int, seed: int | None) -> int:
+    """The seed of a four-post rig run's random post signal (SPEC §13): the run's ``signal_seed``, else one
+    derived from ``seed`` (``rideid simulate --seed``, None as 0) and the run's position ``index``."""
+    if run.signal_seed is not None:
+        return int(run.signal_seed)
+    ss = np.random.SeedSequence([_POST_STREAM, 0 if seed is None else int(seed), int(index)])
+    return int(ss.generate_state(1, np.uint32)[0])
+
+
+def post_function(run: RunSpec, index: int, seed: int | None = None):
+    """A rig run's posts as ``inputs_at(times) -> (r (k, 4), rdot (k, 4))`` (:class:`rideid.model.posts.PostSignal`,
+    a random one seeded by :func:`post_seed`)."""
+    return run.signal.function(np.random.default_rng(post_seed(run, index, seed)))
+
+
+def scenario_run_input(sc: Scenario, run: RunSpec, index: int, seed: int | None = None):
+    """The :class:`rideid.model.simulate.RunInput` of scenario run ``run`` (at position ``index``) at its SPEC §3
+    sample times: its track at its speed, or a rig run's posts (SPEC §13; ``seed`` as ``rideid simulate
+    --seed`` gives it, for a random signal without ``signal_seed``). A run on a generated road (SPEC §9) has
+    none here."""
+    if run.posts:
+        return prepare_function(run_times(run), post_function(run, index, seed))
+    return prepare_run(sc.tracks[run.track], sc.geometry, run.speed, run_times(run))

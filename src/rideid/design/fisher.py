@@ -50,8 +50,7 @@ from ..estimate.cost import ParameterSpace, channel_weights
 from ..model.batch import BatchSimulator
 from ..errors import ArgumentError
 from ..model.equations import CHANNEL_KIND, CHANNELS
-from ..data.scenario import run_times
-from ..model.simulate import prepare_run
+from ..data.scenario import scenario_run_input
 from .colour import NoiseSpectrum, ar1_grams, padded_length, spectral_grams
 
 #: relative finite-difference step
@@ -229,7 +228,7 @@ class RunInformation(Information):
 
 def simulator(sc) -> BatchSimulator:
     """The batched simulator of all runs of a scenario (SPEC §3 sample times)."""
-    runs = [prepare_run(sc.tracks[r.track], sc.geometry, r.speed, run_times(r)) for r in sc.runs]
+    runs = [scenario_run_input(sc, r, i) for i, r in enumerate(sc.runs)]
     return BatchSimulator(sc.geometry, runs)
 
 

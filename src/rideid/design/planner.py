@@ -690,7 +690,7 @@ def _powertrain_block(pb: PlanProblem, inf: PlanInformation, S) -> dict:
     runs = [None] * len(pb.run_ids)
     for i, k in enumerate(tk):
         runs[k] = inf.lin_sim.runs[i]
-    tracks = [pb.sc.tracks[r.track] if r.road_known else None for r in pb.sc.runs]
+    tracks = [pb.sc.tracks[r.track] if r.track is not None else None for r in pb.sc.runs]
     return pt_info.powertrain_block(pb.names, pb.P0, pb.sc.geometry, inf.info.F, runs, tracks,
                                     [r.speed for r in pb.sc.runs], pb.run_ids, S)
 
@@ -747,7 +747,8 @@ def _sensitivity_method(pb: PlanProblem, opts: PlanOptions, inf: PlanInformation
 
 def _candidates(pb: PlanProblem, opts: PlanOptions, inf: PlanInformation) -> list:
     """plan.json ``"candidates"``: each run's road, rate, duration, cost, channels (and knots excited)."""
-    cand = [{"id": r.id, "kind": "track" if r.road_known else "road", "track": r.track, "speed": r.speed,
+    cand = [{"id": r.id, "kind": "rig" if r.posts else "track" if r.road_known else "road", "track": r.track,
+             "speed": r.speed,
              "fs": r.fs, "duration_s": r.duration, "time_cost_s": float(opts.time_cost[k]),
              "channels_used": [c for c, u in zip(CHANNELS, inf.info.used[k]) if u]}
             for k, r in enumerate(pb.sc.runs)]

@@ -489,7 +489,9 @@ def as_built_runs(ds, ext, tracks: str = "as-built") -> tuple[list, dict]:
     for r in runs:
         rd = ds.data[r.id]
         missing = [c for c in CHANNELS[:8] if c not in rd.channels]
-        if bad:
+        if getattr(r, "posts", False):
+            skipped[r.id] = "a four-post rig run (SPEC §13): no track, its posts measured"
+        elif bad:
             skipped[r.id] = f"as drawn: the model has {', '.join(bad)} (the as-built road is fitted on a linear car)"
         elif missing:
             skipped[r.id] = f"as drawn: no {', '.join(missing)} (the as-built road needs all eight accelerometers)"

@@ -28,12 +28,11 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..data.dataset import Dataset
-from ..data.scenario import run_times
+from ..data.scenario import scenario_run_input
 from ..errors import ArgumentError
 from ..model.batch import BatchSimulator
 from ..model.equations import CHANNEL_KIND, CHANNELS
 from ..model.params import ALL_NAMES, Geometry, as_vector
-from ..model.simulate import prepare_run
 from .cost import CostFunction
 
 STEP = 0.25
@@ -134,7 +133,7 @@ def sensitivity_maps(source, *, cost=None) -> SensitivityMaps:
         return cost_maps(cost if cost is not None else CostFunction(source))
     if not getattr(source, "truth", None):
         raise ArgumentError("sensitivity_maps: give a Dataset or a scenario with [truth]")
-    runs = [prepare_run(source.tracks[r.track], source.geometry, r.speed, run_times(r)) for r in source.runs]
+    runs = [scenario_run_input(source, r, i) for i, r in enumerate(source.runs)]
     return compute_maps(BatchSimulator(source.geometry, runs), source.geometry, as_vector(source.truth),
                         [r.id for r in source.runs])
 

@@ -783,7 +783,9 @@ def fit_section(result, dataset, sims) -> dict:
     fit_rows = []
     for r in dataset.runs:
         st = fit_statistics(measured[r.id], sims[r.id])
-        fit_rows.append({"run": r.id, "track": r.track, "speed": r.speed, "weight": result.track_weights.get(r.id),
+        rig = getattr(r, "posts", False)  # SPEC §13: no track, no speed
+        fit_rows.append({"run": r.id, "track": "four-post rig" if rig else r.track, "speed": "–" if rig else r.speed,
+                         "weight": result.track_weights.get(r.id),
                          "worst": max(st.values()) if st else float("nan"),
                          "median": float(np.median(list(st.values()))) if st else float("nan")})
     return {"fit_rows": fit_rows}

@@ -56,8 +56,9 @@ def _md_candidates(res, d: dict) -> list:
            "|---|---|---|---|---|---|"]
     for c in res.candidates:
         road = (f"unknown road, ISO 8608 class {c['road']['road_class']}" if c.get("road")
-                else f"track {c['track']}")
-        out.append(f"| {c['id']} | {road} | {c['speed']:g} | {c['fs']:g} | {c['duration_s']:g} | "
+                else "four-post rig (SPEC §13)" if c.get("kind") == "rig" else f"track {c['track']}")
+        speed = "-" if c["speed"] is None else f"{c['speed']:g}"
+        out.append(f"| {c['id']} | {road} | {speed} | {c['fs']:g} | {c['duration_s']:g} | "
                    f"{'yes' if c['id'] in res.selected_runs else ''} |")
     return out
 

@@ -18,7 +18,8 @@ from pathlib import Path
 import numpy as np
 
 from ..data.noise import sensor_noise
-from ..data.scenario import LIFT_OFF_RHO, generate_road, lead_in, road_record, run_times, write_road_csv
+from ..data.scenario import (LIFT_OFF_RHO, generate_road, lead_in, post_function, road_record, run_times,
+                             write_road_csv)
 from ..data.schema import (BUMP_NAMES, ChannelEntry, DatasetManifest, RunSpec, Scenario, atomic_output, write_run_csv,
                            write_toml)
 from ..errors import ArgumentError, DataError, DataWarning, ModelValidityWarning
@@ -26,6 +27,7 @@ from ..model.equations import CHANNELS, static_corner_loads
 from ..model.nonlinear import NonlinearLayout, NonlinearSimulator, simulate_nonlinear
 from ..model.params import (CORNERS, EXT_NAMES, INDEX, NAMES, ROW_WIDTHS, SUSPENSION_NAMES, as_vector,
                             full_rows)
+from ..model.posts import POST_CHANNELS, prepare_function
 from ..model.simulate import prepare_run, simulate_reference, wheel_displacements, wheel_velocities
 from ..verify.hifi import RAW_NAMES, scenario_properties, simulate_mujoco
 
@@ -35,9 +37,12 @@ class SimulatedRuns(dict):
     run id -> :class:`GeneratedRoad` of every run on a generated road (SPEC §9), which
     :func:`write_dataset` writes to ``road_truth/``."""
 
-    def __init__(self, runs=(), roads=None):
+    def __init__(self, runs=(), roads=None, posts=None):
         super().__init__(runs)
         self.roads = dict(roads or {})
+        #: run id -> ``(n, 4)`` post displacements (m) of every four-post rig run (SPEC §13), as the rig's
+        #: displacement transducers record them (no noise added)
+        self.posts = dict(posts or {})
 
 
 def _tail(ri, k: int):
@@ -190,6 +195,17 @@ def simulate_manifest(sc: Scenario, noise: float = 0.0, seed: int | None = None,
                                 "simulate it without --raw")
     for i, run in enumerate(sc.runs):
         t = run_times(run)
+        if run.posts:  # SPEC §13: a four-post rig, its posts driven by the run's signal
+            y, posts, lf = _simulate_rig(sc, run, i, seed, P, t, engine, raw, nonlinear)
+            lifts += lf
+            out.posts[run.id] = posts
+            if raw:
+                t = np.arange(int(round(RAW_LEAD_IN * run.fs)) + t.size) / run.fs
+            y = _noisy(y, rng, noise, noise_ar1, raw)
+            out[run.id] = (t, y)
+            if progress is not None:
+                progress(i + 1, len(sc.runs), run.id)
+            continue
         if run.road is not None:
             road = generate_road(sc, run, i, seed)
             out.roads[run.id] = road
@@ -221,10 +237,7 @@ def simulate_manifest(sc: Scenario, noise: float = 0.0, seed: int | None = None,
             y, states = simulate_reference(P, sc.geometry, ri, return_states=True)
             y = y[0][k0:]
             lifts += lift_offs(P[0], sc.geometry, run.id, _tail(ri, k0), states[0][k0:])
-        if noise > 0:
-            dyn = y - y[:1] if raw else y  # raw: the noise scales with the motion, not with g
-            rms = np.sqrt(np.mean(dyn * dyn, axis=0))
-            y = y + sensor_noise(rng, y.shape, noise_ar1) * (noise * rms)[None, :]
+        y = _noisy(y, rng, noise, noise_ar1, raw)
         out[run.id] = (t, y)
         if progress is not None:
             progress(i + 1, len(sc.runs), run.id)
@@ -232,6 +245,42 @@ def simulate_manifest(sc: Scenario, noise: float = 0.0, seed: int | None = None,
         if not lo.physics:
             warnings.warn(lo.message(), ModelValidityWarning, stacklevel=2)
     return out, lifts
+
+
+def _noisy(y, rng, noise: float, noise_ar1: float, raw: bool):
+    """``y`` with the sensor noise of ``--noise`` (a fraction of each channel's RMS) added."""
+    if noise > 0:
+        dyn = y - y[:1] if raw else y  # raw: the noise scales with the motion, not with g
+        rms = np.sqrt(np.mean(dyn * dyn, axis=0))
+        y = y + sensor_noise(rng, y.shape, noise_ar1) * (noise * rms)[None, :]
+    return y
+
+
+def _simulate_rig(sc: Scenario, run: RunSpec, index: int, seed, P, t, engine: str, raw: bool, nonlinear):
+    """A four-post rig run (SPEC §13): ``(y, posts (n, 4), lift-offs)``, the car at rest on its posts at the
+    first sample, the posts following the run's signal (:class:`rideid.model.posts.PostSignal`)."""
+    inputs_at = post_function(run, index, seed)
+    posts = inputs_at(t)[0]
+    if engine == "mujoco":
+        lead = RAW_LEAD_IN if raw else 0.0
+        tt = np.arange(int(round(lead * run.fs)) + t.size) / run.fs if raw else t
+
+        def shifted(times, t0=lead):
+            return inputs_at(np.asarray(times, dtype=float) - t0)
+
+        res = simulate_mujoco(P[0], sc.geometry, None, None, tt, inputs=shifted, hifi=scenario_properties(sc),
+                              dampers=sc.dampers, raw=raw, details=True)
+        lifts = [LiftOff(run.id, w, float(res.lift_time[k]), 0.0, "mujoco", physics=sc.nonlinear)
+                 for k, w in enumerate(CORNERS) if res.lift_time[k] >= 0]
+        return res.y, (inputs_at(tt - lead)[0] if raw else posts), lifts
+    ri = prepare_function(t, inputs_at)
+    if nonlinear is not None:
+        Pn, layout = nonlinear
+        y = simulate_nonlinear(Pn[None], sc.geometry, ri, layout)[0]
+        return y, posts, lift_offs(P[0], sc.geometry, run.id, ri, nonlinear_states(Pn, sc.geometry, ri, layout),
+                                   physics=True, coords=True)
+    y, states = simulate_reference(P, sc.geometry, ri, return_states=True)
+    return y[0], posts, lift_offs(P[0], sc.geometry, run.id, ri, states[0])
 
 
 def raw_names() -> tuple[str, ...]:
@@ -264,15 +313,21 @@ def write_dataset(sc: Scenario, data: dict, out_dir, comment: str | None = None,
         runs = []
         for run in sc.runs:
             t, Y = data[run.id]
-            write_run_csv(tmp / "runs" / f"{run.id}.csv", t, Y, raw_names() if raw else CHANNELS)
+            names = raw_names() if raw else CHANNELS
+            if run.posts:  # SPEC §13: the posts' columns after the ten
+                Y, names = np.column_stack([Y, data.posts[run.id]]), names + POST_CHANNELS
+            write_run_csv(tmp / "runs" / f"{run.id}.csv", t, Y, names)
             # a generated road is unknown to the dataset (SPEC §9: track "unknown"); its truth goes to road_truth/
-            runs.append(RunSpec(run.id, run.track, run.speed, file=f"runs/{run.id}.csv", moving=run.moving))
+            runs.append(RunSpec(run.id, run.track, run.speed, file=f"runs/{run.id}.csv", moving=run.moving,
+                                input=run.input))
             if run.road is not None:
                 write_road_csv(tmp / "road_truth" / f"{run.id}.csv", *roads[run.id].truth())
         logged = {}
         if raw:
-            logged = dict(channel_map={c: ChannelEntry(n, "rad/s" if c.endswith("rate") else "m/s^2")
-                                       for c, n in zip(CHANNELS, raw_names())},
+            logged = dict(channel_map={**{c: ChannelEntry(n, "rad/s" if c.endswith("rate") else "m/s^2")
+                                          for c, n in zip(CHANNELS, raw_names())},
+                                       **({c: ChannelEntry(c, "m") for c in POST_CHANNELS}
+                                          if any(r.posts for r in sc.runs) else {})},
                           preprocess={"gravity_included": True, "lead_in": (0.0, RAW_LEAD_IN), "start": RAW_LEAD_IN})
         man = DatasetManifest(**{**sc.shared(), "runs": runs}, **logged)
         doc = man.to_dataset_doc()

@@ -458,7 +458,7 @@ class MujocoRun:
 
 
 def simulate_mujoco(P, geom: Geometry, track, speed, t, distance=None, hifi: HifiProperties | None = None,
-                    raw: bool = False, details: bool = False, dampers=None, **kw):
+                    raw: bool = False, details: bool = False, dampers=None, inputs=None, **kw):
     """Outputs ``(n, 10)`` of the MuJoCo car at the sample times ``t`` (CHANNELS order).
 
     ``t`` must be uniform with a step that is a multiple of 1 ms; the posts
@@ -468,7 +468,9 @@ def simulate_mujoco(P, geom: Geometry, track, speed, t, distance=None, hifi: Hif
     fields as keyword arguments); ``raw``: the sensors' own readings, gravity
     included; ``details``: return a :class:`MujocoRun` with tire loads,
     lift-off times and suspension travel as well; ``dampers``: SPEC §8 damper
-    curves (:class:`MujocoCar`).
+    curves (:class:`MujocoCar`); ``inputs``: ``inputs(times) -> (r (k, 4), rdot (k, 4))``, the posts' heights
+    and velocities at any times, instead of a track (a four-post rig run, SPEC §13; ``track`` and ``speed``
+    then unused).
     """
 
     car = MujocoCar(P, geom, hifi, dampers=dampers, **kw)
@@ -479,13 +481,17 @@ def simulate_mujoco(P, geom: Geometry, track, speed, t, distance=None, hifi: Hif
     if sub < 1 or abs(sub * TIMESTEP - h) > 1e-9:
         raise DataError(f"MuJoCo engine: the sample interval {h} s must be a multiple of {TIMESTEP} s")
     tf = t[0] + TIMESTEP * np.arange((t.size - 1) * sub + 1)
-    x_of = (lambda tt: speed * tt) if distance is None else distance
-    eps = 1e-5
-    r = corner_inputs(track, geom, x_of(tf))
-    rdot = (corner_inputs(track, geom, x_of(tf + eps)) - corner_inputs(track, geom, x_of(tf - eps))) / (2 * eps)
+    if inputs is not None:  # a rig's posts (SPEC §13): their heights and velocities given as functions of time
+        r, rdot = inputs(tf)
+        r_next = inputs(tf + TIMESTEP)[0]
+    else:
+        x_of = (lambda tt: speed * tt) if distance is None else distance
+        eps = 1e-5
+        r = corner_inputs(track, geom, x_of(tf))
+        rdot = (corner_inputs(track, geom, x_of(tf + eps)) - corner_inputs(track, geom, x_of(tf - eps))) / (2 * eps)
+        r_next = corner_inputs(track, geom, x_of(tf + TIMESTEP))
     # over each step the posts accelerate uniformly from (r, rdot) to the road height at the step's end:
     # the road followed to third order in the step (holding rdot, the posts would miss by rddot dt^2 / 2)
-    r_next = corner_inputs(track, geom, x_of(tf + TIMESTEP))
     rddot = 2 * (r_next - r - rdot * TIMESTEP) / TIMESTEP ** 2
     out = np.empty((t.size, len(CHANNELS)))
     load_min = np.full(4, np.inf)

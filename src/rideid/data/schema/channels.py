@@ -14,6 +14,7 @@ from dataclasses import dataclass
 from ...errors import DataError
 from ...model.equations import CHANNEL_KIND, CHANNELS
 from ...model.params import GRAVITY
+from ...model.posts import POST_CHANNELS, POST_VEL_CHANNELS
 from ...model.sensors import ORDERS, AnalogFilter
 from .common import checked_items
 
@@ -24,9 +25,15 @@ UNITS = {
     "speed": {"m/s": 1.0, "km/h": 1 / 3.6, "kph": 1 / 3.6, "mph": 0.44704},
     "distance": {"m": 1.0, "km": 1000.0},
     "time": {"s": 1.0, "ms": 1e-3, "us": 1e-6, "µs": 1e-6, "ns": 1e-9},
+    # a four-post rig's post displacements and velocities (SPEC §13)
+    "displacement": {"m": 1.0, "mm": 1e-3, "cm": 1e-2, "in": 0.0254},
+    "velocity": {"m/s": 1.0, "mm/s": 1e-3, "cm/s": 1e-2, "in/s": 0.0254},
 }
-SI = {"acceleration": "m/s^2", "rate": "rad/s", "speed": "m/s", "distance": "m", "time": "s"}
-EXTRA_TARGETS = ("time", "speed", "distance")
+SI = {"acceleration": "m/s^2", "rate": "rad/s", "speed": "m/s", "distance": "m", "time": "s", "displacement": "m",
+      "velocity": "m/s"}
+#: a four-post rig run's post channels (SPEC §13): displacements (m), optionally velocities (m/s)
+RIG_TARGETS = POST_CHANNELS + POST_VEL_CHANNELS
+EXTRA_TARGETS = ("time", "speed", "distance") + RIG_TARGETS
 #: what a channel map may map file channels to
 TARGETS = CHANNELS + EXTRA_TARGETS
 
@@ -44,6 +51,8 @@ def quantity(target: str) -> str:
     """The physical quantity of a channel-map target: acceleration, rate, speed, distance or time."""
     if target in CHANNELS:
         return "rate" if CHANNEL_KIND[target] == "rate" else "acceleration"
+    if target in RIG_TARGETS:
+        return "displacement" if target in POST_CHANNELS else "velocity"
     return target
 
 
@@ -157,7 +166,10 @@ def parse_channel_map(tab, where: str) -> dict[str, ChannelEntry]:
             raise DataError(f"{w}: sign is for measured channels only")
         sensor = {}
         for k in SENSOR_KEYS:
-            if k in v and target not in CHANNELS:
+            if k == "range" and k in v and target in RIG_TARGETS:
+                raise DataError(f"{w} range: a post channel has no range to leave samples out at (the posts are the "
+                                "model's input, every sample of them is needed); leave it out")
+            if k in v and target not in CHANNELS and target not in RIG_TARGETS:
                 raise DataError(f"{w} {k}: {k} is for measured channels only (SPEC §11), not {target}")
         for k in ("highpass", "lowpass"):
             if k in v:
@@ -245,6 +257,6 @@ def parse_csv_options(tab, where: str) -> CsvOptions:
     return CsvOptions(**kw)
 
 
-__all__ = ["UNITS", "SI", "TARGETS", "EXTRA_TARGETS", "PREPROCESS_KEYS", "RUN_PREPROCESS_KEYS", "CSV_KEYS",
-           "CHANNEL_KEYS", "ChannelEntry", "CsvOptions", "quantity", "unit_factor", "gravity_unit_factor",
+__all__ = ["RIG_TARGETS", "UNITS", "SI", "TARGETS", "EXTRA_TARGETS", "PREPROCESS_KEYS", "RUN_PREPROCESS_KEYS",
+           "CSV_KEYS", "CHANNEL_KEYS", "ChannelEntry", "CsvOptions", "quantity", "unit_factor", "gravity_unit_factor",
            "ACC_FACTORS", "SENSOR_KEYS", "parse_channel_map", "parse_filter", "parse_preprocess", "parse_csv_options"]

@@ -20,6 +20,7 @@ from dataclasses import dataclass, field, fields
 from pathlib import Path
 
 from ...errors import DataError
+from ...model.posts import PATTERNS, SIGNALS, PostSignal
 from ...model.params import (EXT_NAMES, EXTRA_KNOWN, GROUPS, NAMES, SIGNED, Geometry, as_vector, check_parameters,
                              total_mass)
 from ...model.roads import ROAD_CLASSES
@@ -39,9 +40,15 @@ TOP_KEYS_SCENARIO = ("name", "vehicle", "known", "bounds", "model", "tracks", "r
 #: a dataset may also describe how its files were logged (rideid.data.measured)
 TOP_KEYS_DATASET = ("name", "vehicle", "known", "bounds", "model", "channels", "preprocess", "csv", "checks",
                     "tracks", "runs")
-RUN_KEYS_DATASET = ("id", "track", "speed", "file", "moving", "channels", "checks") + RUN_PREPROCESS_KEYS
-#: a scenario run drives a known track (``track``) or a generated ISO 8608 road (``road_class``, SPEC §9)
-RUN_KEYS_SCENARIO = ("id", "track", "road_class", "road_seed", "coherence", "speed", "fs", "duration", "moving")
+RUN_KEYS_DATASET = ("id", "track", "speed", "file", "moving", "channels", "checks", "input") + RUN_PREPROCESS_KEYS
+#: a scenario run drives a known track (``track``) or a generated ISO 8608 road (``road_class``, SPEC §9), or
+#: stands on a four-post rig (``input = "posts"``, SPEC §13) driven by a post signal (:data:`SIGNAL_KEYS`)
+RUN_KEYS_SCENARIO = ("id", "track", "road_class", "road_seed", "coherence", "speed", "fs", "duration", "moving",
+                     "input", "signal", "amplitude", "f_low", "f_high", "pattern", "signal_seed")
+#: the run's input when it stands on a four-post rig (SPEC §13: ``input = "posts"``)
+POSTS_INPUT = "posts"
+#: the keys of a scenario rig run's post signal (:class:`rideid.model.posts.PostSignal`)
+SIGNAL_KEYS = ("signal", "amplitude", "f_low", "f_high", "pattern", "signal_seed")
 #: the keys of a scenario run's generated road (:class:`RoadSpec`)
 ROAD_KEYS = ("road_class", "road_seed", "coherence")
 #: the ``track`` of a run on a road nobody measured (SPEC §9); no [[tracks]] id may take it
@@ -60,7 +67,9 @@ _ANY = Key("any")
 _RUN_HINTS_DATASET = {
     **{k: " (fs and duration belong to scenarios; a dataset run names its 'file')" for k in ("fs", "duration")},
     **{k: (f" ({k} belongs to a scenario, whose roads rideid simulate generates; a dataset run on a road nobody "
-           f"measured gives track = \"{UNKNOWN_ROAD}\" or leaves 'track' out)") for k in ROAD_KEYS}}
+           f"measured gives track = \"{UNKNOWN_ROAD}\" or leaves 'track' out)") for k in ROAD_KEYS},
+    **{k: " (a rig run's drive signal belongs to a scenario; a dataset rig run gives input = \"posts\" and the "
+          "post_fl ... post_rr columns)" for k in SIGNAL_KEYS}}
 _RUN_MESSAGES = Messages(number="{where}: {key}: expected a finite number, got {value!r}",
                          positive="{where}: {key}: must be positive, got {value!r}",
                          string="{where}: key '{key}' must be a path string")
@@ -81,14 +90,17 @@ SECTIONS = {
                      Messages(unknown="{where}: [model]: unknown key '{key}'; allowed: {allowed}")),
     "runs.scenario": Section({"id": Key("any", required=True), "track": _ANY, "road_class": _ANY,
                               "road_seed": _ANY, "coherence": _ANY,
-                              "speed": Key(required=True, unit="m/s", positive=True),
+                              "speed": Key(unit="m/s", positive=True),
                               "fs": Key(required=True, unit="Hz", positive=True),
-                              "duration": Key(required=True, unit="s", positive=True), "moving": _ANY},
+                              "duration": Key(required=True, unit="s", positive=True), "moving": _ANY,
+                              "input": _ANY, "signal": _ANY, "amplitude": Key(unit="m", positive=True),
+                              "f_low": Key(unit="Hz", positive=True), "f_high": Key(unit="Hz", positive=True),
+                              "pattern": _ANY, "signal_seed": _ANY},
                              _RUN_MESSAGES,
                              hints={"file": " (a scenario run gives 'fs' and 'duration' instead of a file)"}),
     "runs.dataset": Section({"id": Key("any", required=True), "track": _ANY, "speed": Key(unit="m/s", positive=True),
                              "file": Key("string", required=True), "moving": _ANY, "channels": _ANY, "checks": _ANY,
-                             **{k: _ANY for k in RUN_PREPROCESS_KEYS}},
+                             "input": _ANY, **{k: _ANY for k in RUN_PREPROCESS_KEYS}},
                             _RUN_MESSAGES, hints=_RUN_HINTS_DATASET),
 }
 assert tuple(SECTIONS["runs.scenario"].keys) == RUN_KEYS_SCENARIO and tuple(SECTIONS["runs.dataset"].keys) == \
@@ -145,6 +157,11 @@ class RunSpec:
     moving: bool = False
     #: a scenario run's generated road (SPEC §9), or None
     road: RoadSpec | None = None
+    #: ``"posts"``: the run stands on a four-post rig (SPEC §13), its wheel inputs the measured posts; None: a road
+    input: str | None = None
+    #: a scenario rig run's drive signal (:class:`rideid.model.posts.PostSignal`) and the seed of a random one
+    signal: PostSignal | None = None
+    signal_seed: int | None = None
 
     def __post_init__(self):
         for k in ("channels", "options", "checks"):
@@ -152,12 +169,27 @@ class RunSpec:
 
     @property
     def road_known(self) -> bool:
-        """Whether the run's road is a known track (False: an unknown or generated road, SPEC §9)."""
-        return self.track is not None
+        """Whether the run's road is known: a known track, or a rig's measured posts (False: an unknown or
+        generated road, SPEC §9)."""
+        return self.track is not None or self.posts
+
+    @property
+    def posts(self) -> bool:
+        """Whether the run stands on a four-post rig (SPEC §13): no track, speed or start; the posts are the road."""
+        return self.input == POSTS_INPUT
 
     def to_table(self) -> dict:
         d = {"id": self.id}
-        if self.road is not None:
+        if self.posts:
+            d["input"] = POSTS_INPUT
+            if self.signal is not None:
+                sg = self.signal
+                d.update(signal=sg.kind, amplitude=sg.amplitude, f_low=sg.f_low, f_high=sg.f_high)
+                if sg.kind == "sweep":
+                    d["pattern"] = sg.pattern
+                if self.signal_seed is not None:
+                    d["signal_seed"] = self.signal_seed
+        elif self.road is not None:
             d.update(self.road.to_table())
         else:
             d["track"] = self.track if self.track is not None else UNKNOWN_ROAD
@@ -297,7 +329,8 @@ class DatasetManifest(Manifest):
     def is_measured(self, run: RunSpec) -> bool:
         """Whether a run goes through rideid.data.measured (anything beyond a SPEC §3 CSV taken as it is)."""
         return bool(self.channel_map or self.preprocess or self.csv_table or run.channels or run.options
-                    or run.speed is None or (run.file is not None and not run.file.lower().endswith(".csv")))
+                    or (run.speed is None and not run.posts)
+                    or (run.file is not None and not run.file.lower().endswith(".csv")))
 
     def to_dataset_doc(self) -> dict:
         """The ``dataset.toml`` document (plain dicts and lists, ready for TOML)."""
@@ -574,25 +607,77 @@ def _parse_runs(doc: dict, where: str, tracks: dict, scenario: bool) -> list[Run
         if rid in seen:
             raise DataError(f"{w}: duplicate run id '{rid}'")
         seen.add(rid)
-        track = _run_track(r, w, where, tracks, scenario)
+        rig = _run_input(r, w, scenario)
+        track = None if rig else _run_track(r, w, where, tracks, scenario)
         road = _parse_road(r, w) if scenario and "road_class" in r else None
         moving = r.get("moving", road is not None)
         if not isinstance(moving, bool):
             raise DataError(f"{w}: moving must be true or false, got {moving!r}")
         speed = vals.get("speed")
+        if scenario and not rig and speed is None:
+            raise DataError(f"{w}: missing key 'speed'")
+        rig_kw = {"input": POSTS_INPUT} if rig else {}
         if scenario:
             fs, dur = vals["fs"], vals["duration"]
             if round(dur * fs) < 2:
                 raise DataError(f"{w}: duration * fs gives fewer than 3 samples")
-            runs.append(RunSpec(rid, track, speed, fs=fs, duration=dur, moving=moving, road=road))
+            if rig:
+                rig_kw.update(_parse_signal(r, vals, w, dur))
+            runs.append(RunSpec(rid, track, speed, fs=fs, duration=dur, moving=moving, road=road, **rig_kw))
         else:
             chans = parse_channel_map(r["channels"], f"{w}: channels") if "channels" in r else {}
             opts = parse_preprocess({k: v for k, v in r.items() if k in RUN_PREPROCESS_KEYS}, w,
                                     RUN_PREPROCESS_KEYS)
             lv = parse_checks(r["checks"], f"{w}: checks") if "checks" in r else {}
             runs.append(RunSpec(rid, track, speed, file=r["file"], channels=chans, options=opts, checks=lv,
-                                moving=moving))
+                                moving=moving, **rig_kw))
     return runs
+
+
+def _run_input(r: dict, w: str, scenario: bool) -> bool:
+    """Whether the run stands on a four-post rig (SPEC §13: ``input = "posts"``); what such a run cannot have
+    (a track, a speed, a moving start, a start to find) is refused in one line naming the key."""
+    if "input" not in r:
+        for k in SIGNAL_KEYS:
+            if scenario and k in r:
+                raise DataError(f"{w}: key '{k}' belongs to a four-post rig run; give input = \"{POSTS_INPUT}\" "
+                                f"too (or leave '{k}' out)")
+        return False
+    if r["input"] != POSTS_INPUT:
+        raise DataError(f"{w}: input: expected \"{POSTS_INPUT}\" (a four-post rig run, SPEC §13), got {r['input']!r}")
+    why = {"track": "its road is the measured posts", "road_class": "its road is the measured posts",
+           "speed": "a rig does not drive", "moving": "a rig run starts with the car at rest on its posts"}
+    for k, reason in why.items():
+        if k in r and not (k == "moving" and r[k] is False):
+            raise DataError(f"{w}: key '{k}' does not apply to a four-post rig run (input = \"{POSTS_INPUT}\": "
+                            f"{reason}); leave it out")
+    return True
+
+
+def _parse_signal(r: dict, vals: dict, w: str, duration: float) -> dict:
+    """A scenario rig run's drive signal (SPEC §13, :class:`rideid.model.posts.PostSignal`) and seed."""
+    kind = r.get("signal")
+    if kind not in SIGNALS:
+        raise DataError(f"{w}: signal: a four-post rig run of a scenario needs signal = \"sweep\" or \"random\" "
+                        f"(the posts' drive), got {kind!r}")
+    for k in ("amplitude", "f_low", "f_high"):
+        if k not in vals:
+            raise DataError(f"{w}: missing key '{k}' of the post signal (amplitude in m, f_low and f_high in Hz)")
+    if not vals["f_low"] < vals["f_high"] < vals["fs"] / 2:
+        raise DataError(f"{w}: the post signal's band needs f_low < f_high < fs / 2 = {vals['fs'] / 2:g} Hz, got "
+                        f"f_low = {vals['f_low']:g}, f_high = {vals['f_high']:g}")
+    pattern = r.get("pattern", "heave")
+    if kind == "random" and "pattern" in r:
+        raise DataError(f"{w}: key 'pattern' belongs to a sweep (signal = \"random\" moves each post on its own)")
+    if pattern not in PATTERNS:
+        raise DataError(f"{w}: pattern: expected one of {', '.join(PATTERNS)}, got {pattern!r}")
+    seed = r.get("signal_seed")
+    if seed is not None and (isinstance(seed, bool) or not isinstance(seed, int) or seed < 0):
+        raise DataError(f"{w}: signal_seed must be a non-negative whole number, got {seed!r}")
+    if kind == "sweep" and seed is not None:
+        raise DataError(f"{w}: key 'signal_seed' belongs to a random signal (a sweep has no randomness)")
+    sig = PostSignal(kind, vals["amplitude"], vals["f_low"], vals["f_high"], duration, pattern=pattern)
+    return {"signal": sig, "signal_seed": seed}
 
 
 def _parse_shared(doc: dict, path: Path, scenario: bool) -> dict:

@@ -16,6 +16,7 @@ import numpy as np
 from ...csvio import read_csv_rows
 from ...errors import DataError, DataWarning
 from ...model.equations import CHANNELS
+from ...model.posts import POST_CHANNELS, POST_VEL_CHANNELS
 
 
 @dataclass
@@ -26,6 +27,10 @@ class RunData:
     channels: dict[str, np.ndarray]
     #: ``distance(t)``: front-axle distance past x = 0 at model time t (varying speed); None for constant speed
     distance: object = None
+    #: a four-post rig run's post displacements ``(n, 4)`` fl, fr, rl, rr (m, SPEC §13); None on a road
+    posts: np.ndarray | None = None
+    #: ... and the measured post velocities ``(n, 4)`` (m/s), None when computed from the displacements
+    post_vel: np.ndarray | None = None
 
     @property
     def fs(self) -> float:
@@ -40,8 +45,9 @@ class RunData:
         return Y
 
 
-def read_run_csv(path: Path) -> RunData:
-    """Read and validate a run CSV (SPEC §3)."""
+def read_run_csv(path: Path, posts: bool = False) -> RunData:
+    """Read and validate a run CSV (SPEC §3); ``posts``: a four-post rig run's (SPEC §13), whose columns
+    ``post_fl … post_rr`` (m) must all be there, and ``post_vel_fl … post_vel_rr`` (m/s) all or none."""
     path = Path(path)
     header, body = read_csv_rows(path, f"{path}: run file not found")
     if "time" not in header:
@@ -54,10 +60,23 @@ def read_run_csv(path: Path) -> RunData:
         raise DataError(f"{path}: header only, no data rows")
     if len(data_rows) < 3:
         raise DataError(f"{path}: only {len(data_rows)} data rows; at least 3 are needed")
-    used = [c for c in header if c == "time" or c in CHANNELS]
+    rig = POST_CHANNELS + POST_VEL_CHANNELS if posts else ()
+    if posts:
+        missing = [c for c in POST_CHANNELS if c not in header]
+        if missing:
+            raise DataError(f"{path}: missing column '{missing[0]}': a four-post rig run (input = \"posts\") needs "
+                            f"the four post displacements {', '.join(POST_CHANNELS)} (m)")
+        vel = [c for c in POST_VEL_CHANNELS if c in header]
+        if vel and len(vel) < 4:
+            missing = [c for c in POST_VEL_CHANNELS if c not in header]
+            raise DataError(f"{path}: missing column '{missing[0]}': give all four post velocities "
+                            f"{', '.join(POST_VEL_CHANNELS)} (m/s) or none (then computed from the displacements)")
+    used = [c for c in header if c == "time" or c in CHANNELS or c in rig]
     extra = [c for c in header if c not in used]
     if extra:
-        warnings.warn(f"{path}: ignoring column(s) not in the SPEC channels: {', '.join(extra)}",
+        hint = (" (post channels are read from a rig run: input = \"posts\")"
+                if any(c in POST_CHANNELS for c in extra) else "")
+        warnings.warn(f"{path}: ignoring column(s) not in the SPEC channels: {', '.join(extra)}{hint}",
                       DataWarning, stacklevel=2)
     idx = {c: header.index(c) for c in used}
     arr = np.empty((len(data_rows), len(used)))
@@ -86,10 +105,15 @@ def read_run_csv(path: Path) -> RunData:
                         f"mean step {h:.6g} s)")
     # rebuild an exactly uniform time base
     t = t[0] + h * np.arange(t.size)
-    channels = {c: arr[:, j] for j, c in enumerate(used) if c != "time"}
+    channels = {c: arr[:, j] for j, c in enumerate(used) if c in CHANNELS}
     if not channels:
         raise DataError(f"{path}: no measured channel; expected some of {', '.join(CHANNELS)}")
-    return RunData(t, channels)
+    post = vel = None
+    if posts:
+        post = np.column_stack([arr[:, used.index(c)] for c in POST_CHANNELS])
+        if POST_VEL_CHANNELS[0] in used:
+            vel = np.column_stack([arr[:, used.index(c)] for c in POST_VEL_CHANNELS])
+    return RunData(t, channels, posts=post, post_vel=vel)
 
 
 def write_run_csv(path: Path, time, Y, channels=CHANNELS):
