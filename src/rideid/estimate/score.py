@@ -2,11 +2,9 @@
 
 from __future__ import annotations
 
+from ..settings import defaults, legacy_names
 from ..model.params import ALL_NAMES, EXT_NAMES
 
-#: an estimate covers the truth when it lies within this many standard errors (about 95 %, SPEC §6): ``std_total``
-#: (SPEC §12: std_robust with every declared uncertainty), ``std_robust`` in results written before it
-COVERAGE_K = 2.0
 AXLES = (("front", "f", "c_sf"), ("rear", "r", "c_sr"))
 
 
@@ -23,7 +21,7 @@ def _row(est, tr, status, rob, total=None, **extra) -> dict:
     total = float(total) if judged and total else rob
 
     def covers(s):
-        return None if s is None or tr is None else bool(abs(est - tr) <= COVERAGE_K * s)
+        return None if s is None or tr is None else bool(abs(est - tr) <= defaults["score.coverage_k"] * s)
     return {"estimate": est, "truth": tr, "error_percent": err, "status": status, "std_robust": rob,
             "std_total": total, "covered": covers(total), "covered_robust": covers(rob), **extra}
 
@@ -114,3 +112,8 @@ def score(result, truth: dict, dampers=None) -> dict:
 
 
 __all__ = ["score"]
+
+
+#: the constants this module had before rideid.settings, read from the registry (PEP 562)
+__getattr__ = legacy_names("score", {
+    "COVERAGE_K": "score.coverage_k"})

@@ -26,14 +26,10 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..settings import defaults, legacy_names
 from ..model.equations import CHANNELS
 from ..model.sensors import AnalogFilter, SensorChain
 from . import roadfit
-
-#: first-order high-pass corners (Hz) tried on the identified car's channels
-HINT_CORNERS = (0.1, 0.2, 0.3, 0.5, 0.7, 1.0, 1.5, 2.0)
-#: the least share by which a corner must cut the channel's residual sum of squares to be named
-HINT_REDUCTION = 0.5
 
 
 def coupling_hints(cf, response: dict) -> list[dict]:
@@ -68,7 +64,7 @@ def coupling_hints(cf, response: dict) -> list[dict]:
         if not rss0 > 0:
             continue
         best = (0.0, None)
-        for hz in HINT_CORNERS:
+        for hz in defaults["sensor_check.hint_corners"]:
             rss = 0.0
             for ri, _rid, y, yh, k, w in rows:
                 chain = SensorChain(((AnalogFilter("highpass", hz),),), cf.sim.runs[ri].h)
@@ -78,7 +74,7 @@ def coupling_hints(cf, response: dict) -> list[dict]:
             if red > best[0]:
                 best = (red, hz)
         red, hz = best
-        if hz is not None and red >= HINT_REDUCTION:
+        if hz is not None and red >= defaults["sensor_check.hint_reduction"]:
             hints.append({"channel": name, "highpass_hz": hz, "rss_reduction": float(red),
                           "message": (f"{name}: the data look AC-coupled (an IEPE sensor?): the fit of this channel "
                                       f"improves {100 * red:.0f} % when the model's channel passes a {hz:g} Hz "
@@ -90,17 +86,9 @@ def coupling_hints(cf, response: dict) -> list[dict]:
 
 #: the groups of accelerometers a road fit's coupling hint tries together (a test's hub sensors are alike)
 ROAD_HINT_GROUPS = (CHANNELS[4:8], CHANNELS[0:4])
-#: the corners a single channel is tried at by the road fit's hint (the groups: every :data:`HINT_CORNERS`)
-ROAD_HINT_SINGLE = (0.2, 0.5, 1.0)
-#: the least share a trial high-pass must cut the residual of runs on unknown roads by to be named: there the road
-#: is free at every frequency and takes up part of a coupling's signature. Measured at the car identified without
-#: the declaration (SPEC CSVs, 200 Hz, ``benchmarks/road_hints.py``): hubs coupled at 0.5 Hz, 2 % noise, two ISO
-#: 8608 roads: 35 %; hubs at 0.3 Hz, 1 % noise, the four roads of examples/roads/class_b.toml: 56 %; the same
-#: data not coupled, or coupled and declared: every trial made the residual 27-105 % larger.
-FREE_ROAD_HINT_REDUCTION = 0.2
 
 
-def road_coupling_hints(P, geom, rruns, filters, threshold: float = HINT_REDUCTION) -> list[dict]:
+def road_coupling_hints(P, geom, rruns, filters, threshold: float | None = None) -> list[dict]:
     """Channels whose data look AC-coupled without a declared ``highpass``, on runs whose road is fitted
     (:mod:`rideid.estimate.roadfit`; tracks as built, :mod:`rideid.estimate.asbuilt`).
 
@@ -119,6 +107,7 @@ def road_coupling_hints(P, geom, rruns, filters, threshold: float = HINT_REDUCTI
     ``rruns``: :class:`rideid.estimate.roadfit.RoadRun` with their declared chains; ``filters``: run id -> the
     dataset's ``sensor_filters``. Returns the hints as :func:`coupling_hints` does, the group's channels each
     named with the group's corner and reduction."""
+    threshold = defaults["sensor_check.hint_reduction"] if threshold is None else threshold
     if not rruns:
         return []
     declared = {rr.run_id: [tuple(f) for f in filters[rr.run_id]] for rr in rruns}
@@ -141,8 +130,8 @@ def road_coupling_hints(P, geom, rruns, filters, threshold: float = HINT_REDUCTI
     base = total({})
     if not base > 0:
         return []
-    trials = [(tuple(free(g)), HINT_CORNERS) for g in ROAD_HINT_GROUPS]
-    trials += [((c,), ROAD_HINT_SINGLE) for c in free(CHANNELS[:8])]
+    trials = [(tuple(free(g)), defaults["sensor_check.hint_corners"]) for g in ROAD_HINT_GROUPS]
+    trials += [((c,), defaults["sensor_check.road_hint_single"]) for c in free(CHANNELS[:8])]
     best = (0.0, None, ())
     for group, corners in trials:
         if not group:
@@ -184,4 +173,11 @@ def clipping_advice(ds, adequacy: dict | None) -> str | None:
             "(`[channels] <name> range = ...`), use a sensor with a larger range, or leave those runs out.")
 
 
-__all__ = ["HINT_CORNERS", "HINT_REDUCTION", "clipping_advice", "coupling_hints"]
+__all__ = ["clipping_advice", "coupling_hints"]
+
+
+#: the constants this module had before rideid.settings, read from the registry (PEP 562)
+__getattr__ = legacy_names("sensor_check", {
+    "HINT_CORNERS": "sensor_check.hint_corners", "HINT_REDUCTION": "sensor_check.hint_reduction",
+    "ROAD_HINT_SINGLE": "sensor_check.road_hint_single", "FREE_ROAD_HINT_REDUCTION":
+    "sensor_check.free_road_hint_reduction"})
