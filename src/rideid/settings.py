@@ -29,6 +29,7 @@ nothing of rideid but its errors, so every layer may read it.
 from __future__ import annotations
 
 import contextlib
+import difflib
 import math
 from collections.abc import Iterator, Mapping
 from dataclasses import dataclass
@@ -558,6 +559,71 @@ _SETTINGS: tuple[Setting, ...] = (
             'docs/uncertainty.md#between-runs-when-the-runs-disagree-beyond-their-noise',
             'tests/test_uncertainty.py::test_jackknife_runs_is_the_exact_delete_one_refit_for_a_linear_model',
             measured=False),
+    # -- rideid.conditioning: the checks of load_dataset whose thresholds decide a refusal or a finding
+    Setting('checks.match_min', 0.5, '1 (correlation)',
+            'correlation with the nominal car below which a run does not match its track and speed',
+            'docs/common-mistakes.md#the-checks',
+            'tests/test_checks.py::test_mistake_ends_in_one_line_naming_the_cause',
+            measured=False),
+    Setting('checks.start_margin', 0.025, '1 (correlation)',
+            ('a given start is a bump or a cycle off when the data correlate with the nominal car by this much '
+             'better at another start more than checks.start_samples samples away than at their best near it'),
+            'docs/common-mistakes.md#the-checks',
+            'tests/test_checks.py::test_start_finding_needs_a_clear_margin',
+            measured=True,
+            note=('Measured on the hatchback of tests/test_checks.py (1 kHz logger files): a start one cycle off '
+                  'peaks 0.050-0.054 below the best start (herringbone, 16 cycles), 0.11 (washboard), 0.33 (twist, '
+                  'one bump), half a cycle off 0.96-1.7 below; the true start given, 0.000 below on the hatchback '
+                  'and on the built-in car with an engine on as-built tracks (tests/realities_case.py, twenty runs), '
+                  'whose best start lies within 1.7 samples of it')),
+    Setting('checks.start_samples', 3.0, 'samples',
+            'the neighbourhood of a given start within which its best correlation is taken (checks.start_margin)',
+            'docs/common-mistakes.md#the-checks',
+            'tests/test_checks.py::test_start_finding_needs_a_clear_margin',
+            measured=True),
+    Setting('speed.wander_max', 0.01, '1 (share of the declared speed)',
+            ('largest relative deviation of the speed from the declared one a run may show beyond its uncertainty '
+             '(a run without a speed channel)'),
+            'docs/real-data.md#a-speed-that-wanders-without-a-speed-channel-teststest_speed_wanderpy-benchmarksspeed_wanderpy',
+            'tests/test_speed_wander.py::test_a_wandering_speed_is_refused_in_one_line_naming_the_run_and_the_wander',
+            measured=True,
+            note=('Measured (benchmarks/speed_wander.py): no run held at its speed shows one beyond its uncertainty, '
+                  'each dataset of a +-3 % driver 1.7-2.3 %')),
+    Setting('speed.z_min', 1.0, 'standard errors',
+            "a deviation of the speed is seen only when it exceeds this many times its uncertainty",
+            'docs/real-data.md#a-speed-that-wanders-without-a-speed-channel-teststest_speed_wanderpy-benchmarksspeed_wanderpy',
+            'tests/test_speed_wander.py::test_runs_held_at_their_speed_pass_with_margin',
+            measured=True,
+            note=('Measured: at most 0.5 on every run held at its speed (exact and as-built tracks, the SUV, the van, '
+                  'the built-in car, damper curves, bump stops, a rough profile road), up to 1.7-2.3 on each dataset '
+                  'of a +-3 % driver')),
+    Setting('speed.steady', 0.5, '1 (share of speed.wander_max)',
+            ('a run off its declared speed whose speed departs from its own mean by at most this fraction of the '
+             'limit is called steady, and the speed the data show is named'),
+            'docs/real-data.md#a-speed-that-wanders-without-a-speed-channel-teststest_speed_wanderpy-benchmarksspeed_wanderpy',
+            'tests/test_speed_wander.py::test_a_steady_speed_other_than_the_declared_one_names_the_speed_the_data_show',
+            measured=False),
+    Setting('wiring.rigid_ok', 0.05, '1 (relative residual)',
+            'rigid-body residual of the body accelerometers against the gyros that counts as consistent',
+            'docs/real-data.md#sensors-as-wired-spec-11',
+            'tests/test_checks.py::test_rigid_body_identities_hold_for_the_van',
+            measured=False),
+    Setting('wiring.rigid_bad', 0.15, '1 (relative residual)',
+            'rigid-body residual of the body accelerometers against the gyros that counts as inconsistent',
+            'docs/real-data.md#sensors-as-wired-spec-11',
+            'tests/test_checks.py::test_rigid_body_identities_hold_for_the_van',
+            measured=False),
+    Setting('wiring.assign_margin', 0.6, '1 (summed correlation)',
+            'a re-wiring must beat the channel map by this much summed correlation to be reported',
+            'docs/real-data.md#sensors-as-wired-spec-11',
+            'tests/test_checks.py::test_best_assignment_on_a_known_matrix',
+            measured=False),
+    Setting('wiring.amplitude_band', 2.5, '1 (factor)',
+            ("an axle channel's amplitude against the road's (nominal car) may differ from its siblings' by this "
+             'factor either way before a unit is blamed'),
+            'docs/common-mistakes.md#the-checks',
+            'tests/test_checks.py::test_no_amplitude_unit_mistake_where_the_lead_in_read_g',
+            measured=False),
 )
 
 
@@ -585,7 +651,8 @@ _values: dict[str, object] = {s.name: s.default for s in _SETTINGS}
 def _check(name: str, value) -> object:
     """``value`` as the setting ``name`` holds it; :class:`ArgumentError` naming the setting otherwise."""
     if name not in REGISTRY:
-        close = [n for n in REGISTRY if n.split(".")[-1] == name.split(".")[-1]]
+        close = difflib.get_close_matches(str(name), REGISTRY, n=2) or [
+            n for n in REGISTRY if n.split(".")[-1] == str(name).split(".")[-1]]
         hint = f" (did you mean {' or '.join(close)}?)" if close else ""
         raise ArgumentError(f"settings: unknown setting '{name}'{hint}; the settings are listed in docs/settings.md")
     default = REGISTRY[name].default
@@ -620,7 +687,10 @@ class _Defaults(Mapping):
         try:
             return _values[name]
         except KeyError:
-            _check(name, None)  # the message naming the unknown setting
+            try:
+                _check(name, None)
+            except ArgumentError as e:  # a KeyError (a Mapping's `in` and `get` rely on it) naming the setting
+                raise KeyError(str(e)) from None
             raise
 
     def __iter__(self) -> Iterator[str]:
@@ -642,6 +712,9 @@ def _flatten(module_or_values, kw) -> dict:
     """``("adequacy", alpha=0.05)`` or ``({"adequacy.alpha": 0.05})`` -> ``{"adequacy.alpha": 0.05}``."""
     if isinstance(module_or_values, str):
         return {f"{module_or_values}.{k}": v for k, v in kw.items()}
+    if module_or_values is None and kw:
+        raise ArgumentError(f"settings: {', '.join(kw)}: a keyword needs the module it belongs to, "
+                            f"as set_defaults('adequacy', alpha=0.05)")
     values = dict(module_or_values or {})
     if kw:
         raise ArgumentError("settings: give a module name with keywords (set_defaults('adequacy', alpha=0.05)) "
@@ -696,13 +769,14 @@ def changed() -> dict:
 
 
 def legacy_names(module: str, names: dict[str, str]):
-    """A module ``__getattr__`` (PEP 562) that reads the old constant names of ``module`` from the registry:
-    ``adequacy.ALPHA`` -> ``defaults["adequacy.alpha"]`` (the names code outside rideid may still import)."""
+    """A module ``__getattr__`` (PEP 562) that reads the old constant names of ``module`` (its ``__name__``)
+    from the registry: ``rideid.estimate.adequacy.ALPHA`` -> ``defaults["adequacy.alpha"]`` (the names code
+    outside rideid may still import; read when imported, so they do not follow a later change)."""
 
     def __getattr__(attr):
         if attr in names:
             return _values[names[attr]]
-        raise AttributeError(f"module 'rideid.estimate.{module}' has no attribute {attr!r}")
+        raise AttributeError(f"module {module!r} has no attribute {attr!r}")
 
     return __getattr__
 
@@ -721,3 +795,7 @@ def markdown_table() -> str:
 
 __all__ = ["Setting", "REGISTRY", "NOT_SETTINGS", "defaults", "set_defaults", "reset_defaults", "using", "checked",
            "current", "changed", "markdown_table"]
+
+
+if __name__ == "__main__":  # python -m rideid.settings: the table of docs/settings.md
+    print(markdown_table(), end="")

@@ -887,7 +887,7 @@ def _identify_any_road(ds, *, rng=None, seed=None, population=None, generations=
 
 
 #: the constants this module had before rideid.settings, read from the registry (PEP 562)
-__getattr__ = legacy_names("anyroad", {
+__getattr__ = legacy_names(__name__, {
     "SPEED_TOLERANCE": "anyroad.speed_tolerance", "HELD_SPEED": "anyroad.held_speed", "PLAUSIBLE_FACTOR":
     "anyroad.plausible_factor", "PLAUSIBLE_RMS": "anyroad.plausible_rms", "PLAUSIBLE_WAVELENGTH":
     "anyroad.plausible_wavelength", "SPREAD_TOL": "anyroad.spread_tol", "JOINT_MOTION_BOUND":

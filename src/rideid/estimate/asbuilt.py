@@ -485,7 +485,7 @@ __all__ = ["MODES", "Prior", "TrackRun", "Fit", "nominal_inputs", "prepare_track
 
 
 #: the constants this module had before rideid.settings, read from the registry (PEP 562)
-__getattr__ = legacy_names("asbuilt", {
+__getattr__ = legacy_names(__name__, {
     "SMOOTH_BINS": "asbuilt.smooth_bins", "OPEN_FACTOR": "asbuilt.open_factor", "PRIOR_FLOOR":
     "asbuilt.prior_floor", "NORMAL_RIDGE": "asbuilt.normal_ridge", "CLUSTER_BINS": "asbuilt.cluster_bins",
     "NOISE_BINS": "asbuilt.noise_bins", "MOTION_SCALE": "asbuilt.motion_scale", "MOTION_STEPS":

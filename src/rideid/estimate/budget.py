@@ -416,5 +416,5 @@ __all__ = ["DeclaredInput", "declared_inputs", "propagate", "budget_entries", "w
 
 
 #: the constants this module had before rideid.settings, read from the registry (PEP 562)
-__getattr__ = legacy_names("budget", {
+__getattr__ = legacy_names(__name__, {
     "AT_BOUND": "budget.at_bound", "JACOBIAN_STEP": "budget.jacobian_step", "INPUT_STEP": "budget.input_step"})

@@ -219,6 +219,6 @@ __all__ = ["BUMP_STOP_NAMES", "NOT_REACHED", "bump_block", "compressions", "form
 
 
 #: the constants this module had before rideid.settings, read from the registry (PEP 562)
-__getattr__ = legacy_names("bumps", {
+__getattr__ = legacy_names(__name__, {
     "MIN_SAMPLES": "bumps.min_samples", "SCAN_COUNTS": "bumps.scan_counts", "SCAN_RATES": "bumps.scan_rates",
     "MIN_GAIN": "bumps.min_gain", "UNREACHED_FACTOR": "bumps.unreached_factor", "STATE_RHO": "bumps.state_rho"})

@@ -708,6 +708,6 @@ class CostFunction:
 
 
 #: the constants this module had before rideid.settings, read from the registry (PEP 562)
-__getattr__ = legacy_names("cost", {
+__getattr__ = legacy_names(__name__, {
     "ENERGY_FLOOR": "cost.energy_floor", "KNOT_BOUND_FACTOR": "cost.knot_bound_factor", "MEAN_SLOPE_VELOCITY":
     "cost.mean_slope_velocity"})

@@ -1053,7 +1053,7 @@ def _derived_std(space, cov):
 
 
 #: the constants this module had before rideid.settings, read from the registry (PEP 562)
-__getattr__ = legacy_names("identify", {
+__getattr__ = legacy_names(__name__, {
     "DEFAULT_SPREAD_TOL": "identify.spread_tol", "DEFAULT_SPREAD_TOL_NO_POLISH":
     "identify.spread_tol_no_polish", "ZERO_SCALE": "identify.zero_scale", "RESTART_AT_BOUND":
     "identify.restart_at_bound", "REPAIR_RESTARTS": "identify.repair_restarts", "POLISH_MAX_NFEV":

@@ -167,5 +167,5 @@ __all__ = ["METHOD", "flagged_pairs", "verdict", "weigh", "weigh_result"]
 
 
 #: the constants this module had before rideid.settings, read from the registry (PEP 562)
-__getattr__ = legacy_names("materiality", {
+__getattr__ = legacy_names(__name__, {
     "MATERIAL_SHIFT": "materiality.material_shift", "MAX_SHARE": "materiality.max_share"})

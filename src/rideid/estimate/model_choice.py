@@ -52,7 +52,9 @@ from ..settings import defaults, legacy_names
 from ..model.params import POWERTRAIN_NAMES
 from ..model.params import SUSPENSION_GROUPS as GROUPS
 from .budget import with_budget
+from .. import settings
 from .adequacy import advise, assess_fit
+from .records import assessments_of, plan_of
 from .adequacy import min_improvement as least_improvement
 from .materiality import weigh_result
 from .small_angle import small_angle
@@ -663,8 +665,36 @@ def identify(ds, *, model=None, rng=None, seed=None, population: int = DEFAULT_P
     -------
     IdentificationResult
         ``parameters`` (name -> value), ``details`` (each estimate's ``std``,
-        ``std_robust``), the model kept and the adequacy verdict.
+        ``std_robust``), the model kept and the adequacy verdict; ``plan``,
+        ``settings`` and ``assessments`` (SPEC §13).
+
+    Notes
+    -----
+    The dataset's ``[settings]`` (:mod:`rideid.settings`) are in force during
+    the fit, over those set in Python; ``settings`` records every value used.
     """
+    with settings.using(dataset_settings(ds)):
+        res = _identify(ds, model=model, rng=rng, seed=seed, population=population, generations=generations,
+                        weights=weights, polish=polish, spread_tol=spread_tol, callback=callback, cost=cost,
+                        maps=maps, start=start, assess=assess, simulator=simulator, tracks=tracks)
+        return with_records(ds, res)
+
+
+def dataset_settings(ds) -> dict:
+    """The ``[settings]`` of the dataset's ``dataset.toml`` (empty for a scenario or a dataset without)."""
+    return dict(getattr(getattr(ds, "manifest", None), "settings", None) or {})
+
+
+def with_records(ds, res):
+    """``res`` with the typed records of SPEC §13 (:mod:`rideid.estimate.records`): the plan, the settings in
+    force, the assessments."""
+    return replace(res, plan=plan_of(res, [r.id for r in ds.runs]), settings=settings.current(),
+                   assessments=assessments_of(res))
+
+
+def _identify(ds, *, model, rng, seed, population, generations, weights, polish, spread_tol, callback, cost, maps,
+              start, assess, simulator, tracks):
+    """The body of :func:`identify` (the dataset's settings in force)."""
     if cost is None:
         model = default_model(ds, model)
     common = dict(rng=rng, seed=seed, population=population, generations=generations, weights=weights,
@@ -779,5 +809,5 @@ def _tracks_before_curves(ds, res, chosen, simulator, tracks, common):
 
 
 #: the constants this module had before rideid.settings, read from the registry (PEP 562)
-__getattr__ = legacy_names("model_choice", {
+__getattr__ = legacy_names(__name__, {
     "PENALTY_LEVEL": "model_choice.penalty_level", "DRAWING_RUNS": "model_choice.drawing_runs"})

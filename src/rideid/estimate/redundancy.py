@@ -144,5 +144,5 @@ __all__ = ["rigid_body_gains", "gain_notes", "BODY", "GYROS"]
 
 
 #: the constants this module had before rideid.settings, read from the registry (PEP 562)
-__getattr__ = legacy_names("redundancy", {
+__getattr__ = legacy_names(__name__, {
     "FLAG_SIGMA": "redundancy.flag_sigma", "FLAG_UNDECLARED": "redundancy.flag_undeclared"})

@@ -620,7 +620,7 @@ def fitted_channels(P, geom: Geometry, rr: RoadRun, y, sol: Solution | None = No
 
 
 #: the constants this module had before rideid.settings, read from the registry (PEP 562)
-__getattr__ = legacy_names("roadfit", {
+__getattr__ = legacy_names(__name__, {
     "BAND": "roadfit.band", "DELAY_ORDER": "roadfit.delay_order", "ROAD_WAVELENGTHS":
     "roadfit.road_wavelengths", "SEARCH_BINS": "roadfit.search_bins", "CLIP_SHARE": "roadfit.clip_share",
     "CLIP_MAX": "roadfit.clip_max", "SIGNAL_FLOOR": "roadfit.signal_floor", "MODAL_COND": "roadfit.modal_cond"})

@@ -115,5 +115,5 @@ __all__ = ["score"]
 
 
 #: the constants this module had before rideid.settings, read from the registry (PEP 562)
-__getattr__ = legacy_names("score", {
+__getattr__ = legacy_names(__name__, {
     "COVERAGE_K": "score.coverage_k"})

@@ -143,5 +143,5 @@ __all__ = ["compute_maps", "cost_maps", "sensitivity_maps", "SensitivityMaps"]
 
 
 #: the constants this module had before rideid.settings, read from the registry (PEP 562)
-__getattr__ = legacy_names("sensitivity", {
+__getattr__ = legacy_names(__name__, {
     "STEP": "sensitivity.step"})

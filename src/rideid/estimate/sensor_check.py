@@ -177,7 +177,7 @@ __all__ = ["clipping_advice", "coupling_hints"]
 
 
 #: the constants this module had before rideid.settings, read from the registry (PEP 562)
-__getattr__ = legacy_names("sensor_check", {
+__getattr__ = legacy_names(__name__, {
     "HINT_CORNERS": "sensor_check.hint_corners", "HINT_REDUCTION": "sensor_check.hint_reduction",
     "ROAD_HINT_SINGLE": "sensor_check.road_hint_single", "FREE_ROAD_HINT_REDUCTION":
     "sensor_check.free_road_hint_reduction"})

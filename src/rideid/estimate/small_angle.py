@@ -90,5 +90,5 @@ __all__ = ["body_angles", "small_angle"]
 
 
 #: the constants this module had before rideid.settings, read from the registry (PEP 562)
-__getattr__ = legacy_names("small_angle", {
+__getattr__ = legacy_names(__name__, {
     "THRESHOLD_DEG": "small_angle.threshold_deg", "BIAS_PER_DEGREE": "small_angle.bias_per_degree"})

@@ -491,6 +491,6 @@ def estimate_covariance(info: dict | None, space, x=None) -> EstimateCovariance:
 
 
 #: the constants this module had before rideid.settings, read from the registry (PEP 562)
-__getattr__ = legacy_names("uncertainty", {
+__getattr__ = legacy_names(__name__, {
     "RHO_MAX": "uncertainty.rho_max", "RANK_RTOL": "uncertainty.rank_rtol", "NULL_SHARE":
     "uncertainty.null_share", "BIRGE_P": "uncertainty.birge_p"})
