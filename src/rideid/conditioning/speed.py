@@ -21,8 +21,8 @@ peak); on a periodic track the lag is followed from window to window within
 half the response's period, so it never jumps a cycle. The speed's
 deviation between two neighbouring windows is their lags' difference over
 their distance in time. :func:`speed_finding` refuses a run whose speed,
-so measured, leaves the declared one by more than :data:`WANDER_MAX`, and
-by more than :data:`Z_MIN` times the deviation's uncertainty.
+so measured, leaves the declared one by more than setting ``speed.wander_max``, and
+by more than setting ``speed.z_min`` times the deviation's uncertainty.
 
 The car is the nominal one, not the car in the data: a different car (other
 modes, damper curves, bump stops) lags the road differently, and by a
@@ -174,8 +174,8 @@ def speed_summary(w: dict) -> dict | None:
     ``deviation``: the relative deviation from the declared speed of the mean speed between two neighbouring
     windows (their lags' difference over their distance in time), ``std`` its uncertainty (the two windows'
     ``sigma`` combined, over the same time); ``low`` and ``high`` the lowest and the highest deviation;
-    ``beyond`` the largest deviation that exceeds :data:`Z_MIN` times its uncertainty (0 if none does: the lags
-    cannot tell the speed from the declared one); ``mean``: the relative difference from the declared speed
+    ``beyond`` the largest deviation that exceeds setting ``speed.z_min`` times its uncertainty (0 if none does: the
+    lags cannot tell the speed from the declared one); ``mean``: the relative difference from the declared speed
     of the constant speed that best explains the lags (the slope of a straight line through them);
     ``wander``: the largest departure of a deviation from ``mean``.
     """
@@ -196,7 +196,7 @@ def speed_summary(w: dict) -> dict | None:
 
 def speed_finding(run_id: str, where: str, speed: float, s: dict, limit: float | None = None) -> Finding | None:
     """The error refusing a run whose speed, as the data show it (:func:`speed_summary`), leaves the declared
-    ``speed`` by more than ``limit`` (default :data:`WANDER_MAX`); None when it holds it."""
+    ``speed`` by more than ``limit`` (default setting ``speed.wander_max``); None when it holds it."""
     limit = defaults["speed.wander_max"] if limit is None else limit
     if s["beyond"] <= limit:
         return None

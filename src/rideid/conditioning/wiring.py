@@ -501,7 +501,7 @@ def axle_amplitude_findings(run_id: str, entries: dict, Y: np.ndarray, Yhat: np.
     on the same road is compared with that of the other axle channels (or,
     when every hub channel is off by the same factor, with the body
     channels', which the rigid-body identities have checked): a ratio of
-    about g (within :data:`AMPLITUDE_BAND`) is a unit mistake, since cars
+    about g (within setting ``wiring.amplitude_band``) is a unit mistake, since cars
     differ from the nominal car by far less.
 
     Returns one error (check "wiring") per channel, with the fix, as

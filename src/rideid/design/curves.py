@@ -22,7 +22,7 @@ car's suspension velocities on each run (the compiled kernel's states at the loo
 per knot, the samples of the axle's two corners beyond the previous knot on
 its side (:func:`rideid.estimate.dampers.knot_counts`). A set of runs
 excites a knot when those counts, summed over its runs, reach
-:data:`rideid.estimate.dampers.MIN_SAMPLES`; the innermost knots always
+setting ``dampers.min_samples``; the innermost knots always
 count as excited and beyond a knot not excited none is (identify's rule).
 A knot a set of runs does not excite is excluded from that set's Fisher
 matrix (its rows and columns zero: identify would not fit it, it continues

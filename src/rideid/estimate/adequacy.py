@@ -18,16 +18,16 @@ input correlation (decisive)
     Sensor noise is independent of the road; a model that misses part of the
     car leaves a residual that is a filtered copy of the road input. The
     residual is prewhitened by its own AR model (order by BIC, at most
-    :data:`AR_MAX`), the same filter is applied to the regressors — the four
-    wheel inputs and their rates at lags :data:`LAGS` — and an F-test asks
+    setting ``adequacy.ar_max``), the same filter is applied to the regressors — the four
+    wheel inputs and their rates at lags setting ``adequacy.lags`` — and an F-test asks
     whether they explain the whitened residual (with whitened residuals the
     test holds whatever the colour of the noise or of the road). A run and
-    channel shows *structure* when the test rejects at :data:`ALPHA`
+    channel shows *structure* when the test rejects at setting ``adequacy.alpha``
     divided by the number of run/channel pairs (Bonferroni: a correct model
     is called inadequate in about 1 % of datasets) and the input explains at
-    least :data:`MIN_EXPLAINED` of the whitened residual's variance and the
+    least setting ``adequacy.min_explained`` of the whitened residual's variance and the
     road-explained part (``sqrt(explained) * RMS(e)``) is at least
-    :data:`MIN_RELATIVE` of the channel's RMS (so that neither a long run nor
+    setting ``adequacy.min_relative`` of the channel's RMS (so that neither a long run nor
     noise-free data, whose residual is a tiny but perfectly road-driven
     parameter offset, flag a negligible effect).
 
@@ -370,7 +370,7 @@ def assess_fit(cf, P, sims=None) -> dict:
 
 def level_caveat(adequacy: dict) -> str | None:
     """What an adequate verdict must add when the residual is well above the sensor noise in many run/channel
-    pairs (:data:`LOUD_SHARE` of those with a quiet lead-in) though the road-driven test finds nothing: the
+    pairs (setting ``adequacy.loud_share`` of those with a quiet lead-in) though the road-driven test finds nothing: the
     prewhitening takes away what the residual's own past predicts, so a slow miss (a roll stiffness the model
     lacks, at the roll mode) passes the F-test and shows only in the level figure, which does not decide
     (sensor noise may grow while driving). None when not adequate, or when few pairs are loud."""

@@ -25,7 +25,7 @@ steps:
    ``std_robust`` with ``B`` the gradient's spread over clusters, each road
    run's DFT bin one cluster and the track runs' HAC long-run covariance
    (:mod:`rideid.estimate.uncertainty`).
-   A channel without signal on a run (RMS below :data:`rideid.estimate.roadfit.SIGNAL_FLOOR` of its kind's
+   A channel without signal on a run (RMS below setting ``roadfit.signal_floor`` of its kind's
    largest: a roll rate on a washboard, a dead sensor) is left out of that run's fit and named in
    ``roads.<run>.channels_left_out``: the fit weights each channel by 1 / its RMS, and rounding must not
    become the heaviest channel.
@@ -94,7 +94,7 @@ def unknown_road_runs(ds, extensions=()) -> list:
 
 def run_speed(ds, run) -> float:
     """The constant speed (m/s) of an unknown-road run: the manifest's, or its speed/distance channel's
-    mean when it varies by at most :data:`SPEED_TOLERANCE` (else one clear error)."""
+    mean when it varies by at most setting ``anyroad.speed_tolerance`` (else one clear error)."""
     rd = ds.data[run.id]
     dist = getattr(rd, "distance", None)
     if dist is None:
@@ -371,7 +371,7 @@ def _with_motion(prob, z, H, Ja, S, s2, trs, along, ds, geom):
 
 
 def _search(space, geom, rruns, gen, population, generations, callback, t0):
-    """JADE on the road runs' search cost, stopped by the population spread (:data:`SPREAD_TOL`)."""
+    """JADE on the road runs' search cost, stopped by the population spread (setting ``anyroad.spread_tol``)."""
     def fun(X):
         P = space.full(X)
         out = np.full(P.shape[0], np.inf)
@@ -442,8 +442,8 @@ def as_built_runs(ds, ext, tracks: str = "as-built") -> tuple[list, dict]:
     """The runs on declared tracks fitted as built (SPEC §11, :mod:`rideid.estimate.asbuilt`), and those taken
     as drawn with why: run id -> one line. As built needs a linear car (``ext`` without damper curves or bump
     stops), the eight accelerometers, the roll rate and a speed held (a declared constant speed, or a speed or
-    distance channel that wanders by at most :data:`HELD_SPEED`, :func:`speed_wander`); ``tracks="as-drawn"``
-    takes every track as drawn.
+    distance channel that wanders by at most setting ``anyroad.held_speed``, :func:`speed_wander`);
+    ``tracks="as-drawn"`` takes every track as drawn.
 
     The roll rate: without it a slow road difference between the wheel paths and the body's roll (a free
     state at the first sample) trade off, and the road the prior is estimated from is not determined. Measured
@@ -451,7 +451,7 @@ def as_built_runs(ds, ext, tracks: str = "as-built") -> tuple[list, dict]:
     boundary unknowns of the free-road fit 4-79 (0.03-0.1 with it), "unevenness" of 0.2-3.6 m RMS, and the
     tracks as built rejected as implausible; the pitch rate removed instead changes nothing. A roll rate that is
     present but carries no signal (a symmetric track in simulated data) has the same trade-off; such runs stay as
-    built, and the plausibility of what the tracks needed (:data:`PLAUSIBLE_RMS`) judges them, as before."""
+    built, and the plausibility of what the tracks needed (setting ``anyroad.plausible_rms``) judges them, as before."""
     if tracks not in TRACK_OPTIONS:
         raise ArgumentError(f"tracks: expected one of {', '.join(TRACK_OPTIONS)}, got {tracks!r}")
     road_ids = {r.id for r in unknown_road_runs(ds, ext)}
@@ -581,7 +581,7 @@ def _road_sensor_hints(P, geom, rruns, ds, threshold=None):
     SUV's hubs coupled at 0.5 Hz, not declared: k_sf +21 %, 37 std_total, which the residual test at the estimated
     road did not see). On unknown roads (no as-drawn fit, no time-domain hint) the road takes up part of a
     coupling's signature, so a smaller cut names it (``threshold`` =
-    :data:`rideid.estimate.sensor_check.FREE_ROAD_HINT_REDUCTION`; the hubs of the built-in car coupled at 0.5 Hz,
+    setting ``sensor_check.free_road_hint_reduction``; the hubs of the built-in car coupled at 0.5 Hz,
     not declared: k_sr +18 % at the fit, the trial cut the residual 35 %)."""
     threshold = defaults["sensor_check.hint_reduction"] if threshold is None else threshold
     return road_coupling_hints(P, geom, rruns, {rr.run_id: ds.sensor_filters(rr.run_id) for rr in rruns},

@@ -38,8 +38,8 @@ the road is projected out (an unknown road's fit), the free road estimate
 ``R`` is regressed on the drawn front road for ``alpha``, and the deviation's
 power ``|R - alpha U_front|^2``, less the part the sensor noise puts into
 ``R`` (``sigma_n^2 (A^H A)^-1``), averaged over both paths and
-:data:`SMOOTH_BINS` neighbouring bins, is ``sigma_d^2``, floored at
-:data:`PRIOR_FLOOR` of that noise part. On an exact track ``sigma_d`` comes
+setting ``asbuilt.smooth_bins`` neighbouring bins, is ``sigma_d^2``, floored at
+setting ``asbuilt.prior_floor`` of that noise part. On an exact track ``sigma_d`` comes
 out near that floor and the fit is the known-road fit; where the track
 carries unevenness the prior widens and the road there is learnt.
 
@@ -164,7 +164,7 @@ def prepare_track_run(ds, run, mode: str = "prior") -> TrackRun:
 
 def moved(tr: TrackRun, ds, run, p) -> TrackRun:
     """``tr`` with its drawing moved by ``p`` = (the speed's relative change, the start's shift) in
-    :data:`MOTION_SCALE` units: the drawing at ``x = v (t - shift)``, the rear wheels' delay at ``v`` (the
+    setting ``asbuilt.motion_scale`` units: the drawing at ``x = v (t - shift)``, the rear wheels' delay at ``v`` (the
     tabulated ``inputs`` as they were: :func:`align_motion` renews them once)."""
     v = tr.rr.speed * (1.0 + p[0] * defaults["asbuilt.motion_scale"][0])
     shift = tr.shift + p[1] * defaults["asbuilt.motion_scale"][1]
@@ -270,7 +270,7 @@ def _whitener(Acol, D, mode):
 
 
 def _normal_solve(G, b):
-    """``G^-1 b`` for the normal matrix ``G`` (unit diagonal), regularised by :data:`NORMAL_RIDGE` on the
+    """``G^-1 b`` for the normal matrix ``G`` (unit diagonal), regularised by setting ``asbuilt.normal_ridge`` on the
     diagonal: some of the rear lead-in's samples and the start's state explain the same thing, so ``G`` is
     singular to rounding; the ridge picks the smallest of the equivalent solutions (the residual the same to
     1e-9) and lets a Cholesky factor solve it (30 times faster than LAPACK's SVD least squares at the 400
@@ -380,8 +380,8 @@ def meat(J, e, tr: TrackRun, s2: float | None = None) -> np.ndarray:
 
 
 def cluster_meat(J, e, tr: TrackRun) -> np.ndarray:
-    """The gradient's spread over clusters of :data:`CLUSTER_BINS` neighbouring DFT bins of run ``tr``'s block
-    (kept for comparison: :func:`meat` says why it is not used)."""
+    """The gradient's spread over clusters of setting ``asbuilt.cluster_bins`` neighbouring DFT bins of run ``tr``'s
+    block (kept for comparison: :func:`meat` says why it is not used)."""
     g = (J * e[:, None]).reshape(-1, tr.per_bin, J.shape[1]).sum(axis=1)           # per bin
     K = g.shape[0]
     groups = np.arange(K) // max(1, defaults["asbuilt.cluster_bins"])

@@ -166,7 +166,7 @@ def _full_jacobian(space: ParameterSpace, x) -> np.ndarray:
 
 def residual_jacobian(cf: CostFunction, x, weights) -> tuple[np.ndarray, np.ndarray]:
     """The polish's Jacobian at ``x``: ``(m, d)`` in bound-normalised coordinates (forward differences,
-    :data:`JACOBIAN_STEP`), and the residuals ``(m,)``."""
+    setting ``budget.jacobian_step``), and the residuals ``(m,)``."""
     lo, span = cf.bounds[:, 0], cf.bounds[:, 1] - cf.bounds[:, 0]
     z = (np.asarray(x, dtype=float) - lo) / span
     d = z.size

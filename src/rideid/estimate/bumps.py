@@ -8,14 +8,14 @@ has no stops. Its best car is simulated as the nonlinear car without stops
 and the compressions ``d_i = z_i - z_bi`` (m, from static ride height) of
 each axle's two corners over all runs are collected. For each axle whose
 stop is not fully known, candidate clearances are the compressions that
-:data:`SCAN_COUNTS` samples exceed (20 .. 1280 samples: from a stop touched
+setting ``bumps.scan_counts`` samples exceed (20 .. 1280 samples: from a stop touched
 on the highest peaks only to one met on every large stroke), inside the
-clearance bounds, crossed with the rates :data:`SCAN_RATES` (N/m, inside the
+clearance bounds, crossed with the rates setting ``bumps.scan_rates`` (N/m, inside the
 rate bounds); a known clearance or rate is the only candidate of its kind.
 Every candidate car (the search's car with that one stop, the other axle
 without) is scored on the equal-weight cost in one batch. An axle's best
 candidate starts the polish when it lowers the cost by at least
-:data:`MIN_GAIN` (relative) against the car without that stop; otherwise the
+setting ``bumps.min_gain`` (relative) against the car without that stop; otherwise the
 stop is **not reached**. The scan is a coarse grid on purpose: the polish
 (Gauss-Newton on the nonlinear car) finishes clearance and rate together,
 and it only needs the stop engaged (a stop that touches no sample has zero
@@ -23,7 +23,7 @@ gradient, so a start above every compression would never move).
 
 Reached
 -------
-An axle's stop is reached when at least :data:`MIN_SAMPLES` samples (both
+An axle's stop is reached when at least setting ``bumps.min_samples`` samples (both
 corners of the axle, all runs) of the fitted car's compression exceed its
 clearance (checked on the scan's start and again on the polished car; an
 axle that fails after the polish is frozen and the polish repeated). A stop

@@ -9,7 +9,7 @@ suspension velocities ``v_i = z_i' - z_bi'`` are simulated over every run
 (the nonlinear car's states from the compiled kernel, plain RK4 sub-steps at the lift-off sub-step bound
 :data:`rideid.data.scenario.LIFT_OFF_RHO`: outputs within 0.02 % of their RMS of the split sub-steps'),
 and a knot of an axle counts as **excited** when at least
-:data:`MIN_SAMPLES` samples of the axle's two corners over all runs go beyond
+setting ``dampers.min_samples`` samples of the axle's two corners over all runs go beyond
 the previous knot on its side (beyond 0 for the innermost knots, which are
 always kept). 20 samples at 200 Hz are 0.1 s of travel in the knot's
 segment: below that the force rests on a handful of peaks and its error bar
@@ -21,7 +21,7 @@ error: "not excited — not a number to trust").
 Knees found by the data
 -----------------------
 Nobody knows where their damper bends before testing it. Without ``[model]
-damper_knots`` the curves are fitted on :data:`KNEE_GRID` instead of the
+damper_knots`` the curves are fitted on setting ``dampers.knee_grid`` instead of the
 default knots: 0.025 m/s apart up to 0.2 m/s (where production dampers bend),
 every default knot among them; the excitation rule above freezes the grid
 knots no run reaches. Where each curve bends is then read off the fitted curve
@@ -248,7 +248,8 @@ def bends_of(v, F, cov=None) -> list:
     """The knots where a side's curve bends: ``[{"velocity", "slope_change", "std_robust"}, ...]`` for each
     interior knot (``v`` positive ascending, ``F`` the forces there, through the origin) whose change of
     slope over its stretch (half the span to its neighbours) is the largest of its neighbours', and whose
-    change is larger than :data:`BEND_SHARE` of the steepest slope and than :data:`KNEE_SIGNIFICANCE` of
+    change is larger than setting ``dampers.bend_share`` of the steepest slope and than setting
+    ``dampers.knee_significance`` of
     its std_robust (from ``cov``, the forces' covariance; None: not tested). Several bends (a valve that
     opens in stages) are each listed; a smooth bend shows at one knot or two close together."""
     v = np.asarray(v, dtype=float)
@@ -285,7 +286,7 @@ def knees(space, P, cov_robust, names, excitation=None) -> dict:
     ``std_robust`` from draws of those forces (covariance ``cov_robust`` over ``names``; rule: :func:`knee_rule`).
 
     A side with fewer than 3 excited knots, or whose slope ratio does not differ from 1 by more than
-    :data:`KNEE_SIGNIFICANCE` std_robust, has ``velocity`` None (no bend the data can place)."""
+    setting ``dampers.knee_significance`` std_robust, has ``velocity`` None (no bend the data can place)."""
     knots = np.asarray(space.layout.knots)
     K = knots.size
     j0 = int(np.searchsorted(knots, 0.0))
@@ -330,7 +331,7 @@ def knees(space, P, cov_robust, names, excitation=None) -> dict:
 
 
 def grid_std(space, P) -> dict:
-    """The approximation error of curves fitted on :data:`KNEE_GRID`, as a standard error per excited knot
+    """The approximation error of curves fitted on setting ``dampers.knee_grid``, as a standard error per excited knot
     force and for the derived ``c_sf``, ``c_sr`` (name -> N or N s/m) of full row ``P``.
 
     A smooth curve is straight between the knots here: the least-squares line through a stretch of local

@@ -48,7 +48,7 @@
    ``c_sf``, ``c_sr`` and frozen knots are derived; their standard errors
    follow by the delta method (they are linear in the knot forces).
    Without ``[model] damper_knots`` the curves' knots are those of
-   :data:`rideid.estimate.dampers.KNEE_GRID` (:func:`knee_cost`), and where
+   setting ``dampers.knee_grid`` (:func:`knee_cost`), and where
    each curve bends is reported with its error bar
    (:func:`rideid.estimate.dampers.knees`).
 10. Bump stops (SPEC §8, group ``bump_stops``): the search on the linear
@@ -316,14 +316,14 @@ def _curve_start(cf: CostFunction, cf_search: CostFunction, x):
 
 
 def finds_knees(space: ParameterSpace) -> bool:
-    """Whether the curves of ``space`` are fitted again on :data:`~rideid.estimate.dampers.KNEE_GRID`: damper
+    """Whether the curves of ``space`` are fitted again on setting ``dampers.knee_grid``: damper
     curves at the default knots (no ``[model] damper_knots``) and no ``[bounds]`` of a knot force (a user's
     knots, or bounds set on the default knots' forces, win)."""
     return space.curves and space.damper_knots is None and not any(k.startswith("F_") for k in space._bounds_arg)
 
 
 def knee_cost(cf: CostFunction) -> CostFunction:
-    """``cf`` on the same model with its curves' knots on :data:`~rideid.estimate.dampers.KNEE_GRID`
+    """``cf`` on the same model with its curves' knots on setting ``dampers.knee_grid``
     (the same data, simulator settings and evaluation count)."""
     old = cf.space
     space = ParameterSpace(old.known, old.geometry, old._bounds_arg, old.extensions,
@@ -704,7 +704,7 @@ def _polish(cf: CostFunction, x0, weights, align=None):
 
     With damper curves a solve that ends on a row the monotone repair changes (a knot force below its
     inner neighbour: :meth:`ParameterSpace.full` hides it, so its gradient is 0 and the solver stops
-    there) is solved again from the physical row, the forces the simulator saw (:data:`REPAIR_RESTARTS`).
+    there) is solved again from the physical row, the forces the simulator saw (setting ``identify.repair_restarts``).
 
     Returns ``(x, info, std)``: the free parameters, the ``polish`` block of result.json and the
     parameters' white standard errors (:class:`_Polish`).
@@ -874,13 +874,13 @@ class _Polish:
         holds a variable on its bound only when it lies exactly there, and it stops short beside a bound in
         two ways. A variable a rounding error inside its bound (a Gauss-Newton step that lands an extension
         on 0 leaves it at 1e-15) cuts every later step to that distance: dogbox ends on ``xtol`` after one
-        step, far from the optimum, its gradient still large (:data:`STALL_OPTIMALITY`). A variable on its
+        step, far from the optimum, its gradient still large (setting ``identify.stall_optimality``). A variable on its
         bound whose gradient points inward while the Gauss-Newton step points outward is released, and
         every step is cut where it meets the bound again: a crawl to ``max_nfev``, each step taking a few
-        parts in 1e5 off the cost. So: a start that close to a bound is put on it (:data:`BOUND_SNAP`);
-        dogbox gets :data:`DOGBOX_MAX_NFEV` evaluations; a dogbox that ran out of them, or ended that close
+        parts in 1e5 off the cost. So: a start that close to a bound is put on it (setting ``identify.bound_snap``);
+        dogbox gets setting ``identify.dogbox_max_nfev`` evaluations; a dogbox that ran out of them, or ended that close
         to a bound without being on it and short of the optimum, is continued by trf from where it stopped,
-        within the polish's :data:`POLISH_MAX_NFEV` in all (the lower cost of the two is the result).
+        within the polish's setting ``identify.polish_max_nfev`` in all (the lower cost of the two is the result).
         """
         d, n_al = self.d, len(self.align)
         n_w = self.n_unknowns - d - n_al

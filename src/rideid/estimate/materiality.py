@@ -13,11 +13,11 @@ fixed starts so that only the left-out data differ:
 ``shift_i = |x_i(without) - x_i(all)| / std_total_i``
 
 (``std_total`` where the result has it, else ``std_robust``). The model is
-adequate when the largest shift is at most :data:`MATERIAL_SHIFT`: what
+adequate when the largest shift is at most setting ``materiality.material_shift``: what
 the model misses in those pairs moves no estimate by more than its error
 bar. It is not adequate when a shift is larger, when the pairs left out
 leave a parameter undetermined (the flagged data were all that measured
-it), or when structure is in more than :data:`MAX_SHARE` of the pairs
+it), or when structure is in more than setting ``materiality.max_share`` of the pairs
 (then there is no clean remainder to compare with: the model misses
 something everywhere).
 

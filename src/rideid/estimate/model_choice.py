@@ -403,7 +403,7 @@ def _curve_subset(r_c, chosen, c_crit):
 
 def knots_like(ds, res=None):
     """``damper_knots`` of a candidate started from curve result ``res``: the grid its knees were found on
-    (:data:`rideid.estimate.dampers.KNEE_GRID`: its knot forces are then the start's own, no second fit),
+    (setting ``dampers.knee_grid``: its knot forces are then the start's own, no second fit),
     else the dataset's ``[model] damper_knots``."""
     found = res is not None and (res.dampers or {}).get("knots_from", "").startswith("found")
     return defaults["dampers.knee_grid"] if found else ds.manifest.damper_knots
@@ -743,7 +743,7 @@ def _identify(ds, *, model, rng, seed, population, generations, weights, polish,
 
 def _drawing_caveat(ds, res, chosen, tracks):
     """``res`` with ``adequacy.tracks_caveat`` when the verdict is adequate only because the structure the
-    residual test found, in :data:`DRAWING_RUNS` or more runs, was weighed immaterial
+    residual test found, in setting ``model_choice.drawing_runs`` or more runs, was weighed immaterial
     (:mod:`rideid.estimate.materiality`) while the tracks stayed as drawn: the as-built stage (SPEC §11) could
     not run or was rejected. Leaving the flagged pairs out cannot show a drawing error, which biases every run
     and channel alike: on the all-realities case (tracks 4 % off their drawing, a GPS speed channel) the

@@ -125,8 +125,9 @@ def rigid_body_gains(ds: Dataset) -> dict | None:
 
 
 def gain_notes(block: dict | None, sensitivity_std: dict) -> list[str]:
-    """A line for each body sensor whose relative gain departs from 1 by more than :data:`FLAG_SIGMA` standard
-    errors and more than twice its declared ``sensitivity_std`` (:data:`FLAG_UNDECLARED` without one)."""
+    """A line for each body sensor whose relative gain departs from 1 by more than setting ``redundancy.flag_sigma``
+    standard errors and more than twice its declared ``sensitivity_std`` (setting ``redundancy.flag_undeclared``
+    without one)."""
     if not block:
         return []
     out = []

@@ -58,14 +58,14 @@ unsprung masses by several per cent):
 
 The delay itself is a fractional number of samples in general. The rear
 input is the front road sampled between the front wheels' samples; it is
-taken as a Lagrange interpolating filter of order :data:`DELAY_ORDER` on
+taken as a Lagrange interpolating filter of order setting ``roadfit.delay_order`` on
 the front samples (``E(omega)`` its frequency response), exact for road
 content well inside the sampling band. Road content at wavelengths shorter
 than about two sample spacings (``speed / fs``) is seen by the rear wheel
 between the front wheel's samples and by neither sample sequence: it breaks
 the front/rear consistency like input noise. Measured: a road profile given
 on a 5 cm grid (linear interpolation kinks) at 15 m/s and 200 Hz biases the
-tires by -0.5 %; on a 1 cm grid by < 0.02 %; :data:`BAND` stops at 25 Hz for
+tires by -0.5 %; on a 1 cm grid by < 0.02 %; setting ``roadfit.band`` stops at 25 Hz for
 the same reason. docs/roads.md says what this asks of a logging rate.
 
 Sensors as wired (SPEC §11)
@@ -103,8 +103,8 @@ others at every trial car. That is the least-squares fit with the sample
 left out; a clipped peak of several samples in a row is determined in the
 band only in its few combinations the band can hold, and the solve takes
 the shortest of the equivalent solutions. A channel clipped on more than
-:data:`CLIP_SHARE` of its in-band real values, or a run with more than
-:data:`CLIP_MAX` clipped samples, leaves that channel out whole instead
+setting ``roadfit.clip_share`` of its in-band real values, or a run with more than
+setting ``roadfit.clip_max`` clipped samples, leaves that channel out whole instead
 (:func:`without_clipped`).
 
 The global unknowns' normal equations are assembled in closed form: the
@@ -136,7 +136,7 @@ from ..model.sensors import discretise, modal_pairs
 
 def used_channels(y) -> tuple[np.ndarray, dict]:
     """The channels of ``y`` (n, 10; NaN columns absent) the road fit uses, and those it leaves out: name ->
-    why (:data:`SIGNAL_FLOOR`)."""
+    why (setting ``roadfit.signal_floor``)."""
     y = np.asarray(y, dtype=float)
     present = np.isfinite(y).all(axis=0)
     rms = np.where(present, np.sqrt(np.mean((np.where(present, y, 0.0) - np.where(present, y, 0.0).mean(axis=0))
@@ -181,7 +181,7 @@ class RoadRun:
     tau : float
         Rear wheels' delay (s).
     left_out : dict
-        Channels the run has but the fit leaves out (:data:`SIGNAL_FLOOR`): name -> why, one line.
+        Channels the run has but the fit leaves out (setting ``roadfit.signal_floor``): name -> why, one line.
     sensors : tuple
         Per used channel (``cols`` order) the analog filters of its sensor chain (SPEC §11, a tuple of
         :class:`rideid.model.sensors.AnalogFilter`); empty: no channel filtered (:func:`with_sensors`).
@@ -224,8 +224,8 @@ def prepare_road_run(run_id: str, y, fs: float, speed: float, geom: Geometry, co
     ``cols``: the channels to use; default those :func:`used_channels` keeps (a channel without signal is left
     out and named in ``left_out``). ``clipped`` (n, 10) bool, optional: where a channel sat at its range
     (SPEC §11, :meth:`rideid.data.dataset.Dataset.clipped`); each such sample is a free unknown of the fit
-    (``clip``, module docstring), or, past :data:`CLIP_SHARE` or :data:`CLIP_MAX`, its channel is left out of
-    this run's fit whole (:func:`without_clipped`) and named in ``left_out``."""
+    (``clip``, module docstring), or, past setting ``roadfit.clip_share`` or setting ``roadfit.clip_max``, its
+    channel is left out of this run's fit whole (:func:`without_clipped`) and named in ``left_out``."""
     band = defaults["roadfit.band"] if band is None else band
     y = np.asarray(y, dtype=float)
     n = y.shape[0]
@@ -257,10 +257,10 @@ def without_clipped(y, clipped=None, values=None) -> tuple[np.ndarray, dict, dic
     On a known track the time-domain cost leaves the clipped samples out one by one (SPEC §11). A road fit
     works on the run's DFT, where a peak cut flat is a distortion of every bin, which the free road would
     partly take up and pass on to the car: each clipped sample is freed instead (module docstring). A channel
-    clipped on more than :data:`CLIP_SHARE` of its ``values`` in-band real values (None: no limit), or every
-    clipped channel of a run with more than :data:`CLIP_MAX` clipped samples, is left out of that run's road fit
-    whole; its other runs keep it, and the road stays determined by the other nine (both wheel paths enter
-    every channel)."""
+    clipped on more than setting ``roadfit.clip_share`` of its ``values`` in-band real values (None: no limit), or
+    every clipped channel of a run with more than setting ``roadfit.clip_max`` clipped samples, is left out of that
+    run's road fit whole; its other runs keep it, and the road stays determined by the other nine (both wheel paths
+    enter every channel)."""
     y = np.array(y, dtype=float)
     left, freed = {}, {}
     if clipped is None:

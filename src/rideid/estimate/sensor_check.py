@@ -10,7 +10,7 @@ the identified car's channel, passed through a first-order high-pass of some
 corner between 0.1 and 2 Hz, matches the data markedly better than the
 channel itself. :func:`coupling_hints` tries those corners on every channel
 without a declared high-pass, over all runs at once, and names a channel
-whose residual sum of squares falls by at least :data:`HINT_REDUCTION`; a
+whose residual sum of squares falls by at least setting ``sensor_check.hint_reduction``; a
 car fitted to data that are not coupled loses by any such filter (it removes
 the body's low-frequency motion the data hold). On runs whose road is fitted
 (tracks as built, unknown roads) :func:`road_coupling_hints` does the same
@@ -96,9 +96,9 @@ def road_coupling_hints(P, geom, rruns, filters, threshold: float | None = None)
     to compare. Here the identified car ``P`` is projected onto each run with its road free
     (:func:`rideid.estimate.roadfit.residuals`, the drawing unused), once as the channels are declared and
     once with a trial first-order high-pass added to a group of channels (the four hub accelerometers, the
-    four body accelerometers; then each accelerometer alone at :data:`ROAD_HINT_SINGLE`): a group whose
-    trial cuts the summed squared residual of every run by ``threshold`` (:data:`HINT_REDUCTION`; on unknown
-    roads :data:`FREE_ROAD_HINT_REDUCTION`) or more is named. Measured
+    four body accelerometers; then each accelerometer alone at setting ``sensor_check.road_hint_single``): a group whose
+    trial cuts the summed squared residual of every run by ``threshold`` (setting ``sensor_check.hint_reduction``; on
+    unknown roads setting ``sensor_check.free_road_hint_reduction``) or more is named. Measured
     on the SUV's five runs on tracks as built (4 % off, 1.5 mm), hubs coupled at 0.5 Hz and not declared, at
     the as-built fit (k_sf +21 %): the hubs at 0.5 Hz cut it by 78 %, the best corner tried (one hub alone:
     16-19 %; the body group: worse); at the true car 100 %. The same runs without coupling, or with it

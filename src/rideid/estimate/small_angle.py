@@ -13,8 +13,8 @@ clean records it can be several error bars.
 
 :func:`small_angle` reads the largest roll and pitch angle of the fitted
 car (the fitted gyros integrated: the model starts at rest, so the integral
-is the angle) and, above :data:`THRESHOLD_DEG`, states the bias to expect
-(:data:`BIAS_PER_DEGREE` times the largest angle) and names the parameters
+is the angle) and, above setting ``small_angle.threshold_deg``, states the bias to expect
+(setting ``small_angle.bias_per_degree`` times the largest angle) and names the parameters
 whose ±2 std_total is narrower than it: their error bars are optimistic by
 that much. It changes no number; it says which ones not to trust to their
 error bar.
@@ -52,8 +52,8 @@ def body_angles(response: dict, fs: dict) -> dict:
 
 def small_angle(res, fs: dict) -> dict | None:
     """The ``adequacy.small_angle`` block of result ``res`` (its ``response`` and ``details``), or None without a
-    response: the largest angles and their runs, the bias to expect and, above :data:`THRESHOLD_DEG`, a note and
-    the parameters whose ±2 std_total is narrower than that bias."""
+    response: the largest angles and their runs, the bias to expect and, above setting ``small_angle.threshold_deg``,
+    a note and the parameters whose ±2 std_total is narrower than that bias."""
     if not res.response:
         return None
     angles = body_angles(res.response, fs)

@@ -107,7 +107,7 @@ class NormalInverse:
     rank : int
         Singular values kept.
     unidentified : ndarray of bool, shape (n,)
-        Parameters with a squared share above :data:`NULL_SHARE` in the dropped directions.
+        Parameters with a squared share above setting ``uncertainty.null_share`` in the dropped directions.
     """
 
     matrix: np.ndarray
@@ -356,8 +356,8 @@ def between_runs_variance(v_jack: float, v_robust: float, k: int) -> float:
     """The variance the runs' disagreement adds to an estimate (0 when it is within their noise).
 
     The Birge ratio ``R^2 = v_jack / v_robust`` is about chi-square(k - 1) / (k - 1) when the runs agree
-    within their noise; above its :data:`BIRGE_P` quantile the excess ``v_jack - v_robust`` is model error
-    that differs between runs (dark uncertainty), and is returned."""
+    within their noise; above its setting ``uncertainty.birge_p`` quantile the excess ``v_jack - v_robust`` is model
+    error that differs between runs (dark uncertainty), and is returned."""
     if not (np.isfinite(v_jack) and np.isfinite(v_robust)) or v_robust <= 0 or k < 3:
         return 0.0
     limit = 2.0 * special.gammaincinv(0.5 * (k - 1), defaults["uncertainty.birge_p"]) / (k - 1)
