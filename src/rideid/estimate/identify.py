@@ -93,7 +93,8 @@ from .uncertainty import jackknife_runs, estimate_covariance, hac_covariance, wh
 from .sensitivity import SensitivityMaps, cost_maps
 from .weighting import TrackWeighting, coefficient_of_variation
 
-#: JADE's population and its early stop before the polish (every free parameter's spread below 20 %).
+#: JADE's population and its early stop before the polish (every free parameter's spread below 20 %: the setting
+#: ``identify.spread_tol``).
 #: The polish only needs the optimum's basin: on five problems (the built-in car noise-free and at 2 %,
 #: an SUV with AR(1) noise, the SUV with bars and tire damping fitted with the full model, a van), two
 #: seeds each, every setting from (64, 0.02) to (24, 0.3) ends within 1e-5 standard errors of the same
