@@ -91,7 +91,7 @@ _SETTINGS: tuple[Setting, ...] = (
             measured=False),
     Setting('adequacy.loud_share', 0.25, '1 (share of run/channel pairs)',
             ('the least share of run/channel pairs (those with a quiet lead-in) whose residual is above 3x the '
-             "lead-in's noise floor for an adequate verdict to carry :func:`level_caveat`. Measured on the MuJoCo "
+             "lead-in's noise floor for an adequate verdict to carry adequacy.level_caveat. Measured on the MuJoCo "
              "cars of docs/verification.md: every right model 2 of 100 (the washboard runs' roll rates, whose lead-in"
              ' floor is about zero); the base model forced on the car with anti-roll bars, 6 % off and called '
              'adequate when its washboard runs were taken as drawn and the rest as built (an intermediate version of '
@@ -128,7 +128,7 @@ _SETTINGS: tuple[Setting, ...] = (
     Setting('anyroad.held_speed', 0.005, '1 (share of the mean speed)',
             ('a run on a declared track with a speed or distance channel is fitted as built when the driver held the '
              "speed: the channel's wander about its mean over the run's window (its spread less the channel's white "
-             "noise, func:`speed_wander`) at most this share of the mean (the rear wheels' delay is taken as "
+             "noise, anyroad.speed_wander) at most this share of the mean (the rear wheels' delay is taken as "
              'constant; a +-3 % driver wanders 1.5 % RMS)'),
             'docs/tracks-as-built.md#along-a-speed-channel-a-clipped-channel',
             'tests/test_asbuilt_speed.py::test_a_held_speed_is_fitted_as_built_and_a_wandering_one_is_not',
@@ -164,8 +164,8 @@ _SETTINGS: tuple[Setting, ...] = (
             'tests/test_anyroad.py::test_the_car_from_two_unknown_roads',
             measured=False),
     Setting('anyroad.joint_motion_bound', 30.0, 'asbuilt.motion_scale units',
-            ("the joint solve's speed and start unknowns (asbuilt.MOTION_SCALE units): their bounds either side of "
-             'the placement they start from, and their finite-difference steps (asbuilt.MOTION_JACOBIAN_STEPS)'),
+            ("the joint solve's speed and start unknowns (asbuilt.motion_scale units): their bounds either side of "
+             'the placement they start from, and their finite-difference steps (asbuilt.motion_jacobian_steps)'),
             'docs/tracks-as-built.md#along-a-speed-channel-a-clipped-channel',
             'tests/test_asbuilt_speed.py::test_the_speed_and_the_start_are_fitted_to_the_track',
             measured=False),
@@ -187,12 +187,12 @@ _SETTINGS: tuple[Setting, ...] = (
             'tests/test_tracks_asbuilt.py::test_the_unevenness_found',
             measured=False),
     Setting('asbuilt.normal_ridge', 1e-12, '1 (on a unit diagonal)',
-            "the diagonal load of the boundary unknowns' normal equations (unit diagonal; :func:`_normal_solve`)",
+            "the diagonal load of the boundary unknowns' normal equations (unit diagonal; asbuilt._normal_solve)",
             'docs/tracks-as-built.md#the-model-rideidestimateasbuiltpy',
             'tests/test_tracks_asbuilt.py::test_the_car_on_tracks_as_built_from_a_start',
             measured=False),
     Setting('asbuilt.cluster_bins', 1, 'DFT bins',
-            "neighbouring DFT bins per cluster of the error bars' sandwich (:func:`meat`)",
+            "neighbouring DFT bins per cluster of the error bars' sandwich (asbuilt.meat)",
             'docs/tracks-as-built.md#the-model-rideidestimateasbuiltpy',
             'tests/test_tracks_asbuilt.py::test_rideid_identify_on_tracks_as_built_and_exact',
             measured=False),
@@ -202,12 +202,12 @@ _SETTINGS: tuple[Setting, ...] = (
             'tests/test_tracks_asbuilt.py::test_the_unevenness_found',
             measured=False),
     Setting('asbuilt.motion_scale', (0.001, 0.001), '1 (relative speed), s (start)',
-            "func:`align_motion`'s unknowns: the speed's relative change and the start's shift (s), in these units",
+            "asbuilt.align_motion's unknowns: the speed's relative change and the start's shift (s), in these units",
             'docs/tracks-as-built.md#the-model-rideidestimateasbuiltpy',
             'tests/test_asbuilt_speed.py::test_the_speed_and_the_start_are_fitted_to_the_track',
             measured=False),
     Setting('asbuilt.motion_steps', (0.5, 2.0), 'asbuilt.motion_scale units',
-            'its Nelder-Mead simplex: first steps (in those units) and tolerance, and evaluations at most',
+            "the first steps of asbuilt.align_motion's Nelder-Mead simplex (asbuilt.motion_scale units)",
             'docs/tracks-as-built.md#the-model-rideidestimateasbuiltpy',
             'tests/test_asbuilt_speed.py::test_the_speed_and_the_start_are_fitted_to_the_track',
             measured=False),
@@ -222,7 +222,7 @@ _SETTINGS: tuple[Setting, ...] = (
             'tests/test_asbuilt_speed.py::test_the_speed_and_the_start_are_fitted_to_the_track',
             measured=False),
     Setting('asbuilt.motion_jacobian_steps', (0.1, 0.2), 'asbuilt.motion_scale units',
-            ("func:`motion_jacobian`'s central-difference steps (:data:`MOTION_SCALE` units: 1e-4 of the speed, 0.2 "
+            ("asbuilt.motion_jacobian's central-difference steps (asbuilt.motion_scale units: 1e-4 of the speed, 0.2 "
              "ms): about the speed's and the start's standard errors on the all-realities case "
              '(docs/tracks-as-built.md)'),
             'docs/tracks-as-built.md#the-model-rideidestimateasbuiltpy',
@@ -259,14 +259,14 @@ _SETTINGS: tuple[Setting, ...] = (
             'tests/test_bump_stops.py::test_bump_stops_are_recovered',
             measured=False),
     Setting('bumps.min_gain', 0.01, '1 (share of the cost)',
-            "an axle's best scan candidate must lower the equal-weight cost by this share to start a stop",
+            ("an axle's best scan candidate must lower the equal-weight cost by this share to start a stop, or by "
+             "adequacy.min_relative squared absolutely (the adequacy verdict's materiality floor), for a car whose "
+             "cost other misfits dominate (a stop then gains less than 1 % of it)"),
             'docs/dampers.md#identifying-bump-stops---model-bump_stops',
             'tests/test_bump_stops.py::test_bump_stops_are_recovered',
             measured=False),
     Setting('bumps.unreached_factor', 1.25, '1 (times the largest compression)',
-            ("or by MIN_IMPROVEMENT absolutely (the adequacy verdict's materiality floor), for a car whose cost other"
-             ' misfits dominate (a stop then gains less than 1 % of it) an unreached stop is held at this multiple of'
-             ' the largest compression reached'),
+            'an unreached stop is held at this multiple of the largest compression reached',
             'docs/dampers.md#identifying-bump-stops---model-bump_stops',
             'tests/test_bump_stops.py::test_stops_never_reached',
             measured=False),
@@ -306,7 +306,7 @@ _SETTINGS: tuple[Setting, ...] = (
             'tests/test_knees.py::test_the_grid_replaces_the_default_knots_unless_the_user_sets_knots',
             measured=False),
     Setting('dampers.knee_draws', 400, 'draws',
-            "draws of the knot forces (robust covariance) behind a knee's standard error; their seed (deterministic)",
+            "draws of the knot forces (robust covariance) behind a knee's standard error",
             'docs/dampers.md#where-the-curves-bend-knees-found-by-the-data',
             'tests/test_knees.py::test_knee_std_robust_agrees_with_the_delta_method',
             measured=False),
@@ -322,7 +322,7 @@ _SETTINGS: tuple[Setting, ...] = (
             measured=False),
     Setting('dampers.bend_share', 0.1, '1 (share of the steepest slope)',
             ("a knot is a bend when its slope change exceeds this share of the side's steepest slope (and "
-             "data:`KNEE_SIGNIFICANCE` std_robust) and no neighbour's is larger"),
+             "dampers.knee_significance std_robust) and no neighbour's is larger"),
             'docs/dampers.md#where-the-curves-bend-knees-found-by-the-data',
             'tests/test_knees.py::test_a_curve_that_bends_in_stages_lists_each_bend',
             measured=False),
@@ -337,7 +337,7 @@ _SETTINGS: tuple[Setting, ...] = (
                   'the same estimate; (32, 0.2) takes 0.3 of the evaluations of the former (64, 0.1) and 0.16 of (64,'
                   ' 0.02) (benchmarks/bench_search.py)')),
     Setting('identify.spread_tol_no_polish', 1e-05, '1 (coefficient of variation)',
-            'Without a polish JADE itself must converge: a much tighter stop.',
+            "JADE's early stop without a polish: JADE itself must converge, so a much tighter stop",
             'docs/method.md#8-jade-rideidestimatejadepy',
             'tests/test_identify.py::test_callback_stops_identify',
             measured=False),
@@ -351,21 +351,20 @@ _SETTINGS: tuple[Setting, ...] = (
             measured=True),
     Setting('identify.restart_at_bound', 1e-06, '1 (share of the range)',
             ('a free parameter this close to a search bound (as a share of its range) is at it, for '
-             ':func:`mode_restart`'),
+             'identify.mode_restart'),
             'docs/method.md#9-polish-and-standard-errors-rideidestimateidentifypy',
             'tests/test_realities.py::test_an_engine_mode_left_at_its_bounds_is_started_again',
             measured=False),
     Setting('identify.repair_restarts', 2, 'polishes',
             ('a polish ending on a damper-curve row the monotone repair changes is solved again from the repaired row'
-             ' at most this often (:func:`_polish`: logger files of the SUV at 100 Hz ended with a front knot force '
+             ' at most this often (identify._polish: logger files of the SUV at 100 Hz ended with a front knot force '
              "57 % off, hidden below its neighbour, at a cost 1e6 times the true car's; solved again, within 0.01 %)"),
             'docs/method.md#9-polish-and-standard-errors-rideidestimateidentifypy',
             'tests/test_paths.py::test_polish_leaves_a_knot_hidden_by_the_monotone_repair',
             measured=True),
     Setting('identify.polish_max_nfev', 100, 'evaluations',
-            ("the polish's evaluations in all; dogbox's share of them (on the built-in car, SUVs, vans and damper "
-             'curves it converges in 6-20, a base model on a car with bars in 30); a variable this share of its range'
-             ' from a bound (bound-normalised) is on it (see :meth:`_Polish.solve`)'),
+            ("the polish's least-squares evaluations in all (on the built-in car, SUVs, vans and damper curves it "
+             'converges in 6-20, a base model on a car with bars in 30; identify._Polish.solve)'),
             'docs/method.md#9-polish-and-standard-errors-rideidestimateidentifypy',
             'tests/test_identify.py::test_the_polish_does_not_stop_beside_a_bound',
             measured=True),
@@ -422,7 +421,7 @@ _SETTINGS: tuple[Setting, ...] = (
             measured=False),
     Setting('model_choice.drawing_runs', 2, 'runs',
             ('the flagged pairs must span at least this many runs for the tracks-as-drawn caveat '
-             '(:func:`_drawing_caveat`)'),
+             '(model_choice._drawing_caveat)'),
             'docs/model-choice.md#adequacy-resultjson-adequacy',
             'tests/test_model_choice.py::test_the_tracks_as_drawn_caveat_says_when_the_weighing_cannot_clear_a_drawing',
             measured=True),
@@ -455,7 +454,7 @@ _SETTINGS: tuple[Setting, ...] = (
             'tests/test_anyroad.py::test_the_roads_and_their_classes',
             measured=False),
     Setting('roadfit.search_bins', 400, 'DFT bins',
-            "the search's cost uses every STRIDE-th bin of a Hann-windowed DFT",
+            "the search's cost uses about this many bins of the fit band (every n-th bin of a Hann-windowed DFT)",
             'docs/any-road.md#how-it-works',
             'tests/test_roadfit.py::test_search_costs_on_thread_slices_equal_one_batch',
             measured=False),
@@ -467,8 +466,8 @@ _SETTINGS: tuple[Setting, ...] = (
             'tests/test_roadfit.py::test_clipped_samples_are_freed_in_the_road_fit',
             measured=False),
     Setting('roadfit.clip_max', 200, 'samples',
-            ("and so is every clipped channel of a run with more than this many clipped samples (the solve's cost "
-             'grows with their square)'),
+            ("every clipped channel of a run with more than this many clipped samples is left out of the run's road "
+             "fit (the solve's cost grows with their square)"),
             'docs/any-road.md#clipped-samples-spec-11',
             'tests/test_roadfit.py::test_clipped_samples_are_freed_in_the_road_fit',
             measured=False),
@@ -509,7 +508,7 @@ _SETTINGS: tuple[Setting, ...] = (
             measured=False),
     Setting('sensor_check.road_hint_single', (0.2, 0.5, 1.0), 'Hz',
             ("the corners a single channel is tried at by the road fit's hint (the groups: every "
-             ':data:`HINT_CORNERS`)'),
+             'sensor_check.hint_corners)'),
             'docs/any-road.md#sensors-as-wired-spec-11',
             'tests/test_sensors_roads.py::test_the_road_fit_names_an_undeclared_coupling',
             measured=False),

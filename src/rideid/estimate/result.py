@@ -174,6 +174,10 @@ class IdentificationResult:
     history : History
     model, adequacy : dict or None
         SPEC §6 blocks (which model was fitted; the residual verdict).
+    plan, settings, assessments
+        SPEC §13: the problem's blocks and their unknowns (:class:`~rideid.estimate.records.Plan`), every tuning
+        value in force during the fit (:mod:`rideid.settings`), one typed record per assessment
+        (:mod:`rideid.estimate.records`; ``verdict`` and ``reason`` each).
     """
 
     x: np.ndarray
