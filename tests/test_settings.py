@@ -175,3 +175,17 @@ def test_the_command_line_refuses_an_unknown_setting_in_one_line(tmp_path):
                                                      "'adequacy.alfa'; the settings (module.name) are listed in "
                                                      "docs/settings.md"]
     assert not out.exists()
+
+
+def test_a_datasets_settings_are_in_force_while_it_is_loaded(sim_dataset, tmp_path):
+    """The built-in runs match their tracks with a correlation of 1.00; a [settings] table that asks for more than
+    a correlation can give makes every run a mismatch when the dataset is loaded, and only while it is."""
+    import shutil
+
+    shutil.copytree(sim_dataset, tmp_path / "ds")
+    with open(tmp_path / "ds" / "dataset.toml", "a") as f:
+        f.write('\n[settings]\n"checks.match_min" = 1.5\n')
+    with pytest.raises(DataError, match=r"run 'T_LL' does not match track 'twist_low' at speed 3 m/s: "
+                                        r"correlation 1\.00 .*\(9 more error\(s\) of this kind\)"):
+        rideid.load_dataset(tmp_path / "ds")
+    assert settings.defaults["checks.match_min"] == 0.5
