@@ -767,14 +767,15 @@ def changed() -> dict:
     return {n: v for n, v in current().items() if _values[n] != REGISTRY[n].default}
 
 
-def legacy_names(module: str, names: dict[str, str]):
+def legacy_names(module: str, names: dict[str, object]):
     """A module ``__getattr__`` (PEP 562) that reads the old constant names of ``module`` (its ``__name__``)
     from the registry: ``rideid.estimate.adequacy.ALPHA`` -> ``defaults["adequacy.alpha"]`` (the names code
-    outside rideid may still import; read when imported, so they do not follow a later change)."""
+    outside rideid may still import; read when imported, so they do not follow a later change). A value that is
+    not a setting's name is a function of none, called (``PENALTY`` -> ``penalty()``)."""
 
     def __getattr__(attr):
         if attr in names:
-            return _values[names[attr]]
+            return _values[names[attr]] if isinstance(names[attr], str) else names[attr]()
         raise AttributeError(f"module {module!r} has no attribute {attr!r}")
 
     return __getattr__

@@ -437,6 +437,7 @@ def verdict_paragraph(adequacy: dict | None) -> str | None:
 
 #: the constants this module had before rideid.settings, read from the registry (PEP 562)
 __getattr__ = legacy_names(__name__, {
+    "MIN_IMPROVEMENT": min_improvement,
     "LAGS": "adequacy.lags", "ALPHA": "adequacy.alpha", "MIN_EXPLAINED": "adequacy.min_explained", "LOUD_SHARE":
     "adequacy.loud_share", "MIN_RELATIVE": "adequacy.min_relative", "AR_MAX": "adequacy.ar_max",
     "WHITENESS_LAGS": "adequacy.whiteness_lags", "MIN_QUIET": "adequacy.min_quiet"})

@@ -387,6 +387,7 @@ def add_grid_std(details: dict, dampers: dict, space, P) -> None:
 
 #: the constants this module had before rideid.settings, read from the registry (PEP 562)
 __getattr__ = legacy_names(__name__, {
+    "KNEE_RULE": knee_rule,
     "MIN_SAMPLES": "dampers.min_samples", "KNEE_GRID": "dampers.knee_grid", "KNEE_DRAWS": "dampers.knee_draws",
     "KNEE_SEED": "dampers.knee_seed", "KNEE_SIGNIFICANCE": "dampers.knee_significance", "BEND_SHARE":
     "dampers.bend_share"})

@@ -810,4 +810,4 @@ def _tracks_before_curves(ds, res, chosen, simulator, tracks, common):
 
 #: the constants this module had before rideid.settings, read from the registry (PEP 562)
 __getattr__ = legacy_names(__name__, {
-    "PENALTY_LEVEL": "model_choice.penalty_level", "DRAWING_RUNS": "model_choice.drawing_runs"})
+    "PENALTY": penalty, "PENALTY_LEVEL": "model_choice.penalty_level", "DRAWING_RUNS": "model_choice.drawing_runs"})
