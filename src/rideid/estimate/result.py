@@ -445,10 +445,10 @@ def load(path) -> IdentificationResult:
         checks=list(doc.get("checks") or []), dampers=doc.get("dampers"), bump_stops=doc.get("bump_stops"),
         roads=doc.get("roads"), road_profiles=_read_roads(doc.get("roads"), rpath.parent), tracks=doc.get("tracks"),
         vehicle=doc.get("vehicle"), uncertainty=doc.get("uncertainty"), data_quality=doc.get("data_quality"),
-        response=_read_responses(doc, rpath.parent), plan=Plan.from_dict(doc.get("plan")),
-        settings=doc.get("settings"))
-    # SPEC §13: the typed assessments as written, or (schema version 1) read from the old keys
-    return replace(res, assessments=assessments_from_json(doc["assessments"]) if "assessments" in doc
+        response=_read_responses(doc, rpath.parent))
+    # SPEC §13: the typed records as written, or (schema version 1) the assessments read from the old keys
+    return replace(res, plan=Plan.from_dict(doc.get("plan")), settings=doc.get("settings"),
+                   assessments=assessments_from_json(doc["assessments"]) if "assessments" in doc
                    else assessments_of(res))
 
 
