@@ -20,7 +20,7 @@ SRC = Path(__file__).resolve().parents[1] / "src"
 
 #: the layers, lowest first: a module imports only from its own layer and those below
 LAYERS = [
-    ("rideid.errors", "rideid.csvio", "rideid.profiling"),
+    ("rideid.errors", "rideid.csvio", "rideid.settings", "rideid.profiling"),  # settings: read by every layer
     ("rideid.model",),                     # physics and kernels over arrays: no files
     ("rideid.data",),                      # schemas, readers, units, pure checks, the Dataset: no simulation
     ("rideid.conditioning",),              # start alignment and nominal-car checks; load_dataset

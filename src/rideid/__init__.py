@@ -73,7 +73,7 @@ del _by_name  # the module's namespace (and dir(rideid)) holds the two tables on
 
 #: the subpackages, reachable as attributes (``rideid.model.params``) after a plain ``import rideid`` as before
 _SUBPACKAGES = ("conditioning", "csvio", "data", "design", "errors", "estimate", "exporter", "model", "profiling",
-                "report", "studies", "synth",
+                "report", "settings", "studies", "synth",
                 "verify")
 
 

@@ -34,6 +34,7 @@ import dataclasses
 
 import numpy as np
 
+from ..settings import defaults, legacy_names
 from ..data.checks import ERROR, PLAUSIBLE, WARNING, Finding
 from ..data.measured import Distance, RelativeDistance
 from ..errors import DataError
@@ -50,17 +51,6 @@ from .wiring import (axle_amplitude_findings, corrected, describe_fix, fix_entri
 #: slowest mode decays to 1e-3 in 2.4-2.7 s on the built-in car, the SUV and the van of the tests
 #: (rideid.data.scenario.settle_time)
 NOMINAL_LEAD_IN = 5.0
-#: correlation with the nominal car below which a run does not match its track and speed
-MATCH_MIN = 0.5
-#: a given start is a bump or a cycle off when the data correlate with the nominal car by this much better at
-#: another start more than START_SAMPLES samples away than at their best within START_SAMPLES of it
-#: (:func:`rideid.conditioning.starts.start_check_steps`). Measured on the hatchback of tests/test_checks.py
-#: (1 kHz logger files): a start one cycle off peaks 0.050-0.054 below the best start (herringbone, 16 cycles),
-#: 0.11 (washboard), 0.33 (twist, one bump), half a cycle off 0.96-1.7 below; the true start given, 0.000 below
-#: on the hatchback and on the built-in car with an engine on as-built tracks (tests/realities_case.py, twenty
-#: runs), whose best start lies within 1.7 samples of it
-START_MARGIN = 0.025
-START_SAMPLES = 3.0
 
 
 # ---------------------------------------------------------------------------
@@ -132,12 +122,12 @@ def match_finding(run_id: str, track_id: str, speed, rho: float, alternatives: l
     alternatives : list of (description, correlation)
         Other speeds and tracks tried; the best one is named if it fits.
     """
-    if rho >= MATCH_MIN:
+    if rho >= defaults["checks.match_min"]:
         return None
     what = f"speed {speed:g} m/s" if speed is not None else "its speed channel"
     msg = (f"{where}run '{run_id}' does not match track '{track_id}' at {what}: correlation {rho:.2f} with a "
            f"nominal car's response (a matching run gives 0.8 or more)")
-    good = [a for a in alternatives if a[1] >= MATCH_MIN]
+    good = [a for a in alternatives if a[1] >= defaults["checks.match_min"]]
     if good:
         desc, r = max(good, key=lambda a: a[1])
         msg += f"; {desc} fits (correlation {r:.2f})"
@@ -170,7 +160,8 @@ def start_finding(run_id: str, track, given: float, best: float, rho_best: float
         The distance (m) the car covers between the two starts, to compare
         with the track's bump spacing or wavelength.
     """
-    if abs(given - best) <= START_SAMPLES / fs or rho_best < rho_given + START_MARGIN:
+    near = defaults["checks.start_samples"] / fs
+    if abs(given - best) <= near or rho_best < rho_given + defaults["checks.start_margin"]:
         return None
     d = given - best
     period = next((track.keys[k] for k in ("spacing", "wavelength") if k in getattr(track, "keys", {})), None)
@@ -390,7 +381,7 @@ def _check_run(ds, r):
         out.append(_at_level(ds, rid, start_off))
         return out
     rho = _score(Yc, Yhat)
-    if rho < MATCH_MIN:
+    if rho < defaults["checks.match_min"]:
         f = match_finding(rid, r.track, r.speed, rho, (yield from _alternatives(ds, rid)))
         out.append(_at_level(ds, rid, f))
     elif rd.distance is None and not r.moving and r.speed:
@@ -473,7 +464,8 @@ def _given_start(ds, rid, mr, track):
     run0 = dataclasses.replace(mr, window=None, start=None)  # the run as read, unaligned, as an estimate sees it
     given = float(mr.start)
     try:
-        best, rho_best, rho_given = yield from start_check_steps(run0, ds.geometry, track, given, START_SAMPLES)
+        best, rho_best, rho_given = yield from start_check_steps(run0, ds.geometry, track, given,
+                                                                 defaults["checks.start_samples"])
     except DataError:  # nothing to correlate (a response or a recording all zero): the other checks say so
         return None
     if mr.distance is None:
@@ -483,5 +475,11 @@ def _given_start(ds, rid, mr, track):
     return start_finding(rid, track, given, best, rho_best, rho_given, mr.fs, travel)
 
 
-__all__ = ["MATCH_MIN", "NOMINAL_LEAD_IN", "check_coverage", "check_dataset", "check_reach", "check_steps",
+__all__ = ["NOMINAL_LEAD_IN", "check_coverage", "check_dataset", "check_reach", "check_steps",
            "feature_span", "match_finding", "speed_candidates", "speed_summaries", "start_finding"]
+
+
+#: the constants this module had before rideid.settings, read from the registry (PEP 562)
+__getattr__ = legacy_names(__name__, {
+    "MATCH_MIN": "checks.match_min", "START_MARGIN": "checks.start_margin", "START_SAMPLES":
+    "checks.start_samples"})

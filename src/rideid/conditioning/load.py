@@ -13,6 +13,7 @@ import math
 from dataclasses import replace
 
 from ..data.checks import enforce
+from ..settings import using
 from ..data.dataset import Dataset, check_rig_run, read_dataset
 from .checks import check_reach, check_steps
 from .nominal import gather, run_steps
@@ -89,7 +90,8 @@ def align_starts(ds: Dataset, starts: dict[str, float | dict] | None = None, car
     # the starts, then the checks, as one step: the nominal car is simulated a round at a time, every run's
     # requests of a round in one batch (rideid.conditioning.nominal)
     step = _aligned(ds, starts)
-    ds, findings = run_steps(step, ds.geometry, car, None if simulator is None else simulator.linear())
+    with using(dict(getattr(ds.manifest, "settings", None) or {})):  # the dataset's [settings] (rideid.settings)
+        ds, findings = run_steps(step, ds.geometry, car, None if simulator is None else simulator.linear())
     enforce(findings, f"{ds.manifest.path}: ")
     return replace(ds, findings=findings)
 

@@ -21,8 +21,8 @@ peak); on a periodic track the lag is followed from window to window within
 half the response's period, so it never jumps a cycle. The speed's
 deviation between two neighbouring windows is their lags' difference over
 their distance in time. :func:`speed_finding` refuses a run whose speed,
-so measured, leaves the declared one by more than :data:`WANDER_MAX`, and
-by more than :data:`Z_MIN` times the deviation's uncertainty.
+so measured, leaves the declared one by more than setting ``speed.wander_max``, and
+by more than setting ``speed.z_min`` times the deviation's uncertainty.
 
 The car is the nominal one, not the car in the data: a different car (other
 modes, damper curves, bump stops) lags the road differently, and by a
@@ -40,25 +40,15 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..settings import defaults, legacy_names
 from ..data.checks import ERROR, Finding
 
 #: windows over the stretch where the wheels are on the track's features
 WINDOWS = 4
-#: largest relative deviation of the speed from the declared one (the mean speed between two windows) a run may
-#: show beyond its uncertainty. Measured (docs/real-data.md, "A speed that wanders"; benchmarks/speed_wander.py):
-#: no run held at its speed shows one beyond its uncertainty, each dataset of a +-3 % driver 1.7-2.3 %
-WANDER_MAX = 0.01
-#: a run off its declared speed whose speed departs from its own mean by at most this fraction of the limit is
-#: called steady, and the speed the data show is named
-STEADY = 0.5
 #: the lag is searched within this fraction of the response's period (on a periodic track) of its prediction
 HALF_PERIOD = 0.45
 #: ... and never further than this (s) from it
 LAG_MAX = 0.08
-#: a deviation of the speed is seen only when it exceeds this many times its uncertainty (:func:`window_lags`'
-#: sigma). Measured: at most 0.5 on every run held at its speed (exact and as-built tracks, the SUV, the van, the
-#: built-in car, damper curves, bump stops, a rough profile road), up to 1.7-2.3 on each dataset of a +-3 % driver
-Z_MIN = 1.0
 
 
 def _norm_cols(Y, Yhat):
@@ -184,8 +174,8 @@ def speed_summary(w: dict) -> dict | None:
     ``deviation``: the relative deviation from the declared speed of the mean speed between two neighbouring
     windows (their lags' difference over their distance in time), ``std`` its uncertainty (the two windows'
     ``sigma`` combined, over the same time); ``low`` and ``high`` the lowest and the highest deviation;
-    ``beyond`` the largest deviation that exceeds :data:`Z_MIN` times its uncertainty (0 if none does: the lags
-    cannot tell the speed from the declared one); ``mean``: the relative difference from the declared speed
+    ``beyond`` the largest deviation that exceeds setting ``speed.z_min`` times its uncertainty (0 if none does: the
+    lags cannot tell the speed from the declared one); ``mean``: the relative difference from the declared speed
     of the constant speed that best explains the lags (the slope of a straight line through them);
     ``wander``: the largest departure of a deviation from ``mean``.
     """
@@ -196,7 +186,7 @@ def speed_summary(w: dict) -> dict | None:
     tc, lag, sig = tc[ok], lag[ok], sig[ok]
     dev = np.diff(lag) / np.diff(tc)
     std = np.hypot(sig[:-1], sig[1:]) / np.diff(tc)
-    seen = np.abs(dev) > Z_MIN * std
+    seen = np.abs(dev) > defaults["speed.z_min"] * std
     k = int(np.argmax(np.where(seen, np.abs(dev), -1.0)))
     mean = float(np.polyfit(tc, lag, 1)[0])
     return {"mean": mean, "low": float(dev.min()), "high": float(dev.max()),
@@ -206,13 +196,13 @@ def speed_summary(w: dict) -> dict | None:
 
 def speed_finding(run_id: str, where: str, speed: float, s: dict, limit: float | None = None) -> Finding | None:
     """The error refusing a run whose speed, as the data show it (:func:`speed_summary`), leaves the declared
-    ``speed`` by more than ``limit`` (default :data:`WANDER_MAX`); None when it holds it."""
-    limit = WANDER_MAX if limit is None else limit
+    ``speed`` by more than ``limit`` (default setting ``speed.wander_max``); None when it holds it."""
+    limit = defaults["speed.wander_max"] if limit is None else limit
     if s["beyond"] <= limit:
         return None
     log = ("log speed: map a speed or distance channel (GPS, wheel speed or odometer) in [channels], see "
            "docs/real-data.md")
-    if s["wander"] <= STEADY * limit and abs(s["mean"]) > limit:
+    if s["wander"] <= defaults["speed.steady"] * limit and abs(s["mean"]) > limit:
         v = speed * (1 + s["mean"])
         msg = (f"run '{run_id}'{where}: its speed looks steady but not {speed:g} m/s: the data match the track "
                f"at about {v:.3g} m/s ({100 * s['mean']:+.1f} %). Set speed = {v:.3g} for run '{run_id}', or "
@@ -225,4 +215,9 @@ def speed_finding(run_id: str, where: str, speed: float, s: dict, limit: float |
     return Finding(ERROR, "track", msg, run_id, "speed")
 
 
-__all__ = ["WANDER_MAX", "WINDOWS", "speed_finding", "speed_summary", "window_lags"]
+__all__ = ["WINDOWS", "speed_finding", "speed_summary", "window_lags"]
+
+
+#: the constants this module had before rideid.settings, read from the registry (PEP 562)
+__getattr__ = legacy_names(__name__, {
+    "WANDER_MAX": "speed.wander_max", "Z_MIN": "speed.z_min", "STEADY": "speed.steady"})

@@ -43,18 +43,13 @@ import math
 
 import numpy as np
 
+from ..settings import defaults, legacy_names
 from ..data.checks import ERROR, Finding
 from ..data.schema.channels import UNITS, quantity
 from ..model.equations import CHANNELS
 
 G0 = 9.80665
 DEG = 180.0 / math.pi
-
-#: rigid-body residual (relative) that counts as consistent / as inconsistent
-RIGID_OK = 0.05
-RIGID_BAD = 0.15
-#: a re-wiring must beat the map by this much summed correlation to be reported
-ASSIGN_MARGIN = 0.6
 
 
 # ---------------------------------------------------------------------------
@@ -358,7 +353,7 @@ def wiring_fix(Y: np.ndarray, Yhat: np.ndarray | None, fs: float, geom, F=None, 
         ident = 0
         e_id = float(scores[ident])
         e_best = float(scores.min())
-        if e_id > RIGID_OK and e_best < e_id / 10:
+        if e_id > defaults["wiring.rigid_ok"] and e_best < e_id / 10:
             tie = np.nonzero(scores <= max(2.0 * e_best, e_best + 0.01))[0]
             h = max(tie, key=lambda k: (round(_track_score(hyps[k], A), 1) if A is not None else 0.0,
                                         -_n_changes(hyps[k])))
@@ -372,19 +367,19 @@ def wiring_fix(Y: np.ndarray, Yhat: np.ndarray | None, fs: float, geom, F=None, 
                         alts.append(alt)
                 if alts:
                     info["alternatives"] = alts
-        elif e_id > RIGID_BAD:
+        elif e_id > defaults["wiring.rigid_bad"]:
             info["rigid_inconsistent"] = (e_id, e_best)
     elif A is not None:
         # no complete body set: signs and order of the body and gyro channels from the track alone
         for g in ("body", "gyro"):
             idx, perm, signs, score, ident, C = A[g]
-            if score - ident > ASSIGN_MARGIN and score / len(idx) > 0.5:
+            if score - ident > defaults["wiring.assign_margin"] and score / len(idx) > 0.5:
                 for c in range(len(idx)):
                     if perm[c] != c or signs[c] != 1.0:
                         fix[CHANNELS[idx[c]]] = {"source": CHANNELS[idx[perm[c]]], "factor": signs[c]}
     if A is not None:
         idx, perm, signs, score, ident, C = A["axle"]
-        if score - ident > ASSIGN_MARGIN and score / 4 > 0.5:
+        if score - ident > defaults["wiring.assign_margin"] and score / 4 > 0.5:
             # names swapped in the map (each entry's unit and sign stay) when that explains the signs too
             renamed = F is not None and all(np.sign(F[idx[c]] / F[idx[perm[c]]]) == signs[c] for c in range(4))
             for c in range(4):
@@ -497,11 +492,6 @@ def lead_in_units(record: dict) -> set:
             and 0.8 * G0 < abs(float(rec.get("removed", 0.0))) < 1.2 * G0}
 
 
-#: an axle channel's amplitude against the road's (nominal car) may differ from its siblings' by this
-#: factor either way before a unit is blamed: real cars differ from the nominal one by far less than g
-AMPLITUDE_BAND = 2.5
-
-
 def axle_amplitude_findings(run_id: str, entries: dict, Y: np.ndarray, Yhat: np.ndarray,
                             skip=()) -> list[Finding]:
     """Axle accelerometers in the wrong unit, seen in their amplitude (gravity removed or not logged).
@@ -511,7 +501,7 @@ def axle_amplitude_findings(run_id: str, entries: dict, Y: np.ndarray, Yhat: np.
     on the same road is compared with that of the other axle channels (or,
     when every hub channel is off by the same factor, with the body
     channels', which the rigid-body identities have checked): a ratio of
-    about g (within :data:`AMPLITUDE_BAND`) is a unit mistake, since cars
+    about g (within setting ``wiring.amplitude_band``) is a unit mistake, since cars
     differ from the nominal car by far less.
 
     Returns one error (check "wiring") per channel, with the fix, as
@@ -528,7 +518,7 @@ def axle_amplitude_findings(run_id: str, entries: dict, Y: np.ndarray, Yhat: np.
     axles = [i for i in range(4, 8) if np.isfinite(r[i]) and r[i] > 0 and CHANNELS[i] not in skip]
     body = np.nanmedian(r[:4]) if np.any(np.isfinite(r[:4])) else np.nan
 
-    def factor(q, band=AMPLITUDE_BAND):
+    def factor(q, band=defaults["wiring.amplitude_band"]):
         for f in (G0, 1 / G0):  # the factor that restores the channel: q is about 1/f
             if 1 / band < q * f < band:
                 return f
@@ -598,3 +588,9 @@ def fix_entries(fix: dict, entries: dict) -> list[str]:
 
 __all__ = ["assignment", "axle_amplitude_findings", "best_assignment", "corrected", "describe_fix", "fix_entries",
            "lead_in_units", "lowpass_gram", "rigid_body_scores", "unit_findings", "wiring_fix"]
+
+
+#: the constants this module had before rideid.settings, read from the registry (PEP 562)
+__getattr__ = legacy_names(__name__, {
+    "RIGID_OK": "wiring.rigid_ok", "RIGID_BAD": "wiring.rigid_bad", "ASSIGN_MARGIN": "wiring.assign_margin",
+    "AMPLITUDE_BAND": "wiring.amplitude_band"})

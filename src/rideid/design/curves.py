@@ -22,7 +22,7 @@ car's suspension velocities on each run (the compiled kernel's states at the loo
 per knot, the samples of the axle's two corners beyond the previous knot on
 its side (:func:`rideid.estimate.dampers.knot_counts`). A set of runs
 excites a knot when those counts, summed over its runs, reach
-:data:`rideid.estimate.dampers.MIN_SAMPLES`; the innermost knots always
+setting ``dampers.min_samples``; the innermost knots always
 count as excited and beyond a knot not excited none is (identify's rule).
 A knot a set of runs does not excite is excluded from that set's Fisher
 matrix (its rows and columns zero: identify would not fit it, it continues
@@ -35,8 +35,9 @@ from types import SimpleNamespace
 
 import numpy as np
 
+from ..settings import defaults
 from ..data.scenario import LIFT_OFF_RHO
-from ..estimate.dampers import MIN_SAMPLES, knot_counts, suspension_velocities_by_run
+from ..estimate.dampers import knot_counts, suspension_velocities_by_run
 from ..model.nonlinear import DEFAULT_KNOTS, curve_names, damper_force
 from ..model.simulator import Simulator
 
@@ -79,8 +80,9 @@ def run_counts(space, sim, P0, rho: float | None = None) -> np.ndarray:
                      for pair in suspension_velocities_by_run(cf, P0, rho=rho)])
 
 
-def excited(knots, counts, min_samples: int = MIN_SAMPLES) -> np.ndarray:
+def excited(knots, counts, min_samples: int | None = None) -> np.ndarray:
     """Identify's rule on summed ``counts`` ``(2, K)``: excited ``(2, K)`` bool."""
+    min_samples = defaults["dampers.min_samples"] if min_samples is None else min_samples
     knots = np.asarray(knots)
     K = knots.size
     j0 = int(np.searchsorted(knots, 0.0))
@@ -104,7 +106,8 @@ def not_excited_names(knots, exc) -> list[str]:
 class Excitation:
     """Knot excitation of the candidate runs of a plan: ``counts`` ``(n_runs, 2, K)``."""
 
-    def __init__(self, knots, counts, names, min_samples: int = MIN_SAMPLES):
+    def __init__(self, knots, counts, names, min_samples: int | None = None):
+        min_samples = defaults["dampers.min_samples"] if min_samples is None else min_samples
         self.knots = tuple(knots)
         self.counts = np.asarray(counts)
         self.names = list(names)  # the plan's free parameters

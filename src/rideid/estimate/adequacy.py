@@ -18,16 +18,16 @@ input correlation (decisive)
     Sensor noise is independent of the road; a model that misses part of the
     car leaves a residual that is a filtered copy of the road input. The
     residual is prewhitened by its own AR model (order by BIC, at most
-    :data:`AR_MAX`), the same filter is applied to the regressors — the four
-    wheel inputs and their rates at lags :data:`LAGS` — and an F-test asks
+    setting ``adequacy.ar_max``), the same filter is applied to the regressors — the four
+    wheel inputs and their rates at lags setting ``adequacy.lags`` — and an F-test asks
     whether they explain the whitened residual (with whitened residuals the
     test holds whatever the colour of the noise or of the road). A run and
-    channel shows *structure* when the test rejects at :data:`ALPHA`
+    channel shows *structure* when the test rejects at setting ``adequacy.alpha``
     divided by the number of run/channel pairs (Bonferroni: a correct model
     is called inadequate in about 1 % of datasets) and the input explains at
-    least :data:`MIN_EXPLAINED` of the whitened residual's variance and the
+    least setting ``adequacy.min_explained`` of the whitened residual's variance and the
     road-explained part (``sqrt(explained) * RMS(e)``) is at least
-    :data:`MIN_RELATIVE` of the channel's RMS (so that neither a long run nor
+    setting ``adequacy.min_relative`` of the channel's RMS (so that neither a long run nor
     noise-free data, whose residual is a tiny but perfectly road-driven
     parameter offset, flag a negligible effect).
 
@@ -45,34 +45,18 @@ from __future__ import annotations
 import numpy as np
 from scipy import special  # the two tail probabilities; scipy.stats takes 0.5 s to import
 
+from ..settings import defaults, legacy_names
 from ..model.params import SUSPENSION_GROUPS as GROUPS
 from ..model.batch import single_threaded_blas, thread_map
 from ..model.equations import CHANNELS
 
-#: lags (samples) of the road inputs and rates regressed on the residual
-LAGS = (0, 1, 2, 3, 4, 6, 8, 12, 16, 24, 32)
-#: family-wise false-alarm rate of the input-correlation tests over all runs and channels
-ALPHA = 0.01
-#: share of the whitened residual variance the road must explain to count as structure
-MIN_EXPLAINED = 0.05
-#: the least share of run/channel pairs (those with a quiet lead-in) whose residual is above 3x the lead-in's noise
-#: floor for an adequate verdict to carry :func:`level_caveat`. Measured on the MuJoCo cars of
-#: docs/verification.md: every right model 2 of 100 (the washboard runs' roll rates, whose lead-in floor is about
-#: zero); the base model forced on the car with anti-roll bars, 6 % off and called adequate when its washboard runs
-#: were taken as drawn and the rest as built (an intermediate version of the as-built rules), 52 of 100
-LOUD_SHARE = 0.25
-#: road-explained residual RMS, as a share of the channel's RMS, below which structure is immaterial
-#: (below the accuracy of any accelerometer or gyro)
-MIN_RELATIVE = 0.005
-#: the least cost reduction that counts as a better fit: the cost is a relative squared error, so a
-#: change must move the fit by MIN_RELATIVE of the channels' RMS (model choice, the bump-stop scan)
-MIN_IMPROVEMENT = MIN_RELATIVE ** 2
-#: highest AR order of the prewhitening filter
-AR_MAX = 10
-#: lags of the whiteness test (MATLAB resid's default)
-WHITENESS_LAGS = 25
-#: fewest quiet lead-in samples for a noise floor
-MIN_QUIET = 20
+
+
+def min_improvement() -> float:
+    """The least cost reduction that counts as a better fit: the cost is a relative squared error, so a change
+    must move the fit by ``adequacy.min_relative`` of the channels' RMS (model choice, the bump-stop scan)."""
+    return defaults["adequacy.min_relative"] ** 2
+
 
 _ADVICE_HEAD = ("The residuals carry road-driven structure the model does not explain, so the estimates are "
                 "biased by more than their error bars say. ")
@@ -91,8 +75,9 @@ _LACKS = (("damper_curves", "nonlinear dampers"), ("bump_stops", "bump stops"),
           ("powertrain", "a powertrain on mounts"))
 
 
-def ljung_box(e, lags: int = WHITENESS_LAGS) -> tuple[float, float]:
+def ljung_box(e, lags: int | None = None) -> tuple[float, float]:
     """Ljung-Box ``Q`` of ``e`` over ``lags`` autocorrelations and its chi-square p-value."""
+    lags = defaults["adequacy.whiteness_lags"] if lags is None else lags
     e = np.asarray(e, dtype=float) - np.mean(e)
     T = e.size
     den = float(e @ e)
@@ -103,7 +88,7 @@ def ljung_box(e, lags: int = WHITENESS_LAGS) -> tuple[float, float]:
     return Q, float(special.chdtrc(lags, Q))
 
 
-def fit_ar(e, max_order: int = AR_MAX) -> np.ndarray:
+def fit_ar(e, max_order: int | None = None) -> np.ndarray:
     """AR coefficients ``a`` (``e_t = sum_k a_k e_{t-k} + w_t``) by least squares, order by BIC.
 
     Returns
@@ -111,6 +96,7 @@ def fit_ar(e, max_order: int = AR_MAX) -> np.ndarray:
     ndarray, shape (p,)
         ``p = 0`` (empty) when no order beats white noise.
     """
+    max_order = defaults["adequacy.ar_max"] if max_order is None else max_order
     e = np.asarray(e, dtype=float) - np.mean(e)
     T = e.size
     best, best_bic = np.zeros(0), T * np.log(max(float(e @ e) / T, 1e-300))
@@ -149,8 +135,9 @@ def whiten(x, a) -> np.ndarray:
     return out
 
 
-def lagged(U, lags=LAGS) -> np.ndarray:
+def lagged(U, lags=None) -> np.ndarray:
     """Regressors ``U[t - k]`` for every column and lag (zeros before the start), shape (T, n_col * n_lag)."""
+    lags = defaults["adequacy.lags"] if lags is None else lags
     U = np.asarray(U, dtype=float)
     T = U.shape[0]
     cols = []
@@ -161,7 +148,7 @@ def lagged(U, lags=LAGS) -> np.ndarray:
     return np.concatenate(cols, axis=1)
 
 
-def input_basis(U, lags=LAGS) -> np.ndarray:
+def input_basis(U, lags=None) -> np.ndarray:
     """Orthonormal basis of the lagged road regressors of one run, shape (T, r).
 
     The columns of :func:`lagged` are centred (an intercept is in both
@@ -171,6 +158,7 @@ def input_basis(U, lags=LAGS) -> np.ndarray:
     track gives identical left and right columns). Decided once per run:
     the regressors' span is the run's, whatever the residual's colour.
     """
+    lags = defaults["adequacy.lags"] if lags is None else lags
     Z = lagged(U, lags)
     sd = Z.std(axis=0)
     keep = sd > 1e-12 * max(sd.max(), 1e-300)
@@ -181,7 +169,7 @@ def input_basis(U, lags=LAGS) -> np.ndarray:
     return Q[:, :int(np.sum(s > 1e-8 * s[0]))]
 
 
-def input_correlation(e, U, lags=LAGS, max_order: int = AR_MAX, basis=None) -> dict:
+def input_correlation(e, U, lags=None, max_order: int | None = None, basis=None) -> dict:
     """F-test of the road inputs (lagged) on the prewhitened residual.
 
     Parameters
@@ -200,6 +188,8 @@ def input_correlation(e, U, lags=LAGS, max_order: int = AR_MAX, basis=None) -> d
         residual variance the inputs explain, 0..1), ``df`` (regressors used),
         ``ar_order`` (of the prewhitening filter).
     """
+    lags = defaults["adequacy.lags"] if lags is None else lags
+    max_order = defaults["adequacy.ar_max"] if max_order is None else max_order
     e = np.asarray(e, dtype=float)
     Q = input_basis(U, lags) if basis is None else basis
     # the noise model is fitted to the residual itself: fitted to what the inputs leave unexplained
@@ -257,7 +247,7 @@ def quiet_samples(U, tol: float = 1e-9) -> int:
     return int(np.argmax(moving)) if moving.any() else U.shape[0]
 
 
-def assess(runs: dict, channels, *, alpha: float = ALPHA, min_explained: float = MIN_EXPLAINED) -> dict:
+def assess(runs: dict, channels, *, alpha: float | None = None, min_explained: float | None = None) -> dict:
     """Adequacy figures and verdict (module docstring).
 
     Parameters
@@ -278,6 +268,8 @@ def assess(runs: dict, channels, *, alpha: float = ALPHA, min_explained: float =
         ``{"adequate", "reasons", "advice", "method", "alpha", "min_explained", "runs":
         {run: {channel: figures}}}``; JSON-ready.
     """
+    alpha = defaults["adequacy.alpha"] if alpha is None else alpha
+    min_explained = defaults["adequacy.min_explained"] if min_explained is None else min_explained
 
     with single_threaded_blas():  # many small SVDs: BLAS threads only contend
         return _assess(runs, channels, alpha, min_explained)
@@ -300,12 +292,13 @@ def _assess(runs, channels, alpha, min_explained):
                 continue
             e = np.nan_to_num(e)
             rms = float(np.sqrt(np.mean(e * e)))
-            floor = float(np.sqrt(np.mean(e[:q] ** 2))) if q >= MIN_QUIET else None
+            floor = float(np.sqrt(np.mean(e[:q] ** 2))) if q >= defaults["adequacy.min_quiet"] else None
             Q, pq = ljung_box(e)
             ic = input_correlation(e, U, basis=basis)
             signal = float(np.sqrt(np.mean(np.nan_to_num(Y[:, c]) ** 2)))
             road_rel = np.sqrt(ic["explained"]) * rms / signal if signal > 0 else 0.0
-            structure = bool(ic["p"] < alpha_each and ic["explained"] >= min_explained and road_rel >= MIN_RELATIVE)
+            structure = bool(ic["p"] < alpha_each and ic["explained"] >= min_explained
+                             and road_rel >= defaults["adequacy.min_relative"])
             rec[name] = {"rms": rms, "signal_rms": signal, "road_explained_rel": float(road_rel), "noise_floor": floor,
                          "level": (rms / floor) if floor else None,
                          "whiteness_q": Q, "whiteness_p": pq, "white": bool(pq >= 0.01),
@@ -339,10 +332,12 @@ def _assess(runs, channels, alpha, min_explained):
                        + ", ".join(f"{rid}/{name} ({lv:.1f}x)" for lv, rid, name in loud[:6])
                        + (f" and {len(loud) - 6} more" if len(loud) > 6 else ""))
     n_white = sum(1 for rec in out_runs.values() for f in rec.values() if f["white"])
-    reasons.append(f"{n_white} of {len(pairs)} residuals pass the whiteness test (25 lags, 1 %); coloured sensor "
+    reasons.append(f"{n_white} of {len(pairs)} residuals pass the whiteness test "
+                   f"({defaults['adequacy.whiteness_lags']} lags, 1 %); coloured sensor "
                    "noise fails it without the model being wrong, so it does not decide")
     out = {"adequate": adequate, "reasons": reasons, "advice": None if adequate else ADVICE,
-           "method": "F-test of the road inputs and rates (lags " + ",".join(map(str, LAGS)) + " samples) on "
+           "method": "F-test of the road inputs and rates (lags " + ",".join(map(str, defaults["adequacy.lags"]))
+                     + " samples) on "
                      "the AR-prewhitened residual of every run and channel; Bonferroni over the pairs",
            "alpha": alpha, "min_explained": min_explained, "runs": out_runs}
     caveat = level_caveat(out)
@@ -375,7 +370,7 @@ def assess_fit(cf, P, sims=None) -> dict:
 
 def level_caveat(adequacy: dict) -> str | None:
     """What an adequate verdict must add when the residual is well above the sensor noise in many run/channel
-    pairs (:data:`LOUD_SHARE` of those with a quiet lead-in) though the road-driven test finds nothing: the
+    pairs (setting ``adequacy.loud_share`` of those with a quiet lead-in) though the road-driven test finds nothing: the
     prewhitening takes away what the residual's own past predicts, so a slow miss (a roll stiffness the model
     lacks, at the roll mode) passes the F-test and shows only in the level figure, which does not decide
     (sensor noise may grow while driving). None when not adequate, or when few pairs are loud."""
@@ -384,7 +379,7 @@ def level_caveat(adequacy: dict) -> str | None:
     levels = [f["level"] for rec in adequacy.get("runs", {}).values() for f in rec.values()
               if f.get("level") is not None]
     loud = sum(1 for lv in levels if lv > 3)
-    if not levels or loud < LOUD_SHARE * len(levels):
+    if not levels or loud < defaults["adequacy.loud_share"] * len(levels):
         return None
     return (f"the road-driven test finds nothing, but the residual is above 3x the lead-in's noise floor in {loud} "
             f"of {len(levels)} run/channel pairs: a model that misses slow dynamics (a roll or pitch stiffness, "
@@ -438,3 +433,11 @@ def verdict_paragraph(adequacy: dict | None) -> str | None:
     if not adequacy or adequacy.get("adequate", True):
         return None
     return "MODEL NOT ADEQUATE: " + adequacy["reasons"][0] + ". " + adequacy["advice"]
+
+
+#: the constants this module had before rideid.settings, read from the registry (PEP 562)
+__getattr__ = legacy_names(__name__, {
+    "MIN_IMPROVEMENT": min_improvement,
+    "LAGS": "adequacy.lags", "ALPHA": "adequacy.alpha", "MIN_EXPLAINED": "adequacy.min_explained", "LOUD_SHARE":
+    "adequacy.loud_share", "MIN_RELATIVE": "adequacy.min_relative", "AR_MAX": "adequacy.ar_max",
+    "WHITENESS_LAGS": "adequacy.whiteness_lags", "MIN_QUIET": "adequacy.min_quiet"})

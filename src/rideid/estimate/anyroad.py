@@ -25,7 +25,7 @@ steps:
    ``std_robust`` with ``B`` the gradient's spread over clusters, each road
    run's DFT bin one cluster and the track runs' HAC long-run covariance
    (:mod:`rideid.estimate.uncertainty`).
-   A channel without signal on a run (RMS below :data:`rideid.estimate.roadfit.SIGNAL_FLOOR` of its kind's
+   A channel without signal on a run (RMS below setting ``roadfit.signal_floor`` of its kind's
    largest: a roll rate on a washboard, a dead sensor) is left out of that run's fit and named in
    ``roads.<run>.channels_left_out``: the fit weights each channel by 1 / its RMS, and rounding must not
    become the heaviest channel.
@@ -58,6 +58,7 @@ from dataclasses import replace
 import numpy as np
 from scipy.optimize import OptimizeResult, least_squares
 
+from ..settings import defaults, legacy_names
 from ..data.schema import NONLINEAR_GROUPS
 from ..errors import ArgumentError, DataError
 from ..model.batch import single_threaded_blas, thread_map, thread_map_rows
@@ -71,34 +72,12 @@ from .identify import (DEFAULT_GENERATIONS, DEFAULT_POPULATION, identify as iden
                        mode_restart, model_extensions, parameter_detail, relative_spread, restart_record)
 from .jade import JadeSolver, make_rng, stop_requested
 from .result import History, IdentificationResult
-from .sensor_check import FREE_ROAD_HINT_REDUCTION, HINT_REDUCTION, road_coupling_hints
+from .sensor_check import road_coupling_hints
 from .uncertainty import andrews_bandwidth, estimate_covariance, long_run_covariance, run_scores
 
-#: an unknown-road run's speed may vary by this fraction of its mean (the delay is taken as constant)
-SPEED_TOLERANCE = 0.02
-#: a run on a declared track with a speed or distance channel is fitted as built when the driver held the speed: the
-#: channel's wander about its mean over the run's window (its spread less the channel's white noise,
-#: :func:`speed_wander`) at most this share of the mean (the rear wheels' delay is taken as constant; a +-3 %
-#: driver wanders 1.5 % RMS)
-HELD_SPEED = 0.005
 #: ``tracks``: each declared track fitted as built (the default: the drawing is the nominal shape, SPEC §11) or
 #: taken exactly as drawn
 TRACK_OPTIONS = ("as-built", "as-drawn")
-#: what a track as built may depart from its drawing before the verdict says the road explains the model's misses:
-#: the amplitude factor's distance from 1, and the unevenness RMS (m, one wheel path; SPEC §11: a few per cent and
-#: 1-2 mm, plus what the disc's envelope adds on sharp features: 2.6 mm measured on a washboard laid with 1.5 mm).
-#: The factor's limit widens by twice its standard error (``amplitude_factor_std``): a track of one spectral line
-#: (a washboard) whose bins the prior opened leaves its factor ill-determined (1.139 +- 0.038 on the all-realities
-#: case, where the envelope of the 4 % taller washboard is 4.0 % taller)
-PLAUSIBLE_FACTOR = 0.10
-PLAUSIBLE_RMS = 3.5e-3
-#: ... the unevenness judged over the waves up to this long (m): a track's surface (SPEC §11's 1-2 mm; the tests'
-#: 0.5-10 m), not its grade and cross-fall; there the slowest bins of the fit band (0.2-1 Hz at 10 m/s, 10-50 m
-#: waves), which the accelerations barely see, are where the prior opens on noise: on the all-realities case the
-#: herringbone's 3.0-3.7 mm was 1.7 mm without its opened bins at 0.3 and 0.6 Hz
-PLAUSIBLE_WAVELENGTH = 10.0
-#: the search's population-spread stop (as the track search with a polish)
-SPREAD_TOL = 0.2
 
 
 def unknown_road_runs(ds, extensions=()) -> list:
@@ -115,7 +94,7 @@ def unknown_road_runs(ds, extensions=()) -> list:
 
 def run_speed(ds, run) -> float:
     """The constant speed (m/s) of an unknown-road run: the manifest's, or its speed/distance channel's
-    mean when it varies by at most :data:`SPEED_TOLERANCE` (else one clear error)."""
+    mean when it varies by at most setting ``anyroad.speed_tolerance`` (else one clear error)."""
     rd = ds.data[run.id]
     dist = getattr(rd, "distance", None)
     if dist is None:
@@ -124,11 +103,11 @@ def run_speed(ds, run) -> float:
     v = np.gradient(x, rd.time)
     vm = float(np.mean(v))
     spread = float((np.max(v) - np.min(v)) / vm) if vm > 0 else np.inf
-    if not np.isfinite(spread) or spread > 2 * SPEED_TOLERANCE:
+    if not np.isfinite(spread) or spread > 2 * defaults["anyroad.speed_tolerance"]:
         raise DataError(f"run '{run.id}': an unknown-road run needs a constant speed (the rear wheels' delay "
                         f"wheelbase/speed is taken as constant), but its speed channel goes from {np.min(v):.2f} to "
                         f"{np.max(v):.2f} m/s ({100 * spread:.0f} % of its mean; at most "
-                        f"{200 * SPEED_TOLERANCE:.0f} %); cut the run to a stretch of steady speed")
+                        f"{200 * defaults['anyroad.speed_tolerance']:.0f} %); cut the run to a stretch of steady speed")
     return vm
 
 
@@ -315,11 +294,6 @@ class _Problem:
         self.size = sum(self.sizes)
 
 
-#: the joint solve's speed and start unknowns (asbuilt.MOTION_SCALE units): their bounds either side of the
-#: placement they start from, and their finite-difference steps (asbuilt.MOTION_JACOBIAN_STEPS)
-JOINT_MOTION_BOUND = 30.0
-
-
 def _joint_solve(prob, z, along: dict, ds, max_nfev: int):
     """Least squares of the car ``z`` (v units) together with the speed and the start of each run along a speed
     channel (``along``: block index in ``prob.rruns`` -> run; the drawing moved by
@@ -344,9 +318,9 @@ def _joint_solve(prob, z, along: dict, ds, max_nfev: int):
         return prob(w[:d])
 
     q = 2 * len(keys)
-    lo = np.concatenate([prob.vbounds[0], np.full(q, -JOINT_MOTION_BOUND)])
-    hi = np.concatenate([prob.vbounds[1], np.full(q, JOINT_MOTION_BOUND)])
-    steps = np.concatenate([np.full(d, 1e-5), np.tile(asbuilt.MOTION_JACOBIAN_STEPS, len(keys))])
+    lo = np.concatenate([prob.vbounds[0], np.full(q, -defaults["anyroad.joint_motion_bound"])])
+    hi = np.concatenate([prob.vbounds[1], np.full(q, defaults["anyroad.joint_motion_bound"])])
+    steps = np.concatenate([np.full(d, 1e-5), np.tile(defaults["asbuilt.motion_jacobian_steps"], len(keys))])
     sol = least_squares(fun, np.concatenate([z, np.zeros(q)]), bounds=(lo, hi), method="trf", diff_step=steps,
                         max_nfev=max_nfev)
     place(sol.x)
@@ -397,7 +371,7 @@ def _with_motion(prob, z, H, Ja, S, s2, trs, along, ds, geom):
 
 
 def _search(space, geom, rruns, gen, population, generations, callback, t0):
-    """JADE on the road runs' search cost, stopped by the population spread (:data:`SPREAD_TOL`)."""
+    """JADE on the road runs' search cost, stopped by the population spread (setting ``anyroad.spread_tol``)."""
     def fun(X):
         P = space.full(X)
         out = np.full(P.shape[0], np.inf)
@@ -430,7 +404,7 @@ def _search(space, geom, rruns, gen, population, generations, callback, t0):
         if stop_requested(callback, state):
             stop = "callback"
             break
-        if cv.max() < SPREAD_TOL:
+        if cv.max() < defaults["anyroad.spread_tol"]:
             stop = "spread"
             break
     return solver.x, g, solver.nfev, stop, history
@@ -468,8 +442,8 @@ def as_built_runs(ds, ext, tracks: str = "as-built") -> tuple[list, dict]:
     """The runs on declared tracks fitted as built (SPEC §11, :mod:`rideid.estimate.asbuilt`), and those taken
     as drawn with why: run id -> one line. As built needs a linear car (``ext`` without damper curves or bump
     stops), the eight accelerometers, the roll rate and a speed held (a declared constant speed, or a speed or
-    distance channel that wanders by at most :data:`HELD_SPEED`, :func:`speed_wander`); ``tracks="as-drawn"``
-    takes every track as drawn.
+    distance channel that wanders by at most setting ``anyroad.held_speed``, :func:`speed_wander`);
+    ``tracks="as-drawn"`` takes every track as drawn.
 
     The roll rate: without it a slow road difference between the wheel paths and the body's roll (a free
     state at the first sample) trade off, and the road the prior is estimated from is not determined. Measured
@@ -477,7 +451,7 @@ def as_built_runs(ds, ext, tracks: str = "as-built") -> tuple[list, dict]:
     boundary unknowns of the free-road fit 4-79 (0.03-0.1 with it), "unevenness" of 0.2-3.6 m RMS, and the
     tracks as built rejected as implausible; the pitch rate removed instead changes nothing. A roll rate that is
     present but carries no signal (a symmetric track in simulated data) has the same trade-off; such runs stay as
-    built, and the plausibility of what the tracks needed (:data:`PLAUSIBLE_RMS`) judges them, as before."""
+    built, and the plausibility of what the tracks needed (setting ``anyroad.plausible_rms``) judges them, as before."""
     if tracks not in TRACK_OPTIONS:
         raise ArgumentError(f"tracks: expected one of {', '.join(TRACK_OPTIONS)}, got {tracks!r}")
     road_ids = {r.id for r in unknown_road_runs(ds, ext)}
@@ -495,10 +469,12 @@ def as_built_runs(ds, ext, tracks: str = "as-built") -> tuple[list, dict]:
             skipped[r.id] = f"as drawn: the model has {', '.join(bad)} (the as-built road is fitted on a linear car)"
         elif missing:
             skipped[r.id] = f"as drawn: no {', '.join(missing)} (the as-built road needs all eight accelerometers)"
-        elif getattr(rd, "distance", None) is not None and (wander := speed_wander(ds, r) or 0.0) > HELD_SPEED:
+        elif getattr(rd, "distance", None) is not None \
+                and (wander := speed_wander(ds, r) or 0.0) > defaults["anyroad.held_speed"]:
             skipped[r.id] = (f"as drawn: its speed wanders {100 * wander:.1f} % RMS about its mean (the speed "
                              f"channel less its noise; the as-built road needs the speed held within "
-                             f"{100 * HELD_SPEED:.1f} %: the rear wheels' delay is taken as constant)")
+                             f"{100 * defaults['anyroad.held_speed']:.1f} %: the rear wheels' delay is taken as "
+                             "constant)")
         elif "roll_rate" not in rd.channels:
             skipped[r.id] = ("as drawn: no roll_rate (without the roll gyro the road's slow left-right "
                              "difference cannot be told from the body's roll, and the as-built road is not determined)")
@@ -539,11 +515,12 @@ def _tracks_block(ds, trs, skipped, P, geom, motion=None):
     for tr in trs:
         fit = asbuilt.solve(P, geom, tr, alpha_std=True)
         rec = out.setdefault(tr.track, {"runs": {}})
-        hi = min(roadfit.BAND[1], 0.45 * tr.rr.fs)
+        hi = min(defaults["roadfit.band"][1], 0.45 * tr.rr.fs)
         rec["runs"][tr.run_id] = {"amplitude_factor": fit.alpha, "amplitude_factor_std": fit.alpha_std,
                                   "unevenness_rms_m": asbuilt.unevenness_rms(tr),
-                                  "unevenness_rms_surface_m": asbuilt.unevenness_rms(tr, PLAUSIBLE_WAVELENGTH),
-                                  "wavelengths_m": [tr.rr.speed / hi, tr.rr.speed / roadfit.BAND[0]]}
+                                  "unevenness_rms_surface_m": asbuilt.unevenness_rms(
+                                      tr, defaults["anyroad.plausible_wavelength"]),
+                                  "wavelengths_m": [tr.rr.speed / hi, tr.rr.speed / defaults["roadfit.band"][0]]}
         if tr.rr.left_out:  # a channel without signal, or clipped (roadfit.without_clipped)
             rec["runs"][tr.run_id]["channels_left_out"] = dict(tr.rr.left_out)
         if tr.rr.clip.shape[0]:  # clipped samples freed as unknowns (roadfit: "Clipped samples")
@@ -571,7 +548,8 @@ def _tracks_block(ds, trs, skipped, P, geom, motion=None):
                        "RMS of what the drawing times that factor leaves, one wheel path, over the wavelengths of "
                        "each run's fit band (it holds the envelope's departure from proportionality too), and "
                        "the RMS over the track's runs; unevenness_rms_surface_m: the same over the waves up to "
-                       f"{PLAUSIBLE_WAVELENGTH:g} m (the surface; what the verdict judges); the parameters' "
+                       f"{defaults['anyroad.plausible_wavelength']:g} m (the surface; what the verdict judges); "
+                       "the parameters' "
                        "std_robust with tracks as built from the white sandwich of their runs (measured on the "
                        "SUV on tracks 4 % off with 1.5 mm unevenness over five seeds: error / std_robust RMS 0.92, "
                        "±2 std_robust covering 12 of 12 on each; the bin-clustered sandwich was 1.8x too narrow; "
@@ -598,15 +576,16 @@ def _with_hints(adequacy, hints, note=ROAD_HINTS_NOTE):
                 + (adequacy.get("advice") or ""))
 
 
-def _road_sensor_hints(P, geom, rruns, ds, threshold=HINT_REDUCTION):
+def _road_sensor_hints(P, geom, rruns, ds, threshold=None):
     """The coupling hints of the road fit (:func:`rideid.estimate.sensor_check.road_coupling_hints`) on road-fitted
     runs ``rruns`` (:class:`rideid.estimate.roadfit.RoadRun`). On tracks as built they are asked when the fit on
     the tracks as drawn gave none: there an undeclared coupling is taken up by the road and the springs (the
     SUV's hubs coupled at 0.5 Hz, not declared: k_sf +21 %, 37 std_total, which the residual test at the estimated
     road did not see). On unknown roads (no as-drawn fit, no time-domain hint) the road takes up part of a
     coupling's signature, so a smaller cut names it (``threshold`` =
-    :data:`rideid.estimate.sensor_check.FREE_ROAD_HINT_REDUCTION`; the hubs of the built-in car coupled at 0.5 Hz,
+    setting ``sensor_check.free_road_hint_reduction``; the hubs of the built-in car coupled at 0.5 Hz,
     not declared: k_sr +18 % at the fit, the trial cut the residual 35 %)."""
+    threshold = defaults["sensor_check.hint_reduction"] if threshold is None else threshold
     return road_coupling_hints(P, geom, rruns, {rr.run_id: ds.sensor_filters(rr.run_id) for rr in rruns},
                                threshold=threshold)
 
@@ -780,14 +759,14 @@ def _identify_any_road(ds, *, rng=None, seed=None, population=None, generations=
     for rr in rruns:
         sol_r = roadfit.solve(P, geom, rr)
         xr, zr = roadfit.road(P, geom, rr, sol_r)
-        cls, gd = iso8608_class(xr, zr, n_band=(1 / roadfit.ROAD_WAVELENGTHS[1], 1 / roadfit.ROAD_WAVELENGTHS[0]))
+        lam, band = defaults["roadfit.road_wavelengths"], defaults["roadfit.band"]
+        cls, gd = iso8608_class(xr, zr, n_band=(1 / lam[1], 1 / lam[0]))
         roads[rr.run_id] = {
             "file": f"road/{rr.run_id}.csv", "iso8608_class": cls, "gd_n0": float(gd),
-            "gd_n0_unit": "m^3", "speed": rr.speed, "fit_band_hz": [float(roadfit.BAND[0]),
-                                                                   float(min(roadfit.BAND[1], 0.45 * rr.fs))],
-            "wavelengths_m": list(roadfit.ROAD_WAVELENGTHS),
-            "note": (f"the road's content at wavelengths {roadfit.ROAD_WAVELENGTHS[0]}-"
-                     f"{roadfit.ROAD_WAVELENGTHS[1]} m; the first and last {roadfit.ROAD_WAVELENGTHS[1]:.0f} m carry "
+            "gd_n0_unit": "m^3", "speed": rr.speed, "fit_band_hz": [float(band[0]), float(min(band[1], 0.45 * rr.fs))],
+            "wavelengths_m": list(defaults["roadfit.road_wavelengths"]),
+            "note": (f"the road's content at wavelengths {lam[0]}-"
+                     f"{lam[1]} m; the first and last {lam[1]:.0f} m carry "
                      "the record's ends and are less certain; adequacy not assessed on this run")}
         run = next(r for r in ds.runs if r.id == rr.run_id)
         if getattr(run, "road_known", False):
@@ -823,9 +802,10 @@ def _identify_any_road(ds, *, rng=None, seed=None, population=None, generations=
             adequacy = dict(adequacy, not_assessed=list(roads),
                             note="the verdict covers the runs on known tracks; runs on unknown roads are not assessed")
         if trs:
+            lo, hi = defaults["roadfit.band"]
             adequacy = dict(adequacy, as_built=sorted(ab_ids),
                             as_built_note="runs on tracks as built: the residual at the estimated road, over the fit "
-                                          f"band {roadfit.BAND[0]}-{roadfit.BAND[1]} Hz")
+                                          f"band {lo}-{hi} Hz")
     tracks_block = _tracks_block(ds, trs, skipped, P, geom, motion) if trs else None
     odd = []
     if tracks_block and adequacy is not None:
@@ -834,20 +814,22 @@ def _identify_any_road(ds, *, rng=None, seed=None, population=None, generations=
         odd = [f"{tid}: factor {rec['amplitude_factor']:.3f} ± {rec['amplitude_factor_std']:.3f}, unevenness "
                f"{1e3 * rec['unevenness_rms_surface_m']:.1f} mm RMS"
                for tid, rec in tracks_block.items() if "amplitude_factor" in rec
-               and (abs(rec["amplitude_factor"] - 1) > PLAUSIBLE_FACTOR + 2 * rec["amplitude_factor_std"]
-                    or rec["unevenness_rms_surface_m"] > PLAUSIBLE_RMS)]
+               and (abs(rec["amplitude_factor"] - 1)
+                    > defaults["anyroad.plausible_factor"] + 2 * rec["amplitude_factor_std"]
+                    or rec["unevenness_rms_surface_m"] > defaults["anyroad.plausible_rms"])]
         if odd:
             adequacy = dict(adequacy, adequate=False, advice=adequacy.get("advice") or ADVICE,
                             reasons=[f"the tracks as built needed more than a track carries ({'; '.join(odd)}; at most "
-                                     f"±{100 * PLAUSIBLE_FACTOR:.0f} % beyond twice the factor's error, and "
-                                     f"{1e3 * PLAUSIBLE_RMS:.1f} mm RMS at waves up to {PLAUSIBLE_WAVELENGTH:g} m): "
+                                     f"±{100 * defaults['anyroad.plausible_factor']:.0f} % beyond twice the "
+                                     f"factor's error, and {1e3 * defaults['anyroad.plausible_rms']:.1f} mm RMS at "
+                                     f"waves up to {defaults['anyroad.plausible_wavelength']:g} m): "
                                      "the road is explaining what the model misses"] + list(adequacy["reasons"]))
     adequacy = _carry_sensor_hints(adequacy, start_result)
     road_hints = _road_sensor_hints(P, geom, [tr.rr for tr in trs], ds) if trs and adequacy is not None \
         and not adequacy.get("sensor_hints") else []
     hints_note = ROAD_HINTS_NOTE
     if not road_hints and rruns and assess and polish and not (adequacy or {}).get("sensor_hints"):
-        road_hints = _road_sensor_hints(P, geom, rruns, ds, FREE_ROAD_HINT_REDUCTION)
+        road_hints = _road_sensor_hints(P, geom, rruns, ds, defaults["sensor_check.free_road_hint_reduction"])
         hints_note = FREE_ROAD_HINTS_NOTE
         if road_hints and adequacy is None:  # unknown roads alone: no residual verdict, but the sensors' is one
             adequacy = {"adequate": False, "not_assessed": list(roads), "reasons": [], "advice": None,
@@ -904,3 +886,11 @@ def _identify_any_road(ds, *, rng=None, seed=None, population=None, generations=
         checks=[f.to_dict() for f in getattr(ds, "findings", [])], roads=roads or None, road_profiles=profiles or None,
         tracks=tracks_block)
     return res
+
+
+#: the constants this module had before rideid.settings, read from the registry (PEP 562)
+__getattr__ = legacy_names(__name__, {
+    "SPEED_TOLERANCE": "anyroad.speed_tolerance", "HELD_SPEED": "anyroad.held_speed", "PLAUSIBLE_FACTOR":
+    "anyroad.plausible_factor", "PLAUSIBLE_RMS": "anyroad.plausible_rms", "PLAUSIBLE_WAVELENGTH":
+    "anyroad.plausible_wavelength", "SPREAD_TOL": "anyroad.spread_tol", "JOINT_MOTION_BOUND":
+    "anyroad.joint_motion_bound"})

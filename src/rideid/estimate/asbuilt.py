@@ -38,8 +38,8 @@ the road is projected out (an unknown road's fit), the free road estimate
 ``R`` is regressed on the drawn front road for ``alpha``, and the deviation's
 power ``|R - alpha U_front|^2``, less the part the sensor noise puts into
 ``R`` (``sigma_n^2 (A^H A)^-1``), averaged over both paths and
-:data:`SMOOTH_BINS` neighbouring bins, is ``sigma_d^2``, floored at
-:data:`PRIOR_FLOOR` of that noise part. On an exact track ``sigma_d`` comes
+setting ``asbuilt.smooth_bins`` neighbouring bins, is ``sigma_d^2``, floored at
+setting ``asbuilt.prior_floor`` of that noise part. On an exact track ``sigma_d`` comes
 out near that floor and the fit is the known-road fit; where the track
 carries unevenness the prior widens and the road there is learnt.
 
@@ -62,24 +62,13 @@ import numpy as np
 import scipy.linalg
 from scipy.optimize import minimize
 
+from ..settings import defaults, legacy_names
 from ..model.simulate import RunInput, corner_inputs, prepare_run
 from . import roadfit
 
 #: the prior's variants: "prior" (the default, an estimated unevenness spectrum), "amplitude" (no
 #: unevenness: the drawn track times a fitted amplitude factor), "free" (the road projected out)
 MODES = ("prior", "amplitude", "free")
-#: the unevenness power is averaged over this many bins either side (and both wheel paths)
-SMOOTH_BINS = 5
-#: a bin whose deviation from the drawing exceeds this many times the unevenness background gets its own variance
-OPEN_FACTOR = 4.0
-#: the unevenness variance is at least this share of what the sensor noise puts into the free road estimate
-PRIOR_FLOOR = 1e-3
-#: the diagonal load of the boundary unknowns' normal equations (unit diagonal; :func:`_normal_solve`)
-NORMAL_RIDGE = 1e-12
-#: neighbouring DFT bins per cluster of the error bars' sandwich (:func:`meat`)
-CLUSTER_BINS = 1
-#: the sensor-noise power per bin is averaged over this many bins either side
-NOISE_BINS = 10
 
 
 @dataclass
@@ -173,28 +162,15 @@ def prepare_track_run(ds, run, mode: str = "prior") -> TrackRun:
                     inputs=ri)
 
 
-#: :func:`align_motion`'s unknowns: the speed's relative change and the start's shift (s), in these units
-MOTION_SCALE = (1e-3, 1e-3)
-#: ... its Nelder-Mead simplex: first steps (in those units) and tolerance, and evaluations at most
-MOTION_STEPS = (0.5, 2.0)
-MOTION_XTOL = 0.01
-MOTION_MAXFEV = 120
-
-
 def moved(tr: TrackRun, ds, run, p) -> TrackRun:
     """``tr`` with its drawing moved by ``p`` = (the speed's relative change, the start's shift) in
-    :data:`MOTION_SCALE` units: the drawing at ``x = v (t - shift)``, the rear wheels' delay at ``v`` (the
+    setting ``asbuilt.motion_scale`` units: the drawing at ``x = v (t - shift)``, the rear wheels' delay at ``v`` (the
     tabulated ``inputs`` as they were: :func:`align_motion` renews them once)."""
-    v = tr.rr.speed * (1.0 + p[0] * MOTION_SCALE[0])
-    shift = tr.shift + p[1] * MOTION_SCALE[1]
+    v = tr.rr.speed * (1.0 + p[0] * defaults["asbuilt.motion_scale"][0])
+    shift = tr.shift + p[1] * defaults["asbuilt.motion_scale"][1]
     u = corner_inputs(ds.manifest.tracks[run.track], ds.geometry, v * (ds.data[run.id].time - shift))
     return replace(tr, rr=replace(tr.rr, speed=v, tau=ds.geometry.wheelbase / v), U=np.fft.rfft(u, axis=0),
                    shift=shift)
-
-
-#: :func:`motion_jacobian`'s central-difference steps (:data:`MOTION_SCALE` units: 1e-4 of the speed, 0.2 ms):
-#: about the speed's and the start's standard errors on the all-realities case (docs/tracks-as-built.md)
-MOTION_JACOBIAN_STEPS = (0.1, 0.2)
 
 
 def motion_jacobian(P, geom, tr: TrackRun, ds, run) -> np.ndarray:
@@ -202,11 +178,11 @@ def motion_jacobian(P, geom, tr: TrackRun, ds, run) -> np.ndarray:
     left it) in its speed (relative) and its start shift (s), by central differences: the columns that put the
     speed's and the start's uncertainty into the error bars (:func:`rideid.estimate.anyroad`'s sandwich)."""
     cols = []
-    for j, h in enumerate(MOTION_JACOBIAN_STEPS):
+    for j, h in enumerate(defaults["asbuilt.motion_jacobian_steps"]):
         p = np.zeros(2)
         p[j] = h
         d = residuals(P, geom, moved(tr, ds, run, p)) - residuals(P, geom, moved(tr, ds, run, -p))
-        cols.append(d / (2 * h * MOTION_SCALE[j]))
+        cols.append(d / (2 * h * defaults["asbuilt.motion_scale"][j]))
     return np.stack(cols, axis=1)
 
 
@@ -235,9 +211,11 @@ def align_motion(P, geom, tr: TrackRun, ds, run, mode: str = "prior") -> tuple[T
         return float(np.sum(residuals(P, geom, moved(base, ds, run, p)) ** 2))
 
     c0 = cost(np.zeros(2))
+    steps = defaults["asbuilt.motion_steps"]
     sol = minimize(cost, np.zeros(2), method="Nelder-Mead",
-                   options={"initial_simplex": np.array([[0.0, 0.0], [MOTION_STEPS[0], 0.0], [0.0, MOTION_STEPS[1]]]),
-                            "xatol": MOTION_XTOL, "fatol": 1e-9 * c0, "maxfev": MOTION_MAXFEV})
+                   options={"initial_simplex": np.array([[0.0, 0.0], [steps[0], 0.0], [0.0, steps[1]]]),
+                            "xatol": defaults["asbuilt.motion_xtol"], "fatol": 1e-9 * c0,
+                            "maxfev": defaults["asbuilt.motion_maxfev"]})
     x = sol.x if sol.fun < c0 else np.zeros(2)
     out = moved(tr, ds, run, x)
     out = replace(out, inputs=nominal_inputs(ds, run, out.rr.speed, out.shift))
@@ -292,12 +270,12 @@ def _whitener(Acol, D, mode):
 
 
 def _normal_solve(G, b):
-    """``G^-1 b`` for the normal matrix ``G`` (unit diagonal), regularised by :data:`NORMAL_RIDGE` on the
+    """``G^-1 b`` for the normal matrix ``G`` (unit diagonal), regularised by setting ``asbuilt.normal_ridge`` on the
     diagonal: some of the rear lead-in's samples and the start's state explain the same thing, so ``G`` is
     singular to rounding; the ridge picks the smallest of the equivalent solutions (the residual the same to
     1e-9) and lets a Cholesky factor solve it (30 times faster than LAPACK's SVD least squares at the 400
     unknowns of a slow run's lead-in)."""
-    A = G + NORMAL_RIDGE * np.eye(G.shape[0])
+    A = G + defaults["asbuilt.normal_ridge"] * np.eye(G.shape[0])
     try:
         return scipy.linalg.cho_solve(scipy.linalg.cho_factor(A, check_finite=False), b, check_finite=False)
     except np.linalg.LinAlgError:
@@ -402,11 +380,11 @@ def meat(J, e, tr: TrackRun, s2: float | None = None) -> np.ndarray:
 
 
 def cluster_meat(J, e, tr: TrackRun) -> np.ndarray:
-    """The gradient's spread over clusters of :data:`CLUSTER_BINS` neighbouring DFT bins of run ``tr``'s block
-    (kept for comparison: :func:`meat` says why it is not used)."""
+    """The gradient's spread over clusters of setting ``asbuilt.cluster_bins`` neighbouring DFT bins of run ``tr``'s
+    block (kept for comparison: :func:`meat` says why it is not used)."""
     g = (J * e[:, None]).reshape(-1, tr.per_bin, J.shape[1]).sum(axis=1)           # per bin
     K = g.shape[0]
-    groups = np.arange(K) // max(1, CLUSTER_BINS)
+    groups = np.arange(K) // max(1, defaults["asbuilt.cluster_bins"])
     G = np.zeros((groups[-1] + 1, J.shape[1]))
     np.add.at(G, groups, g)
     return G.T @ G
@@ -442,7 +420,7 @@ def estimate_prior(P, geom, tr: TrackRun) -> Prior:
     # as road)
     kept = 2 * K * max(c - 2, 1)
     dof = kept / max(kept - sol.f_state.size - 2 * rr.lead_in, 1)
-    noise = _smooth(np.sum(np.abs(sol.residual) ** 2, axis=1) / max(c - 2, 1), NOISE_BINS) * dof
+    noise = _smooth(np.sum(np.abs(sol.residual) ** 2, axis=1) / max(c - 2, 1), defaults["asbuilt.noise_bins"]) * dof
     noise = np.maximum(noise, 1e-30 * max(float(np.mean(np.abs(rr.Y[rr.fit]) ** 2)), 1e-300))
     w = rr.omega(rr.fit)
     h = rr.h
@@ -465,13 +443,14 @@ def estimate_prior(P, geom, tr: TrackRun) -> Prior:
     raw = np.abs(R - alpha * Uf) ** 2                                                       # (K, 2)
     # the spectrum's background: a running median (robust to the few bins where the drawing itself is off), over
     # ln 2 (the median of an exponential variable, |complex Gaussian|^2, is ln 2 of its mean), less the noise
-    background = _running_median(raw, SMOOTH_BINS) / np.log(2.0) - _smooth(np.mean(v, axis=1), SMOOTH_BINS)
-    floor = PRIOR_FLOOR * _smooth(np.mean(v, axis=1), SMOOTH_BINS)
+    bins = defaults["asbuilt.smooth_bins"]
+    background = _running_median(raw, bins) / np.log(2.0) - _smooth(np.mean(v, axis=1), bins)
+    floor = defaults["asbuilt.prior_floor"] * _smooth(np.mean(v, axis=1), bins)
     background = np.maximum(background, floor)
     # a bin whose deviation is far above the background is where the road departs from the drawing times a
     # factor (the disc's envelope of a taller bump, a feature off its drawn place): the prior opens there
     local = np.max(raw - v, axis=1)
-    sd2 = np.where(local > OPEN_FACTOR * background, local, background)
+    sd2 = np.where(local > defaults["asbuilt.open_factor"] * background, local, background)
     return Prior(noise=noise, D=sd2 / noise, unevenness=sd2, alpha=alpha)
 
 
@@ -503,3 +482,12 @@ def fitted_channels(P, geom, tr: TrackRun, y, fit: Fit | None = None) -> np.ndar
 __all__ = ["MODES", "Prior", "TrackRun", "Fit", "nominal_inputs", "prepare_track_run", "solve", "residuals",
            "estimate_prior", "unevenness_rms", "fitted_channels", "meat", "cluster_meat", "align_motion",
            "moved", "motion_jacobian"]
+
+
+#: the constants this module had before rideid.settings, read from the registry (PEP 562)
+__getattr__ = legacy_names(__name__, {
+    "SMOOTH_BINS": "asbuilt.smooth_bins", "OPEN_FACTOR": "asbuilt.open_factor", "PRIOR_FLOOR":
+    "asbuilt.prior_floor", "NORMAL_RIDGE": "asbuilt.normal_ridge", "CLUSTER_BINS": "asbuilt.cluster_bins",
+    "NOISE_BINS": "asbuilt.noise_bins", "MOTION_SCALE": "asbuilt.motion_scale", "MOTION_STEPS":
+    "asbuilt.motion_steps", "MOTION_XTOL": "asbuilt.motion_xtol", "MOTION_MAXFEV": "asbuilt.motion_maxfev",
+    "MOTION_JACOBIAN_STEPS": "asbuilt.motion_jacobian_steps"})

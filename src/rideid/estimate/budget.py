@@ -53,6 +53,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
+from ..settings import defaults, legacy_names
 from ..data.dataset import Dataset
 from ..errors import ArgumentError, DataError
 from ..model.equations import CHANNELS
@@ -71,12 +72,6 @@ MOTION = "speed and start"
 SENSITIVITY = "sensitivity"
 #: parameters that do not scale with the anchor (lengths): the anchor's closed form gives them 0
 LENGTHS = ("a", "bs_clear_f", "bs_clear_r")
-#: a variable this close (bound-normalised) to a search bound is held there by the polish, and here
-AT_BOUND = 1e-9
-#: forward-difference step of the residual Jacobian (bound-normalised, as the polish's)
-JACOBIAN_STEP = 1e-7
-#: central-difference step of a known or geometric input, as a fraction of its declared std
-INPUT_STEP = 0.1
 
 
 @dataclass(frozen=True)
@@ -171,11 +166,12 @@ def _full_jacobian(space: ParameterSpace, x) -> np.ndarray:
 
 def residual_jacobian(cf: CostFunction, x, weights) -> tuple[np.ndarray, np.ndarray]:
     """The polish's Jacobian at ``x``: ``(m, d)`` in bound-normalised coordinates (forward differences,
-    :data:`JACOBIAN_STEP`), and the residuals ``(m,)``."""
+    setting ``budget.jacobian_step``), and the residuals ``(m,)``."""
     lo, span = cf.bounds[:, 0], cf.bounds[:, 1] - cf.bounds[:, 0]
     z = (np.asarray(x, dtype=float) - lo) / span
     d = z.size
-    steps = np.where(z + JACOBIAN_STEP <= 1, JACOBIAN_STEP, -JACOBIAN_STEP)
+    step = defaults["budget.jacobian_step"]
+    steps = np.where(z + step <= 1, step, -step)
     Z = np.tile(z, (d + 1, 1))
     Z[1 + np.arange(d), np.arange(d)] += steps
     R = cf.residuals(lo + span * Z, weights)
@@ -209,7 +205,7 @@ def _input_column(cf: CostFunction, P0, inp: DeclaredInput, weights) -> np.ndarr
     """``dr/du`` of one declared input at the full row ``P0``."""
     if inp.kind == SENSITIVITY:
         return _sensor_column(cf, inp.key, weights)
-    h = INPUT_STEP * inp.std
+    h = defaults["budget.input_step"] * inp.std
     if inp.kind == "known":
         g = _direct(cf.space, inp)
         R = cf.row_residuals(np.vstack([P0 + h * g, P0 - h * g]), weights)
@@ -245,7 +241,8 @@ def propagate(cf: CostFunction, x, inputs) -> dict[str, np.ndarray]:
     Jz, _ = residual_jacobian(cf, x, weights)
     lo, span = cf.bounds[:, 0], cf.bounds[:, 1] - cf.bounds[:, 0]
     z = (x - lo) / span
-    free = (z > AT_BOUND) & (z < 1 - AT_BOUND)  # held at a bound by the polish: held here
+    at = defaults["budget.at_bound"]
+    free = (z > at) & (z < 1 - at)  # held at a bound by the polish: held here
     Jf = Jz[:, free]
     Hinv = normal_inverse(Jf).matrix
     A = _full_jacobian(space, x)
@@ -416,3 +413,8 @@ def dampers_with_totals(res, details: dict):
 
 __all__ = ["DeclaredInput", "declared_inputs", "propagate", "budget_entries", "with_budget", "fit_cost",
            "scale_gradients", "anchor_note", "dampers_with_totals", "STATISTICAL", "SENSITIVITY", "MOTION"]
+
+
+#: the constants this module had before rideid.settings, read from the registry (PEP 562)
+__getattr__ = legacy_names(__name__, {
+    "AT_BOUND": "budget.at_bound", "JACOBIAN_STEP": "budget.jacobian_step", "INPUT_STEP": "budget.input_step"})

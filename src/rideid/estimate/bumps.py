@@ -8,14 +8,14 @@ has no stops. Its best car is simulated as the nonlinear car without stops
 and the compressions ``d_i = z_i - z_bi`` (m, from static ride height) of
 each axle's two corners over all runs are collected. For each axle whose
 stop is not fully known, candidate clearances are the compressions that
-:data:`SCAN_COUNTS` samples exceed (20 .. 1280 samples: from a stop touched
+setting ``bumps.scan_counts`` samples exceed (20 .. 1280 samples: from a stop touched
 on the highest peaks only to one met on every large stroke), inside the
-clearance bounds, crossed with the rates :data:`SCAN_RATES` (N/m, inside the
+clearance bounds, crossed with the rates setting ``bumps.scan_rates`` (N/m, inside the
 rate bounds); a known clearance or rate is the only candidate of its kind.
 Every candidate car (the search's car with that one stop, the other axle
 without) is scored on the equal-weight cost in one batch. An axle's best
 candidate starts the polish when it lowers the cost by at least
-:data:`MIN_GAIN` (relative) against the car without that stop; otherwise the
+setting ``bumps.min_gain`` (relative) against the car without that stop; otherwise the
 stop is **not reached**. The scan is a coarse grid on purpose: the polish
 (Gauss-Newton on the nonlinear car) finishes clearance and rate together,
 and it only needs the stop engaged (a stop that touches no sample has zero
@@ -23,7 +23,7 @@ gradient, so a start above every compression would never move).
 
 Reached
 -------
-An axle's stop is reached when at least :data:`MIN_SAMPLES` samples (both
+An axle's stop is reached when at least setting ``bumps.min_samples`` samples (both
 corners of the axle, all runs) of the fitted car's compression exceed its
 clearance (checked on the scan's start and again on the polished car; an
 axle that fails after the polish is frozen and the polish repeated). A stop
@@ -41,23 +41,10 @@ from dataclasses import replace
 
 import numpy as np
 
+from ..settings import defaults, legacy_names
 from ..model.nonlinear import BUMP_STOP_NAMES, check_nonlinear, travel_by_run
-from .adequacy import MIN_IMPROVEMENT
+from .adequacy import min_improvement
 
-#: samples (both corners of the axle, all runs) beyond the clearance that make a stop reached
-MIN_SAMPLES = 20
-#: scan: candidate clearances are the compressions exceeded by these many samples
-SCAN_COUNTS = (20, 40, 80, 160, 320, 640, 1280)
-#: scan: candidate rates (N/m)
-SCAN_RATES = (1.0e4, 3.0e4, 1.0e5, 3.0e5)
-#: an axle's best scan candidate must lower the equal-weight cost by this share to start a stop
-MIN_GAIN = 0.01
-# ... or by MIN_IMPROVEMENT absolutely (the adequacy verdict's materiality floor), for a car whose cost
-# other misfits dominate (a stop then gains less than 1 % of it)
-#: an unreached stop is held at this multiple of the largest compression reached
-UNREACHED_FACTOR = 1.25
-#: the sub-step bound of the compression simulations (as the report's velocity histograms)
-STATE_RHO = 0.2
 #: how the text output marks a stop no run reaches
 NOT_REACHED = "not reached — not a number to trust"
 AXLES = (("front", "f"), ("rear", "r"))
@@ -67,7 +54,7 @@ def compressions(cf, P) -> tuple[np.ndarray, np.ndarray]:
     """Suspension compressions (m, from static ride height, compression +) of car ``P`` (a full row of
     ``cf.space``) over every run of ``cf``: ``(front, rear)``, both corners of each axle concatenated."""
     geom, layout = cf.space.geometry, cf.space.layout
-    sim = replace(cf.simulator, layout=layout, rho=STATE_RHO).bind(geom, cf.input_runs)
+    sim = replace(cf.simulator, layout=layout, rho=defaults["bumps.state_rho"]).bind(geom, cf.input_runs)
     d = travel_by_run(sim, check_nonlinear(P, geom, layout), P[cf.space.col["a"]])
     d = [t[k:] for t, k in zip(d, cf.lead)]  # a moving start's recorded samples (SPEC §9)
     return np.concatenate([t[:, :2].ravel() for t in d]), np.concatenate([t[:, 2:].ravel() for t in d])
@@ -80,7 +67,7 @@ def reach(cf, P) -> dict:
         c = float(P[cf.space.col[f"bs_clear_{a}"]])
         n = int(np.count_nonzero(d > c))
         out[axle] = {"samples_beyond_clearance": n, "max_compression": float(d.max()),
-                     "reached": n >= MIN_SAMPLES}
+                     "reached": n >= defaults["bumps.min_samples"]}
     return out
 
 
@@ -89,7 +76,7 @@ def frozen_values(space, axle_letter: str, max_compression: float) -> dict:
     out = {}
     c, r = f"bs_clear_{axle_letter}", f"bs_rate_{axle_letter}"
     if c not in space.fixed:
-        out[c] = max(UNREACHED_FACTOR * max_compression, 1e-3)
+        out[c] = max(defaults["bumps.unreached_factor"] * max_compression, 1e-3)
     if r not in space.fixed:
         out[r] = 0.0
     return out
@@ -143,13 +130,13 @@ def scan_start(cf, x) -> tuple[np.ndarray, dict, dict]:
         d = np.sort(dq[a])[::-1]
         if c_name in names:
             lo, hi = bnd[c_name]
-            cs = sorted({float(d[n]) for n in SCAN_COUNTS if n < d.size and lo <= d[n] <= hi})
+            cs = sorted({float(d[n]) for n in defaults["bumps.scan_counts"] if n < d.size and lo <= d[n] <= hi})
         else:
             c = space.fixed[c_name]
-            cs = [c] if np.count_nonzero(d > c) >= MIN_SAMPLES else []
+            cs = [c] if np.count_nonzero(d > c) >= defaults["bumps.min_samples"] else []
         if r_name in names:
             lo, hi = bnd[r_name]
-            ks = [k for k in SCAN_RATES if lo <= k <= hi] or [0.5 * (lo + hi)]
+            ks = [k for k in defaults["bumps.scan_rates"] if lo <= k <= hi] or [0.5 * (lo + hi)]
         else:
             ks = [space.fixed[r_name]]
         for c in cs:
@@ -168,8 +155,8 @@ def scan_start(cf, x) -> tuple[np.ndarray, dict, dict]:
         gain = 0.0 if best is None else float((J[0] - best[0]) / J[0])
         rec = {"scan_gain": gain, "max_compression": float(dq[a].max())}
         if c_name not in names and r_name not in names:  # known stop: used as given
-            rec["reached"] = bool(np.count_nonzero(dq[a] > space.fixed[c_name]) >= MIN_SAMPLES)
-        elif best is not None and (gain >= MIN_GAIN or J[0] - best[0] >= MIN_IMPROVEMENT):
+            rec["reached"] = bool(np.count_nonzero(dq[a] > space.fixed[c_name]) >= defaults["bumps.min_samples"])
+        elif best is not None and (gain >= defaults["bumps.min_gain"] or J[0] - best[0] >= min_improvement()):
             set_stop(x, a, best[1][1], best[1][2], dq[a] if best[1][3] else None)
             rec["reached"] = True
             rec["start"] = {"clearance": best[1][1], "rate": best[1][2]}
@@ -190,7 +177,8 @@ def bump_block(space, P, cov_white, cov_robust, names, record) -> dict:
         return float(np.sqrt(v)) if np.isfinite(v) and v >= 0 else None
 
     out = {"unit": {"clearance": "m", "rate": "N/m"},
-           "rule": f"a stop is reached when at least {MIN_SAMPLES} samples (both corners of the axle, all runs) "
+           "rule": f"a stop is reached when at least {defaults['bumps.min_samples']} samples (both corners of the "
+                   "axle, all runs) "
                    "of the fitted car's compression exceed its clearance"}
     for axle, a in AXLES:
         rec = (record or {}).get(axle, {})
@@ -226,5 +214,11 @@ def format_bump_stops(bs: dict) -> str:
     return "\n".join(lines)
 
 
-__all__ = ["BUMP_STOP_NAMES", "MIN_SAMPLES", "NOT_REACHED", "bump_block", "compressions", "format_bump_stops",
+__all__ = ["BUMP_STOP_NAMES", "NOT_REACHED", "bump_block", "compressions", "format_bump_stops",
            "reach", "scan_start"]
+
+
+#: the constants this module had before rideid.settings, read from the registry (PEP 562)
+__getattr__ = legacy_names(__name__, {
+    "MIN_SAMPLES": "bumps.min_samples", "SCAN_COUNTS": "bumps.scan_counts", "SCAN_RATES": "bumps.scan_rates",
+    "MIN_GAIN": "bumps.min_gain", "UNREACHED_FACTOR": "bumps.unreached_factor", "STATE_RHO": "bumps.state_rho"})

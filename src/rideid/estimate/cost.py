@@ -45,6 +45,7 @@ import threading
 
 import numpy as np
 
+from ..settings import defaults, legacy_names
 from ..data.dataset import Dataset, check_known_consistent, lead_ins, prepare_inputs, scale_anchor
 from ..errors import ArgumentError, DataError
 from ..model.equations import CHANNEL_KIND, CHANNELS
@@ -56,7 +57,6 @@ from ..model.params import (ALL_NAMES, EXT_NAMES, GROUPS, INDEX, MASS_COUNT, NAM
                             SIGNED, SUSPENSION_NAMES, default_bounds, nominal_car, powertrain_fits, total_mass)
 from ..data.schema import NONLINEAR_GROUPS
 
-ENERGY_FLOOR = 0.01
 
 #: the SPEC §8 groups this version identifies
 CURVES = "damper_curves"
@@ -71,13 +71,6 @@ IDENTIFIABLE_GROUPS: tuple[str, ...] = tuple(GROUPS) + (CURVES, BUMP)
 BUMP_BOUNDS = {"bs_clear_f": (0.01, 0.15), "bs_clear_r": (0.01, 0.15), "bs_rate_f": (0.0, 5.0e5),
                "bs_rate_r": (0.0, 5.0e5)}
 BUMP_UNITS = {"bs_clear_f": "m", "bs_clear_r": "m", "bs_rate_f": "N/m", "bs_rate_r": "N/m"}
-#: default bounds of a knot force ``F(v)``: the axle's ``c_s`` bounds times ``|v|``, the lower one divided by
-#: the first factor (a digressive damper's high-speed force lies far below ``c_min v``), the upper one times
-#: the second (a progressive or bleed-stiff low-speed force above ``c_max v``); ``F`` has the sign of ``v``.
-#: Wider upper bounds buy nothing but stiffer search candidates (more RK4 sub-steps).
-KNOT_BOUND_FACTOR = (3.0, 2.0)
-#: the velocity (m/s) of the derived ``c_sf``, ``c_sr``: the curve's mean slope over ``[-V, V]``
-MEAN_SLOPE_VELOCITY = 0.1
 
 
 def refuse_unsupported_groups(groups, where: str = "model"):
@@ -116,7 +109,7 @@ def channel_weights(Y: np.ndarray) -> np.ndarray:
         if not present[i]:
             continue
         same = [j for j, c2 in enumerate(CHANNELS) if CHANNEL_KIND[c2] == CHANNEL_KIND[c] and present[j]]
-        D[i] = max(E[i], ENERGY_FLOOR * max(E[j] for j in same))
+        D[i] = max(E[i], defaults["cost.energy_floor"] * max(E[j] for j in same))
     W = np.zeros(len(CHANNELS))
     n = int(present.sum())
     ok = present & (D > 0)
@@ -246,13 +239,13 @@ class ParameterSpace:
             for n, v in zip(knot_names, self.knot_velocities()):
                 c = "c_sf" if n.startswith("F_f") else "c_sr"
                 lo, hi = bounds.get(c, db[c])
-                f_lo, f_hi = KNOT_BOUND_FACTOR
+                f_lo, f_hi = defaults["cost.knot_bound_factor"]
                 db[n] = (lo * v / f_lo, hi * v * f_hi) if v > 0 else (hi * v * f_hi, lo * v / f_lo)
         self.bounds = np.array([bounds.get(n, db[n]) for n in self.names], dtype=float)
         if self.curves:
             # the mean slope over [-V, V] is linear in the knot forces: c = F @ w
             eye = np.eye(self.layout.n_knots)
-            V = MEAN_SLOPE_VELOCITY
+            V = defaults["cost.mean_slope_velocity"]
             knots = self.layout.knots
             self._slope_w = (damper_force(knots, eye, V) - damper_force(knots, eye, -V)) / (2 * V)
         self._nominal = self._nominal_row()
@@ -712,3 +705,9 @@ class CostFunction:
         P = np.asarray(params, dtype=float).reshape(1, -1)
         outs = self.sim.outputs(P, pin=self.pin)
         return {rid: o[0] for rid, o in zip(self.run_ids, outs)}
+
+
+#: the constants this module had before rideid.settings, read from the registry (PEP 562)
+__getattr__ = legacy_names(__name__, {
+    "ENERGY_FLOOR": "cost.energy_floor", "KNOT_BOUND_FACTOR": "cost.knot_bound_factor", "MEAN_SLOPE_VELOCITY":
+    "cost.mean_slope_velocity"})

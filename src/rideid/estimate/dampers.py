@@ -9,7 +9,7 @@ suspension velocities ``v_i = z_i' - z_bi'`` are simulated over every run
 (the nonlinear car's states from the compiled kernel, plain RK4 sub-steps at the lift-off sub-step bound
 :data:`rideid.data.scenario.LIFT_OFF_RHO`: outputs within 0.02 % of their RMS of the split sub-steps'),
 and a knot of an axle counts as **excited** when at least
-:data:`MIN_SAMPLES` samples of the axle's two corners over all runs go beyond
+setting ``dampers.min_samples`` samples of the axle's two corners over all runs go beyond
 the previous knot on its side (beyond 0 for the innermost knots, which are
 always kept). 20 samples at 200 Hz are 0.1 s of travel in the knot's
 segment: below that the force rests on a handful of peaks and its error bar
@@ -21,7 +21,7 @@ error: "not excited — not a number to trust").
 Knees found by the data
 -----------------------
 Nobody knows where their damper bends before testing it. Without ``[model]
-damper_knots`` the curves are fitted on :data:`KNEE_GRID` instead of the
+damper_knots`` the curves are fitted on setting ``dampers.knee_grid`` instead of the
 default knots: 0.025 m/s apart up to 0.2 m/s (where production dampers bend),
 every default knot among them; the excitation rule above freezes the grid
 knots no run reaches. Where each curve bends is then read off the fitted curve
@@ -37,36 +37,28 @@ from dataclasses import replace
 
 import numpy as np
 
+from ..settings import defaults, legacy_names
 from ..model.nonlinear import check_nonlinear, travel_by_run
 from ..data.scenario import LIFT_OFF_RHO
 
-#: samples (both corners of the axle, all runs) beyond the previous knot that make a knot excited
-MIN_SAMPLES = 20
 #: how the text output marks a knot no run excites
 NOT_EXCITED = "not excited — not a number to trust"
-#: the positive knots (m/s) of the curves fitted without ``[model] damper_knots``, mirrored into rebound:
-#: 0.025 m/s apart to 0.2 m/s, then 0.3 and the default knots' 0.4; every default knot is one of them
-KNEE_GRID: tuple[float, ...] = (0.025, 0.05, 0.075, 0.1, 0.125, 0.15, 0.175, 0.2, 0.3, 0.4)
 #: what the error bars of curves fitted on the grid leave out (result.json ``dampers.grid_note``)
 GRID_NOTE = ("a smooth curve is straight between the grid knots here, which moves the knot forces and the derived "
              "c_s by ~0.2 % at a knee (more than their statistical error at 1 % noise): std_robust includes that "
              "approximation error (std_grid, estimated from the fitted curve's bend); the knees' std_robust is "
              "statistical only")
-#: draws of the knot forces (robust covariance) behind a knee's standard error; their seed (deterministic)
-KNEE_DRAWS = 400
-KNEE_SEED = 20260
-#: a side bends when its slope ratio above/below the knee differs from 1 by more than this many std_robust
-KNEE_SIGNIFICANCE = 3.0
-#: a knot is a bend when its slope change exceeds this share of the side's steepest slope (and
-#: :data:`KNEE_SIGNIFICANCE` std_robust) and no neighbour's is larger
-BEND_SHARE = 0.1
-#: the text of result.json ``dampers.knee_rule``
-KNEE_RULE = ("knee: per axle and side, the break of the two-segment line through the origin (slopes below and "
-             "above it) fitted by least squares to the excited knot forces; std_robust from "
-             f"{KNEE_DRAWS} draws of those forces from their robust covariance; a side bends when its slope ratio "
-             f"differs from 1 by more than {KNEE_SIGNIFICANCE:g} std_robust (else no knee is reported); bends: the "
-             "knots whose slope change per stretch of velocity is the largest of its neighbours', above "
-             f"{BEND_SHARE:g} of the side's steepest slope and {KNEE_SIGNIFICANCE:g} std_robust")
+
+
+def knee_rule() -> str:
+    """The text of result.json ``dampers.knee_rule``, with the settings in force."""
+    significance = defaults["dampers.knee_significance"]
+    return ("knee: per axle and side, the break of the two-segment line through the origin (slopes below and "
+            "above it) fitted by least squares to the excited knot forces; std_robust from "
+            f"{defaults['dampers.knee_draws']} draws of those forces from their robust covariance; a side bends when "
+            f"its slope ratio differs from 1 by more than {significance:g} std_robust (else no knee is reported); "
+            "bends: the knots whose slope change per stretch of velocity is the largest of its neighbours', above "
+            f"{defaults['dampers.bend_share']:g} of the side's steepest slope and {significance:g} std_robust")
 
 
 def suspension_velocities_by_run(cf, P, rho: float | None = None) -> list[tuple[np.ndarray, np.ndarray]]:
@@ -109,7 +101,7 @@ def knot_counts(knots, v) -> np.ndarray:
     return out
 
 
-def knot_excitation(cf, P, min_samples: int = MIN_SAMPLES) -> dict:
+def knot_excitation(cf, P, min_samples: int | None = None) -> dict:
     """Which knots the runs excite with car ``P`` (module docstring).
 
     Returns
@@ -118,6 +110,7 @@ def knot_excitation(cf, P, min_samples: int = MIN_SAMPLES) -> dict:
         ``counts`` and ``excited`` per axle (``"front"``, ``"rear"``; lists in knot order), ``frozen``:
         the knot-force names not excited, ``rule``: the criterion in words.
     """
+    min_samples = defaults["dampers.min_samples"] if min_samples is None else min_samples
     knots = np.asarray(cf.space.layout.knots)
     K = knots.size
     j0 = int(np.searchsorted(knots, 0.0))
@@ -172,14 +165,14 @@ def dampers_block(space, P, cov_white, cov_robust, names, excitation=None) -> di
     out["mean_slope_velocity"] = 0.1
     if space.damper_knots is None:
         out["knots_from"] = "default knots (SPEC §8)"
-    elif space.damper_knots == KNEE_GRID:
+    elif space.damper_knots == defaults["dampers.knee_grid"]:
         out["knots_from"] = ("found: no [model] damper_knots, so the curves were fitted on a grid 0.025 m/s apart "
                              "to 0.2 m/s and the knees read off them (docs/dampers.md)")
         out["grid_note"] = GRID_NOTE
     else:
         out["knots_from"] = "[model] damper_knots"
     out["knees"] = knees(space, P, cov_robust, names)
-    out["knee_rule"] = KNEE_RULE
+    out["knee_rule"] = knee_rule()
     return out
 
 
@@ -255,7 +248,8 @@ def bends_of(v, F, cov=None) -> list:
     """The knots where a side's curve bends: ``[{"velocity", "slope_change", "std_robust"}, ...]`` for each
     interior knot (``v`` positive ascending, ``F`` the forces there, through the origin) whose change of
     slope over its stretch (half the span to its neighbours) is the largest of its neighbours', and whose
-    change is larger than :data:`BEND_SHARE` of the steepest slope and than :data:`KNEE_SIGNIFICANCE` of
+    change is larger than setting ``dampers.bend_share`` of the steepest slope and than setting
+    ``dampers.knee_significance`` of
     its std_robust (from ``cov``, the forces' covariance; None: not tested). Several bends (a valve that
     opens in stages) are each listed; a smooth bend shows at one knot or two close together."""
     v = np.asarray(v, dtype=float)
@@ -279,8 +273,8 @@ def bends_of(v, F, cov=None) -> list:
     for i in range(n - 1):
         size = abs(dS[i])
         local = all(curv[i] >= curv[j] for j in (i - 1, i + 1) if 0 <= j < n - 1)
-        significant = cov is None or size > KNEE_SIGNIFICANCE * sd[i]
-        if local and significant and size > BEND_SHARE * steepest:
+        significant = cov is None or size > defaults["dampers.knee_significance"] * sd[i]
+        if local and significant and size > defaults["dampers.bend_share"] * steepest:
             out.append({"velocity": float(v[i]), "slope_change": float(dS[i]),
                         "std_robust": None if cov is None else float(sd[i])})
     return out
@@ -289,15 +283,15 @@ def bends_of(v, F, cov=None) -> list:
 def knees(space, P, cov_robust, names, excitation=None) -> dict:
     """result.json ``dampers.knees``: per axle (``front``, ``rear``) and side (``compression``, ``rebound``)
     where the fitted curve bends (:func:`knee_of` on the excited knot forces of full row ``P``) with its
-    ``std_robust`` from draws of those forces (covariance ``cov_robust`` over ``names``; rule: :data:`KNEE_RULE`).
+    ``std_robust`` from draws of those forces (covariance ``cov_robust`` over ``names``; rule: :func:`knee_rule`).
 
     A side with fewer than 3 excited knots, or whose slope ratio does not differ from 1 by more than
-    :data:`KNEE_SIGNIFICANCE` std_robust, has ``velocity`` None (no bend the data can place)."""
+    setting ``dampers.knee_significance`` std_robust, has ``velocity`` None (no bend the data can place)."""
     knots = np.asarray(space.layout.knots)
     K = knots.size
     j0 = int(np.searchsorted(knots, 0.0))
     frozen = set(space.frozen)
-    rng = np.random.default_rng(KNEE_SEED)
+    rng = np.random.default_rng(defaults["dampers.knee_seed"])
     out = {}
     for a, axle in enumerate(("front", "rear")):
         ns = space.knot_names[a * K:(a + 1) * K]
@@ -319,7 +313,7 @@ def knees(space, P, cov_robust, names, excitation=None) -> dict:
                 if not np.all(np.isfinite(C)):
                     C = None
                 else:
-                    draws = np.vstack([F, rng.multivariate_normal(np.zeros(len(idx)), C, KNEE_DRAWS,
+                    draws = np.vstack([F, rng.multivariate_normal(np.zeros(len(idx)), C, defaults["dampers.knee_draws"],
                                                                   method="eigh") + F])
             sign = 1.0 if side == "compression" else -1.0
             entry["bends"] = [dict(b, velocity=sign * b["velocity"]) for b in bends_of(v, F, C)]
@@ -329,7 +323,7 @@ def knees(space, P, cov_robust, names, excitation=None) -> dict:
             s_r = float(np.std(ratio[1:])) if kv.size > 1 else None
             entry.update(slope_below=float(c1[0]), slope_above=float(c2[0]), slope_ratio=float(ratio[0]),
                          slope_ratio_std_robust=s_r)
-            if s_r is not None and abs(ratio[0] - 1.0) > KNEE_SIGNIFICANCE * s_r:
+            if s_r is not None and abs(ratio[0] - 1.0) > defaults["dampers.knee_significance"] * s_r:
                 entry.update(velocity=float(kv[0]) * (1 if side == "compression" else -1), std_robust=s_k)
             else:
                 entry["note"] = "no significant bend: the curve is straight within its error bars"
@@ -337,7 +331,7 @@ def knees(space, P, cov_robust, names, excitation=None) -> dict:
 
 
 def grid_std(space, P) -> dict:
-    """The approximation error of curves fitted on :data:`KNEE_GRID`, as a standard error per excited knot
+    """The approximation error of curves fitted on setting ``dampers.knee_grid``, as a standard error per excited knot
     force and for the derived ``c_sf``, ``c_sr`` (name -> N or N s/m) of full row ``P``.
 
     A smooth curve is straight between the knots here: the least-squares line through a stretch of local
@@ -389,3 +383,11 @@ def add_grid_std(details: dict, dampers: dict, space, P) -> None:
         d["std_grid"] = [g.get(n) for n in ns]
         d["std_robust"] = [None if sr is None or g.get(n) is None else float(np.hypot(sr, g[n]))
                            for sr, n in zip(d["std_robust"], ns)]
+
+
+#: the constants this module had before rideid.settings, read from the registry (PEP 562)
+__getattr__ = legacy_names(__name__, {
+    "KNEE_RULE": knee_rule,
+    "MIN_SAMPLES": "dampers.min_samples", "KNEE_GRID": "dampers.knee_grid", "KNEE_DRAWS": "dampers.knee_draws",
+    "KNEE_SEED": "dampers.knee_seed", "KNEE_SIGNIFICANCE": "dampers.knee_significance", "BEND_SHARE":
+    "dampers.bend_share"})

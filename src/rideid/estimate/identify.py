@@ -48,7 +48,7 @@
    ``c_sf``, ``c_sr`` and frozen knots are derived; their standard errors
    follow by the delta method (they are linear in the knot forces).
    Without ``[model] damper_knots`` the curves' knots are those of
-   :data:`rideid.estimate.dampers.KNEE_GRID` (:func:`knee_cost`), and where
+   setting ``dampers.knee_grid`` (:func:`knee_cost`), and where
    each curve bends is reported with its error bar
    (:func:`rideid.estimate.dampers.knees`).
 10. Bump stops (SPEC §8, group ``bump_stops``): the search on the linear
@@ -69,6 +69,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 from scipy.optimize import OptimizeResult, least_squares
 
+from ..settings import defaults, legacy_names
 from ..data.checks import bound_findings
 from ..data.dataset import Dataset, lead_ins
 from ..data.quality import data_quality
@@ -81,7 +82,7 @@ from ..model.nonlinear import BUMP_STOP_NAMES
 from ..model.params import ALL_NAMES, INDEX, NOMINAL_EXTENSIONS, SUSPENSION_GROUPS, SUSPENSION_NAMES, UNITS
 from ..model.simulator import Simulator
 from .bumps import bump_block, frozen_values, reach, scan_start
-from .dampers import KNEE_GRID, add_grid_std, dampers_block, knot_excitation
+from .dampers import add_grid_std, dampers_block, knot_excitation
 from .responses import suspension_velocities
 from .cost import BUMP_UNITS, IDENTIFIABLE_GROUPS, CostFunction, ParameterSpace, refuse_unsupported_groups
 from .jade import JadeSolver, make_rng, stop_requested
@@ -92,7 +93,8 @@ from .uncertainty import jackknife_runs, estimate_covariance, hac_covariance, wh
 from .sensitivity import SensitivityMaps, cost_maps
 from .weighting import TrackWeighting, coefficient_of_variation
 
-#: JADE's population and its early stop before the polish (every free parameter's spread below 20 %).
+#: JADE's population and its early stop before the polish (every free parameter's spread below 20 %: the setting
+#: ``identify.spread_tol``).
 #: The polish only needs the optimum's basin: on five problems (the built-in car noise-free and at 2 %,
 #: an SUV with AR(1) noise, the SUV with bars and tire damping fitted with the full model, a van), two
 #: seeds each, every setting from (64, 0.02) to (24, 0.3) ends within 1e-5 standard errors of the same
@@ -100,9 +102,6 @@ from .weighting import TrackWeighting, coefficient_of_variation
 #: (benchmarks/bench_search.py). 32 is about three times the number of free parameters.
 DEFAULT_POPULATION = 32
 DEFAULT_GENERATIONS = 400
-DEFAULT_SPREAD_TOL = 0.2
-#: Without a polish JADE itself must converge: a much tighter stop.
-DEFAULT_SPREAD_TOL_NO_POLISH = 1e-5
 MESSAGES = {"generations": "Maximum number of generations reached.",
             "spread": "Every free parameter's spread in the population fell below spread_tol.",
             "callback": "Stopped by callback.",
@@ -226,7 +225,7 @@ def identify(ds: Dataset, *, rng=None, seed=None, population: int = DEFAULT_POPU
         raise ArgumentError("model='auto' is the model choice of rideid.identify "
                             "(rideid.estimate.model_choice.identify); this function fits one given model")
     if spread_tol is None:
-        spread_tol = DEFAULT_SPREAD_TOL if polish else DEFAULT_SPREAD_TOL_NO_POLISH
+        spread_tol = defaults["identify.spread_tol"] if polish else defaults["identify.spread_tol_no_polish"]
     if not isinstance(generations, (int, np.integer)) or generations < 1:
         raise ArgumentError(f"generations must be a positive integer, got {generations!r}")
     weighting = TrackWeighting.create(weights)
@@ -318,17 +317,18 @@ def _curve_start(cf: CostFunction, cf_search: CostFunction, x):
 
 
 def finds_knees(space: ParameterSpace) -> bool:
-    """Whether the curves of ``space`` are fitted again on :data:`~rideid.estimate.dampers.KNEE_GRID`: damper
+    """Whether the curves of ``space`` are fitted again on setting ``dampers.knee_grid``: damper
     curves at the default knots (no ``[model] damper_knots``) and no ``[bounds]`` of a knot force (a user's
     knots, or bounds set on the default knots' forces, win)."""
     return space.curves and space.damper_knots is None and not any(k.startswith("F_") for k in space._bounds_arg)
 
 
 def knee_cost(cf: CostFunction) -> CostFunction:
-    """``cf`` on the same model with its curves' knots on :data:`~rideid.estimate.dampers.KNEE_GRID`
+    """``cf`` on the same model with its curves' knots on setting ``dampers.knee_grid``
     (the same data, simulator settings and evaluation count)."""
     old = cf.space
-    space = ParameterSpace(old.known, old.geometry, old._bounds_arg, old.extensions, damper_knots=KNEE_GRID,
+    space = ParameterSpace(old.known, old.geometry, old._bounds_arg, old.extensions,
+                           damper_knots=defaults["dampers.knee_grid"],
                            bump_frozen=old.bump_frozen)
     return CostFunction(cf.ds, space=space, counter=cf.counter, simulator=cf.simulator, use_kernel=cf.use_kernel)
 
@@ -405,13 +405,6 @@ def global_search(cf: CostFunction, weighting, maps: SensitivityMaps, rng, *, po
                           track_weights={rid: float(w[r]) for r, rid in enumerate(cf.run_ids)})
 
 
-#: a parameter whose search range starts at 0 (an extension) may truly be 0, where its coefficient of
-#: variation never settles: its spread is judged against this share of its range instead (the polish
-#: finishes it: the cost is smooth and nearly quadratic in the extensions; measured on the built-in
-#: car, 0.05 doubled the full model's generations)
-ZERO_SCALE = 1.0
-
-
 def relative_spread(pop, bounds) -> np.ndarray:
     """Coefficient of variation of each column; for columns bounded below by 0, std over
     ``max(|mean|, ZERO_SCALE * upper)`` (the early stop of step 4 for a model with extensions)."""
@@ -419,7 +412,7 @@ def relative_spread(pop, bounds) -> np.ndarray:
     zero = bounds[:, 0] == 0
     if zero.any():
         P = np.asarray(pop, dtype=float)[:, zero]
-        cv[zero] = P.std(axis=0) / np.maximum(np.abs(P.mean(axis=0)), ZERO_SCALE * bounds[zero, 1])
+        cv[zero] = P.std(axis=0) / np.maximum(np.abs(P.mean(axis=0)), defaults["identify.zero_scale"] * bounds[zero, 1])
     return cv
 
 
@@ -477,8 +470,6 @@ def polish_fit(ds: Dataset, cf: CostFunction, x0) -> OptimizeResult:
 #: and the typical values (:data:`rideid.model.params.NOMINAL_EXTENSIONS`) a second polish starts them from
 RESTART_MODES = {"the engine's pitch mode": ("I_p", "f_pp", "zeta_pp"),
                  "the engine's bounce mode": ("f_pb", "zeta_pb")}
-#: a free parameter this close to a search bound (as a share of its range) is at it, for :func:`mode_restart`
-RESTART_AT_BOUND = 1e-6
 
 
 def mode_restart(space: ParameterSpace, x) -> tuple[np.ndarray, list] | None:
@@ -496,7 +487,7 @@ def mode_restart(space: ParameterSpace, x) -> tuple[np.ndarray, list] | None:
     x = np.asarray(x, dtype=float)
     lo, hi = space.bounds[:, 0], space.bounds[:, 1]
     rel = (x - lo) / np.where(hi > lo, hi - lo, 1.0)
-    at = {n for j, n in enumerate(names) if min(rel[j], 1.0 - rel[j]) < RESTART_AT_BOUND}
+    at = {n for j, n in enumerate(names) if min(rel[j], 1.0 - rel[j]) < defaults["identify.restart_at_bound"]}
     if not at or "m_p" in at:
         return None
     P = space.full(x[None])[0]
@@ -703,12 +694,6 @@ def warn_bounds(res: IdentificationResult, stacklevel: int = 3) -> None:
             warnings.warn(f["message"], DataWarning, stacklevel=stacklevel)
 
 
-#: a polish ending on a damper-curve row the monotone repair changes is solved again from the repaired row at
-#: most this often (:func:`_polish`: logger files of the SUV at 100 Hz ended with a front knot force 57 % off,
-#: hidden below its neighbour, at a cost 1e6 times the true car's; solved again, within 0.01 %)
-REPAIR_RESTARTS = 2
-
-
 def _polish(cf: CostFunction, x0, weights, align=None):
     """Least squares from ``x0``; ``align`` = [:class:`_Shift`] adds those runs' starts as unknowns.
 
@@ -720,7 +705,7 @@ def _polish(cf: CostFunction, x0, weights, align=None):
 
     With damper curves a solve that ends on a row the monotone repair changes (a knot force below its
     inner neighbour: :meth:`ParameterSpace.full` hides it, so its gradient is 0 and the solver stops
-    there) is solved again from the physical row, the forces the simulator saw (:data:`REPAIR_RESTARTS`).
+    there) is solved again from the physical row, the forces the simulator saw (setting ``identify.repair_restarts``).
 
     Returns ``(x, info, std)``: the free parameters, the ``polish`` block of result.json and the
     parameters' white standard errors (:class:`_Polish`).
@@ -732,7 +717,7 @@ def _polish(cf: CostFunction, x0, weights, align=None):
         r0 = cf.residuals(x0[None], prob.weights, Y=prob.measured(v0))[0]
         prob = replace(prob, prior_scale=float(np.sqrt(np.mean(r0 ** 2))))
     sol = prob.solve(x0)
-    for _ in range(REPAIR_RESTARTS if cf.space.curves else 0):
+    for _ in range(defaults["identify.repair_restarts"] if cf.space.curves else 0):
         x = prob.to_x(sol.x[:prob.d])
         physical = cf.space.reduce(x, cf.space)
         if np.array_equal(physical, x):
@@ -746,20 +731,6 @@ def polish_fixed_starts(cf: CostFunction, x0, weights):
     """The least-squares polish from ``x0`` with the runs as ``cf`` reads them (no start among the unknowns):
     ``(x, info, std)`` as :func:`_polish` returns them (the materiality refits, rideid.estimate.materiality)."""
     return _polish(cf, x0, weights)
-
-
-#: the polish's evaluations in all; dogbox's share of them (on the built-in car, SUVs, vans and damper curves
-#: it converges in 6-20, a base model on a car with bars in 30); a variable this share of its range from a
-#: bound (bound-normalised) is on it (see :meth:`_Polish.solve`)
-POLISH_MAX_NFEV = 100
-DOGBOX_MAX_NFEV = 30
-BOUND_SNAP = 1e-9
-#: a distance correction's knots stay within this many metres of the speed channel's integral in one polish
-WARP_BOUND = 0.5
-#: dogbox's first-order optimality (the largest gradient component of the free variables, bound-normalised;
-#: the cost is a normalised mean square) above which an end beside a bound is a stall, not convergence:
-#: converged polishes end at 1e-13 (noise-free) to 1e-11, the stall on damper-van-logger at 7e-3
-STALL_OPTIMALITY = 1e-8
 
 
 @dataclass(frozen=True)
@@ -904,26 +875,26 @@ class _Polish:
         holds a variable on its bound only when it lies exactly there, and it stops short beside a bound in
         two ways. A variable a rounding error inside its bound (a Gauss-Newton step that lands an extension
         on 0 leaves it at 1e-15) cuts every later step to that distance: dogbox ends on ``xtol`` after one
-        step, far from the optimum, its gradient still large (:data:`STALL_OPTIMALITY`). A variable on its
+        step, far from the optimum, its gradient still large (setting ``identify.stall_optimality``). A variable on its
         bound whose gradient points inward while the Gauss-Newton step points outward is released, and
         every step is cut where it meets the bound again: a crawl to ``max_nfev``, each step taking a few
-        parts in 1e5 off the cost. So: a start that close to a bound is put on it (:data:`BOUND_SNAP`);
-        dogbox gets :data:`DOGBOX_MAX_NFEV` evaluations; a dogbox that ran out of them, or ended that close
+        parts in 1e5 off the cost. So: a start that close to a bound is put on it (setting ``identify.bound_snap``);
+        dogbox gets setting ``identify.dogbox_max_nfev`` evaluations; a dogbox that ran out of them, or ended that close
         to a bound without being on it and short of the optimum, is continued by trf from where it stopped,
-        within the polish's :data:`POLISH_MAX_NFEV` in all (the lower cost of the two is the result).
+        within the polish's setting ``identify.polish_max_nfev`` in all (the lower cost of the two is the result).
         """
         d, n_al = self.d, len(self.align)
         n_w = self.n_unknowns - d - n_al
         z0 = np.clip((x0 - self.lo) / self.span, 0, 1)
         v0 = np.concatenate([z0, np.zeros(n_al + n_w) if shifts is None else np.asarray(shifts, dtype=float)])
-        blo = np.concatenate([np.zeros(d), np.full(n_al, -5.0), np.full(n_w, -WARP_BOUND)])
-        bhi = np.concatenate([np.ones(d), np.full(n_al, 5.0), np.full(n_w, WARP_BOUND)])
-        near = BOUND_SNAP * (bhi - blo)
+        blo = np.concatenate([np.zeros(d), np.full(n_al, -5.0), np.full(n_w, -defaults["identify.warp_bound"])])
+        bhi = np.concatenate([np.ones(d), np.full(n_al, 5.0), np.full(n_w, defaults["identify.warp_bound"])])
+        near = defaults["identify.bound_snap"] * (bhi - blo)
         v0 = np.where(v0 - blo < near, blo, np.where(bhi - v0 < near, bhi, v0))
-        sol = self._least_squares(v0, (blo, bhi), "dogbox", DOGBOX_MAX_NFEV)
+        sol = self._least_squares(v0, (blo, bhi), "dogbox", defaults["identify.dogbox_max_nfev"])
         beside = ((sol.x - blo < near) & (sol.x != blo)) | ((bhi - sol.x < near) & (sol.x != bhi))
-        if sol.status == 0 or (beside.any() and sol.optimality > STALL_OPTIMALITY):
-            more = self._least_squares(sol.x, (blo, bhi), "trf", POLISH_MAX_NFEV - sol.nfev)
+        if sol.status == 0 or (beside.any() and sol.optimality > defaults["identify.stall_optimality"]):
+            more = self._least_squares(sol.x, (blo, bhi), "trf", defaults["identify.polish_max_nfev"] - sol.nfev)
             more.nfev += sol.nfev
             if more.cost <= sol.cost:
                 return more
@@ -998,11 +969,6 @@ class _Polish:
         return info, std_all[:d]
 
 
-#: re-estimate the starts until none moves by more than this fraction of a sample interval
-REALIGN_TOL = 1e-3
-REALIGN_MAX = 8
-
-
 @dataclass(frozen=True)
 class _Shift:
     """A run whose start joins the polish: its index in the cost, id, rate, start and ``D = dy/d(start)``."""
@@ -1032,9 +998,9 @@ def _polish_aligned(ds, cf, x_best, equal):
     starts = {rid: ds.measured[rid].start for rid in ds.auto_start_runs}
     warps = {rid: w for rid in starts if (w := distance_warp(ds.measured[rid], starts[rid])) is not None}
     rounds, settled = [], False
-    for _ in range(REALIGN_MAX + 1):
+    for _ in range(defaults["identify.realign_max"] + 1):
         P = cf.space.full(x_best[None])[0]
-        last = settled or len(rounds) == REALIGN_MAX
+        last = settled or len(rounds) == defaults["identify.realign_max"]
         ds_now, D, Dw = linearise_starts(warped(ds, warps), P, starts, cf.simulator, derivative=not last,
                                          warps=warps)
         # the model's time axes moved with the starts: the cost function (space, simulator, pin) on them
@@ -1056,7 +1022,7 @@ def _polish_aligned(ds, cf, x_best, equal):
         slipped = {rid: s - fitted[rid] for rid, s in moved.items()}
         starts = {**fitted, **moved}
         rounds.append({"max_change_samples": worst, **({"cycle_slips": slipped} if slipped else {})})
-        settled = not slipped and worst < REALIGN_TOL
+        settled = not slipped and worst < defaults["identify.realign_tol"]
     out = {rid: {"value": float(starts[rid]), "source": "estimated with the parameters (least squares)",
                  **_start_std(info["starts"][rid], ds.measured[rid].record.get("start", {}), rid in warps)}
            for rid in starts}
@@ -1085,3 +1051,13 @@ def _derived_std(space, cov):
         return None
     g = space.derived_gradient()
     return float(np.sqrt(max(g @ cov @ g, 0.0)))
+
+
+#: the constants this module had before rideid.settings, read from the registry (PEP 562)
+__getattr__ = legacy_names(__name__, {
+    "DEFAULT_SPREAD_TOL": "identify.spread_tol", "DEFAULT_SPREAD_TOL_NO_POLISH":
+    "identify.spread_tol_no_polish", "ZERO_SCALE": "identify.zero_scale", "RESTART_AT_BOUND":
+    "identify.restart_at_bound", "REPAIR_RESTARTS": "identify.repair_restarts", "POLISH_MAX_NFEV":
+    "identify.polish_max_nfev", "DOGBOX_MAX_NFEV": "identify.dogbox_max_nfev", "BOUND_SNAP":
+    "identify.bound_snap", "WARP_BOUND": "identify.warp_bound", "STALL_OPTIMALITY": "identify.stall_optimality",
+    "REALIGN_TOL": "identify.realign_tol", "REALIGN_MAX": "identify.realign_max"})

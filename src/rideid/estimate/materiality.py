@@ -13,11 +13,11 @@ fixed starts so that only the left-out data differ:
 ``shift_i = |x_i(without) - x_i(all)| / std_total_i``
 
 (``std_total`` where the result has it, else ``std_robust``). The model is
-adequate when the largest shift is at most :data:`MATERIAL_SHIFT`: what
+adequate when the largest shift is at most setting ``materiality.material_shift``: what
 the model misses in those pairs moves no estimate by more than its error
 bar. It is not adequate when a shift is larger, when the pairs left out
 leave a parameter undetermined (the flagged data were all that measured
-it), or when structure is in more than :data:`MAX_SHARE` of the pairs
+it), or when structure is in more than setting ``materiality.max_share`` of the pairs
 (then there is no clean remainder to compare with: the model misses
 something everywhere).
 
@@ -36,17 +36,14 @@ from dataclasses import replace
 
 import numpy as np
 
+from ..settings import defaults, legacy_names
 from .budget import fit_cost
 from .identify import polish_fixed_starts
 
-#: the largest shift (in std_total) the flagged pairs' structure may cause for the model to stay adequate
-MATERIAL_SHIFT = 1.0
-#: structure in more than this share of the pairs is not weighed: the model misses something everywhere
-MAX_SHARE = 0.5
 
 METHOD = ("refit without the flagged run/channel pairs (weights 0; starts and distance corrections as identified; "
           "both fits polished from the identified car with fixed starts); shift = |difference| / std_total "
-          "(std_robust where no std_total); immaterial when every shift is at most {:g}").format(MATERIAL_SHIFT)
+          "(std_robust where no std_total); immaterial when every shift is at most {:g}")  # materiality.material_shift
 
 
 def flagged_pairs(adequacy: dict) -> list[tuple[str, str]]:
@@ -88,11 +85,13 @@ def weigh(cf, x, details: dict, adequacy: dict, polish) -> dict:
     """
     pairs = flagged_pairs(adequacy)
     n_pairs = sum(len(rec) for rec in (adequacy.get("runs") or {}).values())
-    out = {"method": METHOD, "pairs_left_out": [f"{r}/{c}" for r, c in pairs], "threshold": MATERIAL_SHIFT}
-    if len(pairs) > MAX_SHARE * n_pairs:
+    shift = defaults["materiality.material_shift"]
+    out = {"method": METHOD.format(shift), "pairs_left_out": [f"{r}/{c}" for r, c in pairs], "threshold": shift}
+    if len(pairs) > defaults["materiality.max_share"] * n_pairs:
         return {**out, "material": True, "largest_shift": None, "shifts": {},
                 "reason": f"structure in {len(pairs)} of {n_pairs} run/channel pairs, more than "
-                          f"{MAX_SHARE:.0%}: the model misses something in most of the data, so there is no "
+                          f"{defaults['materiality.max_share']:.0%}: the model misses something in most of the "
+                          "data, so there is no "
                           "clean remainder to weigh it against"}
     x_all, _ = polish(cf, x)
     x_wo, std_wo = polish(cf.without_pairs(pairs), x)
@@ -115,12 +114,13 @@ def weigh(cf, x, details: dict, adequacy: dict, polish) -> dict:
     worst = max(shifts, key=shifts.get) if shifts else None
     z = shifts.get(worst, 0.0)
     i = cf.names.index(worst) if worst else None
-    material = z > MATERIAL_SHIFT
+    material = z > defaults["materiality.material_shift"]
     largest = None if worst is None else {"parameter": worst, "in_std_total": z, "value_all": float(x_all[i]),
                                           "value_without": float(x_wo[i])}
     reason = (f"leaving them out moves {worst} by {z:.2g} std_total" if worst else "no estimate to compare") + (
-        f", more than {MATERIAL_SHIFT:g}: the structure matters" if material
-        else f" at most (every estimate within {MATERIAL_SHIFT:g} std_total): the structure does not matter")
+        f", more than {defaults['materiality.material_shift']:g}: the structure matters" if material
+        else f" at most (every estimate within {defaults['materiality.material_shift']:g} std_total): the structure "
+        "does not matter")
     return {**out, "material": material, "largest_shift": largest, "shifts": shifts, "reason": reason}
 
 
@@ -163,4 +163,9 @@ def weigh_result(ds, res, simulator=None):
     return replace(res, adequacy=out)
 
 
-__all__ = ["MATERIAL_SHIFT", "MAX_SHARE", "METHOD", "flagged_pairs", "verdict", "weigh", "weigh_result"]
+__all__ = ["METHOD", "flagged_pairs", "verdict", "weigh", "weigh_result"]
+
+
+#: the constants this module had before rideid.settings, read from the registry (PEP 562)
+__getattr__ = legacy_names(__name__, {
+    "MATERIAL_SHIFT": "materiality.material_shift", "MAX_SHARE": "materiality.max_share"})

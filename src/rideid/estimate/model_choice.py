@@ -8,7 +8,7 @@ full estimate without the dropped parameters.
 
 Criterion: a robust Wald information criterion, computed from the full fit,
 
-    C(M) = W(M) + PENALTY * k(M)
+    C(M) = W(M) + penalty() * k(M)
     W(M) = theta_o^T  Cov_robust(theta_o)^-1  theta_o
 
 with ``theta_o`` the full model's estimates of the extension parameters *not*
@@ -21,9 +21,9 @@ likelihood-ratio test or an AIC/BIC on the raw residual sum of squares (which
 count every sample as independent) would add groups the data do not support.
 A candidate is eligible only if it fits materially better than every
 candidate it contains (:func:`fits_better`: a cost lower by at least
-:data:`MIN_IMPROVEMENT`): on noise-free data, where every standard error is
+:func:`~rideid.estimate.adequacy.min_improvement`): on noise-free data, where every standard error is
 at rounding level, this keeps groups estimated at rounding-level values out.
-``PENALTY`` = half the 99.9 % point of chi-square(2): a group of two
+``penalty()`` = half the 99.9 % point of chi-square(2): a group of two
 parameters enters when its Wald statistic exceeds 13.8, i.e. a test at
 0.1 % per group, so a twelve-parameter car keeps the base model in about 999
 of 1000 datasets whose noise the robust covariance describes.
@@ -48,10 +48,14 @@ from dataclasses import replace
 import numpy as np
 from scipy import special
 
+from ..settings import defaults, legacy_names
 from ..model.params import POWERTRAIN_NAMES
 from ..model.params import SUSPENSION_GROUPS as GROUPS
 from .budget import with_budget
-from .adequacy import MIN_IMPROVEMENT, advise, assess_fit
+from .. import settings
+from .adequacy import advise, assess_fit
+from .records import assessments_of, plan_of
+from .adequacy import min_improvement as least_improvement
 from .materiality import weigh_result
 from .small_angle import small_angle
 from .identify import (DEFAULT_GENERATIONS, DEFAULT_POPULATION, identify as identify_model, model_extensions,
@@ -59,19 +63,24 @@ from .identify import (DEFAULT_GENERATIONS, DEFAULT_POPULATION, identify as iden
 from .anyroad import TRACK_OPTIONS, as_built_runs, identify_any_road, unknown_road_runs
 from ..model.batch import single_threaded_blas, thread_map
 from .cost import CostFunction, ParameterSpace, refuse_unsupported_groups
-from .dampers import KNEE_GRID
 from ..errors import ArgumentError
 from ..model.simulator import Simulator
 from ..data.checks import bound_findings
 from ..data.schema import NONLINEAR_GROUPS
 
-#: per free extension parameter: a group of two enters at the 99.9 % point of chi-square(2)
-PENALTY = float(special.chdtri(2, 0.001) / 2)
 
+
+def penalty() -> float:
+    """The criterion's price per free extension parameter: a group of two enters at the (1 -
+    ``model_choice.penalty_level``) point of chi-square(2) (99.9 % by default)."""
+    return float(special.chdtri(2, defaults["model_choice.penalty_level"]) / 2)
+
+
+#: the criterion in words (``{}``: :func:`penalty` and twice it, filled in where written)
 CRITERION = ("robust Wald information criterion: C = W + {:.2f} k, W the Wald statistic (HAC covariance, "
              "std_robust) of the full model's extension parameters that the candidate leaves out, k its free "
              "extension parameters; smallest C wins (a group of two enters when W > {:.1f}, a 0.1 % test)"
-             ).format(PENALTY, 2 * PENALTY)
+             )
 
 
 def wald(theta, cov) -> float:
@@ -117,7 +126,7 @@ def criteria(names, theta, cov, candidates, free_ext) -> list[dict]:
         idx = [names.index(n) for n in omitted]
         W = wald(np.asarray(theta)[idx], np.asarray(cov)[np.ix_(idx, idx)])
         k = sum(len(free_ext[g]) for g in cand if g in free_ext)
-        out.append({"extensions": list(cand), "wald": W, "k": k, "criterion": W + PENALTY * k})
+        out.append({"extensions": list(cand), "wald": W, "k": k, "criterion": W + penalty() * k})
     return out
 
 
@@ -135,16 +144,16 @@ CURVES_GROUP = "damper_curves"
 #: model groups in their canonical order (the linear groups, then the curves)
 IDENTIFIABLE_ORDER = tuple(GROUPS) + (CURVES_GROUP,)
 
+#: ``{}``: :func:`penalty`, filled in where written
 CURVE_CRITERION = ("damper curves: one more polish, the chosen linear groups plus damper_curves, started from the "
                    "linear car's curves F = c v; W_curves = Wald statistic (std_robust) of the curve forces' "
                    "departure from a straight line per axle; the curves are kept when they fit better and "
                    "W_curves > {:.2f} per extra free parameter (free knots less the 2 linear rates); with the curves "
                    "in, the linear groups are weighed again from the curve fit (the same Wald criterion)"
-                   ).format(PENALTY)
+                   )
 
 
-
-def fits_better(extensions, costs: dict, min_improvement: float = MIN_IMPROVEMENT) -> bool:
+def fits_better(extensions, costs: dict, min_improvement: float | None = None) -> bool:
     """Does the candidate fit materially better than every candidate it contains?
 
     Its cost must be at least ``min_improvement`` below each of theirs. A
@@ -160,7 +169,10 @@ def fits_better(extensions, costs: dict, min_improvement: float = MIN_IMPROVEMEN
     extensions : sequence of str
     costs : dict
         candidate (tuple of groups) -> its cost.
+    min_improvement : float, optional
+        Default :func:`rideid.estimate.adequacy.min_improvement` (the setting ``adequacy.min_relative`` squared).
     """
+    min_improvement = least_improvement() if min_improvement is None else min_improvement
     mine = costs[tuple(extensions)]
     return all(mine <= cost - min_improvement for cand, cost in costs.items() if set(cand) < set(extensions))
 
@@ -246,14 +258,14 @@ def identify_auto(ds, *, rng=None, seed=None, callback=None, maps=None, simulato
             if sub is not None:
                 sub_key_lin, W_sub = sub
                 base_entry = next(c for c in crit if tuple(c["extensions"]) == sub_key_lin)
-                lin_entry = dict(base_entry, criterion=c_crit["criterion"] - PENALTY * c_crit["curve_dof"])
+                lin_entry = dict(base_entry, criterion=c_crit["criterion"] - penalty() * c_crit["curve_dof"])
                 curve2 = curve_candidate(ds, results[sub_key_lin], sub_key_lin, lin_entry, rng=rng, seed=seed,
                                          maps=full.maps, start_from=r_c, simulator=simulator, **kw_nested)
                 if curve2 is not None:
                     e2 = curve2[3]
                     if e2["criterion"] is not None:
                         # the linear groups left out: their Wald in the larger curve fit (k counts them no more)
-                        e2["criterion"] = (c_crit["criterion"] - PENALTY * (c_crit["k"] - e2["k"])) + W_sub
+                        e2["criterion"] = (c_crit["criterion"] - penalty() * (c_crit["k"] - e2["k"])) + W_sub
                         e2["wald"] = W_sub
                     evaluations += _weigh_smaller(curve2, ckey, c_crit, results, costs, crit)
                     best, chosen = _best_of(c_crit, e2, best, chosen)
@@ -312,17 +324,18 @@ def identify_auto(ds, *, rng=None, seed=None, callback=None, maps=None, simulato
             "parameters": dict(r.parameters),
             "std_robust": {n: d.get("std_robust") for n, d in r.details.items() if not d.get("fixed")},
         })
-    model = {"extensions": list(chosen), "selection": "auto", "criterion": CRITERION, "candidates": table}
+    model = {"extensions": list(chosen), "selection": "auto", "criterion": CRITERION.format(penalty(), 2 * penalty()),
+             "candidates": table}
     if not curves_tried:
         model["curves"] = ("not tried: the linear model is adequate (its residuals carry no road-driven "
                                "structure for damper curves to explain)")
     if bump is not None:
         model["bump_criterion"] = BUMP_CRITERION
     if pt is not None:
-        model["powertrain_criterion"] = POWERTRAIN_CRITERION
+        model["powertrain_criterion"] = POWERTRAIN_CRITERION.format(penalty())
         model["powertrain_wald"] = pt[3]["powertrain_wald"]
     if curve is not None:
-        model["curve_criterion"] = CURVE_CRITERION
+        model["curve_criterion"] = CURVE_CRITERION.format(penalty())
         model["curve_departure_wald"] = curve[3]["curve_departure_wald"]
     # the search was the full model's: its history and counts belong to the result returned
     search = {} if chosen == full_key else {"history": full.history, "nit": full.nit, "stop": full.stop,
@@ -390,10 +403,10 @@ def _curve_subset(r_c, chosen, c_crit):
 
 def knots_like(ds, res=None):
     """``damper_knots`` of a candidate started from curve result ``res``: the grid its knees were found on
-    (:data:`rideid.estimate.dampers.KNEE_GRID`: its knot forces are then the start's own, no second fit),
+    (setting ``dampers.knee_grid``: its knot forces are then the start's own, no second fit),
     else the dataset's ``[model] damper_knots``."""
     found = res is not None and (res.dampers or {}).get("knots_from", "").startswith("found")
-    return KNEE_GRID if found else ds.manifest.damper_knots
+    return defaults["dampers.knee_grid"] if found else ds.manifest.damper_knots
 
 
 def curve_candidate(ds, lin, chosen, lin_crit, *, rng=None, seed=None, maps=None, start_from=None, simulator=None,
@@ -404,7 +417,7 @@ def curve_candidate(ds, lin, chosen, lin_crit, *, rng=None, seed=None, maps=None
     Returns ``(candidate key, cost function, result, criterion entry)`` or None when curves do not apply
     (already in the model, or ``c_sf``/``c_sr`` known). ``start_from``: a curve result of a larger model
     to start from instead (its knot forces). The entry's criterion is the linear choice's plus
-    :data:`PENALTY` per extra free parameter (free knots less the two linear rates it replaces), to be
+    :func:`penalty` per extra free parameter (free knots less the two linear rates it replaces), to be
     compared with the linear one's plus ``curve_departure_wald`` (:func:`curve_departure`): the curves
     enter when their departure from straight lines is significant at the same per-parameter price as
     any group (:data:`CURVE_CRITERION`).
@@ -430,7 +443,7 @@ def curve_candidate(ds, lin, chosen, lin_crit, *, rng=None, seed=None, maps=None
         W, df = None, None
     k = (lin_crit["k"] or 0) + (df if df is not None else 0)
     entry = {"extensions": list(key), "wald": 0.0, "k": k, "curve_departure_wald": W, "curve_dof": df,
-             "criterion": None if df is None else lin_crit["criterion"] + PENALTY * df}
+             "criterion": None if df is None else lin_crit["criterion"] + penalty() * df}
     return key, cf, r, entry
 
 
@@ -447,7 +460,7 @@ def bump_candidate(ds, prev, chosen, prev_crit, *, rng=None, seed=None, maps=Non
     """Fit bump stops on top of the model ``chosen`` (result ``prev``, criterion entry ``prev_crit``).
 
     Returns ``(candidate key, cost function, result, criterion entry)`` or None when the group is in
-    already. The entry's criterion is ``prev_crit``'s plus :data:`PENALTY` per free stop parameter of
+    already. The entry's criterion is ``prev_crit``'s plus :func:`penalty` per free stop parameter of
     the axles reached, None (never chosen) when no stop is reached (:data:`BUMP_CRITERION`).
     """
 
@@ -478,7 +491,7 @@ def bump_candidate(ds, prev, chosen, prev_crit, *, rng=None, seed=None, maps=Non
     base = prev_crit.get("criterion")
     entry = {"extensions": list(key), "wald": 0.0, "k": k, "bump_stops_reached": reached,
              "bump_stops_at_bound": at_bound,
-             "criterion": None if not reached or base is None else base + PENALTY * n_free}
+             "criterion": None if not reached or base is None else base + penalty() * n_free}
     return key, cf, r, entry
 
 
@@ -522,7 +535,7 @@ def _linear_groups_again(ds, r_big, chosen, big_crit, *, rng=None, seed=None, ma
     n_left = sum(1 for g in chosen if g in GROUPS and g not in lin for n in GROUPS[g] if n in free)
     k = (big_crit.get("k") or 0) - n_left
     entry = {"extensions": list(key), "wald": W_sub, "k": k,
-             "criterion": big_crit["criterion"] - PENALTY * n_left + W_sub}
+             "criterion": big_crit["criterion"] - penalty() * n_left + W_sub}
     for extra in ("bump_stops_reached", "bump_stops_at_bound"):
         if extra in big_crit:
             entry[extra] = big_crit[extra]
@@ -531,12 +544,13 @@ def _linear_groups_again(ds, r_big, chosen, big_crit, *, rng=None, seed=None, ma
 
 POWERTRAIN_GROUP = "powertrain"
 
+#: ``{}``: :func:`penalty`, filled in where written
 POWERTRAIN_CRITERION = (
     "powertrain on mounts (SPEC §11): tried when the model chosen so far (damper curves and bump stops weighed) is "
     "still not adequate: one more search, the chosen linear groups plus powertrain; W_powertrain = (m_p / "
     "std_robust(m_p))^2, the Wald statistic of no powertrain (m_p = 0); kept when it fits materially better than "
     "every model it contains and its criterion (the linear choice's + {:.2f} per free powertrain parameter) is "
-    "below the chosen model's + W_powertrain").format(PENALTY)
+    "below the chosen model's + W_powertrain")
 
 
 def powertrain_candidate(ds, lin_key, lin_crit, *, rng=None, seed=None, simulator=None, **kw):
@@ -564,7 +578,7 @@ def powertrain_candidate(ds, lin_key, lin_crit, *, rng=None, seed=None, simulato
         i = names.index("m_p")
         W = wald(np.array([r.parameters["m_p"]]), np.array(pol["covariance_robust"])[i:i + 1, i:i + 1])
     entry = {"extensions": list(key), "wald": 0.0, "k": (lin_crit.get("k") or 0) + len(free_pt),
-             "powertrain_wald": W, "criterion": lin_crit["criterion"] + PENALTY * len(free_pt)}
+             "powertrain_wald": W, "criterion": lin_crit["criterion"] + penalty() * len(free_pt)}
     return key, cf, r, entry
 
 
@@ -651,8 +665,36 @@ def identify(ds, *, model=None, rng=None, seed=None, population: int = DEFAULT_P
     -------
     IdentificationResult
         ``parameters`` (name -> value), ``details`` (each estimate's ``std``,
-        ``std_robust``), the model kept and the adequacy verdict.
+        ``std_robust``), the model kept and the adequacy verdict; ``plan``,
+        ``settings`` and ``assessments`` (SPEC §13).
+
+    Notes
+    -----
+    The dataset's ``[settings]`` (:mod:`rideid.settings`) are in force during
+    the fit, over those set in Python; ``settings`` records every value used.
     """
+    with settings.using(dataset_settings(ds)):
+        res = _identify(ds, model=model, rng=rng, seed=seed, population=population, generations=generations,
+                        weights=weights, polish=polish, spread_tol=spread_tol, callback=callback, cost=cost,
+                        maps=maps, start=start, assess=assess, simulator=simulator, tracks=tracks)
+        return with_records(ds, res)
+
+
+def dataset_settings(ds) -> dict:
+    """The ``[settings]`` of the dataset's ``dataset.toml`` (empty for a scenario or a dataset without)."""
+    return dict(getattr(getattr(ds, "manifest", None), "settings", None) or {})
+
+
+def with_records(ds, res):
+    """``res`` with the typed records of SPEC §13 (:mod:`rideid.estimate.records`): the plan, the settings in
+    force, the assessments."""
+    return replace(res, plan=plan_of(res, [r.id for r in ds.runs]), settings=settings.current(),
+                   assessments=assessments_of(res))
+
+
+def _identify(ds, *, model, rng, seed, population, generations, weights, polish, spread_tol, callback, cost, maps,
+              start, assess, simulator, tracks):
+    """The body of :func:`identify` (the dataset's settings in force)."""
     if cost is None:
         model = default_model(ds, model)
     common = dict(rng=rng, seed=seed, population=population, generations=generations, weights=weights,
@@ -699,13 +741,9 @@ def identify(ds, *, model=None, rng=None, seed=None, population: int = DEFAULT_P
     return res
 
 
-#: the flagged pairs must span at least this many runs for the tracks-as-drawn caveat (:func:`_drawing_caveat`)
-DRAWING_RUNS = 2
-
-
 def _drawing_caveat(ds, res, chosen, tracks):
     """``res`` with ``adequacy.tracks_caveat`` when the verdict is adequate only because the structure the
-    residual test found, in :data:`DRAWING_RUNS` or more runs, was weighed immaterial
+    residual test found, in setting ``model_choice.drawing_runs`` or more runs, was weighed immaterial
     (:mod:`rideid.estimate.materiality`) while the tracks stayed as drawn: the as-built stage (SPEC §11) could
     not run or was rejected. Leaving the flagged pairs out cannot show a drawing error, which biases every run
     and channel alike: on the all-realities case (tracks 4 % off their drawing, a GPS speed channel) the
@@ -715,7 +753,7 @@ def _drawing_caveat(ds, res, chosen, tracks):
     if not ad or not ad.get("adequate") or not ad.get("structure"):
         return res
     runs = {pair.split("/")[0] for pair in (ad.get("materiality") or {}).get("pairs_left_out", [])}
-    if len(runs) < DRAWING_RUNS:  # structure local to one run is not a drawing's: the weighing can judge it
+    if len(runs) < defaults["model_choice.drawing_runs"]:  # local to one run, not a drawing's: the weighing judges it
         return res
     built = [t for t in (res.tracks or {}).values() if not t.get("rejected")]
     if built:
@@ -768,3 +806,8 @@ def _tracks_before_curves(ds, res, chosen, simulator, tracks, common):
     ad["reasons"] = list(ad.get("reasons", [])) + [
         f"tried: the linear model ({label}) on the tracks as built, not adequate either, so {kept} stays"]
     return replace(res, adequacy=ad)
+
+
+#: the constants this module had before rideid.settings, read from the registry (PEP 562)
+__getattr__ = legacy_names(__name__, {
+    "PENALTY": penalty, "PENALTY_LEVEL": "model_choice.penalty_level", "DRAWING_RUNS": "model_choice.drawing_runs"})

@@ -35,14 +35,11 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..settings import defaults, legacy_names
 from ..data.dataset import Dataset
 
 BODY = ("body_az_fl", "body_az_fr", "body_az_rl", "body_az_rr")
 GYROS = ("pitch_rate", "roll_rate")
-#: a body sensor whose relative gain departs from 1 by more than this many of its standard errors and by more
-#: than twice its declared sensitivity_std (1 % when none is declared) is named in the result's notes
-FLAG_SIGMA = 3.0
-FLAG_UNDECLARED = 0.01
 
 
 def _runs(ds: Dataset) -> list:
@@ -128,15 +125,16 @@ def rigid_body_gains(ds: Dataset) -> dict | None:
 
 
 def gain_notes(block: dict | None, sensitivity_std: dict) -> list[str]:
-    """A line for each body sensor whose relative gain departs from 1 by more than :data:`FLAG_SIGMA` standard
-    errors and more than twice its declared ``sensitivity_std`` (:data:`FLAG_UNDECLARED` without one)."""
+    """A line for each body sensor whose relative gain departs from 1 by more than setting ``redundancy.flag_sigma``
+    standard errors and more than twice its declared ``sensitivity_std`` (setting ``redundancy.flag_undeclared``
+    without one)."""
     if not block:
         return []
     out = []
     for c, e in block["gains"].items():
         dev, s = e["relative_gain"] - 1.0, e["std"]
-        allowed = 2 * sensitivity_std.get(c, FLAG_UNDECLARED / 2)
-        if s is not None and abs(dev) > FLAG_SIGMA * s and abs(dev) > allowed:
+        allowed = 2 * sensitivity_std.get(c, defaults["redundancy.flag_undeclared"] / 2)
+        if s is not None and abs(dev) > defaults["redundancy.flag_sigma"] * s and abs(dev) > allowed:
             out.append(f"{c} reads {100 * dev:+.2g} % against the other body sensors (rigid-body redundancy, "
                        f"± {100 * s:.2g} %), more than its declared sensitivity allows: check its calibration, "
                        "mounting and sign")
@@ -144,3 +142,8 @@ def gain_notes(block: dict | None, sensitivity_std: dict) -> list[str]:
 
 
 __all__ = ["rigid_body_gains", "gain_notes", "BODY", "GYROS"]
+
+
+#: the constants this module had before rideid.settings, read from the registry (PEP 562)
+__getattr__ = legacy_names(__name__, {
+    "FLAG_SIGMA": "redundancy.flag_sigma", "FLAG_UNDECLARED": "redundancy.flag_undeclared"})

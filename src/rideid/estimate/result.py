@@ -19,16 +19,17 @@ from __future__ import annotations
 import csv
 import json
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
 
-from ..data.schema.result import read_result_json
+from ..data.schema.result import SCHEMA_VERSION, read_result_json
 from ..errors import DataError
 from .sensitivity import SensitivityMaps
 from .bumps import format_bump_stops
 from ..model.equations import CHANNELS
+from .records import Assessment, Plan, assessments_from_json, assessments_of
 
 COST_DEFINITION = ("equal-weight sum over runs of the per-channel energy-normalised squared error "
                    "(see rideid.cost)")
@@ -173,6 +174,10 @@ class IdentificationResult:
     history : History
     model, adequacy : dict or None
         SPEC §6 blocks (which model was fitted; the residual verdict).
+    plan, settings, assessments
+        SPEC §13: the problem's blocks and their unknowns (:class:`~rideid.estimate.records.Plan`), every tuning
+        value in force during the fit (:mod:`rideid.settings`), one typed record per assessment
+        (:mod:`rideid.estimate.records`; ``verdict`` and ``reason`` each).
     """
 
     x: np.ndarray
@@ -233,6 +238,15 @@ class IdentificationResult:
     #: per channel over the runs: clipped share, gaps bridged, noise level, sensor chain
     #: (:func:`rideid.data.quality.data_quality`); None in results written before
     data_quality: dict | None = None
+    # -- SPEC §13: the typed records (rideid.estimate.records), built at the end of rideid.identify
+    #: the problem's blocks and their unknowns; None where the result was not built by rideid.identify
+    plan: Plan | None = None
+    #: every tuning value in force during the fit, name -> value (:mod:`rideid.settings`); None in results
+    #: written before schema version 2
+    settings: dict | None = None
+    #: one record per assessment kind (:data:`rideid.estimate.records.ASSESSMENTS`), each with ``verdict`` and
+    #: ``reason``; read from the old keys for results written before schema version 2
+    assessments: list[Assessment] = field(default_factory=list)
 
     # SciPy/SPEC §4 names for the same numbers
     @property
@@ -322,8 +336,9 @@ class IdentificationResult:
 
     # -- formats -------------------------------------------------------------
     def to_dict(self) -> dict:
-        """``result.json`` as a dict (docs/formats.md)."""
+        """``result.json`` as a dict (docs/formats.md; schema version :data:`SCHEMA_VERSION`)."""
         return jsonable({
+            "schema_version": SCHEMA_VERSION,
             "parameters": self.details,
             "known": self.known,
             "cost": self.fun,
@@ -358,6 +373,10 @@ class IdentificationResult:
             "dataset": str(Path(self.dataset).resolve()) if self.dataset else "",
             "sensitivity": _maps_to_json(self.maps),
             "history_file": "history.csv",
+            # SPEC §13 (schema version 2): the records typed; the keys above stay, with their meaning
+            "plan": None if self.plan is None else self.plan.to_dict(),
+            "settings": self.settings,
+            "assessments": [a.to_dict() for a in (self.assessments or assessments_of(self))],
         })
 
     def save(self, out_dir):
@@ -410,7 +429,7 @@ def load(path) -> IdentificationResult:
     cov = np.full((d, d), np.nan) if cov is None else np.array(cov, dtype=float)  # null -> NaN
     std = np.array([details[n].get("std") for n in names], dtype=float)
     stop = doc.get("stop", "")
-    return IdentificationResult(
+    res = IdentificationResult(
         x=np.array([details[n]["value"] for n in names], dtype=float), names=list(names), std=std, covariance=cov,
         fun=float(doc.get("cost", np.nan)), success=bool(doc.get("success", True)),
         message=doc.get("message", stop), stop=stop, nit=int(doc.get("generations", 0)),
@@ -427,6 +446,10 @@ def load(path) -> IdentificationResult:
         roads=doc.get("roads"), road_profiles=_read_roads(doc.get("roads"), rpath.parent), tracks=doc.get("tracks"),
         vehicle=doc.get("vehicle"), uncertainty=doc.get("uncertainty"), data_quality=doc.get("data_quality"),
         response=_read_responses(doc, rpath.parent))
+    # SPEC §13: the typed records as written, or (schema version 1) the assessments read from the old keys
+    return replace(res, plan=Plan.from_dict(doc.get("plan")), settings=doc.get("settings"),
+                   assessments=assessments_from_json(doc["assessments"]) if "assessments" in doc
+                   else assessments_of(res))
 
 
 def _read_responses(doc, folder):
@@ -455,4 +478,4 @@ def _read_roads(roads, folder):
     return out or None
 
 
-__all__ = ["IdentificationResult", "History", "load", "read_result_json"]
+__all__ = ["IdentificationResult", "History", "load", "read_result_json", "SCHEMA_VERSION"]

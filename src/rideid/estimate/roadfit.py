@@ -58,14 +58,14 @@ unsprung masses by several per cent):
 
 The delay itself is a fractional number of samples in general. The rear
 input is the front road sampled between the front wheels' samples; it is
-taken as a Lagrange interpolating filter of order :data:`DELAY_ORDER` on
+taken as a Lagrange interpolating filter of order setting ``roadfit.delay_order`` on
 the front samples (``E(omega)`` its frequency response), exact for road
 content well inside the sampling band. Road content at wavelengths shorter
 than about two sample spacings (``speed / fs``) is seen by the rear wheel
 between the front wheel's samples and by neither sample sequence: it breaks
 the front/rear consistency like input noise. Measured: a road profile given
 on a 5 cm grid (linear interpolation kinks) at 15 m/s and 200 Hz biases the
-tires by -0.5 %; on a 1 cm grid by < 0.02 %; :data:`BAND` stops at 25 Hz for
+tires by -0.5 %; on a 1 cm grid by < 0.02 %; setting ``roadfit.band`` stops at 25 Hz for
 the same reason. docs/roads.md says what this asks of a logging rate.
 
 Sensors as wired (SPEC §11)
@@ -103,8 +103,8 @@ others at every trial car. That is the least-squares fit with the sample
 left out; a clipped peak of several samples in a row is determined in the
 band only in its few combinations the band can hold, and the solve takes
 the shortest of the equivalent solutions. A channel clipped on more than
-:data:`CLIP_SHARE` of its in-band real values, or a run with more than
-:data:`CLIP_MAX` clipped samples, leaves that channel out whole instead
+setting ``roadfit.clip_share`` of its in-band real values, or a run with more than
+setting ``roadfit.clip_max`` clipped samples, leaves that channel out whole instead
 (:func:`without_clipped`).
 
 The global unknowns' normal equations are assembled in closed form: the
@@ -128,34 +128,15 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 import scipy.linalg
 
+from ..settings import defaults, legacy_names
 from ..model.equations import CHANNEL_KIND, CHANNEL_UNITS, CHANNELS, state_space
 from ..model.params import Geometry
 from ..model.sensors import discretise, modal_pairs
 
-#: the fit band (Hz): below, the accelerations carry little of the road; above, the road between
-#: samples (module docstring) and the logger's anti-alias filter take over
-BAND = (0.2, 25.0)
-#: order of the Lagrange filter of the rear wheels' fractional delay
-DELAY_ORDER = 8
-#: the reconstructed road's wavelength band (m), SPEC §9 and issue 26's acceptance band
-ROAD_WAVELENGTHS = (0.5, 20.0)
-#: the search's cost uses every STRIDE-th bin of a Hann-windowed DFT
-SEARCH_BINS = 400
-#: a clipped channel whose samples at the range exceed this share of its in-band real values (2 per fit bin) is
-#: left out of the run's road fit whole; below it each clipped sample is one free unknown (module docstring)
-CLIP_SHARE = 0.5
-#: ... and so is every clipped channel of a run with more than this many clipped samples (the solve's cost grows
-#: with their square)
-CLIP_MAX = 200
-#: a channel whose RMS (about its mean) is below this share of the largest RMS among the run's channels of the
-#: same kind (body, axle, rate) carries rounding or a dead sensor, not the car: the fit, which weights each
-#: channel by 1 / its RMS, leaves it out (a roll rate on a washboard: 1e-19 against 1e-2 rad/s)
-SIGNAL_FLOOR = 1e-6
-
 
 def used_channels(y) -> tuple[np.ndarray, dict]:
     """The channels of ``y`` (n, 10; NaN columns absent) the road fit uses, and those it leaves out: name ->
-    why (:data:`SIGNAL_FLOOR`)."""
+    why (setting ``roadfit.signal_floor``)."""
     y = np.asarray(y, dtype=float)
     present = np.isfinite(y).all(axis=0)
     rms = np.where(present, np.sqrt(np.mean((np.where(present, y, 0.0) - np.where(present, y, 0.0).mean(axis=0))
@@ -166,7 +147,7 @@ def used_channels(y) -> tuple[np.ndarray, dict]:
             continue
         same = [j for j, c2 in enumerate(CHANNELS) if CHANNEL_KIND[c2] == CHANNEL_KIND[c] and present[j]]
         top = max(rms[j] for j in same)
-        if rms[i] > SIGNAL_FLOOR * top and rms[i] > 0:
+        if rms[i] > defaults["roadfit.signal_floor"] * top and rms[i] > 0:
             cols.append(i)
             continue
         against = max(same, key=lambda j: rms[j])
@@ -200,7 +181,7 @@ class RoadRun:
     tau : float
         Rear wheels' delay (s).
     left_out : dict
-        Channels the run has but the fit leaves out (:data:`SIGNAL_FLOOR`): name -> why, one line.
+        Channels the run has but the fit leaves out (setting ``roadfit.signal_floor``): name -> why, one line.
     sensors : tuple
         Per used channel (``cols`` order) the analog filters of its sensor chain (SPEC §11, a tuple of
         :class:`rideid.model.sensors.AnalogFilter`); empty: no channel filtered (:func:`with_sensors`).
@@ -233,18 +214,19 @@ class RoadRun:
     @property
     def lead_in(self) -> int:
         """Rear lead-in unknowns per side (samples ``0 .. D-1``)."""
-        return int(np.floor(self.tau * self.fs)) + DELAY_ORDER + 2
+        return int(np.floor(self.tau * self.fs)) + defaults["roadfit.delay_order"] + 2
 
 
 def prepare_road_run(run_id: str, y, fs: float, speed: float, geom: Geometry, cols=None,
-                     band=BAND, clipped=None) -> RoadRun:
+                     band=None, clipped=None) -> RoadRun:
     """Prepare a run's channels ``y`` (n, 10; NaN columns unused) for :func:`residuals` and :func:`search_costs`.
 
     ``cols``: the channels to use; default those :func:`used_channels` keeps (a channel without signal is left
     out and named in ``left_out``). ``clipped`` (n, 10) bool, optional: where a channel sat at its range
     (SPEC §11, :meth:`rideid.data.dataset.Dataset.clipped`); each such sample is a free unknown of the fit
-    (``clip``, module docstring), or, past :data:`CLIP_SHARE` or :data:`CLIP_MAX`, its channel is left out of
-    this run's fit whole (:func:`without_clipped`) and named in ``left_out``."""
+    (``clip``, module docstring), or, past setting ``roadfit.clip_share`` or setting ``roadfit.clip_max``, its
+    channel is left out of this run's fit whole (:func:`without_clipped`) and named in ``left_out``."""
+    band = defaults["roadfit.band"] if band is None else band
     y = np.asarray(y, dtype=float)
     n = y.shape[0]
     f = np.fft.rfftfreq(n, 1.0 / fs)
@@ -258,7 +240,7 @@ def prepare_road_run(run_id: str, y, fs: float, speed: float, geom: Geometry, co
     yc = yc - yc.mean(axis=0)
     scale = 1.0 / np.sqrt(np.mean(yc ** 2, axis=0))
     Y = np.fft.rfft(yc * scale, axis=0)
-    stride = max(1, fit.size // SEARCH_BINS)
+    stride = max(1, fit.size // defaults["roadfit.search_bins"])
     search = fit[::stride]
     Ys = np.fft.rfft(yc * scale * np.hanning(n)[:, None], axis=0)[search]
     pos = {int(ch): k for k, ch in enumerate(cols)}
@@ -275,10 +257,10 @@ def without_clipped(y, clipped=None, values=None) -> tuple[np.ndarray, dict, dic
     On a known track the time-domain cost leaves the clipped samples out one by one (SPEC §11). A road fit
     works on the run's DFT, where a peak cut flat is a distortion of every bin, which the free road would
     partly take up and pass on to the car: each clipped sample is freed instead (module docstring). A channel
-    clipped on more than :data:`CLIP_SHARE` of its ``values`` in-band real values (None: no limit), or every
-    clipped channel of a run with more than :data:`CLIP_MAX` clipped samples, is left out of that run's road fit
-    whole; its other runs keep it, and the road stays determined by the other nine (both wheel paths enter
-    every channel)."""
+    clipped on more than setting ``roadfit.clip_share`` of its ``values`` in-band real values (None: no limit), or
+    every clipped channel of a run with more than setting ``roadfit.clip_max`` clipped samples, is left out of that
+    run's road fit whole; its other runs keep it, and the road stays determined by the other nine (both wheel paths
+    enter every channel)."""
     y = np.array(y, dtype=float)
     left, freed = {}, {}
     if clipped is None:
@@ -288,11 +270,12 @@ def without_clipped(y, clipped=None, values=None) -> tuple[np.ndarray, dict, dic
     total = sum(int(np.count_nonzero(clipped[:, i])) for i in chans)
     for i in chans:
         k = int(np.count_nonzero(clipped[:, i]))
-        if total <= CLIP_MAX and (values is None or k <= CLIP_SHARE * values):
+        if total <= defaults["roadfit.clip_max"] and (values is None or k <= defaults["roadfit.clip_share"] * values):
             freed[int(i)] = np.nonzero(clipped[:, i])[0]
             continue
-        why = (f"more than {CLIP_MAX} clipped samples in the run" if total > CLIP_MAX
-               else f"more than {100 * CLIP_SHARE:.0f} % of its {values} in-band values")
+        clip_max = defaults["roadfit.clip_max"]
+        why = (f"more than {clip_max} clipped samples in the run" if total > clip_max
+               else f"more than {100 * defaults['roadfit.clip_share']:.0f} % of its {values} in-band values")
         left[CHANNELS[i]] = (f"left out: {100 * clipped[:, i].mean():.2g} % of its samples at the channel's range "
                              f"(clipped; {why}: the road fit works on the record's DFT)")
         y[:, i] = np.nan
@@ -308,9 +291,10 @@ def _clip_columns(rr: RoadRun, omega) -> np.ndarray:
     return C
 
 
-def delay_filter(tau: float, h: float, order: int = DELAY_ORDER):
+def delay_filter(tau: float, h: float, order: int | None = None):
     """Lagrange fractional-delay filter: taps ``ks`` (samples) and coefficients ``c`` with
     ``u(t - tau) ~ sum c_j u(t - ks_j h)``."""
+    order = defaults["roadfit.delay_order"] if order is None else order
     dl = tau / h
     k0 = int(np.floor(dl)) - (order - 1) // 2
     ks = np.arange(k0, k0 + order + 1)
@@ -318,14 +302,10 @@ def delay_filter(tau: float, h: float, order: int = DELAY_ORDER):
     return ks, c
 
 
-#: eigenvector matrices worse conditioned than this use the direct solves instead of the modal form
-MODAL_COND = 1e8
-
-
 def _modal(A):
     """Eigenvalues and eigenvectors of each ``A`` (n, 14, 14), and whether the modal form is safe."""
     lam, V = np.linalg.eig(A)
-    ok = np.linalg.cond(V) < MODAL_COND
+    ok = np.linalg.cond(V) < defaults["roadfit.modal_cond"]
     Vi = np.full_like(V, np.nan)
     if ok.any():
         Vi[ok] = np.linalg.inv(V[ok])
@@ -576,7 +556,7 @@ def residuals(P, geom: Geometry, rr: RoadRun) -> np.ndarray:
     return np.concatenate([r.real, r.imag], axis=1).ravel()
 
 
-def road(P, geom: Geometry, rr: RoadRun, sol: Solution | None = None, wavelengths=ROAD_WAVELENGTHS):
+def road(P, geom: Geometry, rr: RoadRun, sol: Solution | None = None, wavelengths=None):
     """The estimated road under the left and right wheel paths.
 
     The road's DFT is solved at every bin from half the band's lowest frequency to 1.5 times its highest
@@ -590,6 +570,7 @@ def road(P, geom: Geometry, rr: RoadRun, sol: Solution | None = None, wavelength
     z : (n, 2) m, left and right road heights over ``wavelengths`` (the road's content the accelerations
         carry; outside, nothing is claimed)
     """
+    wavelengths = defaults["roadfit.road_wavelengths"] if wavelengths is None else wavelengths
     sol = solve(P, geom, rr) if sol is None else sol
     f = np.fft.rfftfreq(rr.n, rr.h)
     lo, hi = 0.5 * rr.speed / wavelengths[1], min(1.5 * rr.speed / wavelengths[0], 0.45 * rr.fs)
@@ -614,9 +595,10 @@ def road(P, geom: Geometry, rr: RoadRun, sol: Solution | None = None, wavelength
     return x, band_pass(np.fft.irfft(full, n=rr.n, axis=0), rr.speed * h, wavelengths)
 
 
-def band_pass(z, dx: float, wavelengths=ROAD_WAVELENGTHS):
+def band_pass(z, dx: float, wavelengths=None):
     """Zero-phase 4th-order Butterworth band-pass of road heights ``z`` (n, ...) sampled every ``dx`` m to
     the ``wavelengths`` (m) band (the comparison docs/any-road.md and the tests make with a true road)."""
+    wavelengths = defaults["roadfit.road_wavelengths"] if wavelengths is None else wavelengths
     from scipy.signal import butter, sosfiltfilt
     nyq = 0.5 / dx
     hi = min(1.0 / wavelengths[0], 0.95 * nyq)
@@ -635,3 +617,10 @@ def fitted_channels(P, geom: Geometry, rr: RoadRun, y, sol: Solution | None = No
     out = np.full((rr.n, 10), np.nan)
     out[:, rr.cols] = np.asarray(y, dtype=float)[:, rr.cols] - e
     return out
+
+
+#: the constants this module had before rideid.settings, read from the registry (PEP 562)
+__getattr__ = legacy_names(__name__, {
+    "BAND": "roadfit.band", "DELAY_ORDER": "roadfit.delay_order", "ROAD_WAVELENGTHS":
+    "roadfit.road_wavelengths", "SEARCH_BINS": "roadfit.search_bins", "CLIP_SHARE": "roadfit.clip_share",
+    "CLIP_MAX": "roadfit.clip_max", "SIGNAL_FLOOR": "roadfit.signal_floor", "MODAL_COND": "roadfit.modal_cond"})

@@ -6,11 +6,9 @@ from pathlib import Path
 
 from ..data.schema import load_truth, load_truth_dampers
 from ..errors import ArgumentError
+from ..settings import defaults, legacy_names
 from ..model.params import ALL_NAMES, EXT_NAMES
 
-#: an estimate covers the truth when it lies within this many standard errors (about 95 %, SPEC §6): ``std_total``
-#: (SPEC §12: std_robust with every declared uncertainty), ``std_robust`` in results written before it
-COVERAGE_K = 2.0
 AXLES = (("front", "f", "c_sf"), ("rear", "r", "c_sr"))
 #: a knot force's status when the truth's damper curves were not given: shown, not judged
 NO_TRUE_CURVE = "no true curve"
@@ -33,7 +31,7 @@ def _row(est, tr, status, rob, total=None, **extra) -> dict:
     total = float(total) if judged and total else rob
 
     def covers(s):
-        return None if s is None or tr is None else bool(abs(est - tr) <= COVERAGE_K * s)
+        return None if s is None or tr is None else bool(abs(est - tr) <= defaults["score.coverage_k"] * s)
     return {"estimate": est, "truth": tr, "error_percent": err, "status": status, "std_robust": rob,
             "std_total": total, "covered": covers(total), "covered_robust": covers(rob), **extra}
 
@@ -142,3 +140,8 @@ def score(result, truth, dampers=None) -> dict:
 
 
 __all__ = ["score"]
+
+
+#: the constants this module had before rideid.settings, read from the registry (PEP 562)
+__getattr__ = legacy_names(__name__, {
+    "COVERAGE_K": "score.coverage_k"})

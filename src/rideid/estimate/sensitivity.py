@@ -27,6 +27,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..settings import defaults, legacy_names
 from ..data.dataset import Dataset
 from ..data.scenario import scenario_run_input
 from ..errors import ArgumentError
@@ -35,7 +36,6 @@ from ..model.equations import CHANNEL_KIND, CHANNELS
 from ..model.params import ALL_NAMES, Geometry, as_vector
 from .cost import CostFunction
 
-STEP = 0.25
 P2R_STARS = (1.0, 5.0, 15.0)
 R2T_STARS = (0.05, 0.25, 0.6)
 P2T_STARS = (0.25, 0.75, 1.5)
@@ -76,7 +76,7 @@ def compute_maps(sim: BatchSimulator, geom: Geometry, baseline, run_ids, channel
     names = ALL_NAMES[:base.size]
     P = np.tile(base, (base.size + 1, 1))
     for i, n in enumerate(names):
-        v = base[i] * (1 + STEP)
+        v = base[i] * (1 + defaults["sensitivity.step"])
         if n == "a":
             v = min(v, 0.95 * geom.wheelbase)
         P[1 + i, i] = v
@@ -139,3 +139,8 @@ def sensitivity_maps(source, *, cost=None) -> SensitivityMaps:
 
 
 __all__ = ["compute_maps", "cost_maps", "sensitivity_maps", "SensitivityMaps"]
+
+
+#: the constants this module had before rideid.settings, read from the registry (PEP 562)
+__getattr__ = legacy_names(__name__, {
+    "STEP": "sensitivity.step"})

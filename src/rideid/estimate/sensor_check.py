@@ -10,7 +10,7 @@ the identified car's channel, passed through a first-order high-pass of some
 corner between 0.1 and 2 Hz, matches the data markedly better than the
 channel itself. :func:`coupling_hints` tries those corners on every channel
 without a declared high-pass, over all runs at once, and names a channel
-whose residual sum of squares falls by at least :data:`HINT_REDUCTION`; a
+whose residual sum of squares falls by at least setting ``sensor_check.hint_reduction``; a
 car fitted to data that are not coupled loses by any such filter (it removes
 the body's low-frequency motion the data hold). On runs whose road is fitted
 (tracks as built, unknown roads) :func:`road_coupling_hints` does the same
@@ -26,14 +26,10 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..settings import defaults, legacy_names
 from ..model.equations import CHANNELS
 from ..model.sensors import AnalogFilter, SensorChain
 from . import roadfit
-
-#: first-order high-pass corners (Hz) tried on the identified car's channels
-HINT_CORNERS = (0.1, 0.2, 0.3, 0.5, 0.7, 1.0, 1.5, 2.0)
-#: the least share by which a corner must cut the channel's residual sum of squares to be named
-HINT_REDUCTION = 0.5
 
 
 def coupling_hints(cf, response: dict) -> list[dict]:
@@ -68,7 +64,7 @@ def coupling_hints(cf, response: dict) -> list[dict]:
         if not rss0 > 0:
             continue
         best = (0.0, None)
-        for hz in HINT_CORNERS:
+        for hz in defaults["sensor_check.hint_corners"]:
             rss = 0.0
             for ri, _rid, y, yh, k, w in rows:
                 chain = SensorChain(((AnalogFilter("highpass", hz),),), cf.sim.runs[ri].h)
@@ -78,7 +74,7 @@ def coupling_hints(cf, response: dict) -> list[dict]:
             if red > best[0]:
                 best = (red, hz)
         red, hz = best
-        if hz is not None and red >= HINT_REDUCTION:
+        if hz is not None and red >= defaults["sensor_check.hint_reduction"]:
             hints.append({"channel": name, "highpass_hz": hz, "rss_reduction": float(red),
                           "message": (f"{name}: the data look AC-coupled (an IEPE sensor?): the fit of this channel "
                                       f"improves {100 * red:.0f} % when the model's channel passes a {hz:g} Hz "
@@ -90,17 +86,9 @@ def coupling_hints(cf, response: dict) -> list[dict]:
 
 #: the groups of accelerometers a road fit's coupling hint tries together (a test's hub sensors are alike)
 ROAD_HINT_GROUPS = (CHANNELS[4:8], CHANNELS[0:4])
-#: the corners a single channel is tried at by the road fit's hint (the groups: every :data:`HINT_CORNERS`)
-ROAD_HINT_SINGLE = (0.2, 0.5, 1.0)
-#: the least share a trial high-pass must cut the residual of runs on unknown roads by to be named: there the road
-#: is free at every frequency and takes up part of a coupling's signature. Measured at the car identified without
-#: the declaration (SPEC CSVs, 200 Hz, ``benchmarks/road_hints.py``): hubs coupled at 0.5 Hz, 2 % noise, two ISO
-#: 8608 roads: 35 %; hubs at 0.3 Hz, 1 % noise, the four roads of examples/roads/class_b.toml: 56 %; the same
-#: data not coupled, or coupled and declared: every trial made the residual 27-105 % larger.
-FREE_ROAD_HINT_REDUCTION = 0.2
 
 
-def road_coupling_hints(P, geom, rruns, filters, threshold: float = HINT_REDUCTION) -> list[dict]:
+def road_coupling_hints(P, geom, rruns, filters, threshold: float | None = None) -> list[dict]:
     """Channels whose data look AC-coupled without a declared ``highpass``, on runs whose road is fitted
     (:mod:`rideid.estimate.roadfit`; tracks as built, :mod:`rideid.estimate.asbuilt`).
 
@@ -108,9 +96,9 @@ def road_coupling_hints(P, geom, rruns, filters, threshold: float = HINT_REDUCTI
     to compare. Here the identified car ``P`` is projected onto each run with its road free
     (:func:`rideid.estimate.roadfit.residuals`, the drawing unused), once as the channels are declared and
     once with a trial first-order high-pass added to a group of channels (the four hub accelerometers, the
-    four body accelerometers; then each accelerometer alone at :data:`ROAD_HINT_SINGLE`): a group whose
-    trial cuts the summed squared residual of every run by ``threshold`` (:data:`HINT_REDUCTION`; on unknown
-    roads :data:`FREE_ROAD_HINT_REDUCTION`) or more is named. Measured
+    four body accelerometers; then each accelerometer alone at setting ``sensor_check.road_hint_single``): a group whose
+    trial cuts the summed squared residual of every run by ``threshold`` (setting ``sensor_check.hint_reduction``; on
+    unknown roads setting ``sensor_check.free_road_hint_reduction``) or more is named. Measured
     on the SUV's five runs on tracks as built (4 % off, 1.5 mm), hubs coupled at 0.5 Hz and not declared, at
     the as-built fit (k_sf +21 %): the hubs at 0.5 Hz cut it by 78 %, the best corner tried (one hub alone:
     16-19 %; the body group: worse); at the true car 100 %. The same runs without coupling, or with it
@@ -119,6 +107,7 @@ def road_coupling_hints(P, geom, rruns, filters, threshold: float = HINT_REDUCTI
     ``rruns``: :class:`rideid.estimate.roadfit.RoadRun` with their declared chains; ``filters``: run id -> the
     dataset's ``sensor_filters``. Returns the hints as :func:`coupling_hints` does, the group's channels each
     named with the group's corner and reduction."""
+    threshold = defaults["sensor_check.hint_reduction"] if threshold is None else threshold
     if not rruns:
         return []
     declared = {rr.run_id: [tuple(f) for f in filters[rr.run_id]] for rr in rruns}
@@ -141,8 +130,8 @@ def road_coupling_hints(P, geom, rruns, filters, threshold: float = HINT_REDUCTI
     base = total({})
     if not base > 0:
         return []
-    trials = [(tuple(free(g)), HINT_CORNERS) for g in ROAD_HINT_GROUPS]
-    trials += [((c,), ROAD_HINT_SINGLE) for c in free(CHANNELS[:8])]
+    trials = [(tuple(free(g)), defaults["sensor_check.hint_corners"]) for g in ROAD_HINT_GROUPS]
+    trials += [((c,), defaults["sensor_check.road_hint_single"]) for c in free(CHANNELS[:8])]
     best = (0.0, None, ())
     for group, corners in trials:
         if not group:
@@ -184,4 +173,11 @@ def clipping_advice(ds, adequacy: dict | None) -> str | None:
             "(`[channels] <name> range = ...`), use a sensor with a larger range, or leave those runs out.")
 
 
-__all__ = ["HINT_CORNERS", "HINT_REDUCTION", "clipping_advice", "coupling_hints"]
+__all__ = ["clipping_advice", "coupling_hints"]
+
+
+#: the constants this module had before rideid.settings, read from the registry (PEP 562)
+__getattr__ = legacy_names(__name__, {
+    "HINT_CORNERS": "sensor_check.hint_corners", "HINT_REDUCTION": "sensor_check.hint_reduction",
+    "ROAD_HINT_SINGLE": "sensor_check.road_hint_single", "FREE_ROAD_HINT_REDUCTION":
+    "sensor_check.free_road_hint_reduction"})

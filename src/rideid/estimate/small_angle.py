@@ -13,8 +13,8 @@ clean records it can be several error bars.
 
 :func:`small_angle` reads the largest roll and pitch angle of the fitted
 car (the fitted gyros integrated: the model starts at rest, so the integral
-is the angle) and, above :data:`THRESHOLD_DEG`, states the bias to expect
-(:data:`BIAS_PER_DEGREE` times the largest angle) and names the parameters
+is the angle) and, above setting ``small_angle.threshold_deg``, states the bias to expect
+(setting ``small_angle.bias_per_degree`` times the largest angle) and names the parameters
 whose ±2 std_total is narrower than it: their error bars are optimistic by
 that much. It changes no number; it says which ones not to trust to their
 error bar.
@@ -24,14 +24,9 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..settings import defaults, legacy_names
 from ..model.equations import CHANNELS
 
-#: the largest angle (degrees) below which nothing is said: the bias there (< 0.05 %) is below the error bars
-#: of a proving-ground test at 1 % noise
-THRESHOLD_DEG = 1.0
-#: relative bias per degree of the largest body angle, measured on the MuJoCo car of docs/verification.md
-#: (0.12 % of k_sf at 2.3 degrees of roll; linear in the amplitude)
-BIAS_PER_DEGREE = 0.0012 / 2.3
 
 _ROLL = CHANNELS.index("roll_rate")
 _PITCH = CHANNELS.index("pitch_rate")
@@ -57,8 +52,8 @@ def body_angles(response: dict, fs: dict) -> dict:
 
 def small_angle(res, fs: dict) -> dict | None:
     """The ``adequacy.small_angle`` block of result ``res`` (its ``response`` and ``details``), or None without a
-    response: the largest angles and their runs, the bias to expect and, above :data:`THRESHOLD_DEG`, a note and
-    the parameters whose ±2 std_total is narrower than that bias."""
+    response: the largest angles and their runs, the bias to expect and, above setting ``small_angle.threshold_deg``,
+    a note and the parameters whose ±2 std_total is narrower than that bias."""
     if not res.response:
         return None
     angles = body_angles(res.response, fs)
@@ -68,10 +63,11 @@ def small_angle(res, fs: dict) -> dict | None:
     pitch_run = max(angles, key=lambda r: angles[r]["pitch"])
     roll, pitch = angles[roll_run]["roll"], angles[pitch_run]["pitch"]
     largest = max(roll, pitch)
-    bias = BIAS_PER_DEGREE * largest
+    bias = defaults["small_angle.bias_per_degree"] * largest
     out = {"largest_roll_deg": roll, "roll_run": roll_run, "largest_pitch_deg": pitch, "pitch_run": pitch_run,
-           "expected_bias": bias, "threshold_deg": THRESHOLD_DEG, "optimistic": [], "note": None}
-    if largest <= THRESHOLD_DEG:
+           "expected_bias": bias, "threshold_deg": defaults["small_angle.threshold_deg"], "optimistic": [],
+           "note": None}
+    if largest <= defaults["small_angle.threshold_deg"]:
         return out
     tight = []
     for n, d in (res.details or {}).items():
@@ -90,4 +86,9 @@ def small_angle(res, fs: dict) -> dict | None:
     return out
 
 
-__all__ = ["BIAS_PER_DEGREE", "THRESHOLD_DEG", "body_angles", "small_angle"]
+__all__ = ["body_angles", "small_angle"]
+
+
+#: the constants this module had before rideid.settings, read from the registry (PEP 562)
+__getattr__ = legacy_names(__name__, {
+    "THRESHOLD_DEG": "small_angle.threshold_deg", "BIAS_PER_DEGREE": "small_angle.bias_per_degree"})

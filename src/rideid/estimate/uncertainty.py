@@ -50,6 +50,8 @@ that looks like a measurement.
 
 from __future__ import annotations
 
+from ..settings import defaults, legacy_names
+
 from dataclasses import dataclass
 
 import numpy as np
@@ -57,14 +59,7 @@ from scipy import special
 
 #: Andrews (1991) constant of the Bartlett kernel's optimal bandwidth
 ANDREWS_BARTLETT = 1.1447
-#: first-order autocorrelations are clipped to this in the plug-in rule (a unit root has no finite bandwidth)
-RHO_MAX = 0.97
 
-#: singular values of a Jacobian below this fraction of its largest are taken as zero (no information):
-#: a little above the rounding floor of an SVD of a Jacobian with 1e5 rows (~1e-13 of the largest)
-RANK_RTOL = 1e-12
-#: a parameter whose unit vector has more than this squared share in the dropped directions is not identified
-NULL_SHARE = 1e-8
 
 #: the two arguments every estimator here takes, written once (``{residual_parameters}`` in their docstrings)
 RESIDUAL_PARAMETERS = """J : ndarray, shape (m, n)
@@ -112,7 +107,7 @@ class NormalInverse:
     rank : int
         Singular values kept.
     unidentified : ndarray of bool, shape (n,)
-        Parameters with a squared share above :data:`NULL_SHARE` in the dropped directions.
+        Parameters with a squared share above setting ``uncertainty.null_share`` in the dropped directions.
     """
 
     matrix: np.ndarray
@@ -130,7 +125,7 @@ class NormalInverse:
         return cov
 
 
-def normal_inverse(J, rtol: float = RANK_RTOL) -> NormalInverse:
+def normal_inverse(J, rtol: float | None = None) -> NormalInverse:
     """Pseudo-inverse of ``J^T J`` through the SVD of ``J`` (module docstring).
 
     Parameters
@@ -145,6 +140,7 @@ def normal_inverse(J, rtol: float = RANK_RTOL) -> NormalInverse:
     NormalInverse
         All parameters unidentified (and ``matrix`` NaN) when ``J`` is not finite.
     """
+    rtol = defaults["uncertainty.rank_rtol"] if rtol is None else rtol
     J = np.asarray(J, dtype=float)
     n = J.shape[1]
     if not np.all(np.isfinite(J)):
@@ -155,7 +151,7 @@ def normal_inverse(J, rtol: float = RANK_RTOL) -> NormalInverse:
     Hinv = (V / s[keep] ** 2) @ V.T
     # each parameter's squared share outside the kept directions (the dropped ones, and with m < n the rest)
     share = 1.0 - np.sum(V ** 2, axis=1)
-    return NormalInverse(0.5 * (Hinv + Hinv.T), int(keep.sum()), share > NULL_SHARE)
+    return NormalInverse(0.5 * (Hinv + Hinv.T), int(keep.sum()), share > defaults["uncertainty.null_share"])
 
 
 def andrews_bandwidth(G) -> float:
@@ -186,7 +182,7 @@ def andrews_bandwidth(G) -> float:
         return 0.0
     Z = (G[:, keep] - G[:, keep].mean(axis=0)) / sd[keep]
     rho = np.sum(Z[1:] * Z[:-1], axis=0) / np.sum(Z[:-1] ** 2, axis=0)
-    rho = np.clip(rho, -RHO_MAX, RHO_MAX)
+    rho = np.clip(rho, -defaults["uncertainty.rho_max"], defaults["uncertainty.rho_max"])
     s4 = (1 - rho ** 2) ** 2
     num = np.sum(4 * rho ** 2 * s4 / ((1 - rho) ** 6 * (1 + rho) ** 2))
     den = np.sum(s4 / (1 - rho) ** 4)
@@ -298,7 +294,7 @@ def hac_covariance(J, e, blocks, bandwidth: float | None = None) -> RobustCovari
     return RobustCovariance(cov=inv.mark(0.5 * (cov + cov.T)), bandwidths=bws)
 
 
-def jackknife_runs(J, e, blocks, rtol: float = RANK_RTOL, n_checked: int | None = None):
+def jackknife_runs(J, e, blocks, rtol: float | None = None, n_checked: int | None = None):
     """Delete-one-run jackknife covariance of the estimate, linearised at the optimum.
 
     Leaving run ``r`` out moves a least-squares optimum by ``(H - H_r)^+ g_r``
@@ -328,6 +324,7 @@ def jackknife_runs(J, e, blocks, rtol: float = RANK_RTOL, n_checked: int | None 
     (ndarray (n, n) or None, int)
         The covariance (None with fewer than 3 runs to leave out) and ``k``.
     """
+    rtol = defaults["uncertainty.rank_rtol"] if rtol is None else rtol
     J = np.asarray(J, dtype=float)
     e = np.asarray(e, dtype=float)
     if not (np.all(np.isfinite(J)) and np.all(np.isfinite(e))):
@@ -344,7 +341,7 @@ def jackknife_runs(J, e, blocks, rtol: float = RANK_RTOL, n_checked: int | None 
         sv = np.sqrt(np.clip(lam, 0, None))
         keep = sv > rtol * sv.max() if sv.size and sv.max() > 0 else np.zeros(lam.size, dtype=bool)
         Vk = V[:, keep]
-        if np.any((1.0 - np.sum(Vk ** 2, axis=1))[:n_checked] > NULL_SHARE):
+        if np.any((1.0 - np.sum(Vk ** 2, axis=1))[:n_checked] > defaults["uncertainty.null_share"]):
             continue  # this run alone determines a parameter: it cannot be left out
         deltas.append((Vk / lam[keep]) @ (Vk.T @ (Jr.T @ er)))
     k = len(deltas)
@@ -355,20 +352,15 @@ def jackknife_runs(J, e, blocks, rtol: float = RANK_RTOL, n_checked: int | None 
     return (k - 1) / k * (D.T @ D), k
 
 
-#: the Birge ratio's quantile: the runs disagree beyond their noise when the jackknife variance exceeds the
-#: robust one by more than the chi-square(k - 1) quantile at this probability over k - 1
-BIRGE_P = 0.99
-
-
 def between_runs_variance(v_jack: float, v_robust: float, k: int) -> float:
     """The variance the runs' disagreement adds to an estimate (0 when it is within their noise).
 
     The Birge ratio ``R^2 = v_jack / v_robust`` is about chi-square(k - 1) / (k - 1) when the runs agree
-    within their noise; above its :data:`BIRGE_P` quantile the excess ``v_jack - v_robust`` is model error
-    that differs between runs (dark uncertainty), and is returned."""
+    within their noise; above its setting ``uncertainty.birge_p`` quantile the excess ``v_jack - v_robust`` is model
+    error that differs between runs (dark uncertainty), and is returned."""
     if not (np.isfinite(v_jack) and np.isfinite(v_robust)) or v_robust <= 0 or k < 3:
         return 0.0
-    limit = 2.0 * special.gammaincinv(0.5 * (k - 1), BIRGE_P) / (k - 1)
+    limit = 2.0 * special.gammaincinv(0.5 * (k - 1), defaults["uncertainty.birge_p"]) / (k - 1)
     return float(v_jack - v_robust) if v_jack / v_robust > limit else 0.0
 
 
@@ -496,3 +488,9 @@ class EstimateCovariance:
 def estimate_covariance(info: dict | None, space, x=None) -> EstimateCovariance:
     """Shorthand for :meth:`EstimateCovariance.from_polish`."""
     return EstimateCovariance.from_polish(info, space, x)
+
+
+#: the constants this module had before rideid.settings, read from the registry (PEP 562)
+__getattr__ = legacy_names(__name__, {
+    "RHO_MAX": "uncertainty.rho_max", "RANK_RTOL": "uncertainty.rank_rtol", "NULL_SHARE":
+    "uncertainty.null_share", "BIRGE_P": "uncertainty.birge_p"})

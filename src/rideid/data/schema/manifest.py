@@ -19,7 +19,8 @@ import math
 from dataclasses import dataclass, field, fields
 from pathlib import Path
 
-from ...errors import DataError
+from ... import settings
+from ...errors import ArgumentError, DataError
 from ...model.posts import PATTERNS, SIGNALS, PostSignal
 from ...model.params import (EXT_NAMES, EXTRA_KNOWN, GROUPS, NAMES, SIGNED, Geometry, as_vector, check_parameters,
                              total_mass)
@@ -39,7 +40,7 @@ from .tracks import track_from_table
 TOP_KEYS_SCENARIO = ("name", "vehicle", "known", "bounds", "model", "tracks", "runs", "truth", "dampers", "hifi")
 #: a dataset may also describe how its files were logged (rideid.data.measured)
 TOP_KEYS_DATASET = ("name", "vehicle", "known", "bounds", "model", "channels", "preprocess", "csv", "checks",
-                    "tracks", "runs")
+                    "tracks", "runs", "settings")
 RUN_KEYS_DATASET = ("id", "track", "speed", "file", "moving", "channels", "checks", "input") + RUN_PREPROCESS_KEYS
 #: a scenario run drives a known track (``track``) or a generated ISO 8608 road (``road_class``, SPEC §9), or
 #: stands on a four-post rig (``input = "posts"``, SPEC §13) driven by a post signal (:data:`SIGNAL_KEYS`)
@@ -320,10 +321,12 @@ class DatasetManifest(Manifest):
     checks: ReadOnlyDict = field(default_factory=ReadOnlyDict)
     #: ``[channels]`` ``sensitivity_std`` (SPEC §12): channel -> relative standard uncertainty of its sensitivity
     sensitivity_std: ReadOnlyDict = field(default_factory=ReadOnlyDict)
+    #: ``[settings]``: setting name -> value (:mod:`rideid.settings`), in force while the dataset is loaded and fitted
+    settings: ReadOnlyDict = field(default_factory=ReadOnlyDict)
 
     def __post_init__(self):
         super().__post_init__()
-        for k in ("channel_map", "preprocess", "csv_table", "checks", "sensitivity_std"):
+        for k in ("channel_map", "preprocess", "csv_table", "checks", "sensitivity_std", "settings"):
             object.__setattr__(self, k, read_only(getattr(self, k)))
 
     def is_measured(self, run: RunSpec) -> bool:
@@ -352,6 +355,8 @@ class DatasetManifest(Manifest):
             doc["csv"] = dict(self.csv_table)
         if self.checks:
             doc["checks"] = dict(self.checks)
+        if self.settings:
+            doc["settings"] = {k: list(v) if isinstance(v, tuple) else v for k, v in self.settings.items()}
         if self.tracks:  # none when every run is on an unknown road (SPEC §9)
             doc["tracks"] = [t.to_table() for t in self.tracks.values()]
         doc["runs"] = [r.to_table() for r in self.runs]
@@ -436,6 +441,29 @@ def parse_checks(tab, where: str) -> dict:
         if v not in CHECK_LEVELS:
             raise DataError(f"{where} {k}: expected one of {', '.join(CHECK_LEVELS)}, got {v!r}")
     return dict(tab)
+
+
+def parse_settings(tab, where: str) -> dict:
+    """``[settings]``: setting name -> value, checked against :mod:`rideid.settings` (a dotted key,
+    ``adequacy.alpha = 0.05``, or a quoted one, ``"adequacy.alpha" = 0.05``, or a ``[settings.adequacy]`` table)."""
+    if not isinstance(tab, dict):
+        raise DataError(f"{where}: must be a table of setting = value (docs/settings.md)")
+    flat = {}
+    for k, v in tab.items():
+        if isinstance(v, dict):  # adequacy.alpha = 0.05 (TOML's dotted key) or [settings.adequacy]
+            flat.update({f"{k}.{k2}": v2 for k2, v2 in v.items()})
+        else:
+            flat[k] = v
+    out = {}
+    for k, v in flat.items():
+        if k not in settings.REGISTRY:
+            raise DataError(f"{where}: unknown setting '{k}'; the settings (module.name) are listed in "
+                            "docs/settings.md")
+        try:
+            out.update(settings.checked({k: v}))
+        except ArgumentError as e:
+            raise DataError(f"{where}: {str(e).removeprefix('settings: ')}") from None
+    return out
 
 
 def parse_truth(tab: dict, where: str, geom: Geometry | None) -> dict[str, float]:
@@ -781,6 +809,8 @@ def parse_dataset_manifest(doc: dict, path) -> DatasetManifest:
         extra["csv_table"] = dict(doc["csv"])
     if "checks" in doc:
         extra["checks"] = parse_checks(doc["checks"], f"{where}: [checks]")
+    if "settings" in doc:
+        extra["settings"] = parse_settings(doc["settings"], f"{where}: [settings]")
     return DatasetManifest(**kw, extensions=extensions, damper_knots=knots, **extra)
 
 
@@ -830,3 +860,4 @@ __all__ = ["Manifest", "Scenario", "DatasetManifest", "RunSpec", "RoadSpec", "UN
            "parse_truth", "load_manifest", "load_truth", "load_truth_dampers", "load_truth_roads", "model_table",
            "vehicle_table", "MODEL_GROUPS", "CHECK_NAMES", "CHECK_LEVELS", "TOP_KEYS_SCENARIO", "TOP_KEYS_DATASET",
            "RUN_KEYS_SCENARIO", "RUN_KEYS_DATASET", "ROAD_KEYS", "SECTIONS"]
+__all__ += ["parse_settings"]

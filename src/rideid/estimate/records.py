@@ -1,0 +1,344 @@
+"""Typed records of a result: the problem's plan and one assessment per kind (SPEC §13).
+
+The identification computes its verdicts where it always did (the adequacy
+test, the materiality weighing, the small-angle check, the sensor hints, the
+level and drawing caveats, the bound check) and keeps them in the result's
+``adequacy``, ``details`` and ``tracks`` blocks. This module reads those
+blocks once, at the end of :func:`rideid.identify`, into typed records:
+
+* :class:`Plan`: the problem's blocks and their unknowns (the car's free
+  parameters, each run's start and speed where estimated, each track's
+  amplitude factor and unevenness where fitted as built, the roads of runs
+  on unknown roads);
+* :data:`ASSESSMENTS`: the declared list of assessment kinds, each a frozen
+  dataclass with ``verdict`` and ``reason`` and its own fields, built by its
+  ``from_result``.
+
+Every assessment's ``verdict`` is one of :data:`VERDICTS`:
+
+``"pass"``
+    checked, and nothing found that bears on the estimates;
+``"warn"``
+    the estimates stand, but some of them or their error bars are to be read
+    with the caveat in ``reason``;
+``"fail"``
+    the estimates are not to be trusted as they are (``reason`` says why);
+``"not assessed"``
+    the check did not run (``reason`` says why: ``assess=False``, runs on
+    unknown roads only, no fitted response, ...).
+
+The records are built from what the result holds, so a result written
+before them (schema version 1) gets the same records when it is read back
+(:func:`assessments_of`); docs/formats.md has one table per record.
+"""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass, field, fields
+from typing import ClassVar
+
+#: the four verdicts, mildest first
+VERDICTS = ("pass", "warn", "fail", "not assessed")
+
+
+def _not_assessed(why: str) -> dict:
+    return {"verdict": "not assessed", "reason": why}
+
+
+def _pairs(adequacy: dict, key: str = "structure") -> list[str]:
+    """``run/channel`` of every pair of the adequacy test whose figure ``key`` is true."""
+    return [f"{rid}/{ch}" for rid, rec in (adequacy.get("runs") or {}).items() for ch, f in rec.items()
+            if isinstance(f, dict) and f.get(key)]
+
+
+@dataclass(frozen=True)
+class Assessment:
+    """What every assessment record has: its ``kind`` (class attribute), ``verdict`` and ``reason``."""
+
+    kind: ClassVar[str] = ""
+    verdict: str
+    reason: str
+
+    def __post_init__(self):
+        if self.verdict not in VERDICTS:
+            raise ValueError(f"{self.kind}: verdict {self.verdict!r} is not one of {', '.join(VERDICTS)}")
+
+    def to_dict(self) -> dict:
+        """The record in result.json ``assessments``: ``kind`` first, then the fields."""
+        return {"kind": self.kind, **asdict(self)}
+
+    @classmethod
+    def from_dict(cls, d: dict) -> "Assessment":
+        """The record read back (unknown keys, from a later version, are left out)."""
+        names = {f.name for f in fields(cls)}
+        return cls(**{k: v for k, v in d.items() if k in names})
+
+
+@dataclass(frozen=True)
+class AdequacyAssessment(Assessment):
+    """Does the model explain the road-driven part of the residuals (docs/model-choice.md)?
+
+    ``fail`` when not adequate (road-driven structure that matters, or the sensors suspect).
+    """
+
+    kind: ClassVar[str] = "adequacy"
+    adequate: bool | None = None
+    pairs: int = 0
+    pairs_with_structure: list = field(default_factory=list)
+    alpha: float | None = None
+    min_explained: float | None = None
+    sensors_suspect: bool = False
+    advice: str | None = None
+
+    @classmethod
+    def from_result(cls, res) -> "AdequacyAssessment":
+        ad = res.adequacy
+        if not ad:
+            return cls(**_not_assessed("no adequacy test was run (assess=False, or runs on unknown roads only)"))
+        adequate = ad.get("adequate")
+        pairs = sum(len(rec) for rec in (ad.get("runs") or {}).values())
+        verdict = "not assessed" if adequate is None else ("pass" if adequate else "fail")
+        reasons = ad.get("reasons") or []
+        return cls(verdict=verdict, reason=reasons[0] if reasons else ad.get("note", ""), adequate=adequate,
+                   pairs=pairs, pairs_with_structure=_pairs(ad), alpha=ad.get("alpha"),
+                   min_explained=ad.get("min_explained"), sensors_suspect=bool(ad.get("sensors_suspect")),
+                   advice=ad.get("advice"))
+
+
+@dataclass(frozen=True)
+class MaterialityAssessment(Assessment):
+    """Does the structure the adequacy test found move the estimates by more than their error bars
+    (:mod:`rideid.estimate.materiality`)? ``fail`` when it does."""
+
+    kind: ClassVar[str] = "materiality"
+    material: bool | None = None
+    threshold: float | None = None
+    largest_parameter: str | None = None
+    largest_shift: float | None = None
+    pairs_left_out: list = field(default_factory=list)
+
+    @classmethod
+    def from_result(cls, res) -> "MaterialityAssessment":
+        rec = (res.adequacy or {}).get("materiality")
+        if not rec:
+            why = ("no structure to weigh" if res.adequacy and not _pairs(res.adequacy)
+                   else "not weighed (no adequacy test, runs on unknown roads, or structure everywhere)")
+            return cls(**_not_assessed(why))
+        largest = rec.get("largest_shift") or {}
+        material = rec.get("material")
+        return cls(verdict="fail" if material else "pass", reason=rec.get("reason", ""), material=material,
+                   threshold=rec.get("threshold"), largest_parameter=largest.get("parameter"),
+                   largest_shift=largest.get("in_std_total"), pairs_left_out=list(rec.get("pairs_left_out") or []))
+
+
+@dataclass(frozen=True)
+class SmallAngleAssessment(Assessment):
+    """How far the body turned, against the small-angle model of SPEC §1 (:mod:`rideid.estimate.small_angle`).
+    ``warn`` when the bias to expect exceeds some error bars (``optimistic``)."""
+
+    kind: ClassVar[str] = "small_angles"
+    largest_roll_deg: float | None = None
+    roll_run: str | None = None
+    largest_pitch_deg: float | None = None
+    pitch_run: str | None = None
+    expected_bias: float | None = None
+    threshold_deg: float | None = None
+    optimistic: list = field(default_factory=list)
+
+    @classmethod
+    def from_result(cls, res) -> "SmallAngleAssessment":
+        sa = (res.adequacy or {}).get("small_angle")
+        if not sa:
+            return cls(**_not_assessed("no fitted response to integrate the gyros of (or no adequacy test)"))
+        largest = max(sa.get("largest_roll_deg") or 0.0, sa.get("largest_pitch_deg") or 0.0)
+        optimistic = list(sa.get("optimistic") or [])
+        verdict = "warn" if optimistic else "pass"
+        reason = sa.get("note") or (f"the body turned at most {largest:.2g} deg, below "
+                                    f"{sa.get('threshold_deg')} deg: the small-angle bias is below the error bars")
+        return cls(verdict=verdict, reason=reason, **{k: sa.get(k) for k in (
+            "largest_roll_deg", "roll_run", "largest_pitch_deg", "pitch_run", "expected_bias", "threshold_deg")},
+            optimistic=optimistic)
+
+
+@dataclass(frozen=True)
+class SensorHintsAssessment(Assessment):
+    """Channels that look AC-coupled without a declared ``highpass`` (:mod:`rideid.estimate.sensor_check`).
+    ``warn`` when any is named."""
+
+    kind: ClassVar[str] = "sensor_hints"
+    channels: list = field(default_factory=list)
+    highpass_hz: list = field(default_factory=list)
+    note: str | None = None
+
+    @classmethod
+    def from_result(cls, res) -> "SensorHintsAssessment":
+        ad = res.adequacy
+        if not ad:
+            return cls(**_not_assessed("no adequacy test, so no sensor check"))
+        hints = [h for h in (ad.get("sensor_hints") or []) if isinstance(h, dict)]
+        if not hints:
+            return cls(verdict="pass", reason="no channel looks AC-coupled beyond its declaration")
+        chans = [str(h.get("channel")) for h in hints]
+        return cls(verdict="warn", reason=str(hints[0].get("message") or f"{', '.join(chans)} look AC-coupled"),
+                   channels=chans, highpass_hz=[h.get("highpass_hz") for h in hints],
+                   note=ad.get("sensor_hints_note"))
+
+
+@dataclass(frozen=True)
+class LevelAssessment(Assessment):
+    """An adequate verdict whose residual is well above the lead-in's noise floor in many pairs
+    (:func:`rideid.estimate.adequacy.level_caveat`): ``warn``."""
+
+    kind: ClassVar[str] = "level"
+    loud_pairs: int = 0
+    pairs_with_floor: int = 0
+
+    @classmethod
+    def from_result(cls, res) -> "LevelAssessment":
+        ad = res.adequacy
+        if not ad or not ad.get("adequate"):
+            return cls(**_not_assessed("the level caveat qualifies an adequate verdict only"))
+        levels = [f["level"] for rec in (ad.get("runs") or {}).values() for f in rec.values()
+                  if isinstance(f, dict) and f.get("level") is not None]
+        loud = sum(1 for lv in levels if lv > 3)
+        caveat = ad.get("level_caveat")
+        if not levels:
+            return cls(**_not_assessed("no run has a quiet lead-in to measure the noise floor on"))
+        return cls(verdict="warn" if caveat else "pass",
+                   reason=caveat or f"the residual is above 3x the noise floor in {loud} of {len(levels)} pairs",
+                   loud_pairs=loud, pairs_with_floor=len(levels))
+
+
+@dataclass(frozen=True)
+class DrawingAssessment(Assessment):
+    """An adequate verdict on tracks taken as drawn while the residuals hold road-driven structure in several
+    runs (:func:`rideid.estimate.model_choice._drawing_caveat`): ``warn``."""
+
+    kind: ClassVar[str] = "drawing"
+    tracks_as_built: list = field(default_factory=list)
+    tracks_rejected: list = field(default_factory=list)
+
+    @classmethod
+    def from_result(cls, res) -> "DrawingAssessment":
+        tracks = res.tracks or {}
+        built = sorted(t for t, rec in tracks.items() if not rec.get("rejected")
+                       and any("amplitude_factor" in r for r in (rec.get("runs") or {}).values()))
+        rejected = sorted(t for t, rec in tracks.items() if rec.get("rejected"))
+        ad = res.adequacy
+        if not ad:
+            return cls(**_not_assessed("no adequacy test"), tracks_as_built=built, tracks_rejected=rejected)
+        caveat = ad.get("tracks_caveat")
+        if caveat:
+            return cls(verdict="warn", reason=caveat, tracks_as_built=built, tracks_rejected=rejected)
+        reason = (f"tracks fitted as built: {', '.join(built)}" if built else
+                  "the tracks as drawn leave no road-driven structure that the weighing could not judge")
+        return cls(verdict="pass", reason=reason, tracks_as_built=built, tracks_rejected=rejected)
+
+
+@dataclass(frozen=True)
+class BoundsAssessment(Assessment):
+    """Free parameters that ended at a search bound (:func:`rideid.data.checks.bound_findings`): the bound's
+    value, not the data's. ``fail`` when any."""
+
+    kind: ClassVar[str] = "bounds"
+    at_bound: list = field(default_factory=list)
+
+    @classmethod
+    def from_result(cls, res) -> "BoundsAssessment":
+        at = [n for n, d in (res.details or {}).items() if d.get("at_bound") and not d.get("fixed")]
+        if at:
+            return cls(verdict="fail", reason=f"{', '.join(at)} ended at a search bound: the bound's value, not the "
+                       "data's (widen [bounds] in dataset.toml, or check the data)", at_bound=at)
+        return cls(verdict="pass", reason="no free parameter ended at a search bound")
+
+
+#: the declared list of assessments, in the order result.json lists them
+ASSESSMENTS: tuple[type[Assessment], ...] = (AdequacyAssessment, MaterialityAssessment, SmallAngleAssessment,
+                                             SensorHintsAssessment, LevelAssessment, DrawingAssessment,
+                                             BoundsAssessment)
+_BY_KIND = {a.kind: a for a in ASSESSMENTS}
+
+
+def assessments_of(res) -> list[Assessment]:
+    """Every assessment of the result ``res``, built from its ``adequacy``, ``details`` and ``tracks``."""
+    return [a.from_result(res) for a in ASSESSMENTS]
+
+
+def assessments_from_json(items) -> list[Assessment]:
+    """result.json ``assessments`` read back (records of an unknown kind are left out)."""
+    return [_BY_KIND[d["kind"]].from_dict(d) for d in items or [] if isinstance(d, dict) and d.get("kind") in _BY_KIND]
+
+
+@dataclass(frozen=True)
+class Block:
+    """One block of the problem: a named group of unknowns.
+
+    ``kind``: ``"car"``, ``"run"`` (a run's start and speed), ``"track"`` (a track fitted as built) or
+    ``"road"`` (a run on an unknown road, its road projected out); ``unknowns``: what the fit estimates in it;
+    ``fixed``: what it holds at a known value; ``runs``: the runs whose data determine it (all, for the car).
+    """
+
+    name: str
+    kind: str
+    unknowns: list = field(default_factory=list)
+    fixed: list = field(default_factory=list)
+    runs: list = field(default_factory=list)
+
+
+@dataclass(frozen=True)
+class Plan:
+    """The problem's blocks and their unknowns (result.json ``plan``)."""
+
+    blocks: list = field(default_factory=list)
+
+    def to_dict(self) -> dict:
+        return {"blocks": [asdict(b) for b in self.blocks]}
+
+    @classmethod
+    def from_dict(cls, d: dict | None) -> "Plan | None":
+        if not isinstance(d, dict):
+            return None
+        names = {f.name for f in fields(Block)}
+        return cls([Block(**{k: v for k, v in b.items() if k in names}) for b in d.get("blocks") or []])
+
+
+def plan_of(res, run_ids=()) -> Plan:
+    """The plan of result ``res`` (its free ``names``, ``details``, ``starts``, ``tracks``, ``roads``);
+    ``run_ids``: the dataset's runs, in order."""
+    fixed = [n for n, d in (res.details or {}).items() if d.get("fixed")]
+    fixed += [n for n in (res.known or {}) if n not in fixed]  # total_mass: a known that is no parameter
+    blocks = [Block("car", "car", unknowns=list(res.names), fixed=fixed, runs=list(run_ids))]
+    motion = {}
+    for rec in (res.tracks or {}).values():
+        if rec.get("rejected"):
+            continue
+        for rid, r in (rec.get("runs") or {}).items():
+            if "motion" in r:
+                motion[rid] = r["motion"]
+    roads = res.roads or {}
+    for rid in list(run_ids) or sorted(set(res.starts) | set(motion)):
+        unknowns = []
+        if rid in motion:
+            unknowns += ["speed", "start"]
+        elif rid in res.starts:
+            unknowns.append("start")
+        if rid in roads:
+            continue
+        if unknowns:
+            blocks.append(Block(f"run {rid}", "run", unknowns=unknowns, runs=[rid]))
+    for tid, rec in sorted((res.tracks or {}).items()):
+        runs = [rid for rid, r in (rec.get("runs") or {}).items() if "amplitude_factor" in r]
+        if rec.get("rejected") or not runs:
+            continue
+        method = rec.get("method", "")  # the as-built mode, in words (rideid.estimate.anyroad._tracks_block)
+        unknowns = (["road"] if "projected out" in method else
+                    ["amplitude_factor", "unevenness"] if "unevenness" in method else ["amplitude_factor"])
+        blocks.append(Block(f"track {tid}", "track", unknowns=unknowns, fixed=["drawing"], runs=runs))
+    for rid in roads:
+        blocks.append(Block(f"road {rid}", "road", unknowns=["road"], runs=[rid]))
+    return Plan(blocks)
+
+
+__all__ = ["VERDICTS", "Assessment", "AdequacyAssessment", "MaterialityAssessment", "SmallAngleAssessment",
+           "SensorHintsAssessment", "LevelAssessment", "DrawingAssessment", "BoundsAssessment", "ASSESSMENTS",
+           "assessments_of", "assessments_from_json", "Block", "Plan", "plan_of"]

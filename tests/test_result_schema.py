@@ -1,0 +1,152 @@
+"""result.json is typed and versioned (SPEC §13): schema_version, plan, settings, assessments; the files written
+before (schema version 1, no schema_version) still read, their assessments built from the old keys."""
+
+from __future__ import annotations
+
+import json
+import shutil
+from types import SimpleNamespace
+
+import pytest
+
+import rideid
+from rideid import settings
+from rideid.data.schema.result import SCHEMA_VERSION
+from rideid.errors import DataError
+from rideid.estimate.records import (ASSESSMENTS, VERDICTS, AdequacyAssessment, BoundsAssessment, DrawingAssessment,
+                                     LevelAssessment, MaterialityAssessment, SensorHintsAssessment,
+                                     SmallAngleAssessment, assessments_of, plan_of)
+
+NEW_KEYS = ("schema_version", "plan", "settings", "assessments")
+
+
+@pytest.fixture(scope="module")
+def fitted(sim_dataset, tmp_path_factory):
+    """The built-in car fitted (a short search) from a copy of its dataset that sets one setting in [settings],
+    with another set from Python: ``(result, folder written)``."""
+    ds_dir = tmp_path_factory.mktemp("set") / "ds"
+    shutil.copytree(sim_dataset, ds_dir)
+    with open(ds_dir / "dataset.toml", "a") as f:
+        f.write('\n[settings]\n"adequacy.alpha" = 0.05\n')
+    ds = rideid.load_dataset(ds_dir)
+    with settings.using("materiality", material_shift=2.0):
+        res = rideid.identify(ds, seed=1, generations=6, population=16, model="base")
+    out = tmp_path_factory.mktemp("fit")
+    res.save(out)
+    return res, out
+
+
+def test_result_json_records_the_version_the_plan_and_every_setting_used(fitted):
+    res, out = fitted
+    doc = json.loads((out / "result.json").read_text())
+    assert doc["schema_version"] == SCHEMA_VERSION == 2
+    # every setting, the dataset's and Python's in force, the rest at their defaults; none left changed after
+    assert doc["settings"] == res.settings and len(doc["settings"]) == len(settings.REGISTRY)
+    assert doc["settings"]["adequacy.alpha"] == 0.05 and doc["settings"]["materiality.material_shift"] == 2.0
+    assert doc["settings"]["roadfit.band"] == [0.2, 25.0]
+    assert settings.changed() == {}
+    # the adequacy test ran with the dataset's alpha: the registry is read when the code runs
+    assert res.adequacy["alpha"] == 0.05 and res.assessments[0].alpha == 0.05
+    # the plan: the car's free parameters over all runs, total_mass held (the built-in runs have given starts)
+    blocks = doc["plan"]["blocks"]
+    assert [b["kind"] for b in blocks] == ["car"]
+    assert blocks[0]["unknowns"] == res.names and "total_mass" in blocks[0]["fixed"]
+    assert blocks[0]["runs"] == [r.id for r in rideid.data.schema.load_manifest(res.dataset).runs]
+    # one assessment per declared kind, in order, each with its verdict and reason; the old keys still written
+    kinds = [a["kind"] for a in doc["assessments"]]
+    assert kinds == [a.kind for a in ASSESSMENTS] == ["adequacy", "materiality", "small_angles", "sensor_hints",
+                                                      "level", "drawing", "bounds"]
+    assert all(a["verdict"] in VERDICTS and isinstance(a["reason"], str) and a["reason"] for a in doc["assessments"])
+    ad = doc["assessments"][0]
+    assert ad["verdict"] == ("pass" if doc["adequacy"]["adequate"] else "fail") and ad["pairs"] == 100
+    sa = doc["assessments"][2]
+    assert sa["largest_roll_deg"] == doc["adequacy"]["small_angle"]["largest_roll_deg"]
+    assert sa["verdict"] == ("warn" if doc["adequacy"]["small_angle"]["optimistic"] else "pass")
+    assert doc["assessments"][-1] == {"kind": "bounds", "verdict": "pass", "at_bound": [],
+                                      "reason": "no free parameter ended at a search bound"}
+    for key in ("adequacy", "model", "parameters", "starts", "checks"):
+        assert key in doc
+
+
+def test_load_reads_the_typed_records_back(fitted):
+    res, out = fitted
+    back = rideid.load_result(out)
+    assert back.assessments == res.assessments and back.plan == res.plan and back.settings == res.settings
+    assert type(back.assessments[0]) is AdequacyAssessment
+
+
+def test_a_file_without_a_schema_version_is_version_1_and_gets_its_assessments_from_the_old_keys(fitted, tmp_path):
+    res, out = fitted
+    doc = json.loads((out / "result.json").read_text())
+    old = {k: v for k, v in doc.items() if k not in NEW_KEYS}
+    (tmp_path / "result.json").write_text(json.dumps(old))
+    back = rideid.load_result(tmp_path)
+    assert back.assessments == res.assessments  # the same records, from adequacy and details
+    assert back.plan is None and back.settings is None
+    assert back.to_dict()["schema_version"] == 2 and back.to_dict()["assessments"] == doc["assessments"]
+
+
+@pytest.mark.parametrize("version, message", [
+    (3, "schema_version 3 was written by a newer rideid; this one reads up to 2 (upgrade rideid)"),
+    ("2", "schema_version must be a positive integer, got '2'"),
+    (0, "schema_version must be a positive integer, got 0"),
+])
+def test_a_schema_version_this_rideid_cannot_read_is_one_line(fitted, tmp_path, version, message):
+    doc = json.loads((fitted[1] / "result.json").read_text())
+    (tmp_path / "result.json").write_text(json.dumps({**doc, "schema_version": version}))
+    with pytest.raises(DataError) as e:
+        rideid.load_result(tmp_path)
+    assert str(e.value) == f"{tmp_path / 'result.json'}: {message}"
+
+
+def _res(adequacy=None, details=None, tracks=None, roads=None, starts=None, names=("k_sf",)):
+    return SimpleNamespace(adequacy=adequacy, details=details or {"k_sf": {"value": 1.0}}, tracks=tracks,
+                           roads=roads, starts=starts or {}, names=list(names), known={"total_mass": 1400.0})
+
+
+def test_each_verdict_follows_what_the_result_holds():
+    none = assessments_of(_res())
+    assert [a.verdict for a in none] == ["not assessed"] * 6 + ["pass"]
+    runs = {"r1": {"body_az_fl": {"structure": True, "level": 5.0}, "roll_rate": {"structure": False, "level": 1.0}}}
+    bad = _res({"adequate": False, "reasons": ["the road input explains part of the residual"], "runs": runs,
+                "alpha": 0.01, "advice": "try auto",
+                "sensor_hints": [{"channel": "axle_az_fl", "highpass_hz": 0.5, "message": "axle_az_fl: AC?"}],
+                "materiality": {"material": True, "reason": "moves k_sf by 3 std_total", "threshold": 1.0,
+                                "largest_shift": {"parameter": "k_sf", "in_std_total": 3.0},
+                                "pairs_left_out": ["r1/body_az_fl"]}},
+               details={"k_sf": {"value": 1.0, "at_bound": True}, "m_s": {"value": 1.0, "fixed": True,
+                                                                          "at_bound": True}})
+    a = {x.kind: x for x in assessments_of(bad)}
+    assert a["adequacy"] == AdequacyAssessment("fail", "the road input explains part of the residual", False, 2,
+                                               ["r1/body_az_fl"], 0.01, None, False, "try auto")
+    assert a["materiality"] == MaterialityAssessment("fail", "moves k_sf by 3 std_total", True, 1.0, "k_sf", 3.0,
+                                                     ["r1/body_az_fl"])
+    assert a["sensor_hints"] == SensorHintsAssessment("warn", "axle_az_fl: AC?", ["axle_az_fl"], [0.5], None)
+    assert a["level"].verdict == "not assessed"  # the caveat qualifies an adequate verdict only
+    assert a["bounds"] == BoundsAssessment("fail", a["bounds"].reason, ["k_sf"])  # a fixed one is no finding
+    good = _res({"adequate": True, "reasons": ["fine"], "runs": runs, "level_caveat": "loud",
+                 "tracks_caveat": "drawn", "small_angle": {"largest_roll_deg": 2.3, "largest_pitch_deg": 1.0,
+                                                           "threshold_deg": 1.0, "optimistic": ["k_sf"],
+                                                           "note": "rolls 2.3 deg"}})
+    a = {x.kind: x for x in assessments_of(good)}
+    assert a["level"] == LevelAssessment("warn", "loud", 1, 2)
+    assert a["drawing"] == DrawingAssessment("warn", "drawn", [], [])
+    assert a["small_angles"].verdict == "warn" and a["small_angles"].optimistic == ["k_sf"]
+    assert SmallAngleAssessment.from_dict(a["small_angles"].to_dict()) == a["small_angles"]
+    with pytest.raises(ValueError, match="verdict 'ok' is not one of pass, warn, fail, not assessed"):
+        BoundsAssessment("ok", "")
+
+
+def test_the_plan_has_a_block_per_nuisance():
+    tracks = {"W": {"method": "as built: the drawing times an amplitude factor plus unevenness whose spectrum ...",
+                    "runs": {"w1": {"amplitude_factor": 1.02, "motion": {"speed_m_s": 10.0}}, "w2": {"fitted": "no"}}},
+              "H": {"rejected": "implausible", "runs": {"h1": {"amplitude_factor": 1.5}}}}
+    plan = plan_of(_res(tracks=tracks, roads={"u1": {"file": "road/u1.csv"}}, starts={"s1": {"value": 1.0},
+                                                                                      "u1": {"value": 0.0}}),
+                   ["w1", "w2", "h1", "s1", "u1"])
+    assert [(b.name, b.unknowns, b.runs) for b in plan.blocks] == [
+        ("car", ["k_sf"], ["w1", "w2", "h1", "s1", "u1"]), ("run w1", ["speed", "start"], ["w1"]),
+        ("run s1", ["start"], ["s1"]), ("track W", ["amplitude_factor", "unevenness"], ["w1"]),
+        ("road u1", ["road"], ["u1"])]
+    assert plan.blocks[0].fixed == ["total_mass"]
+    assert type(plan).from_dict(plan.to_dict()) == plan
