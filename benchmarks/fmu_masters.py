@@ -13,7 +13,7 @@ point and at 20 points per sample:
   one classical RK4 step to the next point (:func:`me_set_then_get`).
 
 Each row: the worst channel over the runs, RMS(difference) / RMS(channel), for the body accelerations, the axle
-accelerations and the gyros (``--per-run`` adds each run's).
+accelerations and the gyros (``--per-run`` adds each run's; ``--only=TEXT`` keeps the masters whose label has it).
 """
 
 from __future__ import annotations
@@ -172,6 +172,7 @@ def masters(fmu):
 
 def main(args):
     per_run = "--per-run" in args
+    only = [a.split("=", 1)[1] for a in args if a.startswith("--only=")]
     paths = [a for a in args if not a.startswith("--")]
     sc = rideid.load_scenario(paths[0]) if paths else rideid.default_scenario()
     folder = Path(tempfile.mkdtemp()) / "car"
@@ -182,6 +183,8 @@ def main(args):
     print("| master, step | body | axle | gyros |\n|---|---|---|---|")
     rows = {}
     for how, (drive, sub) in masters(fmu).items():
+        if only and not any(o in how for o in only):
+            continue
         rel = {}
         for run in sc.runs:
             t, Yref = data[run.id]

@@ -78,10 +78,10 @@ POWERTRAIN_OUTPUTS = (
     ("psi_p", "rad", "powertrain pitch relative to the body (mount deflection)"),
 )
 #: the relative tolerance the FMU proposes to a variable-step solver of its Model Exchange interface
-#: (``<DefaultExperiment tolerance>``; FMPy's CVode takes it): 1e-7 keeps every channel within 1e-4 of its RMS of
+#: (``<DefaultExperiment tolerance>``; FMPy's CVode takes it): 1e-8 keeps every channel within 1e-4 of its RMS of
 #: ``rideid simulate`` at a 20x finer grid than the data (docs/export.md); the states' nominal values (1 mm, 1 cm/s)
 #: scale the absolute tolerances
-TOLERANCE = 1e-7
+TOLERANCE = 1e-8
 #: the big clearance standing for "no bump stop" (m); with rate 0 it is never reached anyway
 NO_STOP = 1e6
 
