@@ -1,4 +1,4 @@
-"""``car.fmu``: the identified car as an FMI 2.0 co-simulation FMU (SPEC §10).
+"""``car.fmu``: the identified car as an FMI 2.0 FMU, Model Exchange and Co-Simulation in one (SPEC §10, §13).
 
 The FMU is generated C (``c/model.c.in``, the FMI 2.0 API declared in
 ``c/fmi2_api.h``) with the car's numbers as the parameters' start values,
@@ -22,7 +22,15 @@ Variables (value references):
   ``max_step`` (the longest RK4 sub-step, s) and with damper curves the knots
   ``damper_v1..K`` (m/s) and the forces ``F_f1..K``, ``F_r1..K`` (N);
 * Boolean parameter ``lift_off`` (0): the tires push but never pull (true
-  for a car with damper curves or bump stops, as ``rideid simulate`` has it).
+  for a car with damper curves or bump stops, as ``rideid simulate`` has it);
+* after all of these in ``modelDescription.xml`` (no index of before moves), the continuous states of Model
+  Exchange (:func:`states`: ``state.z ... state.z_rr``, with a powertrain ``state.u_p, state.psi_p``, then their
+  rates ``state.z_dot ...``; from 1000) and their derivatives (``der(state.z) ...``; from 2000).
+
+Model Exchange has no event indicators: the bump stops, lift-off and the damper curves' knots are kinks of a
+continuous right-hand side. Between the times the master sets them the road inputs are carried on along their
+rates, and ``fmi2CompletedIntegratorStep`` asks for an event where the master sets them off that road, so that
+the master restarts its integrator at the jump (docs/export.md).
 """
 
 from __future__ import annotations
