@@ -127,7 +127,7 @@ def open_me(fmu, road0, parameters=None):
     ``{name: value}`` set before."""
     md = read_model_description(fmu)
     vr = {v.name: v.valueReference for v in md.modelVariables}
-    s = FMU2Model(guid=md.guid, unzipDirectory=extract(fmu), modelIdentifier="car", instanceName="car")
+    s = FMU2Model(guid=md.guid, unzipDirectory=unzipped(fmu), modelIdentifier="car", instanceName="car")
     s.instantiate()
     for n, value in (parameters or {}).items():
         s.setReal([vr[n]], [value])
@@ -138,6 +138,14 @@ def open_me(fmu, road0, parameters=None):
     s.newDiscreteStates()
     s.enterContinuousTimeMode()
     return md, s
+
+
+def unzipped(fmu):
+    """The FMU extracted once, beside it (in the test's temporary folder)."""
+    folder = Path(fmu).parent / "unzipped"
+    if not folder.is_dir():
+        extract(fmu, unzipdir=str(folder))
+    return str(folder)
 
 
 def ptr(a):
@@ -275,7 +283,7 @@ def test_co_simulation_outputs_recomputed_when_inputs_set_after_a_step(linear):
     md = read_model_description(fmu)
     pair = []
     for name in ("early", "late"):
-        s = FMU2Slave(guid=md.guid, unzipDirectory=extract(fmu), modelIdentifier="car", instanceName=name)
+        s = FMU2Slave(guid=md.guid, unzipDirectory=unzipped(fmu), modelIdentifier="car", instanceName=name)
         s.instantiate()
         s.setupExperiment(startTime=0.0)
         s.enterInitializationMode()
