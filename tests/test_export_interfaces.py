@@ -1,14 +1,15 @@
 """The FMU's two FMI 2.0 interfaces (SPEC §10, §13): Model Exchange beside Co-Simulation in one ``car.fmu``.
 
 Model Exchange: the model description (states, derivatives, ModelStructure; FMPy's validation clean, the
-variables of before unchanged); the static equilibrium and the derivatives against closed forms written here
-(a road lifted evenly lifts the car rigidly; a wheel displaced at rest pushes on its wheel and the body with the
-spring rates); the FMU's right-hand side integrated by SciPy's DOP853 with the inputs set at every evaluation
-(a continuous master, not rideid's integrator) against ``rideid simulate``; FMPy's ``simulate_fmu`` (CVode and
-Euler) and a set-then-get RK4 master at one data sample per point and at 20 per sample, within what
-docs/export.md states, for the linear car, the car with damper curves, bump stops and lift-off, and the car with
-a powertrain on mounts. Co-Simulation: outputs read before the inputs at a step's end are set are a prediction;
-set the inputs and read again, and they are those a set-then-get master reads, bit for bit.
+variables of before unchanged); the static equilibrium and the derivatives against closed forms written here (a
+road lifted evenly lifts the car rigidly; a wheel displaced at rest pushes on its wheel and the body with the
+spring rates; a tire off the ground lets its wheel fall with the static load; a bump stop adds its rate); a
+master written here that sets the exact road at every evaluation (RK4 at 20 steps a sample) against ``rideid
+simulate``; FMPy's ``simulate_fmu`` (CVode and Euler) and set-then-get masters at one data sample per point and
+at 20 per sample, within what docs/export.md states, for the linear car, the car with damper curves, bump stops
+and lift-off, and the car with a powertrain on mounts. Co-Simulation: outputs read before the inputs at a step's
+end are set are a prediction; set the inputs and read again, and they are those a set-then-get master reads, bit
+for bit.
 
 The default tests drive short stretches (1 s) of the runs; the slow test checks docs/export.md's table over the
 built-in scenario's full runs (``benchmarks/fmu_masters.py`` prints it).
@@ -179,6 +180,38 @@ def test_model_exchange_equilibrium_and_derivatives_in_closed_form(linear):
     # the outputs read the same state: axle fl's acceleration is the wheel's, and der() reads the derivatives
     assert s.getReal([12])[0] == pytest.approx(dx[10], rel=1e-12)
     assert s.getReal(list(range(VR_DER0, VR_DER0 + 14))) == pytest.approx(list(dx), rel=1e-12)
+    s.terminate()
+    s.freeInstance()
+
+
+@needs_cc
+def test_model_exchange_lift_off_and_bump_stop_in_closed_form(curves):
+    """The car with curves, bump stops and lift-off, at rest. The road under wheel fl dropped 0.2 m: the tire
+    cannot pull, the wheel falls with the static load it carried, -L_fl / m_uf (L_fl = m_s g b / (2 l) + m_uf g),
+    and nothing else moves yet. Wheel fl and the road under it raised 10 mm past the bump stop's clearance: the
+    stop adds rate x 10 mm to the spring's force on the body and on the wheel (the tire at its static load)."""
+    fmu, sc = curves
+    car = car_from_scenario(sc)
+    p, g, bs = car.values, car.geometry, car.bump_stops
+    G = 9.80665  # standard gravity (m/s^2), the FMU's gravity parameter
+    md, s = open_me(fmu, [0.0] * 8)
+    x, dx = np.zeros(14), np.zeros(14)
+    s.getContinuousStates(ptr(x), 14)
+    assert np.abs(x).max() < 1e-12
+    s.setReal([0], [-0.2])
+    s.getDerivatives(ptr(dx), 14)
+    L_fl = p["m_s"] * G * (g.wheelbase - p["a"]) / (2 * g.wheelbase) + p["m_uf"] * G
+    assert dx[7 + 3] == pytest.approx(-L_fl / p["m_uf"], rel=1e-12)
+    assert np.abs(np.delete(dx, 10)).max() < 1e-12
+    d = bs["bs_clear_f"] + 0.01
+    x[3] = d
+    s.setContinuousStates(ptr(x), 14)
+    s.setReal([0], [d])
+    s.getDerivatives(ptr(dx), 14)
+    F = p["k_sf"] * d + bs["bs_rate_f"] * 0.01
+    bar = p.get("k_arf", 0.0) * d
+    assert dx[7 + 3] == pytest.approx(-(F + bar) / p["m_uf"], rel=1e-12)
+    assert dx[7 + 0] == pytest.approx(F / p["m_s"], rel=1e-12)
     s.terminate()
     s.freeInstance()
 
