@@ -255,8 +255,8 @@ def _parser() -> argparse.ArgumentParser:
             ("fit", "FIT_DIR", "an identification folder (result.json)"),
             out="output folder: car.toml, car.csv, car.fmu")
     s.add_argument("--format", default="all", metavar="card|fmu|all",
-                   help="card: car.toml (scenario-ready) and car.csv; fmu: car.fmu (FMI 2.0 co-simulation, "
-                        "C sources and a binary for this platform); all: both (default)")
+                   help="card: car.toml (scenario-ready) and car.csv; fmu: car.fmu (FMI 2.0 Model Exchange and "
+                        "Co-Simulation, C sources and a binary for this platform); all: both (default)")
 
     s = add("demo", "the whole job on the built-in car and tracks: simulate (1 % noise), identify, score")
     s.add_argument("--out", default="rideid-demo", metavar="DIR",

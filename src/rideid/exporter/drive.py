@@ -1,8 +1,9 @@
 """Driving ``car.fmu`` with FMPy: a master loop of rideid's own, for the closest match to ``rideid simulate``.
 
-Any FMI master drives the FMU (FMPy's ``simulate_fmu`` at 1/20 of a data
-sample per step: every channel within 3e-5 of ``rideid simulate``,
-docs/export.md): without input derivatives the FMU follows each road input
+Any FMI master drives the FMU, through either interface (FMPy's ``simulate_fmu``
+at 1/20 of a data sample per step: every channel within 3e-5 of ``rideid
+simulate`` in Co-Simulation, 7e-5 in Model Exchange with CVode;
+docs/export.md): in Co-Simulation without input derivatives the FMU follows each road input
 along its rate input and takes a step again once the inputs at its end are
 set. :func:`drive_fmu` does better at coarser steps because it sets the
 inputs of an instant before it reads that instant's outputs (they are direct

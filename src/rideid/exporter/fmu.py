@@ -1,4 +1,4 @@
-"""``car.fmu``: the identified car as an FMI 2.0 co-simulation FMU (SPEC §10).
+"""``car.fmu``: the identified car as an FMI 2.0 FMU, Model Exchange and Co-Simulation in one (SPEC §10, §13).
 
 The FMU is generated C (``c/model.c.in``, the FMI 2.0 API declared in
 ``c/fmi2_api.h``) with the car's numbers as the parameters' start values,
@@ -22,7 +22,15 @@ Variables (value references):
   ``max_step`` (the longest RK4 sub-step, s) and with damper curves the knots
   ``damper_v1..K`` (m/s) and the forces ``F_f1..K``, ``F_r1..K`` (N);
 * Boolean parameter ``lift_off`` (0): the tires push but never pull (true
-  for a car with damper curves or bump stops, as ``rideid simulate`` has it).
+  for a car with damper curves or bump stops, as ``rideid simulate`` has it);
+* after all of these in ``modelDescription.xml`` (no index of before moves), the continuous states of Model
+  Exchange (:func:`states`: ``state.z ... state.z_rr``, with a powertrain ``state.u_p, state.psi_p``, then their
+  rates ``state.z_dot ...``; from 1000) and their derivatives (``der(state.z) ...``; from 2000).
+
+Model Exchange has no event indicators: the bump stops, lift-off and the damper curves' knots are kinks of a
+continuous right-hand side. Between the times the master sets them the road inputs are carried on along their
+rates, and ``fmi2CompletedIntegratorStep`` asks for an event where the master sets them off that road, so that
+the master restarts its integrator at the jump (docs/export.md).
 """
 
 from __future__ import annotations
@@ -53,10 +61,20 @@ MODEL_IDENTIFIER = "car"
 RHO = 0.01
 INPUTS = ("r_fl", "r_fr", "r_rl", "r_rr", "rdot_fl", "rdot_fr", "rdot_rl", "rdot_rr")
 VR_OUTPUT0, VR_PAR0 = 8, 100
+#: value references of the continuous states (Model Exchange) and of their derivatives
+VR_STATE0, VR_DER0 = 1000, 2000
+#: the coordinates q of the 7-DOF car (the states are q and q'): name, unit, description
+COORDINATES = (("z", "m", "body heave at the sprung-mass CG"), ("theta", "rad", "body pitch (nose-down +)"),
+               ("phi", "rad", "body roll (right side down +)"),
+               *((f"z_{c}", "m", f"wheel heave {c}") for c in ("fl", "fr", "rl", "rr")))
+#: the two a powertrain on mounts adds (SPEC §11)
+POWERTRAIN_COORDINATES = (("u_p", "m", "powertrain heave relative to the body point beneath it"),
+                          ("psi_p", "rad", "powertrain pitch relative to the body"))
 #: SI base-unit exponents of every unit the FMU names (FMI 2.0 ``<BaseUnit>``), so a tool can convert them
 BASE_UNITS = {"m": {"m": 1}, "m/s": {"m": 1, "s": -1}, "m/s^2": {"m": 1, "s": -2}, "rad/s": {"rad": 1, "s": -1},
               "s": {"s": 1}, "kg": {"kg": 1}, "kg m^2": {"kg": 1, "m": 2}, "N": {"kg": 1, "m": 1, "s": -2},
-              "N/m": {"kg": 1, "s": -2}, "N s/m": {"kg": 1, "s": -1}, "Hz": {"s": -1}, "rad": {"rad": 1}}
+              "N/m": {"kg": 1, "s": -2}, "N s/m": {"kg": 1, "s": -1}, "Hz": {"s": -1}, "rad": {"rad": 1},
+              "rad/s^2": {"rad": 1, "s": -2}}
 #: the parameters of the FMU's equations: the twelve and SPEC §6's four; a car with a powertrain on mounts
 #: (SPEC §11) has :data:`rideid.model.params.POWERTRAIN_NAMES` after them
 FMU_NAMES = SUSPENSION_NAMES
@@ -67,6 +85,11 @@ POWERTRAIN_OUTPUTS = (
     ("u_p", "m", "powertrain heave relative to the body point beneath it (mount deflection)"),
     ("psi_p", "rad", "powertrain pitch relative to the body (mount deflection)"),
 )
+#: the relative tolerance the FMU proposes to a variable-step solver of its Model Exchange interface
+#: (``<DefaultExperiment tolerance>``; FMPy's CVode takes it): 1e-8 keeps every channel within 1e-4 of its RMS of
+#: ``rideid simulate`` at a 20x finer grid than the data (docs/export.md); the states' nominal values (1 mm, 1 cm/s)
+#: scale the absolute tolerances
+TOLERANCE = 1e-8
 #: the big clearance standing for "no bump stop" (m); with rate 0 it is never reached anyway
 NO_STOP = 1e6
 
@@ -86,6 +109,15 @@ def outputs(car: Car) -> list[tuple[str, str, str]]:
     """The FMU's outputs in value-reference order: ``[(name, unit, description), ...]``."""
     out = [(c, CHANNEL_UNITS[c], f"SPEC channel {c}") for c in CHANNELS]
     return out + (list(POWERTRAIN_OUTPUTS) if car.powertrain else [])
+
+
+def states(car: Car) -> list[tuple[str, str, str]]:
+    """The continuous states in the order of ``fmi2GetContinuousStates``: ``[(name, unit, description), ...]``:
+    the coordinates (``state.z`` ...), then their rates (``state.z_dot`` ...); value references from
+    :data:`VR_STATE0`, their derivatives (``der(state.z)`` ...) from :data:`VR_DER0`."""
+    q = list(COORDINATES) + (list(POWERTRAIN_COORDINATES) if car.powertrain else [])
+    return ([(f"state.{n}", u, d + " (from static equilibrium)") for n, u, d in q]
+            + [(f"state.{n}_dot", u + "/s", f"rate of {n}") for n, u, _ in q])
 
 
 def _parameters(car: Car):
@@ -170,15 +202,21 @@ def _description(car: Car) -> str:
 
 
 def model_description(car: Car, guid: str) -> str:
-    """``modelDescription.xml`` (FMI 2.0, co-simulation)."""
+    """``modelDescription.xml`` (FMI 2.0: Model Exchange and Co-Simulation)."""
     pars = _parameters(car)
     outs = outputs(car)
-    units = sorted({p[2] for p in pars} | {o[1] for o in outs} | {"m", "m/s"})
+    xs = states(car)
+    ders = [(f"der({n})", _der_unit(u), f"derivative of {n}") for n, u, _ in xs]
+    units = sorted({p[2] for p in pars} | {o[1] for o in outs} | {x[1] for x in xs + ders} | {"m", "m/s"})
     units = [u for u in units if u]
     lines = ['<?xml version="1.0" encoding="UTF-8"?>',
              '<fmiModelDescription fmiVersion="2.0" modelName="rideid car" '
              f'guid="{guid}" description="{_description(car)}" '
              'generationTool="rideid export" variableNamingConvention="flat" numberOfEventIndicators="0">',
+             f'  <ModelExchange modelIdentifier="{MODEL_IDENTIFIER}" completedIntegratorStepNotNeeded="false" '
+             'canBeInstantiatedOnlyOncePerProcess="false" canNotUseMemoryManagementFunctions="true">',
+             '    <SourceFiles>', '      <File name="model.c"/>', '    </SourceFiles>',
+             '  </ModelExchange>',
              f'  <CoSimulation modelIdentifier="{MODEL_IDENTIFIER}" canHandleVariableCommunicationStepSize="true" '
              'canInterpolateInputs="true" maxOutputDerivativeOrder="0" canBeInstantiatedOnlyOncePerProcess="false" '
              'canNotUseMemoryManagementFunctions="true">',
@@ -187,7 +225,8 @@ def model_description(car: Car, guid: str) -> str:
     for u in units:
         base = " ".join(f'{k}="{v}"' for k, v in BASE_UNITS[u].items())
         lines += [f'    <Unit name="{escape(u)}">', f'      <BaseUnit {base}/>', '    </Unit>']
-    lines += ['  </UnitDefinitions>', '  <DefaultExperiment startTime="0.0" stopTime="10.0"/>',
+    lines += ['  </UnitDefinitions>',
+              f'  <DefaultExperiment startTime="0.0" stopTime="10.0" tolerance="{TOLERANCE:g}"/>',
               '  <ModelVariables>']
     idx = 0
 
@@ -212,12 +251,27 @@ def model_description(car: Car, guid: str) -> str:
         var(n, VR_PAR0 + k, "parameter", variability, desc, f'<Real{u} start="{_num(v)}"/>')
     var("lift_off", 0, "parameter", "fixed", "tires push but never pull (the nonlinear car of SPEC 8)",
         f'<Boolean start="{"true" if car.nonlinear else "false"}"/>')
+    # the continuous states (start: static equilibrium for the inputs at the end of initialisation) and their
+    # derivatives; q' is a state itself, so der(q) depends on that state alone
+    x_idx = [var(n, VR_STATE0 + k, "local", "continuous", d, f'<Real unit="{escape(u)}"/>')
+             for k, (n, u, d) in enumerate(xs)]
+    d_idx = [var(n, VR_DER0 + k, "local", "continuous", d,
+                 f'<Real unit="{escape(u)}" derivative="{x_idx[k]}"/>') for k, (n, u, d) in enumerate(ders)]
+    nq = len(xs) // 2
     lines += ['  </ModelVariables>', '  <ModelStructure>', '    <Outputs>']
     lines += [f'      <Unknown index="{i}"/>' for i in indices]
-    lines += ['    </Outputs>', '    <InitialUnknowns>']
-    lines += [f'      <Unknown index="{i}"/>' for i in indices]
+    lines += ['    </Outputs>', '    <Derivatives>']
+    lines += [f'      <Unknown index="{i}" dependencies="{x_idx[k + nq]}" dependenciesKind="constant"/>'
+              if k < nq else f'      <Unknown index="{i}"/>' for k, i in enumerate(d_idx)]
+    lines += ['    </Derivatives>', '    <InitialUnknowns>']
+    lines += [f'      <Unknown index="{i}"/>' for i in indices + x_idx + d_idx]
     lines += ['    </InitialUnknowns>', '  </ModelStructure>', '</fmiModelDescription>']
     return "\n".join(lines) + "\n"
+
+
+def _der_unit(unit: str) -> str:
+    """The unit of a quantity's time derivative (m -> m/s, m/s -> m/s^2)."""
+    return unit[:-2] + "/s^2" if unit.endswith("/s") else unit + "/s"
 
 
 class NoBinary(Exception):
@@ -308,5 +362,5 @@ def _compile(cc, build: Path, src: Path) -> None:
         raise NoBinary(f"the C compiler {shlex.join(cc)!r} failed: {first}")
 
 
-__all__ = ["write_fmu", "model_description", "c_source", "find_compiler", "max_step", "outputs", "INPUTS",
+__all__ = ["write_fmu", "model_description", "c_source", "find_compiler", "max_step", "outputs", "states", "INPUTS",
            "MODEL_IDENTIFIER", "POWERTRAIN_OUTPUTS", "NoBinary"]
