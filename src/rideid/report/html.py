@@ -31,13 +31,14 @@ from PIL import Image
 
 from ..data.quality import summarised_warning
 from ..errors import DataError
+from ..estimate.frequency import frequency_response, measured_response
 from ..estimate.sensitivity import P2T_STARS, stars
 from .sensitivity_files import heatmap_figure
 from ..model.equations import CHANNELS
 from ..model.params import ALL_NAMES, DESCRIPTIONS
 from ..model.roads import iso8608_psd
 from .estimate_sections import estimate_context
-from .figures import budget_figure
+from .figures import COHERENCE_MIN, budget_figure, frequency_figure
 
 FIG_DPI = 90
 #: the report's Matplotlib style, applied around each figure's drawing (never to the user's global rcParams);
@@ -661,7 +662,7 @@ def write_report(result, dataset, out_dir, *, compare=None, compare_label: str |
     sims = _responses(result, dataset)
     context = {**figure_sections(result, dataset, sims, out_dir, compare, compare_label),
                **road_section(result, out_dir), **fit_section(result, dataset, sims), **data_section(result, dataset),
-               **estimate_section(result, dataset)}
+               **estimate_section(result, dataset), **frequency_section(result, dataset, out_dir)}
     context.update(summary_section(result, context))
     out = out_dir / "report.html"
     out.write_text(render(context))
@@ -737,6 +738,29 @@ def fig_budget(result, out_dir):
                  "tracks as built along a speed channel, fitted with the car; part of std_robust) and each declared "
                  "input, "
                  f"propagated to first order (GUM; docs/uncertainty.md). Here: {what}.")
+
+
+@styled
+def frequency_section(result, dataset, out_dir) -> dict:
+    """Template context of the frequency responses (SPEC §13): the figure, the runs measured and the notes on the
+    uncertainty; empty for a result without its geometry (written before it carried it)."""
+    if not getattr(result, "vehicle", None):
+        return {}
+    fr = frequency_response(result)
+    measured = measured_response(dataset, result)
+    fig = frequency_figure(result, dataset=False if measured is None else dataset, measured=measured)
+    runs = ", ".join(measured["runs"]) if measured is not None else ""
+    caption = ("The identified car's frequency responses per metre of road height under a wheel: body and axle "
+               "acceleration at each corner from its own wheel, and the body's heave, pitch and roll displacement "
+               "from the wheels moved in phase, front against rear and left against right (1 m each). Bands: ±2 std "
+               "of |H| from the estimates' std_total (docs/frequency-response.md). "
+               + (f"Points: the response the data measured (H1 over the runs {runs}, whose road is known from the "
+                  f"track, speed and start), ±2 std random error, where its partial coherence exceeds "
+                  f"{COHERENCE_MIN:g}; the last panel shows that coherence. " if measured is not None else
+                  "No run has a known road: no measured points. ")
+               + "All frequencies and every output and input in frf.csv (rideid export).")
+    figure = _save(fig, Path(out_dir), "frequency_response", "Frequency responses", caption)
+    return {"frequency_figure": figure, "frequency_notes": fr.notes}
 
 
 def damper_section(result, dataset, out_dir) -> list:
@@ -820,6 +844,8 @@ TOC = (("summary", "Summary", "what to read first"),
        ("model", "Model choice", "the candidate models side by side (--model auto)"),
        ("adequacy", "Adequacy", "per run: do the residuals look like sensor noise"),
        ("modal", "Modes", "natural frequencies and damping ratios of the identified car"),
+       ("frequency", "Frequency responses", "the identified car's transmissibilities with their bands, and what "
+                                            "the data measured"),
        ("dampers", "Damper curves", "the curves with their bands, and the velocities each run reached"),
        ("roads", "Roads", "the estimated roads of the runs on unknown roads and their ISO 8608 classes"),
        ("convergence", "Convergence", "cost per generation of the search"),
@@ -906,6 +932,7 @@ def summary_section(result, context: dict) -> dict:
     present |= {"verdict", "adequacy"} if adq else set()
     present |= {"model"} if context.get("model_choice") else set()
     present |= {"dampers"} if context.get("damper_figures") else set()
+    present |= {"frequency"} if context.get("frequency_figure") else set()
     present |= {"roads"} if context.get("road_figures") else set()
     present |= {f.id for f in context.get("figures", [])}
     return {"summary": lines, "toc": [t for t in TOC if t[0] in present]}
