@@ -37,6 +37,7 @@ relative (Bendat & Piersol eq. 9.65, ``n_d`` segments).
 from __future__ import annotations
 
 import numpy as np
+from scipy.signal import get_window
 
 from .equations import CHANNELS, CHANNEL_UNITS, state_space
 from .params import Geometry
@@ -125,7 +126,7 @@ def _spectra(runs, segment, overlap, m, p):
             starts = np.arange(0, Z.shape[0] - n_fft + 1, step) if Z.shape[0] >= n_fft else np.zeros(0, int)
             if starts.size == 0:
                 continue
-            w = np.hanning(n_fft)
+            w = get_window("hann", n_fft)  # periodic (DFT-even), as scipy.signal.welch's
             idx = starts[:, None] + np.arange(n_fft)
         seg = Z[idx]
         if segment is not None:  # a stationary run's mean is no response

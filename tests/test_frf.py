@@ -1,0 +1,402 @@
+"""Frequency responses (SPEC §13): the model's against closed forms and an independent simulator, the H1 estimate
+against known systems, the bands' coverage, frf.csv and the report's section."""
+
+from __future__ import annotations
+
+import csv
+import warnings
+from dataclasses import replace
+
+import numpy as np
+import pytest
+import scipy.signal as sg
+
+import rideid
+from rideid.estimate.cost import CostFunction
+from rideid.estimate.frequency import FRF_COLUMNS, measured_response
+from rideid.model.equations import mck, rate_input
+from rideid.model.frf import INPUTS, OUTPUTS, frequency_response, h1_estimate
+from rideid.model.params import ALL_NAMES, DEFAULT_CAR, DEFAULT_GEOMETRY, Geometry
+from rideid.synth.scenario import simulate_manifest, write_dataset
+
+TRUTH = dict(DEFAULT_CAR)
+O = {n: i for i, n in enumerate(OUTPUTS)}
+
+
+def _row(values: dict) -> np.ndarray:
+    return np.array([[float(values.get(n, 0.0)) for n in ALL_NAMES]])
+
+
+# ---------------------------------------------------------------------------
+# The independent car of SPEC §1, written out here (not rideid's code)
+
+def spec_matrices(p: dict, geom: Geometry):
+    """M, C, K (7x7), the road's force per metre ``Bf`` and per m/s ``Bd`` (7x4), and the output rows of the ten
+    channels as ``y = Oa q'' + Ov q'``, from SPEC §1 directly (tire damping c_t of SPEC §6 too)."""
+    b = geom.wheelbase - p["a"]
+    xs = [p["a"], p["a"], -b, -b]
+    ys = [geom.track_front / 2, -geom.track_front / 2, geom.track_rear / 2, -geom.track_rear / 2]
+    ks = [p["k_sf"]] * 2 + [p["k_sr"]] * 2
+    cs = [p["c_sf"]] * 2 + [p["c_sr"]] * 2
+    kt = [p["k_tf"]] * 2 + [p["k_tr"]] * 2
+    ct = [p.get("c_tf", 0.0)] * 2 + [p.get("c_tr", 0.0)] * 2
+    mu = [p["m_uf"]] * 2 + [p["m_ur"]] * 2
+    M = np.diag([p["m_s"], p["I_yy"], p["I_xx"], *mu])
+    K, C = np.zeros((7, 7)), np.zeros((7, 7))
+    Bf, Bd = np.zeros((7, 4)), np.zeros((7, 4))
+    Oa, Ov = np.zeros((10, 7)), np.zeros((10, 7))
+    for i in range(4):
+        # suspension deflection d_i = z_i - (z - x_i theta + y_i phi); F_i = k d_i + c d_i' acts up on the body:
+        # body rows get +F_i (z), -x_i F_i (theta), +y_i F_i (phi); the wheel -F_i; so the stiffness is k e e^T
+        e = np.zeros(7)
+        e[0], e[1], e[2], e[3 + i] = -1.0, xs[i], -ys[i], 1.0
+        K += ks[i] * np.outer(e, e)
+        C += cs[i] * np.outer(e, e)
+        K[3 + i, 3 + i] += kt[i]
+        C[3 + i, 3 + i] += ct[i]
+        Bf[3 + i, i], Bd[3 + i, i] = kt[i], ct[i]
+        Oa[i, :3] = [1.0, -xs[i], ys[i]]
+        Oa[4 + i, 3 + i] = 1.0
+    Ov[8, 1] = Ov[9, 2] = 1.0
+    return M, C, K, Bf, Bd, Oa, Ov
+
+
+def spec_response(p: dict, geom: Geometry, freq) -> np.ndarray:
+    """``H`` (n_f, 13, 4) of the car of SPEC §1 by solving ``(-w^2 M + jw C + K) q = (Bf + jw Bd) r``."""
+    M, C, K, Bf, Bd, Oa, Ov = spec_matrices(p, geom)
+    out = np.zeros((len(freq), 13, 4), dtype=complex)
+    for k, f in enumerate(freq):
+        w = 2 * np.pi * f
+        q = np.linalg.solve(-w * w * M + 1j * w * C + K, Bf + 1j * w * Bd)
+        out[k, :10] = -w * w * (Oa @ q) + 1j * w * (Ov @ q)
+        out[k, 10:] = q[:3]
+    return out
+
+
+def spec_simulate(p: dict, geom: Geometry, t, r, rdot) -> np.ndarray:
+    """The ten channels (n, 10) of the SPEC §1 car at rest at ``t[0]``, driven by ``r`` (n, 4) and ``rdot``,
+    by SciPy's ``lsim`` (its own discretisation: inputs linear between the given times)."""
+    M, C, K, Bf, Bd, Oa, Ov = spec_matrices(p, geom)
+    Mi = np.linalg.inv(M)
+    A = np.block([[np.zeros((7, 7)), np.eye(7)], [-Mi @ K, -Mi @ C]])
+    B = np.vstack([np.zeros((7, 8)), Mi @ np.hstack([Bf, Bd])])
+    acc_x, acc_u = A[7:], B[7:]  # q'' as a function of the state and the inputs
+    Cy = Oa @ acc_x + np.hstack([np.zeros((10, 7)), Ov])
+    Dy = Oa @ acc_u
+    _, y, _ = sg.lsim(sg.StateSpace(A, B, Cy, Dy), np.hstack([r, rdot]), t)
+    return y
+
+
+# ---------------------------------------------------------------------------
+# Closed forms
+
+def quarter_car(m, mu, k, c, kt, freq):
+    """Textbook quarter car (sprung m on k, c over unsprung mu on tire kt): body and wheel displacement per
+    metre of road (e.g. Gillespie, *Fundamentals of Vehicle Dynamics*, ch. 5)."""
+    s = 2j * np.pi * np.asarray(freq)
+    den = (m * s ** 2 + c * s + k) * (mu * s ** 2 + c * s + k + kt) - (c * s + k) ** 2
+    return (c * s + k) * kt / den, (m * s ** 2 + c * s + k) * kt / den
+
+
+def test_quarter_cars_of_a_decoupled_car_match_the_textbook():
+    """With I_yy = m_s a b (the dynamic index 1) the front and rear ends do not couple in bounce and pitch: the
+    front axle's wheels moved together drive the front body corners as a quarter car of m_s b / L per corner,
+    and the rear body corners not at all."""
+    p = dict(TRUTH)
+    L = DEFAULT_GEOMETRY.wheelbase
+    b = L - p["a"]
+    p["I_yy"] = p["m_s"] * p["a"] * b
+    freq = np.geomspace(0.2, 30, 60)
+    H = frequency_response(_row(p), DEFAULT_GEOMETRY, freq)[0]
+    front = H[:, :, 0] + H[:, :, 1]  # both front wheels, 1 m each
+    zb, zu = quarter_car(p["m_s"] * b / L / 2, p["m_uf"], p["k_sf"], p["c_sf"], p["k_tf"], freq)
+    w2 = (2 * np.pi * freq) ** 2
+    np.testing.assert_allclose(front[:, O["body_az_fl"]], -w2 * zb, rtol=1e-9)
+    np.testing.assert_allclose(front[:, O["axle_az_fr"]], -w2 * zu, rtol=1e-9)
+    assert np.max(np.abs(front[:, O["body_az_rl"]])) < 1e-9 * np.max(np.abs(front[:, O["body_az_fl"]]))
+
+
+def test_static_gains():
+    """At 0 Hz: all four wheels up 1 m lift the body 1 m; front up and rear down pitch it -2/L (nose up);
+    with equal tracks, left up and right down roll it 2/track; nothing accelerates."""
+    geom = replace(DEFAULT_GEOMETRY, track_rear=DEFAULT_GEOMETRY.track_front)
+    H = frequency_response(_row(TRUTH), geom, [0.0])[0, 0]
+    assert abs(H[O["heave"]].sum() - 1.0) < 1e-12
+    assert abs(H[O["pitch"]] @ [1, 1, -1, -1] + 2 / geom.wheelbase) < 1e-12
+    assert abs(H[O["roll"]] @ [1, -1, 1, -1] - 2 / geom.track_front) < 1e-12
+    assert np.max(np.abs(H[:10])) < 1e-9
+
+
+def test_left_right_symmetry():
+    H = frequency_response(_row(TRUTH), DEFAULT_GEOMETRY, np.geomspace(0.5, 25, 40))[0]
+    mirror = {"fl": "fr", "fr": "fl", "rl": "rr", "rr": "rl"}
+    for out in ("body_az", "axle_az"):
+        for c, m in mirror.items():
+            for ci, mi in mirror.items():
+                np.testing.assert_allclose(H[:, O[f"{out}_{c}"], INPUTS.index(f"r_{ci}")],
+                                           H[:, O[f"{out}_{m}"], INPUTS.index(f"r_{mi}")], rtol=1e-9, atol=1e-12)
+    for name, sign in (("heave", 1), ("pitch", 1), ("pitch_rate", 1), ("roll", -1), ("roll_rate", -1)):
+        np.testing.assert_allclose(H[:, O[name], 0], sign * H[:, O[name], 1], rtol=1e-9, atol=1e-15)
+
+
+def test_kernel_matches_the_spec_car_with_tire_damping_and_bars_absent():
+    """The state-space kernel (eigendecomposition) against the SPEC §1 car solved frequency by frequency."""
+    p = dict(TRUTH, c_tf=150.0, c_tr=180.0)
+    geom = replace(DEFAULT_GEOMETRY, track_rear=1.30)
+    freq = np.geomspace(0.1, 40, 50)
+    np.testing.assert_allclose(frequency_response(_row(p), geom, freq)[0], spec_response(p, geom, freq),
+                               rtol=1e-8, atol=1e-12)
+
+
+def test_kernel_agrees_with_the_models_own_matrices_for_a_powertrain():
+    """With a powertrain (9 coordinates) against a direct solve of rideid's M, C, K (the kernel's other path)."""
+    p = dict(TRUTH, m_p=180.0, x_p=1.0, I_p=40.0, f_pb=11.0, zeta_pb=0.2, f_pp=13.0, zeta_pp=0.2)
+    P = _row(p)
+    freq = np.array([0.7, 1.4, 5.0, 11.0, 20.0])
+    M, C, K, Bf = mck(P, DEFAULT_GEOMETRY)
+    Bd = rate_input(P, DEFAULT_GEOMETRY)
+    H = frequency_response(P, DEFAULT_GEOMETRY, freq)[0]
+    for k, f in enumerate(freq):
+        w = 2 * np.pi * f
+        q = np.linalg.solve(-w * w * M[0] + 1j * w * C[0] + K[0], Bf[0] + 1j * w * Bd[0])
+        np.testing.assert_allclose(H[k, O["heave"]], q[0], rtol=1e-8)
+        np.testing.assert_allclose(H[k, O["axle_az_rl"]], -w * w * q[5], rtol=1e-8)
+
+
+# ---------------------------------------------------------------------------
+# The H1 estimate against known systems
+
+def _filters(fs):
+    return [sg.butter(2, f, fs=fs) for f in (4.0, 9.0, 18.0)]
+
+
+def _system_runs(rng, n_runs, n, fs, shared=False, noise=0.0):
+    """Three inputs (the third a copy of the first when ``shared``) through known filters into one output."""
+    out = []
+    for _ in range(n_runs):
+        X = sg.lfilter(*sg.butter(4, 40, fs=fs), rng.standard_normal((n, 3)), axis=0)
+        if shared:
+            X[:, 2] = X[:, 0]
+        y = sum(sg.lfilter(b, a, X[:, j]) * (j + 1) for j, (b, a) in enumerate(_filters(fs)))
+        y = y + noise * np.std(y) * rng.standard_normal(n)
+        out.append((fs, X, y[:, None]))
+    return out
+
+
+def _truth_of(freq, fs):
+    return np.stack([sg.freqz(b, a, worN=freq, fs=fs)[1] * (j + 1) for j, (b, a) in enumerate(_filters(fs))], -1)
+
+
+def test_h1_recovers_a_three_input_system_with_its_error():
+    rng = np.random.default_rng(7)
+    fs = 200.0
+    est = h1_estimate(_system_runs(rng, 3, 8000, fs, noise=0.05), segment=2.0)
+    sel = (est["coherence"][:, 0] > 0.9) & (est["freq"][:, None] < 40)
+    true = _truth_of(est["freq"], fs)
+    err = np.abs(np.abs(est["H"][:, 0]) - np.abs(true))
+    assert sel.sum() > 100
+    assert np.median(err[sel] / np.abs(true[sel])) < 0.02
+    # the random error is honest: about 95 % of the points within 2 std (leakage adds a little)
+    assert np.mean(err[sel] < 2 * est["std_abs"][:, 0][sel]) > 0.85
+    assert np.all(est["own_power"][:, 0][est["freq"] < 40] > 0.8)  # independent inputs
+
+
+def test_h1_gives_no_coherence_to_an_input_that_copies_another():
+    """A washboard's left and right wheels see one road: what each does alone is not in the data. The copy has no
+    power of its own and no coherence; the estimate of the sum of the two is still right."""
+    rng = np.random.default_rng(8)
+    fs = 200.0
+    est = h1_estimate(_system_runs(rng, 2, 8000, fs, shared=True), segment=2.0)
+    band = est["freq"] < 40
+    assert np.all(est["own_power"][band, 0, 0] < 1e-6) and np.all(est["coherence"][band, 0, 0] < 1e-3)
+    assert np.all(est["coherence"][band, 0, 2] < 1e-3)
+    assert np.median(est["coherence"][band, 0, 1]) > 0.95
+
+
+def test_h1_single_input_is_the_ordinary_estimate():
+    rng = np.random.default_rng(9)
+    fs, n = 100.0, 6000
+    x = rng.standard_normal(n)
+    b, a = sg.butter(2, 10.0, fs=fs)
+    y = sg.lfilter(b, a, x) + 0.1 * rng.standard_normal(n)
+    est = h1_estimate([(fs, x[:, None], y[:, None])], segment=4.0)
+    f, Pxy = sg.csd(x, y, fs=fs, nperseg=400, window="hann", detrend="constant")
+    _, Pxx = sg.welch(x, fs=fs, nperseg=400, window="hann", detrend="constant")
+    _, Cxy = sg.coherence(x, y, fs=fs, nperseg=400, window="hann", detrend="constant")
+    k = np.searchsorted(f, est["freq"])
+    np.testing.assert_allclose(est["H"][:, 0, 0], (Pxy / Pxx)[k], rtol=1e-9)
+    np.testing.assert_allclose(est["coherence"][:, 0, 0], Cxy[k], rtol=1e-6, atol=1e-9)
+    np.testing.assert_allclose(est["multiple_coherence"][:, 0], Cxy[k], rtol=1e-6, atol=1e-9)
+
+
+def test_h1_refuses_mismatched_runs():
+    with pytest.raises(ValueError, match=r"X \(n, 2\) and Y \(n, 1\)"):
+        h1_estimate([(100.0, np.zeros((50, 2)), np.zeros((50, 1))), (100.0, np.zeros((50, 3)), np.zeros((50, 1)))])
+
+
+# ---------------------------------------------------------------------------
+# The identified car's bands against the independent simulator
+
+#: the runs of the small default check: twist (roll, low frequencies), herringbone (left/right shift), washboard
+SMALL_RUNS = ("T_LL", "T_HH", "H_LL", "H_HH", "W_L", "W_H")
+
+
+def independent_dataset(folder, runs, noise: float, seed: int, truth=TRUTH):
+    """The built-in tracks and ``runs`` with ``truth``, the ten channels from :func:`spec_simulate` (SciPy's lsim at
+    ten times the sample rate, the road under each wheel from rideid's envelope) with ``noise`` x each channel's RMS
+    of white noise; written as a dataset."""
+    sc = rideid.default_scenario()
+    sc = replace(sc, runs=[r for r in sc.runs if r.id in runs])
+    data, _ = simulate_manifest(sc, noise=0.0, seed=1)
+    write_dataset(sc, data, folder)
+    ds = rideid.load_dataset(folder)
+    rng = np.random.default_rng(seed)
+    from rideid.data.dataset import prepare_inputs
+    for r, inp in zip(ds.runs, prepare_inputs(ds)):
+        t = ds.data[r.id].time
+        tf = np.linspace(t[0], t[-1], 10 * (t.size - 1) + 1)
+        rr, rd = inp.inputs_at(tf)
+        Y = spec_simulate(truth, ds.geometry, tf, rr, rd)[::10]
+        Y = Y + noise * np.sqrt(np.mean(Y ** 2, axis=0)) * rng.standard_normal(Y.shape)
+        path = folder / "runs" / f"{r.id}.csv"
+        header = path.read_text().splitlines()[0]
+        np.savetxt(path, np.column_stack([t, Y]), delimiter=",", header=header, comments="", fmt="%.12g")
+    return rideid.load_dataset(folder)
+
+
+@pytest.fixture(scope="module")
+def independent(tmp_path_factory):
+    """The small independent dataset at 1 % noise and its fit (the polish from the truth: the identification's
+    last step, which sets the estimates and their errors)."""
+    folder = tmp_path_factory.mktemp("frf") / "ds"
+    ds = independent_dataset(folder, SMALL_RUNS, 0.01, seed=3)
+    cf = CostFunction(ds, extensions=())
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        res = rideid.identify(ds, model="base", start=[TRUTH[n] for n in cf.names], assess=False)
+    return ds, res
+
+
+def coverage(res, truth=TRUTH, freq=None):
+    """Share of (frequency, output, input) over 0.5-25 Hz where the true |H| is inside ±2 std_abs of the
+    identified car's, and the views' share."""
+    freq = np.geomspace(0.5, 25, 120) if freq is None else freq
+    fr = res.frequency_response(freq)
+    true = spec_response(truth, DEFAULT_GEOMETRY, freq)
+    inside = np.abs(np.abs(true) - np.abs(fr.H)) <= 2 * fr.std_abs
+    views = [np.abs(np.abs(true[:, O[v["output"]]] @ v["weights"]) - np.abs(v["H"])) <= 2 * v["std_abs"]
+             for v in fr.views.values()]
+    return float(inside.mean()), float(np.mean(views)), fr
+
+
+def test_true_curves_inside_the_bands(independent):
+    ds, res = independent
+    share, views, fr = coverage(res)
+    assert share >= 0.95, share
+    assert views >= 0.95, views
+    # the bands are not trivially wide: at most a few tenths of a per cent at 1 % noise
+    rel = fr.std_abs / np.abs(fr.H)
+    assert 1e-6 < np.median(rel) < 3e-3
+
+
+def test_measured_h1_of_the_independent_car(independent):
+    """The data's own H1 over the six runs, where coherence exceeds 0.9, against the true car."""
+    ds, res = independent
+    m = measured_response(ds, res)
+    assert m["runs"] == list(SMALL_RUNS)
+    true = spec_response(TRUTH, DEFAULT_GEOMETRY, m["freq"])[:, :10]
+    sel = (m["coherence"] > 0.9) & ((m["freq"] >= 0.5) & (m["freq"] <= 25))[:, None, None]
+    err = np.abs(np.abs(m["H"]) - np.abs(true))
+    assert sel.sum() > 300
+    assert np.median(err[sel] / np.abs(true[sel])) < 0.05
+    assert np.mean(err[sel] < 2 * m["std_abs"][sel]) > 0.6
+
+
+def test_anchor_does_not_move_the_bands(independent, tmp_path):
+    """A weighbridge of 1 % widens every mass, stiffness and damping's std_total, but not the responses: they are
+    ratios (SPEC §1's scale invariance)."""
+    ds, res = independent
+    fr0 = res.frequency_response()
+    unc = dict(res.uncertainty or {})
+    unc["declared"] = {"total_mass": {"kind": "known", "key": "total_mass", "value": 1093.3, "std": 10.933}}
+    fr1 = replace(res, uncertainty=unc).frequency_response()
+    np.testing.assert_allclose(fr1.std_abs, fr0.std_abs, rtol=1e-3, atol=1e-12 * np.abs(fr0.H).max())
+    assert any("scale direction" in n for n in fr1.notes)
+
+
+def test_a_declared_input_without_sign_widens_the_bands(independent):
+    """A tape's 5 mm on the wheelbase: its contributions to the estimates (sizes only in result.json) and its own
+    effect on the model bound the response's change: the bands widen."""
+    ds, res = independent
+    fr0 = res.frequency_response()
+    unc = dict(res.uncertainty or {})
+    unc["declared"] = {"wheelbase": {"kind": "vehicle", "key": "wheelbase", "value": 2.579, "std": 0.005}}
+    details = {n: dict(d, budget={**(d.get("budget") or {}), "wheelbase": 0.001 * abs(d["value"])})
+               for n, d in res.details.items()}
+    fr1 = replace(res, uncertainty=unc, details=details).frequency_response()
+    assert np.all(fr1.std_abs >= fr0.std_abs * (1 - 1e-9))
+    assert np.median(fr1.std_abs / fr0.std_abs) > 1.5
+    assert any("triangle inequality" in n for n in fr1.notes)
+
+
+def test_frequency_response_api(independent):
+    ds, res = independent
+    fr = res.frequency_response([1.0, 2.0, 12.0])
+    assert fr["freq"].tolist() == [1.0, 2.0, 12.0]
+    assert fr.inputs == ("r_fl", "r_fr", "r_rl", "r_rr")
+    assert fr.outputs == rideid.CHANNELS + ("heave", "pitch", "roll")
+    assert fr.H.shape == fr.std_abs.shape == (3, 13, 4) and fr.H.dtype == complex
+    with pytest.raises(rideid.ArgumentError, match="freq: a 1-D array"):
+        res.frequency_response([-1.0])
+    with pytest.raises(rideid.ArgumentError, match="output 'body_az'"):
+        fr.response("body_az", "r_fl")
+
+
+def test_export_writes_frf_csv(independent, tmp_path):
+    ds, res = independent
+    out = rideid.export(res, tmp_path / "car", format="card", compiler=None)
+    assert [p.name for p in out.files] == ["car.toml", "car.csv", "frf.csv"]
+    with open(tmp_path / "car" / "frf.csv", newline="") as f:
+        rows = list(csv.reader(f))
+    assert tuple(rows[0]) == FRF_COLUMNS == ("f_hz", "output", "input", "magnitude", "phase_deg", "magnitude_std")
+    assert len(rows) == 1 + 240 * 13 * 4
+    fr = res.frequency_response()
+    k = 1 + (100 * 13 + O["axle_az_rr"]) * 4 + 3
+    f_hz, out_name, inp, mag, ph, sd = rows[k]
+    assert (out_name, inp) == ("axle_az_rr", "r_rr") and float(f_hz) == pytest.approx(fr.freq[100], rel=1e-6)
+    assert float(mag) == pytest.approx(abs(fr.H[100, O["axle_az_rr"], 3]), rel=1e-8)
+    assert float(ph) == pytest.approx(np.degrees(np.angle(fr.H[100, O["axle_az_rr"], 3])), abs=1e-4)
+    assert float(sd) == pytest.approx(fr.std_abs[100, O["axle_az_rr"], 3], rel=1e-5)
+
+
+def test_report_section(independent, tmp_path):
+    from rideid.estimate.responses import complete
+    from rideid.estimate.sensitivity import sensitivity_maps
+    from rideid.report.html import write_report
+    ds, res = independent
+    if res.maps is None:
+        res = replace(res, maps=sensitivity_maps(ds))
+    res = complete(res, ds)
+    path = write_report(res, ds, tmp_path)
+    html = path.read_text()
+    assert '<section id="frequency">' in html and "figures/frequency_response.png" in html
+    assert "where its partial coherence exceeds 0.9" in html and "T_LL, T_HH, H_LL, H_HH, W_L, W_H" in html
+    assert (tmp_path / "figures" / "frequency_response.png").stat().st_size > 20_000
+    assert 'href="#frequency"' in html
+
+
+@pytest.mark.slow
+def test_band_coverage_study(tmp_path):
+    """The full study: every built-in run, three noise seeds, the whole identification (search and polish) on the
+    independent car at 1 % noise; the true curves inside ±2 std at >= 95 % of frequencies over 0.5-25 Hz."""
+    runs = tuple(r.id for r in rideid.default_scenario().runs)
+    shares = []
+    for seed in (1, 2, 3):
+        ds = independent_dataset(tmp_path / f"s{seed}", runs, 0.01, seed=seed)
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            res = rideid.identify(ds, seed=seed, model="base")
+        share, views, _ = coverage(res)
+        shares.append(share)
+        assert share >= 0.95 and views >= 0.95, (seed, share, views)
+    assert np.mean(shares) >= 0.95
