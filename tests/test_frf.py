@@ -20,7 +20,7 @@ from rideid.model.params import ALL_NAMES, DEFAULT_CAR, DEFAULT_GEOMETRY, Geomet
 from rideid.synth.scenario import simulate_manifest, write_dataset
 
 TRUTH = dict(DEFAULT_CAR)
-O = {n: i for i, n in enumerate(OUTPUTS)}
+OUT = {n: i for i, n in enumerate(OUTPUTS)}
 
 
 def _row(values: dict) -> np.ndarray:
@@ -111,9 +111,9 @@ def test_quarter_cars_of_a_decoupled_car_match_the_textbook():
     front = H[:, :, 0] + H[:, :, 1]  # both front wheels, 1 m each
     zb, zu = quarter_car(p["m_s"] * b / L / 2, p["m_uf"], p["k_sf"], p["c_sf"], p["k_tf"], freq)
     w2 = (2 * np.pi * freq) ** 2
-    np.testing.assert_allclose(front[:, O["body_az_fl"]], -w2 * zb, rtol=1e-9)
-    np.testing.assert_allclose(front[:, O["axle_az_fr"]], -w2 * zu, rtol=1e-9)
-    assert np.max(np.abs(front[:, O["body_az_rl"]])) < 1e-9 * np.max(np.abs(front[:, O["body_az_fl"]]))
+    np.testing.assert_allclose(front[:, OUT["body_az_fl"]], -w2 * zb, rtol=1e-9)
+    np.testing.assert_allclose(front[:, OUT["axle_az_fr"]], -w2 * zu, rtol=1e-9)
+    assert np.max(np.abs(front[:, OUT["body_az_rl"]])) < 1e-9 * np.max(np.abs(front[:, OUT["body_az_fl"]]))
 
 
 def test_static_gains():
@@ -121,9 +121,9 @@ def test_static_gains():
     with equal tracks, left up and right down roll it 2/track; nothing accelerates."""
     geom = replace(DEFAULT_GEOMETRY, track_rear=DEFAULT_GEOMETRY.track_front)
     H = frequency_response(_row(TRUTH), geom, [0.0])[0, 0]
-    assert abs(H[O["heave"]].sum() - 1.0) < 1e-12
-    assert abs(H[O["pitch"]] @ [1, 1, -1, -1] + 2 / geom.wheelbase) < 1e-12
-    assert abs(H[O["roll"]] @ [1, -1, 1, -1] - 2 / geom.track_front) < 1e-12
+    assert abs(H[OUT["heave"]].sum() - 1.0) < 1e-12
+    assert abs(H[OUT["pitch"]] @ [1, 1, -1, -1] + 2 / geom.wheelbase) < 1e-12
+    assert abs(H[OUT["roll"]] @ [1, -1, 1, -1] - 2 / geom.track_front) < 1e-12
     assert np.max(np.abs(H[:10])) < 1e-9
 
 
@@ -133,10 +133,10 @@ def test_left_right_symmetry():
     for out in ("body_az", "axle_az"):
         for c, m in mirror.items():
             for ci, mi in mirror.items():
-                np.testing.assert_allclose(H[:, O[f"{out}_{c}"], INPUTS.index(f"r_{ci}")],
-                                           H[:, O[f"{out}_{m}"], INPUTS.index(f"r_{mi}")], rtol=1e-9, atol=1e-12)
+                np.testing.assert_allclose(H[:, OUT[f"{out}_{c}"], INPUTS.index(f"r_{ci}")],
+                                           H[:, OUT[f"{out}_{m}"], INPUTS.index(f"r_{mi}")], rtol=1e-9, atol=1e-12)
     for name, sign in (("heave", 1), ("pitch", 1), ("pitch_rate", 1), ("roll", -1), ("roll_rate", -1)):
-        np.testing.assert_allclose(H[:, O[name], 0], sign * H[:, O[name], 1], rtol=1e-9, atol=1e-15)
+        np.testing.assert_allclose(H[:, OUT[name], 0], sign * H[:, OUT[name], 1], rtol=1e-9, atol=1e-15)
 
 
 def test_kernel_matches_the_spec_car_with_tire_damping_and_bars_absent():
@@ -159,8 +159,8 @@ def test_kernel_agrees_with_the_models_own_matrices_for_a_powertrain():
     for k, f in enumerate(freq):
         w = 2 * np.pi * f
         q = np.linalg.solve(-w * w * M[0] + 1j * w * C[0] + K[0], Bf[0] + 1j * w * Bd[0])
-        np.testing.assert_allclose(H[k, O["heave"]], q[0], rtol=1e-8)
-        np.testing.assert_allclose(H[k, O["axle_az_rl"]], -w * w * q[5], rtol=1e-8)
+        np.testing.assert_allclose(H[k, OUT["heave"]], q[0], rtol=1e-8)
+        np.testing.assert_allclose(H[k, OUT["axle_az_rl"]], -w * w * q[5], rtol=1e-8)
 
 
 # ---------------------------------------------------------------------------
@@ -284,7 +284,7 @@ def coverage(res, truth=TRUTH, freq=None):
     fr = res.frequency_response(freq)
     true = spec_response(truth, DEFAULT_GEOMETRY, freq)
     inside = np.abs(np.abs(true) - np.abs(fr.H)) <= 2 * fr.std_abs
-    views = [np.abs(np.abs(true[:, O[v["output"]]] @ v["weights"]) - np.abs(v["H"])) <= 2 * v["std_abs"]
+    views = [np.abs(np.abs(true[:, OUT[v["output"]]] @ v["weights"]) - np.abs(v["H"])) <= 2 * v["std_abs"]
              for v in fr.views.values()]
     return float(inside.mean()), float(np.mean(views)), fr
 
@@ -361,28 +361,26 @@ def test_export_writes_frf_csv(independent, tmp_path):
     assert tuple(rows[0]) == FRF_COLUMNS == ("f_hz", "output", "input", "magnitude", "phase_deg", "magnitude_std")
     assert len(rows) == 1 + 240 * 13 * 4
     fr = res.frequency_response()
-    k = 1 + (100 * 13 + O["axle_az_rr"]) * 4 + 3
+    k = 1 + (100 * 13 + OUT["axle_az_rr"]) * 4 + 3
     f_hz, out_name, inp, mag, ph, sd = rows[k]
     assert (out_name, inp) == ("axle_az_rr", "r_rr") and float(f_hz) == pytest.approx(fr.freq[100], rel=1e-6)
-    assert float(mag) == pytest.approx(abs(fr.H[100, O["axle_az_rr"], 3]), rel=1e-8)
-    assert float(ph) == pytest.approx(np.degrees(np.angle(fr.H[100, O["axle_az_rr"], 3])), abs=1e-4)
-    assert float(sd) == pytest.approx(fr.std_abs[100, O["axle_az_rr"], 3], rel=1e-5)
+    assert float(mag) == pytest.approx(abs(fr.H[100, OUT["axle_az_rr"], 3]), rel=1e-8)
+    assert float(ph) == pytest.approx(np.degrees(np.angle(fr.H[100, OUT["axle_az_rr"], 3])), abs=1e-4)
+    assert float(sd) == pytest.approx(fr.std_abs[100, OUT["axle_az_rr"], 3], rel=1e-5)
 
 
 def test_report_section(independent, tmp_path):
-    from rideid.estimate.responses import complete
-    from rideid.estimate.sensitivity import sensitivity_maps
-    from rideid.report.html import write_report
+    """The report's section: the figure written, the runs measured named, the uncertainty's notes (the whole
+    report's structure, this section included, is tests/test_report.py's)."""
+    from rideid.report.html import frequency_section
     ds, res = independent
-    if res.maps is None:
-        res = replace(res, maps=sensitivity_maps(ds))
-    res = complete(res, ds)
-    path = write_report(res, ds, tmp_path)
-    html = path.read_text()
-    assert '<section id="frequency">' in html and "figures/frequency_response.png" in html
-    assert "where its partial coherence exceeds 0.9" in html and "T_LL, T_HH, H_LL, H_HH, W_L, W_H" in html
-    assert (tmp_path / "figures" / "frequency_response.png").stat().st_size > 20_000
-    assert 'href="#frequency"' in html
+    ctx = frequency_section(res, ds, tmp_path)
+    fig = ctx["frequency_figure"]
+    assert fig.file == "figures/frequency_response.png"
+    assert (tmp_path / fig.file).stat().st_size > 20_000
+    assert "where its partial coherence exceeds 0.9" in fig.caption
+    assert "T_LL, T_HH, H_LL, H_HH, W_L, W_H" in fig.caption
+    assert any("taken as exact" in n for n in ctx["frequency_notes"])
 
 
 @pytest.mark.slow

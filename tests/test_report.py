@@ -29,8 +29,8 @@ def test_report_has_every_section_and_nonempty_figures(fit_dir):
         assert f'id="{s}"' in html, s
     assert 'id="dampers"' not in html and "<h2>Damper curves</h2>" not in html  # linear dampers: no curve section
     imgs = _images(html)
-    # convergence, spread, weights, 10 fits, 3 maps, the uncertainty budget
-    assert len(imgs) == 17
+    # convergence, spread, weights, 10 fits, 3 maps, the uncertainty budget, the frequency responses
+    assert len(imgs) == 18
     import base64
     import io
 

@@ -1010,4 +1010,5 @@ def data_tables(pre: dict):
     return rows, chans, warns
 
 
-SECTIONS = ("summary", "estimates", "adequacy", "modal", "convergence", "spread", "weights", "data", "fits", "maps")
+SECTIONS = ("summary", "estimates", "adequacy", "modal", "frequency", "convergence", "spread", "weights", "data",
+            "fits", "maps")
