@@ -23,7 +23,7 @@ def write_frf(result, folder, freq=None) -> Path:
         w = csv.writer(f)
         w.writerow(FRF_COLUMNS)
         for f_hz, out, inp, mag, ph, sd in fr.rows():
-            w.writerow([f"{f_hz:.9g}", out, inp, f"{mag:.9g}", f"{ph:.6g}", f"{sd:.6g}"])
+            w.writerow([f"{f_hz:.9g}", out, inp, f"{mag:.9g}", f"{ph:.9g}", f"{sd:.6g}"])
     return path
 
 
