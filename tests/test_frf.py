@@ -240,6 +240,20 @@ def test_a_declared_input_without_sign_widens_the_bands(independent):
     assert any("triangle inequality" in n for n in fr1.notes)
 
 
+def test_damper_curves_and_no_polish_say_what_the_response_is(independent):
+    """With damper curves the response is the car linearised at the curves' mean slopes (said in the notes); without
+    any standard error (no polish) there is no band, not a band of zero."""
+    ds, res = independent
+    curves = replace(res, dampers={"velocity": [-0.5, 0.5], "front": {}, "rear": {}})
+    fr = curves.frequency_response([1.0, 10.0])
+    assert any("linearised at the curves' mean slope" in n for n in fr.notes)
+    np.testing.assert_allclose(fr.H, res.frequency_response([1.0, 10.0]).H)
+    bare = replace(res, correlation=None, covariance=np.full_like(res.covariance, np.nan),
+                   details={n: dict(d, std_robust=None) for n, d in res.details.items()})
+    fr = bare.frequency_response([1.0, 10.0])
+    assert np.all(np.isnan(fr.std_abs)) and any("no standard errors" in n for n in fr.notes)
+
+
 def test_frequency_response_api(independent):
     ds, res = independent
     fr = res.frequency_response([1.0, 2.0, 12.0])

@@ -58,7 +58,7 @@ def test_report_rebuild(fit_dir, capsys):
     assert "report written" in capsys.readouterr().out
     strip = lambda h: re.sub(r"data:image/png;base64,[A-Za-z0-9+/=]+", "IMG", h)  # noqa: E731
     assert strip(after) == strip(before)
-    assert len(_images(after)) == len(_images(before)) == 17
+    assert len(_images(after)) == len(_images(before)) == 18  # with the frequency responses
 
 
 def test_report_relative_error_column_reads_plainly(fit_dir, tmp_path):

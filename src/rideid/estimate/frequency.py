@@ -303,6 +303,11 @@ def frequency_response(result, freq=None) -> FrequencyResponse:
                      "each contribution's size, not its sign): conservative")
     std = np.sqrt(np.clip(var, 0, None))
     std_v = np.sqrt(np.clip(var_v, 0, None))
+    if not np.any(np.diag(cov) > 0) and not any(v > 0 for v in extra_sd.values()):
+        # no standard error at all (an identification without the polish): no band, rather than a band of 0
+        std[:] = np.nan
+        std_v[:] = np.nan
+        notes.append("the estimates have no standard errors (no polish): std_abs is NaN")
     Hc = H[0]
     views = {v: {"output": out, "weights": list(w), "label": label, "H": Hc[:, OUTPUTS.index(out)] @ np.array(w),
                  "std_abs": std_v[:, j]} for j, (v, (out, w, label)) in enumerate(VIEWS.items())}
