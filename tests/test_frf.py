@@ -213,6 +213,16 @@ def test_measured_h1_of_the_independent_car(independent):
     assert within > 0.6
 
 
+def test_measured_leaves_out_a_channel_through_a_sensor_filter(independent, monkeypatch):
+    """A channel recorded through a high-pass (SPEC §11) measured the chain and the car: no H1 of it."""
+    from rideid.data.dataset import Dataset
+    ds, res = independent
+    monkeypatch.setattr(Dataset, "sensor_filters", lambda self, rid: (("highpass 0.5 Hz",),) + ((),) * 9)
+    m = measured_response(ds, res)
+    assert np.all(np.isnan(m["H"][:, 0])) and np.all(np.isnan(m["coherence"][:, 0]))
+    assert np.isfinite(m["H"][:, 1]).mean() > 0.9 and np.isnan(m["averages"][0]) and m["averages"][1] == 6
+
+
 def test_anchor_does_not_move_the_bands(independent, tmp_path):
     """A weighbridge of 1 % widens every mass, stiffness and damping's std_total, but not the responses: they are
     ratios (SPEC §1's scale invariance)."""

@@ -334,8 +334,11 @@ def measured_response(dataset: Dataset, result=None, segment: float | None = SEG
 
     A run counts when its road under each wheel follows from its track's geometry, speed and start:
     a known track, not fitted as built nor estimated (``result.estimated_road_runs()``) — the inputs are
-    then exactly what the identification fed the car. Rig runs and any other source of measured inputs
-    use :func:`rideid.model.frf.h1_estimate` directly.
+    then exactly what the identification fed the car — and, with one record per run, when it starts at
+    rest (not a moving start). A channel recorded through a sensor chain's filters (SPEC §11) measured the
+    chain and the car together: it is left out. Clipped samples leave their record (or segment) out of that
+    channel. Rig runs and any other source of measured inputs use :func:`rideid.model.frf.h1_estimate`
+    directly.
 
     Parameters
     ----------
@@ -357,7 +360,9 @@ def measured_response(dataset: Dataset, result=None, segment: float | None = SEG
         ``runs`` (those used); None when no run has a known road or every run is shorter than a segment.
     """
     skip = set(result.estimated_road_runs()) if result is not None else set()
-    keep = [r for r in dataset.runs if dataset.road_known(r.id) and r.id not in skip]
+    # one record per run holds Y = H X only for a run that starts at rest: a moving start (SPEC §9) is left out
+    keep = [r for r in dataset.runs if dataset.road_known(r.id) and r.id not in skip
+            and (segment is not None or not dataset.moving(r.id))]
     if not keep:
         return None
     sub = dataset.subset(keep) if len(keep) < len(dataset.runs) else dataset
@@ -368,10 +373,14 @@ def measured_response(dataset: Dataset, result=None, segment: float | None = SEG
         t = rd.time
         if segment is not None and t.size * (t[1] - t[0]) < segment:
             continue
-        Y = rd.matrix()
+        Y = np.array(rd.matrix(), dtype=float)  # a copy: channels are blanked below
         clipped = sub.clipped(r.id)
         if clipped is not None:
             Y = np.where(np.asarray(clipped, dtype=bool), np.nan, Y)
+        # a channel through a sensor chain's filters (SPEC §11) measured the chain times the car: left out
+        for c, filters in enumerate(sub.sensor_filters(r.id)):
+            if filters:
+                Y[:, c] = np.nan
         runs.append((1.0 / float(t[1] - t[0]), inp.u[lead.samples:], Y))
         used.append(r.id)
     if not runs:
