@@ -307,7 +307,7 @@ def frequency_figure(result, dataset=None, measured=None, freq=None):
         a.set_xlabel("frequency [Hz]", fontsize=8)
     rel = _max_relative(fr)
     fig.suptitle("frequency responses of the identified car: ±2 std band (from std_total)"
-                 + (f", at most ±{2 * rel:.2g} % of |H| over 0.5-25 Hz" if rel is not None else "")
+                 + (f", at most ±{2 * rel:.2g} % of these |H| over 0.5-25 Hz" if rel is not None else "")
                  + (f"; measured H1 points where coherence > {COHERENCE_MIN:g}" if measured is not None else ""),
                  fontsize=10)
     return fig

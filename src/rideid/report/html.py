@@ -760,7 +760,30 @@ def frequency_section(result, dataset, out_dir) -> dict:
                   "No run has a known road: no measured points. ")
                + "All frequencies and every output and input in frf.csv (rideid export).")
     figure = _save(fig, Path(out_dir), "frequency_response", "Frequency responses", caption)
-    return {"frequency_figure": figure, "frequency_notes": fr.notes}
+    return {"frequency_figure": figure, "frequency_notes": fr.notes,
+            "frequency_summary": frequency_summary(result, fr, measured)}
+
+
+def frequency_summary(result, fr, measured) -> str:
+    """The summary's line on the frequency responses: the bands' largest width over 0.5-25 Hz and how far the
+    measured H1 points (partial coherence above :data:`COHERENCE_MIN`) lie from the identified car."""
+    sel = (fr.freq >= 0.5) & (fr.freq <= 25)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        rel = fr.std_abs[sel, :10] / np.abs(fr.H[sel, :10])
+    text = ("no band (no standard errors)" if not np.any(np.isfinite(rel)) else
+            f"±2 std of {200 * np.nanmedian(rel):.2g} % of |H| (median over every channel and wheel, 0.5-25 Hz; "
+            f"at most {200 * np.nanmax(rel):.2g} %)")
+    if measured is not None:
+        model = frequency_response(result, measured["freq"]).H[:, :10]
+        keep = (measured["coherence"] > COHERENCE_MIN) & ((measured["freq"] >= 0.5) & (measured["freq"] <= 25))[
+            :, None, None]
+        if keep.any():
+            dev = np.abs(np.abs(measured["H"][keep]) - np.abs(model[keep])) / np.abs(model[keep])
+            text += (f"; the measured H1 ({int(keep.sum())} points, coherence > {COHERENCE_MIN:g}) within "
+                     f"{100 * np.median(dev):.2g} % of the car (median)")
+        else:
+            text += f"; no measured H1 point with coherence > {COHERENCE_MIN:g}"
+    return text
 
 
 def damper_section(result, dataset, out_dir) -> list:
@@ -913,6 +936,8 @@ def summary_section(result, context: dict) -> dict:
         lines.append(("Damper curves", f"{len(d['velocity'])} knots per axle up to {max(d['velocity']):g} m/s"
                       + (f"; {idle} knot force(s) not excited: not to be trusted" if idle else
                          "; every knot excited") + knee_summary(d), "dampers"))
+    if context.get("frequency_summary"):
+        lines.append(("Frequency responses", context["frequency_summary"], "frequency"))
     rows = [r for r in context["fit_rows"] if r["median"] == r["median"]]
     if rows:
         worst = max(rows, key=lambda r: r["worst"])
