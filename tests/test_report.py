@@ -175,7 +175,8 @@ def test_report_opens_on_a_summary_and_its_correlation_table_fits_the_page(fit_d
     summary = re.search(r'<section id="summary">(.*?)</section>', html, re.S).group(1)
     rows = dict(re.findall(r"<tr><th>([^<]*)</th><td>([^<]*)<a", summary))
     # the built-in car rolls 2.3 degrees on the 80 mm twist: the small-angle note (SPEC §1) is in the summary
-    assert set(rows) == {"Verdict", "Car", "Estimates", "Small angles", "Fit", "Data"}
+    assert set(rows) == {"Verdict", "Car", "Estimates", "Small angles", "Frequency responses", "Fit", "Data"}
+    assert rows["Frequency responses"].startswith("±2 std of ") and "the measured H1 (" in rows["Frequency responses"]
     sa = doc["adequacy"]["small_angle"]
     assert sa["roll_run"] == "T_HL" and 2.0 < sa["largest_roll_deg"] < 2.6 and sa["optimistic"]
     assert f"rolls up to {sa['largest_roll_deg']:.1f} deg (T_HL)" in rows["Small angles"]

@@ -243,7 +243,11 @@ def frequency_response(result, freq=None) -> FrequencyResponse:
     geom_declared = [key for kind, key, _ in others.values() if kind == "vehicle" and key in Geometry.KEYS
                      + tuple(Geometry.OPTIONAL_KEYS)]
     # one batch: the car, each column +- its step, the anchor's scale direction +-
-    steps = np.array([STEP * max(abs(row0[ALL_NAMES.index(n)]), 1e-9) for n in cols])
+    # relative steps; a parameter at 0 (a tire damping the data put at its bound) steps by a part of its std
+    own_sd = {**{n: float(np.sqrt(max(cov[i, i], 0.0))) for i, n in enumerate(names)}, **extra_sd,
+              **{key: std for kind, key, std in others.values() if kind == "known"}}
+    steps = np.array([STEP * abs(row0[ALL_NAMES.index(n)]) if row0[ALL_NAMES.index(n)] != 0
+                      else max(1e-3 * own_sd.get(n, 0.0), 1e-9) for n in cols])
     P = [row0]
     for n, h in zip(cols, steps):
         for sgn in (1, -1):
