@@ -38,7 +38,7 @@ known from the track's geometry, the speed and the start.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -321,7 +321,6 @@ def frequency_response(result, freq=None) -> FrequencyResponse:
 
 def _geometry_derivative(row0, geom: Geometry, key: str, std: float, freq):
     """The direct change of ``|H|`` and the views when the dimension ``key`` moves by ``std`` (central)."""
-    from dataclasses import replace
     out = []
     for sgn in (1, -1):
         g = replace(geom, **{key: getattr(geom, key) + sgn * 0.5 * std})
