@@ -96,7 +96,7 @@ def frequency_response(P, geom: Geometry, freq) -> np.ndarray:
 
 
 # ---------------------------------------------------------------------------
-# The measured response: H1 by Welch averaging
+# The measured response: H1 over records (transient runs) or Welch segments (stationary ones)
 
 #: Default Welch segment length, s (frequency resolution 1 / segment), for long stationary runs (a rig's random
 #: input, a road); None: each run is one record (transient runs, below).
@@ -132,7 +132,10 @@ def _spectra(runs, segment, overlap, m, p):
         if segment is not None:  # a stationary run's mean is no response
             seg = seg - seg.mean(axis=1, keepdims=True)
         seg = seg * w[None, :, None]
-        F = np.fft.rfft(seg, n=n_fft, axis=1)[:, k] / np.sqrt(fs * np.sum(w * w))
+        # energy spectral density of a record (a transient: each run weighs by its energy), power spectral
+        # density of a segment; either way in the same units whatever a run's sample rate
+        norm = fs if segment is None else fs * np.sum(w * w)
+        F = np.fft.rfft(seg, n=n_fft, axis=1)[:, k] / np.sqrt(norm)
         blocks.append(F)
     return blocks, k / T
 
