@@ -168,7 +168,7 @@ def test_report_draws_the_curves_and_the_velocities_reached(digressive_fit):
     assert main(["report", str(out)]) == 0
     html = (out / "report.html").read_text()
     assert 'id="dampers"' in html and "<h2>Damper curves</h2>" in html
-    assert html.count("data:image/png;base64,") == 17 + 2  # the linear report's, then the two curve figures
+    assert html.count("data:image/png;base64,") == 18 + 2  # the linear report's, then the two curve figures
     for f in ("damper_curves", "damper_velocities"):
         assert (out / "figures" / f"{f}.png").stat().st_size > 5000
     result = load(out)

@@ -225,7 +225,7 @@ def test_export_into_an_existing_folder_keeps_other_files(fit, tmp_path):
         warnings.simplefilter("error")
         res = export(rideid.load_result(fit), tmp_path / "car", format="card", compiler=None)
     assert res.compiled is None
-    assert sorted(p.name for p in (tmp_path / "car").iterdir()) == ["car.csv", "car.toml", "notes.txt"]
+    assert sorted(p.name for p in (tmp_path / "car").iterdir()) == ["car.csv", "car.toml", "frf.csv", "notes.txt"]
     assert sorted(p.name for p in tmp_path.iterdir()) == ["car"]
 
 
@@ -244,7 +244,7 @@ def test_export_into_an_existing_folder_writes_on_its_file_system(fit, tmp_path,
     export(rideid.load_result(fit), tmp_path / "mounted", format="card", compiler=None)
     export(rideid.load_result(fit), tmp_path / "new", format="card", compiler=None)
     assert made == [(tmp_path / "mounted").resolve(), tmp_path.resolve()]
-    assert sorted(p.name for p in (tmp_path / "mounted").iterdir()) == ["car.csv", "car.toml"]
+    assert sorted(p.name for p in (tmp_path / "mounted").iterdir()) == ["car.csv", "car.toml", "frf.csv"]
     assert sorted(p.name for p in tmp_path.iterdir()) == ["mounted", "new"]
 
 

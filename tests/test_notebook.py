@@ -46,8 +46,9 @@ def _check_notebook(ns, backend, pyplot_before):
     if not pyplot_before:
         assert "matplotlib.pyplot" not in sys.modules
     work = ns["work"]
-    for name in ("car.toml", "car.csv", "car.fmu"):
+    for name in ("car.toml", "car.csv", "frf.csv", "car.fmu"):
         assert (work / "car" / name).is_file(), name
+    assert ns["fr"].H.shape == (240, 13, 4)
     table = ns["table"]
     assert list(table.columns[:7]) == ["value", "unit", "std_total", "std", "std_robust", "fixed", "derived"]
     assert isinstance(ns["fig"], Figure)

@@ -29,8 +29,8 @@ def test_report_has_every_section_and_nonempty_figures(fit_dir):
         assert f'id="{s}"' in html, s
     assert 'id="dampers"' not in html and "<h2>Damper curves</h2>" not in html  # linear dampers: no curve section
     imgs = _images(html)
-    # convergence, spread, weights, 10 fits, 3 maps, the uncertainty budget
-    assert len(imgs) == 17
+    # convergence, spread, weights, 10 fits, 3 maps, the uncertainty budget, the frequency responses
+    assert len(imgs) == 18
     import base64
     import io
 
@@ -58,7 +58,7 @@ def test_report_rebuild(fit_dir, capsys):
     assert "report written" in capsys.readouterr().out
     strip = lambda h: re.sub(r"data:image/png;base64,[A-Za-z0-9+/=]+", "IMG", h)  # noqa: E731
     assert strip(after) == strip(before)
-    assert len(_images(after)) == len(_images(before)) == 17
+    assert len(_images(after)) == len(_images(before)) == 18  # with the frequency responses
 
 
 def test_report_relative_error_column_reads_plainly(fit_dir, tmp_path):
@@ -175,7 +175,8 @@ def test_report_opens_on_a_summary_and_its_correlation_table_fits_the_page(fit_d
     summary = re.search(r'<section id="summary">(.*?)</section>', html, re.S).group(1)
     rows = dict(re.findall(r"<tr><th>([^<]*)</th><td>([^<]*)<a", summary))
     # the built-in car rolls 2.3 degrees on the 80 mm twist: the small-angle note (SPEC §1) is in the summary
-    assert set(rows) == {"Verdict", "Car", "Estimates", "Small angles", "Fit", "Data"}
+    assert set(rows) == {"Verdict", "Car", "Estimates", "Small angles", "Frequency responses", "Fit", "Data"}
+    assert rows["Frequency responses"].startswith("±2 std of ") and "the measured H1 (" in rows["Frequency responses"]
     sa = doc["adequacy"]["small_angle"]
     assert sa["roll_run"] == "T_HL" and 2.0 < sa["largest_roll_deg"] < 2.6 and sa["optimistic"]
     assert f"rolls up to {sa['largest_roll_deg']:.1f} deg (T_HL)" in rows["Small angles"]

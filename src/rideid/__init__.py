@@ -48,6 +48,7 @@ _PUBLIC = _by_name({
     "plot_parameters": ("rideid.report.figures", "parameters_figure"),
     "plot_dampers": ("rideid.report.figures", "dampers_figure"),
     "plot_budget": ("rideid.report.figures", "budget_figure"),
+    "plot_frequency_response": ("rideid.report.figures", "frequency_figure"),
 })
 
 #: what the command line (:mod:`rideid.cli`) uses beyond SPEC §5, reached the same lazy way so that the command
@@ -115,5 +116,5 @@ __all__ = [
     "History", "SensitivityMaps", "load_result", "score", "sensitivity_maps",
     "ALL_NAMES", "EXT_NAMES", "GROUPS", "Scenario", "DatasetManifest",
     "StudyResult", "load_study", "study", "iso8608_class", "iso8608_profile", "export", "ExportResult",
-    "plot_fit", "plot_parameters", "plot_dampers", "plot_budget",
+    "plot_fit", "plot_parameters", "plot_dampers", "plot_budget", "plot_frequency_response",
 ]

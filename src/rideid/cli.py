@@ -251,12 +251,14 @@ def _parser() -> argparse.ArgumentParser:
     s.add_argument("truth", metavar="TRUTH.toml", help="the truth, e.g. the truth.toml rideid simulate writes "
                                                   "(or the folder that holds it)")
 
-    s = add("export", "the identified car as a parameter card (car.toml, car.csv) and an FMI 2.0 FMU (car.fmu)",
+    s = add("export", "the identified car as a parameter card (car.toml, car.csv), its frequency responses (frf.csv) "
+            "and an FMI 2.0 FMU (car.fmu)",
             ("fit", "FIT_DIR", "an identification folder (result.json)"),
-            out="output folder: car.toml, car.csv, car.fmu")
+            out="output folder: car.toml, car.csv, frf.csv, car.fmu")
     s.add_argument("--format", default="all", metavar="card|fmu|all",
-                   help="card: car.toml (scenario-ready) and car.csv; fmu: car.fmu (FMI 2.0 Model Exchange and "
-                        "Co-Simulation, C sources and a binary for this platform); all: both (default)")
+                   help="card: car.toml (scenario-ready), car.csv and frf.csv (frequency responses with the std "
+                        "of their magnitude); fmu: car.fmu (FMI 2.0 Model Exchange and Co-Simulation, C sources and "
+                        "a binary for this platform); all: both (default)")
 
     s = add("demo", "the whole job on the built-in car and tracks: simulate (1 % noise), identify, score")
     s.add_argument("--out", default="rideid-demo", metavar="DIR",

@@ -28,6 +28,7 @@ from ..data.schema.result import SCHEMA_VERSION, read_result_json
 from ..errors import DataError
 from .sensitivity import SensitivityMaps
 from .bumps import format_bump_stops
+from .frequency import frequency_response as _frequency_response
 from ..model.equations import CHANNELS
 from .records import Assessment, Plan, assessments_from_json, assessments_of
 
@@ -333,6 +334,23 @@ class IdentificationResult:
             span = rec.get("model_time") if isinstance(rec, dict) else None
             out[rid] = {"value": s, **({"model_time": list(span)} if span is not None else {})}
         return out
+
+    def frequency_response(self, freq=None):
+        """The identified car's frequency responses with the std of ``|H|`` from ``std_total`` (SPEC §13).
+
+        Parameters
+        ----------
+        freq : array_like, optional
+            Hz (default: 240 log-spaced from 0.2 to 30 Hz).
+
+        Returns
+        -------
+        FrequencyResponse
+            ``freq``, ``inputs`` (``r_fl .. r_rr``), ``outputs`` (the ten channels, ``heave``, ``pitch``,
+            ``roll``), ``H`` (complex, n_freq x n_out x n_in, per metre of road), ``std_abs``
+            (:func:`rideid.estimate.frequency.frequency_response`; docs/frequency-response.md).
+        """
+        return _frequency_response(self, freq)
 
     # -- formats -------------------------------------------------------------
     def to_dict(self) -> dict:

@@ -20,11 +20,13 @@ from ..model.params import ALL_NAMES, check_parameters
 from .car import Car, car_from_result, car_from_scenario
 from .card import write_card
 from .drive import drive_fmu
+from .frf import write_frf
 from .fmu import NoBinary, find_compiler, write_fmu
 
 FORMATS = ("card", "fmu", "all")
-#: the files each format writes
+#: the files each format writes (``frf.csv`` with the card when the source is an identification, SPEC §13)
 FILES = {"card": ("car.toml", "car.csv"), "fmu": ("car.fmu",), "all": ("car.toml", "car.csv", "car.fmu")}
+FRF_FILE = "frf.csv"
 
 
 @dataclass(frozen=True)
@@ -49,16 +51,17 @@ class ExportResult:
 
 
 def _load(source):
-    """A result (object), a fit folder or its result.json -> (Car, label)."""
+    """A result (object), a fit folder or its result.json -> (Car, label, the result or None)."""
     if isinstance(source, Car):
-        return source, "car"
+        return source, "car", None
     if isinstance(source, IdentificationResult):
-        return car_from_result(source), "result"
+        return car_from_result(source), "result", source
     p = Path(source)
     rj = p if p.suffix == ".json" else p / "result.json"
     if not rj.is_file():
         raise DataError(f"{rj}: not found (export needs an identification folder with result.json)")
-    return car_from_result(load(rj), str(rj)), str(p)
+    res = load(rj)
+    return car_from_result(res, str(rj)), str(p), res
 
 
 def export(result_or_fit_dir, out, format: str = "all", *, compiler="auto") -> ExportResult:
@@ -71,7 +74,8 @@ def export(result_or_fit_dir, out, format: str = "all", *, compiler="auto") -> E
     out : str or Path
         Output folder (created; files of the same names there are replaced, others kept).
     format : {"card", "fmu", "all"}
-        ``card``: ``car.toml`` + ``car.csv``; ``fmu``: ``car.fmu``; ``all``: both.
+        ``card``: ``car.toml`` + ``car.csv`` (+ ``frf.csv``, the frequency responses with their std, SPEC §13,
+        from an identification); ``fmu``: ``car.fmu``; ``all``: both.
     compiler : "auto", None or list of str
         C compiler command for the FMU's binary (``"auto"``: ``$CC``, else ``cc``; None: sources only).
         Without a compiler, or when it fails, the FMU carries its sources only and
@@ -94,7 +98,7 @@ def export(result_or_fit_dir, out, format: str = "all", *, compiler="auto") -> E
     """
     if format not in FORMATS:
         raise ArgumentError(f"--format must be one of {', '.join(FORMATS)}, got {format!r}")
-    car, label = _load(result_or_fit_dir)
+    car, label, result = _load(result_or_fit_dir)
     if format in ("fmu", "all") and car.powertrain:
         if car.nonlinear:  # as rideid simulate: the nonlinear car has no powertrain in this version
             raise ArgumentError(f"{label}: the FMU of a car with a powertrain on mounts (SPEC §11) has linear dampers "
@@ -105,13 +109,17 @@ def export(result_or_fit_dir, out, format: str = "all", *, compiler="auto") -> E
     out = Path(out)
     compiled = no_binary = None
     with atomic_output(out) as tmp:  # into an existing folder: only these files are replaced
+        files = [out / n for n in FILES[format]]
         if format in ("card", "all"):
             write_card(car, tmp, source=label)
+            if result is not None:  # the frequency responses with their std (SPEC §13): an identification's
+                write_frf(result, tmp)
+                files.insert(2, out / FRF_FILE)
         if format in ("fmu", "all"):
             no_binary = write_fmu(car, tmp / "car.fmu", compiler=compiler, workdir=tmp)
             compiled = no_binary is None
-    return ExportResult(out, tuple(out / n for n in FILES[format]), compiled, no_binary)
+    return ExportResult(out, tuple(files), compiled, no_binary)
 
 
 __all__ = ["export", "ExportResult", "Car", "car_from_result", "car_from_scenario", "write_card", "write_fmu",
-           "find_compiler", "FORMATS", "NoBinary", "drive_fmu"]
+           "find_compiler", "FORMATS", "NoBinary", "drive_fmu", "write_frf"]

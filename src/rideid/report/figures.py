@@ -8,8 +8,8 @@ or ``%matplotlib inline``, so the figures are :class:`NotebookFigure`, which
 also render themselves as PNG (``_repr_png_``) for a notebook that has
 imported neither.
 They are public as ``rideid.plot_fit``, ``rideid.plot_parameters``,
-``rideid.plot_budget`` and ``rideid.plot_dampers`` (functions of the result, not its methods: the
-result belongs to the estimate layer, which never imports the report).
+``rideid.plot_budget``, ``rideid.plot_dampers`` and ``rideid.plot_frequency_response``
+(functions of the result, not its methods: the result belongs to the estimate layer, which never imports the report).
 """
 
 from __future__ import annotations
@@ -21,6 +21,7 @@ import numpy as np
 from matplotlib.figure import Figure
 
 from ..conditioning.load import load_dataset
+from ..estimate.frequency import frequency_response, measured_response
 from ..estimate.responses import complete
 from ..data.dataset import Dataset
 from ..errors import ArgumentError, DataError
@@ -270,4 +271,123 @@ def dampers_figure(result):
     return fig
 
 
-__all__ = ["fit_figure", "parameters_figure", "dampers_figure", "responses", "result_dataset"]
+#: the frequency-response figure's coherence threshold: measured H1 points are drawn where it is exceeded
+COHERENCE_MIN = 0.9
+_CORNERS = ("fl", "fr", "rl", "rr")
+
+
+def frequency_figure(result, dataset=None, measured=None, freq=None):
+    """The identified car's frequency responses with ±2 std bands and the measured H1 points (SPEC §13).
+
+    Row 1: body acceleration at each corner from its own wheel's road; row 2: the axle's; row 3: heave, pitch
+    and roll from the wheels in phase, front against rear and left against right
+    (:data:`rideid.estimate.frequency.VIEWS`), and the coherence of the measured points. Measured H1 points
+    (:func:`rideid.estimate.frequency.measured_response`, ±2 std random error) only where their partial
+    coherence exceeds :data:`COHERENCE_MIN`.
+
+    Parameters
+    ----------
+    result : IdentificationResult
+    dataset : Dataset, str or Path, optional
+        The runs for the measured points (default: the dataset the result names; none when it is not found).
+        ``False``: no measured points.
+    measured : dict, optional
+        A :func:`rideid.estimate.frequency.measured_response` already computed (then ``dataset`` is not read).
+    freq : array_like, optional
+        The model's frequencies, Hz (default 0.2-30 Hz).
+
+    Returns a ``matplotlib.figure.Figure``.
+    """
+    fr = frequency_response(result, freq)
+    if measured is None and dataset is not False:
+        try:
+            measured = measured_response(result_dataset(result, dataset), result)
+        except DataError:  # the dataset is not there (a result moved elsewhere): the model alone
+            measured = None
+    # a fixed layout and no minor ticks: twelve log-log panels laid out by constrained layout take seconds
+    fig = NotebookFigure(figsize=(12.0, 8.2))
+    fig.subplots_adjust(left=0.06, right=0.99, bottom=0.07, top=0.92, wspace=0.28, hspace=0.32)
+    axes = fig.subplots(3, 4)
+    f = fr.freq
+    for row, kind in enumerate(("body", "axle")):
+        for c, corner in enumerate(_CORNERS):
+            ax = axes[row, c]
+            out, inp = f"{kind}_az_{corner}", f"r_{corner}"
+            H, sd = fr.response(out, inp)
+            _band(ax, f, np.abs(H), sd, f"C{row}")
+            if measured is not None:
+                o, i = list(measured["outputs"]).index(out), list(measured["inputs"]).index(inp)
+                _points(ax, measured, o, i)
+            ax.set_title(f"{out} ← {inp}", fontsize=9)
+            if c == 0:
+                ax.set_ylabel(f"|H| [{fr.units[out]}]", fontsize=8)
+    for c, (name, v) in enumerate(fr.views.items()):
+        ax = axes[2, c]
+        _band(ax, f, np.abs(v["H"]), v["std_abs"], "C2")
+        ax.set_title(f"{name} ← {v['label']}", fontsize=9)
+        ax.set_ylabel(f"|H| [{fr.units[v['output']]}]", fontsize=8)
+    ax = axes[2, 3]
+    if measured is not None:
+        for row, kind in enumerate(("body", "axle")):
+            for c, corner in enumerate(_CORNERS):
+                o = list(measured["outputs"]).index(f"{kind}_az_{corner}")
+                ax.plot(measured["freq"], measured["coherence"][:, o, c], lw=0.6, color=f"C{row}", alpha=0.6,
+                        label=f"{kind} ← own wheel" if c == 0 else None)
+        ax.axhline(COHERENCE_MIN, color="k", ls=":", lw=0.8)
+        ax.set_ylim(0, 1.02)
+        ax.legend(fontsize=7, loc="lower left")
+    else:
+        ax.text(0.5, 0.5, "no measured response\n(no run on a known road)", ha="center", va="center",
+                transform=ax.transAxes, fontsize=8)
+    ax.set_title("partial coherence of the measured H1", fontsize=9)
+    ax.set_xscale("log")
+    ticks = [t for t in (0.2, 0.5, 1, 2, 5, 10, 20, 50, 100) if f[0] <= t <= f[-1]]
+    for a in axes.flat:
+        a.set_xlim(f[0], f[-1])
+        a.minorticks_off()
+        a.set_xticks(ticks, [f"{t:g}" for t in ticks])
+        a.grid(alpha=0.3, lw=0.4)
+        a.tick_params(labelsize=7)
+    for a in axes[2]:
+        a.set_xlabel("frequency [Hz]", fontsize=8)
+    rel = _max_relative(fr)
+    fig.suptitle("frequency responses of the identified car: ±2 std band (from std_total)"
+                 + (f", at most ±{2 * rel:.2g} % of these |H| over 0.5-25 Hz" if rel is not None else "")
+                 + (f"; measured H1 points where coherence > {COHERENCE_MIN:g}" if measured is not None else ""),
+                 fontsize=10)
+    return fig
+
+
+def _max_relative(fr):
+    """The largest std of ``|H|`` in % of ``|H|`` over 0.5-25 Hz of the figure's curves, or None."""
+    sel = (fr.freq >= 0.5) & (fr.freq <= 25)
+    if not sel.any():
+        return None
+    vals = []
+    for kind in ("body", "axle"):
+        for corner in _CORNERS:
+            H, sd = fr.response(f"{kind}_az_{corner}", f"r_{corner}")
+            vals.append(np.max(sd[sel] / np.abs(H[sel])))
+    vals += [np.max(v["std_abs"][sel] / np.abs(v["H"][sel])) for v in fr.views.values()]
+    return 100.0 * float(np.nanmax(vals))
+
+
+def _band(ax, f, mag, sd, colour):
+    ax.fill_between(f, np.clip(mag - 2 * sd, mag * 1e-3, None), mag + 2 * sd, color=colour, alpha=0.3, lw=0)
+    ax.plot(f, mag, color=colour, lw=1.0)
+    ax.set_xscale("log")
+    ax.set_yscale("log")
+
+
+def _points(ax, measured, o, i):
+    """The measured H1 of output ``o`` from input ``i`` where its coherence exceeds :data:`COHERENCE_MIN`."""
+    sel = (measured["coherence"][:, o, i] > COHERENCE_MIN) & np.isfinite(measured["H"][:, o, i])
+    if not sel.any():
+        return
+    mag = np.abs(measured["H"][sel, o, i])
+    err = 2 * np.nan_to_num(measured["std_abs"][sel, o, i])
+    ax.errorbar(measured["freq"][sel], mag, yerr=[np.minimum(err, 0.9 * mag), err], fmt="o", ms=2.2, lw=0.5,
+                color="k", alpha=0.7, label="measured H1")
+
+
+__all__ = ["fit_figure", "parameters_figure", "dampers_figure", "frequency_figure", "responses", "result_dataset"]

@@ -32,13 +32,14 @@ from PIL import Image
 
 from ..data.quality import summarised_warning
 from ..errors import DataError
+from ..estimate.frequency import frequency_response, measured_response
 from ..estimate.sensitivity import P2T_STARS, stars
 from .sensitivity_files import heatmap_figure
 from ..model.equations import CHANNELS
 from ..model.params import ALL_NAMES, DESCRIPTIONS
 from ..model.roads import iso8608_psd
 from .estimate_sections import estimate_context
-from .figures import budget_figure
+from .figures import COHERENCE_MIN, budget_figure, frequency_figure
 
 FIG_DPI = 90
 #: the report's Matplotlib style, applied around each figure's drawing (never to the user's global rcParams);
@@ -671,7 +672,7 @@ def write_report(result, dataset, out_dir, *, compare=None, compare_label: str |
     sims = _responses(result, dataset)
     context = {**figure_sections(result, dataset, sims, out_dir, compare, compare_label),
                **road_section(result, out_dir), **fit_section(result, dataset, sims), **data_section(result, dataset),
-               **estimate_section(result, dataset)}
+               **estimate_section(result, dataset), **frequency_section(result, dataset, out_dir)}
     context.update(summary_section(result, context))
     out = out_dir / "report.html"
     out.write_text(render(context))
@@ -747,6 +748,52 @@ def fig_budget(result, out_dir):
                  "tracks as built along a speed channel, fitted with the car; part of std_robust) and each declared "
                  "input, "
                  f"propagated to first order (GUM; docs/uncertainty.md). Here: {what}.")
+
+
+@styled
+def frequency_section(result, dataset, out_dir) -> dict:
+    """Template context of the frequency responses (SPEC §13): the figure, the runs measured and the notes on the
+    uncertainty; empty for a result without its geometry (written before it carried it)."""
+    if not getattr(result, "vehicle", None):
+        return {}
+    fr = frequency_response(result)
+    measured = measured_response(dataset, result)
+    fig = frequency_figure(result, dataset=False if measured is None else dataset, measured=measured)
+    runs = ", ".join(measured["runs"]) if measured is not None else ""
+    caption = ("The identified car's frequency responses per metre of road height under a wheel: body and axle "
+               "acceleration at each corner from its own wheel, and the body's heave, pitch and roll displacement "
+               "from the wheels moved in phase, front against rear and left against right (1 m each). Bands: ±2 std "
+               "of |H| from the estimates' std_total (docs/frequency-response.md). "
+               + (f"Points: the response the data measured (H1 over the runs {runs}, whose road is known from the "
+                  f"track, speed and start), ±2 std random error, where its partial coherence exceeds "
+                  f"{COHERENCE_MIN:g}; the last panel shows that coherence. " if measured is not None else
+                  "No run has a known road: no measured points. ")
+               + "All frequencies and every output and input in frf.csv (rideid export).")
+    figure = _save(fig, Path(out_dir), "frequency_response", "Frequency responses", caption)
+    return {"frequency_figure": figure, "frequency_notes": fr.notes,
+            "frequency_summary": frequency_summary(result, fr, measured)}
+
+
+def frequency_summary(result, fr, measured) -> str:
+    """The summary's line on the frequency responses: the bands' largest width over 0.5-25 Hz and how far the
+    measured H1 points (partial coherence above :data:`COHERENCE_MIN`) lie from the identified car."""
+    sel = (fr.freq >= 0.5) & (fr.freq <= 25)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        rel = fr.std_abs[sel, :10] / np.abs(fr.H[sel, :10])
+    text = ("no band (no standard errors)" if not np.any(np.isfinite(rel)) else
+            f"±2 std of {200 * np.nanmedian(rel):.2g} % of |H| (median over every channel and wheel, 0.5-25 Hz; "
+            f"at most {200 * np.nanmax(rel):.2g} %)")
+    if measured is not None:
+        model = frequency_response(result, measured["freq"]).H[:, :10]
+        keep = (measured["coherence"] > COHERENCE_MIN) & ((measured["freq"] >= 0.5) & (measured["freq"] <= 25))[
+            :, None, None]
+        if keep.any():
+            dev = np.abs(np.abs(measured["H"][keep]) - np.abs(model[keep])) / np.abs(model[keep])
+            text += (f"; the measured H1 ({int(keep.sum())} points, coherence > {COHERENCE_MIN:g}) within "
+                     f"{100 * np.median(dev):.2g} % of the car (median)")
+        else:
+            text += f"; no measured H1 point with coherence > {COHERENCE_MIN:g}"
+    return text
 
 
 def damper_section(result, dataset, out_dir) -> list:
@@ -832,6 +879,8 @@ TOC = (("summary", "Summary", "what to read first"),
        ("model", "Model choice", "the candidate models side by side (--model auto)"),
        ("adequacy", "Adequacy", "per run: do the residuals look like sensor noise"),
        ("modal", "Modes", "natural frequencies and damping ratios of the identified car"),
+       ("frequency", "Frequency responses", "the identified car's transmissibilities with their bands, and what "
+                                            "the data measured"),
        ("dampers", "Damper curves", "the curves with their bands, and the velocities each run reached"),
        ("roads", "Roads", "the estimated roads of the runs on unknown roads and their ISO 8608 classes"),
        ("convergence", "Convergence", "cost per generation of the search"),
@@ -899,6 +948,8 @@ def summary_section(result, context: dict) -> dict:
         lines.append(("Damper curves", f"{len(d['velocity'])} knots per axle up to {max(d['velocity']):g} m/s"
                       + (f"; {idle} knot force(s) not excited: not to be trusted" if idle else
                          "; every knot excited") + knee_summary(d), "dampers"))
+    if context.get("frequency_summary"):
+        lines.append(("Frequency responses", context["frequency_summary"], "frequency"))
     rows = [r for r in context["fit_rows"] if r["median"] == r["median"]]
     if rows:
         worst = max(rows, key=lambda r: r["worst"])
@@ -918,6 +969,7 @@ def summary_section(result, context: dict) -> dict:
     present |= {"verdict", "adequacy"} if adq else set()
     present |= {"model"} if context.get("model_choice") else set()
     present |= {"dampers"} if context.get("damper_figures") else set()
+    present |= {"frequency"} if context.get("frequency_figure") else set()
     present |= {"roads"} if context.get("road_figures") else set()
     present |= {f.id for f in context.get("figures", [])}
     return {"summary": lines, "toc": [t for t in TOC if t[0] in present]}
@@ -995,4 +1047,5 @@ def data_tables(pre: dict):
     return rows, chans, warns
 
 
-SECTIONS = ("summary", "estimates", "adequacy", "modal", "convergence", "spread", "weights", "data", "fits", "maps")
+SECTIONS = ("summary", "estimates", "adequacy", "modal", "frequency", "convergence", "spread", "weights", "data",
+            "fits", "maps")
