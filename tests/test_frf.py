@@ -220,7 +220,8 @@ def test_measured_leaves_out_a_channel_through_a_sensor_filter(independent, monk
     monkeypatch.setattr(Dataset, "sensor_filters", lambda self, rid: (("highpass 0.5 Hz",),) + ((),) * 9)
     m = measured_response(ds, res)
     assert np.all(np.isnan(m["H"][:, 0])) and np.all(np.isnan(m["coherence"][:, 0]))
-    assert np.isfinite(m["H"][:, 1]).mean() > 0.9 and np.isnan(m["averages"][0]) and m["averages"][1] == 6
+    # the other channels keep their estimates wherever a wheel excites the car (rideid.model.frf.EXCITATION_FLOOR)
+    assert np.isfinite(m["H"][:, 1]).any(axis=-1).sum() > 100 and np.isnan(m["averages"][0]) and m["averages"][1] == 6
 
 
 def test_anchor_does_not_move_the_bands(independent, tmp_path):
@@ -327,3 +328,25 @@ def test_band_coverage_study(tmp_path):
         shares.append(share)
         assert share >= 0.95 and views >= 0.95, (seed, share, views)
     assert np.mean(shares) >= 0.95
+
+
+def test_h1_has_no_estimate_where_no_input_excites():
+    """Above a drive's band the inputs carry no power: no H1 there, however the noise left happens to cohere
+    (five records and four inputs, as on a rig: the partial coherence of noise exceeds 0.9 in one bin of ten)."""
+    rng = np.random.default_rng(5)
+    fs, n, m = 200.0, 2000, 4
+    runs = []
+    for _ in range(5):
+        X = np.zeros((n, m))
+        for j in range(m):  # each input white up to 20 Hz and nothing above (its DFT cut there)
+            spec = np.fft.rfft(rng.standard_normal(n))
+            spec[np.fft.rfftfreq(n, 1 / fs) > 20.0] = 0.0
+            X[:, j] = np.fft.irfft(spec, n)
+        Y = X @ np.array([[1.0], [0.5], [0.2], [0.1]]) + 0.01 * rng.standard_normal((n, 1))
+        runs.append((fs, X, Y))
+    est = h1_estimate(runs)
+    f = est["freq"]
+    excited, above = f < 15.0, f > 25.0
+    assert np.isfinite(est["H"][excited, 0, 0]).mean() > 0.99
+    assert np.allclose(est["H"][excited, 0, 0], 1.0, atol=0.05)
+    assert not np.isfinite(est["H"][above, 0, 0]).any()
