@@ -246,5 +246,5 @@ def h1_estimate(runs, segment: float | None = SEGMENT_S, overlap: float = 0.5, b
             "averages": np.where(count > 0, count, np.nan)}
 
 
-__all__ = ["INPUTS", "OUTPUTS", "BODY_MOTIONS", "OUTPUT_UNITS", "SEGMENT_S", "BAND_BINS", "EXCITATION_FLOOR", "default_frequencies",
-           "frequency_response", "h1_estimate"]
+__all__ = ["INPUTS", "OUTPUTS", "BODY_MOTIONS", "OUTPUT_UNITS", "SEGMENT_S", "BAND_BINS", "EXCITATION_FLOOR",
+           "default_frequencies", "frequency_response", "h1_estimate"]
