@@ -210,7 +210,55 @@ def motion_jacobian(P, geom, tr: TrackRun, ds, run) -> np.ndarray:
     return np.stack(cols, axis=1)
 
 
-def align_motion(P, geom, tr: TrackRun, ds, run, mode: str = "prior") -> tuple[TrackRun, dict]:
+@dataclass(frozen=True)
+class MotionPrior:
+    """SPEC §13: what a run's set-up says of where the car was on the track, as priors of its motion unknowns.
+
+    ``speed``: ``(declared m/s, std m/s, declared with a std)``, None along a speed or distance channel (the
+    channel's mean starts it, unweighted); ``start``: ``(declared file time s, std s, declared with a std)``, None
+    when the start was estimated at load (no declared value to hold it to). A plain number's std is the
+    documented default (:data:`rideid.data.schema.manifest.SPEED_STD_DEFAULT`, ``START_STD_DEFAULT``)."""
+
+    speed: tuple | None
+    start: tuple | None
+
+    def rows(self, v0: float, shift0: float, p, weight: float = 1.0) -> np.ndarray:
+        """The prior's residual rows at the motion ``p`` (:data:`MOTION_SCALE` units) moved from the speed ``v0``
+        and the start shift ``shift0`` (s) the run was placed at: ``weight (value - declared) / std``, speed then
+        start, each only when it has a prior (``weight``: the run's own block's residual level, so a prior
+        counts against the data as a measurement of that std would)."""
+        out = []
+        if self.speed is not None:
+            out.append((v0 * (1.0 + p[0] * MOTION_SCALE[0]) - self.speed[0]) / self.speed[1])
+        if self.start is not None:
+            out.append((shift0 + p[1] * MOTION_SCALE[1]) / self.start[1])  # the shift from the start as read
+        return weight * np.asarray(out, dtype=float)
+
+    def jacobian(self, v0: float, weight: float = 1.0) -> np.ndarray:
+        """``(rows, 2)``: :meth:`rows`' derivatives in the speed's relative change and the start's shift (s)."""
+        out = []
+        if self.speed is not None:
+            out.append([v0 / self.speed[1], 0.0])
+        if self.start is not None:
+            out.append([0.0, 1.0 / self.start[1]])
+        return weight * np.asarray(out, dtype=float).reshape(-1, 2)
+
+
+def motion_prior(ds, run) -> MotionPrior:
+    """The :class:`MotionPrior` of ``run`` (a run on a declared track) in ``ds``: its declared speed (none along a
+    speed or distance channel) and its start where it was given (a SPEC CSV's time 0, a logger file's
+    ``start``), each with its declared std or the default width."""
+    rd = ds.data[run.id]
+    speed = None if getattr(rd, "distance", None) is not None else run.speed_prior()
+    auto = run.id in getattr(ds, "auto_start_runs", ())
+    mr = getattr(ds, "measured", {}).get(run.id)
+    given = 0.0 if mr is None else float(mr.start or 0.0)
+    start = None if auto else (given, run.start_prior_std(), run.start_std is not None)
+    return MotionPrior(speed=speed, start=start)
+
+
+def align_motion(P, geom, tr: TrackRun, ds, run, mode: str = "prior",
+                 prior: MotionPrior | None = None) -> tuple[TrackRun, dict]:
     """``tr`` of a run along a speed channel, its speed held (:func:`rideid.estimate.anyroad.speed_wander`), with
     the speed and the start that fit it at the car ``P`` (16,): the drawing at ``x = v (t - shift)``, the rear
     wheels' delay at ``v``; ``v`` and ``shift`` minimise the run's cost in ``mode`` (:data:`MODES`; the prior as
@@ -230,9 +278,16 @@ def align_motion(P, geom, tr: TrackRun, ds, run, mode: str = "prior") -> tuple[T
     place it. Returns the new run (the prior as it was) and the record ``{"speed_m_s", "start_shift_s",
     "speed_channel_mean_m_s"}`` (``start_shift_s`` from the start as read)."""
     base = replace(tr, mode=mode)
+    weight = 1.0
+    if prior is not None:  # SPEC §13: the declared speed and start weigh in at the run's own residual level
+        r0 = residuals(P, geom, base)
+        weight = float(np.sqrt(np.mean(r0 ** 2)))
 
     def cost(p):
-        return float(np.sum(residuals(P, geom, moved(base, ds, run, p)) ** 2))
+        c = float(np.sum(residuals(P, geom, moved(base, ds, run, p)) ** 2))
+        if prior is not None:
+            c += float(np.sum(prior.rows(base.rr.speed, base.shift, p, weight) ** 2))
+        return c
 
     c0 = cost(np.zeros(2))
     sol = minimize(cost, np.zeros(2), method="Nelder-Mead",
@@ -502,4 +557,4 @@ def fitted_channels(P, geom, tr: TrackRun, y, fit: Fit | None = None) -> np.ndar
 
 __all__ = ["MODES", "Prior", "TrackRun", "Fit", "nominal_inputs", "prepare_track_run", "solve", "residuals",
            "estimate_prior", "unevenness_rms", "fitted_channels", "meat", "cluster_meat", "align_motion",
-           "moved", "motion_jacobian"]
+           "moved", "motion_jacobian", "MotionPrior", "motion_prior"]

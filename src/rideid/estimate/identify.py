@@ -692,14 +692,15 @@ def parameter_detail(space, P, n: str, std, cov, robust) -> dict:
 
 
 def warn_bounds(res: IdentificationResult, stacklevel: int = 3) -> None:
-    """A :class:`rideid.DataWarning` for each estimate of ``res`` that ended at a search bound.
+    """A :class:`rideid.DataWarning` for each estimate of ``res`` that ended at a search bound, and for each
+    run whose speed or start the data moved beyond its prior (SPEC §13, check ``"motion"``).
 
     :func:`rideid.identify` calls it once for the result it returns (under
     ``model="auto"``: the kept model only); the fits themselves only mark
     ``at_bound`` in ``details`` and list the finding in ``checks``.
     """
     for f in res.checks:
-        if f.get("check") == "bounds":
+        if f.get("check") == "bounds" or (f.get("check") == "motion" and f.get("severity") == "warning"):
             warnings.warn(f["message"], DataWarning, stacklevel=stacklevel)
 
 
