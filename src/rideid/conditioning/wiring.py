@@ -650,5 +650,6 @@ def fix_entries(fix: dict, entries: dict) -> list[str]:
     return lines
 
 
-__all__ = ["gyro_or_accelerations", "assignment", "axle_amplitude_findings", "best_assignment", "corrected", "describe_fix", "fix_entries",
+__all__ = ["gyro_or_accelerations", "assignment",
+           "axle_amplitude_findings", "best_assignment", "corrected", "describe_fix", "fix_entries",
            "lead_in_units", "lowpass_gram", "rigid_body_scores", "unit_findings", "wiring_fix"]
