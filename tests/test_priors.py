@@ -259,3 +259,30 @@ def test_accelerations_in_g_are_refused_naming_the_accelerometers(tmp_path, caps
         ds = rideid.load_dataset(bad)
     ref = rideid.load_dataset(src)
     assert np.allclose(ds.data["H_HH"].matrix(), ref.data["H_HH"].matrix(), rtol=1e-6, atol=1e-9)
+
+
+# -- a gross misfit said early ----------------------------------------------------------------------------------
+
+def test_a_gross_first_fit_stops_before_the_model_choice_with_the_set_up_first(slipped):
+    """rideid.estimate.adequacy.gross_misfit: a run with more than GROSS_ERROR of its signal unexplained, or
+    GROSS_BOUNDS parameters at their bounds, is a verdict naming the runs and the set-up (speed, start, rate,
+    units, sensor chain) before any extension; below both, None. run_errors: squared residual over squared data,
+    over the channels measured (a closed form on a known response)."""
+    from rideid.estimate.adequacy import GROSS_BOUNDS, GROSS_ERROR, gross_misfit, run_errors, verdict_paragraph
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        ds = rideid.load_dataset(slipped)
+    y = ds.data["H_HH"].matrix()
+    errs = run_errors(ds, {"H_HH": 0.5 * y, "other": y})
+    assert list(errs) == ["H_HH"] and errs["H_HH"] == pytest.approx(0.25)
+    assert gross_misfit({"H_HH": 0.25}, ["k_sf", "c_sf"]) is None
+    v = gross_misfit({"H_HH": 0.6, "W_H": 0.01}, [], ds.findings)
+    assert v["adequate"] is False and v["gross_misfit"]["threshold"] == GROSS_ERROR
+    assert v["reasons"] == ["the first fit leaves 60 % of run H_HH's signal unexplained (an extension mends at "
+                            "most about 10 %)"]
+    text = verdict_paragraph(v)
+    assert text.index("speed and start") < text.index("the sample rate") < text.index("sensor chain")
+    assert "model choice was not run" in text and "declared speed 10.1 m/s" in text
+    assert "--model auto" not in text
+    bounds = gross_misfit({}, ["m_uf", "k_tf", "k_sr"][:GROSS_BOUNDS])
+    assert bounds["reasons"] == [f"{GROSS_BOUNDS} parameters ended at their search bounds (m_uf, k_tf, k_sr)"]

@@ -51,7 +51,7 @@ from scipy import special
 from ..model.params import POWERTRAIN_NAMES
 from ..model.params import SUSPENSION_GROUPS as GROUPS
 from .budget import with_budget
-from .adequacy import MIN_IMPROVEMENT, advise, assess_fit
+from .adequacy import MIN_IMPROVEMENT, advise, assess_fit, gross_misfit, run_errors
 from .materiality import weigh_result
 from .small_angle import small_angle
 from .identify import (DEFAULT_GENERATIONS, DEFAULT_POPULATION, identify as identify_model, model_extensions,
@@ -179,6 +179,12 @@ def identify_auto(ds, *, rng=None, seed=None, callback=None, maps=None, simulato
     cf_full = CostFunction(ds, extensions=tuple(GROUPS), simulator=simulator)
     simulator = cf_full.simulator  # one value for every candidate
     full = identify_model(ds, rng=rng, seed=seed, callback=callback, maps=maps, cost=cf_full, **kw)
+    # SPEC §13: a first fit far beyond what any extension explains stops here, with the set-up to check
+    gross = gross_misfit(run_errors(ds, full.response), [n for n, d in full.details.items() if d.get("at_bound")],
+                         getattr(ds, "findings", ()))
+    if gross is not None and full.polish:
+        return replace(full, adequacy=gross, model={"extensions": list(full.model.get("extensions", [])),
+                                                    "selection": "auto (not run: the first fit misses grossly)"})
     pol = full.polish or {}
     names = list(pol.get("names", []))
     free_ext = {g: [n for n in GROUPS[g] if n in names] for g in GROUPS}
