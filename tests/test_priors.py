@@ -15,6 +15,7 @@ import time
 import tomllib
 import warnings
 from pathlib import Path
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
@@ -181,6 +182,16 @@ def test_a_motion_record_names_a_value_beyond_three_prior_std(slipped):
     assert len(found) == 1 and found[0]["check"] == "motion" and found[0]["channel"] == "speed"
     assert found[0]["severity"] == "warning" and found[0]["run"] == "H_HH"
     assert anyroad.motion_record(dict(fitted, speed_m_s=10.05), prior, tr)["named"] == []
+    # the track's drawn size as this run saw it: its amplitude factor against the default 5 % prior
+    assert tr.size_std == pytest.approx(0.05)
+    fit = SimpleNamespace(alpha=1.2, alpha_std=0.004)
+    sized = anyroad.with_size(m, fit, tr, ds)
+    assert sized["size"] == {"estimate": 1.2, "std": 0.004, "unit": "relative", "declared": 1.0, "prior_std": 0.05,
+                             "prior": "default", "from_declared_in_prior_std": pytest.approx(4.0)}
+    assert sized["named"][1] == ("track herringbone_high (run H_HH): drawn size amplitude = 0.008 m, the data show "
+                                 "1.2000 ± 0.0040 of it (4.0 times the declared size's std of 5 %, the default width)")
+    assert [f["channel"] for f in anyroad.motion_findings({"H_HH": sized})] == ["speed", "size"]
+    assert len(anyroad.with_size(m, SimpleNamespace(alpha=1.03, alpha_std=0.004), tr, ds)["named"]) == 1
 
 
 @pytest.mark.slow  # 220 s on two shared cores: two Nelder-Mead placements of the drawing

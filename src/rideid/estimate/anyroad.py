@@ -480,11 +480,36 @@ def _pm(value: float, std: float | None) -> str:
     return f"{value:.{dec}f} ± {std:.{dec}f}"
 
 
+def with_size(rec: dict, fit, tr, ds) -> dict:
+    """A run's motion record (:func:`motion_record`) with ``size``: the track's drawn size as this run saw it
+    (SPEC §13), ``{"estimate", "std", "unit": "relative", "declared": 1.0, "prior_std", "prior"}`` from the
+    as-built fit ``fit`` (its amplitude factor), named beyond :data:`MOTION_NAMED` prior std."""
+    if tr.size_std is None:
+        return rec
+    declared = ds.manifest.size_prior(tr.track)[1]
+    e = {"estimate": float(fit.alpha), "std": float(fit.alpha_std), "unit": "relative", "declared": 1.0,
+         "prior_std": float(tr.size_std), "prior": "declared" if declared else "default",
+         "from_declared_in_prior_std": (float(fit.alpha) - 1.0) / tr.size_std}
+    named = [m for m in rec.get("named", []) if "drawn size" not in m]
+    if abs(fit.alpha - 1.0) > MOTION_NAMED * tr.size_std:
+        keys = ds.manifest.tracks[tr.track].keys
+        k = next((k for k in ("amplitude", "height") if k in keys), "size")
+        named.append(f"track {tr.track} (run {tr.run_id}): drawn size {k} = {keys.get(k, float('nan')):g} m, the "
+                     f"data show {_pm(float(fit.alpha), float(fit.alpha_std))} of it "
+                     f"({abs(fit.alpha - 1.0) / tr.size_std:.1f} times the declared size's std of "
+                     f"{100 * tr.size_std:.2g} %{'' if declared else ', the default width'})")
+    return dict(rec, size=e, named=named)
+
+
 def motion_findings(motion: dict) -> list[dict]:
     """The result's ``checks`` records (check ``"motion"``, a warning) of every set-up value the data moved beyond
     its prior (:func:`motion_record`'s ``named``): a declared value is never silently moved (SPEC §13)."""
+    def what(m):
+        return next((k for k, w in (("speed", "declared speed"), ("start", "declared start"), ("size", "drawn size"))
+                     if w in m), "speed")
+
     return [{"severity": "warning", "check": "motion", "message": m + ": estimated with the car (SPEC §13); check "
-             "the run's set-up", "run": rid, "channel": "speed" if "speed" in m.split(":")[1] else "start"}
+             "the run's set-up", "run": rid, "channel": what(m)}
             for rid, rec in motion.items() for m in rec.get("named", [])]
 
 
@@ -641,6 +666,7 @@ def _tracks_block(ds, trs, skipped, P, geom, motion=None):
             rec["runs"][tr.run_id]["clipped_samples_freed"] = {CHANNELS[tr.rr.cols[j]]: int(k)
                                                                for j, k in zip(pos, count)}
         if motion and tr.run_id in motion:
+            motion[tr.run_id] = with_size(motion[tr.run_id], fit, tr, ds)
             rec["runs"][tr.run_id]["motion"] = dict(motion[tr.run_id], note=(
                 "the run taken at a constant speed, placed with its start on the track as built "
                 "(rideid.estimate.asbuilt.align_motion), then both solved with the car (anyroad._joint_solve), a "

@@ -123,6 +123,8 @@ class TrackRun:
     inputs: RunInput | None = field(default=None, repr=False)
     #: the drawing's time shift (s): the front axle at ``x = speed (t - shift)`` (:func:`align_motion`)
     shift: float = 0.0
+    #: SPEC §13: the relative std of the track's drawn size (the amplitude factor's prior about 1; None: free)
+    size_std: float | None = None
 
     @property
     def run_id(self) -> str:
@@ -170,8 +172,20 @@ def prepare_track_run(ds, run, mode: str = "prior") -> TrackRun:
     rr = roadfit.with_sensors(rr, ds.sensor_filters(run.id))  # the channels as wired (SPEC §11)
     ri = nominal_inputs(ds, run, v)
     return TrackRun(rr=rr, track=run.track, U=np.fft.rfft(np.asarray(ri.u, dtype=float), axis=0), mode=mode,
-                    inputs=ri)
+                    inputs=ri, size_std=_size_std(ds, run.track))
 
+
+def _size_std(ds, track_id: str) -> float | None:
+    """The relative std of a track's drawn size (SPEC §13: declared, else the default width), or None for a
+    manifest that has none (an older one)."""
+    prior = getattr(ds.manifest, "size_prior", None)
+    return None if prior is None else float(prior(track_id)[0])
+
+
+#: the weight of the drawn size's prior row (SPEC §13): the whitened residual's real and imaginary parts each have
+#: variance 1/2 (each bin's complex residual divided by its noise level), so a row ``sqrt(1/2) (alpha - 1) / std``
+#: counts the prior as the negative log-likelihood does
+SIZE_PRIOR_WEIGHT = float(np.sqrt(0.5))
 
 #: :func:`align_motion`'s unknowns: the speed's relative change and the start's shift (s), in these units
 MOTION_SCALE = (1e-3, 1e-3)
@@ -403,6 +417,9 @@ def solve(P, geom, tr: TrackRun, car=None, alpha_std: bool = False) -> Fit:
     b = np.zeros(m)
     G[:nb, :nb] = gr.T @ gr
     b[:nb] = gr.T @ np.concatenate([r.real.ravel(), r.imag.ravel()])
+    if tr.size_std is not None and tr.mode != "free":  # SPEC §13: the drawn size's prior, a row of its own
+        G[0, 0] += SIZE_PRIOR_WEIGHT ** 2 / tr.size_std ** 2
+        b[0] += SIZE_PRIOR_WEIGHT ** 2 / tr.size_std ** 2
     gH = np.conj(np.swapaxes(g, 1, 2))                                                     # (K,nb,c)
     for j, a in enumerate((aL, aR)):
         sl = slice(nb + j * Dn, nb + (j + 1) * Dn)
@@ -431,13 +448,16 @@ def solve(P, geom, tr: TrackRun, car=None, alpha_std: bool = False) -> Fit:
 
 def residuals(P, geom, tr: TrackRun) -> np.ndarray:
     """Real residual vector of run ``tr`` at the car ``P``: per bin the real and imaginary parts of the whitened
-    residual, then (mode "prior") ``sqrt(log det M)``; its squared sum is the negative log-likelihood up to a
-    constant."""
+    residual, then (mode "prior") ``sqrt(log det M)``, and (a drawn size with a prior, SPEC §13) the amplitude
+    factor's prior row; its squared sum is the negative log-likelihood up to a constant."""
     fit = solve(P, geom, tr)
     parts = [fit.residual.real, fit.residual.imag]
     if tr.mode == "prior":
         parts.append(np.sqrt(np.clip(fit.logdet, 0.0, None))[:, None])
-    return np.concatenate(parts, axis=1).ravel()
+    out = np.concatenate(parts, axis=1).ravel()
+    if tr.size_std is not None and tr.mode != "free":
+        out = np.append(out, SIZE_PRIOR_WEIGHT * (fit.alpha - 1.0) / tr.size_std)
+    return out
 
 
 def meat(J, e, tr: TrackRun, s2: float | None = None) -> np.ndarray:
@@ -459,7 +479,10 @@ def meat(J, e, tr: TrackRun, s2: float | None = None) -> np.ndarray:
 def cluster_meat(J, e, tr: TrackRun) -> np.ndarray:
     """The gradient's spread over clusters of :data:`CLUSTER_BINS` neighbouring DFT bins of run ``tr``'s block
     (kept for comparison: :func:`meat` says why it is not used)."""
-    g = (J * e[:, None]).reshape(-1, tr.per_bin, J.shape[1]).sum(axis=1)           # per bin
+    nb = (J.shape[0] // tr.per_bin) * tr.per_bin  # the drawn size's prior row (SPEC §13) is a cluster of its own
+    g = (J[:nb] * e[:nb, None]).reshape(-1, tr.per_bin, J.shape[1]).sum(axis=1)   # per bin
+    if nb < J.shape[0]:
+        g = np.concatenate([g, (J[nb:] * e[nb:, None])])
     K = g.shape[0]
     groups = np.arange(K) // max(1, CLUSTER_BINS)
     G = np.zeros((groups[-1] + 1, J.shape[1]))
