@@ -303,3 +303,56 @@ def test_a_gross_first_fit_stops_before_the_model_choice_with_the_set_up_first(s
     assert "--model auto" not in text
     bounds = gross_misfit({}, ["m_uf", "k_tf", "k_sr"][:GROSS_BOUNDS])
     assert bounds["reasons"] == [f"{GROSS_BOUNDS} parameters ended at their search bounds (m_uf, k_tf, k_sr)"]
+
+
+@pytest.mark.parametrize("rid, named", [("T_HH", True), ("W_H", False)])
+def test_a_slip_on_the_twist_and_the_washboard(rid, named, tmp_path):
+    """1 % high on the twist at 5 m/s (5.05) and on the washboard at 10 m/s (10.1): the lags put both within 0.2 %
+    of the speed driven (measured 5.001 and 10.012); the twist's lies more than 3 of the prior's std from the
+    declared value (a warning naming the run and the speed), the washboard's 2.9 of them (a note: the fit starts
+    there, and the as-built fit names it, 10.0000 ± 0.0004, docs/common-mistakes.md); no wiring blamed."""
+    true = BY_ID[rid][2]
+    folder = _write(tmp_path / "ds", [rid], {rid: round(true * 1.01, 6)})
+    with warnings.catch_warnings(record=True) as rec:
+        warnings.simplefilter("always")
+        ds = rideid.load_dataset(folder)
+    msgs = [str(w.message) for w in rec]
+    assert not any("wired" in m for m in msgs), msgs
+    run = ds.manifest.run(rid)
+    assert run.speed == pytest.approx(true, rel=0.002) and run.declared_speed == pytest.approx(true * 1.01)
+    f = next(f for f in ds.findings if f.check == "speed")
+    assert f.severity == ("warning" if named else "note") and f.run == rid
+    assert any(f"run '{rid}'" in m and "declared speed" in m for m in msgs) == named
+
+
+@pytest.mark.slow  # three identifications of three runs with the default settings: minutes on two shared cores
+@pytest.mark.parametrize("rid", ["T_HH", "H_HH", "W_H"])
+def test_a_one_percent_slip_on_any_run_is_named_or_found(rid, tmp_path, capsys):
+    """The SUV's twist, herringbone and washboard runs (exact drawings, 1 % noise), one of them declared 1 % high:
+    `rideid identify` with the default settings names the run and the speed (at load, or after the fit from the
+    runs on tracks as built), or every estimate is within 1 % of the truth. The load's diagnosis comes within a
+    minute."""
+    true = BY_ID[rid][2]
+    folder = _write(tmp_path / "ds", ["T_HH", "H_HH", "W_H"], {rid: round(true * 1.01, 6)})
+    t0 = time.perf_counter()
+    with warnings.catch_warnings(record=True) as rec:
+        warnings.simplefilter("always")
+        rideid.load_dataset(folder)
+    t_load = time.perf_counter() - t0
+    at_load = [str(w.message) for w in rec if f"run '{rid}'" in str(w.message) and "declared speed" in str(w.message)]
+    out = tmp_path / "fit"
+    t0 = time.perf_counter()
+    rc = main(["identify", str(folder), "--out", str(out), "--quiet", "--no-report", "--seed", "1"])
+    t_fit = time.perf_counter() - t0
+    captured = capsys.readouterr()
+    assert rc == 0, captured.err
+    assert "wired" not in captured.err
+    res = rideid.load_result(out)
+    after = [c["message"] for c in res.checks if c.get("check") == "motion" and c.get("run") == rid]
+    errors = {n: res.parameters[n] / SUV_TRUTH[n] - 1 for n in SUV_TRUTH}
+    worst = max(abs(e) for e in errors.values())
+    print(f"{rid}: load {t_load:.1f} s ({'named' if at_load else 'not named'}), identify {t_fit:.1f} s, "
+          f"named after the fit: {bool(after)}, worst estimate {100 * worst:.2f} %")
+    assert at_load or after or worst < 0.01, (at_load, after, errors)
+    if at_load:
+        assert t_load < 60.0

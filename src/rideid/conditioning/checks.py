@@ -436,6 +436,7 @@ def _check_run(ds, r):
 #: than SEEN_Z times its own standard error
 SEEN_MIN = 0.004
 SEEN_Z = 3.0
+SEEN_FLOOR = 0.001
 
 
 def speed_seen(ds, rid, Y, Yhat) -> tuple[float, float, float] | None:
@@ -459,11 +460,16 @@ def speed_seen(ds, rid, Y, Yhat) -> tuple[float, float, float] | None:
     if not sxx > 0:
         return None
     slope = float(np.sum(wt * (t - tm) * lag) / sxx)
-    v = float(ds.manifest.run(rid).speed)
-    if abs(slope) < SEEN_MIN or abs(slope) < SEEN_Z / np.sqrt(sxx):
-        return None
     lag0 = float(np.sum(wt * lag) / np.sum(wt)) - slope * tm
-    return v * (1.0 + slope), v / np.sqrt(sxx), -lag0 / (1.0 + slope)
+    # the slope's error from the lags' scatter about the line: each window's sigma bounds what the nominal car
+    # can move its peak by, but that error is common to the windows (a car's lag on the same road), which the
+    # line's intercept takes up; floored at SEEN_FLOOR (four windows, two degrees of freedom)
+    e = lag - (lag0 + slope * t)
+    std = max(float(np.sqrt(np.sum(wt * e ** 2) / max(t.size - 2, 1) / sxx)), SEEN_FLOOR)
+    v = float(ds.manifest.run(rid).speed)
+    if abs(slope) < SEEN_MIN or abs(slope) < SEEN_Z * std:
+        return None
+    return v * (1.0 + slope), v * std, -lag0 / (1.0 + slope)
 
 
 #: the severity of a finding that is recorded (result.json ``checks``) but neither warned of nor refused
