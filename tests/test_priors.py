@@ -356,3 +356,23 @@ def test_a_one_percent_slip_on_any_run_is_named_or_found(rid, tmp_path, capsys):
     assert at_load or after or worst < 0.01, (at_load, after, errors)
     if at_load:
         assert t_load < 60.0
+
+
+def test_a_start_off_by_two_samples_is_named_and_never_blamed_on_the_wiring(tmp_path):
+    """A SPEC CSV whose rows begin 10 ms late (two samples at 200 Hz: the front axle at x = 0 at -0.010 s): before,
+    the herringbone's axle channels were said to be wired round (and a sign); now a warning names the run and the
+    start the lags show, within a sample."""
+    src = _write(tmp_path / "ds", ["H_HH"])
+    for f in (src / "runs").glob("*.csv"):
+        rows = list(csv.reader(f.open()))
+        body = rows[1:]
+        with f.open("w", newline="") as fh:
+            csv.writer(fh).writerows([rows[0]] + [[body[i][0]] + body[i + 2][1:] for i in range(len(body) - 2)])
+    with warnings.catch_warnings(record=True) as rec:
+        warnings.simplefilter("always")
+        ds = rideid.load_dataset(src)
+    msgs = [str(w.message) for w in rec]
+    assert not any("wired" in m for m in msgs), msgs
+    f = next(f for f in ds.findings if f.check == "track" and f.channel == "start")
+    assert f.run == "H_HH" and f.fix["start_shift"] == pytest.approx(-0.010, abs=0.005)
+    assert any("run 'H_HH': the data match the track with the front axle at x = 0 at -0.01" in m for m in msgs)

@@ -351,14 +351,29 @@ def _check_run(ds, r):
     # SPEC §13: a declared speed is a prior, not a fact. The speed the data show (the lags against the nominal
     # response) is tried before the wiring: a speed slip moves the road under the rear wheels against the front
     # ones and reads as swapped axle channels, so the road-driven comparisons below are made at that speed
-    seen = None
+    seen = shifted = None
     declared = (Y, Yhat)
     if (Yhat is not None and start_off is None and rd.distance is None and not r.moving and r.speed
             and _level(ds, rid, "track") != "off"):
-        seen = speed_seen(ds, rid, Y, Yhat)
+        line = lag_line(ds, rid, Y, Yhat)
+        seen = speed_seen(ds, rid, Y, Yhat, line)
+        shifted = start_seen(line, rd.fs) if seen is None else None
     # with the start off, the rigid-body identities alone (they need no road) judge the wiring
     wire = (wiring_fix(Y, None if start_off is not None else Yhat, rd.fs, geom, _entry_factors(entries),
                        unit_known) if wiring != "off" else None)
+    if seen is None and shifted is not None and ((wire and wire["fix"]) or _score(Y, Yhat) < MATCH_MIN):
+        # a start off by some samples moves the road under every wheel alike, and a herringbone's or a twist's
+        # left-right pattern with it: tried before a re-wiring is proposed
+        (Yhat_s,) = responses((yield [_nominal_job(track, t - shifted, r.speed, None)]))
+        Y_s, Yhat_s = _as_recorded(ds, rid, rd.matrix(), Yhat_s)
+        wire_s = wiring_fix(Y_s, Yhat_s, rd.fs, geom, _entry_factors(entries), unit_known) if wiring != "off" \
+            else None
+        if not (wire_s and wire_s["fix"]) and _score(Y_s, Yhat_s) >= MATCH_MIN:
+            wire, Y, Yhat = wire_s, Y_s, Yhat_s
+            out.append(Finding(WARNING, "track", f"run '{rid}': the data match the track with the front axle at "
+                               f"x = 0 at {shifted:+.4f} s of the run's time, not at its start ({1e3 * shifted:+.1f} "
+                               "ms): check the run's start (a SPEC CSV's time 0, a logger file's start); the fit "
+                               "estimates it with the car (SPEC §13)", rid, "start", {"start_shift": shifted}))
     if seen is not None:
         # the wiring at the speed the data show: a re-wiring that speed makes needless is never proposed, and the
         # checks below compare at that speed; a speed that breaks a wiring the declared one found right is not
@@ -439,14 +454,14 @@ SEEN_Z = 3.0
 SEEN_FLOOR = 0.001
 
 
-def speed_seen(ds, rid, Y, Yhat) -> tuple[float, float, float] | None:
-    """The constant speed (m/s) the data of a run at a declared constant speed show, its standard error, and the
-    start's offset (s) that goes with it: the straight line through the lags against the nominal response at the
-    declared speed (:func:`speed_lags`; data at ``t`` like the response at ``t + l0 + l' t`` are a speed
-    ``v (1 + l')`` from the time ``-l0 / (1 + l')``: a start estimated at the declared speed moves with it),
-    weighted by each window's ``sigma``. None when the lags cannot
-    tell (fewer than three windows) or the speed is within :data:`SEEN_MIN` of the declared one or
-    :data:`SEEN_Z` of its standard error."""
+def lag_line(ds, rid, Y, Yhat) -> dict | None:
+    """The straight line through the lags of a run at a declared constant speed against the nominal response at
+    that speed (:func:`speed_lags`), weighted by each window's ``sigma``: data at ``t`` like the response at
+    ``t + l0 + l' t`` are a speed ``v (1 + l')`` from the time ``shift = -l0 / (1 + l')`` (a start estimated at the
+    declared speed moves with it). Returns ``{"slope", "slope_std", "shift", "shift_std"}`` (the errors from the
+    lags' scatter about the line: each window's sigma bounds what the nominal car can move its peak by, but that
+    error is common to the windows, a car's lag on the same road, which the intercept takes up; the slope's floored
+    at :data:`SEEN_FLOOR`, four windows leaving two degrees of freedom), or None (fewer than three windows)."""
     w = speed_lags(ds, rid, Y, Yhat)
     if w is None:
         return None
@@ -461,15 +476,35 @@ def speed_seen(ds, rid, Y, Yhat) -> tuple[float, float, float] | None:
         return None
     slope = float(np.sum(wt * (t - tm) * lag) / sxx)
     lag0 = float(np.sum(wt * lag) / np.sum(wt)) - slope * tm
-    # the slope's error from the lags' scatter about the line: each window's sigma bounds what the nominal car
-    # can move its peak by, but that error is common to the windows (a car's lag on the same road), which the
-    # line's intercept takes up; floored at SEEN_FLOOR (four windows, two degrees of freedom)
     e = lag - (lag0 + slope * t)
-    std = max(float(np.sqrt(np.sum(wt * e ** 2) / max(t.size - 2, 1) / sxx)), SEEN_FLOOR)
+    s2 = float(np.sum(wt * e ** 2) / max(t.size - 2, 1))
+    return {"slope": slope, "slope_std": max(float(np.sqrt(s2 / sxx)), SEEN_FLOOR), "shift": -lag0 / (1.0 + slope),
+            "shift_std": float(np.sqrt(s2 * (1.0 / np.sum(wt) + tm ** 2 / sxx)))}
+
+
+def speed_seen(ds, rid, Y, Yhat, line: dict | None = None) -> tuple[float, float, float] | None:
+    """The constant speed (m/s) the data of a run at a declared constant speed show, its standard error, and the
+    start's offset (s) that goes with it (:func:`lag_line`, or its ``line``). None when the lags cannot tell
+    (fewer than three windows) or the speed is within :data:`SEEN_MIN` of the declared one or :data:`SEEN_Z` of
+    its standard error."""
+    line = lag_line(ds, rid, Y, Yhat) if line is None else line
+    if line is None:
+        return None
+    slope, std = line["slope"], line["slope_std"]
     v = float(ds.manifest.run(rid).speed)
     if abs(slope) < SEEN_MIN or abs(slope) < SEEN_Z * std:
         return None
-    return v * (1.0 + slope), v * std, -lag0 / (1.0 + slope)
+    return v * (1.0 + slope), v * std, line["shift"]
+
+
+def start_seen(line: dict | None, fs: float) -> float | None:
+    """The start's offset (s) the lags show at the declared speed (:func:`lag_line`) when it exceeds half a sample
+    and :data:`SEEN_Z` of its error; None otherwise. Only tried where the comparison at the declared start fails
+    (a re-wiring proposed, or no match): a car other than the nominal one lags the road by a few ms itself (7 ms
+    on the twist at 5 m/s, tests/asbuilt_tracks.py's SUV)."""
+    if line is None or abs(line["shift"]) <= max(0.5 / fs, SEEN_Z * line["shift_std"]):
+        return None
+    return float(line["shift"])
 
 
 #: the severity of a finding that is recorded (result.json ``checks``) but neither warned of nor refused

@@ -573,9 +573,7 @@ def _result(ds, cf, search, fit, weighting, maps, rng_record, t0, assess=True,
         polish=info, history=history, starts=starts, preprocessing=preprocessing,
         modal=modal, dataset=str(ds.path), maps=maps,
         model=model, response=response, velocities=velocities, correlation=correlation, adequacy=adequacy,
-        checks=[f.to_dict() for f in findings] + [f.to_dict() for f in getattr(ds, "findings", ())
-                                                     if f.check == "speed"],  # SPEC §13: what loading saw of speeds
-        dampers=dampers, bump_stops=stops,
+        checks=[f.to_dict() for f in findings], dampers=dampers, bump_stops=stops,
         data_quality=data_quality(cf.ds), wall_time_s=time.perf_counter() - t0)
 
 
