@@ -134,7 +134,7 @@ def test_a_one_percent_speed_slip_is_named_at_load_and_never_blamed_on_the_wirin
     named = [m for m in msgs if "declared speed 10.1 m/s" in m]
     assert len(named) == 1 and "run 'H_HH'" in named[0], msgs
     v = float(named[0].split("the data match the track at ")[1].split(" ")[0])
-    assert v == pytest.approx(10.0, rel=0.003)
+    assert v == pytest.approx(10.0, rel=0.001)
     run = ds.manifest.run("H_HH")
     assert run.speed == pytest.approx(v, rel=1e-3) and run.declared_speed == 10.1
     assert run.speed_prior() == (10.1, pytest.approx(0.0303), False)
@@ -305,12 +305,13 @@ def test_a_gross_first_fit_stops_before_the_model_choice_with_the_set_up_first(s
     assert bounds["reasons"] == [f"{GROSS_BOUNDS} parameters ended at their search bounds (m_uf, k_tf, k_sr)"]
 
 
-@pytest.mark.parametrize("rid, named", [("T_HH", True), ("W_H", False)])
+@pytest.mark.parametrize("rid, named", [("T_HH", True), ("W_H", True)])
 def test_a_slip_on_the_twist_and_the_washboard(rid, named, tmp_path):
-    """1 % high on the twist at 5 m/s (5.05) and on the washboard at 10 m/s (10.1): the lags put both within 0.2 %
-    of the speed driven (measured 5.001 and 10.012); the twist's lies more than 3 of the prior's std from the
-    declared value (a warning naming the run and the speed), the washboard's 2.9 of them (a note: the fit starts
-    there, and the as-built fit names it, 10.0000 ± 0.0004, docs/common-mistakes.md); no wiring blamed."""
+    """1 % high on the twist at 5 m/s (5.05) and on the washboard at 10 m/s (10.1): the lags, read twice (against
+    the declared speed, then against the speed they showed), put both within 0.1 % of the speed driven (measured
+    4.997 and 10.002; read once, the washboard's was 10.012, 2.9 prior std from the declared value: a note);
+    more than 3 of the prior's std from the declared value: a warning naming the run and the speed; no wiring
+    blamed."""
     true = BY_ID[rid][2]
     folder = _write(tmp_path / "ds", [rid], {rid: round(true * 1.01, 6)})
     with warnings.catch_warnings(record=True) as rec:
@@ -319,7 +320,7 @@ def test_a_slip_on_the_twist_and_the_washboard(rid, named, tmp_path):
     msgs = [str(w.message) for w in rec]
     assert not any("wired" in m for m in msgs), msgs
     run = ds.manifest.run(rid)
-    assert run.speed == pytest.approx(true, rel=0.002) and run.declared_speed == pytest.approx(true * 1.01)
+    assert run.speed == pytest.approx(true, rel=0.001) and run.declared_speed == pytest.approx(true * 1.01)
     f = next(f for f in ds.findings if f.check == "speed")
     assert f.severity == ("warning" if named else "note") and f.run == rid
     assert any(f"run '{rid}'" in m and "declared speed" in m for m in msgs) == named

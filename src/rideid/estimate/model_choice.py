@@ -773,4 +773,8 @@ def _tracks_before_curves(ds, res, chosen, simulator, tracks, common):
     ad = dict(res.adequacy or {})
     ad["reasons"] = list(ad.get("reasons", [])) + [
         f"tried: the linear model ({label}) on the tracks as built, not adequate either, so {kept} stays"]
-    return replace(res, adequacy=ad)
+    # SPEC §13: the speeds and starts that fit named are the data's whatever model stays: never silently dropped
+    named = [c for c in (ab.checks or []) if c.get("check") == "motion"]
+    if named:
+        ad["reasons"].append("the set-up the tracks as built named: " + "; ".join(c["message"] for c in named))
+    return replace(res, adequacy=ad, checks=list(res.checks or []) + named)
