@@ -353,8 +353,7 @@ def _check_run(ds, r):
     # ones and reads as swapped axle channels, so the road-driven comparisons below are made at that speed
     seen = shifted = None
     declared = (Y, Yhat)
-    if (Yhat is not None and start_off is None and rd.distance is None and not r.moving and r.speed
-            and _level(ds, rid, "track") != "off"):
+    if Yhat is not None and start_off is None and rd.distance is None and not r.moving and r.speed:
         line = lag_line(ds, rid, Y, Yhat)
         seen = speed_seen(ds, rid, Y, Yhat, line)
         shifted = start_seen(line, rd.fs) if seen is None else None
