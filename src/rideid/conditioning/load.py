@@ -104,7 +104,10 @@ def _seen_speeds(ds: Dataset, findings) -> Dataset:
     man = ds.manifest
     runs = tuple(replace(r, speed=seen[r.id], declared_speed=r.speed if r.declared_speed is None
                          else r.declared_speed) if r.id in seen else r for r in man.runs)
-    return replace(ds, manifest=replace(man, runs=runs))
+    # a logger file's run: its starts are estimated again with the car at this speed (the polish)
+    measured = {rid: replace(mr, speed=seen[rid]) if rid in seen and mr.speed is not None else mr
+                for rid, mr in ds.measured.items()}
+    return replace(ds, manifest=replace(man, runs=runs), measured=measured)
 
 
 def _aligned(ds: Dataset, starts: dict[str, float | dict] | None):
