@@ -200,7 +200,7 @@ def test_a_motion_record_names_a_value_beyond_three_prior_std(slipped):
     assert len(anyroad.with_size(m, SimpleNamespace(alpha=1.03, alpha_std=0.004), tr, ds)["named"]) == 1
 
 
-@pytest.mark.slow  # 220 s on two shared cores: two Nelder-Mead placements of the drawing
+@pytest.mark.slow  # 10 s on an idle machine, 220 s on two cores shared by other work: two placements of the drawing
 def test_the_speed_is_estimated_with_the_car_and_named(slipped):
     """At the true car the herringbone run, started from the speed the lags show, placed with its declared
     speed's prior (10.1 ± 0.03): the speed comes within 0.02 % of the 10 m/s driven (measured 10.000), its
@@ -332,9 +332,10 @@ def test_a_one_percent_slip_on_any_run_is_named_or_found(rid, tmp_path, capsys):
     """The SUV's twist, herringbone and washboard runs (exact drawings, 1 % noise), one of them declared 1 % high:
     `rideid identify` with the default settings names the run and the speed (at load, or after the fit from the
     runs on tracks as built), or every estimate is within 1 % of the truth. The load's diagnosis comes within a
-    minute. Measured (seed 1, two shared cores): each named at load in 0.9-2.6 s and again after the fit (the
-    twist's 5.05 found 5.00010 ± 0.00013 m/s), identify 45-51 s, the worst estimate 0.6-1.8 % off (the tracks as
-    built rejected on the washboard run's low-frequency "unevenness", docs/tracks-as-built.md)."""
+    minute. Measured (seed 1): each named at load in 0.2-0.4 s (0.9-2.6 s on two cores shared by other work) and
+    again after the fit (the twist's 5.05 found 5.00010 ± 0.00013 m/s), identify 17-18 s (45-51 s shared), the
+    worst estimate 0.6-1.8 % off (the tracks as built rejected on the washboard run's low-frequency
+    "unevenness", docs/tracks-as-built.md)."""
     true = BY_ID[rid][2]
     folder = _write(tmp_path / "ds", ["T_HH", "H_HH", "W_H"], {rid: round(true * 1.01, 6)})
     t0 = time.perf_counter()
@@ -385,7 +386,7 @@ def test_a_start_off_by_two_samples_is_named_and_never_blamed_on_the_wiring(tmp_
 def test_a_gross_first_fit_is_said_before_the_model_choice(tmp_path, capsys):
     """Every acceleration in g and the wiring check switched off ([checks] wiring = "off"): the first fit leaves
     most of the signal unexplained, and `rideid identify` stops before the model choice with the set-up to
-    check (measured: 31 s in all, 73 s with the two cores shared by other work; cost 5.0)."""
+    check (measured: 20-31 s in all, 73 s with the two cores shared by other work; cost 5.0)."""
     src = _write(tmp_path / "ds", ["T_HH", "H_HH", "W_H"])
     bad = _in_g(src, tmp_path / "g")
     doc = tomllib.loads((bad / "dataset.toml").read_text())
