@@ -159,7 +159,12 @@ def test_advice_follows_the_model_option_used():
                          "a flexible body).")
     kept = advice({"extensions": ["damper_curves", "bump_stops"], "selection": "auto"})
     assert kept.endswith("Or the car has what the model lacks (a powertrain on mounts, a flexible body).")
-    assert kept.index("knots where it bends (`[model] damper_knots`") < kept.index("Try: check that the track")
+    assert kept.index("knots where it bends (`[model] damper_knots`") < kept.index("Try the set-up first")
+    # SPEC §13: the set-up's causes (speed, start, rate, units, sensor chain) before any extension
+    for text in (ADVICE, auto, full, kept):
+        first = text.index("Try the set-up first, which no model extension mends: each run's speed and start")
+        assert first < text.index("the sample rate") < text.index("unit") < text.index("sensor chain")
+        assert all(first < text.index(w) for w in ("--model auto", "model lacks") if w in text.split("Try ")[1])
     given = advice({"extensions": ["damper_curves"]})
     assert given.startswith(ADVICE) and "`[model] damper_knots`" in given
     assert "damper_knots" not in auto and "damper_knots" not in ADVICE

@@ -97,15 +97,21 @@ def test_the_prepared_run_holds_the_drawings_inputs(as_built):
 @pytest.mark.slow  # moved to CI's slow pass: make test under 10 minutes on two cores
 def test_the_car_on_tracks_as_built_from_a_start(as_built):
     """The default path from a start 3 % off the truth (the search skipped, the polish and the as-built stage
-    as rideid identify runs them): the twelve within 1 %, every error within 2 std_robust (the white sandwich of
+    as rideid identify runs them): the twelve within 1.2 %, every error within 2 std_robust (the white sandwich of
     the as-built runs, asbuilt.meat; measured 1.3 at most, with the bin-clustered one 2.5 and 9 of 12 within 2),
-    the verdict adequate, and the tracks block in result.json with the twist's factor near 1.04."""
+    the verdict adequate, and the tracks block in result.json with the twist's factor near 1.04.
+
+    SPEC §13: every run's speed and start are solved with the car (their priors the declared values, 0.3 % and
+    5 ms wide). The speeds come within 0.015 % of the driven ones and the starts within 0.6 ms of the exact 0,
+    and the unsprung masses move from +0.51 / +0.61 % (speeds and starts held at the declared values) to +0.95 /
+    +1.08 %, 1.7 and 1.8 std_robust (their error bars now hold the motion); the starts' freedom is most of it
+    (held: +0.66 / +0.79 %), a 2 ms prior changes nothing (the data decide them). Measured on this seed."""
     space, _ = _truth_row(as_built)
     rng = np.random.default_rng(3)
     start = np.array([SUV_TRUTH[n] for n in space.names]) * (1 + 0.03 * rng.choice([-1, 1], len(space.names)))
     res = rideid.identify(as_built, start=start, model="base", rng=1)
     errs = {n: res.parameters[n] / v - 1 for n, v in SUV_TRUTH.items()}
-    assert max(abs(e) for e in errs.values()) < 0.01, errs
+    assert max(abs(e) for e in errs.values()) < 0.012, errs
     z = {n: (res.parameters[n] - v) / res.details[n]["std_robust"] for n, v in SUV_TRUTH.items()}
     assert max(abs(v) for v in z.values()) < 2.0, z
     assert res.adequacy["adequate"] is True

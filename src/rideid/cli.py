@@ -340,12 +340,8 @@ def _tracks_table(res) -> str:
                 lines.append(f"{tid:<18} {rid:<10} {r['fitted']}")
     moving = [(rid, r["motion"]) for rec in res.tracks.values() for rid, r in rec.get("runs", {}).items()
               if "motion" in r]
-    for rid, m in moving:  # a run along a speed channel: its speed and start as fitted (asbuilt.align_motion)
-        # the stds to two significant digits: a small one is not printed as zero
-        sd = "" if "speed_std_m_s" not in m else f" ± {m['speed_std_m_s']:.2g}"
-        st = "" if "start_shift_std_s" not in m else f" ± {1e3 * m['start_shift_std_s']:.2g}"
-        lines.append(f"{rid}: speed {m['speed_m_s']:.4f}{sd} m/s (the speed channel's mean "
-                     f"{m['speed_channel_mean_m_s']:.4f}), start moved {1e3 * m['start_shift_s']:+.2f}{st} ms")
+    for rid, m in moving:  # each run's speed and start as fitted with the car (SPEC §13)
+        lines.append(_motion_line(rid, m))
     rejected = next((rec["rejected"] for rec in res.tracks.values() if rec.get("rejected")), None)
     lines.append("tracks as built REJECTED, the estimates are the tracks' as drawn: " + rejected if rejected else
                  "error bars with tracks as built: the white sandwich of their runs (measured right over five seeds, "
@@ -353,6 +349,19 @@ def _tracks_table(res) -> str:
                                                "'speed and start')" if any("speed_std_m_s" in m for _, m in moving)
                                                else ""))
     return "\n".join(lines)
+
+
+def _motion_line(rid: str, m: dict) -> str:
+    """One run's speed and start as fitted (SPEC §13: the estimate, its std, the declared value)."""
+    sd = "" if m.get("speed_std_m_s") is None else f" ± {m['speed_std_m_s']:.4f}"
+    st = "" if m.get("start_shift_std_s") is None else f" ± {1e3 * m['start_shift_std_s']:.2f}"
+    sp = m.get("speed") or {}
+    if sp.get("declared") is not None:
+        was = f"declared {sp['declared']:.4g} ± {sp['prior_std']:.2g}"
+    else:
+        was = f"the speed channel's mean {m.get('speed_channel_mean_m_s') or float('nan'):.4f}"
+    return (f"{rid}: speed {m['speed_m_s']:.4f}{sd} m/s ({was}), start moved "
+            f"{1e3 * m['start_shift_s']:+.2f}{st} ms")
 
 
 def _budget_lines(res) -> list[str]:

@@ -163,6 +163,26 @@ _SETTINGS: tuple[Setting, ...] = (
             'docs/any-road.md#how-it-works',
             'tests/test_anyroad.py::test_the_car_from_two_unknown_roads',
             measured=False),
+    Setting('adequacy.gross_error', 0.3, '1 (share of a run\'s signal)',
+            ('a first fit leaving more than this share of any run\'s signal unexplained misses grossly: the model '
+             'choice is not run and the set-up is named first'),
+            'docs/model-choice.md#a-gross-first-fit-the-set-up-first',
+            'tests/test_priors.py::test_a_gross_first_fit_stops_before_the_model_choice_with_the_set_up_first',
+            measured=True,
+            note=('linear dampers on 2:1 digressive ones leave 0.096, the largest misfit an extension mends in the '
+                  'project\'s cases; a 1 % speed slip on the SUV\'s herringbone 0.23 of the dataset\'s')),
+    Setting('adequacy.gross_bounds', 3, 'parameters',
+            ('a first fit ending with this many free parameters at their search bounds misses grossly (the bounds, '
+             'not the data, decided them)'),
+            'docs/model-choice.md#a-gross-first-fit-the-set-up-first',
+            'tests/test_priors.py::test_a_gross_first_fit_stops_before_the_model_choice_with_the_set_up_first',
+            measured=False),
+    Setting('anyroad.motion_named', 3.0, 'prior std',
+            ('a run\'s speed, start or track size estimated this many of its prior\'s std from the declared value '
+             'is named with the run and the value the data show (SPEC §13)'),
+            'docs/tracks-as-built.md#every-runs-speed-and-start-with-their-priors-spec-13',
+            'tests/test_priors.py::test_a_motion_record_names_a_value_beyond_three_prior_std',
+            measured=False),
     Setting('anyroad.joint_motion_bound', 30.0, 'asbuilt.motion_scale units',
             ("the joint solve's speed and start unknowns (asbuilt.motion_scale units): their bounds either side of "
              'the placement they start from, and their finite-difference steps (asbuilt.motion_jacobian_steps)'),
@@ -636,6 +656,9 @@ NOT_SETTINGS: dict[str, str] = {
     "sensitivity.P2R_STARS": "display: the report's star ratings of the sensitivity maps (docs/report.md)",
     "sensitivity.R2T_STARS": "display: the report's star ratings of the sensitivity maps (docs/report.md)",
     "sensitivity.P2T_STARS": "display: the report's star ratings of the sensitivity maps (docs/report.md)",
+    "asbuilt.SIZE_PRIOR_WEIGHT": "a mathematical constant: sqrt(1/2), a complex residual's real and imaginary "
+                                 "parts' share of its variance (its comment)",
+    "frequency.STEP": "a numerical stencil: the relative step of the central differences of |H|",
     "roadstaged.HOLD_FIX": "a numerical stencil: the first-order-hold correction filter (module docstring)",
     "roadstaged.LOWPASS_HZ": "the compared time-domain road method (docs/road-methods.md#tuning), run by "
                              "benchmarks/road_methods.py only, not by rideid identify",

@@ -42,10 +42,10 @@ from ..data.schema.channels import SI, UNITS, quantity
 from ..model.equations import CHANNELS
 from ..model.sensors import SensorChain
 from .nominal import Job, gather, responses, run_steps
-from .speed import speed_finding, speed_summary, window_lags
+from .speed import STEADY, WANDER_MAX, speed_finding, speed_summary, window_lags
 from .starts import correlation_score, feature_span, start_check_steps, start_steps
-from .wiring import (axle_amplitude_findings, corrected, describe_fix, fix_entries, lead_in_units, unit_findings,
-                     wiring_fix)
+from .wiring import (axle_amplitude_findings, corrected, describe_fix, fix_entries, gyro_or_accelerations,
+                     lead_in_units, unit_findings, wiring_fix)
 
 #: a moving run's nominal response starts at rest this long (s) before the first sample: the nominal car's
 #: slowest mode decays to 1e-3 in 2.4-2.7 s on the built-in car, the SUV and the van of the tests
@@ -340,10 +340,60 @@ def _check_run(ds, r):
             out += units
             return out  # a flat road excites nothing: nothing to check the data against
         Y, Yhat = _as_recorded(ds, rid, Y, Yhat)
+    # SPEC §13: a declared speed is a prior, not a fact. The speed the data show (the lags against the nominal
+    # response) is tried before the wiring: a speed slip moves the road under the rear wheels against the front
+    # ones and reads as swapped axle channels, so the road-driven comparisons below are made at that speed
+    seen = shifted = None
+    declared = (Y, Yhat)
+    if Yhat is not None and start_off is None and rd.distance is None and not r.moving and r.speed:
+        line = lag_line(ds, rid, Y, Yhat)
+        seen = speed_seen(ds, rid, Y, Yhat, line)
+        shifted = start_seen(line, rd.fs) if seen is None else None
     # with the start off, the rigid-body identities alone (they need no road) judge the wiring
     wire = (wiring_fix(Y, None if start_off is not None else Yhat, rd.fs, geom, _entry_factors(entries),
                        unit_known) if wiring != "off" else None)
+    if seen is None and shifted is not None and ((wire and wire["fix"])
+                                                  or _score(Y, Yhat) < defaults["checks.match_min"]):
+        # a start off by some samples moves the road under every wheel alike, and a herringbone's or a twist's
+        # left-right pattern with it: tried before a re-wiring is proposed
+        (Yhat_s,) = responses((yield [_nominal_job(track, t - shifted, r.speed, None)]))
+        Y_s, Yhat_s = _as_recorded(ds, rid, rd.matrix(), Yhat_s)
+        wire_s = wiring_fix(Y_s, Yhat_s, rd.fs, geom, _entry_factors(entries), unit_known) if wiring != "off" \
+            else None
+        if not (wire_s and wire_s["fix"]) and _score(Y_s, Yhat_s) >= defaults["checks.match_min"]:
+            wire, Y, Yhat = wire_s, Y_s, Yhat_s
+            out.append(Finding(WARNING, "track", f"run '{rid}': the data match the track with the front axle at "
+                               f"x = 0 at {shifted:+.4f} s of the run's time, not at its start ({1e3 * shifted:+.1f} "
+                               "ms): check the run's start (a SPEC CSV's time 0, a logger file's start); the fit "
+                               "estimates it with the car (SPEC §13)", rid, "start", {"start_shift": shifted}))
+    if seen is not None:
+        # the wiring at the speed the data show: a re-wiring that speed makes needless is never proposed, and the
+        # checks below compare at that speed; a speed that breaks a wiring the declared one found right is not
+        # the data's (a wandering run's mean): the declared speed's comparisons stand
+        (Yhat_s,) = responses((yield [_nominal_job(track, t - seen[2], seen[0], None)]))
+        Y_s, Yhat_s = _as_recorded(ds, rid, rd.matrix(), Yhat_s)
+        wire_s = wiring_fix(Y_s, Yhat_s, rd.fs, geom, _entry_factors(entries), unit_known) if wiring != "off" \
+            else None
+        if not (wire_s and wire_s["fix"]):
+            wire, Y, Yhat = wire_s, Y_s, Yhat_s
+            # once more against the response at that speed: the nominal car's phase differs between the declared
+            # speed's frequencies and the data's, which biased the first line (the washboard at 10 m/s declared
+            # 10.1: 10.012 m/s, then 10.00x)
+            again = lag_line(ds, rid, Y_s, Yhat_s)
+            if again is not None:
+                seen = (seen[0] * (1.0 + again["slope"]), seen[1], seen[2])
+            f = speed_prior_finding(rid, r, seen)
+            if f is not None:
+                out.append(f)
+        elif not (wire and wire["fix"]):
+            seen = None
     Yc = Y
+    scale = gyro_or_accelerations(Y, Yhat, wire["fix"]) if wire and wire["fix"] and Yhat is not None else None
+    if scale is not None and scale["side"] != "gyros":
+        # the rigid body says the gyros and the accelerometers disagree by g; the nominal car says which
+        out += units
+        out.append(_scale_finding(rid, scale, entries, wiring))
+        return out
     if wire and wire["fix"]:
         units = [f for f in units if f.channel not in wire["fix"]]
         Yc = corrected(Y, wire["fix"])
@@ -385,10 +435,124 @@ def _check_run(ds, r):
         f = match_finding(rid, r.track, r.speed, rho, (yield from _alternatives(ds, rid)))
         out.append(_at_level(ds, rid, f))
     elif rd.distance is None and not r.moving and r.speed:
-        f = speed_held(ds, rid, Yc, Yhat)
+        # judged at the declared speed, as the lags were read; a steady speed the data put elsewhere is the
+        # prior's to weigh (SPEC §13: estimated with the car, named above), a wandering one is refused (SPEC §11)
+        f = speed_held(ds, rid, Yc if seen is None else declared[0], declared[1], steady_ok=seen is not None)
         if f is not None:
             out.append(_at_level(ds, rid, f))
     return out
+
+
+#: SPEC §13: the speed the lags show (:func:`speed_seen`) is taken for the checks' nominal response when it
+#: departs from the declared one by at least this share (below it a run's lags are within what a car other than
+#: the nominal one puts into them: 0.1-0.3 % on runs held at their speed, docs/common-mistakes.md) and by more
+#: than SEEN_Z times its own standard error
+SEEN_MIN = 0.004
+SEEN_Z = 3.0
+SEEN_FLOOR = 0.001
+
+
+def lag_line(ds, rid, Y, Yhat) -> dict | None:
+    """The straight line through the lags of a run at a declared constant speed against the nominal response at
+    that speed (:func:`speed_lags`), weighted by each window's ``sigma``: data at ``t`` like the response at
+    ``t + l0 + l' t`` are a speed ``v (1 + l')`` from the time ``shift = -l0 / (1 + l')`` (a start estimated at the
+    declared speed moves with it). Returns ``{"slope", "slope_std", "shift", "shift_std"}`` (the errors from the
+    lags' scatter about the line: each window's sigma bounds what the nominal car can move its peak by, but that
+    error is common to the windows, a car's lag on the same road, which the intercept takes up; the slope's floored
+    at :data:`SEEN_FLOOR`, four windows leaving two degrees of freedom), or None (fewer than three windows)."""
+    w = speed_lags(ds, rid, Y, Yhat)
+    if w is None:
+        return None
+    t, lag, sig = (np.asarray(w[k], dtype=float) for k in ("t", "lag", "sigma"))
+    ok = np.isfinite(lag) & np.isfinite(sig) & (sig > 0)
+    if ok.sum() < 3:
+        return None
+    t, lag, wt = t[ok], lag[ok], 1.0 / sig[ok] ** 2
+    tm = float(np.sum(wt * t) / np.sum(wt))
+    sxx = float(np.sum(wt * (t - tm) ** 2))
+    if not sxx > 0:
+        return None
+    slope = float(np.sum(wt * (t - tm) * lag) / sxx)
+    lag0 = float(np.sum(wt * lag) / np.sum(wt)) - slope * tm
+    e = lag - (lag0 + slope * t)
+    s2 = float(np.sum(wt * e ** 2) / max(t.size - 2, 1))
+    return {"slope": slope, "slope_std": max(float(np.sqrt(s2 / sxx)), SEEN_FLOOR), "shift": -lag0 / (1.0 + slope),
+            "shift_std": float(np.sqrt(s2 * (1.0 / np.sum(wt) + tm ** 2 / sxx)))}
+
+
+def speed_seen(ds, rid, Y, Yhat, line: dict | None = None) -> tuple[float, float, float] | None:
+    """The constant speed (m/s) the data of a run at a declared constant speed show, its standard error, and the
+    start's offset (s) that goes with it (:func:`lag_line`, or its ``line``). None when the lags cannot tell
+    (fewer than three windows) or the speed is within :data:`SEEN_MIN` of the declared one or :data:`SEEN_Z` of
+    its standard error."""
+    line = lag_line(ds, rid, Y, Yhat) if line is None else line
+    if line is None:
+        return None
+    slope, std = line["slope"], line["slope_std"]
+    v = float(ds.manifest.run(rid).speed)
+    if abs(slope) < SEEN_MIN or abs(slope) < SEEN_Z * std:
+        return None
+    return v * (1.0 + slope), v * std, line["shift"]
+
+
+def start_seen(line: dict | None, fs: float) -> float | None:
+    """The start's offset (s) the lags show at the declared speed (:func:`lag_line`) when it exceeds half a sample
+    and :data:`SEEN_Z` of its error; None otherwise. Only tried where the comparison at the declared start fails
+    (a re-wiring proposed, or no match): a car other than the nominal one lags the road by a few ms itself (7 ms
+    on the twist at 5 m/s, tests/asbuilt_tracks.py's SUV)."""
+    if line is None or abs(line["shift"]) <= max(0.5 / fs, SEEN_Z * line["shift_std"]):
+        return None
+    return float(line["shift"])
+
+
+#: the severity of a finding that is recorded (result.json ``checks``) but neither warned of nor refused
+NOTE = "note"
+
+
+def speed_prior_finding(rid: str, run, seen: tuple[float, float]) -> Finding | None:
+    """SPEC §13: the finding of a run whose data show another speed than the declared one (:func:`speed_seen`): the
+    fit starts from the speed the data show (its ``fix``) and estimates it with the car, the declared value its
+    prior. A warning naming the run and the speed when that lies more than 3 of the prior's std from the declared
+    one, else a note (recorded, not warned of: the prior covers it)."""
+    pr = run.speed_prior()
+    if pr is None:
+        return None
+    file = getattr(run, "file", None)
+    fix = {"speed": float(seen[0]), "std": float(seen[1])}
+    dec = max(0, 1 - int(np.floor(np.log10(seen[1])))) if seen[1] > 0 else 3
+    shown = f"{seen[0]:.{dec}f} ± {seen[1]:.{dec}f}"
+    if abs(seen[0] - pr[0]) <= 3.0 * pr[1]:
+        return Finding(NOTE, "speed", f"run '{rid}': declared speed {pr[0]:g} ± {pr[1]:.2g} m/s, the data match the "
+                       f"track at {shown} m/s: the fit starts from there", rid, "speed", fix)
+    width = "its declared std" if pr[2] else "the default width of a declared speed, docs/formats.md"
+    return Finding(WARNING, "speed", f"run '{rid}'{f' ({file})' if file else ''}: declared speed {pr[0]:g} m/s, "
+                   f"the data match the track at {shown} m/s ({100 * (seen[0] / pr[0] - 1):+.2f} "
+                   f"%, more than 3 times {width}, {pr[1]:.2g} m/s): the fit starts from {seen[0]:.{dec}f} m/s and "
+                   "estimates the speed with the car; check the run's speed", rid, "speed", fix)
+
+
+def _scale_finding(rid: str, scale: dict, entries: dict, wiring: str) -> Finding:
+    """The finding of :func:`rideid.conditioning.wiring.gyro_or_accelerations`: the accelerometers named with the
+    fix when their amplitudes, restored, and the gyros' agree with the nominal car; else no fix, both named."""
+    sev = ERROR if wiring == "error" else WARNING
+    ratios = scale["ratios"]
+    gyro = (f"the gyros' {scale['gyro_ratio']:.2g}x")
+    if scale["side"] == "accelerations":
+        fix = {c: {"source": c, "factor": scale["factor"]} for c in scale["channels"]}
+        unit = "g" if scale["factor"] > 1 else "m/s^2 where g is written"
+        acc = ", ".join(scale["channels"])
+        return Finding(sev, "wiring", f"run '{rid}': the accelerations read {scale['factor']:.3g}x too "
+                       f"{'small' if scale['factor'] > 1 else 'large'}: {acc} look written in {unit} (their amplitude "
+                       f"{scale['body_ratio']:.2g}x the nominal car's on this road, {gyro}; the body accelerometers "
+                       f"and the gyros then agree as one rigid body and with the nominal car). Fix the channel map: "
+                       f"{'; '.join(fix_entries(fix, entries))} (or set [checks] wiring = \"warn\" if the map is "
+                       "right)", rid, scale["channels"][0], fix)
+    acc = ", ".join(f"{c} {ratios[c]:.2g}x" for c in scale["channels"])
+    return Finding(sev, "wiring", f"run '{rid}': the body accelerometers and the gyros disagree by g "
+                   f"({1 / scale['factor']:.3g}): the accelerations or the gyros are in the wrong unit, and their "
+                   f"amplitudes against the nominal car on this road ({acc}; {gyro}) do not say which: check the "
+                   "units of the accelerometers and the gyros in the channel map (or set [checks] wiring = \"warn\" "
+                   "if the map is right)", rid, "pitch_rate")
 
 
 def speed_lags(ds, rid, Y, Yhat) -> dict | None:
@@ -426,15 +590,19 @@ def speed_summaries(ds, car=None, simulator=None) -> dict:
     return run_steps(step(), ds.geometry, car, None if simulator is None else simulator.linear())
 
 
-def speed_held(ds, rid, Y, Yhat) -> Finding | None:
+def speed_held(ds, rid, Y, Yhat, steady_ok: bool = False) -> Finding | None:
     """SPEC §11, speed as driven: the error refusing a run without a speed channel whose speed wanders (or
-    differs from the declared one), as its lags against the nominal response show (:mod:`rideid.conditioning.speed`)."""
+    differs from the declared one), as its lags against the nominal response show (:mod:`rideid.conditioning.speed`).
+    ``steady_ok``: a steady speed other than the declared one is not refused (SPEC §13: the fit starts from the
+    speed the data show, :func:`speed_seen`, and estimates it with the car); a wandering one still is."""
     w = speed_lags(ds, rid, Y, Yhat)
     summary = None if w is None else speed_summary(w)
     if summary is None:
         return None
     r = ds.manifest.run(rid)
     file = getattr(r, "file", None)
+    if steady_ok and summary["wander"] <= STEADY * WANDER_MAX:
+        return None
     return speed_finding(rid, f" ({file})" if file else "", float(r.speed), summary)
 
 
@@ -476,7 +644,8 @@ def _given_start(ds, rid, mr, track):
 
 
 __all__ = ["NOMINAL_LEAD_IN", "check_coverage", "check_dataset", "check_reach", "check_steps",
-           "feature_span", "match_finding", "speed_candidates", "speed_summaries", "start_finding"]
+           "feature_span", "match_finding", "speed_candidates", "speed_summaries", "start_finding", "speed_seen",
+           "speed_prior_finding", "SEEN_MIN"]
 
 
 #: the constants this module had before rideid.settings, read from the registry (PEP 562)

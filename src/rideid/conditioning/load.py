@@ -93,7 +93,23 @@ def align_starts(ds: Dataset, starts: dict[str, float | dict] | None = None, car
     with using(dict(getattr(ds.manifest, "settings", None) or {})):  # the dataset's [settings] (rideid.settings)
         ds, findings = run_steps(step, ds.geometry, car, None if simulator is None else simulator.linear())
     enforce(findings, f"{ds.manifest.path}: ")
-    return replace(ds, findings=findings)
+    return replace(_seen_speeds(ds, findings), findings=findings)
+
+
+def _seen_speeds(ds: Dataset, findings) -> Dataset:
+    """SPEC §13: each run whose data put its speed beyond the declared value's prior (a ``speed`` warning with
+    the speed the data show, :func:`rideid.conditioning.checks.speed_prior_finding`) is fitted from that speed;
+    the declared one stays its prior (``RunSpec.declared_speed``)."""
+    seen = {f.run: f.fix["speed"] for f in findings if f.check == "speed" and f.fix and "speed" in f.fix}
+    if not seen:
+        return ds
+    man = ds.manifest
+    runs = tuple(replace(r, speed=seen[r.id], declared_speed=r.speed if r.declared_speed is None
+                         else r.declared_speed) if r.id in seen else r for r in man.runs)
+    # a logger file's run: its starts are estimated again with the car at this speed (the polish)
+    measured = {rid: replace(mr, speed=seen[rid]) if rid in seen and mr.speed is not None else mr
+                for rid, mr in ds.measured.items()}
+    return replace(ds, manifest=replace(man, runs=runs), measured=measured)
 
 
 def _aligned(ds: Dataset, starts: dict[str, float | dict] | None):

@@ -547,6 +547,60 @@ def axle_amplitude_findings(run_id: str, entries: dict, Y: np.ndarray, Yhat: np.
     return out
 
 
+def _rms_ratio(Y: np.ndarray, Yhat: np.ndarray, i: int) -> float:
+    """RMS of measured channel ``i`` over the nominal car's on the same road (NaN: missing or no response)."""
+    y, yh = Y[:, i], Yhat[:, i]
+    if np.all(np.isnan(y)):
+        return float("nan")
+    den = float(np.sqrt(np.mean(yh * yh)))
+    return float(np.sqrt(np.nanmean(y * y))) / den if den > 0 else float("nan")
+
+
+def gyro_or_accelerations(Y: np.ndarray, Yhat: np.ndarray, fix: dict) -> dict | None:
+    """Which of the gyros or the accelerometers is off in scale, when the rigid-body identities say the two
+    disagree by g (:func:`wiring_fix` proposes both gyro channels scaled by 1/g or g: all four body accelerations
+    off by g look exactly like that), decided from absolute amplitudes against the nominal car on the same road.
+
+    The rigid-body identities fix only the ratio of the two; the nominal car fixes the scale: a real car's
+    response differs from the nominal one's by far less than g (:data:`AMPLITUDE_BAND`). The gyros' ratio to the
+    nominal car and the accelerometers' (the median over the body and axle channels, and each axle channel
+    judged on its own: hub sensors may be in the other unit) are compared under both hypotheses; the one that
+    brings them within the band of the nominal car is taken. Returns None when ``fix`` is not that gyro scale;
+    else ``{"side": "accelerations" | "gyros" | None (neither checks out), "channels": [...] (the accelerometers
+    off), "factor": f (what restores them), "ratios": {channel: ratio}}``.
+    """
+    gy = [c for c in ("pitch_rate", "roll_rate") if c in fix]
+    if not gy or any(c not in ("pitch_rate", "roll_rate") for c in fix) or any(
+            fix[c]["source"] != c for c in gy):
+        return None
+    f = abs(float(fix[gy[0]]["factor"]))
+    if not any(abs(f * k - 1.0) < 1e-6 for k in (G0, 1 / G0)) or any(abs(abs(fix[c]["factor"]) - f) > 1e-9 * f
+                                                                         for c in gy):
+        return None
+    r = {c: _rms_ratio(Y, Yhat, i) for i, c in enumerate(CHANNELS)}
+    gyro = float(np.nanmedian([r[c] for c in ("pitch_rate", "roll_rate")]))
+    body = [c for c in CHANNELS[:4] if np.isfinite(r[c]) and r[c] > 0]
+    if not body or not np.isfinite(gyro) or gyro <= 0:
+        return None
+    b = float(np.median([r[c] for c in body]))
+    # the accelerometers off by 1/f (the gyro fix's inverse): the body ones for sure, an axle one when it reads
+    # like the body ones rather than like the gyros
+    axles = [c for c in CHANNELS[4:8] if np.isfinite(r[c]) and r[c] > 0
+             and abs(np.log(r[c] / b)) < abs(np.log(r[c] / (b / f)))]
+    acc = body + axles
+
+    def fits(q):
+        return 1 / defaults["wiring.amplitude_band"] < q < defaults["wiring.amplitude_band"]
+
+    if fits(b / f) and fits(gyro) and all(fits(r[c] / f) for c in axles):
+        side = "accelerations"
+    elif fits(b) and fits(gyro * f):
+        side = "gyros"
+    else:
+        side = None
+    return {"side": side, "channels": acc, "factor": 1.0 / f, "ratios": r, "gyro_ratio": gyro, "body_ratio": b}
+
+
 def fix_entries(fix: dict, entries: dict) -> list[str]:
     """``[channels]`` lines (TOML) that apply a wiring fix to the map the run was read with."""
     lines = []
@@ -586,7 +640,8 @@ def fix_entries(fix: dict, entries: dict) -> list[str]:
     return lines
 
 
-__all__ = ["assignment", "axle_amplitude_findings", "best_assignment", "corrected", "describe_fix", "fix_entries",
+__all__ = ["gyro_or_accelerations", "assignment",
+           "axle_amplitude_findings", "best_assignment", "corrected", "describe_fix", "fix_entries",
            "lead_in_units", "lowpass_gram", "rigid_body_scores", "unit_findings", "wiring_fix"]
 
 

@@ -63,9 +63,15 @@ _ADVICE_HEAD = ("The residuals carry road-driven structure the model does not ex
 _ADVICE_CHECKS = ("check that the track in dataset.toml (kind, start, height, wavelength) is the one driven and "
                   "that each run's start is right; check the run/channel pairs named above for a wrong sign, unit, "
                   "axis or a loose sensor.")
+#: SPEC §13: the set-up first, which no model extension mends (a 1 % speed slip left the base model, and every
+#: extension after it, not adequate, where its speed estimated with the car fits)
+_ADVICE_SETUP = ("the set-up first, which no model extension mends: each run's speed and start (declared values are "
+                 "priors: result.json tracks.<track>.runs.<run>.motion and the load's warnings say where the data put "
+                 "them), the sample rate, each channel's unit (accelerations in m/s^2, gyros in rad/s) and sign, and "
+                 "its sensor chain (highpass, lowpass); ")
 #: the advice when the model lacks extension groups and --model auto has not weighed them (see :func:`advice`)
-ADVICE = (_ADVICE_HEAD + "Try: `rideid identify --model auto` (or `--model full`) to let anti-roll bars and tire "
-          "damping in; " + _ADVICE_CHECKS)
+ADVICE = (_ADVICE_HEAD + "Try " + _ADVICE_SETUP + _ADVICE_CHECKS + " Then `rideid identify --model auto` (or "
+          "`--model full`) to let anti-roll bars and tire damping in.")
 #: added to the advice when the model has damper curves: where their straight segments miss the real curve
 KNOT_ADVICE = ("The damper curves are straight between their knots: a real curve that bends between two knots "
                "leaves road-driven structure, so try knots where it bends (`[model] damper_knots` in dataset.toml, "
@@ -417,8 +423,56 @@ def advice(model: dict | None) -> str:
     else:
         return ADVICE + (" " + knots.rstrip() if knots else "")
     lacks = [what for group, what in _LACKS if group not in ext] + ["a flexible body"]
-    return (_ADVICE_HEAD + tried + knots + "Try: " + _ADVICE_CHECKS + " Or the car has what the model lacks ("
+    return (_ADVICE_HEAD + tried + knots + "Try " + _ADVICE_SETUP + _ADVICE_CHECKS + " Or the car has what the "
+            "model lacks ("
             + ", ".join(lacks) + ").")
+
+
+def gross_misfit(run_errors: dict, at_bound: list, findings=()) -> dict | None:
+    """The verdict of a first fit far beyond what any model extension could explain (SPEC §13): a run whose
+    error exceeds setting ``adequacy.gross_error``, or setting ``adequacy.gross_bounds`` parameters at their search
+    bounds; None otherwise.
+
+    ``run_errors``: run id -> relative squared error of the first fit; ``at_bound``: the parameters at a bound;
+    ``findings``: the load's findings (:class:`rideid.data.checks.Finding`), whose speed notes name what the data
+    said of each run's set-up. The verdict (``adequate`` False, ``gross_misfit``, ``reasons``, ``advice``) names
+    the runs, then the set-up to check (speed, start, rate, units, sensor chain), before any extension."""
+    gross_error, gross_bounds = defaults["adequacy.gross_error"], defaults["adequacy.gross_bounds"]
+    bad = {rid: float(e) for rid, e in run_errors.items() if np.isfinite(e) and e > gross_error}
+    if not bad and len(at_bound) < gross_bounds:
+        return None
+    reasons = []
+    if bad:
+        worst = sorted(bad, key=lambda r: -bad[r])
+        reasons.append("the first fit leaves " + ", ".join(f"{100 * bad[r]:.0f} % of run {r}'s signal" for r in worst)
+                       + f" unexplained (an extension mends at most about {100 * gross_error / 3:.0f} %)")
+    if len(at_bound) >= gross_bounds:
+        reasons.append(f"{len(at_bound)} parameters ended at their search bounds ({', '.join(at_bound)})")
+    seen = [f.message for f in findings if getattr(f, "check", None) == "speed"]
+    advice = ("This is far beyond what a model extension explains, so the model choice was not run: check "
+              + _ADVICE_SETUP + _ADVICE_CHECKS
+              + (" What loading found of the speeds: " + " ".join(seen) if seen else ""))
+    return {"adequate": False, "gross_misfit": {"run_errors": {r: float(e) for r, e in run_errors.items()},
+                                                "at_bound": list(at_bound), "threshold": gross_error,
+                                                "bounds_threshold": gross_bounds},
+            "reasons": reasons, "advice": advice}
+
+
+def run_errors(ds, response: dict) -> dict:
+    """Run id -> the relative squared error of the fitted ``response`` (run id -> (n, 10), NaN where not fitted):
+    the squared residual over the squared data, over the samples and channels both have."""
+    out = {}
+    for rid, yhat in (response or {}).items():
+        if rid not in ds.data:
+            continue
+        y = ds.data[rid].matrix()
+        yhat = np.asarray(yhat, dtype=float)
+        if yhat.shape != y.shape:
+            continue
+        ok = np.isfinite(y) & np.isfinite(yhat)
+        den = float(np.sum(np.where(ok, y, 0.0) ** 2))
+        out[rid] = float(np.sum(np.where(ok, y - yhat, 0.0) ** 2)) / den if den > 0 else float("nan")
+    return out
 
 
 def advise(adequacy: dict | None, model: dict | None) -> dict | None:
@@ -440,4 +494,5 @@ __getattr__ = legacy_names(__name__, {
     "MIN_IMPROVEMENT": min_improvement,
     "LAGS": "adequacy.lags", "ALPHA": "adequacy.alpha", "MIN_EXPLAINED": "adequacy.min_explained", "LOUD_SHARE":
     "adequacy.loud_share", "MIN_RELATIVE": "adequacy.min_relative", "AR_MAX": "adequacy.ar_max",
-    "WHITENESS_LAGS": "adequacy.whiteness_lags", "MIN_QUIET": "adequacy.min_quiet"})
+    "WHITENESS_LAGS": "adequacy.whiteness_lags", "MIN_QUIET": "adequacy.min_quiet",
+    "GROSS_ERROR": "adequacy.gross_error", "GROSS_BOUNDS": "adequacy.gross_bounds"})

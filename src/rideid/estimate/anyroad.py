@@ -294,10 +294,19 @@ class _Problem:
         self.size = sum(self.sizes)
 
 
-def _joint_solve(prob, z, along: dict, ds, max_nfev: int):
-    """Least squares of the car ``z`` (v units) together with the speed and the start of each run along a speed
-    channel (``along``: block index in ``prob.rruns`` -> run; the drawing moved by
-    :func:`rideid.estimate.asbuilt.moved`, their priors as they are).
+def _motion_weights(prob, z, keys) -> dict:
+    """Each run's (block index in ``prob.rruns``) residual level at the car ``z``: the RMS of its as-built block,
+    the weight its motion priors' rows take (:meth:`rideid.estimate.asbuilt.MotionPrior.rows`)."""
+    P = prob.space.full(prob.x(z)[None])[0]
+    return {k: float(np.sqrt(np.mean(asbuilt.residuals(P, prob.geom, prob.rruns[k]) ** 2))) for k in keys}
+
+
+def _joint_solve(prob, z, along: dict, ds, max_nfev: int, priors: dict | None = None):
+    """Least squares of the car ``z`` (v units) together with the speed and the start of each run on a track as
+    built (``along``: block index in ``prob.rruns`` -> run; the drawing moved by
+    :func:`rideid.estimate.asbuilt.moved`, their unevenness priors as they are), each set-up value's prior
+    (``priors``: block index -> :class:`rideid.estimate.asbuilt.MotionPrior`, SPEC §13) a residual block of the
+    same solve, weighted by its std against the run's own residual level.
 
     Placed by :func:`rideid.estimate.asbuilt.align_motion` at one car and then held, a run's speed follows that
     car, and the car the speed: on the all-realities case without an engine (seed 5, model base) the speeds
@@ -308,6 +317,8 @@ def _joint_solve(prob, z, along: dict, ds, max_nfev: int):
     d = z.size
     keys = list(along)
     base = {k: prob.rruns[k] for k in keys}
+    priors = priors or {}
+    weights = _motion_weights(prob, z, [k for k in keys if k in priors])
 
     def place(w):
         for j, k in enumerate(keys):
@@ -315,7 +326,9 @@ def _joint_solve(prob, z, along: dict, ds, max_nfev: int):
 
     def fun(w):
         place(w)
-        return prob(w[:d])
+        rows = [priors[k].rows(base[k].rr.speed, base[k].shift, w[d + 2 * j:d + 2 * j + 2], weights[k])
+                for j, k in enumerate(keys) if k in priors]
+        return np.concatenate([prob(w[:d])] + rows)
 
     q = 2 * len(keys)
     lo = np.concatenate([prob.vbounds[0], np.full(q, -defaults["anyroad.joint_motion_bound"])])
@@ -332,35 +345,49 @@ def _joint_solve(prob, z, along: dict, ds, max_nfev: int):
     return OptimizeResult(dict(sol, x=sol.x[:d], motion=sol.x[d:])), moved
 
 
-def _with_motion(prob, z, H, Ja, S, s2, trs, along, ds, geom):
-    """The error bars with the speed and the start of each run along a speed channel (placed by
+def _with_motion(prob, z, H, Ja, S, s2, trs, along, ds, geom, priors: dict | None = None):
+    """The error bars with the speed and the start of each run on a track as built (placed by
     :func:`rideid.estimate.asbuilt.align_motion`, solved with the car by :func:`_joint_solve`, then held for the
     Newton steps and the Hessian) as nuisance parameters of the same sandwich: their residual columns
     (:func:`rideid.estimate.asbuilt.motion_jacobian`) join the car's, the bread
-    ``[[H, Ja^T Jm], [Jm^T Ja, Jm^T Jm]]`` (the car's block the true Hessian, the rest Gauss-Newton: the
-    drawing's inputs are not projected, so ``J^T J`` is their curvature), the meat the runs' white meat over
-    both; the car's block of the inverse is the car's covariance with the motion marginalised.
+    ``[[H, Ja^T Jm], [Jm^T Ja, Jm^T Jm + Jp^T Jp]]`` (the car's block the true Hessian, the rest Gauss-Newton: the
+    drawing's inputs are not projected, so ``J^T J`` is their curvature; ``Jp`` the set-up priors' rows, SPEC §13,
+    ``priors``: index in ``trs`` -> :class:`rideid.estimate.asbuilt.MotionPrior`), the meat the runs' white meat
+    over both (the priors' rows as independent observations of the same level); the car's block of the inverse is
+    the car's covariance with the motion marginalised.
 
     Returns the white and robust covariances (car's parameters, x units) and per run
     ``{"speed_std_m_s", "start_shift_std_s"}``."""
     n = Ja.shape[1]
+    priors = priors or {}
     index = {id(rr): k for k, rr in enumerate(prob.rruns)}
     offs = np.concatenate([[0], np.cumsum(prob.sizes)])
     first = int(prob.cf is not None)
     P = prob.space.full(prob.x(z)[None])[0]
     q = 2 * len(along)
     Jm = np.zeros((Ja.shape[0], q))
+    Jp = np.zeros((0, q))
     for j, (i, r) in enumerate(along.items()):
         k = index[id(trs[i])] + first
         Jm[offs[k]:offs[k + 1], 2 * j:2 * j + 2] = asbuilt.motion_jacobian(P, geom, trs[i], ds, r)
+        if i in priors:
+            w = float(np.sqrt(s2))
+            rows = np.zeros((0, q))
+            pj = priors[i].jacobian(trs[i].rr.speed, w)
+            if pj.size:
+                rows = np.zeros((pj.shape[0], q))
+                rows[:, 2 * j:2 * j + 2] = pj
+            Jp = np.vstack([Jp, rows])
     cross = Ja.T @ Jm
-    Hf = np.block([[H, cross], [cross.T, Jm.T @ Jm]])
-    Sf = np.block([[S, s2 * cross], [s2 * cross.T, s2 * (Jm.T @ Jm)]])  # white meat of the as-built blocks
+    prior_info = Jp.T @ Jp
+    Hf = np.block([[H, cross], [cross.T, Jm.T @ Jm + prior_info]])
+    Sf = np.block([[S, s2 * cross], [s2 * cross.T, s2 * (Jm.T @ Jm + prior_info)]])  # white meat of the blocks
     Hinv = _pinv(Hf)
     D = np.diag(np.concatenate([prob.dxdv(z), np.ones(q)]))
     Jf = np.concatenate([Ja, Jm], axis=1)
     m = Ja.shape[0]
-    cov = (D @ Hinv @ (s2 * Jf.T @ Jf) @ Hinv @ D)
+    cov = (D @ Hinv @ (s2 * (Jf.T @ Jf + np.block([[np.zeros((n, n)), np.zeros((n, q))],
+                                                     [np.zeros((q, n)), prior_info]]))) @ Hinv @ D)
     rob = D @ Hinv @ Sf @ Hinv @ D * (m / max(m - n - q, 1))
     out = {}
     for j, (i, r) in enumerate(along.items()):
@@ -368,6 +395,94 @@ def _with_motion(prob, z, H, Ja, S, s2, trs, along, ds, geom):
         out[r.id] = {"speed_std_m_s": float(trs[i].rr.speed * np.sqrt(max(rob[a, a], 0.0))),
                      "start_shift_std_s": float(np.sqrt(max(rob[a + 1, a + 1], 0.0)))}
     return cov[:n, :n], rob[:n, :n], out
+
+
+
+
+def motion_record(fitted: dict, prior, tr) -> dict:
+    """A run's ``motion`` record of result.json (SPEC §13): ``speed`` and ``start``, each ``{"estimate", "std",
+    "declared", "prior_std", "prior"}`` (``declared`` None where nothing was declared: a speed channel's run, a
+    start estimated at load; ``prior``: "declared" with its std, "default" width, or "none"), ``named``: the
+    sentences naming what the data moved beyond setting ``anyroad.motion_named`` prior std; with the older keys of a
+    run along a speed channel (``speed_m_s``, ``start_shift_s``, their ``_std``, ``speed_channel_mean_m_s``).
+
+    ``fitted``: :func:`rideid.estimate.asbuilt.align_motion`'s record with the solve's speed, shift and their
+    standard errors; ``prior``: the run's :class:`rideid.estimate.asbuilt.MotionPrior`; ``tr``: its
+    :class:`rideid.estimate.asbuilt.TrackRun` as solved."""
+    out = {k: v for k, v in fitted.items() if k in ("speed_m_s", "start_shift_s", "speed_std_m_s",
+                                                    "start_shift_std_s")}
+    if prior.speed is None:
+        out["speed_channel_mean_m_s"] = fitted.get("speed_channel_mean_m_s")
+    v, sv = float(fitted["speed_m_s"]), fitted.get("speed_std_m_s")
+    read = 0.0 if prior.start is None else prior.start[0]
+    start0 = read if prior.start is not None else float(fitted.get("start_read_s", 0.0))
+    st, sst = start0 + float(fitted["start_shift_s"]), fitted.get("start_shift_std_s")
+
+    def entry(est, std, pr, unit):
+        e = {"estimate": est, "std": std, "unit": unit, "declared": None if pr is None else pr[0],
+             "prior_std": None if pr is None else pr[1],
+             "prior": "none" if pr is None else ("declared" if pr[2] else "default")}
+        if pr is not None and pr[1] > 0:
+            e["from_declared_in_prior_std"] = (est - pr[0]) / pr[1]
+        return e
+
+    out["speed"] = entry(v, sv, prior.speed, "m/s")
+    out["start"] = entry(st, sst, prior.start, "s")
+    named = []
+    rid = tr.run_id
+    if prior.speed is not None and abs(v - prior.speed[0]) > defaults["anyroad.motion_named"] * prior.speed[1]:
+        named.append(f"run {rid}: declared speed {prior.speed[0]:.2f} m/s, the data show {_pm(v, sv)} m/s "
+                     f"({100 * (v / prior.speed[0] - 1):+.2f} %, {abs(v - prior.speed[0]) / prior.speed[1]:.1f} "
+                     f"times the declared value's std of {prior.speed[1]:.2g} m/s"
+                     f"{'' if prior.speed[2] else ', the default width'})")
+    if prior.start is not None and abs(st - prior.start[0]) > defaults["anyroad.motion_named"] * prior.start[1]:
+        named.append(f"run {rid}: declared start {prior.start[0]:.4f} s, the data show {_pm(st, sst)} s "
+                     f"({1e3 * (st - prior.start[0]):+.1f} ms, {abs(st - prior.start[0]) / prior.start[1]:.1f} "
+                     f"times the declared value's std of {1e3 * prior.start[1]:.2g} ms"
+                     f"{'' if prior.start[2] else ', the default width'})")
+    out["named"] = named
+    return out
+
+
+def _pm(value: float, std: float | None) -> str:
+    """``value ± std`` with the std to two significant digits and the value to the same decimals."""
+    if std is None or not np.isfinite(std) or std <= 0:
+        return f"{value:.4g}"
+    dec = max(0, 1 - int(np.floor(np.log10(std))))
+    return f"{value:.{dec}f} ± {std:.{dec}f}"
+
+
+def with_size(rec: dict, fit, tr, ds) -> dict:
+    """A run's motion record (:func:`motion_record`) with ``size``: the track's drawn size as this run saw it
+    (SPEC §13), ``{"estimate", "std", "unit": "relative", "declared": 1.0, "prior_std", "prior"}`` from the
+    as-built fit ``fit`` (its amplitude factor), named beyond setting ``anyroad.motion_named`` prior std."""
+    if tr.size_std is None:
+        return rec
+    declared = ds.manifest.size_prior(tr.track)[1]
+    e = {"estimate": float(fit.alpha), "std": float(fit.alpha_std), "unit": "relative", "declared": 1.0,
+         "prior_std": float(tr.size_std), "prior": "declared" if declared else "default",
+         "from_declared_in_prior_std": (float(fit.alpha) - 1.0) / tr.size_std}
+    named = [m for m in rec.get("named", []) if "drawn size" not in m]
+    if abs(fit.alpha - 1.0) > defaults["anyroad.motion_named"] * tr.size_std:
+        keys = ds.manifest.tracks[tr.track].keys
+        k = next((k for k in ("amplitude", "height") if k in keys), "size")
+        named.append(f"track {tr.track} (run {tr.run_id}): drawn size {k} = {keys.get(k, float('nan')):g} m, the "
+                     f"data show {_pm(float(fit.alpha), float(fit.alpha_std))} of it "
+                     f"({abs(fit.alpha - 1.0) / tr.size_std:.1f} times the declared size's std of "
+                     f"{100 * tr.size_std:.2g} %{'' if declared else ', the default width'})")
+    return dict(rec, size=e, named=named)
+
+
+def motion_findings(motion: dict) -> list[dict]:
+    """The result's ``checks`` records (check ``"motion"``, a warning) of every set-up value the data moved beyond
+    its prior (:func:`motion_record`'s ``named``): a declared value is never silently moved (SPEC §13)."""
+    def what(m):
+        return next((k for k, w in (("speed", "declared speed"), ("start", "declared start"), ("size", "drawn size"))
+                     if w in m), "speed")
+
+    return [{"severity": "warning", "check": "motion", "message": m + ": estimated with the car (SPEC §13); check "
+             "the run's set-up", "run": rid, "channel": what(m)}
+            for rid, rec in motion.items() for m in rec.get("named", [])]
 
 
 def _search(space, geom, rruns, gen, population, generations, callback, t0):
@@ -528,11 +643,14 @@ def _tracks_block(ds, trs, skipped, P, geom, motion=None):
             rec["runs"][tr.run_id]["clipped_samples_freed"] = {CHANNELS[tr.rr.cols[j]]: int(k)
                                                                for j, k in zip(pos, count)}
         if motion and tr.run_id in motion:
+            motion[tr.run_id] = with_size(motion[tr.run_id], fit, tr, ds)
             rec["runs"][tr.run_id]["motion"] = dict(motion[tr.run_id], note=(
-                "the speed channel's run taken at a constant speed, placed with its start on the track as built "
-                "(rideid.estimate.asbuilt.align_motion), then both solved with the car (anyroad._joint_solve); "
-                "start_shift_s: the start's change from the one read; the _std: their standard errors, in the "
-                "car's error bars as the budget's 'speed and start'"))
+                "the run taken at a constant speed, placed with its start on the track as built "
+                "(rideid.estimate.asbuilt.align_motion), then both solved with the car (anyroad._joint_solve), a "
+                "declared speed and a given start as priors (SPEC §13: declared ± prior_std, the default width "
+                "docs/formats.md); speed, start: the estimate, its std, the declared value; start_shift_s: the "
+                "start's change from the one read; the std are in the car's error bars as the budget's "
+                "'speed and start'"))
     how = {"prior": "the drawing times an amplitude factor plus unevenness whose spectrum is estimated from the data",
            "amplitude": "the drawing times an amplitude factor", "free": "the road projected out, the drawing unused"}
     for rec in out.values():
@@ -619,8 +737,10 @@ def _identify_any_road(ds, *, rng=None, seed=None, population=None, generations=
     track_runs = [r for r in ds.runs if r.id not in road_ids]
     ab_list, skipped = as_built_runs(ds, ext, tracks if polish else "as-drawn")
     trs = [asbuilt.prepare_track_run(ds, r, as_built_mode) for r in ab_list]
-    # runs along a speed channel, their speed held: the constant speed and the start fitted with the track as built
-    along = {i: r for i, r in enumerate(ab_list) if getattr(ds.data[r.id], "distance", None) is not None}
+    # every run on a track as built: its constant speed and its start fitted with the car (SPEC §13: a declared
+    # speed and a given start are priors of them; along a speed channel the channel's mean starts the speed)
+    along = dict(enumerate(ab_list))
+    motion_priors = {i: asbuilt.motion_prior(ds, r) for i, r in along.items()}
     motion = {}
     ab_ids = {tr.run_id for tr in trs}
     population = population or DEFAULT_POPULATION
@@ -660,13 +780,14 @@ def _identify_any_road(ds, *, rng=None, seed=None, population=None, generations=
     def align(zz, mode):  # the speed and the start of each run along a speed channel (asbuilt.align_motion)
         Pz = space.full(prob.x(zz)[None])[0]
         for i, r in along.items():
-            trs[i], motion[r.id] = asbuilt.align_motion(Pz, geom, trs[i], ds, r, mode)
+            trs[i], motion[r.id] = asbuilt.align_motion(Pz, geom, trs[i], ds, r, mode, motion_priors[i])
             prob.rruns[len(rruns) + i] = trs[i]
 
     def solve(zz, max_nfev):  # the car, and the speed and start of each run along a speed channel with it
         if not along:
             return least_squares(prob, zz, bounds=prob.vbounds, method="trf", diff_step=1e-5, max_nfev=max_nfev)
-        sol_, moved = _joint_solve(prob, zz, {len(rruns) + i: r for i, r in along.items()}, ds, max_nfev)
+        sol_, moved = _joint_solve(prob, zz, {len(rruns) + i: r for i, r in along.items()}, ds, max_nfev,
+                                   {len(rruns) + i: pr for i, pr in motion_priors.items()})
         for k, tr in moved.items():
             trs[k - len(rruns)] = tr
             motion[tr.run_id] = dict(motion[tr.run_id], speed_m_s=float(tr.rr.speed), start_shift_s=float(tr.shift))
@@ -728,9 +849,13 @@ def _identify_any_road(ds, *, rng=None, seed=None, population=None, generations=
         cov_rob = D @ Hinv @ S @ Hinv @ D * (m / max(m - n, 1))
         if along:  # the speed and start fitted along a speed channel: nuisances of the same sandwich
             cov_fixed = cov_rob  # the motion held: for the budget's share
-            cov, cov_rob, motion_std = _with_motion(prob, z, H, Ja, S, s2, trs, along, ds, geom)
+            cov, cov_rob, motion_std = _with_motion(prob, z, H, Ja, S, s2, trs, along, ds, geom, motion_priors)
             for rid, sd in motion_std.items():
                 motion[rid].update(sd)
+            for i, r in along.items():
+                mr_ = ds.measured.get(r.id)
+                motion[r.id] = motion_record(dict(motion[r.id], start_read_s=float(getattr(mr_, "start", 0.0) or 0.0)),
+                                             motion_priors[i], trs[i])
             std = np.sqrt(np.clip(np.diag(cov), 0, None))
         info = {"success": bool(sol.success), "message": sol.message, "nfev": int(sol.nfev),
                 **({} if restarted is None else {"mode_restart": restarted}),
@@ -853,15 +978,17 @@ def _identify_any_road(ds, *, rng=None, seed=None, population=None, generations=
                 ad = _with_hints(ad, road_hints, hints_note)
         for rec in tracks_block.values():
             rec["rejected"] = why
-        return replace(start_result, adequacy=ad or start_result.adequacy, tracks=tracks_block,
+        # the speeds and starts the as-built fit found are the data's all the same (SPEC §13: named, not dropped)
+        checks = [c for c in (start_result.checks or []) if c.get("check") != "motion"] + motion_findings(motion)
+        return replace(start_result, adequacy=ad or start_result.adequacy, tracks=tracks_block, checks=checks,
                        wall_time_s=start_result.wall_time_s + wall)
     if road_hints:
         adequacy = _with_hints(adequacy, road_hints, hints_note)
     if start_result is not None:
         # the as-drawn identification's search, weights, maps and starts stand; the estimate is the as-built fit's,
         # and so are the estimates at a search bound (the as-drawn fit's bound findings replaced)
-        checks = [c for c in (start_result.checks or []) if c.get("check") != "bounds"]
-        checks += [f.to_dict() for f in mark_bounds(details)]
+        checks = [c for c in (start_result.checks or []) if c.get("check") not in ("bounds", "motion")]
+        checks += [f.to_dict() for f in mark_bounds(details)] + motion_findings(motion)
         return replace(start_result, checks=checks, x=np.asarray(x, dtype=float), names=list(space.names),
                        std=std, covariance=cov,
                        fun=float(np.mean(errors)), success=bool(start_result.success and info["success"]),
@@ -883,7 +1010,8 @@ def _identify_any_road(ds, *, rng=None, seed=None, population=None, generations=
         preprocessing=pre, dataset=str(ds.path), maps=None,
         modal=modal_summary(P[:len(ALL_NAMES) if space.layout is None else len(SUSPENSION_NAMES)], geom),
         model=model_block, response=response, correlation=robust.correlation_dict(), adequacy=adequacy,
-        checks=[f.to_dict() for f in getattr(ds, "findings", [])], roads=roads or None, road_profiles=profiles or None,
+        checks=[f.to_dict() for f in getattr(ds, "findings", [])] + motion_findings(motion), roads=roads or None,
+        road_profiles=profiles or None,
         tracks=tracks_block)
     return res
 
@@ -893,4 +1021,4 @@ __getattr__ = legacy_names(__name__, {
     "SPEED_TOLERANCE": "anyroad.speed_tolerance", "HELD_SPEED": "anyroad.held_speed", "PLAUSIBLE_FACTOR":
     "anyroad.plausible_factor", "PLAUSIBLE_RMS": "anyroad.plausible_rms", "PLAUSIBLE_WAVELENGTH":
     "anyroad.plausible_wavelength", "SPREAD_TOL": "anyroad.spread_tol", "JOINT_MOTION_BOUND":
-    "anyroad.joint_motion_bound"})
+    "anyroad.joint_motion_bound", "MOTION_NAMED": "anyroad.motion_named"})

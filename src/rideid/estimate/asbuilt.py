@@ -112,6 +112,8 @@ class TrackRun:
     inputs: RunInput | None = field(default=None, repr=False)
     #: the drawing's time shift (s): the front axle at ``x = speed (t - shift)`` (:func:`align_motion`)
     shift: float = 0.0
+    #: SPEC §13: the relative std of the track's drawn size (the amplitude factor's prior about 1; None: free)
+    size_std: float | None = None
 
     @property
     def run_id(self) -> str:
@@ -159,8 +161,20 @@ def prepare_track_run(ds, run, mode: str = "prior") -> TrackRun:
     rr = roadfit.with_sensors(rr, ds.sensor_filters(run.id))  # the channels as wired (SPEC §11)
     ri = nominal_inputs(ds, run, v)
     return TrackRun(rr=rr, track=run.track, U=np.fft.rfft(np.asarray(ri.u, dtype=float), axis=0), mode=mode,
-                    inputs=ri)
+                    inputs=ri, size_std=_size_std(ds, run.track))
 
+
+def _size_std(ds, track_id: str) -> float | None:
+    """The relative std of a track's drawn size (SPEC §13: declared, else the default width), or None for a
+    manifest that has none (an older one)."""
+    prior = getattr(ds.manifest, "size_prior", None)
+    return None if prior is None else float(prior(track_id)[0])
+
+
+#: the weight of the drawn size's prior row (SPEC §13): the whitened residual's real and imaginary parts each have
+#: variance 1/2 (each bin's complex residual divided by its noise level), so a row ``sqrt(1/2) (alpha - 1) / std``
+#: counts the prior as the negative log-likelihood does
+SIZE_PRIOR_WEIGHT = float(np.sqrt(0.5))
 
 def moved(tr: TrackRun, ds, run, p) -> TrackRun:
     """``tr`` with its drawing moved by ``p`` = (the speed's relative change, the start's shift) in
@@ -186,7 +200,56 @@ def motion_jacobian(P, geom, tr: TrackRun, ds, run) -> np.ndarray:
     return np.stack(cols, axis=1)
 
 
-def align_motion(P, geom, tr: TrackRun, ds, run, mode: str = "prior") -> tuple[TrackRun, dict]:
+@dataclass(frozen=True)
+class MotionPrior:
+    """SPEC §13: what a run's set-up says of where the car was on the track, as priors of its motion unknowns.
+
+    ``speed``: ``(declared m/s, std m/s, declared with a std)``, None along a speed or distance channel (the
+    channel's mean starts it, unweighted); ``start``: ``(declared file time s, std s, declared with a std)``, None
+    when the start was estimated at load (no declared value to hold it to). A plain number's std is the
+    documented default (:data:`rideid.data.schema.manifest.SPEED_STD_DEFAULT`, ``START_STD_DEFAULT``)."""
+
+    speed: tuple | None
+    start: tuple | None
+
+    def rows(self, v0: float, shift0: float, p, weight: float = 1.0) -> np.ndarray:
+        """The prior's residual rows at the motion ``p`` (:data:`MOTION_SCALE` units) moved from the speed ``v0``
+        and the start shift ``shift0`` (s) the run was placed at: ``weight (value - declared) / std``, speed then
+        start, each only when it has a prior (``weight``: the run's own block's residual level, so a prior
+        counts against the data as a measurement of that std would)."""
+        out = []
+        if self.speed is not None:
+            out.append((v0 * (1.0 + p[0] * defaults["asbuilt.motion_scale"][0]) - self.speed[0]) / self.speed[1])
+        if self.start is not None:
+            # the shift from the start as read
+            out.append((shift0 + p[1] * defaults["asbuilt.motion_scale"][1]) / self.start[1])
+        return weight * np.asarray(out, dtype=float)
+
+    def jacobian(self, v0: float, weight: float = 1.0) -> np.ndarray:
+        """``(rows, 2)``: :meth:`rows`' derivatives in the speed's relative change and the start's shift (s)."""
+        out = []
+        if self.speed is not None:
+            out.append([v0 / self.speed[1], 0.0])
+        if self.start is not None:
+            out.append([0.0, 1.0 / self.start[1]])
+        return weight * np.asarray(out, dtype=float).reshape(-1, 2)
+
+
+def motion_prior(ds, run) -> MotionPrior:
+    """The :class:`MotionPrior` of ``run`` (a run on a declared track) in ``ds``: its declared speed (none along a
+    speed or distance channel) and its start where it was given (a SPEC CSV's time 0, a logger file's
+    ``start``), each with its declared std or the default width."""
+    rd = ds.data[run.id]
+    speed = None if getattr(rd, "distance", None) is not None else run.speed_prior()
+    auto = run.id in getattr(ds, "auto_start_runs", ())
+    mr = getattr(ds, "measured", {}).get(run.id)
+    given = 0.0 if mr is None else float(mr.start or 0.0)
+    start = None if auto else (given, run.start_prior_std(), run.start_std is not None)
+    return MotionPrior(speed=speed, start=start)
+
+
+def align_motion(P, geom, tr: TrackRun, ds, run, mode: str = "prior",
+                 prior: MotionPrior | None = None) -> tuple[TrackRun, dict]:
     """``tr`` of a run along a speed channel, its speed held (:func:`rideid.estimate.anyroad.speed_wander`), with
     the speed and the start that fit it at the car ``P`` (16,): the drawing at ``x = v (t - shift)``, the rear
     wheels' delay at ``v``; ``v`` and ``shift`` minimise the run's cost in ``mode`` (:data:`MODES`; the prior as
@@ -206,9 +269,16 @@ def align_motion(P, geom, tr: TrackRun, ds, run, mode: str = "prior") -> tuple[T
     place it. Returns the new run (the prior as it was) and the record ``{"speed_m_s", "start_shift_s",
     "speed_channel_mean_m_s"}`` (``start_shift_s`` from the start as read)."""
     base = replace(tr, mode=mode)
+    weight = 1.0
+    if prior is not None:  # SPEC §13: the declared speed and start weigh in at the run's own residual level
+        r0 = residuals(P, geom, base)
+        weight = float(np.sqrt(np.mean(r0 ** 2)))
 
     def cost(p):
-        return float(np.sum(residuals(P, geom, moved(base, ds, run, p)) ** 2))
+        c = float(np.sum(residuals(P, geom, moved(base, ds, run, p)) ** 2))
+        if prior is not None:
+            c += float(np.sum(prior.rows(base.rr.speed, base.shift, p, weight) ** 2))
+        return c
 
     c0 = cost(np.zeros(2))
     steps = defaults["asbuilt.motion_steps"]
@@ -326,6 +396,9 @@ def solve(P, geom, tr: TrackRun, car=None, alpha_std: bool = False) -> Fit:
     b = np.zeros(m)
     G[:nb, :nb] = gr.T @ gr
     b[:nb] = gr.T @ np.concatenate([r.real.ravel(), r.imag.ravel()])
+    if tr.size_std is not None and tr.mode != "free":  # SPEC §13: the drawn size's prior, a row of its own
+        G[0, 0] += SIZE_PRIOR_WEIGHT ** 2 / tr.size_std ** 2
+        b[0] += SIZE_PRIOR_WEIGHT ** 2 / tr.size_std ** 2
     gH = np.conj(np.swapaxes(g, 1, 2))                                                     # (K,nb,c)
     for j, a in enumerate((aL, aR)):
         sl = slice(nb + j * Dn, nb + (j + 1) * Dn)
@@ -354,13 +427,16 @@ def solve(P, geom, tr: TrackRun, car=None, alpha_std: bool = False) -> Fit:
 
 def residuals(P, geom, tr: TrackRun) -> np.ndarray:
     """Real residual vector of run ``tr`` at the car ``P``: per bin the real and imaginary parts of the whitened
-    residual, then (mode "prior") ``sqrt(log det M)``; its squared sum is the negative log-likelihood up to a
-    constant."""
+    residual, then (mode "prior") ``sqrt(log det M)``, and (a drawn size with a prior, SPEC §13) the amplitude
+    factor's prior row; its squared sum is the negative log-likelihood up to a constant."""
     fit = solve(P, geom, tr)
     parts = [fit.residual.real, fit.residual.imag]
     if tr.mode == "prior":
         parts.append(np.sqrt(np.clip(fit.logdet, 0.0, None))[:, None])
-    return np.concatenate(parts, axis=1).ravel()
+    out = np.concatenate(parts, axis=1).ravel()
+    if tr.size_std is not None and tr.mode != "free":
+        out = np.append(out, SIZE_PRIOR_WEIGHT * (fit.alpha - 1.0) / tr.size_std)
+    return out
 
 
 def meat(J, e, tr: TrackRun, s2: float | None = None) -> np.ndarray:
@@ -382,7 +458,10 @@ def meat(J, e, tr: TrackRun, s2: float | None = None) -> np.ndarray:
 def cluster_meat(J, e, tr: TrackRun) -> np.ndarray:
     """The gradient's spread over clusters of setting ``asbuilt.cluster_bins`` neighbouring DFT bins of run ``tr``'s
     block (kept for comparison: :func:`meat` says why it is not used)."""
-    g = (J * e[:, None]).reshape(-1, tr.per_bin, J.shape[1]).sum(axis=1)           # per bin
+    nb = (J.shape[0] // tr.per_bin) * tr.per_bin  # the drawn size's prior row (SPEC §13) is a cluster of its own
+    g = (J[:nb] * e[:nb, None]).reshape(-1, tr.per_bin, J.shape[1]).sum(axis=1)   # per bin
+    if nb < J.shape[0]:
+        g = np.concatenate([g, (J[nb:] * e[nb:, None])])
     K = g.shape[0]
     groups = np.arange(K) // max(1, defaults["asbuilt.cluster_bins"])
     G = np.zeros((groups[-1] + 1, J.shape[1]))
@@ -481,7 +560,7 @@ def fitted_channels(P, geom, tr: TrackRun, y, fit: Fit | None = None) -> np.ndar
 
 __all__ = ["MODES", "Prior", "TrackRun", "Fit", "nominal_inputs", "prepare_track_run", "solve", "residuals",
            "estimate_prior", "unevenness_rms", "fitted_channels", "meat", "cluster_meat", "align_motion",
-           "moved", "motion_jacobian"]
+           "moved", "motion_jacobian", "MotionPrior", "motion_prior"]
 
 
 #: the constants this module had before rideid.settings, read from the registry (PEP 562)

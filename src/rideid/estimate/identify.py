@@ -637,12 +637,38 @@ def _preprocessing(ds, starts) -> dict:
             fs = float(ds.data[r.id].fs)
             pre[r.id]["moving_start"] = {"lead_in_s": lead.samples / fs, "left_out_s": lead.settle / fs,
                                          "method": MOVING_START_METHOD}
+    for r in ds.runs:
+        held = held_motion(ds, r)
+        if held is not None:
+            pre[r.id]["motion"] = held
     for rid, st in starts.items():
         before = pre[rid].get("start", {}).get("value")
         pre[rid]["start"] = dict(pre[rid].get("start", {}), **st)
         if pre[rid].get("model_time") is not None and before is not None and st.get("value") is not None:
             pre[rid]["model_time"] = [t + before - st["value"] for t in pre[rid]["model_time"]]
     return pre
+
+
+def held_motion(ds, run) -> dict | None:
+    """SPEC §13: the ``motion`` record of a run at a constant declared speed on a known track as the fit on the
+    tracks as drawn holds it (never silently): ``speed`` with the value the fit used, its std where the lags at
+    load measured it (:func:`rideid.conditioning.checks.speed_seen`), the declared value and its prior's std, and
+    ``estimated``: how. The runs fitted as built replace it with their own (``tracks.<track>.runs.<run>.motion``,
+    solved with the car). None for other runs."""
+    if not getattr(run, "road_known", False) or getattr(run, "speed_prior", None) is None:
+        return None
+    prior = run.speed_prior()
+    if prior is None or getattr(ds.data.get(run.id), "distance", None) is not None:
+        return None
+    seen = next((f for f in getattr(ds, "findings", ()) if f.check == "speed" and f.run == run.id and f.fix
+                 and "speed" in f.fix), None)
+    speed = {"estimate": float(run.speed), "std": None if seen is None else float(seen.fix["std"]), "unit": "m/s",
+             "declared": prior[0], "prior_std": prior[1], "prior": "declared" if prior[2] else "default"}
+    how = ("at load, from the lags of the data against a nominal car on the track (the fit on the tracks as drawn "
+           "holds it there)" if seen is not None else
+           "not moved: the lags at load agree with the declared value within their error (the fit on the tracks as "
+           "drawn holds it)")
+    return {"speed": speed, "estimated": how}
 
 
 #: the note of a free parameter the polish's Jacobian does not determine (rideid.estimate.uncertainty)
@@ -683,14 +709,15 @@ def parameter_detail(space, P, n: str, std, cov, robust) -> dict:
 
 
 def warn_bounds(res: IdentificationResult, stacklevel: int = 3) -> None:
-    """A :class:`rideid.DataWarning` for each estimate of ``res`` that ended at a search bound.
+    """A :class:`rideid.DataWarning` for each estimate of ``res`` that ended at a search bound, and for each
+    run whose speed or start the data moved beyond its prior (SPEC §13, check ``"motion"``).
 
     :func:`rideid.identify` calls it once for the result it returns (under
     ``model="auto"``: the kept model only); the fits themselves only mark
     ``at_bound`` in ``details`` and list the finding in ``checks``.
     """
     for f in res.checks:
-        if f.get("check") == "bounds":
+        if f.get("check") == "bounds" or (f.get("check") == "motion" and f.get("severity") == "warning"):
             warnings.warn(f["message"], DataWarning, stacklevel=stacklevel)
 
 

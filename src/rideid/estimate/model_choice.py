@@ -53,7 +53,7 @@ from ..model.params import POWERTRAIN_NAMES
 from ..model.params import SUSPENSION_GROUPS as GROUPS
 from .budget import with_budget
 from .. import settings
-from .adequacy import advise, assess_fit
+from .adequacy import advise, assess_fit, gross_misfit, run_errors
 from .records import assessments_of, plan_of
 from .adequacy import min_improvement as least_improvement
 from .materiality import weigh_result
@@ -191,6 +191,12 @@ def identify_auto(ds, *, rng=None, seed=None, callback=None, maps=None, simulato
     cf_full = CostFunction(ds, extensions=tuple(GROUPS), simulator=simulator)
     simulator = cf_full.simulator  # one value for every candidate
     full = identify_model(ds, rng=rng, seed=seed, callback=callback, maps=maps, cost=cf_full, **kw)
+    # SPEC §13: a first fit far beyond what any extension explains stops here, with the set-up to check
+    gross = gross_misfit(run_errors(ds, full.response), [n for n, d in full.details.items() if d.get("at_bound")],
+                         getattr(ds, "findings", ()))
+    if gross is not None and full.polish:
+        return replace(full, adequacy=gross, model={"extensions": list(full.model.get("extensions", [])),
+                                                    "selection": "auto (not run: the first fit misses grossly)"})
     pol = full.polish or {}
     names = list(pol.get("names", []))
     free_ext = {g: [n for n in GROUPS[g] if n in names] for g in GROUPS}
@@ -805,7 +811,11 @@ def _tracks_before_curves(ds, res, chosen, simulator, tracks, common):
     ad = dict(res.adequacy or {})
     ad["reasons"] = list(ad.get("reasons", [])) + [
         f"tried: the linear model ({label}) on the tracks as built, not adequate either, so {kept} stays"]
-    return replace(res, adequacy=ad)
+    # SPEC §13: the speeds and starts that fit named are the data's whatever model stays: never silently dropped
+    named = [c for c in (ab.checks or []) if c.get("check") == "motion"]
+    if named:
+        ad["reasons"].append("the set-up the tracks as built named: " + "; ".join(c["message"] for c in named))
+    return replace(res, adequacy=ad, checks=list(res.checks or []) + named)
 
 
 #: the constants this module had before rideid.settings, read from the registry (PEP 562)

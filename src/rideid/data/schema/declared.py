@@ -22,8 +22,9 @@ SENSITIVITY_KEY = "sensitivity_std"
 #: a relative sensitivity uncertainty must be below this (a sensor known to 50 % is not calibrated at all)
 SENSITIVITY_STD_MAX = 0.5
 
-_WHERE_ALLOWED = ("a standard uncertainty { value, std } is accepted only in [known] and [vehicle] (and "
-                  "sensitivity_std in a [channels] entry)")
+_WHERE_ALLOWED = ("a standard uncertainty { value, std } is accepted only in [known] and [vehicle], a dataset "
+                  "run's speed and start and a track's amplitude or height (and sensitivity_std in a [channels] "
+                  "entry)")
 
 
 def split_declared(v, where: str):

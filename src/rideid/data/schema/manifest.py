@@ -62,6 +62,15 @@ OPTIONAL_VEHICLE_KEYS = tuple(Geometry.OPTIONAL_KEYS)
 #: every model group a ``[model] extensions`` list may name: the linear ones (SPEC §6), then SPEC §8's
 MODEL_GROUPS = tuple(GROUPS) + NONLINEAR_GROUPS
 MODEL_KEYS = ("extensions", "damper_knots")
+#: SPEC §13, set-up values are priors: the default standard uncertainty of a run's ``speed`` written as a plain
+#: number (relative: 0.3 % of it), of its ``start`` (s; SPEC CSV: time 0, the front axle at x = 0) and of a
+#: track's drawn size (``amplitude``, a twist's ``height``; relative). docs/formats.md says why these.
+SPEED_STD_DEFAULT = 0.003
+START_STD_DEFAULT = 0.005
+SIZE_STD_DEFAULT = 0.05
+#: a run's keys that may be written ``{ value, std }`` (SPEC §13), and a track's
+RUN_PRIOR_KEYS = ("speed", "start")
+TRACK_PRIOR_KEYS = ("amplitude", "height")
 
 #: a key whose value its section's parser checks itself (a table, a list, an id, a flag with its own words)
 _ANY = Key("any")
@@ -163,10 +172,33 @@ class RunSpec:
     #: a scenario rig run's drive signal (:class:`rideid.model.posts.PostSignal`) and the seed of a random one
     signal: PostSignal | None = None
     signal_seed: int | None = None
+    #: SPEC §13: the standard uncertainty declared with ``speed`` (m/s) and ``start`` (s) as ``{ value, std }``;
+    #: None: a plain number, whose default width :meth:`speed_prior`, :meth:`start_prior` give
+    speed_std: float | None = None
+    start_std: float | None = None
+    #: SPEC §13: the speed as declared when loading moved ``speed`` to where the data put it (beyond its prior,
+    #: said in a warning; :func:`rideid.conditioning.load.align_starts`); None: ``speed`` is the declared one
+    declared_speed: float | None = None
 
     def __post_init__(self):
         for k in ("channels", "options", "checks"):
             object.__setattr__(self, k, read_only(getattr(self, k)))
+
+    def speed_prior(self) -> tuple[float, float, bool] | None:
+        """SPEC §13: ``(declared speed m/s, its std m/s, declared with a std)``; a plain number's std is
+        :data:`SPEED_STD_DEFAULT` of it. None without a declared speed (a speed channel's run)."""
+        if self.speed is None:
+            return None
+        v = float(self.speed if self.declared_speed is None else self.declared_speed)
+        if self.speed_std is not None:
+            return v, float(self.speed_std), True
+        return v, SPEED_STD_DEFAULT * v, False
+
+    def start_prior_std(self) -> float:
+        """SPEC §13: the standard uncertainty (s) of the run's start where it is given (a logger file's ``start``,
+        or a SPEC CSV's time 0 at x = 0): the declared std, else :data:`START_STD_DEFAULT`. A start estimated
+        at load (``"auto"``, or left out of a logger file's run) has no prior."""
+        return START_STD_DEFAULT if self.start_std is None else float(self.start_std)
 
     @property
     def road_known(self) -> bool:
@@ -197,7 +229,8 @@ class RunSpec:
         if self.moving != (self.road is not None):  # the default: at rest on a track, moving on a generated road
             d["moving"] = self.moving
         if self.speed is not None:
-            d["speed"] = self.speed
+            d["speed"] = declared_table(self.speed if self.declared_speed is None else self.declared_speed,
+                                        self.speed_std)
         if self.file is not None:
             d["file"] = self.file
         else:
@@ -207,6 +240,8 @@ class RunSpec:
             d["channels"] = {k: e.to_table() for k, e in self.channels.items()}
         for k, v in self.options.items():
             d[k] = list(v) if isinstance(v, tuple) else v
+        if self.start_std is not None and "start" in d:
+            d["start"] = declared_table(d["start"], self.start_std)
         if self.checks:
             d["checks"] = dict(self.checks)
         return d
@@ -237,6 +272,10 @@ class Manifest:
     declared : mapping key -> float
         The standard uncertainties declared in ``[known]`` and ``[vehicle]`` (SPEC §12: a value written
         ``{ value, std }``), in the value's unit; a key absent here is exact.
+    size_std : mapping track id -> float
+        SPEC §13: the standard uncertainty (m) declared with a track's drawn size (``amplitude``, a twist's
+        ``height``, written ``{ value, std }``); a track absent here has the default width
+        (:meth:`size_prior`).
     """
 
     path: Path
@@ -249,10 +288,11 @@ class Manifest:
     extensions: tuple[str, ...] | None = None
     damper_knots: tuple[float, ...] | None = None
     declared: ReadOnlyDict = field(default_factory=ReadOnlyDict)
+    size_std: ReadOnlyDict = field(default_factory=ReadOnlyDict)
 
     def __post_init__(self):
         object.__setattr__(self, "path", Path(self.path))
-        for k in ("known", "bounds", "tracks", "declared"):
+        for k in ("known", "bounds", "tracks", "declared", "size_std"):
             object.__setattr__(self, k, read_only(getattr(self, k)))
         object.__setattr__(self, "runs", tuple(self.runs))
         if self.extensions is not None:
@@ -269,6 +309,16 @@ class Manifest:
             if r.id == run_id:
                 return r
         raise KeyError(run_id)
+
+    def size_prior(self, track_id: str) -> tuple[float, bool]:
+        """SPEC §13: the relative standard uncertainty of a track's drawn size (its amplitude factor's prior
+        std about 1) and whether it was declared; a plain number's is :data:`SIZE_STD_DEFAULT`."""
+        tr = self.tracks[track_id]
+        if track_id in self.size_std:
+            size = next((abs(float(tr.keys[k])) for k in TRACK_PRIOR_KEYS if k in tr.keys), 0.0)
+            if size > 0:
+                return float(self.size_std[track_id]) / size, True
+        return SIZE_STD_DEFAULT, False
 
     def shared(self) -> dict:
         """The fields of :class:`Manifest` as keywords, to build the other kind from this one."""
@@ -358,13 +408,36 @@ class DatasetManifest(Manifest):
         if self.settings:
             doc["settings"] = {k: list(v) if isinstance(v, tuple) else v for k, v in self.settings.items()}
         if self.tracks:  # none when every run is on an unknown road (SPEC §9)
-            doc["tracks"] = [t.to_table() for t in self.tracks.values()]
+            doc["tracks"] = [_size_table(t.to_table(), self.size_std.get(t.id)) for t in self.tracks.values()]
         doc["runs"] = [r.to_table() for r in self.runs]
         return doc
 
 
 # ---------------------------------------------------------------------------
 # Tables
+
+def _size_table(tab: dict, std: float | None) -> dict:
+    """A track's table with its drawn size written ``{ value, std }`` when a std was declared (SPEC §13)."""
+    if std is not None:
+        for k in TRACK_PRIOR_KEYS:
+            if k in tab:
+                tab = dict(tab, **{k: declared_table(tab[k], std)})
+    return tab
+
+
+def _split_priors(t: dict, keys, where: str) -> tuple[dict, dict]:
+    """SPEC §13: a run's or a track's table with its ``{ value, std }`` entries among ``keys`` made plain, and
+    those keys' stds (each finite, >= 0 and below the value's magnitude)."""
+    out, stds = dict(t), {}
+    for k in keys:
+        if isinstance(t.get(k), dict):
+            v, std = split_declared(t[k], f"{where} {k}")
+            if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
+                raise DataError(f"{where} {k} value: expected a finite number, got {v!r}")
+            check_std(v, std, f"{where} {k}")
+            out[k], stds[k] = v, std
+    return out, stds
+
 
 def _param_value(v, name, where):
     """A parameter value: the twelve positive, the extensions (SPEC §6) non-negative."""
@@ -554,8 +627,9 @@ def _parse_bounds(doc: dict, where: str, geom: Geometry, known: dict) -> dict[st
     return bounds
 
 
-def _parse_tracks(doc: dict, where: str, base_dir: Path) -> dict[str, Track]:
-    """The ``[[tracks]]`` tables; none at all is allowed (every run then on an unknown road, checked with the runs)."""
+def _parse_tracks(doc: dict, where: str, base_dir: Path, size_std: dict | None = None) -> dict[str, Track]:
+    """The ``[[tracks]]`` tables; none at all is allowed (every run then on an unknown road, checked with the runs).
+    ``size_std`` (filled): track id -> the std declared with its drawn size (SPEC §13)."""
     raw_tracks = doc.get("tracks", [])
     if not isinstance(raw_tracks, list):
         raise DataError(f"{where}: tracks must be [[tracks]] tables")
@@ -566,10 +640,14 @@ def _parse_tracks(doc: dict, where: str, base_dir: Path) -> dict[str, Track]:
         if t.get("id") == UNKNOWN_ROAD:
             raise DataError(f"{where}: tracks[{i}]: track id '{UNKNOWN_ROAD}' is reserved for runs on roads nobody "
                             "measured (SPEC §9); give the track another id")
+        label = f" (id '{t['id']}')" if isinstance(t.get("id"), str) else ""
+        t, stds = _split_priors(t, TRACK_PRIOR_KEYS, f"{where}: tracks[{i}]{label}")
         tr = track_from_table(t, f"{where}: tracks[{i}]", base_dir=base_dir)
         if tr.id in tracks:
             raise DataError(f"{where}: tracks[{i}]: duplicate track id '{tr.id}'")
         tracks[tr.id] = tr
+        if stds and size_std is not None:
+            size_std[tr.id] = next(iter(stds.values()))
     return tracks
 
 
@@ -631,6 +709,9 @@ def _parse_runs(doc: dict, where: str, tracks: dict, scenario: bool) -> list[Run
         if not isinstance(rid, str) or not rid:
             raise DataError(f"{w}: missing key 'id' (a non-empty string)")
         w = f"{w} (id '{rid}')"
+        stds = {}
+        if not scenario:  # SPEC §13: a dataset run's speed and start may carry their std
+            r, stds = _split_priors(r, RUN_PRIOR_KEYS, w)
         vals = run_keys.read(r, w)
         if rid in seen:
             raise DataError(f"{w}: duplicate run id '{rid}'")
@@ -657,8 +738,11 @@ def _parse_runs(doc: dict, where: str, tracks: dict, scenario: bool) -> list[Run
             opts = parse_preprocess({k: v for k, v in r.items() if k in RUN_PREPROCESS_KEYS}, w,
                                     RUN_PREPROCESS_KEYS)
             lv = parse_checks(r["checks"], f"{w}: checks") if "checks" in r else {}
+            if "start" in stds and isinstance(opts.get("start"), str):
+                raise DataError(f"{w} start: a start estimated (\"{opts['start']}\") takes no std")
             runs.append(RunSpec(rid, track, speed, file=r["file"], channels=chans, options=opts, checks=lv,
-                                moving=moving, **rig_kw))
+                                moving=moving, speed_std=stds.get("speed"), start_std=stds.get("start"),
+                                **rig_kw))
     return runs
 
 
@@ -718,17 +802,19 @@ def _parse_shared(doc: dict, path: Path, scenario: bool) -> dict:
     declared = {}
     geom = _parse_geometry(doc, where, declared)
     known = _parse_known(doc, where, geom, declared)
-    _refuse_declared_elsewhere(doc, where)
+    _refuse_declared_elsewhere(doc, where, scenario)
     bounds = _parse_bounds(doc, where, geom, known)
-    tracks = _parse_tracks(doc, where, path.parent)
+    size_std = {}
+    tracks = _parse_tracks(doc, where, path.parent, size_std)
     runs = _parse_runs(doc, where, tracks, scenario)
     return dict(path=path, name=name, geometry=geom, known=known, bounds=bounds, tracks=tracks, runs=runs,
-                declared=declared)
+                declared=declared, size_std=size_std)
 
 
-def _refuse_declared_elsewhere(doc: dict, where: str) -> None:
+def _refuse_declared_elsewhere(doc: dict, where: str, scenario: bool = False) -> None:
     """A ``{ value, std }`` in ``[bounds]``, a track or a run: one line naming the key (SPEC §12 declares
-    uncertainties in ``[known]`` and ``[vehicle]`` only)."""
+    uncertainties in ``[known]`` and ``[vehicle]``; SPEC §13 a track's drawn size and a dataset run's speed and
+    start)."""
     if isinstance(doc.get("bounds"), dict):
         for k, v in doc["bounds"].items():
             refuse_declared(v, f"{where}: [bounds] {k}")
@@ -738,8 +824,10 @@ def _refuse_declared_elsewhere(doc: dict, where: str) -> None:
             for i, t in enumerate(items):
                 if isinstance(t, dict):
                     label = f" (id '{t['id']}')" if isinstance(t.get("id"), str) else ""
+                    allowed = TRACK_PRIOR_KEYS if section == "tracks" else () if scenario else RUN_PRIOR_KEYS
                     for k, v in t.items():
-                        refuse_declared(v, f"{where}: {section}[{i}]{label} {k}")
+                        if k not in allowed:
+                            refuse_declared(v, f"{where}: {section}[{i}]{label} {k}")
 
 
 # ---------------------------------------------------------------------------
@@ -855,7 +943,8 @@ def load_truth_dampers(path) -> DamperCurves | None:
     return parse_dampers(doc["dampers"], f"{path}: [dampers]") if "dampers" in doc else None
 
 
-__all__ = ["Manifest", "Scenario", "DatasetManifest", "RunSpec", "RoadSpec", "UNKNOWN_ROAD", "ChannelEntry",
+__all__ = ["SPEED_STD_DEFAULT", "START_STD_DEFAULT", "SIZE_STD_DEFAULT", "RUN_PRIOR_KEYS", "TRACK_PRIOR_KEYS",
+           "Manifest", "Scenario", "DatasetManifest", "RunSpec", "RoadSpec", "UNKNOWN_ROAD", "ChannelEntry",
            "parse_scenario", "parse_dataset_manifest", "parse_model", "parse_model_table", "parse_checks",
            "parse_truth", "load_manifest", "load_truth", "load_truth_dampers", "load_truth_roads", "model_table",
            "vehicle_table", "MODEL_GROUPS", "CHECK_NAMES", "CHECK_LEVELS", "TOP_KEYS_SCENARIO", "TOP_KEYS_DATASET",
