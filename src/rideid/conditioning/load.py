@@ -12,6 +12,7 @@ from __future__ import annotations
 import math
 from dataclasses import replace
 
+from ..profiling import stage
 from ..data.checks import enforce
 from ..settings import using
 from ..data.dataset import Dataset, check_rig_run, read_dataset
@@ -20,6 +21,7 @@ from .nominal import gather, run_steps
 from .starts import speed_channel_std, start_steps
 
 
+@stage("load dataset")
 def load_dataset(path, starts: dict[str, float | dict] | None = None, simulator=None) -> Dataset:
     """Load and validate a dataset folder (or its ``dataset.toml``), ready to identify.
 

@@ -45,6 +45,7 @@ from __future__ import annotations
 import numpy as np
 from scipy import special  # the two tail probabilities; scipy.stats takes 0.5 s to import
 
+from ..profiling import stage
 from ..settings import defaults, legacy_names
 from ..model.params import SUSPENSION_GROUPS as GROUPS
 from ..model.batch import single_threaded_blas, thread_map
@@ -350,6 +351,7 @@ def _assess(runs, channels, alpha, min_explained):
     return out if caveat is None else dict(out, level_caveat=caveat)
 
 
+@stage("adequacy")
 def assess_fit(cf, P, sims=None) -> dict:
     """Adequacy of a full parameter row ``P`` on the data of a :class:`rideid.CostFunction`.
 

@@ -58,6 +58,7 @@ from dataclasses import replace
 import numpy as np
 from scipy.optimize import OptimizeResult, least_squares
 
+from ..profiling import stage
 from ..settings import defaults, legacy_names
 from ..data.schema import NONLINEAR_GROUPS
 from ..errors import ArgumentError, DataError
@@ -301,6 +302,7 @@ def _motion_weights(prob, z, keys) -> dict:
     return {k: float(np.sqrt(np.mean(asbuilt.residuals(P, prob.geom, prob.rruns[k]) ** 2))) for k in keys}
 
 
+@stage("joint solve of car and motion")
 def _joint_solve(prob, z, along: dict, ds, max_nfev: int, priors: dict | None = None):
     """Least squares of the car ``z`` (v units) together with the speed and the start of each run on a track as
     built (``along``: block index in ``prob.rruns`` -> run; the drawing moved by
@@ -345,6 +347,7 @@ def _joint_solve(prob, z, along: dict, ds, max_nfev: int, priors: dict | None = 
     return OptimizeResult(dict(sol, x=sol.x[:d], motion=sol.x[d:])), moved
 
 
+@stage("error bars with motion")
 def _with_motion(prob, z, H, Ja, S, s2, trs, along, ds, geom, priors: dict | None = None):
     """The error bars with the speed and the start of each run on a track as built (placed by
     :func:`rideid.estimate.asbuilt.align_motion`, solved with the car by :func:`_joint_solve`, then held for the
@@ -485,6 +488,7 @@ def motion_findings(motion: dict) -> list[dict]:
             for rid, rec in motion.items() for m in rec.get("named", [])]
 
 
+@stage("road search")
 def _search(space, geom, rruns, gen, population, generations, callback, t0):
     """JADE on the road runs' search cost, stopped by the population spread (setting ``anyroad.spread_tol``)."""
     def fun(X):
@@ -708,6 +712,7 @@ def _road_sensor_hints(P, geom, rruns, ds, threshold=None):
                                threshold=threshold)
 
 
+@stage("roads and tracks as built")
 def _identify_any_road(ds, *, rng=None, seed=None, population=None, generations=None, model=None,
                        polish: bool = True, callback=None, assess: bool = True, simulator=None,
                        tracks: str = "as-built", start_result=None, as_built_mode: str = "prior",

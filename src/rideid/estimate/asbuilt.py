@@ -62,6 +62,7 @@ import numpy as np
 import scipy.linalg
 from scipy.optimize import minimize
 
+from ..profiling import stage
 from ..settings import defaults, legacy_names
 from ..model.simulate import RunInput, corner_inputs, prepare_run
 from . import roadfit
@@ -248,6 +249,7 @@ def motion_prior(ds, run) -> MotionPrior:
     return MotionPrior(speed=speed, start=start)
 
 
+@stage("motion alignment")
 def align_motion(P, geom, tr: TrackRun, ds, run, mode: str = "prior",
                  prior: MotionPrior | None = None) -> tuple[TrackRun, dict]:
     """``tr`` of a run along a speed channel, its speed held (:func:`rideid.estimate.anyroad.speed_wander`), with
@@ -486,6 +488,7 @@ def _running_median(raw, half: int):
     return out
 
 
+@stage("unevenness prior")
 def estimate_prior(P, geom, tr: TrackRun) -> Prior:
     """The noise and unevenness levels of run ``tr`` at the car ``P`` (module docstring): the road projected
     out, the free road regressed on the drawn one for the amplitude factor, the rest's power less the noise's

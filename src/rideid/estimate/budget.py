@@ -53,6 +53,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
+from ..profiling import stage
 from ..settings import defaults, legacy_names
 from ..data.dataset import Dataset
 from ..errors import ArgumentError, DataError
@@ -341,6 +342,7 @@ def fit_cost(ds: Dataset, res, simulator=None, cost: CostFunction | None = None)
     return cf
 
 
+@stage("budget")
 def with_budget(ds: Dataset, res, simulator=None, cost: CostFunction | None = None):
     """``res`` with ``std_total`` and ``budget`` on every parameter and the ``uncertainty`` block (SPEC §12):
     what was declared, the anchor (and whether it is taken as exact), how it was propagated, what was not,

@@ -69,6 +69,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 from scipy.optimize import OptimizeResult, least_squares
 
+from ..profiling import stage
 from ..settings import defaults, legacy_names
 from ..data.checks import bound_findings
 from ..data.dataset import Dataset, lead_ins
@@ -152,6 +153,7 @@ def parse_model_arg(model: str):
     return groups
 
 
+@stage("fit")
 def identify(ds: Dataset, *, rng=None, seed=None, population: int = DEFAULT_POPULATION,
              generations: int = DEFAULT_GENERATIONS, weights: str = "adaptive", polish: bool = True,
              spread_tol: float | None = None, callback=None, cost: CostFunction | None = None,
@@ -361,6 +363,7 @@ def _bump_recheck(ds, fit, bumps):
     return fit, bumps
 
 
+@stage("search")
 def global_search(cf: CostFunction, weighting, maps: SensitivityMaps, rng, *, population, generations,
                   spread_tol, callback=None, t0=None) -> OptimizeResult:
     """JADE on the weighted cost, the weights updated by ``weighting`` after every generation.
@@ -433,6 +436,7 @@ def _generation_record(g, solver, E_pop, cf, spread, cv, w) -> dict:
     return rec
 
 
+@stage("polish")
 def polish_fit(ds: Dataset, cf: CostFunction, x0) -> OptimizeResult:
     """Least squares on the equal-weight cost from ``x0``; estimated starts join as unknowns. A mode of the
     powertrain that ends at a search bound is polished again from typical values (:func:`mode_restart`), and
@@ -754,6 +758,7 @@ def _polish(cf: CostFunction, x0, weights, align=None):
     return prob.to_x(sol.x[:prob.d]), info, std
 
 
+@stage("polish")
 def polish_fixed_starts(cf: CostFunction, x0, weights):
     """The least-squares polish from ``x0`` with the runs as ``cf`` reads them (no start among the unknowns):
     ``(x, info, std)`` as :func:`_polish` returns them (the materiality refits, rideid.estimate.materiality)."""
@@ -1011,6 +1016,7 @@ class _Shift:
     Dw: np.ndarray | None = None
 
 
+@stage("polish with starts")
 def _polish_aligned(ds, cf, x_best, equal):
     """Polish the parameters and the estimated starts together, centring the starts' linearisation
     again (new model time axes, the same samples) until no start moves by more than

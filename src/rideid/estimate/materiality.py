@@ -36,6 +36,7 @@ from dataclasses import replace
 
 import numpy as np
 
+from ..profiling import stage
 from ..settings import defaults, legacy_names
 from .budget import fit_cost
 from .identify import polish_fixed_starts
@@ -139,6 +140,7 @@ def verdict(adequacy: dict, record: dict) -> dict:
             "structure": True, "reasons": reasons, "materiality": record}
 
 
+@stage("materiality")
 def weigh_result(ds, res, simulator=None):
     """``res`` with its adequacy weighed for materiality (:func:`weigh`, :func:`verdict`) when the residual
     test found structure; unchanged otherwise (adequate, not assessed). ``ds``: the dataset as loaded."""

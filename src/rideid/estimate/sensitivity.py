@@ -27,6 +27,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..profiling import stage
 from ..settings import defaults, legacy_names
 from ..data.dataset import Dataset
 from ..data.scenario import scenario_run_input
@@ -113,6 +114,7 @@ def cost_maps(cf: CostFunction) -> SensitivityMaps:
     return compute_maps(cf.sim, cf.space.geometry, baseline, cf.run_ids, cf.W > 0)
 
 
+@stage("sensitivity maps")
 def sensitivity_maps(source, *, cost=None) -> SensitivityMaps:
     """The three maps of a dataset or a scenario (``rideid sensitivity``).
 

@@ -24,6 +24,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..profiling import stage
 from ..settings import defaults, legacy_names
 from ..model.equations import CHANNELS
 
@@ -50,6 +51,7 @@ def body_angles(response: dict, fs: dict) -> dict:
     return out
 
 
+@stage("small angles")
 def small_angle(res, fs: dict) -> dict | None:
     """The ``adequacy.small_angle`` block of result ``res`` (its ``response`` and ``details``), or None without a
     response: the largest angles and their runs, the bias to expect and, above setting ``small_angle.threshold_deg``,

@@ -30,6 +30,7 @@ from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure as MplFigure
 from PIL import Image
 
+from ..profiling import stage
 from ..data.quality import summarised_warning
 from ..errors import DataError
 from ..estimate.frequency import frequency_response, measured_response
@@ -641,6 +642,7 @@ def _map_figures(jobs):
     return [_fig_job(j) for j in jobs]
 
 
+@stage("report")
 def write_report(result, dataset, out_dir, *, compare=None, compare_label: str | None = None) -> Path:
     """Render ``report.html`` (and ``figures/*.png``) into ``out_dir``.
 
