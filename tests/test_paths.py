@@ -18,6 +18,16 @@ is simulated noise-free and brought to ``rideid.identify`` by each data path:
 Every fitted parameter is checked against the truth, not only that the fit ran. Before 37ef398 damper curves on
 logger files crashed ("parameter rows must have 12 columns ... got 36"); this matrix is there to catch such holes.
 
+Group pairs (:func:`test_group_pair_on_path`): every pair of the powertrain, damper curves, bump stops, bars and
+tire damping (ten) on the same four paths, each a car with both groups, short runs (the twist and the washboard
+cut to 3 and 2 s, one road run of 5 s, 100 Hz) and a search that only has to run (population 8, one generation,
+no polish): what is checked is that the path takes the pair and reports its names and shapes (the model's
+extensions in canonical order, the twelve and both groups' parameters and nothing else, finite; the knot forces
+and stops with their records; the powertrain's modes), not the accuracy, which the single-group cells above hold.
+A pair with a nonlinear group on unknown roads is refused in one line. Cost (two shared cores): the default part
+(the ten SPEC CSV cells and the seven refusals) about 30 s; the slow part (logger files, moving starts, the
+linear pairs on unknown roads) about 5 minutes, the moving path's nonlinear pairs 11-40 s each.
+
 Tolerances. The data are noise-free and every path's model is exact, so what is left is the solvers' stopping
 and, on the road-projected paths (moving, unknown), the road between the samples. Measured: the twelve, the bars,
 the tire damping and the stops within 0.04 % on every path (tire damping on unknown roads aside, below), the knot
