@@ -31,8 +31,18 @@ equilibrium for the road input at the first sample (``K q = Bf r(0)``,
 exact while the bump stops are clear of it and every tire is loaded, e.g.
 on every track's flat lead-in), zero velocities.
 
+A powertrain on mounts (SPEC §11, ``NonlinearLayout(powertrain=True)``):
+the linear car's (:mod:`rideid.model.equations`), its heave ``u`` and pitch
+``psi`` relative to the body four more states after the fourteen
+(:data:`POWERTRAIN_STATES`); the generalised forces on ``(z, theta, u,
+psi)`` (the suspension's on the body as above, the mounts' springs and
+dampers on ``u``, ``psi``) move them through the inverse of their mass
+matrix (:func:`powertrain_mass`, per candidate), ``phi`` and the wheels as
+above. A row with ``m_p = 0`` gets the linear car's decoupled dummy.
+
 Parameter rows (:class:`NonlinearLayout`): the sixteen
-:data:`rideid.model.params.SUSPENSION_NAMES`, then with bump stops
+:data:`rideid.model.params.SUSPENSION_NAMES` (with a powertrain then its
+seven: the 23 columns of :data:`rideid.model.params.ALL_NAMES`), then with bump stops
 :data:`BUMP_STOP_NAMES` (``bs_clear_f, bs_clear_r`` m, ``bs_rate_f,
 bs_rate_r`` N/m), then with curves the front forces at the ``K`` knots
 ``F_f1 .. F_fK`` and the rear ones ``F_r1 .. F_rK`` (N, knots in ascending
