@@ -925,7 +925,7 @@ class NonlinearSimulator:
     def states(self, P, pin: Pin | None = None):
         """Simulated channels and states: list over runs of ``((n_pop, n_time, 10), (n_pop, n_time, 14))``,
         the states ``[q, q']`` in :data:`rideid.model.equations.COORDS` order (deviations from static
-        equilibrium)."""
+        equilibrium); with a powertrain 18 wide, :data:`POWERTRAIN_STATES` appended."""
         if self._use_numpy():
             return self.states_reference(P, pin)
         _, out, X = self._compiled(P, 3, pin=pin)
