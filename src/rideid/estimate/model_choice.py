@@ -311,7 +311,8 @@ def identify_auto(ds, *, rng=None, seed=None, callback=None, maps=None, simulato
                 and e_p["criterion"] < best["criterion"] + W:
             best, chosen = e_p, pkey
             # the linear groups weighed again with the powertrain in, from its fit's robust covariance
-            again = _linear_groups_again(ds, r_p, chosen, e_p, rng=rng, seed=seed, maps=full.maps,
+            # (the powertrain's own sensitivity maps: the full linear model's have no powertrain)
+            again = _linear_groups_again(ds, r_p, chosen, e_p, rng=rng, seed=seed, maps=r_p.maps,
                                          simulator=simulator, **kw_nested)
             if again is not None:
                 evaluations += _weigh_smaller(again, pkey, e_p, results, costs, crit)
@@ -322,7 +323,7 @@ def identify_auto(ds, *, rng=None, seed=None, callback=None, maps=None, simulato
             if now.adequacy is None:
                 now = results[chosen] = replace(now, adequacy=_own_adequacy(ds, costs[chosen], now))
             if curves_tried and not set(chosen) & set(NONLINEAR_GROUPS) and not now.adequacy.get("adequate", True):
-                pt_curve = curve_candidate(ds, now, chosen, best, rng=rng, seed=seed, maps=full.maps,
+                pt_curve = curve_candidate(ds, now, chosen, best, rng=rng, seed=seed, maps=r_p.maps,
                                            simulator=simulator, **kw_nested)
     if pt_curve is not None:
         qkey, cf_q, r_q, e_q = pt_curve
@@ -334,7 +335,7 @@ def identify_auto(ds, *, rng=None, seed=None, callback=None, maps=None, simulato
         if e_q["fits_better"] and e_q["criterion"] is not None and Wq is not None and np.isfinite(Wq) \
                 and e_q["criterion"] < best["criterion"] + Wq:
             best, chosen = e_q, qkey
-            again = _linear_groups_again(ds, r_q, chosen, e_q, rng=rng, seed=seed, maps=full.maps,
+            again = _linear_groups_again(ds, r_q, chosen, e_q, rng=rng, seed=seed, maps=r_p.maps,
                                          simulator=simulator, **kw_nested)
             if again is not None:
                 evaluations += _weigh_smaller(again, qkey, e_q, results, costs, crit)
