@@ -18,6 +18,16 @@ is simulated noise-free and brought to ``rideid.identify`` by each data path:
 Every fitted parameter is checked against the truth, not only that the fit ran. Before 37ef398 damper curves on
 logger files crashed ("parameter rows must have 12 columns ... got 36"); this matrix is there to catch such holes.
 
+Group pairs (:func:`test_group_pair_on_path`): every pair of the powertrain, damper curves, bump stops, bars and
+tire damping (ten) on the same four paths, each a car with both groups, short runs (the twist and the washboard
+cut to 3 and 2 s, one road run of 5 s, 100 Hz) and a search that only has to run (population 8, one generation,
+no polish): what is checked is that the path takes the pair and reports its names and shapes (the model's
+extensions in canonical order, the twelve and both groups' parameters and nothing else, finite; the knot forces
+and stops with their records; the powertrain's modes), not the accuracy, which the single-group cells above hold.
+A pair with a nonlinear group on unknown roads is refused in one line. Cost (two shared cores): the default part
+(the ten SPEC CSV cells and the seven refusals) about 30 s; the slow part (logger files, moving starts, the
+linear pairs on unknown roads) about 5 minutes, the moving path's nonlinear pairs 11-40 s each.
+
 Tolerances. The data are noise-free and every path's model is exact, so what is left is the solvers' stopping
 and, on the road-projected paths (moving, unknown), the road between the samples. Measured: the twelve, the bars,
 the tire damping and the stops within 0.04 % on every path (tire damping on unknown roads aside, below), the knot
@@ -41,6 +51,7 @@ expensive rest (four more road fits, 11-29 s each) about 90 s.
 
 from __future__ import annotations
 
+import itertools
 import tomllib
 import warnings
 
@@ -301,3 +312,99 @@ def test_polish_leaves_a_knot_hidden_by_the_monotone_repair(cases):
     P = cf.space.full(x[None])[0]
     err = {n: P[cf.space.col[n]] / truth[n] - 1.0 for n in cf.names}
     assert max(abs(e) for e in err.values()) < KNOT_TOL, {n: f"{100 * e:+.3f} %" for n, e in err.items()}
+
+
+# ---------------------------------------------------------------------------
+# group pairs (SPEC §11: every model group combines with every other, on every data path)
+
+#: the groups combined in pairs: the powertrain, the nonlinear groups, the linear groups of SPEC §6
+PAIR_GROUPS = ("powertrain", "damper_curves", "bump_stops", "anti_roll_bars", "tire_damping")
+PAIRS = tuple(itertools.combinations(PAIR_GROUPS, 2))
+#: a pair's runs on the track paths: the shortest twist (the stops reached) and the washboard, cut short
+PAIR_RUNS = (("TW3", "twist", 3.0, 3.0), ("WB8", "wash", 8.0, 2.0))
+#: the road paths' runs: one of 5 s (the road fit's floor), 100 Hz
+PAIR_ROAD_RUNS = (("7", "C", 7.0),)
+PAIR_ROAD_DURATION = 5.0
+#: a search that only has to run: the polish is the path's (its names, its shapes), not the accuracy's
+PAIR_FIT = dict(seed=1, population=8, generations=1, polish=False)
+
+
+def pair_doc(pair) -> dict:
+    """The SUV with both groups of ``pair`` (its [model] table left to the fit)."""
+    doc = {k: (dict(v) if isinstance(v, dict) else v) for k, v in CAR.items()}
+    doc["truth"] = {**CAR["truth"], **EXTRA[pair[0]], **EXTRA[pair[1]]}
+    if "damper_curves" in pair:
+        doc["dampers"] = DAMPERS
+        del doc["truth"]["c_sf"], doc["truth"]["c_sr"]
+    return doc
+
+
+def pair_dataset(folder, pair, path: str):
+    """The pair's scenario and its data by ``path`` (noise-free, short runs)."""
+    doc = pair_doc(pair)
+    if path in ("csv", "logger"):
+        doc["runs"] = [dict(id=rid, track=tr, speed=v, fs=FS, duration=d) for rid, tr, v, d in PAIR_RUNS]
+    elif path == "moving":
+        write_profile(folder)
+        doc["tracks"] = [{"id": "road", "kind": "profile", "file": "road.csv"}]
+        doc["runs"] = [dict(id=f"P{v}", track="road", speed=speed, fs=FS, duration=PAIR_ROAD_DURATION, moving=True)
+                       for v, _, speed in PAIR_ROAD_RUNS]
+    else:
+        del doc["tracks"]
+        doc["runs"] = [dict(id=f"{cls}{v}", road_class=cls, speed=speed, fs=FS, duration=PAIR_ROAD_DURATION)
+                       for v, cls, speed in PAIR_ROAD_RUNS]
+    (folder / "scenario.toml").write_text(tomli_w.dumps(doc))
+    sc = rideid.load_scenario(folder / "scenario.toml")
+    if path == "logger":
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", rideid.DataWarning)
+            return sc, rideid.load_dataset(write_logger(sc, folder / "logger", noise=0.0, seed=1))
+    from rideid.synth.scenario import simulate_manifest, write_dataset
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", rideid.ModelValidityWarning)  # a linear car's wheel in the air: physics
+        data, _ = simulate_manifest(sc, noise=0.0, seed=1)
+    write_dataset(sc, data, folder / "ds")
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", rideid.DataWarning)  # short runs: "a longer recording fits better"
+        return sc, rideid.load_dataset(folder / "ds")
+
+
+def pair_cell(pair, path: str):
+    """The SPEC CSV cells by default; logger files and the road paths slow (each a second search path)."""
+    nonlinear = any(g in NONLINEAR for g in pair)
+    marks = [] if path == "csv" or (path == "unknown" and nonlinear) else [pytest.mark.slow]
+    return pytest.param(pair, path, marks=marks, id=f"{'+'.join(pair)}-{path}")
+
+
+@pytest.mark.parametrize("pair, path", [pair_cell(p, path) for path in PATHS for p in PAIRS])
+def test_group_pair_on_path(pair, path, tmp_path):
+    """Every pair of groups fits on every data path (a nonlinear group on unknown roads: refused in one line):
+    the model is the pair, in the canonical order; the result reports the twelve, each group's parameters and
+    nothing else, every value finite; the knot forces and the bump stops come with their records."""
+    sc, ds = pair_dataset(tmp_path, pair, path)
+    nonlinear = [g for g in pair if g in NONLINEAR]
+    if path == "unknown" and nonlinear:
+        with pytest.raises(ArgumentError) as e:
+            rideid.identify(ds, model=list(pair), **PAIR_FIT)
+        assert "\n" not in str(e.value) and str(e.value).startswith(f"{', '.join(nonlinear)}: a nonlinear model cannot")
+        return
+    res = rideid.identify(ds, model=list(pair), **PAIR_FIT)
+    order = [g for g in rideid.estimate.cost.IDENTIFIABLE_GROUPS if g in pair]
+    assert res.model["extensions"] == order
+    expected = set(rideid.NAMES)
+    for g in pair:
+        expected |= set(rideid.model.params.GROUPS.get(g, ()))
+    if "bump_stops" in pair:
+        expected |= {"bs_clear_f", "bs_clear_r", "bs_rate_f", "bs_rate_r"}
+        assert set(res.bump_stops) >= {"front", "rear"}
+    knots = {n for n in res.parameters if n.startswith("F_")}
+    if "damper_curves" in pair:
+        K = len(res.dampers["velocity"])
+        assert knots == {f"F_{a}{j + 1}" for a in "fr" for j in range(K)}
+    else:
+        assert not knots and res.dampers is None
+    assert set(res.parameters) - knots == expected, set(res.parameters) ^ expected
+    assert all(np.isfinite(v) for v in res.parameters.values())
+    assert set(res.names) <= set(res.parameters)
+    if "powertrain" in pair:
+        assert {"powertrain bounce", "powertrain pitch"} <= set(res.modal)

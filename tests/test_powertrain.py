@@ -8,10 +8,10 @@ import pytest
 from powertrain_car import ENGINE, simulate, undamped_modes, write_dataset
 
 import rideid
-from rideid.errors import ArgumentError, DataError
+from rideid.errors import DataError
 from rideid.model.batch import BatchSimulator
 from rideid.model.equations import modal_summary
-from rideid.model.params import ALL_NAMES, INDEX, as_vector, check_parameters
+from rideid.model.params import ALL_NAMES, INDEX, POWERTRAIN_NAMES, as_vector, check_parameters
 from rideid.model.simulate import corner_inputs, prepare_run, simulate_modal, simulate_reference
 
 
@@ -130,11 +130,22 @@ def test_bad_powertrains_are_refused(scenario):
     check_parameters(as_vector(dict(car, x_p=-0.5), extended=True), G)
 
 
-def test_powertrain_with_a_nonlinear_group_is_refused(tmp_path):
-    write_dataset(tmp_path / "ds", runs=("H_LL",))
+def test_powertrain_with_a_nonlinear_group_is_the_nonlinear_car_with_a_powertrain(tmp_path):
+    """Once refused: a powertrain with damper curves or bump stops fits the nonlinear car with the powertrain's
+    seven columns (tests/test_nonlinear_powertrain.py, tests/test_paths.py's pairs); its true car costs nothing
+    on its own noise-free data (linear dampers, no stop: stops at 150 mm of rate 0)."""
+    truth = write_dataset(tmp_path / "ds", runs=("H_LL",))
     ds = rideid.load_dataset(tmp_path / "ds")
-    with pytest.raises(ArgumentError, match="'powertrain'.*'damper_curves'.*linear car only"):
-        rideid.CostFunction(ds, extensions=("powertrain", "damper_curves"))
+    for groups in (("powertrain", "damper_curves"), ("powertrain", "bump_stops")):
+        cf = rideid.CostFunction(ds, extensions=groups)
+        assert cf.space.layout.powertrain and cf.space.layout.n_car == 23
+        assert [n for n in cf.names if n in POWERTRAIN_NAMES] == list(POWERTRAIN_NAMES)
+    cf = rideid.CostFunction(ds, extensions=("powertrain", "bump_stops"))
+    x = np.array([truth[n] if n in truth else {"bs_clear_f": 0.15, "bs_clear_r": 0.15}.get(n, 0.0)
+                  for n in cf.names])
+    assert cf(x) < 1e-6  # integration accuracy (RK4 against the independent simulator's first-order hold)
+    x[cf.names.index("m_p")] = 1e-3  # the engine all but gone: far off
+    assert cf(x) > 1e-3
 
 
 def test_scenario_truth_with_a_bad_powertrain_is_one_line(tmp_path, capsys):

@@ -21,8 +21,7 @@ from ..model.simulator import Simulator
 from ..estimate.sensitivity import compute_maps
 from ..model.equations import CHANNELS
 from ..model.nonlinear import curve_names
-from ..model.params import (ALL_NAMES, EXT_NAMES, GROUPS, NAMES, POWERTRAIN_NAMES, SCALE_FREE, SIGNED,
-                            SUSPENSION_NAMES)
+from ..model.params import (ALL_NAMES, EXT_NAMES, GROUPS, NAMES, POWERTRAIN_NAMES, SCALE_FREE, SIGNED)
 from ..report.plan_files import pct as _pct, plan_markdown, write_plan
 from . import powertrain as pt_info
 from . import roadinfo
@@ -842,8 +841,8 @@ def _dampers_block(exc, space, x0, names, all_p, sel_p, S, n_runs, knots_from) -
 
 def _check_truth(sc, space, P0):
     """The anchor must describe the nominal car: fixed and derived values equal to [truth]."""
-    # a nonlinear row is the suspension's 16 columns, then the curves' and stops' (no powertrain)
-    names = SUSPENSION_NAMES if space.layout is not None else ALL_NAMES
+    # a nonlinear row is the car's 16 (23 with a powertrain) columns, then the curves' and stops'
+    names = space.layout.names[:space.layout.n_car] if space.layout is not None else ALL_NAMES
     for k, n in enumerate(names[:P0.size]):
         if space.curves and n in ("c_sf", "c_sr"):  # the curves' mean slopes, not parameters of the plan
             continue

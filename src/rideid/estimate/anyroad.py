@@ -64,7 +64,7 @@ from ..data.schema import NONLINEAR_GROUPS
 from ..errors import ArgumentError, DataError
 from ..model.batch import single_threaded_blas, thread_map, thread_map_rows
 from ..model.equations import CHANNELS, modal_summary
-from ..model.params import ALL_NAMES, SUSPENSION_NAMES
+from ..model.params import ALL_NAMES
 from ..model.roads import iso8608_class
 from . import asbuilt, roadfit
 from .adequacy import ADVICE, advise, assess as assess_runs
@@ -1013,7 +1013,7 @@ def _identify_any_road(ds, *, rng=None, seed=None, population=None, generations=
         known=dict(ds.known), wall_time_s=wall, seed=rng_record["seed"], rng_state=rng_record["rng_state"],
         track_weights={}, weights_mode="equal", polish=info, history=History(history), starts={},
         preprocessing=pre, dataset=str(ds.path), maps=None,
-        modal=modal_summary(P[:len(ALL_NAMES) if space.layout is None else len(SUSPENSION_NAMES)], geom),
+        modal=modal_summary(P[:len(ALL_NAMES) if space.layout is None else space.layout.n_car], geom),
         model=model_block, response=response, correlation=robust.correlation_dict(), adequacy=adequacy,
         checks=[f.to_dict() for f in getattr(ds, "findings", [])] + motion_findings(motion), roads=roads or None,
         road_profiles=profiles or None,

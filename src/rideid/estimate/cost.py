@@ -54,7 +54,7 @@ from ..model.nonlinear import (BUMP_STOP_NAMES, DEFAULT_KNOTS, NonlinearLayout, 
 from ..model.sensors import SensorChain, SensorSimulator
 from ..model.simulator import Simulator
 from ..model.params import (ALL_NAMES, EXT_NAMES, GROUPS, INDEX, MASS_COUNT, NAMES, POWERTRAIN_NAMES, SCALE_FREE,
-                            SIGNED, SUSPENSION_NAMES, default_bounds, nominal_car, powertrain_fits, total_mass)
+                            SIGNED, default_bounds, nominal_car, powertrain_fits, total_mass)
 from ..data.schema import NONLINEAR_GROUPS
 
 
@@ -74,13 +74,9 @@ BUMP_UNITS = {"bs_clear_f": "m", "bs_clear_r": "m", "bs_rate_f": "N/m", "bs_rate
 
 
 def refuse_unsupported_groups(groups, where: str = "model"):
-    """The bump stops of SPEC §8 are simulated but not identified yet: one clear :class:`ArgumentError`
-    rather than a fit that silently leaves them out (damper curves are identified)."""
-    if POWERTRAIN in groups and any(g in NONLINEAR_GROUPS for g in groups):
-        raise ArgumentError(f"{where}: 'powertrain' (SPEC §11) together with "
-                            f"{' and '.join(repr(g) for g in groups if g in NONLINEAR_GROUPS)} (SPEC §8): this "
-                            "version of rideid simulates a powertrain on mounts in the linear car only; fit one or "
-                            "the other")
+    """A nonlinear group of SPEC §8 that this version simulates but does not identify: one clear
+    :class:`ArgumentError` rather than a fit that silently leaves it out (damper curves and bump stops are
+    identified, with or without a powertrain on mounts)."""
     bad = [g for g in groups if g in NONLINEAR_GROUPS and g not in IDENTIFIABLE_GROUPS]
     if bad:
         raise ArgumentError(f"{where}: {' and '.join(repr(g) for g in bad)} (SPEC §8) cannot be identified by this "
@@ -176,8 +172,11 @@ class ParameterSpace:
         self.curves = CURVES in self.extensions
         self.bump = BUMP in self.extensions
         self.damper_knots = None if damper_knots is None else tuple(float(k) for k in damper_knots)
+        # a powertrain in the model, or a known one: the nonlinear car carries it too (SPEC §11)
+        powertrain = POWERTRAIN in self.extensions or any(n in known for n in POWERTRAIN_NAMES)
         self.layout = NonlinearLayout(knots=curve_knots(damper_knots) if self.curves else None,
-                                      bump_stops=self.bump) if (self.curves or self.bump) else None
+                                      bump_stops=self.bump, powertrain=powertrain) \
+            if (self.curves or self.bump) else None
         knot_names = curve_names(self.layout.n_knots) if self.curves else ()
         #: the knot-force columns, ``F_f1 .. F_fK, F_r1 .. F_rK`` (empty without curves)
         self.knot_names = tuple(knot_names)
@@ -200,11 +199,6 @@ class ParameterSpace:
                     break
         # a known bump stop is used by a model with the group bump_stops (without it the car has no stops)
         self.fixed = {n: v for n, v in known.items() if n in ALL_NAMES or n in bump_names}
-        if self.layout is not None:
-            if any(self.fixed.get(n, 0.0) for n in POWERTRAIN_NAMES):
-                raise ArgumentError("[known] gives a powertrain (SPEC §11), which the nonlinear car (damper curves, "
-                                    "bump stops) does not have in this version: fit a linear model")
-            self.fixed = {n: v for n, v in self.fixed.items() if n not in POWERTRAIN_NAMES}
         model_ext = [n for g in self.extensions if g in GROUPS for n in GROUPS[g]]
         base = [n for n in NAMES if not (self.curves and n in ("c_sf", "c_sr"))]
         self.names = [n for n in base + model_ext if n not in self.fixed and n != self.derived] + \
@@ -367,10 +361,10 @@ class ParameterSpace:
             col = P[:, INDEX[n]]
             ok &= (col > 0) & ((col < self.geometry.wheelbase) if n == "a" else True)
         if P.shape[1] > len(NAMES):
-            car = len(SUSPENSION_NAMES) if self.layout is not None else P.shape[1]  # the car's columns
+            car = self.layout.n_car if self.layout is not None else P.shape[1]  # the car's columns
             ext = [INDEX[n] for n in ALL_NAMES[len(NAMES):car] if n not in SIGNED]
             ok &= np.all(P[:, ext] >= 0, axis=1)
-        if self.layout is None and P.shape[1] == len(ALL_NAMES):
+        if (self.layout.powertrain if self.layout is not None else P.shape[1] == len(ALL_NAMES)):
             # a powertrain leaves the rest of the body a positive mass and inertia, its pitch inertia > 0
             with np.errstate(invalid="ignore"):
                 ok &= powertrain_fits(np.where(np.isfinite(P[:, :len(ALL_NAMES)]), P[:, :len(ALL_NAMES)], 0.0))
@@ -398,7 +392,7 @@ class ParameterSpace:
         else:
             s = self.known[anchor] / base[INDEX[anchor]]
         P = base * np.where(np.isin(np.array(ALL_NAMES), SCALE_FREE), 1.0, s)
-        P = P[:self.width] if self.layout is None else P[:len(SUSPENSION_NAMES)]  # the nonlinear car: 16
+        P = P[:self.width] if self.layout is None else P[:self.layout.n_car]  # the nonlinear car: 16 or 23
         if self.bump:  # stops at 50 mm, 50 kN/m scaled with the car
             P = np.concatenate([P, [0.05, 0.05, 5.0e4 * s, 5.0e4 * s]])
         if self.curves:

@@ -80,7 +80,7 @@ from ..model.batch import single_threaded_blas
 from ..model.equations import modal_summary
 from ..data.schema import NONLINEAR_GROUPS
 from ..model.nonlinear import BUMP_STOP_NAMES
-from ..model.params import ALL_NAMES, INDEX, NOMINAL_EXTENSIONS, SUSPENSION_GROUPS, SUSPENSION_NAMES, UNITS
+from ..model.params import ALL_NAMES, INDEX, NOMINAL_EXTENSIONS, SUSPENSION_GROUPS, UNITS
 from ..model.simulator import Simulator
 from .bumps import bump_block, frozen_values, reach, scan_start
 from .dampers import add_grid_std, dampers_block, knot_excitation
@@ -557,7 +557,7 @@ def _result(ds, cf, search, fit, weighting, maps, rng_record, t0, assess=True,
     correlation, history = robust.correlation_dict(), History(search.history)
     # what the data were and what the car's modes are: records beside the fit
     preprocessing = _preprocessing(ds, starts)
-    modal = modal_summary(P[:len(ALL_NAMES) if space.layout is None else len(SUSPENSION_NAMES)], ds.geometry)
+    modal = modal_summary(P[:len(ALL_NAMES) if space.layout is None else space.layout.n_car], ds.geometry)
     return IdentificationResult(
         x=np.asarray(x, dtype=float), names=list(cf.names), std=np.asarray(std, dtype=float), covariance=cov,
         fun=float(np.full(final_E.size, 1.0 / final_E.size) @ final_E), success=success, message=message,

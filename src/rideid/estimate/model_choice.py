@@ -32,11 +32,17 @@ The candidates above are SPEC §6's groups (``rideid.model.params.SUSPENSION_GRO
 When the model chosen is not adequate, damper curves (:func:`curve_candidate`),
 bump stops (:func:`bump_candidate`) and last a powertrain on mounts
 (:func:`powertrain_candidate`, SPEC §11: one more search, its Wald statistic
-of ``m_p = 0`` at the same price per parameter) are weighed on top. Once the
-curves, and again once the stops, are in, the chosen linear groups are
-weighed again from that fit's covariance (:func:`_curve_subset`,
-:func:`_linear_groups_again`): a group the linear model needed for what the
-nonlinear one explains is dropped when the criterion prefers fewer groups.
+of ``m_p = 0`` at the same price per parameter) are weighed on top; the
+powertrain on top of whatever is chosen by then, damper curves and bump
+stops included. Once the curves, once the stops and once the powertrain
+are in, the chosen linear groups are weighed again from that fit's
+covariance (:func:`_curve_subset`, :func:`_linear_groups_again`): a group
+the simpler model needed for what the larger one explains is dropped when
+the criterion prefers fewer groups. When the powertrain comes in on a
+linear choice whose curves were weighed and not kept (the engine's modes
+can hide what the curves explain) and the car is still not adequate, the
+curves are weighed again on top of the powertrain, and after them the
+linear groups.
 """
 
 from __future__ import annotations
@@ -62,7 +68,7 @@ from .identify import (DEFAULT_GENERATIONS, DEFAULT_POPULATION, identify as iden
                        sensor_notes, warn_bounds)
 from .anyroad import TRACK_OPTIONS, as_built_runs, identify_any_road, unknown_road_runs
 from ..model.batch import single_threaded_blas, thread_map
-from .cost import CostFunction, ParameterSpace, refuse_unsupported_groups
+from .cost import IDENTIFIABLE_GROUPS, CostFunction, ParameterSpace, refuse_unsupported_groups
 from ..errors import ArgumentError
 from ..model.simulator import Simulator
 from ..data.checks import bound_findings
@@ -143,6 +149,13 @@ def _own_adequacy(ds, cf, res):
 CURVES_GROUP = "damper_curves"
 #: model groups in their canonical order (the linear groups, then the curves)
 IDENTIFIABLE_ORDER = tuple(GROUPS) + (CURVES_GROUP,)
+
+
+def _key(groups) -> tuple:
+    """A candidate's key: its groups in the canonical order of every model (SPEC §6's, the powertrain, the damper
+    curves, the bump stops: :data:`rideid.estimate.cost.IDENTIFIABLE_GROUPS`, as a result's ``extensions``)."""
+    return tuple(g for g in IDENTIFIABLE_GROUPS if g in set(groups))
+
 
 #: ``{}``: :func:`penalty`, filled in where written
 CURVE_CRITERION = ("damper curves: one more polish, the chosen linear groups plus damper_curves, started from the "
@@ -239,7 +252,7 @@ def identify_auto(ds, *, rng=None, seed=None, callback=None, maps=None, simulato
     # tried only when the linear choice is not adequate: an adequate linear model leaves no road-driven
     # structure in the residuals for curves to explain (and the extra polish costs as much as the search)
     lin = results[chosen] = replace(results[chosen], adequacy=_own_adequacy(ds, costs[chosen], results[chosen]))
-    lin_key, lin_entry = chosen, best
+    lin_entry = best
     kw_search = {k: v for k, v in kw.items() if k in ("weights", "polish", "population", "generations", "spread_tol")}
     curves_tried = bool(lin.adequacy) and not lin.adequacy.get("adequate", True)
     curve = (curve_candidate(ds, lin, chosen, best, rng=rng, seed=seed, maps=full.maps, simulator=simulator,
@@ -298,14 +311,14 @@ def identify_auto(ds, *, rng=None, seed=None, callback=None, maps=None, simulato
             if again is not None:
                 evaluations += _weigh_smaller(again, bkey, e_b, results, costs, crit)
                 best, chosen = _best_of(e_b, again[3], best, chosen)
-    # a powertrain on mounts on top of the linear choice, when what is chosen is still not adequate: one more
-    # search (the powertrain's frequencies are not found by a polish from a guess)
+    # a powertrain on mounts on top of what is chosen (damper curves and bump stops kept), when that is still
+    # not adequate: one more search (the powertrain's frequencies are not found by a polish from a guess)
     now = results[chosen]
     if now.adequacy is None:
         now = results[chosen] = replace(now, adequacy=_own_adequacy(ds, costs[chosen], now))
-    pt = None
+    pt = pt_curve = None
     if not now.adequacy.get("adequate", True):
-        pt = powertrain_candidate(ds, lin_key, lin_entry, rng=rng, seed=seed, simulator=simulator, **kw_search)
+        pt = powertrain_candidate(ds, chosen, best, rng=rng, seed=seed, simulator=simulator, **kw_search)
     if pt is not None:
         pkey, cf_p, r_p, e_p = pt
         results[pkey], costs[pkey] = r_p, cf_p
@@ -316,6 +329,36 @@ def identify_auto(ds, *, rng=None, seed=None, callback=None, maps=None, simulato
         if e_p["fits_better"] and e_p["criterion"] is not None and W is not None and np.isfinite(W) \
                 and e_p["criterion"] < best["criterion"] + W:
             best, chosen = e_p, pkey
+            # the linear groups weighed again with the powertrain in, from its fit's robust covariance
+            # (the powertrain's own sensitivity maps: the full linear model's have no powertrain)
+            again = _linear_groups_again(ds, r_p, chosen, e_p, rng=rng, seed=seed, maps=r_p.maps,
+                                         simulator=simulator, **kw_nested)
+            if again is not None:
+                evaluations += _weigh_smaller(again, pkey, e_p, results, costs, crit)
+                best, chosen = _best_of(e_p, again[3], best, chosen)
+            # damper curves on top of the powertrain (and its linear groups: curve_candidate starts from a linear
+            # car), when they were weighed without it and not kept
+            now = results[chosen]
+            if now.adequacy is None:
+                now = results[chosen] = replace(now, adequacy=_own_adequacy(ds, costs[chosen], now))
+            if curves_tried and not set(chosen) & set(NONLINEAR_GROUPS) and not now.adequacy.get("adequate", True):
+                pt_curve = curve_candidate(ds, now, chosen, best, rng=rng, seed=seed, maps=r_p.maps,
+                                           simulator=simulator, **kw_nested)
+    if pt_curve is not None:
+        qkey, cf_q, r_q, e_q = pt_curve
+        results[qkey], costs[qkey] = r_q, cf_q
+        evaluations += r_q.nfev
+        e_q["fits_better"] = fits_better(qkey, {cand: r.cost for cand, r in results.items()})
+        crit.append(e_q)
+        Wq = e_q["curve_departure_wald"]
+        if e_q["fits_better"] and e_q["criterion"] is not None and Wq is not None and np.isfinite(Wq) \
+                and e_q["criterion"] < best["criterion"] + Wq:
+            best, chosen = e_q, qkey
+            again = _linear_groups_again(ds, r_q, chosen, e_q, rng=rng, seed=seed, maps=r_p.maps,
+                                         simulator=simulator, **kw_nested)
+            if again is not None:
+                evaluations += _weigh_smaller(again, qkey, e_q, results, costs, crit)
+                best, chosen = _best_of(e_q, again[3], best, chosen)
     res = results[chosen]
     if res.adequacy is None:
         res = results[chosen] = replace(res, adequacy=_own_adequacy(ds, costs[chosen], res))
@@ -340,6 +383,8 @@ def identify_auto(ds, *, rng=None, seed=None, callback=None, maps=None, simulato
     if pt is not None:
         model["powertrain_criterion"] = POWERTRAIN_CRITERION.format(penalty())
         model["powertrain_wald"] = pt[3]["powertrain_wald"]
+    if pt_curve is not None:
+        model["curve_departure_wald_with_powertrain"] = pt_curve[3]["curve_departure_wald"]
     if curve is not None:
         model["curve_criterion"] = CURVE_CRITERION.format(penalty())
         model["curve_departure_wald"] = curve[3]["curve_departure_wald"]
@@ -431,7 +476,7 @@ def curve_candidate(ds, lin, chosen, lin_crit, *, rng=None, seed=None, maps=None
 
     if CURVES_GROUP in chosen or any(n in ds.known for n in ("c_sf", "c_sr")) or lin_crit.get("criterion") is None:
         return None
-    key = tuple(g for g in IDENTIFIABLE_ORDER if g in chosen or g == CURVES_GROUP)
+    key = _key(set(chosen) | {CURVES_GROUP})
     space = ParameterSpace(ds.known, ds.geometry, ds.manifest.bounds, extensions=key,
                            damper_knots=knots_like(ds, start_from))
     cf = CostFunction(ds, space=space, simulator=simulator)
@@ -472,7 +517,7 @@ def bump_candidate(ds, prev, chosen, prev_crit, *, rng=None, seed=None, maps=Non
 
     if BUMPS_GROUP in chosen:
         return None
-    key = tuple(g for g in IDENTIFIABLE_ORDER + (BUMPS_GROUP,) if g in chosen or g == BUMPS_GROUP)
+    key = _key(set(chosen) | {BUMPS_GROUP})
     space = ParameterSpace(ds.known, ds.geometry, ds.manifest.bounds, extensions=key,
                            damper_knots=knots_like(ds, prev if CURVES_GROUP in chosen else None))
     cf = CostFunction(ds, space=space, simulator=simulator)
@@ -531,7 +576,7 @@ def _linear_groups_again(ds, r_big, chosen, big_crit, *, rng=None, seed=None, ma
     if sub is None or big_crit.get("criterion") is None:
         return None
     lin, W_sub = sub
-    key = tuple(g for g in IDENTIFIABLE_ORDER + (BUMPS_GROUP,) if g in lin or (g in chosen and g not in GROUPS))
+    key = _key(set(lin) | {g for g in chosen if g not in GROUPS})
     space = ParameterSpace(ds.known, ds.geometry, ds.manifest.bounds, extensions=key,
                            damper_knots=knots_like(ds, r_big if CURVES_GROUP in key else None))
     cf = CostFunction(ds, space=space, simulator=simulator)
@@ -553,24 +598,27 @@ POWERTRAIN_GROUP = "powertrain"
 #: ``{}``: :func:`penalty`, filled in where written
 POWERTRAIN_CRITERION = (
     "powertrain on mounts (SPEC §11): tried when the model chosen so far (damper curves and bump stops weighed) is "
-    "still not adequate: one more search, the chosen linear groups plus powertrain; W_powertrain = (m_p / "
-    "std_robust(m_p))^2, the Wald statistic of no powertrain (m_p = 0); kept when it fits materially better than "
-    "every model it contains and its criterion (the linear choice's + {:.2f} per free powertrain parameter) is "
-    "below the chosen model's + W_powertrain")
+    "still not adequate: one more search, the chosen model (its damper curves and bump stops too) plus powertrain; "
+    "W_powertrain = (m_p / std_robust(m_p))^2, the Wald statistic of no powertrain (m_p = 0); kept when it fits "
+    "materially better than every model it contains and its criterion (the chosen model's + {:.2f} per free "
+    "powertrain parameter) is below the chosen model's + W_powertrain; then the linear groups are weighed again "
+    "with it, and damper curves weighed on top of it when they were not kept without it and the car is still not "
+    "adequate")
 
 
-def powertrain_candidate(ds, lin_key, lin_crit, *, rng=None, seed=None, simulator=None, **kw):
-    """Fit a powertrain on mounts on top of the linear groups ``lin_key`` (criterion entry ``lin_crit``): one
-    search (JADE and the polish) on the model ``lin_key`` + ``powertrain`` (:data:`POWERTRAIN_CRITERION`).
+def powertrain_candidate(ds, chosen, crit, *, rng=None, seed=None, simulator=None, **kw):
+    """Fit a powertrain on mounts on top of the model ``chosen`` (criterion entry ``crit``; its linear groups,
+    damper curves and bump stops): one search (JADE on the linear car with the powertrain, then the polish of
+    the whole model) on ``chosen`` + ``powertrain`` (:data:`POWERTRAIN_CRITERION`).
 
     Returns ``(candidate key, cost function, result, criterion entry)``, or None when the group is in already,
-    the linear choice has no criterion, or the powertrain is fully known. The entry carries
+    the choice has no criterion, or the powertrain is fully known. The entry carries
     ``powertrain_wald``, the Wald statistic of ``m_p = 0`` from the fit's robust covariance (``nan`` when
     ``m_p`` is known).
     """
-    if POWERTRAIN_GROUP in lin_key or lin_crit.get("criterion") is None:
+    if POWERTRAIN_GROUP in chosen or crit.get("criterion") is None:
         return None
-    key = tuple(g for g in GROUPS if g in lin_key) + (POWERTRAIN_GROUP,)
+    key = _key(set(chosen) | {POWERTRAIN_GROUP})
     space = ParameterSpace(ds.known, ds.geometry, ds.manifest.bounds, extensions=key)
     free_pt = [n for n in space.names if n in POWERTRAIN_NAMES]
     if not free_pt:
@@ -583,8 +631,8 @@ def powertrain_candidate(ds, lin_key, lin_crit, *, rng=None, seed=None, simulato
     if "covariance_robust" in pol and "m_p" in names:
         i = names.index("m_p")
         W = wald(np.array([r.parameters["m_p"]]), np.array(pol["covariance_robust"])[i:i + 1, i:i + 1])
-    entry = {"extensions": list(key), "wald": 0.0, "k": (lin_crit.get("k") or 0) + len(free_pt),
-             "powertrain_wald": W, "criterion": lin_crit["criterion"] + penalty() * len(free_pt)}
+    entry = {"extensions": list(key), "wald": 0.0, "k": (crit.get("k") or 0) + len(free_pt),
+             "powertrain_wald": W, "criterion": crit["criterion"] + penalty() * len(free_pt)}
     return key, cf, r, entry
 
 

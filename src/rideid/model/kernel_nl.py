@@ -57,6 +57,15 @@ does not meet it either: 1e-3 - 1.7e-2 at one step per sample (ETDRK4 or
 Lawson RK4, ``benchmarks/study_expint.py``; ``docs/dampers.md``), the
 residual's kinks unsplit. Cold compile (fresh install, empty Numba cache):
 about 9 s of CPU.
+
+A car with a powertrain on mounts (SPEC §11) runs a second specialisation
+of the same IR with 18 states (:data:`rideid.model.kernel_nl_ir.NX`; its
+functions' names suffixed :data:`rideid.model.kernel_nl_ir.PT`, its
+coefficients :data:`rideid.model.kernel_nl_ir.ENTRIES_PT`), chosen per call
+by the initial states' width; the 14-state functions are generated as
+before. Measured on 64 cars with curves and stops, three sub-steps, one
+thread: 369 ns per candidate-sample with the engine, 388 without
+(docs/powertrain.md).
 """
 
 from __future__ import annotations
@@ -70,15 +79,15 @@ from . import kernel_nl_ir as kir
 from .kernel_nl_ir import LANES, hermite_value_slope, run_chunks
 
 __all__ = ["compile_kernel", "hermite_value_slope", "pack", "run"]
-_NE = len(kir.ENTRIES)
 
 
-def pack(co, xk, Fk, Sk, curves, kinks):
+def pack(co, xk, Fk, Sk, curves, kinks, pt=False):
     """The kernel's per-chunk tables from :func:`rideid.model.nonlinear.coefficients`'s ``co, xk, Fk, Sk``.
 
     Returns
     -------
-    CF : (n_chunks, len(ENTRIES) * LANES) coefficients, lane innermost
+    CF : (n_chunks, len(ENTRIES) * LANES) coefficients, lane innermost (``pt``: a powertrain's too,
+    :data:`rideid.model.kernel_nl_ir.ENTRIES_PT`)
     TB : (n_chunks, 2 * 4 * ns * LANES) the curves' intercepts then slopes, ``[corner][segment][lane]``
     XK : (nk + 1,) the interior knots, then inf; KF : (2 * max(nk, 1),) 1.0 where a knot is a kink of the
     axle's curves, else 0.0; nk; ns = nk + 1 segments per curve
@@ -89,7 +98,8 @@ def pack(co, xk, Fk, Sk, curves, kinks):
     idx = np.minimum(np.arange(n_chunks * LANES), n - 1)
     co = co[idx]
     cols = {}
-    for name in kir.ENTRIES:
+    entries = kir.ENTRIES_PT if pt else kir.ENTRIES
+    for name in entries:
         if name.startswith("ctm"):
             c = name[-1]
             cols[name] = co[:, CI[f"ct{c}"]] * co[:, CI[f"inv_mu{c}"]]
@@ -97,8 +107,8 @@ def pack(co, xk, Fk, Sk, curves, kinks):
             cols[name] = -co[:, CI[f"L{name[-1]}"]]
         else:
             cols[name] = co[:, CI[name]]
-    CF = np.stack([cols[nm] for nm in kir.ENTRIES], axis=1)  # (n, E)
-    CF = np.ascontiguousarray(CF.reshape(n_chunks, LANES, _NE).transpose(0, 2, 1)).reshape(n_chunks, -1)
+    CF = np.stack([cols[nm] for nm in entries], axis=1)  # (n, E)
+    CF = np.ascontiguousarray(CF.reshape(n_chunks, LANES, len(entries)).transpose(0, 2, 1)).reshape(n_chunks, -1)
     if curves:
         xk = np.asarray(xk, dtype=float)
         Sk = np.asarray(Sk, dtype=float)[idx]
@@ -132,7 +142,8 @@ def _dummy_args():
     X0 = np.zeros((1, n, 14))
     return (0, 1, n, CF, TB, XK, KF, nk, ns, True, X0, np.array([0, 2], dtype=np.int64), np.array([0.01]),
             np.array([1], dtype=np.int64), np.array([0, 3], dtype=np.int64), np.zeros((3, 4)), np.zeros((3, 4)),
-            np.zeros((2, 10)), np.zeros((1, 10)), 0, np.zeros((1, n)), np.zeros((n, 2, 10)), np.zeros((n, 1, 14)))
+            np.zeros((2, 10)), np.zeros((1, 10)), 0, np.zeros((1, n)), np.zeros((n, 2, 10)), np.zeros((n, 1, 14)),
+            False)
 
 
 def compile_kernel() -> None:
@@ -147,7 +158,8 @@ def run(co, xk, Fk, Sk, curves, X0, run_start, h, ms, fines, Y, W, mode, split=T
     ----------
     co : (n, len(COEF)) coefficients, xk (K+1,) knots with 0, Fk (n, 2, K+1), Sk (n, 2, K)
         (:func:`rideid.model.nonlinear.coefficients`); curves : bool
-    X0 : (r, n, 14) initial states; run_start (r + 1,); h (r,) sample intervals; ms (r,) sub-steps
+    X0 : (r, n, 14) initial states (18 with a powertrain on mounts: then its coefficients are in ``co``,
+        :data:`rideid.model.nl_coef.PT_COEF`); run_start (r + 1,); h (r,) sample intervals; ms (r,) sub-steps
     fines : list over runs of ``(U, R)``, inputs and rates at the sub-step and half-step instants
         (:func:`rideid.model.nonlinear.fine_inputs`)
     Y : (T, 10), W : (r, 10), mode : 0 errors only, 1 the channels, 2 the states, 3 both
@@ -157,10 +169,12 @@ def run(co, xk, Fk, Sk, curves, X0, run_start, h, ms, fines, Y, W, mode, split=T
 
     Returns
     -------
-    err : (r, n) (with mode 0); out : (n, T, 10) with mode 1 or 3, else None; states : (n, T, 14) with
+    err : (r, n) (with mode 0); out : (n, T, 10) with mode 1 or 3, else None; states : (n, T, 14) (18) with
     mode 2 or 3, else None: ``[q, q']`` (deviations from static equilibrium, as
     :func:`rideid.model.nonlinear.simulate_numpy`'s)
     """
+    nx = np.shape(X0)[-1]
+    pt = nx == 18
 
     n = co.shape[0]
     n_runs = len(fines)
@@ -171,14 +185,15 @@ def run(co, xk, Fk, Sk, curves, X0, run_start, h, ms, fines, Y, W, mode, split=T
     RF = np.ascontiguousarray(np.concatenate([f[1] for f in fines]))
     hs = np.ascontiguousarray(np.asarray(h, dtype=float) / np.asarray(ms, dtype=float))
     kinks = np.ones((2, np.size(xk)), dtype=np.int64) if kinks is None else kinks
-    CF, TB, XK, KF, nk, ns = pack(co, xk, Fk, Sk, curves, kinks)
+    CF, TB, XK, KF, nk, ns = pack(co, xk, Fk, Sk, curves, kinks, pt)
     err = np.zeros((n_runs, n))
     T = int(run_start[-1])
     out = np.zeros((n, T, 10) if mode & 1 else (n, 1, 10))
-    states = np.zeros((n, T, 14) if mode & 2 else (n, 1, 14))
+    states = np.zeros((n, T, nx) if mode & 2 else (n, 1, nx))
     args = (n, CF, TB, XK, KF, nk, ns, bool(split), np.ascontiguousarray(X0, dtype=float),
             np.asarray(run_start, dtype=np.int64), hs, np.asarray(ms, dtype=np.int64), fine_start, UF, RF,
-            np.ascontiguousarray(Y, dtype=float), np.ascontiguousarray(W, dtype=float), int(mode), err, out, states)
+            np.ascontiguousarray(Y, dtype=float), np.ascontiguousarray(W, dtype=float), int(mode), err, out, states,
+            bool(pt))
     n_chunks = CF.shape[0]
     threads = max(1, min(numba.get_num_threads(), n_chunks))
     if threads == 1:

@@ -63,7 +63,7 @@ from numba.core import cgutils, types
 from numba.extending import intrinsic
 
 from .kernel_ir import IRWriter, ir_library
-from .nl_coef import hermite_value_slope
+from .nl_coef import PT_COEF, hermite_value_slope
 
 #: candidates per vector: two AVX2 registers of doubles (LLVM splits each operation in two)
 LANES = 4
@@ -76,7 +76,12 @@ TRUE = f"<{', '.join(['i1 true'] * LANES)}>"
 CAR = ("inv_ms", "inv_Iyy", "inv_Ixx", "topple", "kar_f", "kar_r")
 CORNER = ("x", "y", "ks", "kt", "ct", "inv_mu", "ctm", "L", "neg_L", "bs_clear", "bs_rate")
 ENTRIES = CAR + tuple(f"{n}{c}" for c in range(4) for n in CORNER)
-E = {n: i for i, n in enumerate(ENTRIES)}
+#: with a powertrain on mounts (SPEC §11) its entries follow (:data:`rideid.model.nl_coef.PT_COEF`): the car's
+#: keep their places
+ENTRIES_PT = ENTRIES + PT_COEF
+E = {n: i for i, n in enumerate(ENTRIES_PT)}
+#: states per candidate: the car's 14, and with a powertrain its heave and pitch on the mounts and their rates
+NX = {False: 14, True: 18}
 #: the switching quantities per corner, in the SW arrays ``[quantity][corner][lane]``
 SWQ = ("d", "v", "g", "vd", "kap")
 N_SW = len(SWQ) * 4
@@ -107,6 +112,8 @@ RETURNS = {END: "void", STEP: "i64", PIECES: "void", ERR: "void"}
 #: the right-hand side's variants: (inputs as table rows to broadcast, switching quantities)
 RHS = {(True, False): "rideid_nl_rhs_row", (True, True): "rideid_nl_rhs_row_end",
        (False, False): "rideid_nl_rhs_vec"}
+#: the powertrain's variant of a function: its name with this suffix (the same arguments)
+PT = "_pt"
 _LINKAGE = "internal"
 _RHS_PARAMS = ("cf", "tb", "tbs", "xk", "kf", "nk", "ns", "SC")
 
@@ -121,8 +128,11 @@ class _W(IRWriter):
     :data:`LANES`); ``opaque``: LLVM's opaque pointers (LLVM >= 17), else typed ones. Tracks the current
     basic block (for phi nodes)."""
 
-    def __init__(self, opaque: bool = True):
+    def __init__(self, opaque: bool = True, pt: bool = False):
         super().__init__(opaque)
+        self.pt = pt
+        self.nx = NX[pt]
+        self.sfx = PT if pt else ""
         self.block = "entry"
         self.labels = 0
         self.invariant = False  # loads marked !invariant.load (memory that the function does not write)
@@ -196,7 +206,7 @@ class _W(IRWriter):
         dp = self.dp
         args = [f"{dp} %{p}" if p not in ("nk", "ns") else f"i64 %{p}" for p in _RHS_PARAMS]
         args += [f"{dp} {p}" for p in (X, u, r, D) + ((Q, SW) if ends else ())]
-        self(f"  call fastcc void @{RHS[row, ends]}({', '.join(args)})")
+        self(f"  call fastcc void @{RHS[row, ends]}{self.sfx}({', '.join(args)})")
 
 
 def _seg_at(entry, k, c):
@@ -269,14 +279,15 @@ def _gen_rhs(w: _W, row: bool, ends: bool):
     (16 vector registers), so few spills."""
     dp = w.dp
     nb = 8 * LANES
-    size = {"cf": nb * len(ENTRIES), "X": nb * 14, "u": 32 if row else nb * 4, "r": 32 if row else nb * 4}
+    size = {"cf": nb * len(ENTRIES_PT if w.pt else ENTRIES), "X": nb * w.nx, "u": 32 if row else nb * 4,
+            "r": 32 if row else nb * 4}
     params = []
     for p in _RHS_PARAMS + ("X", "u", "r", "D") + (("Q", "SW") if ends else ()):
         if p in ("nk", "ns"):
             params.append(f"i64 %{p}")
         else:
             params.append(f"{dp} noalias {f'dereferenceable({size[p]}) ' if p in size else ''}%{p}")
-    w(f"define {_LINKAGE} fastcc void @{RHS[row, ends]}({', '.join(params)}) noinline nounwind {{")
+    w(f"define {_LINKAGE} fastcc void @{RHS[row, ends]}{w.sfx}({', '.join(params)}) noinline nounwind {{")
     w.start("entry")
     w.invariant = True
     X = lambda i: w.at("%X", i)  # noqa: E731
@@ -324,8 +335,27 @@ def _gen_rhs(w: _W, row: bool, ends: bool):
             px, py = w.xop("fmul", w.e(f"x{c}"), f), w.xop("fmul", w.e(f"y{c}"), f)
             sx = px if sx is None else w.xop("fadd", sx, px)
             sy = py if sy is None else w.xop("fadd", sy, py)
-    q0 = w.fmul(sf, w.e("inv_ms"))
-    q1 = w.fmul(w.madd(w.e("topple"), X(1), w.tmp(f"fneg {V} {sx}")), w.e("inv_Iyy"))
+    if w.pt:
+        # the powertrain (SPEC §11): the generalised forces on (z, theta, u, psi), the mounts' on their own
+        # coordinates, through the inverse mass matrix (as rideid.model.nonlinear.accelerations)
+        g = (sf, w.madd(w.e("topple"), X(1), w.tmp(f"fneg {V} {sx}")),
+             w.tmp(f"fneg {V} {w.madd(w.e('pt_ku'), X(14), w.fmul(w.e('pt_cu'), X(16)))}"),
+             w.tmp(f"fneg {V} {w.madd(w.e('pt_kpsi'), X(15), w.fmul(w.e('pt_cpsi'), X(17)))}"))
+        acc = []
+        for i in range(4):
+            a = None
+            for j in range(4):
+                m = w.e(f"pt_m{min(i, j)}{max(i, j)}")
+                a = w.fmul(m, g[j]) if a is None else w.madd(m, g[j], a)
+            acc.append(a)
+        q0, q1 = acc[0], acc[1]
+        w.put(X(16), "%D", 14)
+        w.put(X(17), "%D", 15)
+        w.put(acc[2], "%D", 16)
+        w.put(acc[3], "%D", 17)
+    else:
+        q0 = w.fmul(sf, w.e("inv_ms"))
+        q1 = w.fmul(w.madd(w.e("topple"), X(1), w.tmp(f"fneg {V} {sx}")), w.e("inv_Iyy"))
     q2 = w.fmul(w.madd(w.e("topple"), X(2), sy), w.e("inv_Ixx"))
     for i, val in enumerate((X(7), X(8), X(9))):
         w.put(val, "%D", i)
@@ -347,7 +377,7 @@ def _gen_rhs(w: _W, row: bool, ends: bool):
 def _prologue(w: _W, name):
     args = ARGS[name]
     sig = ", ".join(f"i64 %i{a}" if kind == "ptr" else f"{kind} %{a}" for a, kind in args)
-    w(f"define {RETURNS[name]} @{name}({sig}) nounwind {{")
+    w(f"define {RETURNS[name]} @{name}{w.sfx}({sig}) nounwind {{")
     w.start("entry")
     for a, kind in args:
         if kind == "ptr":
@@ -358,25 +388,26 @@ def _prologue(w: _W, name):
 
 def _rk4(w: _W, Xp, k1, h, mid, end, T, K, Xout=None):
     """One RK4 step of length ``h`` (a vector) from the states at ``Xp`` (read again after each call of the
-    right-hand side rather than kept live across it: no spills) with first stage ``k1`` (14 vectors),
+    right-hand side rather than kept live across it: no spills) with first stage ``k1`` (``w.nx`` vectors),
     inputs ``mid`` and ``end`` (``(row, u, r)``: pointers, table rows or vectors), through the stack arrays
     ``T`` (stage states) and ``K`` (stage derivatives): the new states (as the scalar kernel: the stages
     summed into ``acc``, then ``X + (h / 6) (acc + k4)``), stored into ``Xout`` too if given."""
     hh = w.fmul(w.c(0.5), h)
     two = w.c(2.0)
     acc = list(k1)
+    nx = w.nx
     for stage, (hs, inp) in enumerate(((hh, mid), (hh, mid), (h, end))):
-        k = k1 if stage == 0 else [w.at(K, i) for i in range(14)]
+        k = k1 if stage == 0 else [w.at(K, i) for i in range(nx)]
         if stage:
-            acc = [w.madd(two, k[i], acc[i]) for i in range(14)]
-        for i in range(14):
+            acc = [w.madd(two, k[i], acc[i]) for i in range(nx)]
+        for i in range(nx):
             w.put(w.madd(hs, k[i], w.at(Xp, i)), T, i)
         w.call_rhs(inp[0], False, T, inp[1], inp[2], K)
-    k4 = [w.at(K, i) for i in range(14)]
+    k4 = [w.at(K, i) for i in range(nx)]
     h6 = w.tmp(f"fdiv {FL} {V} {h}, {w.c(6.0)}")
-    Xn = [w.madd(h6, w.fadd(acc[i], k4[i]), w.at(Xp, i)) for i in range(14)]
+    Xn = [w.madd(h6, w.fadd(acc[i], k4[i]), w.at(Xp, i)) for i in range(nx)]
     if Xout is not None:
-        for i in range(14):
+        for i in range(nx):
             w.put(Xn[i], Xout, i)
     return Xn
 
@@ -432,8 +463,8 @@ def _crossed(w: _W):
 
 def _gen_step(w: _W):
     _prologue(w, STEP)
-    T, K = w.stack(14), w.stack(14)
-    k1 = [w.at("%Da", i) for i in range(14)]
+    T, K = w.stack(w.nx), w.stack(w.nx)
+    k1 = [w.at("%Da", i) for i in range(w.nx)]
     _rk4(w, "%Xa", k1, w.splat("%h"), (True, "%u1", "%r1"), (True, "%u2", "%r2"), T, K, "%Xb")
     w.call_rhs(True, True, "%Xb", "%u2", "%r2", "%Db", "%Qb", "%SWb")
     w(f"  ret i64 {_crossed(w)}")
@@ -473,12 +504,13 @@ def _gen_pieces(w: _W):
     from the start ``Xa``/``Da``, lane by lane: a piece of zero length is skipped, the first piece of
     positive length starts from ``Da``, later ones re-evaluate at their start (as the scalar kernel did)."""
     _prologue(w, PIECES)
-    T, K, P = w.stack(14), w.stack(14), w.stack(14)
+    nx = w.nx
+    T, K, P = w.stack(nx), w.stack(nx), w.stack(nx)
     UM, RM, UE, RE = (w.stack(4) for _ in range(4))
     rows = (("%u0", "%r0"), ("%u1", "%r1"), ("%u2", "%r2"))
     h = w.splat("%h")
     hh = w.fmul(w.c(0.5), h)
-    for i in range(14):
+    for i in range(nx):
         w.put(w.at("%Xa", i), P, i)
     pre = w.block
     loop, body, done = w.label("piece"), w.label("piece_body"), w.label("pieces_done")
@@ -503,11 +535,11 @@ def _gen_pieces(w: _W):
     w(f"  br label %{body}_k0")
     w.start(f"{body}_k0")
     first = w.tmp(f"phi {VB} [ {TRUE}, %{body} ], [ {fresh}, %{body}_kn ]")
-    k1 = [w.sel(first, w.at("%Da", i), w.at(K, i)) for i in range(14)]
+    k1 = [w.sel(first, w.at("%Da", i), w.at(K, i)) for i in range(nx)]
     _inputs_at(w, w.fmul(w.c(0.5), w.fadd(a, b)), rows, hh, UM, RM)
     _inputs_at(w, b, rows, hh, UE, RE)
     Xn = _rk4(w, P, k1, hp, (False, UM, RM), (False, UE, RE), T, K)
-    for i in range(14):
+    for i in range(nx):
         w.put(w.sel(active, Xn[i], w.at(P, i)), P, i)
     w(f"  %{body}_fresh = and {VB} {fresh}, {w.tmp(f'xor {VB} {active}, {TRUE}')}")
     w(f"  %{body}_q1 = add i64 {q}, 1")
@@ -515,7 +547,7 @@ def _gen_pieces(w: _W):
     w.start(done)
     # the lanes asked for take the pieces' end state, the others keep theirs; then the end's evaluation
     mv = w.tmp(f"bitcast i{LANES} {w.tmp(f'trunc i64 %mask to i{LANES}')} to {VB}")
-    for i in range(14):
+    for i in range(nx):
         w.put(w.sel(mv, w.at(P, i), w.at("%Xb", i)), "%Xb", i)
     w.call_rhs(True, True, "%Xb", "%u2", "%r2", "%Db", "%Qb", "%SWb")
     w("  ret void")
@@ -528,14 +560,16 @@ def generate_ir(opaque: bool | None = None) -> str:
     if opaque is None:
         import llvmlite.binding as llvm
         opaque = llvm.llvm_version_info[0] >= 17
-    w = _W(opaque)
-    for row, ends in RHS:
-        _gen_rhs(w, row, ends)
-    for gen in (_gen_end, _gen_step, _gen_pieces, _gen_err):
-        gen(w)
-    w('!0 = !{!"branch_weights", i32 1000, i32 1}')
-    w("!1 = !{}")
-    return "\n".join(w.lines) + "\n"
+    lines = []
+    for pt in (False, True):  # the car, then the car with a powertrain on mounts (names suffixed PT)
+        w = _W(opaque, pt)
+        for row, ends in RHS:
+            _gen_rhs(w, row, ends)
+        for gen in (_gen_end, _gen_step, _gen_pieces) + (() if pt else (_gen_err,)):
+            gen(w)
+        lines += w.lines
+    lines += ['!0 = !{!"branch_weights", i32 1000, i32 1}', "!1 = !{}"]
+    return "\n".join(lines) + "\n"
 
 
 _LIBRARY = {}
@@ -547,8 +581,9 @@ def _library(context):
     return ir_library(context, "rideid_kernel_nl_ir", generate_ir, _LIBRARY)
 
 
-def _codegen(name):
-    """Code generation of a call of the IR function ``name`` (linked into the caller's library)."""
+def _codegen(name, sfx=""):
+    """Code generation of a call of the IR function ``name`` (its variant ``name + sfx``; linked into the
+    caller's library)."""
     args = ARGS[name]
     i64 = RETURNS[name] == "i64"
 
@@ -556,7 +591,7 @@ def _codegen(name):
         context.add_linking_libs([_library(context)])
         fnty = ir.FunctionType(ir.IntType(64) if i64 else ir.VoidType(),
                                [ir.DoubleType() if kind == "double" else ir.IntType(64) for _, kind in args])
-        fn = cgutils.get_or_insert_function(builder.module, fnty, name)
+        fn = cgutils.get_or_insert_function(builder.module, fnty, name + sfx)
         res = builder.call(fn, cargs)
         return res if i64 else context.get_dummy_value()
 
@@ -591,6 +626,25 @@ def call_pieces(typingctx, cf, tb, xk, kf, nk, ns, SC, Xa, Da, Xb, Db, Qb, SWb, 
                 mask):
     """:data:`PIECES` (arguments: :data:`ARGS`)."""
     return _sig(PIECES), _codegen(PIECES)
+
+
+@intrinsic
+def call_end_pt(typingctx, cf, tb, xk, kf, nk, ns, SC, X, u, r, D, Q, SW):
+    """:data:`END` of the car with a powertrain (:data:`PT`)."""
+    return _sig(END), _codegen(END, PT)
+
+
+@intrinsic
+def call_step_pt(typingctx, cf, tb, xk, kf, nk, ns, SC, Xa, Da, SWa, Xb, Db, Qb, SWb, u1, r1, u2, r2, h):
+    """:data:`STEP` of the car with a powertrain (:data:`PT`)."""
+    return _sig(STEP), _codegen(STEP, PT)
+
+
+@intrinsic
+def call_pieces_pt(typingctx, cf, tb, xk, kf, nk, ns, SC, Xa, Da, Xb, Db, Qb, SWb, TH, np_, u0, r0, u1, r1, u2, r2,
+                   h, mask):
+    """:data:`PIECES` of the car with a powertrain (:data:`PT`)."""
+    return _sig(PIECES), _codegen(PIECES, PT)
 
 
 # ---------------------------------------------------------------------------
@@ -667,12 +721,13 @@ def _lane_crossings(XK, KF, nk, CF, ch, lane, h, S0, S1, th):
 
 @numba.njit(cache=True, nogil=True, error_model="numpy")
 def run_chunks(ch0, ch1, n, CF, TB, XK, KF, nk, ns, split, X0, run_start, hs, ms, fine_start, UF, RF, Y, W, mode,
-               err, out, states):
+               err, out, states, pt):
     """Chunks ``ch0 <= ch < ch1`` of :data:`LANES` candidates over every run (see :func:`run`; ``n`` real
-    candidates, the lanes past them copy the last)."""
+    candidates, the lanes past them copy the last; ``pt``: the car with a powertrain, 18 states)."""
     # two buffers of states, derivatives and switching quantities: a sub-step goes from one to the other
-    XB = np.empty((2, 14, LANES))
-    DB = np.empty((2, 14, LANES))
+    nx = 18 if pt else 14
+    XB = np.empty((2, nx, LANES))
+    DB = np.empty((2, nx, LANES))
     SB = np.empty((2, N_SW, LANES))
     Q = np.empty((7, LANES))
     SC = np.empty((N_SC, LANES))
@@ -686,7 +741,7 @@ def run_chunks(ch0, ch1, n, CF, TB, XK, KF, nk, ns, split, X0, run_start, hs, ms
     px, pd, psw = XB.ctypes.data, DB.ctypes.data, SB.ctypes.data
     pq, pth, psc = Q.ctypes.data, TH.ctypes.data, SC.ctypes.data
     py, pw, pe = Y.ctypes.data, W.ctypes.data, e_sum.ctypes.data
-    bx = 8 * 14 * LANES  # bytes per buffer of X and D
+    bx = 8 * nx * LANES  # bytes per buffer of X and D
     bs = 8 * N_SW * LANES
     row4 = 8 * 4  # bytes per row of UF, RF
     for ch in range(ch0, ch1):
@@ -699,14 +754,17 @@ def run_chunks(ch0, ch1, n, CF, TB, XK, KF, nk, ns, split, X0, run_start, hs, ms
             cur = 0
             for lane in range(LANES):
                 p = min(ch * LANES + lane, n - 1)
-                for i in range(14):
+                for i in range(nx):
                     XB[0, i, lane] = X0[r, p, i]
                 e_sum[lane] = 0.0
             m = ms[r]
             h = hs[r]
             f0 = fine_start[r]
             nrow = run_start[r + 1] - run_start[r]
-            call_end(pcf, ptb, pxk, pkf, nk, ns, psc, px, puf + row4 * f0, prf + row4 * f0, pd, pq, psw)
+            if pt:
+                call_end_pt(pcf, ptb, pxk, pkf, nk, ns, psc, px, puf + row4 * f0, prf + row4 * f0, pd, pq, psw)
+            else:
+                call_end(pcf, ptb, pxk, pkf, nk, ns, psc, px, puf + row4 * f0, prf + row4 * f0, pd, pq, psw)
             for k in range(nrow):
                 jf = f0 + 2 * m * k
                 row = run_start[r] + k
@@ -732,6 +790,8 @@ def run_chunks(ch0, ch1, n, CF, TB, XK, KF, nk, ns, split, X0, run_start, hs, ms
                             ctm = CF[ch, (_ECT + _CSTRIDE * c) * LANES + lane] * \
                                 CF[ch, (_EMU + _CSTRIDE * c) * LANES + lane]
                             states[p, row, 10 + c] = XB[cur, 10 + c, lane] + ctm * UF[jf, c]
+                        for i in range(14, nx):
+                            states[p, row, i] = XB[cur, i, lane]
                     if mode & 1:
                         for q in range(10):
                             out[p, row, q] = y[q]
@@ -742,9 +802,14 @@ def run_chunks(ch0, ch1, n, CF, TB, XK, KF, nk, ns, split, X0, run_start, hs, ms
                     u0 = puf + row4 * js
                     r0 = prf + row4 * js
                     a, b = cur, 1 - cur
-                    mask = call_step(pcf, ptb, pxk, pkf, nk, ns, psc, px + bx * a, pd + bx * a, psw + bs * a,
-                                     px + bx * b, pd + bx * b, pq, psw + bs * b, u0 + row4, r0 + row4,
-                                     u0 + 2 * row4, r0 + 2 * row4, h)
+                    if pt:
+                        mask = call_step_pt(pcf, ptb, pxk, pkf, nk, ns, psc, px + bx * a, pd + bx * a, psw + bs * a,
+                                            px + bx * b, pd + bx * b, pq, psw + bs * b, u0 + row4, r0 + row4,
+                                            u0 + 2 * row4, r0 + 2 * row4, h)
+                    else:
+                        mask = call_step(pcf, ptb, pxk, pkf, nk, ns, psc, px + bx * a, pd + bx * a, psw + bs * a,
+                                         px + bx * b, pd + bx * b, pq, psw + bs * b, u0 + row4, r0 + row4,
+                                         u0 + 2 * row4, r0 + 2 * row4, h)
                     cur = b
                     if mask == 0 or not split:
                         continue
@@ -756,13 +821,19 @@ def run_chunks(ch0, ch1, n, CF, TB, XK, KF, nk, ns, split, X0, run_start, hs, ms
                             for i in range(nc):
                                 TH[i, lane] = th[i]
                             npc = max(npc, nc)
-                    if npc > 0:
+                    if npc == 0:
+                        continue
+                    if pt:
+                        call_pieces_pt(pcf, ptb, pxk, pkf, nk, ns, psc, px + bx * a, pd + bx * a, px + bx * b,
+                                       pd + bx * b, pq, psw + bs * b, pth, npc, u0, r0, u0 + row4, r0 + row4,
+                                       u0 + 2 * row4, r0 + 2 * row4, h, mask)
+                    else:
                         call_pieces(pcf, ptb, pxk, pkf, nk, ns, psc, px + bx * a, pd + bx * a, px + bx * b,
                                     pd + bx * b, pq, psw + bs * b, pth, npc, u0, r0, u0 + row4, r0 + row4,
                                     u0 + 2 * row4, r0 + 2 * row4, h, mask)
-                        for lane in range(LANES):
-                            for i in range(npc):
-                                TH[i, lane] = 1.0
+                    for lane in range(LANES):
+                        for i in range(npc):
+                            TH[i, lane] = 1.0
             for lane in range(LANES):
                 p = ch * LANES + lane
                 if p < n:

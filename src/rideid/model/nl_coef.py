@@ -12,6 +12,12 @@ from __future__ import annotations
 COEF = ("inv_ms", "inv_Iyy", "inv_Ixx", "topple", "kar_f", "kar_r",
         *(f"{n}{c}" for n in ("inv_mu", "x", "y", "ks", "cs", "kt", "ct", "L", "bs_clear", "bs_rate")
           for c in range(4)))
+#: with a powertrain on mounts (SPEC §11): the inverse of the mass matrix over ``(z, theta, u, psi)`` (its ten
+#: entries on and above the diagonal, ``pt_m{row}{column}``) and the mounts' rates ``k``, ``c`` in bounce (``u``)
+#: and pitch (``psi``); appended, so the car without the group keeps its slots
+PT_COEF = ("pt_m00", "pt_m01", "pt_m02", "pt_m03", "pt_m11", "pt_m12", "pt_m13", "pt_m22", "pt_m23", "pt_m33",
+           "pt_ku", "pt_cu", "pt_kpsi", "pt_cpsi")
+COEF = COEF + PT_COEF
 CI = {n: i for i, n in enumerate(COEF)}
 
 

@@ -31,8 +31,18 @@ equilibrium for the road input at the first sample (``K q = Bf r(0)``,
 exact while the bump stops are clear of it and every tire is loaded, e.g.
 on every track's flat lead-in), zero velocities.
 
+A powertrain on mounts (SPEC §11, ``NonlinearLayout(powertrain=True)``):
+the linear car's (:mod:`rideid.model.equations`), its heave ``u`` and pitch
+``psi`` relative to the body four more states after the fourteen
+(:data:`POWERTRAIN_STATES`); the generalised forces on ``(z, theta, u,
+psi)`` (the suspension's on the body as above, the mounts' springs and
+dampers on ``u``, ``psi``) move them through the inverse of their mass
+matrix (:func:`powertrain_mass`, per candidate), ``phi`` and the wheels as
+above. A row with ``m_p = 0`` gets the linear car's decoupled dummy.
+
 Parameter rows (:class:`NonlinearLayout`): the sixteen
-:data:`rideid.model.params.SUSPENSION_NAMES`, then with bump stops
+:data:`rideid.model.params.SUSPENSION_NAMES` (with a powertrain then its
+seven: the 23 columns of :data:`rideid.model.params.ALL_NAMES`), then with bump stops
 :data:`BUMP_STOP_NAMES` (``bs_clear_f, bs_clear_r`` m, ``bs_rate_f,
 bs_rate_r`` N/m), then with curves the front forces at the ``K`` knots
 ``F_f1 .. F_fK`` and the rear ones ``F_r1 .. F_rK`` (N, knots in ascending
@@ -151,13 +161,17 @@ import numpy as np
 
 from ..errors import DataError
 from . import backend
-from .equations import CHANNELS, mck, blocks as blocks_of, static_corner_loads
-from .params import GRAVITY, INDEX, ROW_WIDTHS, SUSPENSION_NAMES, Geometry, check_parameters, full_rows
+from .equations import CHANNELS, DUMMY_HZ, mck, blocks as blocks_of, static_corner_loads
+from .params import (GRAVITY, INDEX, POWERTRAIN_NAMES, ROW_WIDTHS, SUSPENSION_NAMES, Geometry, check_parameters,
+                     full_rows, has_powertrain)
 from .nl_coef import CI, COEF, hermite_value_slope
 from .simulate import RunInput
 
 #: Default damper velocity knots (m/s), SPEC §8.
 DEFAULT_KNOTS: tuple[float, ...] = (-0.4, -0.2, -0.1, -0.05, -0.025, 0.025, 0.05, 0.1, 0.2, 0.4)
+#: The powertrain's states (SPEC §11) after the car's fourteen: its heave and pitch relative to the body
+#: (:data:`rideid.model.equations.POWERTRAIN_COORDS`), then their rates
+POWERTRAIN_STATES: tuple[str, ...] = ("u_p", "psi_p", "u_p'", "psi_p'")
 #: Bump-stop columns (after the sixteen): clearance m of compression from static, rate N/m.
 BUMP_STOP_NAMES: tuple[str, ...] = ("bs_clear_f", "bs_clear_r", "bs_rate_f", "bs_rate_r")
 #: Largest ``h_sub * max|eig|`` of the RK4 sub-step (accuracy, not stability: RK4 is stable to 2.8).
@@ -179,14 +193,18 @@ class NonlinearLayout:
 
     ``knots``: damper velocity knots (m/s, strictly increasing, nonzero;
     ``None``: linear dampers ``c_sf``, ``c_sr``); ``bump_stops``: the four
-    :data:`BUMP_STOP_NAMES` columns are present. Rows are the sixteen
-    :data:`rideid.model.params.SUSPENSION_NAMES` (the nonlinear car has no
-    powertrain), then the bump stops, then the
-    front and rear curve forces (:func:`curve_names`).
+    :data:`BUMP_STOP_NAMES` columns are present; ``powertrain``: the car
+    carries a powertrain on mounts (SPEC §11, the seven
+    :data:`rideid.model.params.POWERTRAIN_NAMES`; a row with ``m_p = 0``
+    has none). Rows are the sixteen
+    :data:`rideid.model.params.SUSPENSION_NAMES`, with a powertrain its
+    seven (the columns of :data:`rideid.model.params.ALL_NAMES`), then the
+    bump stops, then the front and rear curve forces (:func:`curve_names`).
     """
 
     knots: tuple | None = None
     bump_stops: bool = False
+    powertrain: bool = False
 
     def __post_init__(self):
         if self.knots is not None:
@@ -196,14 +214,27 @@ class NonlinearLayout:
                 raise DataError(f"damper knots must be finite, nonzero and strictly increasing (m/s), got {k}")
             object.__setattr__(self, "knots", k)
         object.__setattr__(self, "bump_stops", bool(self.bump_stops))
+        object.__setattr__(self, "powertrain", bool(self.powertrain))
 
     @property
     def n_knots(self) -> int:
         return 0 if self.knots is None else len(self.knots)
 
     @property
+    def n_car(self) -> int:
+        """The car's columns, 16 (:data:`rideid.model.params.SUSPENSION_NAMES`) or 23 with a powertrain (then
+        the columns of :data:`rideid.model.params.ALL_NAMES`)."""
+        return len(SUSPENSION_NAMES) + (len(POWERTRAIN_NAMES) if self.powertrain else 0)
+
+    @property
+    def n_states(self) -> int:
+        """States of the integrator: 14, or 18 with a powertrain (:data:`POWERTRAIN_STATES` appended)."""
+        return 18 if self.powertrain else 14
+
+    @property
     def names(self) -> tuple[str, ...]:
-        return SUSPENSION_NAMES + (BUMP_STOP_NAMES if self.bump_stops else ()) + curve_names(self.n_knots)
+        return SUSPENSION_NAMES + (POWERTRAIN_NAMES if self.powertrain else ()) + \
+            (BUMP_STOP_NAMES if self.bump_stops else ()) + curve_names(self.n_knots)
 
     @property
     def n_columns(self) -> int:
@@ -224,7 +255,7 @@ class NonlinearLayout:
         if self.knots is None:
             return None
         P = np.atleast_2d(P)
-        s = len(SUSPENSION_NAMES) + (4 if self.bump_stops else 0)
+        s = self.n_car + (4 if self.bump_stops else 0)
         K = self.n_knots
         return P[:, s:s + K], P[:, s + K:s + 2 * K]
 
@@ -232,7 +263,10 @@ class NonlinearLayout:
         """Rows ``P`` as a float array ``(n, n_columns)``; for a linear layout 12 columns are accepted too."""
         P = np.atleast_2d(np.asarray(P, dtype=float))
         if self.linear and P.shape[-1] in ROW_WIDTHS:
-            return full_rows(P)
+            if not self.powertrain and has_powertrain(P):
+                raise DataError("parameter rows carry a powertrain on mounts (m_p > 0) but the nonlinear layout has "
+                                "none: NonlinearLayout(powertrain=True)")
+            return full_rows(P)[:, :self.n_car]
         if P.shape[-1] != self.n_columns:
             raise DataError(f"nonlinear parameter rows must have {self.n_columns} columns "
                             f"({', '.join(self.names)}), got {P.shape[-1]}")
@@ -347,7 +381,45 @@ def coefficients(P, geom: Geometry, layout: NonlinearLayout):
         Ff, Fr = layout.curves(P)
         Fk = np.insert(np.stack([Ff, Fr], 1), j0, 0.0, axis=-1)
     Sk = np.diff(Fk, axis=-1) / np.diff(xk)
+    if layout.powertrain:
+        _powertrain_coefficients(co, p, p["I_yy"] + swing)
     return co, xk, np.ascontiguousarray(Fk), np.ascontiguousarray(Sk)
+
+
+def powertrain_mass(p, I_theta) -> np.ndarray:
+    """The mass matrix ``(n, 4, 4)`` over ``(z, theta, u, psi)`` of a car with a powertrain on mounts (SPEC
+    §11, :func:`rideid.model.equations.mck`'s): ``p`` the columns by name, ``I_theta`` the pitch inertia (with
+    the wheels' swing about a raised CG). A row without a powertrain (``m_p = 0``; or ``I_p = 0``: no pitch
+    mount) gets a decoupled unit-mass dummy, as the linear car."""
+    m_s, m_p, x_p, I_p = p["m_s"], p["m_p"], p["x_p"], p["I_p"]
+    on_u = m_p > 0
+    on_p = on_u & (I_p > 0)
+    n = m_s.shape[0]
+    M = np.zeros((n, 4, 4))
+    M[:, 0, 0] = m_s
+    M[:, 1, 1] = I_theta
+    M[:, 2, 2] = np.where(on_u, m_p, 1.0)
+    M[:, 3, 3] = np.where(on_p, I_p, 1.0)
+    M[:, 0, 2] = M[:, 2, 0] = np.where(on_u, m_p, 0.0)
+    M[:, 1, 2] = M[:, 2, 1] = np.where(on_u, -m_p * x_p, 0.0)
+    M[:, 1, 3] = M[:, 3, 1] = np.where(on_p, I_p, 0.0)
+    return M
+
+
+def _powertrain_coefficients(co, p, I_theta):
+    """In place: the powertrain's slots of ``co`` (:data:`rideid.model.nl_coef.PT_COEF`)."""
+    M = powertrain_mass(p, I_theta)
+    Mi = np.linalg.inv(M)
+    for i in range(4):
+        for j in range(i, 4):
+            co[:, CI[f"pt_m{i}{j}"]] = Mi[:, i, j]
+    on_u = p["m_p"] > 0
+    on_p = on_u & (p["I_p"] > 0)
+    for on, mass, f, zeta, k, c in ((on_u, M[:, 2, 2], p["f_pb"], p["zeta_pb"], "pt_ku", "pt_cu"),
+                                    (on_p, M[:, 3, 3], p["f_pp"], p["zeta_pp"], "pt_kpsi", "pt_cpsi")):
+        w = 2.0 * np.pi * np.where(on, f, DUMMY_HZ)
+        co[:, CI[k]] = mass * w * w
+        co[:, CI[c]] = 2.0 * np.where(on, zeta, 0.5) * mass * w
 
 
 def substeps(P, geom: Geometry, layout: NonlinearLayout, h: float, rho: float = RHO_MAX) -> int:
@@ -369,7 +441,7 @@ def _substeps_of(lam, h: float, rho: float):
 def _spectral_radii(P, geom: Geometry, layout: NonlinearLayout) -> np.ndarray:
     """``(n,)``: the largest |eigenvalue| of each candidate's linearised car (its stiffest segments)."""
     P = layout.rows(P)
-    Q = full_rows(P[:, :len(SUSPENSION_NAMES)]).copy()
+    Q = full_rows(P[:, :layout.n_car]).copy()
     if layout.bump_stops:
         ix = layout.column
         Q[:, INDEX["k_sf"]] += P[:, ix["bs_rate_f"]]
@@ -385,10 +457,11 @@ def _spectral_radii(P, geom: Geometry, layout: NonlinearLayout) -> np.ndarray:
 
 
 def initial_state(P, geom: Geometry, layout: NonlinearLayout, u0) -> np.ndarray:
-    """Static equilibrium ``(n, 14)`` for road input ``u0`` (4,): ``K q = Bf u0``, zero velocities."""
+    """Static equilibrium ``(n, 14)`` (18 with a powertrain) for road input ``u0`` (4,): ``K q = Bf u0``, zero
+    velocities (the mounts are decoupled in ``K``: the powertrain at rest on them, ``u = psi = 0``)."""
     P = layout.rows(P)
     n = P.shape[0]
-    X = np.zeros((n, 14))
+    X = np.zeros((n, layout.n_states))
     u0 = np.asarray(u0, dtype=float)
     if np.any(u0):
         _, _, K, Bf = mck(P[:, :len(SUSPENSION_NAMES)], geom)
@@ -409,20 +482,26 @@ def _curve_eval(xk, Fk, Sk, v):
 
 
 def accelerations(co, xk, Fk, Sk, curves: bool, X, r, rd):
-    """State derivative ``(n, 14)`` and generalised accelerations ``(n, 7)`` for inputs ``r``, rates ``rd`` (4,).
+    """State derivative ``(n, 14)`` (``(n, 18)``) and generalised accelerations ``(n, 7)`` for inputs ``r``, rates
+    ``rd`` (4,).
 
-    ``X = [q, theta', phi', z', p]`` with the wheels' shifted velocities
+    ``X = [q, z', theta', phi', p]`` with the wheels' shifted velocities
     ``p_i = z_i' - (c_t / m_u) r_i`` (see :func:`shifted`): in contact the
     tire damper's ``c_t r'`` cancels from ``p'``, so the road's rate (which
     jumps where the envelope kinks) enters the integration only while a
-    wheel is off the road, and the outputs at the samples.
+    wheel is off the road, and the outputs at the samples. With a
+    powertrain (18 columns) :data:`POWERTRAIN_STATES` follow: its heave
+    ``u`` and pitch ``psi`` relative to the body and their rates; the
+    suspension's forces and the mounts' then move ``(z, theta, u, psi)``
+    through the inverse of their mass matrix (SPEC §11,
+    :func:`powertrain_mass`).
     """
     def c(name):
         return co[:, _C4[name]]
 
     q = X[:, :7]
     ctm = c("ct") * c("inv_mu")
-    w = X[:, 10:] + ctm * r  # wheel velocities
+    w = X[:, 10:14] + ctm * r  # wheel velocities
     x, y = c("x"), c("y")
     d = suspension_travel(q, x, y)
     v = w - body_corners(X[:, 7:], x, y)
@@ -439,11 +518,19 @@ def accelerations(co, xk, Fk, Sk, curves: bool, X, r, rd):
     dp = np.where(contact, t0 - L - F, -L - F - crd) * c("inv_mu")
     qdd = np.empty_like(q)
     topple = co[:, CI["topple"]]
-    qdd[:, 0] = F.sum(-1) * co[:, CI["inv_ms"]]
-    qdd[:, 1] = (-(x * F).sum(-1) + topple * q[:, 1]) * co[:, CI["inv_Iyy"]]
     qdd[:, 2] = ((y * F).sum(-1) + topple * q[:, 2]) * co[:, CI["inv_Ixx"]]
     qdd[:, 3:] = dp + ctm * rd
-    dX = np.concatenate([X[:, 7:10], w, qdd[:, :3], dp], axis=1)
+    if X.shape[1] == 14:
+        qdd[:, 0] = F.sum(-1) * co[:, CI["inv_ms"]]
+        qdd[:, 1] = (-(x * F).sum(-1) + topple * q[:, 1]) * co[:, CI["inv_Iyy"]]
+        return np.concatenate([X[:, 7:10], w, qdd[:, :3], dp], axis=1), qdd
+    # the powertrain: generalised forces on (z, theta, u, psi), the mounts' on their own coordinates
+    g = (F.sum(-1), -(x * F).sum(-1) + topple * q[:, 1],
+         -(co[:, CI["pt_ku"]] * X[:, 14] + co[:, CI["pt_cu"]] * X[:, 16]),
+         -(co[:, CI["pt_kpsi"]] * X[:, 15] + co[:, CI["pt_cpsi"]] * X[:, 17]))
+    acc = [sum(co[:, CI[f"pt_m{min(i, j)}{max(i, j)}"]] * g[j] for j in range(4)) for i in range(4)]
+    qdd[:, 0], qdd[:, 1] = acc[0], acc[1]
+    dX = np.concatenate([X[:, 7:10], w, qdd[:, :3], dp, X[:, 16:18], acc[2][:, None], acc[3][:, None]], axis=1)
     return dX, qdd
 
 
@@ -474,7 +561,7 @@ def shifted(co, X, r, back: bool = False):
     """States with wheel velocities ``z'`` -> shifted ``p = z' - (c_t/m_u) r`` (``back``: the inverse)."""
     ctm = co[:, _C4["ct"]] * co[:, _C4["inv_mu"]]
     out = X.copy()
-    out[..., 10:] += (ctm if back else -ctm) * r
+    out[..., 10:14] += (ctm if back else -ctm) * r
     return out
 
 
@@ -545,7 +632,7 @@ def switching(co, X, qdd, r, rd):
     ``L + k_t (r - z_i) + c_t (r' - z_i')`` and the damper velocities' rates (as the compiled kernel)."""
     x, y = co[:, _C4["x"]], co[:, _C4["y"]]
     ct = co[:, _C4["ct"]]
-    w = X[:, 10:] + ct * co[:, _C4["inv_mu"]] * r
+    w = X[:, 10:14] + ct * co[:, _C4["inv_mu"]] * r
     d = suspension_travel(X[:, :7], x, y)
     v = w - body_corners(X[:, 7:], x, y)
     t0 = co[:, _C4["L"]] + co[:, _C4["kt"]] * (r - X[:, 3:7]) - ct * w
@@ -610,7 +697,8 @@ def inputs_within(U, R, js, tau, dt):
 
 def simulate_numpy(P, geom, run: RunInput, layout: NonlinearLayout, m: int, fine=None, return_states=False,
                    split: bool = True, kinks=None):
-    """NumPy backend for one run: outputs ``(n, n_time, 10)`` (and states ``(n, n_time, 14)``)."""
+    """NumPy backend for one run: outputs ``(n, n_time, 10)`` (and states ``(n, n_time, 14)``, 18 with a
+    powertrain)."""
     co, xk, Fk, Sk = coefficients(P, geom, layout)
     curves = layout.knots is not None
     kinks = kink_mask(Sk) if kinks is None else kinks
@@ -621,7 +709,7 @@ def simulate_numpy(P, geom, run: RunInput, layout: NonlinearLayout, m: int, fine
     hh = 0.5 * hs
     clear = co[:, _C4["bs_clear"]]
     y = np.empty((n, run.n, 10))
-    Xs = np.empty((n, run.n, 14)) if return_states else None
+    Xs = np.empty((n, run.n, layout.n_states)) if return_states else None
 
     def f(X, u, ud, rows=slice(None)):
         dX, qdd = accelerations(co[rows], xk, Fk[rows], Sk[rows], curves, X, u, ud)
@@ -837,7 +925,7 @@ class NonlinearSimulator:
     def states(self, P, pin: Pin | None = None):
         """Simulated channels and states: list over runs of ``((n_pop, n_time, 10), (n_pop, n_time, 14))``,
         the states ``[q, q']`` in :data:`rideid.model.equations.COORDS` order (deviations from static
-        equilibrium)."""
+        equilibrium); with a powertrain 18 wide, :data:`POWERTRAIN_STATES` appended."""
         if self._use_numpy():
             return self.states_reference(P, pin)
         _, out, X = self._compiled(P, 3, pin=pin)
@@ -878,14 +966,14 @@ def _errors_of(outs, run_start, Y, W):
 
 
 def check_nonlinear(P, geom: Geometry, layout: NonlinearLayout, where: str = "parameters") -> np.ndarray:
-    """Validate rows: the sixteen as :func:`rideid.model.params.check_parameters` (``c_sf``, ``c_sr``
-    unused with curves), bump stops ``>= 0``, curve forces finite."""
+    """Validate rows: the sixteen (23 with a powertrain) as :func:`rideid.model.params.check_parameters`
+    (``c_sf``, ``c_sr`` unused with curves), bump stops ``>= 0``, curve forces finite."""
     P = layout.rows(P)
-    base = P[:, :len(SUSPENSION_NAMES)].copy()
+    base = P[:, :layout.n_car].copy()
     if layout.knots is not None:
         base[:, [INDEX["c_sf"], INDEX["c_sr"]]] = 1.0
     check_parameters(base, geom, where)
-    for i, nm in enumerate(layout.names[len(SUSPENSION_NAMES):], start=len(SUSPENSION_NAMES)):
+    for i, nm in enumerate(layout.names[layout.n_car:], start=layout.n_car):
         col = P[:, i]
         if not np.all(np.isfinite(col)):
             raise DataError(f"{where}: {nm} is not finite")
@@ -903,20 +991,23 @@ def simulate_nonlinear(P, geom: Geometry, run: RunInput, layout: NonlinearLayout
     P : (n_pop, layout.n_columns) or (n_columns,)
     geom : Geometry
     run : RunInput
-    layout : NonlinearLayout (``None``: linear dampers, no bump stops; the tires may still lift)
+    layout : NonlinearLayout (``None``: linear dampers, no bump stops, a powertrain if a row has one; the
+        tires may still lift)
 
     Returns
     -------
     y : (n_pop, n_time, 10) in :data:`rideid.model.equations.CHANNELS` order
     states : (n_pop, n_time, 14) ``[q, q']`` in :data:`rideid.model.equations.COORDS`
-        order (deviations from static equilibrium), only with ``return_states``.
+        order (deviations from static equilibrium), only with ``return_states``; with a powertrain
+        (n_pop, n_time, 18), :data:`POWERTRAIN_STATES` appended.
     """
-    layout = NonlinearLayout() if layout is None else layout
+    layout = NonlinearLayout(powertrain=has_powertrain(np.atleast_2d(P))) if layout is None else layout
     P = check_nonlinear(P, geom, layout)
     sim = NonlinearSimulator(geom, [run], layout)
     return sim.states(P)[0] if return_states else sim.outputs(P)[0]
 
 
 __all__ = ["BUMP_STOP_NAMES", "CHANNELS", "DEFAULT_KNOTS", "NonlinearLayout", "NonlinearSimulator", "Pin",
+           "POWERTRAIN_STATES", "powertrain_mass",
            "PinnedSimulator", "RHO_MAX", "curve_names", "damper_force", "kink_mask", "linear_curve",
            "simulate_nonlinear", "substeps"]

@@ -35,7 +35,7 @@ GROUPS: dict[str, tuple[str, ...]] = {
 #: SPEC §6's groups: the ones ``--model full`` fits and ``--model auto`` weighs in its one search (the
 #: powertrain is weighed after it, when the car needs more).
 SUSPENSION_GROUPS: dict[str, tuple[str, ...]] = {g: GROUPS[g] for g in ("anti_roll_bars", "tire_damping")}
-#: The twelve and SPEC §6's four: the parameter columns of the nonlinear car (which has no powertrain) and the
+#: The twelve and SPEC §6's four: the parameter columns of the nonlinear car (a powertrain's seven follow them) and the
 #: FMU's first sixteen parameters (a powertrain's seven follow them there).
 SUSPENSION_NAMES: tuple[str, ...] = NAMES + tuple(n for ns in SUSPENSION_GROUPS.values() for n in ns)
 #: The extension names, in column order after the twelve.

@@ -29,7 +29,7 @@ import numpy as np
 from ..errors import ArgumentError, DataError
 from .batch import BatchSimulator
 from .nonlinear import RHO_MAX, NonlinearLayout, NonlinearSimulator, Pin, linear_curve
-from .params import INDEX, ROW_WIDTHS, SUSPENSION_NAMES, Geometry, full_rows, has_powertrain, nominal_car
+from .params import INDEX, ROW_WIDTHS, Geometry, full_rows, has_powertrain, nominal_car
 from .simulate import RunInput
 
 #: backend names a :class:`Simulator` takes (None: ``RIDEID_KERNEL`` decides at each call)
@@ -105,10 +105,10 @@ class Simulator:
             return P if lay is None else lay.rows(P)
         if P.shape[-1] not in ROW_WIDTHS:
             return lay.rows(P)  # the layout's own message
-        if has_powertrain(P):
-            raise DataError("the nonlinear car (damper curves, bump stops) has no powertrain on mounts in this "
-                            "version of rideid (SPEC §11): give m_p = 0 or fit linear dampers without bump stops")
-        base = full_rows(P)[:, :len(SUSPENSION_NAMES)]
+        if has_powertrain(P) and not lay.powertrain:
+            raise DataError("parameter rows with a powertrain on mounts (SPEC §11) for a nonlinear car without one: "
+                            "give m_p = 0 or a model with the group powertrain")
+        base = full_rows(P)[:, :lay.n_car]
         parts = [base]
         if lay.bump_stops:
             parts.append(np.tile([0.15, 0.15, 0.0, 0.0], (base.shape[0], 1)))

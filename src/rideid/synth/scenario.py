@@ -22,7 +22,7 @@ from ..data.scenario import (LIFT_OFF_RHO, generate_road, lead_in, post_function
                              write_road_csv)
 from ..data.schema import (BUMP_NAMES, ChannelEntry, DatasetManifest, RunSpec, Scenario, atomic_output, write_run_csv,
                            write_toml)
-from ..errors import ArgumentError, DataError, DataWarning, ModelValidityWarning
+from ..errors import ArgumentError, DataWarning, ModelValidityWarning
 from ..model.equations import CHANNELS, static_corner_loads
 from ..model.nonlinear import NonlinearLayout, NonlinearSimulator, simulate_nonlinear
 from ..model.params import (CORNERS, EXT_NAMES, INDEX, NAMES, ROW_WIDTHS, SUSPENSION_NAMES, as_vector,
@@ -112,11 +112,10 @@ def nonlinear_car(sc: Scenario):
     if not sc.nonlinear:
         return None
     dm = sc.dampers
-    layout = NonlinearLayout(knots=None if dm is None else tuple(dm.velocity), bump_stops=bool(sc.bump_stops))
-    if sc.truth.get("m_p", 0.0) > 0:
-        raise DataError(f"{sc.path}: [truth] gives a powertrain on mounts (SPEC §11) and the car has [dampers] curves "
-                        "or bump stops (SPEC §8): this version of rideid simulates a powertrain in the linear car only")
-    row = [float(sc.truth.get(n, 0.0)) for n in SUSPENSION_NAMES]
+    pt = sc.truth.get("m_p", 0.0) > 0
+    layout = NonlinearLayout(knots=None if dm is None else tuple(dm.velocity), bump_stops=bool(sc.bump_stops),
+                             powertrain=pt)
+    row = [float(sc.truth.get(n, 0.0)) for n in layout.names[:layout.n_car]]
     if sc.bump_stops:
         (cf, cr), (rf, rr) = sc.bump_stop_pairs
         # an axle without a stop: rate 0 (the simulator takes finite clearances only; with rate 0 any will do)
