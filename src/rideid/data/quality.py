@@ -5,7 +5,8 @@ the fit, SPEC §11) and in which runs, the gaps in its time bridged by
 interpolation, its noise level (the RMS of the quietest quarter second of
 each run's model window about its mean, :func:`rideid.data.measured.quietest_rms`,
 the median over the runs: the sensor noise where the car stood or rolled on
-flat road), the runs where it flat-lined, and its declared sensor chain.
+flat road), the runs where it flat-lined, and its sensor chain as the model passes it (the declared
+filters, and rideid's own anti-alias filter where it low-passed the data, marked so).
 The terminal prints this table instead of one warning per run and channel;
 ``result.json`` keeps it under ``data_quality`` and the report shows it.
 """
@@ -55,9 +56,12 @@ def data_quality(ds) -> dict:
                 entry["flat_lined"].append(r.id)
             else:
                 noise.append(quietest_rms(v, int(round(NOISE_WINDOW_S * fs))))
+            declared = rec.get("sensor_filters", [])
             for f in ds.sensor_filters(r.id)[i]:
-                if f.describe() not in entry["filters"]:
-                    entry["filters"].append(f.describe())
+                d = f.describe()
+                d = d if d in declared or mr is None else d + " (rideid's anti-alias)"  # the model's chain passes both
+                if d not in entry["filters"]:
+                    entry["filters"].append(d)
         if entry["runs"]:
             entry["noise"] = float(np.median(noise)) if noise else None
             out[name] = entry
@@ -76,7 +80,7 @@ def quality_table(quality: dict) -> str:
         if e["flat_lined"]:
             notes.append("flat-lined in " + ", ".join(e["flat_lined"]))
         if e["filters"]:
-            notes.append("sensor " + "; ".join(e["filters"]))
+            notes.append("filtered: " + "; ".join(e["filters"]))
         lines.append(f"{name:<12} {e['runs']:>4} {clip:>8}  {e['gaps']:>4} {noise:>10}  {e['unit']:<6} "
                      + "; ".join(notes))
     lines.append("clipped: the largest share of a run's samples at the channel's range; gaps: bridged by "
@@ -90,3 +94,36 @@ def summarised_warning(message: str) -> bool:
 
 
 __all__ = ["NOISE_WINDOW_S", "data_quality", "quality_table", "summarised_warning"]
+
+
+def resampling_lines(ds) -> list:
+    """The terminal's lines on rates and filters: per group of runs read the same way, the file's rates, the
+    model's rate and the rule that chose it, and each filter rideid applied to the data (kind, corner, order,
+    channels; whether the model's channels pass it too). From each run's ``preprocessing.<run>.resampling``
+    record; none for SPEC CSVs taken as they are."""
+    groups: dict = {}
+    for r in ds.runs:
+        mr = ds.measured.get(r.id)
+        rec = (mr.record.get("resampling") if mr is not None else None)
+        if not rec:
+            continue
+        parts = [f"{'/'.join(f'{x:g}' for x in rec['file_rates_hz'])} Hz -> {rec['fs']:g} Hz ({rec['rule']})"]
+        dec = sorted(set(rec["decimated"].values()))
+        if dec:
+            parts.append("decimated (1 sample in " + "/".join(str(n) for n in dec) + " taken), no filter")
+        for f in rec["filters"]:
+            chans = _channels_text(f["channels"])
+            if f["kind"] == "lowpass":
+                parts.append(f"low-pass {f['hz']:g} Hz, order {f['order']} ({f['design']}, {f['why']}) on {chans}; "
+                             "the model's channels pass the same filter")
+            else:
+                parts.append(f"{f['what']} on {chans}" + ("" if f["model"] else "; NOT seen by the model"))
+        groups.setdefault(tuple(parts), []).append(r.id)
+    return [f"rates ({', '.join(ids)}): " + "; ".join(parts) for parts, ids in groups.items()]
+
+
+def _channels_text(chans) -> str:
+    """``"the 10 channels"``, ``"the 8 accelerations"`` or the names."""
+    if len(chans) == len(CHANNELS):
+        return "all 10 channels"
+    return ", ".join(chans)
