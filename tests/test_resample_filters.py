@@ -124,3 +124,33 @@ def test_at_200_hz_the_data_and_the_model_pass_the_same_low_pass(tmp_path):
     # unfiltered, the model would miss the filter's delay and gain by far more than either side errs
     assert float(np.max(np.abs(_signal(mr.times) - ref200))) > 5 * max(data_err, model_err)
     assert n == int(T_END * 200) + 1
+
+
+@pytest.mark.slow  # about 15-30 minutes per rate on two shared cores
+@pytest.mark.parametrize("fs_file, fs_model", [(300.0, 300.0), (500.0, 250.0), (1000.0, 200.0)])
+def test_a_van_with_real_dampers_logged_at_300_500_or_1000_hz_is_identified_with_the_defaults(
+        tmp_path, fs_file, fs_model):
+    """The van of ``tests/rate_case.py`` (digressive dampers, bump stops, a CG height; 1 % noise) as its logger
+    writes it at ``fs_file``, identified with every default: the twelve within 1 %, and adequate."""
+    import sys
+    import warnings
+    from pathlib import Path
+
+    import rideid
+    from rideid.model.params import NAMES
+    sys.path.insert(0, str(Path(__file__).parent))
+    from rate_case import write_van_logger
+
+    folder = write_van_logger(tmp_path, fs_file)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        ds = rideid.load_dataset(folder)
+    assert {ds.measured[r.id].fs for r in ds.runs} == {fs_model}
+    assert all(not ds.measured[r.id].record["resampling"]["filters"] for r in ds.runs)
+    res = rideid.identify(ds, seed=1)
+    sc = rideid.score(res, rideid.load_truth(tmp_path / "sim" / "truth.toml"),
+                      dampers=rideid.load_truth_dampers(tmp_path / "sim" / "truth.toml"))
+    worst = max(abs(sc["parameters"][n]["error_percent"]) for n in NAMES
+                if sc["parameters"][n]["status"] in ("estimated", "derived"))
+    assert worst < 1.0, sc["parameters"]
+    assert res.adequacy["adequate"], res.adequacy["reasons"]

@@ -62,6 +62,7 @@ import numpy as np
 from ..errors import DataError, DataWarning
 from ..model.equations import CHANNELS
 from ..model.params import GRAVITY
+from ..model.sensors import AnalogFilter, discretise
 from .readers import FORMAT_NAMES, Signal, open_signals
 from .schema.channels import SI, TARGETS, UNITS, ChannelEntry, gravity_unit_factor, quantity, unit_factor
 from .schema.runfiles import RunData
@@ -718,8 +719,6 @@ def _filter_resample(raw: dict, rec_ch: dict, measured: list, fs: float, anti_al
     """
     from scipy.signal import resample_poly
 
-    from ..model.sensors import AnalogFilter, discretise
-
     channels, added, odd = {}, {}, []
     for c in measured:
         s = raw[c]
@@ -770,7 +769,8 @@ def _filter_resample(raw: dict, rec_ch: dict, measured: list, fs: float, anti_al
         how = ("low-passed at " + f"{FILTER_CUTOFF * fs:g} Hz, the model's channels through the same filter, which "
                "at this rate it reproduces only roughly" if any("filter" in rec_ch[c] for c in odd) else
                "interpolated by a cubic spline the model does not see")
-        _warn(warns, f"{path}: {', '.join(odd)} at {'/'.join(f'{r:g}' for r in odd_rates)} Hz: no whole multiple of "
+        which = "all 10 channels" if len(odd) == len(CHANNELS) else ", ".join(odd)
+        _warn(warns, f"{path}: {which} at {'/'.join(f'{r:g}' for r in odd_rates)} Hz: no whole multiple of "
                      f"the model's {fs:g} Hz, so {how} (up to several times the sensor noise on short "
                      f"wavelengths, docs/real-data.md); {fix}", _STAGE)
     return channels, added
