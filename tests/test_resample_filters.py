@@ -8,11 +8,13 @@ on a fine clock, not rideid's discretisation; the known signal is a sum of sines
 from __future__ import annotations
 
 import math
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
 from scipy.signal import butter, lsim
 
+from rideid.data.quality import rate_advice
 from rideid.data.measured import FILTER_CUTOFF, FILTER_ORDER, default_rate, load_measured_run, uniform_clock
 from rideid.data.schema.manifest import load_manifest
 from rideid.model.equations import CHANNELS
@@ -93,6 +95,12 @@ def test_a_500_hz_logger_is_read_at_250_hz_by_taking_every_second_sample(tmp_pat
     assert rec["fs"] == 250.0 and rec["filters"] == [] and set(rec["decimated"].values()) == {2}
     assert "500 Hz / 2" in rec["rule"]
     assert mr.chain_filters() == ((),) * len(CHANNELS)  # nothing for the model to pass either
+    assert rate_advice(SimpleNamespace(measured={"R": mr}), _flagged()) is None  # nothing filtered to blame
+
+
+def _flagged():
+    """A not-adequate verdict that flags run R's body_az_fl."""
+    return {"adequate": False, "runs": {"R": {"body_az_fl": {"structure": True}, "pitch_rate": {"structure": False}}}}
 
 
 def test_at_200_hz_the_data_and_the_model_pass_the_same_low_pass(tmp_path):
@@ -124,6 +132,10 @@ def test_at_200_hz_the_data_and_the_model_pass_the_same_low_pass(tmp_path):
     # unfiltered, the model would miss the filter's delay and gain by far more than either side errs
     assert float(np.max(np.abs(_signal(mr.times) - ref200))) > 5 * max(data_err, model_err)
     assert n == int(T_END * 200) + 1
+    # a flagged pair on a channel so filtered: the advice names the run, its rates and the rate that divides
+    advice = rate_advice(SimpleNamespace(measured={"R": mr}), _flagged())
+    assert "R (500 Hz read at 200 Hz)" in advice and "set [preprocess] fs = 250" in advice
+    assert rate_advice(SimpleNamespace(measured={"R": mr}), {**_flagged(), "adequate": True}) is None
 
 
 @pytest.mark.slow  # about 15-30 minutes per rate on two shared cores

@@ -16,7 +16,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..model.equations import CHANNEL_KIND, CHANNELS
-from .measured import quietest_rms
+from .measured import default_rate, quietest_rms
 
 #: the stretch (s) whose RMS is a channel's noise level
 NOISE_WINDOW_S = 0.25
@@ -127,3 +127,29 @@ def _channels_text(chans) -> str:
     if len(chans) == len(CHANNELS):
         return "all 10 channels"
     return ", ".join(chans)
+
+
+def rate_advice(ds, adequacy: dict | None) -> str | None:
+    """One sentence when the not-adequate verdict's flagged run/channel pairs are channels rideid low-passed or
+    interpolated to the model's rate (``preprocessing.<run>.resampling.filters``: a rate the model's does not
+    divide, or ``anti_alias = true``), naming the rate that takes every sample as it is; None otherwise."""
+    if not adequacy or adequacy.get("adequate", True):
+        return None
+    hit, fix = [], set()
+    for rid, rec in (adequacy.get("runs") or {}).items():
+        mr = ds.measured.get(rid)
+        res = mr.record.get("resampling") if mr is not None else None
+        if not res or not res.get("filters"):
+            continue
+        touched = {c for f in res["filters"] for c in f["channels"]}
+        flagged = [name for name, fig in rec.items() if fig.get("structure") and name in touched]
+        if flagged:
+            hit.append(f"{rid} ({'/'.join(f'{r:g}' for r in res['file_rates_hz'])} Hz read at {res['fs']:g} Hz)")
+            fix.add(default_rate(res["file_rates_hz"])[0])
+    if not hit:
+        return None
+    rate = (f"set [preprocess] fs = {'/'.join(f'{r:g}' for r in sorted(fix))} (or leave fs out: rideid then "
+            "chooses a rate the file's divides)")
+    return ("Flagged pairs of runs low-passed or interpolated to the model's rate: " + ", ".join(hit[:6]) + "; the "
+            "model reproduces that filter only roughly at this rate (docs/real-data.md, Rates and filters): " + rate
+            + ".")
