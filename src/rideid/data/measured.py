@@ -18,13 +18,17 @@ each recorded in :attr:`MeasuredRun.record` (and in ``result.json``):
    acceleration over the stationary lead-in (gravity plus sensor bias) is
    subtracted; ``remove_bias`` subtracts the lead-in mean of every channel
    (gyro bias too).
-5. **Anti-alias filtering and resampling** to one rate ``fs``: a channel
-   whose rate is a whole multiple of ``fs`` is decimated (its samples at the
-   model's times, as the model predicts them: see :func:`_filter_resample`),
-   other channels faster than ``fs`` are low-passed (Butterworth, order 8,
-   zero-phase, at 0.4 fs; ``anti_alias`` decides otherwise); a channel
-   slower than ``fs`` is upsampled to a grid at least five times finer
-   (polyphase, Kaiser beta 10: passband gain within 1e-6).
+5. **Anti-alias filtering and resampling** to one rate ``fs``, by default
+   the lowest whole division of the channels' rates at or above 200 Hz
+   (:func:`default_rate`): a channel whose rate is a whole multiple of
+   ``fs`` is decimated (its samples at the model's times, as the model
+   predicts them: see :func:`_filter_resample`), other channels faster than
+   ``fs`` are low-passed (analog Butterworth, order 8, at 0.4 fs, causal)
+   and the same filter joins their sensor chain, so the model's channels
+   pass it too (``anti_alias`` decides otherwise); a channel slower than
+   ``fs`` is upsampled to a grid at least five times finer (polyphase,
+   Kaiser beta 10: passband gain within 1e-6). The run's ``resampling``
+   record (:func:`rate_record`) states the rate, its rule and each filter.
    Each channel is then read off once, by a cubic spline, at the run's
    **samples** ``t_first + k / fs``; a channel logged at ``fs`` on that
    clock keeps its own values exactly. The samples never move afterwards.
