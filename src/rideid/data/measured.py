@@ -540,7 +540,7 @@ def _check_time_base(rec_ch: dict, measured: list, time_name, time_scale: float,
 def uniform_clock(t) -> float | None:
     """The sample interval (s) of time stamps that lie on a uniform clock to within
     :data:`ROUNDED_STAMPS` of an interval (a logger that writes its time rounded to a few digits:
-    ``10.00333`` for ``10.003333...`` at 300 Hz), from the first and last stamp; None when they do not
+    ``10.00333`` for ``10.003333...`` at 300 Hz); None when they do not
     (a jittered or gapped time base, put on a uniform grid by :func:`_filter_resample`). The interval is the
     least-squares slope of the stamps over their index (the rounding averages out: 1e-10 relative at 300 Hz
     over 10 s), the clock's origin the first stamp."""
@@ -856,4 +856,4 @@ def _plausibility(c, v, unit, opts, w, warns) -> bool:
     return True
 
 
-__all__ = ["MeasuredRun", "RunData", "load_measured_run"]
+__all__ = ["MeasuredRun", "RunData", "default_rate", "load_measured_run", "rate_record", "uniform_clock"]

@@ -93,7 +93,6 @@ def summarised_warning(message: str) -> bool:
     return any(s in message for s in SUMMARISED)
 
 
-__all__ = ["NOISE_WINDOW_S", "data_quality", "quality_table", "summarised_warning"]
 
 
 def resampling_lines(ds) -> list:
@@ -153,3 +152,6 @@ def rate_advice(ds, adequacy: dict | None) -> str | None:
     return ("Flagged pairs of runs low-passed or interpolated to the model's rate: " + ", ".join(hit[:6]) + "; the "
             "model reproduces that filter only roughly at this rate (docs/real-data.md, Rates and filters): " + rate
             + ".")
+
+
+__all__ = ["NOISE_WINDOW_S", "data_quality", "quality_table", "rate_advice", "resampling_lines", "summarised_warning"]
