@@ -31,8 +31,9 @@ from rideid.model.sensors import SensorChain  # noqa: E402
 
 CASES = [("500 Hz read at 250 Hz (the default: 1 sample in 2)", 500, 250.0, None),
          ("500 Hz read at 200 Hz, zero-phase low-pass in the data only (the default before)", 500, 200.0, "legacy"),
-         ("500 Hz read at 200 Hz, low-pass in the data and in the model (fs = 200)", 500, 200.0, None),
-         ("500 Hz read at 200 Hz, cubic spline, no filter (fs = 200, anti_alias = false)", 500, 200.0, False),
+         ("500 Hz read at 200 Hz, low-pass in the data and in the model (fs = 200, anti_alias = true)", 500, 200.0,
+          True),
+         ("500 Hz read at 200 Hz, cubic spline, no filter (fs = 200: the default now)", 500, 200.0, None),
          ("1000 Hz read at 200 Hz (the default: 1 sample in 5)", 1000, 200.0, None)]
 
 

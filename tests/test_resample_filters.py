@@ -76,7 +76,7 @@ def test_the_default_rate_is_the_lowest_whole_division_at_or_above_200_hz(rates,
     for r in rates:  # every rate a whole multiple, but 500 Hz beside 300 Hz (no common division >= 200 Hz)
         q = r / got
         assert (abs(q - round(q)) < 1e-9) == (rates != [300.0, 500.0] or r == 300.0)
-    assert ("low-passed" in rule) == (rates == [300.0, 500.0])
+    assert ("cubic spline" in rule) == (rates == [300.0, 500.0])
 
 
 def test_time_stamps_rounded_to_seven_digits_are_a_uniform_clock_not_a_jittered_one():
@@ -103,11 +103,30 @@ def _flagged():
     return {"adequate": False, "runs": {"R": {"body_az_fl": {"structure": True}, "pitch_rate": {"structure": False}}}}
 
 
-def test_at_200_hz_the_data_and_the_model_pass_the_same_low_pass(tmp_path):
-    """fs = 200 on a 500 Hz file: the data are low-passed (Butterworth, order 8, 80 Hz, causal), the model's
-    chain gets that filter; each side against SciPy's continuous simulation of it."""
-    with pytest.warns(UserWarning, match=r"no whole multiple of the model's 200 Hz.*set \[preprocess\] fs = 250"):
+def test_at_200_hz_by_default_a_500_hz_file_is_read_off_by_the_spline_and_warned_of(tmp_path):
+    """fs = 200 on a 500 Hz file: no filter (the model could not reproduce one at 200 Hz); every other model
+    sample is a file sample, the ones between are the cubic spline's; a warning names the rate that divides."""
+    with pytest.warns(UserWarning, match=r"no whole multiple of the model's 200 Hz, so read off between its samples "
+                                         r"by a cubic spline.*set \[preprocess\] fs = 250"):
         t, y, mr = _logger(tmp_path, preprocess="fs = 200")
+    assert mr.chain_filters() == ((),) * len(CHANNELS)
+    (rec,) = mr.record["resampling"]["filters"]
+    assert (rec["kind"], rec["model"], rec["channels"]) == ("cubic spline", False, list(CHANNELS))
+    file_values = np.array([float(f"{v:.12g}") for v in y])
+    np.testing.assert_allclose(mr.values[::2, 0], file_values[::5], rtol=0, atol=1e-12)  # 0, 10 ms, ...: samples
+    mid = mr.values[1::2, 0]  # 5 ms, 15 ms, ...: between two file samples
+    exact = _signal(mr.times[1::2])
+    assert 1e-9 < float(np.max(np.abs(mid - exact))) < 2e-4 * float(np.max(np.abs(y)))  # the spline's own error
+    advice = rate_advice(SimpleNamespace(measured={"R": mr}), _flagged())
+    assert "R (500 Hz read at 200 Hz)" in advice and "set [preprocess] fs = 250" in advice
+
+
+def test_with_anti_alias_the_data_and_the_model_pass_the_same_low_pass(tmp_path):
+    """fs = 200 and anti_alias = true on a 500 Hz file: the data are low-passed (Butterworth, order 8, 80 Hz,
+    causal), the model's chain gets that filter; each side against SciPy's continuous simulation of it."""
+    with pytest.warns(UserWarning, match=r"no whole multiple of the model's 200 Hz, so low-passed at 80 Hz "
+                                         r"\(anti_alias\).*set \[preprocess\] fs = 250"):
+        t, y, mr = _logger(tmp_path, preprocess="fs = 200\nanti_alias = true")
     assert mr.fs == 200.0
     corner = FILTER_CUTOFF * 200.0
     filt = AnalogFilter("lowpass", corner, FILTER_ORDER)

@@ -23,9 +23,10 @@ each recorded in :attr:`MeasuredRun.record` (and in ``result.json``):
    (:func:`default_rate`): a channel whose rate is a whole multiple of
    ``fs`` is decimated (its samples at the model's times, as the model
    predicts them: see :func:`_filter_resample`), other channels faster than
-   ``fs`` are low-passed (analog Butterworth, order 8, at 0.4 fs, causal)
-   and the same filter joins their sensor chain, so the model's channels
-   pass it too (``anti_alias`` decides otherwise); a channel slower than
+   ``fs`` are read off by the cubic spline with a warning, or, with
+   ``anti_alias = true``, low-passed (analog Butterworth, order 8, at 0.4 fs,
+   causal) with the same filter joining their sensor chain, so the model's
+   channels pass it too; a channel slower than
    ``fs`` is upsampled to a grid at least five times finer (polyphase,
    Kaiser beta 10: passband gain within 1e-6). The run's ``resampling``
    record (:func:`rate_record`) states the rate, its rule and each filter.
@@ -561,7 +562,7 @@ def default_rate(rates) -> tuple:
     The lowest rate of at least :data:`DEFAULT_FS` that every rate is a whole multiple of (so every channel is
     decimated, its samples taken as they are: 300 Hz -> 300, 500 -> 250, 1000 -> 200, 200 -> 200, mixed
     1000 and 500 -> 250). When the rates have no such common divisor (300 and 500 Hz), the slowest rate's
-    (300 -> 300), and the channels it does not divide are low-passed, their model channels too
+    (300 -> 300), and the channels it does not divide are read off by a cubic spline, with a warning
     (:func:`_filter_resample`). Below :data:`DEFAULT_FS`: the slowest rate.
     """
     rates = [float(r) for r in rates]
@@ -582,7 +583,7 @@ def default_rate(rates) -> tuple:
     fs = slow / n_max
     return fs, (f"{slow:g} Hz / {n_max}: the lowest whole division of the slowest channel's rate at or above "
                 f"{DEFAULT_FS:g} Hz ({', '.join(f'{r:g}' for r in sorted(set(rates)) if not divides(fs, r))} Hz "
-                "no whole multiple of it: low-passed)")
+                "no whole multiple of it: read off by a cubic spline)")
 
 
 def _span_and_rate(raw: dict, rec_ch: dict, measured: list, fs, path: Path, warns: list):
@@ -696,30 +697,28 @@ def _filter_resample(raw: dict, rec_ch: dict, measured: list, fs: float, anti_al
     :class:`rideid.model.sensors.AnalogFilter` this applied to the data, which the channel's sensor chain
     must apply to the model's channel too (every filter rideid applies, its model sees).
 
-    ``anti_alias``: None (default) filters a channel faster than ``fs`` only
-    when its rate is not a whole multiple of ``fs``; a whole multiple is
-    decimated, its samples at the model's times taken as they are. The model
-    predicts instantaneous values at its samples, with all their high
-    frequencies (the rigid-disc road input's harmonics reach the axles far
-    above 0.4 fs on short wavelengths): data low-passed at 0.4 fs lack what
-    the model keeps, and the residual then carries road-driven structure
-    (every 400 -> 200 Hz logger run of an exactly modelled SUV was "not
-    adequate"). Decimating folds the noise above the new Nyquist frequency
-    into the band instead, which only adds to the noise. ``True`` filters
-    every faster channel (for loggers with strong vibration the model does
-    not describe), ``False`` none (a non-integer ratio is then interpolated
-    by the cubic spline, which the model does not see: a warning says so).
+    ``anti_alias``: None (default) or False filters nothing: a channel whose rate is a whole multiple of
+    ``fs`` is decimated, its samples at the model's times taken as they are. The model predicts
+    instantaneous values at its samples, with all their high frequencies (the rigid-disc road input's
+    harmonics reach the axles far above 0.4 fs on short wavelengths): data low-passed at 0.4 fs lack what
+    the model keeps, and the residual then carries road-driven structure (every 400 -> 200 Hz logger run
+    of an exactly modelled SUV was "not adequate"). Decimating folds the noise above the new Nyquist
+    frequency into the band instead, which only adds to the noise. A rate that is no whole multiple is
+    read off between its samples by the cubic spline, which the model does not see, and warned of (``warns``,
+    naming ``path``, with the rate that would take its samples as they are). ``True`` low-passes every
+    faster channel (for loggers with strong vibration the model does not describe): the analog Butterworth
+    of order :data:`FILTER_ORDER` at :data:`FILTER_CUTOFF` ``fs``, run causally on the file's samples
+    (first-order hold at the file's rate, :func:`rideid.model.sensors.discretise`), and the same analog
+    filter joins the channel's sensor chain, where the model's channel passes it at ``fs`` (SPEC §11,
+    ``lowpass``).
 
-    The filter is the analog Butterworth low-pass of order :data:`FILTER_ORDER` at :data:`FILTER_CUTOFF`
-    ``fs``, run causally on the file's samples (first-order hold at the file's rate,
-    :func:`rideid.model.sensors.discretise`), and the same analog filter joins the channel's sensor chain,
-    where the model's channel passes it at ``fs`` (SPEC §11, ``lowpass``): a zero-phase filter of the data
-    has no causal counterpart the model's chain could apply. At ``fs`` the model's version is approximate
-    (the model's samples carry what lies above ``fs / 2`` folded into the band, and the hold between them
-    errs near the corner): measured on a van's 500 Hz runs read at 200 Hz, the data and the model's channel
-    differ by up to 4.6 times 1 % sensor noise (``benchmarks/resample_mismatch.py``), against 0 for a rate
-    the file's divides. So a channel whose rate is no whole multiple of ``fs`` is warned of (``warns``,
-    naming ``path``), with the rate that would take its samples as they are.
+    Why a rate that is no whole multiple is not low-passed by default, the model through the same filter:
+    at ``fs`` the model's version is approximate (its samples carry what lies above ``fs / 2`` folded into
+    the band, and the hold between them errs near the corner). Measured on a van's 500 Hz runs read at
+    200 Hz (``benchmarks/resample_mismatch.py``, docs/real-data.md): the data and the model's channel
+    differ by up to 4.5 times 1 % sensor noise with the filter in both (5.9 with it in the data alone,
+    the default before), 1.1 with the spline alone, 0 decimated to 250 Hz; the damper-curve fits cost
+    0.000228, 0.000397, 0.000109 and 0.000108, with the twelve within 1.14 %, 0.22 %, 0.07 % and 0.017 %.
     """
     from scipy.signal import resample_poly
 
@@ -743,7 +742,7 @@ def _filter_resample(raw: dict, rec_ch: dict, measured: list, fs: float, anti_al
         src_fs = 1.0 / med
         ratio = src_fs / fs
         whole = abs(ratio - round(ratio)) < WHOLE_RATIO
-        if src_fs > fs * 1.0001 and (anti_alias or (anti_alias is None and not whole)):
+        if src_fs > fs * 1.0001 and anti_alias:
             filt = AnalogFilter("lowpass", FILTER_CUTOFF * fs, FILTER_ORDER)
             v = discretise(filt, med).apply(v)
             added[c] = (filt,)
@@ -752,8 +751,8 @@ def _filter_resample(raw: dict, rec_ch: dict, measured: list, fs: float, anti_al
         elif src_fs > fs * 1.0001 and whole:
             rec_ch[c]["decimated"] = f"1 sample in {int(round(ratio))} taken, not filtered"
         elif src_fs > fs * 1.0001:
-            rec_ch[c]["interpolated"] = (f"{src_fs:g} -> {fs:g} Hz by a cubic spline, not filtered "
-                                         "(anti_alias = false); the model does not see it")
+            rec_ch[c]["interpolated"] = (f"{src_fs:g} -> {fs:g} Hz by a cubic spline (no whole multiple), not "
+                                         "filtered")
         up = int(math.ceil(UPSAMPLE_TO * fs / src_fs - 1e-9)) if src_fs < fs * 0.9999 else 1
         if up > 1:  # a channel slower than fs: band-limited interpolation onto a fine grid
             v = resample_poly(v, up, 1, padtype="line", window=("kaiser", UPSAMPLE_BETA))
@@ -770,9 +769,9 @@ def _filter_resample(raw: dict, rec_ch: dict, measured: list, fs: float, anti_al
                if all(abs(r / fs_ok - round(r / fs_ok)) < WHOLE_RATIO for r in rates) else
                "log every channel at one rate (or at rates with a common whole division of at least "
                f"{DEFAULT_FS:g} Hz) and leave fs to rideid")
-        how = ("low-passed at " + f"{FILTER_CUTOFF * fs:g} Hz, the model's channels through the same filter, which "
-               "at this rate it reproduces only roughly" if any("filter" in rec_ch[c] for c in odd) else
-               "interpolated by a cubic spline the model does not see")
+        how = ("low-passed at " + f"{FILTER_CUTOFF * fs:g} Hz (anti_alias), the model's channels through the same "
+               "filter, which at this rate it reproduces only roughly" if any("filter" in rec_ch[c] for c in odd) else
+               "read off between its samples by a cubic spline the model does not see")
         which = "all 10 channels" if len(odd) == len(CHANNELS) else ", ".join(odd)
         _warn(warns, f"{path}: {which} at {'/'.join(f'{r:g}' for r in odd_rates)} Hz: no whole multiple of "
                      f"the model's {fs:g} Hz, so {how} (up to several times the sensor noise on short "
