@@ -124,8 +124,8 @@ def test_at_200_hz_by_default_a_500_hz_file_is_read_off_by_the_spline_and_warned
 def test_with_anti_alias_the_data_and_the_model_pass_the_same_low_pass(tmp_path):
     """fs = 200 and anti_alias = true on a 500 Hz file: the data are low-passed (Butterworth, order 8, 80 Hz,
     causal), the model's chain gets that filter; each side against SciPy's continuous simulation of it."""
-    with pytest.warns(UserWarning, match=r"no whole multiple of the model's 200 Hz, so low-passed at 80 Hz "
-                                         r"\(anti_alias\).*set \[preprocess\] fs = 250"):
+    with pytest.warns(UserWarning, match=r"low-passed at 80 Hz for the model's 200 Hz \(anti_alias = true\).*"
+                                         r"leave anti_alias out and set fs = 250"):
         t, y, mr = _logger(tmp_path, preprocess="fs = 200\nanti_alias = true")
     assert mr.fs == 200.0
     corner = FILTER_CUTOFF * 200.0

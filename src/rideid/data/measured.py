@@ -758,8 +758,8 @@ def _filter_resample(raw: dict, rec_ch: dict, measured: list, fs: float, anti_al
             v = resample_poly(v, up, 1, padtype="line", window=("kaiser", UPSAMPLE_BETA))
             rec_ch[c]["upsampled"] = f"x{up} (polyphase, Kaiser beta {UPSAMPLE_BETA:g})"
         channels[c] = Resampled(t[0], med / up, v)
-        if src_fs > fs * 1.0001 and not whole:
-            odd.append(c)
+        if src_fs > fs * 1.0001 and (not whole or anti_alias):
+            odd.append(c)  # read off by the spline, or low-passed: neither is what the model gives at fs
     if odd and warns is not None:
         rates = sorted({rec_ch[c]["rate_hz"] for c in measured})
         fs_ok, _ = default_rate(rates)
@@ -769,13 +769,18 @@ def _filter_resample(raw: dict, rec_ch: dict, measured: list, fs: float, anti_al
                if all(abs(r / fs_ok - round(r / fs_ok)) < WHOLE_RATIO for r in rates) else
                "log every channel at one rate (or at rates with a common whole division of at least "
                f"{DEFAULT_FS:g} Hz) and leave fs to rideid")
-        how = ("low-passed at " + f"{FILTER_CUTOFF * fs:g} Hz (anti_alias), the model's channels through the same "
-               "filter, which at this rate it reproduces only roughly" if any("filter" in rec_ch[c] for c in odd) else
-               "read off between its samples by a cubic spline the model does not see")
         which = "all 10 channels" if len(odd) == len(CHANNELS) else ", ".join(odd)
-        _warn(warns, f"{path}: {which} at {'/'.join(f'{r:g}' for r in odd_rates)} Hz: no whole multiple of "
-                     f"the model's {fs:g} Hz, so {how} (up to several times the sensor noise on short "
-                     f"wavelengths, docs/real-data.md); {fix}", _STAGE)
+        at = f"{path}: {which} at {'/'.join(f'{r:g}' for r in odd_rates)} Hz"
+        if anti_alias:
+            msg = (f"{at}: low-passed at {FILTER_CUTOFF * fs:g} Hz for the model's {fs:g} Hz (anti_alias = true), the "
+                   "model's channels through the same filter, which at this rate it reproduces only roughly (up to "
+                   "several times the sensor noise on short wavelengths, and tire rates 1 % off on a van, "
+                   f"docs/real-data.md); {fix.replace('set [preprocess] fs', 'leave anti_alias out and set fs')}")
+        else:
+            msg = (f"{at}: no whole multiple of the model's {fs:g} Hz, so read off between its samples by a cubic "
+                   "spline the model does not see (about the sensor noise on short wavelengths, docs/real-data.md); "
+                   f"{fix}")
+        _warn(warns, msg, _STAGE)
     return channels, added
 
 
