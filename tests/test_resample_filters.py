@@ -157,7 +157,7 @@ def test_with_anti_alias_the_data_and_the_model_pass_the_same_low_pass(tmp_path)
     assert rate_advice(SimpleNamespace(measured={"R": mr}), {**_flagged(), "adequate": True}) is None
 
 
-@pytest.mark.slow  # 6-10 minutes per rate on two shared cores (three identifications): make test-slow, not CI
+@pytest.mark.slow  # 84-105 s per rate on two quiet cores, 6-10 min shared (4.9 min in all): make test-slow, not CI
 @pytest.mark.expensive
 @pytest.mark.parametrize("fs_file, fs_model", [(300.0, 300.0), (500.0, 250.0), (1000.0, 200.0)])
 def test_a_van_with_real_dampers_logged_at_300_500_or_1000_hz_is_identified_with_the_defaults(
