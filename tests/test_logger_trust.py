@@ -85,7 +85,7 @@ def test_a_channel_at_the_model_rate_keeps_its_own_samples_and_upsampling_keeps_
     t100 = np.arange(1000) / 100.0
     raw = {"body_az_fl": Signal(t200, _sine(t200), "m/s^2"), "pitch_rate": Signal(t100, _sine(t100), "rad/s")}
     rec = {c: {} for c in raw}
-    ch = _filter_resample(raw, rec, list(raw), 200.0)
+    ch, _ = _filter_resample(raw, rec, list(raw), 200.0)
     # at the model rate: the samples themselves (SciPy's polyphase filter had put a gain of 1.00065 on them)
     assert np.array_equal(ch["body_az_fl"].samples(0.0, 200.0, t200.size), raw["body_az_fl"].values)
     # a 100 Hz gyro read at 200 Hz: band-limited, gain within 1e-5 away from the ends

@@ -62,7 +62,7 @@ def test_round_trip_identifies_within_half_percent(fmt, tmp_path, default_scenar
         for c in CHANNELS[:8]:  # gravity (plus a zero bias) removed, in m/s^2 whatever the file's unit and sign
             assert ch[c]["removed"] == pytest.approx(G0, rel=1e-6)
         assert ch["body_az_fr"]["sign"] == -1 and ch["pitch_rate"]["unit"] == "deg/s"
-        assert rec["fs"] == 200.0
+        assert rec["fs"] == 250.0  # 1 kHz and 500 Hz: 1 sample in 4 and in 2, nothing filtered
     res = rideid.identify(ds, seed=1, model="base")
     assert max_error(res, default_scenario.truth) < 5e-3
     for rid, rec in res.preprocessing.items():

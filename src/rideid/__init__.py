@@ -62,7 +62,7 @@ _COMMAND_LINE = _by_name({
     "rideid.estimate.adequacy": ("verdict_paragraph",), "rideid.estimate.dampers": ("format_dampers",),
     "rideid.estimate.bumps": ("format_bump_stops",), "rideid.design": ("parse_target",),
     "rideid.report.html": ("write_report",),
-    "rideid.data.quality": ("data_quality", "quality_table", "summarised_warning"),
+    "rideid.data.quality": ("data_quality", "quality_table", "summarised_warning", "resampling_lines"),
     "rideid.profiling": ("Profile",),
 }, {
     "write_sensitivity_csvs": ("rideid.report.sensitivity_files", "write_csvs"),

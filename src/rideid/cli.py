@@ -445,6 +445,8 @@ def _load_with_quality(ds_path, out):
             warnings.showwarning(w.message, w.category, w.filename, w.lineno)
     if ds.unknown_road_runs and len(ds.unknown_road_runs) == len(ds.runs):
         return ds
+    for line in rideid.resampling_lines(ds):  # the rate of each run and every filter rideid applied to its data
+        print(textwrap.fill(line, 100, subsequent_indent="  "), file=out)
     quality = rideid.data_quality(ds)
     if summary or any(e["filters"] for e in quality["channels"].values()):
         print("data quality (" + str(len(ds.runs)) + " runs):\n" + rideid.quality_table(quality), file=out)

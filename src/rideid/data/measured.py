@@ -18,13 +18,18 @@ each recorded in :attr:`MeasuredRun.record` (and in ``result.json``):
    acceleration over the stationary lead-in (gravity plus sensor bias) is
    subtracted; ``remove_bias`` subtracts the lead-in mean of every channel
    (gyro bias too).
-5. **Anti-alias filtering and resampling** to one rate ``fs``: a channel
-   whose rate is a whole multiple of ``fs`` is decimated (its samples at the
-   model's times, as the model predicts them: see :func:`_filter_resample`),
-   other channels faster than ``fs`` are low-passed (Butterworth, order 8,
-   zero-phase, at 0.4 fs; ``anti_alias`` decides otherwise); a channel
-   slower than ``fs`` is upsampled to a grid at least five times finer
-   (polyphase, Kaiser beta 10: passband gain within 1e-6).
+5. **Anti-alias filtering and resampling** to one rate ``fs``, by default
+   the lowest whole division of the channels' rates at or above 200 Hz
+   (:func:`default_rate`): a channel whose rate is a whole multiple of
+   ``fs`` is decimated (its samples at the model's times, as the model
+   predicts them: see :func:`_filter_resample`), other channels faster than
+   ``fs`` are read off by the cubic spline with a warning, or, with
+   ``anti_alias = true``, low-passed (analog Butterworth, order 8, at 0.4 fs,
+   causal) with the same filter joining their sensor chain, so the model's
+   channels pass it too; a channel slower than
+   ``fs`` is upsampled to a grid at least five times finer (polyphase,
+   Kaiser beta 10: passband gain within 1e-6). The run's ``resampling``
+   record (:func:`rate_record`) states the rate, its rule and each filter.
    Each channel is then read off once, by a cubic spline, at the run's
    **samples** ``t_first + k / fs``; a channel logged at ``fs`` on that
    clock keeps its own values exactly. The samples never move afterwards.
@@ -62,18 +67,26 @@ import numpy as np
 from ..errors import DataError, DataWarning
 from ..model.equations import CHANNELS
 from ..model.params import GRAVITY
+from ..model.sensors import AnalogFilter, discretise
 from .readers import FORMAT_NAMES, Signal, open_signals
 from ..model.posts import MIN_CHAIN_GAIN, POST_CHANNELS, POST_VEL_CHANNELS, unfilter
 from .schema.channels import RIG_TARGETS, SI, TARGETS, UNITS, ChannelEntry, gravity_unit_factor, quantity, unit_factor
 from .schema.runfiles import RunData
 
 
+#: the default model rate is the lowest whole division of the channels' rates at or above this
+#: (:func:`default_rate`)
 DEFAULT_FS = 200.0
 DEFAULT_LEAD_IN = 1.0
 DEFAULT_PRE_ROLL = 0.5
 FILTER_ORDER = 8
 FILTER_CUTOFF = 0.4  # x fs
 UPSAMPLE_TO = 5.0  # x fs
+#: time stamps within this share of a sample interval of a uniform clock are that clock, rounded
+#: (a logger's time written to 7 digits is off by up to 1.5e-3 of an interval at 300 Hz after 10 s)
+ROUNDED_STAMPS = 0.01
+#: a rate ratio within this of a whole number is whole (decimation takes the samples as they are)
+WHOLE_RATIO = 1e-6
 #: Kaiser window of the polyphase upsampling filter: SciPy's default (5) has a passband gain of
 #: 1.00065 at the original sample phase, a uniform gain error on every upsampled channel that moved
 #: unsprung masses and tire rates by 3 standard errors; 10 keeps it below 1e-6
@@ -340,29 +353,33 @@ def load_measured_run(run, man) -> MeasuredRun:
     measured = [c for c in targets if c in CHANNELS]
     raw, rec_ch = _read_si(targets, sf, time_name, time_scale, opts, path, where_map, warns)
     _check_time_base(rec_ch, measured, time_name, time_scale, path)
-    t_first, t_last, fs = _span_and_rate(raw, rec_ch, measured, opts.get("fs", None), path, warns)
+    t_first, t_last, fs, rule = _span_and_rate(raw, rec_ch, measured, opts.get("fs", None), path, warns)
     lead = opts.get("lead_in", (t_first, t_first + DEFAULT_LEAD_IN))
     grav = opts.get("gravity_included", False)
     bias = opts.get("remove_bias", False)
     _remove_gravity_bias(raw, rec_ch, measured, lead, grav, bias, path, where_map, warns)
-    channels = _filter_resample(raw, rec_ch, measured, fs, opts.get("anti_alias"))
+    channels, added = _filter_resample(raw, rec_ch, measured, fs, opts.get("anti_alias"), path, warns)
     _unfilter_posts(raw, rec_ch, targets)
-    posts = _filter_resample(raw, rec_ch, [c for c in RIG_TARGETS if c in raw], fs, opts.get("anti_alias"))
+    # the posts are the car's input: read off at fs, never low-passed (the model's channels would pass it twice)
+    posts, _ = _filter_resample(raw, rec_ch, [c for c in RIG_TARGETS if c in raw], fs, False, path, warns)
     distance, motion_rec = _motion(raw, targets, run.speed, path)
     if run.posts:
         motion_rec = {"source": "none: a four-post rig run (SPEC §13), its wheel inputs the posts"}
 
     record = {"file": str(path), "format": FORMAT_NAMES[sf.format], "channels": rec_ch, "fs": fs,
-              "speed": motion_rec, "recording": [t_first, t_last]}
+              "speed": motion_rec, "recording": [t_first, t_last],
+              "resampling": rate_record(rec_ch, measured, fs, rule)}
     if grav or bias:
         record["lead_in"] = list(lead)
     if sf.format == "csv":
         record["csv"] = {"delimiter": sf.delimiter, "decimal": sf.decimal}
     clipped = {c: (rec_ch[c].pop("_clipped_times"), 1.0 / rec_ch[c]["rate_hz"]) for c in measured
                if "_clipped_times" in rec_ch[c]}
-    filters = {c: targets[c].filters for c in measured if targets[c].filters}
-    for c, fs_c in filters.items():
+    declared = {c: tuple(targets[c].filters) for c in measured if targets[c].filters}
+    for c, fs_c in declared.items():
         rec_ch[c]["sensor_filters"] = [f.describe() for f in fs_c]
+    # the model's chain: the declared sensor filters, then the ones rideid applied to the data
+    filters = {c: declared.get(c, ()) + added.get(c, ()) for c in measured if c in declared or c in added}
     return MeasuredRun(run.id, path, fs, channels, t_first, t_last, run.speed, distance, opts, record, warns,
                        clipped_times=clipped, filters=filters, posts=posts)
 
@@ -474,8 +491,9 @@ def _read_si(targets: dict, sf, time_name, time_scale: float, opts: dict, path: 
         v = sig.values * factor
         raw[c] = Signal(sig.time, v, unit)
         med = float(np.median(dt))
+        h_clock = uniform_clock(sig.time)
         rec_ch[c] = {"source": e.name, "unit": unit, "unit_from": unit_src, "file_unit": sig.unit, "sign": int(e.sign),
-                     "scale": e.scale, "rate_hz": round(1.0 / med, 6), "samples": int(v.size)}
+                     "scale": e.scale, "rate_hz": round(1.0 / (h_clock or med), 6), "samples": int(v.size)}
         # plausibility
         gap = dt > 1.5 * med
         if gap.any():
@@ -564,19 +582,71 @@ def _check_time_base(rec_ch: dict, measured: list, time_name, time_scale: float,
                     f"({lo:g} Hz - {hi / 1000:g} kHz){hint}")
 
 
+def uniform_clock(t) -> float | None:
+    """The sample interval (s) of time stamps that lie on a uniform clock to within
+    :data:`ROUNDED_STAMPS` of an interval (a logger that writes its time rounded to a few digits:
+    ``10.00333`` for ``10.003333...`` at 300 Hz); None when they do not
+    (a jittered or gapped time base, put on a uniform grid by :func:`_filter_resample`). The interval is the
+    least-squares slope of the stamps over their index (the rounding averages out: 1e-10 relative at 300 Hz
+    over 10 s), the clock's origin the first stamp."""
+    t = np.asarray(t, dtype=float)
+    if t.size < 3:
+        return None
+    k = np.arange(t.size) - (t.size - 1) / 2.0
+    h = float(k @ (t - t.mean()) / (k @ k))
+    if not h > 0:
+        return None
+    dev = t - (t[0] + h * np.arange(t.size))
+    return float(h) if float(np.max(np.abs(dev))) <= ROUNDED_STAMPS * h else None
+
+
+def default_rate(rates) -> tuple:
+    """``(fs, rule)``: rideid's default model rate for channels logged at ``rates`` (Hz), and the rule that chose it.
+
+    The lowest rate of at least :data:`DEFAULT_FS` that every rate is a whole multiple of (so every channel is
+    decimated, its samples taken as they are: 300 Hz -> 300, 500 -> 250, 1000 -> 200, 200 -> 200, mixed
+    1000 and 500 -> 250). When the rates have no such common divisor (300 and 500 Hz), the slowest rate's
+    (300 -> 300), and the channels it does not divide are read off by a cubic spline, with a warning
+    (:func:`_filter_resample`). Below :data:`DEFAULT_FS`: the slowest rate.
+    """
+    rates = [float(r) for r in rates]
+    slow = min(rates)
+
+    def divides(fs, r):
+        q = r / fs
+        return abs(q - round(q)) < WHOLE_RATIO
+
+    if slow <= DEFAULT_FS * (1 + WHOLE_RATIO):
+        return slow, f"the slowest channel's rate, {DEFAULT_FS:g} Hz or less"
+    n_max = int(math.floor(slow / DEFAULT_FS + WHOLE_RATIO))
+    for n in range(n_max, 0, -1):
+        fs = slow / n
+        if all(divides(fs, r) for r in rates):
+            which = "of every channel's rate" if len(set(rates)) > 1 else "of the file's rate"
+            return fs, (f"{slow:g} Hz / {n}: the lowest whole division {which} at or above {DEFAULT_FS:g} Hz")
+    fs = slow / n_max
+    return fs, (f"{slow:g} Hz / {n_max}: the lowest whole division of the slowest channel's rate at or above "
+                f"{DEFAULT_FS:g} Hz ({', '.join(f'{r:g}' for r in sorted(set(rates)) if not divides(fs, r))} Hz "
+                "no whole multiple of it: read off by a cubic spline)")
+
+
 def _span_and_rate(raw: dict, rec_ch: dict, measured: list, fs, path: Path, warns: list):
-    """``(t_first, t_last, fs)``: the time all measured channels cover, and the model rate (default: the slowest)."""
+    """``(t_first, t_last, fs, rule)``: the time all measured channels cover, the model rate (default:
+    :func:`default_rate`) and how it was chosen."""
     t_first = max(s.time[0] for c, s in raw.items() if c in CHANNELS)
     t_last = min(s.time[-1] for c, s in raw.items() if c in CHANNELS)
     if t_last - t_first <= 0:
         raise DataError(f"{path}: the channels do not overlap in time")
-    rate_min = min(rec_ch[c]["rate_hz"] for c in measured)
+    rates = [rec_ch[c]["rate_hz"] for c in measured]
+    rate_min = min(rates)
     if fs is None:
-        fs = min(DEFAULT_FS, rate_min)
+        fs, rule = default_rate(rates)
+    else:
+        rule = "[preprocess] fs"
     if fs > rate_min * 1.0001:
         _warn(warns, f"{path}: resampling to {fs:g} Hz, above the slowest channel's rate ({rate_min:g} Hz): "
                      "that channel carries nothing above its own Nyquist frequency", _STAGE)
-    return t_first, t_last, fs
+    return t_first, t_last, fs, rule
 
 
 #: the lead-in is not stationary when its RMS exceeds this share of the run's ...
@@ -663,32 +733,51 @@ def _remove_gravity_bias(raw: dict, rec_ch: dict, measured: list, lead, grav: bo
             rec_ch[c]["gravity_unit_factor"] = unit_seen
 
 
-def _filter_resample(raw: dict, rec_ch: dict, measured: list, fs: float, anti_alias: bool | None = None) -> dict:
-    """Anti-alias filter each measured channel where asked and represent it for reading off at ``fs``:
-    name -> :class:`Resampled`.
+def _filter_resample(raw: dict, rec_ch: dict, measured: list, fs: float, anti_alias: bool | None = None,
+                     path: Path | None = None, warns: list | None = None):
+    """Anti-alias filter each measured channel where asked and represent it for reading off at ``fs``.
 
-    ``anti_alias``: None (default) filters a channel faster than ``fs`` only
-    when its rate is not a whole multiple of ``fs``; a whole multiple is
-    decimated, its samples at the model's times taken as they are. The model
-    predicts instantaneous values at its samples, with all their high
-    frequencies (the rigid-disc road input's harmonics reach the axles far
-    above 0.4 fs on short wavelengths): data low-passed at 0.4 fs lack what
-    the model keeps, and the residual then carries road-driven structure
-    (every 400 -> 200 Hz logger run of an exactly modelled SUV was "not
-    adequate"). Decimating folds the noise above the new Nyquist frequency
-    into the band instead, which only adds to the noise. ``True`` filters
-    every faster channel (for loggers with strong vibration the model does
-    not describe), ``False`` none (a non-integer ratio is then interpolated
-    by the cubic spline).
+    Returns ``(channels, added)``: name -> :class:`Resampled`, and name -> the tuple of
+    :class:`rideid.model.sensors.AnalogFilter` this applied to the data, which the channel's sensor chain
+    must apply to the model's channel too (every filter rideid applies, its model sees).
+
+    ``anti_alias``: None (default) or False filters nothing: a channel whose rate is a whole multiple of
+    ``fs`` is decimated, its samples at the model's times taken as they are. The model predicts
+    instantaneous values at its samples, with all their high frequencies (the rigid-disc road input's
+    harmonics reach the axles far above 0.4 fs on short wavelengths): data low-passed at 0.4 fs lack what
+    the model keeps, and the residual then carries road-driven structure (every 400 -> 200 Hz logger run
+    of an exactly modelled SUV was "not adequate"). Decimating folds the noise above the new Nyquist
+    frequency into the band instead, which only adds to the noise. A rate that is no whole multiple is
+    read off between its samples by the cubic spline, which the model does not see, and warned of (``warns``,
+    naming ``path``, with the rate that would take its samples as they are). ``True`` low-passes every
+    faster channel (for loggers with strong vibration the model does not describe): the analog Butterworth
+    of order :data:`FILTER_ORDER` at :data:`FILTER_CUTOFF` ``fs``, run causally on the file's samples
+    (first-order hold at the file's rate, :func:`rideid.model.sensors.discretise`), and the same analog
+    filter joins the channel's sensor chain, where the model's channel passes it at ``fs`` (SPEC §11,
+    ``lowpass``).
+
+    Why a rate that is no whole multiple is not low-passed by default, the model through the same filter:
+    at ``fs`` the model's version is approximate (its samples carry what lies above ``fs / 2`` folded into
+    the band, and the hold between them errs near the corner). Measured on a van's 500 Hz runs read at
+    200 Hz (``benchmarks/resample_mismatch.py``, docs/real-data.md): the data and the model's channel
+    differ by up to 4.5 times 1 % sensor noise with the filter in both (5.9 with it in the data alone,
+    the default before), 1.1 with the spline alone, 0 decimated to 250 Hz; the damper-curve fits cost
+    0.000228, 0.000397, 0.000109 and 0.000108, with the twelve within 1.14 %, 0.22 %, 0.07 % and 0.017 %.
     """
-    from scipy.signal import butter, resample_poly, sosfiltfilt
+    from scipy.signal import resample_poly
 
-    channels = {}
+    channels, added, odd = {}, {}, []
     for c in measured:
         s = raw[c]
         t, v = s.time, s.values
         med = float(np.median(np.diff(t)))
-        if np.max(np.abs(np.diff(t) - med)) > 1e-6 * med:
+        h_clock = uniform_clock(t)
+        if h_clock is not None and np.max(np.abs(np.diff(t) - med)) > 1e-6 * med:
+            dev = float(np.max(np.abs(t - (t[0] + h_clock * np.arange(t.size)))))
+            rec_ch[c]["clock"] = (f"time stamps off a uniform clock by up to {dev / h_clock:.2g} of a sample "
+                                  "(rounded): taken as that clock, not interpolated")
+            med = h_clock
+        elif h_clock is None and np.max(np.abs(np.diff(t) - med)) > 1e-6 * med:
             from scipy.interpolate import make_interp_spline
             n = int(math.floor((t[-1] - t[0]) / med)) + 1
             tu = t[0] + med * np.arange(n)
@@ -696,19 +785,68 @@ def _filter_resample(raw: dict, rec_ch: dict, measured: list, fs: float, anti_al
             rec_ch[c]["regridded"] = "non-uniform time put on a uniform grid (cubic spline)"
         src_fs = 1.0 / med
         ratio = src_fs / fs
-        whole = abs(ratio - round(ratio)) < 1e-6
-        if src_fs > fs * 1.0001 and (anti_alias or (anti_alias is None and not whole)):
-            sos = butter(FILTER_ORDER, FILTER_CUTOFF * fs, fs=src_fs, output="sos")
-            v = sosfiltfilt(sos, v)
-            rec_ch[c]["filter"] = (f"Butterworth order {FILTER_ORDER}, zero-phase, {FILTER_CUTOFF * fs:g} Hz")
+        whole = abs(ratio - round(ratio)) < WHOLE_RATIO
+        if src_fs > fs * 1.0001 and anti_alias:
+            filt = AnalogFilter("lowpass", FILTER_CUTOFF * fs, FILTER_ORDER)
+            v = discretise(filt, med).apply(v)
+            added[c] = (filt,)
+            rec_ch[c]["filter"] = (f"{filt.describe()} (anti-alias, {src_fs:g} -> {fs:g} Hz; Butterworth, causal); "
+                                   "the model's channel passes the same filter")
+        elif src_fs > fs * 1.0001 and whole:
+            rec_ch[c]["decimated"] = f"1 sample in {int(round(ratio))} taken, not filtered"
         elif src_fs > fs * 1.0001:
-            rec_ch[c]["decimated"] = f"every {int(round(ratio))}th sample, not filtered (anti_alias)"
+            rec_ch[c]["interpolated"] = (f"{src_fs:g} -> {fs:g} Hz by a cubic spline (no whole multiple), not "
+                                         "filtered")
         up = int(math.ceil(UPSAMPLE_TO * fs / src_fs - 1e-9)) if src_fs < fs * 0.9999 else 1
         if up > 1:  # a channel slower than fs: band-limited interpolation onto a fine grid
             v = resample_poly(v, up, 1, padtype="line", window=("kaiser", UPSAMPLE_BETA))
             rec_ch[c]["upsampled"] = f"x{up} (polyphase, Kaiser beta {UPSAMPLE_BETA:g})"
         channels[c] = Resampled(t[0], med / up, v)
-    return channels
+        if src_fs > fs * 1.0001 and (not whole or anti_alias):
+            odd.append(c)  # read off by the spline, or low-passed: neither is what the model gives at fs
+    if odd and warns is not None:
+        rates = sorted({rec_ch[c]["rate_hz"] for c in measured})
+        fs_ok, _ = default_rate(rates)
+        odd_rates = sorted({rec_ch[c]["rate_hz"] for c in odd})
+        fix = (f"set [preprocess] fs = {fs_ok:g} ({'/'.join(f'{r:g}' for r in rates)} Hz taken 1 sample in "
+               f"{'/'.join(str(int(round(r / fs_ok))) for r in rates)}: nothing filtered)"
+               if all(abs(r / fs_ok - round(r / fs_ok)) < WHOLE_RATIO for r in rates) else
+               "log every channel at one rate (or at rates with a common whole division of at least "
+               f"{DEFAULT_FS:g} Hz) and leave fs to rideid")
+        which = "all 10 channels" if len(odd) == len(CHANNELS) else ", ".join(odd)
+        at = f"{path}: {which} at {'/'.join(f'{r:g}' for r in odd_rates)} Hz"
+        if anti_alias:
+            msg = (f"{at}: low-passed at {FILTER_CUTOFF * fs:g} Hz for the model's {fs:g} Hz (anti_alias = true), the "
+                   "model's channels through the same filter, which at this rate it reproduces only roughly (up to "
+                   "several times the sensor noise on short wavelengths, and tire rates 1 % off on a van, "
+                   f"docs/real-data.md); {fix.replace('set [preprocess] fs', 'leave anti_alias out and set fs')}")
+        else:
+            msg = (f"{at}: no whole multiple of the model's {fs:g} Hz, so read off between its samples by a cubic "
+                   "spline the model does not see (about the sensor noise on short wavelengths, docs/real-data.md); "
+                   f"{fix}")
+        _warn(warns, msg, _STAGE)
+    return channels, added
+
+
+def rate_record(rec_ch: dict, measured: list, fs: float, rule: str) -> dict:
+    """The run's ``resampling`` record: the model rate, the rule that chose it, and each filter rideid applied to
+    the data, by kind, corner, order and channels, with whether the model's channels pass it too."""
+    filters, groups = [], {}
+    for c in measured:
+        r = rec_ch[c]
+        if "filter" in r:
+            groups.setdefault(("lowpass", FILTER_CUTOFF * fs, FILTER_ORDER, r["rate_hz"]), []).append(c)
+    for (kind, hz, order, src), chans in groups.items():
+        filters.append({"kind": kind, "hz": hz, "order": order, "design": "analog Butterworth, causal",
+                        "why": f"anti-alias, {src:g} -> {fs:g} Hz", "channels": chans, "model": True})
+    for key, kind in (("upsampled", "interpolation"), ("interpolated", "cubic spline"), ("regridded", "cubic spline")):
+        chans = [c for c in measured if key in rec_ch[c]]
+        if chans:
+            filters.append({"kind": kind, "what": rec_ch[chans[0]][key], "channels": chans, "model": False})
+    rates = sorted({rec_ch[c]["rate_hz"] for c in measured})
+    return {"fs": fs, "rule": rule, "file_rates_hz": rates,
+            "decimated": {c: int(round(rec_ch[c]["rate_hz"] / fs)) for c in measured if "decimated" in rec_ch[c]},
+            "filters": filters}
 
 
 def _motion(raw: dict, targets: dict, speed: float | None, path: Path):
@@ -766,4 +904,4 @@ def _plausibility(c, v, unit, opts, w, warns) -> bool:
     return True
 
 
-__all__ = ["MeasuredRun", "RunData", "load_measured_run"]
+__all__ = ["MeasuredRun", "RunData", "default_rate", "load_measured_run", "rate_record", "uniform_clock"]

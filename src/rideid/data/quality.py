@@ -5,7 +5,8 @@ the fit, SPEC §11) and in which runs, the gaps in its time bridged by
 interpolation, its noise level (the RMS of the quietest quarter second of
 each run's model window about its mean, :func:`rideid.data.measured.quietest_rms`,
 the median over the runs: the sensor noise where the car stood or rolled on
-flat road), the runs where it flat-lined, and its declared sensor chain.
+flat road), the runs where it flat-lined, and its sensor chain as the model passes it (the declared
+filters, and rideid's own anti-alias filter where it low-passed the data, marked so).
 The terminal prints this table instead of one warning per run and channel;
 ``result.json`` keeps it under ``data_quality`` and the report shows it.
 """
@@ -15,7 +16,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..model.equations import CHANNEL_KIND, CHANNELS
-from .measured import quietest_rms
+from .measured import default_rate, quietest_rms
 
 #: the stretch (s) whose RMS is a channel's noise level
 NOISE_WINDOW_S = 0.25
@@ -55,9 +56,12 @@ def data_quality(ds) -> dict:
                 entry["flat_lined"].append(r.id)
             else:
                 noise.append(quietest_rms(v, int(round(NOISE_WINDOW_S * fs))))
+            declared = rec.get("sensor_filters", [])
             for f in ds.sensor_filters(r.id)[i]:
-                if f.describe() not in entry["filters"]:
-                    entry["filters"].append(f.describe())
+                d = f.describe()
+                d = d if d in declared or mr is None else d + " (rideid's anti-alias)"  # the model's chain passes both
+                if d not in entry["filters"]:
+                    entry["filters"].append(d)
         if entry["runs"]:
             entry["noise"] = float(np.median(noise)) if noise else None
             out[name] = entry
@@ -76,7 +80,7 @@ def quality_table(quality: dict) -> str:
         if e["flat_lined"]:
             notes.append("flat-lined in " + ", ".join(e["flat_lined"]))
         if e["filters"]:
-            notes.append("sensor " + "; ".join(e["filters"]))
+            notes.append("filtered: " + "; ".join(e["filters"]))
         lines.append(f"{name:<12} {e['runs']:>4} {clip:>8}  {e['gaps']:>4} {noise:>10}  {e['unit']:<6} "
                      + "; ".join(notes))
     lines.append("clipped: the largest share of a run's samples at the channel's range; gaps: bridged by "
@@ -89,4 +93,65 @@ def summarised_warning(message: str) -> bool:
     return any(s in message for s in SUMMARISED)
 
 
-__all__ = ["NOISE_WINDOW_S", "data_quality", "quality_table", "summarised_warning"]
+
+
+def resampling_lines(ds) -> list:
+    """The terminal's lines on rates and filters: per group of runs read the same way, the file's rates, the
+    model's rate and the rule that chose it, and each filter rideid applied to the data (kind, corner, order,
+    channels; whether the model's channels pass it too). From each run's ``preprocessing.<run>.resampling``
+    record; none for SPEC CSVs taken as they are."""
+    groups: dict = {}
+    for r in ds.runs:
+        mr = ds.measured.get(r.id)
+        rec = (mr.record.get("resampling") if mr is not None else None)
+        if not rec:
+            continue
+        parts = [f"{'/'.join(f'{x:g}' for x in rec['file_rates_hz'])} Hz -> {rec['fs']:g} Hz ({rec['rule']})"]
+        dec = sorted(set(rec["decimated"].values()))
+        if dec:
+            parts.append("decimated (1 sample in " + "/".join(str(n) for n in dec) + " taken), no filter")
+        for f in rec["filters"]:
+            chans = _channels_text(f["channels"])
+            if f["kind"] == "lowpass":
+                parts.append(f"low-pass {f['hz']:g} Hz, order {f['order']} ({f['design']}, {f['why']}) on {chans}; "
+                             "the model's channels pass the same filter")
+            else:
+                parts.append(f"{f['what']} on {chans}" + ("" if f["model"] else "; NOT seen by the model"))
+        groups.setdefault(tuple(parts), []).append(r.id)
+    return [f"rates ({', '.join(ids)}): " + "; ".join(parts) for parts, ids in groups.items()]
+
+
+def _channels_text(chans) -> str:
+    """``"the 10 channels"``, ``"the 8 accelerations"`` or the names."""
+    if len(chans) == len(CHANNELS):
+        return "all 10 channels"
+    return ", ".join(chans)
+
+
+def rate_advice(ds, adequacy: dict | None) -> str | None:
+    """One sentence when the not-adequate verdict's flagged run/channel pairs are channels rideid low-passed or
+    interpolated to the model's rate (``preprocessing.<run>.resampling.filters``: a rate the model's does not
+    divide, or ``anti_alias = true``), naming the rate that takes every sample as it is; None otherwise."""
+    if not adequacy or adequacy.get("adequate", True):
+        return None
+    hit, fix = [], set()
+    for rid, rec in (adequacy.get("runs") or {}).items():
+        mr = ds.measured.get(rid)
+        res = mr.record.get("resampling") if mr is not None else None
+        if not res or not res.get("filters"):
+            continue
+        touched = {c for f in res["filters"] for c in f["channels"]}
+        flagged = [name for name, fig in rec.items() if fig.get("structure") and name in touched]
+        if flagged:
+            hit.append(f"{rid} ({'/'.join(f'{r:g}' for r in res['file_rates_hz'])} Hz read at {res['fs']:g} Hz)")
+            fix.add(default_rate(res["file_rates_hz"])[0])
+    if not hit:
+        return None
+    rate = (f"set [preprocess] fs = {'/'.join(f'{r:g}' for r in sorted(fix))} (or leave fs out: rideid then "
+            "chooses a rate the file's divides)")
+    return ("Flagged pairs of runs low-passed or interpolated to the model's rate: " + ", ".join(hit[:6]) + "; the "
+            "model reproduces that filter only roughly at this rate (docs/real-data.md, Rates and filters): " + rate
+            + ".")
+
+
+__all__ = ["NOISE_WINDOW_S", "data_quality", "quality_table", "rate_advice", "resampling_lines", "summarised_warning"]

@@ -73,7 +73,7 @@ from ..profiling import stage
 from ..settings import defaults, legacy_names
 from ..data.checks import bound_findings
 from ..data.dataset import Dataset, lead_ins
-from ..data.quality import data_quality
+from ..data.quality import data_quality, rate_advice
 from ..conditioning.starts import cycle_slips, distance_warp, linearise_starts, warped
 from ..errors import ArgumentError, DataWarning
 from ..model.batch import single_threaded_blas
@@ -587,6 +587,9 @@ def sensor_notes(ds, cf, response, adequacy: dict | None) -> dict | None:
         clip = clipping_advice(ds, adequacy)
         if clip:
             first.append(clip)
+        rate = rate_advice(ds, adequacy)  # a rate the file's is no whole multiple of: its filter, roughly modelled
+        if rate:
+            first.append(rate)
         if first:
             out["advice"] = " ".join(first) + " " + (adequacy.get("advice") or "")
     return out
