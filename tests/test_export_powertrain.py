@@ -234,7 +234,7 @@ def test_the_refusal_on_the_command_line_is_one_line_exit_2_nothing_written(engi
     from rideid.cli import main
     car = dataclasses.replace(car_from_scenario(engine_car), bump_stops={"bs_clear_f": 0.05, "bs_clear_r": 0.05,
                                                                          "bs_rate_f": 1e5, "bs_rate_r": 1e5})
-    monkeypatch.setattr(rideid.exporter, "_load", lambda source: (car, str(source)))
+    monkeypatch.setattr(rideid.exporter, "_load", lambda source: (car, str(source), None))
     assert main(["export", str(tmp_path / "fit"), "--out", str(tmp_path / "car"), "--format", "fmu"]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and err[0].startswith("rideid: error:") and "powertrain" in err[0], err

@@ -188,6 +188,7 @@ def test_right_hand_side_is_newton_euler_in_absolute_coordinates():
 
 
 @pytest.mark.slow
+@pytest.mark.expensive  # one 13-minute DOP853 run: make test-slow runs it, CI's slow pass does not
 def test_matches_an_independent_absolute_coordinate_simulation():
     """Digressive asymmetric curves, bump stops reached, a wheel lifting off, the engine on its mounts:
     rideid's nonlinear car (relative coordinates, RK4 split at the kinks, the compiled kernel) against

@@ -61,3 +61,18 @@ def test_nothing_is_recorded_without_an_active_profile():
         pass
     _outer()
     assert prof.stages == {}
+
+
+def test_stages_on_the_candidates_threads_are_counted_under_the_caller(monkeypatch):
+    """rideid.model.batch.thread_map runs each item in a copy of the caller's context: the stages on its threads
+    are recorded under the stage that started them (the model choice's candidates)."""
+    from rideid.model import backend, batch
+
+    monkeypatch.setattr(backend, "threads", lambda: 2)
+    with Profile() as prof:
+        with timing("model choice"):
+            batch.thread_map(lambda s: _inner(s), [0.02, 0.02, 0.02])
+    rows = {r["stage"]: r for r in prof.rows()}
+    assert rows["model choice/inner"]["calls"] == 3
+    assert rows["model choice/inner"]["wall_s"] >= 0.06  # three calls of 0.02 s, on two threads
+

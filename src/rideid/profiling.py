@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import contextvars
 import functools
+import threading
 import time
 from contextlib import contextmanager
 from dataclasses import dataclass, field
@@ -45,15 +46,18 @@ class StageTime:
 class Profile:
     """The stages' times of what runs while it is active (``with Profile() as prof``).
 
-    Threads started inside (the model choice's candidates) inherit the active
-    profile only where the code copies the context (``contextvars.copy_context``);
-    otherwise their time is counted in the stage that waits for them.
+    Threads started inside inherit the active profile where the code copies the
+    context (``contextvars.copy_context``, as :func:`rideid.model.batch.thread_map`
+    does for the model choice's candidates): their stages then overlap in time,
+    so the shares of stages run side by side may add up to more than the whole.
+    Elsewhere a thread's time is counted in the stage that waits for it.
     """
 
     stages: dict = field(default_factory=dict)
     wall_s: float = 0.0
     cpu_s: float = 0.0
     _token: object = None
+    _lock: threading.Lock = field(default_factory=threading.Lock)
     _t0: tuple = (0.0, 0.0)
 
     def __enter__(self):
@@ -105,18 +109,20 @@ def timing(name: str):
         yield
         return
     path = parent + (name,)
-    rec = prof.stages.setdefault(path, StageTime())  # entered now: the rows come in the order first entered
+    with prof._lock:
+        rec = prof.stages.setdefault(path, StageTime())  # entered now: the rows come in the order first entered
     token = _PATH.set(path)
     w0, c0 = time.perf_counter(), time.process_time()
     try:
         yield
     finally:
         dw, dc = time.perf_counter() - w0, time.process_time() - c0
-        rec.calls += 1
-        rec.wall_s += dw
-        rec.cpu_s += dc
-        if parent:
-            prof.stages.setdefault(parent, StageTime()).child_wall_s += dw
+        with prof._lock:  # stages may end on several threads at once
+            rec.calls += 1
+            rec.wall_s += dw
+            rec.cpu_s += dc
+            if parent:
+                prof.stages.setdefault(parent, StageTime()).child_wall_s += dw
         _PATH.reset(token)
 
 

@@ -54,6 +54,7 @@ from dataclasses import replace
 import numpy as np
 from scipy import special
 
+from ..profiling import stage
 from ..settings import defaults, legacy_names
 from ..model.params import POWERTRAIN_NAMES
 from ..model.params import SUSPENSION_GROUPS as GROUPS
@@ -190,6 +191,7 @@ def fits_better(extensions, costs: dict, min_improvement: float | None = None) -
     return all(mine <= cost - min_improvement for cand, cost in costs.items() if set(cand) < set(extensions))
 
 
+@stage("model choice")
 def identify_auto(ds, *, rng=None, seed=None, callback=None, maps=None, simulator=None, **kw):
     """:func:`rideid.identify` with ``model="auto"`` (module docstring).
 
@@ -460,6 +462,7 @@ def knots_like(ds, res=None):
     return defaults["dampers.knee_grid"] if found else ds.manifest.damper_knots
 
 
+@stage("candidate damper_curves")
 def curve_candidate(ds, lin, chosen, lin_crit, *, rng=None, seed=None, maps=None, start_from=None, simulator=None,
                     **kw):
     """Fit damper curves on top of the chosen linear model ``chosen`` (result ``lin``, its criterion
@@ -507,6 +510,7 @@ BUMP_CRITERION = ("bump stops: tried when the model chosen so far (damper curves
                   "stop parameter ends at its search bound (the bound's value, not the data's)")
 
 
+@stage("candidate bump_stops")
 def bump_candidate(ds, prev, chosen, prev_crit, *, rng=None, seed=None, maps=None, simulator=None, **kw):
     """Fit bump stops on top of the model ``chosen`` (result ``prev``, criterion entry ``prev_crit``).
 
@@ -567,6 +571,7 @@ def _best_of(big_entry, small_entry, best, chosen):
     return best, tuple(best["extensions"])
 
 
+@stage("linear groups weighed again")
 def _linear_groups_again(ds, r_big, chosen, big_crit, *, rng=None, seed=None, maps=None, simulator=None, **kw):
     """The linear groups of ``chosen`` weighed again from the robust covariance of its fit ``r_big`` (criterion
     entry ``big_crit``), as :func:`_curve_subset` does when the curves come in; when a smaller set is preferred,
@@ -606,6 +611,7 @@ POWERTRAIN_CRITERION = (
     "adequate")
 
 
+@stage("candidate powertrain")
 def powertrain_candidate(ds, chosen, crit, *, rng=None, seed=None, simulator=None, **kw):
     """Fit a powertrain on mounts on top of the model ``chosen`` (criterion entry ``crit``; its linear groups,
     damper curves and bump stops): one search (JADE on the linear car with the powertrain, then the polish of
@@ -826,6 +832,7 @@ def _drawing_caveat(ds, res, chosen, tracks):
     return replace(res, adequacy={**ad, "tracks_caveat": caveat})
 
 
+@stage("tracks as built before curves")
 def _tracks_before_curves(ds, res, chosen, simulator, tracks, common):
     """``--model auto`` kept a nonlinear group (damper curves, bump stops) on tracks taken as drawn, and the fit
     is still not adequate. A track built off its drawing leaves road-driven structure in every run that a damper

@@ -75,9 +75,13 @@ def thread_map(fn, items, name: str = "rideid") -> list:
     threads = min(backend.threads(), len(items))
     if threads < 2:
         return [fn(x) for x in items]
+    import contextvars
     from concurrent.futures import ThreadPoolExecutor
+    # each item in a copy of the caller's context (the stage it is in: rideid.profiling), copied here on the
+    # caller's thread, one copy per item since one context cannot be entered on two threads at once
+    contexts = [contextvars.copy_context() for _ in items]
     with ThreadPoolExecutor(threads, thread_name_prefix=name) as ex:
-        return list(ex.map(fn, items))
+        return list(ex.map(lambda ctx, x: ctx.run(fn, x), contexts, items))
 
 
 def thread_map_rows(fn, P, name: str = "rideid") -> np.ndarray:

@@ -369,7 +369,8 @@ def _max_relative(fr):
             H, sd = fr.response(f"{kind}_az_{corner}", f"r_{corner}")
             vals.append(np.max(sd[sel] / np.abs(H[sel])))
     vals += [np.max(v["std_abs"][sel] / np.abs(v["H"][sel])) for v in fr.views.values()]
-    return 100.0 * float(np.nanmax(vals))
+    vals = np.asarray(vals, dtype=float)
+    return 100.0 * float(np.max(vals[np.isfinite(vals)])) if np.isfinite(vals).any() else None  # no std: no band
 
 
 def _band(ax, f, mag, sd, colour):
