@@ -150,3 +150,29 @@ def test_the_plan_has_a_block_per_nuisance():
         ("road u1", ["road"], ["u1"])]
     assert plan.blocks[0].fixed == ["total_mass"]
     assert type(plan).from_dict(plan.to_dict()) == plan
+
+
+def test_an_adequate_verdict_with_runs_not_assessed_or_a_loud_residual_is_not_green():
+    """SPEC §12-13, never confidently wrong: a verdict that covers only some runs (the others on unknown roads), or
+    whose residual is far above the sensor noise, is adequate on what was tested but not a clean verdict: the
+    adequacy record says warn and why, and the report's summary and verdict box (amber, not green) say so."""
+    from rideid.estimate.adequacy import caveats
+    from rideid.report.html import summary_section
+
+    clean = {"adequate": True, "reasons": ["no road-driven structure"], "runs": {}}
+    assert caveats(clean) == [] and caveats(None) == [] and caveats({**clean, "adequate": False,
+                                                                     "not_assessed": ["B40"]}) == []
+    mixed = {**clean, "not_assessed": ["B40", "C25"], "note": "the verdict covers the runs on known tracks"}
+    held = caveats(mixed)
+    assert len(held) == 1 and "2 run(s) not assessed (B40, C25" in held[0]
+    assert len(caveats({**mixed, "level_caveat": "the residual is loud"})) == 2
+    rec = {x.kind: x for x in assessments_of(_res(mixed))}["adequacy"]
+    assert rec.verdict == "warn" and rec.adequate and "not assessed (B40, C25" in rec.reason
+    assert {x.kind: x for x in assessments_of(_res(clean))}["adequacy"].verdict == "pass"
+    # the report: the summary's verdict line and the box's colour
+    context = {"res": {"model": {}}, "adequacy": mixed, "known": {"total_mass": 1400.0}, "params": [],
+               "fit_rows": [], "n_runs": 3, "data_warnings": []}
+    summary = summary_section(SimpleNamespace(dampers=None, tracks=None, roads=None, uncertainty=None), context)
+    verdict = dict((label, text) for label, text, _ in summary["summary"])["Verdict"]
+    assert verdict.startswith("MODEL ADEQUATE ON WHAT WAS TESTED, NOT A CLEAN VERDICT (1 caveat, below)")
+    assert summary["verdict_caveats"] == held  # the verdict box: amber (report.html.j2, verdict-warn)

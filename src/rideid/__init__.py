@@ -65,6 +65,7 @@ _COMMAND_LINE = _by_name({
     "rideid.data.quality": ("data_quality", "quality_table", "summarised_warning", "resampling_lines"),
     "rideid.profiling": ("Profile",),
 }, {
+    "adequacy_caveats": ("rideid.estimate.adequacy", "caveats"),
     "write_sensitivity_csvs": ("rideid.report.sensitivity_files", "write_csvs"),
     "complete_result": ("rideid.estimate.responses", "complete"),
     "sensitivity_tables_markdown": ("rideid.report.sensitivity_files", "tables_markdown"),

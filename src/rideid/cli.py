@@ -506,7 +506,15 @@ def run_identify(ds_path, out_dir, *, seed, population=None, generations=None, w
     if para:
         print("\n" + textwrap.fill(para, 100) + "\n", file=out)
     elif res.adequacy:
-        print("model adequate: " + res.adequacy["reasons"][0], file=out)
+        held = rideid.adequacy_caveats(res.adequacy)
+        if held:  # adequate on the pairs tested, but not green: say so where the verdict is read
+            short = [held[0]] if res.adequacy.get("not_assessed") else []
+            short += ["the WARNING above" + ("s" if len(held) - len(short) > 1 else "")] if len(held) > len(short) \
+                else []
+            print(textwrap.fill("model adequate on what was tested, NOT A CLEAN VERDICT: " + "; and ".join(short),
+                                100, subsequent_indent="  "), file=out)
+        else:
+            print("model adequate: " + res.adequacy["reasons"][0], file=out)
     print(f"cost {res.cost:.4g}, {res.generations} generations, {res.evaluations} evaluations, "
           f"{res.wall_time_s:.1f} s; written to {out_dir}" + (f" (open {Path(out_dir) / 'report.html'})"
                                                                 if report else ""), file=out)

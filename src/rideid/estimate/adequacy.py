@@ -396,6 +396,26 @@ def level_caveat(adequacy: dict) -> str | None:
             "auto`, and compare)")
 
 
+def caveats(adequacy: dict | None) -> list[str]:
+    """What keeps an adequate verdict from being a clean one (SPEC §12, §13): runs the verdict does not cover
+    (``not_assessed``: runs on unknown roads), a residual level well above the sensor noise (``level_caveat``),
+    tracks taken as drawn while the residuals hold road-driven structure (``tracks_caveat``). Empty when not
+    adequate (the verdict already says not to trust the numbers) or when there are none. The terminal, the report
+    and the adequacy record all read this list, so they say the same."""
+    if not adequacy or not adequacy.get("adequate"):
+        return []
+    out = []
+    runs = list(adequacy.get("not_assessed") or [])
+    if runs:
+        out.append(f"{len(runs)} run(s) not assessed ({', '.join(map(str, runs))}: on unknown roads, where rideid has "
+                   "no residual test yet): the verdict covers the other runs only, and a misfit on these would not "
+                   "show")
+    for key in ("level_caveat", "tracks_caveat"):
+        if adequacy.get(key):
+            out.append(str(adequacy[key]))
+    return out
+
+
 def advice(model: dict | None) -> str:
     """What to try when the model is not adequate, for the model option the identification used.
 

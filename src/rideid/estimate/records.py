@@ -37,6 +37,8 @@ from __future__ import annotations
 from dataclasses import asdict, dataclass, field, fields
 from typing import ClassVar
 
+from .adequacy import caveats
+
 #: the four verdicts, mildest first
 VERDICTS = ("pass", "warn", "fail", "not assessed")
 
@@ -99,7 +101,11 @@ class AdequacyAssessment(Assessment):
         pairs = sum(len(rec) for rec in (ad.get("runs") or {}).values())
         verdict = "not assessed" if adequate is None else ("pass" if adequate else "fail")
         reasons = ad.get("reasons") or []
-        return cls(verdict=verdict, reason=reasons[0] if reasons else ad.get("note", ""), adequate=adequate,
+        reason = reasons[0] if reasons else ad.get("note", "")
+        held = caveats(ad)
+        if held:  # adequate on what was tested, but not a clean verdict: unassessed runs, a loud residual
+            verdict, reason = "warn", reason + "; but " + "; ".join(held)
+        return cls(verdict=verdict, reason=reason, adequate=adequate,
                    pairs=pairs, pairs_with_structure=_pairs(ad), alpha=ad.get("alpha"),
                    min_explained=ad.get("min_explained"), sensors_suspect=bool(ad.get("sensors_suspect")),
                    advice=ad.get("advice"))

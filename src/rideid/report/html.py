@@ -33,6 +33,7 @@ from PIL import Image
 from ..profiling import stage
 from ..data.quality import summarised_warning
 from ..errors import DataError
+from ..estimate.adequacy import caveats
 from ..estimate.frequency import frequency_response, measured_response
 from ..estimate.sensitivity import P2T_STARS, stars
 from .sensitivity_files import heatmap_figure
@@ -900,8 +901,11 @@ def summary_section(result, context: dict) -> dict:
     res = context["res"]
     adq = context.get("adequacy")
     lines = []
+    held = caveats(adq)
     if adq:
-        lines.append(("Verdict", ("model adequate: " if adq["adequate"] else "MODEL NOT ADEQUATE: ")
+        lines.append(("Verdict", ("MODEL ADEQUATE ON WHAT WAS TESTED, NOT A CLEAN VERDICT "
+                                  f"({len(held)} caveat{'s' if len(held) > 1 else ''}, below): " if held else
+                                  "model adequate: " if adq["adequate"] else "MODEL NOT ADEQUATE: ")
                       + adq["reasons"][0], "adequacy"))
     elif getattr(result, "roads", None):
         lines.append(("Verdict", "adequacy not assessed: rideid has no residual test on unknown roads yet; the "
@@ -974,7 +978,7 @@ def summary_section(result, context: dict) -> dict:
     present |= {"frequency"} if context.get("frequency_figure") else set()
     present |= {"roads"} if context.get("road_figures") else set()
     present |= {f.id for f in context.get("figures", [])}
-    return {"summary": lines, "toc": [t for t in TOC if t[0] in present]}
+    return {"summary": lines, "toc": [t for t in TOC if t[0] in present], "verdict_caveats": held}
 
 
 def parameter_rows(result) -> list:
