@@ -392,8 +392,9 @@ def level_caveat(adequacy: dict) -> str | None:
     return (f"the road-driven test finds nothing, but the residual is above 3x the lead-in's noise floor in {loud} "
             f"of {len(levels)} run/channel pairs: a model that misses slow dynamics (a roll or pitch stiffness, "
             "which the test on prewhitened residuals cannot see) leaves this, as does sensor noise that grows while "
-            "driving; unless the latter, the estimates may be off by more than their error bars (try `--model "
-            "auto`, and compare)")
+            "driving; unless the latter, the estimates may be off by more than their error bars (check the set-up "
+            "first: speeds, starts, sample rate, units, sensor chains; then fit the groups the model lacks, "
+            "`--model` with damper_curves, anti_roll_bars, tire_damping or powertrain, and compare)")
 
 
 def caveats(adequacy: dict | None) -> list[str]:
