@@ -176,3 +176,16 @@ def test_an_adequate_verdict_with_runs_not_assessed_or_a_loud_residual_is_not_gr
     verdict = dict((label, text) for label, text, _ in summary["summary"])["Verdict"]
     assert verdict.startswith("MODEL ADEQUATE ON WHAT WAS TESTED, NOT A CLEAN VERDICT (1 caveat, below)")
     assert summary["verdict_caveats"] == held  # the verdict box: amber (report.html.j2, verdict-warn)
+
+
+def test_the_reports_verdict_carries_the_caveats_the_terminal_warns_of():
+    """The report's adequacy context (rideid.report.estimate_sections.adequacy_rows) keeps what the terminal warns
+    of (runs not assessed, the residual level, the tracks as drawn), so its summary and verdict box say it too."""
+    from rideid.estimate.adequacy import caveats
+    from rideid.report.estimate_sections import adequacy_rows
+
+    adq = {"adequate": True, "reasons": ["fine"], "runs": {}, "level_caveat": "loud", "not_assessed": ["B40"],
+           "note": "the verdict covers the runs on known tracks"}
+    rows = adequacy_rows({"adequacy": adq})
+    assert rows["level_caveat"] == "loud" and rows["not_assessed"] == ["B40"]
+    assert caveats(rows) == caveats(adq) and len(caveats(rows)) == 2
