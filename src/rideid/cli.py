@@ -353,8 +353,9 @@ def _tracks_table(res) -> str:
 
 def _motion_line(rid: str, m: dict) -> str:
     """One run's speed and start as fitted (SPEC §13: the estimate, its std, the declared value)."""
-    sd = "" if m.get("speed_std_m_s") is None else f" ± {m['speed_std_m_s']:.4f}"
-    st = "" if m.get("start_shift_std_s") is None else f" ± {1e3 * m['start_shift_std_s']:.2f}"
+    # the stds to two significant digits: a small one is not printed as zero
+    sd = "" if m.get("speed_std_m_s") is None else f" ± {m['speed_std_m_s']:.2g}"
+    st = "" if m.get("start_shift_std_s") is None else f" ± {1e3 * m['start_shift_std_s']:.2g}"
     sp = m.get("speed") or {}
     if sp.get("declared") is not None:
         was = f"declared {sp['declared']:.4g} ± {sp['prior_std']:.2g}"
