@@ -88,7 +88,7 @@ def test_report_compares_adaptive_and_fixed(fit_dir, sim_dataset, tmp_path, caps
     assert main(["report", str(fit_dir), "--compare", str(fixed)]) == 0
     html = (fit_dir / "report.html").read_text()
     assert 'id="compare"' in html and "adaptive (this) vs fixed (fixed)" in html
-    assert len(_images(html)) == 18
+    assert len(_images(html)) == 19  # the default report's 18 (frequency responses included) and the comparison
     assert (fit_dir / "figures" / "compare.png").stat().st_size > 5000
     # comparing with a folder that is not an identification is bad input
     assert main(["report", str(fit_dir), "--compare", str(tmp_path)]) == 2

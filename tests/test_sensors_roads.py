@@ -66,21 +66,24 @@ def test_tracks_as_built_see_the_declared_coupling(tmp_path, monkeypatch):
 def test_identify_on_tracks_as_built_through_coupled_hubs(tmp_path):
     """The SUV's five runs on tracks as built (4 % off, 1.5 mm RMS), hubs coupled at 0.5 Hz and declared, from a
     start 3 % off the truth, ``model="base"`` (as tests/test_tracks_asbuilt.py's test of the uncoupled case):
-    the twelve within 1 %, every error within 3.5 std_robust, adequate, the twist's factor near 1.04, and no
+    the twelve within 1.2 %, every error within 2.5 std_robust, adequate, the twist's factor near 1.04, and no
     coupling hint (the fit on the tracks as drawn, which gives the hints, saw the declared chain).
 
     Measured (two cores shared with other work): 43 s; largest error 0.58 % (m_ur), largest error over
     std_robust 2.7 (c_sf; the uncoupled case's test measured 2.5: the as-built error bars are optimistic,
-    docs/tracks-as-built.md), twist factor 1.038."""
+    docs/tracks-as-built.md), twist factor 1.038. With every run's speed and start estimated with the car under
+    their default priors (SPEC §13; they were held exact): m_ur +1.03 % and m_uf +0.92 % at 1.8 and 1.6
+    std_robust, the largest 1.8 (the price of not taking the set-up as exact, inside the error bars: the
+    uncoupled case's test, tests/test_tracks_asbuilt.py, moved the same way)."""
     ds = rideid.load_dataset(write_tracks_dataset(tmp_path / "c", seed=4))
     space, _ = _suv_row(ds)
     rng = np.random.default_rng(3)
     start = np.array([SUV_TRUTH[n] for n in space.names]) * (1 + 0.03 * rng.choice([-1, 1], len(space.names)))
     res = rideid.identify(ds, start=start, model="base", rng=1)
     errs = {n: res.parameters[n] / v - 1 for n, v in SUV_TRUTH.items()}
-    assert max(abs(e) for e in errs.values()) < 0.01, errs
     z = {n: (res.parameters[n] - v) / res.details[n]["std_robust"] for n, v in SUV_TRUTH.items()}
-    assert max(abs(v) for v in z.values()) < 3.5, z
+    assert max(abs(e) for e in errs.values()) < 0.012, errs
+    assert max(abs(v) for v in z.values()) < 2.5, z
     assert res.adequacy["adequate"] is True
     assert res.adequacy["as_built"] == sorted(r[0] for r in RUNS)
     assert res.adequacy["sensor_hints"] == [] and "tracks as drawn" in res.adequacy["sensor_hints_note"]
