@@ -321,46 +321,25 @@ def identify_auto(ds, *, rng=None, seed=None, callback=None, maps=None, simulato
     pt = pt_curve = None
     if not now.adequacy.get("adequate", True):
         pt = powertrain_candidate(ds, chosen, best, rng=rng, seed=seed, simulator=simulator, **kw_search)
+    weigh = dict(results=results, costs=costs, crit=crit, rng=rng, seed=seed, simulator=simulator, **kw_nested)
     if pt is not None:
-        pkey, cf_p, r_p, e_p = pt
-        results[pkey], costs[pkey] = r_p, cf_p
-        evaluations += r_p.nfev
-        e_p["fits_better"] = fits_better(pkey, {cand: r.cost for cand, r in results.items()})
-        crit.append(e_p)
-        W = e_p["powertrain_wald"]
-        if e_p["fits_better"] and e_p["criterion"] is not None and W is not None and np.isfinite(W) \
-                and e_p["criterion"] < best["criterion"] + W:
-            best, chosen = e_p, pkey
-            # the linear groups weighed again with the powertrain in, from its fit's robust covariance
-            # (the powertrain's own sensitivity maps: the full linear model's have no powertrain)
-            again = _linear_groups_again(ds, r_p, chosen, e_p, rng=rng, seed=seed, maps=r_p.maps,
-                                         simulator=simulator, **kw_nested)
-            if again is not None:
-                evaluations += _weigh_smaller(again, pkey, e_p, results, costs, crit)
-                best, chosen = _best_of(e_p, again[3], best, chosen)
+        # the powertrain's own sensitivity maps for what follows: the full linear model's have no powertrain
+        maps_p = pt[2].maps
+        best, chosen, n, kept = _weigh_candidate(ds, pt, "powertrain_wald", best, chosen, maps=maps_p, **weigh)
+        evaluations += n
+        if kept:
             # damper curves on top of the powertrain (and its linear groups: curve_candidate starts from a linear
             # car), when they were weighed without it and not kept
             now = results[chosen]
             if now.adequacy is None:
                 now = results[chosen] = replace(now, adequacy=_own_adequacy(ds, costs[chosen], now))
             if curves_tried and not set(chosen) & set(NONLINEAR_GROUPS) and not now.adequacy.get("adequate", True):
-                pt_curve = curve_candidate(ds, now, chosen, best, rng=rng, seed=seed, maps=r_p.maps,
+                pt_curve = curve_candidate(ds, now, chosen, best, rng=rng, seed=seed, maps=maps_p,
                                            simulator=simulator, **kw_nested)
     if pt_curve is not None:
-        qkey, cf_q, r_q, e_q = pt_curve
-        results[qkey], costs[qkey] = r_q, cf_q
-        evaluations += r_q.nfev
-        e_q["fits_better"] = fits_better(qkey, {cand: r.cost for cand, r in results.items()})
-        crit.append(e_q)
-        Wq = e_q["curve_departure_wald"]
-        if e_q["fits_better"] and e_q["criterion"] is not None and Wq is not None and np.isfinite(Wq) \
-                and e_q["criterion"] < best["criterion"] + Wq:
-            best, chosen = e_q, qkey
-            again = _linear_groups_again(ds, r_q, chosen, e_q, rng=rng, seed=seed, maps=r_p.maps,
-                                         simulator=simulator, **kw_nested)
-            if again is not None:
-                evaluations += _weigh_smaller(again, qkey, e_q, results, costs, crit)
-                best, chosen = _best_of(e_q, again[3], best, chosen)
+        best, chosen, n, _ = _weigh_candidate(ds, pt_curve, "curve_departure_wald", best, chosen, maps=maps_p,
+                                              **weigh)
+        evaluations += n
     res = results[chosen]
     if res.adequacy is None:
         res = results[chosen] = replace(res, adequacy=_own_adequacy(ds, costs[chosen], res))
@@ -548,6 +527,29 @@ def bump_candidate(ds, prev, chosen, prev_crit, *, rng=None, seed=None, maps=Non
              "bump_stops_at_bound": at_bound,
              "criterion": None if not reached or base is None else base + penalty() * n_free}
     return key, cf, r, entry
+
+
+def _weigh_candidate(ds, cand, wald_key, best, chosen, *, results, costs, crit, maps, **kw):
+    """Candidate ``cand`` (``(key, cost, result, criterion entry)``) weighed against the choice so far (``best``,
+    ``chosen``): recorded in ``results``, ``costs`` and ``crit``; kept when it fits materially better than every
+    candidate it contains and its criterion is below the chosen model's plus its own Wald statistic (``wald_key``
+    of its entry), and then the linear groups are weighed again with it, from its fit's robust covariance
+    (``maps``: the sensitivity maps to search with). Returns ``(best, chosen, evaluations, kept)``."""
+    key, cf_k, r_k, e_k = cand
+    results[key], costs[key] = r_k, cf_k
+    evaluations = r_k.nfev
+    e_k["fits_better"] = fits_better(key, {c: r.cost for c, r in results.items()})
+    crit.append(e_k)
+    W = e_k[wald_key]
+    kept = bool(e_k["fits_better"] and e_k["criterion"] is not None and W is not None and np.isfinite(W)
+                and e_k["criterion"] < best["criterion"] + W)
+    if kept:
+        best, chosen = e_k, key
+        again = _linear_groups_again(ds, r_k, chosen, e_k, maps=maps, **kw)
+        if again is not None:
+            evaluations += _weigh_smaller(again, key, e_k, results, costs, crit)
+            best, chosen = _best_of(e_k, again[3], best, chosen)
+    return best, chosen, evaluations, kept
 
 
 def _weigh_smaller(small, big_key, big_entry, results, costs, crit) -> int:
