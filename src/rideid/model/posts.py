@@ -29,9 +29,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .discretize import N_MAX, gauss_nodes, moment_weights
 from .equations import CORNER_TO_DECOMPOSED
-from .simulate import RunInput
+from .simulate import RunInput, input_moments
 
 #: post channels, in corner order fl, fr, rl, rr (SPEC §13)
 POST_CHANNELS = ("post_fl", "post_fr", "post_rl", "post_rr")
@@ -61,16 +60,7 @@ def prepare_function(t, inputs_at):
     t = np.asarray(t, dtype=float)
     h = float(t[1] - t[0])
     u, rate = inputs_at(t)
-    nodes, weights = gauss_nodes(MOMENT_PANELS, MOMENT_ORDER)
-    W = moment_weights(nodes, weights, N_MAX)
-    n_int = t.size - 1
-    mu = np.empty((n_int, 4, N_MAX))
-    block = max(1, 2_000_000 // nodes.size)
-    for lo in range(0, n_int, block):
-        hi = min(n_int, lo + block)
-        tq = (t[lo:hi, None] + h * nodes[None, :]).ravel()
-        uq = inputs_at(tq)[0].reshape(hi - lo, nodes.size, 4)
-        mu[lo:hi] = np.matmul(CORNER_TO_DECOMPOSED, np.matmul(uq.transpose(0, 2, 1), W))
+    mu = input_moments(t, lambda tq: inputs_at(tq)[0], MOMENT_PANELS, MOMENT_ORDER)
     u = np.ascontiguousarray(u, dtype=float)
     rate = np.ascontiguousarray(rate, dtype=float)
     run = RunInput(t=t, h=h, u=u, ud=u @ CORNER_TO_DECOMPOSED.T, mu=mu, rate=rate,

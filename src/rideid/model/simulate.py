@@ -113,6 +113,25 @@ def prepare_run(track: Track, geom: Geometry, speed: float | None, t, quad_order
     return res
 
 
+def input_moments(t, corner_inputs_at, n_panels: int, quad_order: int) -> np.ndarray:
+    """The decomposed road inputs' moments over each sample interval, ``(n_t - 1, 4, N_MAX)``: Gauss quadrature
+    (``n_panels`` panels of order ``quad_order``) of ``corner_inputs_at(times) -> (k, 4)`` (m) against the moment
+    basis, in blocks of about two million quadrature points."""
+    h = float(t[1] - t[0])
+    nodes, weights = gauss_nodes(n_panels, quad_order)
+    W = moment_weights(nodes, weights, N_MAX)  # (q, N)
+    n_int = t.size - 1
+    mu = np.empty((n_int, 4, N_MAX))
+    block = max(1, 2_000_000 // nodes.size)
+    for lo in range(0, n_int, block):
+        hi = min(n_int, lo + block)
+        tq = (t[lo:hi, None] + h * nodes[None, :]).ravel()
+        uq = np.asarray(corner_inputs_at(tq)).reshape(hi - lo, nodes.size, 4)
+        mc = np.matmul(uq.transpose(0, 2, 1), W)  # (k, 4, N): BLAS, 3x einsum's speed
+        mu[lo:hi] = np.matmul(CORNER_TO_DECOMPOSED, mc)
+    return mu
+
+
 def _prepare_run(track, geom, speed, t, quad_order, distance) -> RunInput:
     h = float(t[1] - t[0])
     distance_given = distance is not None
@@ -125,17 +144,7 @@ def _prepare_run(track, geom, speed, t, quad_order, distance) -> RunInput:
     u = corner_inputs(track, geom, distance(t))
     # quadrature panels no longer than the envelope grid spacing
     n_panels = max(8, int(np.ceil(max(vmax, 1e-3) * h / ENVELOPE_DX)))
-    nodes, weights = gauss_nodes(n_panels, quad_order)
-    W = moment_weights(nodes, weights, N_MAX)  # (q, N)
-    n_int = t.size - 1
-    mu = np.empty((n_int, 4, N_MAX))
-    block = max(1, 2_000_000 // nodes.size)
-    for lo in range(0, n_int, block):
-        hi = min(n_int, lo + block)
-        tq = (t[lo:hi, None] + h * nodes[None, :]).ravel()
-        uq = corner_inputs(track, geom, distance(tq)).reshape(hi - lo, nodes.size, 4)
-        mc = np.matmul(uq.transpose(0, 2, 1), W)  # (k, 4, N): BLAS, 3x einsum's speed
-        mu[lo:hi] = np.matmul(CORNER_TO_DECOMPOSED, mc)
+    mu = input_moments(t, lambda tq: corner_inputs(track, geom, distance(tq)), n_panels, quad_order)
     ud = u @ CORNER_TO_DECOMPOSED.T
     # input rates at the samples: speed x envelope slope (only the tire dampers use them)
     if distance_given:
