@@ -5,7 +5,7 @@ their drawing, 1.5 mm RMS unevenness, 1 % noise), identified from a start 3 % ab
 ``model="base"`` (the search skipped, the as-built stage as rideid identify runs it). Per seed the twelve's
 errors over std_robust; over the seeds the RMS of those ratios (1 when the error bars have the right width)
 and how many of the twelve ±2 std_robust covers. ``--meat cluster`` puts back the as-built runs' bin-clustered
-meat (rideid.estimate.asbuilt.cluster_meat) in place of the white one (asbuilt.meat) for comparison.
+meat (rideid.estimate.problem.asbuilt.cluster_meat) in place of the white one (asbuilt.meat) for comparison.
 
     PYTHONPATH=src .venv/bin/python benchmarks/asbuilt_error_bars.py --seeds 4 5 6 7 8
     PYTHONPATH=src .venv/bin/python benchmarks/asbuilt_error_bars.py --seeds 4 5 6 7 8 --meat cluster
@@ -27,8 +27,8 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "tests"))
 
 import rideid  # noqa: E402
-from rideid.estimate import asbuilt  # noqa: E402
-from rideid.estimate.cost import ParameterSpace  # noqa: E402
+from rideid.estimate.problem import asbuilt  # noqa: E402
+from rideid.estimate.problem.cost import ParameterSpace  # noqa: E402
 from asbuilt_tracks import write_dataset  # noqa: E402
 from cars import SUV_TRUTH  # noqa: E402
 

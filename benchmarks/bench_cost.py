@@ -28,7 +28,7 @@ import scipy.signal
 
 import rideid
 from rideid.model.contact import envelope
-from rideid.estimate.cost import CostFunction
+from rideid.estimate.problem.cost import CostFunction
 from rideid.model.batch import BatchSimulator, single_threaded_blas
 from rideid.model.equations import state_space, static_state
 from rideid.data.scenario import run_times

@@ -31,7 +31,7 @@ import numpy as np
 
 import rideid
 from rideid.synth.scenario import simulate_manifest, write_dataset
-from rideid.estimate.cost import CostFunction
+from rideid.estimate.problem.cost import CostFunction
 from rideid.model import kernel
 from rideid.model.batch import single_threaded_blas
 from rideid.model.simulate import simulate_lsim

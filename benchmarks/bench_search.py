@@ -27,7 +27,7 @@ sys.path.insert(0, str(ROOT / "tests"))
 import rideid  # noqa: E402
 from cars import SUV_BARS, SUV_TIRE_DAMPING, simulated, suv_scenario  # noqa: E402
 from conftest import van_scenario  # noqa: E402
-from rideid.estimate.identify import identify  # noqa: E402
+from rideid.estimate.fit.identify import identify  # noqa: E402
 
 #: (population, spread_tol); the first is the reference
 SETTINGS = ((64, 0.02), (64, 0.1), (48, 0.15), (32, 0.2), (32, 0.3), (24, 0.3))

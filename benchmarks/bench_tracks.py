@@ -3,7 +3,7 @@
 The SUV of tests/cars.py on five runs of the built-in tracks (T_HL, T_HH, H_HL, H_HH, W_H; 200 Hz, 1 % white
 noise, total mass known), simulated by the independent simulator of tests/asbuilt_tracks.py on the tracks as
 built: the drawing times 1.04 plus 1.5 mm RMS of band-limited unevenness per wheel path; and on the exact
-drawing, for the price. The dataset declares the drawing. Methods (rideid.estimate.asbuilt):
+drawing, for the price. The dataset declares the drawing. Methods (rideid.estimate.problem.asbuilt):
 
 * ``as-drawn``  the drawing taken as exact: rideid identify --tracks as-drawn (JADE and the time-domain polish)
 * ``prior``     the default: from the as-drawn car, the drawing times a fitted amplitude factor plus unevenness
@@ -32,7 +32,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "tests"))
 
 import rideid  # noqa: E402
-from rideid.estimate.anyroad import identify_any_road  # noqa: E402
+from rideid.estimate.fit.anyroad import identify_any_road  # noqa: E402
 from asbuilt_tracks import write_dataset  # noqa: E402
 from cars import SUV_TRUTH  # noqa: E402
 

@@ -242,8 +242,8 @@ def static_path(mod: str, fn: str):
 
 #: the legs of an identification, walked by ``--legs`` (the dataset's path, then the dataset itself): loading,
 #: the single-model fit, the model choice
-LEGS = (("rideid.conditioning.load", "load_dataset", "path"), ("rideid.estimate.identify", "identify", "ds"),
-        ("rideid.estimate.model_choice", "identify", "ds"))
+LEGS = (("rideid.conditioning.load", "load_dataset", "path"), ("rideid.estimate.fit.identify", "identify", "ds"),
+        ("rideid.estimate.choice.model_choice", "identify", "ds"))
 
 
 def main(argv=None) -> int:

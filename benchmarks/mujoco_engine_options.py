@@ -223,7 +223,7 @@ def fit(sc, option):
     with tempfile.TemporaryDirectory() as tmp:
         write_dataset(sc, data, Path(tmp) / "ds")
         ds = rideid.load_dataset(Path(tmp) / "ds")
-        from rideid.estimate.cost import ParameterSpace
+        from rideid.estimate.problem.cost import ParameterSpace
         names = list(ParameterSpace(ds.known, ds.geometry, ds.manifest.bounds, extensions=()).names)
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")

@@ -7,7 +7,7 @@ sample); the error is RMS(estimate - truth) / RMS(truth), over the run away from
 ("inner") and over the whole run ("whole"):
 
 * "as filtered": the estimate against the truth through the same zero-phase 4th-order Butterworth
-  band-pass to 0.5-20 m that the estimate is made with (:func:`rideid.estimate.roadfit.band_pass`: half
+  band-pass to 0.5-20 m that the estimate is made with (:func:`rideid.estimate.problem.roadfit.band_pass`: half
   the amplitude at 0.5 m and 20 m);
 * each band of :data:`BANDS`: the estimate's and the truth's content at those wavelengths alone (a DFT
   cut), with the estimate's least-squares amplitude on the truth's (``gain``; 1: the right size).
@@ -26,7 +26,7 @@ from pathlib import Path
 
 import numpy as np
 
-from rideid.estimate.roadfit import band_pass
+from rideid.estimate.problem.roadfit import band_pass
 
 #: the estimated road's band (m), then the sub-bands reported
 BANDS = ((0.5, 20.0), (0.5, 2.0), (2.0, 10.0), (10.0, 20.0))
@@ -47,7 +47,7 @@ def run_errors(est: np.ndarray, tru: np.ndarray) -> list[dict]:
 
     ``est``: rows ``x, z_left, z_right`` of ``road/<run>.csv``; ``tru``: the same of ``road_truth/<run>.csv``.
     ``filtered``: against the truth through the same zero-phase band-pass the estimate is made with
-    (:func:`rideid.estimate.roadfit.band_pass`); each band of :data:`BANDS`: both with only their content at
+    (:func:`rideid.estimate.problem.roadfit.band_pass`); each band of :data:`BANDS`: both with only their content at
     those wavelengths (:func:`ideal_band`), ``gain`` the least-squares amplitude of the estimate's on the
     truth's (1: the right size). ``part``: ``"inner"`` (away from the first and last 20 m) or ``"whole"``.
     """

@@ -2,12 +2,12 @@
 
 On runs whose road nobody measured the road is free at every frequency and
 takes up part of an AC coupling's signature, so the hint there names a group
-of channels at a smaller cut (:data:`rideid.estimate.sensor_check.FREE_ROAD_HINT_REDUCTION`)
-than on tracks (:data:`~rideid.estimate.sensor_check.HINT_REDUCTION`). This
+of channels at a smaller cut (:data:`rideid.estimate.assess.sensor_check.FREE_ROAD_HINT_REDUCTION`)
+than on tracks (:data:`~rideid.estimate.assess.sensor_check.HINT_REDUCTION`). This
 script measures the separation the threshold rests on. Each case is
 identified (``rideid.identify(ds, model="base", seed=1)``, the declaration as
 the dataset gives it); at the car found, and at the true car, the trials of
-:func:`rideid.estimate.sensor_check.road_coupling_hints` (the hubs and the
+:func:`rideid.estimate.assess.sensor_check.road_coupling_hints` (the hubs and the
 body accelerometers as groups at every corner, each accelerometer alone at
 three) are run and the best few printed as the change of the summed
 residual (negative: the trial cuts it; positive: it makes it larger):
@@ -37,8 +37,9 @@ sys.path.insert(0, str(ROOT / "tests"))
 
 import rideid  # noqa: E402
 from rideid.cli import main as cli  # noqa: E402
-from rideid.estimate import anyroad, roadfit  # noqa: E402
-from rideid.estimate.sensor_check import (FREE_ROAD_HINT_REDUCTION, HINT_CORNERS, ROAD_HINT_GROUPS,  # noqa: E402
+from rideid.estimate.fit import anyroad  # noqa: E402
+from rideid.estimate.problem import roadfit  # noqa: E402
+from rideid.estimate.assess.sensor_check import (FREE_ROAD_HINT_REDUCTION, HINT_CORNERS, ROAD_HINT_GROUPS,  # noqa: E402
                                           ROAD_HINT_SINGLE)
 from rideid.model.equations import CHANNELS  # noqa: E402
 from rideid.model.params import ALL_NAMES, as_vector  # noqa: E402

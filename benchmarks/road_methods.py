@@ -1,7 +1,7 @@
 """Two methods for identifying the car on roads nobody measured (issue 26), on the same data.
 
-* method 1 (default): frequency-domain variable projection, :mod:`rideid.estimate.roadfit`;
-* method 2: time-domain staged fit, :mod:`rideid.estimate.roadstaged`.
+* method 1 (default): frequency-domain variable projection, :mod:`rideid.estimate.problem.roadfit`;
+* method 2: time-domain staged fit, :mod:`rideid.estimate.problem.roadstaged`.
 
 Data: the built-in car driven over random ISO 8608 roads (class A, B, C;
 displacement PSD ``Gd(n) = Gd(n0) (n / 0.1)^-2``, FFT synthesis on a 1 cm grid,
@@ -37,8 +37,8 @@ import numpy as np  # noqa: E402
 import scipy.optimize  # noqa: E402
 
 from rideid.data.scenario import default_scenario  # noqa: E402
-from rideid.estimate import roadstaged  # noqa: E402
-from rideid.estimate import roadfit  # noqa: E402
+from rideid.estimate.problem import roadstaged  # noqa: E402
+from rideid.estimate.problem import roadfit  # noqa: E402
 from rideid.model.params import ALL_NAMES, INDEX, NAMES, as_vector  # noqa: E402
 from rideid.model.simulate import prepare_run, simulate_reference  # noqa: E402
 from rideid.model.tracks import Track  # noqa: E402

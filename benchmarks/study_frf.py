@@ -30,8 +30,8 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
 
 import rideid  # noqa: E402
-from rideid.estimate.cost import CostFunction  # noqa: E402
-from rideid.estimate.frequency import measured_response  # noqa: E402
+from rideid.estimate.problem.cost import CostFunction  # noqa: E402
+from rideid.estimate.assess.frequency import measured_response  # noqa: E402
 
 from frf_car import TRUTH, coverage, h1_accuracy, independent_dataset  # noqa: E402
 

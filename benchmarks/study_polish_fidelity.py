@@ -1,6 +1,6 @@
 """What a cheaper integration of the damper-curve car does to the estimates (issue 37: cost <= 3x the linear kernel).
 
-The polish of a damper-curve model (``rideid.estimate.identify._polish``) is where the nonlinear kernel runs:
+The polish of a damper-curve model (``rideid.estimate.fit.identify._polish``) is where the nonlinear kernel runs:
 its residuals and finite-difference Jacobians. This study fits one dataset with ``--model damper_curves``
 (seed 1, no adequacy) at several integrations of the polish and compares each fit's parameters with the
 default's, in units of the default's standard errors (``std``) and relative:
@@ -45,8 +45,8 @@ from knee_cars import scenario_doc  # noqa: E402
 
 from rideid.cli import main  # noqa: E402
 from rideid.conditioning.load import load_dataset  # noqa: E402
-from rideid.estimate.cost import CostFunction  # noqa: E402
-from rideid.estimate import identify as ident  # noqa: E402
+from rideid.estimate.problem.cost import CostFunction  # noqa: E402
+from rideid.estimate.fit import identify as ident  # noqa: E402
 from rideid.model import kernel_nl  # noqa: E402
 from rideid.model.nonlinear import NonlinearSimulator  # noqa: E402
 from rideid.model.params import INDEX  # noqa: E402

@@ -39,7 +39,7 @@ import numpy as np
 
 import rideid
 from rideid.verify.hifi import HifiProperties, hifi_curve, simulate_mujoco
-from rideid.estimate.cost import ParameterSpace
+from rideid.estimate.problem.cost import ParameterSpace
 from rideid.model.params import EXT_NAMES, NAMES, SUSPENSION_GROUPS, as_vector
 from rideid.data.scenario import run_times
 from rideid.synth.scenario import write_dataset

@@ -113,7 +113,7 @@ def coverage(res, truth=TRUTH, freq=None):
 
 
 def h1_accuracy(m, truth=TRUTH, geom=DEFAULT_GEOMETRY, coherence=0.9):
-    """The measured H1 (:func:`rideid.estimate.frequency.measured_response`) against the true car over 0.5-25 Hz
+    """The measured H1 (:func:`rideid.estimate.assess.frequency.measured_response`) against the true car over 0.5-25 Hz
     where its coherence exceeds ``coherence``: (points, median relative error of |H|, share within 2 std)."""
     true = spec_response(truth, geom, m["freq"])[:, :10]
     sel = (m["coherence"] > coherence) & ((m["freq"] >= 0.5) & (m["freq"] <= 25))[:, None, None]

@@ -1,4 +1,4 @@
-"""Adequacy verdict (rideid.estimate.adequacy): the tests' calibration, then cars of our own."""
+"""Adequacy verdict (rideid.estimate.assess.adequacy): the tests' calibration, then cars of our own."""
 
 import numpy as np
 import pytest
@@ -6,7 +6,7 @@ import pytest
 import rideid
 from rideid.model.batch import single_threaded_blas
 from rideid.data.noise import sensor_noise
-from rideid.estimate.adequacy import (ADVICE, assess, fit_ar, input_correlation, ljung_box, verdict_paragraph,
+from rideid.estimate.assess.adequacy import (ADVICE, assess, fit_ar, input_correlation, ljung_box, verdict_paragraph,
                                       whiten)
 
 
@@ -97,9 +97,9 @@ def _polished_verdict(sc, data, folder):
     """Base-model polish from the true twelve, then the adequacy of the fitted car."""
     from cars import SUV_TRUTH
     from rideid.synth.scenario import write_dataset
-    from rideid.estimate.adequacy import assess_fit
-    from rideid.estimate.cost import CostFunction
-    from rideid.estimate.identify import _polish
+    from rideid.estimate.assess.adequacy import assess_fit
+    from rideid.estimate.problem.cost import CostFunction
+    from rideid.estimate.fit.identify import _polish
     from rideid.model.batch import single_threaded_blas
 
     write_dataset(sc, data, folder)
@@ -140,7 +140,7 @@ def test_suv_with_bars_and_tire_damping_is_not_adequate_with_the_base_model(suv,
 
 def test_advice_follows_the_model_option_used():
     """--model auto is advised only to who has not run it, nor fitted every group already."""
-    from rideid.estimate.adequacy import advice, advise
+    from rideid.estimate.assess.adequacy import advice, advise
     from rideid.model.params import GROUPS
     assert advice({"extensions": []}) == ADVICE and "--model auto` (or `--model full`)" in ADVICE
     assert advice({"extensions": ["anti_roll_bars"]}) == ADVICE
@@ -171,10 +171,10 @@ def test_advice_follows_the_model_option_used():
 
 
 def test_the_level_caveat_needs_an_adequate_verdict_and_many_loud_pairs():
-    """rideid.estimate.adequacy.level_caveat: an adequate verdict whose residual is above 3x the lead-in's noise
+    """rideid.estimate.assess.adequacy.level_caveat: an adequate verdict whose residual is above 3x the lead-in's noise
     floor in at least LOUD_SHARE of the pairs with a floor says so; fewer loud pairs, or a verdict that is not
     adequate (it says more already), get nothing."""
-    from rideid.estimate.adequacy import LOUD_SHARE, level_caveat
+    from rideid.estimate.assess.adequacy import LOUD_SHARE, level_caveat
 
     def verdict(adequate, levels):
         return {"adequate": adequate, "runs": {"R": {f"c{i}": {"level": lv} for i, lv in enumerate(levels)}}}

@@ -1,4 +1,4 @@
-"""Identification with runs on unknown roads (SPEC §9, rideid.estimate.anyroad) from the command line and Python:
+"""Identification with runs on unknown roads (SPEC §9, rideid.estimate.fit.anyroad) from the command line and Python:
 the car, its error bars, the estimated roads and their classes, mixed datasets, and what is refused."""
 
 import json
@@ -13,7 +13,8 @@ import rideid
 from rideid.cli import main
 from rideid.errors import DataError
 from rideid.data.scenario import default_scenario
-from rideid.estimate import anyroad, roadfit
+from rideid.estimate.fit import anyroad
+from rideid.estimate.problem import roadfit
 from rideid.model.params import total_mass
 
 RUNS = [{"id": "B40", "road_class": "B", "speed": 11.0, "fs": 200.0, "duration": 20.0},

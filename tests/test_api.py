@@ -39,7 +39,7 @@ def test_dataset_repr_is_short(sim_dataset):
 
 def test_identify_is_its_own_function():
     """rideid.identify documents and checks its own signature (not the single-model fit's borrowed one)."""
-    from rideid.estimate import identify as single
+    from rideid.estimate.fit import identify as single
 
     assert rideid.identify is not single.identify and not hasattr(rideid.identify, "__wrapped__")
     params = inspect.signature(rideid.identify).parameters

@@ -1,6 +1,6 @@
 """Tracks as built along a speed channel (SPEC §11): a run whose driver held the speed is fitted as built at a
-constant speed, that speed and its start fitted to the track (rideid.estimate.asbuilt.align_motion); a run whose
-speed wandered stays as drawn and says by how much (rideid.estimate.anyroad.speed_wander). The data come from the
+constant speed, that speed and its start fitted to the track (rideid.estimate.problem.asbuilt.align_motion); a run whose
+speed wandered stays as drawn and says by how much (rideid.estimate.fit.anyroad.speed_wander). The data come from the
 independent simulator of tests/driven_speed.py (SciPy lsim of the SUV written from SPEC §1, the exact drawing, a
 10 Hz GPS column with 0.03 m/s of white noise)."""
 
@@ -14,8 +14,9 @@ import rideid
 from asbuilt_tracks import RUNS
 from cars import SUV_TRUTH
 from driven_speed import OFFSET, write_case
-from rideid.estimate import anyroad, asbuilt
-from rideid.estimate.cost import ParameterSpace
+from rideid.estimate.fit import anyroad
+from rideid.estimate.problem import asbuilt
+from rideid.estimate.problem.cost import ParameterSpace
 
 #: the washboard at 10 m/s and the herringbone at 5 m/s: short runs, one spectral line and many
 SHORT = [r for r in RUNS if r[0] in ("W_H", "H_HL")]

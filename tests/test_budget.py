@@ -27,10 +27,10 @@ from rideid.cli import main
 from rideid.data.dataset import Dataset
 from rideid.data.schema import parse_dataset_manifest
 from rideid.data.schema.runfiles import RunData
-from rideid.estimate.budget import declared_inputs, propagate, with_budget
-from rideid.estimate.cost import CostFunction
-from rideid.estimate.identify import polish_fit
-from rideid.estimate.redundancy import BODY, GYROS, gain_notes, rigid_body_gains
+from rideid.estimate.fit.budget import declared_inputs, propagate, with_budget
+from rideid.estimate.problem.cost import CostFunction
+from rideid.estimate.fit.identify import polish_fit
+from rideid.estimate.problem.redundancy import BODY, GYROS, gain_notes, rigid_body_gains
 
 
 

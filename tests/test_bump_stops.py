@@ -11,8 +11,8 @@ import tomli_w
 
 from rideid.cli import main
 from rideid.data.schema import read_toml
-from rideid.estimate.bumps import spring_share
-from rideid.estimate.cost import BUMP_BOUNDS, ParameterSpace
+from rideid.estimate.problem.bumps import spring_share
+from rideid.estimate.problem.cost import BUMP_BOUNDS, ParameterSpace
 from rideid.estimate.result import load
 from rideid.model.params import Geometry
 from test_damper_curves import VEL, digressive

@@ -7,8 +7,8 @@ import numpy as np
 import pytest
 
 from rideid.data.noise import sensor_noise
-from rideid.estimate.adequacy import ljung_box
-from rideid.estimate.uncertainty import hac_covariance
+from rideid.estimate.assess.adequacy import ljung_box
+from rideid.estimate.fit.uncertainty import hac_covariance
 
 sm = pytest.importorskip("statsmodels.api")
 diagnostic = pytest.importorskip("statsmodels.stats.diagnostic")

@@ -10,8 +10,8 @@ import rideid
 from rideid.errors import ArgumentError
 from rideid.cli import main
 from rideid.data.schema import read_toml
-from rideid.estimate.cost import ParameterSpace
-from rideid.estimate.dampers import KNEE_GRID, knot_counts
+from rideid.estimate.problem.cost import ParameterSpace
+from rideid.estimate.problem.dampers import KNEE_GRID, knot_counts
 from rideid.estimate.result import load
 from rideid.model.nonlinear import DEFAULT_KNOTS, damper_force
 from rideid.model.params import Geometry
@@ -150,7 +150,7 @@ def test_knot_counts_and_bad_model_names(sim_dataset, tmp_path, capsys):
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1 and "--model must be one of base, full, auto, got 'damper_curve'" in err
     assert not out.exists()
-    from rideid.estimate.identify import parse_model_arg
+    from rideid.estimate.fit.identify import parse_model_arg
     assert parse_model_arg("damper_curves+bump_stops") == ("damper_curves", "bump_stops")
     with pytest.raises(ArgumentError, match="c_sf"):
         ParameterSpace({"total_mass": 1093.3, "c_sf": 1800.0}, Geometry(2.579, 1.387, 1.364, 0.30),
@@ -161,7 +161,7 @@ def test_report_draws_the_curves_and_the_velocities_reached(digressive_fit):
     """The report of a curve result has the "Damper curves" section: both figures, and per run a histogram
     holding every sample of both corners of each axle (a linear result has none: tests/test_report.py)."""
     import rideid as _r
-    from rideid.estimate import responses as R
+    from rideid.estimate.assess import responses as R
     from rideid.report import html as H
 
     _, res, out = digressive_fit
@@ -207,8 +207,8 @@ def test_knot_forces_carry_std_total_and_the_weighbridge_scales_them(digressive_
     terminal's table says ± 2 std_total); with a weighbridge of 1 % declared, every force scales with the
     anchor (SPEC §1), so its std_total is hypot(std_robust, 0.01 F) exactly."""
     from dataclasses import replace
-    from rideid.estimate.budget import with_budget
-    from rideid.estimate.dampers import format_dampers
+    from rideid.estimate.fit.budget import with_budget
+    from rideid.estimate.problem.dampers import format_dampers
     _, doc, out = digressive_fit
     for axle in ("front", "rear"):
         assert doc["dampers"][axle]["std_total"] == doc["dampers"][axle]["std_robust"]

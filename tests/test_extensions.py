@@ -301,7 +301,7 @@ def test_lift_off_uses_the_full_tire_force():
 
 
 def test_sensitivity_maps_include_the_extensions():
-    from rideid.estimate.sensitivity import compute_maps
+    from rideid.estimate.problem.sensitivity import compute_maps
     from rideid.model.params import NOMINAL_EXTENSIONS
     runs = [prepare_run(track_from_table(table, "t"), G, V, np.arange(401) / FS) for table, V in TRACKS.values()]
     sim = BatchSimulator(G, runs)
@@ -322,7 +322,7 @@ def test_sensitivity_maps_include_the_extensions():
 # datasets and identification
 
 def test_parameter_space_with_extensions():
-    from rideid.estimate.cost import ParameterSpace
+    from rideid.estimate.problem.cost import ParameterSpace
     known = {"total_mass": 1093.3}
     base = ParameterSpace(known, G)
     assert base.width == 12 and base.names == [n for n in NAMES if n != "m_s"]
@@ -418,7 +418,7 @@ def test_identify_model_choice_and_known_extension(sim_dataset, tmp_path, capsys
     # without --model: the dataset's [model]
     d2 = _copy_ds(sim_dataset, tmp_path / "m", lambda x: x.update(model={"extensions": ["anti_roll_bars"]}))
     import rideid
-    from rideid.estimate.identify import model_extensions
+    from rideid.estimate.fit.identify import model_extensions
     ds = rideid.load_dataset(d2)
     assert model_extensions(ds) == ("anti_roll_bars",) and model_extensions(ds, "base") == ()
     assert rideid.CostFunction(ds).names[-2:] == ["k_arf", "k_arr"]

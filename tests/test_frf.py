@@ -12,8 +12,8 @@ import pytest
 import scipy.signal as sg
 
 import rideid
-from rideid.estimate.cost import CostFunction
-from rideid.estimate.frequency import FRF_COLUMNS, measured_response
+from rideid.estimate.problem.cost import CostFunction
+from rideid.estimate.assess.frequency import FRF_COLUMNS, measured_response
 from rideid.model.equations import mck, rate_input
 from rideid.model.frf import INPUTS, frequency_response, h1_estimate
 from rideid.model.params import ALL_NAMES, DEFAULT_GEOMETRY

@@ -8,11 +8,11 @@ import numpy as np
 import pytest
 
 import rideid
-from rideid.estimate.cost import ParameterSpace, channel_weights
+from rideid.estimate.problem.cost import ParameterSpace, channel_weights
 from rideid.model.params import DEFAULT_CAR, NAMES
 from rideid.synth.scenario import simulate_manifest, write_dataset
-from rideid.estimate.sensitivity import compute_maps
-from rideid.estimate.weighting import adaptive_weights, normalised_spread
+from rideid.estimate.problem.sensitivity import compute_maps
+from rideid.estimate.problem.weighting import adaptive_weights, normalised_spread
 
 
 @pytest.fixture(scope="module")
@@ -353,7 +353,7 @@ def test_save_creates_the_folder(sim_dataset, tmp_path):
 
 def test_with_space_shares_the_prepared_data_and_its_own_count(sim_dataset):
     from rideid.errors import ArgumentError
-    from rideid.estimate.cost import EvaluationCounter, ParameterSpace
+    from rideid.estimate.problem.cost import EvaluationCounter, ParameterSpace
     ds = rideid.load_dataset(sim_dataset)
     cf = rideid.CostFunction(ds, extensions=("anti_roll_bars", "tire_damping"))
     names = list(cf.names)
@@ -413,7 +413,7 @@ def test_cycle_slips_returns_a_new_dict(monkeypatch):
 def test_a_start_std_adds_the_speed_channel_in_quadrature():
     """The polish's start std: the fit's and the load record's speed-channel share in quadrature (3-4-5);
     without a speed channel the fit's alone; an undetermined fit stays undetermined."""
-    from rideid.estimate.identify import _start_std
+    from rideid.estimate.fit.identify import _start_std
     both = _start_std({"std": 3e-4, "std_robust": 6e-4}, {"std_speed_channel": 4e-4, "source": "estimated"})
     assert both == {"std": pytest.approx(5e-4, rel=1e-15), "std_fit": 3e-4, "std_speed_channel": 4e-4,
                     "std_robust": 6e-4}
@@ -457,8 +457,8 @@ def test_the_polish_does_not_stop_beside_a_bound(sim_dataset):
     """An extension a rounding error above its bound of 0 (where a Gauss-Newton step leaves a truly-zero
     one) stopped dogbox after two evaluations on ``xtol``, 2 % from the truth; the polish puts it on the
     bound and converges (and continues with trf where dogbox ends beside a bound itself)."""
-    from rideid.estimate.cost import CostFunction
-    from rideid.estimate.identify import _polish
+    from rideid.estimate.problem.cost import CostFunction
+    from rideid.estimate.fit.identify import _polish
     ds = rideid.load_dataset(sim_dataset)
     cf = CostFunction(ds, extensions=("anti_roll_bars", "tire_damping"))
     truth = np.array([DEFAULT_CAR.get(n, 0.0) for n in cf.names])

@@ -4,9 +4,9 @@ the knee grid replacing the default knots, a user's knots winning, the report ma
 import numpy as np
 import pytest
 
-from rideid.estimate.cost import ParameterSpace, curve_knots
-from rideid.estimate.dampers import KNEE_GRID, KNEE_SIGNIFICANCE, format_dampers, knee_of, knees
-from rideid.estimate.identify import finds_knees
+from rideid.estimate.problem.cost import ParameterSpace, curve_knots
+from rideid.estimate.problem.dampers import KNEE_GRID, KNEE_SIGNIFICANCE, format_dampers, knee_of, knees
+from rideid.estimate.fit.identify import finds_knees
 from rideid.model.nonlinear import DEFAULT_KNOTS
 from rideid.model.params import Geometry
 
@@ -96,7 +96,7 @@ def test_terminal_and_figure_show_the_knees():
     space = _space()
     P = _row(space, lambda v: np.sign(v) * broken(abs(v), 2400, 700, 0.12),
              lambda v: np.sign(v) * broken(abs(v), 2000, 500, 0.08))
-    from rideid.estimate.dampers import dampers_block
+    from rideid.estimate.problem.dampers import dampers_block
     names = list(space.names)
     cov = np.diag([1.0] * len(names))
     dm = dampers_block(space, P, cov, cov, names)
@@ -128,7 +128,7 @@ def test_a_curve_that_bends_in_stages_lists_each_bend():
         return sum(s * np.clip(v - lo, 0, hi - lo) for s, lo, hi in zip(slopes, edges[:-1], edges[1:]))
     F = staged(V)
     cov = np.diag((0.001 * F + 0.2) ** 2)
-    from rideid.estimate.dampers import bends_of
+    from rideid.estimate.problem.dampers import bends_of
     got = bends_of(V, F, cov)
     assert [b["velocity"] for b in got] == pytest.approx(list(at))
     assert [b["slope_change"] for b in got] == pytest.approx([-300.0, -1100.0, -400.0], rel=1e-9)

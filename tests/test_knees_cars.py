@@ -17,7 +17,7 @@ import tomli_w
 import rideid
 from rideid.cli import main
 from rideid.data.schema import read_toml
-from rideid.estimate.dampers import knee_of
+from rideid.estimate.problem.dampers import knee_of
 
 from knee_cars import CARS, curve_error, digressive, scenario_doc
 from logger_case import write_logger

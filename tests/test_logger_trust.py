@@ -20,7 +20,7 @@ import rideid
 from logger_case import LEAD, suv_scenario, write_logger
 from rideid.data.measured import _filter_resample
 from rideid.data.readers import Signal
-from rideid.estimate.adequacy import assess_fit
+from rideid.estimate.assess.adequacy import assess_fit
 
 
 def _identify(folder, **kw):

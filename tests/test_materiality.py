@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 import rideid
-from rideid.estimate import materiality as mt
+from rideid.estimate.assess import materiality as mt
 
 
 class _FakeCost:

@@ -1,4 +1,4 @@
-"""--model auto (rideid.estimate.model_choice): the criterion, then cars of our own in both directions."""
+"""--model auto (rideid.estimate.choice.model_choice): the criterion, then cars of our own in both directions."""
 
 import json
 
@@ -7,7 +7,7 @@ import pytest
 
 import rideid
 from rideid.cli import main
-from rideid.estimate.model_choice import criteria, fits_better, penalty, wald
+from rideid.estimate.choice.model_choice import criteria, fits_better, penalty, wald
 
 BOTH = ("anti_roll_bars", "tire_damping")
 CANDIDATES = [(), ("anti_roll_bars",), ("tire_damping",), BOTH]
@@ -70,7 +70,7 @@ def test_unknown_model_value_is_one_line_exit_2(sim_dataset, tmp_path, capsys):
 def _full_polish_criteria(sc, data, folder, truth_ext):
     from cars import SUV_TRUTH
     from rideid.synth.scenario import write_dataset
-    from rideid.estimate.identify import _polish
+    from rideid.estimate.fit.identify import _polish
     from rideid.model.batch import single_threaded_blas
 
     write_dataset(sc, data, folder)
@@ -157,8 +157,8 @@ def test_base_model_on_a_real_car_says_not_adequate_in_terminal_and_report(tmp_p
 def test_curve_departure_wald_closed_form():
     """Linear dampers F = c v depart by nothing; a bend by (R F)^T (R C R^T)^+ (R F), one dof per free knot
     less one slope per axle."""
-    from rideid.estimate.cost import ParameterSpace
-    from rideid.estimate.model_choice import curve_departure
+    from rideid.estimate.problem.cost import ParameterSpace
+    from rideid.estimate.choice.model_choice import curve_departure
     from rideid.model.params import Geometry
 
     sp = ParameterSpace({"total_mass": 1093.3}, Geometry(2.579, 1.387, 1.364, 0.30), extensions=["damper_curves"])
@@ -229,7 +229,7 @@ def test_the_tracks_as_drawn_caveat_says_when_the_weighing_cannot_clear_a_drawin
     not when it is local to one run, not when the as-built fit was accepted, not without structure."""
     from dataclasses import dataclass, field
 
-    from rideid.estimate import model_choice
+    from rideid.estimate.choice import model_choice
 
     @dataclass
     class Res:

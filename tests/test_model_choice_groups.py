@@ -4,8 +4,8 @@ on top of a powertrain, every candidate's key in the canonical order of a result
 import numpy as np
 import pytest
 
-from rideid.estimate import model_choice as mc
-from rideid.estimate.cost import IDENTIFIABLE_GROUPS
+from rideid.estimate.choice import model_choice as mc
+from rideid.estimate.problem.cost import IDENTIFIABLE_GROUPS
 
 from test_paths import PAIR_FIT, pair_dataset
 

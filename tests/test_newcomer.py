@@ -278,7 +278,7 @@ def test_the_estimated_road_is_the_road_through_the_band_pass():
 
     from test_roadfit import FS, car, road_run
 
-    from rideid.estimate import roadfit
+    from rideid.estimate.problem import roadfit
     geom, P = car()
     with tempfile.TemporaryDirectory() as d:
         y, u = road_run(Path(d), P, geom)
@@ -370,9 +370,9 @@ def test_formats_says_what_repr_shows():
 def test_the_budget_keys_are_documented():
     """The budget's "between runs" (and "speed and start") key was in no doc, and "statistical" was said to
     be std_robust while it is what is left of it beside those two: docs/uncertainty.md and docs/formats.md
-    name every key rideid.estimate.budget writes, and the three parts add up to std_robust."""
-    from rideid.estimate import budget
-    from rideid.estimate.budget import budget_entries
+    name every key rideid.estimate.fit.budget writes, and the three parts add up to std_robust."""
+    from rideid.estimate.fit import budget
+    from rideid.estimate.fit.budget import budget_entries
     e = budget_entries({"k_sf": {"value": 1.0, "std_robust": 5.0, "std_between_runs": 3.0, "std_motion": 0.0}},
                        ["k_sf"], {}, [])["k_sf"]
     assert e["budget"] == {budget.STATISTICAL: 4.0, budget.BETWEEN_RUNS: 3.0} and e["std_total"] == 5.0

@@ -66,7 +66,7 @@ from logger_case import SUV, SUV_RUNS, write_logger
 from powertrain_car import ENGINE
 from rideid.data.scenario import write_road_csv
 from rideid.errors import ArgumentError
-from rideid.estimate.identify import _polish
+from rideid.estimate.fit.identify import _polish
 from rideid.model.params import POWERTRAIN_NAMES
 from rideid.model.roads import iso8608_profile
 from rideid.model.tracks import Track
@@ -298,7 +298,7 @@ def test_polish_leaves_a_knot_hidden_by_the_monotone_repair(cases):
     mid-polish the free F_f7 fell below F_f6, where the monotone repair (ParameterSpace.full) hides it, so its
     gradient was 0 and the polish ended with F_f6 between the two true forces, 57 % off, at a cost 1e6 times the
     true car's. From such a row the polish now solves again from the physical row, the forces the simulator saw
-    (rideid.estimate.identify.REPAIR_RESTARTS), and finds the car. (identify's own start is always physical:
+    (rideid.estimate.fit.identify.REPAIR_RESTARTS), and finds the car. (identify's own start is always physical:
     the stall arises inside the polish, so the polish is called here directly.)"""
     sc, ds = cases("damper_curves", "csv")
     truth = truth_of(sc)
@@ -389,7 +389,7 @@ def test_group_pair_on_path(pair, path, tmp_path):
         assert "\n" not in str(e.value) and str(e.value).startswith(f"{', '.join(nonlinear)}: a nonlinear model cannot")
         return
     res = rideid.identify(ds, model=list(pair), **PAIR_FIT)
-    order = [g for g in rideid.estimate.cost.IDENTIFIABLE_GROUPS if g in pair]
+    order = [g for g in rideid.estimate.problem.cost.IDENTIFIABLE_GROUPS if g in pair]
     assert res.model["extensions"] == order
     expected = set(rideid.NAMES)
     for g in pair:

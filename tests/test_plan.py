@@ -9,7 +9,7 @@ import pytest
 
 import rideid
 from rideid.cli import main
-from rideid.estimate.cost import ParameterSpace, channel_weights
+from rideid.estimate.problem.cost import ParameterSpace, channel_weights
 from rideid.design import NoiseModel, Selector, brute_force, catalogue_path, messages, subset_precision
 from rideid.design.fisher import jacobians, run_information, simulator
 

@@ -120,7 +120,7 @@ def test_ar1_spectrum_file_gives_the_ar1_plan(small, plans, tmp_path):
     one = sub_scenario(small, ["T_HL"])
     ref = rideid.plan(one, noise=NOISE, noise_ar1=RHO, budget_runs=1)
     from rideid.design.fisher import run_information, simulator
-    from rideid.estimate.cost import ParameterSpace
+    from rideid.estimate.problem.cost import ParameterSpace
     space = ParameterSpace(one.known, one.geometry, one.bounds)
     x0 = np.array([one.truth[n] for n in space.names])
     rms = run_information(simulator(one), space, x0, rideid.design.NoiseModel(NOISE), [200.0]).rms[0]

@@ -12,7 +12,7 @@ import rideid
 from rideid.cli import main
 from rideid.data.scenario import load_scenario, run_times
 from rideid.data.schema import read_toml
-from rideid.estimate.dampers import MIN_SAMPLES, knot_counts
+from rideid.estimate.problem.dampers import MIN_SAMPLES, knot_counts
 from rideid.model.nonlinear import DEFAULT_KNOTS, NonlinearLayout, curve_names, simulate_nonlinear
 from rideid.model.simulator import make_simulator
 from rideid.model.params import ALL_NAMES

@@ -17,8 +17,8 @@ from rideid.data.scenario import default_scenario_path, load_scenario
 from rideid.design import roadinfo
 from rideid.design.fisher import NoiseModel
 from rideid.errors import ArgumentError
-from rideid.estimate import roadfit
-from rideid.estimate.cost import ParameterSpace
+from rideid.estimate.problem import roadfit
+from rideid.estimate.problem.cost import ParameterSpace
 
 ROAD = {"id": "B11", "road_class": "B", "speed": 11.0, "fs": 200.0, "duration": 8.0}
 
@@ -100,7 +100,7 @@ def test_plan_refuses_road_runs_with_damper_curves(tmp_path):
 def _fit(space, x0, geom, rr, scale):
     """The road fit's minimum near the truth: least squares, then Newton steps on the cost's true Hessian
     (least squares alone stops short along the wheels' common scale, where J^T J of noisy data over-states
-    the curvature: rideid.estimate.anyroad._Problem.hessian)."""
+    the curvature: rideid.estimate.fit.anyroad._Problem.hessian)."""
     def fun(u):
         return roadfit.residuals(space.full((x0 * np.exp(u))[None])[0], geom, rr)
 

@@ -26,8 +26,9 @@ from rideid.cli import main
 from rideid.data.schema import manifest as man_schema
 from rideid.data.schema.manifest import parse_dataset_manifest
 from rideid.errors import DataError
-from rideid.estimate import anyroad, asbuilt
-from rideid.estimate.cost import ParameterSpace
+from rideid.estimate.fit import anyroad
+from rideid.estimate.problem import asbuilt
+from rideid.estimate.problem.cost import ParameterSpace
 
 sys.path.insert(0, str(Path(__file__).parent))
 from asbuilt_tracks import RUNS, write_dataset  # noqa: E402
@@ -141,7 +142,7 @@ def test_a_one_percent_speed_slip_is_named_at_load_and_never_blamed_on_the_wirin
     assert any(f.check == "speed" and f.fix["speed"] == run.speed for f in ds.findings)
     assert wall < 60.0
     # what a fit on the tracks as drawn records of it (result.json preprocessing.<run>.motion): never silently
-    from rideid.estimate.identify import held_motion
+    from rideid.estimate.fit.identify import held_motion
     held = held_motion(ds, run)
     assert held["speed"]["estimate"] == run.speed and held["speed"]["declared"] == 10.1
     assert held["speed"]["std"] == pytest.approx(float(named[0].split(" ± ")[1].split(" ")[0]), rel=0.05)
@@ -281,11 +282,11 @@ def test_accelerations_in_g_are_refused_naming_the_accelerometers(tmp_path, caps
 # -- a gross misfit said early ----------------------------------------------------------------------------------
 
 def test_a_gross_first_fit_stops_before_the_model_choice_with_the_set_up_first(slipped):
-    """rideid.estimate.adequacy.gross_misfit: a run with more than GROSS_ERROR of its signal unexplained, or
+    """rideid.estimate.assess.adequacy.gross_misfit: a run with more than GROSS_ERROR of its signal unexplained, or
     GROSS_BOUNDS parameters at their bounds, is a verdict naming the runs and the set-up (speed, start, rate,
     units, sensor chain) before any extension; below both, None. run_errors: squared residual over squared data,
     over the channels measured (a closed form on a known response)."""
-    from rideid.estimate.adequacy import GROSS_BOUNDS, GROSS_ERROR, gross_misfit, run_errors, verdict_paragraph
+    from rideid.estimate.assess.adequacy import GROSS_BOUNDS, GROSS_ERROR, gross_misfit, run_errors, verdict_paragraph
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         ds = rideid.load_dataset(slipped)

@@ -2,7 +2,7 @@
 
 import numpy as np
 
-from rideid.estimate.sensitivity import P2R_STARS, stars
+from rideid.estimate.problem.sensitivity import P2R_STARS, stars
 from rideid.report.sensitivity_files import star_marks
 from rideid.report import html as H
 

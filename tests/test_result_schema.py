@@ -156,7 +156,7 @@ def test_an_adequate_verdict_with_runs_not_assessed_or_a_loud_residual_is_not_gr
     """SPEC §12-13, never confidently wrong: a verdict that covers only some runs (the others on unknown roads), or
     whose residual is far above the sensor noise, is adequate on what was tested but not a clean verdict: the
     adequacy record says warn and why, and the report's summary and verdict box (amber, not green) say so."""
-    from rideid.estimate.adequacy import caveats
+    from rideid.estimate.assess.adequacy import caveats
     from rideid.report.html import summary_section
 
     clean = {"adequate": True, "reasons": ["no road-driven structure"], "runs": {}}
@@ -181,7 +181,7 @@ def test_an_adequate_verdict_with_runs_not_assessed_or_a_loud_residual_is_not_gr
 def test_the_reports_verdict_carries_the_caveats_the_terminal_warns_of():
     """The report's adequacy context (rideid.report.estimate_sections.adequacy_rows) keeps what the terminal warns
     of (runs not assessed, the residual level, the tracks as drawn), so its summary and verdict box say it too."""
-    from rideid.estimate.adequacy import caveats
+    from rideid.estimate.assess.adequacy import caveats
     from rideid.report.estimate_sections import adequacy_rows
 
     adq = {"adequate": True, "reasons": ["fine"], "runs": {}, "level_caveat": "loud", "not_assessed": ["B40"],

@@ -1,11 +1,11 @@
-"""The car on an unknown road (rideid.estimate.roadfit): closed forms, exactness, scale invariance, recovery."""
+"""The car on an unknown road (rideid.estimate.problem.roadfit): closed forms, exactness, scale invariance, recovery."""
 
 import numpy as np
 import pytest
 from scipy.optimize import least_squares
 
 from rideid.data.scenario import default_scenario
-from rideid.estimate import roadfit
+from rideid.estimate.problem import roadfit
 from rideid.model.equations import CHANNELS, state_space
 from rideid.model.params import ALL_NAMES, INDEX, NAMES, as_vector
 from rideid.model.roads import iso8608_profile

@@ -1,4 +1,4 @@
-"""Sensors as wired (SPEC §11) on an unknown road (rideid.estimate.roadfit): each filtered channel's model output
+"""Sensors as wired (SPEC §11) on an unknown road (estimate.problem.roadfit): each filtered channel's model output
 times its first-order-hold filter's response at ``exp(i omega h)``, the filters' states at the first sample among
 the boundary unknowns. Checked against SciPy (the hold-equivalent system evaluated directly, ``dlsim``) and
 against a record filtered by the analog filter itself (``scipy.signal.lsim`` at 1/8 of a sample)."""
@@ -9,7 +9,7 @@ from scipy.signal import butter, cont2discrete, dlsim, lsim, zpk2ss
 
 from rideid.data.schema.tracks import track_from_table
 from rideid.data.scenario import default_scenario
-from rideid.estimate import roadfit
+from rideid.estimate.problem import roadfit
 from rideid.model.params import ALL_NAMES, INDEX, as_vector
 from rideid.model.roads import iso8608_profile
 from rideid.model.sensors import AnalogFilter, SensorChain

@@ -350,7 +350,7 @@ def test_clipping_advice_names_the_clipped_flagged_pairs():
     nothing when the flagged pairs did not clip or the model is adequate."""
     from types import SimpleNamespace
 
-    from rideid.estimate.sensor_check import clipping_advice
+    from rideid.estimate.assess.sensor_check import clipping_advice
     rec = {"channels": {"axle_az_fl": {"clipped": {"samples": 41, "share": 0.041}}, "body_az_fl": {}}}
     ds = SimpleNamespace(measured={"W_H": SimpleNamespace(record=rec)})
     flagged = {"adequate": False, "runs": {"W_H": {"axle_az_fl": {"structure": True},

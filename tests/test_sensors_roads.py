@@ -1,5 +1,5 @@
 """Sensors as wired (SPEC §11) where the road is fitted in the frequency domain: unknown roads (SPEC §9,
-rideid.estimate.anyroad) and tracks as built (rideid.estimate.asbuilt), with the four hub accelerometers
+rideid.estimate.fit.anyroad) and tracks as built (rideid.estimate.problem.asbuilt), with the four hub accelerometers
 AC-coupled at 0.5 Hz by an analog filter rideid does not share (tests/coupled_case.py: ``lsim`` on a fine grid).
 
 Before, unknown-road runs with a declared filter were refused, and the as-built fit ignored the filters: on the
@@ -20,8 +20,10 @@ from asbuilt_tracks import RUNS, write_dataset as write_plain
 from cars import SUV_TRUTH
 from coupled_case import HUBS, write_roads_dataset, write_tracks_dataset
 from rideid.cli import main
-from rideid.estimate import anyroad, asbuilt, roadfit
-from rideid.estimate.cost import ParameterSpace
+from rideid.estimate.fit import anyroad
+from rideid.estimate.problem import asbuilt
+from rideid.estimate.problem import roadfit
+from rideid.estimate.problem.cost import ParameterSpace
 from rideid.model.equations import CHANNELS
 from rideid.model.params import ALL_NAMES, as_vector
 
@@ -155,7 +157,7 @@ def test_rideid_identify_on_unknown_roads_through_coupled_hubs(coupled_roads, tm
 
 def test_the_as_built_result_keeps_the_as_drawn_hints_and_says_so():
     """The coupling hints are computed in the time domain on the tracks as drawn
-    (rideid.estimate.sensor_check.coupling_hints); the as-built stage's verdict is new, and used to drop them.
+    (rideid.estimate.assess.sensor_check.coupling_hints); the as-built stage's verdict is new, and used to drop them.
     Now they are kept with a note saying where they come from, and lead the advice of a verdict that is not
     adequate; without an as-drawn fit (unknown roads) no hint is made up."""
     hint = {"channel": "axle_az_fl", "highpass_hz": 0.3, "rss_reduction": 0.74,
@@ -179,7 +181,7 @@ def test_the_road_fit_names_an_undeclared_coupling(tmp_path, case):
     Two of the SUV's runs on tracks as built, at the true car: hubs coupled at 0.5 Hz and not declared -> the four
     hubs at 0.5 Hz, the residual cut by at least 90 % (measured 100 % on five runs); not coupled, or coupled and
     declared -> no hint (every trial made the residual 5-18 times larger on five runs)."""
-    from rideid.estimate.sensor_check import road_coupling_hints
+    from rideid.estimate.assess.sensor_check import road_coupling_hints
 
     kw = {"coupled": dict(declare=False), "uncoupled": dict(highpass_hz=None), "declared": dict(declare=True)}[case]
     ds = rideid.load_dataset(write_tracks_dataset(tmp_path / case, seed=4, runs=RUNS[1:3], **kw))
@@ -237,7 +239,7 @@ def test_the_road_fit_names_an_undeclared_coupling_on_unknown_roads(coupled_road
     name the four hubs and the corner at the true car when the 0.5 Hz coupling is not declared (the residual cut by
     more than 80 %: without the chain it is 7-8 times the noise, test_unknown_roads_carry_the_declared_chain;
     measured 87 %), and nothing when it is (every trial makes the residual larger)."""
-    from rideid.estimate.sensor_check import FREE_ROAD_HINT_REDUCTION
+    from rideid.estimate.assess.sensor_check import FREE_ROAD_HINT_REDUCTION
 
     folder = coupled_roads if declared else _undeclared(coupled_roads, tmp_path / "undeclared")
     ds = rideid.load_dataset(folder)

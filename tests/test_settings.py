@@ -42,7 +42,8 @@ def test_every_setting_has_unit_meaning_reason_and_a_test_that_exists(name):
     assert (ROOT / path).is_file(), s.test
     assert re.search(rf"^def {re.escape(test)}\(", (ROOT / path).read_text(), re.M), s.test
     module = s.name.split(".")[0]
-    assert any((ROOT / "src/rideid" / pkg / f"{module}.py").is_file() for pkg in ("estimate", "conditioning")), name
+    homes = ("estimate", "conditioning")
+    assert any(next((ROOT / "src/rideid" / pkg).rglob(f"{module}.py"), None) for pkg in homes), name
 
 
 def _numeric(node) -> bool:
@@ -64,7 +65,7 @@ def _numeric(node) -> bool:
 
 def test_every_module_level_number_of_estimate_is_a_setting_or_said_to_be_none():
     found = {}
-    for path in sorted((ROOT / "src/rideid/estimate").glob("*.py")):
+    for path in sorted((ROOT / "src/rideid/estimate").rglob("*.py")):
         for node in ast.parse(path.read_text()).body:
             target = node.targets[0] if isinstance(node, ast.Assign) else getattr(node, "target", None)
             if isinstance(target, ast.Name) and getattr(node, "value", None) is not None and _numeric(node.value):
@@ -122,7 +123,8 @@ def test_bad_names_and_values_are_one_line_naming_the_setting():
 def test_the_code_reads_the_registry_when_it_runs():
     """Closed forms: the model choice's price per parameter is half the chi-square(2) quantile, -ln(level); the
     Ljung-Box statistic over the lags in force is the one with those lags given; the old names follow."""
-    from rideid.estimate import adequacy, model_choice
+    from rideid.estimate.assess import adequacy
+    from rideid.estimate.choice import model_choice
 
     assert model_choice.penalty() == pytest.approx(-math.log(0.001), rel=1e-12)
     with settings.using("model_choice", penalty_level=0.01):

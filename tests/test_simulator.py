@@ -7,8 +7,8 @@ import pytest
 
 import rideid
 from rideid.errors import ArgumentError
-from rideid.estimate.cost import CostFunction, ParameterSpace
-from rideid.estimate.identify import identify as identify_model
+from rideid.estimate.problem.cost import CostFunction, ParameterSpace
+from rideid.estimate.fit.identify import identify as identify_model
 from rideid.model.batch import BatchSimulator, single_threaded_blas, thread_map
 from rideid.model.nonlinear import DEFAULT_KNOTS, NonlinearLayout, NonlinearSimulator
 from rideid.model.params import DEFAULT_CAR, DEFAULT_GEOMETRY, as_vector

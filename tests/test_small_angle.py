@@ -1,12 +1,12 @@
 """SPEC §1 is small-angle: the statement of how far the fitted body turned and which error bars that makes
-optimistic (rideid.estimate.small_angle; the bias per degree measured on the MuJoCo car, docs/verification.md)."""
+optimistic (estimate.assess.small_angle; the bias per degree measured on the MuJoCo car, docs/verification.md)."""
 
 from types import SimpleNamespace
 
 import numpy as np
 import pytest
 
-from rideid.estimate.small_angle import BIAS_PER_DEGREE, THRESHOLD_DEG, body_angles, small_angle
+from rideid.estimate.assess.small_angle import BIAS_PER_DEGREE, THRESHOLD_DEG, body_angles, small_angle
 from rideid.model.equations import CHANNELS
 
 FS = 200.0

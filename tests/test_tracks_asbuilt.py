@@ -1,4 +1,4 @@
-"""Tracks as built (SPEC §11, rideid.estimate.asbuilt): the drawing is the nominal shape, the road is what the car
+"""Tracks as built (SPEC §11, estimate.problem.asbuilt): the drawing is the nominal shape, the road is what the car
 rolled over. The data come from the independent simulator of tests/asbuilt_tracks.py (SciPy lsim of a 7-DOF car
 written from SPEC §1, brute-force disc envelope), driving the drawing times 1.04 plus 1.5 mm RMS of unevenness."""
 
@@ -12,8 +12,8 @@ from asbuilt_tracks import RUNS, write_dataset
 from cars import SUV_TRUTH
 from rideid.cli import main
 from rideid.errors import ArgumentError
-from rideid.estimate import asbuilt
-from rideid.estimate.cost import ParameterSpace
+from rideid.estimate.problem import asbuilt
+from rideid.estimate.problem.cost import ParameterSpace
 
 
 def _truth_row(ds):
@@ -136,7 +136,7 @@ def test_rideid_identify_on_tracks_as_built_and_exact(tmp_path, capsys):
     The car is linear. On the tracks as drawn ``--model auto`` keeps damper curves (seed 1: a cost 0.6 % below
     the base model's, which the drawing's 4 % leaves in every run), and is still not adequate; the tracks as built
     need a linear car, so the linear part of that pick is fitted on them, is adequate, and is kept
-    (rideid.estimate.model_choice._tracks_before_curves). Before that step the result was the curves' fit on the
+    (rideid.estimate.choice.model_choice._tracks_before_curves). Before that step the result was the curves' fit on the
     drawing, the sprung mass's inertias biased and a parameter 10.6 % off on an earlier tree."""
     truth = {"m_s": 1850.0, **SUV_TRUTH}
     folder = write_dataset(tmp_path / "ab", seed=1)
@@ -168,7 +168,7 @@ def test_a_run_without_a_roll_rate_is_taken_as_drawn(as_built, tmp_path):
     (measured) and is not asked for."""
     import shutil
 
-    from rideid.estimate.anyroad import as_built_runs
+    from rideid.estimate.fit.anyroad import as_built_runs
 
     runs, skipped = as_built_runs(as_built, ())
     assert [r.id for r in runs] == [r[0] for r in RUNS] and skipped == {}

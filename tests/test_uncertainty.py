@@ -1,11 +1,11 @@
-"""Robust standard errors (rideid.estimate.uncertainty): closed forms, then coverage on simulated cars."""
+"""Robust standard errors (rideid.estimate.fit.uncertainty): closed forms, then coverage on simulated cars."""
 
 import numpy as np
 import pytest
 
 import rideid
 from rideid.data.noise import sensor_noise
-from rideid.estimate.uncertainty import (andrews_bandwidth, correlation, hac_covariance, long_run_covariance,
+from rideid.estimate.fit.uncertainty import (andrews_bandwidth, correlation, hac_covariance, long_run_covariance,
                                          white_covariance, with_derived)
 
 
@@ -126,7 +126,7 @@ RHO = 0.9
 
 def _estimates(ds, x, info):
     """(names, estimate, std, std_robust) of the free parameters and the derived mass."""
-    from rideid.estimate.uncertainty import estimate_covariance
+    from rideid.estimate.fit.uncertainty import estimate_covariance
 
     space = ds.space
     cov = estimate_covariance(info, space)
@@ -148,8 +148,8 @@ def test_polish_std_robust_on_coloured_noise(tmp_path):
     and covers the truth where std does not."""
     from cars import SUV_TRUTH, add_noise, suv_scenario
     from rideid.synth.scenario import simulate_manifest, write_dataset
-    from rideid.estimate.cost import CostFunction
-    from rideid.estimate.identify import _polish
+    from rideid.estimate.problem.cost import CostFunction
+    from rideid.estimate.fit.identify import _polish
     from rideid.model.batch import single_threaded_blas
 
     sc = suv_scenario(tmp_path)
@@ -206,7 +206,7 @@ def _jacobian_with(s, seed=0, m=60):
 
 
 def test_white_covariance_of_an_ill_conditioned_jacobian_matches_the_closed_form():
-    from rideid.estimate.uncertainty import normal_inverse
+    from rideid.estimate.fit.uncertainty import normal_inverse
     # cond(J) = 1e9: J^T J has condition 1e18, beyond double precision
     J, V, s = _jacobian_with([1.0, 0.3, 1e-3, 1e-6, 1e-9])
     exact = (V / s ** 2) @ V.T
@@ -232,7 +232,7 @@ def test_white_covariance_of_an_ill_conditioned_jacobian_matches_the_closed_form
 
 
 def test_a_rank_deficient_jacobian_reports_the_unidentified_parameter_as_infinite():
-    from rideid.estimate.uncertainty import normal_inverse
+    from rideid.estimate.fit.uncertainty import normal_inverse
     rng = np.random.default_rng(2)
     A = rng.standard_normal((50, 2))
     # parameter 3 has no information; parameters 4 and 5 enter only as their sum
@@ -257,8 +257,8 @@ def test_a_rank_deficient_jacobian_reports_the_unidentified_parameter_as_infinit
 def test_an_unidentified_parameter_has_no_standard_error_in_the_details():
     from types import SimpleNamespace
 
-    from rideid.estimate.identify import NOT_IDENTIFIED, parameter_detail
-    from rideid.estimate.uncertainty import EstimateCovariance
+    from rideid.estimate.fit.identify import NOT_IDENTIFIED, parameter_detail
+    from rideid.estimate.fit.uncertainty import EstimateCovariance
     space = SimpleNamespace(col={"k_sf": 0, "k_sr": 1}, fixed={}, names=["k_sf", "k_sr"], derived=None,
                             bounds=np.array([[1e4, 1e5], [1e4, 1e5]]), derived_names=lambda: [])
     cov = np.array([[4.0, np.nan], [np.nan, np.inf]])
@@ -275,7 +275,7 @@ def test_jackknife_runs_is_the_exact_delete_one_refit_for_a_linear_model():
     equals the one from refitting without each run (lstsq). A run that alone determines a parameter is not
     left out. Runs that agree within their noise add no between-runs variance (Birge ratio below its 99 %
     quantile); runs whose offsets differ beyond it do, about the offsets' spread."""
-    from rideid.estimate.uncertainty import between_runs_variance, jackknife_runs
+    from rideid.estimate.fit.uncertainty import between_runs_variance, jackknife_runs
     rng = np.random.default_rng(3)
     T, C, k = 200, 2, 6
     X = rng.normal(size=(k * T * C, 3))

@@ -247,7 +247,7 @@ def estimate_start(mr: MeasuredRun, P, geom, track, simulator=None):
 
 
 # ---------------------------------------------------------------------------
-# Starts estimated together with the parameters (rideid.estimate.identify's polish)
+# Starts estimated together with the parameters (rideid.estimate.fit.identify's polish)
 
 #: the start derivative's central difference step, in sample intervals
 SHIFT_STEP = 0.1

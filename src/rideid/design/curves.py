@@ -4,7 +4,7 @@ When the scenario's car has a ``[dampers]`` table (or its ``[model]
 extensions`` name ``damper_curves``), the plan's free parameters are those
 identify would fit with ``--model damper_curves``: ``c_sf``, ``c_sr`` leave,
 the knot forces ``F_f1 .. F_fK``, ``F_r1 .. F_rK`` join
-(:class:`rideid.estimate.cost.ParameterSpace`). The knots are the scenario's
+(:class:`rideid.estimate.problem.cost.ParameterSpace`). The knots are the scenario's
 ``[model] damper_knots`` if given, else the ``[dampers]`` velocities when they
 are symmetric (the truth curve is then exactly a car of the model), else
 :data:`rideid.model.nonlinear.DEFAULT_KNOTS` (the truth curve sampled at
@@ -12,15 +12,15 @@ them). Without ``[dampers]`` the nominal curves are the linear dampers
 ``F = c_s v``.
 
 The sensitivities are finite differences through the nonlinear car
-(:class:`rideid.estimate.cost.CurveSimulator`), its RK4 sub-step count
+(:class:`rideid.estimate.problem.cost.CurveSimulator`), its RK4 sub-step count
 pinned at the nominal car's for every row of the differences, so the
 differenced outputs come from one integrator.
 
-Excitation follows identify (:mod:`rideid.estimate.dampers`): the nominal
+Excitation follows identify (:mod:`rideid.estimate.problem.dampers`): the nominal
 car's suspension velocities on each run (the compiled kernel's states at the looser
 :data:`rideid.data.scenario.LIFT_OFF_RHO`, as the report's histograms);
 per knot, the samples of the axle's two corners beyond the previous knot on
-its side (:func:`rideid.estimate.dampers.knot_counts`). A set of runs
+its side (:func:`rideid.estimate.problem.dampers.knot_counts`). A set of runs
 excites a knot when those counts, summed over its runs, reach
 setting ``dampers.min_samples``; the innermost knots always
 count as excited and beyond a knot not excited none is (identify's rule).
@@ -37,7 +37,7 @@ import numpy as np
 
 from ..settings import defaults
 from ..data.scenario import LIFT_OFF_RHO
-from ..estimate.dampers import knot_counts, suspension_velocities_by_run
+from ..estimate.problem.dampers import knot_counts, suspension_velocities_by_run
 from ..model.nonlinear import DEFAULT_KNOTS, curve_names, damper_force
 from ..model.simulator import Simulator
 
@@ -72,7 +72,7 @@ def run_counts(space, sim, P0, rho: float | None = None) -> np.ndarray:
     """Per run and axle the samples beyond the previous knot, ``(n_runs, 2, K)``, of car ``P0`` (a full row)."""
     if rho is None:
         rho = LIFT_OFF_RHO
-    # a plan's candidate runs start at rest: no lead-in (rideid.estimate.cost.CostFunction.input_runs, .lead)
+    # a plan's candidate runs start at rest: no lead-in (rideid.estimate.problem.cost.CostFunction.input_runs, .lead)
     cf = SimpleNamespace(space=space, sim=sim, simulator=Simulator(space.layout), input_runs=sim.runs,
                          lead=(0,) * len(sim.runs))
     knots = space.layout.knots

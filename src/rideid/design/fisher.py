@@ -46,7 +46,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..estimate.cost import ParameterSpace, channel_weights
+from ..estimate.problem.cost import ParameterSpace, channel_weights
 from ..model.batch import BatchSimulator
 from ..errors import ArgumentError
 from ..model.equations import CHANNEL_KIND, CHANNELS

@@ -14,11 +14,11 @@ import numpy as np
 from ..data.scenario import load_scenario
 from ..data.schema import Scenario
 from ..errors import ArgumentError, DataError
-from ..estimate.budget import LENGTHS
-from ..estimate.cost import ParameterSpace
+from ..estimate.fit.budget import LENGTHS
+from ..estimate.problem.cost import ParameterSpace
 from ..model.nonlinear import PinnedSimulator
 from ..model.simulator import Simulator
-from ..estimate.sensitivity import compute_maps
+from ..estimate.problem.sensitivity import compute_maps
 from ..model.equations import CHANNELS
 from ..model.nonlinear import curve_names
 from ..model.params import (ALL_NAMES, EXT_NAMES, GROUPS, NAMES, POWERTRAIN_NAMES, SCALE_FREE, SIGNED)
@@ -567,7 +567,7 @@ def gather_information(pb: PlanProblem, opts: PlanOptions) -> PlanInformation:
     infos, road_info = _information(sc, sim, pb.space, cars, opts.noise, opts.seed, opts.step)
     if road_info:
         notes.append(f"runs on unknown roads ({', '.join(road_info)}): precision predicted from the road fit of "
-                     f"identify (rideid.estimate.roadfit) on {roadinfo.ROADS} generated roads of their ISO 8608 "
+                     f"identify (estimate.problem.roadfit) on {roadinfo.ROADS} generated roads of their ISO 8608 "
                      "class per run (seeded by --seed; one with a road_seed), information averaged (docs/planning.md)")
     if exc is not None:  # a knot no candidate excites is not in any Fisher matrix
         keep = exc.mask(range(len(pb.run_ids)))

@@ -3,7 +3,7 @@
 A candidate run on a road nobody will measure is given by its ISO 8608
 class (``road_class``), speed, sample rate and duration. Its precision is
 predicted from the road fit identify runs on it
-(:mod:`rideid.estimate.roadfit`, frequency-domain variable projection):
+(:mod:`rideid.estimate.problem.roadfit`, frequency-domain variable projection):
 
 1. *Roads.* :data:`ROADS` roads of the class are generated
    (:func:`rideid.data.scenario.generate_road`, the run's coherence): the
@@ -13,12 +13,12 @@ predicted from the road fit identify runs on it
 2. *Data.* The plan's car drives each road as ``rideid simulate`` would
    (a moving start after its lead-in), without noise: ``y0``.
 3. *Jacobian.* ``J = d e / d u`` of the road fit's residual
-   (:func:`rideid.estimate.roadfit.residuals`, relative coordinates
+   (:func:`rideid.estimate.problem.roadfit.residuals`, relative coordinates
    ``u = x / x0``) at the true car, by central differences. With noise-free
    data the residual is zero there and ``J = dP_perp y0`` has no noise term,
    so ``J^T J`` is the expected Hessian of the concentrated cost (the noise
    parts of ``J^T J`` and of the residual's curvature cancel in expectation:
-   :meth:`rideid.estimate.anyroad._Problem.hessian`).
+   :meth:`rideid.estimate.fit.anyroad._Problem.hessian`).
 4. *Noise in DFT units.* The fit weights channel ``c`` by ``s_c`` (one over
    its measured RMS) and takes an unnormalised ``rfft``; white noise of
    standard deviation ``sigma_c`` gives each real and each imaginary
@@ -39,7 +39,7 @@ predicted from the road fit identify runs on it
 
 Combining with the track runs: the information adds (runs have independent
 noise). For identify's spread, the joint fit weights the road run's block by
-one over its residual RMS (:mod:`rideid.estimate.anyroad`, step 2), so its
+one over its residual RMS (:mod:`rideid.estimate.fit.anyroad`, step 2), so its
 ``A`` and ``B`` enter divided by ``vbar`` and ``vbar^2`` (``vbar`` the mean
 of ``v``), times the track runs' noise level ``c = tr(B) / tr(A)`` of the
 track candidates and ``c^2`` (the units of the track runs' matrices; with no
@@ -57,7 +57,7 @@ import numpy as np
 
 from ..data.scenario import generate_road, lead_in, road_seed, run_times
 from ..errors import ArgumentError
-from ..estimate import roadfit
+from ..estimate.problem import roadfit
 from ..model.equations import CHANNEL_KIND, CHANNELS
 from ..model.simulate import prepare_run, simulate_reference
 from .colour import ar1_psd
@@ -124,7 +124,7 @@ def _spectrum_shape(noise, fs: float, f: np.ndarray, cols) -> np.ndarray:
 
 
 def residual_jacobian(space, x0, geom, rr, step: float = ROAD_STEP) -> np.ndarray:
-    """``d e / d u`` (m, d) of :func:`rideid.estimate.roadfit.residuals` at the car ``x0`` (free parameters),
+    """``d e / d u`` (m, d) of :func:`rideid.estimate.problem.roadfit.residuals` at the car ``x0`` (free parameters),
     ``u = x / x0``, by central differences."""
     x0 = np.asarray(x0, dtype=float)
     d = x0.size
@@ -138,7 +138,7 @@ def residual_jacobian(space, x0, geom, rr, step: float = ROAD_STEP) -> np.ndarra
 
 
 def _prepared(run_id, y, fs, speed, geom, cols, scale):
-    """A :class:`rideid.estimate.roadfit.RoadRun` of noise-free ``y`` with the channel weights ``scale``."""
+    """A :class:`rideid.estimate.problem.roadfit.RoadRun` of noise-free ``y`` with the channel weights ``scale``."""
     rr = roadfit.prepare_road_run(run_id, y, fs, speed, geom, cols=cols)
     yc = y[:, cols] - y[:, cols].mean(axis=0)
     return replace(rr, scale=np.asarray(scale, float), Y=np.fft.rfft(yc * scale, axis=0))

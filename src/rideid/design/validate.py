@@ -13,9 +13,9 @@ from pathlib import Path
 import numpy as np
 
 from ..conditioning.load import load_dataset
-from ..estimate.identify import identify
+from ..estimate.fit.identify import identify
 from ..synth.scenario import simulate_manifest, write_dataset
-from ..estimate.cost import CostFunction, channel_weights
+from ..estimate.problem.cost import CostFunction, channel_weights
 from ..data.noise import sensor_noise
 
 
@@ -86,7 +86,7 @@ def linearised_monte_carlo(sc, run_ids, names, noise: float, seeds, step: float 
     ``simulate_manifest(noise=noise, seed=s, noise_ar1=noise_ar1)`` adds (same
     generator, same order: run by run, :func:`rideid.data.noise.sensor_noise`,
     white or AR(1), times ``noise`` times each channel's noise-free RMS), recomputes identify's channel
-    weights from the noisy data (:func:`rideid.estimate.cost.channel_weights`)
+    weights from the noisy data (:func:`rideid.estimate.problem.cost.channel_weights`)
     and takes the Gauss-Newton step. About 10 ms a seed for the ten built-in
     runs, so thousands of seeds pin the spread of the estimator the plan
     predicts to ~1 % (the sampling sd of a ratio of standard deviations from

@@ -37,7 +37,7 @@ from __future__ import annotations
 from dataclasses import asdict, dataclass, field, fields
 from typing import ClassVar
 
-from .adequacy import caveats
+from .assess.adequacy import caveats
 
 #: the four verdicts, mildest first
 VERDICTS = ("pass", "warn", "fail", "not assessed")
@@ -114,7 +114,7 @@ class AdequacyAssessment(Assessment):
 @dataclass(frozen=True)
 class MaterialityAssessment(Assessment):
     """Does the structure the adequacy test found move the estimates by more than their error bars
-    (:mod:`rideid.estimate.materiality`)? ``fail`` when it does."""
+    (:mod:`rideid.estimate.assess.materiality`)? ``fail`` when it does."""
 
     kind: ClassVar[str] = "materiality"
     material: bool | None = None
@@ -139,7 +139,7 @@ class MaterialityAssessment(Assessment):
 
 @dataclass(frozen=True)
 class SmallAngleAssessment(Assessment):
-    """How far the body turned, against the small-angle model of SPEC §1 (:mod:`rideid.estimate.small_angle`).
+    """How far the body turned, against the small-angle model of SPEC §1 (:mod:`rideid.estimate.assess.small_angle`).
     ``warn`` when the bias to expect exceeds some error bars (``optimistic``)."""
 
     kind: ClassVar[str] = "small_angles"
@@ -168,7 +168,7 @@ class SmallAngleAssessment(Assessment):
 
 @dataclass(frozen=True)
 class SensorHintsAssessment(Assessment):
-    """Channels that look AC-coupled without a declared ``highpass`` (:mod:`rideid.estimate.sensor_check`).
+    """Channels that look AC-coupled without a declared ``highpass`` (:mod:`rideid.estimate.assess.sensor_check`).
     ``warn`` when any is named."""
 
     kind: ClassVar[str] = "sensor_hints"
@@ -193,7 +193,7 @@ class SensorHintsAssessment(Assessment):
 @dataclass(frozen=True)
 class LevelAssessment(Assessment):
     """An adequate verdict whose residual is well above the lead-in's noise floor in many pairs
-    (:func:`rideid.estimate.adequacy.level_caveat`): ``warn``."""
+    (:func:`rideid.estimate.assess.adequacy.level_caveat`): ``warn``."""
 
     kind: ClassVar[str] = "level"
     loud_pairs: int = 0
@@ -218,7 +218,7 @@ class LevelAssessment(Assessment):
 @dataclass(frozen=True)
 class DrawingAssessment(Assessment):
     """An adequate verdict on tracks taken as drawn while the residuals hold road-driven structure in several
-    runs (:func:`rideid.estimate.model_choice._drawing_caveat`): ``warn``."""
+    runs (:func:`rideid.estimate.choice.model_choice._drawing_caveat`): ``warn``."""
 
     kind: ClassVar[str] = "drawing"
     tracks_as_built: list = field(default_factory=list)
@@ -336,7 +336,7 @@ def plan_of(res, run_ids=()) -> Plan:
         runs = [rid for rid, r in (rec.get("runs") or {}).items() if "amplitude_factor" in r]
         if rec.get("rejected") or not runs:
             continue
-        method = rec.get("method", "")  # the as-built mode, in words (rideid.estimate.anyroad._tracks_block)
+        method = rec.get("method", "")  # the as-built mode, in words (rideid.estimate.fit.anyroad._tracks_block)
         unknowns = (["road"] if "projected out" in method else
                     ["amplitude_factor", "unevenness"] if "unevenness" in method else ["amplitude_factor"])
         blocks.append(Block(f"track {tid}", "track", unknowns=unknowns, fixed=["drawing"], runs=runs))

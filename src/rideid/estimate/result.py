@@ -26,9 +26,9 @@ import numpy as np
 
 from ..data.schema.result import SCHEMA_VERSION, read_result_json
 from ..errors import DataError
-from .sensitivity import SensitivityMaps
-from .bumps import format_bump_stops
-from .frequency import frequency_response as _frequency_response
+from .problem.sensitivity import SensitivityMaps
+from .problem.bumps import format_bump_stops
+from .assess.frequency import frequency_response as _frequency_response
 from ..model.equations import CHANNELS
 from .records import Assessment, Plan, assessments_from_json, assessments_of
 
@@ -213,28 +213,28 @@ class IdentificationResult:
     #: the identified car's channels per run on the final data (in memory only, for the report)
     response: dict | None = None
     #: with damper curves: run id -> (front, rear) suspension velocities of the identified car (in memory
-    #: only, the report's histograms; rideid.estimate.responses)
+    #: only, the report's histograms; rideid.estimate.assess.responses)
     velocities: dict | None = None
     #: findings of the data checks and of the bound check (rideid.data.checks), as dicts
     checks: list = field(default_factory=list)
     #: SPEC §8 damper curves when the model has them: {"velocity", "front": {"force", "std", "std_robust",
-    #: "excited", ...}, "rear": {...}} (rideid.estimate.dampers.dampers_block); None otherwise
+    #: "excited", ...}, "rear": {...}} (rideid.estimate.problem.dampers.dampers_block); None otherwise
     dampers: dict | None = None
     #: SPEC §8 bump stops when the model has them: per axle {"reached", "clearance", "rate", "std",
-    #: "std_robust", ...} (rideid.estimate.bumps.bump_block); None otherwise
+    #: "std_robust", ...} (rideid.estimate.problem.bumps.bump_block); None otherwise
     bump_stops: dict | None = None
     #: SPEC §9 runs on unknown roads: run id -> {"file", "iso8608_class", "gd_n0", ...}; None without such runs
     roads: dict | None = None
     #: the estimated roads (in memory; written as road/<run>.csv): run id -> (x (n,), z (n, 2) left, right)
     road_profiles: dict | None = field(default=None, repr=False)
     #: SPEC §11 tracks as built: track id -> what was learnt about it ("amplitude_factor", "unevenness_rms_m",
-    #: per run, ...; rideid.estimate.asbuilt); None when every track was taken as drawn
+    #: per run, ...; rideid.estimate.problem.asbuilt); None when every track was taken as drawn
     tracks: dict | None = None
     #: the dataset's ``[vehicle]`` table (m: wheelbase, tracks, tire_radius, cg_height when given), so that the
     #: identified car can leave without its dataset (rideid export, SPEC §10); None in results written before
     vehicle: dict | None = None
     #: SPEC §12: what was declared uncertain and how it was propagated: {"declared", "anchor", "anchor_exact",
-    #: "method", "not_propagated", "notes"} (rideid.estimate.budget.with_budget); None in results written before
+    #: "method", "not_propagated", "notes"} (rideid.estimate.fit.budget.with_budget); None in results written before
     uncertainty: dict | None = None
     #: per channel over the runs: clipped share, gaps bridged, noise level, sensor chain
     #: (:func:`rideid.data.quality.data_quality`); None in results written before
@@ -348,7 +348,7 @@ class IdentificationResult:
         FrequencyResponse
             ``freq``, ``inputs`` (``r_fl .. r_rr``), ``outputs`` (the ten channels, ``heave``, ``pitch``,
             ``roll``), ``H`` (complex, n_freq x n_out x n_in, per metre of road), ``std_abs``
-            (:func:`rideid.estimate.frequency.frequency_response`; docs/frequency-response.md).
+            (:func:`rideid.estimate.assess.frequency.frequency_response`; docs/frequency-response.md).
         """
         return _frequency_response(self, freq)
 

@@ -46,8 +46,8 @@ decays with the filter's time constant ``1 / (2 pi f)`` (0.32 s for 0.5 Hz),
 so leave five of them out of a moving start's window.
 
 **In the frequency domain.** Where the road is fitted per DFT bin (unknown
-roads, tracks as built: :mod:`rideid.estimate.roadfit`,
-:mod:`rideid.estimate.asbuilt`) the same discrete filter enters as its
+roads, tracks as built: :mod:`rideid.estimate.problem.roadfit`,
+:mod:`rideid.estimate.problem.asbuilt`) the same discrete filter enters as its
 response at ``z = exp(i omega h)`` (``d + sum c g / (z - lam)`` of
 :class:`DiscreteFilter`), and its state at the first sample is not chosen
 but estimated with the car's (the modes' free responses are boundary

@@ -1,7 +1,7 @@
 """The simulator as a value: which car model, which backend, which integration settings.
 
 Every stage of rideid that simulates the car — start alignment and the
-wiring checks (:mod:`rideid.conditioning`), the cost (:mod:`rideid.estimate.cost`),
+wiring checks (:mod:`rideid.conditioning`), the cost (:mod:`rideid.estimate.problem.cost`),
 the polish's start derivatives, the model choice, adequacy, the damper and
 bump-stop checks, planning — is handed one :class:`Simulator` and binds it
 to the runs it needs (:meth:`Simulator.bind`). The value is frozen and

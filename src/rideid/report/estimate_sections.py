@@ -65,7 +65,7 @@ def adequacy_rows(res: dict) -> dict | None:
         rows.append({"run": rid, "level": lv, "level_channel": lc, "explained": ex, "explained_channel": ec,
                      "structure": [c for c, f in rec.items() if f["structure"]],
                      "white": sum(f["white"] for f in rec.values()), "channels": len(rec)})
-    # the caveats the terminal warns of travel with the verdict (rideid.estimate.adequacy.caveats)
+    # the caveats the terminal warns of travel with the verdict (rideid.estimate.assess.adequacy.caveats)
     return {"adequate": adq["adequate"], "reasons": adq["reasons"], "advice": adq.get("advice"),
             "method": adq.get("method", ""), "rows": rows, "small_angle": adq.get("small_angle"),
             **{k: adq[k] for k in ("level_caveat", "tracks_caveat", "not_assessed", "note") if adq.get(k)}}

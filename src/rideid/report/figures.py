@@ -21,8 +21,8 @@ import numpy as np
 from matplotlib.figure import Figure
 
 from ..conditioning.load import load_dataset
-from ..estimate.frequency import frequency_response, measured_response
-from ..estimate.responses import complete
+from ..estimate.assess.frequency import frequency_response, measured_response
+from ..estimate.assess.responses import complete
 from ..data.dataset import Dataset
 from ..errors import ArgumentError, DataError
 from ..model.equations import CHANNELS
@@ -63,7 +63,7 @@ def responses(result, dataset) -> dict:
     """The identified car's channels on every run of ``dataset``: run id -> ``(n_time, 10)``.
 
     The response kept in memory by :func:`rideid.identify`, else simulated with the result's model
-    (:func:`rideid.estimate.responses.complete`: the curves' car for a result with damper curves).
+    (:func:`rideid.estimate.assess.responses.complete`: the curves' car for a result with damper curves).
     """
     return complete(result, dataset).response
 
@@ -257,7 +257,7 @@ def dampers_figure(result):
         ax.fill_between(vv, FF - 2 * np.nan_to_num(ss), FF + 2 * np.nan_to_num(ss), color=f"C{k}", alpha=0.2)
         if not exc.all():
             ax.plot(v[~exc], F[~exc], "x", color="k", ms=7)
-        for side in ("compression", "rebound"):  # the knees found (rideid.estimate.dampers.knees)
+        for side in ("compression", "rebound"):  # the knees found (rideid.estimate.problem.dampers.knees)
             vk = (((d.get("knees") or {}).get(axle) or {}).get(side) or {}).get("velocity")
             if vk is not None:
                 ax.axvline(vk, color=f"C{k}", ls=":", lw=1.2)
@@ -281,8 +281,8 @@ def frequency_figure(result, dataset=None, measured=None, freq=None):
 
     Row 1: body acceleration at each corner from its own wheel's road; row 2: the axle's; row 3: heave, pitch
     and roll from the wheels in phase, front against rear and left against right
-    (:data:`rideid.estimate.frequency.VIEWS`), and the coherence of the measured points. Measured H1 points
-    (:func:`rideid.estimate.frequency.measured_response`, ±2 std random error) only where their partial
+    (:data:`rideid.estimate.assess.frequency.VIEWS`), and the coherence of the measured points. Measured H1 points
+    (:func:`rideid.estimate.assess.frequency.measured_response`, ±2 std random error) only where their partial
     coherence exceeds :data:`COHERENCE_MIN`.
 
     Parameters
@@ -292,7 +292,7 @@ def frequency_figure(result, dataset=None, measured=None, freq=None):
         The runs for the measured points (default: the dataset the result names; none when it is not found).
         ``False``: no measured points.
     measured : dict, optional
-        A :func:`rideid.estimate.frequency.measured_response` already computed (then ``dataset`` is not read).
+        A :func:`rideid.estimate.assess.frequency.measured_response` already computed (then ``dataset`` is not read).
     freq : array_like, optional
         The model's frequencies, Hz (default 0.2-30 Hz).
 

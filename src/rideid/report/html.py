@@ -33,9 +33,9 @@ from PIL import Image
 from ..profiling import stage
 from ..data.quality import summarised_warning
 from ..errors import DataError
-from ..estimate.adequacy import caveats
-from ..estimate.frequency import frequency_response, measured_response
-from ..estimate.sensitivity import P2T_STARS, stars
+from ..estimate.assess.adequacy import caveats
+from ..estimate.assess.frequency import frequency_response, measured_response
+from ..estimate.problem.sensitivity import P2T_STARS, stars
 from .sensitivity_files import heatmap_figure
 from ..model.equations import CHANNELS
 from ..model.params import ALL_NAMES, DESCRIPTIONS
@@ -689,12 +689,12 @@ def _parameter_names(result) -> list:
 
 def _responses(result, dataset) -> dict:
     """The identified car's response on every run, run id -> (n_time, 10): the result's own (the report never
-    simulates: a result read back is completed first, :func:`rideid.estimate.responses.complete`)."""
+    simulates: a result read back is completed first, :func:`rideid.estimate.assess.responses.complete`)."""
     sims = result.response
     if sims is None or set(sims) != {r.id for r in dataset.runs} or any(
             len(sims[r.id]) != len(dataset.data[r.id].time) for r in dataset.runs):
         raise DataError("the result carries no response of these runs: pass it through "
-                        "rideid.estimate.responses.complete(result, dataset) before writing its report")
+                        "rideid.estimate.assess.responses.complete(result, dataset) before writing its report")
     return sims
 
 
@@ -805,7 +805,7 @@ def damper_section(result, dataset, out_dir) -> list:
         return []
     if getattr(result, "velocities", None) is None:
         raise DataError("the result carries no suspension velocities: pass it through "
-                        "rideid.estimate.responses.complete(result, dataset) before writing its report")
+                        "rideid.estimate.assess.responses.complete(result, dataset) before writing its report")
     edges, hists = velocity_histograms(result.velocities)
     slopes = {a: result.parameters.get(n) for a, n in (("front", "c_sf"), ("rear", "c_sr"))}
     return [fig_damper_curves(result.dampers, slopes, out_dir),
@@ -930,7 +930,7 @@ def summary_section(result, context: dict) -> dict:
         lines.append(("Estimates", text, "estimates"))
     tracks = getattr(result, "tracks", None) or {}
     built = {tid: rec for tid, rec in tracks.items() if "amplitude_factor" in rec}
-    if built:  # SPEC §11: what the tracks as built needed (rideid.estimate.anyroad._tracks_block)
+    if built:  # SPEC §11: what the tracks as built needed (rideid.estimate.fit.anyroad._tracks_block)
         rejected = next((rec["rejected"] for rec in tracks.values() if rec.get("rejected")), None)
         text = "; ".join(f"{tid} x {rec['amplitude_factor']:.3f}"
                          + (f" ± {rec['amplitude_factor_std']:.3f}" if rec.get("amplitude_factor_std", 0) > 0.01
@@ -940,7 +940,7 @@ def summary_section(result, context: dict) -> dict:
         lines.append(("Tracks as built", ("REJECTED, the estimates are the tracks' as drawn: " + rejected)
                       if rejected else text + " (amplitude factor, unevenness at waves up to 10 m)", "estimates"))
     caveat = (adq or {}).get("tracks_caveat")
-    if caveat:  # adequate only by the weighing, on tracks as drawn (rideid.estimate.model_choice._drawing_caveat)
+    if caveat:  # adequate only by the weighing, on tracks as drawn (model_choice._drawing_caveat)
         lines.append(("Tracks as drawn", "NOT TO BE TRUSTED beyond the error bars: " + caveat, "estimates"))
     loud = (adq or {}).get("level_caveat")
     if loud and adq.get("adequate"):  # adequate by the road-driven test, the residual well above the noise

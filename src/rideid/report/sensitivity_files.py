@@ -1,7 +1,7 @@
 """The sensitivity maps as files (``rideid sensitivity``, the report): the paper's Tables 4-7 as Markdown,
-CSV and heatmaps with their star ratings (:func:`rideid.estimate.sensitivity.stars`).
+CSV and heatmaps with their star ratings (:func:`rideid.estimate.problem.sensitivity.stars`).
 
-The maps themselves are computed in :mod:`rideid.estimate.sensitivity`; every
+The maps themselves are computed in :mod:`rideid.estimate.problem.sensitivity`; every
 figure here is a plain :class:`matplotlib.figure.Figure` on its own Agg
 canvas: no pyplot, the caller's backend untouched.
 """
@@ -15,7 +15,7 @@ import numpy as np
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 
-from ..estimate.sensitivity import P2R_STARS, P2T_STARS, R2T_STARS, SensitivityMaps, stars
+from ..estimate.problem.sensitivity import P2R_STARS, P2T_STARS, R2T_STARS, SensitivityMaps, stars
 
 
 def tables_markdown(m: SensitivityMaps) -> str:

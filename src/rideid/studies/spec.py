@@ -26,8 +26,8 @@ from pathlib import Path
 from ..data.scenario import BUILTIN, default_scenario, default_scenario_path, load_scenario
 from ..data.schema import Key, Messages, Section, read_toml
 from ..errors import DataError
-from ..estimate.identify import DEFAULT_GENERATIONS, DEFAULT_POPULATION
-from ..estimate.model_choice import identify
+from ..estimate.fit.identify import DEFAULT_GENERATIONS, DEFAULT_POPULATION
+from ..estimate.choice.model_choice import identify
 
 TOP_KEYS = ("name", "data", "identify", "subsets")
 DATA_KEYS = ("datasets", "scenario", "noise", "noise_seeds")

@@ -23,7 +23,7 @@ from ..data.dataset import Dataset
 from ..data.schema import load_truth
 from ..errors import DataError, RideidError
 from ..model.backend import one_thread
-from ..estimate.model_choice import identify
+from ..estimate.choice.model_choice import identify
 from ..estimate.result import jsonable
 from ..synth.scenario import simulate_manifest, write_dataset
 

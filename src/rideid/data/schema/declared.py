@@ -5,7 +5,7 @@ std = 10.0 }``: the value and its standard uncertainty (a weighbridge's, a
 tape's), in the value's unit. A ``[channels]`` entry may give
 ``sensitivity_std``: the relative standard uncertainty of that sensor's
 sensitivity (``0.02``: calibrated to 2 %). A plain number is exact, as before.
-:mod:`rideid.estimate.budget` propagates what is declared to the estimates.
+:mod:`rideid.estimate.fit.budget` propagates what is declared to the estimates.
 """
 
 from __future__ import annotations

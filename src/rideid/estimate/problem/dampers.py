@@ -37,9 +37,9 @@ from dataclasses import replace
 
 import numpy as np
 
-from ..settings import defaults, legacy_names
-from ..model.nonlinear import check_nonlinear, travel_by_run
-from ..data.scenario import LIFT_OFF_RHO
+from ...settings import defaults, legacy_names
+from ...model.nonlinear import check_nonlinear, travel_by_run
+from ...data.scenario import LIFT_OFF_RHO
 
 #: how the text output marks a knot no run excites
 NOT_EXCITED = "not excited — not a number to trust"

@@ -26,10 +26,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..settings import defaults, legacy_names
-from ..model.equations import CHANNELS
-from ..model.sensors import AnalogFilter, SensorChain
-from . import roadfit
+from ...settings import defaults, legacy_names
+from ...model.equations import CHANNELS
+from ...model.sensors import AnalogFilter, SensorChain
+from ..problem import roadfit
 
 
 def coupling_hints(cf, response: dict) -> list[dict]:
@@ -90,11 +90,11 @@ ROAD_HINT_GROUPS = (CHANNELS[4:8], CHANNELS[0:4])
 
 def road_coupling_hints(P, geom, rruns, filters, threshold: float | None = None) -> list[dict]:
     """Channels whose data look AC-coupled without a declared ``highpass``, on runs whose road is fitted
-    (:mod:`rideid.estimate.roadfit`; tracks as built, :mod:`rideid.estimate.asbuilt`).
+    (:mod:`rideid.estimate.problem.roadfit`; tracks as built, :mod:`rideid.estimate.problem.asbuilt`).
 
     The time-domain hint (:func:`coupling_hints`) compares a simulation with the data; a fitted road has none
     to compare. Here the identified car ``P`` is projected onto each run with its road free
-    (:func:`rideid.estimate.roadfit.residuals`, the drawing unused), once as the channels are declared and
+    (:func:`rideid.estimate.problem.roadfit.residuals`, the drawing unused), once as the channels are declared and
     once with a trial first-order high-pass added to a group of channels (the four hub accelerometers, the
     four body accelerometers; then each accelerometer alone at setting ``sensor_check.road_hint_single``): a group whose
     trial cuts the summed squared residual of every run by ``threshold`` (setting ``sensor_check.hint_reduction``; on
@@ -104,7 +104,7 @@ def road_coupling_hints(P, geom, rruns, filters, threshold: float | None = None)
     16-19 %; the body group: worse); at the true car 100 %. The same runs without coupling, or with it
     declared: every trial makes it 5-18 times larger.
 
-    ``rruns``: :class:`rideid.estimate.roadfit.RoadRun` with their declared chains; ``filters``: run id -> the
+    ``rruns``: :class:`rideid.estimate.problem.roadfit.RoadRun` with their declared chains; ``filters``: run id -> the
     dataset's ``sensor_filters``. Returns the hints as :func:`coupling_hints` does, the group's channels each
     named with the group's corner and reduction."""
     threshold = defaults["sensor_check.hint_reduction"] if threshold is None else threshold

@@ -31,7 +31,7 @@ import math
 import numpy as np
 from scipy.optimize import OptimizeResult
 
-from ..errors import ArgumentError
+from ...errors import ArgumentError
 
 
 def make_rng(rng=None, seed=None):

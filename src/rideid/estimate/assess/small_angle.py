@@ -24,9 +24,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..profiling import stage
-from ..settings import defaults, legacy_names
-from ..model.equations import CHANNELS
+from ...profiling import stage
+from ...settings import defaults, legacy_names
+from ...model.equations import CHANNELS
 
 
 _ROLL = CHANNELS.index("roll_rate")

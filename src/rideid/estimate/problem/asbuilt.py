@@ -5,7 +5,7 @@ The model
 ---------
 A proving-ground track is never its drawing: its amplitudes are a few per
 cent off and it carries 1-2 mm RMS of unevenness. A run on such a track is
-fitted like a run on an unknown road (:mod:`rideid.estimate.roadfit`: the
+fitted like a run on an unknown road (:mod:`rideid.estimate.problem.roadfit`: the
 channels' DFT, 0.2-25 Hz, the car linear, the state at the first sample and
 the rear wheels' lead-in as free boundary unknowns), except that the road
 is not free: at each frequency ``omega`` of the run's DFT
@@ -15,7 +15,7 @@ is not free: at each frequency ``omega`` of the run's DFT
 ``U`` (4,) the DFT of the drawn track's four corner inputs (the rigid-disc
 envelope of SPEC §2), ``alpha`` the track's amplitude factor (one real
 unknown per run), ``A`` (c x 2) the left and right wheel paths' columns of
-:mod:`rideid.estimate.roadfit` (rear through the delay) and ``delta`` the
+:mod:`rideid.estimate.problem.roadfit` (rear through the delay) and ``delta`` the
 unevenness under the front wheels, a complex Gaussian with variance
 ``sigma_d^2(omega)`` per path, independent of the sensor noise (variance
 ``sigma_n^2(omega)`` per weighted channel). Integrating ``delta`` out, each
@@ -46,7 +46,7 @@ carries unevenness the prior widens and the road there is learnt.
 Sensors as wired (SPEC §11): a channel with a declared ``highpass`` or ``lowpass`` is compared as its sensor
 records it: ``H`` (the drawing's response included) and the boundary columns through the filter's
 first-order-hold response, the filters' states at the first sample among the boundary unknowns
-(:func:`rideid.estimate.roadfit.recorded_columns`).
+(:func:`rideid.estimate.problem.roadfit.recorded_columns`).
 
 Limits (between the two limits of the prior): ``D = 0`` is the drawn track
 with an amplitude factor (:data:`MODES` "amplitude"), ``D`` infinite the
@@ -62,9 +62,9 @@ import numpy as np
 import scipy.linalg
 from scipy.optimize import minimize
 
-from ..profiling import stage
-from ..settings import defaults, legacy_names
-from ..model.simulate import RunInput, corner_inputs, prepare_run
+from ...profiling import stage
+from ...settings import defaults, legacy_names
+from ...model.simulate import RunInput, corner_inputs, prepare_run
 from . import roadfit
 
 #: the prior's variants: "prior" (the default, an estimated unevenness spectrum), "amplitude" (no
@@ -141,7 +141,7 @@ def nominal_inputs(ds, run, speed=None, shift: float = 0.0):
 
 def held_speed(ds, run) -> float:
     """The run's constant speed (m/s) as the as-built road starts from: the declared one, or, along a speed or
-    distance channel (a speed held, :func:`rideid.estimate.anyroad.speed_wander`), the channel's mean over the
+    distance channel (a speed held, :func:`rideid.estimate.fit.anyroad.speed_wander`), the channel's mean over the
     run's samples (refined with the start by :func:`align_motion`)."""
     rd = ds.data[run.id]
     dist = getattr(rd, "distance", None)
@@ -191,7 +191,7 @@ def moved(tr: TrackRun, ds, run, p) -> TrackRun:
 def motion_jacobian(P, geom, tr: TrackRun, ds, run) -> np.ndarray:
     """The Jacobian (m, 2) of :func:`residuals` of ``tr`` (a run along a speed channel, as :func:`align_motion`
     left it) in its speed (relative) and its start shift (s), by central differences: the columns that put the
-    speed's and the start's uncertainty into the error bars (:func:`rideid.estimate.anyroad`'s sandwich)."""
+    speed's and the start's uncertainty into the error bars (:func:`rideid.estimate.fit.anyroad`'s sandwich)."""
     cols = []
     for j, h in enumerate(defaults["asbuilt.motion_jacobian_steps"]):
         p = np.zeros(2)
@@ -252,13 +252,13 @@ def motion_prior(ds, run) -> MotionPrior:
 @stage("motion alignment")
 def align_motion(P, geom, tr: TrackRun, ds, run, mode: str = "prior",
                  prior: MotionPrior | None = None) -> tuple[TrackRun, dict]:
-    """``tr`` of a run along a speed channel, its speed held (:func:`rideid.estimate.anyroad.speed_wander`), with
+    """``tr`` of a run along a speed channel, its speed held (:func:`rideid.estimate.fit.anyroad.speed_wander`), with
     the speed and the start that fit it at the car ``P`` (16,): the drawing at ``x = v (t - shift)``, the rear
     wheels' delay at ``v``; ``v`` and ``shift`` minimise the run's cost in ``mode`` (:data:`MODES`; the prior as
     ``tr`` has it) from ``tr``'s (Nelder-Mead: the cost is flat to a few per cent over millimetres, and a gradient
     solver stopped on its tolerance where it began).
 
-    Two passes place a drawing (:func:`rideid.estimate.anyroad`'s as-built stage): "amplitude" first (the
+    Two passes place a drawing (:func:`rideid.estimate.fit.anyroad`'s as-built stage): "amplitude" first (the
     drawing alone: sharp, but the unevenness, weighed as if it were sensor noise, pulls it: H_HH's speed +0.5 to
     +1.1 % off at the true car of the all-realities case, seeds 1-3), the prior estimated again there, then
     "prior" from that placement. The prior alone cannot start: a drawing placed by the channel's speed is off at
@@ -550,7 +550,7 @@ def unevenness_rms(tr: TrackRun, longest: float | None = None) -> float:
 
 def fitted_channels(P, geom, tr: TrackRun, y, fit: Fit | None = None) -> np.ndarray:
     """The model's channels (n, 10) at the estimated road: the measured ones less the fit band's residual (NaN
-    for unused channels), as :func:`rideid.estimate.roadfit.fitted_channels`."""
+    for unused channels), as :func:`rideid.estimate.problem.roadfit.fitted_channels`."""
     fit = solve(P, geom, tr) if fit is None else fit
     rr = tr.rr
     full = np.zeros(rr.Y.shape, dtype=complex)

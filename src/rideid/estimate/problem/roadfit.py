@@ -112,7 +112,7 @@ lead-in columns at one frequency are one projected vector times
 ``exp(-i omega n h)``, so their Gram matrix is a function of ``n - m`` only
 (Toeplitz) and costs one sum over frequencies per lag.
 
-Uncertainty (:mod:`rideid.estimate.anyroad`): DFT residuals at different
+Uncertainty (:mod:`rideid.estimate.fit.anyroad`): DFT residuals at different
 frequencies are uncorrelated for any stationary noise (white or coloured),
 with a variance that may change with frequency, so each frequency's residual
 block is one cluster of a sandwich estimate. Its bread is the cost's true
@@ -128,10 +128,10 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 import scipy.linalg
 
-from ..settings import defaults, legacy_names
-from ..model.equations import CHANNEL_KIND, CHANNEL_UNITS, CHANNELS, state_space
-from ..model.params import Geometry
-from ..model.sensors import discretise, modal_pairs
+from ...settings import defaults, legacy_names
+from ...model.equations import CHANNEL_KIND, CHANNEL_UNITS, CHANNELS, state_space
+from ...model.params import Geometry
+from ...model.sensors import discretise, modal_pairs
 
 
 def used_channels(y) -> tuple[np.ndarray, dict]:

@@ -50,7 +50,7 @@ that looks like a measurement.
 
 from __future__ import annotations
 
-from ..settings import defaults, legacy_names
+from ...settings import defaults, legacy_names
 
 from dataclasses import dataclass
 

@@ -45,11 +45,11 @@ from __future__ import annotations
 import numpy as np
 from scipy import special  # the two tail probabilities; scipy.stats takes 0.5 s to import
 
-from ..profiling import stage
-from ..settings import defaults, legacy_names
-from ..model.params import SUSPENSION_GROUPS as GROUPS
-from ..model.batch import single_threaded_blas, thread_map
-from ..model.equations import CHANNELS
+from ...profiling import stage
+from ...settings import defaults, legacy_names
+from ...model.params import SUSPENSION_GROUPS as GROUPS
+from ...model.batch import single_threaded_blas, thread_map
+from ...model.equations import CHANNELS
 
 
 

@@ -2,10 +2,10 @@
 
 1. The free parameters and bounds come from the dataset (``[known]``,
    ``[bounds]``, defaults in :data:`rideid.params.DEFAULT_BOUNDS`).
-2. The parameter -> track map ``M`` (:mod:`rideid.estimate.sensitivity`) is
+2. The parameter -> track map ``M`` (:mod:`rideid.estimate.problem.sensitivity`) is
    computed around a nominal car (the built-in car scaled to the anchor).
 3. JADE evolves the population on ``J = sum_r w_r E_r``. After every
-   generation the track weighting (:mod:`rideid.estimate.weighting`;
+   generation the track weighting (:mod:`rideid.estimate.problem.weighting`;
    ``weights="adaptive"``) takes the normalised spread of each free
    parameter (eq. 12) to new weights ``w ∝ spread @ M`` (eq. 13) and the
    population is re-scored with them before the next generation (no new
@@ -29,12 +29,12 @@
    and their standard errors come back in ``result.starts``. Without the
    polish the nominal alignment stands.
 7. Standard errors: ``std`` from ``cov = s^2 (J^T J)^+`` (through the SVD of ``J``:
-   :func:`rideid.estimate.uncertainty.normal_inverse`) at the optimum with
+   :func:`rideid.estimate.fit.uncertainty.normal_inverse`) at the optimum with
    ``s^2 = RSS / (m - d)``, assuming white residuals (an optimistic lower
    bound when residuals are correlated or the model is wrong), and
-   ``std_robust`` from the HAC sandwich of :mod:`rideid.estimate.uncertainty`
+   ``std_robust`` from the HAC sandwich of :mod:`rideid.estimate.fit.uncertainty`
    (residuals correlated in time and across channels, runs independent).
-8. Adequacy (:mod:`rideid.estimate.adequacy`): per run and channel, the
+8. Adequacy (:mod:`rideid.estimate.assess.adequacy`): per run and channel, the
    residual level against the quiet lead-in, a whiteness test and the
    decisive test: does the road input explain the prewhitened residual?
 9. Damper curves (SPEC §8, group ``damper_curves``): the global search runs
@@ -42,7 +42,7 @@
    ~100x cheaper per candidate than the RK4 nonlinear car, whose cost also
    grows with the stiffest segment of every random candidate); its best car
    starts the curves as ``F = c v``. The knots no run excites with that car
-   are frozen (:mod:`rideid.estimate.dampers`), and the polish fits the
+   are frozen (:mod:`rideid.estimate.problem.dampers`), and the polish fits the
    curves with the other parameters on the nonlinear car, its RK4 sub-steps
    pinned at its start (so every differenced residual uses one integrator).
    ``c_sf``, ``c_sr`` and frozen knots are derived; their standard errors
@@ -50,10 +50,10 @@
    Without ``[model] damper_knots`` the curves' knots are those of
    setting ``dampers.knee_grid`` (:func:`knee_cost`), and where
    each curve bends is reported with its error bar
-   (:func:`rideid.estimate.dampers.knees`).
+   (:func:`rideid.estimate.problem.dampers.knees`).
 10. Bump stops (SPEC §8, group ``bump_stops``): the search on the linear
     model as in 9; a scan of clearance and rate per axle from its car
-    (:mod:`rideid.estimate.bumps`) starts the polish on the nonlinear car;
+    (:mod:`rideid.estimate.problem.bumps`) starts the polish on the nonlinear car;
     a stop no run reaches is held (not free, reported ``reached: false``
     without standard errors), also when the polished car no longer reaches
     it (the polish is then repeated).
@@ -69,30 +69,30 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 from scipy.optimize import OptimizeResult, least_squares
 
-from ..profiling import stage
-from ..settings import defaults, legacy_names
-from ..data.checks import bound_findings
-from ..data.dataset import Dataset, lead_ins
-from ..data.quality import data_quality, rate_advice
-from ..conditioning.starts import cycle_slips, distance_warp, linearise_starts, warped
-from ..errors import ArgumentError, DataWarning
-from ..model.batch import single_threaded_blas
-from ..model.equations import modal_summary
-from ..data.schema import NONLINEAR_GROUPS
-from ..model.nonlinear import BUMP_STOP_NAMES
-from ..model.params import ALL_NAMES, INDEX, NOMINAL_EXTENSIONS, SUSPENSION_GROUPS, UNITS
-from ..model.simulator import Simulator
-from .bumps import bump_block, frozen_values, reach, scan_start
-from .dampers import add_grid_std, dampers_block, knot_excitation
-from .responses import suspension_velocities
-from .cost import BUMP_UNITS, IDENTIFIABLE_GROUPS, CostFunction, ParameterSpace, refuse_unsupported_groups
+from ...profiling import stage
+from ...settings import defaults, legacy_names
+from ...data.checks import bound_findings
+from ...data.dataset import Dataset, lead_ins
+from ...data.quality import data_quality, rate_advice
+from ...conditioning.starts import cycle_slips, distance_warp, linearise_starts, warped
+from ...errors import ArgumentError, DataWarning
+from ...model.batch import single_threaded_blas
+from ...model.equations import modal_summary
+from ...data.schema import NONLINEAR_GROUPS
+from ...model.nonlinear import BUMP_STOP_NAMES
+from ...model.params import ALL_NAMES, INDEX, NOMINAL_EXTENSIONS, SUSPENSION_GROUPS, UNITS
+from ...model.simulator import Simulator
+from ..problem.bumps import bump_block, frozen_values, reach, scan_start
+from ..problem.dampers import add_grid_std, dampers_block, knot_excitation
+from ..assess.responses import suspension_velocities
+from ..problem.cost import BUMP_UNITS, IDENTIFIABLE_GROUPS, CostFunction, ParameterSpace, refuse_unsupported_groups
 from .jade import JadeSolver, make_rng, stop_requested
-from .adequacy import advise, assess_fit
-from .sensor_check import clipping_advice, coupling_hints
-from .result import History, IdentificationResult
+from ..assess.adequacy import advise, assess_fit
+from ..assess.sensor_check import clipping_advice, coupling_hints
+from ..result import History, IdentificationResult
 from .uncertainty import jackknife_runs, estimate_covariance, hac_covariance, white_covariance
-from .sensitivity import SensitivityMaps, cost_maps
-from .weighting import TrackWeighting, coefficient_of_variation
+from ..problem.sensitivity import SensitivityMaps, cost_maps
+from ..problem.weighting import TrackWeighting, coefficient_of_variation
 
 #: JADE's population and its early stop before the polish (every free parameter's spread below 20 %: the setting
 #: ``identify.spread_tol``).
@@ -177,7 +177,7 @@ def identify(ds: Dataset, *, rng=None, seed=None, population: int = DEFAULT_POPU
         JADE's NP and generation limit.
     weights : {"adaptive", "fixed"}
         Adaptive track weights (paper eq. 12-13) or equal weights
-        (:class:`rideid.estimate.sensitivity.TrackWeighting`).
+        (:class:`rideid.estimate.problem.sensitivity.TrackWeighting`).
     polish : bool
         Refine with ``scipy.optimize.least_squares`` after JADE.
     spread_tol : float, optional
@@ -198,10 +198,10 @@ def identify(ds: Dataset, *, rng=None, seed=None, population: int = DEFAULT_POPU
         The model (SPEC §6): the twelve (``"base"``), with every extension
         group (``"full"``), or the given groups; ``"auto"``: fit the
         candidates and keep the model the data support
-        (:func:`rideid.estimate.model_choice.identify_auto`). ``None``: the
+        (:func:`rideid.estimate.choice.model_choice.identify_auto`). ``None``: the
         dataset's ``[model]``, else ``"auto"``, as ``rideid identify`` does
-        (SPEC §5 amended; :func:`rideid.estimate.model_choice.default_model`;
-        the single-model fit :func:`rideid.estimate.identify.identify` takes
+        (SPEC §5 amended; :func:`rideid.estimate.choice.model_choice.default_model`;
+        the single-model fit :func:`rideid.estimate.fit.identify.identify` takes
         the dataset's ``[model]``, else the twelve). Ignored when ``cost`` is given (its parameter space
         decides). Known extension values are held fixed and used whatever
         the model.
@@ -212,7 +212,7 @@ def identify(ds: Dataset, *, rng=None, seed=None, population: int = DEFAULT_POPU
         (``c_sf``, ``c_sr`` free), whose curves ``F = c v`` start the polish,
         or a row of the curve model itself (its knot forces as given).
     assess : bool
-        Compute the adequacy verdict (:mod:`rideid.estimate.adequacy`; a few
+        Compute the adequacy verdict (:mod:`rideid.estimate.assess.adequacy`; a few
         seconds); ``False`` leaves ``adequacy`` None.
     simulator : Simulator, optional
         How the car is simulated (backend, integration settings:
@@ -225,7 +225,7 @@ def identify(ds: Dataset, *, rng=None, seed=None, population: int = DEFAULT_POPU
     """
     if isinstance(model, str) and model == "auto" and cost is None:
         raise ArgumentError("model='auto' is the model choice of rideid.identify "
-                            "(rideid.estimate.model_choice.identify); this function fits one given model")
+                            "(rideid.estimate.choice.model_choice.identify); this function fits one given model")
     if spread_tol is None:
         spread_tol = defaults["identify.spread_tol"] if polish else defaults["identify.spread_tol_no_polish"]
     if not isinstance(generations, (int, np.integer)) or generations < 1:
@@ -277,7 +277,7 @@ def _linear_cost(ds, cf: CostFunction) -> CostFunction:
 def _curve_start(cf: CostFunction, cf_search: CostFunction, x):
     """The nonlinear model's start from the search's best car: ``x`` mapped into the nonlinear space (a
     linear car's curves ``F = c v``), its knots' excitation, the space with the knots not excited frozen;
-    with bump stops the scan of :func:`rideid.estimate.bumps.scan_start` and the stops not reached held.
+    with bump stops the scan of :func:`rideid.estimate.problem.bumps.scan_start` and the stops not reached held.
 
     Returns ``(cost function on that space with its sub-steps pinned, start row, excitation, bump record)``.
     """
@@ -521,7 +521,7 @@ def restart_record(modes, cost, cost_restart, space, x, x_restart) -> dict:
             "first": {n: float(v) for n, v in zip(names, x)},
             "restart": {n: float(v) for n, v in zip(names, x_restart)},
             "note": "a powertrain mode at a search bound (switched off) was polished again from typical values "
-                    "(rideid.estimate.identify.mode_restart); the lower cost is kept"}
+                    "(rideid.estimate.fit.identify.mode_restart); the lower cost is kept"}
 
 
 def _result(ds, cf, search, fit, weighting, maps, rng_record, t0, assess=True,
@@ -574,8 +574,8 @@ def _result(ds, cf, search, fit, weighting, maps, rng_record, t0, assess=True,
 
 def sensor_notes(ds, cf, response, adequacy: dict | None) -> dict | None:
     """``adequacy`` with ``sensor_hints`` (channels that look AC-coupled without a declared ``highpass``,
-    :func:`rideid.estimate.sensor_check.coupling_hints`) and, when not adequate, advice that names them and
-    the clipped channels among the flagged pairs first (:func:`rideid.estimate.sensor_check.clipping_advice`);
+    :func:`rideid.estimate.assess.sensor_check.coupling_hints`) and, when not adequate, advice that names them and
+    the clipped channels among the flagged pairs first (:func:`rideid.estimate.assess.sensor_check.clipping_advice`);
     None when the adequacy was not assessed. ``cf`` and ``response``: the fit's cost function at its final starts
     and the identified car's channels."""
     if adequacy is None:
@@ -678,7 +678,7 @@ def held_motion(ds, run) -> dict | None:
     return {"speed": speed, "estimated": how}
 
 
-#: the note of a free parameter the polish's Jacobian does not determine (rideid.estimate.uncertainty)
+#: the note of a free parameter the polish's Jacobian does not determine (rideid.estimate.fit.uncertainty)
 NOT_IDENTIFIED = ("not identified: the data determine it only in combination with other parameters, or not at "
                   "all (a singular value of the Jacobian below RANK_RTOL of the largest); no standard error")
 
@@ -686,7 +686,7 @@ NOT_IDENTIFIED = ("not identified: the data determine it only in combination wit
 def parameter_detail(space, P, n: str, std, cov, robust) -> dict:
     """Parameter ``n``'s ``result.json`` entry: value, unit, fixed/derived, search bounds, ``std`` (white)
     and ``std_robust``, from the full row ``P``, the free parameters' ``std`` and white covariance ``cov``
-    and the :class:`~rideid.estimate.uncertainty.EstimateCovariance` ``robust``."""
+    and the :class:`~rideid.estimate.fit.uncertainty.EstimateCovariance` ``robust``."""
     e = {"value": float(P[space.col[n]]), "unit": UNITS.get(n, BUMP_UNITS.get(n, "N")), "fixed": n in space.fixed,
          "derived": n in space.derived_names()}
     if n in space.names:
@@ -764,7 +764,7 @@ def _polish(cf: CostFunction, x0, weights, align=None):
 @stage("polish")
 def polish_fixed_starts(cf: CostFunction, x0, weights):
     """The least-squares polish from ``x0`` with the runs as ``cf`` reads them (no start among the unknowns):
-    ``(x, info, std)`` as :func:`_polish` returns them (the materiality refits, rideid.estimate.materiality)."""
+    ``(x, info, std)`` as :func:`_polish` returns them (the materiality refits, rideid.estimate.assess.materiality)."""
     return _polish(cf, x0, weights)
 
 
@@ -947,7 +947,7 @@ class _Polish:
 
     def covariance(self, sol):
         """White covariance ``s^2 (J^T J)^+`` of every unknown in its own units, and its standard errors
-        (:func:`rideid.estimate.uncertainty.white_covariance`: SVD, unidentified directions inf/NaN)."""
+        (:func:`rideid.estimate.fit.uncertainty.white_covariance`: SVD, unidentified directions inf/NaN)."""
         sc = self.scale()
         cov = white_covariance(sol.jac, sol.fun) * np.outer(sc, sc)
         with np.errstate(invalid="ignore"):
@@ -955,7 +955,7 @@ class _Polish:
 
     def robust(self, sol):
         """HAC covariance of every unknown in its own units (runs as independent blocks of samples, see
-        :mod:`rideid.estimate.uncertainty`) and the runs' bandwidths."""
+        :mod:`rideid.estimate.fit.uncertainty`) and the runs' bandwidths."""
         cf = self.cf
         blocks = self.run_blocks()
         n_prior = sol.fun.size - sum(t * c for t, c in blocks)
@@ -972,7 +972,7 @@ class _Polish:
 
     def jackknife(self, sol):
         """The delete-one-run jackknife covariance of every unknown in its own units and its number of runs
-        (:func:`rideid.estimate.uncertainty.jackknife_runs`; None with fewer than 3 runs to leave out)."""
+        (:func:`rideid.estimate.fit.uncertainty.jackknife_runs`; None with fewer than 3 runs to leave out)."""
         cov, k = jackknife_runs(sol.jac, sol.fun, self.run_blocks(), n_checked=self.d)
         return (None if cov is None else cov * np.outer(self.scale(), self.scale())), k
 

@@ -1,14 +1,14 @@
 """Identification of a dataset with runs on unknown roads (SPEC §9).
 
 The road under an unknown-road run is projected out frequency by frequency
-(:mod:`rideid.estimate.roadfit`); runs on known tracks keep their
-time-domain residuals (:class:`rideid.estimate.cost.CostFunction`). The
+(:mod:`rideid.estimate.problem.roadfit`); runs on known tracks keep their
+time-domain residuals (:class:`rideid.estimate.problem.cost.CostFunction`). The
 steps:
 
 1. *Start.* With track runs: the usual identification of the track runs
-   alone (search and polish, :func:`rideid.estimate.identify.identify`).
+   alone (search and polish, :func:`rideid.estimate.fit.identify.identify`).
    Without: JADE on the road runs' search cost
-   (:func:`rideid.estimate.roadfit.search_costs`, a Hann-windowed
+   (:func:`rideid.estimate.problem.roadfit.search_costs`, a Hann-windowed
    approximation a few per cent from the exact cost), stopped by the same
    population-spread rule as the track search.
 2. *Polish.* Least squares on the exact residuals of every run together:
@@ -24,19 +24,19 @@ steps:
    pseudo-inverse by SVD): ``std`` with ``B = s^2 J^T J`` (one variance),
    ``std_robust`` with ``B`` the gradient's spread over clusters, each road
    run's DFT bin one cluster and the track runs' HAC long-run covariance
-   (:mod:`rideid.estimate.uncertainty`).
+   (:mod:`rideid.estimate.fit.uncertainty`).
    A channel without signal on a run (RMS below setting ``roadfit.signal_floor`` of its kind's
    largest: a roll rate on a washboard, a dead sensor) is left out of that run's fit and named in
    ``roads.<run>.channels_left_out``: the fit weights each channel by 1 / its RMS, and rounding must not
    become the heaviest channel.
 4. *Road.* Each road run's road under both wheel paths
-   (:func:`rideid.estimate.roadfit.road`), written as ``road/<run>.csv``,
+   (:func:`rideid.estimate.problem.roadfit.road`), written as ``road/<run>.csv``,
    and its ISO 8608 class (:func:`rideid.model.roads.iso8608_class`).
 
 Declared sensor filters (SPEC §11 ``highpass``, ``lowpass``) pass into the projection: each filtered channel
 times its filter's response, the filters' states at the first sample estimated with the car's
-(:func:`rideid.estimate.roadfit.with_sensors`; module docstring there). A coupling that is not declared gets
-no hint on an unknown road (:func:`rideid.estimate.sensor_check.coupling_hints` compares a simulation in the
+(:func:`rideid.estimate.problem.roadfit.with_sensors`; module docstring there). A coupling that is not declared gets
+no hint on an unknown road (:func:`rideid.estimate.assess.sensor_check.coupling_hints` compares a simulation in the
 time domain); on tracks as built the hints of the fit on the tracks as drawn are kept, with a note.
 
 The model: linear (the twelve, anti-roll bars, tire damping, CG height).
@@ -45,7 +45,7 @@ car: such a model with an unknown-road run is refused. ``auto`` fits the
 twelve plus the dataset's ``[model]`` groups (model choice is not run on
 unknown roads) and says so in ``result.json`` (``model.note``). The
 adequacy verdict covers the track runs only; road runs are listed as not
-assessed. The result's cost is the one of :mod:`rideid.estimate.cost` on every run, equal weights: on a
+assessed. The result's cost is the one of :mod:`rideid.estimate.problem.cost` on every run, equal weights: on a
 road run each used channel's squared error at the estimated road over its measured energy
 (:func:`road_run_error`).
 """
@@ -58,22 +58,23 @@ from dataclasses import replace
 import numpy as np
 from scipy.optimize import OptimizeResult, least_squares
 
-from ..profiling import stage
-from ..settings import defaults, legacy_names
-from ..data.schema import NONLINEAR_GROUPS
-from ..errors import ArgumentError, DataError
-from ..model.batch import single_threaded_blas, thread_map, thread_map_rows
-from ..model.equations import CHANNELS, modal_summary
-from ..model.params import ALL_NAMES
-from ..model.roads import iso8608_class
-from . import asbuilt, roadfit
-from .adequacy import ADVICE, advise, assess as assess_runs
-from .cost import CostFunction, ParameterSpace, channel_weights, refuse_unsupported_groups
+from ...profiling import stage
+from ...settings import defaults, legacy_names
+from ...data.schema import NONLINEAR_GROUPS
+from ...errors import ArgumentError, DataError
+from ...model.batch import single_threaded_blas, thread_map, thread_map_rows
+from ...model.equations import CHANNELS, modal_summary
+from ...model.params import ALL_NAMES
+from ...model.roads import iso8608_class
+from ..problem import asbuilt
+from ..problem import roadfit
+from ..assess.adequacy import ADVICE, advise, assess as assess_runs
+from ..problem.cost import CostFunction, ParameterSpace, channel_weights, refuse_unsupported_groups
 from .identify import (DEFAULT_GENERATIONS, DEFAULT_POPULATION, identify as identify_model, mark_bounds,
                        mode_restart, model_extensions, parameter_detail, relative_spread, restart_record)
 from .jade import JadeSolver, make_rng, stop_requested
-from .result import History, IdentificationResult
-from .sensor_check import road_coupling_hints
+from ..result import History, IdentificationResult
+from ..assess.sensor_check import road_coupling_hints
 from .uncertainty import andrews_bandwidth, estimate_covariance, long_run_covariance, run_scores
 
 #: ``tracks``: each declared track fitted as built (the default: the drawing is the nominal shape, SPEC §11) or
@@ -113,7 +114,7 @@ def run_speed(ds, run) -> float:
 
 
 def prepare_road_runs(ds, extensions=()) -> list:
-    """:class:`rideid.estimate.roadfit.RoadRun` of each run fitted with its road projected out
+    """:class:`rideid.estimate.problem.roadfit.RoadRun` of each run fitted with its road projected out
     (:func:`unknown_road_runs` of the model's ``extensions``)."""
     out = []
     for r in unknown_road_runs(ds, extensions):
@@ -125,8 +126,8 @@ def prepare_road_runs(ds, extensions=()) -> list:
 
 
 def road_run_error(rr, y, fitted) -> float:
-    """``E_r`` of :mod:`rideid.estimate.cost` for an unknown-road run: each used channel's squared error at
-    the estimated road (:func:`rideid.estimate.roadfit.fitted_channels`) over its measured energy (floored as
+    """``E_r`` of :mod:`rideid.estimate.problem.cost` for an unknown-road run: each used channel's squared error at
+    the estimated road (:func:`rideid.estimate.problem.roadfit.fitted_channels`) over its measured energy (floored as
     there), averaged over the channels the fit used; so the result's cost has the one meaning on every run
     (the polish's own objective, each block weighted by its noise, is about 1 by construction)."""
     ym = np.full(np.shape(y), np.nan)
@@ -286,7 +287,7 @@ class _Problem:
 
     def reweight(self, z):
         """Each block divided by its own RMS at ``z``; a run on a track as built is already divided by its noise
-        level, bin by bin (:mod:`rideid.estimate.asbuilt`), and keeps its weight 1."""
+        level, bin by bin (:mod:`rideid.estimate.problem.asbuilt`), and keeps its weight 1."""
         b = self.blocks(z)
         jobs = ([] if self.cf is None else [None]) + list(self.rruns)
         self.scale = np.array([1.0 if isinstance(j, asbuilt.TrackRun) else 1.0 / max(np.sqrt(np.mean(r ** 2)), 1e-300)
@@ -297,7 +298,7 @@ class _Problem:
 
 def _motion_weights(prob, z, keys) -> dict:
     """Each run's (block index in ``prob.rruns``) residual level at the car ``z``: the RMS of its as-built block,
-    the weight its motion priors' rows take (:meth:`rideid.estimate.asbuilt.MotionPrior.rows`)."""
+    the weight its motion priors' rows take (:meth:`rideid.estimate.problem.asbuilt.MotionPrior.rows`)."""
     P = prob.space.full(prob.x(z)[None])[0]
     return {k: float(np.sqrt(np.mean(asbuilt.residuals(P, prob.geom, prob.rruns[k]) ** 2))) for k in keys}
 
@@ -306,11 +307,11 @@ def _motion_weights(prob, z, keys) -> dict:
 def _joint_solve(prob, z, along: dict, ds, max_nfev: int, priors: dict | None = None):
     """Least squares of the car ``z`` (v units) together with the speed and the start of each run on a track as
     built (``along``: block index in ``prob.rruns`` -> run; the drawing moved by
-    :func:`rideid.estimate.asbuilt.moved`, their unevenness priors as they are), each set-up value's prior
-    (``priors``: block index -> :class:`rideid.estimate.asbuilt.MotionPrior`, SPEC §13) a residual block of the
+    :func:`rideid.estimate.problem.asbuilt.moved`, their unevenness priors as they are), each set-up value's prior
+    (``priors``: block index -> :class:`rideid.estimate.problem.asbuilt.MotionPrior`, SPEC §13) a residual block of the
     same solve, weighted by its std against the run's own residual level.
 
-    Placed by :func:`rideid.estimate.asbuilt.align_motion` at one car and then held, a run's speed follows that
+    Placed by :func:`rideid.estimate.problem.asbuilt.align_motion` at one car and then held, a run's speed follows that
     car, and the car the speed: on the all-realities case without an engine (seed 5, model base) the speeds
     ended 0.03-0.07 % low (4-8 of their standard errors) and the unsprung masses +3.5-4.2 % (4 std_robust);
     with the speed declared instead, +0.8 %. Solved together, both go to their joint minimum (measured:
@@ -350,12 +351,12 @@ def _joint_solve(prob, z, along: dict, ds, max_nfev: int, priors: dict | None = 
 @stage("error bars with motion")
 def _with_motion(prob, z, H, Ja, S, s2, trs, along, ds, geom, priors: dict | None = None):
     """The error bars with the speed and the start of each run on a track as built (placed by
-    :func:`rideid.estimate.asbuilt.align_motion`, solved with the car by :func:`_joint_solve`, then held for the
+    :func:`rideid.estimate.problem.asbuilt.align_motion`, solved with the car by :func:`_joint_solve`, then held for the
     Newton steps and the Hessian) as nuisance parameters of the same sandwich: their residual columns
-    (:func:`rideid.estimate.asbuilt.motion_jacobian`) join the car's, the bread
+    (:func:`rideid.estimate.problem.asbuilt.motion_jacobian`) join the car's, the bread
     ``[[H, Ja^T Jm], [Jm^T Ja, Jm^T Jm + Jp^T Jp]]`` (the car's block the true Hessian, the rest Gauss-Newton: the
     drawing's inputs are not projected, so ``J^T J`` is their curvature; ``Jp`` the set-up priors' rows, SPEC §13,
-    ``priors``: index in ``trs`` -> :class:`rideid.estimate.asbuilt.MotionPrior`), the meat the runs' white meat
+    ``priors``: index in ``trs`` -> :class:`rideid.estimate.problem.asbuilt.MotionPrior`), the meat the runs' white meat
     over both (the priors' rows as independent observations of the same level); the car's block of the inverse is
     the car's covariance with the motion marginalised.
 
@@ -409,9 +410,9 @@ def motion_record(fitted: dict, prior, tr) -> dict:
     sentences naming what the data moved beyond setting ``anyroad.motion_named`` prior std; with the older keys of a
     run along a speed channel (``speed_m_s``, ``start_shift_s``, their ``_std``, ``speed_channel_mean_m_s``).
 
-    ``fitted``: :func:`rideid.estimate.asbuilt.align_motion`'s record with the solve's speed, shift and their
-    standard errors; ``prior``: the run's :class:`rideid.estimate.asbuilt.MotionPrior`; ``tr``: its
-    :class:`rideid.estimate.asbuilt.TrackRun` as solved."""
+    ``fitted``: :func:`rideid.estimate.problem.asbuilt.align_motion`'s record with the solve's speed, shift and their
+    standard errors; ``prior``: the run's :class:`rideid.estimate.problem.asbuilt.MotionPrior`; ``tr``: its
+    :class:`rideid.estimate.problem.asbuilt.TrackRun` as solved."""
     out = {k: v for k, v in fitted.items() if k in ("speed_m_s", "start_shift_s", "speed_std_m_s",
                                                     "start_shift_std_s")}
     if prior.speed is None:
@@ -558,7 +559,7 @@ def speed_wander(ds, run) -> float | None:
 
 
 def as_built_runs(ds, ext, tracks: str = "as-built") -> tuple[list, dict]:
-    """The runs on declared tracks fitted as built (SPEC §11, :mod:`rideid.estimate.asbuilt`), and those taken
+    """The runs on declared tracks fitted as built (SPEC §11, :mod:`rideid.estimate.problem.asbuilt`), and those taken
     as drawn with why: run id -> one line. As built needs a linear car (``ext`` without damper curves or bump
     stops), the eight accelerometers, the roll rate and a speed held (a declared constant speed, or a speed or
     distance channel that wanders by at most setting ``anyroad.held_speed``, :func:`speed_wander`);
@@ -611,7 +612,7 @@ def identify_any_road(ds, **kw) -> IdentificationResult:
 
 def _carry_sensor_hints(adequacy, start_result):
     """``adequacy`` of the as-built stage with the hints of an undeclared AC coupling that the fit on the tracks as
-    drawn gave (:func:`rideid.estimate.identify.sensor_notes`: a time-domain comparison of the car's channel,
+    drawn gave (:func:`rideid.estimate.fit.identify.sensor_notes`: a time-domain comparison of the car's channel,
     high-passed, with the data), said to be from there, and, when not adequate, first in the advice. They are
     not computed again at the estimated road: there the model's channels are the data less the fit band's
     residual, and high-passing them says nothing about the sensor. Runs on unknown roads get the road fit's own
@@ -629,7 +630,7 @@ def _carry_sensor_hints(adequacy, start_result):
 def _tracks_block(ds, trs, skipped, P, geom, motion=None):
     """result.json ``tracks``: per track what the as-built fit learnt (amplitude factor, unevenness RMS), per
     run and over the track's runs; a run taken as drawn says why; a run along a speed channel its speed and
-    start as fitted (``motion``: run id -> :func:`rideid.estimate.asbuilt.align_motion`'s record)."""
+    start as fitted (``motion``: run id -> :func:`rideid.estimate.problem.asbuilt.align_motion`'s record)."""
     out = {}
     for tr in trs:
         fit = asbuilt.solve(P, geom, tr, alpha_std=True)
@@ -650,7 +651,7 @@ def _tracks_block(ds, trs, skipped, P, geom, motion=None):
             motion[tr.run_id] = with_size(motion[tr.run_id], fit, tr, ds)
             rec["runs"][tr.run_id]["motion"] = dict(motion[tr.run_id], note=(
                 "the run taken at a constant speed, placed with its start on the track as built "
-                "(rideid.estimate.asbuilt.align_motion), then both solved with the car (anyroad._joint_solve), a "
+                "(estimate.problem.asbuilt.align_motion), then both solved with the car (anyroad._joint_solve), a "
                 "declared speed and a given start as priors (SPEC §13: declared ± prior_std, the default width "
                 "docs/formats.md); speed, start: the estimate, its std, the declared value; start_shift_s: the "
                 "start's change from the one read; the std are in the car's error bars as the budget's "
@@ -664,7 +665,7 @@ def _tracks_block(ds, trs, skipped, P, geom, motion=None):
                                             / len(runs))
         for key in ("unevenness_rms_m", "unevenness_rms_surface_m"):
             rec[key] = float(np.sqrt(np.mean(np.square([r[key] for r in runs]))))
-        rec["method"] = f"as built: {how[trs[0].mode]} (rideid.estimate.asbuilt)"
+        rec["method"] = f"as built: {how[trs[0].mode]} (rideid.estimate.problem.asbuilt)"
         rec["note"] = ("amplitude_factor: the road over its drawing, each run's and their mean (amplitude_factor_std: "
                        "its standard error at the car, the prior's opened bins make it large); unevenness_rms_m: the "
                        "RMS of what the drawing times that factor leaves, one wheel path, over the wavelengths of "
@@ -699,9 +700,10 @@ def _with_hints(adequacy, hints, note=ROAD_HINTS_NOTE):
 
 
 def _road_sensor_hints(P, geom, rruns, ds, threshold=None):
-    """The coupling hints of the road fit (:func:`rideid.estimate.sensor_check.road_coupling_hints`) on road-fitted
-    runs ``rruns`` (:class:`rideid.estimate.roadfit.RoadRun`). On tracks as built they are asked when the fit on
-    the tracks as drawn gave none: there an undeclared coupling is taken up by the road and the springs (the
+    """The coupling hints of the road fit
+    (:func:`~rideid.estimate.assess.sensor_check.road_coupling_hints`) on road-fitted runs ``rruns``
+    (:class:`rideid.estimate.problem.roadfit.RoadRun`). On tracks as built they are asked when the fit on the tracks
+    as drawn gave none: there an undeclared coupling is taken up by the road and the springs (the
     SUV's hubs coupled at 0.5 Hz, not declared: k_sf +21 %, 37 std_total, which the residual test at the estimated
     road did not see). On unknown roads (no as-drawn fit, no time-domain hint) the road takes up part of a
     coupling's signature, so a smaller cut names it (``threshold`` =
@@ -777,7 +779,7 @@ def _identify_any_road(ds, *, rng=None, seed=None, population=None, generations=
     std = np.full(len(space.names), np.nan)
     cov = np.full((len(space.names),) * 2, np.nan)
 
-    def priors(zz):  # the as-built runs' noise and unevenness levels at the car zz (rideid.estimate.asbuilt)
+    def priors(zz):  # the as-built runs' noise and unevenness levels at the car zz (rideid.estimate.problem.asbuilt)
         Pz = space.full(prob.x(zz)[None])[0]
         for tr, pr in zip(trs, thread_map(lambda tr: asbuilt.estimate_prior(Pz, geom, tr), trs, "rideid-priors")):
             tr.prior = pr
@@ -869,8 +871,8 @@ def _identify_any_road(ds, *, rng=None, seed=None, population=None, generations=
                 **({} if not along else {"covariance_robust_motion_fixed": cov_fixed.tolist()}),
                 "method": "joint: " + ", ".join(
                     ([] if not rruns else ["road runs by frequency-domain variable projection "
-                                           "(rideid.estimate.roadfit)"])
-                    + ([] if not trs else ["runs on tracks as built (rideid.estimate.asbuilt)"])
+                                           "(rideid.estimate.problem.roadfit)"])
+                    + ([] if not trs else ["runs on tracks as built (rideid.estimate.problem.asbuilt)"])
                     + ([] if cf is None else ["runs on tracks as drawn in the time domain"]))}
         nfev += int(sol.nfev) * (n + 1)
     x = prob.x(z)
@@ -878,7 +880,7 @@ def _identify_any_road(ds, *, rng=None, seed=None, population=None, generations=
     robust = estimate_covariance(info, space, x)
     details = {nme: parameter_detail(space, P, nme, std, cov, robust) for nme in space.reported_names}
     if info is not None and "covariance_robust_motion_fixed" in info:
-        # the speed's and start's share of std_robust (the budget's "speed and start", rideid.estimate.budget)
+        # the speed's and start's share of std_robust (the budget's "speed and start", rideid.estimate.fit.budget)
         fixed = estimate_covariance(dict(info, covariance_robust=info["covariance_robust_motion_fixed"]), space, x)
         for nme, d in details.items():
             a, b = d.get("std_robust"), (None if nme in space.fixed else fixed.std_robust(nme))

@@ -45,17 +45,17 @@ import threading
 
 import numpy as np
 
-from ..settings import defaults, legacy_names
-from ..data.dataset import Dataset, check_known_consistent, lead_ins, prepare_inputs, scale_anchor
-from ..errors import ArgumentError, DataError
-from ..model.equations import CHANNEL_KIND, CHANNELS
-from ..model.nonlinear import (BUMP_STOP_NAMES, DEFAULT_KNOTS, NonlinearLayout, NonlinearSimulator, Pin,
+from ...settings import defaults, legacy_names
+from ...data.dataset import Dataset, check_known_consistent, lead_ins, prepare_inputs, scale_anchor
+from ...errors import ArgumentError, DataError
+from ...model.equations import CHANNEL_KIND, CHANNELS
+from ...model.nonlinear import (BUMP_STOP_NAMES, DEFAULT_KNOTS, NonlinearLayout, NonlinearSimulator, Pin,
                                curve_names, damper_force)
-from ..model.sensors import SensorChain, SensorSimulator
-from ..model.simulator import Simulator
-from ..model.params import (ALL_NAMES, EXT_NAMES, GROUPS, INDEX, MASS_COUNT, NAMES, POWERTRAIN_NAMES, SCALE_FREE,
+from ...model.sensors import SensorChain, SensorSimulator
+from ...model.simulator import Simulator
+from ...model.params import (ALL_NAMES, EXT_NAMES, GROUPS, INDEX, MASS_COUNT, NAMES, POWERTRAIN_NAMES, SCALE_FREE,
                             SIGNED, default_bounds, nominal_car, powertrain_fits, total_mass)
-from ..data.schema import NONLINEAR_GROUPS
+from ...data.schema import NONLINEAR_GROUPS
 
 
 #: the SPEC §8 groups this version identifies
@@ -131,7 +131,7 @@ class ParameterSpace:
         (default :data:`rideid.model.nonlinear.DEFAULT_KNOTS`).
     frozen : sequence of str, optional
         Knot forces that no run excites: derived (the last excited segment's
-        slope continued), not free (:func:`rideid.estimate.dampers.knot_excitation`).
+        slope continued), not free (:func:`rideid.estimate.problem.dampers.knot_excitation`).
 
     Attributes
     ----------

@@ -35,8 +35,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..settings import defaults, legacy_names
-from ..data.dataset import Dataset
+from ...settings import defaults, legacy_names
+from ...data.dataset import Dataset
 
 BODY = ("body_az_fl", "body_az_fr", "body_az_rl", "body_az_rr")
 GYROS = ("pitch_rate", "roll_rate")

@@ -4,10 +4,10 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from ..data.schema import load_truth, load_truth_dampers
-from ..errors import ArgumentError
-from ..settings import defaults, legacy_names
-from ..model.params import ALL_NAMES, EXT_NAMES
+from ...data.schema import load_truth, load_truth_dampers
+from ...errors import ArgumentError
+from ...settings import defaults, legacy_names
+from ...model.params import ALL_NAMES, EXT_NAMES
 
 AXLES = (("front", "f", "c_sf"), ("rear", "r", "c_sr"))
 #: a knot force's status when the truth's damper curves were not given: shown, not judged

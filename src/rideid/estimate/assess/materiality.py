@@ -1,6 +1,6 @@
 """Does the structure in the residuals matter? (SPEC §12 materiality)
 
-The adequacy test (:mod:`rideid.estimate.adequacy`) asks whether the road
+The adequacy test (:mod:`rideid.estimate.assess.adequacy`) asks whether the road
 input explains part of a residual. With long, clean records it always will
 somewhere on a real car (large-angle kinematics on an 80 mm twist, a
 bushing's stiffening), and what a user needs to know is whether that
@@ -36,10 +36,10 @@ from dataclasses import replace
 
 import numpy as np
 
-from ..profiling import stage
-from ..settings import defaults, legacy_names
-from .budget import fit_cost
-from .identify import polish_fixed_starts
+from ...profiling import stage
+from ...settings import defaults, legacy_names
+from ..fit.budget import fit_cost
+from ..fit.identify import polish_fixed_starts
 
 
 METHOD = ("refit without the flagged run/channel pairs (weights 0; starts and distance corrections as identified; "
@@ -73,7 +73,7 @@ def weigh(cf, x, details: dict, adequacy: dict, polish) -> dict:
     details : dict
         The result's ``details`` (their ``std_total`` / ``std_robust``).
     adequacy : dict
-        The residual test's record (:func:`rideid.estimate.adequacy.assess`) with structure.
+        The residual test's record (:func:`rideid.estimate.assess.adequacy.assess`) with structure.
     polish : callable
         ``polish(cf, x0) -> (x, std)``: the least-squares polish with fixed starts.
 
@@ -135,7 +135,7 @@ def verdict(adequacy: dict, record: dict) -> dict:
     if adequacy.get("sensors_suspect"):  # the sensor chain found wrong stays the first reason
         reasons = [adequacy["reasons"][0], first] + list(adequacy.get("reasons", [])[1:])
     # structure that does not matter clears the structure, not a sensor chain the road fit found wrong
-    # (rideid.estimate.anyroad: an undeclared AC coupling, ``sensors_suspect``)
+    # (rideid.estimate.fit.anyroad: an undeclared AC coupling, ``sensors_suspect``)
     return {**adequacy, "adequate": not record["material"] and not adequacy.get("sensors_suspect"),
             "structure": True, "reasons": reasons, "materiality": record}
 

@@ -13,7 +13,7 @@ Criterion: a robust Wald information criterion, computed from the full fit,
 
 with ``theta_o`` the full model's estimates of the extension parameters *not*
 in M, ``Cov_robust`` their HAC covariance (``std_robust``,
-:mod:`rideid.estimate.uncertainty`) and ``k(M)`` the number of free extension
+:mod:`rideid.estimate.fit.uncertainty`) and ``k(M)`` the number of free extension
 parameters in M. The smallest C wins. ``W`` asks whether the omitted
 parameters are zero with an error bar that holds under coloured,
 cross-channel-correlated noise, so the criterion stays honest where a
@@ -21,7 +21,7 @@ likelihood-ratio test or an AIC/BIC on the raw residual sum of squares (which
 count every sample as independent) would add groups the data do not support.
 A candidate is eligible only if it fits materially better than every
 candidate it contains (:func:`fits_better`: a cost lower by at least
-:func:`~rideid.estimate.adequacy.min_improvement`): on noise-free data, where every standard error is
+:func:`~rideid.estimate.assess.adequacy.min_improvement`): on noise-free data, where every standard error is
 at rounding level, this keeps groups estimated at rounding-level values out.
 ``penalty()`` = half the 99.9 % point of chi-square(2): a group of two
 parameters enters when its Wald statistic exceeds 13.8, i.e. a test at
@@ -54,26 +54,26 @@ from dataclasses import replace
 import numpy as np
 from scipy import special
 
-from ..profiling import stage
-from ..settings import defaults, legacy_names
-from ..model.params import POWERTRAIN_NAMES
-from ..model.params import SUSPENSION_GROUPS as GROUPS
-from .budget import with_budget
-from .. import settings
-from .adequacy import advise, assess_fit, gross_misfit, run_errors
-from .records import assessments_of, plan_of
-from .adequacy import min_improvement as least_improvement
-from .materiality import weigh_result
-from .small_angle import small_angle
-from .identify import (DEFAULT_GENERATIONS, DEFAULT_POPULATION, identify as identify_model, model_extensions,
+from ...profiling import stage
+from ...settings import defaults, legacy_names
+from ...model.params import POWERTRAIN_NAMES
+from ...model.params import SUSPENSION_GROUPS as GROUPS
+from ..fit.budget import with_budget
+from ... import settings
+from ..assess.adequacy import advise, assess_fit, gross_misfit, run_errors
+from ..records import assessments_of, plan_of
+from ..assess.adequacy import min_improvement as least_improvement
+from ..assess.materiality import weigh_result
+from ..assess.small_angle import small_angle
+from ..fit.identify import (DEFAULT_GENERATIONS, DEFAULT_POPULATION, identify as identify_model, model_extensions,
                        sensor_notes, warn_bounds)
-from .anyroad import TRACK_OPTIONS, as_built_runs, identify_any_road, unknown_road_runs
-from ..model.batch import single_threaded_blas, thread_map
-from .cost import IDENTIFIABLE_GROUPS, CostFunction, ParameterSpace, refuse_unsupported_groups
-from ..errors import ArgumentError
-from ..model.simulator import Simulator
-from ..data.checks import bound_findings
-from ..data.schema import NONLINEAR_GROUPS
+from ..fit.anyroad import TRACK_OPTIONS, as_built_runs, identify_any_road, unknown_road_runs
+from ...model.batch import single_threaded_blas, thread_map
+from ..problem.cost import IDENTIFIABLE_GROUPS, CostFunction, ParameterSpace, refuse_unsupported_groups
+from ...errors import ArgumentError
+from ...model.simulator import Simulator
+from ...data.checks import bound_findings
+from ...data.schema import NONLINEAR_GROUPS
 
 
 
@@ -154,7 +154,7 @@ IDENTIFIABLE_ORDER = tuple(GROUPS) + (CURVES_GROUP,)
 
 def _key(groups) -> tuple:
     """A candidate's key: its groups in the canonical order of every model (SPEC §6's, the powertrain, the damper
-    curves, the bump stops: :data:`rideid.estimate.cost.IDENTIFIABLE_GROUPS`, as a result's ``extensions``)."""
+    curves, the bump stops: :data:`rideid.estimate.problem.cost.IDENTIFIABLE_GROUPS`, as a result's ``extensions``)."""
     return tuple(g for g in IDENTIFIABLE_GROUPS if g in set(groups))
 
 
@@ -184,7 +184,7 @@ def fits_better(extensions, costs: dict, min_improvement: float | None = None) -
     costs : dict
         candidate (tuple of groups) -> its cost.
     min_improvement : float, optional
-        Default :func:`rideid.estimate.adequacy.min_improvement` (the setting ``adequacy.min_relative`` squared).
+        Default :func:`rideid.estimate.assess.adequacy.min_improvement` (the setting ``adequacy.min_relative`` squared).
     """
     min_improvement = least_improvement() if min_improvement is None else min_improvement
     mine = costs[tuple(extensions)]
@@ -195,7 +195,7 @@ def fits_better(extensions, costs: dict, min_improvement: float | None = None) -
 def identify_auto(ds, *, rng=None, seed=None, callback=None, maps=None, simulator=None, **kw):
     """:func:`rideid.identify` with ``model="auto"`` (module docstring).
 
-    Returns the chosen candidate's :class:`~rideid.estimate.identify.IdentificationResult`
+    Returns the chosen candidate's :class:`~rideid.estimate.fit.identify.IdentificationResult`
     whose ``model`` holds ``extensions``, ``selection = "auto"``, the
     criterion's description and every candidate (``extensions``, ``cost``,
     ``criterion``, ``wald``, ``adequate``, ``parameters``, ``std_robust``).
@@ -676,10 +676,10 @@ def identify(ds, *, model=None, rng=None, seed=None, population: int = DEFAULT_P
     """Estimate the ride parameters of a dataset, choosing the model as ``rideid identify`` does (SPEC §5).
 
     The dispatch of the command line: runs on unknown roads (SPEC §9) are
-    fitted with the road projected out (:mod:`rideid.estimate.anyroad`);
+    fitted with the road projected out (:mod:`rideid.estimate.fit.anyroad`);
     ``model="auto"`` fits the candidate models and keeps the one the data
     support (:func:`identify_auto`); any other model is fitted as given
-    (:func:`rideid.estimate.identify.identify`). The result carries the
+    (:func:`rideid.estimate.fit.identify.identify`). The result carries the
     dataset's vehicle (for ``rideid export``).
 
     Parameters
@@ -719,7 +719,7 @@ def identify(ds, *, model=None, rng=None, seed=None, population: int = DEFAULT_P
     tracks : {"as-built", "as-drawn"}
         SPEC §11: each declared track is the nominal shape of the road the
         car rolled over, its amplitude factor and unevenness fitted with the
-        car (:mod:`rideid.estimate.asbuilt`; a linear car with the eight
+        car (:mod:`rideid.estimate.problem.asbuilt`; a linear car with the eight
         accelerometers at a speed held, else the track is taken as
         drawn), or every track exactly as drawn.
 
@@ -767,7 +767,7 @@ def _identify(ds, *, model, rng, seed, population, generations, weights, polish,
     # a linear one projects its road out with the unknown roads' (unknown_road_runs)
     asked = (cost.space.extensions if cost is not None else
              () if isinstance(model, str) and model == "auto" else model_extensions(ds, model))
-    if cost is None and unknown_road_runs(ds, asked):  # SPEC §9: the road projected out (rideid.estimate.anyroad)
+    if cost is None and unknown_road_runs(ds, asked):  # SPEC §9: the road projected out (rideid.estimate.fit.anyroad)
         res = identify_any_road(ds, model=model, start=start, simulator=simulator, tracks=tracks, **common)
     elif isinstance(model, str) and model == "auto" and cost is None:
         if start is not None:
@@ -781,7 +781,7 @@ def _identify(ds, *, model, rng, seed, population, generations, weights, polish,
     drawn_fits = res.adequacy is None or bool(res.adequacy.get("adequate"))
     if cost is None and polish and not drawn_fits and not unknown_road_runs(ds, chosen) \
             and as_built_runs(ds, chosen, tracks)[0]:
-        # SPEC §11: the tracks as built, from the car fitted on them as drawn (rideid.estimate.asbuilt), when the
+        # SPEC §11: the tracks as built, from the car fitted on them as drawn (estimate.problem.asbuilt), when the
         # drawing taken as exact leaves structure in the residuals (a drawing the data do not fault is kept: on an
         # exact track the as-built stage would only cost time)
         res = identify_any_road(ds, start_result=res, simulator=simulator, tracks=tracks, **common)
@@ -806,7 +806,7 @@ def _identify(ds, *, model, rng, seed, population, generations, weights, polish,
 def _drawing_caveat(ds, res, chosen, tracks):
     """``res`` with ``adequacy.tracks_caveat`` when the verdict is adequate only because the structure the
     residual test found, in setting ``model_choice.drawing_runs`` or more runs, was weighed immaterial
-    (:mod:`rideid.estimate.materiality`) while the tracks stayed as drawn: the as-built stage (SPEC §11) could
+    (:mod:`rideid.estimate.assess.materiality`) while the tracks stayed as drawn: the as-built stage (SPEC §11) could
     not run or was rejected. Leaving the flagged pairs out cannot show a drawing error, which biases every run
     and channel alike: on the all-realities case (tracks 4 % off their drawing, a GPS speed channel) the
     weighing called 13 flagged pairs immaterial while k_tf was 12 % off, 2.8 std_total
@@ -839,7 +839,7 @@ def _tracks_before_curves(ds, res, chosen, simulator, tracks, common):
     """``--model auto`` kept a nonlinear group (damper curves, bump stops) on tracks taken as drawn, and the fit
     is still not adequate. A track built off its drawing leaves road-driven structure in every run that a damper
     curve's extra freedom partly absorbs (measured: a linear car on tracks 4 % off their drawing, auto kept curves
-    bent by 8 % and stayed not adequate), and the tracks as built need a linear car (rideid.estimate.asbuilt). So
+    bent by 8 % and stayed not adequate), and the tracks as built need a linear car (estimate.problem.asbuilt). So
     the linear part of the pick, polished from its own candidate, is fitted on the tracks as built; when that is
     adequate the drawing, not the dampers, was what the model missed, and that result is returned with the model
     choice's record and a note saying so. Otherwise ``res`` stands, with a line saying what was tried."""

@@ -4,14 +4,14 @@ A strategy object with one rule, :meth:`TrackWeighting.update`, applied by
 the search after every generation: ``fixed`` keeps equal weights,
 ``adaptive`` moves them to the runs that carry most information on the
 parameters the population still disagrees on, through the parameter ->
-track map ``M`` (:mod:`rideid.estimate.sensitivity`).
+track map ``M`` (:mod:`rideid.estimate.problem.sensitivity`).
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-from ..errors import ArgumentError
+from ...errors import ArgumentError
 
 
 def normalised_spread(X) -> np.ndarray:

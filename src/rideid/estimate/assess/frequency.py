@@ -42,12 +42,12 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from ..data.dataset import Dataset, lead_ins, prepare_inputs
-from ..errors import ArgumentError, DataError
-from ..model.frf import INPUTS, OUTPUT_UNITS, OUTPUTS, SEGMENT_S, default_frequencies, frequency_response as _kernel
-from ..model.equations import CHANNELS
-from ..model.frf import h1_estimate
-from ..model.params import ALL_NAMES, SCALE_FREE, Geometry
+from ...data.dataset import Dataset, lead_ins, prepare_inputs
+from ...errors import ArgumentError, DataError
+from ...model.frf import INPUTS, OUTPUT_UNITS, OUTPUTS, SEGMENT_S, default_frequencies, frequency_response as _kernel
+from ...model.equations import CHANNELS
+from ...model.frf import h1_estimate
+from ...model.params import ALL_NAMES, SCALE_FREE, Geometry
 
 #: Relative step of the central differences of ``|H|`` in each parameter.
 STEP = 1e-5

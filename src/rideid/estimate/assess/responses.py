@@ -15,11 +15,11 @@ from dataclasses import replace
 
 import numpy as np
 
-from ..data.scenario import LIFT_OFF_RHO
-from ..model.params import ALL_NAMES, as_vector
-from ..model.simulator import Simulator
-from .cost import CostFunction, ParameterSpace, bind_runs
-from .dampers import suspension_velocities_by_run
+from ...data.scenario import LIFT_OFF_RHO
+from ...model.params import ALL_NAMES, as_vector
+from ...model.simulator import Simulator
+from ..problem.cost import CostFunction, ParameterSpace, bind_runs
+from ..problem.dampers import suspension_velocities_by_run
 
 
 def simulate_runs(dataset, parameters: dict, simulator: Simulator | None = None) -> dict:
@@ -50,7 +50,7 @@ def curve_responses(result, dataset, simulator: Simulator | None = None) -> dict
 def suspension_velocities(cf: CostFunction, P) -> dict:
     """Run id -> ``(front, rear)`` suspension velocities (m/s, compression +, both corners of the axle) of
     car ``P`` (a full row of ``cf.space``, with damper curves) on each run of ``cf``
-    (:func:`rideid.estimate.dampers.suspension_velocities_by_run`, the excitation check's, at the looser
+    (:func:`rideid.estimate.problem.dampers.suspension_velocities_by_run`, the excitation check's, at the looser
     sub-step bound :data:`rideid.data.scenario.LIFT_OFF_RHO`: a histogram needs no more)."""
     return {rid: v for rid, v in zip(cf.run_ids, suspension_velocities_by_run(cf, P, rho=LIFT_OFF_RHO))}
 

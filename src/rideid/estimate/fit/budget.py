@@ -20,7 +20,7 @@ at the optimum: the fit solves ``J^T r(theta, u) = 0``, so
 (the Gauss–Newton Hessian ``J^T J`` the polish already uses; its second-order
 term ``sum r d2r`` is dropped as everywhere in the polish's uncertainty).
 ``J`` is differenced at the optimum as the polish does it (bound-normalised,
-pseudo-inverse by SVD: :func:`rideid.estimate.uncertainty.normal_inverse`),
+pseudo-inverse by SVD: :func:`rideid.estimate.fit.uncertainty.normal_inverse`),
 a parameter held at a search bound is held here too, and ``dr/du``:
 
 - a sensor's sensitivity: the data of channel ``c`` are ``(1 + eps) y``, so
@@ -53,14 +53,14 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from ..profiling import stage
-from ..settings import defaults, legacy_names
-from ..data.dataset import Dataset
-from ..errors import ArgumentError, DataError
-from ..model.equations import CHANNELS
-from ..model.params import EXTRA_KNOWN, MASS_COUNT, UNITS
-from .cost import BUMP_UNITS, CostFunction, ParameterSpace
-from .redundancy import gain_notes, rigid_body_gains
+from ...profiling import stage
+from ...settings import defaults, legacy_names
+from ...data.dataset import Dataset
+from ...errors import ArgumentError, DataError
+from ...model.equations import CHANNELS
+from ...model.params import EXTRA_KNOWN, MASS_COUNT, UNITS
+from ..problem.cost import BUMP_UNITS, CostFunction, ParameterSpace
+from ..problem.redundancy import gain_notes, rigid_body_gains
 from .uncertainty import normal_inverse
 
 #: the budget's entry for ``std_robust`` (the sensor noise, through the HAC sandwich)
@@ -290,10 +290,10 @@ def budget_entries(details: dict, names, gradients: dict, inputs) -> dict:
             e["std_total"] = None
             e["budget"] = None
         else:
-            # the runs' disagreement beyond their noise is in std_robust (rideid.estimate.uncertainty
+            # the runs' disagreement beyond their noise is in std_robust (rideid.estimate.fit.uncertainty
             # between_runs_variance): shown as its own contribution
             between = float(e.get("std_between_runs") or 0.0)
-            # the speed and start fitted along a speed channel (rideid.estimate.anyroad) are in std_robust too
+            # the speed and start fitted along a speed channel (rideid.estimate.fit.anyroad) are in std_robust too
             motion = float(e.get("std_motion") or 0.0)
             parts = {STATISTICAL: float(np.sqrt(max(stat ** 2 - between ** 2 - motion ** 2, 0.0)))}
             if between > 0:
@@ -321,7 +321,7 @@ def fit_cost(ds: Dataset, res, simulator=None, cost: CostFunction | None = None)
         cf = cost
     else:
         ext = tuple((res.model or {}).get("extensions") or ())
-        # the knots the curves were fitted at: the dataset's, or the knee grid (rideid.estimate.dampers.KNEE_GRID)
+        # the knots the curves were fitted at: the dataset's, or the knee grid (problem.dampers.KNEE_GRID)
         knots = ([v for v in res.dampers["velocity"] if v > 0] if getattr(res, "dampers", None)
                  else ds.manifest.damper_knots)
         space = ParameterSpace(ds.known, ds.geometry, ds.manifest.bounds, extensions=ext, damper_knots=knots)
@@ -356,7 +356,7 @@ def with_budget(ds: Dataset, res, simulator=None, cost: CostFunction | None = No
              "anchor_exact": anchor is not None and not any(i.key == anchor and i.kind == "known" for i in inputs),
              "method": "none declared: std_total = std_robust" if not inputs else
              "first order (GUM): implicit-function sensitivities from the polish's Jacobian, in quadrature "
-             "with std_robust (rideid.estimate.budget)",
+             "with std_robust (rideid.estimate.fit.budget)",
              "not_propagated": []}
     notes = []
     if block["anchor_exact"]:
@@ -384,7 +384,7 @@ def with_budget(ds: Dataset, res, simulator=None, cost: CostFunction | None = No
             block["method"] = f"closed form of the scale anchor only ({why})"
             notes.append("std_total omits " + ", ".join(block["not_propagated"]) + ": not propagated on this "
                          "fit, so std_total is optimistic about them")
-    # what the data tell of the body sensors' gains themselves (rideid.estimate.redundancy): reported, and
+    # what the data tell of the body sensors' gains themselves (rideid.estimate.problem.redundancy): reported, and
     # a sensor that reads off by more than its declared sensitivity allows is named
     block["rigid_body"] = rigid_body_gains(ds)
     notes += gain_notes(block["rigid_body"], dict(getattr(ds.manifest, "sensitivity_std", {}) or {}))

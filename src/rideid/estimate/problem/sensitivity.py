@@ -27,14 +27,14 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..profiling import stage
-from ..settings import defaults, legacy_names
-from ..data.dataset import Dataset
-from ..data.scenario import scenario_run_input
-from ..errors import ArgumentError
-from ..model.batch import BatchSimulator
-from ..model.equations import CHANNEL_KIND, CHANNELS
-from ..model.params import ALL_NAMES, Geometry, as_vector
+from ...profiling import stage
+from ...settings import defaults, legacy_names
+from ...data.dataset import Dataset
+from ...data.scenario import scenario_run_input
+from ...errors import ArgumentError
+from ...model.batch import BatchSimulator
+from ...model.equations import CHANNEL_KIND, CHANNELS
+from ...model.params import ALL_NAMES, Geometry, as_vector
 from .cost import CostFunction
 
 P2R_STARS = (1.0, 5.0, 15.0)

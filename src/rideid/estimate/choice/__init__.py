@@ -1,0 +1,7 @@
+"""``--model auto``: the model choice as a loop over extensions of one problem.
+
+:mod:`~rideid.estimate.choice.model_choice` fits the base problem, extends it by one group at a time (anti-roll
+bars, tire damping, a powertrain, damper curves, bump stops), weighs each extension against the choice so far on
+its criterion and Wald statistic, weighs the linear groups again when a nonlinear one comes in, and hands the
+kept model to the assessments.
+"""

@@ -1,0 +1,13 @@
+"""The problem and its blocks: what a dataset asks the fit to solve.
+
+:class:`~rideid.estimate.problem.cost.CostFunction` is the problem: the residual blocks of the runs, the free
+parameters' space (:class:`~rideid.estimate.problem.cost.ParameterSpace`) with bounds, and the nuisance unknowns
+each block owns — a run's speed and start under their priors, a track's size and unevenness
+(:mod:`~rideid.estimate.problem.asbuilt`), an unknown road projected out frequency by frequency
+(:mod:`~rideid.estimate.problem.roadfit`, with the time-domain alternative
+:mod:`~rideid.estimate.problem.roadstaged`), a sensor chain's relative gains
+(:mod:`~rideid.estimate.problem.redundancy`). The nonlinear groups' blocks (damper curves' knots,
+:mod:`~rideid.estimate.problem.dampers`; bump stops, :mod:`~rideid.estimate.problem.bumps`), the track weights
+of the search (:mod:`~rideid.estimate.problem.weighting`) and the sensitivity maps
+(:mod:`~rideid.estimate.problem.sensitivity`) live here too. Nothing here searches or decides: the fit does.
+"""
