@@ -9,9 +9,10 @@ import pytest
 import tomli_w
 
 from rideid.cli import main
+from rideid.data.schema.runfiles import missing_post_channel
 from rideid.model.equations import CHANNEL_KIND, CHANNELS
 from rideid.model.params import NAMES, as_vector
-from rideid.model.posts import POST_CHANNELS, PostSignal, prepare_function, prepare_posts
+from rideid.model.posts import POST_CHANNELS, POST_VEL_CHANNELS, PostSignal, prepare_function, prepare_posts
 from rideid.model.simulate import simulate_reference
 
 TRUTH = {"m_s": 965.7, "I_xx": 207.3, "I_yy": 1565.8, "a": 1.156, "m_uf": 31.9, "m_ur": 31.9, "k_sf": 24445.0,
@@ -473,3 +474,11 @@ def test_mujoco_four_poster_accuracy(car, tmp_path, capsys):
             got = np.array(res["dampers"][key]["force"])
             excited = np.array(res["dampers"][key].get("excited", [True] * v.size), dtype=bool)
             assert np.max(np.abs(got - true)[excited] / np.abs(true[excited])) < 1e-2
+
+
+def test_missing_post_channel_names_the_first_gap():
+    """The four displacements are needed, the four velocities all or none (SPEC §13): the first gap named."""
+    assert missing_post_channel(POST_CHANNELS) is None
+    assert missing_post_channel(POST_CHANNELS + POST_VEL_CHANNELS + ("time",)) is None
+    assert missing_post_channel(("post_fl", "post_fr", "post_rr", "post_vel_fl")) == "post_rl"
+    assert missing_post_channel({*POST_CHANNELS, "post_vel_fl", "post_vel_rl"}) == "post_vel_fr"
