@@ -361,13 +361,13 @@ def _typo_input(doc):
 
 
 @pytest.mark.parametrize("edit_csv, edit_doc, message", [
-    (_drop_post_rl, None, "random.csv: missing column 'post_rl': a four-post rig run (input = \"posts\") needs the "
-                          "four post displacements post_fl, post_fr, post_rl, post_rr (m)"),
+    (_drop_post_rl, None, "random.csv: a four-post rig run (input = \"posts\") needs the four post displacements "
+                          "post_fl, post_fr, post_rl, post_rr (m); 'post_rl' is missing"),
     (_posts_times(1000.0), None, "m peak to peak, beyond any ride rig's stroke (0.3 m)"),
     (_posts_times(25.0), None, "the post's acceleration between 3 and 6 Hz is 22.7 times its axle's, where a "
                                "wheel follows its post (about 1): the posts are not in m as SPEC §13 says"),
-    (_drop_post_rl, _map_post_fl, "needs the four post displacements; 'post_rl' is neither mapped in [channels] "
-                                  "nor a column of"),
+    (_drop_post_rl, _map_post_fl, "needs the four post displacements post_fl, post_fr, post_rl, post_rr (m); "
+                                  "'post_rl' is neither mapped in [channels] nor a column of"),
     (None, _range_on_a_post, "[channels] post_fl range: a post channel has no range to leave samples out at"),
     (None, _track_on_rig, "key 'track' does not apply to a four-post rig run"),
     (None, _typo_input, "input: expected \"posts\" (a four-post rig run, SPEC §13), got 'post'"),

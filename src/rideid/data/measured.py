@@ -71,7 +71,7 @@ from ..model.sensors import AnalogFilter, discretise
 from .readers import FORMAT_NAMES, Signal, open_signals
 from ..model.posts import MIN_CHAIN_GAIN, POST_CHANNELS, POST_VEL_CHANNELS, unfilter
 from .schema.channels import RIG_TARGETS, SI, TARGETS, UNITS, ChannelEntry, gravity_unit_factor, quantity, unit_factor
-from .schema.runfiles import RunData, missing_post_channel
+from .schema.runfiles import RunData, check_post_channels
 
 
 #: the default model rate is the lowest whole division of the channels' rates at or above this
@@ -444,13 +444,7 @@ def _map_channels(run, cmap: dict, sf, path: Path, where_map: str):
         raise DataError(f"{where_map}: map either a speed or a distance channel, not both")
     has_motion = "speed" in targets or "distance" in targets
     if run.posts:  # SPEC §13: a rig run's road is its four posts; it does not drive
-        gap = missing_post_channel(targets)
-        if gap in POST_CHANNELS:
-            raise DataError(f"{where_map}: a four-post rig run (input = \"posts\") needs the four post "
-                            f"displacements; '{gap}' is neither mapped in [channels] nor a column of {path}")
-        if gap is not None:
-            raise DataError(f"{where_map}: give all four post velocities {', '.join(POST_VEL_CHANNELS)} or none "
-                            f"('{gap}' is missing)")
+        check_post_channels(targets, where_map, f"is neither mapped in [channels] nor a column of {path}")
         if has_motion:
             raise DataError(f"{where_map}: a four-post rig run has no speed or distance channel (a rig does not "
                             "drive); leave it out of the run's channels")

@@ -272,19 +272,9 @@ def _block_response(Phi, G, mu, x0):
 
 
 def simulate_modal(P, geom: Geometry, run: RunInput, disc: Discretized | None = None):
-    """The outputs of :func:`simulate_reference` (the same exact discretisation) by a modal recursion
-    vectorised over the samples: any block size (a powertrain's 12-state symmetric block, SPEC §11).
-
-    Parameters
-    ----------
-    P : (n_pop, 12), (n_pop, 16) or (n_pop, 23)
-    geom : Geometry
-    run : RunInput
-
-    Returns
-    -------
-    y : (n_pop, n_time, 10) in :data:`rideid.model.CHANNELS` order.
-    """
+    """The outputs ``y`` of :func:`simulate_reference` (the same parameters and the same exact discretisation)
+    by a modal recursion vectorised over the samples: any block size (a powertrain's 12-state symmetric block,
+    SPEC §11)."""
     P = np.atleast_2d(np.asarray(P, dtype=float))
     if disc is None:
         disc = Discretized(P, geom, run.h)
