@@ -113,7 +113,7 @@ def channel_weights(Y: np.ndarray) -> np.ndarray:
     return W
 
 
-def _checked_extensions(extensions) -> tuple[str, ...]:
+def checked_groups(extensions) -> tuple[str, ...]:
     """The model's extension groups in canonical order (:data:`IDENTIFIABLE_GROUPS`); a group this version
     cannot identify, or an unknown one, is an :class:`ArgumentError`."""
     extensions = tuple(extensions)
@@ -174,7 +174,7 @@ class ParameterSpace:
         check_known_consistent(known)
         self.known = dict(known)
         self.geometry = geometry
-        self.extensions = _checked_extensions(extensions)
+        self.extensions = checked_groups(extensions)
         self.curves = CURVES in self.extensions
         self.bump = BUMP in self.extensions
         self.damper_knots = None if damper_knots is None else tuple(float(k) for k in damper_knots)
