@@ -297,8 +297,8 @@ class MeasuredRun:
         if ends.shape != (2,) or not np.all(np.isfinite(ends)):
             return False
         k = np.rint((ends - self.t_first) * self.fs)
-        if np.any(np.abs(k - (ends - self.t_first) * self.fs) > 0.1) or k[0] < 0 or k[1] >= self.times.size \
-                or k[1] - k[0] < 2:
+        if (np.any(np.abs(k - (ends - self.t_first) * self.fs) > 0.1) or k[0] < 0 or k[1] >= self.times.size
+                or k[1] - k[0] < 2):
             return False
         self.window = (int(k[0]), int(k[1]) + 1)
         return True

@@ -102,8 +102,8 @@ def prepare_run(track: Track, geom: Geometry, speed: float | None, t, quad_order
     t = np.asarray(t, dtype=float)
     for tr, ge, sp, tt, qo, di, res in _PREPARED:
         # the same objects (tracks and distance functions are not compared by value) and the same grid
-        if tr is track and di is distance and ge == geom and sp == speed and qo == quad_order \
-                and tt.shape == t.shape and np.array_equal(tt, t):
+        if (tr is track and di is distance and ge == geom and sp == speed and qo == quad_order
+                and tt.shape == t.shape and np.array_equal(tt, t)):
             return res
     res = _prepare_run(track, geom, speed, t, quad_order, distance)
     for arr in (res.t, res.u, res.ud, res.mu, res.rate, res.rated):

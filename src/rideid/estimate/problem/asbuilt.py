@@ -490,8 +490,8 @@ def estimate_prior(P, geom, tr: TrackRun) -> Prior:
     Acol = roadfit._road_columns(H, E)
     _, road_of = roadfit._projector(Acol)
     en = np.exp(-1j * np.outer(w * h, np.arange(rr.lead_in)))
-    known = S @ sol.f_state \
-        + H[:, :, 2] * (en @ sol.f_lead[0])[:, None] + H[:, :, 3] * (en @ sol.f_lead[1])[:, None]
+    known = (S @ sol.f_state
+             + H[:, :, 2] * (en @ sol.f_lead[0])[:, None] + H[:, :, 3] * (en @ sol.f_lead[1])[:, None])
     R = road_of((rr.Y[rr.fit] - known)[:, :, None])[..., 0]                                 # (K, 2) m
     AH = np.conj(np.swapaxes(Acol, -1, -2))
     Ginv = np.linalg.inv(AH @ Acol)

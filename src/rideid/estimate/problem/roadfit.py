@@ -586,8 +586,8 @@ def road(P, geom: Geometry, rr: RoadRun, sol: Solution | None = None, wavelength
     _, road_of = _projector(_road_columns(H, E))
     D = rr.lead_in
     en = np.exp(-1j * np.outer(w * h, np.arange(D)))
-    known = S @ sol.f_state \
-        + H[:, :, 2] * (en @ sol.f_lead[0])[:, None] + H[:, :, 3] * (en @ sol.f_lead[1])[:, None]
+    known = (S @ sol.f_state
+             + H[:, :, 2] * (en @ sol.f_lead[0])[:, None] + H[:, :, 3] * (en @ sol.f_lead[1])[:, None])
     # the boundary unknowns are fitted in the fit band only: outside it their spectrum is not determined
     # (D free samples have content up to the Nyquist frequency), and subtracting it would add noise there
     known[~np.isin(bins, rr.fit)] = 0.0
