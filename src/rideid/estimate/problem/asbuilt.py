@@ -161,15 +161,11 @@ def prepare_track_run(ds, run, mode: str = "prior") -> TrackRun:
     rr = roadfit.prepare_road_run(run.id, rd.matrix(), rd.fs, v, ds.geometry, clipped=ds.clipped(run.id))
     rr = roadfit.with_sensors(rr, ds.sensor_filters(run.id))  # the channels as wired (SPEC §11)
     ri = nominal_inputs(ds, run, v)
-    return TrackRun(rr=rr, track=run.track, U=np.fft.rfft(np.asarray(ri.u, dtype=float), axis=0), mode=mode,
-                    inputs=ri, size_std=_size_std(ds, run.track))
-
-
-def _size_std(ds, track_id: str) -> float | None:
-    """The relative std of a track's drawn size (SPEC §13: declared, else the default width), or None for a
-    manifest that has none (an older one)."""
+    # the relative std of the track's drawn size (SPEC §13: declared, else the default width); None for a manifest
+    # that has none (an older one)
     prior = getattr(ds.manifest, "size_prior", None)
-    return None if prior is None else float(prior(track_id)[0])
+    return TrackRun(rr=rr, track=run.track, U=np.fft.rfft(np.asarray(ri.u, dtype=float), axis=0), mode=mode,
+                    inputs=ri, size_std=None if prior is None else float(prior(run.track)[0]))
 
 
 #: the weight of the drawn size's prior row (SPEC §13): the whitened residual's real and imaginary parts each have

@@ -178,7 +178,9 @@ class ParameterSpace:
         self.curves = CURVES in self.extensions
         self.bump = BUMP in self.extensions
         self.damper_knots = None if damper_knots is None else tuple(float(k) for k in damper_knots)
-        self.layout = self._layout(known, damper_knots)
+        # a powertrain in the model, or a known one: the nonlinear car carries it too (SPEC §11)
+        powertrain = POWERTRAIN in self.extensions or any(n in known for n in POWERTRAIN_NAMES)
+        self.layout = self._layout(damper_knots, powertrain)
         knot_names = curve_names(self.layout.n_knots) if self.curves else ()
         #: the knot-force columns, ``F_f1 .. F_fK, F_r1 .. F_rK`` (empty without curves)
         self.knot_names = tuple(knot_names)
@@ -219,12 +221,11 @@ class ParameterSpace:
             self._slope_w = (damper_force(knots, eye, V) - damper_force(knots, eye, -V)) / (2 * V)
         self._nominal = self._nominal_row()
 
-    def _layout(self, known, damper_knots) -> NonlinearLayout | None:
-        """The nonlinear car's row layout with damper curves or bump stops (None: the linear model); a
-        powertrain in the model, or a known one, is carried by the nonlinear car too (SPEC §11)."""
+    def _layout(self, damper_knots, powertrain: bool) -> NonlinearLayout | None:
+        """The nonlinear car's row layout with damper curves or bump stops (None: the linear model), with the
+        ``powertrain`` or without."""
         if not (self.curves or self.bump):
             return None
-        powertrain = POWERTRAIN in self.extensions or any(n in known for n in POWERTRAIN_NAMES)
         return NonlinearLayout(knots=curve_knots(damper_knots) if self.curves else None, bump_stops=self.bump,
                                powertrain=powertrain)
 
@@ -441,20 +442,15 @@ def _measured(ds: Dataset, leads=None):
 
 def bind_runs(simulator: Simulator, ds: Dataset, keep=None, leads=None):
     """``simulator`` bound to the runs of ``ds`` (a moving start from the start of its lead-in, SPEC §9),
-    recording through their sensor chains, comparing only the kept samples and giving the recorded samples
-    (:func:`sensor_simulator`)."""
+    recording through their sensor chains (SPEC §11), comparing only the kept samples and cut to the recorded
+    ones (:class:`rideid.model.sensors.SensorSimulator`); the bound simulator itself when no run has a filter or
+    a lead-in and every sample is kept (the kernels' fast path, unchanged)."""
+    filters = [ds.sensor_filters(r.id) for r in ds.runs]
     leads = lead_ins(ds) if leads is None else leads
-    return sensor_simulator(simulator.bind(ds.geometry, prepare_inputs(ds, leads)), ds, keep,
-                            [lead.samples for lead in leads])
-
-
-def sensor_simulator(sim, ds: Dataset, keep=None, lead=None):
-    """``sim`` recording through the runs' sensor chains (SPEC §11), comparing only the kept samples and cut to
-    the recorded ones (``lead``: per run the samples ``sim`` simulates before them, SPEC §9;
-    :class:`rideid.model.sensors.SensorSimulator`); ``sim`` itself when no run has a filter or a lead-in and
-    every sample is kept (the kernels' fast path, unchanged)."""
-    chains = [SensorChain(ds.sensor_filters(r.id), run.h) for r, run in zip(ds.runs, sim.runs)]
-    if keep is None and not any(ch.active for ch in chains) and not any(lead or ()):
+    sim = simulator.bind(ds.geometry, prepare_inputs(ds, leads))
+    chains = [SensorChain(f, run.h) for f, run in zip(filters, sim.runs)]
+    lead = [lead.samples for lead in leads]
+    if keep is None and not any(ch.active for ch in chains) and not any(lead):
         return sim
     return SensorSimulator(sim, chains, keep, lead)
 
