@@ -276,6 +276,8 @@ class _Walk:
         return (*hit, first)
 
     def returns(self, hit) -> tuple | None:
+        """The rideid class of what the call ``hit`` returns: the class a ``__init__`` makes, else the function's
+        return annotation (None where it has none)."""
         m, f = hit[:2]
         node = self.src.defs[m][f]
         if f.endswith(".__init__"):
@@ -313,6 +315,8 @@ class _Walk:
                             objects[t.id] = made
 
     def follow(self, hit, call: ast.Call, tracked: dict, key):
+        """Visit the parameters of ``hit`` the call passes a tracked name to (a method's ``self`` when called on
+        one), each as its annotation's class or, passed as it is, the tracked name's."""
         m, f, first = hit
         a = self.src.defs[m][f].args
         pos = [x.arg for x in a.posonlyargs + a.args]
