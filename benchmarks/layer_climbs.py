@@ -295,7 +295,9 @@ class _Walk:
         m, f, name = key
         node = self.src.defs[m][f]
         tracked, objects = {name: kind}, {}
-        calls = sorted((n for n in ast.walk(node) if isinstance(n, ast.Call)), key=lambda n: (n.lineno, n.col_offset))
+        # in the order they run: a call's arguments before it (by where each call ends)
+        calls = sorted((n for n in ast.walk(node) if isinstance(n, ast.Call)),
+                       key=lambda n: (n.end_lineno, n.end_col_offset))
         assigns = {id(n.value): n for n in ast.walk(node) if isinstance(n, ast.Assign)}
         for c in calls:
             hit = self.target(m, f, c, objects, tracked)
@@ -343,7 +345,8 @@ def walk_path(mod: str, fn: str, param: str, kind=None):
     """``(steps, upward steps)``: be the parameter ``param`` of ``mod.fn`` (a value of the class ``kind``, e.g.
     :data:`DATASET`; default its annotation) and follow the calls that pass it on (as any part of a positional or
     keyword argument, to the rideid function, class or method the call resolves to, under that function's own
-    name for it), depth-first in source order, each (function, parameter) once. Followed: functions by name or
+    name for it), depth-first in the order the calls run (a call's arguments before it), each (function,
+    parameter) once. Followed: functions by name or
     through a module, classes (their ``__init__``) and methods (called on the class, on an instance the function
     made, on ``self``, or on the dataset itself, which is then their ``self``); a name bound to what a call
     given the dataset returns as a dataset (its annotation) carries it on. The upward steps are those where the
