@@ -35,6 +35,7 @@ from __future__ import annotations
 
 import argparse
 import ast
+import functools
 import sys
 import tempfile
 from pathlib import Path
@@ -211,6 +212,12 @@ class _Source:
         return out
 
 
+@functools.cache
+def _source() -> _Source:
+    """The source read once (the walks only read it)."""
+    return _Source()
+
+
 def _passes(node, names) -> bool:
     """Whether the expression ``node`` uses one of ``names`` (a name or a collection of names), other than in a
     message (an f-string: what it says of the value is not the value)."""
@@ -357,7 +364,7 @@ def walk_path(mod: str, fn: str, param: str, kind=None):
 
 def _walk(mod, fn, param, kind=None):
     """:func:`walk_path` with the upward steps themselves: ``(order, count, [(before, next, next's caller)])``."""
-    w = _Walk(_Source())
+    w = _Walk(_source())
     if kind is None:
         args = w.src.defs[mod][fn].args
         kind = next((w.annotation(mod, x.annotation) for x in args.posonlyargs + args.args + args.kwonlyargs
@@ -371,7 +378,7 @@ def _walk(mod, fn, param, kind=None):
 def static_path(mod: str, fn: str):
     """``(functions, upward steps)``: the rideid functions reached from ``mod.fn``, depth-first in source order
     (each once), and how often the next one lives in a higher layer than the one before it."""
-    src, seen, order = _Source(), set(), []
+    src, seen, order = _source(), set(), []
 
     def visit(key):
         if key in seen:
