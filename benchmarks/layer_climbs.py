@@ -1,7 +1,10 @@
 """How often loading a dataset climbs back up a layer: ``python benchmarks/layer_climbs.py [DATASET]``.
 
 ``--legs``: the dataset walked through each leg of an identification (:data:`LEGS`, :func:`walk_path`),
-read from the source: loading (its path), the single-model fit and the model choice (the dataset).
+read from the source: loading (its path), the single-model fit and the model choice (the dataset), a study's
+task (the dataset's path, loaded, then fitted); the walk follows functions, classes and methods, and the
+dataset into what a call returns as a dataset. ``--legs --verbose``: each upward step, with the function
+before it, the next one and the function whose call reached the next one.
 
 ``rideid.load_dataset(DATASET)`` (default: the built-in scenario simulated
 with 1 % noise, written to a temporary folder) runs under a profiler hook
@@ -32,6 +35,7 @@ from __future__ import annotations
 
 import argparse
 import ast
+import functools
 import sys
 import tempfile
 from pathlib import Path
@@ -40,9 +44,10 @@ import rideid
 
 #: the layers, lowest first (tests/test_layers.py checks the import graph against the same order)
 LAYERS = [
-    ("rideid.errors", "rideid.csvio"), ("rideid.model",), ("rideid.data",), ("rideid.conditioning",),
-    ("rideid.verify",), ("rideid.synth",), ("rideid.estimate",), ("rideid.design", "rideid.report", "rideid.studies"),
-    ("rideid",), ("rideid.cli", "rideid.__main__"),
+    ("rideid.errors", "rideid.csvio", "rideid.settings", "rideid.profiling"), ("rideid.model",), ("rideid.data",),
+    ("rideid.conditioning",), ("rideid.verify",), ("rideid.synth",), ("rideid.estimate",),
+    ("rideid.design", "rideid.report", "rideid.studies", "rideid.exporter"), ("rideid",),
+    ("rideid.cli", "rideid.__main__"),
 ]
 
 
@@ -121,14 +126,19 @@ def _modules() -> dict[str, tuple[Path, bool]]:
 
 
 class _Source:
-    """Every rideid module's top-level functions and the names its imports bind."""
+    """Every rideid module's top-level functions and classes (their methods as ``Class.method``) and the names
+    its imports bind."""
 
     def __init__(self):
         self.modules = _modules()
-        self.defs, self.names = {}, {}
+        self.defs, self.classes, self.names = {}, {}, {}
         for mod, (p, pkg) in self.modules.items():
             tree = ast.parse(p.read_text(), str(p))
             self.defs[mod] = {n.name: n for n in tree.body if isinstance(n, (ast.FunctionDef, ast.AsyncFunctionDef))}
+            self.classes[mod] = {n.name: n for n in tree.body if isinstance(n, ast.ClassDef)}
+            for c in self.classes[mod].values():
+                self.defs[mod].update({f"{c.name}.{n.name}": n for n in c.body
+                                       if isinstance(n, (ast.FunctionDef, ast.AsyncFunctionDef))})
             names = {}
             for node in ast.walk(tree):
                 if isinstance(node, ast.ImportFrom):
@@ -158,6 +168,32 @@ class _Source:
             return None
         return self.resolve(b[1], b[2], depth + 1)
 
+    def resolve_class(self, mod: str, name: str, depth: int = 0):
+        """``(module, class)`` the name ``name`` of ``mod`` stands for, or None (not a rideid class)."""
+        if depth > 5 or mod not in self.modules:
+            return None
+        if name in self.classes[mod]:
+            return mod, name
+        b = self.names[mod].get(name)
+        if b is None or b[0] == "module":
+            return None
+        return self.resolve_class(b[1], b[2], depth + 1)
+
+    def method(self, cls, name: str, depth: int = 0):
+        """``(module, "Class.method")`` of the method ``name`` of the class ``cls`` (its rideid bases searched
+        too), or None."""
+        if cls is None or depth > 5:
+            return None
+        mod, c = cls
+        if f"{c}.{name}" in self.defs[mod]:
+            return mod, f"{c}.{name}"
+        for base in self.classes[mod][c].bases:
+            if isinstance(base, ast.Name):
+                hit = self.method(self.resolve_class(mod, base.id), name, depth + 1)
+                if hit is not None:
+                    return hit
+        return None
+
     def callees(self, mod: str, fn: str):
         """The rideid functions ``fn`` calls (nested functions included), in source order."""
         calls = sorted((n for n in ast.walk(self.defs[mod][fn]) if isinstance(n, ast.Call)),
@@ -176,56 +212,173 @@ class _Source:
         return out
 
 
-def _passes(node, name: str) -> bool:
-    return any(isinstance(n, ast.Name) and n.id == name for n in ast.walk(node))
+@functools.cache
+def _source() -> _Source:
+    """The source read once (the walks only read it)."""
+    return _Source()
 
 
-def walk_path(mod: str, fn: str, param: str):
-    """``(steps, upward steps)``: be the parameter ``param`` of ``mod.fn`` and follow the calls that pass it
-    on (as any part of a positional or keyword argument, to the rideid function the call resolves to, under
-    that function's own name for it), depth-first in source order, each (function, parameter) once; the
-    upward steps are those where the next function lives in a higher layer than the one before it."""
-    src, seen, order = _Source(), set(), []
+def _passes(node, names) -> bool:
+    """Whether the expression ``node`` uses one of ``names`` (a name or a collection of names), other than in a
+    message (an f-string: what it says of the value is not the value)."""
+    names = {names} if isinstance(names, str) else names
+    if isinstance(node, ast.JoinedStr):
+        return False
+    if isinstance(node, ast.Name):
+        return node.id in names
+    return any(_passes(n, names) for n in ast.iter_child_nodes(node))
 
-    def params(m, f):
-        a = src.defs[m][f].args
-        return [x.arg for x in a.posonlyargs + a.args], {x.arg for x in a.posonlyargs + a.args + a.kwonlyargs}
 
-    def visit(key):
-        if key in seen:
+#: the value a leg follows: a dataset (a name bound to what a call returns as one carries it on, and its methods
+#: are followed with it as ``self``)
+DATASET = ("rideid.data.dataset", "Dataset")
+
+
+class _Walk:
+    """The walk of :func:`walk_path`: the order of (module, function, parameter), each with its caller."""
+
+    def __init__(self, src: _Source):
+        self.src, self.seen, self.order, self.caller = src, set(), [], {}
+
+    def annotation(self, mod: str, node):
+        """The rideid class an annotation names (``Dataset``, ``"Dataset"``), or None."""
+        if node is None:
+            return None
+        text = node.value if isinstance(node, ast.Constant) and isinstance(node.value, str) else ast.unparse(node)
+        return self.src.resolve_class(mod, text.strip("\"'")) if text.strip("\"'").isidentifier() else None
+
+    def target(self, mod: str, fn: str, call: ast.Call, objects: dict, tracked: dict):
+        """``(module, function, self's name or None)`` a call goes to: a function (by name or through a module),
+        a class's ``__init__``, or a method of a class (called on it, on an instance the function made, on
+        ``self``, or on a tracked dataset); None where the source does not say."""
+        f, src = call.func, self.src
+        if isinstance(f, ast.Name):
+            hit = src.resolve(mod, f.id)
+            if hit is not None:
+                return (*hit, None)
+            return self._bound(src.method(src.resolve_class(mod, f.id), "__init__"))
+        if not (isinstance(f, ast.Attribute) and isinstance(f.value, ast.Name)):
+            return None
+        name = f.value.id
+        b = src.names[mod].get(name)
+        if b is not None and b[0] == "module":
+            hit = src.resolve(b[1], f.attr)
+            return None if hit is None else (*hit, None)
+        cls = objects.get(name) or tracked.get(name)
+        if cls is None and name == "self" and "." in fn:
+            cls = (mod, fn.split(".")[0])
+        if cls is not None:
+            return self._bound(src.method(cls, f.attr))
+        # a class called by its name: a class or static method (its first parameter stays)
+        hit = src.method(src.resolve_class(mod, name), f.attr)
+        return None if hit is None else (*hit, None)
+
+    def _bound(self, hit):
+        """A method called on an instance: its first parameter is the instance (None for a static method)."""
+        if hit is None:
+            return None
+        node = self.src.defs[hit[0]][hit[1]]
+        static = any(isinstance(d, ast.Name) and d.id == "staticmethod" for d in node.decorator_list)
+        first = None if static or not node.args.args else node.args.args[0].arg
+        return (*hit, first)
+
+    def returns(self, hit) -> tuple | None:
+        """The rideid class of what the call ``hit`` returns: the class a ``__init__`` makes, else the function's
+        return annotation (None where it has none)."""
+        m, f = hit[:2]
+        node = self.src.defs[m][f]
+        if f.endswith(".__init__"):
+            return m, f.split(".")[0]
+        return self.annotation(m, node.returns)
+
+    def visit(self, key, kind, caller=None):
+        """Be the parameter ``key[2]`` of ``key[0].key[1]`` (a value of the class ``kind``, or None where unknown)
+        and follow the calls that pass it on."""
+        if key in self.seen:
             return
-        seen.add(key)
-        order.append(key)
+        self.seen.add(key)
+        self.order.append(key)
+        self.caller[key] = caller
         m, f, name = key
-        calls = sorted((n for n in ast.walk(src.defs[m][f]) if isinstance(n, ast.Call)),
-                       key=lambda n: (n.lineno, n.col_offset))
+        node = self.src.defs[m][f]
+        tracked, objects = {name: kind}, {}
+        # in the order they run: a call's arguments before it (by where each call ends)
+        calls = sorted((n for n in ast.walk(node) if isinstance(n, ast.Call)),
+                       key=lambda n: (n.end_lineno, n.end_col_offset))
+        assigns = {id(n.value): n for n in ast.walk(node) if isinstance(n, ast.Assign)}
         for c in calls:
-            hit = None
-            if isinstance(c.func, ast.Name):
-                hit = src.resolve(m, c.func.id)
-            elif isinstance(c.func, ast.Attribute) and isinstance(c.func.value, ast.Name):
-                b = src.names[m].get(c.func.value.id)
-                if b is not None and b[0] == "module":
-                    hit = src.resolve(b[1], c.func.attr)
-            if hit is None:
-                continue
-            pos, every = params(*hit)
-            for i, a in enumerate(c.args):
-                if i < len(pos) and _passes(a, name):
-                    visit((*hit, pos[i]))
-            for kw in c.keywords:
-                if kw.arg in every and _passes(kw.value, name):
-                    visit((*hit, kw.arg))
+            hit = self.target(m, f, c, objects, tracked)
+            passed = _passes(c, tracked)
+            if hit is not None and passed:
+                self.follow(hit, c, tracked, key)
+            a = assigns.get(id(c))
+            if a is not None and hit is not None:
+                # what the call returns: an object whose methods are followed, a dataset carried on when the
+                # call was given the dataset
+                made = self.returns(hit)
+                for t in a.targets:
+                    if isinstance(t, ast.Name) and made is not None:
+                        if passed and made == DATASET:
+                            tracked[t.id] = made
+                        else:
+                            objects[t.id] = made
 
-    visit((mod, fn, param))
-    lays = [layer_of(m) for m, _, _ in order]
-    return order, sum(1 for a, b in zip(lays, lays[1:]) if b > a)
+    def follow(self, hit, call: ast.Call, tracked: dict, key):
+        """Visit the parameters of ``hit`` the call passes a tracked name to (a method's ``self`` when called on
+        one), each as its annotation's class or, passed as it is, the tracked name's."""
+        m, f, first = hit
+        a = self.src.defs[m][f].args
+        pos = [x.arg for x in a.posonlyargs + a.args]
+        every = {x.arg for x in a.posonlyargs + a.args + a.kwonlyargs}
+        if first is not None:
+            pos = pos[1:]
+            recv = call.func.value if isinstance(call.func, ast.Attribute) else None
+            if isinstance(recv, ast.Name) and recv.id in tracked:
+                self.visit((m, f, first), tracked[recv.id], key)
+        kinds = {x.arg: self.annotation(m, x.annotation) for x in a.posonlyargs + a.args + a.kwonlyargs}
+        for i, arg in enumerate(call.args):
+            if i < len(pos) and _passes(arg, tracked):
+                self.visit((m, f, pos[i]), kinds.get(pos[i]) or self._kind(arg, tracked), key)
+        for kw in call.keywords:
+            if kw.arg in every and _passes(kw.value, tracked):
+                self.visit((m, f, kw.arg), kinds.get(kw.arg) or self._kind(kw.value, tracked), key)
+
+    @staticmethod
+    def _kind(arg, tracked):
+        return tracked.get(arg.id) if isinstance(arg, ast.Name) else None
+
+
+def walk_path(mod: str, fn: str, param: str, kind=None):
+    """``(steps, upward steps)``: be the parameter ``param`` of ``mod.fn`` (a value of the class ``kind``, e.g.
+    :data:`DATASET`; default its annotation) and follow the calls that pass it on (as any part of a positional or
+    keyword argument, to the rideid function, class or method the call resolves to, under that function's own
+    name for it), depth-first in the order the calls run (a call's arguments before it), each (function,
+    parameter) once. Followed: functions by name or
+    through a module, classes (their ``__init__``) and methods (called on the class, on an instance the function
+    made, on ``self``, or on the dataset itself, which is then their ``self``); a name bound to what a call
+    given the dataset returns as a dataset (its annotation) carries it on. The upward steps are those where the
+    next function lives in a higher layer than the one before it."""
+    order, steps, _ = _walk(mod, fn, param, kind)
+    return order, steps
+
+
+def _walk(mod, fn, param, kind=None):
+    """:func:`walk_path` with the upward steps themselves: ``(order, count, [(before, next, next's caller)])``."""
+    w = _Walk(_source())
+    if kind is None:
+        args = w.src.defs[mod][fn].args
+        kind = next((w.annotation(mod, x.annotation) for x in args.posonlyargs + args.args + args.kwonlyargs
+                     if x.arg == param), None)
+    w.visit((mod, fn, param), kind)
+    lays = [layer_of(m) for m, _, _ in w.order]
+    ups = [(a, b, w.caller[b]) for a, b, la, lb in zip(w.order, w.order[1:], lays, lays[1:]) if lb > la]
+    return w.order, len(ups), ups
 
 
 def static_path(mod: str, fn: str):
     """``(functions, upward steps)``: the rideid functions reached from ``mod.fn``, depth-first in source order
     (each once), and how often the next one lives in a higher layer than the one before it."""
-    src, seen, order = _Source(), set(), []
+    src, seen, order = _source(), set(), []
 
     def visit(key):
         if key in seen:
@@ -240,10 +393,18 @@ def static_path(mod: str, fn: str):
     return order, sum(1 for a, b in zip(lays, lays[1:]) if b > a)
 
 
-#: the legs of an identification, walked by ``--legs`` (the dataset's path, then the dataset itself): loading,
-#: the single-model fit, the model choice
-LEGS = (("rideid.conditioning.load", "load_dataset", "path"), ("rideid.estimate.fit.identify", "identify", "ds"),
-        ("rideid.estimate.choice.model_choice", "identify", "ds"))
+#: the legs of an identification, walked by ``--legs``: (module, function, parameter, the class of its value or
+#: None): loading (the dataset's path), the single-model fit and the model choice (the dataset), a study's task
+#: (the dataset's path, which it loads, then fits)
+LEGS = (("rideid.conditioning.load", "load_dataset", "path", None),
+        ("rideid.estimate.fit.identify", "identify", "ds", DATASET),
+        ("rideid.estimate.choice.model_choice", "identify", "ds", DATASET),
+        ("rideid.studies.task", "run_task", "dataset_path", None))
+
+
+def _name(key) -> str:
+    m, f, param = key
+    return f"{m}.{f}({param}) [{'/'.join(x.split('.')[-1] for x in LAYERS[layer_of(m)])}]"
 
 
 def main(argv=None) -> int:
@@ -252,11 +413,15 @@ def main(argv=None) -> int:
     ap.add_argument("--static", action="store_true", help="the static count only (nothing is run)")
     ap.add_argument("--legs", action="store_true",
                     help="walk the dataset through every leg of an identification (LEGS): upward steps per leg")
+    ap.add_argument("--verbose", action="store_true",
+                    help="with --legs: each upward step (the function before, the next, the call that reached it)")
     args = ap.parse_args(argv)
     if args.legs:
-        for mod, fn, param in LEGS:
-            order, steps = walk_path(mod, fn, param)
+        for mod, fn, param, kind in LEGS:
+            order, steps, ups = _walk(mod, fn, param, kind)
             print(f"{mod}:{fn}:{param}: {len(order)} steps, climbs back up a layer {steps} times")
+            for before, after, caller in ups if args.verbose else ():
+                print(f"  {_name(before)} -> {_name(after)}, called by {_name(caller)}")
         return 0
     order, steps = static_path(rideid.load_dataset.__module__, rideid.load_dataset.__name__)
     names = {i: "/".join(p.split(".")[-1] for p in prefixes) for i, prefixes in enumerate(LAYERS)}

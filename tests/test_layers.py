@@ -208,3 +208,44 @@ def test_no_library_module_switches_the_matplotlib_backend():
     r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True,
                        env={"PYTHONPATH": str(SRC), "PATH": "", "NUMBA_NUM_THREADS": "1", "OMP_NUM_THREADS": "1"})
     assert r.stdout.strip().split(maxsplit=2) == ["svg", "False", "[True, True, True]"]
+
+
+def _layer_climbs():
+    import importlib.util
+
+    path = SRC.parent / "benchmarks" / "layer_climbs.py"
+    spec = importlib.util.spec_from_file_location("layer_climbs", path)
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+#: the upward steps issue 50 allows a leg (a dataset followed through the calls)
+MAX_CLIMBS = 10
+#: the files being rewritten (issue 50) whose calls still climb: a leg's upward steps reached by calls elsewhere are
+#: held to MAX_CLIMBS, and the legs through these files as a whole to what they measured (a ratchet: lower it as
+#: they go; ``python benchmarks/layer_climbs.py --legs --verbose`` prints every step and the call that made it)
+REWRITTEN = ("rideid.estimate.fit.identify", "rideid.estimate.fit.anyroad", "rideid.estimate.choice.model_choice")
+RATCHET = {("rideid.estimate.choice.model_choice", "identify"): 17, ("rideid.studies.task", "run_task"): 19}
+
+
+def test_the_layer_walk_follows_calls_and_each_leg_climbs_at_most_ten_times():
+    """``benchmarks/layer_climbs.py --legs``: each leg of an identification walked from the source (functions,
+    classes, methods, the dataset carried into what a call returns as one)."""
+    lc = _layer_climbs()
+    assert [tuple(x) for x in lc.LAYERS] == [tuple(x) for x in LAYERS]
+    legs = {leg[:2]: lc._walk(*leg) for leg in lc.LEGS}
+    assert set(RATCHET) < set(legs)
+    # the walk follows methods (the dataset's own, a class made in the function) and a study's path into its fit
+    assert ("rideid.estimate.problem.cost", "CostFunction.__init__", "ds") in legs["rideid.estimate.fit.identify",
+                                                                                   "identify"][0]
+    assert ("rideid.data.dataset", "Dataset.subset", "self") in legs["rideid.estimate.choice.model_choice",
+                                                                       "identify"][0]
+    study = legs["rideid.studies.task", "run_task"][0]
+    assert ("rideid.conditioning.load", "load_dataset", "path") in study
+    assert ("rideid.estimate.choice.model_choice", "identify", "ds") in study
+    for leg, (order, steps, ups) in legs.items():
+        assert len(order) > 50, leg
+        elsewhere = [up for up in ups if up[2][0] not in REWRITTEN]
+        assert len(elsewhere) <= MAX_CLIMBS, (leg, elsewhere)
+        assert steps <= RATCHET.get(leg, MAX_CLIMBS), (leg, steps)

@@ -9,9 +9,10 @@ import pytest
 import tomli_w
 
 from rideid.cli import main
+from rideid.data.schema.runfiles import missing_post_channel
 from rideid.model.equations import CHANNEL_KIND, CHANNELS
 from rideid.model.params import NAMES, as_vector
-from rideid.model.posts import POST_CHANNELS, PostSignal, prepare_function, prepare_posts
+from rideid.model.posts import POST_CHANNELS, POST_VEL_CHANNELS, PostSignal, prepare_function, prepare_posts
 from rideid.model.simulate import simulate_reference
 
 TRUTH = {"m_s": 965.7, "I_xx": 207.3, "I_yy": 1565.8, "a": 1.156, "m_uf": 31.9, "m_ur": 31.9, "k_sf": 24445.0,
@@ -360,13 +361,13 @@ def _typo_input(doc):
 
 
 @pytest.mark.parametrize("edit_csv, edit_doc, message", [
-    (_drop_post_rl, None, "random.csv: missing column 'post_rl': a four-post rig run (input = \"posts\") needs the "
-                          "four post displacements post_fl, post_fr, post_rl, post_rr (m)"),
+    (_drop_post_rl, None, "random.csv: a four-post rig run (input = \"posts\") needs the four post displacements "
+                          "post_fl, post_fr, post_rl, post_rr (m); 'post_rl' is missing"),
     (_posts_times(1000.0), None, "m peak to peak, beyond any ride rig's stroke (0.3 m)"),
     (_posts_times(25.0), None, "the post's acceleration between 3 and 6 Hz is 22.7 times its axle's, where a "
                                "wheel follows its post (about 1): the posts are not in m as SPEC §13 says"),
-    (_drop_post_rl, _map_post_fl, "needs the four post displacements; 'post_rl' is neither mapped in [channels] "
-                                  "nor a column of"),
+    (_drop_post_rl, _map_post_fl, "needs the four post displacements post_fl, post_fr, post_rl, post_rr (m); "
+                                  "'post_rl' is neither mapped in [channels] nor a column of"),
     (None, _range_on_a_post, "[channels] post_fl range: a post channel has no range to leave samples out at"),
     (None, _track_on_rig, "key 'track' does not apply to a four-post rig run"),
     (None, _typo_input, "input: expected \"posts\" (a four-post rig run, SPEC §13), got 'post'"),
@@ -473,3 +474,11 @@ def test_mujoco_four_poster_accuracy(car, tmp_path, capsys):
             got = np.array(res["dampers"][key]["force"])
             excited = np.array(res["dampers"][key].get("excited", [True] * v.size), dtype=bool)
             assert np.max(np.abs(got - true)[excited] / np.abs(true[excited])) < 1e-2
+
+
+def test_missing_post_channel_names_the_first_gap():
+    """The four displacements are needed, the four velocities all or none (SPEC §13): the first gap named."""
+    assert missing_post_channel(POST_CHANNELS) is None
+    assert missing_post_channel(POST_CHANNELS + POST_VEL_CHANNELS + ("time",)) is None
+    assert missing_post_channel(("post_fl", "post_fr", "post_rr", "post_vel_fl")) == "post_rl"
+    assert missing_post_channel({*POST_CHANNELS, "post_vel_fl", "post_vel_rl"}) == "post_vel_fr"

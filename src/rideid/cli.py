@@ -510,8 +510,8 @@ def run_identify(ds_path, out_dir, *, seed, population=None, generations=None, w
         held = rideid.adequacy_caveats(res.adequacy)
         if held:  # adequate on the pairs tested, but not green: say so where the verdict is read
             short = [held[0]] if res.adequacy.get("not_assessed") else []
-            short += ["the WARNING above" + ("s" if len(held) - len(short) > 1 else "")] if len(held) > len(short) \
-                else []
+            short += (["the WARNING above" + ("s" if len(held) - len(short) > 1 else "")] if len(held) > len(short)
+                      else [])
             print(textwrap.fill("model adequate on what was tested, NOT A CLEAN VERDICT: " + "; and ".join(short),
                                 100, subsequent_indent="  "), file=out)
         else:

@@ -358,8 +358,8 @@ def _check_run(ds, r):
         # left-right pattern with it: tried before a re-wiring is proposed
         (Yhat_s,) = responses((yield [_nominal_job(track, t - shifted, r.speed, None)]))
         Y_s, Yhat_s = _as_recorded(ds, rid, rd.matrix(), Yhat_s)
-        wire_s = wiring_fix(Y_s, Yhat_s, rd.fs, geom, _entry_factors(entries), unit_known) if wiring != "off" \
-            else None
+        wire_s = (wiring_fix(Y_s, Yhat_s, rd.fs, geom, _entry_factors(entries), unit_known) if wiring != "off"
+                  else None)
         if not (wire_s and wire_s["fix"]) and _score(Y_s, Yhat_s) >= defaults["checks.match_min"]:
             wire, Y, Yhat = wire_s, Y_s, Yhat_s
             out.append(Finding(WARNING, "track", f"run '{rid}': the data match the track with the front axle at "
@@ -372,8 +372,8 @@ def _check_run(ds, r):
         # the data's (a wandering run's mean): the declared speed's comparisons stand
         (Yhat_s,) = responses((yield [_nominal_job(track, t - seen[2], seen[0], None)]))
         Y_s, Yhat_s = _as_recorded(ds, rid, rd.matrix(), Yhat_s)
-        wire_s = wiring_fix(Y_s, Yhat_s, rd.fs, geom, _entry_factors(entries), unit_known) if wiring != "off" \
-            else None
+        wire_s = (wiring_fix(Y_s, Yhat_s, rd.fs, geom, _entry_factors(entries), unit_known) if wiring != "off"
+                  else None)
         if not (wire_s and wire_s["fix"]):
             wire, Y, Yhat = wire_s, Y_s, Yhat_s
             # once more against the response at that speed: the nominal car's phase differs between the declared

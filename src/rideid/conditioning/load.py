@@ -149,8 +149,8 @@ def _start_of(ds: Dataset, rid: str, starts: dict[str, float | dict] | None):
     run = man.run(rid)
     if starts and rid in starts:
         given = starts[rid]
-        return float(given["value"] if isinstance(given, dict) else given), \
-            {"source": "given (from a previous identification)"}
+        return (float(given["value"] if isinstance(given, dict) else given),
+                {"source": "given (from a previous identification)"})
     if not mr.auto_start:
         return mr.options["start"], {"source": "given"}
     if run.posts:  # SPEC §13: no track to align with; the rig's time 0 is the first sample (of the window)

@@ -71,7 +71,7 @@ from ..model.sensors import AnalogFilter, discretise
 from .readers import FORMAT_NAMES, Signal, open_signals
 from ..model.posts import MIN_CHAIN_GAIN, POST_CHANNELS, POST_VEL_CHANNELS, unfilter
 from .schema.channels import RIG_TARGETS, SI, TARGETS, UNITS, ChannelEntry, gravity_unit_factor, quantity, unit_factor
-from .schema.runfiles import RunData
+from .schema.runfiles import RunData, check_post_channels
 
 
 #: the default model rate is the lowest whole division of the channels' rates at or above this
@@ -297,8 +297,8 @@ class MeasuredRun:
         if ends.shape != (2,) or not np.all(np.isfinite(ends)):
             return False
         k = np.rint((ends - self.t_first) * self.fs)
-        if np.any(np.abs(k - (ends - self.t_first) * self.fs) > 0.1) or k[0] < 0 or k[1] >= self.times.size \
-                or k[1] - k[0] < 2:
+        if (np.any(np.abs(k - (ends - self.t_first) * self.fs) > 0.1) or k[0] < 0 or k[1] >= self.times.size
+                or k[1] - k[0] < 2):
             return False
         self.window = (int(k[0]), int(k[1]) + 1)
         return True
@@ -444,14 +444,7 @@ def _map_channels(run, cmap: dict, sf, path: Path, where_map: str):
         raise DataError(f"{where_map}: map either a speed or a distance channel, not both")
     has_motion = "speed" in targets or "distance" in targets
     if run.posts:  # SPEC §13: a rig run's road is its four posts; it does not drive
-        missing = [c for c in POST_CHANNELS if c not in targets]
-        if missing:
-            raise DataError(f"{where_map}: a four-post rig run (input = \"posts\") needs the four post "
-                            f"displacements; '{missing[0]}' is neither mapped in [channels] nor a column of {path}")
-        vel = [c for c in POST_VEL_CHANNELS if c in targets]
-        if vel and len(vel) < 4:
-            raise DataError(f"{where_map}: give all four post velocities {', '.join(POST_VEL_CHANNELS)} or none "
-                            f"('{[c for c in POST_VEL_CHANNELS if c not in targets][0]}' is missing)")
+        check_post_channels(targets, where_map, f"is neither mapped in [channels] nor a column of {path}")
         if has_motion:
             raise DataError(f"{where_map}: a four-post rig run has no speed or distance channel (a rig does not "
                             "drive); leave it out of the run's channels")
@@ -768,21 +761,7 @@ def _filter_resample(raw: dict, rec_ch: dict, measured: list, fs: float, anti_al
 
     channels, added, odd = {}, {}, []
     for c in measured:
-        s = raw[c]
-        t, v = s.time, s.values
-        med = float(np.median(np.diff(t)))
-        h_clock = uniform_clock(t)
-        if h_clock is not None and np.max(np.abs(np.diff(t) - med)) > 1e-6 * med:
-            dev = float(np.max(np.abs(t - (t[0] + h_clock * np.arange(t.size)))))
-            rec_ch[c]["clock"] = (f"time stamps off a uniform clock by up to {dev / h_clock:.2g} of a sample "
-                                  "(rounded): taken as that clock, not interpolated")
-            med = h_clock
-        elif h_clock is None and np.max(np.abs(np.diff(t) - med)) > 1e-6 * med:
-            from scipy.interpolate import make_interp_spline
-            n = int(math.floor((t[-1] - t[0]) / med)) + 1
-            tu = t[0] + med * np.arange(n)
-            v = make_interp_spline(t, v, k=3)(tu)
-            rec_ch[c]["regridded"] = "non-uniform time put on a uniform grid (cubic spline)"
+        t, v, med = _uniform(raw[c].time, raw[c].values, rec_ch[c])
         src_fs = 1.0 / med
         ratio = src_fs / fs
         whole = abs(ratio - round(ratio)) < WHOLE_RATIO
@@ -805,27 +784,51 @@ def _filter_resample(raw: dict, rec_ch: dict, measured: list, fs: float, anti_al
         if src_fs > fs * 1.0001 and (not whole or anti_alias):
             odd.append(c)  # read off by the spline, or low-passed: neither is what the model gives at fs
     if odd and warns is not None:
-        rates = sorted({rec_ch[c]["rate_hz"] for c in measured})
-        fs_ok, _ = default_rate(rates)
-        odd_rates = sorted({rec_ch[c]["rate_hz"] for c in odd})
-        fix = (f"set [preprocess] fs = {fs_ok:g} ({'/'.join(f'{r:g}' for r in rates)} Hz taken 1 sample in "
-               f"{'/'.join(str(int(round(r / fs_ok))) for r in rates)}: nothing filtered)"
-               if all(abs(r / fs_ok - round(r / fs_ok)) < WHOLE_RATIO for r in rates) else
-               "log every channel at one rate (or at rates with a common whole division of at least "
-               f"{DEFAULT_FS:g} Hz) and leave fs to rideid")
-        which = "all 10 channels" if len(odd) == len(CHANNELS) else ", ".join(odd)
-        at = f"{path}: {which} at {'/'.join(f'{r:g}' for r in odd_rates)} Hz"
-        if anti_alias:
-            msg = (f"{at}: low-passed at {FILTER_CUTOFF * fs:g} Hz for the model's {fs:g} Hz (anti_alias = true), the "
-                   "model's channels through the same filter, which at this rate it reproduces only roughly (up to "
-                   "several times the sensor noise on short wavelengths, and tire rates 1 % off on a van, "
-                   f"docs/real-data.md); {fix.replace('set [preprocess] fs', 'leave anti_alias out and set fs')}")
-        else:
-            msg = (f"{at}: no whole multiple of the model's {fs:g} Hz, so read off between its samples by a cubic "
-                   "spline the model does not see (about the sensor noise on short wavelengths, docs/real-data.md); "
-                   f"{fix}")
-        _warn(warns, msg, _STAGE)
+        _warn(warns, _rate_warning(rec_ch, measured, odd, fs, anti_alias, path), _STAGE)
     return channels, added
+
+
+def _uniform(t, v, rec: dict):
+    """``(t, v, h)``: a channel's samples on a uniform clock of step ``h``: time stamps off a uniform clock by
+    rounding taken as that clock, other non-uniform times put on a uniform grid by a cubic spline (each said in
+    the channel's record ``rec``)."""
+    med = float(np.median(np.diff(t)))
+    h_clock = uniform_clock(t)
+    if h_clock is not None and np.max(np.abs(np.diff(t) - med)) > 1e-6 * med:
+        dev = float(np.max(np.abs(t - (t[0] + h_clock * np.arange(t.size)))))
+        rec["clock"] = (f"time stamps off a uniform clock by up to {dev / h_clock:.2g} of a sample "
+                        "(rounded): taken as that clock, not interpolated")
+        med = h_clock
+    elif h_clock is None and np.max(np.abs(np.diff(t) - med)) > 1e-6 * med:
+        from scipy.interpolate import make_interp_spline
+        n = int(math.floor((t[-1] - t[0]) / med)) + 1
+        tu = t[0] + med * np.arange(n)
+        v = make_interp_spline(t, v, k=3)(tu)
+        rec["regridded"] = "non-uniform time put on a uniform grid (cubic spline)"
+    return t, v, med
+
+
+def _rate_warning(rec_ch: dict, measured: list, odd: list, fs: float, anti_alias, path) -> str:
+    """The warning of :func:`_filter_resample` for the channels ``odd`` (read off by the spline, or low-passed):
+    what was done at which rates, and the rate or logging that would take every sample as it is."""
+    rates = sorted({rec_ch[c]["rate_hz"] for c in measured})
+    fs_ok, _ = default_rate(rates)
+    odd_rates = sorted({rec_ch[c]["rate_hz"] for c in odd})
+    fix = (f"set [preprocess] fs = {fs_ok:g} ({'/'.join(f'{r:g}' for r in rates)} Hz taken 1 sample in "
+           f"{'/'.join(str(int(round(r / fs_ok))) for r in rates)}: nothing filtered)"
+           if all(abs(r / fs_ok - round(r / fs_ok)) < WHOLE_RATIO for r in rates) else
+           "log every channel at one rate (or at rates with a common whole division of at least "
+           f"{DEFAULT_FS:g} Hz) and leave fs to rideid")
+    which = "all 10 channels" if len(odd) == len(CHANNELS) else ", ".join(odd)
+    at = f"{path}: {which} at {'/'.join(f'{r:g}' for r in odd_rates)} Hz"
+    if anti_alias:
+        return (f"{at}: low-passed at {FILTER_CUTOFF * fs:g} Hz for the model's {fs:g} Hz (anti_alias = true), the "
+                "model's channels through the same filter, which at this rate it reproduces only roughly (up to "
+                "several times the sensor noise on short wavelengths, and tire rates 1 % off on a van, "
+                f"docs/real-data.md); {fix.replace('set [preprocess] fs', 'leave anti_alias out and set fs')}")
+    return (f"{at}: no whole multiple of the model's {fs:g} Hz, so read off between its samples by a cubic "
+            "spline the model does not see (about the sensor noise on short wavelengths, docs/real-data.md); "
+            f"{fix}")
 
 
 def rate_record(rec_ch: dict, measured: list, fs: float, rule: str) -> dict:

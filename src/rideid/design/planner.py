@@ -172,8 +172,8 @@ class PlanResult:
                             for k, (rid, p) in enumerate(self.path)],
             "sensitivity_map_comparison": self.comparison,
             "notes": self.notes,
-        } | ({"dampers": self.dampers} if self.dampers is not None else {}) \
-            | ({"powertrain": self.powertrain} if self.powertrain is not None else {})
+        } | ({"dampers": self.dampers} if self.dampers is not None else {}) | (
+            {"powertrain": self.powertrain} if self.powertrain is not None else {})
 
     def label(self, rid: str) -> str:
         """A run id, with ``(road B)`` for a run on an unknown road of ISO 8608 class B."""
@@ -314,8 +314,8 @@ def _extensions(sc, extensions) -> tuple:
     """The groups to plan: ``extensions``, else the scenario's [model], else the groups the nominal car has;
     damper curves added when the car has real dampers."""
     if extensions is None:
-        extensions = sc.extensions if sc.extensions is not None else \
-            tuple(g for g, ns in GROUPS.items() if any(sc.truth.get(n, 0.0) > 0 for n in ns))
+        extensions = (sc.extensions if sc.extensions is not None else
+                      tuple(g for g, ns in GROUPS.items() if any(sc.truth.get(n, 0.0) > 0 for n in ns)))
     extensions = tuple(extensions)
     if sc.dampers is not None and CURVES not in extensions:  # the car has real dampers: plan their curves
         extensions += (CURVES,)
@@ -550,8 +550,8 @@ BUMP_STOP_NOTE = ("bump stops are not in the plan's model (it plans the linear g
 def gather_information(pb: PlanProblem, opts: PlanOptions) -> PlanInformation:
     """Information of every candidate run for the nominal car and the robust cars."""
     sc, notes = pb.sc, []
-    sim = simulator(replace(sc, runs=tuple(r for r in sc.runs if r.road_known))) \
-        if len(pb.road_ids) < len(pb.run_ids) else None
+    sim = (simulator(replace(sc, runs=tuple(r for r in sc.runs if r.road_known)))
+           if len(pb.road_ids) < len(pb.run_ids) else None)
     lin_sim, exc = sim, None
     if pb.curves:
         curve_sim = Simulator(pb.space.layout).bind(sc.geometry, sim.runs)
@@ -599,8 +599,8 @@ def select_runs(pb: PlanProblem, opts: PlanOptions, inf: PlanInformation) -> Sel
     ti = [pb.names.index(n) for n in opts.targets]
     sel = Selector(F, A, B, cost, opts.criterion, ti, [opts.targets[n] for n in opts.targets])
     # greedy path over all candidates (no budget), for the figure
-    order = sel.greedy(lambda S: True, stop_when_met=False) if opts.criterion != "target" else \
-        Selector(F, A, B, np.ones(R), opts.criterion, ti, sel.tr).greedy(lambda S: True, stop_when_met=False)
+    order = (sel.greedy(lambda S: True, stop_when_met=False) if opts.criterion != "target" else
+             Selector(F, A, B, np.ones(R), opts.criterion, ti, sel.tr).greedy(lambda S: True, stop_when_met=False))
     path = [(pb.run_ids[j], inf.precision(order[:k + 1])) for k, j in enumerate(order)]
     S, notes = (_budgeted_subset if opts.budgeted else _fewest_within)(pb, opts, inf, sel)
     return Selection(sorted(S), order, path, sel, notes)

@@ -787,8 +787,8 @@ def run_chunks(ch0, ch1, n, CF, TB, XK, KF, nk, ns, split, X0, run_start, hs, ms
                         for i in range(10):
                             states[p, row, i] = XB[cur, i, lane]
                         for c in range(4):
-                            ctm = CF[ch, (_ECT + _CSTRIDE * c) * LANES + lane] * \
-                                CF[ch, (_EMU + _CSTRIDE * c) * LANES + lane]
+                            ctm = (CF[ch, (_ECT + _CSTRIDE * c) * LANES + lane]
+                                   * CF[ch, (_EMU + _CSTRIDE * c) * LANES + lane])
                             states[p, row, 10 + c] = XB[cur, 10 + c, lane] + ctm * UF[jf, c]
                         for i in range(14, nx):
                             states[p, row, i] = XB[cur, i, lane]

@@ -27,7 +27,7 @@ def hermite_value_slope(t, s0, s1, m0, m1):
     and on arrays in :func:`rideid.model.nonlinear.hermite_root`."""
     t2 = t * t
     t3 = t2 * t
-    val = (2.0 * t3 - 3.0 * t2 + 1.0) * s0 + (t3 - 2.0 * t2 + t) * m0 + (3.0 * t2 - 2.0 * t3) * s1 \
-        + (t3 - t2) * m1
+    val = ((2.0 * t3 - 3.0 * t2 + 1.0) * s0 + (t3 - 2.0 * t2 + t) * m0 + (3.0 * t2 - 2.0 * t3) * s1
+           + (t3 - t2) * m1)
     der = (6.0 * t2 - 6.0 * t) * (s0 - s1) + (3.0 * t2 - 4.0 * t + 1.0) * m0 + (3.0 * t2 - 2.0 * t) * m1
     return val, der

@@ -209,8 +209,8 @@ class NonlinearLayout:
     def __post_init__(self):
         if self.knots is not None:
             k = tuple(float(v) for v in self.knots)
-            if len(k) < 1 or not all(math.isfinite(v) and v != 0 for v in k) \
-                    or any(b <= a for a, b in zip(k, k[1:])):
+            if (len(k) < 1 or not all(math.isfinite(v) and v != 0 for v in k)
+                    or any(b <= a for a, b in zip(k, k[1:]))):
                 raise DataError(f"damper knots must be finite, nonzero and strictly increasing (m/s), got {k}")
             object.__setattr__(self, "knots", k)
         object.__setattr__(self, "bump_stops", bool(self.bump_stops))
@@ -233,8 +233,8 @@ class NonlinearLayout:
 
     @property
     def names(self) -> tuple[str, ...]:
-        return SUSPENSION_NAMES + (POWERTRAIN_NAMES if self.powertrain else ()) + \
-            (BUMP_STOP_NAMES if self.bump_stops else ()) + curve_names(self.n_knots)
+        return (SUSPENSION_NAMES + (POWERTRAIN_NAMES if self.powertrain else ())
+                + (BUMP_STOP_NAMES if self.bump_stops else ()) + curve_names(self.n_knots))
 
     @property
     def n_columns(self) -> int:
@@ -690,8 +690,8 @@ def inputs_within(U, R, js, tau, dt):
     s = np.where(up, x - 1.0, x)[:, None]
     om = 1.0 - s
     s2 = s * s
-    u = ((1.0 + 2.0 * s) * om * om) * U[i] + (s * om * om * dt) * R[i] + (s2 * (3.0 - 2.0 * s)) * U[i + 1] \
-        + (s2 * (s - 1.0) * dt) * R[i + 1]
+    u = (((1.0 + 2.0 * s) * om * om) * U[i] + (s * om * om * dt) * R[i] + (s2 * (3.0 - 2.0 * s)) * U[i + 1]
+         + (s2 * (s - 1.0) * dt) * R[i + 1])
     return u, om * R[i] + s * R[i + 1]
 
 

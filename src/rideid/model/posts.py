@@ -227,8 +227,8 @@ class PostSignal:
                     z[lo:lo + 20_000, i] = amp * np.sin(a).sum(axis=1)
                     zd[lo:lo + 20_000, i] = amp * (np.cos(a) * w).sum(axis=1)
             e, de = self._envelope(t)
-            return (e[:, None] * z).reshape(np.shape(times) + (4,)), \
-                (de[:, None] * z + e[:, None] * zd).reshape(np.shape(times) + (4,))
+            return ((e[:, None] * z).reshape(np.shape(times) + (4,)),
+                    (de[:, None] * z + e[:, None] * zd).reshape(np.shape(times) + (4,)))
 
         return inputs_at
 

@@ -96,8 +96,8 @@ def class_gd(road_class) -> float:
             raise ArgumentError(f"unknown ISO 8608 road class {road_class!r}; classes are "
                                 f"{', '.join(ROAD_CLASSES)}")
         return ROAD_CLASSES[key]
-    if isinstance(road_class, bool) or not isinstance(road_class, (int, float)) \
-            or not (math.isfinite(road_class) and road_class > 0):
+    if (isinstance(road_class, bool) or not isinstance(road_class, (int, float))
+            or not (math.isfinite(road_class) and road_class > 0)):
         raise ArgumentError(f"road class must be a letter A-H or a positive Gd(n0) in m^3, got {road_class!r}")
     return float(road_class)
 

@@ -102,8 +102,8 @@ def prepare_run(track: Track, geom: Geometry, speed: float | None, t, quad_order
     t = np.asarray(t, dtype=float)
     for tr, ge, sp, tt, qo, di, res in _PREPARED:
         # the same objects (tracks and distance functions are not compared by value) and the same grid
-        if tr is track and di is distance and ge == geom and sp == speed and qo == quad_order \
-                and tt.shape == t.shape and np.array_equal(tt, t):
+        if (tr is track and di is distance and ge == geom and sp == speed and qo == quad_order
+                and tt.shape == t.shape and np.array_equal(tt, t)):
             return res
     res = _prepare_run(track, geom, speed, t, quad_order, distance)
     for arr in (res.t, res.u, res.ud, res.mu, res.rate, res.rated):
@@ -272,19 +272,9 @@ def _block_response(Phi, G, mu, x0):
 
 
 def simulate_modal(P, geom: Geometry, run: RunInput, disc: Discretized | None = None):
-    """The outputs of :func:`simulate_reference` (the same exact discretisation) by a modal recursion
-    vectorised over the samples: any block size (a powertrain's 12-state symmetric block, SPEC §11).
-
-    Parameters
-    ----------
-    P : (n_pop, 12), (n_pop, 16) or (n_pop, 23)
-    geom : Geometry
-    run : RunInput
-
-    Returns
-    -------
-    y : (n_pop, n_time, 10) in :data:`rideid.model.CHANNELS` order.
-    """
+    """The outputs ``y`` of :func:`simulate_reference` (the same parameters and the same exact discretisation)
+    by a modal recursion vectorised over the samples: any block size (a powertrain's 12-state symmetric block,
+    SPEC §11)."""
     P = np.atleast_2d(np.asarray(P, dtype=float))
     if disc is None:
         disc = Discretized(P, geom, run.h)

@@ -900,22 +900,56 @@ def summary_section(result, context: dict) -> dict:
     data, in a few lines) and of the list of sections to jump to (``toc``: those the report has)."""
     res = context["res"]
     adq = context.get("adequacy")
-    lines = []
     held = caveats(adq)
-    if adq:
-        lines.append(("Verdict", ("MODEL ADEQUATE ON WHAT WAS TESTED, NOT A CLEAN VERDICT "
-                                  f"({len(held)} caveat{'s' if len(held) > 1 else ''}, below): " if held else
-                                  "model adequate: " if adq["adequate"] else "MODEL NOT ADEQUATE: ")
-                      + adq["reasons"][0], "adequacy"))
-    elif getattr(result, "roads", None):
-        lines.append(("Verdict", "adequacy not assessed: rideid has no residual test on unknown roads yet; the "
-                                 "error bars hold only if the linear model describes the car", "roads"))
-    else:
-        lines.append(("Verdict", "adequacy not assessed (no polish)", "estimates"))
+    lines = [_verdict_line(result, adq, held)]
     ext = (res.get("model") or {}).get("extensions") or []
     known = ", ".join(f"{k} = {v:g}" for k, v in context["known"].items())
     lines.append(("Car", f"model {' + '.join(ext) if ext else 'base (the twelve parameters)'}; anchored on "
                          f"{known} (every mass, inertia, stiffness and damping scales with it)", "estimates"))
+    lines += _estimates_lines(result, context)
+    lines += _caveat_lines(result, adq)
+    if getattr(result, "dampers", None):
+        d = result.dampers
+        idle = sum(not e for axle in ("front", "rear") for e in d[axle]["excited"])
+        lines.append(("Damper curves", f"{len(d['velocity'])} knots per axle up to {max(d['velocity']):g} m/s"
+                      + (f"; {idle} knot force(s) not excited: not to be trusted" if idle else
+                         "; every knot excited") + knee_summary(d), "dampers"))
+    if context.get("frequency_summary"):
+        lines.append(("Frequency responses", context["frequency_summary"], "frequency"))
+    rows = [r for r in context["fit_rows"] if r["median"] == r["median"]]
+    if rows:
+        worst = max(rows, key=lambda r: r["worst"])
+        lines.append(("Fit", f"cost {res['cost']:.3g}; median channel NRMSE per run "
+                             f"{min(r['median'] for r in rows):.2g} – {max(r['median'] for r in rows):.2g}; "
+                             f"worst channel {worst['worst']:.2g} (run {worst['run']})", "fits"))
+    lines.append(_data_line(result, context))
+    present = {"summary", "estimates", "modal", "data", "fits", "maps"}
+    present |= {"verdict", "adequacy"} if adq else set()
+    present |= {"model"} if context.get("model_choice") else set()
+    present |= {"dampers"} if context.get("damper_figures") else set()
+    present |= {"frequency"} if context.get("frequency_figure") else set()
+    present |= {"roads"} if context.get("road_figures") else set()
+    present |= {f.id for f in context.get("figures", [])}
+    return {"summary": lines, "toc": [t for t in TOC if t[0] in present], "verdict_caveats": held}
+
+
+def _verdict_line(result, adq, held) -> tuple:
+    """The summary's verdict: adequate, adequate with caveats ``held``, not adequate, or why not assessed."""
+    if adq:
+        return ("Verdict", ("MODEL ADEQUATE ON WHAT WAS TESTED, NOT A CLEAN VERDICT "
+                            f"({len(held)} caveat{'s' if len(held) > 1 else ''}, below): " if held else
+                            "model adequate: " if adq["adequate"] else "MODEL NOT ADEQUATE: ")
+                + adq["reasons"][0], "adequacy")
+    if getattr(result, "roads", None):
+        return ("Verdict", "adequacy not assessed: rideid has no residual test on unknown roads yet; the "
+                           "error bars hold only if the linear model describes the car", "roads")
+    return ("Verdict", "adequacy not assessed (no polish)", "estimates")
+
+
+def _estimates_lines(result, context) -> list:
+    """The summary's error bars (the narrowest and the widest, what the budget notes, estimates at a search
+    bound) and what the tracks as built needed (SPEC §11)."""
+    lines = []
     est = [p for p in context["params"] if p["status"] in ("estimated", "AT A SEARCH BOUND")
            and p["rel_std_total"] is not None]
     if est:
@@ -939,6 +973,12 @@ def summary_section(result, context: dict) -> dict:
                          for tid, rec in built.items())
         lines.append(("Tracks as built", ("REJECTED, the estimates are the tracks' as drawn: " + rejected)
                       if rejected else text + " (amplitude factor, unevenness at waves up to 10 m)", "estimates"))
+    return lines
+
+
+def _caveat_lines(result, adq) -> list:
+    """The summary's caveats on the error bars: tracks as drawn, a residual level above the noise, small angles."""
+    lines = []
     caveat = (adq or {}).get("tracks_caveat")
     if caveat:  # adequate only by the weighing, on tracks as drawn (model_choice._drawing_caveat)
         lines.append(("Tracks as drawn", "NOT TO BE TRUSTED beyond the error bars: " + caveat, "estimates"))
@@ -948,20 +988,11 @@ def summary_section(result, context: dict) -> dict:
     small = ((adq or {}).get("small_angle") or {}).get("note")
     if small:  # SPEC §1 is small-angle: which error bars a body that turned degrees makes optimistic
         lines.append(("Small angles", small.split(": ", 1)[-1], "estimates"))
-    if getattr(result, "dampers", None):
-        d = result.dampers
-        idle = sum(not e for axle in ("front", "rear") for e in d[axle]["excited"])
-        lines.append(("Damper curves", f"{len(d['velocity'])} knots per axle up to {max(d['velocity']):g} m/s"
-                      + (f"; {idle} knot force(s) not excited: not to be trusted" if idle else
-                         "; every knot excited") + knee_summary(d), "dampers"))
-    if context.get("frequency_summary"):
-        lines.append(("Frequency responses", context["frequency_summary"], "frequency"))
-    rows = [r for r in context["fit_rows"] if r["median"] == r["median"]]
-    if rows:
-        worst = max(rows, key=lambda r: r["worst"])
-        lines.append(("Fit", f"cost {res['cost']:.3g}; median channel NRMSE per run "
-                             f"{min(r['median'] for r in rows):.2g} – {max(r['median'] for r in rows):.2g}; "
-                             f"worst channel {worst['worst']:.2g} (run {worst['run']})", "fits"))
+    return lines
+
+
+def _data_line(result, context) -> tuple:
+    """The summary's data: runs (on unknown roads), warnings on the data, channels left out of a road run."""
     roads = getattr(result, "roads", None) or {}
     n_road = len(roads)
     text = f"{context['n_runs']} runs" + (f" ({n_road} on unknown roads)" if n_road else "")
@@ -970,15 +1001,7 @@ def summary_section(result, context: dict) -> dict:
     left = sum(len(r.get("channels_left_out") or {}) for r in roads.values())
     if left:
         text += f"; {left} channel(s) left out of a road run's fit (no signal)"
-    lines.append(("Data", text, "data"))
-    present = {"summary", "estimates", "modal", "data", "fits", "maps"}
-    present |= {"verdict", "adequacy"} if adq else set()
-    present |= {"model"} if context.get("model_choice") else set()
-    present |= {"dampers"} if context.get("damper_figures") else set()
-    present |= {"frequency"} if context.get("frequency_figure") else set()
-    present |= {"roads"} if context.get("road_figures") else set()
-    present |= {f.id for f in context.get("figures", [])}
-    return {"summary": lines, "toc": [t for t in TOC if t[0] in present], "verdict_caveats": held}
+    return ("Data", text, "data")
 
 
 def parameter_rows(result) -> list:

@@ -93,8 +93,8 @@ def local_cluster(n_workers: int | None = None):
     n = n_workers or machine_cores()
     # Ctrl-C on a terminal reaches the whole process group: the workers are started with SIGINT ignored
     # (inherited, and kept by Python), so that only the client handles it and closes the cluster cleanly
-    old = signal.signal(signal.SIGINT, signal.SIG_IGN) if threading.current_thread() is threading.main_thread() \
-        else None
+    old = (signal.signal(signal.SIGINT, signal.SIG_IGN) if threading.current_thread() is threading.main_thread()
+           else None)
     # The one-thread settings must be in the environment the worker processes start with (they
     # inherit this process's, set here for the spawn only): LocalCluster's ``env`` argument is applied
     # after the worker has imported Numba (whose thread count is read at import), and then every

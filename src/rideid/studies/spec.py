@@ -249,8 +249,8 @@ def _parse_data(tab, where, base):
                 p = Path(m)
                 if not p.is_dir():  # a broken dataset inside a folder is a failed task, a wrong path is this
                     raise _err(w, f"'{pat}': {p} is not a folder" if p.exists() else f"'{pat}': no such folder {p}")
-                label = Path(m).resolve().relative_to(base.resolve()).as_posix() \
-                    if Path(m).resolve().is_relative_to(base.resolve()) else str(Path(m).resolve())
+                label = (Path(m).resolve().relative_to(base.resolve()).as_posix()
+                         if Path(m).resolve().is_relative_to(base.resolve()) else str(Path(m).resolve()))
                 if label in seen:
                     continue
                 seen.add(label)

@@ -232,8 +232,8 @@ def parse_preprocess(tab, where: str, keys=PREPROCESS_KEYS) -> dict:
             else:
                 raise DataError(f"{w}: expected a time in seconds of file time, or \"auto\"")
         elif k in ("fs", "pre_roll"):
-            if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) or v < 0 \
-                    or (k == "fs" and v == 0):
+            if (isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) or v < 0
+                    or (k == "fs" and v == 0)):
                 raise DataError(f"{w}: expected a {'positive' if k == 'fs' else 'non-negative'} number")
             out[k] = float(v)
     return out

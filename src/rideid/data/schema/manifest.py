@@ -113,8 +113,8 @@ SECTIONS = {
                              "input": _ANY, **{k: _ANY for k in RUN_PREPROCESS_KEYS}},
                             _RUN_MESSAGES, hints=_RUN_HINTS_DATASET),
 }
-assert tuple(SECTIONS["runs.scenario"].keys) == RUN_KEYS_SCENARIO and tuple(SECTIONS["runs.dataset"].keys) == \
-    RUN_KEYS_DATASET
+assert (tuple(SECTIONS["runs.scenario"].keys) == RUN_KEYS_SCENARIO
+        and tuple(SECTIONS["runs.dataset"].keys) == RUN_KEYS_DATASET)
 
 
 # ---------------------------------------------------------------------------
@@ -467,8 +467,8 @@ def parse_model_table(tab, where: str) -> tuple[tuple[str, ...] | None, tuple[fl
     if not isinstance(tab, dict):
         raise DataError(f"{where}: [model] must be a table")
     SECTIONS["model"].check_unknown(tab, where)
-    knots = parse_damper_knots(tab["damper_knots"], f"{where}: [model] damper_knots") if "damper_knots" in tab \
-        else None
+    knots = (parse_damper_knots(tab["damper_knots"], f"{where}: [model] damper_knots") if "damper_knots" in tab
+             else None)
     if "extensions" not in tab and knots is not None:
         return None, knots
     ext = tab.get("extensions", [])

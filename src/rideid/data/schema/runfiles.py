@@ -45,6 +45,26 @@ class RunData:
         return Y
 
 
+def missing_post_channel(present) -> str | None:
+    """The first post channel a four-post rig run (SPEC §13) lacks among the names ``present``: its four
+    displacements are needed (:data:`~rideid.model.posts.POST_CHANNELS`), its four velocities all or none
+    (:data:`~rideid.model.posts.POST_VEL_CHANNELS`); None when nothing is missing."""
+    needed = POST_CHANNELS + (POST_VEL_CHANNELS if any(c in present for c in POST_VEL_CHANNELS) else ())
+    return next((c for c in needed if c not in present), None)
+
+
+def check_post_channels(present, where, absent: str = "is missing"):
+    """A :class:`DataError` (``where: ...``) naming the first post channel a four-post rig run lacks among the
+    names ``present`` (:func:`missing_post_channel`) and how it is missing (``absent``); nothing if none is."""
+    gap = missing_post_channel(present)
+    if gap in POST_CHANNELS:
+        raise DataError(f"{where}: a four-post rig run (input = \"posts\") needs the four post displacements "
+                        f"{', '.join(POST_CHANNELS)} (m); '{gap}' {absent}")
+    if gap is not None:
+        raise DataError(f"{where}: give all four post velocities {', '.join(POST_VEL_CHANNELS)} (m/s) or none "
+                        f"(then computed from the displacements); '{gap}' {absent}")
+
+
 def read_run_csv(path: Path, posts: bool = False) -> RunData:
     """Read and validate a run CSV (SPEC §3); ``posts``: a four-post rig run's (SPEC §13), whose columns
     ``post_fl … post_rr`` (m) must all be there, and ``post_vel_fl … post_vel_rr`` (m/s) all or none."""
@@ -62,15 +82,7 @@ def read_run_csv(path: Path, posts: bool = False) -> RunData:
         raise DataError(f"{path}: only {len(data_rows)} data rows; at least 3 are needed")
     rig = POST_CHANNELS + POST_VEL_CHANNELS if posts else ()
     if posts:
-        missing = [c for c in POST_CHANNELS if c not in header]
-        if missing:
-            raise DataError(f"{path}: missing column '{missing[0]}': a four-post rig run (input = \"posts\") needs "
-                            f"the four post displacements {', '.join(POST_CHANNELS)} (m)")
-        vel = [c for c in POST_VEL_CHANNELS if c in header]
-        if vel and len(vel) < 4:
-            missing = [c for c in POST_VEL_CHANNELS if c not in header]
-            raise DataError(f"{path}: missing column '{missing[0]}': give all four post velocities "
-                            f"{', '.join(POST_VEL_CHANNELS)} (m/s) or none (then computed from the displacements)")
+        check_post_channels(header, path)
     used = [c for c in header if c == "time" or c in CHANNELS or c in rig]
     extra = [c for c in header if c not in used]
     if extra:

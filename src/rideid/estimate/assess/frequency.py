@@ -227,27 +227,67 @@ def frequency_response(result, freq=None) -> FrequencyResponse:
     row0 = _row(result)
     names, cov, notes = _statistical(result, details)
     anchor, anchor_std, anchor_value, others = _declared(result)
-    curves = bool(getattr(result, "dampers", None))
-    # the columns differentiated: the statistical block, the damper slopes (curves), known values declared
-    cols = list(names)
-    extra_sd = {}
-    if curves:
-        for n in ("c_sf", "c_sr"):
-            if n not in cols:
-                cols.append(n)
-                extra_sd[n] = float(details.get(n, {}).get("std_total") or 0.0)
-        notes.append("damper curves: the response of the car linearised at the curves' mean slope over the "
-                     "excited knots (c_sf, c_sr), their std taken as independent of the rest")
-    known_declared = [key for kind, key, _ in others.values() if kind == "known" and key in ALL_NAMES]
-    cols += [k for k in known_declared if k not in cols]
-    geom_declared = [key for kind, key, _ in others.values() if kind == "vehicle" and key in Geometry.KEYS
-                     + tuple(Geometry.OPTIONAL_KEYS)]
-    # one batch: the car, each column +- its step, the anchor's scale direction +-
+    cols, extra_sd = _columns(result, names, others, notes)
     # relative steps; a parameter at 0 (a tire damping the data put at its bound) steps by a part of its std
     own_sd = {**{n: float(np.sqrt(max(cov[i, i], 0.0))) for i, n in enumerate(names)}, **extra_sd,
               **{key: std for kind, key, std in others.values() if kind == "known"}}
     steps = np.array([STEP * abs(row0[ALL_NAMES.index(n)]) if row0[ALL_NAMES.index(n)] != 0
                       else max(1e-3 * own_sd.get(n, 0.0), 1e-9) for n in cols])
+    H, grad, scale = _gradients(row0, geom, freq, cols, steps)
+    # statistical: g^T Sigma g over the statistical block, the damper slopes independent of it
+    ks = len(names)
+    var = [np.einsum("a...,ab,b...->...", g[:ks], cov, g[:ks]) for g in grad]
+    for n, sd in extra_sd.items():
+        j = cols.index(n)
+        var = [v + (g[j] * sd) ** 2 for v, g in zip(var, grad)]
+    # the anchor: exactly along the scale direction (zero to rounding: responses to the road are ratios)
+    if anchor_std and anchor_value:
+        var = [v + (d * anchor_std / anchor_value) ** 2 for v, d in zip(var, scale)]
+        notes.append(f"{anchor} (declared ± {anchor_std:g}): propagated along the scale direction, where the "
+                     "responses to the road do not change")
+    elif anchor:
+        notes.append(f"{anchor} taken as exact; its uncertainty would not change these responses (they are "
+                     "ratios: every mass, inertia, stiffness and damping scales with it)")
+    for name, (kind, key, std) in others.items():
+        b = _declared_bound(details, name, kind, key, std, cols, grad, (row0, geom, freq))
+        var = [v + bb * bb for v, bb in zip(var, b)]
+    if others:
+        notes.append(f"{', '.join(others)}: bounded by the triangle inequality over the estimates (result.json keeps "
+                     "each contribution's size, not its sign): conservative")
+    std, std_v = (np.sqrt(np.clip(v, 0, None)) for v in var)
+    if not np.any(np.diag(cov) > 0) and not any(v > 0 for v in extra_sd.values()):
+        # no standard error at all (an identification without the polish): no band, rather than a band of 0
+        std[:] = np.nan
+        std_v[:] = np.nan
+        notes.append("the estimates have no standard errors (no polish): std_abs is NaN")
+    Hc = H[0]
+    views = {v: {"output": out, "weights": list(w), "label": label, "H": Hc[:, OUTPUTS.index(out)] @ np.array(w),
+                 "std_abs": std_v[:, j]} for j, (v, (out, w, label)) in enumerate(VIEWS.items())}
+    return FrequencyResponse(freq=freq, inputs=INPUTS, outputs=OUTPUTS, H=Hc, std_abs=std, views=views,
+                             notes=notes)
+
+
+def _columns(result, names, others, notes):
+    """``(columns, extra std)``: the parameters differentiated, the statistical block's ``names``, then the
+    damper slopes of a result with curves (their ``std_total`` in ``extra std``, taken as independent; a note
+    says so), then the known values declared with a std."""
+    cols, extra_sd = list(names), {}
+    if getattr(result, "dampers", None):
+        for n in ("c_sf", "c_sr"):
+            if n not in cols:
+                cols.append(n)
+                extra_sd[n] = float(result.details.get(n, {}).get("std_total") or 0.0)
+        notes.append("damper curves: the response of the car linearised at the curves' mean slope over the "
+                     "excited knots (c_sf, c_sr), their std taken as independent of the rest")
+    known_declared = [key for kind, key, _ in others.values() if kind == "known" and key in ALL_NAMES]
+    return cols + [k for k in known_declared if k not in cols], extra_sd
+
+
+def _gradients(row0, geom: Geometry, freq, cols, steps):
+    """``(H, (G, G_views), (scale, scale_views))`` from one batch of the car, each column +- its step and the
+    anchor's scale direction +-: ``H`` the batch's responses (the car's first), ``G`` ``d|H|/d column``
+    ``(k, f, o, i)`` and the views' ``(k, f, len(VIEWS))`` by central differences, ``scale`` ``d|H|/d(log
+    scale)`` and the views'."""
     P = [row0]
     for n, h in zip(cols, steps):
         for sgn in (1, -1):
@@ -260,63 +300,33 @@ def frequency_response(result, freq=None) -> FrequencyResponse:
     H = _kernel(np.array(P), geom, freq)
     mag, view = _abs_and_view(H)
     k = len(cols)
-    G = (mag[1:2 * k + 1:2] - mag[2:2 * k + 2:2]) / (2 * steps[:, None, None, None])  # (k, f, o, i)
+    G = (mag[1:2 * k + 1:2] - mag[2:2 * k + 2:2]) / (2 * steps[:, None, None, None])
     Gv = (view[1:2 * k + 1:2] - view[2:2 * k + 2:2]) / (2 * steps[:, None, None])
-    scale_mag = (mag[-2] - mag[-1]) / (2 * STEP)  # d|H| / d(log scale)
-    scale_view = (view[-2] - view[-1]) / (2 * STEP)
-    # statistical: g^T Sigma g over the statistical block
-    ks = len(names)
-    var = np.einsum("a...,ab,b...->...", G[:ks], cov, G[:ks])
-    var_v = np.einsum("a...,ab,b...->...", Gv[:ks], cov, Gv[:ks])
-    for n, sd in extra_sd.items():
-        j = cols.index(n)
-        var += (G[j] * sd) ** 2
-        var_v += (Gv[j] * sd) ** 2
-    # the anchor: exactly along the scale direction (zero to rounding: responses to the road are ratios)
-    if anchor_std and anchor_value:
-        var += (scale_mag * anchor_std / anchor_value) ** 2
-        var_v += (scale_view * anchor_std / anchor_value) ** 2
-        notes.append(f"{anchor} (declared ± {anchor_std:g}): propagated along the scale direction, where the "
-                     "responses to the road do not change")
-    elif anchor:
-        notes.append(f"{anchor} taken as exact; its uncertainty would not change these responses (they are "
-                     "ratios: every mass, inertia, stiffness and damping scales with it)")
-    # every other declared input: the triangle inequality over its contributions (signs not kept)
-    bounded = []
-    for name, (kind, key, std) in others.items():
-        b = np.zeros(mag.shape[1:])
-        bv = np.zeros(view.shape[1:])
-        for j, n in enumerate(cols):
-            c = ((details.get(n) or {}).get("budget") or {}).get(name)
-            if c and not (details.get(n) or {}).get("fixed"):
-                b += np.abs(G[j]) * c
-                bv += np.abs(Gv[j]) * c
-        if kind == "known" and key in cols:
-            j = cols.index(key)
-            b += np.abs(G[j]) * std
-            bv += np.abs(Gv[j]) * std
-        elif kind == "vehicle" and key in geom_declared and std > 0:
-            d, dv = _geometry_derivative(row0, geom, key, std, freq)
-            b += np.abs(d)
-            bv += np.abs(dv)
-        var += b * b
-        var_v += bv * bv
-        bounded.append(name)
-    if bounded:
-        notes.append(f"{', '.join(bounded)}: bounded by the triangle inequality over the estimates (result.json keeps "
-                     "each contribution's size, not its sign): conservative")
-    std = np.sqrt(np.clip(var, 0, None))
-    std_v = np.sqrt(np.clip(var_v, 0, None))
-    if not np.any(np.diag(cov) > 0) and not any(v > 0 for v in extra_sd.values()):
-        # no standard error at all (an identification without the polish): no band, rather than a band of 0
-        std[:] = np.nan
-        std_v[:] = np.nan
-        notes.append("the estimates have no standard errors (no polish): std_abs is NaN")
-    Hc = H[0]
-    views = {v: {"output": out, "weights": list(w), "label": label, "H": Hc[:, OUTPUTS.index(out)] @ np.array(w),
-                 "std_abs": std_v[:, j]} for j, (v, (out, w, label)) in enumerate(VIEWS.items())}
-    return FrequencyResponse(freq=freq, inputs=INPUTS, outputs=OUTPUTS, H=Hc, std_abs=std, views=views,
-                             notes=notes)
+    return H, (G, Gv), ((mag[-2] - mag[-1]) / (2 * STEP), (view[-2] - view[-1]) / (2 * STEP))
+
+
+def _declared_bound(details, name, kind, key, std, cols, grad, car):
+    """The bound on the change of ``|H|`` and of the views a declared input ``name`` makes: the triangle
+    inequality over its contributions to the estimates (result.json keeps their sizes, not their signs), plus
+    its own direct effect when it is a known value differentiated (``cols``) or a dimension of the car
+    (``car``: the row, the geometry and the frequencies)."""
+    G, Gv = grad
+    b, bv = np.zeros(G.shape[1:]), np.zeros(Gv.shape[1:])
+    for j, n in enumerate(cols):
+        c = ((details.get(n) or {}).get("budget") or {}).get(name)
+        if c and not (details.get(n) or {}).get("fixed"):
+            b += np.abs(G[j]) * c
+            bv += np.abs(Gv[j]) * c
+    if kind == "known" and key in cols:
+        j = cols.index(key)
+        b += np.abs(G[j]) * std
+        bv += np.abs(Gv[j]) * std
+    elif kind == "vehicle" and key in Geometry.KEYS + tuple(Geometry.OPTIONAL_KEYS) and std > 0:
+        row0, geom, freq = car
+        d, dv = _geometry_derivative(row0, geom, key, std, freq)
+        b += np.abs(d)
+        bv += np.abs(dv)
+    return b, bv
 
 
 def _geometry_derivative(row0, geom: Geometry, key: str, std: float, freq):

@@ -86,35 +86,64 @@ def score(result, truth, dampers=None) -> dict:
         truth = load_truth(truth)
     if isinstance(dampers, str) and dampers != "linear":
         raise ArgumentError(f"score: dampers={dampers!r}; expected the true DamperCurves, 'linear' or None")
-    linear = isinstance(dampers, str)
     details = result.details if hasattr(result, "details") else result["parameters"]
-    rows, notes = {}, []
+    rows, notes = _parameter_rows(details, truth), []
+    if _get(result, "dampers"):
+        rows.update(_knot_rows(_get(result, "dampers"), truth, dampers))
+        if dampers is None:
+            notes.append(NO_TRUE_CURVE_NOTE)
+    elif dampers is not None and not isinstance(dampers, str):
+        notes.append("the truth has damper curves and the model linear dampers: c_sf and c_sr are compared with "
+                     "the curves' mean slope between -0.1 and 0.1 m/s")
+    rows.update(_stop_rows(_get(result, "bump_stops"), truth, details))
+    worst = max((abs(x["error_percent"]) for x in rows.values()
+                 if x["error_percent"] is not None and x["status"] in ("estimated", "derived")), default=0.0)
+    judged = [x["covered"] for x in rows.values() if x["covered"] is not None]
+    basis = "std_total" if any(isinstance(d, dict) and "std_total" in d for d in details.values()) else "std_robust"
+    return {"parameters": rows, "worst_percent": worst, "covered": sum(judged), "coverable": len(judged),
+            "covered_robust": sum(bool(x["covered_robust"]) for x in rows.values()), "basis": basis,
+            "notes": notes}
+
+
+def _parameter_rows(details, truth) -> dict:
+    """The rows of the car's parameters (:data:`rideid.model.params.ALL_NAMES`); an extension neither in the
+    result nor in the truth has none, one absent from the truth is 0 there, one absent from the result is
+    ``"not in the model"`` (estimate 0)."""
+    rows = {}
     for n in ALL_NAMES:
         if n in EXT_NAMES and n not in details and n not in truth:
             continue
         d = details.get(n, {})
         est = float(d["value"]) if n in details else 0.0
-        tr = float(truth.get(n, 0.0))  # an extension absent from the truth is 0
+        tr = float(truth.get(n, 0.0))
         status = ("not in the model" if n not in details else "known" if d.get("fixed")
                   else "derived" if d.get("derived") else "estimated")
         rows[n] = _row(est, tr, status, d.get("std_robust"), d.get("std_total"))
-    curves = _get(result, "dampers")
-    if curves:
-        for axle, a, c in AXLES:
-            ax = curves[axle]
-            none = [None] * len(ax["force"])
-            for j, v in enumerate(curves["velocity"]):
-                tr = (None if dampers is None else float(truth[c]) * v if linear else dampers.force(axle, v))
-                excited = ax.get("excited", [True] * len(ax["force"]))[j]
-                status = NO_TRUE_CURVE if tr is None else "estimated" if excited else "not excited"
-                rows[f"F_{a}{j + 1}"] = _row(float(ax["force"][j]), tr, status, (ax.get("std_robust") or none)[j],
-                                             (ax.get("std_total") or none)[j], velocity=float(v))
-        if dampers is None:
-            notes.append(NO_TRUE_CURVE_NOTE)
-    elif dampers is not None and not linear:
-        notes.append("the truth has damper curves and the model linear dampers: c_sf and c_sr are compared with "
-                     "the curves' mean slope between -0.1 and 0.1 m/s")
-    stops = _get(result, "bump_stops")
+    return rows
+
+
+def _knot_rows(curves, truth, dampers) -> dict:
+    """The rows of the result's knot forces ``F_f1 ..``, ``F_r1 ..`` (``curves``: its ``dampers`` block): the
+    truth off the true curves ``dampers``, ``c_s v`` when they are ``"linear"``, None (not judged) when None."""
+    rows = {}
+    for axle, a, c in AXLES:
+        ax = curves[axle]
+        none = [None] * len(ax["force"])
+        for j, v in enumerate(curves["velocity"]):
+            tr = (None if dampers is None else float(truth[c]) * v if isinstance(dampers, str)
+                  else dampers.force(axle, v))
+            excited = ax.get("excited", [True] * len(ax["force"]))[j]
+            status = NO_TRUE_CURVE if tr is None else "estimated" if excited else "not excited"
+            rows[f"F_{a}{j + 1}"] = _row(float(ax["force"][j]), tr, status, (ax.get("std_robust") or none)[j],
+                                         (ax.get("std_total") or none)[j], velocity=float(v))
+    return rows
+
+
+def _stop_rows(stops, truth, details) -> dict:
+    """The rows of the bump stops (``stops``: the result's ``bump_stops`` block, or None): a clearance where the
+    truth has a stop on that axle, the rate always (0 in a truth without the stop); without stops in the result,
+    the truth's rates as ``"not in the model"``."""
+    rows = {}
     for axle, a, _ in AXLES:
         c, r = f"bs_clear_{a}", f"bs_rate_{a}"
         if stops:
@@ -130,13 +159,7 @@ def score(result, truth, dampers=None) -> dict:
                                rob[k], (details.get(n) or {}).get("std_total"))
         elif r in truth:
             rows[r] = _row(0.0, float(truth[r]), "not in the model", None)
-    worst = max((abs(x["error_percent"]) for x in rows.values()
-                 if x["error_percent"] is not None and x["status"] in ("estimated", "derived")), default=0.0)
-    judged = [x["covered"] for x in rows.values() if x["covered"] is not None]
-    basis = "std_total" if any(isinstance(d, dict) and "std_total" in d for d in details.values()) else "std_robust"
-    return {"parameters": rows, "worst_percent": worst, "covered": sum(judged), "coverable": len(judged),
-            "covered_robust": sum(bool(x["covered_robust"]) for x in rows.values()), "basis": basis,
-            "notes": notes}
+    return rows
 
 
 __all__ = ["score"]

@@ -161,15 +161,11 @@ def prepare_track_run(ds, run, mode: str = "prior") -> TrackRun:
     rr = roadfit.prepare_road_run(run.id, rd.matrix(), rd.fs, v, ds.geometry, clipped=ds.clipped(run.id))
     rr = roadfit.with_sensors(rr, ds.sensor_filters(run.id))  # the channels as wired (SPEC §11)
     ri = nominal_inputs(ds, run, v)
-    return TrackRun(rr=rr, track=run.track, U=np.fft.rfft(np.asarray(ri.u, dtype=float), axis=0), mode=mode,
-                    inputs=ri, size_std=_size_std(ds, run.track))
-
-
-def _size_std(ds, track_id: str) -> float | None:
-    """The relative std of a track's drawn size (SPEC §13: declared, else the default width), or None for a
-    manifest that has none (an older one)."""
+    # the relative std of the track's drawn size (SPEC §13: declared, else the default width); None for a manifest
+    # that has none (an older one)
     prior = getattr(ds.manifest, "size_prior", None)
-    return None if prior is None else float(prior(track_id)[0])
+    return TrackRun(rr=rr, track=run.track, U=np.fft.rfft(np.asarray(ri.u, dtype=float), axis=0), mode=mode,
+                    inputs=ri, size_std=None if prior is None else float(prior(run.track)[0]))
 
 
 #: the weight of the drawn size's prior row (SPEC §13): the whitened residual's real and imaginary parts each have
@@ -380,36 +376,14 @@ def solve(P, geom, tr: TrackRun, car=None, alpha_std: bool = False) -> Fit:
     # each bin's whitened columns and data divided by its noise level
     sn = np.sqrt(pr.noise) if pr is not None else np.ones(bins.size)
     aN, S, aL, aR, r = cols[0] / sn[:, None], S / sn[:, None, None], aL / sn[:, None], aR / sn[:, None], r / sn[:, None]
-    Dn = rr.lead_in
-    lags = np.arange(-(Dn - 1), Dn)
-    ph = np.exp(1j * np.outer(w * h, lags))
-    idx = np.arange(Dn)[:, None] - np.arange(Dn)[None, :] + (Dn - 1)
-
-    def toeplitz(q):
-        return (q @ ph).real[idx]
-
-    en = np.exp(-1j * np.outer(w * h, np.arange(Dn)))                                      # (K, Dn)
     g = np.concatenate([aN[:, :, None], S], axis=2)                                        # (K,c,nb)
     nb = g.shape[-1]  # alpha, the car's states (14, 18 with a powertrain) and the sensor filters' (SPEC §11)
-    gf = g.reshape(-1, nb)
-    gr = np.concatenate([gf.real, gf.imag])
-    m = nb + 2 * Dn
-    G = np.zeros((m, m))
-    b = np.zeros(m)
-    G[:nb, :nb] = gr.T @ gr
-    b[:nb] = gr.T @ np.concatenate([r.real.ravel(), r.imag.ravel()])
+    Dn = rr.lead_in
+    G, b, en = roadfit.lead_in_normal_equations(g, aL, aR, r, w * h, Dn)
+    m = G.shape[0]
     if tr.size_std is not None and tr.mode != "free":  # SPEC §13: the drawn size's prior, a row of its own
         G[0, 0] += SIZE_PRIOR_WEIGHT ** 2 / tr.size_std ** 2
         b[0] += SIZE_PRIOR_WEIGHT ** 2 / tr.size_std ** 2
-    gH = np.conj(np.swapaxes(g, 1, 2))                                                     # (K,nb,c)
-    for j, a in enumerate((aL, aR)):
-        sl = slice(nb + j * Dn, nb + (j + 1) * Dn)
-        G[:nb, sl] = ((gH @ a[:, :, None])[..., 0].T @ en).real
-        G[sl, :nb] = G[:nb, sl].T
-        b[sl] = (np.sum(np.conj(a) * r, axis=1) @ np.conj(en)).real
-        for i, a2 in enumerate((aL, aR)):
-            sl2 = slice(nb + i * Dn, nb + (i + 1) * Dn)
-            G[sl, sl2] = toeplitz(np.sum(np.conj(a) * a2, axis=1))
     d = np.sqrt(np.clip(np.diag(G), 1e-300, None))
     f = _normal_solve(G / np.outer(d, d), b / d) / d
     alpha, fS, fL, fR = f[0], f[1:nb], f[nb:nb + Dn], f[nb + Dn:]
@@ -512,8 +486,8 @@ def estimate_prior(P, geom, tr: TrackRun) -> Prior:
     Acol = roadfit._road_columns(H, E)
     _, road_of = roadfit._projector(Acol)
     en = np.exp(-1j * np.outer(w * h, np.arange(rr.lead_in)))
-    known = S @ sol.f_state \
-        + H[:, :, 2] * (en @ sol.f_lead[0])[:, None] + H[:, :, 3] * (en @ sol.f_lead[1])[:, None]
+    known = (S @ sol.f_state
+             + H[:, :, 2] * (en @ sol.f_lead[0])[:, None] + H[:, :, 3] * (en @ sol.f_lead[1])[:, None])
     R = road_of((rr.Y[rr.fit] - known)[:, :, None])[..., 0]                                 # (K, 2) m
     AH = np.conj(np.swapaxes(Acol, -1, -2))
     Ginv = np.linalg.inv(AH @ Acol)
@@ -552,13 +526,7 @@ def fitted_channels(P, geom, tr: TrackRun, y, fit: Fit | None = None) -> np.ndar
     """The model's channels (n, 10) at the estimated road: the measured ones less the fit band's residual (NaN
     for unused channels), as :func:`rideid.estimate.problem.roadfit.fitted_channels`."""
     fit = solve(P, geom, tr) if fit is None else fit
-    rr = tr.rr
-    full = np.zeros(rr.Y.shape, dtype=complex)
-    full[rr.fit] = fit.plain
-    e = np.fft.irfft(full, n=rr.n, axis=0) / rr.scale
-    out = np.full((rr.n, 10), np.nan)
-    out[:, rr.cols] = np.asarray(y, dtype=float)[:, rr.cols] - e
-    return out
+    return roadfit.channels_less(tr.rr, y, fit.plain)
 
 
 __all__ = ["MODES", "Prior", "TrackRun", "Fit", "nominal_inputs", "prepare_track_run", "solve", "residuals",

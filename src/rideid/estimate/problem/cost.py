@@ -113,6 +113,17 @@ def channel_weights(Y: np.ndarray) -> np.ndarray:
     return W
 
 
+def checked_groups(extensions) -> tuple[str, ...]:
+    """The model's extension groups in canonical order (:data:`IDENTIFIABLE_GROUPS`); a group this version
+    cannot identify, or an unknown one, is an :class:`ArgumentError`."""
+    extensions = tuple(extensions)
+    refuse_unsupported_groups(extensions)
+    for g in extensions:
+        if g not in IDENTIFIABLE_GROUPS:
+            raise ArgumentError(f"unknown extension group '{g}'; groups are: {', '.join(IDENTIFIABLE_GROUPS)}")
+    return tuple(g for g in IDENTIFIABLE_GROUPS if g in extensions)
+
+
 class ParameterSpace:
     """Free, fixed and derived parameters of a dataset, and their bounds.
 
@@ -163,20 +174,13 @@ class ParameterSpace:
         check_known_consistent(known)
         self.known = dict(known)
         self.geometry = geometry
-        extensions = tuple(extensions)
-        refuse_unsupported_groups(extensions)
-        for g in extensions:
-            if g not in IDENTIFIABLE_GROUPS:
-                raise ArgumentError(f"unknown extension group '{g}'; groups are: {', '.join(IDENTIFIABLE_GROUPS)}")
-        self.extensions = tuple(g for g in IDENTIFIABLE_GROUPS if g in extensions)
+        self.extensions = checked_groups(extensions)
         self.curves = CURVES in self.extensions
         self.bump = BUMP in self.extensions
         self.damper_knots = None if damper_knots is None else tuple(float(k) for k in damper_knots)
         # a powertrain in the model, or a known one: the nonlinear car carries it too (SPEC §11)
         powertrain = POWERTRAIN in self.extensions or any(n in known for n in POWERTRAIN_NAMES)
-        self.layout = NonlinearLayout(knots=curve_knots(damper_knots) if self.curves else None,
-                                      bump_stops=self.bump, powertrain=powertrain) \
-            if (self.curves or self.bump) else None
+        self.layout = self._layout(damper_knots, powertrain)
         knot_names = curve_names(self.layout.n_knots) if self.curves else ()
         #: the knot-force columns, ``F_f1 .. F_fK, F_r1 .. F_rK`` (empty without curves)
         self.knot_names = tuple(knot_names)
@@ -191,51 +195,24 @@ class ParameterSpace:
                 raise ArgumentError(f"[known] {', '.join(both)}: with damper_curves the damping is the curves' "
                                     "(c_sf, c_sr are derived from them); leave it out of [known] or fit "
                                     "linear dampers")
-        self.derived = None
-        if "total_mass" in known:
-            for cand in ("m_s", "m_ur", "m_uf"):
-                if cand not in known:
-                    self.derived = cand
-                    break
+        #: the mass that follows from ``total_mass`` (None without it)
+        self.derived = (next((c for c in ("m_s", "m_ur", "m_uf") if c not in known), None)
+                        if "total_mass" in known else None)
         # a known bump stop is used by a model with the group bump_stops (without it the car has no stops)
         self.fixed = {n: v for n, v in known.items() if n in ALL_NAMES or n in bump_names}
         model_ext = [n for g in self.extensions if g in GROUPS for n in GROUPS[g]]
         base = [n for n in NAMES if not (self.curves and n in ("c_sf", "c_sr"))]
-        self.names = [n for n in base + model_ext if n not in self.fixed and n != self.derived] + \
-            [n for n in bump_names if n not in self.fixed and n not in self.bump_frozen] + \
-            [n for n in knot_names if n not in self.frozen]
-        if self.layout is not None:
-            self.param_names = self.layout.names
-        else:
-            # 12 columns, 16 with SPEC §6's groups, 23 with the powertrain (the narrowest row of the model)
-            if any(n in POWERTRAIN_NAMES for n in model_ext) or any(n in self.fixed for n in POWERTRAIN_NAMES):
-                width = len(ALL_NAMES)
-            elif model_ext or any(n in self.fixed for n in EXT_NAMES):
-                width = len(NAMES) + 4
-            else:
-                width = len(NAMES)
-            self.param_names = ALL_NAMES[:width]
+        self.names = ([n for n in base + model_ext if n not in self.fixed and n != self.derived]
+                      + [n for n in bump_names if n not in self.fixed and n not in self.bump_frozen]
+                      + [n for n in knot_names if n not in self.frozen])
+        self.param_names = self.layout.names if self.layout is not None else self._linear_columns(model_ext)
         self.width = len(self.param_names)
         self.col = {n: i for i, n in enumerate(self.param_names)}
         #: what a result reports: the twelve, the model's extensions and any known extension, the knot forces
-        self.reported_names = tuple(n for n in ALL_NAMES if n in NAMES or n in model_ext or n in self.fixed) + \
-            bump_names + knot_names
-        db = default_bounds(geometry)
-        bounds = dict(bounds or {})
-        self._bounds_arg = dict(bounds)
-        db.update(BUMP_BOUNDS)
-        for k in bounds:
-            if k not in ALL_NAMES and k not in knot_names and k not in BUMP_STOP_NAMES:
-                raise DataError(f"[bounds]: unknown parameter '{k}'"
-                                + ("" if self.curves or not k.startswith("F_") else
-                                   " (knot forces are parameters of the damper_curves model only)"))
-        if self.curves:
-            for n, v in zip(knot_names, self.knot_velocities()):
-                c = "c_sf" if n.startswith("F_f") else "c_sr"
-                lo, hi = bounds.get(c, db[c])
-                f_lo, f_hi = defaults["cost.knot_bound_factor"]
-                db[n] = (lo * v / f_lo, hi * v * f_hi) if v > 0 else (hi * v * f_hi, lo * v / f_lo)
-        self.bounds = np.array([bounds.get(n, db[n]) for n in self.names], dtype=float)
+        self.reported_names = (tuple(n for n in ALL_NAMES if n in NAMES or n in model_ext or n in self.fixed)
+                               + bump_names + knot_names)
+        self._bounds_arg = dict(bounds or {})
+        self.bounds = self._free_bounds(self._bounds_arg)
         if self.curves:
             # the mean slope over [-V, V] is linear in the knot forces: c = F @ w
             eye = np.eye(self.layout.n_knots)
@@ -243,6 +220,44 @@ class ParameterSpace:
             knots = self.layout.knots
             self._slope_w = (damper_force(knots, eye, V) - damper_force(knots, eye, -V)) / (2 * V)
         self._nominal = self._nominal_row()
+
+    def _layout(self, damper_knots, powertrain: bool) -> NonlinearLayout | None:
+        """The nonlinear car's row layout with damper curves or bump stops (None: the linear model), with the
+        ``powertrain`` or without."""
+        if not (self.curves or self.bump):
+            return None
+        return NonlinearLayout(knots=curve_knots(damper_knots) if self.curves else None, bump_stops=self.bump,
+                               powertrain=powertrain)
+
+    def _linear_columns(self, model_ext) -> tuple[str, ...]:
+        """The linear model's columns: 12, 16 with SPEC §6's groups, 23 with the powertrain (the narrowest
+        row of the model and the known values)."""
+        if any(n in POWERTRAIN_NAMES for n in model_ext) or any(n in self.fixed for n in POWERTRAIN_NAMES):
+            width = len(ALL_NAMES)
+        elif model_ext or any(n in self.fixed for n in EXT_NAMES):
+            width = len(NAMES) + 4
+        else:
+            width = len(NAMES)
+        return ALL_NAMES[:width]
+
+    def _free_bounds(self, bounds: dict) -> np.ndarray:
+        """The free parameters' bounds ``(d, 2)``: ``[bounds]`` over the defaults (the geometry's, the bump
+        stops' :data:`BUMP_BOUNDS`, the knot forces' from their axle's damping bounds); an unknown name in
+        ``[bounds]`` is a :class:`DataError`."""
+        db = default_bounds(self.geometry)
+        db.update(BUMP_BOUNDS)
+        for k in bounds:
+            if k not in ALL_NAMES and k not in self.knot_names and k not in BUMP_STOP_NAMES:
+                raise DataError(f"[bounds]: unknown parameter '{k}'"
+                                + ("" if self.curves or not k.startswith("F_") else
+                                   " (knot forces are parameters of the damper_curves model only)"))
+        if self.curves:
+            f_lo, f_hi = defaults["cost.knot_bound_factor"]
+            for n, v in zip(self.knot_names, self.knot_velocities()):
+                c = "c_sf" if n.startswith("F_f") else "c_sr"
+                lo, hi = bounds.get(c, db[c])
+                db[n] = (lo * v / f_lo, hi * v * f_hi) if v > 0 else (hi * v * f_hi, lo * v / f_lo)
+        return np.array([bounds.get(n, db[n]) for n in self.names], dtype=float)
 
     def knot_velocities(self) -> np.ndarray:
         """Velocity (m/s) of each knot-force column, ``F_f1 .. F_fK, F_r1 .. F_rK`` (empty without curves)."""
@@ -427,20 +442,15 @@ def _measured(ds: Dataset, leads=None):
 
 def bind_runs(simulator: Simulator, ds: Dataset, keep=None, leads=None):
     """``simulator`` bound to the runs of ``ds`` (a moving start from the start of its lead-in, SPEC §9),
-    recording through their sensor chains, comparing only the kept samples and giving the recorded samples
-    (:func:`sensor_simulator`)."""
+    recording through their sensor chains (SPEC §11), comparing only the kept samples and cut to the recorded
+    ones (:class:`rideid.model.sensors.SensorSimulator`); the bound simulator itself when no run has a filter or
+    a lead-in and every sample is kept (the kernels' fast path, unchanged)."""
+    filters = [ds.sensor_filters(r.id) for r in ds.runs]
     leads = lead_ins(ds) if leads is None else leads
-    return sensor_simulator(simulator.bind(ds.geometry, prepare_inputs(ds, leads)), ds, keep,
-                            [lead.samples for lead in leads])
-
-
-def sensor_simulator(sim, ds: Dataset, keep=None, lead=None):
-    """``sim`` recording through the runs' sensor chains (SPEC §11), comparing only the kept samples and cut to
-    the recorded ones (``lead``: per run the samples ``sim`` simulates before them, SPEC §9;
-    :class:`rideid.model.sensors.SensorSimulator`); ``sim`` itself when no run has a filter or a lead-in and
-    every sample is kept (the kernels' fast path, unchanged)."""
-    chains = [SensorChain(ds.sensor_filters(r.id), run.h) for r, run in zip(ds.runs, sim.runs)]
-    if keep is None and not any(ch.active for ch in chains) and not any(lead or ()):
+    sim = simulator.bind(ds.geometry, prepare_inputs(ds, leads))
+    chains = [SensorChain(f, run.h) for f, run in zip(filters, sim.runs)]
+    lead = [lead.samples for lead in leads]
+    if keep is None and not any(ch.active for ch in chains) and not any(lead):
         return sim
     return SensorSimulator(sim, chains, keep, lead)
 

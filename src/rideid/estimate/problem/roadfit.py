@@ -501,6 +501,33 @@ def recorded_columns(car: System, rr: RoadRun, omega):
     return H * rr.scale[None, :, None], S * rr.scale[None, :, None]
 
 
+def lead_in_normal_equations(g, aL, aR, r, wh, D: int):
+    """``(G, b, en)``: the real normal equations ``G f = b`` of the data ``r`` (K, c) at the bins ``wh = w h``
+    (K,) in the columns ``g`` (K, c, nb) with real coefficients and the rear wheels' ``D`` lead-in samples on
+    each side, which enter through ``aL``, ``aR`` (K, c) times ``en`` (K, D) ``= e^{-i w n h}``; the unknowns
+    ``f`` are ``[the nb coefficients, the left lead-in, the right lead-in]``."""
+    nb = g.shape[-1]
+    gf = g.reshape(-1, nb)
+    gr = np.concatenate([gf.real, gf.imag])
+    G = np.zeros((nb + 2 * D, nb + 2 * D))
+    b = np.zeros(nb + 2 * D)
+    G[:nb, :nb] = gr.T @ gr
+    b[:nb] = gr.T @ np.concatenate([r.real.ravel(), r.imag.ravel()])
+    ph = np.exp(1j * np.outer(wh, np.arange(-(D - 1), D)))                                   # (K, 2D-1)
+    idx = np.arange(D)[:, None] - np.arange(D)[None, :] + (D - 1)
+    en = np.exp(-1j * np.outer(wh, np.arange(D)))                                            # (K, D)
+    gH = np.conj(np.swapaxes(g, 1, 2))                                                        # (K,nb,c)
+    for j, a in enumerate((aL, aR)):
+        sl = slice(nb + j * D, nb + (j + 1) * D)
+        G[:nb, sl] = ((gH @ a[:, :, None])[..., 0].T @ en).real
+        G[sl, :nb] = G[:nb, sl].T
+        b[sl] = (np.sum(np.conj(a) * r, axis=1) @ np.conj(en)).real
+        for i, a2 in enumerate((aL, aR)):
+            # (n, m): sum_k conj(a e^{-iwnh}) a2 e^{-iwmh} = sum_k conj(a) a2 e^{iw(n-m)h}, a Toeplitz block
+            G[sl, slice(nb + i * D, nb + (i + 1) * D)] = (np.sum(np.conj(a) * a2, axis=1) @ ph).real[idx]
+    return G, b, en
+
+
 def solve(P, geom: Geometry, rr: RoadRun, bins=None) -> Solution:
     """Project the road out of run ``rr`` at the car ``P`` (16,) (module docstring): the residual at
     the fit bins and the global unknowns (transient ``f``, rear lead-in samples)."""
@@ -517,32 +544,8 @@ def solve(P, geom: Geometry, rr: RoadRun, bins=None) -> Solution:
     aR = perp(H[:, :, 3:4])[..., 0]
     r = perp(rr.Y[bins][:, :, None])[..., 0]                                                 # (K,c)
     D = rr.lead_in
-    lags = np.arange(-(D - 1), D)
-    ph = np.exp(1j * np.outer(w * h, lags))                                                  # (K, 2D-1)
-
-    def toeplitz(q):  # (K,) -> (D, D): sum_k q_k exp(i w (n - m) h)
-        g = (q @ ph).real
-        idx = np.arange(D)[:, None] - np.arange(D)[None, :] + (D - 1)
-        return g[idx]
-
-    en = np.exp(-1j * np.outer(w * h, np.arange(D)))                                         # (K, D)
+    G, b, en = lead_in_normal_equations(S, aL, aR, r, w * h, D)
     ns = S.shape[-1]  # the car's states: 14, 18 with a powertrain on mounts, + the sensor filters' (SPEC §11)
-    Sf = S.reshape(-1, ns)
-    SH = np.conj(np.swapaxes(S, 1, 2))                                                        # (K,ns,c)
-    G = np.zeros((ns + 2 * D, ns + 2 * D))
-    b = np.zeros(ns + 2 * D)
-    Sr = np.concatenate([Sf.real, Sf.imag])
-    G[:ns, :ns] = Sr.T @ Sr
-    b[:ns] = Sr.T @ np.concatenate([r.real.ravel(), r.imag.ravel()])
-    for j, a in enumerate((aL, aR)):
-        sl = slice(ns + j * D, ns + (j + 1) * D)
-        G[:ns, sl] = ((SH @ a[:, :, None])[..., 0].T @ en).real
-        G[sl, :ns] = G[:ns, sl].T
-        b[sl] = (np.sum(np.conj(a) * r, axis=1) @ np.conj(en)).real
-        for i, a2 in enumerate((aL, aR)):
-            sl2 = slice(ns + i * D, ns + (i + 1) * D)
-            # (n, m): sum_k conj(a e^{-iwnh}) a2 e^{-iwmh} = sum_k conj(a) a2 e^{iw(n-m)h}
-            G[sl, sl2] = toeplitz(np.sum(np.conj(a) * a2, axis=1))
     d = np.sqrt(np.clip(np.diag(G), 1e-300, None))
     f = np.linalg.lstsq(G / np.outer(d, d), b / d, rcond=1e-13)[0] / d
     fS, fL, fR = f[:ns], f[ns:ns + D], f[ns + D:]
@@ -583,8 +586,8 @@ def road(P, geom: Geometry, rr: RoadRun, sol: Solution | None = None, wavelength
     _, road_of = _projector(_road_columns(H, E))
     D = rr.lead_in
     en = np.exp(-1j * np.outer(w * h, np.arange(D)))
-    known = S @ sol.f_state \
-        + H[:, :, 2] * (en @ sol.f_lead[0])[:, None] + H[:, :, 3] * (en @ sol.f_lead[1])[:, None]
+    known = (S @ sol.f_state
+             + H[:, :, 2] * (en @ sol.f_lead[0])[:, None] + H[:, :, 3] * (en @ sol.f_lead[1])[:, None])
     # the boundary unknowns are fitted in the fit band only: outside it their spectrum is not determined
     # (D free samples have content up to the Nyquist frequency), and subtracting it would add noise there
     known[~np.isin(bins, rr.fit)] = 0.0
@@ -611,8 +614,14 @@ def fitted_channels(P, geom: Geometry, rr: RoadRun, y, sol: Solution | None = No
     fit band (NaN for unused channels). Outside the fit band the residual is not modelled (zero).
     ``sol``: the projection at ``P`` when already solved (:func:`solve`)."""
     sol = solve(P, geom, rr) if sol is None else sol
+    return channels_less(rr, y, sol.residual)
+
+
+def channels_less(rr: RoadRun, y, residual) -> np.ndarray:
+    """The channels ``y`` (n, 10) of run ``rr`` less the fit band's ``residual`` (K, c) taken back to time (zero
+    outside the fit band; NaN for the channels the run does not use)."""
     full = np.zeros(rr.Y.shape, dtype=complex)
-    full[rr.fit] = sol.residual
+    full[rr.fit] = residual
     e = np.fft.irfft(full, n=rr.n, axis=0) / rr.scale
     out = np.full((rr.n, 10), np.nan)
     out[:, rr.cols] = np.asarray(y, dtype=float)[:, rr.cols] - e
