@@ -37,7 +37,7 @@ import rideid
 from rideid.data.schema.runfiles import RunData
 from rideid.estimate.fit.budget import declared_inputs, propagate
 from rideid.estimate.problem.cost import CostFunction
-from rideid.estimate.fit.identify import polish_fit
+from rideid.estimate.fit.polish import polish_fit
 from rideid.model.equations import CHANNEL_KIND, CHANNELS
 from rideid.model.params import NAMES
 from rideid.synth.scenario import simulate_manifest, write_dataset

@@ -1,6 +1,6 @@
 """What a cheaper integration of the damper-curve car does to the estimates (issue 37: cost <= 3x the linear kernel).
 
-The polish of a damper-curve model (``rideid.estimate.fit.identify._polish``) is where the nonlinear kernel runs:
+The polish of a damper-curve model (``rideid.estimate.fit.polish._polish``) is where the nonlinear kernel runs:
 its residuals and finite-difference Jacobians. This study fits one dataset with ``--model damper_curves``
 (seed 1, no adequacy) at several integrations of the polish and compares each fit's parameters with the
 default's, in units of the default's standard errors (``std``) and relative:

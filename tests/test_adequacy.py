@@ -99,7 +99,7 @@ def _polished_verdict(sc, data, folder):
     from rideid.synth.scenario import write_dataset
     from rideid.estimate.assess.adequacy import assess_fit
     from rideid.estimate.problem.cost import CostFunction
-    from rideid.estimate.fit.identify import _polish
+    from rideid.estimate.fit.polish import _polish
     from rideid.model.batch import single_threaded_blas
 
     write_dataset(sc, data, folder)

@@ -29,7 +29,7 @@ from rideid.data.schema import parse_dataset_manifest
 from rideid.data.schema.runfiles import RunData
 from rideid.estimate.fit.budget import declared_inputs, propagate, with_budget
 from rideid.estimate.problem.cost import CostFunction
-from rideid.estimate.fit.identify import polish_fit
+from rideid.estimate.fit.polish import polish_fit
 from rideid.estimate.problem.redundancy import BODY, GYROS, gain_notes, rigid_body_gains
 
 

@@ -150,7 +150,7 @@ def test_knot_counts_and_bad_model_names(sim_dataset, tmp_path, capsys):
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1 and "--model must be one of base, full, auto, got 'damper_curve'" in err
     assert not out.exists()
-    from rideid.estimate.fit.identify import parse_model_arg
+    from rideid.estimate.problem.build import parse_model_arg
     assert parse_model_arg("damper_curves+bump_stops") == ("damper_curves", "bump_stops")
     with pytest.raises(ArgumentError, match="c_sf"):
         ParameterSpace({"total_mass": 1093.3, "c_sf": 1800.0}, Geometry(2.579, 1.387, 1.364, 0.30),

@@ -418,7 +418,7 @@ def test_identify_model_choice_and_known_extension(sim_dataset, tmp_path, capsys
     # without --model: the dataset's [model]
     d2 = _copy_ds(sim_dataset, tmp_path / "m", lambda x: x.update(model={"extensions": ["anti_roll_bars"]}))
     import rideid
-    from rideid.estimate.fit.identify import model_extensions
+    from rideid.estimate.problem.build import model_extensions
     ds = rideid.load_dataset(d2)
     assert model_extensions(ds) == ("anti_roll_bars",) and model_extensions(ds, "base") == ()
     assert rideid.CostFunction(ds).names[-2:] == ["k_arf", "k_arr"]

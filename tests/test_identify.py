@@ -413,7 +413,7 @@ def test_cycle_slips_returns_a_new_dict(monkeypatch):
 def test_a_start_std_adds_the_speed_channel_in_quadrature():
     """The polish's start std: the fit's and the load record's speed-channel share in quadrature (3-4-5);
     without a speed channel the fit's alone; an undetermined fit stays undetermined."""
-    from rideid.estimate.fit.identify import _start_std
+    from rideid.estimate.fit.polish import _start_std
     both = _start_std({"std": 3e-4, "std_robust": 6e-4}, {"std_speed_channel": 4e-4, "source": "estimated"})
     assert both == {"std": pytest.approx(5e-4, rel=1e-15), "std_fit": 3e-4, "std_speed_channel": 4e-4,
                     "std_robust": 6e-4}
@@ -458,7 +458,7 @@ def test_the_polish_does_not_stop_beside_a_bound(sim_dataset):
     one) stopped dogbox after two evaluations on ``xtol``, 2 % from the truth; the polish puts it on the
     bound and converges (and continues with trf where dogbox ends beside a bound itself)."""
     from rideid.estimate.problem.cost import CostFunction
-    from rideid.estimate.fit.identify import _polish
+    from rideid.estimate.fit.polish import _polish
     ds = rideid.load_dataset(sim_dataset)
     cf = CostFunction(ds, extensions=("anti_roll_bars", "tire_damping"))
     truth = np.array([DEFAULT_CAR.get(n, 0.0) for n in cf.names])

@@ -6,7 +6,7 @@ import pytest
 
 from rideid.estimate.problem.cost import ParameterSpace, curve_knots
 from rideid.estimate.problem.dampers import KNEE_GRID, KNEE_SIGNIFICANCE, format_dampers, knee_of, knees
-from rideid.estimate.fit.identify import finds_knees
+from rideid.estimate.problem.build import finds_knees
 from rideid.model.nonlinear import DEFAULT_KNOTS
 from rideid.model.params import Geometry
 

@@ -70,7 +70,7 @@ def test_unknown_model_value_is_one_line_exit_2(sim_dataset, tmp_path, capsys):
 def _full_polish_criteria(sc, data, folder, truth_ext):
     from cars import SUV_TRUTH
     from rideid.synth.scenario import write_dataset
-    from rideid.estimate.fit.identify import _polish
+    from rideid.estimate.fit.polish import _polish
     from rideid.model.batch import single_threaded_blas
 
     write_dataset(sc, data, folder)

@@ -66,7 +66,7 @@ from logger_case import SUV, SUV_RUNS, write_logger
 from powertrain_car import ENGINE
 from rideid.data.scenario import write_road_csv
 from rideid.errors import ArgumentError
-from rideid.estimate.fit.identify import _polish
+from rideid.estimate.fit.polish import _polish
 from rideid.model.params import POWERTRAIN_NAMES
 from rideid.model.roads import iso8608_profile
 from rideid.model.tracks import Track

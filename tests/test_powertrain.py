@@ -273,12 +273,12 @@ def test_plan_knows_the_powertrain(tmp_path):
 
 
 def test_a_mode_left_at_a_bound_gets_a_second_start(scenario):
-    """rideid.estimate.fit.identify.mode_restart: a powertrain mode with a member at a search bound (switched off: the
+    """rideid.estimate.fit.polish.mode_restart: a powertrain mode with a member at a search bound (switched off: the
     engine's pitch inertia at 1 kg m^2) is started again from typical values, I_p at the nominal radius of
     gyration for this engine's mass; the other parameters stay; no second start when nothing is at a bound, when
     the engine's mass is (no engine to place), or for the bounce mode when only the pitch mode is off. What the
     second start does on data: tests/test_realities.py (seed 3)."""
-    from rideid.estimate.fit.identify import mode_restart, restart_record
+    from rideid.estimate.fit.polish import mode_restart, restart_record
     from rideid.model.params import NOMINAL_EXTENSIONS
     space = rideid.ParameterSpace(scenario.known, scenario.geometry, extensions=("powertrain",))
     names = list(space.names)

@@ -187,7 +187,7 @@ def test_an_engine_mode_left_at_its_bounds_is_started_again(tmp_path):
     (I_p 1 kg m^2, f_pp 5 Hz, zeta_pp 0.02) and the polish kept it there (I_p 1, f_pp 5.6 Hz), the unsprung
     masses taking up what the mode leaves: +2.78 % and +2.38 %, 2.3-2.8 std_robust, under an adequate verdict and
     three bound warnings (the as-drawn fit's, though the as-built one had moved f_pp and zeta_pp off them).
-    Polished again from the typical mode (rideid.estimate.fit.identify.mode_restart) the tracks-as-drawn cost falls
+    Polished again from the typical mode (rideid.estimate.fit.polish.mode_restart) the tracks-as-drawn cost falls
     (0.20913 to 0.20880) and the mode lands at the truth: measured, the twelve within 0.71 % (m_uf), every one
     within 1.0 std_robust, f_pp +0.15 %, I_p -1.1 %, no bound warning, adequate; with the speeds and starts solved
     with the car (anyroad._joint_solve) within 0.09 %, 0.6 std_robust, f_pp +0.10 % (100 s on two cores)."""

@@ -149,7 +149,7 @@ def test_polish_std_robust_on_coloured_noise(tmp_path):
     from cars import SUV_TRUTH, add_noise, suv_scenario
     from rideid.synth.scenario import simulate_manifest, write_dataset
     from rideid.estimate.problem.cost import CostFunction
-    from rideid.estimate.fit.identify import _polish
+    from rideid.estimate.fit.polish import _polish
     from rideid.model.batch import single_threaded_blas
 
     sc = suv_scenario(tmp_path)
@@ -257,7 +257,7 @@ def test_a_rank_deficient_jacobian_reports_the_unidentified_parameter_as_infinit
 def test_an_unidentified_parameter_has_no_standard_error_in_the_details():
     from types import SimpleNamespace
 
-    from rideid.estimate.fit.identify import NOT_IDENTIFIED, parameter_detail
+    from rideid.estimate.assess.details import NOT_IDENTIFIED, parameter_detail
     from rideid.estimate.fit.uncertainty import EstimateCovariance
     space = SimpleNamespace(col={"k_sf": 0, "k_sr": 1}, fixed={}, names=["k_sf", "k_sr"], derived=None,
                             bounds=np.array([[1e4, 1e5], [1e4, 1e5]]), derived_names=lambda: [])

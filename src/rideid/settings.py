@@ -377,14 +377,14 @@ _SETTINGS: tuple[Setting, ...] = (
             measured=False),
     Setting('identify.repair_restarts', 2, 'polishes',
             ('a polish ending on a damper-curve row the monotone repair changes is solved again from the repaired row'
-             ' at most this often (identify._polish: logger files of the SUV at 100 Hz ended with a front knot force '
+             ' at most this often (fit.polish._polish: logger files of the SUV at 100 Hz ended with a front knot force '
              "57 % off, hidden below its neighbour, at a cost 1e6 times the true car's; solved again, within 0.01 %)"),
             'docs/method.md#9-polish-and-standard-errors-rideidestimatefitidentifypy',
             'tests/test_paths.py::test_polish_leaves_a_knot_hidden_by_the_monotone_repair',
             measured=True),
     Setting('identify.polish_max_nfev', 100, 'evaluations',
             ("the polish's least-squares evaluations in all (on the built-in car, SUVs, vans and damper curves it "
-             'converges in 6-20, a base model on a car with bars in 30; identify._Polish.solve)'),
+             'converges in 6-20, a base model on a car with bars in 30; fit.polish._Polish.solve)'),
             'docs/method.md#9-polish-and-standard-errors-rideidestimatefitidentifypy',
             'tests/test_identify.py::test_the_polish_does_not_stop_beside_a_bound',
             measured=True),

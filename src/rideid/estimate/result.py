@@ -240,7 +240,9 @@ class IdentificationResult:
     #: (:func:`rideid.data.quality.data_quality`); None in results written before
     data_quality: dict | None = None
     # -- SPEC §13: the typed records (rideid.estimate.records), built at the end of rideid.identify
-    #: the problem's blocks and their unknowns; None where the result was not built by rideid.identify
+    #: the problem's blocks and their unknowns (the single-model fit's: the problem built up front,
+    #: rideid.estimate.problem.build.Problem.plan; rideid.identify's: read from the result it returns, with the
+    #: tracks and roads); None where the result was built by neither
     plan: Plan | None = None
     #: every tuning value in force during the fit, name -> value (:mod:`rideid.settings`); None in results
     #: written before schema version 2

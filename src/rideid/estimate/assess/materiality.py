@@ -39,7 +39,7 @@ import numpy as np
 from ...profiling import stage
 from ...settings import defaults, legacy_names
 from ..fit.budget import fit_cost
-from ..fit.identify import polish_fixed_starts
+from ..fit.polish import polish_fixed_starts
 
 
 METHOD = ("refit without the flagged run/channel pairs (weights 0; starts and distance corrections as identified; "

@@ -27,6 +27,7 @@ from __future__ import annotations
 import numpy as np
 
 from ...settings import defaults, legacy_names
+from ...data.quality import rate_advice
 from ...model.equations import CHANNELS
 from ...model.sensors import AnalogFilter, SensorChain
 from ..problem import roadfit
@@ -173,7 +174,31 @@ def clipping_advice(ds, adequacy: dict | None) -> str | None:
             "(`[channels] <name> range = ...`), use a sensor with a larger range, or leave those runs out.")
 
 
-__all__ = ["clipping_advice", "coupling_hints"]
+def sensor_notes(ds, cf, response, adequacy: dict | None) -> dict | None:
+    """``adequacy`` with ``sensor_hints`` (channels that look AC-coupled without a declared ``highpass``,
+    :func:`rideid.estimate.assess.sensor_check.coupling_hints`) and, when not adequate, advice that names them and
+    the clipped channels among the flagged pairs first (:func:`rideid.estimate.assess.sensor_check.clipping_advice`);
+    None when the adequacy was not assessed. ``cf`` and ``response``: the fit's cost function at its final starts
+    and the identified car's channels."""
+    if adequacy is None:
+        return None
+    hints = coupling_hints(cf, response)
+    out = {**adequacy, "sensor_hints": hints}
+    if not adequacy.get("adequate", True):
+        first = [h["message"] + "." for h in hints[:4]]
+        clip = clipping_advice(ds, adequacy)
+        if clip:
+            first.append(clip)
+        rate = rate_advice(ds, adequacy)  # a rate the file's is no whole multiple of: its filter, roughly modelled
+        if rate:
+            first.append(rate)
+        if first:
+            out["advice"] = " ".join(first) + " " + (adequacy.get("advice") or "")
+    return out
+
+
+
+__all__ = ["clipping_advice", "coupling_hints", "sensor_notes"]
 
 
 #: the constants this module had before rideid.settings, read from the registry (PEP 562)

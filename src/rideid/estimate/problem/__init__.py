@@ -1,5 +1,9 @@
 """The problem and its blocks: what a dataset asks the fit to solve.
 
+:func:`~rideid.estimate.problem.build.build_problem` builds it up front from the dataset and the fit's options
+(a frozen :class:`~rideid.estimate.problem.build.Problem`: the model fitted, the model searched, where the
+nonlinear groups start, the runs whose start is estimated, the settings; its plan is result.json's ``plan``).
+
 :class:`~rideid.estimate.problem.cost.CostFunction` is the problem: the residual blocks of the runs, the free
 parameters' space (:class:`~rideid.estimate.problem.cost.ParameterSpace`) with bounds, and the nuisance unknowns
 each block owns — a run's speed and start under their priors, a track's size and unevenness

@@ -1,0 +1,153 @@
+"""The result's entries of each estimate and each run: what result.json says of them beside the verdicts.
+
+:func:`parameter_detail` is one parameter's entry (value, unit, fixed or derived, search bounds, white and
+robust standard errors, the runs' disagreement), :func:`details_of` every reported parameter's with the marks
+of what the data did not measure (a knot no run excites, a stop no run reaches) and of the bound check
+(:func:`mark_bounds`: an estimate the bound stopped, not the data); :func:`preprocessing_record` the dataset's
+preprocessing with the starts the fit settled and the motion it held (:func:`held_motion`, SPEC §13).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from ...data.checks import bound_findings
+from ...data.dataset import lead_ins
+from ...model.nonlinear import BUMP_STOP_NAMES
+from ...model.params import UNITS
+from ..problem.cost import BUMP_UNITS
+
+
+#: the note of a free parameter the polish's Jacobian does not determine (rideid.estimate.fit.uncertainty)
+NOT_IDENTIFIED = ("not identified: the data determine it only in combination with other parameters, or not at "
+                  "all (a singular value of the Jacobian below RANK_RTOL of the largest); no standard error")
+
+
+def parameter_detail(space, P, n: str, std, cov, robust) -> dict:
+    """Parameter ``n``'s ``result.json`` entry: value, unit, fixed/derived, search bounds, ``std`` (white)
+    and ``std_robust``, from the full row ``P``, the free parameters' ``std`` and white covariance ``cov``
+    and the :class:`~rideid.estimate.fit.uncertainty.EstimateCovariance` ``robust``."""
+    e = {"value": float(P[space.col[n]]), "unit": UNITS.get(n, BUMP_UNITS.get(n, "N")), "fixed": n in space.fixed,
+         "derived": n in space.derived_names()}
+    if n in space.names:
+        j = space.names.index(n)
+        e["lower"], e["upper"] = float(space.bounds[j, 0]), float(space.bounds[j, 1])
+        e["std"] = None if not np.isfinite(std[j]) else float(std[j])
+        if np.isinf(std[j]):
+            e["note"] = NOT_IDENTIFIED
+    elif n == space.derived:
+        e["std"] = derived_std(space, cov)
+        e["lower"] = e["upper"] = None  # follows from the anchor: never searched
+    elif e["derived"]:
+        e["std"] = robust.std_white(n)
+        e["lower"] = e["upper"] = None
+    else:
+        e["std"] = 0.0
+    e["std_robust"] = robust.std_robust(n) if n not in space.fixed else 0.0
+    if n not in space.fixed and robust.jackknife is not None:
+        # the runs' disagreement beyond their noise (docs/uncertainty.md "Between runs") is part of the robust
+        # standard error: the HAC sandwich's share is std_hac
+        e["std_jackknife"] = robust.std_jackknife(n)
+        e["std_between_runs"] = between = robust.std_between_runs(n)
+        if between and e["std_robust"] is not None:
+            e["std_hac"] = e["std_robust"]
+            e["std_robust"] = float(math.hypot(e["std_robust"], between))
+    return e
+
+
+
+def details_of(ds, space, P, std, cov, robust, bumps):
+    """``details`` (name -> :func:`parameter_detail`, with the knots not excited, the stops not reached and
+    the estimates at a bound marked) and the findings of the data and bound checks."""
+    details = {}
+    for n in space.reported_names:
+        e = parameter_detail(space, P, n, std, cov, robust)
+        if n in space.frozen:  # a knot no run excites: continued, not measured
+            e["std"] = e["std_robust"] = None
+            e["excited"] = False
+            e["note"] = "not excited"
+        elif n.startswith("F_"):
+            e["excited"] = True
+        if n in BUMP_STOP_NAMES:  # a stop no run reaches: held, not measured
+            e["reached"] = n not in space.bump_frozen and bool(
+                ((bumps or {}).get("front" if n.endswith("_f") else "rear") or {}).get("reached", True))
+            if not e["reached"] and not e["fixed"]:
+                e["std"] = e["std_robust"] = None
+                e["note"] = "not reached"
+        details[n] = e
+    # an estimate the bound stopped, not the data (rideid.data.checks); warned of by rideid.identify, once,
+    # for the model it returns (warn_bounds), not for every candidate fitted on the way
+    return details, list(getattr(ds, "findings", [])) + mark_bounds(details)
+
+
+
+def mark_bounds(details: dict) -> list:
+    """The findings of the estimates in ``details`` that ended at a search bound
+    (:func:`rideid.data.checks.bound_findings`), each such entry marked ``at_bound``."""
+    found = bound_findings(details)
+    for f in found:
+        details[f.channel]["at_bound"] = True
+    return found
+
+
+#: ``preprocessing.<run>.moving_start.method`` of a run that begins moving, fitted on its track (SPEC §9)
+MOVING_START_METHOD = ("simulated from rest lead_in_s before the first sample on the track's road before x = 0, "
+                       "compared from the first sample on; the first left_out_s s of the run not compared (the "
+                       "profile known less than a settling time before x = 0); docs/any-road.md")
+
+
+def preprocessing_record(ds, starts) -> dict:
+    """The dataset's preprocessing record with the starts the fit settled; ``model_time``, the samples' span of
+    model time, at those starts (the samples stay those read at the first start, their model times move); a run
+    that begins moving on its track with its lead-in (``moving_start``, :func:`rideid.data.dataset.run_lead_in`)."""
+    pre = ds.preprocessing()
+    for r, lead in zip(ds.runs, lead_ins(ds)):
+        if getattr(r, "moving", False) and r.road_known:
+            fs = float(ds.data[r.id].fs)
+            pre[r.id]["moving_start"] = {"lead_in_s": lead.samples / fs, "left_out_s": lead.settle / fs,
+                                         "method": MOVING_START_METHOD}
+    for r in ds.runs:
+        held = held_motion(ds, r)
+        if held is not None:
+            pre[r.id]["motion"] = held
+    for rid, st in starts.items():
+        before = pre[rid].get("start", {}).get("value")
+        pre[rid]["start"] = dict(pre[rid].get("start", {}), **st)
+        if pre[rid].get("model_time") is not None and before is not None and st.get("value") is not None:
+            pre[rid]["model_time"] = [t + before - st["value"] for t in pre[rid]["model_time"]]
+    return pre
+
+
+def held_motion(ds, run) -> dict | None:
+    """SPEC §13: the ``motion`` record of a run at a constant declared speed on a known track as the fit on the
+    tracks as drawn holds it (never silently): ``speed`` with the value the fit used, its std where the lags at
+    load measured it (:func:`rideid.conditioning.checks.speed_seen`), the declared value and its prior's std, and
+    ``estimated``: how. The runs fitted as built replace it with their own (``tracks.<track>.runs.<run>.motion``,
+    solved with the car). None for other runs."""
+    if not getattr(run, "road_known", False) or getattr(run, "speed_prior", None) is None:
+        return None
+    prior = run.speed_prior()
+    if prior is None or getattr(ds.data.get(run.id), "distance", None) is not None:
+        return None
+    seen = next((f for f in getattr(ds, "findings", ()) if f.check == "speed" and f.run == run.id and f.fix
+                 and "speed" in f.fix), None)
+    speed = {"estimate": float(run.speed), "std": None if seen is None else float(seen.fix["std"]), "unit": "m/s",
+             "declared": prior[0], "prior_std": prior[1], "prior": "declared" if prior[2] else "default"}
+    how = ("at load, from the lags of the data against a nominal car on the track (the fit on the tracks as drawn "
+           "holds it there)" if seen is not None else
+           "not moved: the lags at load agree with the declared value within their error (the fit on the tracks as "
+           "drawn holds it)")
+    return {"speed": speed, "estimated": how}
+
+
+
+def derived_std(space, cov):
+    """The standard error of the parameter the anchor derives (``space.derived``) by the delta method from the
+    free parameters' white covariance ``cov``; None when there is none or ``cov`` is not finite."""
+    if space.derived is None or not np.all(np.isfinite(cov)):
+        return None
+    g = space.derived_gradient()
+    return float(np.sqrt(max(g @ cov @ g, 0.0)))
+
