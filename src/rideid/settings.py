@@ -221,6 +221,15 @@ _SETTINGS: tuple[Setting, ...] = (
             'docs/tracks-as-built.md#the-model-rideidestimateproblemasbuiltpy',
             'tests/test_tracks_asbuilt.py::test_the_unevenness_found',
             measured=False),
+    Setting('asbuilt.boundary_share', 10.0, "1 (times the drawing's road power)",
+            ("a run whose free-road fit puts more than this many times the drawn road's power into the road estimate "
+             "through its boundary unknowns (the start's state, the rear lead-in) cannot tell unevenness from them: "
+             "its unevenness is held at the prior's floor, said in result.json, and not judged"),
+            'docs/tracks-as-built.md#limits-said-plainly',
+            'tests/test_tracks_asbuilt.py::test_a_short_washboard_run_holds_its_unevenness_at_the_prior',
+            note=("measured at the true SUV, exact drawings, 1 % noise, seeds 1-3 (tests/asbuilt_tracks.py): the "
+                  "washboard's 3.1 s at 10 m/s 1.2e3-5.4e5 (the fake 19-399 mm RMS); the twist, the herringbone, a "
+                  "6 s washboard and the washboard with 1.5 mm unevenness 2e-4 to 0.83")),
     Setting('asbuilt.motion_scale', (0.001, 0.001), '1 (relative speed), s (start)',
             "asbuilt.align_motion's unknowns: the speed's relative change and the start's shift (s), in these units",
             'docs/tracks-as-built.md#the-model-rideidestimateproblemasbuiltpy',

@@ -641,6 +641,8 @@ def _tracks_block(ds, trs, skipped, P, geom, motion=None):
                                   "unevenness_rms_surface_m": asbuilt.unevenness_rms(
                                       tr, defaults["anyroad.plausible_wavelength"]),
                                   "wavelengths_m": [tr.rr.speed / hi, tr.rr.speed / defaults["roadfit.band"][0]]}
+        if tr.prior is not None and tr.prior.held:  # the unevenness not estimated on this run (asbuilt.estimate_prior)
+            rec["runs"][tr.run_id]["unevenness_held"] = tr.prior.held
         if tr.rr.left_out:  # a channel without signal, or clipped (roadfit.without_clipped)
             rec["runs"][tr.run_id]["channels_left_out"] = dict(tr.rr.left_out)
         if tr.rr.clip.shape[0]:  # clipped samples freed as unknowns (roadfit: "Clipped samples")
