@@ -221,6 +221,15 @@ _SETTINGS: tuple[Setting, ...] = (
             'docs/tracks-as-built.md#the-model-rideidestimateproblemasbuiltpy',
             'tests/test_tracks_asbuilt.py::test_the_unevenness_found',
             measured=False),
+    Setting('roads.max_share', 0.03, "1 (share of the channel's RMS)",
+            ("a road run's channel whose residual at its own road estimate is above this share of the channel's RMS "
+             "is off: a right car leaves the noise's fit-band share (0.45 % at 1 % noise, 0.8-1.0 % at 2 %)"),
+            'docs/any-road.md#is-the-car-adequate-on-an-unknown-road',
+            'tests/test_road_verdict.py::test_the_road_runs_verdict_on_a_right_and_a_wrong_car',
+            note=("measured: the van with real dampers fitted with linear ones (../shared/cases/van-roads-dampers, "
+                  "c_sf -16 %) 2.5-12 % on its three roads (every acceleration 9-12 %); the built-in car on a B road "
+                  "with a twist run, 1 % noise, the right model, 0.42-0.47 %; a run fails at adequacy.loud_share of "
+                  "its channels off")),
     Setting('asbuilt.boundary_share', 10.0, "1 (times the drawing's road power)",
             ("a run whose free-road fit puts more than this many times the drawn road's power into the road estimate "
              "through its boundary unknowns (the start's state, the rear lead-in) cannot tell unevenness from them: "

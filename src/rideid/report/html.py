@@ -908,8 +908,12 @@ def summary_section(result, context: dict) -> dict:
                                   "model adequate: " if adq["adequate"] else "MODEL NOT ADEQUATE: ")
                       + adq["reasons"][0], "adequacy"))
     elif getattr(result, "roads", None):
-        lines.append(("Verdict", "adequacy not assessed: rideid has no residual test on unknown roads yet; the "
-                                 "error bars hold only if the linear model describes the car", "roads"))
+        judged = any("residual" in r for r in result.roads.values())  # rideid.estimate.assess.roads: passed
+        lines.append(("Verdict", ("adequacy not fully assessed: each road run's residual at its own road estimate "
+                                  "is of the noise's size (a car far off would fail it), but rideid has no test of "
+                                  "its structure on unknown roads; " if judged else
+                                  "adequacy not assessed: rideid has no residual test on unknown roads yet; the ")
+                      + "error bars hold only if the linear model describes the car", "roads"))
     else:
         lines.append(("Verdict", "adequacy not assessed (no polish)", "estimates"))
     ext = (res.get("model") or {}).get("extensions") or []
