@@ -39,7 +39,15 @@ import numpy as np
 from ...model.equations import CHANNELS
 from ...settings import defaults
 from ..records import RoadsAssessment
-from .adequacy import ADVICE
+from .adequacy import _ADVICE_SETUP
+
+#: the advice when a road run fails: the set-up first, then what unknown roads cannot fit (the road's projection needs
+#: a linear car, so `--model auto`, which the generic advice names, is not run there)
+ROAD_ADVICE = ("The car leaves more than the sensor noise on runs on unknown roads, so the estimates are biased by "
+               "more than their error bars say. Try " + _ADVICE_SETUP + "then what the model lacks: dampers that "
+               "are not linear, or bump stops, cannot be fitted on unknown roads (the road is projected out with a "
+               "linear car): add runs on known tracks and fit them with `--model auto` (damper curves, bump stops); "
+               "anti-roll bars and tire damping can be given here (`--model anti_roll_bars,tire_damping`).")
 
 #: what the verdict says of road runs that pass (adequacy.note)
 PASSED_NOTE = ("runs on unknown roads: each run's residual at its own road estimate is of the sensor noise's size "
@@ -106,16 +114,17 @@ def judge(adequacy: dict | None, roads: dict, rruns, data: dict, response: dict)
     if adequacy is None:
         if rec.verdict == "pass":
             return None
-        adequacy = {"adequate": False, "reasons": [], "advice": ADVICE, "runs": {},
+        adequacy = {"adequate": False, "reasons": [], "advice": ROAD_ADVICE, "runs": {},
                     "note": "runs on unknown roads alone: the residual of each at its own road estimate"}
     adequacy = dict(adequacy, roads=rec.to_dict())
     left = [r for r in adequacy.get("not_assessed") or [] if r not in rec.runs]
     adequacy["not_assessed"] = left
     if rec.verdict == "fail":
-        return dict(adequacy, adequate=False, advice=adequacy.get("advice") or ADVICE,
+        return dict(adequacy, adequate=False, advice=ROAD_ADVICE + (" " + adequacy["advice"] if adequacy.get("advice")
+                                                                    else ""),
                     reasons=[rec.reason] + list(adequacy.get("reasons") or []))
     note = adequacy.get("note", "")
     return dict(adequacy, note=PASSED_NOTE if "not assessed" in note or not note else note + "; " + PASSED_NOTE)
 
 
-__all__ = ["assess", "judge", "run_figures", "PASSED_NOTE"]
+__all__ = ["assess", "judge", "run_figures", "PASSED_NOTE", "ROAD_ADVICE"]
