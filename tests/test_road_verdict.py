@@ -116,3 +116,34 @@ def test_the_verdict_joins_the_known_track_runs_adequacy():
     failed = roads.judge(None, {"B40": {"note": note}}, rr, {"B40": y}, {"B40": 0.9 * y})
     assert failed["adequate"] is False and failed["roads"]["failed"] == ["B40"]
     assert roads.judge(_adequacy(), {}, [], {}, {}) == _adequacy()  # no road runs: unchanged
+
+
+def test_the_terminal_says_what_the_road_runs_verdict_is():
+    """rideid identify's road table: a failing road run in capitals with its reason; passing ones as passed, and
+    road runs alone then 'not fully assessed' (no test of the residual's structure on unknown roads); a result
+    without the figures (written before the test) keeps 'not assessed'."""
+    from rideid.cli import _roads_table
+    y = np.random.default_rng(2).standard_normal((2000, 10))
+    y -= y.mean(axis=0)
+    rr = [_RR("B40", range(10))]
+
+    def road():
+        return {"B40": {"iso8608_class": "B", "gd_n0": 3e-6, "speed": 11.0, "file": "road/B40.csv",
+                        "wavelengths_m": [0.5, 20.0], "note": "adequacy not assessed on this run"}}
+
+    def table(adequacy, rd):
+        res = _Res(adequacy, rd)
+        res.model = {}
+        return _roads_table(res)
+
+    rd = road()
+    bad = table(roads.judge(_adequacy(), rd, rr, {"B40": y}, {"B40": 0.9 * y}), rd)
+    assert "ROAD RUNS FAIL: the car leaves more than the sensor noise" in bad and "not assessed" not in bad
+    rd = road()
+    good = table(roads.judge(_adequacy(), rd, rr, {"B40": y}, {"B40": 0.995 * y}), rd)
+    assert "road runs: every run on an unknown road is explained" in good and "not assessed" not in good
+    rd = road()
+    alone = table(roads.judge(None, rd, rr, {"B40": y}, {"B40": 0.995 * y}), rd)
+    assert "ADEQUACY NOT FULLY ASSESSED: every run is on an unknown road" in alone
+    assert "ADEQUACY NOT ASSESSED: every run is on an unknown road" in table(None, road())
+    assert "the road runs are not assessed" in table(_adequacy(), road())
