@@ -137,7 +137,10 @@ def test_a_dataset_mixing_a_track_and_a_road(tmp_path):
     truth = tomllib.loads((sim / "truth.toml").read_text())["truth"]
     for n, t in truth.items():
         assert abs(res.parameters[n] / t - 1) < 0.01, n
-    assert res.adequacy["not_assessed"] == ["B40"] and "known tracks" in res.adequacy["note"]
+    # every run assessed (issue 51): the road run by its residual at its own road estimate, which passes here
+    # (measured: 0.39-0.49 % of each channel over seeds 1-5 of this case, against roads.max_share 3 %)
+    assert res.adequacy["not_assessed"] == [] and res.adequacy["roads"]["verdict"] == "pass"
+    assert res.adequacy["adequate"] and res.roads["B40"]["residual"]["axle_az_fl"]["share"] < 0.01
     assert set(res.response) == {"B40", "T"}
 
 

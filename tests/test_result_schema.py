@@ -55,7 +55,7 @@ def test_result_json_records_the_version_the_plan_and_every_setting_used(fitted)
     # one assessment per declared kind, in order, each with its verdict and reason; the old keys still written
     kinds = [a["kind"] for a in doc["assessments"]]
     assert kinds == [a.kind for a in ASSESSMENTS] == ["adequacy", "materiality", "small_angles", "sensor_hints",
-                                                      "level", "drawing", "bounds"]
+                                                      "level", "drawing", "roads", "bounds"]
     assert all(a["verdict"] in VERDICTS and isinstance(a["reason"], str) and a["reason"] for a in doc["assessments"])
     ad = doc["assessments"][0]
     assert ad["verdict"] == ("pass" if doc["adequacy"]["adequate"] else "fail") and ad["pairs"] == 100
@@ -106,7 +106,7 @@ def _res(adequacy=None, details=None, tracks=None, roads=None, starts=None, name
 
 def test_each_verdict_follows_what_the_result_holds():
     none = assessments_of(_res())
-    assert [a.verdict for a in none] == ["not assessed"] * 6 + ["pass"]
+    assert [a.verdict for a in none] == ["not assessed"] * 7 + ["pass"]
     runs = {"r1": {"body_az_fl": {"structure": True, "level": 5.0}, "roll_rate": {"structure": False, "level": 1.0}}}
     bad = _res({"adequate": False, "reasons": ["the road input explains part of the residual"], "runs": runs,
                 "alpha": 0.01, "advice": "try auto",

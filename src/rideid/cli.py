@@ -384,12 +384,19 @@ def _roads_table(res) -> str:
                      f"({r['wavelengths_m'][0]:g}-{r['wavelengths_m'][1]:g} m wavelengths)")
     for rid, r in res.roads.items():
         lines += [f"{rid}: {c} {why}" for c, why in (r.get("channels_left_out") or {}).items()]
-    if not res.adequacy or not res.adequacy.get("runs"):
+    from .estimate.records import RoadsAssessment
+    judged = RoadsAssessment.from_result(res)  # each road run's residual at its own road estimate
+    if judged.verdict != "not assessed":
+        lines.append(("ROAD RUNS FAIL: " if judged.verdict == "fail" else "road runs: ") + judged.reason)
+    if judged.verdict != "fail" and (not res.adequacy or not res.adequacy.get("runs")):
         what = "RESIDUALS" if res.adequacy else "ADEQUACY"  # a verdict from the sensor check alone, or none
-        lines.append(f"{what} NOT ASSESSED: every run is on an unknown road, where rideid has no residual test yet; "
+        lines.append(f"{what} NOT FULLY ASSESSED: every run is on an unknown road, where rideid judges only the "
+                     "residual's size (a car far off), not its structure; the error bars hold only if the linear "
+                     "model describes the car (add a known-track run to test it)" if judged.verdict == "pass" else
+                     f"{what} NOT ASSESSED: every run is on an unknown road, where rideid has no residual test yet; "
                      "the error bars hold only if the linear model describes the car (add a known-track run to "
                      "test it)")
-    else:
+    elif judged.verdict == "not assessed":
         lines.append("the adequacy verdict covers the known-track runs only; the road runs are not assessed")
     note = (res.model or {}).get("note")
     if note:

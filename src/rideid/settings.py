@@ -221,6 +221,24 @@ _SETTINGS: tuple[Setting, ...] = (
             'docs/tracks-as-built.md#the-model-rideidestimateproblemasbuiltpy',
             'tests/test_tracks_asbuilt.py::test_the_unevenness_found',
             measured=False),
+    Setting('roads.max_share', 0.03, "1 (share of the channel's RMS)",
+            ("a road run's channel whose residual at its own road estimate is above this share of the channel's RMS "
+             "is off: a right car leaves the noise's fit-band share (0.45 % at 1 % noise, 0.8-1.0 % at 2 %)"),
+            'docs/any-road.md#is-the-car-adequate-on-an-unknown-road',
+            'tests/test_road_verdict.py::test_the_road_runs_verdict_on_a_right_and_a_wrong_car',
+            note=("measured: the van with real dampers fitted with linear ones (../shared/cases/van-roads-dampers, "
+                  "c_sf -16 %) 2.5-12 % on its three roads (every acceleration 9-12 %); the built-in car on a B road "
+                  "with a twist run, 1 % noise, the right model, 0.42-0.47 %; a run fails at adequacy.loud_share of "
+                  "its channels off")),
+    Setting('asbuilt.boundary_share', 10.0, "1 (times the drawing's road power)",
+            ("a run whose free-road fit puts more than this many times the drawn road's power into the road estimate "
+             "through its boundary unknowns (the start's state, the rear lead-in) cannot tell unevenness from them: "
+             "its unevenness is held at the prior's floor, said in result.json, and not judged"),
+            'docs/tracks-as-built.md#limits-said-plainly',
+            'tests/test_tracks_asbuilt.py::test_a_short_washboard_run_holds_its_unevenness_at_the_prior',
+            note=("measured at the true SUV, exact drawings, 1 % noise, seeds 1-3 (tests/asbuilt_tracks.py): the "
+                  "washboard's 3.1 s at 10 m/s 1.2e3-5.4e5 (the fake 19-399 mm RMS); the twist, the herringbone, a "
+                  "6 s washboard and the washboard with 1.5 mm unevenness 2e-4 to 0.83")),
     Setting('asbuilt.motion_scale', (0.001, 0.001), '1 (relative speed), s (start)',
             "asbuilt.align_motion's unknowns: the speed's relative change and the start's shift (s), in these units",
             'docs/tracks-as-built.md#the-model-rideidestimateproblemasbuiltpy',

@@ -258,10 +258,37 @@ class BoundsAssessment(Assessment):
         return cls(verdict="pass", reason="no free parameter ended at a search bound")
 
 
+@dataclass(frozen=True)
+class RoadsAssessment(Assessment):
+    """Do the runs on unknown roads leave only the sensor noise at their own road estimate
+    (:mod:`rideid.estimate.assess.roads`)? ``fail`` when a run leaves more; ``runs``: run -> channel -> figures
+    (``rms``, ``signal_rms``, ``share``, ``off``); ``failed``: the runs that fail."""
+
+    kind: ClassVar[str] = "roads"
+    runs: dict = field(default_factory=dict)
+    failed: list = field(default_factory=list)
+
+    @classmethod
+    def from_result(cls, res) -> "RoadsAssessment":
+        ad = res.adequacy or {}
+        if isinstance(ad.get("roads"), dict):
+            return cls.from_dict(ad["roads"])
+        roads = getattr(res, "roads", None) or {}
+        if not roads:
+            return cls(**_not_assessed("no run on an unknown road"))
+        runs = {rid: r["residual"] for rid, r in roads.items() if isinstance(r, dict) and "residual" in r}
+        if not runs:
+            return cls(**_not_assessed("the road runs' residuals were not judged (assess=False, no polish, or a "
+                                       "result written before the test)"))
+        # judged, and no adequacy block kept: the road runs passed (rideid.estimate.assess.roads.judge)
+        return cls(verdict="pass", reason="every run on an unknown road is explained to the sensor noise at its own "
+                   "road estimate", runs=runs)
+
+
 #: the declared list of assessments, in the order result.json lists them
 ASSESSMENTS: tuple[type[Assessment], ...] = (AdequacyAssessment, MaterialityAssessment, SmallAngleAssessment,
                                              SensorHintsAssessment, LevelAssessment, DrawingAssessment,
-                                             BoundsAssessment)
+                                             RoadsAssessment, BoundsAssessment)
 _BY_KIND = {a.kind: a for a in ASSESSMENTS}
 
 
@@ -346,5 +373,6 @@ def plan_of(res, run_ids=()) -> Plan:
 
 
 __all__ = ["VERDICTS", "Assessment", "AdequacyAssessment", "MaterialityAssessment", "SmallAngleAssessment",
-           "SensorHintsAssessment", "LevelAssessment", "DrawingAssessment", "BoundsAssessment", "ASSESSMENTS",
+           "SensorHintsAssessment", "LevelAssessment", "DrawingAssessment", "RoadsAssessment",
+           "BoundsAssessment", "ASSESSMENTS",
            "assessments_of", "assessments_from_json", "Block", "Plan", "plan_of"]

@@ -941,8 +941,12 @@ def _verdict_line(result, adq, held) -> tuple:
                             "model adequate: " if adq["adequate"] else "MODEL NOT ADEQUATE: ")
                 + adq["reasons"][0], "adequacy")
     if getattr(result, "roads", None):
-        return ("Verdict", "adequacy not assessed: rideid has no residual test on unknown roads yet; the "
-                           "error bars hold only if the linear model describes the car", "roads")
+        judged = any("residual" in r for r in result.roads.values())  # rideid.estimate.assess.roads: passed
+        return ("Verdict", ("adequacy not fully assessed: each road run's residual at its own road estimate is of "
+                            "the noise's size (a car far off would fail it), but rideid has no test of its "
+                            "structure on unknown roads; " if judged else
+                            "adequacy not assessed: rideid has no residual test on unknown roads yet; the ")
+                + "error bars hold only if the linear model describes the car", "roads")
     return ("Verdict", "adequacy not assessed (no polish)", "estimates")
 
 

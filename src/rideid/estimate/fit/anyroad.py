@@ -75,6 +75,7 @@ from .identify import (DEFAULT_GENERATIONS, DEFAULT_POPULATION, identify as iden
 from .jade import JadeSolver, make_rng, stop_requested
 from ..result import History, IdentificationResult
 from ..assess.sensor_check import road_coupling_hints
+from ..assess.roads import judge as judge_road_runs
 from .uncertainty import andrews_bandwidth, estimate_covariance, long_run_covariance, run_scores
 
 #: ``tracks``: each declared track fitted as built (the default: the drawing is the nominal shape, SPEC §11) or
@@ -641,6 +642,8 @@ def _tracks_block(ds, trs, skipped, P, geom, motion=None):
                                   "unevenness_rms_surface_m": asbuilt.unevenness_rms(
                                       tr, defaults["anyroad.plausible_wavelength"]),
                                   "wavelengths_m": [tr.rr.speed / hi, tr.rr.speed / defaults["roadfit.band"][0]]}
+        if tr.prior is not None and tr.prior.held:  # the unevenness not estimated on this run (asbuilt.estimate_prior)
+            rec["runs"][tr.run_id]["unevenness_held"] = tr.prior.held
         if tr.rr.left_out:  # a channel without signal, or clipped (roadfit.without_clipped)
             rec["runs"][tr.run_id]["channels_left_out"] = dict(tr.rr.left_out)
         if tr.rr.clip.shape[0]:  # clipped samples freed as unknowns (roadfit: "Clipped samples")
@@ -938,6 +941,9 @@ def _identify_any_road(ds, *, rng=None, seed=None, population=None, generations=
             adequacy = dict(adequacy, as_built=sorted(ab_ids),
                             as_built_note="runs on tracks as built: the residual at the estimated road, over the fit "
                                           f"band {lo}-{hi} Hz")
+    if assess and polish:  # every run assessed: the road runs by their residual at their own road estimate
+        adequacy = judge_road_runs(adequacy, roads, rruns, {r.run_id: ds.data[r.run_id].matrix() for r in rruns},
+                                   response)
     tracks_block = _tracks_block(ds, trs, skipped, P, geom, motion) if trs else None
     odd = []
     if tracks_block and adequacy is not None:

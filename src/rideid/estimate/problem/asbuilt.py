@@ -82,6 +82,8 @@ class Prior:
     D: np.ndarray
     unevenness: np.ndarray
     alpha: float
+    #: why the unevenness is held at the prior's floor, not estimated (None: estimated; :func:`estimate_prior`)
+    held: str | None = None
 
 
 @dataclass
@@ -489,6 +491,16 @@ def estimate_prior(P, geom, tr: TrackRun) -> Prior:
     known = (S @ sol.f_state
              + H[:, :, 2] * (en @ sol.f_lead[0])[:, None] + H[:, :, 3] * (en @ sol.f_lead[1])[:, None])
     R = road_of((rr.Y[rr.fit] - known)[:, :, None])[..., 0]                                 # (K, 2) m
+    # a short run on a track that excites little at its slowest bins (the washboard's one line): the start's state
+    # and the rear wheels' lead-in explain those bins as well as a road does, and the free fit's boundary unknowns
+    # come out with a road share many times the drawing's; what is left there is theirs, not the track's
+    share = float(np.sum(np.abs(road_of(known[:, :, None])[..., 0]) ** 2)
+                  / max(float(np.sum(np.abs(tr.U[rr.fit][:, :2]) ** 2)), 1e-300))
+    held = None
+    if share > defaults["asbuilt.boundary_share"]:
+        held = (f"held at the prior's floor: the run's start state and rear lead-in put {share:.2g} times the drawn "
+                "road's power into the road estimate (a run too short, or a track too narrow in frequency, to tell "
+                f"unevenness from them; more than {defaults['asbuilt.boundary_share']:g} holds it)")
     AH = np.conj(np.swapaxes(Acol, -1, -2))
     Ginv = np.linalg.inv(AH @ Acol)
     v = noise[:, None] * np.real(np.stack([Ginv[:, 0, 0], Ginv[:, 1, 1]], axis=1))          # (K, 2) m^2
@@ -507,7 +519,9 @@ def estimate_prior(P, geom, tr: TrackRun) -> Prior:
     # factor (the disc's envelope of a taller bump, a feature off its drawn place): the prior opens there
     local = np.max(raw - v, axis=1)
     sd2 = np.where(local > defaults["asbuilt.open_factor"] * background, local, background)
-    return Prior(noise=noise, D=sd2 / noise, unevenness=sd2, alpha=alpha)
+    if held:
+        sd2 = floor
+    return Prior(noise=noise, D=sd2 / noise, unevenness=sd2, alpha=alpha, held=held)
 
 
 def unevenness_rms(tr: TrackRun, longest: float | None = None) -> float:
