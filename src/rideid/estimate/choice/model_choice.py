@@ -26,8 +26,9 @@ parameters at their null: curves ``F = c v``, stops not reached, a typical engin
 statistic ``W`` of the departure from that null, from its own fit's robust covariance, and its degrees of freedom
 ``dof``). Each rival is first **screened** at the parent's fit (:func:`screen`): one Gauss-Newton step from its
 start with its parameters freed (one batch of forward differences) predicts the cost it can reach; a rival whose
-predicted gain over the parent is below what would be accepted (:func:`min_improvement`, or a white-noise
-score statistic ``gain / s^2`` below ``penalty() * dof``, ``s^2`` the parent's residual variance) is skipped and
+predicted gain over the parent is below what would be accepted (:func:`min_improvement`, or a score statistic
+``gain / s^2`` below ``penalty() * dof``, ``s^2`` the parent's residual variance times its robust variance
+inflation, the median of ``(std_robust / std)^2`` over its estimates) is skipped and
 recorded with its statistic (``model.screens``). The rivals that pass are polished from their parent's fit (no new
 search), on both cores. A rival is **accepted** when it fits materially better than every candidate it contains
 and ``W > penalty() * dof`` (its criterion, the parent's + ``penalty() * dof``, below the parent's +
@@ -293,7 +294,7 @@ def screen(ds, parent, key, simulator) -> dict:
     """The score screen of candidate ``key`` at its parent's fit (module docstring): its start
     (:func:`start_row`, mapped as the fit maps it: knots not excited frozen, the stop scan), one Gauss-Newton step
     (:func:`gauss_newton_gain`), the predicted gain over the parent and its score statistic ``gain / s^2``
-    against ``penalty() * dof``; ``passes`` says whether the candidate is worth its fit."""
+    (at the robust scale) against ``penalty() * dof``; ``passes`` says whether the candidate is worth its fit."""
     space = _space(ds, key, parent)
     x = start_row(ds, parent, space)
     cf = CostFunction(ds.with_starts(parent.starts or {}), space=space, simulator=simulator)
@@ -302,10 +303,15 @@ def screen(ds, parent, key, simulator) -> dict:
         cost0, predicted, m = gauss_newton_gain(cf, x)
     gain = parent.cost - predicted
     dof = len(cf.names) - len(parent.names)
-    score = gain * max(m - len(parent.names), 1) / parent.cost
+    # the score at the robust scale: the white one divided by the parent's variance inflation (median of
+    # (std_robust / std)^2 over its estimates), as the Wald statistics it stands in for are robust
+    inflation = np.nanmedian([(d.get("std_robust") or np.nan) ** 2 / (d.get("std") or np.nan) ** 2
+                              for n, d in parent.details.items() if n in parent.names] or [1.0])
+    score = gain * max(m - len(parent.names), 1) / parent.cost / float(np.fmax(inflation, 1.0))
     passes = bool(gain >= least_improvement() and score >= penalty() * dof)
     return {"extensions": list(key), "cost_at_start": cost0, "predicted_cost": predicted, "predicted_gain": gain,
-            "score": score, "dof": dof, "threshold": penalty() * dof, "least_improvement": least_improvement(),
+            "score": score, "variance_inflation": float(inflation), "dof": dof, "threshold": penalty() * dof,
+            "least_improvement": least_improvement(),
             "passes": passes}
 
 
