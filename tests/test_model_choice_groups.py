@@ -97,3 +97,37 @@ def test_auto_brings_the_powertrain_on_top_of_the_curves_and_weighs_the_linear_g
     assert res.model["extensions"] == ["powertrain", "damper_curves"] and res.adequacy["adequate"]
     for n in ("m_p", "x_p", "f_pb", "f_pp"):
         assert abs(res.parameters[n] / sc.truth[n] - 1) < 1e-4, n
+
+
+def test_rivals_of_one_step_are_compared_on_their_cost(monkeypatch):
+    """One step of the loop on stand-in fits (the all-realities case's pattern, issue 50: curves cost 0.0934
+    with a large Wald statistic, the powertrain 0.0815 with a smaller one): both are accepted (each fits better
+    than the parent and its W exceeds penalty() per degree of freedom), and the lower cost is kept, whatever their
+    Wald statistics; a rival whose W is below its price is not accepted however low its cost; a rival the screen
+    skips is never fitted. Every candidate without the kept group then pays its W in its criterion."""
+    from types import SimpleNamespace
+
+    def fake(key, cost):
+        return SimpleNamespace(cost=cost, adequacy={"adequate": False}, polish={"names": []}, parameters={},
+                               details={}, model={"extensions": list(key)}, names=[])
+
+    W = {"powertrain": (60.0, 7), "damper_curves": (500.0, 18), "bump_stops": (1.0, 2)}
+    cost = {"powertrain": 0.0815, "damper_curves": 0.0934, "bump_stops": 0.05}
+    exts = tuple(mc.Extension(g, lambda ds: True, lambda *a, g=g: W[g]) for g in W)
+    monkeypatch.setattr(mc, "EXTENSIONS", exts + (mc.Extension("anti_roll_bars", lambda ds: True, None),))
+    monkeypatch.setattr(mc, "_space", lambda *a: None)
+    monkeypatch.setattr(mc, "screen", lambda ds, parent, key, sim: {"extensions": list(key),
+                                                                    "passes": "anti_roll_bars" not in key})
+    fitted = []
+    monkeypatch.setattr(mc._Choice, "fit", lambda self, parent, key, maps=None: fitted.append(key) or
+                        fake(key, cost[key[-1]]))
+    choice = mc._Choice(None, None, {})
+    choice.add((), fake((), 0.1), {"criterion": 2.0, "k": 0, "wald": 3.0})
+    choice.keep_best(*choice.entries)
+    assert choice.extend()
+    assert choice.key == ("powertrain",) and choice.best["criterion"] == pytest.approx(2.0 + 7 * mc.penalty())
+    assert sorted(fitted) == [("bump_stops",), ("damper_curves",), ("powertrain",)]  # the bars skipped, not fitted
+    assert [s["passes"] for s in choice.screens].count(False) == 1
+    by = {tuple(e["extensions"]): e for e in choice.entries}
+    assert by[()]["criterion"] == pytest.approx(2.0 + 60.0) and by[()]["wald"] == pytest.approx(63.0)
+    assert by[("damper_curves",)]["criterion"] == pytest.approx(2.0 + 18 * mc.penalty() + 60.0)
