@@ -405,6 +405,9 @@ def _candidates_table(model: dict) -> str:
         adq = {True: "yes", False: "no", None: "-"}[c.get("adequate")]
         better = {True: "yes", False: "no", None: "-"}[c.get("fits_better")]
         lines.append(f"{' + '.join(c['extensions']) or 'base':<30} {c['cost']:>11.5g} {crit:>11} {better:>12} {adq:>9}")
+    lines += [f"{' + '.join(s['extensions']):<30} skipped: its predicted gain {s['predicted_gain']:.3g}, score "
+              f"{s['score']:.3g} against {s['threshold']:.3g} (one Gauss-Newton step at its parent's fit)"
+              for s in model.get("screens", ()) if not s["passes"]]
     if any(c.get("fits_better") is False for c in model["candidates"]):
         lines.append("fits better: a cost at least (0.5 %)^2 below every candidate it contains; a candidate that "
                      "does not is not kept, whatever its criterion")
