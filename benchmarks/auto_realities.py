@@ -3,11 +3,11 @@
 The case is tests/realities_case.py's (independent simulators): the SUV with an engine on mounts, linear dampers,
 tracks 4 % off their drawing with 1.5 mm of unevenness, a noisy GPS speed channel, AC-coupled hubs, a clipping hub
 and unstated starts; seed 1, the five runs of ``realities_case.SUV_RUNS`` (the twist at two speeds, the
-herringbone at two, the washboard) or the first ``--runs N`` of them. Prints the wall time, the model kept, each
+herringbone at two, the washboard) or those named by ``--runs``. Prints the wall time, the model kept, each
 candidate's cost and criterion, each screen's statistic, the twelve's (and the engine's) errors against
 ``realities_case.truth("suv")`` and the verdict.
 
-    PYTHONPATH=src python benchmarks/auto_realities.py [--runs 5] [--keep DIR]
+    PYTHONPATH=src python benchmarks/auto_realities.py [--runs T_HH H_HH W_H] [--keep DIR]
 """
 
 from __future__ import annotations
@@ -31,11 +31,12 @@ import rideid  # noqa: E402
 
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--runs", type=int, default=5, help="how many of the SUV's five runs (in their order)")
+    ap.add_argument("--runs", nargs="+", default=[r[0] for r in realities_case.SUV_RUNS],
+                    help="run ids of realities_case.SUV_RUNS (default: all five)")
     ap.add_argument("--keep", type=Path, help="write the dataset and the fit here (default: a temporary folder)")
     args = ap.parse_args(argv)
     top = args.keep or Path(tempfile.mkdtemp(prefix="auto-realities-"))
-    runs = [r[0] for r in realities_case.SUV_RUNS[:args.runs]]
+    runs = list(args.runs)
     realities_case.write_dataset(top / "ds", car="suv", seed=1, runs=runs)
     env = {**os.environ, "PYTHONPATH": str(Path(rideid.__file__).parents[1])}
     t0 = time.perf_counter()
