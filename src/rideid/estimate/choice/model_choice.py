@@ -60,7 +60,7 @@ from ..records import assessments_of, plan_of
 from ..assess.adequacy import min_improvement as least_improvement
 from ..assess.materiality import weigh_result
 from ..assess.small_angle import small_angle
-from ..fit.identify import (_curve_start, _linear_cost, identify as identify_model, model_extensions, sensor_notes,
+from ..fit.identify import (nonlinear_start, linear_cost, identify as identify_model, model_extensions, sensor_notes,
                             warn_bounds)
 from ..fit.identify import DEFAULT_GENERATIONS, DEFAULT_POPULATION
 from ..fit.anyroad import TRACK_OPTIONS, as_built_runs, identify_any_road, unknown_road_runs
@@ -298,7 +298,7 @@ def screen(ds, parent, key, simulator) -> dict:
     space = _space(ds, key, parent)
     x = start_row(ds, parent, space)
     cf = CostFunction(ds.with_starts(parent.starts or {}), space=space, simulator=simulator)
-    cf, x, _, _ = _curve_start(cf, cf if len(x) == len(cf.names) else _linear_cost(cf.ds, cf), x)
+    cf, x, _, _ = nonlinear_start(cf, cf if len(x) == len(cf.names) else linear_cost(cf.ds, cf), x)
     with single_threaded_blas():
         cost0, predicted, m = gauss_newton_gain(cf, x)
     gain = parent.cost - predicted

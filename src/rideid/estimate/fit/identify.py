@@ -239,7 +239,7 @@ def identify(ds: Dataset, *, rng=None, seed=None, population: int = DEFAULT_POPU
         # damper curves, bump stops: the search on the linear model (steps 9, 10 of the module docstring)
         # (a start is then the linear model's row: the curves start as its F = c v)
         nonlinear = cf.space.layout is not None
-        cf_search = _linear_cost(ds, cf) if nonlinear else cf
+        cf_search = linear_cost(ds, cf) if nonlinear else cf
         if maps is None:
             maps = cost_maps(cf_search)
         search = global_search(cf_search, weighting, maps, gen, population=population,
@@ -252,7 +252,7 @@ def identify(ds: Dataset, *, rng=None, seed=None, population: int = DEFAULT_POPU
         x0 = search.x if start is None else np.asarray(start, dtype=float)
         excitation = bumps = None
         if nonlinear:
-            cf, x0, excitation, bumps = _curve_start(cf, cf if own else cf_search, x0)
+            cf, x0, excitation, bumps = nonlinear_start(cf, cf if own else cf_search, x0)
         search = OptimizeResult(dict(search, x=x0, stop=search.stop if start is None else "start"))
         fit = polish_fit(ds, cf, x0) if polish else None
         if fit is not None and cf.space.bump:
@@ -263,7 +263,7 @@ def identify(ds: Dataset, *, rng=None, seed=None, population: int = DEFAULT_POPU
                        excitation, bumps)
 
 
-def _linear_cost(ds, cf: CostFunction) -> CostFunction:
+def linear_cost(ds, cf: CostFunction) -> CostFunction:
     """The linear model of a damper-curve or bump-stop cost function: the same groups less the curves and
     the stops (``c_sf``, ``c_sr`` free, the linear kernel), the same data and bounds."""
     sp = cf.space
@@ -274,7 +274,7 @@ def _linear_cost(ds, cf: CostFunction) -> CostFunction:
     return CostFunction(cf.ds, space=space, counter=cf.counter, simulator=cf.simulator)  # one count
 
 
-def _curve_start(cf: CostFunction, cf_search: CostFunction, x):
+def nonlinear_start(cf: CostFunction, cf_search: CostFunction, x):
     """The nonlinear model's start from the search's best car: ``x`` mapped into the nonlinear space (a
     linear car's curves ``F = c v``), its knots' excitation, the space with the knots not excited frozen;
     with bump stops the scan of :func:`rideid.estimate.problem.bumps.scan_start` and the stops not reached held.
