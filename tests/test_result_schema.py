@@ -75,6 +75,15 @@ def test_load_reads_the_typed_records_back(fitted):
     assert type(back.assessments[0]) is AdequacyAssessment
 
 
+def test_one_assessment_by_its_kind(fitted):
+    res, out = fitted
+    assert res.assessment("adequacy") is res.assessments[0]
+    roads = rideid.load_result(out).assessment("roads")
+    assert roads.verdict == "not assessed" and "no run on an unknown road" in roads.reason  # track runs only
+    with pytest.raises(KeyError, match="no assessment 'road' .*roads"):
+        res.assessment("road")
+
+
 def test_a_file_without_a_schema_version_is_version_1_and_gets_its_assessments_from_the_old_keys(fitted, tmp_path):
     res, out = fitted
     doc = json.loads((out / "result.json").read_text())

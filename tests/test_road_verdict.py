@@ -87,8 +87,13 @@ def _adequacy():
 
 
 class _Res:
+    """What the records and the terminal read of a result (IdentificationResult.assessment: the record by kind)."""
+
     def __init__(self, adequacy, road):
         self.adequacy, self.roads, self.details, self.tracks = adequacy, road, {}, None
+
+    def assessment(self, kind):
+        return {a.kind: a for a in assessments_of(self)}[kind]
 
 
 def test_the_verdict_joins_the_known_track_runs_adequacy():

@@ -384,8 +384,7 @@ def _roads_table(res) -> str:
                      f"({r['wavelengths_m'][0]:g}-{r['wavelengths_m'][1]:g} m wavelengths)")
     for rid, r in res.roads.items():
         lines += [f"{rid}: {c} {why}" for c, why in (r.get("channels_left_out") or {}).items()]
-    from .estimate.records import RoadsAssessment
-    judged = RoadsAssessment.from_result(res)  # each road run's residual at its own road estimate
+    judged = res.assessment("roads")  # each road run's residual at its own road estimate
     if judged.verdict != "not assessed":
         lines.append(("ROAD RUNS FAIL: " if judged.verdict == "fail" else "road runs: ") + judged.reason)
     if judged.verdict != "fail" and (not res.adequacy or not res.adequacy.get("runs")):
@@ -412,6 +411,9 @@ def _candidates_table(model: dict) -> str:
         adq = {True: "yes", False: "no", None: "-"}[c.get("adequate")]
         better = {True: "yes", False: "no", None: "-"}[c.get("fits_better")]
         lines.append(f"{' + '.join(c['extensions']) or 'base':<30} {c['cost']:>11.5g} {crit:>11} {better:>12} {adq:>9}")
+    lines += [f"{' + '.join(s['extensions']):<30} skipped: its predicted gain {s['predicted_gain']:.3g}, score "
+              f"{s['score']:.3g} against {s['threshold']:.3g} (one Gauss-Newton step at its parent's fit)"
+              for s in model.get("screens", ()) if not s["passes"]]
     if any(c.get("fits_better") is False for c in model["candidates"]):
         lines.append("fits better: a cost at least (0.5 %)^2 below every candidate it contains; a candidate that "
                      "does not is not kept, whatever its criterion")

@@ -337,6 +337,16 @@ class IdentificationResult:
             out[rid] = {"value": s, **({"model_time": list(span)} if span is not None else {})}
         return out
 
+    def assessment(self, kind: str) -> Assessment:
+        """The typed record of one assessment (SPEC §13): ``kind`` one of ``adequacy``, ``materiality``,
+        ``small_angles``, ``sensor_hints``, ``level``, ``drawing``, ``roads``, ``bounds``; the record as kept, or
+        built from the result's blocks (a result read from schema version 1)."""
+        found = [a for a in (self.assessments or assessments_of(self)) if a.kind == kind]
+        if not found:
+            kinds = sorted({a.kind for a in assessments_of(self)})
+            raise KeyError(f"no assessment {kind!r} (one of {', '.join(kinds)})")
+        return found[0]
+
     def frequency_response(self, freq=None):
         """The identified car's frequency responses with the std of ``|H|`` from ``std_total`` (SPEC §13).
 

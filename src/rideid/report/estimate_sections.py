@@ -103,7 +103,8 @@ def model_rows(res: dict) -> dict | None:
             moved = bool(std) and abs(v - v0) > 2 * std
             cells.append((f"{v:.5g}", moved))
         rows.append({"name": n, "cells": cells})
-    return {"chosen": chosen, "criterion": model.get("criterion", ""), "curve_criterion": model.get("curve_criterion"),
+    return {"chosen": chosen, "criterion": model.get("criterion", ""),
+            "curve_criterion": model.get("extension_criterion", model.get("curve_criterion")),
             "heads": heads, "rows": rows}
 
 

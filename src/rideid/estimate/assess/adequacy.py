@@ -66,12 +66,12 @@ _ADVICE_CHECKS = ("check that the track in dataset.toml (kind, start, height, wa
                   "axis or a loose sensor.")
 #: SPEC §13: the set-up first, which no model extension mends (a 1 % speed slip left the base model, and every
 #: extension after it, not adequate, where its speed estimated with the car fits)
-_ADVICE_SETUP = ("the set-up first, which no model extension mends: each run's speed and start (declared values are "
+ADVICE_SETUP = ("the set-up first, which no model extension mends: each run's speed and start (declared values are "
                  "priors: result.json tracks.<track>.runs.<run>.motion and the load's warnings say where the data put "
                  "them), the sample rate, each channel's unit (accelerations in m/s^2, gyros in rad/s) and sign, and "
                  "its sensor chain (highpass, lowpass); ")
 #: the advice when the model lacks extension groups and --model auto has not weighed them (see :func:`advice`)
-ADVICE = (_ADVICE_HEAD + "Try " + _ADVICE_SETUP + _ADVICE_CHECKS + " Then `rideid identify --model auto` (or "
+ADVICE = (_ADVICE_HEAD + "Try " + ADVICE_SETUP + _ADVICE_CHECKS + " Then `rideid identify --model auto` (or "
           "`--model full`) to let anti-roll bars and tire damping in.")
 #: added to the advice when the model has damper curves: where their straight segments miss the real curve
 KNOT_ADVICE = ("The damper curves are straight between their knots: a real curve that bends between two knots "
@@ -446,7 +446,7 @@ def advice(model: dict | None) -> str:
     else:
         return ADVICE + (" " + knots.rstrip() if knots else "")
     lacks = [what for group, what in _LACKS if group not in ext] + ["a flexible body"]
-    return (_ADVICE_HEAD + tried + knots + "Try " + _ADVICE_SETUP + _ADVICE_CHECKS + " Or the car has what the "
+    return (_ADVICE_HEAD + tried + knots + "Try " + ADVICE_SETUP + _ADVICE_CHECKS + " Or the car has what the "
             "model lacks ("
             + ", ".join(lacks) + ").")
 
@@ -473,7 +473,7 @@ def gross_misfit(run_errors: dict, at_bound: list, findings=()) -> dict | None:
         reasons.append(f"{len(at_bound)} parameters ended at their search bounds ({', '.join(at_bound)})")
     seen = [f.message for f in findings if getattr(f, "check", None) == "speed"]
     advice = ("This is far beyond what a model extension explains, so the model choice was not run: check "
-              + _ADVICE_SETUP + _ADVICE_CHECKS
+              + ADVICE_SETUP + _ADVICE_CHECKS
               + (" What loading found of the speeds: " + " ".join(seen) if seen else ""))
     return {"adequate": False, "gross_misfit": {"run_errors": {r: float(e) for r, e in run_errors.items()},
                                                 "at_bound": list(at_bound), "threshold": gross_error,

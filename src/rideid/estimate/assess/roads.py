@@ -39,12 +39,12 @@ import numpy as np
 from ...model.equations import CHANNELS
 from ...settings import defaults
 from ..records import RoadsAssessment
-from .adequacy import _ADVICE_SETUP
+from .adequacy import ADVICE_SETUP
 
 #: the advice when a road run fails: the set-up first, then what unknown roads cannot fit (the road's projection needs
 #: a linear car, so `--model auto`, which the generic advice names, is not run there)
 ROAD_ADVICE = ("The car leaves more than the sensor noise on runs on unknown roads, so the estimates are biased by "
-               "more than their error bars say. Try " + _ADVICE_SETUP + "then what the model lacks: dampers that "
+               "more than their error bars say. Try " + ADVICE_SETUP + "then what the model lacks: dampers that "
                "are not linear, or bump stops, cannot be fitted on unknown roads (the road is projected out with a "
                "linear car): add runs on known tracks and fit them with `--model auto` (damper curves, bump stops); "
                "anti-roll bars and tire damping can be given here (`--model anti_roll_bars,tire_damping`).")

@@ -1,62 +1,57 @@
-"""``--model auto``: fit the candidate models, keep the one the data support.
+"""``--model auto``: the model choice, a loop over extensions of one problem.
 
-Candidates: every subset of the extension groups of SPEC §6 (base, bars,
-tire damping, both). Cost: one search, on the full model (the largest
-candidate: a smaller model is the full one with some parameters at 0, so its
-optimum lies near), then each smaller candidate by a polish started from the
-full estimate without the dropped parameters.
-
-Criterion: a robust Wald information criterion, computed from the full fit,
+**The linear groups** (SPEC §6: ``anti_roll_bars``, ``tire_damping``). One search on the full linear model (the
+largest: a smaller model is the full one with some parameters at 0, so its optimum lies near), then each smaller
+candidate by a polish from the full estimate without the dropped parameters (on both cores). Criterion: a robust
+Wald information criterion, computed from the full fit,
 
     C(M) = W(M) + penalty() * k(M)
     W(M) = theta_o^T  Cov_robust(theta_o)^-1  theta_o
 
-with ``theta_o`` the full model's estimates of the extension parameters *not*
-in M, ``Cov_robust`` their HAC covariance (``std_robust``,
-:mod:`rideid.estimate.fit.uncertainty`) and ``k(M)`` the number of free extension
-parameters in M. The smallest C wins. ``W`` asks whether the omitted
-parameters are zero with an error bar that holds under coloured,
-cross-channel-correlated noise, so the criterion stays honest where a
-likelihood-ratio test or an AIC/BIC on the raw residual sum of squares (which
-count every sample as independent) would add groups the data do not support.
-A candidate is eligible only if it fits materially better than every
-candidate it contains (:func:`fits_better`: a cost lower by at least
-:func:`~rideid.estimate.assess.adequacy.min_improvement`): on noise-free data, where every standard error is
-at rounding level, this keeps groups estimated at rounding-level values out.
-``penalty()`` = half the 99.9 % point of chi-square(2): a group of two
-parameters enters when its Wald statistic exceeds 13.8, i.e. a test at
-0.1 % per group, so a twelve-parameter car keeps the base model in about 999
-of 1000 datasets whose noise the robust covariance describes.
+with ``theta_o`` the full model's estimates of the extension parameters *not* in M, ``Cov_robust`` their HAC
+covariance (``std_robust``, :mod:`rideid.estimate.fit.uncertainty`) and ``k(M)`` the number of free extension
+parameters in M. The smallest C wins. ``W`` asks whether the omitted parameters are zero with an error bar that
+holds under coloured, cross-channel-correlated noise, so the criterion stays honest where a likelihood-ratio test
+or an AIC/BIC on the raw residual sum of squares (which count every sample as independent) would add groups the
+data do not support. A candidate is eligible only if it fits materially better than every candidate it contains
+(:func:`fits_better`: a cost lower by at least :func:`~rideid.estimate.assess.adequacy.min_improvement`): on
+noise-free data, where every standard error is at rounding level, this keeps groups estimated at rounding-level
+values out. ``penalty()`` = half the 99.9 % point of chi-square(2): a group of two parameters enters when its Wald
+statistic exceeds 13.8, i.e. a test at 0.1 % per group.
 
-The candidates above are SPEC §6's groups (``rideid.model.params.SUSPENSION_GROUPS``).
-When the model chosen is not adequate, damper curves (:func:`curve_candidate`),
-bump stops (:func:`bump_candidate`) and last a powertrain on mounts
-(:func:`powertrain_candidate`, SPEC §11: one more search, its Wald statistic
-of ``m_p = 0`` at the same price per parameter) are weighed on top; the
-powertrain on top of whatever is chosen by then, damper curves and bump
-stops included. Once the curves, once the stops and once the powertrain
-are in, the chosen linear groups are weighed again from that fit's
-covariance (:func:`_curve_subset`, :func:`_linear_groups_again`): a group
-the simpler model needed for what the larger one explains is dropped when
-the criterion prefers fewer groups. When the powertrain comes in on a
-linear choice whose curves were weighed and not kept (the engine's modes
-can hide what the curves explain) and the car is still not adequate, the
-curves are weighed again on top of the powertrain, and after them the
-linear groups.
+**The extensions on top** (:data:`EXTENSIONS`: a powertrain on mounts, damper curves, bump stops; SPEC §8, §11).
+While the model chosen is not adequate, one step: every extension not in the model is a rival, each declared by
+what it adds (its group), how it starts from the parent's fit (:func:`start_row`: the parent's values, the new
+parameters at their null: curves ``F = c v``, stops not reached, a typical engine) and how it is weighed (its Wald
+statistic ``W`` of the departure from that null, from its own fit's robust covariance, and its degrees of freedom
+``dof``). Each rival is first **screened** at the parent's fit (:func:`screen`): one Gauss-Newton step from its
+start with its parameters freed (one batch of forward differences) predicts the cost it can reach; a rival whose
+predicted gain over the parent is below what would be accepted (:func:`min_improvement`, or a score statistic
+``gain / s^2`` below ``penalty() * dof``, ``s^2`` the parent's residual variance times its robust variance
+inflation, the median of ``(std_robust / std)^2`` over its estimates) is skipped and
+recorded with its statistic (``model.screens``). The rivals that pass are polished from their parent's fit (no new
+search), on both cores. A rival is **accepted** when it fits materially better than every candidate it contains
+and ``W > penalty() * dof`` (its criterion, the parent's + ``penalty() * dof``, below the parent's +
+``W``). Of the accepted rivals of one step **the one with the lowest cost** is kept: the same data, the same
+equal-weight residual scaling, so the costs compare the rivals' fits directly (their Wald statistics come from
+different fits' covariances and do not). With a group kept the linear groups are weighed again from its fit's
+robust covariance (:func:`_curve_subset`), a smaller set polished from it and kept when its criterion is lower.
+The loop ends when the model is adequate, no rival is accepted, or none is left.
 """
 
 from __future__ import annotations
 
 import itertools
 import time
-from dataclasses import replace
+from dataclasses import dataclass, field, replace
+from typing import Callable
 
 import numpy as np
 from scipy import special
 
 from ...profiling import stage
 from ...settings import defaults, legacy_names
-from ...model.params import POWERTRAIN_NAMES
+from ...model.params import NOMINAL_EXTENSIONS, POWERTRAIN_NAMES
 from ...model.params import SUSPENSION_GROUPS as GROUPS
 from ..fit.budget import with_budget
 from ... import settings
@@ -65,8 +60,10 @@ from ..records import assessments_of, plan_of
 from ..assess.adequacy import min_improvement as least_improvement
 from ..assess.materiality import weigh_result
 from ..assess.small_angle import small_angle
-from ..fit.identify import (DEFAULT_GENERATIONS, DEFAULT_POPULATION, identify as identify_model, model_extensions,
-                       sensor_notes, warn_bounds)
+from ..fit.identify import identify as identify_model, warn_bounds
+from ..problem.build import curve_start, linear_cost, model_extensions
+from ..assess.sensor_check import sensor_notes
+from ..fit.identify import DEFAULT_GENERATIONS, DEFAULT_POPULATION
 from ..fit.anyroad import TRACK_OPTIONS, as_built_runs, identify_any_road, unknown_road_runs
 from ...model.batch import single_threaded_blas, thread_map
 from ..problem.cost import IDENTIFIABLE_GROUPS, CostFunction, ParameterSpace, refuse_unsupported_groups
@@ -74,7 +71,6 @@ from ...errors import ArgumentError
 from ...model.simulator import Simulator
 from ...data.checks import bound_findings
 from ...data.schema import NONLINEAR_GROUPS
-
 
 
 def penalty() -> float:
@@ -89,6 +85,15 @@ CRITERION = ("robust Wald information criterion: C = W + {:.2f} k, W the Wald st
              "extension parameters; smallest C wins (a group of two enters when W > {:.1f}, a 0.1 % test)"
              )
 
+#: how the extensions on top are weighed (``{}``: :func:`penalty`)
+EXTENSION_CRITERION = (
+    "extensions on top (powertrain, damper_curves, bump_stops), while the model is not adequate: each rival "
+    "screened at the parent's fit by one Gauss-Newton step (skipped when its predicted gain is below the least "
+    "improvement or its score statistic below {0:.2f} per degree of freedom), the rest polished from the parent's "
+    "fit; accepted when it fits materially better and its Wald statistic of departure from its null exceeds "
+    "{0:.2f} per degree of freedom; of the accepted rivals the lowest cost (same data, same residual scaling) is "
+    "kept, then the linear groups weighed again from its fit")
+
 
 def wald(theta, cov) -> float:
     """``theta^T cov^-1 theta`` (pseudo-inverse, so a parameter without information adds nothing).
@@ -98,9 +103,7 @@ def wald(theta, cov) -> float:
     theta : ndarray, shape (k,)
     cov : ndarray, shape (k, k)
     """
-    theta = np.asarray(theta, dtype=float)
-    if theta.size == 0:
-        return 0.0
+    theta = np.asarray(theta, dtype=float)  # no parameter: 0 (the pseudo-inverse of an empty matrix)
     cov = np.asarray(cov, dtype=float)
     if not np.all(np.isfinite(cov)):
         return float("nan")
@@ -137,34 +140,10 @@ def criteria(names, theta, cov, candidates, free_ext) -> list[dict]:
     return out
 
 
-def _own_adequacy(ds, cf, res):
-    """The adequacy verdict of a candidate at its own final state: its parameters, and the model's time
-    axes at the starts its own polish settled (a nested cost function still has the starts it began from)."""
-
-    space = cf.space
-    cf = cf.with_data(ds.with_starts(res.starts)) if res.starts else cf
-    with single_threaded_blas():
-        return assess_fit(cf, space.full(np.array([[res.parameters[n] for n in cf.names]]))[0], res.response)
-
-
-CURVES_GROUP = "damper_curves"
-#: model groups in their canonical order (the linear groups, then the curves)
-IDENTIFIABLE_ORDER = tuple(GROUPS) + (CURVES_GROUP,)
-
-
 def _key(groups) -> tuple:
     """A candidate's key: its groups in the canonical order of every model (SPEC §6's, the powertrain, the damper
     curves, the bump stops: :data:`rideid.estimate.problem.cost.IDENTIFIABLE_GROUPS`, as a result's ``extensions``)."""
     return tuple(g for g in IDENTIFIABLE_GROUPS if g in set(groups))
-
-
-#: ``{}``: :func:`penalty`, filled in where written
-CURVE_CRITERION = ("damper curves: one more polish, the chosen linear groups plus damper_curves, started from the "
-                   "linear car's curves F = c v; W_curves = Wald statistic (std_robust) of the curve forces' "
-                   "departure from a straight line per axle; the curves are kept when they fit better and "
-                   "W_curves > {:.2f} per extra free parameter (free knots less the 2 linear rates); with the curves "
-                   "in, the linear groups are weighed again from the curve fit (the same Wald criterion)"
-                   )
 
 
 def fits_better(extensions, costs: dict, min_improvement: float | None = None) -> bool:
@@ -189,194 +168,6 @@ def fits_better(extensions, costs: dict, min_improvement: float | None = None) -
     min_improvement = least_improvement() if min_improvement is None else min_improvement
     mine = costs[tuple(extensions)]
     return all(mine <= cost - min_improvement for cand, cost in costs.items() if set(cand) < set(extensions))
-
-
-@stage("model choice")
-def identify_auto(ds, *, rng=None, seed=None, callback=None, maps=None, simulator=None, **kw):
-    """:func:`rideid.identify` with ``model="auto"`` (module docstring).
-
-    Returns the chosen candidate's :class:`~rideid.estimate.fit.identify.IdentificationResult`
-    whose ``model`` holds ``extensions``, ``selection = "auto"``, the
-    criterion's description and every candidate (``extensions``, ``cost``,
-    ``criterion``, ``wald``, ``adequate``, ``parameters``, ``std_robust``).
-    Its ``evaluations`` and ``wall_time_s`` cover all candidates.
-    """
-
-    t0 = time.perf_counter()
-    cf_full = CostFunction(ds, extensions=tuple(GROUPS), simulator=simulator)
-    simulator = cf_full.simulator  # one value for every candidate
-    full = identify_model(ds, rng=rng, seed=seed, callback=callback, maps=maps, cost=cf_full, **kw)
-    # SPEC §13: a first fit far beyond what any extension explains stops here, with the set-up to check
-    gross = gross_misfit(run_errors(ds, full.response), [n for n, d in full.details.items() if d.get("at_bound")],
-                         getattr(ds, "findings", ()))
-    if gross is not None and full.polish:
-        return replace(full, adequacy=gross, model={"extensions": list(full.model.get("extensions", [])),
-                                                    "selection": "auto (not run: the first fit misses grossly)"})
-    pol = full.polish or {}
-    names = list(pol.get("names", []))
-    free_ext = {g: [n for n in GROUPS[g] if n in names] for g in GROUPS}
-    free_ext = {g: ns for g, ns in free_ext.items() if ns}  # fully known groups are in every candidate
-    candidates = [tuple(g for g in GROUPS if g in sub or g not in free_ext)
-                  for r in range(len(free_ext) + 1) for sub in itertools.combinations(free_ext, r)]
-    if "covariance_robust" in pol:
-        x_full = np.array([full.parameters[n] for n in names])
-        crit = criteria(names, x_full, np.array(pol["covariance_robust"]), candidates, free_ext)
-    else:  # no polish, no covariance: keep the full model and say why
-        crit = [{"extensions": list(c), "wald": None, "k": None,
-                 "criterion": 0.0 if set(c) == set(GROUPS) else None} for c in candidates]
-    results, costs = {}, {}
-    evaluations = full.evaluations
-    kw_nested = {k: v for k, v in kw.items() if k in ("weights", "polish", "population")}
-
-    def nested(cand):
-        cf = _nested_cost(cf_full, ds, cand)
-        x0 = np.array([full.parameters[n] for n in cf.names])
-        # the adequacy verdict only for the model kept (below): it costs as much as a polish
-        return cf, identify_model(ds, rng=rng, seed=seed, cost=cf, maps=full.maps, start=x0, assess=False,
-                                  **kw_nested)
-
-    full_key = next(c for c in candidates if set(c) == set(GROUPS))
-    smaller = [c for c in candidates if c != full_key]
-    # the smaller candidates' polishes are independent (no randomness: each starts from the full
-    # estimate): on parallel threads, whose kernel calls, SVDs and array work release the GIL
-    with single_threaded_blas():
-        fits = thread_map(nested, smaller, "rideid-candidates")
-    results[full_key], costs[full_key] = full, cf_full
-    for cand, (cf, r) in zip(smaller, fits):
-        results[cand], costs[cand] = r, cf
-        evaluations += r.nfev
-    for c in crit:
-        c["fits_better"] = fits_better(c["extensions"], {cand: r.cost for cand, r in results.items()})
-    scored = [c for c in crit if c["criterion"] is not None and c["fits_better"]]
-    best = min(scored, key=lambda c: (c["criterion"], c["k"] or 0))
-    chosen = tuple(best["extensions"])
-    # damper curves on top of the linear choice: one more polish, kept when warranted (curve_candidate);
-    # tried only when the linear choice is not adequate: an adequate linear model leaves no road-driven
-    # structure in the residuals for curves to explain (and the extra polish costs as much as the search)
-    lin = results[chosen] = replace(results[chosen], adequacy=_own_adequacy(ds, costs[chosen], results[chosen]))
-    lin_entry = best
-    kw_search = {k: v for k, v in kw.items() if k in ("weights", "polish", "population", "generations", "spread_tol")}
-    curves_tried = bool(lin.adequacy) and not lin.adequacy.get("adequate", True)
-    curve = (curve_candidate(ds, lin, chosen, best, rng=rng, seed=seed, maps=full.maps, simulator=simulator,
-                             **kw_nested)
-             if curves_tried else None)
-    if curve is not None:
-        ckey, cf_c, r_c, c_crit = curve
-        results[ckey], costs[ckey] = r_c, cf_c
-        evaluations += r_c.nfev
-        W = c_crit["curve_departure_wald"]
-        for c in crit:  # every linear candidate leaves out the curves' departure from F = c v
-            if c["criterion"] is not None and W is not None and np.isfinite(W):
-                c["wald"] = (c["wald"] or 0.0) + W
-                c["criterion"] += W
-        c_crit["fits_better"] = fits_better(ckey, {cand: r.cost for cand, r in results.items()})
-        crit.append(c_crit)
-        if c_crit["fits_better"] and c_crit["criterion"] is not None and c_crit["criterion"] < best["criterion"]:
-            best, chosen = c_crit, ckey
-            # with the curves in, a linear group the wrong (linear-damper) model needed may be spurious:
-            # the same criterion from the curve fit's robust covariance over the chosen groups' subsets
-            sub = _curve_subset(r_c, chosen, c_crit)
-            if sub is not None:
-                sub_key_lin, W_sub = sub
-                base_entry = next(c for c in crit if tuple(c["extensions"]) == sub_key_lin)
-                lin_entry = dict(base_entry, criterion=c_crit["criterion"] - penalty() * c_crit["curve_dof"])
-                curve2 = curve_candidate(ds, results[sub_key_lin], sub_key_lin, lin_entry, rng=rng, seed=seed,
-                                         maps=full.maps, start_from=r_c, simulator=simulator, **kw_nested)
-                if curve2 is not None:
-                    e2 = curve2[3]
-                    if e2["criterion"] is not None:
-                        # the linear groups left out: their Wald in the larger curve fit (k counts them no more)
-                        e2["criterion"] = (c_crit["criterion"] - penalty() * (c_crit["k"] - e2["k"])) + W_sub
-                        e2["wald"] = W_sub
-                    evaluations += _weigh_smaller(curve2, ckey, c_crit, results, costs, crit)
-                    best, chosen = _best_of(c_crit, e2, best, chosen)
-    # bump stops on top of what is chosen, when that is still not adequate: one more polish (bump_candidate)
-    now = results[chosen]
-    if now.adequacy is None:
-        now = results[chosen] = replace(now, adequacy=_own_adequacy(ds, costs[chosen], now))
-    bump = None
-    if curves_tried and not now.adequacy.get("adequate", True):
-        bump = bump_candidate(ds, now, chosen, best, rng=rng, seed=seed, maps=full.maps, simulator=simulator,
-                              **kw_nested)
-    if bump is not None:
-        bkey, cf_b, r_b, e_b = bump
-        results[bkey], costs[bkey] = r_b, cf_b
-        evaluations += r_b.nfev
-        e_b["fits_better"] = fits_better(bkey, {cand: r.cost for cand, r in results.items()})
-        crit.append(e_b)
-        if e_b["fits_better"] and e_b["criterion"] is not None:
-            best, chosen = e_b, bkey
-            # with the stops in, a linear group kept for what the stops explain may be spurious (a bar of
-            # nothing against the springs): the linear groups weighed again from the stop fit's covariance
-            again = _linear_groups_again(ds, r_b, chosen, e_b, rng=rng, seed=seed, maps=full.maps,
-                                         simulator=simulator, **kw_nested)
-            if again is not None:
-                evaluations += _weigh_smaller(again, bkey, e_b, results, costs, crit)
-                best, chosen = _best_of(e_b, again[3], best, chosen)
-    # a powertrain on mounts on top of what is chosen (damper curves and bump stops kept), when that is still
-    # not adequate: one more search (the powertrain's frequencies are not found by a polish from a guess)
-    now = results[chosen]
-    if now.adequacy is None:
-        now = results[chosen] = replace(now, adequacy=_own_adequacy(ds, costs[chosen], now))
-    pt = pt_curve = None
-    if not now.adequacy.get("adequate", True):
-        pt = powertrain_candidate(ds, chosen, best, rng=rng, seed=seed, simulator=simulator, **kw_search)
-    weigh = dict(results=results, costs=costs, crit=crit, rng=rng, seed=seed, simulator=simulator, **kw_nested)
-    if pt is not None:
-        # the powertrain's own sensitivity maps for what follows: the full linear model's have no powertrain
-        maps_p = pt[2].maps
-        best, chosen, n, kept = _weigh_candidate(ds, pt, "powertrain_wald", best, chosen, maps=maps_p, **weigh)
-        evaluations += n
-        if kept:
-            # damper curves on top of the powertrain (and its linear groups: curve_candidate starts from a linear
-            # car), when they were weighed without it and not kept
-            now = results[chosen]
-            if now.adequacy is None:
-                now = results[chosen] = replace(now, adequacy=_own_adequacy(ds, costs[chosen], now))
-            if curves_tried and not set(chosen) & set(NONLINEAR_GROUPS) and not now.adequacy.get("adequate", True):
-                pt_curve = curve_candidate(ds, now, chosen, best, rng=rng, seed=seed, maps=maps_p,
-                                           simulator=simulator, **kw_nested)
-    if pt_curve is not None:
-        best, chosen, n, _ = _weigh_candidate(ds, pt_curve, "curve_departure_wald", best, chosen, maps=maps_p,
-                                              **weigh)
-        evaluations += n
-    res = results[chosen]
-    if res.adequacy is None:
-        res = results[chosen] = replace(res, adequacy=_own_adequacy(ds, costs[chosen], res))
-    table = []
-    for c in crit:
-        r = results[tuple(c["extensions"])]
-        table.append({
-            "extensions": c["extensions"], "cost": r.cost, "criterion": c["criterion"], "wald": c["wald"],
-            "fits_better": c["fits_better"],
-            "free_extension_parameters": c["k"],
-            "adequate": (r.adequacy or {}).get("adequate"),
-            "parameters": dict(r.parameters),
-            "std_robust": {n: d.get("std_robust") for n, d in r.details.items() if not d.get("fixed")},
-        })
-    model = {"extensions": list(chosen), "selection": "auto", "criterion": CRITERION.format(penalty(), 2 * penalty()),
-             "candidates": table}
-    if not curves_tried:
-        model["curves"] = ("not tried: the linear model is adequate (its residuals carry no road-driven "
-                               "structure for damper curves to explain)")
-    if bump is not None:
-        model["bump_criterion"] = BUMP_CRITERION
-    if pt is not None:
-        model["powertrain_criterion"] = POWERTRAIN_CRITERION.format(penalty())
-        model["powertrain_wald"] = pt[3]["powertrain_wald"]
-    if pt_curve is not None:
-        model["curve_departure_wald_with_powertrain"] = pt_curve[3]["curve_departure_wald"]
-    if curve is not None:
-        model["curve_criterion"] = CURVE_CRITERION.format(penalty())
-        model["curve_departure_wald"] = curve[3]["curve_departure_wald"]
-    # the search was the full model's: its history and counts belong to the result returned
-    search = {} if chosen == full_key else {"history": full.history, "nit": full.nit, "stop": full.stop,
-                                            "message": full.message, "track_weights": full.track_weights}
-    cf = costs[chosen].with_data(ds.with_starts(res.starts)) if res.starts else costs[chosen]
-    adequacy = sensor_notes(ds, cf, res.response, advise(res.adequacy, model)) if res.response else \
-        advise(res.adequacy, model)
-    return replace(res, model=model, adequacy=adequacy,  # advice, the candidates weighed
-                   nfev=evaluations, wall_time_s=time.perf_counter() - t0, **search)
 
 
 def curve_departure(names, theta, cov, space) -> tuple[float, int]:
@@ -410,27 +201,41 @@ def curve_departure(names, theta, cov, space) -> tuple[float, int]:
     return wald(R @ th, R @ C @ R.T), len(idx) - len(blocks)
 
 
-def _curve_subset(r_c, chosen, c_crit):
-    """The subset of the linear groups ``chosen`` that the criterion prefers once the curves are in
-    (Wald of the left-out groups' parameters from the curve fit ``r_c``'s robust covariance), with that
-    Wald statistic; None when it is ``chosen`` itself."""
-    lin = tuple(g for g in chosen if g in GROUPS)
-    pol = r_c.polish or {}
-    names = list(pol.get("names", []))
-    if not lin or "covariance_robust" not in pol:
-        return None
-    free = {g: [n for n in GROUPS[g] if n in names] for g in lin}
-    free = {g: ns for g, ns in free.items() if ns}
-    if not free:
-        return None
-    subs = [tuple(g for g in lin if g in sub or g not in free)
-            for r in range(len(free) + 1) for sub in itertools.combinations(free, r)]
-    theta = np.array([r_c.parameters[n] for n in names])
-    crit = criteria(names, theta, np.array(pol["covariance_robust"]), subs, free)
-    best = min(crit, key=lambda c: (c["criterion"], c["k"]))
-    if set(best["extensions"]) == set(lin) or not np.isfinite(best["wald"]):
-        return None
-    return tuple(g for g in GROUPS if g in best["extensions"]), best["wald"]
+def powertrain_departure(names, theta, cov, space, res) -> tuple[float, int]:
+    """Wald statistic of no powertrain (``m_p = 0``, ``(m_p / std_robust)^2``; 0 when ``m_p`` is not free) and
+    the powertrain's free parameters."""
+    j = [names.index(n) for n in ("m_p",) if n in names]
+    return wald(np.asarray(theta)[j], np.asarray(cov)[np.ix_(j, j)]), sum(n in names for n in POWERTRAIN_NAMES)
+
+
+def stop_departure(names, theta, cov, space, res) -> tuple[float, int]:
+    """Wald statistic of the stops' rates being 0, over the stops reached (a stop not reached is held, not free),
+    and their free parameters; 0 when a stop parameter ends at its search bound (the bound's value, not the
+    data's: a misfit elsewhere that a stiff stop at the least clearance patches up)."""
+    at_bound = [f for f in bound_findings(res.details) if f.channel.startswith("bs_")]
+    j = [names.index(n) for n in names if n.startswith("bs_rate") and not at_bound]
+    return wald(np.asarray(theta)[j], np.asarray(cov)[np.ix_(j, j)]), sum(n.startswith("bs_") for n in names)
+
+
+@dataclass(frozen=True)
+class Extension:
+    """One extension of the model choice: the group it adds, when it applies (the dataset's known values leave
+    it free parameters) and how it is weighed (``departure(names, theta, cov, space, result) -> (W, dof)``, from
+    its own fit). How it starts from the parent's fit is common to all (:func:`start_row`)."""
+    group: str
+    applies: Callable
+    departure: Callable
+
+
+CURVES_GROUP, BUMPS_GROUP, POWERTRAIN_GROUP = "damper_curves", "bump_stops", "powertrain"
+
+#: the extensions weighed on top of the linear choice, each step's rivals (module docstring)
+EXTENSIONS = (
+    Extension(POWERTRAIN_GROUP, lambda ds: not set(POWERTRAIN_NAMES) <= set(ds.known), powertrain_departure),
+    Extension(CURVES_GROUP, lambda ds: not {"c_sf", "c_sr"} & set(ds.known),
+              lambda names, theta, cov, space, res: curve_departure(names, theta, cov, space)),
+    Extension(BUMPS_GROUP, lambda ds: True, stop_departure),
+)
 
 
 def knots_like(ds, res=None):
@@ -441,218 +246,269 @@ def knots_like(ds, res=None):
     return defaults["dampers.knee_grid"] if found else ds.manifest.damper_knots
 
 
-@stage("candidate damper_curves")
-def curve_candidate(ds, lin, chosen, lin_crit, *, rng=None, seed=None, maps=None, start_from=None, simulator=None,
-                    **kw):
-    """Fit damper curves on top of the chosen linear model ``chosen`` (result ``lin``, its criterion
-    entry ``lin_crit``): one polish on the nonlinear simulator from the linear car's curves ``F = c v``.
+def _space(ds, key, like=None) -> ParameterSpace:
+    """The parameter space of candidate ``key``, its knots those of result ``like`` (:func:`knots_like`)."""
+    return ParameterSpace(ds.known, ds.geometry, ds.manifest.bounds, extensions=key, damper_knots=knots_like(ds, like))
 
-    Returns ``(candidate key, cost function, result, criterion entry)`` or None when curves do not apply
-    (already in the model, or ``c_sf``/``c_sr`` known). ``start_from``: a curve result of a larger model
-    to start from instead (its knot forces). The entry's criterion is the linear choice's plus
-    :func:`penalty` per extra free parameter (free knots less the two linear rates it replaces), to be
-    compared with the linear one's plus ``curve_departure_wald`` (:func:`curve_departure`): the curves
-    enter when their departure from straight lines is significant at the same per-parameter price as
-    any group (:data:`CURVE_CRITERION`).
+
+def _null_values(space, parameters) -> dict:
+    """The values at which each extension of ``space`` is absent, from a car's ``parameters``: damper curves
+    ``F = c v`` (the car's linear rates), stops with no rate at the most clearance, a typical engine
+    (:data:`rideid.model.params.NOMINAL_EXTENSIONS`: with ``m_p`` > 0 its modes have a gradient to screen)."""
+    v = dict(zip(space.knot_names, space.knot_velocities()))
+    hi = dict(zip(space.names, space.bounds[:, 1]))
+    vals = {n: parameters[f"c_s{n[2]}"] * vn for n, vn in v.items()}
+    vals.update({n: NOMINAL_EXTENSIONS[n] for n in POWERTRAIN_NAMES}, bs_rate_f=0.0, bs_rate_r=0.0,
+                bs_clear_f=hi.get("bs_clear_f", 0.15), bs_clear_r=hi.get("bs_clear_r", 0.15))
+    return vals
+
+
+def start_row(ds, parent, space) -> np.ndarray:
+    """A candidate's start from its parent's fit: the parent's values, the new parameters at their null
+    (:func:`_null_values`). From a linear parent a nonlinear candidate gets the linear model's row, as
+    :func:`rideid.estimate.fit.identify.identify` takes it (curves ``F = c v`` on the knee grid, the stop scan);
+    from a nonlinear parent its own row (the parent's knot forces as they are)."""
+    linear = not set(parent.model["extensions"]) & set(NONLINEAR_GROUPS)
+    row = _space(ds, [g for g in space.extensions if g not in NONLINEAR_GROUPS]) if linear else space
+    vals = {**_null_values(space, parent.parameters), **parent.parameters}
+    return np.clip([vals[n] for n in row.names], row.bounds[:, 0], row.bounds[:, 1])
+
+
+def gauss_newton_gain(cf: CostFunction, x) -> tuple[float, float, int]:
+    """``(cost at x, cost predicted after one Gauss-Newton step from x, residuals)`` on the equal-weight cost.
+
+    The Jacobian by forward differences (step 1e-6 of each bound span, into the box) as one batch of ``d + 1``
+    rows; the step is the unbounded least-squares one, ``J dz = -r``, predicting ``|r|^2 - |J dz|^2``.
     """
+    x = np.asarray(x, dtype=float)
+    lo, hi = cf.space.bounds[:, 0], cf.space.bounds[:, 1]
+    h = 1e-6 * (hi - lo)
+    h = np.where(x + h <= hi, h, -h)
+    R = cf.residuals(np.vstack([x, x + np.diag(h)]), np.full(len(cf.run_ids), 1.0 / len(cf.run_ids)))
+    J = (R[1:] - R[0]).T / h
+    step = np.linalg.lstsq(J, -R[0], rcond=None)[0]
+    drop = J @ step
+    return float(R[0] @ R[0]), float(R[0] @ R[0] - drop @ drop), R.shape[1]
 
-    if CURVES_GROUP in chosen or any(n in ds.known for n in ("c_sf", "c_sr")) or lin_crit.get("criterion") is None:
-        return None
-    key = _key(set(chosen) | {CURVES_GROUP})
-    space = ParameterSpace(ds.known, ds.geometry, ds.manifest.bounds, extensions=key,
-                           damper_knots=knots_like(ds, start_from))
-    cf = CostFunction(ds, space=space, simulator=simulator)
-    if start_from is not None:  # a curve fit of a larger model: its values, knot forces included
-        x0 = np.array([start_from.parameters[n] for n in space.names])
-    else:
-        lin_space = ParameterSpace(ds.known, ds.geometry, ds.manifest.bounds, extensions=chosen)
-        x0 = np.array([lin.parameters[n] for n in lin_space.names])  # the curves start as F = c v
-    r = identify_model(ds, rng=rng, seed=seed, cost=cf, maps=maps, start=x0, assess=False, **kw)
-    pol = r.polish or {}
+
+def screen(ds, parent, key, simulator) -> dict:
+    """The score screen of candidate ``key`` at its parent's fit (module docstring): its start
+    (:func:`start_row`, mapped as the fit maps it: knots not excited frozen, the stop scan), one Gauss-Newton step
+    (:func:`gauss_newton_gain`), the predicted gain over the parent and its score statistic ``gain / s^2``
+    (at the robust scale) against ``penalty() * dof``; ``passes`` says whether the candidate is worth its fit."""
+    space = _space(ds, key, parent)
+    x = start_row(ds, parent, space)
+    cf = CostFunction(ds.with_starts(parent.starts or {}), space=space, simulator=simulator)
+    cf, x, _, _ = curve_start(cf, cf if len(x) == len(cf.names) else linear_cost(cf.ds, cf), x)
+    with single_threaded_blas():
+        cost0, predicted, m = gauss_newton_gain(cf, x)
+    gain = parent.cost - predicted
+    dof = len(cf.names) - len(parent.names)
+    # the score at the robust scale: the white one divided by the parent's variance inflation (median of
+    # (std_robust / std)^2 over its estimates), as the Wald statistics it stands in for are robust
+    inflation = np.nanmedian([(d.get("std_robust") or np.nan) ** 2 / (d.get("std") or np.nan) ** 2
+                              for n, d in parent.details.items() if n in parent.names] or [1.0])
+    score = gain * max(m - len(parent.names), 1) / parent.cost / float(np.fmax(inflation, 1.0))
+    passes = bool(gain >= least_improvement() and score >= penalty() * dof)
+    return {"extensions": list(key), "cost_at_start": cost0, "predicted_cost": predicted, "predicted_gain": gain,
+            "score": score, "variance_inflation": float(inflation), "dof": dof, "threshold": penalty() * dof,
+            "least_improvement": least_improvement(),
+            "passes": passes}
+
+
+def _own_adequacy(ds, res, simulator):
+    """The adequacy verdict of a candidate at its own final state: its parameters on its own knots, and the
+    model's time axes at the starts its own polish settled."""
+    cf = _cost_of(ds, res, simulator)
+    with single_threaded_blas():
+        return assess_fit(cf, cf.space.full(np.array([[res.parameters[n] for n in cf.names]]))[0], res.response)
+
+
+def _cost_of(ds, res, simulator) -> CostFunction:
+    """The cost function of a candidate's result: its model on its knots, the data at its starts."""
+    return CostFunction(ds.with_starts(res.starts or {}), space=_space(ds, _key(res.model["extensions"]), res),
+                        simulator=simulator)
+
+
+@dataclass
+class _Choice:
+    """The model choice's state: every candidate fitted (``results``: key -> result, ``entries``: its criterion
+    record), the screens, and the model kept so far (``key``, its entry ``best``)."""
+    ds: object
+    simulator: object
+    fit_kw: dict
+    results: dict = field(default_factory=dict)
+    entries: list = field(default_factory=list)
+    screens: list = field(default_factory=list)
+    key: tuple = ()
+    best: dict = field(default_factory=dict)
+
+    def add(self, key, res, entry) -> dict:
+        """Record candidate ``key`` (its result and entry); every candidate's ``fits_better`` again (a new
+        candidate may be contained in an older one)."""
+        self.results[key] = res
+        self.entries.append(dict(entry, extensions=list(key)))
+        costs = {c: r.cost for c, r in self.results.items()}
+        for e in self.entries:
+            e["fits_better"] = fits_better(tuple(e["extensions"]), costs)
+        return self.entries[-1]
+
+    def keep_best(self, *entries):
+        """Keep the lowest criterion (fewer parameters on a tie) of ``entries`` that fit better and have one."""
+        live = [e for e in entries if e["fits_better"] and e["criterion"] is not None]
+        self.best = min(live, key=lambda e: (e["criterion"], e["k"]), default=self.best)
+        self.key = tuple(self.best["extensions"])
+
+    def chosen(self):
+        """The result of the model kept, with its own adequacy verdict."""
+        r = self.results[self.key]
+        if r.adequacy is None:
+            r = self.results[self.key] = replace(r, adequacy=_own_adequacy(self.ds, r, self.simulator))
+        return r
+
+    def fit(self, parent, key, maps=None):
+        """Candidate ``key`` polished from ``parent``'s fit (:func:`start_row`), no search, no verdict."""
+        space = _space(self.ds, key, parent)
+        return identify_model(self.ds, cost=CostFunction(self.ds, space=space, simulator=self.simulator),
+                              start=start_row(self.ds, parent, space), maps=maps, assess=False, **self.fit_kw)
+
+    def linear_step(self, full):
+        """The linear groups: the full linear model's fit ``full``, its subsets polished from it (on both cores),
+        the criterion of each from the full fit's robust covariance; the lowest kept."""
+        pol = full.polish or {}
+        names = list(pol.get("names", []))
+        free = {g: [n for n in GROUPS[g] if n in names] for g in GROUPS}
+        free = {g: ns for g, ns in free.items() if ns}  # fully known groups are in every candidate
+        subs = [_key(set(sub) | (set(GROUPS) - set(free))) for r in range(len(free) + 1)
+                for sub in itertools.combinations(free, r)]
+        cov = np.array(pol.get("covariance_robust", np.full((len(names),) * 2, np.nan)))
+        crit = criteria(names, np.array([full.parameters[n] for n in names]), cov, subs, free)
+        with single_threaded_blas():
+            fits = thread_map(lambda key: self.fit(full, key, full.maps), subs[:-1], "rideid-candidates")
+        for key, r, c in zip(subs, fits + [full], crit):
+            self.add(key, r, dict(c, criterion=c["criterion"] if np.isfinite(c["criterion"]) else None))
+        self.keep_best(*self.entries)
+
+    def extend(self) -> bool:
+        """One step on top of the model kept (module docstring): the rivals screened, those that pass fitted on both
+        cores, the accepted one of lowest cost kept and the linear groups weighed again with it. Returns whether
+        an extension was kept."""
+        parent, parent_entry = self.chosen(), self.best
+        rivals = {_key(self.key + (e.group,)): e for e in EXTENSIONS if e.group not in self.key and e.applies(self.ds)}
+        with single_threaded_blas():
+            screens = thread_map(lambda key: screen(self.ds, parent, key, self.simulator), rivals, "rideid-screens")
+            self.screens += screens
+            passed = [tuple(s["extensions"]) for s in screens if s["passes"]]
+            fits = thread_map(lambda key: self.fit(parent, key), passed, "rideid-candidates")
+        accepted = []
+        for key, r in zip(passed, fits):
+            pol = r.polish or {}
+            names = list(pol.get("names", []))
+            W, dof = rivals[key].departure(names, np.array([r.parameters[n] for n in names]),
+                                           np.array(pol.get("covariance_robust", np.full((len(names),) * 2, np.nan))),
+                                           _space(self.ds, key, r), r)
+            e = self.add(key, r, {"wald": W, "k": parent_entry["k"] + dof, "dof": dof, "parent": list(self.key),
+                                  "criterion": parent_entry["criterion"] + penalty() * dof})
+            accepted += [e] if e["fits_better"] and np.isfinite(W) and W > penalty() * dof else []
+        if not accepted:
+            return False
+        self.best = min(accepted, key=lambda e: self.results[tuple(e["extensions"])].cost)
+        group = set(self.best["extensions"]) - set(self.key)
+        # every candidate without the group leaves out the departure its fit measured: its criterion pays W
+        for e in (e for e in self.entries if e["criterion"] is not None and not group <= set(e["extensions"])):
+            e["criterion"], e["wald"] = e["criterion"] + self.best["wald"], e["wald"] + self.best["wald"]
+        self.key = tuple(self.best["extensions"])
+        self.linear_again()
+        return True
+
+    def table(self) -> list:
+        """``model.candidates`` of result.json: each entry with its fit's cost, verdict and estimates."""
+        out = []
+        for e in self.entries:
+            r = self.results[tuple(e["extensions"])]
+            out.append(dict(e, cost=r.cost, free_extension_parameters=e["k"],
+                            adequate=(r.adequacy or {}).get("adequate"), parameters=dict(r.parameters),
+                            std_robust={n: d.get("std_robust") for n, d in r.details.items() if not d.get("fixed")}))
+        return out
+
+    def linear_again(self):
+        """The linear groups of the model kept weighed again from its fit's robust covariance (:func:`_curve_subset`);
+        a smaller set preferred is polished from that fit and kept when its criterion is lower."""
+        big, big_entry = self.results[self.key], self.best
+        sub = _curve_subset(big, self.key, big_entry)
+        if sub is None:
+            return
+        lin, W_sub = sub
+        key = _key(set(lin) | (set(self.key) - set(GROUPS)))
+        n_left = sum(n in big.names for g in set(self.key) - set(lin) for n in GROUPS.get(g, ()))
+        e = self.add(key, self.fit(big, key), {"wald": W_sub, "k": big_entry["k"] - n_left,
+                                               "criterion": big_entry["criterion"] - penalty() * n_left + W_sub})
+        self.keep_best(big_entry, e)
+
+
+def _curve_subset(r_c, chosen, c_crit):
+    """The subset of the linear groups ``chosen`` that the criterion prefers once a group is in
+    (Wald of the left-out groups' parameters from the fit ``r_c``'s robust covariance), with that
+    Wald statistic; None when it is ``chosen`` itself."""
+    pol = r_c.polish or {}
     names = list(pol.get("names", []))
-    if "covariance_robust" in pol:
-        W, df = curve_departure(names, [r.parameters[n] for n in names], pol["covariance_robust"], space)
-    else:
-        W, df = None, None
-    k = (lin_crit["k"] or 0) + (df if df is not None else 0)
-    entry = {"extensions": list(key), "wald": 0.0, "k": k, "curve_departure_wald": W, "curve_dof": df,
-             "criterion": None if df is None else lin_crit["criterion"] + penalty() * df}
-    return key, cf, r, entry
+    free = {g: [n for n in GROUPS[g] if n in names] for g in chosen if g in GROUPS}
+    free = {g: ns for g, ns in free.items() if ns}
+    if not free or "covariance_robust" not in pol:
+        return None
+    lin = tuple(g for g in chosen if g in GROUPS)
+    subs = [tuple(g for g in lin if g in sub or g not in free)
+            for r in range(len(free) + 1) for sub in itertools.combinations(free, r)]
+    theta = np.array([r_c.parameters[n] for n in names])
+    crit = criteria(names, theta, np.array(pol["covariance_robust"]), subs, free)
+    best = min(crit, key=lambda c: (c["criterion"], c["k"]))
+    if set(best["extensions"]) == set(lin) or not np.isfinite(best["wald"]):
+        return None
+    return tuple(g for g in GROUPS if g in best["extensions"]), best["wald"]
 
 
-BUMPS_GROUP = "bump_stops"
+@stage("model choice")
+def identify_auto(ds, *, rng=None, seed=None, callback=None, maps=None, simulator=None, **kw):
+    """:func:`rideid.identify` with ``model="auto"`` (module docstring).
 
-BUMP_CRITERION = ("bump stops: tried when the model chosen so far (damper curves weighed) is still not adequate: "
-                  "one more polish with bump_stops, started from that model's fit (the stop scan of "
-                  "docs/dampers.md); kept when it fits materially better than every model it contains, at "
-                  "least one stop is reached (a stop not reached is not identifiable and adds nothing) and no "
-                  "stop parameter ends at its search bound (the bound's value, not the data's)")
-
-
-@stage("candidate bump_stops")
-def bump_candidate(ds, prev, chosen, prev_crit, *, rng=None, seed=None, maps=None, simulator=None, **kw):
-    """Fit bump stops on top of the model ``chosen`` (result ``prev``, criterion entry ``prev_crit``).
-
-    Returns ``(candidate key, cost function, result, criterion entry)`` or None when the group is in
-    already. The entry's criterion is ``prev_crit``'s plus :func:`penalty` per free stop parameter of
-    the axles reached, None (never chosen) when no stop is reached (:data:`BUMP_CRITERION`).
+    Returns the chosen candidate's :class:`~rideid.estimate.fit.identify.IdentificationResult`
+    whose ``model`` holds ``extensions``, ``selection = "auto"``, the
+    criteria's description, every candidate fitted (``extensions``, ``cost``,
+    ``criterion``, ``wald``, ``fits_better``, ``adequate``, ``parameters``,
+    ``std_robust``) and every screen (``screens``: the candidates skipped with
+    their statistic). Its ``evaluations`` and ``wall_time_s`` cover all candidates.
     """
-
-    if BUMPS_GROUP in chosen:
-        return None
-    key = _key(set(chosen) | {BUMPS_GROUP})
-    space = ParameterSpace(ds.known, ds.geometry, ds.manifest.bounds, extensions=key,
-                           damper_knots=knots_like(ds, prev if CURVES_GROUP in chosen else None))
-    cf = CostFunction(ds, space=space, simulator=simulator)
-    if CURVES_GROUP in chosen:  # the curve fit as it is (knot forces too), no stops yet: the scan starts them
-        x0 = np.array([prev.parameters[n] if n in prev.parameters else
-                       (0.0 if n.startswith("bs_rate") else float(space.bounds[space.names.index(n), 1]))
-                       for n in space.names])
-    else:
-        lin_space = ParameterSpace(ds.known, ds.geometry, ds.manifest.bounds, extensions=chosen)
-        x0 = np.array([prev.parameters[n] for n in lin_space.names])
-    r = identify_model(ds, rng=rng, seed=seed, cost=cf, maps=maps, start=x0, assess=False, **kw)
-
-    stops = r.bump_stops or {}
-    reached = [ax for ax in ("front", "rear") if (stops.get(ax) or {}).get("reached")]
-    # a stop held by its search bound is the bound's, not the data's: a misfit elsewhere (a spring held
-    # by its bound, a wrong track) that a stiff stop at the least clearance patches up
-    at_bound = [f.channel for f in bound_findings(r.details) if f.channel.startswith("bs_")]
-    if at_bound:
-        reached = []
-    n_free = sum(1 for ax in reached for n in (f"bs_clear_{ax[0]}", f"bs_rate_{ax[0]}") if n not in ds.known)
-    k = (prev_crit.get("k") or 0) + n_free
-    base = prev_crit.get("criterion")
-    entry = {"extensions": list(key), "wald": 0.0, "k": k, "bump_stops_reached": reached,
-             "bump_stops_at_bound": at_bound,
-             "criterion": None if not reached or base is None else base + penalty() * n_free}
-    return key, cf, r, entry
-
-
-def _weigh_candidate(ds, cand, wald_key, best, chosen, *, results, costs, crit, maps, **kw):
-    """Candidate ``cand`` (``(key, cost, result, criterion entry)``) weighed against the choice so far (``best``,
-    ``chosen``): recorded in ``results``, ``costs`` and ``crit``; kept when it fits materially better than every
-    candidate it contains and its criterion is below the chosen model's plus its own Wald statistic (``wald_key``
-    of its entry), and then the linear groups are weighed again with it, from its fit's robust covariance
-    (``maps``: the sensitivity maps to search with). Returns ``(best, chosen, evaluations, kept)``."""
-    key, cf_k, r_k, e_k = cand
-    results[key], costs[key] = r_k, cf_k
-    evaluations = r_k.nfev
-    e_k["fits_better"] = fits_better(key, {c: r.cost for c, r in results.items()})
-    crit.append(e_k)
-    W = e_k[wald_key]
-    kept = bool(e_k["fits_better"] and e_k["criterion"] is not None and W is not None and np.isfinite(W)
-                and e_k["criterion"] < best["criterion"] + W)
-    if kept:
-        best, chosen = e_k, key
-        again = _linear_groups_again(ds, r_k, chosen, e_k, maps=maps, **kw)
-        if again is not None:
-            evaluations += _weigh_smaller(again, key, e_k, results, costs, crit)
-            best, chosen = _best_of(e_k, again[3], best, chosen)
-    return best, chosen, evaluations, kept
-
-
-def _weigh_smaller(small, big_key, big_entry, results, costs, crit) -> int:
-    """Record the candidate ``small`` = ``(key, cost function, result, criterion entry)``, a model with fewer
-    linear groups than ``big_key`` (criterion entry ``big_entry``) polished from its fit: its ``fits_better``, and
-    the larger model's again (it must now fit better than this one too). Returns its evaluations."""
-    key, cf, r, entry = small
-    results[key], costs[key] = r, cf
-    entry["fits_better"] = fits_better(key, {cand: res.cost for cand, res in results.items()})
-    big_entry["fits_better"] = fits_better(big_key, {cand: res.cost for cand, res in results.items()})
-    crit.append(entry)
-    return r.nfev
-
-
-def _best_of(big_entry, small_entry, best, chosen):
-    """``(best entry, chosen key)``: the lower criterion of the two entries still eligible, else as they were."""
-    live = [c for c in (big_entry, small_entry) if c["fits_better"] and c["criterion"] is not None]
-    if not live:
-        return best, chosen
-    best = min(live, key=lambda c: (c["criterion"], c["k"]))
-    return best, tuple(best["extensions"])
-
-
-@stage("linear groups weighed again")
-def _linear_groups_again(ds, r_big, chosen, big_crit, *, rng=None, seed=None, maps=None, simulator=None, **kw):
-    """The linear groups of ``chosen`` weighed again from the robust covariance of its fit ``r_big`` (criterion
-    entry ``big_crit``), as :func:`_curve_subset` does when the curves come in; when a smaller set is preferred,
-    that candidate (its nonlinear groups kept) polished from ``r_big``'s values. Returns ``(candidate key, cost
-    function, result, criterion entry)`` or None when ``chosen``'s linear groups stand."""
-    sub = _curve_subset(r_big, chosen, big_crit)
-    if sub is None or big_crit.get("criterion") is None:
-        return None
-    lin, W_sub = sub
-    key = _key(set(lin) | {g for g in chosen if g not in GROUPS})
-    space = ParameterSpace(ds.known, ds.geometry, ds.manifest.bounds, extensions=key,
-                           damper_knots=knots_like(ds, r_big if CURVES_GROUP in key else None))
-    cf = CostFunction(ds, space=space, simulator=simulator)
-    x0 = np.array([r_big.parameters[n] for n in space.names])
-    r = identify_model(ds, rng=rng, seed=seed, cost=cf, maps=maps, start=x0, assess=False, **kw)
-    free = set((r_big.polish or {}).get("names", ()))
-    n_left = sum(1 for g in chosen if g in GROUPS and g not in lin for n in GROUPS[g] if n in free)
-    k = (big_crit.get("k") or 0) - n_left
-    entry = {"extensions": list(key), "wald": W_sub, "k": k,
-             "criterion": big_crit["criterion"] - penalty() * n_left + W_sub}
-    for extra in ("bump_stops_reached", "bump_stops_at_bound"):
-        if extra in big_crit:
-            entry[extra] = big_crit[extra]
-    return key, cf, r, entry
-
-
-POWERTRAIN_GROUP = "powertrain"
-
-#: ``{}``: :func:`penalty`, filled in where written
-POWERTRAIN_CRITERION = (
-    "powertrain on mounts (SPEC §11): tried when the model chosen so far (damper curves and bump stops weighed) is "
-    "still not adequate: one more search, the chosen model (its damper curves and bump stops too) plus powertrain; "
-    "W_powertrain = (m_p / std_robust(m_p))^2, the Wald statistic of no powertrain (m_p = 0); kept when it fits "
-    "materially better than every model it contains and its criterion (the chosen model's + {:.2f} per free "
-    "powertrain parameter) is below the chosen model's + W_powertrain; then the linear groups are weighed again "
-    "with it, and damper curves weighed on top of it when they were not kept without it and the car is still not "
-    "adequate")
-
-
-@stage("candidate powertrain")
-def powertrain_candidate(ds, chosen, crit, *, rng=None, seed=None, simulator=None, **kw):
-    """Fit a powertrain on mounts on top of the model ``chosen`` (criterion entry ``crit``; its linear groups,
-    damper curves and bump stops): one search (JADE on the linear car with the powertrain, then the polish of
-    the whole model) on ``chosen`` + ``powertrain`` (:data:`POWERTRAIN_CRITERION`).
-
-    Returns ``(candidate key, cost function, result, criterion entry)``, or None when the group is in already,
-    the choice has no criterion, or the powertrain is fully known. The entry carries
-    ``powertrain_wald``, the Wald statistic of ``m_p = 0`` from the fit's robust covariance (``nan`` when
-    ``m_p`` is known).
-    """
-    if POWERTRAIN_GROUP in chosen or crit.get("criterion") is None:
-        return None
-    key = _key(set(chosen) | {POWERTRAIN_GROUP})
-    space = ParameterSpace(ds.known, ds.geometry, ds.manifest.bounds, extensions=key)
-    free_pt = [n for n in space.names if n in POWERTRAIN_NAMES]
-    if not free_pt:
-        return None
-    cf = CostFunction(ds, space=space, simulator=simulator)
-    r = identify_model(ds, rng=rng, seed=seed, cost=cf, assess=False, **kw)
-    pol = r.polish or {}
-    names = list(pol.get("names", []))
-    W = float("nan")
-    if "covariance_robust" in pol and "m_p" in names:
-        i = names.index("m_p")
-        W = wald(np.array([r.parameters["m_p"]]), np.array(pol["covariance_robust"])[i:i + 1, i:i + 1])
-    entry = {"extensions": list(key), "wald": 0.0, "k": (crit.get("k") or 0) + len(free_pt),
-             "powertrain_wald": W, "criterion": crit["criterion"] + penalty() * len(free_pt)}
-    return key, cf, r, entry
-
-
-def _nested_cost(cf_full, ds, extensions):
-    """The full model's cost function over a smaller parameter space (same data, same simulator).
-
-    Saves re-tabulating every run's road input for each candidate.
-    """
-
-
-    space = ParameterSpace(ds.known, ds.geometry, ds.manifest.bounds, extensions=extensions)
-    return cf_full.with_space(space)  # its own count of evaluations
+    t0 = time.perf_counter()
+    cf_full = CostFunction(ds, extensions=tuple(GROUPS), simulator=simulator)
+    simulator = cf_full.simulator  # one value for every candidate
+    full = identify_model(ds, rng=rng, seed=seed, callback=callback, maps=maps, cost=cf_full, **kw)
+    # SPEC §13: a first fit far beyond what any extension explains stops here, with the set-up to check
+    gross = gross_misfit(run_errors(ds, full.response), [n for n, d in full.details.items() if d.get("at_bound")],
+                         getattr(ds, "findings", ()))
+    if gross is not None and full.polish:
+        return replace(full, adequacy=gross, model={"extensions": list(full.model.get("extensions", [])),
+                                                    "selection": "auto (not run: the first fit misses grossly)"})
+    choice = _Choice(ds, simulator, dict(rng=rng, seed=seed, **{k: v for k, v in kw.items()
+                                                                 if k in ("weights", "polish", "population")}))
+    choice.linear_step(full)
+    steps = 0
+    while not choice.chosen().adequacy.get("adequate", True) and choice.extend():
+        steps += 1
+    res = choice.chosen()
+    model = {"extensions": list(choice.key), "selection": "auto",
+             "criterion": CRITERION.format(penalty(), 2 * penalty()),
+             "extension_criterion": EXTENSION_CRITERION.format(penalty()), "candidates": choice.table(),
+             "screens": choice.screens, "steps": steps,
+             "skipped": [s["extensions"] for s in choice.screens if not s["passes"]]}
+    model.update({} if choice.screens else {"curves": "not tried: the linear model is adequate (its residuals carry "
+                                                     "no road-driven structure for damper curves to explain)"})
+    # the search was the full model's: its history and counts belong to the result returned
+    search = {} if choice.key == tuple(GROUPS) else {"history": full.history, "nit": full.nit, "stop": full.stop,
+                                                     "message": full.message, "track_weights": full.track_weights}
+    adequacy = advise(res.adequacy, model)
+    adequacy = sensor_notes(ds, _cost_of(ds, res, simulator), res.response, adequacy) if res.response else adequacy
+    return replace(res, model=model, adequacy=adequacy,  # advice, the candidates weighed
+                   nfev=sum(r.nfev for r in choice.results.values()), wall_time_s=time.perf_counter() - t0, **search)
 
 
 def default_model(ds, model=None):
