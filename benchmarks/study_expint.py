@@ -40,6 +40,7 @@ from rideid.model import kernel_nl
 from rideid.model import nonlinear as nl
 from rideid.model.nonlinear import DEFAULT_KNOTS, NonlinearLayout, NonlinearSimulator
 from rideid.model.params import ALL_NAMES, SUSPENSION_NAMES, as_vector
+from rideid.model.nl_coef import hermite_value_slope
 from rideid.model.simulate import prepare_run
 from rideid.verify.hifi import hifi_curve
 
@@ -168,6 +169,252 @@ def simulate_exp(P, geom, run, layout, scheme="etd2", m=1):
             X = lin + (h / 6) * (mv(E, k1) + 2 * mv(Eh, k2 + k3) + k4)
         else:
             raise ValueError(scheme)
+    return y
+
+
+# ---------------------------------------------------------------------------
+# the kinks' contributions in closed form (issue 52, item 4)
+#
+# Within a step every corner is held in the region it starts in (the damper on its segment's line, the bump
+# stop on or off, the tire in contact or not): that car is affine, so the exponential scheme integrates it to
+# its order. What it misses is, per crossing at time t_c of a switching quantity sigma (a damper velocity
+# less a kink's knot, a deflection less the clearance, a tire load), the change of force
+# ``vec * sigma(X(s))`` from t_c on. With delta = X_true - X_frozen, exactly
+# ``delta' = (A_frozen + sum over crossings passed of vec grad^T) delta + sum 1[s > t_c] vec sigma_frozen(s)``,
+# sigma_frozen the switching quantity along the frozen car (a cubic Hermite from the step's ends), so the
+# correction is ``int e^{A' (h - s)} vec sigma_frozen(s) ds``: phi-functions of ``A' (h - t_c)`` applied to
+# ``vec``, by their series (matrix-vector products, no matrix exponential per crossing).
+
+
+def frozen_regions(co, xk, curves, X, r):
+    """Each corner's curve segment ``j`` and bump stop ``on`` at a step's start (the tire's contact: the load of
+    :func:`rideid.model.nonlinear.switching` at or above zero)."""
+    d, v, _, _ = nl.switching(co, X, np.zeros((X.shape[0], 7)), r, np.zeros(4))
+    j = np.clip(np.searchsorted(xk, v, side="right") - 1, 0, xk.size - 2) if curves else np.zeros(v.shape, int)
+    return j, d > co[:, nl._C4["bs_clear"]]
+
+
+def accelerations_frozen(co, xk, Fk, Sk, curves, X, r, rd, reg):
+    """:func:`rideid.model.nonlinear.accelerations` (14 states) with every corner held in region ``reg``: the
+    damper on its segment's line, the bump stop on or off, the tire in contact or not (straight continuations)."""
+    j, on, contact = reg
+    c = lambda name: co[:, nl._C4[name]]  # noqa: E731
+    q = X[:, :7]
+    ctm = c("ct") * c("inv_mu")
+    w = X[:, 10:14] + ctm * r
+    x, y = c("x"), c("y")
+    d = nl.suspension_travel(q, x, y)
+    v = w - nl.body_corners(X[:, 7:], x, y)
+    F = c("ks") * d
+    bf = co[:, nl.CI["kar_f"]] * (d[:, 0] - d[:, 1])
+    br = co[:, nl.CI["kar_r"]] * (d[:, 2] - d[:, 3])
+    F = F + np.stack([bf, -bf, br, -br], -1)
+    if curves:
+        ax = np.array([0, 0, 1, 1])
+        rows = np.arange(v.shape[0])[:, None]
+        F = F + Fk[rows, ax, j] + Sk[rows, ax, j] * (v - xk[j])
+    else:
+        F = F + c("cs") * v
+    with np.errstate(invalid="ignore"):
+        F = F + np.where(on, c("bs_rate") * (d - c("bs_clear")), 0.0)
+    L = c("L")
+    t0 = L + c("kt") * (r - q[:, 3:]) - c("ct") * w
+    crd = c("ct") * rd
+    dp = np.where(contact, t0 - L - F, -L - F - crd) * c("inv_mu")
+    qdd = np.empty_like(q)
+    qdd[:, 0] = F.sum(-1) * co[:, nl.CI["inv_ms"]]
+    qdd[:, 1] = (-(x * F).sum(-1) + co[:, nl.CI["topple"]] * q[:, 1]) * co[:, nl.CI["inv_Iyy"]]
+    qdd[:, 2] = ((y * F).sum(-1) + co[:, nl.CI["topple"]] * q[:, 2]) * co[:, nl.CI["inv_Ixx"]]
+    qdd[:, 3:] = dp + ctm * rd
+    return np.concatenate([X[:, 7:10], w, qdd[:, :3], dp], axis=1), qdd
+
+
+def force_columns(co):
+    """``(n, 14, 4)``: the state derivative per newton of suspension force at each corner, and ``(n, 14, 4)``
+    per newton of tire force."""
+    n = co.shape[0]
+    c = lambda name: co[:, nl._C4[name]]  # noqa: E731
+    BF = np.zeros((n, 14, 4))
+    BF[:, 7, :] = co[:, [nl.CI["inv_ms"]]]
+    BF[:, 8, :] = -c("x") * co[:, [nl.CI["inv_Iyy"]]]
+    BF[:, 9, :] = c("y") * co[:, [nl.CI["inv_Ixx"]]]
+    BT = np.zeros((n, 14, 4))
+    for k in range(4):
+        BF[:, 10 + k, k] = -c("inv_mu")[:, k]
+        BT[:, 10 + k, k] = c("inv_mu")[:, k]
+    return BF, BT
+
+
+def switch_gradients(co, c):
+    """d(damper velocity)/dX, d(deflection)/dX, d(tire load)/dX at corner ``c``: each (n, 14)."""
+    n = co.shape[0]
+    x, y = co[:, nl._C4["x"][c]], co[:, nl._C4["y"][c]]
+    gv, gd, gg = np.zeros((n, 14)), np.zeros((n, 14)), np.zeros((n, 14))
+    gv[:, 10 + c], gv[:, 7], gv[:, 8], gv[:, 9] = 1.0, -1.0, x, -y
+    gd[:, 3 + c], gd[:, 0], gd[:, 1], gd[:, 2] = 1.0, -1.0, x, -y
+    gg[:, 3 + c], gg[:, 10 + c] = -co[:, nl._C4["kt"][c]], -co[:, nl._C4["ct"][c]]
+    return gv, gd, gg
+
+
+def frozen_matrix(co, xk, Sk, curves, A, BF, BT, c_ref, reg):
+    """``A_frozen`` (n, 14, 14): the reference car plus each corner's departure in its region (rank one each)."""
+    j, on, contact = reg
+    n = co.shape[0]
+    Af = A.copy()
+    for c in range(4):
+        gv, gd, gg = switch_gradients(co, c)
+        dS = (Sk[np.arange(n), c // 2, j[:, c]] if curves else co[:, nl._C4["cs"][c]]) - c_ref[:, c // 2]
+        Af += (BF[:, :, c] * dS[:, None])[:, :, None] * gv[:, None, :]
+        rate = np.where(on[:, c], co[:, nl._C4["bs_rate"][c]], 0.0)
+        Af += (BF[:, :, c] * rate[:, None])[:, :, None] * gd[:, None, :]
+        Af -= (BT[:, :, c] * np.where(contact[:, c], 0.0, 1.0)[:, None])[:, :, None] * gg[:, None, :]
+    return Af
+
+
+def ramp_response(A, vec, tau, s, terms=8):
+    """``int_0^tau e^{A (tau - u)} vec sigma(u) du`` with ``sigma(u) = s0 + s1 u + s2 u^2 / 2 + s3 u^3 / 6``:
+    ``sum_i tau^(i+1) phi_(i+1)(A tau) vec s_i`` (``A`` (14, 14), ``vec`` (14,), ``s`` four numbers), by the
+    phi-functions' series."""
+    out = np.zeros_like(vec)
+    z = vec.copy()
+    fact = np.array([1.0, 2.0, 6.0, 24.0])
+    for i in range(terms):
+        out += z * sum(tau ** (i + 1 + p) * s[p] / fact[p] for p in range(4))
+        z = A @ z
+        fact *= np.arange(i + 2, i + 6)
+    return out
+
+
+def crossing_events(co, xk, Sk, curves, h, sw0, sw1, kinks):
+    """Per row: the step's crossings ``(vec, grad, t_c, (s1, s2, s3))``, sorted by ``t_c`` (seconds into the
+    step), the switching quantity along the frozen car ``s1 u + s2 u^2 / 2 + s3 u^3 / 6`` after it (from its
+    cubic Hermite between the step's ends; a tire load's chord)."""
+    d0, v0, g0, a0 = sw0
+    d1, v1, g1, a1 = sw1
+    BF, BT = force_columns(co)
+    per = {}
+
+    def add(rows, vec, grad, s0, s1, m0, m1):
+        t = nl.hermite_root(s0, s1, m0, m1)
+        _, der = hermite_value_slope(t, s0, s1, m0, m1)
+        sec = (12.0 * t - 6.0) * (s0 - s1) + (6.0 * t - 4.0) * m0 + (6.0 * t - 2.0) * m1
+        third = 12.0 * (s0 - s1) + 6.0 * (m0 + m1)
+        for q, r in enumerate(rows):
+            per.setdefault(int(r), []).append((vec[q], grad[q], t[q] * h, (der[q] / h, sec[q] / h ** 2,
+                                                                         third[q] / h ** 3)))
+
+    for c in range(4):
+        gv, gd, gg = switch_gradients(co, c)
+        for k in range(1, xk.size - 1) if curves else ():
+            if kinks is not None and not kinks[c // 2, k]:
+                continue
+            rows = np.flatnonzero((v0[:, c] < xk[k]) != (v1[:, c] < xk[k]))
+            dS = Sk[rows, c // 2, k] - Sk[rows, c // 2, k - 1]
+            coef = np.where(v1[rows, c] > v0[rows, c], dS, -dS)
+            add(rows, BF[rows, :, c] * coef[:, None], gv[rows], v0[rows, c] - xk[k], v1[rows, c] - xk[k],
+                h * a0[rows, c], h * a1[rows, c])
+        cl = co[:, nl._C4["bs_clear"][c]]
+        with np.errstate(invalid="ignore"):
+            e0, e1 = d0[:, c] - cl, d1[:, c] - cl
+        rows = np.flatnonzero((e0 > 0.0) != (e1 > 0.0))
+        coef = np.where(e1[rows] > 0.0, 1.0, -1.0) * co[rows, nl._C4["bs_rate"][c]]
+        add(rows, BF[rows, :, c] * coef[:, None], gd[rows], e0[rows], e1[rows], h * v0[rows, c], h * v1[rows, c])
+        rows = np.flatnonzero((g0[:, c] >= 0.0) != (g1[:, c] >= 0.0))
+        # contact -> off: the tire's force g leaves (-g); off -> contact: it comes back; the load's chord
+        coef = np.where(g1[rows, c] >= 0.0, 1.0, -1.0)
+        chord = g1[rows, c] - g0[rows, c]
+        add(rows, BT[rows, :, c] * coef[:, None], gg[rows], g0[rows, c], g1[rows, c], chord, chord)
+    for evs in per.values():
+        evs.sort(key=lambda e: e[2])
+    return per
+
+
+def kink_corrections(Af, h, per):
+    """What the step with every region frozen at its start misses, ``(n, 14)``: each crossing's source carried
+    by the car after it. A later crossing's time is corrected (three Newton steps) for the earlier ones' pull
+    on its switching quantity ``grad . vec_earlier (s1 w^2 / 2 + s2 w^3 / 6 + s3 w^4 / 24)``."""
+    corr = np.zeros((Af.shape[0], 14))
+    for r, evs in per.items():
+        done = []  # (vec, grad, true time, its source's (s1, s2, s3))
+        A_after = Af[r].copy()
+        for vec, grad, tf, (s1, s2, s3) in evs:
+            def frozen(t, tf=tf, s1=s1, s2=s2, s3=s3):
+                u = t - tf
+                return s1 * u + s2 * u * u / 2 + s3 * u ** 3 / 6, s1 + s2 * u + s3 * u * u / 2, s2 + s3 * u
+
+            def pull(t, grad=grad, done=done):
+                val = der = 0.0
+                for v2, _, tj, (a1, a2, a3) in done:
+                    w = max(t - tj, 0.0)
+                    val += (grad @ v2) * (a1 * w * w / 2 + a2 * w ** 3 / 6 + a3 * w ** 4 / 24)
+                    der += (grad @ v2) * (a1 * w + a2 * w * w / 2 + a3 * w ** 3 / 6)
+                return val, der
+
+            t = tf
+            for _ in range(3 if done else 0):
+                (f0, f1, _), (p0, p1) = frozen(t), pull(t)
+                if f1 + p1 != 0.0:
+                    t = min(max(t - (f0 + p0) / (f1 + p1), 0.0), h)
+            A_after += np.outer(vec, grad)
+            f0, f1, f2 = frozen(t)
+            corr[r] += ramp_response(A_after, vec, h - t, (f0, f1, f2, s3))
+            done.append((vec, grad, t, (f1, f2, s3)))
+    return corr
+
+
+def simulate_expk(P, geom, run, layout, m=1, kinks=None):
+    """Channels (n, n_time, 10) by ETDRK4 (Cox-Matthews) at ``m`` steps per sample with every corner's
+    region frozen at the step's start, plus :func:`kink_corrections`."""
+    co, xk, Fk, Sk = nl.coefficients(P, geom, layout)
+    curves = layout.knots is not None
+    kinks = nl.kink_mask(Sk) if kinks is None else kinks
+    c_ref = reference_slopes(Sk, xk) if curves else co[:, [nl.CI["cs0"], nl.CI["cs2"]]]
+    A, Bt = linear_parts(co, xk, Fk, Sk, c_ref)
+    BF, BT = force_columns(co)
+    run_f = run if m == 1 else prepare_run_like(run, run.t[0] + (run.h / m) * np.arange(m * (run.n - 1) + 1))
+    h = run_f.h
+    E, p1, p2, p3 = phis(A, h)
+    Eh, q1, _, _ = phis(A, h / 2)
+    Ff = forcing(A, Bt, run_f, 0.0, h)
+    Fa = forcing(A, Bt, run_f, 0.0, h / 2)
+    Fb = forcing(A, Bt, run_f, h / 2, h)
+    um, rm = run_f.inputs_at(run_f.t[:-1] + h / 2)
+    U, R = run_f.u, run_f.rate
+    mv = lambda M, x: np.einsum("nij,nj->ni", M, x)  # noqa: E731
+
+    def resid(X, u, r, reg):
+        return accelerations_frozen(co, xk, Fk, Sk, curves, X, u, r, reg)[0] - mv(A, X) \
+            - np.einsum("nij,j->ni", Bt, u)
+
+    X = nl.shifted(co, nl.initial_state(P, geom, layout, run.u[0]), run.u[0])
+    y = np.empty((X.shape[0], run.n, 10))
+    f1, f2, f3 = p1 - 3 * p2 + 4 * p3, p2 - 2 * p3, -p2 + 4 * p3
+    _, qdd = nl.accelerations(co, xk, Fk, Sk, curves, X, U[0], R[0])
+    sw = nl.switching(co, X, qdd, U[0], R[0])
+    for k in range(run_f.n):
+        if k % m == 0:
+            y[:, k // m] = nl.channels(co, X, qdd)
+        if k + 1 == run_f.n:
+            break
+        # the regions at the step's start, as nonlinear.accelerations decides them
+        j, on = frozen_regions(co, xk, curves, X, U[k])
+        reg = (j, on, sw[2] >= 0.0)
+        Nk = resid(X, U[k], R[k], reg)
+        half = mv(Eh, X) + Fa[:, k]
+        a = half + (h / 2) * mv(q1, Nk)
+        Na = resid(a, um[k], rm[k], reg)
+        b = half + (h / 2) * mv(q1, Na)
+        Nb = resid(b, um[k], rm[k], reg)
+        c = mv(Eh, a) + Fb[:, k] + (h / 2) * mv(q1, 2 * Nb - Nk)
+        Nc = resid(c, U[k + 1], R[k + 1], reg)
+        Xn = mv(E, X) + Ff[:, k] + h * (mv(f1, Nk) + 2 * mv(f2, Na + Nb) + mv(f3, Nc))
+        # the frozen car's switching quantities at the step's end, their rates on the frozen side too
+        _, qf = accelerations_frozen(co, xk, Fk, Sk, curves, Xn, U[k + 1], R[k + 1], reg)
+        per = crossing_events(co, xk, Sk, curves, h, sw, nl.switching(co, Xn, qf, U[k + 1], R[k + 1]), kinks)
+        if per:
+            Xn = Xn + kink_corrections(frozen_matrix(co, xk, Sk, curves, A, BF, BT, c_ref, reg), h, per)
+        _, qdd = nl.accelerations(co, xk, Fk, Sk, curves, Xn, U[k + 1], R[k + 1])
+        X, sw = Xn, nl.switching(co, Xn, qdd, U[k + 1], R[k + 1])
     return y
 
 
