@@ -40,7 +40,6 @@ from rideid.model import kernel_nl
 from rideid.model import nonlinear as nl
 from rideid.model.nonlinear import DEFAULT_KNOTS, NonlinearLayout, NonlinearSimulator
 from rideid.model.params import ALL_NAMES, SUSPENSION_NAMES, as_vector
-from rideid.model.nl_coef import hermite_value_slope
 from rideid.model.simulate import prepare_run
 from rideid.verify.hifi import hifi_curve
 
@@ -285,86 +284,112 @@ def ramp_response(A, vec, tau, s, terms=8):
     return out
 
 
-def crossing_events(co, xk, Sk, curves, h, sw0, sw1, kinks):
-    """Per row: the step's crossings ``(vec, grad, t_c, (s1, s2, s3))``, sorted by ``t_c`` (seconds into the
-    step), the switching quantity along the frozen car ``s1 u + s2 u^2 / 2 + s3 u^3 / 6`` after it (from its
-    cubic Hermite between the step's ends; a tire load's chord)."""
+def hermite_taylor(theta, s0, s1, m0, m1, h):
+    """Value and first three time derivatives at ``theta`` of the cubic Hermite over a step of ``h`` seconds."""
+    t2 = theta * theta
+    val = (2 * t2 * theta - 3 * t2 + 1) * s0 + (t2 * theta - 2 * t2 + theta) * m0 + (3 * t2 - 2 * t2 * theta) * s1 \
+        + (t2 * theta - t2) * m1
+    der = (6 * t2 - 6 * theta) * (s0 - s1) + (3 * t2 - 4 * theta + 1) * m0 + (3 * t2 - 2 * theta) * m1
+    sec = (12 * theta - 6) * (s0 - s1) + (6 * theta - 4) * m0 + (6 * theta - 2) * m1
+    third = 12 * (s0 - s1) + 6 * (m0 + m1)
+    return val, der / h, sec / h ** 2, third / h ** 3
+
+
+def crossing_events(co, xk, Sk, curves, h, sw0, sw1, kinks, sw_true=None):
+    """Per row: the step's crossings ``(vec, grad, hermite, first guess of t_c)``: a switching quantity whose end
+    (the frozen car's, ``sw1``; with ``sw_true`` the corrected end's) is on the other side of its start;
+    ``hermite``: ``(s0, s1, m0, m1)`` of the quantity along the frozen car (a tire load's chord)."""
     d0, v0, g0, a0 = sw0
     d1, v1, g1, a1 = sw1
+    dt, vt, gt, _ = sw1 if sw_true is None else sw_true
     BF, BT = force_columns(co)
     per = {}
 
-    def add(rows, vec, grad, s0, s1, m0, m1):
-        t = nl.hermite_root(s0, s1, m0, m1)
-        _, der = hermite_value_slope(t, s0, s1, m0, m1)
-        sec = (12.0 * t - 6.0) * (s0 - s1) + (6.0 * t - 4.0) * m0 + (6.0 * t - 2.0) * m1
-        third = 12.0 * (s0 - s1) + 6.0 * (m0 + m1)
+    def add(sel, vec, grad, s0, s1, m0, m1, st):
+        rows = np.flatnonzero(sel)
+        s0, s1, m0, m1, st = s0[rows], s1[rows], m0[rows], m1[rows], st[rows]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            guess = np.where((s0 > 0) != (s1 > 0), nl.hermite_root(s0, s1, m0, m1), s0 / (s0 - st))
         for q, r in enumerate(rows):
-            per.setdefault(int(r), []).append((vec[q], grad[q], t[q] * h, (der[q] / h, sec[q] / h ** 2,
-                                                                         third[q] / h ** 3)))
+            per.setdefault(int(r), []).append((vec[r], grad[r], (s0[q], s1[q], m0[q], m1[q]), guess[q] * h))
 
     for c in range(4):
         gv, gd, gg = switch_gradients(co, c)
         for k in range(1, xk.size - 1) if curves else ():
             if kinks is not None and not kinks[c // 2, k]:
                 continue
-            rows = np.flatnonzero((v0[:, c] < xk[k]) != (v1[:, c] < xk[k]))
-            dS = Sk[rows, c // 2, k] - Sk[rows, c // 2, k - 1]
-            coef = np.where(v1[rows, c] > v0[rows, c], dS, -dS)
-            add(rows, BF[rows, :, c] * coef[:, None], gv[rows], v0[rows, c] - xk[k], v1[rows, c] - xk[k],
-                h * a0[rows, c], h * a1[rows, c])
+            up = (v1[:, c] > xk[k]) if sw_true is None else (vt[:, c] > xk[k])
+            sel = (v0[:, c] > xk[k]) != up
+            dS = Sk[:, c // 2, k] - Sk[:, c // 2, k - 1]
+            coef = np.where(up, dS, -dS)
+            add(sel, BF[:, :, c] * coef[:, None], gv, v0[:, c] - xk[k], v1[:, c] - xk[k], h * a0[:, c],
+                h * a1[:, c], vt[:, c] - xk[k])
         cl = co[:, nl._C4["bs_clear"][c]]
         with np.errstate(invalid="ignore"):
-            e0, e1 = d0[:, c] - cl, d1[:, c] - cl
-        rows = np.flatnonzero((e0 > 0.0) != (e1 > 0.0))
-        coef = np.where(e1[rows] > 0.0, 1.0, -1.0) * co[rows, nl._C4["bs_rate"][c]]
-        add(rows, BF[rows, :, c] * coef[:, None], gd[rows], e0[rows], e1[rows], h * v0[rows, c], h * v1[rows, c])
-        rows = np.flatnonzero((g0[:, c] >= 0.0) != (g1[:, c] >= 0.0))
+            e0, e1, et = d0[:, c] - cl, d1[:, c] - cl, dt[:, c] - cl
+        on = (e1 > 0.0) if sw_true is None else (et > 0.0)
+        coef = np.where(on, 1.0, -1.0) * co[:, nl._C4["bs_rate"][c]]
+        add((e0 > 0.0) != on, BF[:, :, c] * coef[:, None], gd, e0, e1, h * v0[:, c], h * v1[:, c], et)
         # contact -> off: the tire's force g leaves (-g); off -> contact: it comes back; the load's chord
-        coef = np.where(g1[rows, c] >= 0.0, 1.0, -1.0)
-        chord = g1[rows, c] - g0[rows, c]
-        add(rows, BT[rows, :, c] * coef[:, None], gg[rows], g0[rows, c], g1[rows, c], chord, chord)
+        contact = (g1[:, c] >= 0.0) if sw_true is None else (gt[:, c] >= 0.0)
+        chord = g1[:, c] - g0[:, c]
+        add((g0[:, c] >= 0.0) != contact, BT[:, :, c] * np.where(contact, 1.0, -1.0)[:, None], gg, g0[:, c],
+            g1[:, c], chord, chord, gt[:, c])
     for evs in per.values():
-        evs.sort(key=lambda e: e[2])
+        evs.sort(key=lambda e: e[3])
     return per
 
 
+def expv(A, tau, x, terms=10):
+    """``e^{A tau} x`` by its series."""
+    out = x.copy()
+    z = x.copy()
+    for i in range(1, terms):
+        z = (tau / i) * (A @ z)
+        out += z
+    return out
+
+
 def kink_corrections(Af, h, per):
-    """What the step with every region frozen at its start misses, ``(n, 14)``: each crossing's source carried
-    by the car after it. A later crossing's time is corrected (three Newton steps) for the earlier ones' pull
-    on its switching quantity ``grad . vec_earlier (s1 w^2 / 2 + s2 w^3 / 6 + s3 w^4 / 24)``."""
+    """What the step with every region frozen at its start misses, ``(n, 14)``: ``delta = X_true - X_frozen``
+    carried from crossing to crossing, ``delta' = (A_frozen + sum_passed vec grad^T) delta + sum_passed vec
+    sigma(s)`` (each source the switching quantity along the frozen car), by series of the phi-functions. A
+    crossing's time is the root of its switching quantity along the true car, ``sigma_frozen + grad . delta``
+    (Newton steps kept in the step)."""
     corr = np.zeros((Af.shape[0], 14))
     for r, evs in per.items():
-        done = []  # (vec, grad, true time, its source's (s1, s2, s3))
-        A_after = Af[r].copy()
-        for vec, grad, tf, (s1, s2, s3) in evs:
-            def frozen(t, tf=tf, s1=s1, s2=s2, s3=s3):
-                u = t - tf
-                return s1 * u + s2 * u * u / 2 + s3 * u ** 3 / 6, s1 + s2 * u + s3 * u * u / 2, s2 + s3 * u
+        A_now = Af[r].copy()
+        t_now, delta = 0.0, np.zeros(14)
+        active = []  # (vec, hermite)
 
-            def pull(t, grad=grad, done=done):
-                val = der = 0.0
-                for v2, _, tj, (a1, a2, a3) in done:
-                    w = max(t - tj, 0.0)
-                    val += (grad @ v2) * (a1 * w * w / 2 + a2 * w ** 3 / 6 + a3 * w ** 4 / 24)
-                    der += (grad @ v2) * (a1 * w + a2 * w * w / 2 + a3 * w ** 3 / 6)
-                return val, der
+        def advance(t, A_now, t_now, delta, active):
+            tau = t - t_now
+            out = expv(A_now, tau, delta)
+            for v2, herm2 in active:
+                out = out + ramp_response(A_now, v2, tau, hermite_taylor(t_now / h, *herm2, h))
+            return out
 
-            t = tf
-            for _ in range(3 if done else 0):
-                (f0, f1, _), (p0, p1) = frozen(t), pull(t)
-                if f1 + p1 != 0.0:
-                    t = min(max(t - (f0 + p0) / (f1 + p1), 0.0), h)
-            A_after += np.outer(vec, grad)
-            f0, f1, f2 = frozen(t)
-            corr[r] += ramp_response(A_after, vec, h - t, (f0, f1, f2, s3))
-            done.append((vec, grad, t, (f1, f2, s3)))
+        for vec, grad, herm, t in evs:
+            t = max(t, t_now)
+            for _ in range(4):
+                f0, f1, _, _ = hermite_taylor(t / h, *herm, h)
+                d = advance(t, A_now, t_now, delta, active)
+                dd = A_now @ d + sum((v2 * hermite_taylor(t / h, *h2, h)[0] for v2, h2 in active), np.zeros(14))
+                val, der = f0 + grad @ d, f1 + grad @ dd
+                if der != 0.0:
+                    t = min(max(t - val / der, t_now), h)
+            delta = advance(t, A_now, t_now, delta, active)
+            t_now = t
+            A_now = A_now + np.outer(vec, grad)
+            active.append((vec, herm))
+        corr[r] = advance(h, A_now, t_now, delta, active)
     return corr
 
 
-def simulate_expk(P, geom, run, layout, m=1, kinks=None):
+def simulate_expk(P, geom, run, layout, m=1, kinks=None, passes=0):
     """Channels (n, n_time, 10) by ETDRK4 (Cox-Matthews) at ``m`` steps per sample with every corner's
-    region frozen at the step's start, plus :func:`kink_corrections`."""
+    region frozen at the step's start, plus :func:`kink_corrections`; then ``passes`` passes that find the
+    crossings again on the corrected end (the true car's: after a first crossing the frozen car's may differ)."""
     co, xk, Fk, Sk = nl.coefficients(P, geom, layout)
     curves = layout.knots is not None
     kinks = nl.kink_mask(Sk) if kinks is None else kinks
@@ -410,9 +435,17 @@ def simulate_expk(P, geom, run, layout, m=1, kinks=None):
         Xn = mv(E, X) + Ff[:, k] + h * (mv(f1, Nk) + 2 * mv(f2, Na + Nb) + mv(f3, Nc))
         # the frozen car's switching quantities at the step's end, their rates on the frozen side too
         _, qf = accelerations_frozen(co, xk, Fk, Sk, curves, Xn, U[k + 1], R[k + 1], reg)
-        per = crossing_events(co, xk, Sk, curves, h, sw, nl.switching(co, Xn, qf, U[k + 1], R[k + 1]), kinks)
+        sw1 = nl.switching(co, Xn, qf, U[k + 1], R[k + 1])
+        per = crossing_events(co, xk, Sk, curves, h, sw, sw1, kinks)
         if per:
-            Xn = Xn + kink_corrections(frozen_matrix(co, xk, Sk, curves, A, BF, BT, c_ref, reg), h, per)
+            Af = frozen_matrix(co, xk, Sk, curves, A, BF, BT, c_ref, reg)
+            Xf = Xn
+            Xn = Xf + kink_corrections(Af, h, per)
+            for _ in range(passes):
+                _, qdd = nl.accelerations(co, xk, Fk, Sk, curves, Xn, U[k + 1], R[k + 1])
+                per = crossing_events(co, xk, Sk, curves, h, sw, sw1, kinks,
+                                      nl.switching(co, Xn, qdd, U[k + 1], R[k + 1]))
+                Xn = Xf + kink_corrections(Af, h, per)
         _, qdd = nl.accelerations(co, xk, Fk, Sk, curves, Xn, U[k + 1], R[k + 1])
         X, sw = Xn, nl.switching(co, Xn, qdd, U[k + 1], R[k + 1])
     return y
