@@ -23,8 +23,16 @@ are reached, wheels that lift; CG 0.25 m) and the built-in scenario's runs
 with the bench's digressive cars. The reference slope: the mean slope of the
 two curve segments around zero velocity.
 
+With ``--crossings`` (issue 52, item 4): every corner held over the step in the region it starts in (its
+curve's segment, its bump stop on or off, its tire in contact or not; that car is affine, so ETDRK4 integrates
+it to its order) and what that misses added in closed form: from each crossing of a kink, a clearance or
+zero tire load on, the change of force along the switching quantity, carried to the step's end by the
+phi-functions of the car after the crossing (their series on the force's column: no matrix exponential per
+crossing), crossing after crossing, each timed on the true car (:func:`kink_corrections`).
+
 Run: ``python benchmarks/study_expint.py [SCHEME ...]`` (about 8 minutes of one core), ``--shapes``: the
-curve shapes' table (ETDRK4 on two runs, about 2 minutes).
+curve shapes' table (ETDRK4 on two runs, about 2 minutes), ``--crossings``: the frozen regions with the
+crossings in closed form (about 10 minutes).
 """
 
 from __future__ import annotations
@@ -295,10 +303,18 @@ def hermite_taylor(theta, s0, s1, m0, m1, h):
     return val, der / h, sec / h ** 2, third / h ** 3
 
 
-def crossing_events(co, xk, Sk, curves, h, sw0, sw1, kinks, sw_true=None):
+def tire_load_rate(co, X, qdd, r, rd, rdd):
+    """The tire loads' rates ``k_t (r' - z') + c_t (r'' - z'')`` (n, 4), ``rdd`` the road's second derivative."""
+    c = lambda name: co[:, nl._C4[name]]  # noqa: E731
+    w = X[:, 10:14] + c("ct") * c("inv_mu") * r
+    return c("kt") * (rd - w) + c("ct") * (rdd - qdd[:, 3:])
+
+
+def crossing_events(co, xk, Sk, curves, h, sw0, sw1, kinks, sw_true=None, gslope=None):
     """Per row: the step's crossings ``(vec, grad, hermite, first guess of t_c)``: a switching quantity whose end
     (the frozen car's, ``sw1``; with ``sw_true`` the corrected end's) is on the other side of its start;
-    ``hermite``: ``(s0, s1, m0, m1)`` of the quantity along the frozen car (a tire load's chord)."""
+    ``hermite``: ``(s0, s1, m0, m1)`` of the quantity along the frozen car (a tire load's slopes ``gslope``,
+    without them its chord)."""
     d0, v0, g0, a0 = sw0
     d1, v1, g1, a1 = sw1
     dt, vt, gt, _ = sw1 if sw_true is None else sw_true
@@ -333,8 +349,9 @@ def crossing_events(co, xk, Sk, curves, h, sw0, sw1, kinks, sw_true=None):
         # contact -> off: the tire's force g leaves (-g); off -> contact: it comes back; the load's chord
         contact = (g1[:, c] >= 0.0) if sw_true is None else (gt[:, c] >= 0.0)
         chord = g1[:, c] - g0[:, c]
+        gm0, gm1 = (chord, chord) if gslope is None else (h * gslope[0][:, c], h * gslope[1][:, c])
         add((g0[:, c] >= 0.0) != contact, BT[:, :, c] * np.where(contact, 1.0, -1.0)[:, None], gg, g0[:, c],
-            g1[:, c], chord, chord, gt[:, c])
+            g1[:, c], gm0, gm1, gt[:, c])
     for evs in per.values():
         evs.sort(key=lambda e: e[3])
     return per
@@ -386,10 +403,11 @@ def kink_corrections(Af, h, per):
     return corr
 
 
-def simulate_expk(P, geom, run, layout, m=1, kinks=None, passes=0):
-    """Channels (n, n_time, 10) by ETDRK4 (Cox-Matthews) at ``m`` steps per sample with every corner's
-    region frozen at the step's start, plus :func:`kink_corrections`; then ``passes`` passes that find the
-    crossings again on the corrected end (the true car's: after a first crossing the frozen car's may differ)."""
+def simulate_expk(P, geom, run, layout, m=1, kinks=None, passes=0, scheme="etd4"):
+    """Channels (n, n_time, 10) by ETDRK4 (Cox-Matthews; ``scheme="etd2"``: ETD2RK) at ``m`` steps per sample
+    with every corner's region frozen at the step's start, plus :func:`kink_corrections`; then ``passes``
+    passes that find the crossings again on the corrected end (the true car's: after a first crossing the
+    frozen car's may differ)."""
     co, xk, Fk, Sk = nl.coefficients(P, geom, layout)
     curves = layout.knots is not None
     kinks = nl.kink_mask(Sk) if kinks is None else kinks
@@ -425,18 +443,25 @@ def simulate_expk(P, geom, run, layout, m=1, kinks=None, passes=0):
         j, on = frozen_regions(co, xk, curves, X, U[k])
         reg = (j, on, sw[2] >= 0.0)
         Nk = resid(X, U[k], R[k], reg)
-        half = mv(Eh, X) + Fa[:, k]
-        a = half + (h / 2) * mv(q1, Nk)
-        Na = resid(a, um[k], rm[k], reg)
-        b = half + (h / 2) * mv(q1, Na)
-        Nb = resid(b, um[k], rm[k], reg)
-        c = mv(Eh, a) + Fb[:, k] + (h / 2) * mv(q1, 2 * Nb - Nk)
-        Nc = resid(c, U[k + 1], R[k + 1], reg)
-        Xn = mv(E, X) + Ff[:, k] + h * (mv(f1, Nk) + 2 * mv(f2, Na + Nb) + mv(f3, Nc))
+        if scheme == "etd2":
+            a = mv(E, X) + Ff[:, k] + h * mv(p1, Nk)
+            Xn = a + h * mv(p2, resid(a, U[k + 1], R[k + 1], reg) - Nk)
+        else:
+            half = mv(Eh, X) + Fa[:, k]
+            a = half + (h / 2) * mv(q1, Nk)
+            Na = resid(a, um[k], rm[k], reg)
+            b = half + (h / 2) * mv(q1, Na)
+            Nb = resid(b, um[k], rm[k], reg)
+            c = mv(Eh, a) + Fb[:, k] + (h / 2) * mv(q1, 2 * Nb - Nk)
+            Nc = resid(c, U[k + 1], R[k + 1], reg)
+            Xn = mv(E, X) + Ff[:, k] + h * (mv(f1, Nk) + 2 * mv(f2, Na + Nb) + mv(f3, Nc))
         # the frozen car's switching quantities at the step's end, their rates on the frozen side too
         _, qf = accelerations_frozen(co, xk, Fk, Sk, curves, Xn, U[k + 1], R[k + 1], reg)
         sw1 = nl.switching(co, Xn, qf, U[k + 1], R[k + 1])
-        per = crossing_events(co, xk, Sk, curves, h, sw, sw1, kinks)
+        # the tire loads' rates (the road's second derivative: its rate's chord over the step)
+        rdd = (R[k + 1] - R[k]) / h
+        gslope = (tire_load_rate(co, X, qdd, U[k], R[k], rdd), tire_load_rate(co, Xn, qf, U[k + 1], R[k + 1], rdd))
+        per = crossing_events(co, xk, Sk, curves, h, sw, sw1, kinks, gslope=gslope)
         if per:
             Af = frozen_matrix(co, xk, Sk, curves, A, BF, BT, c_ref, reg)
             Xf = Xn
@@ -444,7 +469,7 @@ def simulate_expk(P, geom, run, layout, m=1, kinks=None, passes=0):
             for _ in range(passes):
                 _, qdd = nl.accelerations(co, xk, Fk, Sk, curves, Xn, U[k + 1], R[k + 1])
                 per = crossing_events(co, xk, Sk, curves, h, sw, sw1, kinks,
-                                      nl.switching(co, Xn, qdd, U[k + 1], R[k + 1]))
+                                      nl.switching(co, Xn, qdd, U[k + 1], R[k + 1]), gslope)
                 Xn = Xf + kink_corrections(Af, h, per)
         _, qdd = nl.accelerations(co, xk, Fk, Sk, curves, Xn, U[k + 1], R[k + 1])
         X, sw = Xn, nl.switching(co, Xn, qdd, U[k + 1], R[k + 1])
@@ -513,9 +538,24 @@ def shapes():
             print(f"| {name} | {ratio:g} | {above:g} | " + " | ".join(f"{e:.1e}" for e in errs) + " |", flush=True)
 
 
+def crossings_table():
+    """The frozen regions with the crossings in closed form (:func:`simulate_expk`) against the present scheme
+    and unsplit ETDRK4, on every case."""
+    print("| case | RK4 split (m) | etd4 m=1 | frozen + crossings m=1 | m=2 | ETD2RK frozen + crossings m=1 |")
+    for name, P, geom, run, layout in cases():
+        sim = NonlinearSimulator(geom, [run], layout)
+        ref, m0 = reference(P, geom, run, layout, sim)
+        errs = [rel_rms(sim.outputs(P)[0], ref).max(), rel_rms(simulate_exp(P, geom, run, layout, "etd4"), ref).max()]
+        errs += [rel_rms(simulate_expk(P, geom, run, layout, m=m, kinks=sim.kinks(P)), ref).max() for m in (1, 2)]
+        errs.append(rel_rms(simulate_expk(P, geom, run, layout, kinks=sim.kinks(P), scheme="etd2"), ref).max())
+        print(f"| {name} | {errs[0]:.1e} ({m0}) | " + " | ".join(f"{e:.1e}" for e in errs[1:]) + " |", flush=True)
+
+
 def main():
     if "--shapes" in sys.argv[1:]:
         return shapes()
+    if "--crossings" in sys.argv[1:]:
+        return crossings_table()
     schemes = [a for a in sys.argv[1:] if not a.startswith("--")] or ["etd2", "etd4", "lawson4"]
     ms = (1, 2)
     print("| case | RK4 split (m) | " + " | ".join(f"{s} m={m}" for s in schemes for m in ms) + " |")
