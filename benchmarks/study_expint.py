@@ -32,7 +32,8 @@ crossing), crossing after crossing, each timed on the true car (:func:`kink_corr
 
 Run: ``python benchmarks/study_expint.py [SCHEME ...]`` (about 8 minutes of one core), ``--shapes``: the
 curve shapes' table (ETDRK4 on two runs, about 2 minutes), ``--crossings``: the frozen regions with the
-crossings in closed form (about 10 minutes).
+crossings in closed form (about 10 minutes), ``--dop853``: the reference checked against SciPy's DOP853 on
+one run (about 20 minutes).
 """
 
 from __future__ import annotations
@@ -551,9 +552,40 @@ def crossings_table():
         print(f"| {name} | {errs[0]:.1e} ({m0}) | " + " | ".join(f"{e:.1e}" for e in errs[1:]) + " |", flush=True)
 
 
+def dop853_check(case=4):
+    """The yardstick checked: SciPy's DOP853 (rtol 1e-10, steps at most a sample) on the same equations, one car,
+    one run (built-in twist_low 3 m/s: about 20 minutes of one core), against the reference, the present
+    scheme and :func:`simulate_expk`."""
+    from scipy.integrate import solve_ivp
+
+    name, P, geom, run, layout = list(cases())[case]
+    P = P[:1]
+    sim = NonlinearSimulator(geom, [run], layout)
+    ref, _ = reference(P, geom, run, layout, sim)
+    co, xk, Fk, Sk = nl.coefficients(P, geom, layout)
+    curves = layout.knots is not None
+    X0 = nl.shifted(co, nl.initial_state(P, geom, layout, run.u[0]), run.u[0])[0]
+
+    def rhs(t, X):
+        u, ud = run.inputs_at(np.array([t]))
+        return nl.accelerations(co, xk, Fk, Sk, curves, X[None], u[0], ud[0])[0][0]
+
+    sol = solve_ivp(rhs, (run.t[0], run.t[-1]), X0, method="DOP853", t_eval=run.t, rtol=1e-10, atol=1e-13,
+                    max_step=run.h)
+    y = np.empty((1, run.n, 10))
+    for k, X in enumerate(sol.y.T):
+        _, qdd = nl.accelerations(co, xk, Fk, Sk, curves, X[None], run.u[k], run.rate[k])
+        y[0, k] = nl.channels(co, X[None], qdd)[0]
+    yk = simulate_expk(P, geom, run, layout, kinks=sim.kinks(P))
+    print(f"{name}: DOP853 ({sol.nfev} evaluations) against the reference {rel_rms(ref, y).max():.1e}, the present "
+          f"scheme {rel_rms(sim.outputs(P)[0], y).max():.1e}, frozen + crossings m=1 {rel_rms(yk, y).max():.1e}")
+
+
 def main():
     if "--shapes" in sys.argv[1:]:
         return shapes()
+    if "--dop853" in sys.argv[1:]:
+        return dop853_check()
     if "--crossings" in sys.argv[1:]:
         return crossings_table()
     schemes = [a for a in sys.argv[1:] if not a.startswith("--")] or ["etd2", "etd4", "lawson4"]
