@@ -23,8 +23,17 @@ are reached, wheels that lift; CG 0.25 m) and the built-in scenario's runs
 with the bench's digressive cars. The reference slope: the mean slope of the
 two curve segments around zero velocity.
 
+With ``--crossings`` (issue 52, item 4): every corner held over the step in the region it starts in (its
+curve's segment, its bump stop on or off, its tire in contact or not; that car is affine, so ETDRK4 integrates
+it to its order) and what that misses added in closed form: from each crossing of a kink, a clearance or
+zero tire load on, the change of force along the switching quantity, carried to the step's end by the
+phi-functions of the car after the crossing (their series on the force's column: no matrix exponential per
+crossing), crossing after crossing, each timed on the true car (:func:`kink_corrections`).
+
 Run: ``python benchmarks/study_expint.py [SCHEME ...]`` (about 8 minutes of one core), ``--shapes``: the
-curve shapes' table (ETDRK4 on two runs, about 2 minutes).
+curve shapes' table (ETDRK4 on two runs, about 2 minutes), ``--crossings``: the frozen regions with the
+crossings in closed form (about 10 minutes), ``--dop853``: the reference checked against SciPy's DOP853 on
+one run (about 20 minutes).
 """
 
 from __future__ import annotations
@@ -171,6 +180,303 @@ def simulate_exp(P, geom, run, layout, scheme="etd2", m=1):
     return y
 
 
+# ---------------------------------------------------------------------------
+# the kinks' contributions in closed form (issue 52, item 4)
+#
+# Within a step every corner is held in the region it starts in (the damper on its segment's line, the bump
+# stop on or off, the tire in contact or not): that car is affine, so the exponential scheme integrates it to
+# its order. What it misses is, per crossing at time t_c of a switching quantity sigma (a damper velocity
+# less a kink's knot, a deflection less the clearance, a tire load), the change of force
+# ``vec * sigma(X(s))`` from t_c on. With delta = X_true - X_frozen, exactly
+# ``delta' = (A_frozen + sum over crossings passed of vec grad^T) delta + sum 1[s > t_c] vec sigma_frozen(s)``,
+# sigma_frozen the switching quantity along the frozen car (a cubic Hermite from the step's ends), so the
+# correction is ``int e^{A' (h - s)} vec sigma_frozen(s) ds``: phi-functions of ``A' (h - t_c)`` applied to
+# ``vec``, by their series (matrix-vector products, no matrix exponential per crossing).
+
+
+def frozen_regions(co, xk, curves, X, r):
+    """Each corner's curve segment ``j`` and bump stop ``on`` at a step's start (the tire's contact: the load of
+    :func:`rideid.model.nonlinear.switching` at or above zero)."""
+    d, v, _, _ = nl.switching(co, X, np.zeros((X.shape[0], 7)), r, np.zeros(4))
+    j = np.clip(np.searchsorted(xk, v, side="right") - 1, 0, xk.size - 2) if curves else np.zeros(v.shape, int)
+    return j, d > co[:, nl._C4["bs_clear"]]
+
+
+def accelerations_frozen(co, xk, Fk, Sk, curves, X, r, rd, reg):
+    """:func:`rideid.model.nonlinear.accelerations` (14 states) with every corner held in region ``reg``: the
+    damper on its segment's line, the bump stop on or off, the tire in contact or not (straight continuations)."""
+    j, on, contact = reg
+    c = lambda name: co[:, nl._C4[name]]  # noqa: E731
+    q = X[:, :7]
+    ctm = c("ct") * c("inv_mu")
+    w = X[:, 10:14] + ctm * r
+    x, y = c("x"), c("y")
+    d = nl.suspension_travel(q, x, y)
+    v = w - nl.body_corners(X[:, 7:], x, y)
+    F = c("ks") * d
+    bf = co[:, nl.CI["kar_f"]] * (d[:, 0] - d[:, 1])
+    br = co[:, nl.CI["kar_r"]] * (d[:, 2] - d[:, 3])
+    F = F + np.stack([bf, -bf, br, -br], -1)
+    if curves:
+        ax = np.array([0, 0, 1, 1])
+        rows = np.arange(v.shape[0])[:, None]
+        F = F + Fk[rows, ax, j] + Sk[rows, ax, j] * (v - xk[j])
+    else:
+        F = F + c("cs") * v
+    with np.errstate(invalid="ignore"):
+        F = F + np.where(on, c("bs_rate") * (d - c("bs_clear")), 0.0)
+    L = c("L")
+    t0 = L + c("kt") * (r - q[:, 3:]) - c("ct") * w
+    crd = c("ct") * rd
+    dp = np.where(contact, t0 - L - F, -L - F - crd) * c("inv_mu")
+    qdd = np.empty_like(q)
+    qdd[:, 0] = F.sum(-1) * co[:, nl.CI["inv_ms"]]
+    qdd[:, 1] = (-(x * F).sum(-1) + co[:, nl.CI["topple"]] * q[:, 1]) * co[:, nl.CI["inv_Iyy"]]
+    qdd[:, 2] = ((y * F).sum(-1) + co[:, nl.CI["topple"]] * q[:, 2]) * co[:, nl.CI["inv_Ixx"]]
+    qdd[:, 3:] = dp + ctm * rd
+    return np.concatenate([X[:, 7:10], w, qdd[:, :3], dp], axis=1), qdd
+
+
+def force_columns(co):
+    """``(n, 14, 4)``: the state derivative per newton of suspension force at each corner, and ``(n, 14, 4)``
+    per newton of tire force."""
+    n = co.shape[0]
+    c = lambda name: co[:, nl._C4[name]]  # noqa: E731
+    BF = np.zeros((n, 14, 4))
+    BF[:, 7, :] = co[:, [nl.CI["inv_ms"]]]
+    BF[:, 8, :] = -c("x") * co[:, [nl.CI["inv_Iyy"]]]
+    BF[:, 9, :] = c("y") * co[:, [nl.CI["inv_Ixx"]]]
+    BT = np.zeros((n, 14, 4))
+    for k in range(4):
+        BF[:, 10 + k, k] = -c("inv_mu")[:, k]
+        BT[:, 10 + k, k] = c("inv_mu")[:, k]
+    return BF, BT
+
+
+def switch_gradients(co, c):
+    """d(damper velocity)/dX, d(deflection)/dX, d(tire load)/dX at corner ``c``: each (n, 14)."""
+    n = co.shape[0]
+    x, y = co[:, nl._C4["x"][c]], co[:, nl._C4["y"][c]]
+    gv, gd, gg = np.zeros((n, 14)), np.zeros((n, 14)), np.zeros((n, 14))
+    gv[:, 10 + c], gv[:, 7], gv[:, 8], gv[:, 9] = 1.0, -1.0, x, -y
+    gd[:, 3 + c], gd[:, 0], gd[:, 1], gd[:, 2] = 1.0, -1.0, x, -y
+    gg[:, 3 + c], gg[:, 10 + c] = -co[:, nl._C4["kt"][c]], -co[:, nl._C4["ct"][c]]
+    return gv, gd, gg
+
+
+def frozen_matrix(co, xk, Sk, curves, A, BF, BT, c_ref, reg):
+    """``A_frozen`` (n, 14, 14): the reference car plus each corner's departure in its region (rank one each)."""
+    j, on, contact = reg
+    n = co.shape[0]
+    Af = A.copy()
+    for c in range(4):
+        gv, gd, gg = switch_gradients(co, c)
+        dS = (Sk[np.arange(n), c // 2, j[:, c]] if curves else co[:, nl._C4["cs"][c]]) - c_ref[:, c // 2]
+        Af += (BF[:, :, c] * dS[:, None])[:, :, None] * gv[:, None, :]
+        rate = np.where(on[:, c], co[:, nl._C4["bs_rate"][c]], 0.0)
+        Af += (BF[:, :, c] * rate[:, None])[:, :, None] * gd[:, None, :]
+        Af -= (BT[:, :, c] * np.where(contact[:, c], 0.0, 1.0)[:, None])[:, :, None] * gg[:, None, :]
+    return Af
+
+
+def ramp_response(A, vec, tau, s, terms=8):
+    """``int_0^tau e^{A (tau - u)} vec sigma(u) du`` with ``sigma(u) = s0 + s1 u + s2 u^2 / 2 + s3 u^3 / 6``:
+    ``sum_i tau^(i+1) phi_(i+1)(A tau) vec s_i`` (``A`` (14, 14), ``vec`` (14,), ``s`` four numbers), by the
+    phi-functions' series."""
+    out = np.zeros_like(vec)
+    z = vec.copy()
+    fact = np.array([1.0, 2.0, 6.0, 24.0])
+    for i in range(terms):
+        out += z * sum(tau ** (i + 1 + p) * s[p] / fact[p] for p in range(4))
+        z = A @ z
+        fact *= np.arange(i + 2, i + 6)
+    return out
+
+
+def hermite_taylor(theta, s0, s1, m0, m1, h):
+    """Value and first three time derivatives at ``theta`` of the cubic Hermite over a step of ``h`` seconds."""
+    t2 = theta * theta
+    val = (2 * t2 * theta - 3 * t2 + 1) * s0 + (t2 * theta - 2 * t2 + theta) * m0 + (3 * t2 - 2 * t2 * theta) * s1 \
+        + (t2 * theta - t2) * m1
+    der = (6 * t2 - 6 * theta) * (s0 - s1) + (3 * t2 - 4 * theta + 1) * m0 + (3 * t2 - 2 * theta) * m1
+    sec = (12 * theta - 6) * (s0 - s1) + (6 * theta - 4) * m0 + (6 * theta - 2) * m1
+    third = 12 * (s0 - s1) + 6 * (m0 + m1)
+    return val, der / h, sec / h ** 2, third / h ** 3
+
+
+def tire_load_rate(co, X, qdd, r, rd, rdd):
+    """The tire loads' rates ``k_t (r' - z') + c_t (r'' - z'')`` (n, 4), ``rdd`` the road's second derivative."""
+    c = lambda name: co[:, nl._C4[name]]  # noqa: E731
+    w = X[:, 10:14] + c("ct") * c("inv_mu") * r
+    return c("kt") * (rd - w) + c("ct") * (rdd - qdd[:, 3:])
+
+
+def crossing_events(co, xk, Sk, curves, h, sw0, sw1, kinks, sw_true=None, gslope=None):
+    """Per row: the step's crossings ``(vec, grad, hermite, first guess of t_c)``: a switching quantity whose end
+    (the frozen car's, ``sw1``; with ``sw_true`` the corrected end's) is on the other side of its start;
+    ``hermite``: ``(s0, s1, m0, m1)`` of the quantity along the frozen car (a tire load's slopes ``gslope``,
+    without them its chord)."""
+    d0, v0, g0, a0 = sw0
+    d1, v1, g1, a1 = sw1
+    dt, vt, gt, _ = sw1 if sw_true is None else sw_true
+    BF, BT = force_columns(co)
+    per = {}
+
+    def add(sel, vec, grad, s0, s1, m0, m1, st):
+        rows = np.flatnonzero(sel)
+        s0, s1, m0, m1, st = s0[rows], s1[rows], m0[rows], m1[rows], st[rows]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            guess = np.where((s0 > 0) != (s1 > 0), nl.hermite_root(s0, s1, m0, m1), s0 / (s0 - st))
+        for q, r in enumerate(rows):
+            per.setdefault(int(r), []).append((vec[r], grad[r], (s0[q], s1[q], m0[q], m1[q]), guess[q] * h))
+
+    for c in range(4):
+        gv, gd, gg = switch_gradients(co, c)
+        for k in range(1, xk.size - 1) if curves else ():
+            if kinks is not None and not kinks[c // 2, k]:
+                continue
+            up = (v1[:, c] > xk[k]) if sw_true is None else (vt[:, c] > xk[k])
+            sel = (v0[:, c] > xk[k]) != up
+            dS = Sk[:, c // 2, k] - Sk[:, c // 2, k - 1]
+            coef = np.where(up, dS, -dS)
+            add(sel, BF[:, :, c] * coef[:, None], gv, v0[:, c] - xk[k], v1[:, c] - xk[k], h * a0[:, c],
+                h * a1[:, c], vt[:, c] - xk[k])
+        cl = co[:, nl._C4["bs_clear"][c]]
+        with np.errstate(invalid="ignore"):
+            e0, e1, et = d0[:, c] - cl, d1[:, c] - cl, dt[:, c] - cl
+        on = (e1 > 0.0) if sw_true is None else (et > 0.0)
+        coef = np.where(on, 1.0, -1.0) * co[:, nl._C4["bs_rate"][c]]
+        add((e0 > 0.0) != on, BF[:, :, c] * coef[:, None], gd, e0, e1, h * v0[:, c], h * v1[:, c], et)
+        # contact -> off: the tire's force g leaves (-g); off -> contact: it comes back; the load's chord
+        contact = (g1[:, c] >= 0.0) if sw_true is None else (gt[:, c] >= 0.0)
+        chord = g1[:, c] - g0[:, c]
+        gm0, gm1 = (chord, chord) if gslope is None else (h * gslope[0][:, c], h * gslope[1][:, c])
+        add((g0[:, c] >= 0.0) != contact, BT[:, :, c] * np.where(contact, 1.0, -1.0)[:, None], gg, g0[:, c],
+            g1[:, c], gm0, gm1, gt[:, c])
+    for evs in per.values():
+        evs.sort(key=lambda e: e[3])
+    return per
+
+
+def expv(A, tau, x, terms=10):
+    """``e^{A tau} x`` by its series."""
+    out = x.copy()
+    z = x.copy()
+    for i in range(1, terms):
+        z = (tau / i) * (A @ z)
+        out += z
+    return out
+
+
+def kink_corrections(Af, h, per):
+    """What the step with every region frozen at its start misses, ``(n, 14)``: ``delta = X_true - X_frozen``
+    carried from crossing to crossing, ``delta' = (A_frozen + sum_passed vec grad^T) delta + sum_passed vec
+    sigma(s)`` (each source the switching quantity along the frozen car), by series of the phi-functions. A
+    crossing's time is the root of its switching quantity along the true car, ``sigma_frozen + grad . delta``
+    (Newton steps kept in the step)."""
+    corr = np.zeros((Af.shape[0], 14))
+    for r, evs in per.items():
+        A_now = Af[r].copy()
+        t_now, delta = 0.0, np.zeros(14)
+        active = []  # (vec, hermite)
+
+        def advance(t, A_now, t_now, delta, active):
+            tau = t - t_now
+            out = expv(A_now, tau, delta)
+            for v2, herm2 in active:
+                out = out + ramp_response(A_now, v2, tau, hermite_taylor(t_now / h, *herm2, h))
+            return out
+
+        for vec, grad, herm, t in evs:
+            t = max(t, t_now)
+            for _ in range(4):
+                f0, f1, _, _ = hermite_taylor(t / h, *herm, h)
+                d = advance(t, A_now, t_now, delta, active)
+                dd = A_now @ d + sum((v2 * hermite_taylor(t / h, *h2, h)[0] for v2, h2 in active), np.zeros(14))
+                val, der = f0 + grad @ d, f1 + grad @ dd
+                if der != 0.0:
+                    t = min(max(t - val / der, t_now), h)
+            delta = advance(t, A_now, t_now, delta, active)
+            t_now = t
+            A_now = A_now + np.outer(vec, grad)
+            active.append((vec, herm))
+        corr[r] = advance(h, A_now, t_now, delta, active)
+    return corr
+
+
+def simulate_expk(P, geom, run, layout, m=1, kinks=None, passes=0, scheme="etd4"):
+    """Channels (n, n_time, 10) by ETDRK4 (Cox-Matthews; ``scheme="etd2"``: ETD2RK) at ``m`` steps per sample
+    with every corner's region frozen at the step's start, plus :func:`kink_corrections`; then ``passes``
+    passes that find the crossings again on the corrected end (the true car's: after a first crossing the
+    frozen car's may differ)."""
+    co, xk, Fk, Sk = nl.coefficients(P, geom, layout)
+    curves = layout.knots is not None
+    kinks = nl.kink_mask(Sk) if kinks is None else kinks
+    c_ref = reference_slopes(Sk, xk) if curves else co[:, [nl.CI["cs0"], nl.CI["cs2"]]]
+    A, Bt = linear_parts(co, xk, Fk, Sk, c_ref)
+    BF, BT = force_columns(co)
+    run_f = run if m == 1 else prepare_run_like(run, run.t[0] + (run.h / m) * np.arange(m * (run.n - 1) + 1))
+    h = run_f.h
+    E, p1, p2, p3 = phis(A, h)
+    Eh, q1, _, _ = phis(A, h / 2)
+    Ff = forcing(A, Bt, run_f, 0.0, h)
+    Fa = forcing(A, Bt, run_f, 0.0, h / 2)
+    Fb = forcing(A, Bt, run_f, h / 2, h)
+    um, rm = run_f.inputs_at(run_f.t[:-1] + h / 2)
+    U, R = run_f.u, run_f.rate
+    mv = lambda M, x: np.einsum("nij,nj->ni", M, x)  # noqa: E731
+
+    def resid(X, u, r, reg):
+        return accelerations_frozen(co, xk, Fk, Sk, curves, X, u, r, reg)[0] - mv(A, X) \
+            - np.einsum("nij,j->ni", Bt, u)
+
+    X = nl.shifted(co, nl.initial_state(P, geom, layout, run.u[0]), run.u[0])
+    y = np.empty((X.shape[0], run.n, 10))
+    f1, f2, f3 = p1 - 3 * p2 + 4 * p3, p2 - 2 * p3, -p2 + 4 * p3
+    _, qdd = nl.accelerations(co, xk, Fk, Sk, curves, X, U[0], R[0])
+    sw = nl.switching(co, X, qdd, U[0], R[0])
+    for k in range(run_f.n):
+        if k % m == 0:
+            y[:, k // m] = nl.channels(co, X, qdd)
+        if k + 1 == run_f.n:
+            break
+        # the regions at the step's start, as nonlinear.accelerations decides them
+        j, on = frozen_regions(co, xk, curves, X, U[k])
+        reg = (j, on, sw[2] >= 0.0)
+        Nk = resid(X, U[k], R[k], reg)
+        if scheme == "etd2":
+            a = mv(E, X) + Ff[:, k] + h * mv(p1, Nk)
+            Xn = a + h * mv(p2, resid(a, U[k + 1], R[k + 1], reg) - Nk)
+        else:
+            half = mv(Eh, X) + Fa[:, k]
+            a = half + (h / 2) * mv(q1, Nk)
+            Na = resid(a, um[k], rm[k], reg)
+            b = half + (h / 2) * mv(q1, Na)
+            Nb = resid(b, um[k], rm[k], reg)
+            c = mv(Eh, a) + Fb[:, k] + (h / 2) * mv(q1, 2 * Nb - Nk)
+            Nc = resid(c, U[k + 1], R[k + 1], reg)
+            Xn = mv(E, X) + Ff[:, k] + h * (mv(f1, Nk) + 2 * mv(f2, Na + Nb) + mv(f3, Nc))
+        # the frozen car's switching quantities at the step's end, their rates on the frozen side too
+        _, qf = accelerations_frozen(co, xk, Fk, Sk, curves, Xn, U[k + 1], R[k + 1], reg)
+        sw1 = nl.switching(co, Xn, qf, U[k + 1], R[k + 1])
+        # the tire loads' rates (the road's second derivative: its rate's chord over the step)
+        rdd = (R[k + 1] - R[k]) / h
+        gslope = (tire_load_rate(co, X, qdd, U[k], R[k], rdd), tire_load_rate(co, Xn, qf, U[k + 1], R[k + 1], rdd))
+        per = crossing_events(co, xk, Sk, curves, h, sw, sw1, kinks, gslope=gslope)
+        if per:
+            Af = frozen_matrix(co, xk, Sk, curves, A, BF, BT, c_ref, reg)
+            Xf = Xn
+            Xn = Xf + kink_corrections(Af, h, per)
+            for _ in range(passes):
+                _, qdd = nl.accelerations(co, xk, Fk, Sk, curves, Xn, U[k + 1], R[k + 1])
+                per = crossing_events(co, xk, Sk, curves, h, sw, sw1, kinks,
+                                      nl.switching(co, Xn, qdd, U[k + 1], R[k + 1]), gslope)
+                Xn = Xf + kink_corrections(Af, h, per)
+        _, qdd = nl.accelerations(co, xk, Fk, Sk, curves, Xn, U[k + 1], R[k + 1])
+        X, sw = Xn, nl.switching(co, Xn, qdd, U[k + 1], R[k + 1])
+    return y
+
+
 def prepare_run_like(run, t):
     """``run`` at finer sample times ``t`` (the same road model)."""
     u, r = run.inputs_at(t)
@@ -233,9 +539,55 @@ def shapes():
             print(f"| {name} | {ratio:g} | {above:g} | " + " | ".join(f"{e:.1e}" for e in errs) + " |", flush=True)
 
 
+def crossings_table():
+    """The frozen regions with the crossings in closed form (:func:`simulate_expk`) against the present scheme
+    and unsplit ETDRK4, on every case."""
+    print("| case | RK4 split (m) | etd4 m=1 | frozen + crossings m=1 | m=2 | ETD2RK frozen + crossings m=1 |")
+    for name, P, geom, run, layout in cases():
+        sim = NonlinearSimulator(geom, [run], layout)
+        ref, m0 = reference(P, geom, run, layout, sim)
+        errs = [rel_rms(sim.outputs(P)[0], ref).max(), rel_rms(simulate_exp(P, geom, run, layout, "etd4"), ref).max()]
+        errs += [rel_rms(simulate_expk(P, geom, run, layout, m=m, kinks=sim.kinks(P)), ref).max() for m in (1, 2)]
+        errs.append(rel_rms(simulate_expk(P, geom, run, layout, kinks=sim.kinks(P), scheme="etd2"), ref).max())
+        print(f"| {name} | {errs[0]:.1e} ({m0}) | " + " | ".join(f"{e:.1e}" for e in errs[1:]) + " |", flush=True)
+
+
+def dop853_check(case=4):
+    """The yardstick checked: SciPy's DOP853 (rtol 1e-10, steps at most a sample) on the same equations, one car,
+    one run (built-in twist_low 3 m/s: about 20 minutes of one core), against the reference, the present
+    scheme and :func:`simulate_expk`."""
+    from scipy.integrate import solve_ivp
+
+    name, P, geom, run, layout = list(cases())[case]
+    P = P[:1]
+    sim = NonlinearSimulator(geom, [run], layout)
+    ref, _ = reference(P, geom, run, layout, sim)
+    co, xk, Fk, Sk = nl.coefficients(P, geom, layout)
+    curves = layout.knots is not None
+    X0 = nl.shifted(co, nl.initial_state(P, geom, layout, run.u[0]), run.u[0])[0]
+
+    def rhs(t, X):
+        u, ud = run.inputs_at(np.array([t]))
+        return nl.accelerations(co, xk, Fk, Sk, curves, X[None], u[0], ud[0])[0][0]
+
+    sol = solve_ivp(rhs, (run.t[0], run.t[-1]), X0, method="DOP853", t_eval=run.t, rtol=1e-10, atol=1e-13,
+                    max_step=run.h)
+    y = np.empty((1, run.n, 10))
+    for k, X in enumerate(sol.y.T):
+        _, qdd = nl.accelerations(co, xk, Fk, Sk, curves, X[None], run.u[k], run.rate[k])
+        y[0, k] = nl.channels(co, X[None], qdd)[0]
+    yk = simulate_expk(P, geom, run, layout, kinks=sim.kinks(P))
+    print(f"{name}: DOP853 ({sol.nfev} evaluations) against the reference {rel_rms(ref, y).max():.1e}, the present "
+          f"scheme {rel_rms(sim.outputs(P)[0], y).max():.1e}, frozen + crossings m=1 {rel_rms(yk, y).max():.1e}")
+
+
 def main():
     if "--shapes" in sys.argv[1:]:
         return shapes()
+    if "--dop853" in sys.argv[1:]:
+        return dop853_check()
+    if "--crossings" in sys.argv[1:]:
+        return crossings_table()
     schemes = [a for a in sys.argv[1:] if not a.startswith("--")] or ["etd2", "etd4", "lawson4"]
     ms = (1, 2)
     print("| case | RK4 split (m) | " + " | ".join(f"{s} m={m}" for s in schemes for m in ms) + " |")

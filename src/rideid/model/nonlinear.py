@@ -63,7 +63,10 @@ state. Alternatives considered:
   (``benchmarks/study_expint.py``: the linear car with the curves' mean
   slope at zero velocity exact, road forcing included; ETDRK4 or Lawson
   RK4 on the remainder): 1e-3 - 1.7e-2 of RMS at one step per sample,
-  2.4e-4 - 8.4e-3 at two, on the runs below and the built-in ones;
+  2.4e-4 - 8.4e-3 at two, on the runs below and the built-in ones; with
+  each corner's region frozen over the step and the crossings' missed
+  forces in closed form (``--crossings``) 7.3e-5 - 3.7e-4 at one step, at
+  about 4x the linear kernel's arithmetic (``docs/dampers.md``);
 * *operator splitting* (linear exact step + nonlinear kick): first or second
   order only, error hard to bound on a stiff bump stop;
 * *implicit schemes* (trapezoidal, Radau): unconditionally stable, but a
