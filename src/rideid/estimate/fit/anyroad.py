@@ -61,7 +61,7 @@ from scipy.optimize import OptimizeResult, least_squares
 from ...profiling import stage
 from ...settings import defaults, legacy_names
 from ...data.schema import NONLINEAR_GROUPS
-from ...errors import ArgumentError, DataError
+from ...errors import ArgumentError
 from ...model.batch import single_threaded_blas, thread_map, thread_map_rows
 from ...model.equations import CHANNELS, modal_summary
 from ...model.params import ALL_NAMES
@@ -69,6 +69,9 @@ from ...model.roads import iso8608_class
 from ..problem import asbuilt
 from ..problem import roadfit
 from ..problem.blocks import DrawnTracks, RoadBlock, TrackBlock, method as blocks_method
+# which block each run gets (the problem's, re-exported: the model choice and the tests read them here)
+from ..problem.blocks import (TRACK_OPTIONS, as_built_runs, prepare_road_runs, run_speed,  # noqa: F401
+                              speed_wander, unknown_road_runs)
 from ..assess.adequacy import ADVICE, advise, assess as assess_runs
 from ..problem.cost import CostFunction, ParameterSpace, channel_weights, refuse_unsupported_groups
 from .identify import (DEFAULT_GENERATIONS, DEFAULT_POPULATION, identify as identify_model, mark_bounds,
@@ -77,54 +80,6 @@ from .jade import JadeSolver, make_rng, stop_requested
 from ..result import History, IdentificationResult
 from ..assess.sensor_check import road_coupling_hints
 from .uncertainty import estimate_covariance
-
-#: ``tracks``: each declared track fitted as built (the default: the drawing is the nominal shape, SPEC §11) or
-#: taken exactly as drawn
-TRACK_OPTIONS = ("as-built", "as-drawn")
-
-
-def unknown_road_runs(ds, extensions=()) -> list:
-    """The runs of ``ds`` fitted with their road projected out: those on unknown roads (SPEC §9), and, when the
-    model (its ``extensions``) is linear, those on known tracks that begin moving (``moving = true``: the road
-    fit estimates the state at the first sample, and the road, without using the track's profile). With
-    damper curves or bump stops, which the projection cannot take, a moving run on a known track is fitted on
-    its track, simulated from rest a lead-in before its first sample (:func:`rideid.data.dataset.run_lead_in`,
-    docs/any-road.md)."""
-    nonlinear = any(g in NONLINEAR_GROUPS for g in extensions)
-    return [r for r in ds.runs
-            if not getattr(r, "road_known", True) or (getattr(r, "moving", False) and not nonlinear)]
-
-
-def run_speed(ds, run) -> float:
-    """The constant speed (m/s) of an unknown-road run: the manifest's, or its speed/distance channel's
-    mean when it varies by at most setting ``anyroad.speed_tolerance`` (else one clear error)."""
-    rd = ds.data[run.id]
-    dist = getattr(rd, "distance", None)
-    if dist is None:
-        return float(run.speed)
-    x = np.asarray(dist(rd.time), dtype=float)
-    v = np.gradient(x, rd.time)
-    vm = float(np.mean(v))
-    spread = float((np.max(v) - np.min(v)) / vm) if vm > 0 else np.inf
-    if not np.isfinite(spread) or spread > 2 * defaults["anyroad.speed_tolerance"]:
-        raise DataError(f"run '{run.id}': an unknown-road run needs a constant speed (the rear wheels' delay "
-                        f"wheelbase/speed is taken as constant), but its speed channel goes from {np.min(v):.2f} to "
-                        f"{np.max(v):.2f} m/s ({100 * spread:.0f} % of its mean; at most "
-                        f"{200 * defaults['anyroad.speed_tolerance']:.0f} %); cut the run to a stretch of steady speed")
-    return vm
-
-
-def prepare_road_runs(ds, extensions=()) -> list:
-    """:class:`rideid.estimate.problem.roadfit.RoadRun` of each run fitted with its road projected out
-    (:func:`unknown_road_runs` of the model's ``extensions``)."""
-    out = []
-    for r in unknown_road_runs(ds, extensions):
-        rd = ds.data[r.id]
-        rr = roadfit.prepare_road_run(r.id, rd.matrix(), rd.fs, run_speed(ds, r), ds.geometry,
-                                      clipped=ds.clipped(r.id))
-        out.append(roadfit.with_sensors(rr, ds.sensor_filters(r.id)))  # the channels as wired (SPEC §11)
-    return out
-
 
 def road_run_error(rr, y, fitted) -> float:
     """``E_r`` of :mod:`rideid.estimate.problem.cost` for an unknown-road run: each used channel's squared error at
@@ -154,16 +109,16 @@ class _Problem:
     its range's width for those that may be 0 (bars, tire damping). A problem is a value: :meth:`reweighted` and
     :meth:`with_blocks` return new ones."""
 
-    def __init__(self, space, geom, blocks, scale=None, sizes=None):
+    def __init__(self, space, geom, blocks, scale, sizes=()):
         self.space, self.geom, self.parts = space, geom, tuple(blocks)
         lo, hi = space.bounds[:, 0], space.bounds[:, 1]
         self.log = lo > 0
         self.span = np.where(self.log, 1.0, hi - lo)
         self.vbounds = (np.where(self.log, np.log(np.where(self.log, lo, 1.0)), lo / self.span),
                         np.where(self.log, np.log(np.where(self.log, hi, 1.0)), hi / self.span))
-        self.scale = np.ones(len(self.parts)) if scale is None else scale
-        self.sizes = sizes
-        self.size = None if sizes is None else sum(sizes)
+        self.scale = np.asarray(scale, dtype=float)  # each block's weight (1 until reweighted)
+        self.sizes = list(sizes)  # each block's residual count, set by reweighted
+        self.size = sum(self.sizes)
 
     def with_blocks(self, blocks) -> _Problem:
         """The same problem (weights, sizes) on ``blocks`` (each block's nuisances moved)."""
@@ -448,9 +403,7 @@ def with_size(rec: dict, fit, tr, ds) -> dict:
     if tr.size_std is None:
         return rec
     declared = ds.manifest.size_prior(tr.track)[1]
-    e = {"estimate": float(fit.alpha), "std": float(fit.alpha_std), "unit": "relative", "declared": 1.0,
-         "prior_std": float(tr.size_std), "prior": "declared" if declared else "default",
-         "from_declared_in_prior_std": (float(fit.alpha) - 1.0) / tr.size_std}
+    e = _entry(float(fit.alpha), float(fit.alpha_std), (1.0, float(tr.size_std), declared), "relative")
     named = [m for m in rec.get("named", []) if "drawn size" not in m]
     if abs(fit.alpha - 1.0) > defaults["anyroad.motion_named"] * tr.size_std:
         keys = ds.manifest.tracks[tr.track].keys
@@ -458,7 +411,7 @@ def with_size(rec: dict, fit, tr, ds) -> dict:
         named.append(f"track {tr.track} (run {tr.run_id}): drawn size {k} = {keys.get(k, float('nan')):g} m, the "
                      f"data show {_pm(float(fit.alpha), float(fit.alpha_std))} of it "
                      f"({abs(fit.alpha - 1.0) / tr.size_std:.1f} times the declared size's std of "
-                     f"{100 * tr.size_std:.2g} %{'' if declared else ', the default width'})")
+                     f"{100 * tr.size_std:.2g} %{('', ', the default width')[not declared]})")
     return dict(rec, size=e, named=named)
 
 
@@ -515,82 +468,6 @@ def _search(space, geom, rruns, gen, population, generations, callback, t0):
     return solver.x, g, solver.nfev, stop, history
 
 
-def speed_wander(ds, run) -> float | None:
-    """The relative RMS wander (about its mean) of the speed of ``run`` over its window, from its speed or distance
-    channel (None without one): the channel's speed between its samples, its variance less what the channel's
-    white noise (``preprocessing.<run>.speed.noise_std``, a GPS's) puts into a trapezoid's mean of two samples
-    (``sigma^2 / 2``) and twice that estimate's own standard error (``sigma^2 / 2 sqrt(2 / (N - 1))``: a slow
-    run's GPS noise is a per cent of its speed), floored at 0, over the mean speed. Measured on
-    tests/driven_speed.py's five runs, seeds 1-2: a held speed 0-0.35 %, a +-3 % driver 0.7-2.2 %."""
-    mr = ds.measured.get(run.id)
-    dist = getattr(mr, "distance", None) if mr is not None else None
-    if dist is None:
-        return None
-    if mr.window is not None and mr.start is not None:
-        lo, hi = mr.times[mr.window[0]], mr.times[mr.window[1] - 1]
-    else:
-        lo, hi = mr.t_first, mr.t_last
-    t = np.asarray(dist.t, dtype=float)
-    k = np.nonzero((t >= lo) & (t <= hi))[0]
-    if k.size < 4:
-        k = np.arange(t.size)
-    v = np.diff(np.asarray(dist.d, dtype=float)[k]) / np.diff(t[k])
-    vm = float(np.mean(v))
-    if not vm > 0:
-        return float("inf")
-    noise = float(mr.record.get("speed", {}).get("noise_std") or 0.0)
-    excess = float(np.var(v)) - 0.5 * noise ** 2 * (1.0 + 2.0 * np.sqrt(2.0 / max(v.size - 1, 1)))
-    return float(np.sqrt(max(excess, 0.0)) / vm)
-
-
-#: why a run on a declared track is taken as drawn, in order: (the test on the run, the dataset, the run's data and
-#: the model's nonlinear groups; the line that says why)
-_AS_DRAWN = (
-    (lambda ds, r, rd, bad: getattr(r, "posts", False),
-     lambda ds, r, rd, bad: "a four-post rig run (SPEC §13): no track, its posts measured"),
-    (lambda ds, r, rd, bad: bool(bad),
-     lambda ds, r, rd, bad: f"as drawn: the model has {', '.join(bad)} (the as-built road is fitted on a linear car)"),
-    (lambda ds, r, rd, bad: any(c not in rd.channels for c in CHANNELS[:8]),
-     lambda ds, r, rd, bad: f"as drawn: no {', '.join(c for c in CHANNELS[:8] if c not in rd.channels)} (the "
-                            "as-built road needs all eight accelerometers)"),
-    (lambda ds, r, rd, bad: getattr(rd, "distance", None) is not None
-     and (speed_wander(ds, r) or 0.0) > defaults["anyroad.held_speed"],
-     lambda ds, r, rd, bad: f"as drawn: its speed wanders {100 * (speed_wander(ds, r) or 0.0):.1f} % RMS about its "
-                            "mean (the speed channel less its noise; the as-built road needs the speed held within "
-                            f"{100 * defaults['anyroad.held_speed']:.1f} %: the rear wheels' delay is taken as "
-                            "constant)"),
-    (lambda ds, r, rd, bad: "roll_rate" not in rd.channels,
-     lambda ds, r, rd, bad: "as drawn: no roll_rate (without the roll gyro the road's slow left-right difference "
-                            "cannot be told from the body's roll, and the as-built road is not determined)"),
-)
-
-
-def as_built_runs(ds, ext, tracks: str = "as-built") -> tuple[list, dict]:
-    """The runs on declared tracks fitted as built (SPEC §11, :mod:`rideid.estimate.problem.asbuilt`), and those taken
-    as drawn with why: run id -> one line. As built needs a linear car (``ext`` without damper curves or bump
-    stops), the eight accelerometers, the roll rate and a speed held (a declared constant speed, or a speed or
-    distance channel that wanders by at most setting ``anyroad.held_speed``, :func:`speed_wander`);
-    ``tracks="as-drawn"`` takes every track as drawn (:data:`_AS_DRAWN`, in order).
-
-    The roll rate: without it a slow road difference between the wheel paths and the body's roll (a free
-    state at the first sample) trade off, and the road the prior is estimated from is not determined. Measured
-    on the SUV's five runs on tracks as built (4 % off, 1.5 mm RMS) with the roll_rate column removed: the
-    boundary unknowns of the free-road fit 4-79 (0.03-0.1 with it), "unevenness" of 0.2-3.6 m RMS, and the
-    tracks as built rejected as implausible; the pitch rate removed instead changes nothing. A roll rate that is
-    present but carries no signal (a symmetric track in simulated data) has the same trade-off; such runs stay as
-    built, and the plausibility of what the tracks needed (setting ``anyroad.plausible_rms``) judges them, as before."""
-    if tracks not in TRACK_OPTIONS:
-        raise ArgumentError(f"tracks: expected one of {', '.join(TRACK_OPTIONS)}, got {tracks!r}")
-    road_ids = {r.id for r in unknown_road_runs(ds, ext)}
-    runs = [r for r in ds.runs if r.id not in road_ids]
-    if tracks == "as-drawn":
-        return [], {r.id: "as drawn (tracks = as-drawn)" for r in runs}
-    bad = [g for g in ext if g in NONLINEAR_GROUPS]
-    why = {r.id: next((say(ds, r, ds.data[r.id], bad) for test, say in _AS_DRAWN if test(ds, r, ds.data[r.id], bad)),
-                      None) for r in runs}
-    return [r for r in runs if why[r.id] is None], {rid: w for rid, w in why.items() if w is not None}
-
-
 def identify_any_road(ds, **kw) -> IdentificationResult:
     """Identify ``ds``, which has at least one unknown-road run or one run on a track fitted as built (module
     docstring); BLAS on one thread (its small products are many, and threads only contend)."""
@@ -605,7 +482,7 @@ def _carry_sensor_hints(adequacy, start_result):
     not computed again at the estimated road: there the model's channels are the data less the fit band's
     residual, and high-passing them says nothing about the sensor. Runs on unknown roads get the road fit's own
     (:func:`_road_sensor_hints`)."""
-    hints = ((start_result.adequacy or {}).get("sensor_hints") if start_result is not None else None)
+    hints = (getattr(start_result, "adequacy", None) or {}).get("sensor_hints")
     if adequacy is None or hints is None:
         return adequacy
     out = dict(adequacy, sensor_hints=list(hints),
@@ -627,6 +504,12 @@ _HOW = {"prior": "the drawing times an amplitude factor plus unevenness whose sp
         "amplitude": "the drawing times an amplitude factor", "free": "the road projected out, the drawing unused"}
 
 
+def _left_out(rr) -> dict:
+    """``{"channels_left_out": ...}`` of a road-fitted run that left channels out (without signal, or clipped:
+    :func:`rideid.estimate.problem.roadfit.without_clipped`), else nothing."""
+    return {"channels_left_out": dict(rr.left_out)} if rr.left_out else {}
+
+
 def _track_run_record(tr, fit) -> dict:
     """One run's entry of result.json ``tracks.<track>.runs``: what the as-built fit ``fit`` learnt of it."""
     hi = min(defaults["roadfit.band"][1], 0.45 * tr.rr.fs)
@@ -634,8 +517,7 @@ def _track_run_record(tr, fit) -> dict:
            "unevenness_rms_m": asbuilt.unevenness_rms(tr),
            "unevenness_rms_surface_m": asbuilt.unevenness_rms(tr, defaults["anyroad.plausible_wavelength"]),
            "wavelengths_m": [tr.rr.speed / hi, tr.rr.speed / defaults["roadfit.band"][0]]}
-    if tr.rr.left_out:  # a channel without signal, or clipped (roadfit.without_clipped)
-        rec["channels_left_out"] = dict(tr.rr.left_out)
+    rec.update(_left_out(tr.rr))
     if tr.rr.clip.shape[0]:  # clipped samples freed as unknowns (roadfit: "Clipped samples")
         pos, count = np.unique(tr.rr.clip[:, 0], return_counts=True)
         rec["clipped_samples_freed"] = {CHANNELS[tr.rr.cols[j]]: int(k) for j, k in zip(pos, count)}
@@ -673,9 +555,8 @@ def _tracks_block(ds, blocks, skipped, P, geom) -> tuple[dict, dict]:
                        "±2 std_robust covering 12 of 12 on each; the bin-clustered sandwich was 1.8x too narrow; "
                        "docs/tracks-as-built.md); the speed and start fitted along a speed channel are in them as "
                        "nuisance parameters (the budget's 'speed and start'; each run's motion has its std)")
-    for r in ds.runs:
-        if r.id in skipped:
-            out.setdefault(r.track, {"runs": {}})["runs"][r.id] = {"fitted": skipped[r.id]}
+    for r in (r for r in ds.runs if r.id in skipped):
+        out.setdefault(r.track, {"runs": {}})["runs"][r.id] = {"fitted": skipped[r.id]}
     return out, motion
 
 
@@ -711,12 +592,12 @@ def _road_sensor_hints(P, geom, rruns, ds, threshold=None):
 
 @dataclass(frozen=True)
 class _Plan:
-    """The problem a dataset poses, built up front: the model's groups (``ext``, ``note`` when ``auto`` was not
-    run), the parameter space, the blocks (:mod:`rideid.estimate.problem.blocks`: each unknown road, each track as
+    """The problem a dataset poses, built up front: the model's groups (``ext``; ``model``: result.json's record of
+    them), the parameter space, the blocks (:mod:`rideid.estimate.problem.blocks`: each unknown road, each track as
     built with its run's motion, the runs on tracks as drawn) and the runs taken as drawn with why (``skipped``)."""
 
     ext: tuple
-    note: str | None
+    model: dict
     space: ParameterSpace
     roads: list
     tracks: list
@@ -728,25 +609,29 @@ class _Plan:
         """The joint problem: the runs as drawn (one block), then the unknown roads, then the tracks as built."""
         cf = [DrawnTracks(CostFunction(ds.subset(self.drawn), space=self.space, simulator=simulator))] \
             if self.drawn else []
-        return _Problem(self.space, geom, cf + self.roads + self.tracks)
+        blocks = cf + self.roads + self.tracks
+        return _Problem(self.space, geom, blocks, np.ones(len(blocks)))
 
 
-def _extensions(ds, model, start_result) -> tuple[tuple, str | None]:
-    """The model's groups (from the start's result, the dataset's ``[model]`` for ``auto``, else ``model``) and the
-    note that the model choice was not run."""
+def _extensions(ds, model, start_result) -> tuple[tuple, dict]:
+    """The model's groups and result.json's ``model``: the start's; else for ``auto`` the dataset's ``[model]``
+    groups, with the note that the model choice was not run; else ``model``'s."""
     if start_result is not None:
-        return tuple((start_result.model or {}).get("extensions", ())), None
+        ext = tuple((start_result.model or {}).get("extensions", ()))
+        return ext, dict(start_result.model or {"extensions": list(ext), "selection": "given"})
     if not (isinstance(model, str) and model == "auto"):
-        return tuple(model_extensions(ds, model)), None
+        ext = tuple(model_extensions(ds, model))
+        return ext, {"extensions": list(ext), "selection": "given"}
     ext = tuple(ds.manifest.extensions or ())
-    return ext, ("model choice (auto) is not run on unknown roads: fitted the twelve"
-                 + (f" plus the dataset's [model] groups ({', '.join(ext)})" if ext else "")
-                 + "; give --model to fit anti_roll_bars or tire_damping")
+    return ext, {"extensions": list(ext), "selection": "auto (not run: unknown roads)",
+                 "note": ("model choice (auto) is not run on unknown roads: fitted the twelve"
+                          + (f" plus the dataset's [model] groups ({', '.join(ext)})" if ext else "")
+                          + "; give --model to fit anti_roll_bars or tire_damping")}
 
 
 def _plan(ds, model, start_result, tracks: str, polish: bool, as_built_mode: str) -> _Plan:
     """The :class:`_Plan` of ``ds``; a nonlinear model with unknown roads is refused."""
-    ext, note = _extensions(ds, model, start_result)
+    ext, model_block = _extensions(ds, model, start_result)
     bad = [g for g in ext if g in NONLINEAR_GROUPS]
     road_ids = [r.id for r in unknown_road_runs(ds, ext)]
     if bad and road_ids:
@@ -763,7 +648,8 @@ def _plan(ds, model, start_result, tracks: str, polish: bool, as_built_mode: str
               for r in ab_list]
     track_runs = [r for r in ds.runs if r.id not in road_ids]
     ab_ids = {r.id for r in ab_list}
-    return _Plan(ext, note, space, roads, blocks, [r for r in track_runs if r.id not in ab_ids], track_runs, skipped)
+    return _Plan(ext, model_block, space, roads, blocks, [r for r in track_runs if r.id not in ab_ids], track_runs,
+                 skipped)
 
 
 def _start(ds, plan, gen, population, generations, polish, callback, simulator, start_result, t0):
@@ -923,8 +809,7 @@ def _road_records(ds, P, geom, roads) -> tuple[dict, dict, dict, list]:
             out[rr.run_id]["note"] = (f"moving at its first sample on the known track '{run.track}': fitted as a "
                                       "road run (its state at the first sample and its road estimated; the "
                                       "track's profile not used); " + out[rr.run_id]["note"])
-        if rr.left_out:
-            out[rr.run_id]["channels_left_out"] = dict(rr.left_out)
+        out[rr.run_id].update(_left_out(rr))
         profiles[rr.run_id] = (xr, zr)
         response[rr.run_id] = roadfit.fitted_channels(P, geom, rr, ds.data[rr.run_id].matrix(), sol_r)
     errors = [road_run_error(rr, ds.data[rr.run_id].matrix(), response[rr.run_id]) for rr in (b.rr for b in roads)]
@@ -970,14 +855,13 @@ def _verdict(checked, ext, road_ids: list, ab_ids: list, tracks_block: dict) -> 
     on tracks as built, ``ab_ids``, judged at their estimated road), not adequate when the tracks as built needed
     more than a track carries; and those tracks' lines."""
     adequacy = advise(assess_runs(checked, CHANNELS), {"extensions": list(ext)})
-    if road_ids:
-        adequacy = dict(adequacy, not_assessed=list(road_ids),
-                        note="the verdict covers the runs on known tracks; runs on unknown roads are not assessed")
-    if ab_ids:
-        lo, hi = defaults["roadfit.band"]
-        adequacy = dict(adequacy, as_built=sorted(ab_ids),
-                        as_built_note="runs on tracks as built: the residual at the estimated road, over the fit "
-                                      f"band {lo}-{hi} Hz")
+    lo, hi = defaults["roadfit.band"]
+    notes = ((road_ids, {"not_assessed": list(road_ids), "note": "the verdict covers the runs on known tracks; runs "
+                         "on unknown roads are not assessed"}),
+             (ab_ids, {"as_built": sorted(ab_ids), "as_built_note": "runs on tracks as built: the residual at the "
+                       f"estimated road, over the fit band {lo}-{hi} Hz"}))
+    for note in (note for ids, note in notes if ids):
+        adequacy = dict(adequacy, **note)
     odd = _implausible(tracks_block)
     if odd:
         adequacy = dict(adequacy, adequate=False, advice=adequacy.get("advice") or ADVICE,
@@ -990,37 +874,30 @@ def _verdict(checked, ext, road_ids: list, ab_ids: list, tracks_block: dict) -> 
 
 
 def _road_hints(ds, P, geom, prob, adequacy, assess: bool, polish: bool) -> tuple[list, str]:
-    """The coupling hints of the road fit (:func:`_road_sensor_hints`) and where they come from: asked of the tracks
-    as built when a verdict was given, else of the unknown roads after a polish; none when the adequacy has
-    hints already (the fit on the tracks as drawn gave them)."""
-    if (adequacy or {}).get("sensor_hints"):
-        return [], ROAD_HINTS_NOTE
-    sources = ((TrackBlock, adequacy is not None, ROAD_HINTS_NOTE, defaults["sensor_check.hint_reduction"]),
-               (RoadBlock, assess and polish, FREE_ROAD_HINTS_NOTE, defaults["sensor_check.free_road_hint_reduction"]))
-    for kind, asked, note, threshold in sources:
-        runs = [prob.parts[k].rr for k in prob.of(kind)]
-        hints = _road_sensor_hints(P, geom, runs, ds, threshold) if runs and asked else []
+    """The coupling hints of the road fit (:func:`_road_sensor_hints`) and where they come from, from the first
+    source that gives any (:data:`_HINT_SOURCES`); none when the adequacy has hints already (the fit on the tracks
+    as drawn gave them)."""
+    asked = {"verdict": adequacy is not None and not adequacy.get("sensor_hints"),
+             "polish": assess and polish and not (adequacy or {}).get("sensor_hints")}
+    for kind, when, note, threshold in _HINT_SOURCES:
+        runs = [prob.parts[k].rr for k in prob.of(kind) if asked[when]]
+        hints = _road_sensor_hints(P, geom, runs, ds, defaults[threshold]) if runs else []
         if hints:
             return hints, note
     return [], ROAD_HINTS_NOTE
 
 
-def _model_block(plan, start_result) -> dict:
-    """result.json ``model``: the start's, or the groups fitted and how they were chosen."""
-    if start_result is not None and start_result.model:
-        block = dict(start_result.model)
-    else:
-        block = {"extensions": list(plan.ext), "selection": "given" if plan.note is None else
-                 "auto (not run: unknown roads)"}
-    if plan.note:
-        block["note"] = plan.note
-    return block
+#: where the road fit's coupling hints are asked, in order: (the blocks, asked after a verdict or after a polish,
+#: the note, the setting of the residual's reduction that names a coupling)
+_HINT_SOURCES = ((TrackBlock, "verdict", ROAD_HINTS_NOTE, "sensor_check.hint_reduction"),
+                 (RoadBlock, "polish", FREE_ROAD_HINTS_NOTE, "sensor_check.free_road_hint_reduction"))
 
 
 @dataclass
 class _Outcome:
     """What the fit gives, for the result: the estimate (``x``, ``P``), its error bars and records, the
-    fitted channels, the verdict, the roads' and tracks' records."""
+    fitted channels, the verdict and the road fit's coupling hints, the roads' and tracks' records, the
+    search's record (``search``: ``(x0, nit, nfev, stop, history)``)."""
 
     x: np.ndarray
     P: np.ndarray
@@ -1030,22 +907,31 @@ class _Outcome:
     errors: list
     response: dict
     adequacy: dict | None
+    hints: tuple
     tracks: dict | None
     motion: dict
-    model: dict
+    roads: dict
+    profiles: dict
+    search: tuple
+    rng_record: dict
     wall: float
 
+    @property
+    def hinted(self) -> dict | None:
+        """The verdict with the road fit's coupling hints (:func:`_with_hints`), when it has any."""
+        return _with_hints(self.adequacy, *self.hints) if self.hints[0] else self.adequacy
 
-def _as_drawn_stands(start_result, out: _Outcome, road_hints, hints_note):
-    """The as-drawn result with its verdict and what the tracks as built needed (they were rejected: the road is
-    not the explanation); the speeds and starts the as-built fit found are the data's all the same (SPEC §13:
-    named, not dropped)."""
+
+def _as_drawn_stands(ds, plan, start_result, out: _Outcome):
+    """The tracks as built rejected (the road is not the explanation): the as-drawn result with its verdict and
+    what the tracks as built needed; the speeds and starts the as-built fit found are the data's all the same
+    (SPEC §13: named, not dropped)."""
     why = out.adequacy["reasons"][0]
     ad = dict(start_result.adequacy or {})
     if ad:
         ad["reasons"] = [f"tracks as built rejected: {why}"] + list(ad.get("reasons", []))
-        if road_hints and not ad.get("sensor_hints"):  # what the road fit saw of the sensors
-            ad = _with_hints(ad, road_hints, hints_note)
+        if out.hints[0] and not ad.get("sensor_hints"):  # what the road fit saw of the sensors
+            ad = _with_hints(ad, *out.hints)
     for rec in out.tracks.values():
         rec["rejected"] = why
     checks = [c for c in (start_result.checks or []) if c.get("check") != "motion"] + motion_findings(out.motion)
@@ -1053,10 +939,10 @@ def _as_drawn_stands(start_result, out: _Outcome, road_hints, hints_note):
                    wall_time_s=start_result.wall_time_s + out.wall)
 
 
-def _on_start(start_result, out: _Outcome, space, geom):
+def _on_start(ds, plan, start_result, out: _Outcome):
     """The as-drawn identification's search, weights, maps and starts stand; the estimate is the as-built fit's,
     and so are the estimates at a search bound (the as-drawn fit's bound findings replaced)."""
-    info = out.fitted.info
+    info, space = out.fitted.info, plan.space
     checks = [c for c in (start_result.checks or []) if c.get("check") not in ("bounds", "motion")]
     checks += [f.to_dict() for f in mark_bounds(out.details)] + motion_findings(out.motion)
     return replace(start_result, checks=checks, x=np.asarray(out.x, dtype=float), names=list(space.names),
@@ -1066,15 +952,16 @@ def _on_start(start_result, out: _Outcome, space, geom):
                    nfev=int(start_result.nfev + out.fitted.nfev),
                    parameters={nme: float(out.P[space.col[nme]]) for nme in space.reported_names},
                    details=out.details, wall_time_s=start_result.wall_time_s + out.wall,
-                   polish=dict(info, as_drawn=start_result.polish), modal=modal_summary(out.P[:len(ALL_NAMES)], geom),
-                   model=out.model, response=out.response, correlation=out.robust.correlation_dict(),
-                   adequacy=out.adequacy, tracks=out.tracks)
+                   polish=dict(info, as_drawn=start_result.polish),
+                   modal=modal_summary(out.P[:len(ALL_NAMES)], ds.geometry), model=dict(plan.model),
+                   response=out.response, correlation=out.robust.correlation_dict(), adequacy=out.hinted,
+                   tracks=out.tracks)
 
 
-def _fresh(ds, out: _Outcome, space, search, rng_record, roads, profiles):
-    """The result of a fit from its own start (``search``: ``(x0, nit, nfev, stop, history)``)."""
-    info = out.fitted.info
-    _, nit, nfev, stop, history = search
+def _fresh(ds, plan, start_result, out: _Outcome):
+    """The result of a fit from its own start."""
+    info, space = out.fitted.info, plan.space
+    _, nit, nfev, stop, history = out.search
     return IdentificationResult(
         x=np.asarray(out.x, dtype=float), names=list(space.names), std=out.fitted.std, covariance=out.fitted.cov,
         fun=float(np.mean(out.errors)),
@@ -1082,13 +969,17 @@ def _fresh(ds, out: _Outcome, space, search, rng_record, roads, profiles):
         ("" if info is None else f"; polish: {info['message']}"), stop=stop, nit=int(nit),
         nfev=int(nfev + out.fitted.nfev),
         parameters={nme: float(out.P[space.col[nme]]) for nme in space.reported_names}, details=out.details,
-        known=dict(ds.known), wall_time_s=out.wall, seed=rng_record["seed"], rng_state=rng_record["rng_state"],
-        track_weights={}, weights_mode="equal", polish=info, history=History(history), starts={},
-        preprocessing=ds.preprocessing(), dataset=str(ds.path), maps=None,
+        known=dict(ds.known), wall_time_s=out.wall, seed=out.rng_record["seed"],
+        rng_state=out.rng_record["rng_state"], track_weights={}, weights_mode="equal", polish=info,
+        history=History(history), starts={}, preprocessing=ds.preprocessing(), dataset=str(ds.path), maps=None,
         modal=modal_summary(out.P[:len(ALL_NAMES) if space.layout is None else space.layout.n_car], ds.geometry),
-        model=out.model, response=out.response, correlation=out.robust.correlation_dict(), adequacy=out.adequacy,
-        checks=[f.to_dict() for f in getattr(ds, "findings", [])] + motion_findings(out.motion), roads=roads or None,
-        road_profiles=profiles or None, tracks=out.tracks)
+        model=dict(plan.model), response=out.response, correlation=out.robust.correlation_dict(),
+        adequacy=out.hinted, checks=[f.to_dict() for f in getattr(ds, "findings", [])] + motion_findings(out.motion),
+        roads=out.roads or None, road_profiles=out.profiles or None, tracks=out.tracks)
+
+
+#: the result by (a start's result given, the tracks as built rejected)
+_RESULTS = {(True, True): _as_drawn_stands, (True, False): _on_start, (False, True): _fresh, (False, False): _fresh}
 
 
 def _fit(prob, z0, ds, polish: bool) -> _Fitted:
@@ -1130,14 +1021,9 @@ def _identify_any_road(ds, *, rng=None, seed=None, population=None, generations=
                     "note": "runs on unknown roads alone: the residuals are not assessed; the sensor check of the "
                             "road fit is"}
     out = _Outcome(x, P, fitted, details, robust, errors + errors_t, dict(response, **response_t), adequacy,
-                   tracks_block, motion, _model_block(plan, start_result), time.perf_counter() - t0)
-    if start_result is not None and odd:
-        return _as_drawn_stands(start_result, out, road_hints, hints_note)
-    if road_hints:
-        out.adequacy = _with_hints(adequacy, road_hints, hints_note)
-    if start_result is not None:
-        return _on_start(start_result, out, plan.space, geom)
-    return _fresh(ds, out, plan.space, search, rng_record, roads, profiles)
+                   (road_hints, hints_note), tracks_block, motion, roads, profiles, search, rng_record,
+                   time.perf_counter() - t0)
+    return _RESULTS[(start_result is not None, bool(odd))](ds, plan, start_result, out)
 
 
 #: the constants this module had before rideid.settings, read from the registry (PEP 562)
