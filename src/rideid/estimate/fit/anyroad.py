@@ -39,6 +39,12 @@ times its filter's response, the filters' states at the first sample estimated w
 no hint on an unknown road (:func:`rideid.estimate.assess.sensor_check.coupling_hints` compares a simulation in the
 time domain); on tracks as built the hints of the fit on the tracks as drawn are kept, with a note.
 
+The problem is built up front (:class:`_Plan`): one block per unknown road, one per run on a track as built (with
+where the car was on it, its speed and start under their priors), one for the runs on tracks as drawn
+(:mod:`rideid.estimate.problem.blocks`, one interface: residuals, weight, meat, record). Each stage takes the
+problem and returns the next one (:func:`_start`, :func:`_polish`, :func:`_error_bars`, then the records and the
+verdict); a new nuisance is a new block, not a new stage.
+
 The model: linear (the twelve, anti-roll bars, tire damping, CG height).
 Damper curves and bump stops are nonlinear and the projection needs a linear
 car: such a model with an unknown-road run is refused. ``auto`` fits the
@@ -256,8 +262,8 @@ def _joint_solve(prob, z, ds, max_nfev: int):
     prior (SPEC §13) a residual block of the same solve, weighted by its std against the run's own residual level.
     Without a track as built: the car alone.
 
-    Placed by :func:`rideid.estimate.problem.asbuilt.align_motion` at one car and then held, a run's speed follows that
-    car, and the car the speed: on the all-realities case without an engine (seed 5, model base) the speeds
+    Placed by :meth:`rideid.estimate.problem.blocks.TrackBlock.aligned` at one car and then held, a run's speed
+    follows that car, and the car the speed: on the all-realities case without an engine (seed 5, model base) the speeds
     ended 0.03-0.07 % low (4-8 of their standard errors) and the unsprung masses +3.5-4.2 % (4 std_robust);
     with the speed declared instead, +0.8 %. Solved together, both go to their joint minimum (measured:
     docs/tracks-as-built.md). Returns the solution (``x``: the car) and the problem on the moved blocks (their
@@ -292,8 +298,8 @@ def _joint_solve(prob, z, ds, max_nfev: int):
 @stage("error bars with motion")
 def _with_motion(prob, z, H, Ja, S, s2, ds):
     """The error bars with the speed and the start of each run on a track as built (placed by
-    :func:`rideid.estimate.problem.asbuilt.align_motion`, solved with the car by :func:`_joint_solve`, then held for the
-    Newton steps and the Hessian) as nuisance parameters of the same sandwich: their residual columns
+    :meth:`rideid.estimate.problem.blocks.TrackBlock.aligned`, solved with the car by :func:`_joint_solve`, then
+    held for the Newton steps and the Hessian) as nuisance parameters of the same sandwich: their residual columns
     (:meth:`rideid.estimate.problem.blocks.TrackBlock.motion_jacobian`) join the car's, the bread
     ``[[H, Ja^T Jm], [Jm^T Ja, Jm^T Jm + Jp^T Jp]]`` (the car's block the true Hessian, the rest Gauss-Newton: the
     drawing's inputs are not projected, so ``J^T J`` is their curvature; ``Jp`` the set-up priors' rows, SPEC §13),
@@ -372,8 +378,8 @@ def motion_record(fitted: dict, prior, tr) -> dict:
     sentences naming what the data moved beyond setting ``anyroad.motion_named`` prior std; with the older keys of a
     run along a speed channel (``speed_m_s``, ``start_shift_s``, their ``_std``, ``speed_channel_mean_m_s``).
 
-    ``fitted``: :func:`rideid.estimate.problem.asbuilt.align_motion`'s record with the solve's speed, shift and their
-    standard errors; ``prior``: the run's :class:`rideid.estimate.problem.asbuilt.MotionPrior`; ``tr``: its
+    ``fitted``: :meth:`rideid.estimate.problem.blocks.TrackBlock.aligned`'s record with the solve's speed, shift and
+    their standard errors; ``prior``: the run's :class:`rideid.estimate.problem.asbuilt.MotionPrior`; ``tr``: its
     :class:`rideid.estimate.problem.asbuilt.TrackRun` as solved."""
     out = {k: v for k, v in fitted.items() if k in ("speed_m_s", "start_shift_s", "speed_std_m_s",
                                                     "start_shift_std_s")}
@@ -494,7 +500,7 @@ def _carry_sensor_hints(adequacy, start_result):
 
 #: result.json ``tracks.<track>.runs.<run>.motion.note``
 _MOTION_NOTE = ("the run taken at a constant speed, placed with its start on the track as built "
-                "(estimate.problem.asbuilt.align_motion), then both solved with the car (anyroad._joint_solve), a "
+                "(estimate.problem.blocks.TrackBlock.aligned), then both solved with the car (anyroad._joint_solve), a "
                 "declared speed and a given start as priors (SPEC §13: declared ± prior_std, the default width "
                 "docs/formats.md); speed, start: the estimate, its std, the declared value; start_shift_s: the "
                 "start's change from the one read; the std are in the car's error bars as the budget's "
@@ -683,7 +689,7 @@ def _realigned(prob, P, ds, mode: str) -> _Problem:
 
 def _placed(prob, z, ds) -> _Problem:
     """The track blocks' noise and unevenness levels at the car ``z``, each run's drawing placed there on the
-    drawing alone and then with the prior estimated there (:func:`rideid.estimate.problem.asbuilt.align_motion`
+    drawing alone and then with the prior estimated there (:meth:`rideid.estimate.problem.blocks.TrackBlock.aligned`
     says why), the levels again at each placement."""
     P = prob.car(z)
     prob = _replaced(prob, lambda b: b.with_prior(P, prob.geom))
