@@ -1,8 +1,8 @@
 """Tracks as built along a speed channel (SPEC §11): a run whose driver held the speed is fitted as built at a
-constant speed, that speed and its start fitted to the track (rideid.estimate.problem.asbuilt.align_motion); a run whose
-speed wandered stays as drawn and says by how much (rideid.estimate.fit.anyroad.speed_wander). The data come from the
-independent simulator of tests/driven_speed.py (SciPy lsim of the SUV written from SPEC §1, the exact drawing, a
-10 Hz GPS column with 0.03 m/s of white noise)."""
+constant speed, that speed and its start fitted to the track (rideid.estimate.problem.blocks.TrackBlock.aligned); a
+run whose speed wandered stays as drawn and says by how much (rideid.estimate.problem.blocks.speed_wander). The data
+come from the independent simulator of tests/driven_speed.py (SciPy lsim of the SUV written from SPEC §1, the exact
+drawing, a 10 Hz GPS column with 0.03 m/s of white noise)."""
 
 import warnings
 from dataclasses import replace
@@ -15,7 +15,7 @@ from asbuilt_tracks import RUNS
 from cars import SUV_TRUTH
 from driven_speed import OFFSET, write_case
 from rideid.estimate.fit import anyroad
-from rideid.estimate.problem import asbuilt
+from rideid.estimate.problem import asbuilt, blocks
 from rideid.estimate.problem.cost import ParameterSpace
 
 #: the washboard at 10 m/s and the herringbone at 5 m/s: short runs, one spectral line and many
@@ -73,9 +73,9 @@ def test_the_speed_and_the_start_are_fitted_to_the_track(held):
     for run in held.runs:
         tr = asbuilt.prepare_track_run(held, run)
         tr.prior = asbuilt.estimate_prior(P, held.geometry, tr)
-        moved, rec = asbuilt.align_motion(P, held.geometry, tr, held, run, "amplitude")
+        moved, rec = blocks.align_motion(P, held.geometry, tr, held, run, "amplitude")
         moved.prior = asbuilt.estimate_prior(P, held.geometry, moved)
-        moved, rec = asbuilt.align_motion(P, held.geometry, moved, held, run, "prior")
+        moved, rec = blocks.align_motion(P, held.geometry, moved, held, run, "prior")
         after = asbuilt.residuals(P, held.geometry, moved)
         before = asbuilt.residuals(P, held.geometry, replace(tr, prior=moved.prior))  # the same prior
         assert after @ after < before @ before
@@ -88,7 +88,7 @@ def test_the_speed_and_the_start_are_fitted_to_the_track(held):
         # sandwich adds, anyroad._with_motion): the errors within 3 of them (measured over seeds 10-13: within
         # 0.96 std; the herringbone's start 0.01-0.05 ms, the washboard's tens of ms: a pure sine's start shifts
         # nothing but its ends)
-        Jm = asbuilt.motion_jacobian(P, held.geometry, moved, held, run)
+        Jm = blocks.motion_jacobian(P, held.geometry, moved, held, run)
         sd = np.sqrt(np.diag(float(after @ after) / after.size * np.linalg.inv(Jm.T @ Jm)))
         assert abs(rec["speed_m_s"] / speeds[run.id] - 1) < 3 * sd[0] < 1e-4, (run.id, rec, sd)
         assert abs(start - OFFSET) < 3 * sd[1], (run.id, start, sd)

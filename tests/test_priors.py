@@ -27,7 +27,7 @@ from rideid.data.schema import manifest as man_schema
 from rideid.data.schema.manifest import parse_dataset_manifest
 from rideid.errors import DataError
 from rideid.estimate.fit import anyroad
-from rideid.estimate.problem import asbuilt
+from rideid.estimate.problem import asbuilt, blocks
 from rideid.estimate.problem.cost import ParameterSpace
 
 sys.path.insert(0, str(Path(__file__).parent))
@@ -217,12 +217,12 @@ def test_the_speed_is_estimated_with_the_car_and_named(slipped):
     assert prior.speed == (10.1, pytest.approx(0.0303), False) and prior.start == (0.0, 0.005, False)
     tr = asbuilt.prepare_track_run(ds, run)
     tr.prior = asbuilt.estimate_prior(P, ds.geometry, tr)
-    tr, rec = asbuilt.align_motion(P, ds.geometry, tr, ds, run, "amplitude", prior)
+    tr, rec = blocks.align_motion(P, ds.geometry, tr, ds, run, "amplitude", prior)
     tr.prior = asbuilt.estimate_prior(P, ds.geometry, tr)
-    tr, rec = asbuilt.align_motion(P, ds.geometry, tr, ds, run, "prior", prior)
+    tr, rec = blocks.align_motion(P, ds.geometry, tr, ds, run, "prior", prior)
     assert rec["speed_m_s"] == pytest.approx(10.0, rel=2e-4)
     e = asbuilt.residuals(P, ds.geometry, tr)
-    Jm = asbuilt.motion_jacobian(P, ds.geometry, tr, ds, run)
+    Jm = blocks.motion_jacobian(P, ds.geometry, tr, ds, run)
     sd = np.sqrt(np.diag(float(e @ e) / e.size * np.linalg.inv(Jm.T @ Jm)))
     assert abs(rec["speed_m_s"] / 10.0 - 1) < 3 * sd[0] + 1e-5
     m = anyroad.motion_record(dict(rec, speed_std_m_s=10.0 * sd[0], start_shift_std_s=sd[1]), prior, tr)

@@ -130,7 +130,7 @@ def test_identify_runs_on_the_all_realities_case(realities, tmp_path):
 
     Measured (seed 1, three runs, each wheel on its own lateral path; 112 s on two cores): the speed channel
     holds (its wander 0 % after its noise), so the runs are fitted as built, each at a constant speed placed with
-    its start (two passes, asbuilt.align_motion) and then solved with the car (anyroad._joint_solve), the hub's
+    its start (two passes, blocks.TrackBlock.aligned) and then solved with the car (anyroad._joint_solve), the hub's
     clipped samples freed (26 and 84). The twelve within 0.60 % (m_ur), every one within 1.4 std_robust (the
     white sandwich of the as-built runs, the speeds and starts in it), the engine's mass -0.24 %, its bounce
     frequency -0.00 %, adequate. The tracks: the washboard is one spectral line whose bins the prior opens, so

@@ -111,9 +111,10 @@ def test_a_short_washboard_run_holds_its_unevenness_at_the_prior(tmp_path):
                 assert asbuilt.solve(P, ds.geometry, tr).alpha == pytest.approx(1.0, abs=2e-3)
             else:
                 assert tr.prior.held is None and surface < 1e-3, (run.id, surface)
-        block = anyroad._tracks_block(ds, trs, {}, P, ds.geometry)
-        assert "too short" in block["washboard"]["runs"]["W_H"]["unevenness_held"]
-        assert block["washboard"]["unevenness_rms_surface_m"] < rideid.settings.defaults["anyroad.plausible_rms"]
+        held = next(tr for tr in trs if tr.run_id == "W_H")  # its entry of result.json tracks.washboard.runs
+        rec = anyroad._track_run_record(held, asbuilt.solve(P, ds.geometry, held, alpha_std=True))
+        assert "too short" in rec["unevenness_held"]
+        assert rec["unevenness_rms_surface_m"] < rideid.settings.defaults["anyroad.plausible_rms"]
     ds = rideid.load_dataset(write_dataset(tmp_path / "rough", seed=1, runs=[by_id["W_H"]]))
     _, P = _truth_row(ds)
     tr = asbuilt.prepare_track_run(ds, ds.runs[0])

@@ -240,28 +240,29 @@ _SETTINGS: tuple[Setting, ...] = (
                   "washboard's 3.1 s at 10 m/s 1.2e3-5.4e5 (the fake 19-399 mm RMS); the twist, the herringbone, a "
                   "6 s washboard and the washboard with 1.5 mm unevenness 2e-4 to 0.83")),
     Setting('asbuilt.motion_scale', (0.001, 0.001), '1 (relative speed), s (start)',
-            "asbuilt.align_motion's unknowns: the speed's relative change and the start's shift (s), in these units",
+            ("blocks.TrackBlock.aligned's unknowns: the speed's relative change and the start's shift (s), in these "
+             "units"),
             'docs/tracks-as-built.md#the-model-rideidestimateproblemasbuiltpy',
             'tests/test_asbuilt_speed.py::test_the_speed_and_the_start_are_fitted_to_the_track',
             measured=False),
     Setting('asbuilt.motion_steps', (0.5, 2.0), 'asbuilt.motion_scale units',
-            "the first steps of asbuilt.align_motion's Nelder-Mead simplex (asbuilt.motion_scale units)",
+            "the first steps of blocks.TrackBlock.aligned's Nelder-Mead simplex (asbuilt.motion_scale units)",
             'docs/tracks-as-built.md#the-model-rideidestimateproblemasbuiltpy',
             'tests/test_asbuilt_speed.py::test_the_speed_and_the_start_are_fitted_to_the_track',
             measured=False),
     Setting('asbuilt.motion_xtol', 0.01, 'asbuilt.motion_scale units',
-            "the tolerance of align_motion's Nelder-Mead simplex",
+            "the tolerance of TrackBlock.aligned's Nelder-Mead simplex",
             'docs/tracks-as-built.md#the-model-rideidestimateproblemasbuiltpy',
             'tests/test_asbuilt_speed.py::test_the_speed_and_the_start_are_fitted_to_the_track',
             measured=False),
     Setting('asbuilt.motion_maxfev', 120, 'evaluations',
-            "align_motion's Nelder-Mead evaluations at most",
+            "TrackBlock.aligned's Nelder-Mead evaluations at most",
             'docs/tracks-as-built.md#the-model-rideidestimateproblemasbuiltpy',
             'tests/test_asbuilt_speed.py::test_the_speed_and_the_start_are_fitted_to_the_track',
             measured=False),
     Setting('asbuilt.motion_jacobian_steps', (0.1, 0.2), 'asbuilt.motion_scale units',
-            ("asbuilt.motion_jacobian's central-difference steps (asbuilt.motion_scale units: 1e-4 of the speed, 0.2 "
-             "ms): about the speed's and the start's standard errors on the all-realities case "
+            ("blocks.TrackBlock.motion_jacobian's central-difference steps (asbuilt.motion_scale units: 1e-4 of the "
+             "speed, 0.2 ms): about the speed's and the start's standard errors on the all-realities case "
              '(docs/tracks-as-built.md)'),
             'docs/tracks-as-built.md#the-model-rideidestimateproblemasbuiltpy',
             'tests/test_asbuilt_speed.py::test_the_speed_and_the_start_are_fitted_to_the_track',

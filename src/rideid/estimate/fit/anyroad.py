@@ -39,6 +39,12 @@ times its filter's response, the filters' states at the first sample estimated w
 no hint on an unknown road (:func:`rideid.estimate.assess.sensor_check.coupling_hints` compares a simulation in the
 time domain); on tracks as built the hints of the fit on the tracks as drawn are kept, with a note.
 
+The problem is built up front (:class:`_Plan`): one block per unknown road, one per run on a track as built (with
+where the car was on it, its speed and start under their priors), one for the runs on tracks as drawn
+(:mod:`rideid.estimate.problem.blocks`, one interface: residuals, weight, meat, record). Each stage takes the
+problem and returns the next one (:func:`_start`, :func:`_polish`, :func:`_error_bars`, then the records and the
+verdict); a new nuisance is a new block, not a new stage.
+
 The model: linear (the twelve, anti-roll bars, tire damping, CG height).
 Damper curves and bump stops are nonlinear and the projection needs a linear
 car: such a model with an unknown-road run is refused. ``auto`` fits the
@@ -53,7 +59,7 @@ road run each used channel's squared error at the estimated road over its measur
 from __future__ import annotations
 
 import time
-from dataclasses import replace
+from dataclasses import dataclass, replace
 
 import numpy as np
 from scipy.optimize import OptimizeResult, least_squares
@@ -61,13 +67,17 @@ from scipy.optimize import OptimizeResult, least_squares
 from ...profiling import stage
 from ...settings import defaults, legacy_names
 from ...data.schema import NONLINEAR_GROUPS
-from ...errors import ArgumentError, DataError
+from ...errors import ArgumentError
 from ...model.batch import single_threaded_blas, thread_map, thread_map_rows
 from ...model.equations import CHANNELS, modal_summary
 from ...model.params import ALL_NAMES
 from ...model.roads import iso8608_class
 from ..problem import asbuilt
 from ..problem import roadfit
+from ..problem.blocks import DrawnTracks, RoadBlock, TrackBlock, method as blocks_method
+# which block each run gets (the problem's, re-exported: the model choice and the tests read them here)
+from ..problem.blocks import (TRACK_OPTIONS, as_built_runs, prepare_road_runs, run_speed,  # noqa: F401
+                              speed_wander, unknown_road_runs)
 from ..assess.adequacy import ADVICE, advise, assess as assess_runs
 from ..problem.cost import CostFunction, ParameterSpace, channel_weights, refuse_unsupported_groups
 from .identify import (DEFAULT_GENERATIONS, DEFAULT_POPULATION, identify as identify_model, mark_bounds,
@@ -76,55 +86,7 @@ from .jade import JadeSolver, make_rng, stop_requested
 from ..result import History, IdentificationResult
 from ..assess.sensor_check import road_coupling_hints
 from ..assess.roads import judge as judge_road_runs
-from .uncertainty import andrews_bandwidth, estimate_covariance, long_run_covariance, run_scores
-
-#: ``tracks``: each declared track fitted as built (the default: the drawing is the nominal shape, SPEC §11) or
-#: taken exactly as drawn
-TRACK_OPTIONS = ("as-built", "as-drawn")
-
-
-def unknown_road_runs(ds, extensions=()) -> list:
-    """The runs of ``ds`` fitted with their road projected out: those on unknown roads (SPEC §9), and, when the
-    model (its ``extensions``) is linear, those on known tracks that begin moving (``moving = true``: the road
-    fit estimates the state at the first sample, and the road, without using the track's profile). With
-    damper curves or bump stops, which the projection cannot take, a moving run on a known track is fitted on
-    its track, simulated from rest a lead-in before its first sample (:func:`rideid.data.dataset.run_lead_in`,
-    docs/any-road.md)."""
-    nonlinear = any(g in NONLINEAR_GROUPS for g in extensions)
-    return [r for r in ds.runs
-            if not getattr(r, "road_known", True) or (getattr(r, "moving", False) and not nonlinear)]
-
-
-def run_speed(ds, run) -> float:
-    """The constant speed (m/s) of an unknown-road run: the manifest's, or its speed/distance channel's
-    mean when it varies by at most setting ``anyroad.speed_tolerance`` (else one clear error)."""
-    rd = ds.data[run.id]
-    dist = getattr(rd, "distance", None)
-    if dist is None:
-        return float(run.speed)
-    x = np.asarray(dist(rd.time), dtype=float)
-    v = np.gradient(x, rd.time)
-    vm = float(np.mean(v))
-    spread = float((np.max(v) - np.min(v)) / vm) if vm > 0 else np.inf
-    if not np.isfinite(spread) or spread > 2 * defaults["anyroad.speed_tolerance"]:
-        raise DataError(f"run '{run.id}': an unknown-road run needs a constant speed (the rear wheels' delay "
-                        f"wheelbase/speed is taken as constant), but its speed channel goes from {np.min(v):.2f} to "
-                        f"{np.max(v):.2f} m/s ({100 * spread:.0f} % of its mean; at most "
-                        f"{200 * defaults['anyroad.speed_tolerance']:.0f} %); cut the run to a stretch of steady speed")
-    return vm
-
-
-def prepare_road_runs(ds, extensions=()) -> list:
-    """:class:`rideid.estimate.problem.roadfit.RoadRun` of each run fitted with its road projected out
-    (:func:`unknown_road_runs` of the model's ``extensions``)."""
-    out = []
-    for r in unknown_road_runs(ds, extensions):
-        rd = ds.data[r.id]
-        rr = roadfit.prepare_road_run(r.id, rd.matrix(), rd.fs, run_speed(ds, r), ds.geometry,
-                                      clipped=ds.clipped(r.id))
-        out.append(roadfit.with_sensors(rr, ds.sensor_filters(r.id)))  # the channels as wired (SPEC §11)
-    return out
-
+from .uncertainty import estimate_covariance
 
 def road_run_error(rr, y, fitted) -> float:
     """``E_r`` of :mod:`rideid.estimate.problem.cost` for an unknown-road run: each used channel's squared error at
@@ -144,38 +106,34 @@ def _pinv(H):
     return np.linalg.pinv(H, rcond=1e-12, hermitian=True)
 
 
-def _road_meat(J, e, m_per_bin):
-    """Sum over DFT bins of ``(J_k^T e_k)(J_k^T e_k)^T`` (each bin's rows one cluster)."""
-    g = (J * e[:, None]).reshape(-1, m_per_bin, J.shape[1]).sum(axis=1)
-    return g.T @ g
-
-
-def _track_meat(J, e, cf):
-    blocks = [(int(e_ - s), int(np.count_nonzero(cf.W[ri] > 0)))
-              for ri, (s, e_) in enumerate(zip(cf.sim.run_start[:-1], cf.sim.run_start[1:]))]
-    S = np.zeros((J.shape[1], J.shape[1]))
-    for G in run_scores(J, e, blocks):
-        S += long_run_covariance(G, andrews_bandwidth(G))
-    return S
-
-
 class _Problem:
-    """The joint residual of the road runs (and the track runs' cost ``cf``).
+    """The joint residual of the problem's blocks (:mod:`rideid.estimate.problem.blocks`: the runs on tracks as
+    drawn, each unknown road, each track as built), each block times its weight ``scale``.
 
     Coordinates ``v``: the logarithm of each parameter bounded away from 0 (relative steps: the road fit's
     valley along the wheels' common scale, unsprung masses and tires together, is long and shallow, and the
     solver crosses it in a few steps in these coordinates, not in the bounds' unit box), the parameter over
-    its range's width for those that may be 0 (bars, tire damping)."""
+    its range's width for those that may be 0 (bars, tire damping). A problem is a value: :meth:`reweighted` and
+    :meth:`with_blocks` return new ones."""
 
-    def __init__(self, space, geom, rruns, cf=None):
-        self.space, self.geom, self.rruns, self.cf = space, geom, rruns, cf
+    def __init__(self, space, geom, blocks, scale, sizes=()):
+        self.space, self.geom, self.parts = space, geom, tuple(blocks)
         lo, hi = space.bounds[:, 0], space.bounds[:, 1]
         self.log = lo > 0
         self.span = np.where(self.log, 1.0, hi - lo)
         self.vbounds = (np.where(self.log, np.log(np.where(self.log, lo, 1.0)), lo / self.span),
                         np.where(self.log, np.log(np.where(self.log, hi, 1.0)), hi / self.span))
-        self.scale = np.ones(len(rruns) + (cf is not None))
-        self.equal = None if cf is None else np.full(len(cf.run_ids), 1.0 / len(cf.run_ids))
+        self.scale = np.asarray(scale, dtype=float)  # each block's weight (1 until reweighted)
+        self.sizes = list(sizes)  # each block's residual count, set by reweighted
+        self.size = sum(self.sizes)
+
+    def with_blocks(self, blocks) -> _Problem:
+        """The same problem (weights, sizes) on ``blocks`` (each block's nuisances moved)."""
+        return _Problem(self.space, self.geom, blocks, self.scale, self.sizes)
+
+    def of(self, kind) -> list[int]:
+        """The indices of the blocks of class ``kind``."""
+        return [k for k, b in enumerate(self.parts) if isinstance(b, kind)]
 
     def x(self, v):
         v = np.asarray(v, dtype=float)
@@ -189,26 +147,22 @@ class _Problem:
         """``dx/dv`` (d,): Jacobians in ``v`` divided by it are Jacobians in ``x``."""
         return np.where(self.log, self.x(v), self.span)
 
-    def blocks(self, z, rruns=None):
-        """The residual blocks at ``z``: the track runs' (with ``cf``), then each road run's, computed on
-        parallel threads (their NumPy and LAPACK work releases the GIL; each block is its own), the
-        track runs and then the longest road runs first."""
+    def car(self, v):
+        """The full parameter row (16+,) at ``v``."""
+        return self.space.full(self.x(v)[None])[0]
+
+    def blocks(self, z):
+        """The residual blocks at ``z``, computed on parallel threads (their NumPy and LAPACK work releases the
+        GIL; each block is its own), the track runs as drawn and then the longest runs first; None where the
+        car is not valid."""
         x = self.x(z)
         P = self.space.full(x[None])
         if not self.space.valid(P)[0]:
             return None
-        jobs = ([] if self.cf is None else [None]) + list(rruns or self.rruns)
-        order = sorted(range(len(jobs)), key=lambda i: -np.inf if jobs[i] is None else -jobs[i].fit.size)
-
-        def block(i):
-            if jobs[i] is None:
-                return self.cf.residuals(x[None], self.equal)[0]
-            if isinstance(jobs[i], asbuilt.TrackRun):
-                return asbuilt.residuals(P[0], self.geom, jobs[i])
-            return roadfit.residuals(P[0], self.geom, jobs[i])
-
-        done = dict(zip(order, thread_map(block, order, "rideid-roads")))
-        return [done[i] for i in range(len(jobs))]
+        order = sorted(range(len(self.parts)), key=lambda i: self.parts[i].order)
+        done = dict(zip(order, thread_map(lambda i: self.parts[i].residuals(x, P[0], self.geom), order,
+                                          "rideid-roads")))
+        return [done[i] for i in range(len(self.parts))]
 
     def jacobian(self, v, step: float = 1e-5) -> np.ndarray:
         """Central-difference Jacobian of the residuals at ``v`` (in ``v`` units).
@@ -225,7 +179,6 @@ class _Problem:
             vm[j] -= lo
             J[:, j] = (self(vp) - self(vm)) / (hi + lo) if hi + lo > 0 else 0.0
         return J
-
     def newton(self, v, H, steps: int = 3):
         """Newton steps on the cost with the true (half) Hessian ``H``: where the Gauss-Newton solver stops
         short along the wheels' common scale (its ``J^T J`` over-states the curvature there, so its steps
@@ -280,59 +233,56 @@ class _Problem:
                     4 * h[i] * h[j])
         return 0.5 * H
 
+
     def __call__(self, z):
         b = self.blocks(z)
         if b is None:
             return np.full(self.size, 1e3)
         return np.concatenate([s * r for s, r in zip(self.scale, b)])
 
-    def reweight(self, z):
-        """Each block divided by its own RMS at ``z``; a run on a track as built is already divided by its noise
-        level, bin by bin (:mod:`rideid.estimate.problem.asbuilt`), and keeps its weight 1."""
+    def reweighted(self, z) -> _Problem:
+        """The problem with each block divided by its own RMS at ``z``; a run on a track as built is already
+        divided by its noise level, bin by bin (:mod:`rideid.estimate.problem.asbuilt`), and keeps its weight 1."""
         b = self.blocks(z)
-        jobs = ([] if self.cf is None else [None]) + list(self.rruns)
-        self.scale = np.array([1.0 if isinstance(j, asbuilt.TrackRun) else 1.0 / max(np.sqrt(np.mean(r ** 2)), 1e-300)
-                               for j, r in zip(jobs, b)])
-        self.sizes = [r.size for r in b]
-        self.size = sum(self.sizes)
+        scale = np.array([1.0 / max(np.sqrt(np.mean(r ** 2)), 1e-300) if blk.reweighted else 1.0
+                          for blk, r in zip(self.parts, b)])
+        return _Problem(self.space, self.geom, self.parts, scale, [r.size for r in b])
 
 
-def _motion_weights(prob, z, keys) -> dict:
-    """Each run's (block index in ``prob.rruns``) residual level at the car ``z``: the RMS of its as-built block,
-    the weight its motion priors' rows take (:meth:`rideid.estimate.problem.asbuilt.MotionPrior.rows`)."""
-    P = prob.space.full(prob.x(z)[None])[0]
-    return {k: float(np.sqrt(np.mean(asbuilt.residuals(P, prob.geom, prob.rruns[k]) ** 2))) for k in keys}
+def _motion_block(prob, w, d: int):
+    """Where each track block's motion unknowns sit in the joint vector ``w`` (the car's ``d`` first): block
+    index -> ``w``'s slice of its (speed, start)."""
+    return {k: w[d + 2 * j:d + 2 * j + 2] for j, k in enumerate(prob.of(TrackBlock))}
 
 
 @stage("joint solve of car and motion")
-def _joint_solve(prob, z, along: dict, ds, max_nfev: int, priors: dict | None = None):
+def _joint_solve(prob, z, ds, max_nfev: int):
     """Least squares of the car ``z`` (v units) together with the speed and the start of each run on a track as
-    built (``along``: block index in ``prob.rruns`` -> run; the drawing moved by
-    :func:`rideid.estimate.problem.asbuilt.moved`, their unevenness priors as they are), each set-up value's prior
-    (``priors``: block index -> :class:`rideid.estimate.problem.asbuilt.MotionPrior`, SPEC §13) a residual block of the
-    same solve, weighted by its std against the run's own residual level.
+    built (each :class:`rideid.estimate.problem.blocks.TrackBlock` of ``prob``: the drawing moved by
+    :meth:`~rideid.estimate.problem.blocks.TrackBlock.moved`, its unevenness prior as it is), each set-up value's
+    prior (SPEC §13) a residual block of the same solve, weighted by its std against the run's own residual level.
+    Without a track as built: the car alone.
 
-    Placed by :func:`rideid.estimate.problem.asbuilt.align_motion` at one car and then held, a run's speed follows that
-    car, and the car the speed: on the all-realities case without an engine (seed 5, model base) the speeds
+    Placed by :meth:`rideid.estimate.problem.blocks.TrackBlock.aligned` at one car and then held, a run's speed
+    follows that car, and the car the speed: on the all-realities case without an engine (seed 5, model base) the speeds
     ended 0.03-0.07 % low (4-8 of their standard errors) and the unsprung masses +3.5-4.2 % (4 std_robust);
     with the speed declared instead, +0.8 %. Solved together, both go to their joint minimum (measured:
-    docs/tracks-as-built.md). Returns the solution (``x``: the car) and the moved runs (block index -> run, their
-    ``inputs`` tabulated at the new speed and start)."""
+    docs/tracks-as-built.md). Returns the solution (``x``: the car) and the problem on the moved blocks (their
+    ``inputs`` tabulated at the new speed and start, their records the solved speed and shift)."""
     d = z.size
-    keys = list(along)
-    base = {k: prob.rruns[k] for k in keys}
-    priors = priors or {}
-    weights = _motion_weights(prob, z, [k for k in keys if k in priors])
+    keys = prob.of(TrackBlock)
+    P0 = prob.car(z)
+    weights = {k: prob.parts[k].level(P0, prob.geom) for k in keys}
 
-    def place(w):
-        for j, k in enumerate(keys):
-            prob.rruns[k] = asbuilt.moved(base[k], ds, along[k], w[d + 2 * j:d + 2 * j + 2])
+    def placed(w):
+        parts = list(prob.parts)
+        for k, p in _motion_block(prob, w, d).items():
+            parts[k] = prob.parts[k].moved(ds, p)
+        return prob.with_blocks(parts)
 
     def fun(w):
-        place(w)
-        rows = [priors[k].rows(base[k].rr.speed, base[k].shift, w[d + 2 * j:d + 2 * j + 2], weights[k])
-                for j, k in enumerate(keys) if k in priors]
-        return np.concatenate([prob(w[:d])] + rows)
+        rows = [prob.parts[k].prior_rows(p, weights[k]) for k, p in _motion_block(prob, w, d).items()]
+        return np.concatenate([placed(w)(w[:d])] + rows)
 
     q = 2 * len(keys)
     lo = np.concatenate([prob.vbounds[0], np.full(q, -defaults["anyroad.joint_motion_bound"])])
@@ -340,49 +290,38 @@ def _joint_solve(prob, z, along: dict, ds, max_nfev: int, priors: dict | None = 
     steps = np.concatenate([np.full(d, 1e-5), np.tile(defaults["asbuilt.motion_jacobian_steps"], len(keys))])
     sol = least_squares(fun, np.concatenate([z, np.zeros(q)]), bounds=(lo, hi), method="trf", diff_step=steps,
                         max_nfev=max_nfev)
-    place(sol.x)
-    moved = {}
+    parts = list(placed(sol.x).parts)
     for k in keys:
-        tr = prob.rruns[k]
-        moved[k] = replace(tr, inputs=asbuilt.nominal_inputs(ds, along[k], tr.rr.speed, tr.shift))
-        prob.rruns[k] = moved[k]
-    return OptimizeResult(dict(sol, x=sol.x[:d], motion=sol.x[d:])), moved
+        parts[k] = parts[k].settled(ds)
+    return OptimizeResult(dict(sol, x=sol.x[:d], motion=sol.x[d:])), prob.with_blocks(parts)
 
 
 @stage("error bars with motion")
-def _with_motion(prob, z, H, Ja, S, s2, trs, along, ds, geom, priors: dict | None = None):
+def _with_motion(prob, z, H, Ja, S, s2, ds):
     """The error bars with the speed and the start of each run on a track as built (placed by
-    :func:`rideid.estimate.problem.asbuilt.align_motion`, solved with the car by :func:`_joint_solve`, then held for the
-    Newton steps and the Hessian) as nuisance parameters of the same sandwich: their residual columns
-    (:func:`rideid.estimate.problem.asbuilt.motion_jacobian`) join the car's, the bread
+    :meth:`rideid.estimate.problem.blocks.TrackBlock.aligned`, solved with the car by :func:`_joint_solve`, then
+    held for the Newton steps and the Hessian) as nuisance parameters of the same sandwich: their residual columns
+    (:meth:`rideid.estimate.problem.blocks.TrackBlock.motion_jacobian`) join the car's, the bread
     ``[[H, Ja^T Jm], [Jm^T Ja, Jm^T Jm + Jp^T Jp]]`` (the car's block the true Hessian, the rest Gauss-Newton: the
-    drawing's inputs are not projected, so ``J^T J`` is their curvature; ``Jp`` the set-up priors' rows, SPEC §13,
-    ``priors``: index in ``trs`` -> :class:`rideid.estimate.problem.asbuilt.MotionPrior`), the meat the runs' white meat
-    over both (the priors' rows as independent observations of the same level); the car's block of the inverse is
-    the car's covariance with the motion marginalised.
+    drawing's inputs are not projected, so ``J^T J`` is their curvature; ``Jp`` the set-up priors' rows, SPEC §13),
+    the meat the runs' white meat over both (the priors' rows as independent observations of the same level); the
+    car's block of the inverse is the car's covariance with the motion marginalised.
 
-    Returns the white and robust covariances (car's parameters, x units) and per run
+    Returns the white and robust covariances (car's parameters, x units) and per track block index
     ``{"speed_std_m_s", "start_shift_std_s"}``."""
     n = Ja.shape[1]
-    priors = priors or {}
-    index = {id(rr): k for k, rr in enumerate(prob.rruns)}
+    keys = prob.of(TrackBlock)
     offs = np.concatenate([[0], np.cumsum(prob.sizes)])
-    first = int(prob.cf is not None)
-    P = prob.space.full(prob.x(z)[None])[0]
-    q = 2 * len(along)
+    P = prob.car(z)
+    q = 2 * len(keys)
     Jm = np.zeros((Ja.shape[0], q))
     Jp = np.zeros((0, q))
-    for j, (i, r) in enumerate(along.items()):
-        k = index[id(trs[i])] + first
-        Jm[offs[k]:offs[k + 1], 2 * j:2 * j + 2] = asbuilt.motion_jacobian(P, geom, trs[i], ds, r)
-        if i in priors:
-            w = float(np.sqrt(s2))
-            rows = np.zeros((0, q))
-            pj = priors[i].jacobian(trs[i].rr.speed, w)
-            if pj.size:
-                rows = np.zeros((pj.shape[0], q))
-                rows[:, 2 * j:2 * j + 2] = pj
-            Jp = np.vstack([Jp, rows])
+    for j, k in enumerate(keys):
+        Jm[offs[k]:offs[k + 1], 2 * j:2 * j + 2] = prob.parts[k].motion_jacobian(P, prob.geom, ds)
+        pj = prob.parts[k].prior_jacobian(float(np.sqrt(s2)))
+        rows = np.zeros((pj.shape[0], q))
+        rows[:, 2 * j:2 * j + 2] = pj
+        Jp = np.vstack([Jp, rows])
     cross = Ja.T @ Jm
     prior_info = Jp.T @ Jp
     Hf = np.block([[H, cross], [cross.T, Jm.T @ Jm + prior_info]])
@@ -395,13 +334,42 @@ def _with_motion(prob, z, H, Ja, S, s2, trs, along, ds, geom, priors: dict | Non
                                                      [np.zeros((q, n)), prior_info]]))) @ Hinv @ D)
     rob = D @ Hinv @ Sf @ Hinv @ D * (m / max(m - n - q, 1))
     out = {}
-    for j, (i, r) in enumerate(along.items()):
+    for j, k in enumerate(keys):
         a = 2 * j + n
-        out[r.id] = {"speed_std_m_s": float(trs[i].rr.speed * np.sqrt(max(rob[a, a], 0.0))),
-                     "start_shift_std_s": float(np.sqrt(max(rob[a + 1, a + 1], 0.0)))}
+        out[k] = {"speed_std_m_s": float(prob.parts[k].tr.rr.speed * np.sqrt(max(rob[a, a], 0.0))),
+                  "start_shift_std_s": float(np.sqrt(max(rob[a + 1, a + 1], 0.0)))}
     return cov[:n, :n], rob[:n, :n], out
 
 
+def _entry(est, std, pr, unit) -> dict:
+    """One value of a run's ``motion`` record: its estimate and std, the declared value and its prior's std."""
+    e = {"estimate": est, "std": std, "unit": unit, "declared": None, "prior_std": None, "prior": "none"}
+    if pr is None:
+        return e
+    e.update(declared=pr[0], prior_std=pr[1], prior=("default", "declared")[bool(pr[2])])
+    if pr[1] > 0:
+        e["from_declared_in_prior_std"] = (est - pr[0]) / pr[1]
+    return e
+
+
+#: how a motion record's value is named when the data move it beyond its prior: (what, its unit, the estimate's
+#: departure from the declared value in words, the prior's std in words)
+_NAMED = {
+    "speed": ("declared speed {d:.2f} m/s", "m/s", lambda v, d: f"{100 * (v / d - 1):+.2f} %",
+              lambda s: f"{s:.2g} m/s"),
+    "start": ("declared start {d:.4f} s", "s", lambda v, d: f"{1e3 * (v - d):+.1f} ms", lambda s: f"{1e3 * s:.2g} ms"),
+}
+
+
+def _named(rid: str, key: str, value: float, std, pr) -> list[str]:
+    """The sentence naming run ``rid``'s ``key`` (speed, start) when ``value`` is beyond setting
+    ``anyroad.motion_named`` times its prior's std from the declared value (none without a prior)."""
+    if pr is None or abs(value - pr[0]) <= defaults["anyroad.motion_named"] * pr[1]:
+        return []
+    what, unit, off, width = _NAMED[key]
+    return [f"run {rid}: {what.format(d=pr[0])}, the data show {_pm(value, std)} {unit} ({off(value, pr[0])}, "
+            f"{abs(value - pr[0]) / pr[1]:.1f} times the declared value's std of {width(pr[1])}"
+            f"{('', ', the default width')[not pr[2]]})"]
 
 
 def motion_record(fitted: dict, prior, tr) -> dict:
@@ -411,41 +379,19 @@ def motion_record(fitted: dict, prior, tr) -> dict:
     sentences naming what the data moved beyond setting ``anyroad.motion_named`` prior std; with the older keys of a
     run along a speed channel (``speed_m_s``, ``start_shift_s``, their ``_std``, ``speed_channel_mean_m_s``).
 
-    ``fitted``: :func:`rideid.estimate.problem.asbuilt.align_motion`'s record with the solve's speed, shift and their
-    standard errors; ``prior``: the run's :class:`rideid.estimate.problem.asbuilt.MotionPrior`; ``tr``: its
+    ``fitted``: :meth:`rideid.estimate.problem.blocks.TrackBlock.aligned`'s record with the solve's speed, shift and
+    their standard errors; ``prior``: the run's :class:`rideid.estimate.problem.asbuilt.MotionPrior`; ``tr``: its
     :class:`rideid.estimate.problem.asbuilt.TrackRun` as solved."""
     out = {k: v for k, v in fitted.items() if k in ("speed_m_s", "start_shift_s", "speed_std_m_s",
                                                     "start_shift_std_s")}
     if prior.speed is None:
         out["speed_channel_mean_m_s"] = fitted.get("speed_channel_mean_m_s")
     v, sv = float(fitted["speed_m_s"]), fitted.get("speed_std_m_s")
-    read = 0.0 if prior.start is None else prior.start[0]
-    start0 = read if prior.start is not None else float(fitted.get("start_read_s", 0.0))
+    start0 = float(fitted.get("start_read_s", 0.0)) if prior.start is None else prior.start[0]
     st, sst = start0 + float(fitted["start_shift_s"]), fitted.get("start_shift_std_s")
-
-    def entry(est, std, pr, unit):
-        e = {"estimate": est, "std": std, "unit": unit, "declared": None if pr is None else pr[0],
-             "prior_std": None if pr is None else pr[1],
-             "prior": "none" if pr is None else ("declared" if pr[2] else "default")}
-        if pr is not None and pr[1] > 0:
-            e["from_declared_in_prior_std"] = (est - pr[0]) / pr[1]
-        return e
-
-    out["speed"] = entry(v, sv, prior.speed, "m/s")
-    out["start"] = entry(st, sst, prior.start, "s")
-    named = []
-    rid = tr.run_id
-    if prior.speed is not None and abs(v - prior.speed[0]) > defaults["anyroad.motion_named"] * prior.speed[1]:
-        named.append(f"run {rid}: declared speed {prior.speed[0]:.2f} m/s, the data show {_pm(v, sv)} m/s "
-                     f"({100 * (v / prior.speed[0] - 1):+.2f} %, {abs(v - prior.speed[0]) / prior.speed[1]:.1f} "
-                     f"times the declared value's std of {prior.speed[1]:.2g} m/s"
-                     f"{'' if prior.speed[2] else ', the default width'})")
-    if prior.start is not None and abs(st - prior.start[0]) > defaults["anyroad.motion_named"] * prior.start[1]:
-        named.append(f"run {rid}: declared start {prior.start[0]:.4f} s, the data show {_pm(st, sst)} s "
-                     f"({1e3 * (st - prior.start[0]):+.1f} ms, {abs(st - prior.start[0]) / prior.start[1]:.1f} "
-                     f"times the declared value's std of {1e3 * prior.start[1]:.2g} ms"
-                     f"{'' if prior.start[2] else ', the default width'})")
-    out["named"] = named
+    out["speed"] = _entry(v, sv, prior.speed, "m/s")
+    out["start"] = _entry(st, sst, prior.start, "s")
+    out["named"] = _named(tr.run_id, "speed", v, sv, prior.speed) + _named(tr.run_id, "start", st, sst, prior.start)
     return out
 
 
@@ -464,9 +410,7 @@ def with_size(rec: dict, fit, tr, ds) -> dict:
     if tr.size_std is None:
         return rec
     declared = ds.manifest.size_prior(tr.track)[1]
-    e = {"estimate": float(fit.alpha), "std": float(fit.alpha_std), "unit": "relative", "declared": 1.0,
-         "prior_std": float(tr.size_std), "prior": "declared" if declared else "default",
-         "from_declared_in_prior_std": (float(fit.alpha) - 1.0) / tr.size_std}
+    e = _entry(float(fit.alpha), float(fit.alpha_std), (1.0, float(tr.size_std), declared), "relative")
     named = [m for m in rec.get("named", []) if "drawn size" not in m]
     if abs(fit.alpha - 1.0) > defaults["anyroad.motion_named"] * tr.size_std:
         keys = ds.manifest.tracks[tr.track].keys
@@ -474,7 +418,7 @@ def with_size(rec: dict, fit, tr, ds) -> dict:
         named.append(f"track {tr.track} (run {tr.run_id}): drawn size {k} = {keys.get(k, float('nan')):g} m, the "
                      f"data show {_pm(float(fit.alpha), float(fit.alpha_std))} of it "
                      f"({abs(fit.alpha - 1.0) / tr.size_std:.1f} times the declared size's std of "
-                     f"{100 * tr.size_std:.2g} %{'' if declared else ', the default width'})")
+                     f"{100 * tr.size_std:.2g} %{('', ', the default width')[not declared]})")
     return dict(rec, size=e, named=named)
 
 
@@ -531,79 +475,6 @@ def _search(space, geom, rruns, gen, population, generations, callback, t0):
     return solver.x, g, solver.nfev, stop, history
 
 
-def speed_wander(ds, run) -> float | None:
-    """The relative RMS wander (about its mean) of the speed of ``run`` over its window, from its speed or distance
-    channel (None without one): the channel's speed between its samples, its variance less what the channel's
-    white noise (``preprocessing.<run>.speed.noise_std``, a GPS's) puts into a trapezoid's mean of two samples
-    (``sigma^2 / 2``) and twice that estimate's own standard error (``sigma^2 / 2 sqrt(2 / (N - 1))``: a slow
-    run's GPS noise is a per cent of its speed), floored at 0, over the mean speed. Measured on
-    tests/driven_speed.py's five runs, seeds 1-2: a held speed 0-0.35 %, a +-3 % driver 0.7-2.2 %."""
-    mr = ds.measured.get(run.id)
-    dist = getattr(mr, "distance", None) if mr is not None else None
-    if dist is None:
-        return None
-    if mr.window is not None and mr.start is not None:
-        lo, hi = mr.times[mr.window[0]], mr.times[mr.window[1] - 1]
-    else:
-        lo, hi = mr.t_first, mr.t_last
-    t = np.asarray(dist.t, dtype=float)
-    k = np.nonzero((t >= lo) & (t <= hi))[0]
-    if k.size < 4:
-        k = np.arange(t.size)
-    v = np.diff(np.asarray(dist.d, dtype=float)[k]) / np.diff(t[k])
-    vm = float(np.mean(v))
-    if not vm > 0:
-        return float("inf")
-    noise = float(mr.record.get("speed", {}).get("noise_std") or 0.0)
-    excess = float(np.var(v)) - 0.5 * noise ** 2 * (1.0 + 2.0 * np.sqrt(2.0 / max(v.size - 1, 1)))
-    return float(np.sqrt(max(excess, 0.0)) / vm)
-
-
-def as_built_runs(ds, ext, tracks: str = "as-built") -> tuple[list, dict]:
-    """The runs on declared tracks fitted as built (SPEC §11, :mod:`rideid.estimate.problem.asbuilt`), and those taken
-    as drawn with why: run id -> one line. As built needs a linear car (``ext`` without damper curves or bump
-    stops), the eight accelerometers, the roll rate and a speed held (a declared constant speed, or a speed or
-    distance channel that wanders by at most setting ``anyroad.held_speed``, :func:`speed_wander`);
-    ``tracks="as-drawn"`` takes every track as drawn.
-
-    The roll rate: without it a slow road difference between the wheel paths and the body's roll (a free
-    state at the first sample) trade off, and the road the prior is estimated from is not determined. Measured
-    on the SUV's five runs on tracks as built (4 % off, 1.5 mm RMS) with the roll_rate column removed: the
-    boundary unknowns of the free-road fit 4-79 (0.03-0.1 with it), "unevenness" of 0.2-3.6 m RMS, and the
-    tracks as built rejected as implausible; the pitch rate removed instead changes nothing. A roll rate that is
-    present but carries no signal (a symmetric track in simulated data) has the same trade-off; such runs stay as
-    built, and the plausibility of what the tracks needed (setting ``anyroad.plausible_rms``) judges them, as before."""
-    if tracks not in TRACK_OPTIONS:
-        raise ArgumentError(f"tracks: expected one of {', '.join(TRACK_OPTIONS)}, got {tracks!r}")
-    road_ids = {r.id for r in unknown_road_runs(ds, ext)}
-    runs = [r for r in ds.runs if r.id not in road_ids]
-    if tracks == "as-drawn":
-        return [], {r.id: "as drawn (tracks = as-drawn)" for r in runs}
-    bad = [g for g in ext if g in NONLINEAR_GROUPS]
-    out, skipped = [], {}
-    for r in runs:
-        rd = ds.data[r.id]
-        missing = [c for c in CHANNELS[:8] if c not in rd.channels]
-        if getattr(r, "posts", False):
-            skipped[r.id] = "a four-post rig run (SPEC §13): no track, its posts measured"
-        elif bad:
-            skipped[r.id] = f"as drawn: the model has {', '.join(bad)} (the as-built road is fitted on a linear car)"
-        elif missing:
-            skipped[r.id] = f"as drawn: no {', '.join(missing)} (the as-built road needs all eight accelerometers)"
-        elif getattr(rd, "distance", None) is not None \
-                and (wander := speed_wander(ds, r) or 0.0) > defaults["anyroad.held_speed"]:
-            skipped[r.id] = (f"as drawn: its speed wanders {100 * wander:.1f} % RMS about its mean (the speed "
-                             f"channel less its noise; the as-built road needs the speed held within "
-                             f"{100 * defaults['anyroad.held_speed']:.1f} %: the rear wheels' delay is taken as "
-                             "constant)")
-        elif "roll_rate" not in rd.channels:
-            skipped[r.id] = ("as drawn: no roll_rate (without the roll gyro the road's slow left-right "
-                             "difference cannot be told from the body's roll, and the as-built road is not determined)")
-        else:
-            out.append(r)
-    return out, skipped
-
-
 def identify_any_road(ds, **kw) -> IdentificationResult:
     """Identify ``ds``, which has at least one unknown-road run or one run on a track fitted as built (module
     docstring); BLAS on one thread (its small products are many, and threads only contend)."""
@@ -618,7 +489,7 @@ def _carry_sensor_hints(adequacy, start_result):
     not computed again at the estimated road: there the model's channels are the data less the fit band's
     residual, and high-passing them says nothing about the sensor. Runs on unknown roads get the road fit's own
     (:func:`_road_sensor_hints`)."""
-    hints = ((start_result.adequacy or {}).get("sensor_hints") if start_result is not None else None)
+    hints = (getattr(start_result, "adequacy", None) or {}).get("sensor_hints")
     if adequacy is None or hints is None:
         return adequacy
     out = dict(adequacy, sensor_hints=list(hints),
@@ -628,39 +499,51 @@ def _carry_sensor_hints(adequacy, start_result):
     return out
 
 
-def _tracks_block(ds, trs, skipped, P, geom, motion=None):
-    """result.json ``tracks``: per track what the as-built fit learnt (amplitude factor, unevenness RMS), per
-    run and over the track's runs; a run taken as drawn says why; a run along a speed channel its speed and
-    start as fitted (``motion``: run id -> :func:`rideid.estimate.problem.asbuilt.align_motion`'s record)."""
-    out = {}
-    for tr in trs:
-        fit = asbuilt.solve(P, geom, tr, alpha_std=True)
-        rec = out.setdefault(tr.track, {"runs": {}})
-        hi = min(defaults["roadfit.band"][1], 0.45 * tr.rr.fs)
-        rec["runs"][tr.run_id] = {"amplitude_factor": fit.alpha, "amplitude_factor_std": fit.alpha_std,
-                                  "unevenness_rms_m": asbuilt.unevenness_rms(tr),
-                                  "unevenness_rms_surface_m": asbuilt.unevenness_rms(
-                                      tr, defaults["anyroad.plausible_wavelength"]),
-                                  "wavelengths_m": [tr.rr.speed / hi, tr.rr.speed / defaults["roadfit.band"][0]]}
-        if tr.prior is not None and tr.prior.held:  # the unevenness not estimated on this run (asbuilt.estimate_prior)
-            rec["runs"][tr.run_id]["unevenness_held"] = tr.prior.held
-        if tr.rr.left_out:  # a channel without signal, or clipped (roadfit.without_clipped)
-            rec["runs"][tr.run_id]["channels_left_out"] = dict(tr.rr.left_out)
-        if tr.rr.clip.shape[0]:  # clipped samples freed as unknowns (roadfit: "Clipped samples")
-            pos, count = np.unique(tr.rr.clip[:, 0], return_counts=True)
-            rec["runs"][tr.run_id]["clipped_samples_freed"] = {CHANNELS[tr.rr.cols[j]]: int(k)
-                                                               for j, k in zip(pos, count)}
-        if motion and tr.run_id in motion:
-            motion[tr.run_id] = with_size(motion[tr.run_id], fit, tr, ds)
-            rec["runs"][tr.run_id]["motion"] = dict(motion[tr.run_id], note=(
-                "the run taken at a constant speed, placed with its start on the track as built "
-                "(estimate.problem.asbuilt.align_motion), then both solved with the car (anyroad._joint_solve), a "
+#: result.json ``tracks.<track>.runs.<run>.motion.note``
+_MOTION_NOTE = ("the run taken at a constant speed, placed with its start on the track as built "
+                "(estimate.problem.blocks.TrackBlock.aligned), then both solved with the car (anyroad._joint_solve), a "
                 "declared speed and a given start as priors (SPEC §13: declared ± prior_std, the default width "
                 "docs/formats.md); speed, start: the estimate, its std, the declared value; start_shift_s: the "
                 "start's change from the one read; the std are in the car's error bars as the budget's "
-                "'speed and start'"))
-    how = {"prior": "the drawing times an amplitude factor plus unevenness whose spectrum is estimated from the data",
-           "amplitude": "the drawing times an amplitude factor", "free": "the road projected out, the drawing unused"}
+                "'speed and start'")
+#: result.json ``tracks.<track>.method``, by the as-built mode
+_HOW = {"prior": "the drawing times an amplitude factor plus unevenness whose spectrum is estimated from the data",
+        "amplitude": "the drawing times an amplitude factor", "free": "the road projected out, the drawing unused"}
+
+
+def _left_out(rr) -> dict:
+    """``{"channels_left_out": ...}`` of a road-fitted run that left channels out (without signal, or clipped:
+    :func:`rideid.estimate.problem.roadfit.without_clipped`), else nothing."""
+    return {"channels_left_out": dict(rr.left_out)} if rr.left_out else {}
+
+
+def _track_run_record(tr, fit) -> dict:
+    """One run's entry of result.json ``tracks.<track>.runs``: what the as-built fit ``fit`` learnt of it."""
+    hi = min(defaults["roadfit.band"][1], 0.45 * tr.rr.fs)
+    rec = {"amplitude_factor": fit.alpha, "amplitude_factor_std": fit.alpha_std,
+           "unevenness_rms_m": asbuilt.unevenness_rms(tr),
+           "unevenness_rms_surface_m": asbuilt.unevenness_rms(tr, defaults["anyroad.plausible_wavelength"]),
+           "wavelengths_m": [tr.rr.speed / hi, tr.rr.speed / defaults["roadfit.band"][0]]}
+    rec.update(_left_out(tr.rr))
+    if tr.prior is not None and tr.prior.held:  # the unevenness not estimated on this run (asbuilt.estimate_prior)
+        rec["unevenness_held"] = tr.prior.held
+    if tr.rr.clip.shape[0]:  # clipped samples freed as unknowns (roadfit: "Clipped samples")
+        pos, count = np.unique(tr.rr.clip[:, 0], return_counts=True)
+        rec["clipped_samples_freed"] = {CHANNELS[tr.rr.cols[j]]: int(k) for j, k in zip(pos, count)}
+    return rec
+
+
+def _tracks_block(ds, blocks, skipped, P, geom) -> tuple[dict, dict]:
+    """result.json ``tracks``: per track what the as-built fit learnt (amplitude factor, unevenness RMS), per
+    run and over the track's runs; a run taken as drawn says why; each run's speed and start as fitted (its
+    :class:`rideid.estimate.problem.blocks.TrackBlock`'s record, with the track's size, :func:`with_size`).
+    Returns the block and the runs' motion records (run id -> record)."""
+    out, motion = {}, {}
+    for b in blocks:
+        fit = asbuilt.solve(P, geom, b.tr, alpha_std=True)
+        rec = out.setdefault(b.tr.track, {"runs": {}})
+        motion[b.run_id] = with_size(b.record, fit, b.tr, ds)
+        rec["runs"][b.run_id] = dict(_track_run_record(b.tr, fit), motion=dict(motion[b.run_id], note=_MOTION_NOTE))
     for rec in out.values():
         runs = list(rec["runs"].values())
         rec["amplitude_factor"] = float(np.mean([r["amplitude_factor"] for r in runs]))
@@ -668,7 +551,7 @@ def _tracks_block(ds, trs, skipped, P, geom, motion=None):
                                             / len(runs))
         for key in ("unevenness_rms_m", "unevenness_rms_surface_m"):
             rec[key] = float(np.sqrt(np.mean(np.square([r[key] for r in runs]))))
-        rec["method"] = f"as built: {how[trs[0].mode]} (rideid.estimate.problem.asbuilt)"
+        rec["method"] = f"as built: {_HOW[blocks[0].tr.mode]} (rideid.estimate.problem.asbuilt)"
         rec["note"] = ("amplitude_factor: the road over its drawing, each run's and their mean (amplitude_factor_std: "
                        "its standard error at the car, the prior's opened bins make it large); unevenness_rms_m: the "
                        "RMS of what the drawing times that factor leaves, one wheel path, over the wavelengths of "
@@ -681,10 +564,9 @@ def _tracks_block(ds, trs, skipped, P, geom, motion=None):
                        "±2 std_robust covering 12 of 12 on each; the bin-clustered sandwich was 1.8x too narrow; "
                        "docs/tracks-as-built.md); the speed and start fitted along a speed channel are in them as "
                        "nuisance parameters (the budget's 'speed and start'; each run's motion has its std)")
-    for r in ds.runs:
-        if r.id in skipped:
-            out.setdefault(r.track, {"runs": {}})["runs"][r.id] = {"fitted": skipped[r.id]}
-    return out
+    for r in (r for r in ds.runs if r.id in skipped):
+        out.setdefault(r.track, {"runs": {}})["runs"][r.id] = {"fitted": skipped[r.id]}
+    return out, motion
 
 
 #: where the road fit's coupling hints come from (adequacy.sensor_hints_note)
@@ -717,23 +599,48 @@ def _road_sensor_hints(P, geom, rruns, ds, threshold=None):
                                threshold=threshold)
 
 
-@stage("roads and tracks as built")
-def _identify_any_road(ds, *, rng=None, seed=None, population=None, generations=None, model=None,
-                       polish: bool = True, callback=None, assess: bool = True, simulator=None,
-                       tracks: str = "as-built", start_result=None, as_built_mode: str = "prior",
-                       **_ignored) -> IdentificationResult:
-    t0 = time.perf_counter()
-    gen, rng_record = make_rng(rng, seed)
-    note = None
+@dataclass(frozen=True)
+class _Plan:
+    """The problem a dataset poses, built up front: the model's groups (``ext``; ``model``: result.json's record of
+    them), the parameter space, the blocks (:mod:`rideid.estimate.problem.blocks`: each unknown road, each track as
+    built with its run's motion, the runs on tracks as drawn) and the runs taken as drawn with why (``skipped``)."""
+
+    ext: tuple
+    model: dict
+    space: ParameterSpace
+    roads: list
+    tracks: list
+    drawn: list
+    track_runs: list
+    skipped: dict
+
+    def problem(self, ds, geom, simulator) -> _Problem:
+        """The joint problem: the runs as drawn (one block), then the unknown roads, then the tracks as built."""
+        cf = [DrawnTracks(CostFunction(ds.subset(self.drawn), space=self.space, simulator=simulator))] \
+            if self.drawn else []
+        blocks = cf + self.roads + self.tracks
+        return _Problem(self.space, geom, blocks, np.ones(len(blocks)))
+
+
+def _extensions(ds, model, start_result) -> tuple[tuple, dict]:
+    """The model's groups and result.json's ``model``: the start's; else for ``auto`` the dataset's ``[model]``
+    groups, with the note that the model choice was not run; else ``model``'s."""
     if start_result is not None:
         ext = tuple((start_result.model or {}).get("extensions", ()))
-    elif isinstance(model, str) and model == "auto":
-        ext = tuple(ds.manifest.extensions or ())
-        note = ("model choice (auto) is not run on unknown roads: fitted the twelve"
-                + (f" plus the dataset's [model] groups ({', '.join(ext)})" if ext else "")
-                + "; give --model to fit anti_roll_bars or tire_damping")
-    else:
+        return ext, dict(start_result.model or {"extensions": list(ext), "selection": "given"})
+    if not (isinstance(model, str) and model == "auto"):
         ext = tuple(model_extensions(ds, model))
+        return ext, {"extensions": list(ext), "selection": "given"}
+    ext = tuple(ds.manifest.extensions or ())
+    return ext, {"extensions": list(ext), "selection": "auto (not run: unknown roads)",
+                 "note": ("model choice (auto) is not run on unknown roads: fitted the twelve"
+                          + (f" plus the dataset's [model] groups ({', '.join(ext)})" if ext else "")
+                          + "; give --model to fit anti_roll_bars or tire_damping")}
+
+
+def _plan(ds, model, start_result, tracks: str, polish: bool, as_built_mode: str) -> _Plan:
+    """The :class:`_Plan` of ``ds``; a nonlinear model with unknown roads is refused."""
+    ext, model_block = _extensions(ds, model, start_result)
     bad = [g for g in ext if g in NONLINEAR_GROUPS]
     road_ids = [r.id for r in unknown_road_runs(ds, ext)]
     if bad and road_ids:
@@ -741,186 +648,194 @@ def _identify_any_road(ds, *, rng=None, seed=None, population=None, generations=
                             f"({', '.join(road_ids)}): the road is projected out of a linear car (docs/any-road.md); "
                             f"fit the linear model, or {' and '.join(bad)} on known tracks only")
     refuse_unsupported_groups(ext, "model")
-    geom = ds.geometry
-    space = ParameterSpace(ds.known, geom, ds.manifest.bounds, extensions=ext)
-    rruns = prepare_road_runs(ds, ext)
-    track_runs = [r for r in ds.runs if r.id not in road_ids]
+    space = ParameterSpace(ds.known, ds.geometry, ds.manifest.bounds, extensions=ext)
+    roads = [RoadBlock(rr) for rr in prepare_road_runs(ds, ext)]
     ab_list, skipped = as_built_runs(ds, ext, tracks if polish else "as-drawn")
-    trs = [asbuilt.prepare_track_run(ds, r, as_built_mode) for r in ab_list]
     # every run on a track as built: its constant speed and its start fitted with the car (SPEC §13: a declared
     # speed and a given start are priors of them; along a speed channel the channel's mean starts the speed)
-    along = dict(enumerate(ab_list))
-    motion_priors = {i: asbuilt.motion_prior(ds, r) for i, r in along.items()}
-    motion = {}
-    ab_ids = {tr.run_id for tr in trs}
-    population = population or DEFAULT_POPULATION
-    generations = generations or DEFAULT_GENERATIONS
-    cf = None
-    history = []
-    drawn = [r for r in track_runs if r.id not in ab_ids]
-    if start_result is not None:
-        x0 = np.array([start_result.parameters[n] for n in space.names])
-        nit, nfev, stop = start_result.nit, start_result.nfev, start_result.stop
-        history = list(start_result.history)
-    elif track_runs:
-        # the start: the usual identification of every track run, each track taken as drawn
-        ds_t = ds.subset(track_runs)
-        first = identify_model(ds_t, rng=gen, population=population, generations=generations, model=list(ext),
-                               polish=polish, callback=callback, assess=False, simulator=simulator)
-        x0 = np.array([first.parameters[n] for n in space.names])
-        nit, nfev, stop = first.nit, first.nfev, first.stop
-        history = list(first.history)
-    else:
-        x0, nit, nfev, stop, history = _search(space, geom, rruns, gen, population, generations, callback, t0)
-    if drawn:
-        cf = CostFunction(ds.subset(drawn), space=space, simulator=simulator)
-    runs = list(rruns) + trs
-    prob = _Problem(space, geom, runs, cf)
-    z0 = prob.v(x0)
-    info = None
-    z = z0
-    std = np.full(len(space.names), np.nan)
-    cov = np.full((len(space.names),) * 2, np.nan)
+    blocks = [TrackBlock(asbuilt.prepare_track_run(ds, r, as_built_mode), r, asbuilt.motion_prior(ds, r))
+              for r in ab_list]
+    track_runs = [r for r in ds.runs if r.id not in road_ids]
+    ab_ids = {r.id for r in ab_list}
+    return _Plan(ext, model_block, space, roads, blocks, [r for r in track_runs if r.id not in ab_ids], track_runs,
+                 skipped)
 
-    def priors(zz):  # the as-built runs' noise and unevenness levels at the car zz (rideid.estimate.problem.asbuilt)
-        Pz = space.full(prob.x(zz)[None])[0]
-        for tr, pr in zip(trs, thread_map(lambda tr: asbuilt.estimate_prior(Pz, geom, tr), trs, "rideid-priors")):
-            tr.prior = pr
 
-    def align(zz, mode):  # the speed and the start of each run along a speed channel (asbuilt.align_motion)
-        Pz = space.full(prob.x(zz)[None])[0]
-        for i, r in along.items():
-            trs[i], motion[r.id] = asbuilt.align_motion(Pz, geom, trs[i], ds, r, mode, motion_priors[i])
-            prob.rruns[len(rruns) + i] = trs[i]
+def _start(ds, plan, gen, population, generations, polish, callback, simulator, start_result, t0):
+    """Where the polish starts, and the search's record: ``(x0, nit, nfev, stop, history)``. From the given
+    result; else the usual identification of every track run, each track taken as drawn; else (unknown roads
+    alone) JADE on the road runs' search cost (:func:`_search`)."""
+    if start_result is None and plan.track_runs:
+        start_result = identify_model(ds.subset(plan.track_runs), rng=gen, population=population,
+                                      generations=generations, model=list(plan.ext), polish=polish, callback=callback,
+                                      assess=False, simulator=simulator)
+    if start_result is None:
+        return _search(plan.space, ds.geometry, [b.rr for b in plan.roads], gen, population, generations, callback,
+                       t0)
+    return (np.array([start_result.parameters[n] for n in plan.space.names]), start_result.nit, start_result.nfev,
+            start_result.stop, list(start_result.history))
 
-    def solve(zz, max_nfev):  # the car, and the speed and start of each run along a speed channel with it
-        if not along:
-            return least_squares(prob, zz, bounds=prob.vbounds, method="trf", diff_step=1e-5, max_nfev=max_nfev)
-        sol_, moved = _joint_solve(prob, zz, {len(rruns) + i: r for i, r in along.items()}, ds, max_nfev,
-                                   {len(rruns) + i: pr for i, pr in motion_priors.items()})
-        for k, tr in moved.items():
-            trs[k - len(rruns)] = tr
-            motion[tr.run_id] = dict(motion[tr.run_id], speed_m_s=float(tr.rr.speed), start_shift_s=float(tr.shift))
-        return sol_
 
-    def refine(zz):  # the placements, priors and block weights at the car zz, then a short solve from it
-        if along:
-            align(zz, "prior")
-        priors(zz)
-        prob.reweight(zz)
-        return solve(zz, 50)
+def _replaced(prob, fn) -> _Problem:
+    """``prob`` with each track block ``b`` replaced by ``fn(b)`` (on parallel threads)."""
+    keys = prob.of(TrackBlock)
+    parts = list(prob.parts)
+    for k, b in zip(keys, thread_map(lambda k: fn(prob.parts[k]), keys, "rideid-priors")):
+        parts[k] = b
+    return prob.with_blocks(parts)
 
-    if polish:
-        priors(z0)
-        if along:  # on the drawing alone, then with the prior estimated there (asbuilt.align_motion says why)
-            align(z0, "amplitude")
-            priors(z0)
-            align(z0, "prior")
-            priors(z0)
-        prob.reweight(z0)
-        cost_before = float(np.sum(prob(z0) ** 2))
-        # one solve at the start's block weights (and priors), both again at its solution, a short second solve
-        sol = least_squares(prob, z, bounds=prob.vbounds, method="trf", diff_step=1e-5, max_nfev=100)
-        sol = refine(sol.x)
-        z = sol.x
-        restarted = None
-        restart = mode_restart(space, prob.x(z))
-        if restart is not None:  # a powertrain mode left at a search bound: polished again from typical values
-            alt = least_squares(prob, prob.v(restart[0]), bounds=prob.vbounds, method="trf", diff_step=1e-5,
-                                max_nfev=100)
-            c_first, c_alt = float(np.sum(prob(z) ** 2)), float(np.sum(prob(alt.x) ** 2))  # the same priors
-            restarted = restart_record(restart[1], c_first, c_alt, space, prob.x(z), prob.x(alt.x))
-            if c_alt < c_first:
-                sol = refine(alt.x)
-                z = sol.x
-        # the true Hessian; Newton steps on it to the minimum (module docstring); the sandwich: bread the
-        # Hessian, meat the gradient's spread over clusters
-        H = prob.hessian(z)
-        z, e, Ja = prob.newton(z, H)          # in v units
-        m, n = Ja.shape
-        s2 = float(e @ e) / max(m - n, 1)
-        Hinv = _pinv(H)
-        D = np.diag(prob.dxdv(z))
-        cov = D @ Hinv @ (s2 * Ja.T @ Ja) @ Hinv @ D
-        std = np.sqrt(np.clip(np.diag(cov), 0, None))
-        S = np.zeros((n, n))
-        off = 0
-        for k, size in enumerate(prob.sizes):
-            Jb, eb = Ja[off:off + size], e[off:off + size]
-            if cf is not None and k == 0:
-                S += _track_meat(Jb, eb, cf)
-            else:
-                rr = runs[k - (cf is not None)]
-                if isinstance(rr, asbuilt.TrackRun):  # the white meat (asbuilt.meat says why)
-                    S += asbuilt.meat(Jb, eb, rr, s2)
-                else:
-                    S += _road_meat(Jb, eb, 2 * len(rr.cols))
-            off += size
-        cov_rob = D @ Hinv @ S @ Hinv @ D * (m / max(m - n, 1))
-        if along:  # the speed and start fitted along a speed channel: nuisances of the same sandwich
-            cov_fixed = cov_rob  # the motion held: for the budget's share
-            cov, cov_rob, motion_std = _with_motion(prob, z, H, Ja, S, s2, trs, along, ds, geom, motion_priors)
-            for rid, sd in motion_std.items():
-                motion[rid].update(sd)
-            for i, r in along.items():
-                mr_ = ds.measured.get(r.id)
-                motion[r.id] = motion_record(dict(motion[r.id], start_read_s=float(getattr(mr_, "start", 0.0) or 0.0)),
-                                             motion_priors[i], trs[i])
-            std = np.sqrt(np.clip(np.diag(cov), 0, None))
-        info = {"success": bool(sol.success), "message": sol.message, "nfev": int(sol.nfev),
-                **({} if restarted is None else {"mode_restart": restarted}),
-                "cost_before": cost_before, "cost_after": float(e @ e), "covariance": cov.tolist(),
-                "names": list(space.names), "covariance_robust": (0.5 * (cov_rob + cov_rob.T)).tolist(),
-                **({} if not along else {"covariance_robust_motion_fixed": cov_fixed.tolist()}),
-                "method": "joint: " + ", ".join(
-                    ([] if not rruns else ["road runs by frequency-domain variable projection "
-                                           "(rideid.estimate.problem.roadfit)"])
-                    + ([] if not trs else ["runs on tracks as built (rideid.estimate.problem.asbuilt)"])
-                    + ([] if cf is None else ["runs on tracks as drawn in the time domain"]))}
-        nfev += int(sol.nfev) * (n + 1)
-    x = prob.x(z)
-    P = space.full(x[None])[0]
+
+def _realigned(prob, P, ds, mode: str) -> _Problem:
+    """Each track block placed at the car ``P`` in ``mode`` and its levels estimated there."""
+    return _replaced(prob, lambda b: b.aligned(P, prob.geom, ds, mode).with_prior(P, prob.geom))
+
+
+def _placed(prob, z, ds) -> _Problem:
+    """The track blocks' noise and unevenness levels at the car ``z``, each run's drawing placed there on the
+    drawing alone and then with the prior estimated there (:meth:`rideid.estimate.problem.blocks.TrackBlock.aligned`
+    says why), the levels again at each placement."""
+    P = prob.car(z)
+    prob = _replaced(prob, lambda b: b.with_prior(P, prob.geom))
+    for mode in ("amplitude", "prior"):
+        prob = _realigned(prob, P, ds, mode)
+    return prob
+
+
+def _refined(prob, z, ds):
+    """The placements, priors and block weights at the car ``z``, then a short joint solve from it."""
+    return _joint_solve(_realigned(prob, prob.car(z), ds, "prior").reweighted(z), z, ds, 50)
+
+
+def _polish(prob, z0, ds):
+    """The polish from ``z0``: one solve at the start's block weights (and priors), both again at its solution, a
+    short joint solve; a powertrain mode left at a search bound polished again from typical values. Returns the
+    solution, the problem at it, the cost before and the restart's record."""
+    prob = _placed(prob, z0, ds).reweighted(z0)
+    cost_before = float(np.sum(prob(z0) ** 2))
+    sol = least_squares(prob, z0, bounds=prob.vbounds, method="trf", diff_step=1e-5, max_nfev=100)
+    sol, prob = _refined(prob, sol.x, ds)
+    restart = mode_restart(prob.space, prob.x(sol.x))
+    if restart is None:
+        return sol, prob, cost_before, None
+    alt = least_squares(prob, prob.v(restart[0]), bounds=prob.vbounds, method="trf", diff_step=1e-5, max_nfev=100)
+    c_first, c_alt = float(np.sum(prob(sol.x) ** 2)), float(np.sum(prob(alt.x) ** 2))  # the same priors
+    restarted = restart_record(restart[1], c_first, c_alt, prob.space, prob.x(sol.x), prob.x(alt.x))
+    if c_alt < c_first:
+        sol, prob = _refined(prob, alt.x, ds)
+    return sol, prob, cost_before, restarted
+
+
+@dataclass(frozen=True)
+class _Fitted:
+    """The fit at its solution: ``z`` (v units), the problem there (the track blocks' records final), the polish's
+    ``info`` (None unpolished), the white error bars ``std`` and covariance ``cov`` (x units), the function
+    evaluations spent."""
+
+    z: np.ndarray
+    prob: _Problem
+    info: dict | None
+    std: np.ndarray
+    cov: np.ndarray
+    nfev: int = 0
+
+
+def _with_records(prob, motion_std: dict, ds) -> _Problem:
+    """The track blocks with their motion's std (``motion_std``: block index -> stds) and their result.json
+    records (:func:`motion_record`)."""
+    parts = list(prob.parts)
+    for k, sd in motion_std.items():
+        b = parts[k]
+        read = float(getattr(ds.measured.get(b.run_id), "start", 0.0) or 0.0)
+        parts[k] = replace(b, record=motion_record(dict(b.record, **sd, start_read_s=read), b.prior, b.tr))
+    return prob.with_blocks(parts)
+
+
+@stage("error bars")
+def _error_bars(prob, sol, ds, cost_before: float, restarted) -> _Fitted:
+    """The true Hessian; Newton steps on it to the minimum (module docstring); the sandwich: bread the Hessian,
+    meat each block's (:meth:`rideid.estimate.problem.blocks.TrackBlock.meat` and its kin); with tracks as built the
+    runs' speeds and starts as nuisances of the same sandwich (:func:`_with_motion`)."""
+    H = prob.hessian(sol.x)
+    z, e, Ja = prob.newton(sol.x, H)          # in v units
+    m, n = Ja.shape
+    s2 = float(e @ e) / max(m - n, 1)
+    Hinv = _pinv(H)
+    D = np.diag(prob.dxdv(z))
+    cov = D @ Hinv @ (s2 * Ja.T @ Ja) @ Hinv @ D
+    S = np.zeros((n, n))
+    offs = np.concatenate([[0], np.cumsum(prob.sizes)])
+    for k, b in enumerate(prob.parts):
+        S += b.meat(Ja[offs[k]:offs[k + 1]], e[offs[k]:offs[k + 1]], s2)
+    cov_rob = D @ Hinv @ S @ Hinv @ D * (m / max(m - n, 1))
+    cov_fixed = None
+    if prob.of(TrackBlock):  # the speed and start of each run: nuisances of the same sandwich
+        cov_fixed = cov_rob  # the motion held: for the budget's share
+        cov, cov_rob, motion_std = _with_motion(prob, z, H, Ja, S, s2, ds)
+        prob = _with_records(prob, motion_std, ds)
+    info = {"success": bool(sol.success), "message": sol.message, "nfev": int(sol.nfev),
+            **({} if restarted is None else {"mode_restart": restarted}),
+            "cost_before": cost_before, "cost_after": float(e @ e), "covariance": cov.tolist(),
+            "names": list(prob.space.names), "covariance_robust": (0.5 * (cov_rob + cov_rob.T)).tolist(),
+            **({} if cov_fixed is None else {"covariance_robust_motion_fixed": cov_fixed.tolist()}),
+            "method": blocks_method(prob.parts)}
+    return _Fitted(z, prob, info, np.sqrt(np.clip(np.diag(cov), 0, None)), cov, int(sol.nfev) * (n + 1))
+
+
+def _details(space, x, P, fitted) -> tuple[dict, object]:
+    """Each reported parameter's record (:func:`rideid.estimate.fit.identify.parameter_detail`), with the speeds' and
+    starts' share of ``std_robust`` (``std_motion``: the budget's "speed and start",
+    :mod:`rideid.estimate.fit.budget`) with tracks as built; and the robust covariance."""
+    info = fitted.info
     robust = estimate_covariance(info, space, x)
-    details = {nme: parameter_detail(space, P, nme, std, cov, robust) for nme in space.reported_names}
-    if info is not None and "covariance_robust_motion_fixed" in info:
-        # the speed's and start's share of std_robust (the budget's "speed and start", rideid.estimate.fit.budget)
-        fixed = estimate_covariance(dict(info, covariance_robust=info["covariance_robust_motion_fixed"]), space, x)
-        for nme, d in details.items():
-            a, b = d.get("std_robust"), (None if nme in space.fixed else fixed.std_robust(nme))
-            if a is not None and b is not None and not d.get("fixed"):
-                d["std_motion"] = float(np.sqrt(max(a * a - b * b, 0.0)))
-    # the roads, their classes and the fitted channels
-    roads, profiles, response = {}, {}, {}
-    for rr in rruns:
+    details = {nme: parameter_detail(space, P, nme, fitted.std, fitted.cov, robust) for nme in space.reported_names}
+    if "covariance_robust_motion_fixed" not in (info or {}):
+        return details, robust
+    fixed = estimate_covariance(dict(info, covariance_robust=info["covariance_robust_motion_fixed"]), space, x)
+    for nme, d in details.items():
+        a, b = d.get("std_robust"), (None if nme in space.fixed else fixed.std_robust(nme))
+        if a is not None and b is not None and not d.get("fixed"):
+            d["std_motion"] = float(np.sqrt(max(a * a - b * b, 0.0)))
+    return details, robust
+
+
+def _road_records(ds, P, geom, roads) -> tuple[dict, dict, dict, list]:
+    """Each unknown road's record (result.json ``roads``: its file, ISO 8608 class, fit band), its profile, the
+    fitted channels and its error (:func:`road_run_error`)."""
+    out, profiles, response = {}, {}, {}
+    lam, band = defaults["roadfit.road_wavelengths"], defaults["roadfit.band"]
+    for rr in (b.rr for b in roads):
         sol_r = roadfit.solve(P, geom, rr)
         xr, zr = roadfit.road(P, geom, rr, sol_r)
-        lam, band = defaults["roadfit.road_wavelengths"], defaults["roadfit.band"]
         cls, gd = iso8608_class(xr, zr, n_band=(1 / lam[1], 1 / lam[0]))
-        roads[rr.run_id] = {
+        out[rr.run_id] = {
             "file": f"road/{rr.run_id}.csv", "iso8608_class": cls, "gd_n0": float(gd),
             "gd_n0_unit": "m^3", "speed": rr.speed, "fit_band_hz": [float(band[0]), float(min(band[1], 0.45 * rr.fs))],
             "wavelengths_m": list(defaults["roadfit.road_wavelengths"]),
-            "note": (f"the road's content at wavelengths {lam[0]}-"
-                     f"{lam[1]} m; the first and last {lam[1]:.0f} m carry "
+            "note": (f"the road's content at wavelengths {lam[0]}-{lam[1]} m; the first and last {lam[1]:.0f} m carry "
                      "the record's ends and are less certain; adequacy not assessed on this run")}
         run = next(r for r in ds.runs if r.id == rr.run_id)
         if getattr(run, "road_known", False):
-            roads[rr.run_id]["note"] = (f"moving at its first sample on the known track '{run.track}': fitted as a "
-                                        "road run (its state at the first sample and its road estimated; the "
-                                        "track's profile not used); " + roads[rr.run_id]["note"])
-        if rr.left_out:
-            roads[rr.run_id]["channels_left_out"] = dict(rr.left_out)
+            out[rr.run_id]["note"] = (f"moving at its first sample on the known track '{run.track}': fitted as a "
+                                      "road run (its state at the first sample and its road estimated; the "
+                                      "track's profile not used); " + out[rr.run_id]["note"])
+        out[rr.run_id].update(_left_out(rr))
         profiles[rr.run_id] = (xr, zr)
         response[rr.run_id] = roadfit.fitted_channels(P, geom, rr, ds.data[rr.run_id].matrix(), sol_r)
-    errors = [road_run_error(rr, ds.data[rr.run_id].matrix(), response[rr.run_id]) for rr in rruns]
-    checked = {}   # run id -> (residual, measured, inputs) of the runs on known tracks, for the verdict
-    for tr in trs:
-        y = ds.data[tr.run_id].matrix()
-        response[tr.run_id] = asbuilt.fitted_channels(P, geom, tr, y)
-        errors.append(road_run_error(tr.rr, y, response[tr.run_id]))
-        ri = tr.inputs  # the drawing's, tabulated when the run was prepared (asbuilt.prepare_track_run)
-        checked[tr.run_id] = (y - response[tr.run_id], y, np.concatenate([ri.u, ri.rate], axis=1))
-    if cf is not None:
+    errors = [road_run_error(rr, ds.data[rr.run_id].matrix(), response[rr.run_id]) for rr in (b.rr for b in roads)]
+    return out, profiles, response, errors
+
+
+def _checked(ds, P, geom, x, prob) -> tuple[dict, list, dict]:
+    """The fitted channels, the errors and, for the verdict, run id -> (residual, measured, inputs) of the runs on
+    known tracks: each track as built at its estimated road, the runs as drawn simulated."""
+    response, errors, checked = {}, [], {}
+    for b in (prob.parts[k] for k in prob.of(TrackBlock)):
+        y = ds.data[b.run_id].matrix()
+        response[b.run_id] = asbuilt.fitted_channels(P, geom, b.tr, y)
+        errors.append(road_run_error(b.tr.rr, y, response[b.run_id]))
+        ri = b.tr.inputs  # the drawing's, tabulated when the run was prepared (asbuilt.prepare_track_run)
+        checked[b.run_id] = (y - response[b.run_id], y, np.concatenate([ri.u, ri.rate], axis=1))
+    for cf in (prob.parts[k].cf for k in prob.of(DrawnTracks)):
         errors += list(cf.run_errors(x[None])[:, 0])
         resp_t = cf.simulate(P)
         response.update(resp_t)
@@ -930,103 +845,197 @@ def _identify_any_road(ds, *, rng=None, seed=None, population=None, generations=
             Y[:, cf.W[ri_] <= 0] = np.nan
             run_in = cf.sim.runs[ri_]
             checked[rid] = (Y - resp_t[rid], Y, np.concatenate([run_in.u, run_in.rate], axis=1))
-    adequacy = None
-    if assess and checked:
-        adequacy = advise(assess_runs(checked, CHANNELS), {"extensions": list(ext)})
-        if roads:
-            adequacy = dict(adequacy, not_assessed=list(roads),
-                            note="the verdict covers the runs on known tracks; runs on unknown roads are not assessed")
-        if trs:
-            lo, hi = defaults["roadfit.band"]
-            adequacy = dict(adequacy, as_built=sorted(ab_ids),
-                            as_built_note="runs on tracks as built: the residual at the estimated road, over the fit "
-                                          f"band {lo}-{hi} Hz")
-    if assess and polish:  # every run assessed: the road runs by their residual at their own road estimate
-        adequacy = judge_road_runs(adequacy, roads, rruns, {r.run_id: ds.data[r.run_id].matrix() for r in rruns},
-                                   response)
-    tracks_block = _tracks_block(ds, trs, skipped, P, geom, motion) if trs else None
-    odd = []
-    if tracks_block and adequacy is not None:
-        # a road can explain what the car lacks (a missing anti-roll bar, as unevenness left and right): what the
-        # tracks as built needed must be what a track carries, else the verdict says so
-        odd = [f"{tid}: factor {rec['amplitude_factor']:.3f} ± {rec['amplitude_factor_std']:.3f}, unevenness "
-               f"{1e3 * rec['unevenness_rms_surface_m']:.1f} mm RMS"
-               for tid, rec in tracks_block.items() if "amplitude_factor" in rec
-               and (abs(rec["amplitude_factor"] - 1)
-                    > defaults["anyroad.plausible_factor"] + 2 * rec["amplitude_factor_std"]
-                    or rec["unevenness_rms_surface_m"] > defaults["anyroad.plausible_rms"])]
-        if odd:
-            adequacy = dict(adequacy, adequate=False, advice=adequacy.get("advice") or ADVICE,
-                            reasons=[f"the tracks as built needed more than a track carries ({'; '.join(odd)}; at most "
-                                     f"±{100 * defaults['anyroad.plausible_factor']:.0f} % beyond twice the "
-                                     f"factor's error, and {1e3 * defaults['anyroad.plausible_rms']:.1f} mm RMS at "
-                                     f"waves up to {defaults['anyroad.plausible_wavelength']:g} m): "
-                                     "the road is explaining what the model misses"] + list(adequacy["reasons"]))
-    adequacy = _carry_sensor_hints(adequacy, start_result)
-    road_hints = _road_sensor_hints(P, geom, [tr.rr for tr in trs], ds) if trs and adequacy is not None \
-        and not adequacy.get("sensor_hints") else []
-    hints_note = ROAD_HINTS_NOTE
-    if not road_hints and rruns and assess and polish and not (adequacy or {}).get("sensor_hints"):
-        road_hints = _road_sensor_hints(P, geom, rruns, ds, defaults["sensor_check.free_road_hint_reduction"])
-        hints_note = FREE_ROAD_HINTS_NOTE
-        if road_hints and adequacy is None:  # unknown roads alone: no residual verdict, but the sensors' is one
-            adequacy = {"adequate": False, "not_assessed": list(roads), "reasons": [], "advice": None,
-                        "note": "runs on unknown roads alone: the residuals are not assessed; the sensor check of "
-                                "the road fit is"}
-    if start_result is not None and start_result.model:
-        model_block = dict(start_result.model)
-    else:
-        model_block = {"extensions": list(ext),
-                       "selection": "given" if note is None else "auto (not run: unknown roads)"}
-    if note:
-        model_block["note"] = note
-    wall = time.perf_counter() - t0
-    if start_result is not None and odd:
-        # the road is not the explanation: the as-drawn result stands, with its verdict and what the road needed
-        why = adequacy["reasons"][0]
-        ad = dict(start_result.adequacy or {})
-        if ad:
-            ad["reasons"] = [f"tracks as built rejected: {why}"] + list(ad.get("reasons", []))
-            if road_hints and not ad.get("sensor_hints"):  # what the road fit saw of the sensors
-                ad = _with_hints(ad, road_hints, hints_note)
-        for rec in tracks_block.values():
-            rec["rejected"] = why
-        # the speeds and starts the as-built fit found are the data's all the same (SPEC §13: named, not dropped)
-        checks = [c for c in (start_result.checks or []) if c.get("check") != "motion"] + motion_findings(motion)
-        return replace(start_result, adequacy=ad or start_result.adequacy, tracks=tracks_block, checks=checks,
-                       wall_time_s=start_result.wall_time_s + wall)
-    if road_hints:
-        adequacy = _with_hints(adequacy, road_hints, hints_note)
-    if start_result is not None:
-        # the as-drawn identification's search, weights, maps and starts stand; the estimate is the as-built fit's,
-        # and so are the estimates at a search bound (the as-drawn fit's bound findings replaced)
-        checks = [c for c in (start_result.checks or []) if c.get("check") not in ("bounds", "motion")]
-        checks += [f.to_dict() for f in mark_bounds(details)] + motion_findings(motion)
-        return replace(start_result, checks=checks, x=np.asarray(x, dtype=float), names=list(space.names),
-                       std=std, covariance=cov,
-                       fun=float(np.mean(errors)), success=bool(start_result.success and info["success"]),
-                       message=f"{start_result.message}; tracks as built: polish {info['message']}",
-                       nfev=int(nfev), parameters={nme: float(P[space.col[nme]]) for nme in space.reported_names},
-                       details=details, wall_time_s=start_result.wall_time_s + wall,
-                       polish=dict(info, as_drawn=start_result.polish), modal=modal_summary(P[:len(ALL_NAMES)], geom),
-                       model=model_block, response=response, correlation=robust.correlation_dict(),
-                       adequacy=adequacy, tracks=tracks_block)
-    pre = ds.preprocessing()
-    res = IdentificationResult(
-        x=np.asarray(x, dtype=float), names=list(space.names), std=std, covariance=cov,
-        fun=float(np.mean(errors)),
+    return response, errors, checked
+
+
+def _implausible(tracks_block: dict) -> list[str]:
+    """The tracks whose as-built fit needed more than a track carries (a road can explain what the car lacks: a
+    missing anti-roll bar, as unevenness left and right), one line each."""
+    return [f"{tid}: factor {rec['amplitude_factor']:.3f} ± {rec['amplitude_factor_std']:.3f}, unevenness "
+            f"{1e3 * rec['unevenness_rms_surface_m']:.1f} mm RMS"
+            for tid, rec in tracks_block.items() if "amplitude_factor" in rec
+            and (abs(rec["amplitude_factor"] - 1)
+                 > defaults["anyroad.plausible_factor"] + 2 * rec["amplitude_factor_std"]
+                 or rec["unevenness_rms_surface_m"] > defaults["anyroad.plausible_rms"])]
+
+
+def _verdict(checked, ext, road_ids: list, ab_ids: list, tracks_block: dict) -> tuple[dict, list]:
+    """The adequacy of the runs on known tracks (runs on unknown roads, ``road_ids``, listed as not assessed; runs
+    on tracks as built, ``ab_ids``, judged at their estimated road), not adequate when the tracks as built needed
+    more than a track carries; and those tracks' lines."""
+    adequacy = advise(assess_runs(checked, CHANNELS), {"extensions": list(ext)})
+    lo, hi = defaults["roadfit.band"]
+    notes = ((road_ids, {"not_assessed": list(road_ids), "note": "the verdict covers the runs on known tracks; runs "
+                         "on unknown roads are not assessed"}),
+             (ab_ids, {"as_built": sorted(ab_ids), "as_built_note": "runs on tracks as built: the residual at the "
+                       f"estimated road, over the fit band {lo}-{hi} Hz"}))
+    for note in (note for ids, note in notes if ids):
+        adequacy = dict(adequacy, **note)
+    odd = _implausible(tracks_block)
+    if odd:
+        adequacy = dict(adequacy, adequate=False, advice=adequacy.get("advice") or ADVICE,
+                        reasons=[f"the tracks as built needed more than a track carries ({'; '.join(odd)}; at most "
+                                 f"±{100 * defaults['anyroad.plausible_factor']:.0f} % beyond twice the "
+                                 f"factor's error, and {1e3 * defaults['anyroad.plausible_rms']:.1f} mm RMS at "
+                                 f"waves up to {defaults['anyroad.plausible_wavelength']:g} m): "
+                                 "the road is explaining what the model misses"] + list(adequacy["reasons"]))
+    return adequacy, odd
+
+
+def _road_hints(ds, P, geom, prob, adequacy, assess: bool, polish: bool) -> tuple[list, str]:
+    """The coupling hints of the road fit (:func:`_road_sensor_hints`) and where they come from, from the first
+    source that gives any (:data:`_HINT_SOURCES`); none when the adequacy has hints already (the fit on the tracks
+    as drawn gave them)."""
+    asked = {"verdict": adequacy is not None and not adequacy.get("sensor_hints"),
+             "polish": assess and polish and not (adequacy or {}).get("sensor_hints")}
+    for kind, when, note, threshold in _HINT_SOURCES:
+        runs = [prob.parts[k].rr for k in prob.of(kind) if asked[when]]
+        hints = _road_sensor_hints(P, geom, runs, ds, defaults[threshold]) if runs else []
+        if hints:
+            return hints, note
+    return [], ROAD_HINTS_NOTE
+
+
+#: where the road fit's coupling hints are asked, in order: (the blocks, asked after a verdict or after a polish,
+#: the note, the setting of the residual's reduction that names a coupling)
+_HINT_SOURCES = ((TrackBlock, "verdict", ROAD_HINTS_NOTE, "sensor_check.hint_reduction"),
+                 (RoadBlock, "polish", FREE_ROAD_HINTS_NOTE, "sensor_check.free_road_hint_reduction"))
+
+
+@dataclass
+class _Outcome:
+    """What the fit gives, for the result: the estimate (``x``, ``P``), its error bars and records, the
+    fitted channels, the verdict and the road fit's coupling hints, the roads' and tracks' records, the
+    search's record (``search``: ``(x0, nit, nfev, stop, history)``)."""
+
+    x: np.ndarray
+    P: np.ndarray
+    fitted: _Fitted
+    details: dict
+    robust: object
+    errors: list
+    response: dict
+    adequacy: dict | None
+    hints: tuple
+    tracks: dict | None
+    motion: dict
+    roads: dict
+    profiles: dict
+    search: tuple
+    rng_record: dict
+    wall: float
+
+    @property
+    def hinted(self) -> dict | None:
+        """The verdict with the road fit's coupling hints (:func:`_with_hints`), when it has any."""
+        return _with_hints(self.adequacy, *self.hints) if self.hints[0] else self.adequacy
+
+
+def _as_drawn_stands(ds, plan, start_result, out: _Outcome):
+    """The tracks as built rejected (the road is not the explanation): the as-drawn result with its verdict and
+    what the tracks as built needed; the speeds and starts the as-built fit found are the data's all the same
+    (SPEC §13: named, not dropped)."""
+    why = out.adequacy["reasons"][0]
+    ad = dict(start_result.adequacy or {})
+    if ad:
+        ad["reasons"] = [f"tracks as built rejected: {why}"] + list(ad.get("reasons", []))
+        if out.hints[0] and not ad.get("sensor_hints"):  # what the road fit saw of the sensors
+            ad = _with_hints(ad, *out.hints)
+    for rec in out.tracks.values():
+        rec["rejected"] = why
+    checks = [c for c in (start_result.checks or []) if c.get("check") != "motion"] + motion_findings(out.motion)
+    return replace(start_result, adequacy=ad or start_result.adequacy, tracks=out.tracks, checks=checks,
+                   wall_time_s=start_result.wall_time_s + out.wall)
+
+
+def _on_start(ds, plan, start_result, out: _Outcome):
+    """The as-drawn identification's search, weights, maps and starts stand; the estimate is the as-built fit's,
+    and so are the estimates at a search bound (the as-drawn fit's bound findings replaced)."""
+    info, space = out.fitted.info, plan.space
+    checks = [c for c in (start_result.checks or []) if c.get("check") not in ("bounds", "motion")]
+    checks += [f.to_dict() for f in mark_bounds(out.details)] + motion_findings(out.motion)
+    return replace(start_result, checks=checks, x=np.asarray(out.x, dtype=float), names=list(space.names),
+                   std=out.fitted.std, covariance=out.fitted.cov, fun=float(np.mean(out.errors)),
+                   success=bool(start_result.success and info["success"]),
+                   message=f"{start_result.message}; tracks as built: polish {info['message']}",
+                   nfev=int(start_result.nfev + out.fitted.nfev),
+                   parameters={nme: float(out.P[space.col[nme]]) for nme in space.reported_names},
+                   details=out.details, wall_time_s=start_result.wall_time_s + out.wall,
+                   polish=dict(info, as_drawn=start_result.polish),
+                   modal=modal_summary(out.P[:len(ALL_NAMES)], ds.geometry), model=dict(plan.model),
+                   response=out.response, correlation=out.robust.correlation_dict(), adequacy=out.hinted,
+                   tracks=out.tracks)
+
+
+def _fresh(ds, plan, start_result, out: _Outcome):
+    """The result of a fit from its own start."""
+    info, space = out.fitted.info, plan.space
+    _, nit, nfev, stop, history = out.search
+    return IdentificationResult(
+        x=np.asarray(out.x, dtype=float), names=list(space.names), std=out.fitted.std, covariance=out.fitted.cov,
+        fun=float(np.mean(out.errors)),
         success=bool(info is None or info["success"]), message="unknown-road identification" +
-        ("" if info is None else f"; polish: {info['message']}"), stop=stop, nit=int(nit), nfev=int(nfev),
-        parameters={nme: float(P[space.col[nme]]) for nme in space.reported_names}, details=details,
-        known=dict(ds.known), wall_time_s=wall, seed=rng_record["seed"], rng_state=rng_record["rng_state"],
-        track_weights={}, weights_mode="equal", polish=info, history=History(history), starts={},
-        preprocessing=pre, dataset=str(ds.path), maps=None,
-        modal=modal_summary(P[:len(ALL_NAMES) if space.layout is None else space.layout.n_car], geom),
-        model=model_block, response=response, correlation=robust.correlation_dict(), adequacy=adequacy,
-        checks=[f.to_dict() for f in getattr(ds, "findings", [])] + motion_findings(motion), roads=roads or None,
-        road_profiles=profiles or None,
-        tracks=tracks_block)
-    return res
+        ("" if info is None else f"; polish: {info['message']}"), stop=stop, nit=int(nit),
+        nfev=int(nfev + out.fitted.nfev),
+        parameters={nme: float(out.P[space.col[nme]]) for nme in space.reported_names}, details=out.details,
+        known=dict(ds.known), wall_time_s=out.wall, seed=out.rng_record["seed"],
+        rng_state=out.rng_record["rng_state"], track_weights={}, weights_mode="equal", polish=info,
+        history=History(history), starts={}, preprocessing=ds.preprocessing(), dataset=str(ds.path), maps=None,
+        modal=modal_summary(out.P[:len(ALL_NAMES) if space.layout is None else space.layout.n_car], ds.geometry),
+        model=dict(plan.model), response=out.response, correlation=out.robust.correlation_dict(),
+        adequacy=out.hinted, checks=[f.to_dict() for f in getattr(ds, "findings", [])] + motion_findings(out.motion),
+        roads=out.roads or None, road_profiles=out.profiles or None, tracks=out.tracks)
+
+
+#: the result by (a start's result given, the tracks as built rejected)
+_RESULTS = {(True, True): _as_drawn_stands, (True, False): _on_start, (False, True): _fresh, (False, False): _fresh}
+
+
+def _fit(prob, z0, ds, polish: bool) -> _Fitted:
+    """The polish and the error bars from ``z0``; unpolished, the start as it is."""
+    if not polish:
+        nan = np.full(len(prob.space.names), np.nan)
+        return _Fitted(z0, prob, None, nan, np.full((nan.size,) * 2, np.nan))
+    sol, prob, cost_before, restarted = _polish(prob, z0, ds)
+    return _error_bars(prob, sol, ds, cost_before, restarted)
+
+
+@stage("roads and tracks as built")
+def _identify_any_road(ds, *, rng=None, seed=None, population=None, generations=None, model=None,
+                       polish: bool = True, callback=None, assess: bool = True, simulator=None,
+                       tracks: str = "as-built", start_result=None, as_built_mode: str = "prior",
+                       **_ignored) -> IdentificationResult:
+    """The pipeline on the problem of ``ds`` (:class:`_Plan`): start, polish, error bars, records, verdict."""
+    t0 = time.perf_counter()
+    gen, rng_record = make_rng(rng, seed)
+    geom = ds.geometry
+    plan = _plan(ds, model, start_result, tracks, polish, as_built_mode)
+    search = _start(ds, plan, gen, population or DEFAULT_POPULATION, generations or DEFAULT_GENERATIONS, polish,
+                    callback, simulator, start_result, t0)
+    prob = plan.problem(ds, geom, simulator)
+    fitted = _fit(prob, prob.v(search[0]), ds, polish)
+    x = fitted.prob.x(fitted.z)
+    P = plan.space.full(x[None])[0]
+    details, robust = _details(plan.space, x, P, fitted)
+    roads, profiles, response, errors = _road_records(ds, P, geom, plan.roads)
+    response_t, errors_t, checked = _checked(ds, P, geom, x, fitted.prob)
+    blocks = [fitted.prob.parts[k] for k in fitted.prob.of(TrackBlock)]
+    tracks_block, motion = _tracks_block(ds, blocks, plan.skipped, P, geom) if blocks else (None, {})
+    adequacy, odd = (_verdict(checked, plan.ext, list(roads), [b.run_id for b in blocks], tracks_block or {})
+                     if assess and checked else (None, []))
+    if assess and polish:  # every run assessed: the road runs by their residual at their own road estimate
+        adequacy = judge_road_runs(adequacy, roads, [b.rr for b in plan.roads],
+                                   {b.rr.run_id: ds.data[b.rr.run_id].matrix() for b in plan.roads}, response)
+    adequacy = _carry_sensor_hints(adequacy, start_result)
+    road_hints, hints_note = _road_hints(ds, P, geom, fitted.prob, adequacy, assess, polish)
+    if road_hints and adequacy is None:  # unknown roads alone: no residual verdict, but the sensors' is one
+        adequacy = {"adequate": False, "not_assessed": list(roads), "reasons": [], "advice": None,
+                    "note": "runs on unknown roads alone: the residuals are not assessed; the sensor check of the "
+                            "road fit is"}
+    out = _Outcome(x, P, fitted, details, robust, errors + errors_t, dict(response, **response_t), adequacy,
+                   (road_hints, hints_note), tracks_block, motion, roads, profiles, search, rng_record,
+                   time.perf_counter() - t0)
+    return _RESULTS[(start_result is not None, bool(odd))](ds, plan, start_result, out)
 
 
 #: the constants this module had before rideid.settings, read from the registry (PEP 562)

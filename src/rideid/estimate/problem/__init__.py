@@ -10,8 +10,10 @@ each block owns — a run's speed and start under their priors, a track's size a
 (:mod:`~rideid.estimate.problem.asbuilt`), an unknown road projected out frequency by frequency
 (:mod:`~rideid.estimate.problem.roadfit`, with the time-domain alternative
 :mod:`~rideid.estimate.problem.roadstaged`), a sensor chain's relative gains
-(:mod:`~rideid.estimate.problem.redundancy`). The nonlinear groups' blocks (damper curves' knots,
-:mod:`~rideid.estimate.problem.dampers`; bump stops, :mod:`~rideid.estimate.problem.bumps`), the track weights
-of the search (:mod:`~rideid.estimate.problem.weighting`) and the sensitivity maps
+(:mod:`~rideid.estimate.problem.redundancy`). The fit with unknown roads or tracks as built takes its problem as
+blocks of one interface (:mod:`~rideid.estimate.problem.blocks`: the runs as drawn, an unknown road, a track as
+built with the run's speed and start, placed and then solved with the car). The nonlinear groups' blocks (damper
+curves' knots, :mod:`~rideid.estimate.problem.dampers`; bump stops, :mod:`~rideid.estimate.problem.bumps`), the
+track weights of the search (:mod:`~rideid.estimate.problem.weighting`) and the sensitivity maps
 (:mod:`~rideid.estimate.problem.sensitivity`) live here too. Nothing here searches or decides: the fit does.
 """

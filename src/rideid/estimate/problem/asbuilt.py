@@ -60,7 +60,6 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 import scipy.linalg
-from scipy.optimize import minimize
 
 from ...profiling import stage
 from ...settings import defaults, legacy_names
@@ -113,7 +112,7 @@ class TrackRun:
     mode: str = "prior"
     prior: Prior | None = field(default=None, repr=False)
     inputs: RunInput | None = field(default=None, repr=False)
-    #: the drawing's time shift (s): the front axle at ``x = speed (t - shift)`` (:func:`align_motion`)
+    #: the drawing's time shift (s): the front axle at ``x = speed (t - shift)`` (``TrackBlock.aligned``)
     shift: float = 0.0
     #: SPEC §13: the relative std of the track's drawn size (the amplitude factor's prior about 1; None: free)
     size_std: float | None = None
@@ -135,7 +134,7 @@ class TrackRun:
 def nominal_inputs(ds, run, speed=None, shift: float = 0.0):
     """The drawn track's corner inputs of ``run`` (:class:`rideid.model.simulate.RunInput`), as the fit of the
     track as drawn tabulates them; ``speed`` (default the run's) and ``shift`` (s): the front axle at
-    ``x = speed (t - shift)`` (a run along a speed channel, :func:`align_motion`)."""
+    ``x = speed (t - shift)`` (a run placed by :meth:`rideid.estimate.problem.blocks.TrackBlock.aligned`)."""
     rd = ds.data[run.id]
     v = float(run.speed) if speed is None else float(speed)
     return prepare_run(ds.manifest.tracks[run.track], ds.geometry, v, rd.time - shift if shift else rd.time)
@@ -144,7 +143,7 @@ def nominal_inputs(ds, run, speed=None, shift: float = 0.0):
 def held_speed(ds, run) -> float:
     """The run's constant speed (m/s) as the as-built road starts from: the declared one, or, along a speed or
     distance channel (a speed held, :func:`rideid.estimate.fit.anyroad.speed_wander`), the channel's mean over the
-    run's samples (refined with the start by :func:`align_motion`)."""
+    run's samples (refined with the start by :meth:`rideid.estimate.problem.blocks.TrackBlock.aligned`)."""
     rd = ds.data[run.id]
     dist = getattr(rd, "distance", None)
     if dist is None:
@@ -178,25 +177,12 @@ SIZE_PRIOR_WEIGHT = float(np.sqrt(0.5))
 def moved(tr: TrackRun, ds, run, p) -> TrackRun:
     """``tr`` with its drawing moved by ``p`` = (the speed's relative change, the start's shift) in
     setting ``asbuilt.motion_scale`` units: the drawing at ``x = v (t - shift)``, the rear wheels' delay at ``v`` (the
-    tabulated ``inputs`` as they were: :func:`align_motion` renews them once)."""
+    tabulated ``inputs`` as they were: :meth:`rideid.estimate.problem.blocks.TrackBlock.aligned` renews them once)."""
     v = tr.rr.speed * (1.0 + p[0] * defaults["asbuilt.motion_scale"][0])
     shift = tr.shift + p[1] * defaults["asbuilt.motion_scale"][1]
     u = corner_inputs(ds.manifest.tracks[run.track], ds.geometry, v * (ds.data[run.id].time - shift))
     return replace(tr, rr=replace(tr.rr, speed=v, tau=ds.geometry.wheelbase / v), U=np.fft.rfft(u, axis=0),
                    shift=shift)
-
-
-def motion_jacobian(P, geom, tr: TrackRun, ds, run) -> np.ndarray:
-    """The Jacobian (m, 2) of :func:`residuals` of ``tr`` (a run along a speed channel, as :func:`align_motion`
-    left it) in its speed (relative) and its start shift (s), by central differences: the columns that put the
-    speed's and the start's uncertainty into the error bars (:func:`rideid.estimate.fit.anyroad`'s sandwich)."""
-    cols = []
-    for j, h in enumerate(defaults["asbuilt.motion_jacobian_steps"]):
-        p = np.zeros(2)
-        p[j] = h
-        d = residuals(P, geom, moved(tr, ds, run, p)) - residuals(P, geom, moved(tr, ds, run, -p))
-        cols.append(d / (2 * h * defaults["asbuilt.motion_scale"][j]))
-    return np.stack(cols, axis=1)
 
 
 @dataclass(frozen=True)
@@ -245,52 +231,6 @@ def motion_prior(ds, run) -> MotionPrior:
     given = 0.0 if mr is None else float(mr.start or 0.0)
     start = None if auto else (given, run.start_prior_std(), run.start_std is not None)
     return MotionPrior(speed=speed, start=start)
-
-
-@stage("motion alignment")
-def align_motion(P, geom, tr: TrackRun, ds, run, mode: str = "prior",
-                 prior: MotionPrior | None = None) -> tuple[TrackRun, dict]:
-    """``tr`` of a run along a speed channel, its speed held (:func:`rideid.estimate.fit.anyroad.speed_wander`), with
-    the speed and the start that fit it at the car ``P`` (16,): the drawing at ``x = v (t - shift)``, the rear
-    wheels' delay at ``v``; ``v`` and ``shift`` minimise the run's cost in ``mode`` (:data:`MODES`; the prior as
-    ``tr`` has it) from ``tr``'s (Nelder-Mead: the cost is flat to a few per cent over millimetres, and a gradient
-    solver stopped on its tolerance where it began).
-
-    Two passes place a drawing (:func:`rideid.estimate.fit.anyroad`'s as-built stage): "amplitude" first (the
-    drawing alone: sharp, but the unevenness, weighed as if it were sensor noise, pulls it: H_HH's speed +0.5 to
-    +1.1 % off at the true car of the all-realities case, seeds 1-3), the prior estimated again there, then
-    "prior" from that placement. The prior alone cannot start: a drawing placed by the channel's speed is off at
-    its own lines, the prior takes them up as unevenness, and the cost no longer sees where the drawing lies
-    (flat to 1e-5 over ±9 ms on an exact washboard).
-
-    A GPS channel's mean speed is 0.05-0.1 % off over a few seconds, centimetres of the drawing at a run's end;
-    the distance the fit on the tracks as drawn corrected it to was 15-29 mm off (the drawing's error is in it;
-    the all-realities case of tests/realities_case.py): the drawing as built needs the track's own features to
-    place it. Returns the new run (the prior as it was) and the record ``{"speed_m_s", "start_shift_s",
-    "speed_channel_mean_m_s"}`` (``start_shift_s`` from the start as read)."""
-    base = replace(tr, mode=mode)
-    weight = 1.0
-    if prior is not None:  # SPEC §13: the declared speed and start weigh in at the run's own residual level
-        r0 = residuals(P, geom, base)
-        weight = float(np.sqrt(np.mean(r0 ** 2)))
-
-    def cost(p):
-        c = float(np.sum(residuals(P, geom, moved(base, ds, run, p)) ** 2))
-        if prior is not None:
-            c += float(np.sum(prior.rows(base.rr.speed, base.shift, p, weight) ** 2))
-        return c
-
-    c0 = cost(np.zeros(2))
-    steps = defaults["asbuilt.motion_steps"]
-    sol = minimize(cost, np.zeros(2), method="Nelder-Mead",
-                   options={"initial_simplex": np.array([[0.0, 0.0], [steps[0], 0.0], [0.0, steps[1]]]),
-                            "xatol": defaults["asbuilt.motion_xtol"], "fatol": 1e-9 * c0,
-                            "maxfev": defaults["asbuilt.motion_maxfev"]})
-    x = sol.x if sol.fun < c0 else np.zeros(2)
-    out = moved(tr, ds, run, x)
-    out = replace(out, inputs=nominal_inputs(ds, run, out.rr.speed, out.shift))
-    return out, {"speed_m_s": float(out.rr.speed), "start_shift_s": float(out.shift),
-                 "speed_channel_mean_m_s": held_speed(ds, run)}
 
 
 @dataclass
@@ -544,8 +484,8 @@ def fitted_channels(P, geom, tr: TrackRun, y, fit: Fit | None = None) -> np.ndar
 
 
 __all__ = ["MODES", "Prior", "TrackRun", "Fit", "nominal_inputs", "prepare_track_run", "solve", "residuals",
-           "estimate_prior", "unevenness_rms", "fitted_channels", "meat", "cluster_meat", "align_motion",
-           "moved", "motion_jacobian", "MotionPrior", "motion_prior"]
+           "estimate_prior", "unevenness_rms", "fitted_channels", "meat", "cluster_meat",
+           "moved", "MotionPrior", "motion_prior"]
 
 
 #: the constants this module had before rideid.settings, read from the registry (PEP 562)
