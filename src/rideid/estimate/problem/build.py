@@ -27,7 +27,7 @@ from ...model.simulator import Simulator
 from ...settings import defaults
 from ..records import Block, Plan
 from .bumps import frozen_values, reach, scan_start
-from .cost import IDENTIFIABLE_GROUPS, CostFunction, ParameterSpace, refuse_unsupported_groups
+from .cost import IDENTIFIABLE_GROUPS, CostFunction, ParameterSpace, checked_groups, refuse_unsupported_groups
 from .dampers import knot_excitation
 from .weighting import TrackWeighting
 
@@ -54,12 +54,7 @@ def model_extensions(ds: Dataset, model=None) -> tuple[str, ...]:
         if model in MODELS:
             raise ArgumentError(f"model {model!r} is not one fitted model")
         model = parse_model_arg(model)
-    groups = tuple(model)
-    refuse_unsupported_groups(groups)
-    for g in groups:
-        if g not in IDENTIFIABLE_GROUPS:
-            raise ArgumentError(f"unknown extension group '{g}'; groups are: {', '.join(IDENTIFIABLE_GROUPS)}")
-    return tuple(g for g in IDENTIFIABLE_GROUPS if g in groups)
+    return checked_groups(model)
 
 
 def parse_model_arg(model: str):
