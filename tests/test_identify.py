@@ -435,6 +435,28 @@ def test_cycle_slips_of_every_run_side_by_side_are_each_runs_own(tmp_path):
     assert moved == {rid: s for rid, s in alone.items() if abs(s - starts[rid]) > 2.0 / ds.measured[rid].fs}
     assert list(moved) == ["HB6"] and abs(moved["HB6"] - ds.measured["HB6"].start) < 5e-4
 
+
+def test_the_runs_alignments_at_load_run_side_by_side_and_give_the_same_starts_on_one_or_two_cores(tmp_path):
+    """Loading checks and aligns every run side by side: the steps' work between their simulations runs on as
+    many threads as the kernel has (rideid.conditioning.nominal.gather on rideid.model.batch.thread_map), one
+    after the other with one (rideid.model.backend.one_thread). The SUV's five logger runs, starts estimated: the
+    same starts and load records to the last bit either way, each within 20 ms (4 samples) of the truth, LEAD
+    (the nominal car's alignment, which the polish refines; measured at most 16.5 ms, TW3)."""
+    import warnings
+
+    from logger_case import LEAD, suv_scenario, write_logger
+    from rideid.model import backend
+
+    folder = write_logger(suv_scenario(tmp_path / "sc"), tmp_path / "ds", noise=0.02, seed=3)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # the washboard run's flat-lined roll gyro
+        two = rideid.load_dataset(folder)
+        with backend.one_thread():
+            one = rideid.load_dataset(folder)
+    assert {r: (m.start, m.record) for r, m in two.measured.items()} == \
+        {r: (m.start, m.record) for r, m in one.measured.items()}
+    assert len(two.measured) == 5 and all(abs(m.start - LEAD) < 0.02 for m in two.measured.values())
+
 def test_a_start_std_adds_the_speed_channel_in_quadrature():
     """The polish's start std: the fit's and the load record's speed-channel share in quadrature (3-4-5);
     without a speed channel the fit's alone; an undetermined fit stays undetermined."""
