@@ -26,6 +26,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from ...profiling import stage
 from ...settings import defaults, legacy_names
 from ...data.quality import rate_advice
 from ...model.batch import single_threaded_blas, thread_map
@@ -90,6 +91,7 @@ def coupling_hints(cf, response: dict) -> list[dict]:
 ROAD_HINT_GROUPS = (CHANNELS[4:8], CHANNELS[0:4])
 
 
+@stage("road hints")
 def road_coupling_hints(P, geom, rruns, filters, threshold: float | None = None) -> list[dict]:
     """Channels whose data look AC-coupled without a declared ``highpass``, on runs whose road is fitted
     (:mod:`rideid.estimate.problem.roadfit`; tracks as built, :mod:`rideid.estimate.problem.asbuilt`).
