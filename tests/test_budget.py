@@ -283,6 +283,29 @@ def test_sensitivities_agree_with_refits_with_the_input_moved(declared):
     assert _relative_mismatch(fd, g, x) < 0.03
 
 
+
+def test_the_inputs_columns_run_side_by_side_and_give_the_same_numbers_on_one_or_two_cores(declared):
+    """Each declared input's residual column (the weighbridge, the wheelbase's tape with a cost function of its
+    own, three sensors' gains) is independent and computed side by side (rideid.model.batch.thread_map); with
+    the kernel on one thread (rideid.model.backend.one_thread) one after the other. The same gradients to the
+    last bit either way, and the same as each input propagated alone."""
+    from rideid.model import backend
+
+    ds, _, res = declared
+    cf = CostFunction(ds, extensions=())
+    x = np.asarray(res.x)
+    inputs = declared_inputs(ds.manifest)
+    two = propagate(cf, x, inputs)
+    with backend.one_thread():
+        one = propagate(cf, x, inputs)
+    alone = {i.name: propagate(cf, x, [i])[i.name] for i in inputs[:2]}
+    assert list(two) == [i.name for i in inputs] and len(two) == 5
+    for name, g in two.items():
+        assert np.array_equal(g, one[name]), name
+    for name, g in alone.items():
+        assert np.array_equal(g, two[name]), name
+    assert np.max(np.abs(two["wheelbase"])) > 0  # the wheelbase moves the estimate
+
 # -- the score, the figure ----------------------------------------------------------------------------------
 
 def test_score_judges_by_std_total(declared):

@@ -197,6 +197,26 @@ def test_the_road_fit_names_an_undeclared_coupling(tmp_path, case):
     assert "`[channels] axle_az_fl = { ..., highpass = 0.5 }`" in hints[0]["message"]
 
 
+def test_the_road_fit_hint_trials_run_side_by_side_and_name_the_same_on_one_or_two_cores(tmp_path):
+    """The road fit's coupling trials (sensor_check.road_coupling_hints: the declared chains and 24 trial
+    high-passes, each a road fit of every run) are independent and run on as many threads as the kernel has
+    (rideid.model.batch.thread_map); with one (rideid.model.backend.one_thread) one after the other. Two of the
+    SUV's runs on tracks as built, hubs coupled at 0.5 Hz and not declared, at the true car: the same hints, their
+    reductions equal to the last bit (the best trial is taken in the trials' order, not the order they end)."""
+    from rideid.estimate.assess.sensor_check import road_coupling_hints
+    from rideid.model import backend
+
+    ds = rideid.load_dataset(write_tracks_dataset(tmp_path / "c", seed=4, runs=RUNS[1:3], declare=False))
+    P = as_vector({n: SUV_TRUTH.get(n, 0.0) for n in ALL_NAMES}, extended=True)
+    rruns = [asbuilt.prepare_track_run(ds, r).rr for r in ds.runs]
+    filters = {r.id: ds.sensor_filters(r.id) for r in ds.runs}
+    two = road_coupling_hints(P, ds.geometry, rruns, filters)
+    with backend.one_thread():
+        one = road_coupling_hints(P, ds.geometry, rruns, filters)
+    assert [h["channel"] for h in two] == list(HUBS) and two[0]["rss_reduction"] > 0.9
+    assert one == two  # floats compared exactly
+
+
 @pytest.mark.slow
 def test_rideid_identify_names_an_undeclared_coupling_on_tracks_as_built(tmp_path, capsys):
     """The SUV's five runs on tracks as built, hubs coupled at 0.5 Hz and not declared, `rideid identify --model

@@ -25,7 +25,7 @@ from typing import NamedTuple
 import numpy as np
 
 from ..model import backend
-from ..model.batch import thread_map
+from ..model.batch import single_threaded_blas, thread_map
 from ..model.contact import envelope_grid
 from ..model.simulate import ENVELOPE_DX, prepare_run
 from ..model.simulator import Simulator
@@ -131,19 +131,24 @@ def gather(steps):
         else:
             pending[i] = list(jobs)
 
-    for i in range(len(steps)):
-        advance(i, None)
+    def advance_all(moves):
+        # the steps are independent (each its own run or candidate): their work between simulations side by side
+        # (rideid.model.batch.thread_map), BLAS on one thread however many workers, so the same numbers on one
+        # or two cores
+        with single_threaded_blas():
+            thread_map(lambda move: advance(*move), moves, "rideid-steps")
+
+    advance_all([(i, None) for i in range(len(steps))])
     while True:
         first_failed = min(failed, default=len(steps))
         order = [i for i in sorted(pending) if i < first_failed]
         if not order:
             break
         got = yield [job for i in order for job in pending[i]]
-        at = 0
+        ends = np.cumsum([0] + [len(pending[i]) for i in order])
         for i in order:
-            n = len(pending.pop(i))
-            advance(i, got[at:at + n])
-            at += n
+            del pending[i]
+        advance_all([(i, got[a:b]) for i, a, b in zip(order, ends[:-1], ends[1:])])
     for g in steps:
         g.close()
     if failed:

@@ -346,9 +346,10 @@ def wiring_fix(Y: np.ndarray, Yhat: np.ndarray | None, fs: float, geom, F=None, 
     A = assignment(Y, Yhat) if Yhat is not None else None
     hyps, scores = rigid_body_scores(Y, fs, geom, F)
     known = [c for c in range(4) if CHANNELS[c] in unit_known]
-    if hyps is not None and known:
-        scores = np.where([not h[6] and any(abs(abs(h[1][c]) - 1.0) > 1e-9 for c in known) for h in hyps],
-                          np.inf, scores)
+    if hyps is not None and known:  # as arrays: a loop over the ~10^5 hypotheses took 0.1-0.2 s a run
+        signs = np.array([h[1] for h in hyps], dtype=float)[:, known]
+        renamed = np.array([bool(h[6]) for h in hyps])
+        scores = np.where(~renamed & np.any(np.abs(np.abs(signs) - 1.0) > 1e-9, axis=1), np.inf, scores)
     if hyps is not None:
         ident = 0
         e_id = float(scores[ident])

@@ -26,8 +26,10 @@ from __future__ import annotations
 
 import numpy as np
 
+from ...profiling import stage
 from ...settings import defaults, legacy_names
 from ...data.quality import rate_advice
+from ...model.batch import single_threaded_blas, thread_map
 from ...model.equations import CHANNELS
 from ...model.sensors import AnalogFilter, SensorChain
 from ..problem import roadfit
@@ -89,6 +91,7 @@ def coupling_hints(cf, response: dict) -> list[dict]:
 ROAD_HINT_GROUPS = (CHANNELS[4:8], CHANNELS[0:4])
 
 
+@stage("road hints")
 def road_coupling_hints(P, geom, rruns, filters, threshold: float | None = None) -> list[dict]:
     """Channels whose data look AC-coupled without a declared ``highpass``, on runs whose road is fitted
     (:mod:`rideid.estimate.problem.roadfit`; tracks as built, :mod:`rideid.estimate.problem.asbuilt`).
@@ -128,19 +131,21 @@ def road_coupling_hints(P, geom, rruns, filters, threshold: float | None = None)
         return [c for c in idx if all(c in rr.cols and not any(f.kind == "highpass" for f in declared[rr.run_id][c])
                                       for rr in rruns)]
 
-    base = total({})
-    if not base > 0:
-        return []
     trials = [(tuple(free(g)), defaults["sensor_check.hint_corners"]) for g in ROAD_HINT_GROUPS]
     trials += [((c,), defaults["sensor_check.road_hint_single"]) for c in free(CHANNELS[:8])]
+    # every trial (and the declared chain, first) is independent: side by side (rideid.model.batch.thread_map),
+    # BLAS on one thread, the best taken in the trials' order, so one or two cores give the same hint
+    tried = [{}] + [{c: hz for c in group} for group, corners in trials if group for hz in corners]
+    with single_threaded_blas():
+        totals = thread_map(total, tried, "rideid-hints")
+    base = totals[0]
+    if not base > 0:
+        return []
     best = (0.0, None, ())
-    for group, corners in trials:
-        if not group:
-            continue
-        for hz in corners:
-            red = 1.0 - total({c: hz for c in group}) / base
-            if red > best[0]:
-                best = (red, hz, group)
+    for extra, tot in zip(tried[1:], totals[1:]):
+        red = 1.0 - tot / base
+        if red > best[0]:
+            best = (red, next(iter(extra.values())), tuple(extra))
     red, hz, group = best
     if hz is None or red < threshold:
         return []

@@ -58,6 +58,7 @@ from ...settings import defaults, legacy_names
 from ...data.dataset import Dataset
 from ...errors import ArgumentError, DataError
 from ...model.equations import CHANNELS
+from ...model.batch import single_threaded_blas, thread_map
 from ...model.params import EXTRA_KNOWN, MASS_COUNT, UNITS
 from ..problem.cost import BUMP_UNITS, CostFunction, ParameterSpace
 from ..problem.redundancy import gain_notes, rigid_body_gains
@@ -248,8 +249,11 @@ def propagate(cf: CostFunction, x, inputs) -> dict[str, np.ndarray]:
     Hinv = normal_inverse(Jf).matrix
     A = _full_jacobian(space, x)
     out = {}
-    for inp in inputs:
-        g = _input_column(cf, P0, inp, weights)
+    # each input's column is independent (a geometry input: two simulations on a cost function of its own): side by
+    # side, BLAS on one thread, in the inputs' order, so one or two cores give the same numbers (tests/test_budget.py)
+    with single_threaded_blas():
+        columns = thread_map(lambda inp: _input_column(cf, P0, inp, weights), inputs, "rideid-budget")
+    for inp, g in zip(inputs, columns):
         dx = np.zeros(x.size)
         dx[free] = -span[free] * (Hinv @ (Jf.T @ g))
         direct = _direct(space, inp) if inp.kind == "known" else np.zeros(space.width)

@@ -17,7 +17,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 from scipy.optimize import OptimizeResult, least_squares
 
-from ...profiling import stage
+from ...profiling import stage, timing
 from ...settings import defaults
 from ...conditioning.starts import cycle_slips, distance_warp, linearise_starts, warped
 from ...data.dataset import Dataset
@@ -453,8 +453,9 @@ def _polish_aligned(ds, cf, x_best, equal):
     for _ in range(defaults["identify.realign_max"] + 1):
         P = cf.space.full(x_best[None])[0]
         last = settled or len(rounds) == defaults["identify.realign_max"]
-        ds_now, D, Dw = linearise_starts(warped(ds, warps), P, starts, cf.simulator, derivative=not last,
-                                         warps=warps)
+        with timing("linearise starts"):
+            ds_now, D, Dw = linearise_starts(warped(ds, warps), P, starts, cf.simulator, derivative=not last,
+                                             warps=warps)
         # the model's time axes moved with the starts: the cost function (space, simulator, pin) on them
         cf = cf.with_data(ds_now)
         if last:
@@ -470,7 +471,8 @@ def _polish_aligned(ds, cf, x_best, equal):
             v_mean = max(float(ds.measured[rid].record.get("speed", {}).get("mean") or 1.0), 1e-3)
             worst = max(worst, float(np.max(np.abs(new - w.values))) * ds.measured[rid].fs / v_mean)
             warps[rid] = replace(w, values=new)
-        moved = cycle_slips(ds, cf.space.full(x_best[None])[0], fitted, cf.simulator)
+        with timing("cycle slips"):
+            moved = cycle_slips(ds, cf.space.full(x_best[None])[0], fitted, cf.simulator)
         slipped = {rid: s - fitted[rid] for rid, s in moved.items()}
         starts = {**fitted, **moved}
         rounds.append({"max_change_samples": worst, **({"cycle_slips": slipped} if slipped else {})})
