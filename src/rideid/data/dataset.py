@@ -19,6 +19,7 @@ from ..model.params import (CORNERS, EXT_NAMES, EXTRA_KNOWN, MASS_COUNT, NAMES, 
 from ..model.posts import POST_CHANNELS, prepare_posts
 from ..model.simulate import prepare_run
 from .measured import load_measured_run
+from .quality import resampled_runs
 from .scenario import flat_before, settle_time
 
 
@@ -149,6 +150,12 @@ class Dataset:
             if held is not None:
                 pre[r.id]["motion"] = held
         return ReadOnlyDict(pre)
+
+    @cached_property
+    def resampled(self) -> ReadOnlyDict:
+        """The runs rideid low-passed or interpolated to the model's rate, what and from which rates
+        (:func:`rideid.data.quality.resampled_runs`); worked out once, on first asking."""
+        return ReadOnlyDict(resampled_runs(self.measured))
 
     def sensor_filters(self, run_id: str) -> tuple:
         """Per SPEC channel (CHANNELS order) the analog filters of its sensor chain in run ``run_id``
