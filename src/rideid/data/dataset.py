@@ -182,6 +182,17 @@ class Dataset:
         return Dataset(man, {k: v for k, v in self.data.items() if k in ids},
                        {k: v for k, v in self.measured.items() if k in ids}, self.findings)
 
+    def with_runs(self, run_ids, what: str) -> "Dataset":
+        """:meth:`subset` to the runs named ``run_ids`` (manifest order kept) with the findings of those runs (and
+        the dataset's own); :class:`DataError` naming ``what`` (who asked) and the first id that is no run of it."""
+        have = [r.id for r in self.runs]
+        bad = [r for r in run_ids if r not in have]
+        if bad:
+            raise DataError(f"{what}: run '{bad[0]}' is not in dataset {self.path} (its runs: {', '.join(have)})")
+        keep = set(run_ids)
+        sub = self.subset([r for r in self.runs if r.id in keep])
+        return replace(sub, findings=tuple(f for f in self.findings if getattr(f, "run", None) in keep | {None}))
+
     def with_data(self, data: dict) -> "Dataset":
         """A new dataset with other run data (same manifest and measured runs)."""
         return Dataset(self.manifest, {r.id: data[r.id] for r in self.runs}, self.measured)
