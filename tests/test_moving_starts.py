@@ -66,6 +66,10 @@ def test_lead_in_reaches_back_on_the_profile_and_leaves_out_what_it_lacks(tmp_pa
     for lead, v in zip(leads, (7.0, 11.0)):
         assert lead.samples == math.ceil(g.tire_radius / v * fs)
         assert lead.settle == math.ceil((LEFT_OUT_SETTLES * settle - g.tire_radius / v) * fs - 1e-9) > 400
+    # the dataset carries them from load, for every cost function and the result's record (SPEC §13)
+    assert ds0.leads == tuple(leads)
+    assert [ds0.preprocessed[r.id]["moving_start"]["left_out_s"] for r in ds0.runs] == [lead.settle / fs
+                                                                                         for lead in leads]
     cf = rideid.CostFunction(ds0, extensions=["bump_stops"])
     for ri, lead in enumerate(leads):
         s, e = cf.sim.run_start[ri], cf.sim.run_start[ri + 1]

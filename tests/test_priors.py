@@ -142,11 +142,12 @@ def test_a_one_percent_speed_slip_is_named_at_load_and_never_blamed_on_the_wirin
     assert any(f.check == "speed" and f.fix["speed"] == run.speed for f in ds.findings)
     assert wall < 60.0
     # what a fit on the tracks as drawn records of it (result.json preprocessing.<run>.motion): never silently
-    from rideid.estimate.assess.details import held_motion
+    from rideid.data.dataset import held_motion
     held = held_motion(ds, run)
     assert held["speed"]["estimate"] == run.speed and held["speed"]["declared"] == 10.1
     assert held["speed"]["std"] == pytest.approx(float(named[0].split(" ± ")[1].split(" ")[0]), rel=0.05)
     assert held["estimated"].startswith("at load, from the lags")
+    assert ds.preprocessed["H_HH"]["motion"] == held  # the dataset carries it from load (the fit copies it)
 
 
 # -- the speed estimated with the car -----------------------------------------------------------------------------

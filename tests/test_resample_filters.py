@@ -14,7 +14,8 @@ import numpy as np
 import pytest
 from scipy.signal import butter, lsim
 
-from rideid.data.quality import rate_advice
+from rideid.data.quality import resampled_runs
+from rideid.estimate.assess.sensor_check import rate_advice
 from rideid.data.measured import FILTER_CUTOFF, FILTER_ORDER, default_rate, load_measured_run, uniform_clock
 from rideid.data.schema.manifest import load_manifest
 from rideid.model.equations import CHANNELS
@@ -95,7 +96,9 @@ def test_a_500_hz_logger_is_read_at_250_hz_by_taking_every_second_sample(tmp_pat
     assert rec["fs"] == 250.0 and rec["filters"] == [] and set(rec["decimated"].values()) == {2}
     assert "500 Hz / 2" in rec["rule"]
     assert mr.chain_filters() == ((),) * len(CHANNELS)  # nothing for the model to pass either
-    assert rate_advice(SimpleNamespace(measured={"R": mr}), _flagged()) is None  # nothing filtered to blame
+    # nothing filtered to blame
+    assert resampled_runs({"R": mr}) == {}
+    assert rate_advice(SimpleNamespace(resampled=resampled_runs({"R": mr})), _flagged()) is None
 
 
 def _flagged():
@@ -117,7 +120,7 @@ def test_at_200_hz_by_default_a_500_hz_file_is_read_off_by_the_spline_and_warned
     mid = mr.values[1::2, 0]  # 5 ms, 15 ms, ...: between two file samples
     exact = _signal(mr.times[1::2])
     assert 1e-9 < float(np.max(np.abs(mid - exact))) < 2e-4 * float(np.max(np.abs(y)))  # the spline's own error
-    advice = rate_advice(SimpleNamespace(measured={"R": mr}), _flagged())
+    advice = rate_advice(SimpleNamespace(resampled=resampled_runs({"R": mr})), _flagged())
     assert "R (500 Hz read at 200 Hz)" in advice and "set [preprocess] fs = 250" in advice
 
 
@@ -152,9 +155,9 @@ def test_with_anti_alias_the_data_and_the_model_pass_the_same_low_pass(tmp_path)
     assert float(np.max(np.abs(_signal(mr.times) - ref200))) > 5 * max(data_err, model_err)
     assert n == int(T_END * 200) + 1
     # a flagged pair on a channel so filtered: the advice names the run, its rates and the rate that divides
-    advice = rate_advice(SimpleNamespace(measured={"R": mr}), _flagged())
+    advice = rate_advice(SimpleNamespace(resampled=resampled_runs({"R": mr})), _flagged())
     assert "R (500 Hz read at 200 Hz)" in advice and "set [preprocess] fs = 250" in advice
-    assert rate_advice(SimpleNamespace(measured={"R": mr}), {**_flagged(), "adequate": True}) is None
+    assert rate_advice(SimpleNamespace(resampled=resampled_runs({"R": mr})), {**_flagged(), "adequate": True}) is None
 
 
 @pytest.mark.slow  # 84-105 s per rate on two quiet cores, 6-10 min shared (4.9 min in all): make test-slow, not CI

@@ -454,3 +454,23 @@ def test_ctrl_c_while_waiting_is_a_flag_the_loop_turns_into_keyboard_interrupt()
     assert signal.getsignal(signal.SIGINT) is before
     with engine._interrupt_flag() as stop:  # nothing pending: the loop ends
         assert list(engine._completions(Ready(), stop)) == [1, 2, 3]
+
+
+def test_a_tasks_subset_keeps_its_runs_in_manifest_order_with_their_findings(sim_dataset):
+    """A study task's subset (``Dataset.with_runs``): the runs named, in the manifest's order, their data and the
+    load findings of those runs and of the dataset; an id the dataset lacks is one line naming the subset."""
+    from dataclasses import replace
+
+    from rideid.data.checks import Finding
+    from rideid.errors import DataError
+
+    ds = rideid.load_dataset(sim_dataset)
+    ids = [r.id for r in ds.runs]
+    found = (Finding("warning", "speed", "a", run=ids[0]), Finding("warning", "numbers", "b"),
+             Finding("warning", "speed", "c", run=ids[2]))
+    sub = replace(ds, findings=found).with_runs([ids[2], ids[0]], "subset 'two'")
+    assert [r.id for r in sub.runs] == [ids[0], ids[2]] and set(sub.data) == {ids[0], ids[2]}
+    assert [f.message for f in sub.findings] == ["a", "b", "c"]
+    assert [f.message for f in replace(ds, findings=found).with_runs([ids[1]], "s").findings] == ["b"]
+    with pytest.raises(DataError, match=rf"subset 'two': run 'X_X' is not in dataset .* \(its runs: {ids[0]}, "):
+        ds.with_runs([ids[0], "X_X"], "subset 'two'")

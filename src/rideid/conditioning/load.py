@@ -53,6 +53,10 @@ def load_dataset(path, starts: dict[str, float | dict] | None = None, simulator=
         How the nominal car is simulated (backend, integration settings;
         default ``Simulator()``, the linear car as ``RIDEID_KERNEL`` says).
 
+    The dataset's ``[settings]`` (:mod:`rideid.settings`) are in force while its runs are aligned and checked
+    (:func:`align_starts` runs under the settings in force: called on its own, ``rideid.settings.using`` puts a
+    dataset's in force around it).
+
     Returns
     -------
     Dataset
@@ -63,7 +67,8 @@ def load_dataset(path, starts: dict[str, float | dict] | None = None, simulator=
         Naming the file, key or column at fault.
     """
     ds = read_dataset(path)
-    return align_starts(ds, starts, simulator=simulator)
+    with using(dict(getattr(ds.manifest, "settings", None) or {})):  # the dataset's [settings] (rideid.settings)
+        return align_starts(ds, starts, simulator=simulator)
 
 
 def align_starts(ds: Dataset, starts: dict[str, float | dict] | None = None, car=None, simulator=None) -> Dataset:
@@ -88,12 +93,13 @@ def align_starts(ds: Dataset, starts: dict[str, float | dict] | None = None, car
     simulator : rideid.model.simulator.Simulator, optional
         How it is simulated (default ``Simulator()``: the linear car). The nominal car is linear: the model to
         fit is not chosen yet, and a start and a wiring check need only the car's main response.
+
+    Runs under the settings in force (:func:`load_dataset` puts the dataset's ``[settings]`` in force around it).
     """
     # the starts, then the checks, as one step: the nominal car is simulated a round at a time, every run's
     # requests of a round in one batch (rideid.conditioning.nominal)
     step = _aligned(ds, starts)
-    with using(dict(getattr(ds.manifest, "settings", None) or {})):  # the dataset's [settings] (rideid.settings)
-        ds, findings = run_steps(step, ds.geometry, car, None if simulator is None else simulator.linear())
+    ds, findings = run_steps(step, ds.geometry, car, None if simulator is None else simulator.linear())
     enforce(findings, f"{ds.manifest.path}: ")
     return replace(_seen_speeds(ds, findings), findings=findings)
 

@@ -19,6 +19,7 @@ from ..model.params import (CORNERS, EXT_NAMES, EXTRA_KNOWN, MASS_COUNT, NAMES, 
 from ..model.posts import POST_CHANNELS, prepare_posts
 from ..model.simulate import prepare_run
 from .measured import load_measured_run
+from .quality import resampled_runs
 from .scenario import flat_before, settle_time
 
 
@@ -127,6 +128,35 @@ class Dataset:
                 out[r.id] = rec
         return out
 
+    @cached_property
+    def leads(self) -> tuple:
+        """:func:`lead_ins` of every run, in order (a moving start's lead-in, SPEC §9); worked out once, on first
+        asking (the data are frozen), for every cost function built on this dataset."""
+        return tuple(lead_ins(self))
+
+    @cached_property
+    def preprocessed(self) -> ReadOnlyDict:
+        """The preprocessing record (:meth:`preprocessing`) as a fit on this dataset reports it (SPEC §13): a run
+        that begins moving on its track with its lead-in (``moving_start``, :func:`run_lead_in`), a run at a held
+        constant speed with the ``motion`` the fit holds (:func:`held_motion`); worked out once, on first asking.
+        Read-only: a result copies it (:func:`rideid.estimate.assess.details.preprocessing_record`)."""
+        pre = self.preprocessing()
+        for r, lead in zip(self.runs, self.leads):
+            if getattr(r, "moving", False) and r.road_known:
+                fs = float(self.data[r.id].fs)
+                pre[r.id]["moving_start"] = {"lead_in_s": lead.samples / fs, "left_out_s": lead.settle / fs,
+                                             "method": MOVING_START_METHOD}
+            held = held_motion(self, r)
+            if held is not None:
+                pre[r.id]["motion"] = held
+        return ReadOnlyDict(pre)
+
+    @cached_property
+    def resampled(self) -> ReadOnlyDict:
+        """The runs rideid low-passed or interpolated to the model's rate, what and from which rates
+        (:func:`rideid.data.quality.resampled_runs`); worked out once, on first asking."""
+        return ReadOnlyDict(resampled_runs(self.measured))
+
     def sensor_filters(self, run_id: str) -> tuple:
         """Per SPEC channel (CHANNELS order) the analog filters of its sensor chain in run ``run_id``
         (SPEC §11 ``highpass``, ``lowpass``; empty tuples for a SPEC CSV taken as it is)."""
@@ -151,6 +181,17 @@ class Dataset:
         man = replace(self.manifest, runs=tuple(r for r in self.runs if r.id in ids))
         return Dataset(man, {k: v for k, v in self.data.items() if k in ids},
                        {k: v for k, v in self.measured.items() if k in ids}, self.findings)
+
+    def with_runs(self, run_ids, what: str) -> "Dataset":
+        """:meth:`subset` to the runs named ``run_ids`` (manifest order kept) with the findings of those runs (and
+        the dataset's own); :class:`DataError` naming ``what`` (who asked) and the first id that is no run of it."""
+        have = [r.id for r in self.runs]
+        bad = [r for r in run_ids if r not in have]
+        if bad:
+            raise DataError(f"{what}: run '{bad[0]}' is not in dataset {self.path} (its runs: {', '.join(have)})")
+        keep = set(run_ids)
+        sub = self.subset([r for r in self.runs if r.id in keep])
+        return replace(sub, findings=tuple(f for f in self.findings if getattr(f, "run", None) in keep | {None}))
 
     def with_data(self, data: dict) -> "Dataset":
         """A new dataset with other run data (same manifest and measured runs)."""
@@ -312,6 +353,34 @@ def run_lead_in(ds: Dataset, run) -> LeadIn:
         T = min(flat_before(track, geom, speed), LEAD_IN_SETTLES * settle)
         short = 0.0
     return LeadIn(int(math.ceil(T * rd.fs - 1e-9)), min(int(math.ceil(short * rd.fs - 1e-9)), rd.time.size))
+
+
+#: ``preprocessing.<run>.moving_start.method`` of a run that begins moving, fitted on its track (SPEC §9)
+MOVING_START_METHOD = ("simulated from rest lead_in_s before the first sample on the track's road before x = 0, "
+                       "compared from the first sample on; the first left_out_s s of the run not compared (the "
+                       "profile known less than a settling time before x = 0); docs/any-road.md")
+
+
+def held_motion(ds, run) -> dict | None:
+    """SPEC §13: the ``motion`` record of a run at a constant declared speed on a known track as the fit on the
+    tracks as drawn holds it (never silently): ``speed`` with the value the fit used, its std where the lags at
+    load measured it (:func:`rideid.conditioning.checks.speed_seen`), the declared value and its prior's std, and
+    ``estimated``: how. The runs fitted as built replace it with their own (``tracks.<track>.runs.<run>.motion``,
+    solved with the car). None for other runs."""
+    if not getattr(run, "road_known", False) or getattr(run, "speed_prior", None) is None:
+        return None
+    prior = run.speed_prior()
+    if prior is None or getattr(ds.data.get(run.id), "distance", None) is not None:
+        return None
+    seen = next((f for f in getattr(ds, "findings", ()) if f.check == "speed" and f.run == run.id and f.fix
+                 and "speed" in f.fix), None)
+    speed = {"estimate": float(run.speed), "std": None if seen is None else float(seen.fix["std"]), "unit": "m/s",
+             "declared": prior[0], "prior_std": prior[1], "prior": "declared" if prior[2] else "default"}
+    how = ("at load, from the lags of the data against a nominal car on the track (the fit on the tracks as drawn "
+           "holds it there)" if seen is not None else
+           "not moved: the lags at load agree with the declared value within their error (the fit on the tracks as "
+           "drawn holds it)")
+    return {"speed": speed, "estimated": how}
 
 
 def lead_ins(ds: Dataset) -> list:

@@ -128,30 +128,23 @@ def _channels_text(chans) -> str:
     return ", ".join(chans)
 
 
-def rate_advice(ds, adequacy: dict | None) -> str | None:
-    """One sentence when the not-adequate verdict's flagged run/channel pairs are channels rideid low-passed or
-    interpolated to the model's rate (``preprocessing.<run>.resampling.filters``: a rate the model's does not
-    divide, or ``anti_alias = true``), naming the rate that takes every sample as it is; None otherwise."""
-    if not adequacy or adequacy.get("adequate", True):
-        return None
-    hit, fix = [], set()
-    for rid, rec in (adequacy.get("runs") or {}).items():
-        mr = ds.measured.get(rid)
-        res = mr.record.get("resampling") if mr is not None else None
+def resampled_runs(measured: dict) -> dict:
+    """Run id -> what rideid did to its channels to reach the model's rate, for the runs it low-passed or
+    interpolated (``preprocessing.<run>.resampling.filters``: a rate the model's does not divide, or
+    ``anti_alias = true``): ``channels`` (the names touched), ``file_rates_hz``, ``fs`` (the model's rate) and
+    ``divides`` (the rate that takes every sample as it is, :func:`rideid.data.measured.default_rate`). A fact of
+    the files, known at load (:attr:`rideid.data.dataset.Dataset.resampled`); the verdict's advice names it
+    (:func:`rideid.estimate.assess.sensor_check.rate_advice`)."""
+    out = {}
+    for rid, mr in measured.items():
+        res = mr.record.get("resampling")
         if not res or not res.get("filters"):
             continue
-        touched = {c for f in res["filters"] for c in f["channels"]}
-        flagged = [name for name, fig in rec.items() if fig.get("structure") and name in touched]
-        if flagged:
-            hit.append(f"{rid} ({'/'.join(f'{r:g}' for r in res['file_rates_hz'])} Hz read at {res['fs']:g} Hz)")
-            fix.add(default_rate(res["file_rates_hz"])[0])
-    if not hit:
-        return None
-    rate = (f"set [preprocess] fs = {'/'.join(f'{r:g}' for r in sorted(fix))} (or leave fs out: rideid then "
-            "chooses a rate the file's divides)")
-    return ("Flagged pairs of runs low-passed or interpolated to the model's rate: " + ", ".join(hit[:6]) + "; the "
-            "model reproduces that filter only roughly at this rate (docs/real-data.md, Rates and filters): " + rate
-            + ".")
+        out[rid] = {"channels": frozenset(c for f in res["filters"] for c in f["channels"]),
+                    "file_rates_hz": list(res["file_rates_hz"]), "fs": res["fs"],
+                    "divides": default_rate(res["file_rates_hz"])[0]}
+    return out
 
 
-__all__ = ["NOISE_WINDOW_S", "data_quality", "quality_table", "rate_advice", "resampling_lines", "summarised_warning"]
+__all__ = ["NOISE_WINDOW_S", "data_quality", "quality_table", "resampled_runs", "resampling_lines",
+           "summarised_warning"]

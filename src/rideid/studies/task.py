@@ -11,7 +11,6 @@ core is never oversubscribed (docs/studies.md).
 from __future__ import annotations
 
 import contextlib
-import dataclasses
 import tempfile
 import time
 import warnings
@@ -19,9 +18,8 @@ from importlib.metadata import PackageNotFoundError, version
 from pathlib import Path
 
 from ..conditioning.load import load_dataset
-from ..data.dataset import Dataset
 from ..data.schema import load_truth
-from ..errors import DataError, RideidError
+from ..errors import RideidError
 from ..model.backend import one_thread
 from ..estimate.choice.model_choice import identify
 from ..estimate.result import jsonable
@@ -44,19 +42,6 @@ def one_core():
 
     with one_thread(), threadpool_limits(limits=1):
         yield
-
-
-def subset_dataset(ds, run_ids, subset):
-    """The dataset restricted to ``run_ids`` (manifest order kept)."""
-    have = [r.id for r in ds.runs]
-    bad = [r for r in run_ids if r not in have]
-    if bad:
-        raise DataError(f"subset '{subset}': run '{bad[0]}' is not in dataset {ds.path} "
-                               f"(its runs: {', '.join(have)})")
-    keep = set(run_ids)
-    man = dataclasses.replace(ds.manifest, runs=[r for r in ds.runs if r.id in keep])
-    return Dataset(man, {k: v for k, v in ds.data.items() if k in keep},
-                          {k: v for k, v in ds.measured.items() if k in keep})
 
 
 def _one_line(e: BaseException) -> str:
@@ -120,13 +105,16 @@ def _identify(options, dataset_path, scenario, tmp: Path):
         sim, _ = simulate_manifest(scenario, noise=data["noise"], seed=data["noise_seed"])
         write_dataset(scenario, sim, tmp / "dataset")
         ds = load_dataset(tmp / "dataset")
-        truth = dict(scenario.truth)
     else:
         ds = load_dataset(dataset_path)
+    if options["runs"] is not None:
+        # the runs named (a DataError naming the subset for one the dataset lacks), with their load findings
+        ds = ds.with_runs(options["runs"], f"subset '{options['subset']}'")
+    if "scenario" in data:
+        truth = dict(scenario.truth)
+    else:
         tp = Path(dataset_path) / "truth.toml"
         truth = load_truth(tp, ds.geometry) if tp.is_file() else None
-    if options["runs"] is not None:
-        ds = subset_dataset(ds, options["runs"], options["subset"])
     return identify(ds, **options["identify"]), truth
 
 

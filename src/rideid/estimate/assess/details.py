@@ -4,17 +4,18 @@
 robust standard errors, the runs' disagreement), :func:`details_of` every reported parameter's with the marks
 of what the data did not measure (a knot no run excites, a stop no run reaches) and of the bound check
 (:func:`mark_bounds`: an estimate the bound stopped, not the data); :func:`preprocessing_record` the dataset's
-preprocessing with the starts the fit settled and the motion it held (:func:`held_motion`, SPEC §13).
+preprocessing with the starts the fit settled (the motion it held, SPEC §13, is the dataset's own record:
+:attr:`rideid.data.dataset.Dataset.preprocessed`).
 """
 
 from __future__ import annotations
 
+import copy
 import math
 
 import numpy as np
 
 from ...data.checks import bound_findings
-from ...data.dataset import lead_ins
 from ...model.nonlinear import BUMP_STOP_NAMES
 from ...model.params import UNITS
 from ..problem.cost import BUMP_UNITS
@@ -92,54 +93,18 @@ def mark_bounds(details: dict) -> list:
     return found
 
 
-#: ``preprocessing.<run>.moving_start.method`` of a run that begins moving, fitted on its track (SPEC §9)
-MOVING_START_METHOD = ("simulated from rest lead_in_s before the first sample on the track's road before x = 0, "
-                       "compared from the first sample on; the first left_out_s s of the run not compared (the "
-                       "profile known less than a settling time before x = 0); docs/any-road.md")
-
-
 def preprocessing_record(ds, starts) -> dict:
-    """The dataset's preprocessing record with the starts the fit settled; ``model_time``, the samples' span of
-    model time, at those starts (the samples stay those read at the first start, their model times move); a run
-    that begins moving on its track with its lead-in (``moving_start``, :func:`rideid.data.dataset.run_lead_in`)."""
-    pre = ds.preprocessing()
-    for r, lead in zip(ds.runs, lead_ins(ds)):
-        if getattr(r, "moving", False) and r.road_known:
-            fs = float(ds.data[r.id].fs)
-            pre[r.id]["moving_start"] = {"lead_in_s": lead.samples / fs, "left_out_s": lead.settle / fs,
-                                         "method": MOVING_START_METHOD}
-    for r in ds.runs:
-        held = held_motion(ds, r)
-        if held is not None:
-            pre[r.id]["motion"] = held
+    """The dataset's preprocessing record (:attr:`rideid.data.dataset.Dataset.preprocessed`: a run that begins
+    moving on its track with its lead-in, a run at a held speed with its ``motion``, SPEC §13) with the starts the
+    fit settled; ``model_time``, the samples' span of model time, at those starts (the samples stay those read at
+    the first start, their model times move)."""
+    pre = copy.deepcopy(dict(ds.preprocessed))
     for rid, st in starts.items():
         before = pre[rid].get("start", {}).get("value")
         pre[rid]["start"] = dict(pre[rid].get("start", {}), **st)
         if pre[rid].get("model_time") is not None and before is not None and st.get("value") is not None:
             pre[rid]["model_time"] = [t + before - st["value"] for t in pre[rid]["model_time"]]
     return pre
-
-
-def held_motion(ds, run) -> dict | None:
-    """SPEC §13: the ``motion`` record of a run at a constant declared speed on a known track as the fit on the
-    tracks as drawn holds it (never silently): ``speed`` with the value the fit used, its std where the lags at
-    load measured it (:func:`rideid.conditioning.checks.speed_seen`), the declared value and its prior's std, and
-    ``estimated``: how. The runs fitted as built replace it with their own (``tracks.<track>.runs.<run>.motion``,
-    solved with the car). None for other runs."""
-    if not getattr(run, "road_known", False) or getattr(run, "speed_prior", None) is None:
-        return None
-    prior = run.speed_prior()
-    if prior is None or getattr(ds.data.get(run.id), "distance", None) is not None:
-        return None
-    seen = next((f for f in getattr(ds, "findings", ()) if f.check == "speed" and f.run == run.id and f.fix
-                 and "speed" in f.fix), None)
-    speed = {"estimate": float(run.speed), "std": None if seen is None else float(seen.fix["std"]), "unit": "m/s",
-             "declared": prior[0], "prior_std": prior[1], "prior": "declared" if prior[2] else "default"}
-    how = ("at load, from the lags of the data against a nominal car on the track (the fit on the tracks as drawn "
-           "holds it there)" if seen is not None else
-           "not moved: the lags at load agree with the declared value within their error (the fit on the tracks as "
-           "drawn holds it)")
-    return {"speed": speed, "estimated": how}
 
 
 

@@ -28,7 +28,6 @@ import numpy as np
 
 from ...profiling import stage
 from ...settings import defaults, legacy_names
-from ...data.quality import rate_advice
 from ...model.batch import single_threaded_blas, thread_map
 from ...model.equations import CHANNELS
 from ...model.sensors import AnalogFilter, SensorChain
@@ -179,6 +178,31 @@ def clipping_advice(ds, adequacy: dict | None) -> str | None:
             "(`[channels] <name> range = ...`), use a sensor with a larger range, or leave those runs out.")
 
 
+def rate_advice(ds, adequacy: dict | None) -> str | None:
+    """One sentence when the not-adequate verdict's flagged run/channel pairs are channels rideid low-passed or
+    interpolated to the model's rate (the dataset's :attr:`~rideid.data.dataset.Dataset.resampled`: a rate the
+    model's does not divide, or ``anti_alias = true``), naming the rate that takes every sample as it is; None
+    otherwise."""
+    if not adequacy or adequacy.get("adequate", True):
+        return None
+    hit, fix = [], set()
+    for rid, rec in (adequacy.get("runs") or {}).items():
+        res = ds.resampled.get(rid)
+        if res is None:
+            continue
+        flagged = [name for name, fig in rec.items() if fig.get("structure") and name in res["channels"]]
+        if flagged:
+            hit.append(f"{rid} ({'/'.join(f'{r:g}' for r in res['file_rates_hz'])} Hz read at {res['fs']:g} Hz)")
+            fix.add(res["divides"])
+    if not hit:
+        return None
+    rate = (f"set [preprocess] fs = {'/'.join(f'{r:g}' for r in sorted(fix))} (or leave fs out: rideid then "
+            "chooses a rate the file's divides)")
+    return ("Flagged pairs of runs low-passed or interpolated to the model's rate: " + ", ".join(hit[:6]) + "; the "
+            "model reproduces that filter only roughly at this rate (docs/real-data.md, Rates and filters): " + rate
+            + ".")
+
+
 def sensor_notes(ds, cf, response, adequacy: dict | None) -> dict | None:
     """``adequacy`` with ``sensor_hints`` (channels that look AC-coupled without a declared ``highpass``,
     :func:`rideid.estimate.assess.sensor_check.coupling_hints`) and, when not adequate, advice that names them and
@@ -203,7 +227,7 @@ def sensor_notes(ds, cf, response, adequacy: dict | None) -> dict | None:
 
 
 
-__all__ = ["clipping_advice", "coupling_hints", "sensor_notes"]
+__all__ = ["clipping_advice", "coupling_hints", "rate_advice", "sensor_notes"]
 
 
 #: the constants this module had before rideid.settings, read from the registry (PEP 562)

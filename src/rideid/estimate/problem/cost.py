@@ -46,7 +46,7 @@ import threading
 import numpy as np
 
 from ...settings import defaults, legacy_names
-from ...data.dataset import Dataset, check_known_consistent, lead_ins, prepare_inputs, scale_anchor
+from ...data.dataset import Dataset, check_known_consistent, prepare_inputs, scale_anchor
 from ...errors import ArgumentError, DataError
 from ...model.equations import CHANNEL_KIND, CHANNELS
 from ...model.nonlinear import (BUMP_STOP_NAMES, DEFAULT_KNOTS, NonlinearLayout, NonlinearSimulator, Pin,
@@ -426,7 +426,7 @@ def _measured(ds: Dataset, leads=None):
     a moving start's settling time, SPEC §9 and :func:`rideid.data.dataset.run_lead_in`; None when every sample
     is kept)."""
     Ys, Ws, Ks = [], [], []
-    for r, lead in zip(ds.runs, lead_ins(ds) if leads is None else leads):
+    for r, lead in zip(ds.runs, ds.leads if leads is None else leads):
         Y = ds.data[r.id].matrix()
         clipped = ds.clipped(r.id)
         left_out = np.zeros(Y.shape, dtype=bool) if clipped is None else np.asarray(clipped, dtype=bool).copy()
@@ -446,7 +446,7 @@ def bind_runs(simulator: Simulator, ds: Dataset, keep=None, leads=None):
     ones (:class:`rideid.model.sensors.SensorSimulator`); the bound simulator itself when no run has a filter or
     a lead-in and every sample is kept (the kernels' fast path, unchanged)."""
     filters = [ds.sensor_filters(r.id) for r in ds.runs]
-    leads = lead_ins(ds) if leads is None else leads
+    leads = ds.leads if leads is None else leads
     sim = simulator.bind(ds.geometry, prepare_inputs(ds, leads))
     chains = [SensorChain(f, run.h) for f, run in zip(filters, sim.runs)]
     lead = [lead.samples for lead in leads]
@@ -532,7 +532,7 @@ class CostFunction:
         # the given settings (backend, integration) for this space's model: the linear car unless it has
         # damper curves or bump stops (rideid.model.nonlinear)
         simulator = (Simulator() if simulator is None else simulator).for_layout(space.layout)
-        leads = lead_ins(ds)
+        leads = ds.leads  # worked out once per dataset (rideid.data.dataset.Dataset.leads)
         Y, W, keep = _measured(ds, leads)
         sim = bind_runs(simulator, ds, keep, leads)
         self._build(ds, space, simulator, sim, Y, W, use_kernel, weights, counter, None)
