@@ -584,3 +584,25 @@ def test_no_amplitude_unit_mistake_where_the_lead_in_read_g():
     entries = {c: {"name": c, "unit": "m/s^2", "sign": 1, "scale": 1.0} for c in wiring.CHANNELS}
     assert [f.channel for f in wiring.axle_amplitude_findings("R", entries, Y, Yhat)] == ["axle_az_fr"]
     assert wiring.axle_amplitude_findings("R", entries, Y, Yhat, skip={"axle_az_fr"}) == []
+
+
+def test_a_fix_found_on_some_runs_goes_in_their_own_channel_map():
+    """A cable swapped on one run of several: the wiring finding's fix names the run's own channel map (its
+    [[runs]] entry), since the dataset-wide [channels] would break the runs read as mapped; the same fix on every
+    checked run goes in [channels]; one run alone, as before."""
+    from rideid.conditioning.load import where_to_fix
+    from rideid.data.checks import Finding
+    fix = {"axle_az_fl": {"source": "axle_az_fr", "factor": 1.0}, "axle_az_fr": {"source": "axle_az_fl", "factor": 1.0}}
+    tail = 'axle_az_fl = { name = "axle_az_fr" } (or set [checks] wiring = "warn" if the map is right)'
+
+    def found(rid):
+        return Finding("error", "wiring", f"run '{rid}': swapped. Fix the channel map: {tail}", rid, "axle_az_fl",
+                       fix)
+    other = Finding("warning", "speed", "run 'T_LL': a speed", "T_LL", "speed", None)
+    some = where_to_fix([found("H_HH"), other], ["T_LL", "H_HH", "W_H"])
+    assert some[0].message == ("run 'H_HH': swapped. Fix this run's channel map only (its [[runs]] entry: channels "
+                               "= { ... }; the other runs read as mapped): " + tail)
+    assert some[1] is other
+    every = where_to_fix([found(r) for r in ("T_LL", "H_HH")], ["T_LL", "H_HH"])
+    assert all("Fix the channel map ([channels]: every run's file is wired so): " in f.message for f in every)
+    assert where_to_fix([found("H_HH")], ["H_HH"])[0] == found("H_HH")

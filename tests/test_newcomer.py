@@ -392,3 +392,21 @@ def test_the_motion_line_never_prints_a_small_std_as_zero():
                                  "start_shift_std_s": 6.1e-5, "speed": {"declared": 3.0, "prior_std": 0.009}})
     assert "± 3.2e-05 m/s" in line and "± 0.061 ms" in line and "declared 3 ± 0.009" in line
     assert "0.0000" not in line
+
+
+def test_a_column_missing_from_one_run_is_said():
+    """A column deleted from one run's file: SPEC says a missing channel is simply not used, and the terminal says
+    which run lacks which channel (it passed without a word); a channel no run has (a car without gyros) is not a
+    slip and is not listed."""
+    from types import SimpleNamespace
+
+    from rideid.cli import partial_channels
+    every = {c: np.zeros(3) for c in rideid.CHANNELS if c != "roll_rate"}
+    lacking = {c: v for c, v in every.items() if c != "axle_az_rr"}
+    ds = SimpleNamespace(runs=[SimpleNamespace(id=r) for r in ("T_LL", "H_HH", "W_H")],
+                         data={"T_LL": SimpleNamespace(channels=every), "H_HH": SimpleNamespace(channels=lacking),
+                               "W_H": SimpleNamespace(channels=every)})
+    assert partial_channels(ds) == ["note: axle_az_rr is not in run(s) H_HH (measured on 2 of 3 runs): fitted "
+                                    "without it there; check the file if it should be"]
+    ds.data["H_HH"] = SimpleNamespace(channels=every)
+    assert partial_channels(ds) == []

@@ -148,6 +148,13 @@ def test_a_one_percent_speed_slip_is_named_at_load_and_never_blamed_on_the_wirin
     assert held["speed"]["std"] == pytest.approx(float(named[0].split(" ± ")[1].split(" ")[0]), rel=0.05)
     assert held["estimated"].startswith("at load, from the lags")
     assert ds.preprocessed["H_HH"]["motion"] == held  # the dataset carries it from load (the fit copies it)
+    # an adequate verdict on these data is not a clean one: the set-up slip is a caveat (terminal, report, record)
+    from rideid.estimate.assess.adequacy import caveats, setup_caveat
+    slip = setup_caveat(ds.findings)
+    assert slip.startswith(f"a declared speed the data contradict: H_HH (declared 10.1, the data {v:.4g} m/s)")
+    assert caveats({"adequate": True, "reasons": ["ok"], "setup_caveat": slip}) == [slip]
+    assert setup_caveat([f for f in ds.findings if f.check != "speed"]) is None
+    assert "estimated with the car when they are fitted as built" in named[0]  # what the fit does, said as it is
 
 
 # -- the speed estimated with the car -----------------------------------------------------------------------------

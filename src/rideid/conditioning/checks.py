@@ -518,7 +518,7 @@ def speed_prior_finding(rid: str, run, seen: tuple[float, float]) -> Finding | N
     if pr is None:
         return None
     file = getattr(run, "file", None)
-    fix = {"speed": float(seen[0]), "std": float(seen[1])}
+    fix = {"speed": float(seen[0]), "std": float(seen[1]), "declared": float(pr[0])}
     dec = max(0, 1 - int(np.floor(np.log10(seen[1])))) if seen[1] > 0 else 3
     shown = f"{seen[0]:.{dec}f} ± {seen[1]:.{dec}f}"
     if abs(seen[0] - pr[0]) <= 3.0 * pr[1]:
@@ -527,8 +527,9 @@ def speed_prior_finding(rid: str, run, seen: tuple[float, float]) -> Finding | N
     width = "its declared std" if pr[2] else "the default width of a declared speed, docs/formats.md"
     return Finding(WARNING, "speed", f"run '{rid}'{f' ({file})' if file else ''}: declared speed {pr[0]:g} m/s, "
                    f"the data match the track at {shown} m/s ({100 * (seen[0] / pr[0] - 1):+.2f} "
-                   f"%, more than 3 times {width}, {pr[1]:.2g} m/s): the fit starts from {seen[0]:.{dec}f} m/s and "
-                   "estimates the speed with the car; check the run's speed", rid, "speed", fix)
+                   f"%, more than 3 times {width}, {pr[1]:.2g} m/s): the fit takes {seen[0]:.{dec}f} m/s (held there "
+                   "on the tracks as drawn, estimated with the car when they are fitted as built; the verdict is then "
+                   "not a clean one); check the run's speed", rid, "speed", fix)
 
 
 def _scale_finding(rid: str, scale: dict, entries: dict, wiring: str) -> Finding:

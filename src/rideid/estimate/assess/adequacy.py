@@ -400,7 +400,8 @@ def level_caveat(adequacy: dict) -> str | None:
 def caveats(adequacy: dict | None) -> list[str]:
     """What keeps an adequate verdict from being a clean one (SPEC §12, §13): runs the verdict does not cover
     (``not_assessed``: runs on unknown roads), a residual level well above the sensor noise (``level_caveat``),
-    tracks taken as drawn while the residuals hold road-driven structure (``tracks_caveat``). Empty when not
+    tracks taken as drawn while the residuals hold road-driven structure (``tracks_caveat``), a declared set-up value
+    the data contradicted at load (``setup_caveat``, :func:`setup_caveat`). Empty when not
     adequate (the verdict already says not to trust the numbers) or when there are none. The terminal, the report
     and the adequacy record all read this list, so they say the same."""
     if not adequacy or not adequacy.get("adequate"):
@@ -411,10 +412,24 @@ def caveats(adequacy: dict | None) -> list[str]:
         out.append(f"{len(runs)} run(s) not assessed ({', '.join(map(str, runs))}: on unknown roads, where rideid has "
                    "no residual test yet): the verdict covers the other runs only, and a misfit on these would not "
                    "show")
-    for key in ("level_caveat", "tracks_caveat"):
+    for key in ("level_caveat", "tracks_caveat", "setup_caveat"):
         if adequacy.get(key):
             out.append(str(adequacy[key]))
     return out
+
+
+def setup_caveat(findings) -> str | None:
+    """``adequacy.setup_caveat``: the set-up values the data contradicted at load (a warning of the ``speed`` check:
+    a declared speed more than 3 of its prior's std from the speed the lags show), one sentence naming each run; None
+    when there are none. The fit took the data's value, so the numbers may be right; but a set-up slip the data had
+    to mend means the verdict is not a clean one (the terminal warned first; the report must say so too)."""
+    slips = [f for f in findings or () if f.check == "speed" and f.severity == "warning" and f.run]
+    if not slips:
+        return None
+    runs = ", ".join(f"{f.run} (declared {f.fix['declared']:g}, the data {f.fix['speed']:.4g} m/s)" if f.fix
+                     and "declared" in f.fix else str(f.run) for f in slips)
+    return (f"a declared speed the data contradict: {runs}; the fit took the data's speed; check the test log "
+            "(a speed typed wrong may not be the only slip of that run)")
 
 
 def advice(model: dict | None) -> str:

@@ -55,7 +55,7 @@ from ...model.params import NOMINAL_EXTENSIONS, POWERTRAIN_NAMES
 from ...model.params import SUSPENSION_GROUPS as GROUPS
 from ..fit.budget import with_budget
 from ... import settings
-from ..assess.adequacy import advise, assess_fit, gross_misfit, run_errors
+from ..assess.adequacy import advise, assess_fit, gross_misfit, run_errors, setup_caveat
 from ..records import assessments_of, plan_of
 from ..assess.adequacy import min_improvement as least_improvement
 from ..assess.materiality import weigh_result
@@ -655,6 +655,9 @@ def _identify(ds, *, model, rng, seed, population, generations, weights, polish,
         sa = small_angle(res, {r.id: ds.data[r.id].fs for r in ds.runs if r.id in ds.data})
         if sa is not None:
             res = replace(res, adequacy={**res.adequacy, "small_angle": sa})
+    slip = setup_caveat(ds.findings) if (res.adequacy or {}).get("adequate") else None
+    if slip:  # SPEC §13: a set-up value the data had to mend keeps the verdict from being a clean one
+        res = replace(res, adequacy={**res.adequacy, "setup_caveat": slip})
     warn_bounds(res)
     return res
 
