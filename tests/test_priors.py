@@ -207,6 +207,14 @@ def test_a_motion_record_names_a_value_beyond_three_prior_std(slipped):
                                  "1.2000 ± 0.0040 of it (4.0 times the declared size's std of 5 %, the default width)")
     assert [f["channel"] for f in anyroad.motion_findings({"H_HH": sized})] == ["speed", "size"]
     assert len(anyroad.with_size(m, SimpleNamespace(alpha=1.03, alpha_std=0.004), tr, ds)["named"]) == 1
+    # the data show the size of another track of the family (herringbone_low, 0.005 m): it is named
+    high = ds.manifest.tracks["herringbone_high"]
+    family = SimpleNamespace(tracks={"herringbone_high": high, "herringbone_low": SimpleNamespace(
+        kind=high.kind, keys=dict(high.keys, amplitude=0.005))}, size_prior=ds.manifest.size_prior)
+    low = anyroad.with_size(m, SimpleNamespace(alpha=0.625, alpha_std=0.004), tr,
+                            SimpleNamespace(manifest=family))["named"][1]
+    assert low.endswith("; track 'herringbone_low' (amplitude = 0.005 m) is that size: is it the run's track?"), low
+    assert "is that size" not in sized["named"][1]  # 1.2 x 0.008 m is no declared track
 
 
 @pytest.mark.slow  # 10 s on an idle machine, 220 s on two cores shared by other work: two placements of the drawing

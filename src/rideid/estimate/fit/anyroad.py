@@ -418,8 +418,26 @@ def with_size(rec: dict, fit, tr, ds) -> dict:
         named.append(f"track {tr.track} (run {tr.run_id}): drawn size {k} = {keys.get(k, float('nan')):g} m, the "
                      f"data show {_pm(float(fit.alpha), float(fit.alpha_std))} of it "
                      f"({abs(fit.alpha - 1.0) / tr.size_std:.1f} times the declared size's std of "
-                     f"{100 * tr.size_std:.2g} %{('', ', the default width')[not declared]})")
+                     f"{100 * tr.size_std:.2g} %{('', ', the default width')[not declared]})"
+                     + _same_size_track(ds, tr.track, k, float(fit.alpha), float(fit.alpha_std)))
     return dict(rec, size=e, named=named)
+
+
+def _same_size_track(ds, track: str, key: str, alpha: float, alpha_std: float) -> str:
+    """``"; track 'X' (key = v m) is that size: is it the run's track?"`` when another declared track of the same
+    kind has the size the data show (within 3 std of the factor, or 2 %): a run given the wrong track of a
+    family (twist_low for twist_high) names the right one; else ``""``."""
+    tracks = ds.manifest.tracks
+    here = tracks[track]
+    size = here.keys.get(key)
+    if not size:
+        return ""
+    for tid, other in tracks.items():
+        v = other.keys.get(key)
+        if (tid != track and v and getattr(other, "kind", None) == getattr(here, "kind", None)
+                and abs(v / size - alpha) <= max(3 * alpha_std, 0.02 * alpha)):
+            return f"; track '{tid}' ({key} = {v:g} m) is that size: is it the run's track?"
+    return ""
 
 
 def motion_findings(motion: dict) -> list[dict]:
