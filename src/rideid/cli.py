@@ -524,7 +524,7 @@ def run_identify(ds_path, out_dir, *, seed, population=None, generations=None, w
     small = ((res.adequacy or {}).get("small_angle") or {}).get("note")
     if small:
         print(textwrap.fill("note: " + small, 100, subsequent_indent="  "), file=out)
-    for key in ("tracks_caveat", "level_caveat"):  # adequate, but say which numbers not to trust and why
+    for key in ("tracks_caveat", "level_caveat", "setup_caveat"):  # adequate, but which numbers not to trust, why
         caveat = (res.adequacy or {}).get(key)
         if caveat and (key == "tracks_caveat" or res.adequacy.get("adequate")):
             print(textwrap.fill("WARNING: " + caveat, 100, subsequent_indent="  "), file=out)
