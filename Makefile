@@ -28,7 +28,9 @@ demo: $(STAMP)
 # to CI's slow pass; 9.5 minutes (7.8 the tests, 769) with the road fits' new coupling and roll-rate tests, then
 # one 20 s test moved to CI's slow pass; 5.5 minutes (4.6 the tests, 1005 of them: the rig, frequency responses,
 # both FMI interfaces, the settings registry, the priors and every group pair included) on a fresh clone of two
-# idle cores; it takes longer when other jobs share the cores
+# idle cores; 5.2 minutes (4.3 the tests, 1029 of them: the problem's blocks, the model choice's screen, the road
+# runs' verdict and the both-cores tests included) on a fresh clone, the cores otherwise idle; it takes longer when
+# other jobs share the cores
 test: $(STAMP)
 	$(PY) -m ruff check src tests benchmarks
 	$(PY) -m pytest -q -n auto
