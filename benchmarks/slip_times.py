@@ -20,46 +20,22 @@ from __future__ import annotations
 import sys
 import tempfile
 import time
-import tomllib
 import warnings
 from pathlib import Path
 
-import tomli_w
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
 
 import rideid  # noqa: E402
 from rideid.errors import DataError  # noqa: E402
-from asbuilt_tracks import RUNS, write_dataset  # noqa: E402
+from asbuilt_tracks import in_g, write_exact  # noqa: E402
 
-BY_ID = {r[0]: r for r in RUNS}
-ACCELS = [f"{p}_az_{c}" for p in ("body", "axle") for c in ("fl", "fr", "rl", "rr")]
 
 
 def suv(folder: Path, speeds: dict | None = None) -> Path:
-    """The SUV on the exact drawings (tests/test_priors.py's ``_write``): T_HH, H_HH, W_H; ``speeds`` declared."""
-    write_dataset(folder, amplitude=1.0, rms=0.0, noise=0.01, seed=1, runs=[BY_ID[r] for r in ("T_HH", "H_HH", "W_H")])
-    doc = tomllib.loads((folder / "dataset.toml").read_text())
-    for r in doc["runs"]:
-        if speeds and r["id"] in speeds:
-            r["speed"] = speeds[r["id"]]
-    (folder / "dataset.toml").write_text(tomli_w.dumps(doc))
-    return folder
-
-
-def in_g(src: Path, dst: Path) -> Path:
-    """``src`` with every acceleration column divided by g."""
-    import csv
-    import shutil
-    shutil.copytree(src, dst)
-    for f in (dst / "runs").glob("*.csv"):
-        rows = list(csv.reader(f.open()))
-        head = rows[0]
-        out = [head] + [[row[0]] + [f"{float(v) / 9.80665:.9e}" if head[i] in ACCELS else v
-                                    for i, v in enumerate(row[1:], start=1)] for row in rows[1:]]
-        with f.open("w", newline="") as fh:
-            csv.writer(fh).writerows(out)
-    return dst
+    """The SUV on the exact drawings (tests/asbuilt_tracks.py's ``write_exact``): T_HH, H_HH, W_H; ``speeds``
+    declared."""
+    return write_exact(folder, ["T_HH", "H_HH", "W_H"], speeds)
 
 
 def diagnose(folder: Path, named) -> tuple[str, float]:

@@ -14,6 +14,8 @@ from __future__ import annotations
 
 import csv
 import math
+import shutil
+import tomllib
 
 import numpy as np
 import tomli_w
@@ -187,3 +189,34 @@ def write_dataset(folder, *, amplitude=1.04, rms=1.5e-3, noise=0.01, seed=1, run
         doc["runs"].append({"id": run[0], "track": run[1], "speed": run[2], "file": f"runs/{run[0]}.csv"})
     (folder / "dataset.toml").write_text(tomli_w.dumps(doc))
     return folder
+
+
+#: the eight accelerometers (SPEC §2)
+ACCELS = [f"{p}_az_{c}" for p in ("body", "axle") for c in ("fl", "fr", "rl", "rr")]
+
+
+def write_exact(folder, run_ids, speeds=None):
+    """The SUV on the exact drawings (amplitude 1, no unevenness), 1 % noise, seed 1, the runs ``run_ids``;
+    ``speeds``: run id -> the speed declared in dataset.toml (a slip), else the speed driven."""
+    by_id = {r[0]: r for r in RUNS}
+    write_dataset(folder, amplitude=1.0, rms=0.0, noise=0.01, seed=1, runs=[by_id[r] for r in run_ids])
+    doc = tomllib.loads((folder / "dataset.toml").read_text())
+    for r in doc["runs"]:
+        if speeds and r["id"] in speeds:
+            r["speed"] = speeds[r["id"]]
+    (folder / "dataset.toml").write_text(tomli_w.dumps(doc))
+    return folder
+
+
+def in_g(src, dst):
+    """``src`` copied to ``dst`` with every acceleration column divided by g (a SPEC CSV whose accelerations were
+    written in g)."""
+    shutil.copytree(src, dst)
+    for f in (dst / "runs").glob("*.csv"):
+        rows = list(csv.reader(f.open()))
+        head = rows[0]
+        out = [head] + [[row[0]] + [f"{float(v) / 9.80665:.9e}" if head[i] in ACCELS else v
+                                    for i, v in enumerate(row[1:], start=1)] for row in rows[1:]]
+        with f.open("w", newline="") as fh:
+            csv.writer(fh).writerows(out)
+    return dst

@@ -9,7 +9,6 @@ at a speed 1 % off the one driven: the slips of a test day (10.1 typed for 10 m/
 """
 
 import csv
-import shutil
 import sys
 import time
 import tomllib
@@ -31,22 +30,15 @@ from rideid.estimate.problem import asbuilt, blocks
 from rideid.estimate.problem.cost import ParameterSpace
 
 sys.path.insert(0, str(Path(__file__).parent))
-from asbuilt_tracks import RUNS, write_dataset  # noqa: E402
+from asbuilt_tracks import ACCELS, RUNS, in_g, write_exact  # noqa: E402
 from cars import SUV_TRUTH  # noqa: E402
 
 BY_ID = {r[0]: r for r in RUNS}
-ACCELS = [f"{p}_az_{c}" for p in ("body", "axle") for c in ("fl", "fr", "rl", "rr")]
 
 
 def _write(folder, runs, speeds=None):
     """The SUV on exact drawings (amplitude 1, no unevenness), 1 % noise; ``speeds``: run id -> declared speed."""
-    write_dataset(folder, amplitude=1.0, rms=0.0, noise=0.01, seed=1, runs=[BY_ID[r] for r in runs])
-    doc = tomllib.loads((folder / "dataset.toml").read_text())
-    for r in doc["runs"]:
-        if speeds and r["id"] in speeds:
-            r["speed"] = speeds[r["id"]]
-    (folder / "dataset.toml").write_text(tomli_w.dumps(doc))
-    return folder
+    return write_exact(folder, runs, speeds)
 
 
 @pytest.fixture(scope="module")
@@ -254,18 +246,6 @@ def test_the_speed_is_estimated_with_the_car_and_named(slipped):
 
 # -- units ------------------------------------------------------------------------------------------------------
 
-def _in_g(src: Path, dst: Path) -> Path:
-    """``src`` with every acceleration column divided by g (a SPEC CSV whose accelerations were written in g)."""
-    shutil.copytree(src, dst)
-    for f in (dst / "runs").glob("*.csv"):
-        rows = list(csv.reader(f.open()))
-        head = rows[0]
-        out = [head] + [[row[0]] + [f"{float(v) / 9.80665:.9e}" if head[i] in ACCELS else v
-                                    for i, v in enumerate(row[1:], start=1)] for row in rows[1:]]
-        with f.open("w", newline="") as fh:
-            csv.writer(fh).writerows(out)
-    return dst
-
 
 def test_accelerations_in_g_are_refused_naming_the_accelerometers(tmp_path, capsys):
     """Every acceleration of a SPEC CSV written in g: the rigid-body identities say the gyros and the
@@ -273,7 +253,7 @@ def test_accelerations_in_g_are_refused_naming_the_accelerometers(tmp_path, caps
     parameters at their bounds). The amplitudes against the nominal car decide: the accelerometers, all eight
     named, exit 2, one line; the fix rideid prints loads cleanly."""
     src = _write(tmp_path / "ds", ["H_HH"])
-    bad = _in_g(src, tmp_path / "g")
+    bad = in_g(src, tmp_path / "g")
     rc = main(["identify", str(bad), "--out", str(tmp_path / "fit"), "--quiet", "--no-report"])
     err = capsys.readouterr().err.strip().splitlines()
     assert rc == 2 and len(err) == 1 and err[0].startswith("rideid: error: "), err
@@ -406,7 +386,7 @@ def test_a_gross_first_fit_is_said_before_the_model_choice(tmp_path, capsys):
     most of the signal unexplained, and `rideid identify` stops before the model choice with the set-up to
     check (measured: 20-31 s in all, 73 s with the two cores shared by other work; cost 5.0)."""
     src = _write(tmp_path / "ds", ["T_HH", "H_HH", "W_H"])
-    bad = _in_g(src, tmp_path / "g")
+    bad = in_g(src, tmp_path / "g")
     doc = tomllib.loads((bad / "dataset.toml").read_text())
     doc["checks"] = {"wiring": "off"}
     (bad / "dataset.toml").write_text(tomli_w.dumps(doc))
