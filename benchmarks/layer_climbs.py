@@ -157,27 +157,25 @@ class _Source:
                             names[a.asname] = ("module", a.name)
             self.names[mod] = names
 
-    def resolve(self, mod: str, name: str, depth: int = 0):
-        """``(module, function)`` the name ``name`` of ``mod`` calls, or None (not a rideid function)."""
+    def _resolve(self, mod: str, name: str, table: dict, depth: int = 0):
+        """``(module, name)`` where ``name`` of ``mod`` is defined in ``table`` (module -> its definitions),
+        following imports, or None."""
         if depth > 5 or mod not in self.modules:
             return None
-        if name in self.defs[mod]:
+        if name in table[mod]:
             return mod, name
         b = self.names[mod].get(name)
         if b is None or b[0] == "module":
             return None
-        return self.resolve(b[1], b[2], depth + 1)
+        return self._resolve(b[1], b[2], table, depth + 1)
 
-    def resolve_class(self, mod: str, name: str, depth: int = 0):
+    def resolve(self, mod: str, name: str):
+        """``(module, function)`` the name ``name`` of ``mod`` calls, or None (not a rideid function)."""
+        return self._resolve(mod, name, self.defs)
+
+    def resolve_class(self, mod: str, name: str):
         """``(module, class)`` the name ``name`` of ``mod`` stands for, or None (not a rideid class)."""
-        if depth > 5 or mod not in self.modules:
-            return None
-        if name in self.classes[mod]:
-            return mod, name
-        b = self.names[mod].get(name)
-        if b is None or b[0] == "module":
-            return None
-        return self.resolve_class(b[1], b[2], depth + 1)
+        return self._resolve(mod, name, self.classes)
 
     def method(self, cls, name: str, depth: int = 0):
         """``(module, "Class.method")`` of the method ``name`` of the class ``cls`` (its rideid bases searched

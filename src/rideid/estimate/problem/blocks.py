@@ -73,15 +73,9 @@ class DrawnTracks:
         return track_meat(J, e, self.cf)
 
 
-@dataclass(frozen=True)
-class RoadBlock:
-    """A run on an unknown road (or moving at its first sample): ``rr`` its
-    :class:`rideid.estimate.problem.roadfit.RoadRun`; the meat the gradient's spread over DFT bins."""
-
-    rr: roadfit.RoadRun
-    reweighted = True
-    rank = 0
-    method = "road runs by frequency-domain variable projection (rideid.estimate.problem.roadfit)"
+class _OneRun:
+    """What a block that owns one run's road-fitted channels (``rr``) says of itself: the run, and its order in
+    the threads (the longest first)."""
 
     @property
     def run_id(self) -> str:
@@ -91,6 +85,17 @@ class RoadBlock:
     def order(self) -> float:
         return -self.rr.fit.size
 
+
+@dataclass(frozen=True)
+class RoadBlock(_OneRun):
+    """A run on an unknown road (or moving at its first sample): ``rr`` its
+    :class:`rideid.estimate.problem.roadfit.RoadRun`; the meat the gradient's spread over DFT bins."""
+
+    rr: roadfit.RoadRun
+    reweighted = True
+    rank = 0
+    method = "road runs by frequency-domain variable projection (rideid.estimate.problem.roadfit)"
+
     def residuals(self, x, P, geom) -> np.ndarray:
         return roadfit.residuals(P, geom, self.rr)
 
@@ -99,7 +104,7 @@ class RoadBlock:
 
 
 @dataclass(frozen=True)
-class TrackBlock:
+class TrackBlock(_OneRun):
     """A run on a track as built, ``tr`` (:class:`rideid.estimate.problem.asbuilt.TrackRun`), with where the car
     was on it: ``run`` (the manifest's run), ``prior`` (:class:`rideid.estimate.problem.asbuilt.MotionPrior`) and
     ``record`` (the motion as last placed or solved: ``speed_m_s``, ``start_shift_s``, ...; the result's
@@ -114,17 +119,9 @@ class TrackBlock:
     method = "runs on tracks as built (rideid.estimate.problem.asbuilt)"
 
     @property
-    def run_id(self) -> str:
-        return self.tr.run_id
-
-    @property
     def rr(self) -> roadfit.RoadRun:
         """The run's channels as an unknown-road run (the road fit's view of it)."""
         return self.tr.rr
-
-    @property
-    def order(self) -> float:
-        return -self.tr.fit.size
 
     def residuals(self, x, P, geom) -> np.ndarray:
         return asbuilt.residuals(P, geom, self.tr)
