@@ -591,13 +591,14 @@ def test_a_fix_found_on_some_runs_goes_in_their_own_channel_map():
     [[runs]] entry), since the dataset-wide [channels] would break the runs read as mapped; the same fix on every
     checked run goes in [channels]; one run alone, as before."""
     from rideid.conditioning.load import where_to_fix
-    from rideid.data.checks import Finding
+    from rideid.data.checks import Finding, MapFix
     fix = {"axle_az_fl": {"source": "axle_az_fr", "factor": 1.0}, "axle_az_fr": {"source": "axle_az_fl", "factor": 1.0}}
-    tail = 'axle_az_fl = { name = "axle_az_fr" } (or set [checks] wiring = "warn" if the map is right)'
+    entry = 'axle_az_fl = { name = "axle_az_fr" }'
+    tail = f'{entry} (or set [checks] wiring = "warn" if the map is right)'
 
     def found(rid):
-        return Finding("error", "wiring", f"run '{rid}': swapped. Fix the channel map: {tail}", rid, "axle_az_fl",
-                       fix)
+        return Finding("error", "wiring", f"run '{rid}': swapped", rid, "axle_az_fl", fix, MapFix((entry,)))
+    assert found("H_HH").message == f"run 'H_HH': swapped. Fix the channel map: {tail}"
     other = Finding("warning", "speed", "run 'T_LL': a speed", "T_LL", "speed", None)
     some = where_to_fix([found("H_HH"), other], ["T_LL", "H_HH", "W_H"])
     assert some[0].message == ("run 'H_HH': swapped. Fix this run's channel map only (its [[runs]] entry: channels "
@@ -605,4 +606,6 @@ def test_a_fix_found_on_some_runs_goes_in_their_own_channel_map():
     assert some[1] is other
     every = where_to_fix([found(r) for r in ("T_LL", "H_HH")], ["T_LL", "H_HH"])
     assert all("Fix the channel map ([channels]: every run's file is wired so): " in f.message for f in every)
+    assert [f.remedy.where for f in every] == ["channels", "channels"] and some[0].remedy.where == "run"
+    assert every[0].to_dict()["message"] == every[0].message and "remedy" not in every[0].to_dict()
     assert where_to_fix([found("H_HH")], ["H_HH"])[0] == found("H_HH")

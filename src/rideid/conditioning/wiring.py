@@ -44,7 +44,7 @@ import math
 import numpy as np
 
 from ..settings import defaults, legacy_names
-from ..data.checks import ERROR, Finding
+from ..data.checks import ERROR, Finding, MapFix
 from ..data.schema.channels import UNITS, quantity
 from ..model.equations import CHANNELS
 
@@ -475,9 +475,8 @@ def unit_findings(run_id: str, entries: dict, record: dict) -> list[Finding]:
             continue
         fix = {c: {"source": c, "factor": f}}
         out.append(Finding(ERROR, "wiring", f"run '{run_id}': {describe_fix(fix)}: its lead-in reads "
-                           f"{rec['removed']:.3g} m/s^2 with gravity included, g is {G0:.2f}. Fix the channel "
-                           f"map: {'; '.join(fix_entries(fix, entries))} (or set [checks] wiring = \"warn\" if the "
-                           "map is right)", run_id, c, fix))
+                           f"{rec['removed']:.3g} m/s^2 with gravity included, g is {G0:.2f}", run_id, c, fix,
+                           MapFix(tuple(fix_entries(fix, entries)))))
     return out
 
 
@@ -542,9 +541,8 @@ def axle_amplitude_findings(run_id: str, entries: dict, Y: np.ndarray, Yhat: np.
         fix = {c: {"source": c, "factor": f}}
         i = CHANNELS.index(c)
         out.append(Finding(ERROR, "wiring", f"run '{run_id}': {describe_fix(fix)}: its amplitude is {r[i]:.3g}x the "
-                           f"nominal car's on this road, the other channels' about {r[i] * f:.3g}x. Fix the channel "
-                           f"map: {'; '.join(fix_entries(fix, entries))} (or set [checks] wiring = \"warn\" if the "
-                           "map is right)", run_id, c, fix))
+                           f"nominal car's on this road, the other channels' about {r[i] * f:.3g}x", run_id, c, fix,
+                           MapFix(tuple(fix_entries(fix, entries)))))
     return out
 
 
