@@ -59,13 +59,23 @@ class MapFix:
         ``"map"``: the run's channel map (a dataset of one checked run); ``"channels"``: the dataset's
         ``[channels]``, every checked run needing the same fix; ``"run"``: this run's own ``[[runs]]`` entry,
         the other runs read as mapped (:func:`rideid.conditioning.load.where_to_fix` decides).
+    level : {"error", "warn"}
+        The run's ``[checks] wiring`` level: at ``"error"`` the message also says how to go on with the map as it
+        is (:func:`keep_map`); at ``"warn"`` that is already done.
     """
 
     entries: tuple[str, ...]
     where: str = "map"
+    level: str = "error"
 
     def text(self) -> str:
-        return f'{FIX_HEADS[self.where]}{"; ".join(self.entries)} (or set [checks] wiring = "warn" if the map is right)'
+        return f'{FIX_HEADS[self.where]}{"; ".join(self.entries)}{keep_map(self.level)}'
+
+
+def keep_map(level: str) -> str:
+    """How a wiring finding at the run's ``[checks] wiring`` level says to go on with the map as it is: at
+    ``"error"`` (a refusal) by setting the level to ``"warn"``; nothing where it is set so."""
+    return ' (or set [checks] wiring = "warn" if the map is right)' if level == "error" else ""
 
 
 @dataclass(frozen=True)
@@ -229,4 +239,4 @@ def bound_findings(details: dict, fraction: float = BOUND_FRACTION) -> list[Find
 
 
 __all__ = ["BOUND_FRACTION", "ERROR", "FIX_HEADS", "Finding", "MapFix", "PLAUSIBLE", "WARNING", "bound_findings",
-           "check_numbers", "enforce"]
+           "check_numbers", "enforce", "keep_map"]
