@@ -676,7 +676,7 @@ NOT_SETTINGS: dict[str, str] = {
     "identify.DEFAULT_POPULATION": "an argument's default (rideid.identify population=, --population; SPEC §5)",
     "identify.DEFAULT_GENERATIONS": "an argument's default (rideid.identify generations=, --generations; SPEC §5)",
     "cost.BUMP_BOUNDS": "the bump stops' default search bounds: a model default, [bounds] overrides it",
-    "uncertainty.ANDREWS_BARTLETT": "a mathematical constant: Andrews (1991), the Bartlett kernel's optimal bandwidth",
+    "scores.ANDREWS_BARTLETT": "a mathematical constant: Andrews (1991), the Bartlett kernel's optimal bandwidth",
     "sensitivity.P2R_STARS": "display: the report's star ratings of the sensitivity maps (docs/report.md)",
     "sensitivity.R2T_STARS": "display: the report's star ratings of the sensitivity maps (docs/report.md)",
     "sensitivity.P2T_STARS": "display: the report's star ratings of the sensitivity maps (docs/report.md)",
