@@ -55,8 +55,8 @@ from ...model.params import NOMINAL_EXTENSIONS, POWERTRAIN_NAMES
 from ...model.params import SUSPENSION_GROUPS as GROUPS
 from ..fit.budget import with_budget
 from ... import settings
-from ..assess.adequacy import advise, assess_fit, gross_misfit, run_errors, setup_caveat
-from ..records import assessments_of, plan_of
+from ..assess.adequacy import advise, assess_fit, gross_misfit, run_errors
+from ..records import assessments_of, plan_of, with_caveats
 from ..assess.adequacy import min_improvement as least_improvement
 from ..assess.materiality import weigh_result
 from ..assess.small_angle import small_angle
@@ -605,7 +605,9 @@ def dataset_settings(ds) -> dict:
 
 def with_records(ds, res):
     """``res`` with the typed records of SPEC §13 (:mod:`rideid.estimate.records`): the plan, the settings in
-    force, the assessments."""
+    force, the assessments (those that qualify an adequate verdict, a set-up value the data had to mend, written
+    into ``adequacy`` as its caveats first: :func:`rideid.estimate.records.with_caveats`)."""
+    res = with_caveats(res)
     return replace(res, plan=plan_of(res, [r.id for r in ds.runs]), settings=settings.current(),
                    assessments=assessments_of(res))
 
@@ -655,9 +657,6 @@ def _identify(ds, *, model, rng, seed, population, generations, weights, polish,
         sa = small_angle(res, {r.id: ds.data[r.id].fs for r in ds.runs if r.id in ds.data})
         if sa is not None:
             res = replace(res, adequacy={**res.adequacy, "small_angle": sa})
-    slip = setup_caveat(ds.findings) if (res.adequacy or {}).get("adequate") else None
-    if slip:  # SPEC §13: a set-up value the data had to mend keeps the verdict from being a clean one
-        res = replace(res, adequacy={**res.adequacy, "setup_caveat": slip})
     warn_bounds(res)
     return res
 
