@@ -50,13 +50,8 @@ from ...settings import defaults, legacy_names
 from ...model.params import SUSPENSION_GROUPS as GROUPS
 from ...model.batch import single_threaded_blas, thread_map
 from ...model.equations import CHANNELS
+from ..problem.cost import min_improvement
 
-
-
-def min_improvement() -> float:
-    """The least cost reduction that counts as a better fit: the cost is a relative squared error, so a change
-    must move the fit by ``adequacy.min_relative`` of the channels' RMS (model choice, the bump-stop scan)."""
-    return defaults["adequacy.min_relative"] ** 2
 
 
 _ADVICE_HEAD = ("The residuals carry road-driven structure the model does not explain, so the estimates are "
