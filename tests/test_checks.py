@@ -251,6 +251,28 @@ def test_warn_level_lets_a_run_through_with_the_warning(hatch, tmp_path):
         ds = rideid.load_dataset(path)
     assert [f.check for f in ds.findings] == ["wiring"]
     assert any("axle_az_fl and axle_az_rl are swapped" in str(w.message) for w in wl)
+    # the fix is said, but not the way to a level already set
+    msg = ds.findings[0].message
+    assert "Fix the channel map: axle_az_fl = " in msg and "[checks]" not in msg, msg
+
+
+def test_a_wiring_finding_offers_the_warn_level_only_where_it_is_not_set():
+    """At the run's ``[checks] wiring`` level "error" a wiring finding is an error that says how to go on with the
+    map as it is; at "warn" it is a warning with the same fix and without that advice."""
+    rng = np.random.default_rng(2)
+    Yhat = rng.standard_normal((400, 10))
+    Y = Yhat.copy()
+    Y[:, 5] /= 9.80665
+    entries = {c: {"name": c, "unit": "m/s^2", "sign": 1, "scale": 1.0} for c in wiring.CHANNELS}
+    (err,) = wiring.axle_amplitude_findings("R", entries, Y, Yhat)
+    (warn,) = wiring.axle_amplitude_findings("R", entries, Y, Yhat, level="warn")
+    fix = 'Fix the channel map: axle_az_fr = { name = "axle_az_fr", unit = "g" }'
+    assert (err.severity, warn.severity) == ("error", "warning")
+    assert err.message.endswith(f'{fix} (or set [checks] wiring = "warn" if the map is right)'), err.message
+    assert warn.message.endswith(fix) and warn.message == err.message.split(" (or set")[0]
+    record = {"axle_az_fl": {"removed_as": "gravity and bias", "removed": 1.0, "gravity_unit_factor": 9.80665}}
+    (unit,) = wiring.unit_findings("R", entries, record, "warn")
+    assert unit.severity == "warning" and unit.message.endswith('{ name = "axle_az_fl", unit = "g" }'), unit.message
 
 
 def test_unknown_check_level_is_refused(hatch, tmp_path):
@@ -591,13 +613,14 @@ def test_a_fix_found_on_some_runs_goes_in_their_own_channel_map():
     [[runs]] entry), since the dataset-wide [channels] would break the runs read as mapped; the same fix on every
     checked run goes in [channels]; one run alone, as before."""
     from rideid.conditioning.load import where_to_fix
-    from rideid.data.checks import Finding
+    from rideid.data.checks import Finding, MapFix
     fix = {"axle_az_fl": {"source": "axle_az_fr", "factor": 1.0}, "axle_az_fr": {"source": "axle_az_fl", "factor": 1.0}}
-    tail = 'axle_az_fl = { name = "axle_az_fr" } (or set [checks] wiring = "warn" if the map is right)'
+    entry = 'axle_az_fl = { name = "axle_az_fr" }'
+    tail = f'{entry} (or set [checks] wiring = "warn" if the map is right)'
 
     def found(rid):
-        return Finding("error", "wiring", f"run '{rid}': swapped. Fix the channel map: {tail}", rid, "axle_az_fl",
-                       fix)
+        return Finding("error", "wiring", f"run '{rid}': swapped", rid, "axle_az_fl", fix, MapFix((entry,)))
+    assert found("H_HH").message == f"run 'H_HH': swapped. Fix the channel map: {tail}"
     other = Finding("warning", "speed", "run 'T_LL': a speed", "T_LL", "speed", None)
     some = where_to_fix([found("H_HH"), other], ["T_LL", "H_HH", "W_H"])
     assert some[0].message == ("run 'H_HH': swapped. Fix this run's channel map only (its [[runs]] entry: channels "
@@ -605,4 +628,6 @@ def test_a_fix_found_on_some_runs_goes_in_their_own_channel_map():
     assert some[1] is other
     every = where_to_fix([found(r) for r in ("T_LL", "H_HH")], ["T_LL", "H_HH"])
     assert all("Fix the channel map ([channels]: every run's file is wired so): " in f.message for f in every)
+    assert [f.remedy.where for f in every] == ["channels", "channels"] and some[0].remedy.where == "run"
+    assert every[0].to_dict()["message"] == every[0].message and "remedy" not in every[0].to_dict()
     assert where_to_fix([found("H_HH")], ["H_HH"])[0] == found("H_HH")

@@ -142,6 +142,17 @@ def test_data_neither_simulates_nor_reaches_up():
     assert bad == []
 
 
+def test_the_problem_does_not_reach_into_the_fit_the_model_choice_or_the_assessments():
+    """estimate/problem/ (the problem and its blocks) is below the fit, the model choice and the assessments that
+    solve and judge it: a block's share of the error bars is made of the score series of problem/scores.py, which
+    the fit's uncertainty composes, and the least improvement that counts is the cost's (problem/cost.py); before,
+    problem/blocks.py imported the fit's uncertainty module and problem/bumps.py the adequacy test's."""
+    up = [(m, t) for m, ts in EDGES.items() if m.startswith("rideid.estimate.problem") for t in ts
+          if t.startswith(("rideid.estimate.fit", "rideid.estimate.choice", "rideid.estimate.assess"))]
+    assert up == []
+    assert "rideid.estimate.problem.scores" in EDGES["rideid.estimate.fit.uncertainty"]
+
+
 def test_no_import_cycle_even_through_function_level_imports():
     graph = {m: {t for t in ts if (m, t) not in EDGES_ALLOWED} for m, ts in EDGES.items()}
     state, stack, cycles = {}, [], []

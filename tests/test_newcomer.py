@@ -400,13 +400,14 @@ def test_a_column_missing_from_one_run_is_said():
     slip and is not listed."""
     from types import SimpleNamespace
 
-    from rideid.cli import partial_channels
+    from rideid.data.quality import partial_channel_lines, partial_channels
     every = {c: np.zeros(3) for c in rideid.CHANNELS if c != "roll_rate"}
     lacking = {c: v for c, v in every.items() if c != "axle_az_rr"}
     ds = SimpleNamespace(runs=[SimpleNamespace(id=r) for r in ("T_LL", "H_HH", "W_H")],
                          data={"T_LL": SimpleNamespace(channels=every), "H_HH": SimpleNamespace(channels=lacking),
                                "W_H": SimpleNamespace(channels=every)})
-    assert partial_channels(ds) == ["note: axle_az_rr is not in run(s) H_HH (measured on 2 of 3 runs): fitted "
-                                    "without it there; check the file if it should be"]
+    assert partial_channels(ds) == {"axle_az_rr": ["H_HH"]}
+    assert partial_channel_lines(ds) == ["note: axle_az_rr is not in run(s) H_HH (measured on 2 of 3 runs): "
+                                         "fitted without it there; check the file if it should be"]
     ds.data["H_HH"] = SimpleNamespace(channels=every)
-    assert partial_channels(ds) == []
+    assert partial_channels(ds) == {} and partial_channel_lines(ds) == []

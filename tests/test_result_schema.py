@@ -55,15 +55,17 @@ def test_result_json_records_the_version_the_plan_and_every_setting_used(fitted)
     # one assessment per declared kind, in order, each with its verdict and reason; the old keys still written
     kinds = [a["kind"] for a in doc["assessments"]]
     assert kinds == [a.kind for a in ASSESSMENTS] == ["adequacy", "materiality", "small_angles", "sensor_hints",
-                                                      "level", "drawing", "roads", "bounds"]
+                                                      "level", "drawing", "roads", "bounds", "setup"]
     assert all(a["verdict"] in VERDICTS and isinstance(a["reason"], str) and a["reason"] for a in doc["assessments"])
     ad = doc["assessments"][0]
     assert ad["verdict"] == ("pass" if doc["adequacy"]["adequate"] else "fail") and ad["pairs"] == 100
     sa = doc["assessments"][2]
     assert sa["largest_roll_deg"] == doc["adequacy"]["small_angle"]["largest_roll_deg"]
     assert sa["verdict"] == ("warn" if doc["adequacy"]["small_angle"]["optimistic"] else "pass")
-    assert doc["assessments"][-1] == {"kind": "bounds", "verdict": "pass", "at_bound": [],
+    assert doc["assessments"][-2] == {"kind": "bounds", "verdict": "pass", "at_bound": [],
                                       "reason": "no free parameter ended at a search bound"}
+    assert doc["assessments"][-1] == {"kind": "setup", "verdict": "pass", "runs": [],
+                                      "reason": "the data contradicted no declared set-up value at load"}
     for key in ("adequacy", "model", "parameters", "starts", "checks"):
         assert key in doc
 
@@ -115,7 +117,7 @@ def _res(adequacy=None, details=None, tracks=None, roads=None, starts=None, name
 
 def test_each_verdict_follows_what_the_result_holds():
     none = assessments_of(_res())
-    assert [a.verdict for a in none] == ["not assessed"] * 7 + ["pass"]
+    assert [a.verdict for a in none] == ["not assessed"] * 7 + ["pass", "pass"]
     runs = {"r1": {"body_az_fl": {"structure": True, "level": 5.0}, "roll_rate": {"structure": False, "level": 1.0}}}
     bad = _res({"adequate": False, "reasons": ["the road input explains part of the residual"], "runs": runs,
                 "alpha": 0.01, "advice": "try auto",
@@ -144,6 +146,40 @@ def test_each_verdict_follows_what_the_result_holds():
     assert SmallAngleAssessment.from_dict(a["small_angles"].to_dict()) == a["small_angles"]
     with pytest.raises(ValueError, match="verdict 'ok' is not one of pass, warn, fail, not assessed"):
         BoundsAssessment("ok", "")
+
+
+def test_a_set_up_value_the_data_mended_is_an_assessment_and_the_caveat_of_an_adequate_verdict():
+    """The ``setup`` record reads the load's speed warnings in ``checks``: warn, naming each run with its declared
+    speed and the data's; on an adequate verdict its reason is also ``adequacy.setup_caveat`` (with_caveats), which
+    the adequacy record, the terminal and the report read; a verdict that is not adequate gets no caveat."""
+    from dataclasses import dataclass, field, replace
+
+    from rideid.estimate.records import SetupAssessment, with_caveats
+
+    @dataclass(frozen=True)
+    class Result:  # what the records read of an IdentificationResult
+        adequacy: dict | None
+        checks: list
+        details: dict = field(default_factory=lambda: {"k_sf": {"value": 1.0}})
+        tracks: dict | None = None
+        roads: dict | None = None
+
+    slip = {"severity": "warning", "check": "speed", "message": "run 'H': declared speed 10.1 m/s ...", "run": "H",
+            "channel": "speed", "fix": {"speed": 10.0012, "std": 0.0101, "declared": 10.1}}
+    note = {**slip, "severity": "note", "run": "T"}
+    res = Result({"adequate": True, "reasons": ["fine"], "runs": {}}, [slip, note])
+    rec = SetupAssessment.from_result(res)
+    caveat = ("a declared speed the data contradict: H (declared 10.1, the data 10 m/s); the fit took the data's "
+              "speed; check the test log (a speed typed wrong may not be the only slip of that run)")
+    assert rec == SetupAssessment("warn", caveat, [{"run": "H", "declared": 10.1, "speed": 10.0012}])
+    assert SetupAssessment.from_dict(rec.to_dict()) == rec
+    held = with_caveats(res)
+    assert held.adequacy == {**res.adequacy, "setup_caveat": caveat} and "setup_caveat" not in res.adequacy
+    a = {x.kind: x for x in assessments_of(held)}
+    assert a["adequacy"].verdict == "warn" and a["adequacy"].reason == f"fine; but {caveat}"
+    bad = replace(res, adequacy={"adequate": False, "reasons": ["structure"]})
+    assert with_caveats(bad) is bad and SetupAssessment.from_result(bad).verdict == "warn"
+    assert with_caveats(replace(res, checks=[note])).adequacy == res.adequacy
 
 
 def test_the_plan_has_a_block_per_nuisance():

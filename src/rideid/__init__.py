@@ -64,7 +64,8 @@ _COMMAND_LINE = _by_name({
     "rideid.estimate.assess.adequacy": ("verdict_paragraph",), "rideid.estimate.problem.dampers": ("format_dampers",),
     "rideid.estimate.problem.bumps": ("format_bump_stops",), "rideid.design": ("parse_target",),
     "rideid.report.html": ("write_report",),
-    "rideid.data.quality": ("data_quality", "quality_table", "summarised_warning", "resampling_lines"),
+    "rideid.data.quality": ("data_quality", "quality_table", "summarised_warning", "resampling_lines",
+                            "partial_channel_lines"),
     "rideid.profiling": ("Profile",),
 }, {
     "adequacy_caveats": ("rideid.estimate.assess.adequacy", "caveats"),

@@ -457,26 +457,12 @@ def _load_with_quality(ds_path, out):
         return ds
     for line in rideid.resampling_lines(ds):  # the rate of each run and every filter rideid applied to its data
         print(textwrap.fill(line, 100, subsequent_indent="  "), file=out)
-    for line in partial_channels(ds):  # SPEC: a missing channel is simply not used; never silently
+    for line in rideid.partial_channel_lines(ds):  # SPEC: a missing channel is simply not used; never silently
         print(textwrap.fill(line, 100, subsequent_indent="  "), file=out)
     quality = rideid.data_quality(ds)
     if summary or any(e["filters"] for e in quality["channels"].values()):
         print("data quality (" + str(len(ds.runs)) + " runs):\n" + rideid.quality_table(quality), file=out)
     return ds
-
-
-def partial_channels(ds) -> list[str]:
-    """One line per channel that some runs measure and others do not (a column left out of one file): SPEC says a
-    missing channel is simply not used, so those runs are fitted without it; said, so that a column deleted by
-    mistake does not pass unseen."""
-    runs = [r.id for r in ds.runs if r.id in ds.data]
-    out = []
-    for name in rideid.CHANNELS:
-        lacking = [rid for rid in runs if name not in ds.data[rid].channels]
-        if 0 < len(lacking) < len(runs):
-            out.append(f"note: {name} is not in run(s) {', '.join(lacking)} (measured on {len(runs) - len(lacking)} "
-                       f"of {len(runs)} runs): fitted without it there; check the file if it should be")
-    return out
 
 
 def run_identify(ds_path, out_dir, *, seed, population=None, generations=None, weights="adaptive",

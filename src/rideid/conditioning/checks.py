@@ -35,7 +35,7 @@ import dataclasses
 import numpy as np
 
 from ..settings import defaults, legacy_names
-from ..data.checks import ERROR, PLAUSIBLE, WARNING, Finding
+from ..data.checks import ERROR, PLAUSIBLE, WARNING, Finding, MapFix, keep_map
 from ..data.measured import Distance, RelativeDistance
 from ..errors import DataError
 from ..data.schema.channels import SI, UNITS, quantity
@@ -326,12 +326,10 @@ def _check_run(ds, r):
             and mr.record.get("start", {}).get("source") == "given"):
         start_off = yield from _given_start(ds, rid, mr, track)
     # an acceleration in the wrong unit, seen in its lead-in; a re-wiring below that explains it says it better
-    units = (unit_findings(rid, entries, mr.record["channels"])
+    units = (unit_findings(rid, entries, mr.record["channels"], wiring)
              if mr is not None and wiring != "off" else [])
     # ... and one whose lead-in read g is in the right unit: no other check may say otherwise
     unit_known = lead_in_units(mr.record["channels"]) if mr is not None else set()
-    if wiring == "warn":
-        units = [Finding(WARNING, f.check, f.message, f.run, f.channel, f.fix) for f in units]
     Y = rd.matrix()
     Yhat = None
     if track is not None:
@@ -411,19 +409,17 @@ def _check_run(ds, r):
             alts = ("; without a known road this cannot be told from " +
                     " or from ".join(describe_fix(a) for a in wire["alternatives"][:2]) + ": check which")
         msg = (f"run '{rid}': the channels look wired differently from the map: {describe_fix(wire['fix'])}; "
-               f"{' and '.join(how)}{alts}. Fix the channel map: {'; '.join(lines)}"
-               " (or set [checks] wiring = \"warn\" if the map is right)")
-        out.append(Finding(sev, "wiring", msg, rid, next(iter(wire["fix"])), wire["fix"]))
+               f"{' and '.join(how)}{alts}")
+        out.append(Finding(sev, "wiring", msg, rid, next(iter(wire["fix"])), wire["fix"],
+                           MapFix(tuple(lines), level=wiring)))
     elif wire and "rigid_inconsistent" in wire:
         e_id, _ = wire["rigid_inconsistent"]
         out.append(Finding(WARNING, "wiring", f"run '{rid}': the body accelerometers and the gyro do not agree as "
                            f"one rigid body (residual {e_id:.0%}) and no swap, sign or unit explains it: check "
                            "the sensors' positions (at the spring/damper top mounts), units and the map", rid))
     if wiring != "off" and Yhat is not None and start_off is None and not (wire and wire["fix"]):
-        amp = axle_amplitude_findings(rid, entries, Y, Yhat, skip={f.channel for f in units} | unit_known)
-        if wiring == "warn":
-            amp = [Finding(WARNING, f.check, f.message, f.run, f.channel, f.fix) for f in amp]
-        units += amp
+        units += axle_amplitude_findings(rid, entries, Y, Yhat, skip={f.channel for f in units} | unit_known,
+                                         level=wiring)
     out += units
     if track is None or _level(ds, rid, "track") == "off":
         return out
@@ -545,15 +541,13 @@ def _scale_finding(rid: str, scale: dict, entries: dict, wiring: str) -> Finding
         return Finding(sev, "wiring", f"run '{rid}': the accelerations read {scale['factor']:.3g}x too "
                        f"{'small' if scale['factor'] > 1 else 'large'}: {acc} look written in {unit} (their amplitude "
                        f"{scale['body_ratio']:.2g}x the nominal car's on this road, {gyro}; the body accelerometers "
-                       f"and the gyros then agree as one rigid body and with the nominal car). Fix the channel map: "
-                       f"{'; '.join(fix_entries(fix, entries))} (or set [checks] wiring = \"warn\" if the map is "
-                       "right)", rid, scale["channels"][0], fix)
+                       f"and the gyros then agree as one rigid body and with the nominal car)", rid,
+                       scale["channels"][0], fix, MapFix(tuple(fix_entries(fix, entries)), level=wiring))
     acc = ", ".join(f"{c} {ratios[c]:.2g}x" for c in scale["channels"])
     return Finding(sev, "wiring", f"run '{rid}': the body accelerometers and the gyros disagree by g "
                    f"({1 / scale['factor']:.3g}): the accelerations or the gyros are in the wrong unit, and their "
                    f"amplitudes against the nominal car on this road ({acc}; {gyro}) do not say which: check the "
-                   "units of the accelerometers and the gyros in the channel map (or set [checks] wiring = \"warn\" "
-                   "if the map is right)", rid, "pitch_rate")
+                   f"units of the accelerometers and the gyros in the channel map{keep_map(wiring)}", rid, "pitch_rate")
 
 
 def speed_lags(ds, rid, Y, Yhat) -> dict | None:

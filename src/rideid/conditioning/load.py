@@ -105,23 +105,18 @@ def align_starts(ds: Dataset, starts: dict[str, float | dict] | None = None, car
     return replace(_seen_speeds(ds, findings), findings=findings)
 
 
-#: how a wiring finding's fix names where it goes: the channel map of every run, or of the runs found so only
-_FIX_HERE = ("Fix the channel map: ", {True: "Fix the channel map ([channels]: every run's file is wired so): ",
-                                        False: "Fix this run's channel map only (its [[runs]] entry: channels = "
-                                               "{ ... }; the other runs read as mapped): "})
-
-
 def where_to_fix(findings: list, checked: list) -> list:
-    """The wiring findings with their fix placed where it belongs: the dataset's ``[channels]`` when every checked
-    run (``checked``: run ids) needs the same re-wiring, else the run's own ``channels`` (a cable swapped on one
-    run: the dataset-wide fix would break the others). Other findings, and a dataset of one run, unchanged."""
-    wired = [f for f in findings if f.check == "wiring" and f.fix and _FIX_HERE[0] in f.message]
+    """The wiring findings with their fix placed where it belongs (:attr:`rideid.data.checks.MapFix.where`): the
+    dataset's ``[channels]`` when every checked run (``checked``: run ids) needs the same re-wiring, else the run's
+    own ``channels`` (a cable swapped on one run: the dataset-wide fix would break the others). Other findings,
+    and a dataset of one run, unchanged."""
+    wired = [f for f in findings if f.check == "wiring" and f.fix and f.remedy is not None]
     if len(checked) < 2 or not wired:
         return findings
     fixes = {f.run: f.fix for f in wired}
     every = set(checked) <= set(fixes) and all(fx == wired[0].fix for fx in fixes.values())
-    return [replace(f, message=f.message.replace(_FIX_HERE[0], _FIX_HERE[1][every], 1)) if f in wired else f
-            for f in findings]
+    where = "channels" if every else "run"
+    return [replace(f, remedy=replace(f.remedy, where=where)) if f in wired else f for f in findings]
 
 
 def _seen_speeds(ds: Dataset, findings) -> Dataset:

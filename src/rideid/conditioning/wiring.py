@@ -44,7 +44,7 @@ import math
 import numpy as np
 
 from ..settings import defaults, legacy_names
-from ..data.checks import ERROR, Finding
+from ..data.checks import ERROR, WARNING, Finding, MapFix
 from ..data.schema.channels import UNITS, quantity
 from ..model.equations import CHANNELS
 
@@ -445,7 +445,7 @@ def describe_fix(fix: dict) -> str:
 # ---------------------------------------------------------------------------
 # Units: an acceleration whose lead-in reads g in another unit
 
-def unit_findings(run_id: str, entries: dict, record: dict) -> list[Finding]:
+def unit_findings(run_id: str, entries: dict, record: dict, level: str = "error") -> list[Finding]:
     """Acceleration channels mapped in the wrong unit, seen in the gravity their lead-in reads.
 
     Parameters
@@ -461,12 +461,14 @@ def unit_findings(run_id: str, entries: dict, record: dict) -> list[Finding]:
         :func:`rideid.data.schema.channels.gravity_unit_factor`, recorded
         when the run was read; a ``flat_lined`` channel is dead, not in a
         wrong unit).
+    level : {"error", "warn"}
+        The run's ``[checks] wiring`` level: errors, or warnings at ``"warn"``.
 
     Returns
     -------
-    list of Finding (errors, check "wiring"), one per channel, with the fix
+    list of Finding (check "wiring"), one per channel, with the fix
     """
-    out = []
+    out, severity = [], ERROR if level == "error" else WARNING
     for c, rec in record.items():
         if c not in CHANNELS or rec.get("removed_as") != "gravity and bias" or rec.get("flat_lined"):
             continue
@@ -474,10 +476,9 @@ def unit_findings(run_id: str, entries: dict, record: dict) -> list[Finding]:
         if f is None:
             continue
         fix = {c: {"source": c, "factor": f}}
-        out.append(Finding(ERROR, "wiring", f"run '{run_id}': {describe_fix(fix)}: its lead-in reads "
-                           f"{rec['removed']:.3g} m/s^2 with gravity included, g is {G0:.2f}. Fix the channel "
-                           f"map: {'; '.join(fix_entries(fix, entries))} (or set [checks] wiring = \"warn\" if the "
-                           "map is right)", run_id, c, fix))
+        out.append(Finding(severity, "wiring", f"run '{run_id}': {describe_fix(fix)}: its lead-in reads "
+                           f"{rec['removed']:.3g} m/s^2 with gravity included, g is {G0:.2f}", run_id, c, fix,
+                           MapFix(tuple(fix_entries(fix, entries)), level=level)))
     return out
 
 
@@ -494,7 +495,7 @@ def lead_in_units(record: dict) -> set:
 
 
 def axle_amplitude_findings(run_id: str, entries: dict, Y: np.ndarray, Yhat: np.ndarray,
-                            skip=()) -> list[Finding]:
+                            skip=(), level: str = "error") -> list[Finding]:
     """Axle accelerometers in the wrong unit, seen in their amplitude (gravity removed or not logged).
 
     Without a lead-in reading g, a hub channel in g mapped as m/s^2 is only
@@ -505,8 +506,8 @@ def axle_amplitude_findings(run_id: str, entries: dict, Y: np.ndarray, Yhat: np.
     about g (within setting ``wiring.amplitude_band``) is a unit mistake, since cars
     differ from the nominal car by far less.
 
-    Returns one error (check "wiring") per channel, with the fix, as
-    :func:`unit_findings`.
+    Returns one finding (check "wiring") per channel, with the fix, as
+    :func:`unit_findings` (a warning at ``level`` ``"warn"``).
     """
     def ratio(i):
         y, yh = Y[:, i], Yhat[:, i]
@@ -537,14 +538,13 @@ def axle_amplitude_findings(run_id: str, entries: dict, Y: np.ndarray, Yhat: np.
             f = factor(r[i] / body, 2.0) if factor(ref / body, 2.0) is not None else None
         if f is not None:
             flagged[CHANNELS[i]] = f
-    out = []
+    out, severity = [], ERROR if level == "error" else WARNING
     for c, f in flagged.items():
         fix = {c: {"source": c, "factor": f}}
         i = CHANNELS.index(c)
-        out.append(Finding(ERROR, "wiring", f"run '{run_id}': {describe_fix(fix)}: its amplitude is {r[i]:.3g}x the "
-                           f"nominal car's on this road, the other channels' about {r[i] * f:.3g}x. Fix the channel "
-                           f"map: {'; '.join(fix_entries(fix, entries))} (or set [checks] wiring = \"warn\" if the "
-                           "map is right)", run_id, c, fix))
+        out.append(Finding(severity, "wiring", f"run '{run_id}': {describe_fix(fix)}: its amplitude is {r[i]:.3g}x the "
+                           f"nominal car's on this road, the other channels' about {r[i] * f:.3g}x", run_id, c, fix,
+                           MapFix(tuple(fix_entries(fix, entries)), level=level)))
     return out
 
 

@@ -23,8 +23,9 @@ simulates it: :mod:`rideid.conditioning.checks` and
 
 from __future__ import annotations
 
+import copy
 import warnings
-from dataclasses import asdict, dataclass
+from dataclasses import dataclass
 
 from ..errors import DataError, DataWarning
 from ..model.params import EXT_NAMES
@@ -37,6 +38,46 @@ ERROR, WARNING = "error", "warning"
 BOUND_FRACTION = 0.01
 
 
+#: where a channel-map fix goes (:attr:`MapFix.where`) and how its message says so
+FIX_HEADS = {"map": "Fix the channel map: ",
+             "channels": "Fix the channel map ([channels]: every run's file is wired so): ",
+             "run": ("Fix this run's channel map only (its [[runs]] entry: channels = { ... }; the other runs read "
+                     "as mapped): ")}
+
+
+@dataclass(frozen=True)
+class MapFix:
+    """The channel-map entries that fix a wiring finding and where they go, said once in its message
+    (:attr:`Finding.message`).
+
+    Attributes
+    ----------
+    entries : tuple of str
+        The map entries (TOML, ``axle_az_fl = { name = "AccZ_Hub_RL", unit = "m/s^2" }``) that apply the
+        finding's ``fix`` to the map the run was read with (:func:`rideid.conditioning.wiring.fix_entries`).
+    where : {"map", "channels", "run"}
+        ``"map"``: the run's channel map (a dataset of one checked run); ``"channels"``: the dataset's
+        ``[channels]``, every checked run needing the same fix; ``"run"``: this run's own ``[[runs]]`` entry,
+        the other runs read as mapped (:func:`rideid.conditioning.load.where_to_fix` decides).
+    level : {"error", "warn"}
+        The run's ``[checks] wiring`` level: at ``"error"`` the message also says how to go on with the map as it
+        is (:func:`keep_map`); at ``"warn"`` that is already done.
+    """
+
+    entries: tuple[str, ...]
+    where: str = "map"
+    level: str = "error"
+
+    def text(self) -> str:
+        return f'{FIX_HEADS[self.where]}{"; ".join(self.entries)}{keep_map(self.level)}'
+
+
+def keep_map(level: str) -> str:
+    """How a wiring finding at the run's ``[checks] wiring`` level says to go on with the map as it is: at
+    ``"error"`` (a refusal) by setting the level to ``"warn"``; nothing where it is set so."""
+    return ' (or set [checks] wiring = "warn" if the map is right)' if level == "error" else ""
+
+
 @dataclass(frozen=True)
 class Finding:
     """One result of a check.
@@ -47,8 +88,8 @@ class Finding:
     check : str
         Which check: "numbers", "coverage", "wiring", "track", "bounds" (the middle three:
         :mod:`rideid.conditioning.checks`).
-    message : str
-        One line: what is wrong, the likely cause and the fix.
+    text : str
+        One line: what is wrong, the likely cause and, without a ``remedy``, the fix.
     run : str or None
         The run concerned (None for the manifest or the fit).
     channel : str or None
@@ -56,17 +97,27 @@ class Finding:
     fix : dict or None
         SPEC channel -> ``{source, factor}``: the corrected channel is
         ``factor`` times the channel currently mapped to ``source``.
+    remedy : MapFix or None
+        A wiring finding's fix as channel-map entries, and where they go; said after ``text`` in :attr:`message`.
     """
 
     severity: str
     check: str
-    message: str
+    text: str
     run: str | None = None
     channel: str | None = None
     fix: dict | None = None
+    remedy: MapFix | None = None
+
+    @property
+    def message(self) -> str:
+        """What the user reads: the text, then the remedy's entries and where they go."""
+        return self.text if self.remedy is None else f"{self.text}. {self.remedy.text()}"
 
     def to_dict(self) -> dict:
-        return {k: v for k, v in asdict(self).items() if v is not None}
+        d = {"severity": self.severity, "check": self.check, "message": self.message, "run": self.run,
+             "channel": self.channel, "fix": copy.deepcopy(self.fix)}
+        return {k: v for k, v in d.items() if v is not None}
 
 
 # ---------------------------------------------------------------------------
@@ -187,5 +238,5 @@ def bound_findings(details: dict, fraction: float = BOUND_FRACTION) -> list[Find
     return out
 
 
-__all__ = ["BOUND_FRACTION", "ERROR", "Finding", "PLAUSIBLE", "WARNING", "bound_findings", "check_numbers",
-           "enforce"]
+__all__ = ["BOUND_FRACTION", "ERROR", "FIX_HEADS", "Finding", "MapFix", "PLAUSIBLE", "WARNING", "bound_findings",
+           "check_numbers", "enforce", "keep_map"]

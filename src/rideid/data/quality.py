@@ -93,6 +93,23 @@ def summarised_warning(message: str) -> bool:
     return any(s in message for s in SUMMARISED)
 
 
+def partial_channels(ds) -> dict[str, list[str]]:
+    """SPEC channel -> the runs that lack it, for each channel some runs measure and others do not (a column left
+    out of one file). SPEC says a missing channel is simply not used, so those runs are fitted without it; a
+    channel no run has (a car without gyros) is not a slip and is not listed."""
+    runs = [r.id for r in ds.runs if r.id in ds.data]
+    lacking = {name: [rid for rid in runs if name not in ds.data[rid].channels] for name in CHANNELS}
+    return {name: ids for name, ids in lacking.items() if 0 < len(ids) < len(runs)}
+
+
+def partial_channel_lines(ds) -> list[str]:
+    """The terminal's note per channel of :func:`partial_channels`, so that a column deleted by mistake does not
+    pass unseen."""
+    runs = sum(r.id in ds.data for r in ds.runs)
+    return [f"note: {name} is not in run(s) {', '.join(ids)} (measured on {runs - len(ids)} of {runs} runs): fitted "
+            "without it there; check the file if it should be" for name, ids in partial_channels(ds).items()]
+
+
 
 
 def resampling_lines(ds) -> list:
@@ -146,5 +163,5 @@ def resampled_runs(measured: dict) -> dict:
     return out
 
 
-__all__ = ["NOISE_WINDOW_S", "data_quality", "quality_table", "resampled_runs", "resampling_lines",
-           "summarised_warning"]
+__all__ = ["NOISE_WINDOW_S", "data_quality", "partial_channel_lines", "partial_channels", "quality_table",
+           "resampled_runs", "resampling_lines", "summarised_warning"]

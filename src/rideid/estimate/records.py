@@ -34,10 +34,10 @@ before them (schema version 1) gets the same records when it is read back
 
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass, field, fields
+from dataclasses import asdict, dataclass, field, fields, replace
 from typing import ClassVar
 
-from .assess.adequacy import caveats
+from .assess.adequacy import caveats, setup_caveat, setup_slips
 
 #: the four verdicts, mildest first
 VERDICTS = ("pass", "warn", "fail", "not assessed")
@@ -58,6 +58,9 @@ class Assessment:
     """What every assessment record has: its ``kind`` (class attribute), ``verdict`` and ``reason``."""
 
     kind: ClassVar[str] = ""
+    #: the ``adequacy`` key whose caveat this record's ``warn`` writes on an adequate verdict (:func:`with_caveats`),
+    #: or None: a record that only reads the result
+    caveat: ClassVar[str | None] = None
     verdict: str
     reason: str
 
@@ -285,15 +288,47 @@ class RoadsAssessment(Assessment):
                    "road estimate", runs=runs)
 
 
+@dataclass(frozen=True)
+class SetupAssessment(Assessment):
+    """Did the data contradict a declared set-up value at load (SPEC §13: a declared speed more than 3 of its prior's
+    std from the speed the lags show, a warning of the ``speed`` check in ``checks``)? ``warn`` when they did: the
+    fit took the data's value, so the numbers may be right, but an adequate verdict is then not a clean one (its
+    caveat ``adequacy.setup_caveat``, :func:`rideid.estimate.assess.adequacy.setup_caveat`). ``runs``: one
+    ``{"run", "declared", "speed"}`` (m/s) per such run."""
+
+    kind: ClassVar[str] = "setup"
+    caveat: ClassVar[str | None] = "setup_caveat"
+    runs: list = field(default_factory=list)
+
+    @classmethod
+    def from_result(cls, res) -> "SetupAssessment":
+        checks = getattr(res, "checks", None) or []
+        slips = setup_slips(checks)
+        if slips:
+            return cls(verdict="warn", reason=setup_caveat(checks), runs=slips)
+        return cls(verdict="pass", reason="the data contradicted no declared set-up value at load")
+
+
 #: the declared list of assessments, in the order result.json lists them
 ASSESSMENTS: tuple[type[Assessment], ...] = (AdequacyAssessment, MaterialityAssessment, SmallAngleAssessment,
                                              SensorHintsAssessment, LevelAssessment, DrawingAssessment,
-                                             RoadsAssessment, BoundsAssessment)
+                                             RoadsAssessment, BoundsAssessment, SetupAssessment)
 _BY_KIND = {a.kind: a for a in ASSESSMENTS}
 
 
+def with_caveats(res):
+    """``res`` with the caveat of each declared assessment that qualifies an adequate verdict (``caveat``: its
+    ``adequacy`` key) written into ``adequacy`` where the record warns, so that :func:`caveats` (the terminal, the
+    report, the adequacy record) says it; ``res`` itself when the verdict is not adequate or nothing warns."""
+    ad = getattr(res, "adequacy", None)
+    if not ad or not ad.get("adequate"):
+        return res
+    held = {a.caveat: r.reason for a in ASSESSMENTS if a.caveat for r in [a.from_result(res)] if r.verdict == "warn"}
+    return replace(res, adequacy={**ad, **held}) if held else res
+
+
 def assessments_of(res) -> list[Assessment]:
-    """Every assessment of the result ``res``, built from its ``adequacy``, ``details`` and ``tracks``."""
+    """Every assessment of the result ``res``, built from its ``adequacy``, ``details``, ``tracks`` and ``checks``."""
     return [a.from_result(res) for a in ASSESSMENTS]
 
 
@@ -374,5 +409,5 @@ def plan_of(res, run_ids=()) -> Plan:
 
 __all__ = ["VERDICTS", "Assessment", "AdequacyAssessment", "MaterialityAssessment", "SmallAngleAssessment",
            "SensorHintsAssessment", "LevelAssessment", "DrawingAssessment", "RoadsAssessment",
-           "BoundsAssessment", "ASSESSMENTS",
+           "BoundsAssessment", "SetupAssessment", "ASSESSMENTS", "with_caveats",
            "assessments_of", "assessments_from_json", "Block", "Plan", "plan_of"]

@@ -50,13 +50,8 @@ from ...settings import defaults, legacy_names
 from ...model.params import SUSPENSION_GROUPS as GROUPS
 from ...model.batch import single_threaded_blas, thread_map
 from ...model.equations import CHANNELS
+from ..problem.cost import min_improvement
 
-
-
-def min_improvement() -> float:
-    """The least cost reduction that counts as a better fit: the cost is a relative squared error, so a change
-    must move the fit by ``adequacy.min_relative`` of the channels' RMS (model choice, the bump-stop scan)."""
-    return defaults["adequacy.min_relative"] ** 2
 
 
 _ADVICE_HEAD = ("The residuals carry road-driven structure the model does not explain, so the estimates are "
@@ -418,16 +413,31 @@ def caveats(adequacy: dict | None) -> list[str]:
     return out
 
 
+def setup_slips(findings) -> list[dict]:
+    """The set-up values the data contradicted at load: a warning of the ``speed`` check (a declared speed more than
+    3 of its prior's std from the speed the lags show), one ``{"run", "declared", "speed"}`` per run (m/s; None
+    where the finding has no fix). ``findings``: :class:`rideid.data.checks.Finding` objects or their dicts
+    (result.json ``checks``)."""
+    out = []
+    for f in findings or ():
+        f = f.to_dict() if hasattr(f, "to_dict") else f
+        if f.get("check") == "speed" and f.get("severity") == "warning" and f.get("run"):
+            fix = f.get("fix") or {}
+            out.append({"run": f["run"], "declared": fix.get("declared") if "declared" in fix else None,
+                        "speed": fix.get("speed") if "declared" in fix else None})
+    return out
+
+
 def setup_caveat(findings) -> str | None:
-    """``adequacy.setup_caveat``: the set-up values the data contradicted at load (a warning of the ``speed`` check:
-    a declared speed more than 3 of its prior's std from the speed the lags show), one sentence naming each run; None
-    when there are none. The fit took the data's value, so the numbers may be right; but a set-up slip the data had
-    to mend means the verdict is not a clean one (the terminal warned first; the report must say so too)."""
-    slips = [f for f in findings or () if f.check == "speed" and f.severity == "warning" and f.run]
+    """``adequacy.setup_caveat``: the set-up values the data contradicted at load (:func:`setup_slips`), one
+    sentence naming each run; None when there are none. The fit took the data's value, so the numbers may be right;
+    but a set-up slip the data had to mend means the verdict is not a clean one (the terminal warned first; the
+    report must say so too). The assessment ``setup`` (:class:`rideid.estimate.records.SetupAssessment`) says it."""
+    slips = setup_slips(findings)
     if not slips:
         return None
-    runs = ", ".join(f"{f.run} (declared {f.fix['declared']:g}, the data {f.fix['speed']:.4g} m/s)" if f.fix
-                     and "declared" in f.fix else str(f.run) for f in slips)
+    runs = ", ".join(f"{s['run']} (declared {s['declared']:g}, the data {s['speed']:.4g} m/s)"
+                     if s["declared"] is not None else str(s["run"]) for s in slips)
     return (f"a declared speed the data contradict: {runs}; the fit took the data's speed; check the test log "
             "(a speed typed wrong may not be the only slip of that run)")
 

@@ -14,7 +14,7 @@ parameters in M. The smallest C wins. ``W`` asks whether the omitted parameters 
 holds under coloured, cross-channel-correlated noise, so the criterion stays honest where a likelihood-ratio test
 or an AIC/BIC on the raw residual sum of squares (which count every sample as independent) would add groups the
 data do not support. A candidate is eligible only if it fits materially better than every candidate it contains
-(:func:`fits_better`: a cost lower by at least :func:`~rideid.estimate.assess.adequacy.min_improvement`): on
+(:func:`fits_better`: a cost lower by at least :func:`~rideid.estimate.problem.cost.min_improvement`): on
 noise-free data, where every standard error is at rounding level, this keeps groups estimated at rounding-level
 values out. ``penalty()`` = half the 99.9 % point of chi-square(2): a group of two parameters enters when its Wald
 statistic exceeds 13.8, i.e. a test at 0.1 % per group.
@@ -26,9 +26,10 @@ parameters at their null: curves ``F = c v``, stops not reached, a typical engin
 statistic ``W`` of the departure from that null, from its own fit's robust covariance, and its degrees of freedom
 ``dof``). Each rival is first **screened** at the parent's fit (:func:`screen`): one Gauss-Newton step from its
 start with its parameters freed (one batch of forward differences) predicts the cost it can reach; a rival whose
-predicted gain over the parent is below what would be accepted (:func:`min_improvement`, or a score statistic
-``gain / s^2`` below ``penalty() * dof``, ``s^2`` the parent's residual variance times its robust variance
-inflation, the median of ``(std_robust / std)^2`` over its estimates) is skipped and
+predicted gain over the parent is below what would be accepted
+(:func:`~rideid.estimate.problem.cost.min_improvement`, or a score statistic ``gain / s^2`` below
+``penalty() * dof``, ``s^2`` the parent's residual variance times its robust variance inflation, the median of
+``(std_robust / std)^2`` over its estimates) is skipped and
 recorded with its statistic (``model.screens``). The rivals that pass are polished from their parent's fit (no new
 search), on both cores. A rival is **accepted** when it fits materially better than every candidate it contains
 and ``W > penalty() * dof`` (its criterion, the parent's + ``penalty() * dof``, below the parent's +
@@ -55,9 +56,8 @@ from ...model.params import NOMINAL_EXTENSIONS, POWERTRAIN_NAMES
 from ...model.params import SUSPENSION_GROUPS as GROUPS
 from ..fit.budget import with_budget
 from ... import settings
-from ..assess.adequacy import advise, assess_fit, gross_misfit, run_errors, setup_caveat
-from ..records import assessments_of, plan_of
-from ..assess.adequacy import min_improvement as least_improvement
+from ..assess.adequacy import advise, assess_fit, gross_misfit, run_errors
+from ..records import assessments_of, plan_of, with_caveats
 from ..assess.materiality import weigh_result
 from ..assess.small_angle import small_angle
 from ..fit.identify import identify as identify_model, warn_bounds
@@ -67,6 +67,7 @@ from ..fit.identify import DEFAULT_GENERATIONS, DEFAULT_POPULATION
 from ..fit.anyroad import TRACK_OPTIONS, as_built_runs, identify_any_road, unknown_road_runs
 from ...model.batch import single_threaded_blas, thread_map
 from ..problem.cost import IDENTIFIABLE_GROUPS, CostFunction, ParameterSpace, refuse_unsupported_groups
+from ..problem.cost import min_improvement as least_improvement
 from ...errors import ArgumentError
 from ...model.simulator import Simulator
 from ...data.checks import bound_findings
@@ -163,7 +164,7 @@ def fits_better(extensions, costs: dict, min_improvement: float | None = None) -
     costs : dict
         candidate (tuple of groups) -> its cost.
     min_improvement : float, optional
-        Default :func:`rideid.estimate.assess.adequacy.min_improvement` (the setting ``adequacy.min_relative`` squared).
+        Default :func:`rideid.estimate.problem.cost.min_improvement` (the setting ``adequacy.min_relative`` squared).
     """
     min_improvement = least_improvement() if min_improvement is None else min_improvement
     mine = costs[tuple(extensions)]
@@ -605,7 +606,9 @@ def dataset_settings(ds) -> dict:
 
 def with_records(ds, res):
     """``res`` with the typed records of SPEC §13 (:mod:`rideid.estimate.records`): the plan, the settings in
-    force, the assessments."""
+    force, the assessments (those that qualify an adequate verdict, a set-up value the data had to mend, written
+    into ``adequacy`` as its caveats first: :func:`rideid.estimate.records.with_caveats`)."""
+    res = with_caveats(res)
     return replace(res, plan=plan_of(res, [r.id for r in ds.runs]), settings=settings.current(),
                    assessments=assessments_of(res))
 
@@ -655,9 +658,6 @@ def _identify(ds, *, model, rng, seed, population, generations, weights, polish,
         sa = small_angle(res, {r.id: ds.data[r.id].fs for r in ds.runs if r.id in ds.data})
         if sa is not None:
             res = replace(res, adequacy={**res.adequacy, "small_angle": sa})
-    slip = setup_caveat(ds.findings) if (res.adequacy or {}).get("adequate") else None
-    if slip:  # SPEC §13: a set-up value the data had to mend keeps the verdict from being a clean one
-        res = replace(res, adequacy={**res.adequacy, "setup_caveat": slip})
     warn_bounds(res)
     return res
 

@@ -50,29 +50,13 @@ that looks like a measurement.
 
 from __future__ import annotations
 
-from ...settings import defaults, legacy_names
-
 from dataclasses import dataclass
 
 import numpy as np
 from scipy import special
 
-#: Andrews (1991) constant of the Bartlett kernel's optimal bandwidth
-ANDREWS_BARTLETT = 1.1447
-
-
-#: the two arguments every estimator here takes, written once (``{residual_parameters}`` in their docstrings)
-RESIDUAL_PARAMETERS = """J : ndarray, shape (m, n)
-        Jacobian of the residuals at the optimum.
-    e : ndarray, shape (m,)
-        Residuals at the optimum."""
-
-
-def takes_residuals(f):
-    """Put :data:`RESIDUAL_PARAMETERS` into ``f``'s numpydoc Parameters section."""
-    if f.__doc__:  # None under python -OO
-        f.__doc__ = f.__doc__.replace("{residual_parameters}", RESIDUAL_PARAMETERS)
-    return f
+from ...settings import defaults, legacy_names
+from ..problem.scores import andrews_bandwidth, long_run_covariance, run_scores, takes_residuals
 
 
 @takes_residuals
@@ -154,67 +138,6 @@ def normal_inverse(J, rtol: float | None = None) -> NormalInverse:
     return NormalInverse(0.5 * (Hinv + Hinv.T), int(keep.sum()), share > defaults["uncertainty.null_share"])
 
 
-def andrews_bandwidth(G) -> float:
-    """Bartlett-kernel bandwidth by Andrews' (1991) AR(1) plug-in rule.
-
-    Each column of ``G`` (a score component over time) is standardised and
-    fitted with an AR(1), ``rho_a``; then
-    ``alpha = sum 4 rho^2 s^4 / ((1-rho)^6 (1+rho)^2) / sum s^4 / (1-rho)^4``
-    with ``s^2 = 1 - rho^2`` the innovation variance, and
-    ``L = 1.1447 (alpha T)^(1/3)``, at most ``T - 1``.
-
-    Parameters
-    ----------
-    G : ndarray, shape (T, n)
-
-    Returns
-    -------
-    float
-        The bandwidth in samples (lags ``|l| <= L`` get weight ``1 - l/(L+1)``).
-    """
-    G = np.asarray(G, dtype=float)
-    T = G.shape[0]
-    if T < 3:
-        return 0.0
-    sd = G.std(axis=0)
-    keep = sd > 0
-    if not keep.any():
-        return 0.0
-    Z = (G[:, keep] - G[:, keep].mean(axis=0)) / sd[keep]
-    rho = np.sum(Z[1:] * Z[:-1], axis=0) / np.sum(Z[:-1] ** 2, axis=0)
-    rho = np.clip(rho, -defaults["uncertainty.rho_max"], defaults["uncertainty.rho_max"])
-    s4 = (1 - rho ** 2) ** 2
-    num = np.sum(4 * rho ** 2 * s4 / ((1 - rho) ** 6 * (1 + rho) ** 2))
-    den = np.sum(s4 / (1 - rho) ** 4)
-    alpha = num / den
-    return float(min(ANDREWS_BARTLETT * (alpha * T) ** (1.0 / 3.0), T - 1))
-
-
-def long_run_covariance(G, bandwidth: float) -> np.ndarray:
-    """Bartlett-weighted sum of the autocovariances of the rows of ``G`` (not demeaned).
-
-    ``sum_{|l| <= L} (1 - |l|/(L+1)) sum_t g_t g_{t-l}^T`` (a sum, not a mean).
-
-    Parameters
-    ----------
-    G : ndarray, shape (T, n)
-    bandwidth : float
-        ``L`` in samples (0: the heteroscedasticity-only estimate).
-
-    Returns
-    -------
-    ndarray, shape (n, n)
-    """
-    G = np.asarray(G, dtype=float)
-    S = G.T @ G
-    L = int(np.floor(bandwidth))
-    for lag in range(1, min(L, G.shape[0] - 1) + 1):
-        w = 1.0 - lag / (bandwidth + 1.0)
-        Gam = G[lag:].T @ G[:-lag]
-        S += w * (Gam + Gam.T)
-    return S
-
-
 @dataclass
 class RobustCovariance:
     """The HAC sandwich and what went into it.
@@ -229,35 +152,6 @@ class RobustCovariance:
 
     cov: np.ndarray
     bandwidths: list
-
-
-@takes_residuals
-def run_scores(J, e, blocks) -> list[np.ndarray]:
-    """Per-sample scores ``g_t = J_t^T e_t`` of each run.
-
-    Parameters
-    ----------
-    {residual_parameters}
-    blocks : sequence of (int, int)
-        ``(n_time, n_channel)`` of each run; ``sum n_time * n_channel == m``.
-
-    Returns
-    -------
-    list of ndarray, each (n_time, n)
-    """
-    J = np.asarray(J, dtype=float)
-    e = np.asarray(e, dtype=float)
-    m, n = J.shape
-    sizes = [int(T) * int(C) for T, C in blocks]
-    if sum(sizes) != m or e.shape != (m,):
-        raise ValueError(f"blocks cover {sum(sizes)} residuals, the Jacobian has {m} rows and e {e.shape}")
-    out, i = [], 0
-    for (T, C), size in zip(blocks, sizes):
-        Jr = J[i:i + size].reshape(T, C, n)
-        er = e[i:i + size].reshape(T, C, 1)
-        out.append(np.sum(Jr * er, axis=1))
-        i += size
-    return out
 
 
 @takes_residuals

@@ -14,6 +14,7 @@ each block owns — a run's speed and start under their priors, a track's size a
 blocks of one interface (:mod:`~rideid.estimate.problem.blocks`: the runs as drawn, an unknown road, a track as
 built with the run's speed and start, placed and then solved with the car). The nonlinear groups' blocks (damper
 curves' knots, :mod:`~rideid.estimate.problem.dampers`; bump stops, :mod:`~rideid.estimate.problem.bumps`), the
-track weights of the search (:mod:`~rideid.estimate.problem.weighting`) and the sensitivity maps
+track weights of the search (:mod:`~rideid.estimate.problem.weighting`), the score series each block's share of
+the error bars is made of (:mod:`~rideid.estimate.problem.scores`) and the sensitivity maps
 (:mod:`~rideid.estimate.problem.sensitivity`) live here too. Nothing here searches or decides: the fit does.
 """

@@ -33,7 +33,7 @@ from ...model.equations import CHANNELS
 from ...settings import defaults
 from ...profiling import stage
 from . import asbuilt, roadfit
-from ..fit.uncertainty import andrews_bandwidth, long_run_covariance, run_scores
+from .scores import andrews_bandwidth, long_run_covariance, run_scores
 
 
 def road_meat(J, e, m_per_bin: int) -> np.ndarray:

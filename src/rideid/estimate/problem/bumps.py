@@ -43,7 +43,7 @@ import numpy as np
 
 from ...settings import defaults, legacy_names
 from ...model.nonlinear import BUMP_STOP_NAMES, check_nonlinear, travel_by_run
-from ..assess.adequacy import min_improvement
+from .cost import min_improvement
 
 #: how the text output marks a stop no run reaches
 NOT_REACHED = "not reached — not a number to trust"

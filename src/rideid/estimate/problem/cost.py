@@ -113,6 +113,13 @@ def channel_weights(Y: np.ndarray) -> np.ndarray:
     return W
 
 
+def min_improvement() -> float:
+    """The least cost reduction that counts as a better fit: the cost is a relative squared error, so a change
+    must move the fit by setting ``adequacy.min_relative`` of the channels' RMS (the model choice, the bump-stop
+    scan; the adequacy test's floor of material structure is the same share)."""
+    return defaults["adequacy.min_relative"] ** 2
+
+
 def checked_groups(extensions) -> tuple[str, ...]:
     """The model's extension groups in canonical order (:data:`IDENTIFIABLE_GROUPS`); a group this version
     cannot identify, or an unknown one, is an :class:`ArgumentError`."""

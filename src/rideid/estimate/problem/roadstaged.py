@@ -88,7 +88,7 @@ which depends on stage 1 through ``eta``) and the joint sandwich
 ``A^-1 B A^-T`` is taken, ``A = [[J_1^T J_1, 0], [d psi_2/d theta_1,
 d psi_2/d theta_2]]`` (the lower blocks by central differences) and ``B`` the
 Bartlett long-run covariance of the per-sample stacked scores per run
-(Andrews' bandwidth, :mod:`rideid.estimate.fit.uncertainty`). So stage 1's
+(Andrews' bandwidth, :mod:`rideid.estimate.problem.scores`). So stage 1's
 uncertainty propagates into stage 2 (through ``eta`` and the scale mapping),
 and the correlation of the two stages' scores (same sensors, front/rear
 delay) is included. The twelve values' standard errors follow by the delta
@@ -105,7 +105,7 @@ import scipy.optimize
 import scipy.signal
 
 from ...model.params import INDEX, NAMES, Geometry
-from ..fit.uncertainty import andrews_bandwidth, long_run_covariance
+from .scores import andrews_bandwidth, long_run_covariance
 
 #: Half-amplitude frequency (Hz) of the Gaussian low-pass of stage 1 (body) and stage 2 (wheels).
 #: Chosen by a sweep on class-B roads at 2 % noise (docs/road-methods.md): stage 1 gains up to
