@@ -370,8 +370,9 @@ class _Choice:
     def fit(self, parent, key, maps=None):
         """Candidate ``key`` polished from ``parent``'s fit (:func:`start_row`), no search, no verdict."""
         space = _space(self.ds, key, parent)
-        return identify_model(self.ds, cost=CostFunction(self.ds, space=space, simulator=self.simulator),
-                              start=start_row(self.ds, parent, space), maps=maps, assess=False, **self.fit_kw)
+        ds = self.ds.with_starts(parent.starts or {})  # the starts the parent settled: the polish starts there
+        return identify_model(ds, cost=CostFunction(ds, space=space, simulator=self.simulator),
+                              start=start_row(ds, parent, space), maps=maps, assess=False, **self.fit_kw)
 
     def linear_step(self, full):
         """The linear groups: the full linear model's fit ``full``, its subsets polished from it (on both cores),
