@@ -35,6 +35,35 @@ import realities_case  # noqa: E402
 import rideid  # noqa: E402
 
 
+def identify_cli(ds: Path, out: Path, *args: str) -> tuple[float, int, dict | None]:
+    """``rideid identify DS --out OUT --seed 1 --no-report [args]`` in a child process of this tree's rideid:
+    ``(wall time s, exit code, result.json or None)``; its output in ``OUT.log``."""
+    env = {**os.environ, "PYTHONPATH": str(Path(rideid.__file__).parents[1])}
+    t0 = time.perf_counter()
+    proc = subprocess.run([sys.executable, "-m", "rideid", "identify", str(ds), "--out", str(out), "--seed", "1",
+                           "--no-report", *args], capture_output=True, text=True, env=env)
+    wall = time.perf_counter() - t0
+    Path(f"{out}.log").write_text(proc.stdout + proc.stderr)
+    if proc.returncode != 0:
+        print(proc.stderr[-3000:])
+        return wall, proc.returncode, None
+    return wall, 0, json.loads((out / "result.json").read_text())
+
+
+def print_choice(model: dict) -> None:
+    """The model choice of a result.json: the model kept, the steps, each candidate's cost and criterion, each
+    screen's statistic."""
+    print(f"kept: {' + '.join(model['extensions']) or 'base'}; steps {model.get('steps')}; skipped "
+          f"{[' + '.join(s) for s in model.get('skipped', [])]}")
+    for c in model.get("candidates", []):
+        crit = "-" if c["criterion"] is None else f"{c['criterion']:.4g}"
+        print(f"  candidate {' + '.join(c['extensions']) or 'base':<40} cost {c['cost']:.5g}  criterion {crit:>9}"
+              f"  wald {c.get('wald')!s:.8}  fits better {c['fits_better']}")
+    for s in model.get("screens", []):
+        print(f"  screen {' + '.join(s['extensions']):<40} predicted gain {s['predicted_gain']:.4g}  score "
+              f"{s['score']:.4g} (threshold {s['threshold']:.4g})  {'fitted' if s['passes'] else 'skipped'}")
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--runs", nargs="+", default=[r[0] for r in realities_case.SUV_RUNS],
@@ -44,26 +73,12 @@ def main(argv=None) -> int:
     top = args.keep or Path(tempfile.mkdtemp(prefix="auto-realities-"))
     runs = list(args.runs)
     realities_case.write_dataset(top / "ds", car="suv", seed=1, runs=runs)
-    env = {**os.environ, "PYTHONPATH": str(Path(rideid.__file__).parents[1])}
-    t0 = time.perf_counter()
-    proc = subprocess.run([sys.executable, "-m", "rideid", "identify", str(top / "ds"), "--out", str(top / "fit"),
-                           "--seed", "1", "--no-report"], capture_output=True, text=True, env=env)
-    wall = time.perf_counter() - t0
-    (top / "identify.log").write_text(proc.stdout + proc.stderr)
-    print(f"runs {', '.join(runs)}; wall {wall:.0f} s; exit {proc.returncode}; log {top / 'identify.log'}")
-    if proc.returncode != 0:
-        print(proc.stderr[-3000:])
+    wall, rc, res = identify_cli(top / "ds", top / "fit")
+    print(f"runs {', '.join(runs)}; wall {wall:.0f} s; exit {rc}; log {top / 'fit.log'}")
+    if res is None:
         return 1
-    res = json.loads((top / "fit" / "result.json").read_text())
-    model = res["model"]
-    print(f"kept: {' + '.join(model['extensions']) or 'base'}; adequate: {res['adequacy'].get('adequate')}")
-    for c in model.get("candidates", []):
-        crit = "-" if c["criterion"] is None else f"{c['criterion']:.4g}"
-        print(f"  candidate {' + '.join(c['extensions']) or 'base':<40} cost {c['cost']:.5g}  criterion {crit:>9}"
-              f"  wald {c.get('wald')!s:.8}  fits better {c['fits_better']}")
-    for s in model.get("screens", []):
-        print(f"  screen {' + '.join(s['extensions']):<40} predicted gain {s['predicted_gain']:.4g}  score "
-              f"{s['score']:.4g} (threshold {s['threshold']:.4g})  {'fitted' if s['passes'] else 'skipped'}")
+    print_choice(res["model"])
+    print(f"adequate: {res['adequacy'].get('adequate')}")
     truth = realities_case.truth("suv")
     errs = {n: res["parameters"][n]["value"] / truth[n] - 1 for n in truth if n in res["parameters"] and truth[n]}
     print("errors: " + ", ".join(f"{n} {100 * e:+.2f} %" for n, e in errs.items()))

@@ -48,24 +48,25 @@ CARS = {
 }
 
 
-def scenario_doc(car: str) -> dict:
-    """The built-in scenario with car ``car`` of :data:`CARS` (its dampers, and its extra truths)."""
+def scenario_doc(car: str | dict, name: str | None = None) -> dict:
+    """The built-in scenario with car ``car`` of :data:`CARS` (its dampers, and its extra truths), or a car given
+    as such a dict (``front``, ``rear``, ``truth``) named ``name``."""
     import rideid
     from rideid.data.schema import read_toml
 
-    spec = CARS[car]
+    spec = CARS[car] if isinstance(car, str) else car
     doc = read_toml(rideid.default_scenario_path())
-    doc["name"] = f"knees-{car}"
+    doc["name"] = name or f"knees-{car}"
     doc["truth"].update(spec["truth"])
     del doc["truth"]["c_sf"], doc["truth"]["c_sr"]
     doc["dampers"] = dampers_table(spec["front"], spec["rear"])
     return doc
 
 
-def curve_error(car: str, dampers: dict) -> float:
-    """Largest relative error of a fitted ``dampers`` block (result.json) against car ``car``'s true curve,
-    over the excited knots."""
-    spec = CARS[car]
+def curve_error(car: str | dict, dampers: dict) -> float:
+    """Largest relative error of a fitted ``dampers`` block (result.json) against car ``car``'s true curve (a name
+    of :data:`CARS` or such a dict), over the excited knots."""
+    spec = CARS[car] if isinstance(car, str) else car
     worst = 0.0
     for axle in ("front", "rear"):
         v = np.asarray(dampers["velocity"])

@@ -131,3 +131,25 @@ def test_rivals_of_one_step_are_compared_on_their_cost(monkeypatch):
     by = {tuple(e["extensions"]): e for e in choice.entries}
     assert by[()]["criterion"] == pytest.approx(2.0 + 60.0) and by[()]["wald"] == pytest.approx(63.0)
     assert by[("damper_curves",)]["criterion"] == pytest.approx(2.0 + 18 * mc.penalty() + 60.0)
+
+
+def test_variance_inflation_is_one_on_white_noise_and_the_long_run_ratio_on_ar1():
+    """The screen's variance inflation (median of HAC over white variance): on white noise about 1; on AR(1)
+    noise of coefficient 0.8 below the long-run ratio (1 + 0.8) / (1 - 0.8) = 9 that an infinite bandwidth would
+    reach (Bartlett weights and Andrews' finite bandwidth shrink it); measured 0.99 and 8.1 (seed 5, two runs of
+    4000 samples, a mean and a trend per run's channel pair)."""
+    rng = np.random.default_rng(5)
+    n, blocks = 4000, [(4000, 2), (4000, 2)]
+    t = np.linspace(-1.0, 1.0, n)
+    J = np.zeros((4 * n, 2))
+    J[:, 0] = 1.0
+    J[:, 1] = np.tile(np.repeat(t, 2), 2)
+    white = rng.standard_normal(4 * n)
+    ar = np.empty((2, n, 2))
+    e = rng.standard_normal((2, n, 2))
+    ar[:, 0] = e[:, 0] / np.sqrt(1 - 0.8 ** 2)
+    for k in range(1, n):
+        ar[:, k] = 0.8 * ar[:, k - 1] + e[:, k]
+    assert mc.variance_inflation(J, white, blocks) == pytest.approx(1.0, abs=0.1)
+    v = mc.variance_inflation(J, ar.ravel(), blocks)
+    assert v == pytest.approx(8.1, rel=0.05) and v < 9.0

@@ -115,6 +115,13 @@ def restart_record(modes, cost, cost_restart, space, x, x_restart) -> dict:
                     "(rideid.estimate.fit.identify.mode_restart); the lower cost is kept"}
 
 
+def run_blocks(cf: CostFunction) -> list:
+    """``(n_time, n_channel)`` of each run's residuals in ``cf.residuals``'s layout, in their order: the blocks of
+    the HAC covariance (:func:`rideid.estimate.fit.uncertainty.hac_covariance`)."""
+    return [(int(e - s), int(np.count_nonzero(cf.W[ri] > 0)))
+            for ri, (s, e) in enumerate(zip(cf.sim.run_start[:-1], cf.sim.run_start[1:]))]
+
+
 def bump_recheck(ds, fit, bumps):
     """After the polish: a stop the polished car no longer reaches (fewer than ``MIN_SAMPLES`` samples beyond
     its clearance) is held as not reached and the polish repeated (at most twice).
@@ -382,9 +389,7 @@ class _Polish:
 
     def run_blocks(self) -> list:
         """``(n_time, n_channel)`` of each run's residuals, in their order (the prior rows not among them)."""
-        cf = self.cf
-        return [(int(e - s), int(np.count_nonzero(cf.W[ri] > 0)))
-                for ri, (s, e) in enumerate(zip(cf.sim.run_start[:-1], cf.sim.run_start[1:]))]
+        return run_blocks(self.cf)
 
     def jackknife(self, sol):
         """The delete-one-run jackknife covariance of every unknown in its own units and its number of runs
