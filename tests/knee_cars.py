@@ -62,10 +62,10 @@ def scenario_doc(car: str) -> dict:
     return doc
 
 
-def curve_error(car: str, dampers: dict) -> float:
-    """Largest relative error of a fitted ``dampers`` block (result.json) against car ``car``'s true curve,
-    over the excited knots."""
-    spec = CARS[car]
+def curve_error(car: str | dict, dampers: dict) -> float:
+    """Largest relative error of a fitted ``dampers`` block (result.json) against car ``car``'s true curve
+    (a name in :data:`CARS`, or its ``{"front": ..., "rear": ...}`` keyword sets), over the excited knots."""
+    spec = CARS[car] if isinstance(car, str) else car
     worst = 0.0
     for axle in ("front", "rear"):
         v = np.asarray(dampers["velocity"])

@@ -22,7 +22,7 @@ from rideid.model.params import GRAVITY
 @numba.njit(cache=False)
 def _rhs(c, xk, Fk, X, u, ud, out, y):
     # c: m_b, I_b, I_xx, x_b, x_p, m_p, I_p, kp, cp, kt_, ct_ (mount rates), then per corner xs(4), ys(4), ks(4),
-    # kt(4), ct(4), mu(4), L(4), kar(2)
+    # kt(4), ct(4), mu(4), L(4), kar(2) (c[39], c[40])
     m_b, I_b, I_xx, x_b, x_p, m_p, I_p, kp, cp, kq, cq = c[0], c[1], c[2], c[3], c[4], c[5], c[6], c[7], c[8], \
         c[9], c[10]
     F = np.empty(4)
@@ -42,7 +42,7 @@ def _rhs(c, xk, Fk, X, u, ud, out, y):
         t = L + c[23 + i] * (u[i] - X[3 + i]) + c[27 + i] * (ud[i] - X[12 + i])
         T[i] = (t if t > 0.0 else 0.0) - L
     for ax in range(2):
-        bar = c[43 + ax] * (d[2 * ax] - d[2 * ax + 1])
+        bar = c[39 + ax] * (d[2 * ax] - d[2 * ax + 1])
         F[2 * ax] += bar
         F[2 * ax + 1] -= bar
     e = X[7] - (X[0] - (x_p - x_b) * X[1])
