@@ -441,9 +441,11 @@ class _Choice:
         return out
 
     def every_linear_group(self):
-        """The model kept with every linear group it lacks (their parameters from 0), polished from its fit; the
-        model kept then pays the Wald statistic of those groups in that fit (as a candidate without a kept
-        extension pays its W). Returns the new candidate's entry, None when no linear group is left out."""
+        """The model kept with every linear group it lacks (their parameters from 0), polished from its fit. When it
+        fits materially better (:func:`fits_better`), the model kept pays the Wald statistic of those groups in that
+        fit (as a candidate without a kept extension pays its W) and it is returned; else None (also when no linear
+        group is left out): a group that does not improve the fit is not weighed by that fit's covariance (on
+        noise-free data a bar of nothing has a Wald statistic at rounding level, tests/test_model_choice_groups.py)."""
         kept, kept_entry = self.results[self.key], self.best
         key = _key(set(self.key) | set(GROUPS))
         if key == self.key:
@@ -458,8 +460,9 @@ class _Choice:
         W = wald(np.array([r.parameters[n] for n in added]), np.array(pol["covariance_robust"])[np.ix_(j, j)])
         e = self.add(key, r, {"wald": 0.0, "k": kept_entry["k"] + len(added),
                               "criterion": kept_entry["criterion"] + penalty() * len(added)})
-        if np.isfinite(W):
-            kept_entry["criterion"], kept_entry["wald"] = kept_entry["criterion"] + W, kept_entry["wald"] + W
+        if not (e["fits_better"] and np.isfinite(W)):
+            return None
+        kept_entry["criterion"], kept_entry["wald"] = kept_entry["criterion"] + W, kept_entry["wald"] + W
         return e
 
     def linear_again(self):
