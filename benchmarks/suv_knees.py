@@ -52,10 +52,11 @@ def describe(res: dict, wall: float, logger: bool = False, out=sys.stdout) -> di
     for s in model.get("screens", []):
         print(f"    screen {s['extensions']}: score {s['score']:.4g} (threshold {s['threshold']:.3g}), predicted gain "
               f"{s['predicted_gain']:.3g}, passes {s['passes']}", file=out)
-    for n, st in res.get("preprocessing", {}).items():
-        size = (st or {}).get("track_size") if isinstance(st, dict) else None
-        if size:
-            print(f"    {n}: track size {json.dumps(size, default=str)[:160]}", file=out)
+    knees = (res.get("dampers") or {}).get("knees") or {}
+    if knees:
+        print("    knees (m/s, true " + f"{case.KNEE}): " + ", ".join(
+            f"{axle} {side} {abs(k['velocity']):.3f}" for axle, sides in knees.items() for side, k in sides.items()),
+            file=out)
     cells = [f"{n} {100 * e:+.2f} %" for n, e in err.items() if n in case.TRUTH and not math.isnan(e)]
     for i in range(0, len(cells), 6):
         print("  " + ", ".join(cells[i:i + 6]), file=out)
