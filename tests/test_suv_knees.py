@@ -54,7 +54,7 @@ def test_the_small_case_on_spec_csv_keeps_bars_tire_damping_and_curves(small, tm
     assert not screens["powertrain"]["passes"] and not screens["bump_stops"]["passes"]
 
 
-@pytest.mark.slow  # about 4 minutes on two shared cores: the starts estimated, four candidates more
+@pytest.mark.slow  # 138 s on two cores shared under a load of 14: the starts estimated, a candidate more
 def test_the_small_case_on_logger_files_weighs_tire_damping_again_with_the_curves(small, tmp_path):
     """The same runs from logger files, starts estimated: the linear step drops tire damping (its Wald statistic
     small beside the linear model's misfit), the curves come on top of the bars; then every linear group is weighed
