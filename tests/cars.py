@@ -20,9 +20,12 @@ SUV_BARS = {"k_arf": 15600.0, "k_arr": 6000.0}
 SUV_TIRE_DAMPING = {"c_tf": 180.0, "c_tr": 200.0}
 
 
-def suv_scenario(folder, extra: dict | None = None, name: str = "suv"):
+def suv_scenario(folder, extra: dict | None = None, name: str = "suv", dampers: dict | None = None,
+                 runs=None):
     """The built-in tracks and runs with the SUV (plus ``extra`` truth values) as truth.
 
+    ``dampers``: a ``[dampers]`` table (``knee_cars.dampers_table``) for real dampers in place of ``c_sf``,
+    ``c_sr``; ``runs``: ``{run id: duration}`` to keep only those runs, each that long (s).
     Written to ``folder/<name>.toml`` and loaded.
     """
     import tomli_w
@@ -32,6 +35,12 @@ def suv_scenario(folder, extra: dict | None = None, name: str = "suv"):
     doc["vehicle"] = dict(SUV_VEHICLE)
     doc["known"] = {"total_mass": SUV_TOTAL_MASS}
     doc["truth"] = {**SUV_TRUTH, **(extra or {})}
+    if dampers is not None:
+        del doc["truth"]["c_sf"], doc["truth"]["c_sr"]
+        doc["dampers"] = dampers
+    if runs is not None:
+        doc["runs"] = [{**r, "duration": runs[r["id"]]} for r in doc["runs"] if r["id"] in runs]
+        doc["tracks"] = [t for t in doc["tracks"] if any(r["track"] == t["id"] for r in doc["runs"])]
     path = folder / f"{name}.toml"
     path.write_text(tomli_w.dumps(doc))
     return rideid.load_scenario(path)

@@ -101,12 +101,14 @@ def suv_scenario(folder, fs=200.0, extensions=("anti_roll_bars",), bars=True):
     return rideid.load_scenario(folder / "scenario.toml")
 
 
-def write_logger(sc, folder, *, noise=0.02, ar1=0.0, seed=0, model_fs=None):
+def write_logger(sc, folder, *, noise=0.02, ar1=0.0, seed=0, model_fs=None, data=None):
     """Simulate ``sc`` and write it as logger files in ``folder``; returns the folder.
 
-    ``model_fs``: ``[preprocess] fs`` (resample to it), default the runs' own rate.
+    ``model_fs``: ``[preprocess] fs`` (resample to it), default the runs' own rate. ``data``: the runs already
+    simulated, noise included (``{run id: (t, Y)}`` from t = 0 at rest, another simulator's), written instead.
     """
-    data, _ = rideid.simulate_manifest(sc, noise=noise, seed=seed, noise_ar1=ar1)
+    if data is None:
+        data, _ = rideid.simulate_manifest(sc, noise=noise, seed=seed, noise_ar1=ar1)
     rng = np.random.default_rng([seed, 42])
     (folder / "runs").mkdir(parents=True, exist_ok=True)
     runs = []

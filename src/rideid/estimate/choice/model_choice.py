@@ -36,8 +36,10 @@ search), on both cores. A rival is **accepted** when it fits materially better t
 and ``W > penalty() * dof`` (its criterion, the parent's + ``penalty() * dof``, below the parent's +
 ``W``). Of the accepted rivals of one step **the one with the lowest cost** is kept: the same data, the same
 equal-weight residual scaling, so the costs compare the rivals' fits directly (their Wald statistics come from
-different fits' covariances and do not). With a group kept the linear groups are weighed again from its fit's
-robust covariance (:func:`_curve_subset`), a smaller set polished from it and kept when its criterion is lower.
+different fits' covariances and do not). With a group kept every linear group is weighed again with it: the
+linear groups it lacks are added (a fit from it), the model kept pays their Wald statistic in that fit, then the
+linear groups of the larger are weighed from its robust covariance (:func:`_curve_subset`), a smaller set polished
+from it; the lowest criterion is kept.
 The loop ends when the model is adequate, no rival is accepted, or none is left.
 """
 
@@ -261,7 +263,8 @@ def _null_values(space, parameters) -> dict:
     (:data:`rideid.model.params.NOMINAL_EXTENSIONS`: with ``m_p`` > 0 its modes have a gradient to screen)."""
     v = dict(zip(space.knot_names, space.knot_velocities()))
     hi = dict(zip(space.names, space.bounds[:, 1]))
-    vals = {n: parameters[f"c_s{n[2]}"] * vn for n, vn in v.items()}
+    vals = {n: 0.0 for g in GROUPS.values() for n in g}  # a linear group absent: its rates 0
+    vals.update({n: parameters[f"c_s{n[2]}"] * vn for n, vn in v.items()})
     vals.update({n: NOMINAL_EXTENSIONS[n] for n in POWERTRAIN_NAMES}, bs_rate_f=0.0, bs_rate_r=0.0,
                 bs_clear_f=hi.get("bs_clear_f", 0.15), bs_clear_r=hi.get("bs_clear_r", 0.15))
     return vals
@@ -463,19 +466,57 @@ class _Choice:
                             std_robust={n: d.get("std_robust") for n, d in r.details.items() if not d.get("fixed")}))
         return out
 
+    def every_linear_group(self):
+        """The model kept with every linear group it lacks (their parameters from 0), polished from its fit. When it
+        fits materially better (:func:`fits_better`), the model kept pays the Wald statistic of those groups in that
+        fit (as a candidate without a kept extension pays its W) and it is returned; else None (also when no linear
+        group is left out): a group that does not improve the fit is not weighed by that fit's covariance (on
+        noise-free data a bar of nothing has a Wald statistic at rounding level, tests/test_model_choice_groups.py)."""
+        kept, kept_entry = self.results[self.key], self.best
+        key = _key(set(self.key) | set(GROUPS))
+        if key == self.key:
+            return None
+        r = self.fit(kept, key)
+        pol = r.polish or {}
+        names = list(pol.get("names", []))
+        added = [n for g in set(key) - set(self.key) for n in GROUPS[g] if n in names]
+        if not added or "covariance_robust" not in pol:
+            return None
+        j = [names.index(n) for n in added]
+        W = wald(np.array([r.parameters[n] for n in added]), np.array(pol["covariance_robust"])[np.ix_(j, j)])
+        e = self.add(key, r, {"wald": 0.0, "k": kept_entry["k"] + len(added),
+                              "criterion": kept_entry["criterion"] + penalty() * len(added)})
+        if not (e["fits_better"] and np.isfinite(W)):
+            return None
+        kept_entry["criterion"], kept_entry["wald"] = kept_entry["criterion"] + W, kept_entry["wald"] + W
+        return e
+
     def linear_again(self):
-        """The linear groups of the model kept weighed again from its fit's robust covariance (:func:`_curve_subset`);
-        a smaller set preferred is polished from that fit and kept when its criterion is lower."""
-        big, big_entry = self.results[self.key], self.best
-        sub = _curve_subset(big, self.key, big_entry)
+        """Every linear group weighed again with the group just kept (issue 50): the model kept with every linear
+        group (:meth:`every_linear_group`: a linear model makes up for digressive dampers with spurious tire
+        damping, or leaves out a real one the curves then need), then the linear groups of the largest of them
+        weighed from its fit's robust covariance (:func:`_curve_subset`); a smaller set preferred is polished from
+        that fit; of these the lowest criterion is kept."""
+        kept_entry = self.best
+        grown = self.every_linear_group()
+        big_entry = grown or kept_entry
+        key = tuple(big_entry["extensions"])
+        big = self.results[key]
+        sub = _curve_subset(big, key, big_entry)
         if sub is None:
+            self.keep_best(kept_entry, big_entry)
             return
         lin, W_sub = sub
-        key = _key(set(lin) | (set(self.key) - set(GROUPS)))
-        n_left = sum(n in big.names for g in set(self.key) - set(lin) for n in GROUPS.get(g, ()))
-        e = self.add(key, self.fit(big, key), {"wald": W_sub, "k": big_entry["k"] - n_left,
-                                               "criterion": big_entry["criterion"] - penalty() * n_left + W_sub})
-        self.keep_best(big_entry, e)
+        small = _key(set(lin) | (set(key) - set(GROUPS)))
+        n_left = sum(n in big.names for g in set(key) - set(lin) for n in GROUPS.get(g, ()))
+        crit = {"wald": W_sub, "k": big_entry["k"] - n_left,
+                "criterion": big_entry["criterion"] - penalty() * n_left + W_sub}
+        if grown and small == tuple(kept_entry["extensions"]):  # the model kept: weighed by the larger fit
+            e = kept_entry
+            e.update(crit)
+        else:
+            e = self.add(small, self.fit(big, small), crit)
+        self.keep_best(kept_entry, big_entry, e)
 
 
 def _curve_subset(r_c, chosen, c_crit):
