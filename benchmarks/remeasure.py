@@ -227,8 +227,10 @@ def _largest(f, effective=False):
 
 def check_verify(item, out):
     vj = out / item.name / "verification.json"
+    finished = (out / f"{item.name}.time").is_file()
     if not vj.is_file():
-        return [Row(item.doc, item.about, "", "failed: " + _tail(out, item.name), "", False)]
+        return [Row(item.doc, item.about, "", "failed: " + _tail(out, item.name) if finished else
+                    "not finished (stopped)", "", False if finished else None)]
     doc, rows = item.doc, []
     for r in json.loads(vj.read_text()):
         cfg, fits = r["config"], r["fits"]
@@ -283,9 +285,17 @@ def check_verify(item, out):
                          f"{modes.get('powertrain bounce', float('nan')):+.2f} / "
                          f"{modes.get('powertrain pitch', float('nan')):+.2f} %", "", None),
                      same_row(doc, "  verdict", "adequate" if adequate else "not adequate",
-                              "adequate" if f["adequate"] else "not adequate")]
+                              "adequate" if f["adequate"] else "not adequate"),
+                     Row(doc, "  ±2 std_robust covers", "5 of 18 (previous MuJoCo car)",
+                         f"{f['covered_std_robust']} of {f['estimated']}", "not fewer", f["covered_std_robust"] >= 5)]
+            for m, b in (("base", 23.4), ("full", 23.3)):
+                got, name = _largest(fits[m])
+                rows.append(Row(doc, f"MuJoCo {cfg}, {m}: largest error", f"{b} % (m_uf; previous MuJoCo car)",
+                                f"{got:.2f} % ({name})", "not judged: the car changed (its contact mass)", None))
         rows.append(Row(doc, f"MuJoCo {cfg}: identify (auto, base, full)", "", f"{r['identify_s']:.0f} s",
                         "not judged", None))
+    if not finished:
+        rows.append(Row(doc, f"{item.about}: the other rows", "", "not finished (stopped)", "", None))
     return rows
 
 
