@@ -176,7 +176,10 @@ def identify_models(ds, seed, truth):
     for m, ext in (("base", ()), ("full", tuple(SUSPENSION_GROUPS))):
         c = cands[tuple(sorted(ext))]
         x0 = [c["parameters"][n] for n in free_names(ds, ext)]
-        res = rideid.identify(ds, seed=seed, model=m, start=x0, maps=auto.maps)
+        # auto's maps are those of the model it kept: a kept curve model has no bars' or tire damping's rows
+        names = free_names(ds, ext)
+        maps = auto.maps if all(n in auto.maps.params for n in names) else None
+        res = rideid.identify(ds, seed=seed, model=m, start=x0, maps=maps)
         fits[m] = fit_record(res, truth, ext)
     if truth.get("m_p", 0.0) > 0:  # a car with a powertrain: also `--model powertrain`, and its modes
         res = rideid.identify(ds, seed=seed, model=("powertrain",))
