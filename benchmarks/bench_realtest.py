@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import argparse
 import csv
+import json
 import os
 import shutil
 import subprocess
@@ -117,12 +118,19 @@ def run_case(case: str, out: Path) -> dict:
     data = write_case(case, folder)
     fit = folder / "fit"
     t0 = time.perf_counter()
-    p = _check(_rideid("identify", data, "--out", fit, "--seed", "1", "--quiet", "--no-report", "--profile"))
+    _check(_rideid("identify", data, "--out", fit, "--seed", "1", "--quiet", "--no-report", "--profile"))
     wall = time.perf_counter() - t0
     with open(fit / "profile.csv", newline="") as f:
         rows = list(csv.DictReader(f))
-    verdict = next((ln for ln in p.stdout.splitlines() if "adequate" in ln.lower()), "")
-    return {"case": case, "wall_s": wall, "rows": rows, "verdict": verdict.strip()}
+    return {"case": case, "wall_s": wall, "rows": rows, "verdict": verdict_of(fit / "result.json")}
+
+
+def verdict_of(path: Path) -> str:
+    """The model kept and the verdict of a result.json, in a few words."""
+    res = json.loads(Path(path).read_text())
+    ok = (res.get("adequacy") or {}).get("adequate")
+    model = " + ".join(res.get("model", {}).get("extensions") or []) or "base"
+    return f"{model}; {'adequate' if ok else 'NOT adequate' if ok is False else 'not assessed'}"
 
 
 def main(argv=None, out=sys.stdout):
