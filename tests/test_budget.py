@@ -22,6 +22,8 @@ import numpy as np
 import pytest
 import tomli_w
 
+import benchmark_module
+
 import rideid
 from rideid.cli import main
 from rideid.data.dataset import Dataset
@@ -36,12 +38,7 @@ from rideid.estimate.problem.redundancy import BODY, GYROS, gain_notes, rigid_bo
 
 def _study():
     """benchmarks/study_budget.py as a module (the measurement the slow tests repeat)."""
-    import importlib.util
-    path = Path(__file__).resolve().parents[1] / "benchmarks" / "study_budget.py"
-    spec = importlib.util.spec_from_file_location("study_budget", path)
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
-    return mod
+    return benchmark_module.load("study_budget")
 
 #: the built-in car's total mass (its scenario's [known])
 TOTAL_MASS = 1093.3

@@ -433,14 +433,11 @@ def test_raw_needs_the_mujoco_engine(tmp_path, capsys):
 def test_verification_study(tmp_path):
     """`make verify`'s key rows (about 2 minutes alone): the reduced MuJoCo car, and the car with anti-roll
     bars and tire damping identified with the base model, the full model and ``--model auto``."""
-    import importlib.util
     import io
     import json
-    from pathlib import Path
-    path = Path(__file__).resolve().parents[1] / "benchmarks" / "verify_mujoco.py"
-    spec = importlib.util.spec_from_file_location("verify_mujoco", path)
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
+
+    import benchmark_module
+    mod = benchmark_module.load("verify_mujoco")
     labels = [c[0] for c in mod.CONFIGS]
     i_red, i_ext = labels.index("reduced (7-DOF physics)"), labels.index("bars + tire damping")
     assert mod.main(["--only", str(i_red), str(i_ext), "--out", str(tmp_path)], out=io.StringIO()) == 0

@@ -1,23 +1,12 @@
 """The damper kernel's integration against the estimates (issue 52 item 4): how far a scheme's output error
 would move the fit, in the fit's std, on the built-in runs (``benchmarks/study_kernel_schemes.py``)."""
 
-import importlib.util
-from pathlib import Path
-
 import numpy as np
 import pytest
 
+import benchmark_module
 from rideid.data.scenario import default_scenario, run_times
 from rideid.model.simulate import prepare_run
-
-
-def _study():
-    """benchmarks/study_kernel_schemes.py as a module (the measurement this test repeats)."""
-    path = Path(__file__).resolve().parents[1] / "benchmarks" / "study_kernel_schemes.py"
-    spec = importlib.util.spec_from_file_location("study_kernel_schemes", path)
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
-    return mod
 
 
 def test_default_scheme_within_a_tenth_of_a_std_cheaper_ones_not():
@@ -26,7 +15,7 @@ def test_default_scheme_within_a_tenth_of_a_std_cheaper_ones_not():
     the cheaper settings measured at 3.5x and 2.8x the linear kernel move them 0.24 (split m = 1) and 0.47 std
     (plain m = 2), so the default keeps its sub-steps. Measured by ``python benchmarks/study_kernel_schemes.py
     sedan`` (the bars and stops cars: docs/dampers.md)."""
-    mod = _study()
+    mod = benchmark_module.load("study_kernel_schemes")
     sc = default_scenario()
     runs = [prepare_run(sc.tracks[r.track], sc.geometry, r.speed, run_times(r)) for r in sc.runs]
     res = mod.study("sedan", sc, runs)

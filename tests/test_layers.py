@@ -222,13 +222,9 @@ def test_no_library_module_switches_the_matplotlib_backend():
 
 
 def _layer_climbs():
-    import importlib.util
+    import benchmark_module
 
-    path = SRC.parent / "benchmarks" / "layer_climbs.py"
-    spec = importlib.util.spec_from_file_location("layer_climbs", path)
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
+    return benchmark_module.load("layer_climbs")
 
 
 #: the upward steps issue 50 allows a leg (a dataset followed through the calls); measured: loading 3, identify 3,
