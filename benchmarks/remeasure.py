@@ -320,11 +320,16 @@ def _tail(out, name, n=1):
     return p.read_text().strip().splitlines()[-n] if p.is_file() and p.read_text().strip() else "no output"
 
 
+def _failed(item, out, what: str, before: str = "") -> Row:
+    """The row of a command that wrote no result: the last line it printed."""
+    return Row(item.doc, what, before, "failed: " + _tail(out, item.name), "", False)
+
+
 def check_van_roads(item, out):
     d = out / item.name
     doc = item.doc
     if not (d / "fit" / "result.json").is_file():
-        return [Row(doc, "van-roads-dampers", "", "failed: " + _tail(out, item.name), "", False)]
+        return [_failed(item, out, "van-roads-dampers")]
     f = fit_of(d / "fit", d / "sim" / "truth.toml")
     text = (out / f"{item.name}.txt").read_text()
     rows = [same_row(doc, "van on roads + twist: verdict (README wants 'not green' unless within 2 %/5 %)",
@@ -347,7 +352,7 @@ def check_logger_suv(item, out):
     d = out / item.name
     doc = item.doc
     if not (d / "fit" / "result.json").is_file():
-        return [Row(doc, "logger-start-suv", "", "failed: " + _tail(out, item.name), "", False)]
+        return [_failed(item, out, "logger-start-suv")]
     f = fit_of(d / "fit", d / "sim" / "truth.toml")
     starts = {r: 1e3 * (s["value"] - 2.0) for r, s in f["starts"].items() if isinstance(s, dict) and "value" in s}
     worst_start = max((abs(v) for v in starts.values()), default=math.nan)
@@ -366,7 +371,7 @@ def check_dvl_csv(item, out):
     d = out / "dvl"
     doc = item.doc
     if not (d / "fsim" / "result.json").is_file():
-        return [Row(doc, "damper-van SPEC CSV", "", "failed: " + _tail(out, item.name), "", False)]
+        return [_failed(item, out, "damper-van SPEC CSV")]
     f = fit_of(d / "fsim", d / "sim" / "truth.toml")
     rows = [same_row(doc, "damper van, SPEC CSV, defaults: model kept", "damper_curves", "+".join(f["extensions"]))]
     for n, b, digit in (("c_sf", 4.3, 0.1), ("c_sr", 3.5, 0.1), ("I_yy", -0.27, 0.01), ("k_sr", -0.21, 0.01)):
@@ -384,8 +389,7 @@ def check_dvl_logger(item, out):
     doc = item.doc
     text = (out / f"{item.name}.txt").read_text() if (out / f"{item.name}.txt").is_file() else ""
     if not (d / "fit" / "result.json").is_file():
-        return [Row(doc, "damper van, logger path, defaults", "exit 2 (12 vs 36 columns)",
-                    "failed: " + _tail(out, item.name), "", False)]
+        return [_failed(item, out, "damper van, logger path, defaults", "exit 2 (12 vs 36 columns)")]
     f = fit_of(d / "fit", d / "sim" / "truth.toml")
     stale = "lead-in not stationary" in text
     return [Row(doc, "damper van, logger path, defaults", "exit 2: parameter rows must have 12 columns",
@@ -409,7 +413,7 @@ def check_dvl_linear(item, out):
                           ok=f["covered"] >= 12, tol="not fewer"),
                  same_row(doc, "  verdict", "adequate", verdict(f))]
     else:
-        rows.append(Row(doc, "linear van, logger path, auto", "", "failed: " + _tail(out, item.name), "", False))
+        rows.append(_failed(item, out, "linear van, logger path, auto"))
     if (d / "vfull" / "result.json").is_file():
         f = fit_of(d / "vfull", d / "vsim" / "truth.toml")
         st = {r: 1e3 * (s["value"] - 2.5) for r, s in f["starts"].items() if isinstance(s, dict) and "value" in s}
@@ -429,7 +433,7 @@ def check_rate1000(item, out):
     d = out / item.name
     doc = item.doc
     if not (d / "fit" / "result.json").is_file():
-        return [Row(doc, "1000 Hz van logger", "", "failed: " + _tail(out, item.name), "", False)]
+        return [_failed(item, out, "1000 Hz van logger")]
     f = fit_of(d / "fit", d / "sim" / "truth.toml")
     rows = [same_row(doc, "van logged at 1000 Hz, defaults: model kept", "damper_curves", "+".join(f["extensions"]))]
     for n, b in (("m_uf", 0.038), ("k_tf", 0.029), ("c_sr", -0.028)):
