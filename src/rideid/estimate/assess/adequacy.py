@@ -423,7 +423,7 @@ def setup_slips(findings) -> list[dict]:
         f = f.to_dict() if hasattr(f, "to_dict") else f
         if f.get("check") == "speed" and f.get("severity") == "warning" and f.get("run"):
             fix = f.get("fix") or {}
-            out.append({"run": f["run"], "declared": fix.get("declared") if "declared" in fix else None,
+            out.append({"run": f["run"], "declared": fix.get("declared"),
                         "speed": fix.get("speed") if "declared" in fix else None})
     return out
 

@@ -298,13 +298,6 @@ def gauss_newton_step(cf: CostFunction, x) -> tuple[np.ndarray, np.ndarray, np.n
     return J, R[0], R[0] + J @ step
 
 
-def gauss_newton_gain(cf: CostFunction, x) -> tuple[float, float, int]:
-    """``(cost at x, cost predicted after one Gauss-Newton step from x, residuals)`` on the equal-weight cost
-    (:func:`gauss_newton_step`): ``|r|^2`` and ``|r + J dz|^2 = |r|^2 - |J dz|^2``."""
-    _, r, r_next = gauss_newton_step(cf, x)
-    return float(r @ r), float(r_next @ r_next), r.size
-
-
 def variance_inflation(J, e, blocks) -> float:
     """The median over the parameters (columns of ``J``) of their HAC variance over their white one at residuals
     ``e`` (:func:`rideid.estimate.fit.uncertainty.hac_covariance`, runs ``blocks`` as independent blocks): how
