@@ -87,13 +87,13 @@ class AdequacyAssessment(Assessment):
     """
 
     kind: ClassVar[str] = "adequacy"
-    adequate: bool | None = None
-    pairs: int = 0
-    pairs_with_structure: list = field(default_factory=list)
-    alpha: float | None = None
-    min_explained: float | None = None
-    sensors_suspect: bool = False
-    advice: str | None = None
+    adequate: bool | None = None  #: the verdict: no structure that matters, no suspect sensor; None: no verdict
+    pairs: int = 0  #: the run/channel pairs tested
+    pairs_with_structure: list = field(default_factory=list)  #: ``"run/channel"`` of each pair with structure
+    alpha: float | None = None  #: the test's family-wise rate (setting ``adequacy.alpha``), split over the pairs
+    min_explained: float | None = None  #: the least share of a whitened residual's variance the road must explain
+    sensors_suspect: bool = False  #: the road fit's sensor hints made the verdict not adequate (docs/real-data.md)
+    advice: str | None = None  #: what to try next; None when adequate
 
     @classmethod
     def from_result(cls, res) -> "AdequacyAssessment":
@@ -120,11 +120,11 @@ class MaterialityAssessment(Assessment):
     (:mod:`rideid.estimate.assess.materiality`)? ``fail`` when it does."""
 
     kind: ClassVar[str] = "materiality"
-    material: bool | None = None
-    threshold: float | None = None
-    largest_parameter: str | None = None
-    largest_shift: float | None = None
-    pairs_left_out: list = field(default_factory=list)
+    material: bool | None = None  #: the structure matters: an estimate moves beyond ``threshold`` without its pairs
+    threshold: float | None = None  #: the move that is material, std_total (setting ``materiality.material_shift``)
+    largest_parameter: str | None = None  #: the estimate that moved most; None when none could be compared
+    largest_shift: float | None = None  #: how far it moved, in std_total
+    pairs_left_out: list = field(default_factory=list)  #: ``"run/channel"`` of the pairs with structure, left out
 
     @classmethod
     def from_result(cls, res) -> "MaterialityAssessment":
@@ -146,13 +146,13 @@ class SmallAngleAssessment(Assessment):
     ``warn`` when the bias to expect exceeds some error bars (``optimistic``)."""
 
     kind: ClassVar[str] = "small_angles"
-    largest_roll_deg: float | None = None
-    roll_run: str | None = None
-    largest_pitch_deg: float | None = None
-    pitch_run: str | None = None
-    expected_bias: float | None = None
-    threshold_deg: float | None = None
-    optimistic: list = field(default_factory=list)
+    largest_roll_deg: float | None = None  #: the fitted body's largest roll over the runs, deg (its gyro integrated)
+    roll_run: str | None = None  #: the run it rolls that far in
+    largest_pitch_deg: float | None = None  #: the fitted body's largest pitch over the runs, deg
+    pitch_run: str | None = None  #: the run it pitches that far in
+    expected_bias: float | None = None  #: relative bias to expect: ``small_angle.bias_per_degree`` x the larger angle
+    threshold_deg: float | None = None  #: the angle above which it is weighed, deg (``small_angle.threshold_deg``)
+    optimistic: list = field(default_factory=list)  #: the parameters whose ±2 std_total is narrower than that bias
 
     @classmethod
     def from_result(cls, res) -> "SmallAngleAssessment":
@@ -175,9 +175,9 @@ class SensorHintsAssessment(Assessment):
     ``warn`` when any is named."""
 
     kind: ClassVar[str] = "sensor_hints"
-    channels: list = field(default_factory=list)
-    highpass_hz: list = field(default_factory=list)
-    note: str | None = None
+    channels: list = field(default_factory=list)  #: the channels that look AC-coupled (SPEC channel names)
+    highpass_hz: list = field(default_factory=list)  #: per channel, the trial high-pass corner that fits best, Hz
+    note: str | None = None  #: which road fit the hints come from (``adequacy.sensor_hints_note``); None: the car's fit
 
     @classmethod
     def from_result(cls, res) -> "SensorHintsAssessment":
@@ -199,8 +199,8 @@ class LevelAssessment(Assessment):
     (:func:`rideid.estimate.assess.adequacy.level_caveat`): ``warn``."""
 
     kind: ClassVar[str] = "level"
-    loud_pairs: int = 0
-    pairs_with_floor: int = 0
+    loud_pairs: int = 0  #: the run/channel pairs whose residual is above 3x their noise floor
+    pairs_with_floor: int = 0  #: the pairs with a quiet lead-in to measure the floor on
 
     @classmethod
     def from_result(cls, res) -> "LevelAssessment":
@@ -224,8 +224,8 @@ class DrawingAssessment(Assessment):
     runs (:func:`rideid.estimate.choice.model_choice._drawing_caveat`): ``warn``."""
 
     kind: ClassVar[str] = "drawing"
-    tracks_as_built: list = field(default_factory=list)
-    tracks_rejected: list = field(default_factory=list)
+    tracks_as_built: list = field(default_factory=list)  #: the tracks fitted as built (SPEC §11), sorted
+    tracks_rejected: list = field(default_factory=list)  #: the tracks whose as-built fit was rejected (taken as drawn)
 
     @classmethod
     def from_result(cls, res) -> "DrawingAssessment":
@@ -250,7 +250,7 @@ class BoundsAssessment(Assessment):
     value, not the data's. ``fail`` when any."""
 
     kind: ClassVar[str] = "bounds"
-    at_bound: list = field(default_factory=list)
+    at_bound: list = field(default_factory=list)  #: the free parameters within 1 % of the search range of a bound
 
     @classmethod
     def from_result(cls, res) -> "BoundsAssessment":

@@ -193,19 +193,19 @@ class IdentificationResult:
     nfev: int
     parameters: dict
     details: dict
-    known: dict
-    wall_time_s: float
-    seed: int | None
-    track_weights: dict
-    weights_mode: str
-    polish: dict | None
+    known: dict  #: the dataset's ``[known]`` values, name -> value (SI units)
+    wall_time_s: float  #: how long the identification took, s (wall clock)
+    seed: int | None  #: the integer seed; None when a ``numpy.random.Generator`` was given
+    track_weights: dict  #: run id -> the run's final weight in the cost; empty when they weigh equally
+    weights_mode: str  #: ``"adaptive"`` or ``"fixed"`` run weights in the search; ``"equal"`` in the any-road fit
+    polish: dict | None  #: the least-squares polish (docs/formats.md ``polish``); None without it
     history: History = field(default_factory=History)
     starts: dict = field(default_factory=dict)
-    preprocessing: dict = field(default_factory=dict)
-    modal: dict | None = None
-    dataset: str = ""
-    maps: SensitivityMaps | None = None
-    rng_state: dict | None = None
+    preprocessing: dict = field(default_factory=dict)  #: per run, how its data were read, resampled and filtered
+    modal: dict | None = None  #: mode -> frequency (Hz), damping ratio (:func:`rideid.model.equations.modal_summary`)
+    dataset: str = ""  #: the dataset's folder (:attr:`rideid.Dataset.path`)
+    maps: SensitivityMaps | None = None  #: the three sensitivity maps (result.json ``sensitivity``); None: not computed
+    rng_state: dict | None = None  #: the generator's starting state (``bit_generator.state``), to repeat the search
     model: dict | None = None
     adequacy: dict | None = None
     #: correlation matrix of the estimates (robust covariance): {"names", "matrix", "basis"}

@@ -169,12 +169,14 @@ class RunSpec:
     road: RoadSpec | None = None
     #: ``"posts"``: the run stands on a four-post rig (SPEC §13), its wheel inputs the measured posts; None: a road
     input: str | None = None
-    #: a scenario rig run's drive signal (:class:`rideid.model.posts.PostSignal`) and the seed of a random one
+    #: a scenario rig run's drive signal (:class:`rideid.model.posts.PostSignal`); None: measured posts, or a road
     signal: PostSignal | None = None
-    signal_seed: int | None = None
-    #: SPEC §13: the standard uncertainty declared with ``speed`` (m/s) and ``start`` (s) as ``{ value, std }``;
-    #: None: a plain number, whose default width :meth:`speed_prior`, :meth:`start_prior` give
+    signal_seed: int | None = None  #: the seed of a random ``signal``; None: derived (rideid.data.scenario.post_seed)
+    #: SPEC §13: the standard uncertainty (m/s) declared with ``speed`` as ``{ value, std }``; None: a plain number,
+    #: whose default width :meth:`speed_prior` gives
     speed_std: float | None = None
+    #: SPEC §13: the standard uncertainty (s) declared with ``start`` as ``{ value, std }``; None: a plain number,
+    #: whose default width :meth:`start_prior_std` gives
     start_std: float | None = None
     #: SPEC §13: the speed as declared when loading moved ``speed`` to where the data put it (beyond its prior,
     #: said in a warning; :func:`rideid.conditioning.load.align_starts`); None: ``speed`` is the declared one
