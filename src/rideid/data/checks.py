@@ -84,9 +84,12 @@ class Finding:
 
     Attributes
     ----------
-    severity : {"error", "warning"}
+    severity : {"error", "warning", "note"}
+        ``"error"``: the data are refused (:func:`enforce` raises :class:`rideid.DataError` naming the first);
+        ``"warning"``: warned of (:class:`rideid.DataWarning`); ``"note"``
+        (:data:`rideid.conditioning.checks.NOTE`): recorded (result.json ``checks``), neither warned of nor refused.
     check : str
-        Which check: "numbers", "coverage", "wiring", "track", "bounds" (the middle three:
+        Which check: "numbers", "coverage", "wiring", "track", "speed", "bounds" (the middle four:
         :mod:`rideid.conditioning.checks`).
     text : str
         One line: what is wrong, the likely cause and, without a ``remedy``, the fix.

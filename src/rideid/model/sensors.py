@@ -74,10 +74,12 @@ class AnalogFilter:
     Parameters
     ----------
     kind : {"highpass", "lowpass"}
+        Which side of ``hz`` passes: ``"highpass"`` above (an AC-coupled sensor), ``"lowpass"`` below (a logger's
+        anti-alias filter).
     hz : float
         Corner (-3 dB) frequency, Hz, positive.
     order : int
-        1 to 8.
+        1 to 8 (:data:`ORDERS`).
     """
 
     kind: str
