@@ -374,27 +374,30 @@ def linearise_starts(ds, P, starts: dict, simulator=None, derivative: bool = Tru
     ``P`` is one row of ``simulator``'s model (a :class:`rideid.model.simulator.Simulator`; default the
     linear car): the derivative is the model's that is being fitted, damper curves and bump stops included.
 
-    Returns ``(dataset, D)``: ``ds.with_starts(starts)`` (:meth:`rideid.data.dataset.Dataset.with_starts`;
-    ``ds`` is not changed), and run id ->
+    Returns ``(dataset, D, D2, Dw)``: ``ds.with_starts(starts)`` (:meth:`rideid.data.dataset.Dataset.with_starts`;
+    ``ds`` is not changed); run id ->
     ``(n, 10)`` derivative of ``P``'s response at the run's fixed samples with
-    respect to its start (empty when not ``derivative``): a central
-    difference of two simulations whose time axes (and, with a speed channel,
-    distance profiles) belong to ``start -/+ SHIFT_STEP`` samples, every run's
-    pair in one batch (:func:`rideid.conditioning.nominal.simulate_jobs`). The
-    model moves, the samples stay.
+    respect to its start, and its second derivative (both empty when not ``derivative``): central
+    differences of three simulations whose time axes (and, with a speed channel,
+    distance profiles) belong to ``start -/+ SHIFT_STEP`` samples and the start, every run's
+    three in one batch (:func:`rideid.conditioning.nominal.simulate_jobs`). The
+    model moves, the samples stay. The second derivative makes the polish's model of a moved start
+    quadratic: with the linear one alone, a car that misfits (a rival of the model choice) has a residual
+    that correlates with the response's curvature, and the rounds overshoot (each move about -0.55 of the
+    last on the van's logger files, docs/performance.md).
 
-    With ``warps`` (run id -> :class:`DistanceWarp`, already applied to ``ds``'s runs by :func:`warped`)
-    a third item: run id -> ``(K, n, 10)``, the derivative with respect to each free knot of its warp
-    (central differences of :data:`WARP_STEP`, in the same batch).
+    ``Dw``, with ``warps`` (run id -> :class:`DistanceWarp`, already applied to ``ds``'s runs by
+    :func:`warped`): run id -> ``(K, n, 10)``, the derivative with respect to each free knot of its warp
+    (central differences of :data:`WARP_STEP`, in the same batch); else empty.
     """
     at = ds.with_starts(starts)
     if not derivative:
-        return (at, {}) if warps is None else (at, {}, {})
+        return at, {}, {}, {}
     eps = {rid: SHIFT_STEP / ds.measured[rid].fs for rid in starts}
     jobs = []
     for rid, s in starts.items():
         mr, track = ds.measured[rid], ds.manifest.tracks[ds.manifest.run(rid).track]
-        for sign in (-1, 1):
+        for sign in (-1, 1, 0):
             rd = mr.run_data(s + sign * eps[rid])
             jobs.append(Job(track, rd.time, mr.speed, rd.distance))
     n_start = len(jobs)
@@ -409,16 +412,16 @@ def linearise_starts(ds, P, starts: dict, simulator=None, derivative: bool = Tru
                 jobs.append(Job(track, t, mr.speed, RelativeDistance(mk.distance, starts[rid])))
             order.append((rid, k))
     y = responses(simulate_jobs(P, ds.geometry, jobs, simulator)) if jobs else []
-    D = {}
+    D, D2 = {}, {}
     for k, rid in enumerate(starts):
-        D[rid] = _recorded(at, rid, (y[2 * k + 1] - y[2 * k]) / (2 * eps[rid]))
-    if warps is None:
-        return at, D
-    Dw = {rid: np.empty((w.free.size, at.data[rid].time.size, len(CHANNELS))) for rid, w in warps.items()}
+        lo, hi, mid = y[3 * k], y[3 * k + 1], y[3 * k + 2]
+        D[rid] = _recorded(at, rid, (hi - lo) / (2 * eps[rid]))
+        D2[rid] = _recorded(at, rid, (hi - 2 * mid + lo) / eps[rid] ** 2)
+    Dw = {rid: np.empty((w.free.size, at.data[rid].time.size, len(CHANNELS))) for rid, w in (warps or {}).items()}
     for j, (rid, k) in enumerate(order):
         a, b = y[n_start + 2 * j], y[n_start + 2 * j + 1]
         Dw[rid][k] = _recorded(at, rid, (b - a) / (2 * WARP_STEP))
-    return at, D, Dw
+    return at, D, D2, Dw
 
 
 def _recorded(ds, rid, d):

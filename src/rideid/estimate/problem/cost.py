@@ -566,6 +566,11 @@ class CostFunction:
         self.counter = EvaluationCounter() if counter is None else counter
 
     @property
+    def run_times(self) -> list:
+        """Per run, its samples' times (s, the model's axis; :attr:`Y`'s rows of the run)."""
+        return [self.ds.data[rid].time for rid in self.run_ids]
+
+    @property
     def input_runs(self) -> list:
         """Each run's inputs as simulated: a moving start's from the start of its lead-in (SPEC §9; the
         first :attr:`lead` samples of a simulation of them come before the run's first recorded sample)."""
@@ -679,16 +684,18 @@ class CostFunction:
         """Costs ``(n,)`` for free-parameter rows ``X`` of shape ``(n, d)``."""
         return self.combine(self.run_errors(X))
 
-    def residuals(self, X, weights=None, Y=None) -> np.ndarray:
+    def residuals(self, X, weights=None, Y=None, advance=None) -> np.ndarray:
         """Stacked weighted residuals ``(n, m)`` whose squared sum is ``J``.
 
         ``Y`` replaces the measured data (same layout as :attr:`Y`), e.g. the
         data re-read at other start times. The layout: run by run, time-major,
-        the run's used channels (``W[r] > 0``) within each sample.
+        the run's used channels (``W[r] > 0``) within each sample. ``advance``: run index -> seconds ``a``,
+        that run's response taken as ``y - a dy/dt`` (the time derivative a central difference of the samples):
+        the part of a start's move that changes with the car (:class:`rideid.estimate.fit.polish._Polish`).
         """
-        return self.row_residuals(self.space.full(X), weights, Y)
+        return self.row_residuals(self.space.full(X), weights, Y, advance)
 
-    def row_residuals(self, P, weights=None, Y=None) -> np.ndarray:
+    def row_residuals(self, P, weights=None, Y=None, advance=None) -> np.ndarray:
         """:meth:`residuals` of full rows ``P`` ``(n, width)`` (:attr:`ParameterSpace.param_names`): known and
         derived columns as given, not as the space fills them (the uncertainty budget moves a known value)."""
         P = np.atleast_2d(np.asarray(P, dtype=float))
@@ -698,7 +705,10 @@ class CostFunction:
         parts = []
         for ri, (s, e) in enumerate(zip(self.sim.run_start[:-1], self.sim.run_start[1:])):
             cols, sc = self.residual_scale(ri, w)
-            d = (outs[ri][:, :, cols] - Y[None, s:e, cols]) * sc
+            out = outs[ri][:, :, cols]
+            if advance and advance.get(ri):
+                out = out - advance[ri] * time_derivative(out, self.run_times[ri])
+            d = (out - Y[None, s:e, cols]) * sc
             if self.keep is not None:  # a left-out sample's residual is 0: it moves nothing
                 d = d * self.keep[None, s:e, cols]
             parts.append(d.reshape(P.shape[0], -1))
@@ -716,6 +726,18 @@ class CostFunction:
         P = np.asarray(params, dtype=float).reshape(1, -1)
         outs = self.sim.outputs(P, pin=self.pin)
         return {rid: o[0] for rid, o in zip(self.run_ids, outs)}
+
+
+def time_derivative(y, time) -> np.ndarray:
+    """``dy/dt`` of samples ``y`` (time on axis -2, the rows of one run; ``time`` its uniform axis, s): central
+    differences inside, one-sided at the two ends (:func:`numpy.gradient`'s, without its general spacing)."""
+    y = np.asarray(y, dtype=float)
+    h = float(time[1] - time[0])
+    out = np.empty_like(y)
+    out[..., 1:-1, :] = (y[..., 2:, :] - y[..., :-2, :]) / (2 * h)
+    out[..., 0, :] = (y[..., 1, :] - y[..., 0, :]) / h
+    out[..., -1, :] = (y[..., -1, :] - y[..., -2, :]) / h
+    return out
 
 
 #: the constants this module had before rideid.settings, read from the registry (PEP 562)
