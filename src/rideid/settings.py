@@ -93,6 +93,9 @@ _SETTINGS: tuple[Setting, ...] = _read_table(Path(__file__).with_name("settings.
 #: module-level numbers of :mod:`rideid.estimate` that are not tuning constants, each with what it is instead
 #: (tests/test_settings.py: every other module-level number there is in the registry)
 NOT_SETTINGS: dict[str, str] = {
+    "tall.TALL": "when a least squares is reduced by a QR first: the same solution either way (speed only)",
+    "tall.BLOCK_ROWS": "the blocked QR's block size: the same triangle either way (speed only)",
+    "tall._users": "how many threads are inside tall_steps (state, not a value)",
     "identify.DEFAULT_POPULATION": "an argument's default (rideid.identify population=, --population; SPEC §5)",
     "identify.DEFAULT_GENERATIONS": "an argument's default (rideid.identify generations=, --generations; SPEC §5)",
     "cost.BUMP_BOUNDS": "the bump stops' default search bounds: a model default, [bounds] overrides it",

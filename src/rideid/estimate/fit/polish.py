@@ -24,6 +24,7 @@ from ...data.dataset import Dataset
 from ...model.params import INDEX, NOMINAL_EXTENSIONS
 from ..problem.bumps import frozen_values, reach
 from ..problem.cost import CostFunction, ParameterSpace, time_derivative
+from .tall import tall_steps
 from .uncertainty import jackknife_runs, hac_covariance, white_covariance
 
 
@@ -381,8 +382,9 @@ class _Polish:
         return sol
 
     def _least_squares(self, v0, bounds, method, max_nfev) -> OptimizeResult:
-        return least_squares(self.residuals, v0, jac=self.jacobian, bounds=bounds, method=method,
-                             x_scale="jac", ftol=1e-15, xtol=1e-12, gtol=1e-15, max_nfev=max_nfev)
+        with tall_steps():  # dogbox's steps on the tall Jacobian reduced once (rideid.estimate.fit.tall)
+            return least_squares(self.residuals, v0, jac=self.jacobian, bounds=bounds, method=method,
+                                 x_scale="jac", ftol=1e-15, xtol=1e-12, gtol=1e-15, max_nfev=max_nfev)
 
     def scale(self) -> np.ndarray:
         """``dx/dv`` of every unknown: the bounds' spans, one sample interval per shift, 1 per knot (m)."""

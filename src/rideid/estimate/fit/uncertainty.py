@@ -57,6 +57,7 @@ from scipy import special
 
 from ...settings import defaults, legacy_names
 from ..problem.scores import andrews_bandwidth, long_run_covariance, run_scores, takes_residuals
+from .tall import tall_r
 
 
 @takes_residuals
@@ -129,7 +130,7 @@ def normal_inverse(J, rtol: float | None = None) -> NormalInverse:
     n = J.shape[1]
     if not np.all(np.isfinite(J)):
         return NormalInverse(np.full((n, n), np.nan), 0, np.ones(n, dtype=bool))
-    _, s, Vt = np.linalg.svd(J, full_matrices=False)
+    _, s, Vt = np.linalg.svd(tall_r(J), full_matrices=False)  # J's singular values and V, from its QR's triangle
     keep = s > rtol * (s[0] if s.size else 0.0)
     V = Vt[keep].T
     Hinv = (V / s[keep] ** 2) @ V.T

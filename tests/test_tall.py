@@ -1,0 +1,70 @@
+"""The polish's least squares on a tall Jacobian reduced once (rideid.estimate.fit.tall): the same steps, rank and
+singular values as numpy's lstsq of all of it, and SciPy's dogbox solved with it to the same answer."""
+
+import numpy as np
+import pytest
+from scipy.optimize import least_squares
+from scipy.optimize._lsq import dogbox
+
+from rideid.estimate.fit.tall import BLOCK_ROWS, tall_lstsq, tall_r, tall_steps
+
+
+def _tall(rng, m, n, rank_deficient=False):
+    a = rng.standard_normal((m, n)) * np.logspace(0, 4, n)  # columns four decades apart, as a polish's are
+    if rank_deficient:
+        a[:, 5] = 2.0 * a[:, 3]
+    return a, rng.standard_normal(m)
+
+
+@pytest.mark.parametrize("m, n, rank_deficient", [(3 * BLOCK_ROWS + 17, 30, False), (3 * BLOCK_ROWS + 17, 30, True),
+                                                  (5000, 25, True), (200, 12, False), (100, 30, False)])
+def test_the_reduced_least_squares_is_numpys(m, n, rank_deficient):
+    """The least-norm solution, rank and singular values of numpy's lstsq (rcond=-1, as dogbox asks, and None),
+    to rounding; a rank-deficient matrix stays rank-deficient (the QR's rounding-level singular value is cut at
+    eps * m, not eps: cut at eps it came back as 1e-15 of the largest and the step as 1e14)."""
+    rng = np.random.default_rng(m + n)
+    a, b = _tall(rng, m, n, rank_deficient)
+    for rcond in (-1, None):
+        x0, res0, rank0, s0 = np.linalg.lstsq(a, b, rcond=rcond)
+        x1, res1, rank1, s1 = tall_lstsq(a, b, rcond=rcond)
+        assert rank1 == rank0 == n - rank_deficient
+        np.testing.assert_allclose(x1, x0, rtol=0, atol=1e-10 * np.abs(x0).max())
+        np.testing.assert_allclose(s1, s0, rtol=1e-10, atol=1e-10 * s0[0])  # the zero one at rounding level
+        np.testing.assert_allclose(res1, res0, rtol=1e-9)
+
+
+def test_the_blocked_triangle_has_the_matrix_s_gram():
+    """R^T R = a^T a and the same singular values, for a matrix of several blocks; a wide one is returned as it is."""
+    rng = np.random.default_rng(7)
+    a, _ = _tall(rng, 2 * BLOCK_ROWS + 5, 9)
+    r = tall_r(a)
+    assert r.shape == (9, 9)
+    np.testing.assert_allclose(r.T @ r, a.T @ a, rtol=1e-10, atol=1e-10 * np.abs(a.T @ a).max())
+    np.testing.assert_allclose(np.linalg.svd(r, compute_uv=False), np.linalg.svd(a, compute_uv=False), rtol=1e-10)
+    wide = rng.standard_normal((10, 9))
+    assert tall_r(wide) is not None and np.array_equal(tall_r(wide), wide)
+
+
+def test_dogbox_reaches_the_same_fit_and_scipy_is_left_as_it_was():
+    """A bounded exponential fit, 40 000 residuals: dogbox with the reduced steps ends where it ends with its own
+    (to 1e-10), its lstsq swapped only while inside (threads counted) and put back after."""
+    rng = np.random.default_rng(3)
+    t = np.linspace(0, 10, 40000)
+    y = 2.0 * np.exp(-0.3 * t) + 0.5 * np.sin(1.7 * t) + 0.01 * rng.standard_normal(t.size)
+
+    def f(p):
+        return p[0] * np.exp(-p[1] * t) + p[2] * np.sin(p[3] * t) - y
+
+    kw = dict(bounds=([0, 0, 0, 1.0], [5, 2, 0.45, 3]), method="dogbox", x_scale="jac", ftol=1e-15, xtol=1e-12,
+              gtol=1e-15)
+    own = dogbox.lstsq
+    plain = least_squares(f, [1.5, 0.2, 0.3, 1.65], **kw)
+    with tall_steps():
+        assert dogbox.lstsq is tall_lstsq
+        with tall_steps():
+            reduced = least_squares(f, [1.5, 0.2, 0.3, 1.65], **kw)
+        assert dogbox.lstsq is tall_lstsq  # the outer user is still inside
+    assert dogbox.lstsq is own
+    assert plain.x[2] == reduced.x[2] == 0.45  # the amplitude (0.5 in the data) held on its bound
+    np.testing.assert_allclose(reduced.x, plain.x, rtol=1e-10)
+    np.testing.assert_allclose(reduced.x[[0, 1, 3]], [2.0, 0.3, 1.7], rtol=0.05)
