@@ -3,11 +3,10 @@ solution and singular values.
 
 The polish's Jacobian has a row per residual (every run's samples times its channels: 60 000 to 300 000) and a
 column per unknown (12 to 60). :func:`numpy.linalg.lstsq` (LAPACK ``gelsd``: a bidiagonalisation and an SVD of
-all of it) took 0.38 s a step on the all-realities SUV and was 38 % of the polish
-(docs/performance.md#the-tall-jacobian); a Householder QR of the same matrix takes a fraction of that and what is
-left is a square problem of the columns' size (0.08 s against 0.19 s on a 300 000 x 30 matrix). :func:`tall_lstsq` is that for SciPy's ``dogbox``
-(:func:`tall_steps` swaps it in while the polish's ``least_squares`` runs) and :func:`tall_r` the same reduction
-for the covariance's SVD.
+all of it) took 0.38 s a step on the all-realities SUV, 38 % of the polish (docs/performance.md#the-tall-jacobian);
+a blocked Householder QR of the same matrix leaves a square problem of the columns' size (0.085 s against 0.16 s
+on a 300 000 x 30 matrix, two cores). :func:`tall_lstsq` is that for SciPy's ``dogbox`` (:func:`tall_steps`
+swaps it in while the polish's ``least_squares`` runs), :func:`tall_r` the same reduction for the covariance's SVD.
 """
 
 from __future__ import annotations
