@@ -377,10 +377,11 @@ def linearise_starts(ds, P, starts: dict, simulator=None, derivative: bool = Tru
     Returns ``(dataset, D, D2, Dw)``: ``ds.with_starts(starts)`` (:meth:`rideid.data.dataset.Dataset.with_starts`;
     ``ds`` is not changed); run id ->
     ``(n, 10)`` derivative of ``P``'s response at the run's fixed samples with
-    respect to its start, and its second derivative (both empty when not ``derivative``): central
+    respect to its start, and its second derivative (both empty when not ``derivative``; no second
+    derivative for a run of ``warps``, whose start's move the polish keeps linear): central
     differences of three simulations whose time axes (and, with a speed channel,
     distance profiles) belong to ``start -/+ SHIFT_STEP`` samples and the start, every run's
-    three in one batch (:func:`rideid.conditioning.nominal.simulate_jobs`). The
+    in one batch (:func:`rideid.conditioning.nominal.simulate_jobs`). The
     model moves, the samples stay. The second derivative makes the polish's model of a moved start
     quadratic: with the linear one alone, a car that misfits (a rival of the model choice) has a residual
     that correlates with the response's curvature, and the rounds overshoot (each move about -0.55 of the
@@ -394,16 +395,18 @@ def linearise_starts(ds, P, starts: dict, simulator=None, derivative: bool = Tru
     if not derivative:
         return at, {}, {}, {}
     eps = {rid: SHIFT_STEP / ds.measured[rid].fs for rid in starts}
-    jobs = []
+    warps = warps or {}
+    jobs, at_job = [], {}
     for rid, s in starts.items():
         mr, track = ds.measured[rid], ds.manifest.tracks[ds.manifest.run(rid).track]
-        for sign in (-1, 1, 0):
+        at_job[rid] = len(jobs)
+        for sign in (-1, 1) if rid in warps else (-1, 1, 0):
             rd = mr.run_data(s + sign * eps[rid])
             jobs.append(Job(track, rd.time, mr.speed, rd.distance))
     n_start = len(jobs)
     # a distance correction's knots: the run at its start with one knot moved by -/+ WARP_STEP
     order = []
-    for rid, w in (warps or {}).items():
+    for rid, w in warps.items():
         mr, track = ds.measured[rid], ds.manifest.tracks[ds.manifest.run(rid).track]
         t = mr.run_data(starts[rid]).time
         for k in range(w.free.size):
@@ -413,11 +416,12 @@ def linearise_starts(ds, P, starts: dict, simulator=None, derivative: bool = Tru
             order.append((rid, k))
     y = responses(simulate_jobs(P, ds.geometry, jobs, simulator)) if jobs else []
     D, D2 = {}, {}
-    for k, rid in enumerate(starts):
-        lo, hi, mid = y[3 * k], y[3 * k + 1], y[3 * k + 2]
+    for rid, j in at_job.items():
+        lo, hi = y[j], y[j + 1]
         D[rid] = _recorded(at, rid, (hi - lo) / (2 * eps[rid]))
-        D2[rid] = _recorded(at, rid, (hi - 2 * mid + lo) / eps[rid] ** 2)
-    Dw = {rid: np.empty((w.free.size, at.data[rid].time.size, len(CHANNELS))) for rid, w in (warps or {}).items()}
+        if rid not in warps:
+            D2[rid] = _recorded(at, rid, (hi - 2 * y[j + 2] + lo) / eps[rid] ** 2)
+    Dw = {rid: np.empty((w.free.size, at.data[rid].time.size, len(CHANNELS))) for rid, w in warps.items()}
     for j, (rid, k) in enumerate(order):
         a, b = y[n_start + 2 * j], y[n_start + 2 * j + 1]
         Dw[rid][k] = _recorded(at, rid, (b - a) / (2 * WARP_STEP))

@@ -497,15 +497,17 @@ def _polish_aligned(ds, cf, x_best, equal):
         cf = cf.with_data(ds_now)
         if last:
             break
-        y0 = cf.simulate(P)
         # a run with a distance correction keeps its start's move as the correction's is modelled, linear and at the
-        # round's car: a start and a constant correction are the same move (a start modelled otherwise opened a
-        # valley the two slid along, 0.2 samples a round on the GPS runs, or took twice the evaluations a round)
-        shifts = [_Shift(cf.run_ids.index(rid), rid, ds.measured[rid].fs, s, D[rid], D2[rid],
-                         time_derivative(y0[rid], cf.run_times[cf.run_ids.index(rid)]))
-                  if rid not in warps else
-                  _Shift(cf.run_ids.index(rid), rid, ds.measured[rid].fs, s, D[rid], None, None, warps[rid], Dw[rid])
-                  for rid, s in starts.items()]
+        # round's car (no D2, no ydot0): a start and a constant correction are the same move (a start modelled
+        # otherwise opened a valley the two slid along, 0.2 samples a round on the GPS runs, or took twice the
+        # evaluations a round)
+        y0 = cf.simulate(P) if D2 else {}
+        shifts = []
+        for rid, s in starts.items():
+            ri = cf.run_ids.index(rid)
+            ydot0 = time_derivative(y0[rid], cf.run_times[ri]) if rid in D2 else None
+            shifts.append(_Shift(ri, rid, ds.measured[rid].fs, s, D[rid], D2.get(rid), ydot0, warps.get(rid),
+                                 Dw.get(rid)))
         x_before = x_best
         x_best, info, std = _polish(cf, x_best, equal, shifts)
         with np.errstate(divide="ignore", invalid="ignore"):
