@@ -440,7 +440,8 @@ def test_a_noisy_speed_channel_is_corrected_and_its_noise_is_in_the_error_bars(t
     for rec in res.preprocessing.values():
         st = rec["start"]
         dc = st["distance_correction"]
-        assert st["std"] == st["std_fit"] and 0.3 < st["std"] / st["std_speed_channel"] < 5  # the walk is in it
+        assert 0.3 < st["std_fit"] / st["std_speed_channel"] < 5  # the walk is in the fit's std
+        assert st["std"] == max(st["std_fit"], st["std_speed_channel"])  # the channel's drift a floor under it
         assert 0 < dc["rms_m"] < 0.2 and len(dc["std_m"]) == len(dc["knots_s"])
         ratios.append(abs(st["value"] - OFFSET) / st["std"])
     print("start error / std", ratios)
@@ -700,3 +701,53 @@ def test_a_fix_found_on_some_runs_goes_in_their_own_channel_map():
     assert [f.remedy.where for f in every] == ["channels", "channels"] and some[0].remedy.where == "run"
     assert every[0].to_dict()["message"] == every[0].message and "remedy" not in every[0].to_dict()
     assert where_to_fix([found("H_HH")], ["H_HH"])[0] == found("H_HH")
+
+
+def test_a_knots_derivative_over_its_window_is_the_whole_runs(tmp_path):
+    """A distance correction's knot (0.2 s apart along a noisy speed channel) is differentiated over its own
+    window (rideid.conditioning.starts.knot_window: its hat widened by the distance's PCHIP reach, and
+    identify.knot_settle s after), not the whole run: the same derivative as two whole-run simulations to 1e-6 of
+    its largest value (the tail cut after 5 s of the car's decay), exactly 0 before the window; a nonlinear car's
+    window starts that much before the hat. Without the reach (two 0.1 s intervals of the speed channel) the
+    derivative began 0.095 s before the hat and the GPS SUV's starts moved 1-5 of their std."""
+    from asbuilt_tracks import RUNS
+    from driven_speed import OFFSET, write_case
+    from rideid.conditioning.starts import distance_warp, knot_window, linearise_starts, warped
+    from rideid.model.params import as_vector
+    from rideid.model.simulator import Simulator
+    from rideid.settings import using
+    from cars import SUV_TRUTH
+    from dataclasses import replace
+    write_case(tmp_path / "ds", seed=1, gps_noise=0.03, noise=0.0, runs=RUNS[1:2])
+    ds = rideid.load_dataset(tmp_path / "ds")
+    rid = RUNS[1][0]
+    w = distance_warp(ds.measured[rid], OFFSET)
+    assert w is not None and w.free.size > 20
+    t = ds.with_starts({rid: OFFSET}).data[rid].time
+    P = as_vector(SUV_TRUTH)
+    _, _, _, Dw = linearise_starts(warped(ds, {rid: w}), P, {rid: OFFSET}, warps={rid: w})
+    step = 1e-3
+
+    def whole(k):  # the whole run simulated with knot k moved -/+ step (two cost functions)
+        y = [rideid.CostFunction(warped(ds, {rid: replace(w, values=w.values + sign * step * w.hat(k))})
+                                 .with_starts({rid: OFFSET})).simulate(P)[rid] for sign in (-1, 1)]
+        return (y[1] - y[0]) / (2 * step)
+
+    for k in (0, w.free.size // 2, w.free.size - 1):
+        ref = whole(k)
+        np.testing.assert_allclose(Dw[rid][k], ref, rtol=0, atol=1e-6 * np.abs(ref).max())
+        a, b = knot_window(w, k, t, OFFSET, reach=0.2)  # the 10 Hz speed channel's PCHIP: two intervals
+        j = int(w.free[k])
+        assert j == 0 or t[a] >= w.knots[j - 1] - OFFSET - 0.2 - 1e-9
+        assert np.all(Dw[rid][k][:a] == 0.0) and np.abs(ref[:a]).max(initial=0.0) == 0.0
+    dt = t[1] - t[0]
+    for i in range(1, w.free.size - 1):  # a hat (0.4 s), twice the reach and the settling, not the run
+        a, b = knot_window(w, i, t, OFFSET, reach=0.2)
+        assert b - a <= (0.4 + 0.4 + 5.0) / dt + 2
+    k = w.free.size // 2
+    a, _ = knot_window(w, k, t, OFFSET)
+    a_nl, _ = knot_window(w, k, t, OFFSET, pre=None)
+    assert t[a] - t[a_nl] == pytest.approx(5.0, abs=0.02) or a_nl == 0
+    with using({"identify.knot_settle": 1e3}):
+        assert knot_window(w, k, t, OFFSET, pre=None) == (0, t.size)
+    assert Simulator().layout is None  # the linear car: no pre-roll (linearise_starts' rule)

@@ -116,7 +116,11 @@ def test_rivals_of_one_step_are_compared_on_their_cost(monkeypatch):
     exts = tuple(mc.Extension(g, lambda ds: True, lambda *a, g=g: W[g]) for g in W)
     monkeypatch.setattr(mc, "EXTENSIONS", exts + (mc.Extension("anti_roll_bars", lambda ds: True, None),))
     monkeypatch.setattr(mc, "_space", lambda *a: None)
+    # predicted costs that leave each rival worth fitting after the one before: the stops first (not accepted),
+    # the curves (0.0934) above what the powertrain is predicted to reach (0.085)
+    predicted = {"powertrain": 0.085, "damper_curves": 0.08, "bump_stops": 0.05, "anti_roll_bars": 0.1}
     monkeypatch.setattr(mc, "screen", lambda ds, parent, key, sim: {"extensions": list(key),
+                                                                    "predicted_cost": predicted[key[-1]],
                                                                     "passes": "anti_roll_bars" not in key})
     fitted = []
     monkeypatch.setattr(mc._Choice, "fit", lambda self, parent, key, maps=None: fitted.append(key) or
@@ -131,9 +135,49 @@ def test_rivals_of_one_step_are_compared_on_their_cost(monkeypatch):
     assert sorted(fitted) == [("anti_roll_bars", "tire_damping", "powertrain"), ("bump_stops",), ("damper_curves",),
                               ("powertrain",)]
     assert [s["passes"] for s in choice.screens].count(False) == 1
+    assert [s.get("fitted") for s in choice.screens] == [True, True, True, None]
     by = {tuple(e["extensions"]): e for e in choice.entries}
     assert by[()]["criterion"] == pytest.approx(2.0 + 60.0) and by[()]["wald"] == pytest.approx(63.0)
     assert by[("damper_curves",)]["criterion"] == pytest.approx(2.0 + 18 * mc.penalty() + 60.0)
+
+
+def test_rivals_are_fitted_the_most_promising_first_until_one_wins(monkeypatch):
+    """The knee car's pattern (benchmarks/bench_realtest.py ``knees``): the curves predicted at 0.011 reach
+    1.1e-4 and are accepted; the stops, predicted at 0.089, cannot come below that and are not fitted (their
+    screen says so); had the curves been refused, the stops would have been fitted next."""
+    from types import SimpleNamespace
+
+    def fake(key, cost):
+        return SimpleNamespace(cost=cost, adequacy={"adequate": False}, polish={"names": []}, parameters={},
+                               details={}, model={"extensions": list(key)}, names=[])
+
+    predicted = {"damper_curves": 0.011, "bump_stops": 0.089, "powertrain": 0.0894}
+    passes = {"damper_curves": True, "bump_stops": True, "powertrain": False}
+    cost = {"damper_curves": 1.1e-4, "bump_stops": 0.0889}
+    for curves_W, fitted_expected in ((500.0, [("damper_curves",)]),
+                                      (1.0, [("damper_curves",), ("bump_stops",)])):
+        W = {"powertrain": (60.0, 7), "damper_curves": (curves_W, 18), "bump_stops": (50.0, 2)}
+        monkeypatch.setattr(mc, "EXTENSIONS", tuple(mc.Extension(g, lambda ds: True, lambda *a, w=w: w)
+                                                    for g, w in W.items()))
+        monkeypatch.setattr(mc, "_space", lambda *a: None)
+        monkeypatch.setattr(mc, "screen", lambda ds, parent, key, sim: {"extensions": list(key),
+                                                                        "predicted_cost": predicted[key[-1]],
+                                                                        "passes": passes[key[-1]]})
+        fitted = []
+        monkeypatch.setattr(mc._Choice, "fit", lambda self, parent, key, maps=None, fitted=fitted:
+                            fitted.append(key) or fake(key, cost[key[-1]]))
+        monkeypatch.setattr(mc._Choice, "linear_again", lambda self: None)
+        choice = mc._Choice(None, None, {})
+        choice.add((), fake((), 0.0894), {"criterion": 2.0, "k": 0, "wald": 3.0})
+        choice.keep_best(*choice.entries)
+        assert choice.extend()
+        assert fitted == fitted_expected
+        screens = {s["extensions"][-1]: s for s in choice.screens}
+        if curves_W > 100:
+            assert choice.key == ("damper_curves",) and screens["bump_stops"]["fitted"] is False
+        else:
+            assert choice.key == ("bump_stops",) and screens["bump_stops"]["fitted"] is True
+        assert "fitted" not in screens["powertrain"]
 
 
 def test_variance_inflation_is_one_on_white_noise_and_the_long_run_ratio_on_ar1():

@@ -29,6 +29,7 @@ from ..data.measured import DEFAULT_PRE_ROLL, MeasuredRun, RelativeDistance
 from ..errors import DataError
 from ..model.equations import CHANNELS
 from ..model.sensors import SensorChain
+from ..settings import defaults
 from .nominal import Job, gather, responses, run_steps, simulate_jobs
 
 
@@ -404,16 +405,21 @@ def linearise_starts(ds, P, starts: dict, simulator=None, derivative: bool = Tru
             rd = mr.run_data(s + sign * eps[rid])
             jobs.append(Job(track, rd.time, mr.speed, rd.distance))
     n_start = len(jobs)
-    # a distance correction's knots: the run at its start with one knot moved by -/+ WARP_STEP
+    # a distance correction's knots: the run at its start with one knot moved by -/+ WARP_STEP, over the knot's
+    # window only (knot_window)
     order = []
+    pre = 0.0 if simulator is None or simulator.layout is None or simulator.layout.linear else None
     for rid, w in warps.items():
         mr, track = ds.measured[rid], ds.manifest.tracks[ds.manifest.run(rid).track]
         t = mr.run_data(starts[rid]).time
+        base = (mr.channel_distance or mr.distance).t
+        reach = 2.0 * float(np.max(np.diff(base)))  # the distance's PCHIP: a node moves two intervals each side
         for k in range(w.free.size):
+            a, b = knot_window(w, k, t, starts[rid], pre, reach)
             for sign in (-1, 1):
                 mk = _warped_run(mr, w, w.values + sign * WARP_STEP * w.hat(k))
-                jobs.append(Job(track, t, mr.speed, RelativeDistance(mk.distance, starts[rid])))
-            order.append((rid, k))
+                jobs.append(Job(track, t[a:b], mr.speed, RelativeDistance(mk.distance, starts[rid])))
+            order.append((rid, k, a, b))
     y = responses(simulate_jobs(P, ds.geometry, jobs, simulator)) if jobs else []
     D, D2 = {}, {}
     for rid, j in at_job.items():
@@ -422,10 +428,36 @@ def linearise_starts(ds, P, starts: dict, simulator=None, derivative: bool = Tru
         if rid not in warps:
             D2[rid] = _recorded(at, rid, (hi - 2 * y[j + 2] + lo) / eps[rid] ** 2)
     Dw = {rid: np.empty((w.free.size, at.data[rid].time.size, len(CHANNELS))) for rid, w in warps.items()}
-    for j, (rid, k) in enumerate(order):
-        a, b = y[n_start + 2 * j], y[n_start + 2 * j + 1]
-        Dw[rid][k] = _recorded(at, rid, (b - a) / (2 * WARP_STEP))
+    for j, (rid, k, a, b) in enumerate(order):
+        d = np.zeros(Dw[rid].shape[1:])
+        d[a:b] = (y[n_start + 2 * j + 1] - y[n_start + 2 * j]) / (2 * WARP_STEP)
+        Dw[rid][k] = _recorded(at, rid, d)
     return at, D, D2, Dw
+
+
+def knot_window(warp: DistanceWarp, k: int, t, start: float, pre: float | None = 0.0,
+                reach: float = 0.0) -> tuple[int, int]:
+    """The samples ``[a, b)`` of model times ``t`` over which moving free knot ``k`` of ``warp`` changes the
+    response: from ``pre`` s before its hat begins (``None``: setting ``identify.knot_settle`` s) to that setting's
+    seconds after it ends (the first knot's hat reaches back to the run's beginning, the last's on to its end),
+    the hat widened by ``reach`` s each side (the distance profile's interpolation between its nodes carries a
+    node's move that far: :class:`rideid.data.measured.Distance` is a PCHIP, two node intervals).
+
+    Before the hat the two simulations of a knot's central difference have the same road and the same state, so
+    their difference is exactly 0 there and each can start at rest at ``a``: for the linear car the difference
+    is the response to the road's change, whatever the state (``pre`` 0); a nonlinear car starts
+    ``identify.knot_settle`` s early for the state's start to be forgotten. After the hat the difference decays
+    with the car's slowest mode; it is cut off after ``identify.knot_settle`` s (docs/performance.md). A knot's
+    simulations were the whole run's: 0.2 s apart, a 20 s run's 100 knots took 200 simulations of all of it."""
+    settle = defaults["identify.knot_settle"]
+    pre = settle if pre is None else pre
+    j = int(warp.free[k])
+    lo = -np.inf if j == 0 else warp.knots[j - 1] - start - reach - pre
+    hi = np.inf if j == warp.knots.size - 1 else warp.knots[j + 1] - start + reach + settle
+    t = np.asarray(t, dtype=float)
+    a, b = int(np.searchsorted(t, lo, side="left")), int(np.searchsorted(t, hi, side="right"))
+    a = min(a, max(t.size - 2, 0))  # at least two samples: a time axis
+    return a, max(b, a + 2)
 
 
 def _recorded(ds, rid, d):
@@ -485,5 +517,5 @@ def speed_channel_std(mr: MeasuredRun, track, geom) -> float | None:
 
 
 __all__ = ["SHIFT_STEP", "WARP_SPACING", "DistanceWarp", "correlation_score", "cycle_slips", "distance_warp",
-           "estimate_start", "feature_span", "linearise_starts", "speed_channel_std", "start_check_steps",
-           "start_steps", "warped"]
+           "estimate_start", "feature_span", "knot_window", "linearise_starts", "speed_channel_std",
+           "start_check_steps", "start_steps", "warped"]
