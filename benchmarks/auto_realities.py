@@ -60,8 +60,9 @@ def print_choice(model: dict) -> None:
         print(f"  candidate {' + '.join(c['extensions']) or 'base':<40} cost {c['cost']:.5g}  criterion {crit:>9}"
               f"  wald {c.get('wald')!s:.8}  fits better {c['fits_better']}")
     for s in model.get("screens", []):
+        fate = "skipped" if not s["passes"] else "not fitted" if s.get("fitted") is False else "fitted"
         print(f"  screen {' + '.join(s['extensions']):<40} predicted gain {s['predicted_gain']:.4g}  score "
-              f"{s['score']:.4g} (threshold {s['threshold']:.4g})  {'fitted' if s['passes'] else 'skipped'}")
+              f"{s['score']:.4g} (threshold {s['threshold']:.4g})  {fate}")
 
 
 def main(argv=None) -> int:

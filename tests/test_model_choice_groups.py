@@ -200,3 +200,24 @@ def test_variance_inflation_is_one_on_white_noise_and_the_long_run_ratio_on_ar1(
     assert mc.variance_inflation(J, white, blocks) == pytest.approx(1.0, abs=0.1)
     v = mc.variance_inflation(J, ar.ravel(), blocks)
     assert v == pytest.approx(8.1, rel=0.05) and v < 9.0
+
+
+def test_the_candidates_table_says_which_rival_was_not_fitted():
+    """``rideid identify``'s candidates table names a rival the screen skipped and one that passed but was not
+    fitted (an accepted rival already fitted below what it was predicted to reach)."""
+    from rideid.cli import _candidates_table
+    model = {"extensions": ["damper_curves"],
+             "candidates": [{"extensions": [], "cost": 0.0894, "criterion": 2.0, "fits_better": True,
+                             "adequate": False},
+                            {"extensions": ["damper_curves"], "cost": 1.1e-4, "criterion": 286.6,
+                             "fits_better": True, "adequate": True}],
+             "screens": [{"extensions": ["powertrain"], "passes": False, "predicted_gain": 3.8e-4, "score": 28.4,
+                          "threshold": 48.4, "predicted_cost": 0.0890},
+                         {"extensions": ["damper_curves"], "passes": True, "fitted": True, "predicted_gain": 0.078,
+                          "score": 12175.0, "threshold": 124.3, "predicted_cost": 0.011},
+                         {"extensions": ["bump_stops"], "passes": True, "fitted": False, "predicted_gain": 4.7e-4,
+                          "score": 29.4, "threshold": 27.6, "predicted_cost": 0.0889}]}
+    lines = _candidates_table(model).splitlines()
+    assert [ln.split()[0] for ln in lines if "skipped:" in ln] == ["powertrain"]
+    assert [ln.split()[0] for ln in lines if "not fitted:" in ln] == ["bump_stops"]
+    assert "0.0889" in [ln for ln in lines if "not fitted:" in ln][0]

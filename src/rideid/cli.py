@@ -414,6 +414,9 @@ def _candidates_table(model: dict) -> str:
     lines += [f"{' + '.join(s['extensions']):<30} skipped: its predicted gain {s['predicted_gain']:.3g}, score "
               f"{s['score']:.3g} against {s['threshold']:.3g} (one Gauss-Newton step at its parent's fit)"
               for s in model.get("screens", ()) if not s["passes"]]
+    lines += [f"{' + '.join(s['extensions']):<30} not fitted: predicted to reach a cost of {s['predicted_cost']:.3g}, "
+              f"above a rival accepted at this step"
+              for s in model.get("screens", ()) if s["passes"] and s.get("fitted") is False]
     if any(c.get("fits_better") is False for c in model["candidates"]):
         lines.append("fits better: a cost at least (0.5 %)^2 below every candidate it contains; a candidate that "
                      "does not is not kept, whatever its criterion")
