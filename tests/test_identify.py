@@ -640,3 +640,6 @@ def test_the_polish_ends_when_it_no_longer_moves_the_car_and_hands_a_crawl_to_tr
         polish.CALLBACK = True
     assert np.max(np.abs(x - x_own) / std) < 0.1
     assert info["nfev"] <= info_own["nfev"], (info["nfev"], info_own["nfev"])
+    # the watch ended it (SciPy passes the callback an OptimizeResult only when its parameter is named
+    # ``intermediate_result``: under another name it would get x alone, and nothing would be stopped)
+    assert "Gauss-Newton step" in info["message"] and "Gauss-Newton step" not in info_own["message"]
