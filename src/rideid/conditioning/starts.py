@@ -408,7 +408,7 @@ def linearise_starts(ds, P, starts: dict, simulator=None, derivative: bool = Tru
     # a distance correction's knots: the run at its start with one knot moved by -/+ WARP_STEP, over the knot's
     # window only (knot_window)
     order = []
-    pre = 0.0 if simulator is None or simulator.layout is None or simulator.layout.linear else None
+    pre = None if simulator is not None and simulator.nonlinear else 0.0
     for rid, w in warps.items():
         mr, track = ds.measured[rid], ds.manifest.tracks[ds.manifest.run(rid).track]
         t = mr.run_data(starts[rid]).time
