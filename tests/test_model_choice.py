@@ -255,10 +255,11 @@ def test_the_tracks_as_drawn_caveat_says_when_the_weighing_cannot_clear_a_drawin
 
 def test_a_rival_on_estimated_starts_is_polished_from_the_starts_its_parent_settled(tmp_path):
     """A candidate of the model choice on runs whose starts are estimated (logger files) is polished from its
-    parent's settled starts, not from the starts found at load: its starts need one round, not several, and
-    land where a polish from the load's starts puts them. Measured on the damper van's logger files
+    parent's settled starts, not from the starts found at load: its starts barely move (the load's move 1.7
+    samples), it takes fewer evaluations (2 against 4), and they land where a polish from the load's starts puts
+    them. Measured on the damper van's logger files when the starts' moves were modelled round by round
     (``python benchmarks/bench_realtest.py --cases van-logger``): 121 -> 63 s of CPU, rounds of start
-    re-estimation 48 -> 35, estimates moved at most 4e-5 std."""
+    re-estimation 48 -> 35, estimates moved at most 4e-5 std; with exact starts each polish is one round."""
     from logger_case import suv_scenario, write_logger
 
     from rideid.estimate.choice.model_choice import _Choice, _space, start_row
@@ -274,8 +275,9 @@ def test_a_rival_on_estimated_starts_is_polished_from_the_starts_its_parent_sett
     space = _space(ds, key, parent)
     cold = identify_model(ds, cost=CostFunction(ds, space=space), start=start_row(ds, parent, space), seed=1,
                           assess=False)
-    assert len(rival.polish["alignment_rounds"]) == 1
-    assert len(cold.polish["alignment_rounds"]) >= 2
+    (warm,), (first,) = rival.polish["alignment_rounds"], cold.polish["alignment_rounds"]
+    assert warm["max_change_samples"] < 1e-3 and first["max_change_samples"] > 1.0
+    assert rival.polish["nfev"] < cold.polish["nfev"]
     for rid, st in rival.starts.items():
         assert abs(st["value"] - cold.starts[rid]["value"]) < 0.05 / 100.0
     for n, d in rival.details.items():

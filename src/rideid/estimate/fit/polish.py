@@ -153,7 +153,7 @@ def bump_recheck(ds, fit, bumps):
 
 
 
-def _polish(cf: CostFunction, x0, weights, align=None):
+def _polish(cf: CostFunction, x0, weights, align=None, at=None):
     """Least squares from ``x0``; ``align`` = [:class:`_Shift`] adds those runs' starts as unknowns.
 
     The model moves, the data never do: a start changed by ``delta`` moves the
@@ -175,7 +175,7 @@ def _polish(cf: CostFunction, x0, weights, align=None):
     Returns ``(x, info, std)``: the free parameters, the ``polish`` block of result.json and the
     parameters' white standard errors (:class:`_Polish`).
     """
-    prob = _Polish(cf, np.asarray(weights, dtype=float), tuple(align or ()))
+    prob = _Polish(cf, np.asarray(weights, dtype=float), tuple(align or ()), at=at)
     if prob.has_warps:
         # the prior rows weigh a knot's increment against the data at the data's residual level
         v0 = np.concatenate([np.clip((x0 - prob.lo) / prob.span, 0, 1), np.zeros(prob.n_unknowns - prob.d)])
@@ -253,11 +253,8 @@ class Progress:
             self.z.append(math.sqrt(max(self.costs[-1] - F, 0.0) * dof / F))
         self.costs.append(F)
         small = defaults["identify.converged_step_std"]
-        J = self.jacobian(x) if self.jacobian is not None else None
-        if J is not None and F > 0:
-            free = ~self.active(x) if self.active is not None else np.ones(J.shape[1], dtype=bool)
-            free &= np.any(J != 0.0, axis=0)  # a column of zeros moves nothing (a knot the curves' repair hides)
-            step = gauss_newton_length(J[:, free], f) * math.sqrt(dof / (2 * F))
+        step = self.step_length(x, f, self.jacobian(x) if self.jacobian is not None else None)
+        if step is not None:
             self.step_std.append(step)
             if step < small:
                 self.reason = "converged"
@@ -267,6 +264,16 @@ class Progress:
             self.reason = self.reason or "crawl"
         if self.reason:
             raise StopIteration
+
+
+    def step_length(self, x, f, J) -> float | None:
+        """The Gauss-Newton step's length from ``x`` in standard errors (None without a Jacobian ``J`` or a cost)."""
+        F = 0.5 * float(f @ f)
+        if J is None or F <= 0:
+            return None
+        free = ~self.active(x) if self.active is not None else np.ones(J.shape[1], dtype=bool)
+        free &= np.any(J != 0.0, axis=0)  # a column of zeros moves nothing (a knot the curves' repair hides)
+        return gauss_newton_length(J[:, free], f) * math.sqrt(max(f.size - self.d, 1) / (2 * F))
 
 
 def gauss_newton_length(J, f) -> float:
@@ -286,7 +293,8 @@ class _Polish:
 
     ``z`` in ``[0, 1]`` per free parameter (``x = lo + span z``), then one shift per run of ``align``
     (samples, ``[-5, 5]``). The residuals are the cost function's at ``weights``; the measured data of an
-    aligned run move by ``delta D`` (the start's linearisation, :func:`_polish`).
+    aligned run move by ``delta D`` (the start's linearisation, :func:`_polish`), or, with ``at``, the runs are
+    read at the moved starts themselves (exact).
     """
 
     cf: CostFunction
@@ -294,6 +302,9 @@ class _Polish:
     align: tuple = ()
     #: the residual noise level the distance corrections' prior rows are scaled to (:meth:`prior_rows`)
     prior_scale: float = 1.0
+    #: exact starts: run id -> start (s) of every run of ``align`` -> the cost function on the runs read there
+    #: (None: the round's model of a start's move, ``D`` and ``D2``). Runs without a distance correction only.
+    at: object = None
     #: the residuals of the last :meth:`residuals` call: least_squares asks for the Jacobian where it just
     #: evaluated (a memo, not state of the problem)
     _last: dict = field(default_factory=dict, repr=False, compare=False)
@@ -355,7 +366,7 @@ class _Polish:
 
     def measured(self, v):
         """The measured data with each aligned run moved by its shift's linearisation (None: no shift)."""
-        if not self.align:
+        if not self.align or self.at is not None:
             return None
         cf, d = self.cf, self.d
         Y = cf.Y.copy()
@@ -380,10 +391,23 @@ class _Polish:
         Held at the round's car (``D`` alone), a car that misfits (a rival of the model choice) and the starts
         traded against each other, the model's cost below the true one by up to 8 % on the van's logger
         files, and the rounds never settled; with ``D(P)`` within 0.05 % (docs/performance.md)."""
-        r = self.cf.residuals(self.to_x(v[:self.d])[None], self.weights, Y=self.measured(v),
-                              advance=self.advance(v))[0]
+        r = self.cost_at(v).residuals(self.to_x(v[:self.d])[None], self.weights, Y=self.measured(v),
+                                      advance=self.advance(v))[0]
         self._last["v"], self._last["r"] = v.copy(), r
         return np.concatenate([r, self.prior_rows(v)[0]]) if self.has_warps else r
+
+    def cost_at(self, v) -> CostFunction:
+        """The cost function whose runs are read at ``v``'s starts (with ``at``; else :attr:`cf`, the round's). The
+        last few are kept: least_squares asks for the Jacobian where it just evaluated."""
+        if self.at is None:
+            return self.cf
+        key = tuple(self.start_of(v, k) for k in range(len(self.align)))
+        memo = self._last.setdefault("at", {})
+        if key not in memo:
+            if len(memo) >= 4:
+                memo.pop(next(iter(memo)))
+            memo[key] = self.at({sh.run_id: s for sh, s in zip(self.align, key)})
+        return memo[key]
 
     @property
     def has_warps(self) -> bool:
@@ -392,11 +416,16 @@ class _Polish:
     def jacobian(self, v) -> np.ndarray:
         """``(m, d + len(align))``: forward differences (step 1e-7 in ``z``) as one batch, the shifts' columns
         from their ``D``."""
+        memo = self._jacobian_at(v)
+        if memo is not None:  # the least squares' first, taken by the check before them (_least_squares)
+            return memo.copy()
         d, cf = self.d, self.cf
         D = self._differences(v)
         J = np.zeros((D.shape[0], v.size))
         J[:, :d] = D
         offsets = self._run_offsets()
+        if self.at is not None:
+            return self._exact_start_columns(v, J, offsets)
         at_car = any(sh.ydot0 is not None for sh in self.align)
         y = cf.simulate(cf.space.full(self.to_x(v[:d])[None])[0]) if at_car else {}
         for k, (sh, sl) in enumerate(zip(self.align, self.warp_slices)):
@@ -412,6 +441,22 @@ class _Polish:
             if sl is not None:
                 J[rows, sl] = (sh.Dw[:, :, cols] * sc).reshape(sh.Dw.shape[0], -1).T
         J = np.vstack([J, self.prior_rows(v)[1]]) if self.has_warps else J
+        self._last["J"] = (v.copy(), J)
+        return J
+
+    def _exact_start_columns(self, v, J, offsets) -> np.ndarray:
+        """``J`` with the starts' columns of :meth:`jacobian` by a forward difference of the runs read at every
+        start moved by setting ``identify.exact_start_step`` (samples) at once: each run's residuals depend on its
+        own start alone, so one evaluation gives every column."""
+        d, h = self.d, defaults["identify.exact_start_step"]
+        vh = v.copy()
+        vh[d:d + len(self.align)] += h
+        x = self.to_x(v[:d])[None]
+        r0 = self.cost_at(v).residuals(x, self.weights)[0]
+        rh = self.cost_at(vh).residuals(x, self.weights)[0]
+        for k, sh in enumerate(self.align):
+            rows = slice(offsets[sh.run_index], offsets[sh.run_index + 1])
+            J[rows, d + k] = (rh[rows] - r0[rows]) / h
         self._last["J"] = (v.copy(), J)
         return J
 
@@ -432,10 +477,10 @@ class _Polish:
         steps = np.where(z + h <= 1, h, -h)
         Z = np.tile(z, (self.d, 1))
         Z[np.arange(self.d), np.arange(self.d)] += steps
-        Yv, adv = self.measured(v), self.advance(v)
-        R = self.cf.residuals(self.to_x(Z), self.weights, Y=Yv, advance=adv)
+        Yv, adv, cf = self.measured(v), self.advance(v), self.cost_at(v)
+        R = cf.residuals(self.to_x(Z), self.weights, Y=Yv, advance=adv)
         last = self._last
-        r0 = last["r"] if "v" in last and np.array_equal(last["v"], v) else self.cf.residuals(
+        r0 = last["r"] if "v" in last and np.array_equal(last["v"], v) else cf.residuals(
             self.to_x(z[None]), self.weights, Y=Yv, advance=adv)[0]
         return ((R - r0) / steps[:, None]).T
 
@@ -494,6 +539,14 @@ class _Polish:
                          active=lambda v: (v - lo <= near) | (hi - v <= near),
                          repaired=self._repaired if repair_stop else None)
         kw = {"callback": watch} if CALLBACK else {}
+        # already where the car stops moving: no solve (its steps, below rounding, would be refused). Not with
+        # distance corrections: their hundreds of knots make the check's QR cost a second (the GPS SUV 64 -> 70 s)
+        if CALLBACK and not self.has_warps:
+            f0 = self.residuals(v0)
+            J0 = self.jacobian(v0)
+            step = watch.step_length(v0, f0, J0)
+            if step is not None and step < defaults["identify.converged_step_std"]:
+                return self._converged_at(v0, f0, J0, watch.active(v0), step)
         with tall_steps():  # dogbox's steps on the tall Jacobian reduced once (rideid.estimate.fit.tall)
             sol = least_squares(self.residuals, v0, jac=self.jacobian, bounds=bounds, method=method,
                                 x_scale="jac", ftol=1e-15, xtol=1e-12, gtol=1e-15, max_nfev=max_nfev, **kw)
@@ -502,6 +555,19 @@ class _Polish:
             sol.success, sol.message = True, (f"a Gauss-Newton step from here would move the unknowns by less than "
                                               f"{defaults['identify.converged_step_std']} of their standard errors")
         return sol
+
+    @staticmethod
+    def _converged_at(v0, f0, J0, active, step) -> OptimizeResult:
+        """The least squares' result at their start ``v0`` (residuals ``f0``, Jacobian ``J0``, the unknowns on a
+        bound ``active``), where the Gauss-Newton step is ``step`` standard errors long, below setting
+        ``identify.converged_step_std``: a polish from a parent's converged fit, or a start's round that
+        changed nothing (dogbox took 8 evaluations there, its steps below rounding refused one by one)."""
+        g = J0.T @ f0
+        return OptimizeResult(x=v0.copy(), fun=f0, jac=J0, cost=0.5 * float(f0 @ f0), nfev=1, njev=1, status=2,
+                              optimality=float(np.max(np.abs(np.where(active, 0.0, g)), initial=0.0)),
+                              active_mask=np.zeros(v0.size, dtype=int), success=True, progress="converged",
+                              message=(f"a Gauss-Newton step from here would move the unknowns by {step:.2g} of their "
+                                       f"standard errors (below {defaults['identify.converged_step_std']})"))
 
     def scale(self) -> np.ndarray:
         """``dx/dv`` of every unknown: the bounds' spans, one sample interval per shift, 1 per knot (m)."""
@@ -574,7 +640,8 @@ class _Shift:
     run_id: str
     fs: float
     start: float
-    D: np.ndarray
+    #: None with exact starts (:attr:`_Polish.at`)
+    D: np.ndarray | None
     #: ``D``'s derivative, and the time derivative (central differences of the samples) of the response ``D``
     #: belongs to, the car the round began from: ``D`` at another car is taken as ``D + ydot0 - ydot``
     #: (:meth:`_Polish.residuals`); both None: the move linear, at the round's car (a run with a ``warp``)
@@ -588,45 +655,49 @@ class _Shift:
 
 @stage("polish with starts")
 def _polish_aligned(ds, cf, x_best, equal):
-    """Polish the parameters and the estimated starts together, centring the starts' linearisation
-    again (new model time axes, the same samples) until no start moves by more than
-    ``identify.realign_tol`` of a sample interval or ``identify.realign_std`` of its standard error,
-    whichever is larger (:func:`_move`), or until no parameter moves by more than
-    ``identify.realign_parameter_std`` of its standard error (:func:`_settled`); a constant-speed run whose
-    correlation with the polished car peaks a cycle away (:func:`rideid.conditioning.starts.cycle_slips`) is moved
-    there.
+    """Polish the parameters and the estimated starts together.
 
-    Each round reads the runs at the current starts with the derivative of the car's response there
-    (:func:`rideid.conditioning.starts.linearise_starts`) and polishes; once the starts settle, the runs
-    are read at the settled starts (no derivative) and the cost function on them is returned.
+    Runs without a distance correction (a constant speed, or a speed channel trusted as it is): the starts'
+    moves are exact, every evaluation of the least squares reading the runs at its starts (:attr:`_Polish.at`),
+    in one round, a second only where a constant-speed run's correlation with the polished car peaks a cycle away
+    (:func:`rideid.conditioning.starts.cycle_slips`: moved there, polished again). Measured on the shared damper
+    van's logger files, the damper-curve candidate: the rounds of a modelled start took five polishes (its
+    parameters moving 848, 330, 154, 25 and 0.3 standard errors round to round while the starts moved 0.9, 0.2,
+    0.09, 0.02 samples: the model's cost at a round's end was off the runs' by up to 60 % on the bump runs,
+    whose response to a start's move is not a time shift of the car's, ``D(P) = D + ydot0 - ydot(P)`` a poor
+    model of it once the car moves), exact one polish; docs/performance.md.
+
+    Runs with a distance correction (a noisy speed channel's, :func:`rideid.conditioning.starts.distance_warp`):
+    the starts' and the corrections' moves are modelled (:func:`rideid.conditioning.starts.linearise_starts`: the
+    derivative of the car's response there), the model centred again round after round (new model time axes,
+    the same samples) until no start moves by more than ``identify.realign_tol`` of a sample interval or
+    ``identify.realign_std`` of its standard error, whichever is larger (:func:`_move`), or until no parameter
+    moves by more than ``identify.realign_parameter_std`` of its standard error (:func:`_settled`).
+
+    Once the starts settle, the runs are read at the settled starts and the cost function on them is returned.
     Works on its own copy of the run data: ``ds`` is not changed.
     """
     starts = {rid: ds.measured[rid].start for rid in ds.auto_start_runs}
     warps = {rid: w for rid in starts if (w := distance_warp(ds.measured[rid], starts[rid])) is not None}
+    exact = not warps
     rounds, settled = [], False
     for _ in range(defaults["identify.realign_max"] + 1):
         P = cf.space.full(x_best[None])[0]
         last = settled or len(rounds) == defaults["identify.realign_max"]
         with timing("linearise starts"):
-            ds_now, D, D2, Dw = linearise_starts(warped(ds, warps), P, starts, cf.simulator, derivative=not last,
-                                                 warps=warps)
+            ds_now, D, D2, Dw = linearise_starts(warped(ds, warps), P, starts, cf.simulator,
+                                                 derivative=not (last or exact), warps=warps)
         # the model's time axes moved with the starts: the cost function (space, simulator, pin) on them
         cf = cf.with_data(ds_now)
         if last:
             break
-        # a run with a distance correction keeps its start's move as the correction's is modelled, linear and at the
-        # round's car (no D2, no ydot0): a start and a constant correction are the same move (a start modelled
-        # otherwise opened a valley the two slid along, 0.2 samples a round on the GPS runs, or took twice the
-        # evaluations a round)
-        y0 = cf.simulate(P) if D2 else {}
-        shifts = []
-        for rid, s in starts.items():
-            ri = cf.run_ids.index(rid)
-            ydot0 = time_derivative(y0[rid], cf.run_times[ri]) if rid in D2 else None
-            shifts.append(_Shift(ri, rid, ds.measured[rid].fs, s, D[rid], D2.get(rid), ydot0, warps.get(rid),
-                                 Dw.get(rid)))
         x_before = x_best
-        x_best, info, std = _polish(cf, x_best, equal, shifts)
+        if exact:
+            shifts = [_Shift(cf.run_ids.index(rid), rid, ds.measured[rid].fs, s, None) for rid, s in starts.items()]
+            x_best, info, std = _polish(cf, x_best, equal, shifts,
+                                        at=lambda st, cf=cf: cf.with_data(ds.with_starts(st)))
+        else:
+            x_best, info, std = _polish(cf, x_best, equal, _modelled_shifts(ds, cf, P, starts, D, D2, Dw, warps))
         with np.errstate(divide="ignore", invalid="ignore"):
             steps = np.abs(x_best - x_before) / std
         param_move = float(np.max(np.where(np.isfinite(steps), steps, 0.0), initial=0.0))
@@ -640,21 +711,37 @@ def _polish_aligned(ds, cf, x_best, equal):
             per_m = ds.measured[rid].fs / max(float(ds.measured[rid].record.get("speed", {}).get("mean") or 1.0), 1e-3)
             moves += [_move(abs(a - b) * per_m, s * per_m) for a, b, s in zip(new, w.values, dc["std_m"])]
             warps[rid] = replace(w, values=new)
-        worst = max(m[0] for m in moves)
-        share = max(m[1] for m in moves)
         with timing("cycle slips"):
             moved = cycle_slips(ds, cf.space.full(x_best[None])[0], fitted, cf.simulator)
         slipped = {rid: s - fitted[rid] for rid, s in moved.items()}
         starts = {**fitted, **moved}
-        rounds.append({"max_change_samples": worst, "max_change_share": share, "max_parameter_move_std": param_move,
+        rounds.append({"max_change_samples": max(m[0] for m in moves), "max_change_share": max(m[1] for m in moves),
+                       "max_parameter_move_std": param_move, "exact": exact,
                        **({"cycle_slips": slipped} if slipped else {})})
-        settled = _settled(rounds[-1])
+        settled = not slipped if exact else _settled(rounds[-1])
     out = {rid: {"value": float(starts[rid]), "source": "estimated with the parameters (least squares)",
                  **_start_std(info["starts"][rid], ds.measured[rid].record.get("start", {}), rid in warps)}
            for rid in starts}
     for rid in warps:
         out[rid]["distance_correction"] = info["starts"][rid]["distance_correction"]
     return x_best, dict(info, alignment_rounds=rounds), std, cf, out
+
+
+def _modelled_shifts(ds, cf, P, starts, D, D2, Dw, warps) -> list:
+    """The round's :class:`_Shift` of every run of ``starts``: its start's move modelled by ``D`` and ``D2`` (and
+    the time derivative of car ``P``'s response, the car the round began from), a distance correction's by ``Dw``.
+
+    A run with a distance correction keeps its start's move as the correction's is modelled, linear and at the
+    round's car (no D2, no ydot0): a start and a constant correction are the same move (a start modelled otherwise
+    opened a valley the two slid along, 0.2 samples a round on the GPS runs, or took twice the evaluations a
+    round)."""
+    y0 = cf.simulate(P) if D2 else {}
+    shifts = []
+    for rid, s in starts.items():
+        ri = cf.run_ids.index(rid)
+        ydot0 = time_derivative(y0[rid], cf.run_times[ri]) if rid in D2 else None
+        shifts.append(_Shift(ri, rid, ds.measured[rid].fs, s, D[rid], D2.get(rid), ydot0, warps.get(rid), Dw.get(rid)))
+    return shifts
 
 
 def _settled(round_record: dict) -> bool:
