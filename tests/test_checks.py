@@ -736,6 +736,40 @@ def test_a_fix_found_on_some_runs_goes_in_their_own_channel_map():
     assert where_to_fix([found("H_HH")], ["H_HH"])[0] == found("H_HH")
 
 
+def test_a_distance_correction_starts_from_the_one_the_run_is_driven_along(tmp_path):
+    """A rival of the model choice reads the runs along its parent's distance corrections
+    (Dataset.with_starts with a ``distance_correction``); its own correction starts from them, not from 0
+    (rideid.conditioning.starts.distance_warp): the same distance at every sample to 1e-12 m when the start is
+    the parent's anchor, the anchor knot at 0; re-anchored 3 ms later, the distance differs from the parent's by
+    the correction's value there alone (a constant: what a start's move absorbs). Before, every rival's
+    corrections began at 0 and the all-realities SUV's first round moved them 2.76 samples, each rival alike."""
+    from asbuilt_tracks import RUNS
+    from driven_speed import OFFSET, write_case
+    from rideid.conditioning.starts import distance_warp, warped
+    write_case(tmp_path / "ds", seed=1, gps_noise=0.03, noise=0.0, runs=RUNS[1:2])
+    ds = rideid.load_dataset(tmp_path / "ds")
+    rid = RUNS[1][0]
+    w = distance_warp(ds.measured[rid], OFFSET)
+    assert np.all(w.values == 0.0)
+    rng = np.random.default_rng(3)
+    values = np.cumsum(rng.normal(0.0, 0.01, w.knots.size))
+    values -= values[w.anchor]
+    parent = ds.with_starts({rid: {"value": OFFSET, "distance_correction": {"knots_s": w.knots.tolist(),
+                                                                            "values_m": values.tolist()}}})
+    for start in (OFFSET, OFFSET + 0.003):
+        mine = distance_warp(parent.measured[rid], start)
+        assert mine.values[mine.anchor] == 0.0
+        d_parent = parent.measured[rid].distance
+        d_mine = warped(parent, {rid: mine}).measured[rid].distance
+        gap = d_mine.d - d_parent.d
+        inside = (d_parent.t >= mine.knots[0]) & (d_parent.t <= mine.knots[-1])
+        offset = float(np.interp(start, w.knots, values))
+        if start == OFFSET:
+            assert np.abs(gap[inside]).max() < 1e-12
+        else:  # the parent's correction at the new knots: piecewise linear between them, less its value at start
+            assert abs(np.median(gap[inside]) + offset) < 0.2 * np.abs(np.diff(values)).max()
+
+
 def test_a_knots_derivative_over_its_window_is_the_whole_runs(tmp_path):
     """A distance correction's knot (0.2 s apart along a noisy speed channel) is differentiated over its own
     window (rideid.conditioning.starts.knot_window: its hat widened by the distance's PCHIP reach, and

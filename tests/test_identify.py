@@ -546,7 +546,7 @@ def test_a_distance_warp_is_a_random_walk_anchored_at_the_start():
     assert rec["std_m"] == [1e-3, 2e-3, 0.0, 3e-3, 4e-3] and rec["max_abs_m"] == pytest.approx(0.009)
     # from a run's record: none without speed noise (a distance channel, a clean speed channel)
     rd = SimpleNamespace(time=np.linspace(-0.5, 3.0, 351))
-    run = SimpleNamespace(distance=object(), run_data=lambda s: rd,
+    run = SimpleNamespace(distance=object(), channel_distance=None, run_data=lambda s: rd,
                           record={"speed": {"noise_std": 0.03, "noise_interval": 0.1}})
     got = distance_warp(run, 5.0)
     assert got.knots[got.anchor] == 5.0 and got.knots[0] <= 4.5 and got.knots[-1] >= 8.0
