@@ -140,7 +140,7 @@ def _sine_run(omega, amp, t, corners=(1.0, 1.0, 0.0, 0.0)):
     uq = amp * np.sin(omega * tq)  # (k, q)
     mc = np.einsum("kq,qn->kn", uq, W)[:, None, :] * c[None, :, None]
     mu = np.einsum("dc,kcn->kdn", CORNER_TO_DECOMPOSED, mc)
-    return RunInput(t=t, h=h, u=u, ud=u @ CORNER_TO_DECOMPOSED.T, mu=mu, rate=rate,
+    return RunInput(t=t, h=h, u=u, ud=u @ CORNER_TO_DECOMPOSED.T, moments=mu, rate=rate,
                     rated=rate @ CORNER_TO_DECOMPOSED.T)
 
 

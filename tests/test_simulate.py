@@ -195,3 +195,25 @@ def test_series_length_meets_its_stated_tolerance(rng, fs):
         assert (err <= 100 * TOL * rms + 1e-14).all(), (table["kind"], N, (err / rms).max())
         shorter = simulate_reference(P, G, run, disc=Discretized(P, G, run.h, nterms=N - 2))
         assert np.sqrt(np.mean((shorter - ref) ** 2, axis=1)).max() > err.max()  # the terms matter
+
+
+
+def test_a_runs_moments_are_computed_when_first_read():
+    """``prepare_run`` leaves the input moments (the linear car's exact discretisation) to the first read of
+    ``RunInput.mu``: the nonlinear car never reads them, and a damper-curve fit on estimated starts prepares
+    its runs again at every trial start (docs/performance.md, "Exact starts"). Read, they are the quadrature's
+    (:func:`rideid.model.simulate.input_moments`) to the bit and not writeable; a run cut from its k-th sample
+    on (a moving start's recorded part) keeps them lazy and gives the whole run's from interval k."""
+    from rideid.model.sensors import _recorded
+    from rideid.model.simulate import ENVELOPE_DX, corner_inputs, input_moments
+    table, V = TRACKS["chassis_twist"]
+    tr = track_from_table(table, "t")
+    t = np.arange(401) / FS + 0.0123  # a grid of its own: not a preparation cached by another test
+    ri = prepare_run(tr, G, V, t)
+    cut = _recorded(ri, 40)
+    assert callable(ri.moments) and callable(cut.moments)
+    mu = ri.mu
+    assert not callable(ri.moments) and not mu.flags.writeable
+    n_panels = max(8, int(np.ceil(V * (t[1] - t[0]) / ENVELOPE_DX)))
+    np.testing.assert_array_equal(mu, input_moments(t, lambda tq: corner_inputs(tr, G, V * tq), n_panels, 2))
+    np.testing.assert_array_equal(cut.mu, mu[40:])

@@ -63,7 +63,7 @@ def prepare_function(t, inputs_at):
     mu = input_moments(t, lambda tq: inputs_at(tq)[0], MOMENT_PANELS, MOMENT_ORDER)
     u = np.ascontiguousarray(u, dtype=float)
     rate = np.ascontiguousarray(rate, dtype=float)
-    run = RunInput(t=t, h=h, u=u, ud=u @ CORNER_TO_DECOMPOSED.T, mu=mu, rate=rate,
+    run = RunInput(t=t, h=h, u=u, ud=u @ CORNER_TO_DECOMPOSED.T, moments=mu, rate=rate,
                    rated=rate @ CORNER_TO_DECOMPOSED.T, inputs_at=inputs_at)
     for arr in (run.t, run.u, run.ud, run.mu, run.rate, run.rated):
         arr.flags.writeable = False

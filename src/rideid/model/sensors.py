@@ -340,7 +340,7 @@ def _recorded(run, k: int):
     """The inputs of ``run`` from its ``k``-th sample on (a moving start's recorded part)."""
     if not k:
         return run
-    return replace(run, t=run.t[k:], u=run.u[k:], ud=run.ud[k:], mu=run.mu[k:], rate=run.rate[k:],
+    return replace(run, t=run.t[k:], u=run.u[k:], ud=run.ud[k:], moments=run.moments_from(k), rate=run.rate[k:],
                    rated=run.rated[k:])
 
 

@@ -60,7 +60,10 @@ class RunInput:
     h : sample interval, s
     u : (n, 4) corner inputs fl, fr, rl, rr at the samples, m
     ud : (n, 4) decomposed inputs ``[rf_s, rr_s, rf_a, rr_a]``
-    mu : (n-1, 4, N_MAX) decomposed input moments per interval
+    mu : (n-1, 4, N_MAX) decomposed input moments per interval (the linear car's exact discretisation): given as
+        ``moments``, the array or a function that computes it, called on the first read of ``mu`` (the
+        nonlinear car never reads them: a damper-curve fit on estimated starts prepares its runs again at every
+        trial start, and the moments' quadrature was 52 of its 63 ms a preparation)
     rate : (n, 4) input rates ``r'`` (speed times envelope slope) at the samples, m/s
     rated : (n, 4) decomposed input rates (used with tire damping)
     inputs_at : callable ``times (k,) -> (u (k, 4), rate (k, 4))``, the corner inputs and
@@ -74,10 +77,24 @@ class RunInput:
     h: float
     u: np.ndarray
     ud: np.ndarray
-    mu: np.ndarray
+    moments: object
     rate: np.ndarray
     rated: np.ndarray
     inputs_at: object = field(default=None, repr=False, compare=False)
+
+    @property
+    def mu(self) -> np.ndarray:
+        if callable(self.moments):
+            mu = np.asarray(self.moments())
+            mu.flags.writeable = False  # shared by every caller with the same arguments (prepare_run)
+            self.moments = mu
+        return self.moments
+
+    def moments_from(self, k: int):
+        """``moments`` from the ``k``-th interval on, still lazy where they are."""
+        if callable(self.moments):
+            return lambda: self.mu[k:]
+        return self.moments[k:]
 
     @property
     def n(self) -> int:
@@ -106,7 +123,7 @@ def prepare_run(track: Track, geom: Geometry, speed: float | None, t, quad_order
                 and tt.shape == t.shape and np.array_equal(tt, t)):
             return res
     res = _prepare_run(track, geom, speed, t, quad_order, distance)
-    for arr in (res.t, res.u, res.ud, res.mu, res.rate, res.rated):
+    for arr in (res.t, res.u, res.ud, res.rate, res.rated):
         arr.flags.writeable = False  # shared by every caller with the same arguments
     _PREPARED.append((track, geom, speed, t.copy(), quad_order, distance, res))
     del _PREPARED[:-PREPARED_MAX]
@@ -144,7 +161,8 @@ def _prepare_run(track, geom, speed, t, quad_order, distance) -> RunInput:
     u = corner_inputs(track, geom, distance(t))
     # quadrature panels no longer than the envelope grid spacing
     n_panels = max(8, int(np.ceil(max(vmax, 1e-3) * h / ENVELOPE_DX)))
-    mu = input_moments(t, lambda tq: corner_inputs(track, geom, distance(tq)), n_panels, quad_order)
+    def mu():
+        return input_moments(t, lambda tq: corner_inputs(track, geom, distance(tq)), n_panels, quad_order)
     ud = u @ CORNER_TO_DECOMPOSED.T
     # input rates at the samples: speed x envelope slope (only the tire dampers use them)
     if distance_given:
@@ -165,7 +183,7 @@ def _prepare_run(track, geom, speed, t, quad_order, distance) -> RunInput:
             vv = np.full(times.shape, float(speed))
         return corner_inputs(track, geom, x), corner_input_slopes(track, geom, x) * vv[:, None]
 
-    return RunInput(t=t, h=h, u=u, ud=ud, mu=mu, rate=rate, rated=rate @ CORNER_TO_DECOMPOSED.T,
+    return RunInput(t=t, h=h, u=u, ud=ud, moments=mu, rate=rate, rated=rate @ CORNER_TO_DECOMPOSED.T,
                     inputs_at=inputs_at)
 
 

@@ -402,7 +402,8 @@ class _Polish:
         if self.at is None:
             return self.cf
         key = tuple(self.start_of(v, k) for k in range(len(self.align)))
-        memo = self._last.setdefault("at", {})
+        # the round's own cost function reads the runs at its starts: no second reading
+        memo = self._last.setdefault("at", {tuple(sh.start for sh in self.align): self.cf})
         if key not in memo:
             if len(memo) >= 4:
                 memo.pop(next(iter(memo)))
