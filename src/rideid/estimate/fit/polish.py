@@ -14,6 +14,7 @@ from __future__ import annotations
 import inspect
 import math
 from dataclasses import dataclass, field, replace
+from functools import partial
 
 import numpy as np
 from scipy.optimize import OptimizeResult, least_squares
@@ -292,9 +293,9 @@ class _Polish:
     """The polish's least-squares problem in bound-normalised coordinates ``v = (z, start shifts)``.
 
     ``z`` in ``[0, 1]`` per free parameter (``x = lo + span z``), then one shift per run of ``align``
-    (samples, ``[-5, 5]``). The residuals are the cost function's at ``weights``; the measured data of an
-    aligned run move by ``delta D`` (the start's linearisation, :func:`_polish`), or, with ``at``, the runs are
-    read at the moved starts themselves (exact).
+    (samples, within setting ``identify.start_bound``). The residuals are the cost function's at ``weights``;
+    the measured data of an aligned run move by ``delta D`` (the start's linearisation, :func:`_polish`), or,
+    with ``at``, the runs are read at the moved starts themselves (exact).
     """
 
     cf: CostFunction
@@ -513,8 +514,9 @@ class _Polish:
         n_w = self.n_unknowns - d - n_al
         z0 = np.clip((x0 - self.lo) / self.span, 0, 1)
         v0 = np.concatenate([z0, np.zeros(n_al + n_w) if shifts is None else np.asarray(shifts, dtype=float)])
-        blo = np.concatenate([np.zeros(d), np.full(n_al, -5.0), np.full(n_w, -defaults["identify.warp_bound"])])
-        bhi = np.concatenate([np.ones(d), np.full(n_al, 5.0), np.full(n_w, defaults["identify.warp_bound"])])
+        sb, wb = defaults["identify.start_bound"], defaults["identify.warp_bound"]
+        blo = np.concatenate([np.zeros(d), np.full(n_al, -sb), np.full(n_w, -wb)])
+        bhi = np.concatenate([np.ones(d), np.full(n_al, sb), np.full(n_w, wb)])
         near = defaults["identify.bound_snap"] * (bhi - blo)
         v0 = np.where(v0 - blo < near, blo, np.where(bhi - v0 < near, bhi, v0))
         sol = self._least_squares(v0, (blo, bhi), "dogbox", defaults["identify.dogbox_max_nfev"], repair_stop)
@@ -681,22 +683,25 @@ def _polish_aligned(ds, cf, x_best, equal):
     starts = {rid: ds.measured[rid].start for rid in ds.auto_start_runs}
     warps = {rid: w for rid in starts if (w := distance_warp(ds.measured[rid], starts[rid])) is not None}
     exact = not warps
+    read = {}  # exact starts: the runs read at the last few trial starts, the polish's end among them
     rounds, settled = [], False
     for _ in range(defaults["identify.realign_max"] + 1):
         P = cf.space.full(x_best[None])[0]
         last = settled or len(rounds) == defaults["identify.realign_max"]
-        with timing("linearise starts"):
-            ds_now, D, D2, Dw = linearise_starts(warped(ds, warps), P, starts, cf.simulator,
-                                                 derivative=not (last or exact), warps=warps)
-        # the model's time axes moved with the starts: the cost function (space, simulator, pin) on them
-        cf = cf.with_data(ds_now)
+        if exact and _key(starts) in read:  # read there by the polish already
+            cf = read[_key(starts)]
+        else:
+            with timing("linearise starts"):
+                ds_now, D, D2, Dw = linearise_starts(warped(ds, warps), P, starts, cf.simulator,
+                                                     derivative=not (last or exact), warps=warps)
+            # the model's time axes moved with the starts: the cost function (space, simulator, pin) on them
+            cf = cf.with_data(ds_now)
         if last:
             break
         x_before = x_best
         if exact:
             shifts = [_Shift(cf.run_ids.index(rid), rid, ds.measured[rid].fs, s, None) for rid, s in starts.items()]
-            x_best, info, std = _polish(cf, x_best, equal, shifts,
-                                        at=lambda st, cf=cf: cf.with_data(ds.with_starts(st)))
+            x_best, info, std = _polish(cf, x_best, equal, shifts, at=partial(_read_at, ds, cf, read))
         else:
             x_best, info, std = _polish(cf, x_best, equal, _modelled_shifts(ds, cf, P, starts, D, D2, Dw, warps))
         with np.errstate(divide="ignore", invalid="ignore"):
@@ -719,13 +724,30 @@ def _polish_aligned(ds, cf, x_best, equal):
         rounds.append({"max_change_samples": max(m[0] for m in moves), "max_change_share": max(m[1] for m in moves),
                        "max_parameter_move_std": param_move, "exact": exact,
                        **({"cycle_slips": slipped} if slipped else {})})
-        settled = not slipped if exact else _settled(rounds[-1])
+        # exact: settled unless a run slipped a cycle or a start ended on the round's bound (its move, in sample
+        # intervals, is bounded round by round: the next round's bound is centred on where this one ended)
+        on_bound = max(m[0] for m in moves[:len(fitted)]) >= defaults["identify.start_bound"] * (1 - 1e-9)
+        settled = not (slipped or on_bound) if exact else _settled(rounds[-1])
     out = {rid: {"value": float(starts[rid]), "source": "estimated with the parameters (least squares)",
                  **_start_std(info["starts"][rid], ds.measured[rid].record.get("start", {}), rid in warps)}
            for rid in starts}
     for rid in warps:
         out[rid]["distance_correction"] = info["starts"][rid]["distance_correction"]
     return x_best, dict(info, alignment_rounds=rounds), std, cf, out
+
+
+def _key(starts: dict) -> tuple:
+    return tuple(sorted(starts.items()))
+
+
+def _read_at(ds, cf, read: dict, starts: dict):
+    """``cf`` on the runs of ``ds`` read at ``starts`` (run id -> s), kept in ``read`` (the last four)."""
+    key = _key(starts)
+    if key not in read:
+        if len(read) >= 4:
+            read.pop(next(iter(read)))
+        read[key] = cf.with_data(ds.with_starts(starts))
+    return read[key]
 
 
 def _modelled_shifts(ds, cf, P, starts, D, D2, Dw, warps) -> list:
