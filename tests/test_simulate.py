@@ -204,13 +204,12 @@ def test_a_runs_moments_are_computed_when_first_read():
     its runs again at every trial start (docs/performance.md, "Exact starts"). Read, they are the quadrature's
     (:func:`rideid.model.simulate.input_moments`) to the bit and not writeable; a run cut from its k-th sample
     on (a moving start's recorded part) keeps them lazy and gives the whole run's from interval k."""
-    from rideid.model.sensors import _recorded
     from rideid.model.simulate import ENVELOPE_DX, corner_inputs, input_moments
     table, V = TRACKS["chassis_twist"]
     tr = track_from_table(table, "t")
     t = np.arange(401) / FS + 0.0123  # a grid of its own: not a preparation cached by another test
     ri = prepare_run(tr, G, V, t)
-    cut = _recorded(ri, 40)
+    cut = ri.tail(40)
     assert callable(ri.moments) and callable(cut.moments)
     mu = ri.mu
     assert not callable(ri.moments) and not mu.flags.writeable

@@ -58,7 +58,7 @@ from __future__ import annotations
 
 import functools
 import math
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -297,7 +297,7 @@ class SensorSimulator:
         lens = [int(e - s) - k for s, e, k in zip(sim.run_start[:-1], sim.run_start[1:], self.lead)]
         self.run_start = np.concatenate([[0], np.cumsum(lens)]).astype(np.int64)
         self.lead_runs = list(sim.runs)
-        self.runs = [_recorded(r, k) for r, k in zip(sim.runs, self.lead)]
+        self.runs = [r.tail(k) for r, k in zip(sim.runs, self.lead)]  # a moving start's recorded part
 
     def __getattr__(self, name):
         if name == "inner":  # not set yet (unpickling): no recursion
@@ -334,14 +334,6 @@ class SensorSimulator:
     def errors_reference(self, P, Y, W, pin=None):
         return self._errors(self.outputs_reference(P, pin=pin), np.asarray(Y, dtype=float),
                             np.asarray(W, dtype=float))
-
-
-def _recorded(run, k: int):
-    """The inputs of ``run`` from its ``k``-th sample on (a moving start's recorded part)."""
-    if not k:
-        return run
-    return replace(run, t=run.t[k:], u=run.u[k:], ud=run.ud[k:], moments=run.moments_from(k), rate=run.rate[k:],
-                   rated=run.rated[k:])
 
 
 def unfiltered(n_channels: int = 10) -> tuple:

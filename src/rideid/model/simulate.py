@@ -15,7 +15,7 @@ independent fine-step check with ``scipy.signal.lsim``.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -90,11 +90,14 @@ class RunInput:
             self.moments = mu
         return self.moments
 
-    def moments_from(self, k: int):
-        """``moments`` from the ``k``-th interval on, still lazy where they are."""
-        if callable(self.moments):
-            return lambda: self.mu[k:]
-        return self.moments[k:]
+    def tail(self, k: int) -> "RunInput":
+        """The run from its ``k``-th sample on (a moving start's recorded part), its moments still lazy where they
+        are."""
+        if not k:
+            return self
+        moments = (lambda: self.mu[k:]) if callable(self.moments) else self.moments[k:]
+        return replace(self, t=self.t[k:], u=self.u[k:], ud=self.ud[k:], moments=moments, rate=self.rate[k:],
+                       rated=self.rated[k:])
 
     @property
     def n(self) -> int:

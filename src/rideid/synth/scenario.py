@@ -47,10 +47,7 @@ class SimulatedRuns(dict):
 
 def _tail(ri, k: int):
     """The run input from sample ``k`` on (a moving run's recorded part), for the lift-off check."""
-    if k == 0:
-        return ri
-    return replace(ri, t=ri.t[k:], u=ri.u[k:], ud=ri.ud[k:], moments=ri.moments_from(k), rate=ri.rate[k:],
-                   rated=ri.rated[k:], inputs_at=None)
+    return ri if k == 0 else replace(ri.tail(k), inputs_at=None)
 
 
 @dataclass

@@ -266,7 +266,6 @@ class Progress:
         if self.reason:
             raise StopIteration
 
-
     def step_length(self, x, f, J) -> float | None:
         """The Gauss-Newton step's length from ``x`` in standard errors (None without a Jacobian ``J`` or a cost)."""
         F = 0.5 * float(f @ f)
@@ -398,18 +397,11 @@ class _Polish:
         return np.concatenate([r, self.prior_rows(v)[0]]) if self.has_warps else r
 
     def cost_at(self, v) -> CostFunction:
-        """The cost function whose runs are read at ``v``'s starts (with ``at``; else :attr:`cf`, the round's). The
-        last few are kept: least_squares asks for the Jacobian where it just evaluated."""
+        """The cost function whose runs are read at ``v``'s starts (with ``at``, which keeps the last few: least_squares
+        asks for the Jacobian where it just evaluated; else :attr:`cf`, the round's)."""
         if self.at is None:
             return self.cf
-        key = tuple(self.start_of(v, k) for k in range(len(self.align)))
-        # the round's own cost function reads the runs at its starts: no second reading
-        memo = self._last.setdefault("at", {tuple(sh.start for sh in self.align): self.cf})
-        if key not in memo:
-            if len(memo) >= 4:
-                memo.pop(next(iter(memo)))
-            memo[key] = self.at({sh.run_id: s for sh, s in zip(self.align, key)})
-        return memo[key]
+        return self.at({sh.run_id: self.start_of(v, k) for k, sh in enumerate(self.align)})
 
     @property
     def has_warps(self) -> bool:
@@ -417,7 +409,7 @@ class _Polish:
 
     def jacobian(self, v) -> np.ndarray:
         """``(m, d + len(align))``: forward differences (step 1e-7 in ``z``) as one batch, the shifts' columns
-        from their ``D``."""
+        from their ``D`` (exact starts: :meth:`_exact_start_columns`)."""
         memo = self._jacobian_at(v)
         if memo is not None:  # the least squares' first, taken by the check before them (_least_squares)
             return memo.copy()
@@ -453,9 +445,8 @@ class _Polish:
         d, h = self.d, defaults["identify.exact_start_step"]
         vh = v.copy()
         vh[d:d + len(self.align)] += h
-        x = self.to_x(v[:d])[None]
-        r0 = self.cost_at(v).residuals(x, self.weights)[0]
-        rh = self.cost_at(vh).residuals(x, self.weights)[0]
+        r0 = self._residuals_at(v)
+        rh = self.cost_at(vh).residuals(self.to_x(v[:d])[None], self.weights)[0]
         for k, sh in enumerate(self.align):
             rows = slice(offsets[sh.run_index], offsets[sh.run_index + 1])
             J[rows, d + k] = (rh[rows] - r0[rows]) / h
@@ -479,12 +470,16 @@ class _Polish:
         steps = np.where(z + h <= 1, h, -h)
         Z = np.tile(z, (self.d, 1))
         Z[np.arange(self.d), np.arange(self.d)] += steps
-        Yv, adv, cf = self.measured(v), self.advance(v), self.cost_at(v)
-        R = cf.residuals(self.to_x(Z), self.weights, Y=Yv, advance=adv)
+        R = self.cost_at(v).residuals(self.to_x(Z), self.weights, Y=self.measured(v), advance=self.advance(v))
+        return ((R - self._residuals_at(v)) / steps[:, None]).T
+
+    def _residuals_at(self, v) -> np.ndarray:
+        """The cost function's residuals at ``v`` (no prior rows): the last :meth:`residuals` call's when at ``v``."""
         last = self._last
-        r0 = last["r"] if "v" in last and np.array_equal(last["v"], v) else cf.residuals(
-            self.to_x(z[None]), self.weights, Y=Yv, advance=adv)[0]
-        return ((R - r0) / steps[:, None]).T
+        if "v" in last and np.array_equal(last["v"], v):
+            return last["r"]
+        return self.cost_at(v).residuals(self.to_x(v[:self.d])[None], self.weights, Y=self.measured(v),
+                                         advance=self.advance(v))[0]
 
     def _run_offsets(self) -> np.ndarray:
         """Row where each run's residuals start in the stacked vector (and the end)."""
@@ -696,6 +691,8 @@ def _polish_aligned(ds, cf, x_best, equal):
                                                      derivative=not (last or exact), warps=warps)
             # the model's time axes moved with the starts: the cost function (space, simulator, pin) on them
             cf = cf.with_data(ds_now)
+            if exact:  # the polish's first trial reads the runs here
+                _read_at(ds, cf, read, starts, cf)
         if last:
             break
         x_before = x_best
@@ -740,13 +737,14 @@ def _key(starts: dict) -> tuple:
     return tuple(sorted(starts.items()))
 
 
-def _read_at(ds, cf, read: dict, starts: dict):
-    """``cf`` on the runs of ``ds`` read at ``starts`` (run id -> s), kept in ``read`` (the last four)."""
+def _read_at(ds, cf, read: dict, starts: dict, known=None):
+    """``cf`` on the runs of ``ds`` read at ``starts`` (run id -> s), kept in ``read`` (the last four); ``known``:
+    that cost function already (the round's)."""
     key = _key(starts)
     if key not in read:
         if len(read) >= 4:
             read.pop(next(iter(read)))
-        read[key] = cf.with_data(ds.with_starts(starts))
+        read[key] = known if known is not None else cf.with_data(ds.with_starts(starts))
     return read[key]
 
 
