@@ -275,7 +275,8 @@ def test_plan_knows_the_powertrain(tmp_path):
 def test_a_mode_left_at_a_bound_gets_a_second_start(scenario):
     """rideid.estimate.fit.polish.mode_restart: a powertrain mode with a member at a search bound (switched off: the
     engine's pitch inertia at 1 kg m^2) is started again from typical values, I_p at the nominal radius of
-    gyration for this engine's mass; the other parameters stay; no second start when nothing is at a bound, when
+    gyration for this engine's mass; the other parameters stay; no second start when nothing is at a bound or only a
+    damping ratio at its lower bound (a lightly damped mode, on), when
     the engine's mass is (no engine to place), or for the bounce mode when only the pitch mode is off. What the
     second start does on data: tests/test_realities.py (seed 3)."""
     from rideid.estimate.fit.polish import mode_restart, restart_record
@@ -284,6 +285,9 @@ def test_a_mode_left_at_a_bound_gets_a_second_start(scenario):
     names = list(space.names)
     x = np.array([{**scenario.truth, **ENGINE}[n] for n in names])
     assert mode_restart(space, x) is None
+    light = x.copy()  # a lightly damped mode is on: no second start
+    light[names.index("zeta_pp")] = space.bounds[names.index("zeta_pp"), 0]
+    assert mode_restart(space, light) is None
     off = x.copy()
     off[names.index("I_p")] = space.bounds[names.index("I_p"), 0]
     off[names.index("f_pp")] = 5.6
