@@ -1,12 +1,14 @@
 """The polish's least squares on a tall Jacobian reduced once (rideid.estimate.fit.tall): the same steps, rank and
-singular values as numpy's lstsq of all of it, and SciPy's dogbox solved with it to the same answer."""
+singular values as numpy's lstsq of all of it, the same singular values and ``U^T y`` as SciPy's SVD, and SciPy's
+dogbox and trf solved with them to the same answer."""
 
 import numpy as np
 import pytest
+import scipy.linalg
 from scipy.optimize import least_squares
-from scipy.optimize._lsq import dogbox
+from scipy.optimize._lsq import dogbox, trf
 
-from rideid.estimate.fit.tall import BLOCK_ROWS, tall_lstsq, tall_r, tall_steps
+from rideid.estimate.fit.tall import BLOCK_ROWS, tall_lstsq, tall_r, tall_steps, tall_svd
 
 
 def _tall(rng, m, n, rank_deficient=False):
@@ -68,3 +70,44 @@ def test_dogbox_reaches_the_same_fit_and_scipy_is_left_as_it_was():
     assert plain.x[2] == reduced.x[2] == 0.45  # the amplitude (0.5 in the data) held on its bound
     np.testing.assert_allclose(reduced.x, plain.x, rtol=1e-10)
     np.testing.assert_allclose(reduced.x[[0, 1, 3]], [2.0, 0.3, 1.7], rtol=0.05)
+
+
+@pytest.mark.parametrize("m, n, rank_deficient", [(3 * BLOCK_ROWS + 17, 30, False), (2 * BLOCK_ROWS + 3, 40, True),
+                                                  (5000, 25, True), (100, 30, False)])
+def test_the_reduced_svd_is_scipys(m, n, rank_deficient):
+    """tall_svd: SciPy's singular values and right vectors, and ``U^T y`` (all trf asks of ``U``), to rounding; the
+    products ``V diag(1/s) U^T y`` over the nonzero singular values (sign-free: a vector's sign is the SVD's choice)
+    the same; a last block shorter than the matrix is wide (17 rows of 30 columns) reduced as well."""
+    rng = np.random.default_rng(m + n)
+    a, y = _tall(rng, m, n, rank_deficient)
+    u0, s0, vt0 = scipy.linalg.svd(a, full_matrices=False)
+    u1, s1, vt1 = tall_svd(a, full_matrices=False)
+    np.testing.assert_allclose(s1, s0, rtol=1e-10, atol=1e-12 * s0[0])
+    k = s0 > 1e-10 * s0[0]
+    assert k.sum() == n - rank_deficient
+    p0 = vt0[k].T @ (u0.T.dot(y)[k] / s0[k])
+    p1 = vt1[k].T @ (u1.T.dot(y)[k] / s1[k])
+    np.testing.assert_allclose(p1, p0, rtol=0, atol=1e-10 * np.abs(p0).max())
+    np.testing.assert_allclose(np.abs(u1.T.dot(y)[k]), np.abs(u0.T.dot(y)[k]), rtol=1e-8)
+
+
+def test_trf_reaches_the_same_fit_and_scipy_is_left_as_it_was():
+    """The bounded exponential fit of the dogbox test by trf: with the reduced SVD inside tall_steps it ends where
+    it ends with SciPy's own (to 1e-9), SciPy's svd put back after."""
+    rng = np.random.default_rng(3)
+    t = np.linspace(0, 10, 40000)
+    y = 2.0 * np.exp(-0.3 * t) + 0.5 * np.sin(1.7 * t) + 0.01 * rng.standard_normal(t.size)
+
+    def f(p):
+        return p[0] * np.exp(-p[1] * t) + p[2] * np.sin(p[3] * t) - y
+
+    kw = dict(bounds=([0, 0, 0, 1.0], [5, 2, 0.45, 3]), method="trf", x_scale="jac", ftol=1e-15, xtol=1e-12,
+              gtol=1e-15)
+    own = trf.svd
+    plain = least_squares(f, [1.5, 0.2, 0.3, 1.65], **kw)
+    with tall_steps():
+        assert trf.svd is tall_svd and dogbox.lstsq is tall_lstsq
+        reduced = least_squares(f, [1.5, 0.2, 0.3, 1.65], **kw)
+    assert trf.svd is own
+    np.testing.assert_allclose(reduced.x, plain.x, rtol=1e-9)
+    assert reduced.x[2] == pytest.approx(0.45, rel=1e-6)  # the amplitude held at its bound

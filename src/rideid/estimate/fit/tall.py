@@ -6,7 +6,9 @@ column per unknown (12 to 60). :func:`numpy.linalg.lstsq` (LAPACK ``gelsd``: a b
 all of it) took 0.38 s a step on the all-realities SUV, 38 % of the polish (docs/performance.md#the-tall-jacobian);
 a blocked Householder QR of the same matrix leaves a square problem of the columns' size (0.085 s against 0.16 s
 on a 300 000 x 30 matrix, two cores). :func:`tall_lstsq` is that for SciPy's ``dogbox`` (:func:`tall_steps`
-swaps it in while the polish's ``least_squares`` runs), :func:`tall_r` the same reduction for the covariance's SVD.
+swaps it in while the polish's ``least_squares`` runs), :func:`tall_svd` for SciPy's ``trf`` (an SVD of the
+triangle, its left vectors kept as the blocks' Householder reflections: 0.5 s a step of the all-realities SUV's
+155 unknowns before), :func:`tall_r` the same reduction for the covariance's SVD.
 """
 
 from __future__ import annotations
@@ -15,8 +17,11 @@ import threading
 from contextlib import contextmanager
 
 import numpy as np
+from scipy import linalg
+from scipy.linalg import lapack
 
 from scipy.optimize._lsq import dogbox as _dogbox
+from scipy.optimize._lsq import trf as _trf
 
 #: a matrix at least this many times taller than wide is reduced first (below, LAPACK's own lstsq is as quick)
 TALL = 4
@@ -62,22 +67,82 @@ def tall_lstsq(a, b, rcond=None):
     return x, resid, rank, s
 
 
+def _geqrf(a):
+    """LAPACK's Householder QR of ``a`` ``(m, n)``: its reflections and factors, and its triangle ``(min(m, n), n)``."""
+    h, tau, _, info = lapack.dgeqrf(np.asarray(a, dtype=float))
+    if info != 0:
+        raise np.linalg.LinAlgError(f"dgeqrf: info {info}")
+    return h, tau, np.triu(h[:min(a.shape), :])
+
+
+def _qt(h, tau, c) -> np.ndarray:
+    """``Q^T c`` of the reflections ``(h, tau)`` of :func:`_geqrf`: the first ``min(m, n)`` entries."""
+    k = tau.size
+    out, _, info = lapack.dormqr("L", "T", h[:, :k], tau, np.asarray(c, dtype=float)[:, None], max(1, k) * 64)
+    if info != 0:
+        raise np.linalg.LinAlgError(f"dormqr: info {info}")
+    return out[:k, 0]
+
+
+class _ReducedU:
+    """The left singular vectors ``U = Q U_R`` of a tall matrix reduced by a blocked QR (:func:`tall_svd`), kept
+    as the QR's reflections: ``U.T.dot(y)`` (all SciPy's trf asks of them) is ``U_R^T Q^T y``."""
+
+    def __init__(self, blocks, top, u_r):
+        self.blocks, self.top, self.u_r = blocks, top, u_r
+
+    @property
+    def T(self):  # noqa: N802 (numpy's name)
+        return self
+
+    def dot(self, y):
+        y = np.asarray(y, dtype=float)
+        c = np.concatenate([_qt(h, tau, y[i:i + h.shape[0]]) for i, h, tau in self.blocks])
+        if self.top is not None:
+            c = _qt(*self.top, c)
+        return self.u_r.T @ c
+
+
+def tall_svd(a, full_matrices=True, **kw):
+    """:func:`scipy.linalg.svd` of a tall ``a`` ``(m, n)`` (``full_matrices=False``, as trf asks) reduced first:
+    the triangle ``R`` of a blocked QR (:func:`tall_r`'s blocks) and the SVD of ``R``, the same singular values and
+    right vectors; the left vectors a :class:`_ReducedU`, which only computes ``U^T y``. Other shapes and options go
+    to SciPy's own."""
+    a = np.asarray(a)
+    m, n = a.shape if a.ndim == 2 else (0, 0)
+    if full_matrices or kw or not n or m < TALL * n:
+        return linalg.svd(a, full_matrices=full_matrices, **kw)
+    blocks, tri = [], []
+    for i in range(0, m, BLOCK_ROWS):
+        h, tau, r = _geqrf(a[i:i + BLOCK_ROWS])
+        blocks.append((i, h, tau))
+        tri.append(r)
+    top = None
+    if len(blocks) > 1:
+        h, tau, r = _geqrf(np.vstack(tri))
+        top = (h, tau)
+    else:
+        r = tri[0]
+    u_r, s, vt = linalg.svd(r, full_matrices=False)
+    return _ReducedU(blocks, top, u_r), s, vt
+
+
 _lock = threading.Lock()
 _users = [0]
 
 
 @contextmanager
 def tall_steps():
-    """While inside, SciPy's ``dogbox`` solves its Gauss-Newton steps with :func:`tall_lstsq` (the module's own
-    ``lstsq`` put back when the last user leaves; threads share it, counted). Without that module attribute (a
-    SciPy that no longer has it) nothing is changed."""
-    if not hasattr(_dogbox, "lstsq"):
-        yield
-        return
+    """While inside, SciPy's ``dogbox`` solves its Gauss-Newton steps with :func:`tall_lstsq` and its ``trf`` takes
+    its SVDs from :func:`tall_svd` (the modules' own put back when the last user leaves; threads share them,
+    counted). Without those module attributes (a SciPy that no longer has them) nothing is changed."""
+    swaps = [(mod, name, new) for mod, name, new in ((_dogbox, "lstsq", tall_lstsq), (_trf, "svd", tall_svd))
+             if hasattr(mod, name)]
     with _lock:
         if _users[0] == 0:
-            _users.append(_dogbox.lstsq)
-            _dogbox.lstsq = tall_lstsq
+            _users[1:] = [getattr(mod, name) for mod, name, _ in swaps]
+            for mod, name, new in swaps:
+                setattr(mod, name, new)
         _users[0] += 1
     try:
         yield
@@ -85,4 +150,6 @@ def tall_steps():
         with _lock:
             _users[0] -= 1
             if _users[0] == 0:
-                _dogbox.lstsq = _users.pop()
+                for (mod, name, _), own in zip(swaps, _users[1:]):
+                    setattr(mod, name, own)
+                del _users[1:]
