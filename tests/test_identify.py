@@ -643,3 +643,27 @@ def test_the_polish_ends_when_it_no_longer_moves_the_car_and_hands_a_crawl_to_tr
     # the watch ended it (SciPy passes the callback an OptimizeResult only when its parameter is named
     # ``intermediate_result``: under another name it would get x alone, and nothing would be stopped)
     assert "Gauss-Newton step" in info["message"] and "Gauss-Newton step" not in info_own["message"]
+
+
+def test_a_gauss_newton_steps_length_is_the_same_from_the_gram_matrix_and_the_qr():
+    """rideid.estimate.fit.polish.gauss_newton_length: from the equilibrated Gram matrix (columns four decades apart,
+    a column of zeros left out) the length of a QR of ``[J | f]`` to 1e-10; a Jacobian whose columns' condition
+    number is above 1e5 (two columns 1e-7 apart: the Gram matrix's smallest eigenvalue below setting
+    identify.gram_rcond of its largest) is measured by the QR, and the length is right there too."""
+    from rideid.estimate.fit.polish import gauss_newton_length
+    from rideid.settings import defaults
+    rng = np.random.default_rng(11)
+    J = rng.standard_normal((3000, 12)) * np.logspace(0, 4, 12)
+    J[:, 4] = 0.0
+    f = rng.standard_normal(3000) + J @ rng.standard_normal(12)
+    Q, _ = np.linalg.qr(np.delete(J, 4, axis=1))
+    want = np.linalg.norm(Q.T @ f)
+    assert gauss_newton_length(J, f) == pytest.approx(want, rel=1e-10)
+    near = J.copy()
+    near[:, 7] = near[:, 6] * (1 + 1e-7 * rng.standard_normal(3000))
+    K = np.delete(near, 4, axis=1)
+    c = np.linalg.norm(K, axis=0)
+    w = np.linalg.eigvalsh(K.T @ K / np.outer(c, c))
+    assert w[0] < defaults["identify.gram_rcond"] * w[-1]
+    Q, _ = np.linalg.qr(np.delete(near, 4, axis=1))
+    assert gauss_newton_length(near, f) == pytest.approx(np.linalg.norm(Q.T @ f), rel=1e-6)

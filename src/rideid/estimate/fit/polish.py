@@ -284,12 +284,28 @@ class Progress:
 
 def gauss_newton_length(J, f) -> float:
     """``|Q^T f|``: the length of ``f``'s projection on ``J``'s columns (``Q`` their orthonormal basis), the cost
-    a Gauss-Newton step from here would take off as ``|Q^T f|^2 / 2``; from the triangle of a QR of ``[J | f]``."""
-    A = np.column_stack([J, f])
+    a Gauss-Newton step from here would take off as ``|Q^T f|^2 / 2``.
+
+    From the columns' Gram matrix, equilibrated (``g^T G^-1 g``, ``g = J^T f``: one matrix product, 0.11 s
+    against 0.50 s for a QR of a 100 000 x 157 Jacobian) while its smallest eigenvalue is above setting
+    ``identify.gram_rcond`` of its largest (the columns' condition number below its inverse square root, where
+    the normal equations lose nothing the stopping rule reads); else from the triangle of a QR of ``[J | f]``.
+    Columns of zeros take no part."""
+    J = np.asarray(J, dtype=float)
+    G = J.T @ J
+    c = np.sqrt(np.diag(G))
+    keep = c > 0
+    if not keep.any():
+        return 0.0
+    g = (J.T @ f)[keep] / c[keep]
+    w, V = np.linalg.eigh(G[np.ix_(keep, keep)] / np.outer(c[keep], c[keep]))
+    if w[0] > defaults["identify.gram_rcond"] * w[-1]:
+        return float(np.sqrt(np.sum((V.T @ g) ** 2 / w)))
+    A = np.column_stack([J[:, keep], f])
     R = tall_r(A)
     if R is A:
         R = np.linalg.qr(A, mode="r")
-    n = J.shape[1]
+    n = int(keep.sum())
     return float(np.linalg.norm(R[:min(n, R.shape[0]), n]))
 
 
