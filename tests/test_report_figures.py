@@ -88,3 +88,25 @@ print("ok")
 """
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
     assert out.returncode == 0 and out.stdout.strip() == "ok", out.stderr[-2000:]
+
+
+def test_the_summarys_data_line_names_what_the_quality_table_holds():
+    """The summary's Data row: a flat-lined or clipped channel, whose per-run warning the data-quality table stands
+    for, is named there ("no other warning"), not hidden behind "no warning on the data"; without one the row reads
+    as before."""
+    from types import SimpleNamespace
+
+    from rideid.report.html import _data_line, quality_rows
+    quality = {"channels": {
+        "roll_rate": {"runs": 5, "clipped_share": 0.0, "clipped_runs": {}, "gaps": 0, "noise": 1e-4,
+                      "unit": "rad/s", "flat_lined": ["WB7"], "filters": []},
+        "body_az_fl": {"runs": 5, "clipped_share": 0.0, "clipped_runs": {}, "gaps": 0, "noise": 0.01,
+                       "unit": "m/s^2", "flat_lined": [], "filters": []}}}
+    res = SimpleNamespace(roads={})
+    ctx = {"n_runs": 5, "data_warnings": [], "quality_rows": quality_rows(quality)}
+    label, text, _ = _data_line(res, ctx)
+    assert label == "Data"
+    assert "no other warning on the data" in text and "flat-lined in some run: roll_rate" in text
+    assert "body_az_fl" not in text
+    clean = {"channels": {"body_az_fl": quality["channels"]["body_az_fl"]}}
+    assert _data_line(res, dict(ctx, quality_rows=quality_rows(clean)))[1] == "5 runs; no warning on the data"

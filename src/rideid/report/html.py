@@ -1001,7 +1001,13 @@ def _data_line(result, context) -> tuple:
     n_road = len(roads)
     text = f"{context['n_runs']} runs" + (f" ({n_road} on unknown roads)" if n_road else "")
     nw = len(context["data_warnings"])
-    text += f"; {nw} warning{'s' if nw != 1 else ''} on the data" if nw else "; no warning on the data"
+    # the per-run lines on clipping and flat lines stand in the data-quality table, not among the warnings
+    flagged = [r["channel"] for r in context.get("quality_rows") or []
+               if r.get("clipped", "-") != "-" or "flat-lined" in (r.get("notes") or "")]
+    text += f"; {nw} warning{'s' if nw != 1 else ''} on the data" if nw else (
+        "; no other warning on the data" if flagged else "; no warning on the data")
+    if flagged:
+        text += f"; clipped or flat-lined in some run: {', '.join(flagged)} (the data-quality table)"
     left = sum(len(r.get("channels_left_out") or {}) for r in roads.values())
     if left:
         text += f"; {left} channel(s) left out of a road run's fit (no signal)"
