@@ -75,20 +75,25 @@ def test_dogbox_reaches_the_same_fit_and_scipy_is_left_as_it_was():
 @pytest.mark.parametrize("m, n, rank_deficient", [(3 * BLOCK_ROWS + 17, 30, False), (2 * BLOCK_ROWS + 3, 40, True),
                                                   (5000, 25, True), (100, 30, False)])
 def test_the_reduced_svd_is_scipys(m, n, rank_deficient):
-    """tall_svd: SciPy's singular values and right vectors, and ``U^T y`` (all trf asks of ``U``), to rounding; the
-    products ``V diag(1/s) U^T y`` over the nonzero singular values (sign-free: a vector's sign is the SVD's choice)
-    the same; a last block shorter than the matrix is wide (17 rows of 30 columns) reduced as well."""
+    """tall_svd: SciPy's singular values and right vectors, and ``U^T y`` (all trf asks of ``U``); the products
+    ``V diag(1/s) U^T y`` over the nonzero singular values (sign-free: a vector's sign is the SVD's choice) the
+    same: to rounding by the blocked QR (rank-deficient matrices; a last block shorter than the matrix is wide,
+    17 rows of 30 columns), to rounding times the condition number squared by the Gram matrix (full rank, columns
+    four decades apart: 2e-8)."""
     rng = np.random.default_rng(m + n)
     a, y = _tall(rng, m, n, rank_deficient)
     u0, s0, vt0 = scipy.linalg.svd(a, full_matrices=False)
     u1, s1, vt1 = tall_svd(a, full_matrices=False)
-    np.testing.assert_allclose(s1, s0, rtol=1e-10, atol=1e-12 * s0[0])
     k = s0 > 1e-10 * s0[0]
     assert k.sum() == n - rank_deficient
+    gram = not rank_deficient and m >= 4 * n  # full rank and tall: from the Gram matrix
+    assert type(u1).__name__ == ("_GramU" if gram else "_ReducedU" if m >= 4 * n else "ndarray")
+    tol = 1e-10 if not gram else 1e-15 * (s0[0] / s0[-1]) ** 2
+    np.testing.assert_allclose(s1, s0, rtol=tol, atol=1e-12 * s0[0])
     p0 = vt0[k].T @ (u0.T.dot(y)[k] / s0[k])
     p1 = vt1[k].T @ (u1.T.dot(y)[k] / s1[k])
-    np.testing.assert_allclose(p1, p0, rtol=0, atol=1e-10 * np.abs(p0).max())
-    np.testing.assert_allclose(np.abs(u1.T.dot(y)[k]), np.abs(u0.T.dot(y)[k]), rtol=1e-8)
+    np.testing.assert_allclose(p1, p0, rtol=0, atol=tol * np.abs(p0).max())
+    np.testing.assert_allclose(np.abs(u1.T.dot(y)[k]), np.abs(u0.T.dot(y)[k]), rtol=max(tol, 1e-8))
 
 
 def test_trf_reaches_the_same_fit_and_scipy_is_left_as_it_was():
