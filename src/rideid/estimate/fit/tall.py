@@ -124,8 +124,8 @@ def tall_svd(a, full_matrices=True, **kw):
     """:func:`scipy.linalg.svd` of a tall ``a`` ``(m, n)`` (``full_matrices=False``, as trf asks) reduced first:
     from the eigenvectors of ``a^T a`` while their condition is above setting ``identify.gram_rcond`` (the left
     vectors a :class:`_GramU`), else the triangle ``R`` of a blocked QR (:func:`tall_r`'s blocks) and the SVD of
-    ``R``, the left vectors a :class:`_ReducedU`: the same singular values and right vectors, and ``U^T y``. Other shapes and options go
-    to SciPy's own."""
+    ``R``, the left vectors a :class:`_ReducedU`: the same singular values and right vectors, and ``U^T y``.
+    Other shapes and options go to SciPy's own."""
     a = np.asarray(a)
     m, n = a.shape if a.ndim == 2 else (0, 0)
     if full_matrices or kw or not n or m < TALL * n:
