@@ -47,9 +47,9 @@ def test_the_blocked_triangle_has_the_matrix_s_gram():
     assert tall_r(wide) is not None and np.array_equal(tall_r(wide), wide)
 
 
-def test_dogbox_reaches_the_same_fit_and_scipy_is_left_as_it_was():
-    """A bounded exponential fit, 40 000 residuals: dogbox with the reduced steps ends where it ends with its own
-    (to 1e-10), its lstsq swapped only while inside (threads counted) and put back after."""
+def _exponential_fit(method):
+    """A bounded exponential-and-sine fit of 40 000 residuals (the amplitude's bound below its true value) and the
+    least squares' options with ``method``."""
     rng = np.random.default_rng(3)
     t = np.linspace(0, 10, 40000)
     y = 2.0 * np.exp(-0.3 * t) + 0.5 * np.sin(1.7 * t) + 0.01 * rng.standard_normal(t.size)
@@ -57,8 +57,14 @@ def test_dogbox_reaches_the_same_fit_and_scipy_is_left_as_it_was():
     def f(p):
         return p[0] * np.exp(-p[1] * t) + p[2] * np.sin(p[3] * t) - y
 
-    kw = dict(bounds=([0, 0, 0, 1.0], [5, 2, 0.45, 3]), method="dogbox", x_scale="jac", ftol=1e-15, xtol=1e-12,
-              gtol=1e-15)
+    return f, dict(bounds=([0, 0, 0, 1.0], [5, 2, 0.45, 3]), method=method, x_scale="jac", ftol=1e-15, xtol=1e-12,
+                   gtol=1e-15)
+
+
+def test_dogbox_reaches_the_same_fit_and_scipy_is_left_as_it_was():
+    """A bounded exponential fit, 40 000 residuals: dogbox with the reduced steps ends where it ends with its own
+    (to 1e-10), its lstsq swapped only while inside (threads counted) and put back after."""
+    f, kw = _exponential_fit("dogbox")
     own = dogbox.lstsq
     plain = least_squares(f, [1.5, 0.2, 0.3, 1.65], **kw)
     with tall_steps():
@@ -99,15 +105,7 @@ def test_the_reduced_svd_is_scipys(m, n, rank_deficient):
 def test_trf_reaches_the_same_fit_and_scipy_is_left_as_it_was():
     """The bounded exponential fit of the dogbox test by trf: with the reduced SVD inside tall_steps it ends where
     it ends with SciPy's own (to 1e-9), SciPy's svd put back after."""
-    rng = np.random.default_rng(3)
-    t = np.linspace(0, 10, 40000)
-    y = 2.0 * np.exp(-0.3 * t) + 0.5 * np.sin(1.7 * t) + 0.01 * rng.standard_normal(t.size)
-
-    def f(p):
-        return p[0] * np.exp(-p[1] * t) + p[2] * np.sin(p[3] * t) - y
-
-    kw = dict(bounds=([0, 0, 0, 1.0], [5, 2, 0.45, 3]), method="trf", x_scale="jac", ftol=1e-15, xtol=1e-12,
-              gtol=1e-15)
+    f, kw = _exponential_fit("trf")
     own = trf.svd
     plain = least_squares(f, [1.5, 0.2, 0.3, 1.65], **kw)
     with tall_steps():

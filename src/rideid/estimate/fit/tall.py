@@ -86,16 +86,20 @@ def _qt(h, tau, c) -> np.ndarray:
     return out[:k, 0]
 
 
-class _ReducedU:
+class _LeftVectors:
+    """Left singular vectors that only compute ``U^T y`` (``U.T.dot(y)``, all SciPy's trf asks of them)."""
+
+    @property
+    def T(self):  # noqa: N802 (numpy's name)
+        return self
+
+
+class _ReducedU(_LeftVectors):
     """The left singular vectors ``U = Q U_R`` of a tall matrix reduced by a blocked QR (:func:`tall_svd`), kept
     as the QR's reflections: ``U.T.dot(y)`` (all SciPy's trf asks of them) is ``U_R^T Q^T y``."""
 
     def __init__(self, blocks, top, u_r):
         self.blocks, self.top, self.u_r = blocks, top, u_r
-
-    @property
-    def T(self):  # noqa: N802 (numpy's name)
-        return self
 
     def dot(self, y):
         y = np.asarray(y, dtype=float)
@@ -105,16 +109,12 @@ class _ReducedU:
         return self.u_r.T @ c
 
 
-class _GramU:
+class _GramU(_LeftVectors):
     """The left singular vectors ``U = a V diag(1/s)`` of a well-conditioned tall ``a`` whose SVD came from its
     Gram matrix (:func:`tall_svd`): ``U.T.dot(y)`` is ``diag(1/s) V^T (a^T y)``, one product with ``a``."""
 
     def __init__(self, a, v, s):
         self.a, self.v, self.s = a, v, s
-
-    @property
-    def T(self):  # noqa: N802 (numpy's name)
-        return self
 
     def dot(self, y):
         return (self.v.T @ (self.a.T @ np.asarray(y, dtype=float))) / self.s
