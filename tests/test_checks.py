@@ -818,3 +818,27 @@ def test_a_knots_derivative_over_its_window_is_the_whole_runs(tmp_path):
     with using({"identify.knot_settle": 1e3}):
         assert knot_window(w, k, t, OFFSET, pre=None) == (0, t.size)
     assert Simulator().layout is None  # the linear car: no pre-roll (linearise_starts' rule)
+
+
+def test_an_exact_start_that_ends_on_its_bound_is_polished_again_from_there(hatch, tmp_path):
+    """rideid.estimate.fit.polish._polish_aligned, exact starts: a start may move at most setting
+    identify.start_bound (samples) in one polish; one that ends on it is polished again with the bound centred where
+    it ended. The hatchback's twist run (the car held at its truth): its start polished from where it was found at
+    load, then read 0.8 samples away from that end with the bound set to 0.3 samples: two rounds end on their
+    bounds, the third moves less than the bound, and the start comes back to within 0.01 samples of the first end."""
+    from rideid.estimate.fit.polish import _polish_aligned
+    from rideid.settings import using
+    sc, raw = hatch
+    ds = rideid.load_dataset(one_run(tmp_path, sc, raw, "T_HH"))
+    fs = ds.measured["T_HH"].fs
+    cf = rideid.CostFunction(ds)
+    x = np.array([HATCH_TRUTH[n] for n in cf.names])
+    s_opt = _polish_aligned(ds, cf, x, np.ones(1))[4]["T_HH"]["value"]
+    off = ds.with_starts({"T_HH": s_opt + 0.8 / fs})
+    assert off.auto_start_runs == ["T_HH"]
+    with using({"identify.start_bound": 0.3}):
+        _, info, _, _, starts = _polish_aligned(off, rideid.CostFunction(off), x, np.ones(1))
+    moves = [r["max_change_samples"] for r in info["alignment_rounds"]]
+    assert len(moves) >= 3 and all(m == pytest.approx(0.3, rel=1e-6) for m in moves[:2]), moves
+    assert moves[2] < 0.3
+    assert abs(starts["T_HH"]["value"] - s_opt) * fs < 0.01
