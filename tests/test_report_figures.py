@@ -96,17 +96,17 @@ def test_the_summarys_data_line_names_what_the_quality_table_holds():
     as before."""
     from types import SimpleNamespace
 
-    from rideid.report.html import _data_line, quality_rows
+    from rideid.report.html import _data_line
     quality = {"channels": {
         "roll_rate": {"runs": 5, "clipped_share": 0.0, "clipped_runs": {}, "gaps": 0, "noise": 1e-4,
                       "unit": "rad/s", "flat_lined": ["WB7"], "filters": []},
         "body_az_fl": {"runs": 5, "clipped_share": 0.0, "clipped_runs": {}, "gaps": 0, "noise": 0.01,
                        "unit": "m/s^2", "flat_lined": [], "filters": []}}}
-    res = SimpleNamespace(roads={})
-    ctx = {"n_runs": 5, "data_warnings": [], "quality_rows": quality_rows(quality)}
+    res = SimpleNamespace(roads={}, data_quality=quality)
+    ctx = {"n_runs": 5, "data_warnings": []}
     label, text, _ = _data_line(res, ctx)
     assert label == "Data"
     assert "no other warning on the data" in text and "flat-lined in some run: roll_rate" in text
     assert "body_az_fl" not in text
     clean = {"channels": {"body_az_fl": quality["channels"]["body_az_fl"]}}
-    assert _data_line(res, dict(ctx, quality_rows=quality_rows(clean)))[1] == "5 runs; no warning on the data"
+    assert _data_line(SimpleNamespace(roads={}, data_quality=clean), ctx)[1] == "5 runs; no warning on the data"

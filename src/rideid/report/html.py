@@ -1002,8 +1002,8 @@ def _data_line(result, context) -> tuple:
     text = f"{context['n_runs']} runs" + (f" ({n_road} on unknown roads)" if n_road else "")
     nw = len(context["data_warnings"])
     # the per-run lines on clipping and flat lines stand in the data-quality table, not among the warnings
-    flagged = [r["channel"] for r in context.get("quality_rows") or []
-               if r.get("clipped", "-") != "-" or "flat-lined" in (r.get("notes") or "")]
+    quality = (getattr(result, "data_quality", None) or {}).get("channels") or {}
+    flagged = [name for name, e in quality.items() if e.get("clipped_runs") or e.get("flat_lined")]
     text += f"; {nw} warning{'s' if nw != 1 else ''} on the data" if nw else (
         "; no other warning on the data" if flagged else "; no warning on the data")
     if flagged:
