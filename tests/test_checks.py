@@ -736,6 +736,31 @@ def test_a_fix_found_on_some_runs_goes_in_their_own_channel_map():
     assert where_to_fix([found("H_HH")], ["H_HH"])[0] == found("H_HH")
 
 
+def test_a_unit_mistake_on_every_run_names_the_whole_channels_fix():
+    """Every accelerometer of every run in g mapped as m/s^2: each channel is its own finding (its own fix), so the
+    run's fix is their union; the same union on every checked run goes in [channels], and each message names all of
+    it (the first error is the one a user reads). Before, the runs' fixes were compared one finding at a time and a
+    dataset mapped wrong for every run was told to fix one run's [[runs]] entry for one channel. A run whose union
+    differs (one channel fewer) keeps each fix in the runs' own maps."""
+    from rideid.conditioning.load import where_to_fix
+    from rideid.data.checks import Finding, MapFix
+    names = {"body_az_fl": "AccBodyFL", "axle_az_rr": "AccHubRR"}
+
+    def found(rid, c):
+        entry = f'{c} = {{ name = "{names[c]}", unit = "g" }}'
+        return Finding("error", "wiring", f"run '{rid}': {c} reads 9.81x too small", rid, c,
+                       {c: {"source": c, "factor": 9.80665}}, MapFix((entry,)))
+    runs = ["TW3", "HB6", "WB8"]
+    every = where_to_fix([found(r, c) for r in runs for c in names], runs)
+    both = '; '.join(f'{c} = {{ name = "{n}", unit = "g" }}' for c, n in names.items())
+    assert every[0].message == ("run 'TW3': body_az_fl reads 9.81x too small. Fix the channel map ([channels]: every "
+                                f'run\'s file is wired so): {both} (or set [checks] wiring = "warn" if the map is right)')
+    assert {f.remedy.where for f in every} == {"channels"} and {f.remedy.entries for f in every} == {
+        tuple(every[0].remedy.entries)}
+    some = where_to_fix([found(r, c) for r in runs for c in names if (r, c) != ("WB8", "axle_az_rr")], runs)
+    assert {f.remedy.where for f in some} == {"run"} and all(len(f.remedy.entries) == 1 for f in some)
+
+
 def test_a_distance_correction_starts_from_the_one_the_run_is_driven_along(tmp_path):
     """A rival of the model choice reads the runs along its parent's distance corrections
     (Dataset.with_starts with a ``distance_correction``); its own correction starts from them, not from 0

@@ -113,10 +113,16 @@ def where_to_fix(findings: list, checked: list) -> list:
     wired = [f for f in findings if f.check == "wiring" and f.fix and f.remedy is not None]
     if len(checked) < 2 or not wired:
         return findings
-    fixes = {f.run: f.fix for f in wired}
-    every = set(checked) <= set(fixes) and all(fx == wired[0].fix for fx in fixes.values())
-    where = "channels" if every else "run"
-    return [replace(f, remedy=replace(f.remedy, where=where)) if f in wired else f for f in findings]
+    fixes, entries = {}, {}
+    for f in wired:  # a run's findings each fix one channel (a unit) or several (a swap): the run's whole fix
+        fixes.setdefault(f.run, {}).update(f.fix)
+        entries.setdefault(f.run, {}).update(dict.fromkeys(f.remedy.entries))
+    first = fixes[wired[0].run]
+    if not (set(checked) <= set(fixes) and all(fx == first for fx in fixes.values())):
+        return [replace(f, remedy=replace(f.remedy, where="run")) if f in wired else f for f in findings]
+    # every run wired the same way: each message names the whole [channels] fix, not its own channel's entry
+    return [replace(f, remedy=replace(f.remedy, where="channels", entries=tuple(entries[f.run])))
+            if f in wired else f for f in findings]
 
 
 def _seen_speeds(ds: Dataset, findings) -> Dataset:
