@@ -753,8 +753,9 @@ def test_a_unit_mistake_on_every_run_names_the_whole_channels_fix():
     runs = ["TW3", "HB6", "WB8"]
     every = where_to_fix([found(r, c) for r in runs for c in names], runs)
     both = '; '.join(f'{c} = {{ name = "{n}", unit = "g" }}' for c, n in names.items())
-    assert every[0].message == ("run 'TW3': body_az_fl reads 9.81x too small. Fix the channel map ([channels]: every "
-                                f'run\'s file is wired so): {both} (or set [checks] wiring = "warn" if the map is right)')
+    assert every[0].message == ("run 'TW3': body_az_fl reads 9.81x too small. Fix the channel map ([channels]: "
+                                f"every run's file is wired so): {both} "
+                                '(or set [checks] wiring = "warn" if the map is right)')
     assert {f.remedy.where for f in every} == {"channels"} and {f.remedy.entries for f in every} == {
         tuple(every[0].remedy.entries)}
     some = where_to_fix([found(r, c) for r in runs for c in names if (r, c) != ("WB8", "axle_az_rr")], runs)
