@@ -741,7 +741,8 @@ def test_a_unit_mistake_on_every_run_names_the_whole_channels_fix():
     run's fix is their union; the same union on every checked run goes in [channels], and each message names all of
     it (the first error is the one a user reads). Before, the runs' fixes were compared one finding at a time and a
     dataset mapped wrong for every run was told to fix one run's [[runs]] entry for one channel. A run whose union
-    differs (one channel fewer) keeps each fix in the runs' own maps."""
+    differs (one channel fewer) keeps each fix in the runs' own maps, each message naming the runs that share it
+    (the SUV's logger files with the roll gyro's sign flipped on every run: the washboard run cannot read it)."""
     from rideid.conditioning.load import where_to_fix
     from rideid.data.checks import Finding, MapFix
     names = {"body_az_fl": "AccBodyFL", "axle_az_rr": "AccHubRR"}
@@ -760,6 +761,10 @@ def test_a_unit_mistake_on_every_run_names_the_whole_channels_fix():
         tuple(every[0].remedy.entries)}
     some = where_to_fix([found(r, c) for r in runs for c in names if (r, c) != ("WB8", "axle_az_rr")], runs)
     assert {f.remedy.where for f in some} == {"run"} and all(len(f.remedy.entries) == 1 for f in some)
+    # the runs that need the same fix are named with it: 2 of the 3 here (WB8 could not read its rear hub)
+    assert some[0].message.endswith("; 2 of the 3 checked runs need this same fix (TW3, HB6): if every run's file is "
+                                    "wired so, it goes once in [channels]")
+    assert "checked runs need" not in some[-1].message and some[-1].run == "WB8"
 
 
 def test_a_distance_correction_starts_from_the_one_the_run_is_driven_along(tmp_path):

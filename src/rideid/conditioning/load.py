@@ -119,7 +119,11 @@ def where_to_fix(findings: list, checked: list) -> list:
         entries.setdefault(f.run, {}).update(dict.fromkeys(f.remedy.entries))
     first = fixes[wired[0].run]
     if not (set(checked) <= set(fixes) and all(fx == first for fx in fixes.values())):
-        return [replace(f, remedy=replace(f.remedy, where="run")) if f in wired else f for f in findings]
+        # each run's own map; the runs that need the same fix are named (the rest may be wired as mapped, or be
+        # runs the check cannot read: a symmetric run's roll)
+        shared = {rid: tuple(r for r in fixes if fixes[r] == fixes[rid]) for rid in fixes}
+        return [replace(f, remedy=replace(f.remedy, where="run", shared=shared[f.run], checked=len(checked)))
+                if f in wired else f for f in findings]
     # every run wired the same way: each message names the whole [channels] fix, not its own channel's entry
     return [replace(f, remedy=replace(f.remedy, where="channels", entries=tuple(entries[f.run])))
             if f in wired else f for f in findings]

@@ -67,9 +67,17 @@ class MapFix:
     entries: tuple[str, ...]
     where: str = "map"
     level: str = "error"
+    #: with ``where == "run"``: the checked runs that need this same fix, this one among them, and how many runs
+    #: were checked (a run the check could not read, or one wired as mapped, keeps the fix out of ``[channels]``)
+    shared: tuple[str, ...] = ()
+    checked: int = 0
 
     def text(self) -> str:
-        return f'{FIX_HEADS[self.where]}{"; ".join(self.entries)}{keep_map(self.level)}'
+        head = f'{FIX_HEADS[self.where]}{"; ".join(self.entries)}{keep_map(self.level)}'
+        if self.where != "run" or len(self.shared) < 2:
+            return head
+        return (f"{head}; {len(self.shared)} of the {self.checked} checked runs need this same fix "
+                f"({', '.join(self.shared)}): if every run's file is wired so, it goes once in [channels]")
 
 
 def keep_map(level: str) -> str:
