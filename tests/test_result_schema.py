@@ -55,17 +55,21 @@ def test_result_json_records_the_version_the_plan_and_every_setting_used(fitted)
     # one assessment per declared kind, in order, each with its verdict and reason; the old keys still written
     kinds = [a["kind"] for a in doc["assessments"]]
     assert kinds == [a.kind for a in ASSESSMENTS] == ["adequacy", "materiality", "small_angles", "sensor_hints",
-                                                      "level", "drawing", "roads", "bounds", "setup"]
+                                                      "level", "drawing", "roads", "bounds", "setup",
+                                                      "error_bar_shape"]
     assert all(a["verdict"] in VERDICTS and isinstance(a["reason"], str) and a["reason"] for a in doc["assessments"])
     ad = doc["assessments"][0]
     assert ad["verdict"] == ("pass" if doc["adequacy"]["adequate"] else "fail") and ad["pairs"] == 100
     sa = doc["assessments"][2]
     assert sa["largest_roll_deg"] == doc["adequacy"]["small_angle"]["largest_roll_deg"]
     assert sa["verdict"] == ("warn" if doc["adequacy"]["small_angle"]["optimistic"] else "pass")
-    assert doc["assessments"][-2] == {"kind": "bounds", "verdict": "pass", "at_bound": [],
+    assert doc["assessments"][-3] == {"kind": "bounds", "verdict": "pass", "at_bound": [],
                                       "reason": "no free parameter ended at a search bound"}
-    assert doc["assessments"][-1] == {"kind": "setup", "verdict": "pass", "runs": [],
+    assert doc["assessments"][-2] == {"kind": "setup", "verdict": "pass", "runs": [],
                                       "reason": "the data contradicted no declared set-up value at load"}
+    shape = doc["assessments"][-1]
+    assert shape["kind"] == "error_bar_shape" and shape["ratio"] == doc["polish"]["shape"]["ratio"]
+    assert shape["verdict"] in ("pass", "not assessed") and shape["optimistic"] == []
     for key in ("adequacy", "model", "parameters", "starts", "checks"):
         assert key in doc
 
@@ -117,7 +121,7 @@ def _res(adequacy=None, details=None, tracks=None, roads=None, starts=None, name
 
 def test_each_verdict_follows_what_the_result_holds():
     none = assessments_of(_res())
-    assert [a.verdict for a in none] == ["not assessed"] * 7 + ["pass", "pass"]
+    assert [a.verdict for a in none] == ["not assessed"] * 7 + ["pass", "pass", "not assessed"]
     runs = {"r1": {"body_az_fl": {"structure": True, "level": 5.0}, "roll_rate": {"structure": False, "level": 1.0}}}
     bad = _res({"adequate": False, "reasons": ["the road input explains part of the residual"], "runs": runs,
                 "alpha": 0.01, "advice": "try auto",

@@ -517,6 +517,9 @@ def run_identify(ds_path, out_dir, *, seed, population=None, generations=None, w
         caveat = (res.adequacy or {}).get(key)
         if caveat and (key == "tracks_caveat" or res.adequacy.get("adequate")):
             print(textwrap.fill("WARNING: " + caveat, 100, subsequent_indent="  "), file=out)
+    shape = rideid.error_bar_caveat((res.polish or {}).get("shape"))  # error bars the cost's shape does not bear
+    if shape:  # out, whatever the verdict
+        print(textwrap.fill("WARNING: " + shape, 100, subsequent_indent="  "), file=out)
     para = rideid.verdict_paragraph(res.adequacy)
     if para:
         print("\n" + textwrap.fill(para, 100) + "\n", file=out)

@@ -38,6 +38,7 @@ from dataclasses import asdict, dataclass, field, fields, replace
 from typing import ClassVar
 
 from .assess.adequacy import caveats, setup_caveat, setup_slips
+from .assess.shape import caveat as shape_caveat
 
 #: the four verdicts, mildest first
 VERDICTS = ("pass", "warn", "fail", "not assessed")
@@ -309,10 +310,43 @@ class SetupAssessment(Assessment):
         return cls(verdict="pass", reason="the data contradicted no declared set-up value at load")
 
 
+@dataclass(frozen=True)
+class ShapeAssessment(Assessment):
+    """Is the cost as curved out to ±2 std_robust along each free parameter's profile line as its curvature at the
+    minimum says (:mod:`rideid.estimate.assess.shape`)? ``warn`` naming the parameters where it rises less than
+    setting ``shape.flat_ratio`` of that (their error bars are optimistic: a flat valley); written as the adequate
+    verdict's caveat ``adequacy.shape_caveat``."""
+
+    kind: ClassVar[str] = "error_bar_shape"
+    caveat: ClassVar[str | None] = "shape_caveat"
+    optimistic: list = field(default_factory=list)  #: the parameters whose error bar is optimistic
+    ratio: dict = field(default_factory=dict)  #: parameter -> [minus, plus]: the cost's rise over the quadratic's
+    error_bars: float | None = None  #: how far out, in std_robust (setting ``shape.error_bars``)
+    flat_ratio: float | None = None  #: the share below which an error bar is optimistic (``shape.flat_ratio``)
+
+    @classmethod
+    def from_result(cls, res) -> "ShapeAssessment":
+        shape = (getattr(res, "polish", None) or {}).get("shape")
+        if not shape:
+            return cls(**_not_assessed("no polish, or a result written before the check"))
+        fields_ = {k: shape.get(k) for k in ("error_bars", "flat_ratio")}
+        optimistic = list(shape.get("optimistic") or [])
+        if optimistic:
+            return cls(verdict="warn", reason=shape_caveat(shape), optimistic=optimistic, ratio=shape["ratio"],
+                       **fields_)
+        judged = sum(1 for r in shape["ratio"].values() if any(v is not None for v in r))
+        if not judged:
+            return cls(**_not_assessed("no error bar could be judged (each at the rounding of its value: a noise-free "
+                                       "fit; or every step beyond a bound)"), ratio=shape["ratio"], **fields_)
+        return cls(verdict="pass", reason=f"the cost is as curved as the error bars say out to "
+                   f"±{shape['error_bars']:g} of them on the {judged} parameter(s) judged", ratio=shape["ratio"],
+                   **fields_)
+
+
 #: the declared list of assessments, in the order result.json lists them
 ASSESSMENTS: tuple[type[Assessment], ...] = (AdequacyAssessment, MaterialityAssessment, SmallAngleAssessment,
                                              SensorHintsAssessment, LevelAssessment, DrawingAssessment,
-                                             RoadsAssessment, BoundsAssessment, SetupAssessment)
+                                             RoadsAssessment, BoundsAssessment, SetupAssessment, ShapeAssessment)
 _BY_KIND = {a.kind: a for a in ASSESSMENTS}
 
 
@@ -409,5 +443,5 @@ def plan_of(res, run_ids=()) -> Plan:
 
 __all__ = ["VERDICTS", "Assessment", "AdequacyAssessment", "MaterialityAssessment", "SmallAngleAssessment",
            "SensorHintsAssessment", "LevelAssessment", "DrawingAssessment", "RoadsAssessment",
-           "BoundsAssessment", "SetupAssessment", "ASSESSMENTS", "with_caveats",
+           "BoundsAssessment", "SetupAssessment", "ShapeAssessment", "ASSESSMENTS", "with_caveats",
            "assessments_of", "assessments_from_json", "Block", "Plan", "plan_of"]

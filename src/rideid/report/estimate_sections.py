@@ -68,7 +68,8 @@ def adequacy_rows(res: dict) -> dict | None:
     # the caveats the terminal warns of travel with the verdict (rideid.estimate.assess.adequacy.caveats)
     return {"adequate": adq["adequate"], "reasons": adq["reasons"], "advice": adq.get("advice"),
             "method": adq.get("method", ""), "rows": rows, "small_angle": adq.get("small_angle"),
-            **{k: adq[k] for k in ("level_caveat", "tracks_caveat", "setup_caveat", "not_assessed", "note")
+            **{k: adq[k] for k in ("level_caveat", "tracks_caveat", "setup_caveat", "shape_caveat", "not_assessed",
+                                   "note")
                if adq.get(k)}}
 
 

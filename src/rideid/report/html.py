@@ -35,6 +35,7 @@ from ..data.quality import summarised_warning
 from ..errors import DataError
 from ..estimate.assess.adequacy import caveats
 from ..estimate.assess.frequency import frequency_response, measured_response
+from ..estimate.assess.shape import caveat as shape_caveat
 from ..estimate.problem.sensitivity import P2T_STARS, stars
 from .sensitivity_files import heatmap_figure
 from ..model.equations import CHANNELS
@@ -981,7 +982,8 @@ def _estimates_lines(result, context) -> list:
 
 
 def _caveat_lines(result, adq) -> list:
-    """The summary's caveats on the error bars: tracks as drawn, a residual level above the noise, small angles."""
+    """The summary's caveats on the error bars: tracks as drawn, a residual level above the noise, small angles, a
+    flat valley of the cost (:mod:`rideid.estimate.assess.shape`)."""
     lines = []
     caveat = (adq or {}).get("tracks_caveat")
     if caveat:  # adequate only by the weighing, on tracks as drawn (model_choice._drawing_caveat)
@@ -992,6 +994,9 @@ def _caveat_lines(result, adq) -> list:
     small = ((adq or {}).get("small_angle") or {}).get("note")
     if small:  # SPEC §1 is small-angle: which error bars a body that turned degrees makes optimistic
         lines.append(("Small angles", small.split(": ", 1)[-1], "estimates"))
+    shape = shape_caveat((getattr(result, "polish", None) or {}).get("shape"))
+    if shape:  # a flat valley of the cost: whatever the verdict, these error bars are narrower than the data allow
+        lines.append(("Error bars' shape", "NOT TO BE TRUSTED to their std: " + shape, "estimates"))
     return lines
 
 

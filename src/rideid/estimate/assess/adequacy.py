@@ -396,7 +396,8 @@ def caveats(adequacy: dict | None) -> list[str]:
     """What keeps an adequate verdict from being a clean one (SPEC §12, §13): runs the verdict does not cover
     (``not_assessed``: runs on unknown roads), a residual level well above the sensor noise (``level_caveat``),
     tracks taken as drawn while the residuals hold road-driven structure (``tracks_caveat``), a declared set-up value
-    the data contradicted at load (``setup_caveat``, :func:`setup_caveat`). Empty when not
+    the data contradicted at load (``setup_caveat``, :func:`setup_caveat`), error bars narrower than the cost's
+    shape allows (``shape_caveat``, :mod:`rideid.estimate.assess.shape`). Empty when not
     adequate (the verdict already says not to trust the numbers) or when there are none. The terminal, the report
     and the adequacy record all read this list, so they say the same."""
     if not adequacy or not adequacy.get("adequate"):
@@ -407,7 +408,7 @@ def caveats(adequacy: dict | None) -> list[str]:
         out.append(f"{len(runs)} run(s) not assessed ({', '.join(map(str, runs))}: on unknown roads, where rideid has "
                    "no residual test yet): the verdict covers the other runs only, and a misfit on these would not "
                    "show")
-    for key in ("level_caveat", "tracks_caveat", "setup_caveat"):
+    for key in ("level_caveat", "tracks_caveat", "setup_caveat", "shape_caveat"):
         if adequacy.get(key):
             out.append(str(adequacy[key]))
     return out

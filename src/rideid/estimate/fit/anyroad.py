@@ -64,7 +64,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 from scipy.optimize import OptimizeResult, least_squares
 
-from ...profiling import stage
+from ...profiling import stage, timing
 from ...settings import defaults, legacy_names
 from ...data.schema import NONLINEAR_GROUPS
 from ...errors import ArgumentError
@@ -86,6 +86,7 @@ from .jade import JadeSolver, make_rng, stop_requested
 from ..result import History, IdentificationResult
 from ..assess.sensor_check import road_coupling_hints
 from ..assess.roads import judge as judge_road_runs
+from ..assess.shape import profile_ratios, record as shape_record
 from .uncertainty import estimate_covariance
 
 def road_run_error(rr, y, fitted) -> float:
@@ -797,7 +798,13 @@ def _error_bars(prob, sol, ds, cost_before: float, restarted) -> _Fitted:
         cov_fixed = cov_rob  # the motion held: for the budget's share
         cov, cov_rob, motion_std = _with_motion(prob, z, H, Ja, S, s2, ds)
         prob = _with_records(prob, motion_std, ds)
-    info = {"success": bool(sol.success), "message": sol.message, "nfev": int(sol.nfev),
+    with timing("error bars' shape"):  # the car's cost along each parameter's profile line, the motion held
+        sigma = np.sqrt(np.clip(np.diag(cov_rob), 0, None)) / prob.dxdv(z)
+        with np.errstate(divide="ignore"):
+            shape = shape_record(prob.space.names, profile_ratios(prob.costs, z, Hinv, sigma, prob.vbounds,
+                                                                  curvature=1.0 / np.diag(Hinv),
+                                                                  scale=np.ones(z.size)))
+    info = {"success": bool(sol.success), "message": sol.message, "nfev": int(sol.nfev), "shape": shape,
             **({} if restarted is None else {"mode_restart": restarted}),
             "cost_before": cost_before, "cost_after": float(e @ e), "covariance": cov.tolist(),
             "names": list(prob.space.names), "covariance_robust": (0.5 * (cov_rob + cov_rob.T)).tolist(),

@@ -1,0 +1,107 @@
+"""The error bars' shape check (rideid.estimate.assess.shape): the cost out at ±2 error bars along each parameter's
+profile line against the quadratic its curvature at the minimum draws."""
+
+from __future__ import annotations
+
+import json
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+
+import rideid
+from rideid.estimate.assess.shape import caveat, profile_ratios, record
+from rideid.estimate.records import ShapeAssessment, assessments_from_json
+
+#: a two-parameter cost with a known shape: ``Q (x0 + x1 / 2)^2 + g(x1)``; ``g(t) = W^2 (1 - exp(-t^2 / W^2))``
+#: is ``t^2`` near 0 and flat beyond ``W`` (a valley), or ``t^2`` itself (a quadratic)
+Q, W = 100.0, 1.0
+
+
+def _cost(flat: bool):
+    def g(t):
+        return W ** 2 * (1 - np.exp(-t ** 2 / W ** 2)) if flat else t ** 2
+
+    def cost(X):
+        X = np.atleast_2d(X)
+        return Q * (X[:, 0] + X[:, 1] / 2) ** 2 + g(X[:, 1])
+    return cost
+
+
+#: the half Hessian at 0 (both costs): [[Q, Q/2], [Q/2, Q/4 + 1]]; its inverse is the curvature's covariance
+H = np.array([[Q, Q / 2], [Q / 2, Q / 4 + 1]])
+C = np.linalg.inv(H)
+BOUNDS = (np.full(2, -50.0), np.full(2, 50.0))
+
+
+def test_a_flat_valleys_error_bar_is_named_and_a_quadratic_ones_is_not():
+    """Along x1's profile line (x0 = -x1 / 2) the cost is g(x1): the quadratic's rise at 2 error bars of 1.5 W is
+    9 W^2, the valley's W^2 (1 - e^-9): a ratio of 0.111, named; x0's line moves x1 by C10 / C00 = -1.92 per unit,
+    0.19 at its 2 error bars of 0.05, where g is still 0.97 of its quadratic. The quadratic cost: every ratio 1.
+    The curvature given (1 / C[k, k]: exact here) and measured from small steps agree."""
+    sigma = np.array([0.05, 1.5 * W])
+    flat = profile_ratios(_cost(True), np.zeros(2), C, sigma, BOUNDS, a=2.0, small=np.full(2, 1e-3))
+    given = profile_ratios(_cost(True), np.zeros(2), C, sigma, BOUNDS, a=2.0, curvature=1.0 / np.diag(C))
+    expected = (1 - np.exp(-9.0)) / 9.0
+    np.testing.assert_allclose(flat[1], [expected, expected], rtol=1e-5)
+    np.testing.assert_allclose(given[1], [expected, expected], rtol=1e-12)
+    b = 2 * sigma[0]
+    t = b * C[1, 0] / C[0, 0]  # x1 at x0's 2 error bars: the rise falls short of the quadratic's by t^2 - g(t)
+    np.testing.assert_allclose(given[0], [1 - (t * t - W ** 2 * (1 - np.exp(-t * t / W ** 2))) * C[0, 0] / b ** 2] * 2,
+                               rtol=1e-9)
+    assert 0.95 < given[0][0] < 1.0
+    quad = profile_ratios(_cost(False), np.zeros(2), C, sigma, BOUNDS, a=2.0, small=np.full(2, 1e-3))
+    np.testing.assert_allclose(quad, np.ones((2, 2)), rtol=1e-6)
+    rec = record(["x0", "x1"], flat)
+    assert rec["optimistic"] == ["x1"] and rec["error_bars"] == 2.0 and rec["flat_ratio"] == 0.25
+    assert record(["x0", "x1"], quad)["optimistic"] == []
+    # a wider threshold, from the registry, names x1 only down to its ratio
+    with rideid.settings.using({"shape.flat_ratio": 0.1}):
+        assert record(["x0", "x1"], flat)["optimistic"] == []
+
+
+def test_a_side_beyond_a_bound_is_not_judged_and_a_missing_error_bar_skips_the_parameter():
+    """x1's step of 3 W out crosses an upper bound at 2 W: that side None, the other judged; a parameter without
+    a finite error bar is not judged at all; a bound inside the small steps leaves the parameter unjudged."""
+    bounds = (np.full(2, -50.0), np.array([50.0, 2.0]))
+    out = profile_ratios(_cost(True), np.zeros(2), C, np.array([np.inf, 1.5]), bounds, a=2.0, small=np.full(2, 1e-3))
+    assert out[0] == [None, None] and out[1][1] is None and out[1][0] == pytest.approx((1 - np.exp(-9.0)) / 9.0,
+                                                                                      rel=1e-5)
+    tight = (np.full(2, -50.0), np.array([50.0, 1e-4]))
+    assert profile_ratios(_cost(True), np.zeros(2), C, np.array([0.05, 1.5]), tight, a=2.0,
+                          small=np.full(2, 1e-3))[1] == [None, None]
+
+
+def test_the_assessment_names_the_optimistic_error_bars_and_says_by_how_much():
+    """The record's sentence names each flagged parameter with its worst side's rise, in per cent; a result without a
+    polish's shape is not assessed; a result with every ratio near 1 passes."""
+    shape = record(["I_p", "zeta_pp", "k_sf"], [[0.59, 0.65], [0.32, 0.229], [1.0, 1.0]])
+    a = ShapeAssessment.from_result(SimpleNamespace(polish={"shape": shape}))
+    assert a.verdict == "warn" and a.optimistic == ["zeta_pp"]
+    assert a.reason == caveat(shape) and a.reason.startswith(
+        "the error bar of zeta_pp is optimistic: out at ±2 of it along its profile line the cost rises only 23 % of "
+        "what the error bar assumes (below 25 %: no more than it assumes at ±1)")
+    assert ShapeAssessment.from_result(SimpleNamespace(polish=None)).verdict == "not assessed"
+    ok = ShapeAssessment.from_result(SimpleNamespace(polish={"shape": record(["k_sf"], [[1.0, 0.98]])}))
+    assert ok.verdict == "pass" and "1 parameter(s) judged" in ok.reason
+
+
+def test_the_built_in_cars_error_bars_have_the_shape_they_say(sim_dataset, default_scenario, tmp_path):
+    """End to end (the linear car on the built-in runs at 1 % noise): every free parameter's cost out at ±2
+    std_robust is its curvature's quadratic (ratios within 2 % of 1: the linear car's outputs are close to linear
+    in its parameters over error bars this small), the assessment passes in result.json, and reading the file back
+    gives the same record. Noise-free, the error bars are the rounding of the numbers: not assessed."""
+    from rideid.synth.scenario import simulate_manifest, write_dataset
+    data, _ = simulate_manifest(default_scenario, noise=0.01, seed=1)
+    write_dataset(default_scenario, data, tmp_path / "noisy")
+    res = rideid.identify(rideid.load_dataset(tmp_path / "noisy"), seed=1, model="base")
+    ratios = np.array(list(res.polish["shape"]["ratio"].values()), dtype=float)
+    assert ratios.shape == (11, 2) and np.all(np.abs(ratios - 1) < 0.02)
+    res.save(tmp_path / "fit")
+    doc = json.loads((tmp_path / "fit" / "result.json").read_text())
+    rec = [a for a in assessments_from_json(doc["assessments"]) if a.kind == "error_bar_shape"]
+    assert len(rec) == 1 and rec[0].verdict == "pass" and rec[0].optimistic == []
+    assert rec[0] == ShapeAssessment.from_result(rideid.load_result(tmp_path / "fit" / "result.json"))
+    clean = rideid.identify(rideid.load_dataset(sim_dataset), seed=1, model="base")
+    assert all(r == [None, None] for r in clean.polish["shape"]["ratio"].values())
+    assert ShapeAssessment.from_result(clean).verdict == "not assessed"
