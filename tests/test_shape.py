@@ -105,3 +105,29 @@ def test_the_built_in_cars_error_bars_have_the_shape_they_say(sim_dataset, defau
     clean = rideid.identify(rideid.load_dataset(sim_dataset), seed=1, model="base")
     assert all(r == [None, None] for r in clean.polish["shape"]["ratio"].values())
     assert ShapeAssessment.from_result(clean).verdict == "not assessed"
+
+
+def test_a_named_error_bar_is_said_beside_its_number_in_the_terminal_and_the_report(default_scenario, tmp_path):
+    """The estimates table of ``rideid identify`` and of the report mark a parameter the shape check names, and the
+    terminal and the report's summary say why (the caveat's sentence), whatever the adequacy verdict."""
+    from dataclasses import replace
+
+    from rideid import cli
+    from rideid.report.html import _caveat_lines, parameter_rows
+    from rideid.synth.scenario import simulate_manifest, write_dataset
+    data, _ = simulate_manifest(default_scenario, noise=0.01, seed=2)
+    write_dataset(default_scenario, data, tmp_path / "noisy")
+    res = rideid.identify(rideid.load_dataset(tmp_path / "noisy"), seed=1, model="base")
+    flagged = dict(res.polish["shape"], optimistic=["k_sf"], ratio={**res.polish["shape"]["ratio"], "k_sf": [0.2, 0.9]})
+    bad = replace(res, polish=dict(res.polish, shape=flagged))
+    table = cli._summary_table(bad).splitlines()
+    k_sf = next(ln for ln in table if ln.startswith("k_sf"))
+    assert k_sf.endswith("ERROR BAR OPTIMISTIC: a flat valley (WARNING below)")
+    assert not any("OPTIMISTIC" in ln for ln in cli._summary_table(res).splitlines())
+    rows = {p["name"]: p for p in parameter_rows(bad)}
+    assert rows["k_sf"]["note"] == "ERROR BAR OPTIMISTIC (summary)" and rows["k_sr"]["note"] == ""
+    line = [ln for ln in _caveat_lines(bad, bad.adequacy) if ln[0] == "Error bars' shape"]
+    assert line == [("Error bars' shape", "NOT TO BE TRUSTED to their std: " + caveat(flagged), "estimates")]
+    assert caveat(flagged).startswith("the error bar of k_sf is optimistic: out at ±2 of it along its profile line "
+                                      "the cost rises only 20 %")
+    assert not [ln for ln in _caveat_lines(res, res.adequacy) if ln[0] == "Error bars' shape"]

@@ -1022,6 +1022,7 @@ def _data_line(result, context) -> tuple:
 def parameter_rows(result) -> list:
     """One row per parameter: value, unit, standard deviations (absolute and %), bounds, status."""
     params = []
+    flat = set((((getattr(result, "polish", None) or {}).get("shape")) or {}).get("optimistic") or ())
     for n in _parameter_names(result):
         d = result.details[n]
         std = d.get("std")
@@ -1037,6 +1038,8 @@ def parameter_rows(result) -> list:
             "lower": d.get("lower"), "upper": d.get("upper"),
             "status": "known" if d.get("fixed") else ("derived" if d.get("derived") else
                                                       ("AT A SEARCH BOUND" if d.get("at_bound") else "estimated")),
+            # a flat valley of the cost (rideid.estimate.assess.shape): said beside the number, not only above it
+            "note": "ERROR BAR OPTIMISTIC (summary)" if n in flat else "",
         })
     return params
 
