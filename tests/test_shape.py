@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 import rideid
-from rideid.estimate.assess.shape import caveat, profile_ratios, record
+from rideid.estimate.assess.shape import caveat, check, profile_ratios, record
 from rideid.estimate.records import ShapeAssessment, assessments_from_json
 
 #: a two-parameter cost with a known shape: ``Q (x0 + x1 / 2)^2 + g(x1)``; ``g(t) = W^2 (1 - exp(-t^2 / W^2))``
@@ -58,6 +58,32 @@ def test_a_flat_valleys_error_bar_is_named_and_a_quadratic_ones_is_not():
     # a wider threshold, from the registry, names x1 only down to its ratio
     with rideid.settings.using({"shape.flat_ratio": 0.1}):
         assert record(["x0", "x1"], flat)["optimistic"] == []
+
+
+def test_an_optimistic_error_bars_reach_is_the_last_point_below_its_quadratics_rise():
+    """The valley with a floor that rises again, ``g(t) = W^2 (1 - exp(-t^2 / W^2)) + 0.05 t^2``: x1's quadratic
+    rise at 2 error bars of 1.5 is 4 x 1.05 x 2.25 = 9.45; the walk (3, 4, 6, 8, 12, ... error bars) is below it at
+    8 (1 + 0.05 x 144 = 8.2) and above at 12 (17.2): the data allow x1 out to at least ±12, said in the record and
+    its sentence. Without the floor the cost never gets there inside ±32 error bars: None on both sides."""
+    def cost(X, eps):
+        X = np.atleast_2d(X)
+        return Q * (X[:, 0] + X[:, 1] / 2) ** 2 + W ** 2 * (1 - np.exp(-X[:, 1] ** 2 / W ** 2)) + eps * X[:, 1] ** 2
+    Cf = np.linalg.inv(np.array([[Q, Q / 2], [Q / 2, Q / 4 + 1.05]]))
+    rec = check(lambda X: cost(X, 0.05), np.zeros(2), Cf, np.array([0.05, 1.5]), BOUNDS, ["x0", "x1"],
+                small=np.full(2, 1e-3))
+    assert rec["optimistic"] == ["x1"]
+    r = rec["reach"]["x1"]
+    assert r["walked"] == [True, True] and (r["value"], r["lower"], r["upper"]) == pytest.approx((0, -12, 12))
+    assert caveat(rec).endswith("along it the cost is still below the rise the error bar assumes at ±2 at x1 = -12 "
+                                "and 12 (the estimate 0)")
+    flat = check(lambda X: cost(X, 0.0), np.zeros(2), C, np.array([0.05, 1.5]), BOUNDS, ["x0", "x1"],
+                 small=np.full(2, 1e-3))
+    assert flat["reach"]["x1"] == {"value": 0.0, "lower": None, "upper": None, "walked": [True, True]}
+    assert caveat(flat).endswith("at x1 = every point walked below it and every point walked above it (the estimate 0)")
+    # a bound at 10 ends the plus side's walk below the rise: not reached there
+    near = check(lambda X: cost(X, 0.05), np.zeros(2), Cf, np.array([0.05, 1.5]),
+                 (np.full(2, -50.0), np.array([50.0, 10.0])), ["x0", "x1"], small=np.full(2, 1e-3))
+    assert near["reach"]["x1"]["lower"] == pytest.approx(-12.0) and near["reach"]["x1"]["upper"] is None
 
 
 def test_a_side_beyond_a_bound_is_not_judged_and_a_missing_error_bar_skips_the_parameter():

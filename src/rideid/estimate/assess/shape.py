@@ -20,6 +20,11 @@ as printed, where the cost grows as a square beyond) says for certain that
 the error bar is optimistic. A ratio above it proves nothing either way; a
 side that would cross a search bound is not judged (None).
 
+:func:`profile_reach` then walks a named parameter's line on, on each side
+flatter than the quadratic, to the last point where the cost is still below
+the rise the error bar assumes at ±2 (setting ``shape.reach``): a bound on
+how far the data allow the value, for the same reason a lower one.
+
 It changes no number: the result's ``polish.shape`` holds the ratios, the
 ``error_bar_shape`` assessment (:class:`rideid.estimate.records.ShapeAssessment`)
 names the parameters, and the terminal and the report say it beside the
@@ -35,7 +40,15 @@ from ...settings import defaults
 
 def profile_ratios(cost, x0, C, sigma, bounds, *, a: float | None = None, curvature=None, small=None,
                    scale=None) -> list:
-    """Each parameter's cost rise at ``±a`` error bars along its profile line, over its quadratic's.
+    """Each parameter's cost rise at ``±a`` error bars along its profile line, over its quadratic's
+    (:func:`ratios_and_curvatures`, the ratios alone)."""
+    return ratios_and_curvatures(cost, x0, C, sigma, bounds, a=a, curvature=curvature, small=small, scale=scale)[0]
+
+
+def ratios_and_curvatures(cost, x0, C, sigma, bounds, *, a: float | None = None, curvature=None, small=None,
+                          scale=None) -> tuple[list, list]:
+    """Each parameter's cost rise at ``±a`` error bars along its profile line, over its quadratic's, and the
+    curvature used (per unit of ``x_k`` squared; None where not judged).
 
     Parameters
     ----------
@@ -52,8 +65,8 @@ def profile_ratios(cost, x0, C, sigma, bounds, *, a: float | None = None, curvat
         of a number that size (``sqrt(eps)`` of it: a noise-free fit's) is not judged, its cost's rise being rounding
     Returns
     -------
-    list over parameters of ``[minus, plus]`` (float, or None where not judged: no finite error bar, a step beyond a
-    bound, a cost that is not finite at the minimum)
+    ratios : list over parameters of ``[minus, plus]`` (float, or None where not judged: no finite error bar, a step
+    beyond a bound, a cost that is not finite at the minimum); curvatures : list over parameters
     """
     a = defaults["shape.error_bars"] if a is None else float(a)
     x0 = np.asarray(x0, dtype=float)
@@ -76,23 +89,77 @@ def profile_ratios(cost, x0, C, sigma, bounds, *, a: float | None = None, curvat
         plan.append((len(rows), u, steps, inside))
         rows += [x0 + t * u for t in steps]
     c = np.asarray(cost(np.array(rows)), dtype=float)
-    out = []
+    out, curv = [], []
     for k, p in enumerate(plan):
-        if p is None or not np.isfinite(c[0]):
+        q = None if p is None else (float(curvature[k]) if curvature is not None
+                                    else ((c[p[0] + 2] + c[p[0] + 3]) / 2 - c[0]) / p[2][3] ** 2)
+        if q is None or not np.isfinite(c[0]) or not (np.isfinite(q) and q > 0):
             out.append([None, None])
+            curv.append(None)
             continue
         i, u, steps, inside = p
-        if curvature is not None:
-            q = float(curvature[k])
-        else:
-            h = steps[3]
-            q = ((c[i + 2] + c[i + 3]) / 2 - c[0]) / h ** 2
-        if not (np.isfinite(q) and q > 0):
-            out.append([None, None])
-            continue
         b = steps[1]
         out.append([float((c[i + j] - c[0]) / (q * b * b)) if inside[j] and not np.isnan(c[i + j]) else None
                     for j in (0, 1)])
+        curv.append(q)
+    return out, curv
+
+
+def check(cost, x0, C, sigma, bounds, names, *, to_x=None, **kw) -> dict:
+    """``polish.shape`` (:func:`record`) of a fit at ``x0``: :func:`ratios_and_curvatures` (``kw``: its ``curvature``,
+    ``small``, ``scale``), then for each parameter it names optimistic :func:`profile_reach`, as the parameter's
+    own values (``to_x``: a row of ``x0``'s coordinates -> the parameters' row; None: the same)."""
+    ratios, curv = ratios_and_curvatures(cost, x0, C, sigma, bounds, **kw)
+    rec = record(names, ratios)
+    to_x = to_x or (lambda row: row)
+    x0 = np.asarray(x0, dtype=float)
+    u_of = {k: np.asarray(C, dtype=float)[:, k] / C[k, k] for k, n in enumerate(names) if n in rec["optimistic"]}
+    reach = {}
+    for k, u in u_of.items():
+        walked = [r is not None and r < 1 for r in ratios[k]]  # the sides flatter than the quadratic
+        t = profile_reach(cost, x0, C, sigma, bounds, k, curv[k], sides=walked)
+        reach[names[k]] = {"value": float(to_x(x0)[k]), "walked": walked,
+                           **{side: None if v is None else float(to_x(x0 + v * u)[k])
+                              for side, v in zip(("lower", "upper"), t)}}
+    rec["reach"] = reach
+    return rec
+
+
+def profile_reach(cost, x0, C, sigma, bounds, k: int, q: float, *, a: float | None = None,
+                  sides=(True, True)) -> list:
+    """How far along parameter ``k``'s profile line the cost stays below the rise its quadratic has at ``±a``
+    error bars (``a^2 q sigma_k^2``), walking out at the multiples of the error bar in setting ``shape.reach``:
+    ``[minus, plus]``, each the step ``t`` (``x0 + t u``, ``u`` moving ``x_k`` by one; negative on the minus side)
+    of the last point of the walk still below that rise, or None when the walk ends (at a search bound, at an
+    invalid car, or at its last point) still below it. The others on a straight line are not at their own best,
+    so the profile's own interval reaches at least this far. ``sides``: which sides to walk (a side whose cost at
+    ``±a`` already rose as much as its quadratic is not: None there)."""
+    a = defaults["shape.error_bars"] if a is None else float(a)
+    x0, C = np.asarray(x0, dtype=float), np.asarray(C, dtype=float)
+    lo, hi = (np.asarray(b, dtype=float) for b in bounds)
+    u, s = C[:, k] / C[k, k], float(sigma[k])
+    walk = [m for m in defaults["shape.reach"] if m > a]
+    steps = [sign * m * s for sign in (-1, 1) for m in walk]
+    inside = [bool(side and np.all(x0 + t * u >= lo) and np.all(x0 + t * u <= hi))
+              for side, t in zip(np.repeat(sides, len(walk)), steps)]
+    c = np.asarray(cost(np.array([x0] + [x0 + t * u for t, ok in zip(steps, inside) if ok])), dtype=float)
+    vals = iter(c[1:] - c[0])
+    rises = [next(vals) if ok else None for ok in inside]
+    level = a * a * q * s * s
+    out = []
+    for side in (0, 1):
+        if not sides[side]:
+            out.append(None)
+            continue
+        below, found = a, False
+        for m, r in zip(walk, rises[side * len(walk):(side + 1) * len(walk)]):
+            if r is None or not np.isfinite(r):
+                break
+            if r >= level:
+                found = True
+                break
+            below = m
+        out.append((-1, 1)[side] * below * s if found else None)
     return out
 
 
@@ -114,8 +181,19 @@ def caveat(shape: dict | None) -> str | None:
     worst = {n: min(v for v in shape["ratio"][n] if v is not None) for n in shape["optimistic"]}
     one = len(worst) == 1
     rises = ", ".join(f"{100 * w:.0f} %" + ("" if one else f" ({n})") for n, w in worst.items())
+    reach = [_reach_words(n, r) for n, r in (shape.get("reach") or {}).items()]
     return (f"the error bar{'' if one else 's'} of {', '.join(worst)} {'is' if one else 'are'} optimistic: out at "
             f"±{a:g} of {'it' if one else 'them'} along {'its' if one else 'their'} profile line the cost rises only "
             f"{rises} of what the error bar assumes (below {100 * flat:.0f} %: no more than it assumes at "
             f"±{a * np.sqrt(flat):g}), so the data allow {'this value' if one else 'these values'} further than "
-            "printed (a flat valley of the cost)")
+            "printed (a flat valley of the cost)" + (f"; along it the cost is still below the rise the error bar "
+                                                     f"assumes at ±{a:g} at " + "; ".join(reach) if reach else ""))
+
+
+def _reach_words(name: str, r: dict) -> str:
+    """``zeta_pp = 0.081 and 0.104 (the estimate 0.0937)``: the walked sides' reach (``beyond the last point
+    walked`` where the walk ended still below the rise)."""
+    walked = r.get("walked") or [True, True]
+    sides = [f"{r[key]:.4g}" if r.get(key) is not None else f"every point walked {word} it"
+             for key, word, w in zip(("lower", "upper"), ("below", "above"), walked) if w]
+    return f"{name} = {' and '.join(sides)} (the estimate {r['value']:.4g})"

@@ -86,7 +86,7 @@ from .jade import JadeSolver, make_rng, stop_requested
 from ..result import History, IdentificationResult
 from ..assess.sensor_check import road_coupling_hints
 from ..assess.roads import judge as judge_road_runs
-from ..assess.shape import profile_ratios, record as shape_record
+from ..assess.shape import check as shape_check
 from .uncertainty import estimate_covariance
 
 def road_run_error(rr, y, fitted) -> float:
@@ -801,9 +801,8 @@ def _error_bars(prob, sol, ds, cost_before: float, restarted) -> _Fitted:
     with timing("error bars' shape"):  # the car's cost along each parameter's profile line, the motion held
         sigma = np.sqrt(np.clip(np.diag(cov_rob), 0, None)) / prob.dxdv(z)
         with np.errstate(divide="ignore"):
-            shape = shape_record(prob.space.names, profile_ratios(prob.costs, z, Hinv, sigma, prob.vbounds,
-                                                                  curvature=1.0 / np.diag(Hinv),
-                                                                  scale=np.ones(z.size)))
+            shape = shape_check(prob.costs, z, Hinv, sigma, prob.vbounds, list(prob.space.names), to_x=prob.x,
+                                curvature=1.0 / np.diag(Hinv), scale=np.ones(z.size))
     info = {"success": bool(sol.success), "message": sol.message, "nfev": int(sol.nfev), "shape": shape,
             **({} if restarted is None else {"mode_restart": restarted}),
             "cost_before": cost_before, "cost_after": float(e @ e), "covariance": cov.tolist(),

@@ -81,7 +81,7 @@ from ..assess.adequacy import advise, assess_fit
 from ..assess.details import details_of, mark_bounds, parameter_detail, preprocessing_record
 from ..assess.responses import suspension_velocities
 from ..assess.sensor_check import sensor_notes
-from ..assess.shape import profile_ratios, record as shape_record
+from ..assess.shape import check as shape_check
 from ..problem.build import Problem, build_problem, fit_settings, model_extensions
 from ..problem.bumps import bump_block
 from ..problem.cost import CostFunction
@@ -343,7 +343,7 @@ def _shape(cf: CostFunction, x, info: dict | None) -> dict | None:
     with np.errstate(invalid="ignore"):
         white, robust = (np.sqrt(np.clip(np.diag(M), 0, None)) for M in (C, R))
     b = cf.space.bounds
-    return shape_record(cf.names, profile_ratios(cf, x, C, robust, (b[:, 0], b[:, 1]), small=0.5 * white))
+    return shape_check(cf, x, C, robust, (b[:, 0], b[:, 1]), list(cf.names), small=0.5 * white)
 
 
 def _result(ds, problem: Problem, search, fit, maps, rng_record, t0, excitation=None,
