@@ -68,10 +68,10 @@ def test_dogbox_reaches_the_same_fit_and_scipy_is_left_as_it_was():
     own = dogbox.lstsq
     plain = least_squares(f, [1.5, 0.2, 0.3, 1.65], **kw)
     with tall_steps():
-        assert dogbox.lstsq is tall_lstsq
+        assert dogbox.lstsq.own is own
         with tall_steps():
             reduced = least_squares(f, [1.5, 0.2, 0.3, 1.65], **kw)
-        assert dogbox.lstsq is tall_lstsq  # the outer user is still inside
+        assert dogbox.lstsq.own is own  # the outer user is still inside
     assert dogbox.lstsq is own
     assert plain.x[2] == reduced.x[2] == 0.45  # the amplitude (0.5 in the data) held on its bound
     np.testing.assert_allclose(reduced.x, plain.x, rtol=1e-10)
@@ -109,8 +109,35 @@ def test_trf_reaches_the_same_fit_and_scipy_is_left_as_it_was():
     own = trf.svd
     plain = least_squares(f, [1.5, 0.2, 0.3, 1.65], **kw)
     with tall_steps():
-        assert trf.svd is tall_svd and dogbox.lstsq is tall_lstsq
+        assert trf.svd.own is own and dogbox.lstsq.own is not None  # SciPy's own behind this thread's dispatch
         reduced = least_squares(f, [1.5, 0.2, 0.3, 1.65], **kw)
     assert trf.svd is own
     np.testing.assert_allclose(reduced.x, plain.x, rtol=1e-9)
     assert reduced.x[2] == pytest.approx(0.45, rel=1e-6)  # the amplitude held at its bound
+
+
+def test_only_the_thread_inside_takes_the_reduced_steps(monkeypatch):
+    """While one thread is inside tall_steps, a least squares on another thread at the same time takes SciPy's own
+    lstsq and SVD, the thread inside the reduced ones (counted by spies); after, SciPy's own functions are back."""
+    import threading
+
+    from rideid.estimate.fit import tall
+    calls = {"tall_lstsq": 0, "tall_svd": 0}
+    for name in calls:
+        real = getattr(tall, name)
+        monkeypatch.setattr(tall, name, lambda *a, _real=real, _name=name, **k: (
+            calls.__setitem__(_name, calls[_name] + 1), _real(*a, **k))[1])
+    own = (dogbox.lstsq, trf.svd)
+    A = np.random.default_rng(1).standard_normal((3000, 4))
+    b = A @ np.arange(4.0)
+    other = {}
+    with tall_steps():
+        t = threading.Thread(target=lambda: other.update(x=dogbox.lstsq(A, b, rcond=-1)[0], s=trf.svd(A)[1]))
+        t.start()
+        t.join()
+        assert calls == {"tall_lstsq": 0, "tall_svd": 0}  # the other thread took SciPy's own
+        inside = dogbox.lstsq(A, b, rcond=-1)[0], trf.svd(A, full_matrices=False)[1]
+        assert calls == {"tall_lstsq": 1, "tall_svd": 1}
+    np.testing.assert_allclose(inside[0], other["x"], rtol=1e-10, atol=1e-12)
+    np.testing.assert_allclose(inside[1], other["s"], rtol=1e-10)
+    assert (dogbox.lstsq, trf.svd) == own

@@ -155,27 +155,40 @@ def tall_svd(a, full_matrices=True, **kw):
 
 _lock = threading.Lock()
 _users = [0]
+#: this thread's depth inside :func:`tall_steps` (the module attributes are SciPy's for every thread; a call from a
+#: thread that is not inside takes SciPy's own function)
+_inside = threading.local()
+
+
+def _dispatch(own, name: str):
+    """SciPy's ``own`` function, or this module's ``name`` (looked up at the call) on a thread inside
+    :func:`tall_steps`."""
+    def call(*args, **kwargs):
+        return (globals()[name] if getattr(_inside, "depth", 0) else own)(*args, **kwargs)
+    call.own = own
+    return call
 
 
 @contextmanager
 def tall_steps():
     """While inside, SciPy's ``dogbox`` solves its Gauss-Newton steps with :func:`tall_lstsq` and its ``trf`` takes
-    its SVDs from :func:`tall_svd` (the modules' own put back when the last user leaves; threads share them,
-    counted). Without those module attributes (a SciPy that no longer has them) nothing is changed."""
-    swaps = [(mod, name, new) for mod, name, new in ((_dogbox, "lstsq", tall_lstsq), (_trf, "svd", tall_svd))
+    its SVDs from :func:`tall_svd` on this thread: the modules' attributes dispatch on the calling thread (another
+    thread's least squares at the same time takes SciPy's own), put back when the last thread leaves (counted).
+    Without those module attributes (a SciPy that no longer has them) nothing is changed."""
+    swaps = [(mod, name, new) for mod, name, new in ((_dogbox, "lstsq", "tall_lstsq"), (_trf, "svd", "tall_svd"))
              if hasattr(mod, name)]
     with _lock:
         if _users[0] == 0:
-            _users[1:] = [getattr(mod, name) for mod, name, _ in swaps]
             for mod, name, new in swaps:
-                setattr(mod, name, new)
+                setattr(mod, name, _dispatch(getattr(mod, name), new))
         _users[0] += 1
+    _inside.depth = getattr(_inside, "depth", 0) + 1
     try:
         yield
     finally:
+        _inside.depth -= 1
         with _lock:
             _users[0] -= 1
             if _users[0] == 0:
-                for (mod, name, _), own in zip(swaps, _users[1:]):
-                    setattr(mod, name, own)
-                del _users[1:]
+                for mod, name, _ in swaps:
+                    setattr(mod, name, getattr(mod, name).own)
