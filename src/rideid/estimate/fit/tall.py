@@ -6,9 +6,9 @@ column per unknown (12 to 60). :func:`numpy.linalg.lstsq` (LAPACK ``gelsd``: a b
 all of it) took 0.38 s a step on the all-realities SUV, 38 % of the polish (docs/performance.md#the-tall-jacobian);
 a blocked Householder QR of the same matrix leaves a square problem of the columns' size (0.085 s against 0.16 s
 on a 300 000 x 30 matrix, two cores). :func:`tall_lstsq` is that for SciPy's ``dogbox`` (:func:`tall_steps`
-swaps it in while the polish's ``least_squares`` runs, on the polish's thread alone), :func:`tall_svd` for SciPy's ``trf`` (from the Gram matrix
-where the columns are well-conditioned, else an SVD of the triangle, its left vectors kept as the blocks'
-Householder reflections: 1.15 s a step of the all-realities SUV's 155 unknowns before, 0.06 s now;
+swaps it in while the polish's ``least_squares`` runs, on the polish's thread alone), :func:`tall_svd` for SciPy's
+``trf`` (from the Gram matrix where the columns are well-conditioned, else an SVD of the triangle, its left vectors
+kept as the blocks' Householder reflections: 1.15 s a step of the all-realities SUV's 155 unknowns before, 0.06 s now;
 docs/performance.md#the-all-realities-suv-under-two-minutes), :func:`tall_r` the same reduction for the
 covariance's SVD.
 """
