@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 import rideid
-from rideid.estimate.assess.shape import caveat, check, profile_ratios, record
+from rideid.estimate.assess.shape import caveat, check, profile_ratios, record, table_note
 from rideid.estimate.records import ShapeAssessment, assessments_from_json
 
 #: a two-parameter cost with a known shape: ``Q (x0 + x1 / 2)^2 + g(x1)``; ``g(t) = W^2 (1 - exp(-t^2 / W^2))``
@@ -148,10 +148,17 @@ def test_a_named_error_bar_is_said_beside_its_number_in_the_terminal_and_the_rep
     bad = replace(res, polish=dict(res.polish, shape=flagged))
     table = cli._summary_table(bad).splitlines()
     k_sf = next(ln for ln in table if ln.startswith("k_sf"))
-    assert k_sf.endswith("ERROR BAR OPTIMISTIC: a flat valley (WARNING below)")
+    assert k_sf.endswith("ERROR BAR OPTIMISTIC (WARNING below)")  # no reach recorded here
     assert not any("OPTIMISTIC" in ln for ln in cli._summary_table(res).splitlines())
     rows = {p["name"]: p for p in parameter_rows(bad)}
-    assert rows["k_sf"]["note"] == "ERROR BAR OPTIMISTIC (summary)" and rows["k_sr"]["note"] == ""
+    assert rows["k_sf"]["note"] == "ERROR BAR OPTIMISTIC" and rows["k_sr"]["note"] == ""
+    reach = dict(flagged, reach={"k_sf": {"value": 1.0, "lower": 0.8, "upper": None, "walked": [True, True]}})
+    assert table_note(reach, "k_sf") == "ERROR BAR OPTIMISTIC: the data allow at least 0.8 to beyond the walk"
+    one_side = dict(reach, reach={"k_sf": {"value": 1.0, "lower": 0.8, "upper": None, "walked": [True, False]}})
+    assert table_note(one_side, "k_sf") == "ERROR BAR OPTIMISTIC: the data allow at least 0.8 to the printed ±2 std"
+    assert table_note(reach, "k_sr") is None and table_note(None, "k_sf") is None
+    rows = {p["name"]: p for p in parameter_rows(replace(res, polish=dict(res.polish, shape=reach)))}
+    assert rows["k_sf"]["note"] == table_note(reach, "k_sf")
     line = [ln for ln in _caveat_lines(bad, bad.adequacy) if ln[0] == "Error bars' shape"]
     assert line == [("Error bars' shape", "NOT TO BE TRUSTED to their std: " + caveat(flagged), "estimates")]
     assert caveat(flagged).startswith("the error bar of k_sf is optimistic: out at ±2 of it along its profile line "

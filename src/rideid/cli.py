@@ -299,7 +299,7 @@ def cmd_simulate(args, out=None):
 
 def _summary_table(res) -> str:
     lines = [f"{'parameter':<10} {'estimate':>14} {'± std_total':>12} {'± robust':>11} {'± std':>11}  {'unit':<8} note"]
-    flat = set((((res.polish or {}).get("shape")) or {}).get("optimistic") or ())  # a flat valley of the cost
+    shape = (res.polish or {}).get("shape")  # a flat valley of the cost: its note beside the number
     for n, d in res.details.items():
         if n.startswith("F_") and res.dampers:
             continue  # the curves' table below
@@ -310,8 +310,8 @@ def _summary_table(res) -> str:
             note = "NOT REACHED: no run compresses the suspension to the stop — not a number to trust"
         elif d.get("at_bound"):
             note = "AT A SEARCH BOUND: set by the bound, not the data"
-        elif n in flat:
-            note = "ERROR BAR OPTIMISTIC: a flat valley (WARNING below)"
+        elif rideid.error_bar_note(shape, n):
+            note = rideid.error_bar_note(shape, n) + " (WARNING below)"
         std = "" if d.get("std") in (None, 0.0) else f"{d['std']:.3g}"
         rob = "" if d.get("std_robust") in (None, 0.0) else f"{d['std_robust']:.3g}"
         tot = d.get("std_total", d.get("std_robust"))

@@ -35,7 +35,7 @@ from ..data.quality import summarised_warning
 from ..errors import DataError
 from ..estimate.assess.adequacy import caveats
 from ..estimate.assess.frequency import frequency_response, measured_response
-from ..estimate.assess.shape import caveat as shape_caveat
+from ..estimate.assess.shape import caveat as shape_caveat, table_note
 from ..estimate.problem.sensitivity import P2T_STARS, stars
 from .sensitivity_files import heatmap_figure
 from ..model.equations import CHANNELS
@@ -1022,7 +1022,7 @@ def _data_line(result, context) -> tuple:
 def parameter_rows(result) -> list:
     """One row per parameter: value, unit, standard deviations (absolute and %), bounds, status."""
     params = []
-    flat = set((((getattr(result, "polish", None) or {}).get("shape")) or {}).get("optimistic") or ())
+    shape = (getattr(result, "polish", None) or {}).get("shape")
     for n in _parameter_names(result):
         d = result.details[n]
         std = d.get("std")
@@ -1039,7 +1039,7 @@ def parameter_rows(result) -> list:
             "status": "known" if d.get("fixed") else ("derived" if d.get("derived") else
                                                       ("AT A SEARCH BOUND" if d.get("at_bound") else "estimated")),
             # a flat valley of the cost (rideid.estimate.assess.shape): said beside the number, not only above it
-            "note": "ERROR BAR OPTIMISTIC (summary)" if n in flat else "",
+            "note": table_note(shape, n) or "",
         })
     return params
 

@@ -197,3 +197,17 @@ def _reach_words(name: str, r: dict) -> str:
     sides = [f"{r[key]:.4g}" if r.get(key) is not None else f"every point walked {word} it"
              for key, word, w in zip(("lower", "upper"), ("below", "above"), walked) if w]
     return f"{name} = {' and '.join(sides)} (the estimate {r['value']:.4g})"
+
+
+def table_note(shape: dict | None, name: str) -> str | None:
+    """The estimates tables' note of a parameter the check names: ``ERROR BAR OPTIMISTIC: the data allow at least
+    0.0833 to 0.1053`` (a side the walk did not reach the rise on: ``beyond``); None for one it does not name."""
+    if not shape or name not in (shape.get("optimistic") or ()):
+        return None
+    r = (shape.get("reach") or {}).get(name)
+    if not r:
+        return "ERROR BAR OPTIMISTIC"
+    walked = r.get("walked") or [True, True]
+    ends = [("beyond the walk" if r.get(k) is None else f"{r[k]:.4g}") if w else "the printed ±2 std"
+            for k, w in zip(("lower", "upper"), walked)]
+    return f"ERROR BAR OPTIMISTIC: the data allow at least {ends[0]} to {ends[1]}"
