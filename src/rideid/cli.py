@@ -310,8 +310,8 @@ def _summary_table(res) -> str:
             note = "NOT REACHED: no run compresses the suspension to the stop — not a number to trust"
         elif d.get("at_bound"):
             note = "AT A SEARCH BOUND: set by the bound, not the data"
-        elif rideid.error_bar_note(shape, n):
-            note = rideid.error_bar_note(shape, n) + " (WARNING below)"
+        elif flat := rideid.error_bar_note(shape, n):
+            note = flat + " (WARNING below)"
         std = "" if d.get("std") in (None, 0.0) else f"{d['std']:.3g}"
         rob = "" if d.get("std_robust") in (None, 0.0) else f"{d['std_robust']:.3g}"
         tot = d.get("std_total", d.get("std_robust"))

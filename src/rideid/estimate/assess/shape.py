@@ -38,6 +38,16 @@ import numpy as np
 from ...settings import defaults
 
 
+def _line(C, k: int) -> np.ndarray:
+    """Parameter ``k``'s profile line: the step that moves ``x_k`` by one, the others following at their linearised
+    best (column ``k`` of the inverse curvature ``C`` over ``C[k, k]``)."""
+    return C[:, k] / C[k, k]
+
+
+def _within(x, lo, hi) -> bool:
+    return bool(np.all(x >= lo) and np.all(x <= hi))
+
+
 def profile_ratios(cost, x0, C, sigma, bounds, *, a: float | None = None, curvature=None, small=None,
                    scale=None) -> list:
     """Each parameter's cost rise at ``±a`` error bars along its profile line, over its quadratic's
@@ -80,9 +90,9 @@ def ratios_and_curvatures(cost, x0, C, sigma, bounds, *, a: float | None = None,
         if not (np.isfinite(ckk) and ckk > 0 and np.isfinite(s) and a * s > floor[k] and np.isfinite(C[:, k]).all()):
             plan.append(None)
             continue
-        u = C[:, k] / ckk
+        u = _line(C, k)
         steps = [-a * s, a * s] + ([] if curvature is not None else [-small[k], small[k]])
-        inside = [bool(np.all(x0 + t * u >= lo) and np.all(x0 + t * u <= hi)) for t in steps]
+        inside = [_within(x0 + t * u, lo, hi) for t in steps]
         if curvature is None and not all(inside[2:]):
             plan.append(None)
             continue
@@ -110,14 +120,14 @@ def check(cost, x0, C, sigma, bounds, names, *, to_x=None, **kw) -> dict:
     ``small``, ``scale``), then for each parameter it names optimistic :func:`profile_reach`, as the parameter's
     own values (``to_x``: a row of ``x0``'s coordinates -> the parameters' row; None: the same)."""
     ratios, curv = ratios_and_curvatures(cost, x0, C, sigma, bounds, **kw)
-    rec = record(names, ratios)
+    rec = record(names, ratios, a=kw.get("a"))
     to_x = to_x or (lambda row: row)
-    x0 = np.asarray(x0, dtype=float)
-    u_of = {k: np.asarray(C, dtype=float)[:, k] / C[k, k] for k, n in enumerate(names) if n in rec["optimistic"]}
+    x0, C = np.asarray(x0, dtype=float), np.asarray(C, dtype=float)
     reach = {}
-    for k, u in u_of.items():
+    for k in (names.index(n) for n in rec["optimistic"]):
+        u = _line(C, k)
         walked = [r is not None and r < 1 for r in ratios[k]]  # the sides flatter than the quadratic
-        t = profile_reach(cost, x0, C, sigma, bounds, k, curv[k], sides=walked)
+        t = profile_reach(cost, x0, C, sigma, bounds, k, curv[k], a=kw.get("a"), sides=walked)
         reach[names[k]] = {"value": float(to_x(x0)[k]), "walked": walked,
                            **{side: None if v is None else float(to_x(x0 + v * u)[k])
                               for side, v in zip(("lower", "upper"), t)}}
@@ -137,11 +147,10 @@ def profile_reach(cost, x0, C, sigma, bounds, k: int, q: float, *, a: float | No
     a = defaults["shape.error_bars"] if a is None else float(a)
     x0, C = np.asarray(x0, dtype=float), np.asarray(C, dtype=float)
     lo, hi = (np.asarray(b, dtype=float) for b in bounds)
-    u, s = C[:, k] / C[k, k], float(sigma[k])
+    u, s = _line(C, k), float(sigma[k])
     walk = [m for m in defaults["shape.reach"] if m > a]
     steps = [sign * m * s for sign in (-1, 1) for m in walk]
-    inside = [bool(side and np.all(x0 + t * u >= lo) and np.all(x0 + t * u <= hi))
-              for side, t in zip(np.repeat(sides, len(walk)), steps)]
+    inside = [bool(side) and _within(x0 + t * u, lo, hi) for side, t in zip(np.repeat(sides, len(walk)), steps)]
     c = np.asarray(cost(np.array([x0] + [x0 + t * u for t, ok in zip(steps, inside) if ok])), dtype=float)
     vals = iter(c[1:] - c[0])
     rises = [next(vals) if ok else None for ok in inside]
@@ -163,14 +172,31 @@ def profile_reach(cost, x0, C, sigma, bounds, k: int, q: float, *, a: float | No
     return out
 
 
-def record(names, ratios) -> dict:
-    """``polish.shape`` of result.json: the ratios by parameter, the error bars out and the threshold in force,
-    and the parameters whose error bar is optimistic (a ratio below ``shape.flat_ratio`` on either side)."""
+def record(names, ratios, a: float | None = None) -> dict:
+    """``polish.shape`` of result.json: the ratios by parameter, the error bars out they were judged at (``a``;
+    None: setting ``shape.error_bars``) and the threshold in force, and the parameters whose error bar is
+    optimistic (a ratio below ``shape.flat_ratio`` on either side)."""
     flat = defaults["shape.flat_ratio"]
     ratio = {n: r for n, r in zip(names, ratios)}
     optimistic = [n for n, r in ratio.items() if any(v is not None and v < flat for v in r)]
-    return {"error_bars": defaults["shape.error_bars"], "flat_ratio": flat, "ratio": ratio,
-            "optimistic": optimistic}
+    return {"error_bars": defaults["shape.error_bars"] if a is None else float(a), "flat_ratio": flat,
+            "ratio": ratio, "optimistic": optimistic}
+
+
+def with_shape(cost, x0, info: dict | None) -> dict | None:
+    """A track fit's polish record with its ``shape`` (:func:`check`): the cost function ``cost``
+    (:class:`rideid.CostFunction`: its ``names`` and ``space.bounds``) at the free parameters ``x0``, each profile
+    line from the polish's white covariance, the error bars its ``covariance_robust``, the curvature measured at
+    ±0.5 white std, the runs' starts held. ``info`` itself where it has no covariances (no polish)."""
+    if not info or info.get("covariance") is None or info.get("covariance_robust") is None:
+        return info
+    d = len(cost.names)
+    C = np.array(info["covariance"], dtype=float)[:d, :d]
+    R = np.array(info["covariance_robust"], dtype=float)[:d, :d]
+    with np.errstate(invalid="ignore"):
+        white, robust = (np.sqrt(np.clip(np.diag(M), 0, None)) for M in (C, R))
+    b = cost.space.bounds
+    return dict(info, shape=check(cost, x0, C, robust, (b[:, 0], b[:, 1]), list(cost.names), small=0.5 * white))
 
 
 def caveat(shape: dict | None) -> str | None:

@@ -68,7 +68,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.optimize import OptimizeResult
 
-from ...profiling import stage
+from ...profiling import stage, timing
 from ...settings import defaults, legacy_names
 from ...data.dataset import Dataset
 from ...data.quality import data_quality
@@ -81,7 +81,7 @@ from ..assess.adequacy import advise, assess_fit
 from ..assess.details import details_of, mark_bounds, parameter_detail, preprocessing_record
 from ..assess.responses import suspension_velocities
 from ..assess.sensor_check import sensor_notes
-from ..assess.shape import check as shape_check
+from ..assess.shape import with_shape
 from ..problem.build import Problem, build_problem, fit_settings, model_extensions
 from ..problem.bumps import bump_block
 from ..problem.cost import CostFunction
@@ -330,22 +330,6 @@ RESULT_BLOCKS = (
 )
 
 
-@stage("error bars' shape")
-def _shape(cf: CostFunction, x, info: dict | None) -> dict | None:
-    """``polish.shape`` (:mod:`rideid.estimate.assess.shape`): each free parameter's cost rise at ±2 std_robust
-    along its profile line (the polish's white covariance, the runs' starts held) over the rise its curvature
-    there, measured at ±0.5 white std, says; None without a polish's covariances."""
-    if not info or info.get("covariance") is None or info.get("covariance_robust") is None:
-        return None
-    d = len(cf.names)
-    C = np.array(info["covariance"], dtype=float)[:d, :d]
-    R = np.array(info["covariance_robust"], dtype=float)[:d, :d]
-    with np.errstate(invalid="ignore"):
-        white, robust = (np.sqrt(np.clip(np.diag(M), 0, None)) for M in (C, R))
-    b = cf.space.bounds
-    return shape_check(cf, x, C, robust, (b[:, 0], b[:, 1]), list(cf.names), small=0.5 * white)
-
-
 def _result(ds, problem: Problem, search, fit, maps, rng_record, t0, excitation=None,
             bumps=None) -> IdentificationResult:
     """The result, built once: the estimate, its uncertainty, details and the blocks of :data:`RESULT_BLOCKS`,
@@ -359,8 +343,8 @@ def _result(ds, problem: Problem, search, fit, maps, rng_record, t0, excitation=
     success = bool(np.all(np.isfinite(x)) and np.isfinite(final_E).all()) and fit.success
     response = cf.simulate(P)
     nfev = int(cf.nfev)  # the fit's evaluations (the adequacy's simulations are not the fit's)
-    shape = _shape(cf, x, fit.info)
-    polish = fit.info if shape is None else dict(fit.info, shape=shape)
+    with timing("error bars' shape"):  # rideid.estimate.assess.shape
+        polish = with_shape(cf, x, fit.info)
     fitted = _Fitted(ds, problem, cf, P, response, robust, details, excitation, bumps)
     blocks = {name: make(fitted) if has(fitted) else None for name, has, make in RESULT_BLOCKS}
     return IdentificationResult(
