@@ -38,10 +38,10 @@ def test_a_flat_valleys_error_bar_is_named_and_a_quadratic_ones_is_not():
     """Along x1's profile line (x0 = -x1 / 2) the cost is g(x1): the quadratic's rise at 2 error bars of 1.5 W is
     9 W^2, the valley's W^2 (1 - e^-9): a ratio of 0.111, named; x0's line moves x1 by C10 / C00 = -1.92 per unit,
     0.19 at its 2 error bars of 0.05, where g is still 0.97 of its quadratic. The quadratic cost: every ratio 1.
-    The curvature given (1 / C[k, k]: exact here) and measured from small steps agree."""
+    The curvature from C (``exact``: the inverse half Hessian here) and measured from small steps agree."""
     sigma = np.array([0.05, 1.5 * W])
     flat = profile_ratios(_cost(True), np.zeros(2), C, sigma, BOUNDS, a=2.0, small=np.full(2, 1e-3))
-    given = profile_ratios(_cost(True), np.zeros(2), C, sigma, BOUNDS, a=2.0, curvature=1.0 / np.diag(C))
+    given = profile_ratios(_cost(True), np.zeros(2), C, sigma, BOUNDS, a=2.0, exact=True)
     expected = (1 - np.exp(-9.0)) / 9.0
     np.testing.assert_allclose(flat[1], [expected, expected], rtol=1e-5)
     np.testing.assert_allclose(given[1], [expected, expected], rtol=1e-12)
@@ -84,6 +84,36 @@ def test_an_optimistic_error_bars_reach_is_the_last_point_below_its_quadratics_r
     near = check(lambda X: cost(X, 0.05), np.zeros(2), Cf, np.array([0.05, 1.5]),
                  (np.full(2, -50.0), np.array([50.0, 10.0])), ["x0", "x1"], small=np.full(2, 1e-3))
     assert near["reach"]["x1"]["lower"] == pytest.approx(-12.0) and near["reach"]["x1"]["upper"] is None
+
+
+def test_a_parameter_on_its_bound_is_held_on_the_others_lines():
+    """A third parameter x2 on its lower bound 0 (tire damping at 0), tied to x1 by ``Q2 (x2 + 0.3 x1)^2``: x1's
+    unconditioned line moves x2 below 0, so it would leave the box and nothing would be judged. With x2 held there
+    (its ±2 error bars cross the bound), x1's line is the one of the cost with x2 fixed: its quadratic rises
+    ``(1 + 0.09 Q2) t^2`` and the valley ``g(t) + 0.09 Q2 t^2``, at 2 error bars of 1.5: ratio
+    ``(W^2 (1 - e^-9) + 0.81) / 9.81``, named; x2 itself crosses its bound on the minus side, its plus side
+    judged where the curvature comes from C (a small step below 0 leaves it unjudged otherwise)."""
+    Q2 = 1.0
+
+    def cost(X):
+        X = np.atleast_2d(X)
+        return (Q * (X[:, 0] + X[:, 1] / 2) ** 2 + W ** 2 * (1 - np.exp(-X[:, 1] ** 2 / W ** 2))
+                + Q2 * (X[:, 2] + 0.3 * X[:, 1]) ** 2)
+    H3 = np.array([[Q, Q / 2, 0], [Q / 2, Q / 4 + 1 + 0.09 * Q2, 0.3 * Q2], [0, 0.3 * Q2, Q2]])
+    C3 = np.linalg.inv(H3)
+    bounds = (np.array([-50.0, -50.0, 0.0]), np.full(3, 50.0))
+    sigma = np.array([0.05, 1.5, 0.5])
+    expected = (W ** 2 * (1 - np.exp(-9.0)) + 0.81) / 9.81
+    t1 = C3[1, 2] / C3[2, 2]  # x1 at x2's plus error bars (2 x 0.5 = 1): the valley's shortfall there alone
+    x2_plus = 1 + (W ** 2 * (1 - np.exp(-t1 ** 2 / W ** 2)) - t1 ** 2) * C3[2, 2]
+    for kw, x2 in ((dict(exact=True), [None, x2_plus]), (dict(small=np.full(3, 1e-3)), [None, None])):
+        out = profile_ratios(cost, np.zeros(3), C3, sigma, bounds, a=2.0, **kw)
+        np.testing.assert_allclose(out[1], [expected, expected], rtol=1e-5)
+        # x2's own line: its minus side beyond the bound; measured from small steps, one of them is beyond it too
+        assert out[2][0] is None and (out[2][1] is None) == (x2[1] is None), out
+        if x2[1] is not None:
+            assert out[2][1] == pytest.approx(x2[1], rel=1e-9)
+    assert check(cost, np.zeros(3), C3, sigma, bounds, ["x0", "x1", "x2"], exact=True)["optimistic"] == ["x1"]
 
 
 def test_a_side_beyond_a_bound_is_not_judged_and_a_missing_error_bar_skips_the_parameter():

@@ -38,45 +38,73 @@ import numpy as np
 from ...settings import defaults
 
 
-def _line(C, k: int) -> np.ndarray:
-    """Parameter ``k``'s profile line: the step that moves ``x_k`` by one, the others following at their linearised
-    best (column ``k`` of the inverse curvature ``C`` over ``C[k, k]``)."""
-    return C[:, k] / C[k, k]
+def _lines(C, x0, sigma, a: float, lo, hi) -> list:
+    """Each parameter's profile line ``(u, c)``: ``u`` the step that moves ``x_k`` by one, the others following at
+    their linearised best, and ``c`` the inverse curvature along it (``C[k, k]``); None where there is none.
+
+    A parameter whose ``±a`` error bars cross a search bound (tire damping at 0) is held on every other parameter's
+    line: the line is the one of the cost with it fixed (the inverse curvature conditioned on it, a Schur
+    complement), so that a line does not leave the box only because that parameter follows it."""
+    d = x0.size
+    with np.errstate(invalid="ignore"):
+        near = np.isfinite(sigma) & ((x0 - a * sigma < lo) | (x0 + a * sigma > hi))
+    conditioned = {}
+    out = []
+    for k in range(d):
+        held = tuple(j for j in np.flatnonzero(near) if j != k)
+        if held not in conditioned:
+            free = np.array([j for j in range(d) if j not in held])
+            Cf = C[np.ix_(free, free)]
+            if held:
+                Cfa = C[np.ix_(free, held)]
+                Cf = Cf - Cfa @ np.linalg.pinv(C[np.ix_(held, held)]) @ Cfa.T
+            conditioned[held] = (free, Cf)
+        free, Cf = conditioned[held]
+        i = int(np.flatnonzero(free == k)[0])
+        ckk = Cf[i, i]
+        if not (np.isfinite(ckk) and ckk > 0 and np.isfinite(Cf[:, i]).all()):
+            out.append(None)
+            continue
+        u = np.zeros(d)
+        u[free] = Cf[:, i] / ckk
+        out.append((u, float(ckk)))
+    return out
 
 
 def _within(x, lo, hi) -> bool:
     return bool(np.all(x >= lo) and np.all(x <= hi))
 
 
-def profile_ratios(cost, x0, C, sigma, bounds, *, a: float | None = None, curvature=None, small=None,
+def profile_ratios(cost, x0, C, sigma, bounds, *, a: float | None = None, exact: bool = False, small=None,
                    scale=None) -> list:
     """Each parameter's cost rise at ``±a`` error bars along its profile line, over its quadratic's
     (:func:`ratios_and_curvatures`, the ratios alone)."""
-    return ratios_and_curvatures(cost, x0, C, sigma, bounds, a=a, curvature=curvature, small=small, scale=scale)[0]
+    return ratios_and_curvatures(cost, x0, C, sigma, bounds, a=a, exact=exact, small=small, scale=scale)[0]
 
 
-def ratios_and_curvatures(cost, x0, C, sigma, bounds, *, a: float | None = None, curvature=None, small=None,
-                          scale=None) -> tuple[list, list]:
-    """Each parameter's cost rise at ``±a`` error bars along its profile line, over its quadratic's, and the
-    curvature used (per unit of ``x_k`` squared; None where not judged).
+def ratios_and_curvatures(cost, x0, C, sigma, bounds, *, a: float | None = None, exact: bool = False, small=None,
+                          scale=None) -> tuple[list, list, list]:
+    """Each parameter's cost rise at ``±a`` error bars along its profile line, over its quadratic's, the
+    curvature used (per unit of ``x_k`` squared; None where not judged) and the lines (:func:`_lines`).
 
     Parameters
     ----------
     cost : callable
         ``(n, d)`` rows -> ``(n,)`` costs (a sum of squares, or any positive multiple of one).
     x0 : (d,) the minimum; C : (d, d) the inverse curvature of the cost there, up to a positive factor (a white
-        covariance): its column ``k`` over ``C[k, k]`` is the step that moves parameter ``k`` by one
+        covariance): its column ``k`` over ``C[k, k]`` is the step that moves parameter ``k`` by one (with the
+        parameters held whose error bars cross a bound, :func:`_lines`)
     sigma : (d,) the error bars, in ``x0``'s units; bounds : (lower (d,), upper (d,))
     a : how many error bars out (None: setting ``shape.error_bars``)
-    curvature : (d,) the cost's rise per unit of ``x_k`` squared along the line, known (a measured Hessian:
-        ``1 / Hinv[k, k]`` for the half Hessian of a sum of squares); None: measured here from two steps of
-        ``small`` (d,) each side
+    exact : ``C`` is the inverse of the cost's half Hessian itself (a measured Hessian of a sum of squares): the
+        cost's rise per unit of ``x_k`` squared along the line is ``1 / c`` (:func:`_lines`); else measured here
+        from two steps of ``small`` (d,) each side
     scale : (d,) each parameter's magnitude (None: ``|x0|``): an error bar whose ``a`` times is within the rounding
         of a number that size (``sqrt(eps)`` of it: a noise-free fit's) is not judged, its cost's rise being rounding
     Returns
     -------
     ratios : list over parameters of ``[minus, plus]`` (float, or None where not judged: no finite error bar, a step
-    beyond a bound, a cost that is not finite at the minimum); curvatures : list over parameters
+    beyond a bound, a cost that is not finite at the minimum); curvatures : list over parameters; lines : list
     """
     a = defaults["shape.error_bars"] if a is None else float(a)
     x0 = np.asarray(x0, dtype=float)
@@ -84,16 +112,18 @@ def ratios_and_curvatures(cost, x0, C, sigma, bounds, *, a: float | None = None,
     lo, hi = (np.asarray(b, dtype=float) for b in bounds)
     d = x0.size
     floor = np.sqrt(np.finfo(float).eps) * (np.abs(x0) if scale is None else np.asarray(scale, dtype=float))
+    sigma = np.asarray(sigma, dtype=float)
+    lines = _lines(C, x0, sigma, a, lo, hi)
     rows, plan = [x0], []
     for k in range(d):
-        ckk, s = C[k, k], float(sigma[k])
-        if not (np.isfinite(ckk) and ckk > 0 and np.isfinite(s) and a * s > floor[k] and np.isfinite(C[:, k]).all()):
+        s = float(sigma[k])
+        if lines[k] is None or not (np.isfinite(s) and a * s > floor[k]):
             plan.append(None)
             continue
-        u = _line(C, k)
-        steps = [-a * s, a * s] + ([] if curvature is not None else [-small[k], small[k]])
+        u = lines[k][0]
+        steps = [-a * s, a * s] + ([] if exact else [-small[k], small[k]])
         inside = [_within(x0 + t * u, lo, hi) for t in steps]
-        if curvature is None and not all(inside[2:]):
+        if not exact and not all(inside[2:]):
             plan.append(None)
             continue
         plan.append((len(rows), u, steps, inside))
@@ -101,7 +131,7 @@ def ratios_and_curvatures(cost, x0, C, sigma, bounds, *, a: float | None = None,
     c = np.asarray(cost(np.array(rows)), dtype=float)
     out, curv = [], []
     for k, p in enumerate(plan):
-        q = None if p is None else (float(curvature[k]) if curvature is not None
+        q = None if p is None else (1.0 / lines[k][1] if exact
                                     else ((c[p[0] + 2] + c[p[0] + 3]) / 2 - c[0]) / p[2][3] ** 2)
         if q is None or not np.isfinite(c[0]) or not (np.isfinite(q) and q > 0):
             out.append([None, None])
@@ -112,22 +142,22 @@ def ratios_and_curvatures(cost, x0, C, sigma, bounds, *, a: float | None = None,
         out.append([float((c[i + j] - c[0]) / (q * b * b)) if inside[j] and not np.isnan(c[i + j]) else None
                     for j in (0, 1)])
         curv.append(q)
-    return out, curv
+    return out, curv, lines
 
 
 def check(cost, x0, C, sigma, bounds, names, *, to_x=None, **kw) -> dict:
     """``polish.shape`` (:func:`record`) of a fit at ``x0``: :func:`ratios_and_curvatures` (``kw``: its ``curvature``,
     ``small``, ``scale``), then for each parameter it names optimistic :func:`profile_reach`, as the parameter's
     own values (``to_x``: a row of ``x0``'s coordinates -> the parameters' row; None: the same)."""
-    ratios, curv = ratios_and_curvatures(cost, x0, C, sigma, bounds, **kw)
+    ratios, curv, lines = ratios_and_curvatures(cost, x0, C, sigma, bounds, **kw)
     rec = record(names, ratios, a=kw.get("a"))
     to_x = to_x or (lambda row: row)
-    x0, C = np.asarray(x0, dtype=float), np.asarray(C, dtype=float)
+    x0 = np.asarray(x0, dtype=float)
     reach = {}
     for k in (names.index(n) for n in rec["optimistic"]):
-        u = _line(C, k)
+        u = lines[k][0]
         walked = [r is not None and r < 1 for r in ratios[k]]  # the sides flatter than the quadratic
-        t = profile_reach(cost, x0, C, sigma, bounds, k, curv[k], a=kw.get("a"), sides=walked)
+        t = profile_reach(cost, x0, u, float(sigma[k]), bounds, curv[k], a=kw.get("a"), sides=walked)
         reach[names[k]] = {"value": float(to_x(x0)[k]), "walked": walked,
                            **{side: None if v is None else float(to_x(x0 + v * u)[k])
                               for side, v in zip(("lower", "upper"), t)}}
@@ -135,19 +165,18 @@ def check(cost, x0, C, sigma, bounds, names, *, to_x=None, **kw) -> dict:
     return rec
 
 
-def profile_reach(cost, x0, C, sigma, bounds, k: int, q: float, *, a: float | None = None,
-                  sides=(True, True)) -> list:
-    """How far along parameter ``k``'s profile line the cost stays below the rise its quadratic has at ``±a``
-    error bars (``a^2 q sigma_k^2``), walking out at the multiples of the error bar in setting ``shape.reach``:
-    ``[minus, plus]``, each the step ``t`` (``x0 + t u``, ``u`` moving ``x_k`` by one; negative on the minus side)
+def profile_reach(cost, x0, u, s: float, bounds, q: float, *, a: float | None = None, sides=(True, True)) -> list:
+    """How far along a parameter's profile line ``u`` (:func:`_lines`: moving it by one) the cost stays below the
+    rise its quadratic has at ``±a`` error bars ``s`` (``a^2 q s^2``, ``q`` the curvature along the line), walking
+    out at the multiples of the error bar in setting ``shape.reach``:
+    ``[minus, plus]``, each the step ``t`` (``x0 + t u``; negative on the minus side)
     of the last point of the walk still below that rise, or None when the walk ends (at a search bound, at an
     invalid car, or at its last point) still below it. The others on a straight line are not at their own best,
     so the profile's own interval reaches at least this far. ``sides``: which sides to walk (a side whose cost at
     ``±a`` already rose as much as its quadratic is not: None there)."""
     a = defaults["shape.error_bars"] if a is None else float(a)
-    x0, C = np.asarray(x0, dtype=float), np.asarray(C, dtype=float)
+    x0 = np.asarray(x0, dtype=float)
     lo, hi = (np.asarray(b, dtype=float) for b in bounds)
-    u, s = _line(C, k), float(sigma[k])
     walk = [m for m in defaults["shape.reach"] if m > a]
     steps = [sign * m * s for sign in (-1, 1) for m in walk]
     inside = [bool(side) and _within(x0 + t * u, lo, hi) for side, t in zip(np.repeat(sides, len(walk)), steps)]

@@ -802,7 +802,7 @@ def _error_bars(prob, sol, ds, cost_before: float, restarted) -> _Fitted:
         sigma = np.sqrt(np.clip(np.diag(cov_rob), 0, None)) / prob.dxdv(z)
         with np.errstate(divide="ignore"):
             shape = shape_check(prob.costs, z, Hinv, sigma, prob.vbounds, list(prob.space.names), to_x=prob.x,
-                                curvature=1.0 / np.diag(Hinv), scale=np.ones(z.size))
+                                exact=True, scale=np.ones(z.size))
     info = {"success": bool(sol.success), "message": sol.message, "nfev": int(sol.nfev), "shape": shape,
             **({} if restarted is None else {"mode_restart": restarted}),
             "cost_before": cost_before, "cost_after": float(e @ e), "covariance": cov.tolist(),
