@@ -364,6 +364,8 @@ def _motion_line(rid: str, m: dict) -> str:
         was = f"declared {sp['declared']:.4g} ± {sp['prior_std']:.2g}"
     else:
         was = f"the speed channel's mean {m.get('speed_channel_mean_m_s') or float('nan'):.4f}"
+    if "start_shift_s" not in m:  # a run on an unknown road: its speed alone
+        return f"{rid}: speed {m['speed_m_s']:.4f}{sd} m/s ({was})"
     return (f"{rid}: speed {m['speed_m_s']:.4f}{sd} m/s ({was}), start moved "
             f"{1e3 * m['start_shift_s']:+.2f}{st} ms")
 
@@ -387,6 +389,8 @@ def _roads_table(res) -> str:
                      f"({r['wavelengths_m'][0]:g}-{r['wavelengths_m'][1]:g} m wavelengths)")
     for rid, r in res.roads.items():
         lines += [f"{rid}: {c} {why}" for c, why in (r.get("channels_left_out") or {}).items()]
+    # each road run's speed as fitted with the car (SPEC §13: the rear wheels' delay)
+    lines += [_motion_line(rid, r["motion"]) for rid, r in res.roads.items() if "motion" in r]
     judged = res.assessment("roads")  # each road run's residual at its own road estimate
     if judged.verdict != "not assessed":
         lines.append(("ROAD RUNS FAIL: " if judged.verdict == "fail" else "road runs: ") + judged.reason)

@@ -749,7 +749,7 @@ def fig_budget(result, out_dir):
                  "Each estimate's ±2 std_total in % of its value, cut into its sources in proportion to their share "
                  "of the variance: statistical (the sensor noise), between runs (where the runs disagree beyond their "
                  "noise: model error that differs from run to run, part of std_robust), speed and start (of runs on "
-                 "tracks as built along a speed channel, fitted with the car; part of std_robust) and each declared "
+                 "tracks as built and on unknown roads, fitted with the car; part of std_robust) and each declared "
                  "input, "
                  f"propagated to first order (GUM; docs/uncertainty.md). Here: {what}.")
 
@@ -813,6 +813,19 @@ def damper_section(result, dataset, out_dir) -> list:
             fig_damper_velocities(edges, hists, result.dampers["velocity"], out_dir)]
 
 
+def _road_speed_notes(rid: str, m: dict | None) -> list[str]:
+    """A road run's speed as estimated with the car (SPEC §13, result.json ``roads.<run>.motion``), and the sentence
+    naming it when the data moved it beyond its prior."""
+    if not m:
+        return []
+    sp, sd = m.get("speed") or {}, m.get("speed_std_m_s")
+    was = (f"declared {sp['declared']:.4g} ± {sp['prior_std']:.2g}" if sp.get("declared") is not None
+           else "the speed channel's mean started it")
+    line = (f"{rid}: speed {m['speed_m_s']:.4f}" + (f" ± {sd:.2g}" if sd else "")
+            + f" m/s, estimated with the car ({was})")
+    return [line] + [f"SET-UP: {n}" for n in m.get("named", [])]
+
+
 def road_section(result, out_dir) -> dict:
     """Template context of the unknown-road runs (SPEC §9): their rows, figures and wavelength band."""
     road_figs, road_rows, road_notes = [], [], []
@@ -820,6 +833,7 @@ def road_section(result, out_dir) -> dict:
         road_rows.append({"run": rid, "cls": rec["iso8608_class"], "gd": rec["gd_n0"], "speed": rec["speed"],
                           "file": rec["file"]})
         road_notes += [f"{rid}: {c} {why}" for c, why in (rec.get("channels_left_out") or {}).items()]
+        road_notes += _road_speed_notes(rid, rec.get("motion"))
         if result.road_profiles and rid in result.road_profiles:
             x, z = result.road_profiles[rid]
             road_figs.append(fig_road(rid, x, z, rec, out_dir))

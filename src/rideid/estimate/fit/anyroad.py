@@ -136,6 +136,11 @@ class _Problem:
         """The indices of the blocks of class ``kind``."""
         return [k for k, b in enumerate(self.parts) if isinstance(b, kind)]
 
+    def moving(self) -> list[int]:
+        """The indices of the blocks with motion unknowns (SPEC §13): each track as built (its speed and start) and
+        each unknown road (its speed), in block order."""
+        return [k for k, b in enumerate(self.parts) if getattr(b, "n_motion", 0)]
+
     def x(self, v):
         v = np.asarray(v, dtype=float)
         return np.where(self.log, np.exp(v), v * self.span)
@@ -258,18 +263,28 @@ class _Problem:
 
 
 def _motion_block(prob, w, d: int):
-    """Where each track block's motion unknowns sit in the joint vector ``w`` (the car's ``d`` first): block
-    index -> ``w``'s slice of its (speed, start)."""
-    return {k: w[d + 2 * j:d + 2 * j + 2] for j, k in enumerate(prob.of(TrackBlock))}
+    """Where each moving block's motion unknowns sit in the joint vector ``w`` (the car's ``d`` first): block
+    index -> ``w``'s slice of its unknowns (a track as built: speed, start; an unknown road: speed)."""
+    return {k: w[a:b] for k, (a, b) in _motion_slices(prob, d).items()}
+
+
+def _motion_slices(prob, d: int) -> dict:
+    """Block index -> ``(first, end)`` of its motion unknowns in the joint vector (the car's ``d`` first)."""
+    out, a = {}, d
+    for k in prob.moving():
+        out[k] = (a, a + prob.parts[k].n_motion)
+        a += prob.parts[k].n_motion
+    return out
 
 
 @stage("joint solve of car and motion")
 def _joint_solve(prob, z, ds, max_nfev: int):
     """Least squares of the car ``z`` (v units) together with the speed and the start of each run on a track as
     built (each :class:`rideid.estimate.problem.blocks.TrackBlock` of ``prob``: the drawing moved by
-    :meth:`~rideid.estimate.problem.blocks.TrackBlock.moved`, its unevenness prior as it is), each set-up value's
-    prior (SPEC §13) a residual block of the same solve, weighted by its std against the run's own residual level.
-    Without a track as built: the car alone.
+    :meth:`~rideid.estimate.problem.blocks.TrackBlock.moved`, its unevenness prior as it is) and the speed of each
+    run on an unknown road (:class:`rideid.estimate.problem.blocks.RoadBlock`: the rear wheels' delay), each set-up
+    value's prior (SPEC §13) a residual block of the same solve, weighted by its std against the run's own residual
+    level in the problem (the block's weight times its RMS).
 
     Placed by :meth:`rideid.estimate.problem.blocks.TrackBlock.aligned` at one car and then held, a run's speed
     follows that car, and the car the speed: on the all-realities case without an engine (seed 5, model base) the speeds
@@ -278,9 +293,9 @@ def _joint_solve(prob, z, ds, max_nfev: int):
     docs/tracks-as-built.md). Returns the solution (``x``: the car) and the problem on the moved blocks (their
     ``inputs`` tabulated at the new speed and start, their records the solved speed and shift)."""
     d = z.size
-    keys = prob.of(TrackBlock)
+    keys = prob.moving()
     P0 = prob.car(z)
-    weights = {k: prob.parts[k].level(P0, prob.geom) for k in keys}
+    weights = {k: prob.scale[k] * prob.parts[k].level(P0, prob.geom) for k in keys}
 
     def placed(w):
         parts = list(prob.parts)
@@ -292,10 +307,10 @@ def _joint_solve(prob, z, ds, max_nfev: int):
         rows = [prob.parts[k].prior_rows(p, weights[k]) for k, p in _motion_block(prob, w, d).items()]
         return np.concatenate([placed(w)(w[:d])] + rows)
 
-    q = 2 * len(keys)
+    q = sum(prob.parts[k].n_motion for k in keys)
     lo = np.concatenate([prob.vbounds[0], np.full(q, -defaults["anyroad.joint_motion_bound"])])
     hi = np.concatenate([prob.vbounds[1], np.full(q, defaults["anyroad.joint_motion_bound"])])
-    steps = np.concatenate([np.full(d, 1e-5), np.tile(defaults["asbuilt.motion_jacobian_steps"], len(keys))])
+    steps = np.concatenate([np.full(d, 1e-5)] + [np.asarray(prob.parts[k].motion_steps, dtype=float) for k in keys])
     sol = least_squares(fun, np.concatenate([z, np.zeros(q)]), bounds=(lo, hi), method="trf", diff_step=steps,
                         max_nfev=max_nfev)
     parts = list(placed(sol.x).parts)
@@ -315,20 +330,23 @@ def _with_motion(prob, z, H, Ja, S, s2, ds):
     the meat the runs' white meat over both (the priors' rows as independent observations of the same level); the
     car's block of the inverse is the car's covariance with the motion marginalised.
 
-    Returns the white and robust covariances (car's parameters, x units) and per track block index
-    ``{"speed_std_m_s", "start_shift_std_s"}``."""
+    The speed of each run on an unknown road (:class:`rideid.estimate.problem.blocks.RoadBlock`) joins the same
+    way, one column (its residuals are weighted by the block's scale, as the problem's).
+
+    Returns the white and robust covariances (car's parameters, x units) and per moving block index
+    ``{"speed_std_m_s"}`` and, on a track as built, ``"start_shift_std_s"``."""
     n = Ja.shape[1]
-    keys = prob.of(TrackBlock)
     offs = np.concatenate([[0], np.cumsum(prob.sizes)])
     P = prob.car(z)
-    q = 2 * len(keys)
+    where = {k: (a - n, b - n) for k, (a, b) in _motion_slices(prob, n).items()}
+    q = sum(b - a for a, b in where.values())
     Jm = np.zeros((Ja.shape[0], q))
     Jp = np.zeros((0, q))
-    for j, k in enumerate(keys):
-        Jm[offs[k]:offs[k + 1], 2 * j:2 * j + 2] = prob.parts[k].motion_jacobian(P, prob.geom, ds)
+    for k, (a, b) in where.items():
+        Jm[offs[k]:offs[k + 1], a:b] = prob.scale[k] * prob.parts[k].motion_jacobian(P, prob.geom, ds)
         pj = prob.parts[k].prior_jacobian(float(np.sqrt(s2)))
         rows = np.zeros((pj.shape[0], q))
-        rows[:, 2 * j:2 * j + 2] = pj
+        rows[:, a:b] = pj
         Jp = np.vstack([Jp, rows])
     cross = Ja.T @ Jm
     prior_info = Jp.T @ Jp
@@ -342,10 +360,11 @@ def _with_motion(prob, z, H, Ja, S, s2, ds):
                                                      [np.zeros((q, n)), prior_info]]))) @ Hinv @ D)
     rob = D @ Hinv @ Sf @ Hinv @ D * (m / max(m - n - q, 1))
     out = {}
-    for j, k in enumerate(keys):
-        a = 2 * j + n
-        out[k] = {"speed_std_m_s": float(prob.parts[k].tr.rr.speed * np.sqrt(max(rob[a, a], 0.0))),
-                  "start_shift_std_s": float(np.sqrt(max(rob[a + 1, a + 1], 0.0)))}
+    for k, (a, b) in where.items():
+        sd = np.sqrt(np.clip(np.diag(rob)[n + a:n + b], 0.0, None))
+        out[k] = {"speed_std_m_s": float(prob.parts[k].rr.speed * sd[0])}
+        if b - a > 1:
+            out[k]["start_shift_std_s"] = float(sd[1])
     return cov[:n, :n], rob[:n, :n], out
 
 
@@ -675,7 +694,8 @@ def _plan(ds, model, start_result, tracks: str, polish: bool, as_built_mode: str
                             f"fit the linear model, or {' and '.join(bad)} on known tracks only")
     refuse_unsupported_groups(ext, "model")
     space = ParameterSpace(ds.known, ds.geometry, ds.manifest.bounds, extensions=ext)
-    roads = [RoadBlock(rr) for rr in prepare_road_runs(ds, ext)]
+    # SPEC §13: each road run's speed estimated with the car, the declared one its prior (none along a speed channel)
+    roads = [RoadBlock.of(rr, _road_prior(ds, rr.run_id), ds.geometry) for rr in prepare_road_runs(ds, ext)]
     ab_list, skipped = as_built_runs(ds, ext, tracks if polish else "as-drawn")
     # every run on a track as built: its constant speed and its start fitted with the car (SPEC §13: a declared
     # speed and a given start are priors of them; along a speed channel the channel's mean starts the speed)
@@ -685,6 +705,15 @@ def _plan(ds, model, start_result, tracks: str, polish: bool, as_built_mode: str
     ab_ids = {r.id for r in ab_list}
     return _Plan(ext, model_block, space, roads, blocks, [r for r in track_runs if r.id not in ab_ids], track_runs,
                  skipped)
+
+
+def _road_prior(ds, run_id: str):
+    """The :class:`rideid.estimate.problem.asbuilt.MotionPrior` of an unknown-road run: its declared speed with its
+    std or the default width (none along a speed or distance channel, whose mean starts it), no start."""
+    run = next(r for r in ds.runs if r.id == run_id)
+    rd = ds.data[run_id]
+    speed = None if getattr(rd, "distance", None) is not None else run.speed_prior()
+    return asbuilt.MotionPrior(speed=speed, start=None)
 
 
 def _start(ds, plan, gen, population, generations, polish, callback, simulator, start_result, t0):
@@ -703,8 +732,9 @@ def _start(ds, plan, gen, population, generations, polish, callback, simulator, 
 
 
 def _replaced(prob, fn) -> _Problem:
-    """``prob`` with each track block ``b`` replaced by ``fn(b)`` (on parallel threads)."""
-    keys = prob.of(TrackBlock)
+    """``prob`` with each moving block ``b`` (a track as built, an unknown road) replaced by ``fn(b)`` (on parallel
+    threads)."""
+    keys = prob.moving()
     parts = list(prob.parts)
     for k, b in zip(keys, thread_map(lambda k: fn(prob.parts[k]), keys, "rideid-priors")):
         parts[k] = b
@@ -712,7 +742,8 @@ def _replaced(prob, fn) -> _Problem:
 
 
 def _realigned(prob, P, ds, mode: str) -> _Problem:
-    """Each track block placed at the car ``P`` in ``mode`` and its levels estimated there."""
+    """Each track block placed at the car ``P`` in ``mode`` and its levels estimated there; each unknown road's
+    speed scanned there (:meth:`rideid.estimate.problem.blocks.RoadBlock.aligned`)."""
     return _replaced(prob, lambda b: b.aligned(P, prob.geom, ds, mode).with_prior(P, prob.geom))
 
 
@@ -766,14 +797,27 @@ class _Fitted:
 
 
 def _with_records(prob, motion_std: dict, ds) -> _Problem:
-    """The track blocks with their motion's std (``motion_std``: block index -> stds) and their result.json
-    records (:func:`motion_record`)."""
+    """The moving blocks with their motion's std (``motion_std``: block index -> stds) and their result.json
+    records (:func:`motion_record`, :func:`road_motion_record`)."""
     parts = list(prob.parts)
     for k, sd in motion_std.items():
         b = parts[k]
+        if isinstance(b, RoadBlock):
+            parts[k] = replace(b, record=road_motion_record(dict(b.record, **sd), b.prior, b.run_id))
+            continue
         read = float(getattr(ds.measured.get(b.run_id), "start", 0.0) or 0.0)
         parts[k] = replace(b, record=motion_record(dict(b.record, **sd, start_read_s=read), b.prior, b.tr))
     return prob.with_blocks(parts)
+
+
+def road_motion_record(fitted: dict, prior, run_id: str) -> dict:
+    """An unknown-road run's ``motion`` record (SPEC §13): ``speed`` as :func:`motion_record` gives it (a road run
+    has no start to place), ``named`` the sentence naming a speed the data moved beyond setting
+    ``anyroad.motion_named`` prior std, and ``speed_m_s``, ``speed_std_m_s``."""
+    v, sv = float(fitted["speed_m_s"]), fitted.get("speed_std_m_s")
+    pr = None if prior is None else prior.speed
+    return {"speed_m_s": v, "speed_std_m_s": sv, "speed": _entry(v, sv, pr, "m/s"),
+            "named": _named(run_id, "speed", v, sv, pr)}
 
 
 @stage("error bars")
@@ -794,7 +838,7 @@ def _error_bars(prob, sol, ds, cost_before: float, restarted) -> _Fitted:
         S += b.meat(Ja[offs[k]:offs[k + 1]], e[offs[k]:offs[k + 1]], s2)
     cov_rob = D @ Hinv @ S @ Hinv @ D * (m / max(m - n, 1))
     cov_fixed = None
-    if prob.of(TrackBlock):  # the speed and start of each run: nuisances of the same sandwich
+    if prob.moving():  # the speed (and start) of each run: nuisances of the same sandwich
         cov_fixed = cov_rob  # the motion held: for the budget's share
         cov, cov_rob, motion_std = _with_motion(prob, z, H, Ja, S, s2, ds)
         prob = _with_records(prob, motion_std, ds)
@@ -829,18 +873,27 @@ def _details(space, x, P, fitted) -> tuple[dict, object]:
     return details, robust
 
 
+#: what a road run's motion record says (result.json ``roads.<run>.motion.note``)
+_ROAD_MOTION_NOTE = ("the run's speed estimated with the car (SPEC §13): it sets the rear wheels' delay "
+                     "wheelbase / speed, which the road fit reads from the front and rear wheels' agreement; the "
+                     "declared speed is its prior (none along a speed channel); its std is in the parameters' "
+                     "std_robust (the budget's 'speed and start')")
+
+
 def _road_records(ds, P, geom, roads) -> tuple[dict, dict, dict, list]:
     """Each unknown road's record (result.json ``roads``: its file, ISO 8608 class, fit band), its profile, the
     fitted channels and its error (:func:`road_run_error`)."""
     out, profiles, response = {}, {}, {}
     lam, band = defaults["roadfit.road_wavelengths"], defaults["roadfit.band"]
-    for rr in (b.rr for b in roads):
+    for b in roads:
+        rr = b.rr
         sol_r = roadfit.solve(P, geom, rr)
         xr, zr = roadfit.road(P, geom, rr, sol_r)
         cls, gd = iso8608_class(xr, zr, n_band=(1 / lam[1], 1 / lam[0]))
         out[rr.run_id] = {
             "file": f"road/{rr.run_id}.csv", "iso8608_class": cls, "gd_n0": float(gd),
             "gd_n0_unit": "m^3", "speed": rr.speed, "fit_band_hz": [float(band[0]), float(min(band[1], 0.45 * rr.fs))],
+            **({"motion": dict(b.record, note=_ROAD_MOTION_NOTE)} if "speed" in b.record else {}),
             "wavelengths_m": list(defaults["roadfit.road_wavelengths"]),
             "note": (f"the road's content at wavelengths {lam[0]}-{lam[1]} m; the first and last {lam[1]:.0f} m carry "
                      "the record's ends and are less certain; adequacy not assessed on this run")}
@@ -1048,15 +1101,17 @@ def _identify_any_road(ds, *, rng=None, seed=None, population=None, generations=
     x = fitted.prob.x(fitted.z)
     P = plan.space.full(x[None])[0]
     details, robust = _details(plan.space, x, P, fitted)
-    roads, profiles, response, errors = _road_records(ds, P, geom, plan.roads)
+    road_blocks = [fitted.prob.parts[k] for k in fitted.prob.of(RoadBlock)]  # each at its estimated speed
+    roads, profiles, response, errors = _road_records(ds, P, geom, road_blocks)
     response_t, errors_t, checked = _checked(ds, P, geom, x, fitted.prob)
     blocks = [fitted.prob.parts[k] for k in fitted.prob.of(TrackBlock)]
     tracks_block, motion = _tracks_block(ds, blocks, plan.skipped, P, geom) if blocks else (None, {})
+    motion = {**{b.run_id: b.record for b in road_blocks if "speed" in b.record}, **motion}
     adequacy, odd = (_verdict(checked, plan.ext, list(roads), [b.run_id for b in blocks], tracks_block or {})
                      if assess and checked else (None, []))
     if assess and polish:  # every run assessed: the road runs by their residual at their own road estimate
-        adequacy = judge_road_runs(adequacy, roads, [b.rr for b in plan.roads],
-                                   {b.rr.run_id: ds.data[b.rr.run_id].matrix() for b in plan.roads}, response)
+        adequacy = judge_road_runs(adequacy, roads, [b.rr for b in road_blocks],
+                                   {b.rr.run_id: ds.data[b.rr.run_id].matrix() for b in road_blocks}, response)
     adequacy = _carry_sensor_hints(adequacy, start_result)
     road_hints, hints_note = _road_hints(ds, P, geom, fitted.prob, adequacy, assess, polish)
     if road_hints and adequacy is None:  # unknown roads alone: no residual verdict, but the sensors' is one

@@ -187,6 +187,10 @@ class RoadRun:
         :class:`rideid.model.sensors.AnalogFilter`); empty: no channel filtered (:func:`with_sensors`).
     clip : (m, 2) int
         The clipped samples freed as unknowns (module docstring): position in ``cols``, sample index.
+    lead : int or None
+        The rear lead-in unknowns per side when held (a run whose speed is estimated: the count fixed for every
+        speed the fit may try, so the cost does not jump where ``tau fs`` crosses a whole sample); None: from
+        ``tau`` (:attr:`lead_in`).
     """
 
     run_id: str
@@ -203,6 +207,7 @@ class RoadRun:
     left_out: dict = field(default_factory=dict)
     sensors: tuple = ()
     clip: np.ndarray = field(default_factory=lambda: np.zeros((0, 2), dtype=int))
+    lead: int | None = None
 
     @property
     def h(self) -> float:
@@ -213,7 +218,9 @@ class RoadRun:
 
     @property
     def lead_in(self) -> int:
-        """Rear lead-in unknowns per side (samples ``0 .. D-1``)."""
+        """Rear lead-in unknowns per side (samples ``0 .. D-1``): :attr:`lead` when held, else enough for ``tau``."""
+        if self.lead is not None:
+            return self.lead
         return int(np.floor(self.tau * self.fs)) + defaults["roadfit.delay_order"] + 2
 
 
