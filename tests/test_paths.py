@@ -40,7 +40,10 @@ rate, and the rate of a road interpolated linearly between samples jumps at ever
 meet between the front wheels' samples (tests/test_roadfit.py: the true car then fits to 1e-6 of the signal, not
 1e-9). The damper's force is a few per cent of the tire's, so that texture moves it: by 1.4 % on the generated
 roads (rideid simulate's 1 cm grid); on the moving path's profile by 2.7 % on a 1 cm grid, by 0.08 % on the
-2.5 mm grid it is written on (the rest of the car within 0.04 % either way).
+2.5 mm grid it is written on (the rest of the car within 0.04 % either way). With each road run's speed estimated
+(SPEC §13, docs/any-road.md#a-road-runs-speed) the front tire damper and the rear wheels' delay trade off on these
+6 s runs: on the moving path c_tf -0.28 % at std_robust 1.5 % (0.25 % with the speed held), the speeds within
+1e-5 of the truth, so the moving path takes the same tolerance.
 
 Cost (2 cores shared with other work, pytest --durations): the default part (the SPEC CSV cells, the refusals on
 unknown roads, the polish's regression test) about 28 s; the slow part CI runs (logger files, one road fit per
@@ -228,7 +231,7 @@ def tolerance(name: str, group: str, path: str) -> float:
     """The tolerance of one parameter (module docstring)."""
     if name.startswith("F_") or (group == "damper_curves" and name in ("c_sf", "c_sr")):
         return KNOT_TOL  # the knot forces and the mean slopes derived from them
-    if name in ("c_tf", "c_tr") and path == "unknown":
+    if name in ("c_tf", "c_tr") and path in ("unknown", "moving"):
         return TIRE_DAMPING_ROAD_TOL
     if name in POWERTRAIN_NAMES and path in ("moving", "unknown"):
         return POWERTRAIN_ROAD_TOL

@@ -415,14 +415,16 @@ def caveats(adequacy: dict | None) -> list[str]:
 
 
 def setup_slips(findings) -> list[dict]:
-    """The set-up values the data contradicted at load: a warning of the ``speed`` check (a declared speed more than
-    3 of its prior's std from the speed the lags show), one ``{"run", "declared", "speed"}`` per run (m/s; None
-    where the finding has no fix). ``findings``: :class:`rideid.data.checks.Finding` objects or their dicts
-    (result.json ``checks``)."""
+    """The declared speeds the data contradicted: a warning of the ``speed`` check at load (a declared speed more
+    than 3 of its prior's std from the speed the lags show) or of the ``motion`` check on a speed (the speed
+    estimated with the car beyond 3 prior std: a track as built, an unknown road; rideid.estimate.fit.anyroad), one
+    ``{"run", "declared", "speed"}`` per run (m/s; None where the finding has no fix). ``findings``:
+    :class:`rideid.data.checks.Finding` objects or their dicts (result.json ``checks``)."""
     out = []
     for f in findings or ():
         f = f.to_dict() if hasattr(f, "to_dict") else f
-        if f.get("check") == "speed" and f.get("severity") == "warning" and f.get("run"):
+        speed = f.get("check") == "speed" or (f.get("check") == "motion" and f.get("channel") == "speed")
+        if speed and f.get("severity") == "warning" and f.get("run") and f["run"] not in {o["run"] for o in out}:
             fix = f.get("fix") or {}
             out.append({"run": f["run"], "declared": fix.get("declared"),
                         "speed": fix.get("speed") if "declared" in fix else None})

@@ -308,8 +308,8 @@ def _joint_solve(prob, z, ds, max_nfev: int):
         return np.concatenate([placed(w)(w[:d])] + rows)
 
     q = sum(prob.parts[k].n_motion for k in keys)
-    lo = np.concatenate([prob.vbounds[0], np.full(q, -defaults["anyroad.joint_motion_bound"])])
-    hi = np.concatenate([prob.vbounds[1], np.full(q, defaults["anyroad.joint_motion_bound"])])
+    reach = np.concatenate([np.full(prob.parts[k].n_motion, prob.parts[k].motion_bound) for k in keys] or [[]])
+    lo, hi = np.concatenate([prob.vbounds[0], -reach]), np.concatenate([prob.vbounds[1], reach])
     steps = np.concatenate([np.full(d, 1e-5)] + [np.asarray(prob.parts[k].motion_steps, dtype=float) for k in keys])
     sol = least_squares(fun, np.concatenate([z, np.zeros(q)]), bounds=(lo, hi), method="trf", diff_step=steps,
                         max_nfev=max_nfev)
@@ -474,8 +474,12 @@ def motion_findings(motion: dict) -> list[dict]:
         return next((k for k, w in (("speed", "declared speed"), ("start", "declared start"), ("size", "drawn size"))
                      if w in m), "speed")
 
+    def fix(rec, m):  # a named speed: the declared value and the data's (rideid.estimate.assess.adequacy.setup_slips)
+        sp = rec.get("speed") or {}
+        return {"fix": {"declared": sp["declared"], "speed": sp["estimate"]}} if what(m) == "speed" and sp else {}
+
     return [{"severity": "warning", "check": "motion", "message": m + ": estimated with the car (SPEC §13); check "
-             "the run's set-up", "run": rid, "channel": what(m)}
+             "the run's set-up", "run": rid, "channel": what(m), **fix(rec, m)}
             for rid, rec in motion.items() for m in rec.get("named", [])]
 
 

@@ -91,6 +91,12 @@ class _OneRun:
         ``asbuilt.motion_jacobian_steps``: the speed's, the start's)."""
         return tuple(defaults["asbuilt.motion_jacobian_steps"][:self.n_motion])
 
+    @property
+    def motion_bound(self) -> float:
+        """How far (setting ``asbuilt.motion_scale`` units, either way) the joint solve may move the motion: setting
+        ``anyroad.joint_motion_bound``."""
+        return float(defaults["anyroad.joint_motion_bound"])
+
 
 @dataclass(frozen=True)
 class RoadBlock(_OneRun):
@@ -115,10 +121,22 @@ class RoadBlock(_OneRun):
     @classmethod
     def of(cls, rr: roadfit.RoadRun, prior: asbuilt.MotionPrior | None, geom) -> RoadBlock:
         """The block of ``rr`` with its rear lead-in unknowns held at the count the slowest speed the joint solve
-        may try needs (setting ``anyroad.joint_motion_bound``), so its cost is smooth in the speed."""
-        slowest = rr.speed * (1.0 - defaults["anyroad.joint_motion_bound"] * defaults["asbuilt.motion_scale"][0])
-        lead = int(np.floor(geom.wheelbase / max(slowest, 1e-9) * rr.fs)) + defaults["roadfit.delay_order"] + 2
-        return cls(replace(rr, lead=max(lead, rr.lead_in)), prior, {"speed_m_s": float(rr.speed)})
+        may try needs (:attr:`motion_bound`), so its cost is smooth in the speed."""
+        b = cls(rr, prior, {"speed_m_s": float(rr.speed)})
+        slowest = rr.speed * (1.0 - min(b.motion_bound * defaults["asbuilt.motion_scale"][0], 0.5))
+        lead = int(np.floor(geom.wheelbase / slowest * rr.fs)) + defaults["roadfit.delay_order"] + 2
+        return replace(b, rr=replace(rr, lead=max(lead, rr.lead_in)))
+
+    @property
+    def motion_bound(self) -> float:
+        """How far the speed may move (setting ``asbuilt.motion_scale`` units, either way): setting
+        ``anyroad.joint_motion_bound``, or four prior std where the declared speed is wider (a speedometer's
+        ``speed = { value = 11.0, std = 0.4 }``)."""
+        bound = float(defaults["anyroad.joint_motion_bound"])
+        if self.prior is None or self.prior.speed is None:
+            return bound
+        v, sd = self.prior.speed[:2]
+        return max(bound, 4.0 * sd / (v * defaults["asbuilt.motion_scale"][0]))
 
     def residuals(self, x, P, geom) -> np.ndarray:
         return roadfit.residuals(P, geom, self.rr)
@@ -129,8 +147,8 @@ class RoadBlock(_OneRun):
     @stage("road speed alignment")
     def aligned(self, P, geom, ds, mode: str = "prior") -> RoadBlock:
         """The block at the speed that minimises its cost at the car ``P`` with its declared speed's row (weighed
-        at its own residual level, as the joint solve weighs it): a scan over the joint solve's range (setting
-        ``anyroad.joint_motion_bound``) at setting ``anyroad.road_speed_scan`` steps, then a bounded Brent
+        at its own residual level, as the joint solve weighs it): a scan over the joint solve's range
+        (:attr:`motion_bound`) at setting ``anyroad.road_speed_scan`` steps, then a bounded Brent
         search between the best point's neighbours. The cost is a narrow valley in the speed (the delay's phase
         over the fit band): on the van's 50 km/h run typed 1 % fast, at the car fitted with it, the cost is 2.2e6
         at the declared speed, 2.5e4 at the true one and 5.8e5 half-way, and the joint solve's trust region
@@ -144,7 +162,7 @@ class RoadBlock(_OneRun):
             return (float(np.sum(self.moved(ds, [p]).residuals(None, P, geom) ** 2))
                     + float(np.sum(self.prior_rows([p], weight) ** 2)))
 
-        bound, step = defaults["anyroad.joint_motion_bound"], defaults["anyroad.road_speed_scan"]
+        bound, step = self.motion_bound, defaults["anyroad.road_speed_scan"]
         grid = np.arange(-bound, bound + 0.5 * step, step)
         costs = [cost(p) for p in grid]
         j = int(np.argmin(costs))
