@@ -190,13 +190,13 @@ def test_the_plan_has_a_block_per_nuisance():
     tracks = {"W": {"method": "as built: the drawing times an amplitude factor plus unevenness whose spectrum ...",
                     "runs": {"w1": {"amplitude_factor": 1.02, "motion": {"speed_m_s": 10.0}}, "w2": {"fitted": "no"}}},
               "H": {"rejected": "implausible", "runs": {"h1": {"amplitude_factor": 1.5}}}}
-    plan = plan_of(_res(tracks=tracks, roads={"u1": {"file": "road/u1.csv"}}, starts={"s1": {"value": 1.0},
-                                                                                      "u1": {"value": 0.0}}),
-                   ["w1", "w2", "h1", "s1", "u1"])
+    roads = {"u1": {"file": "road/u1.csv"}, "u2": {"file": "road/u2.csv", "motion": {"speed_m_s": 8.0}}}
+    plan = plan_of(_res(tracks=tracks, roads=roads, starts={"s1": {"value": 1.0}, "u1": {"value": 0.0}}),
+                   ["w1", "w2", "h1", "s1", "u1", "u2"])
     assert [(b.name, b.unknowns, b.runs) for b in plan.blocks] == [
-        ("car", ["k_sf"], ["w1", "w2", "h1", "s1", "u1"]), ("run w1", ["speed", "start"], ["w1"]),
+        ("car", ["k_sf"], ["w1", "w2", "h1", "s1", "u1", "u2"]), ("run w1", ["speed", "start"], ["w1"]),
         ("run s1", ["start"], ["s1"]), ("track W", ["amplitude_factor", "unevenness"], ["w1"]),
-        ("road u1", ["road"], ["u1"])]
+        ("road u1", ["road"], ["u1"]), ("road u2", ["road", "speed"], ["u2"])]
     assert plan.blocks[0].fixed == ["total_mass"]
     assert type(plan).from_dict(plan.to_dict()) == plan
 

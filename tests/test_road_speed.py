@@ -122,3 +122,30 @@ def test_a_road_runs_speed_typed_one_per_cent_off_is_estimated_and_named(slipped
         assert abs(d["value"] - t) < 4 * d["std_total"], (n, d["value"], t, d["std_total"])
     # the speed's share is in the error bars (the budget's "speed and start")
     assert any((d.get("budget") or {}).get("speed and start") for d in doc["parameters"].values())
+
+
+def _road_motion(declared, estimate, std=1e-4):
+    rec = {"speed": {"estimate": estimate, "std": std, "declared": declared}}
+    rec["named"] = ["named"] if abs(estimate - declared) > 3 * 0.003 * declared else []
+    return rec
+
+
+def test_every_road_speed_off_alike_names_the_wheelbase_and_the_sample_rate():
+    """The rear wheels' delay is wheelbase / speed: a wheelbase typed 1 % long reads as every road run's speed 1 %
+    fast. Two runs named alike give one warning naming the wheelbase and the sample rate; runs off by different
+    shares, one run alone, or a run not named, give none; a track run (it has a start) is not counted."""
+    alike = {"B": _road_motion(11.0, 11.11), "C": _road_motion(7.0, 7.07)}
+    (w,) = anyroad.common_speed_offset(alike)
+    assert w["severity"] == "warning" and w["check"] == "motion" and w["run"] is None
+    assert "runs B, C" in w["message"] and "1.00 % faster" in w["message"]
+    assert "wheelbase 1 % too long" in w["message"] and "sample rate (one typed that much too high" in w["message"]
+    (s,) = anyroad.common_speed_offset({"B": _road_motion(11.0, 10.89), "C": _road_motion(7.0, 6.93)})
+    assert "slower" in s["message"] and "too short" in s["message"] and "too low" in s["message"]
+    assert anyroad.common_speed_offset({"B": _road_motion(11.0, 11.11), "C": _road_motion(7.0, 7.14)}) == []
+    assert anyroad.common_speed_offset({"B": _road_motion(11.0, 11.11)}) == []
+    assert anyroad.common_speed_offset({"B": _road_motion(11.0, 11.11), "C": _road_motion(7.0, 7.0)}) == []
+    track = dict(_road_motion(7.0, 7.0707), start={"estimate": 0.0})
+    assert anyroad.common_speed_offset({"B": _road_motion(11.0, 11.11), "T": track}) == []
+    # every such warning is among the motion checks, after the runs' own
+    checks = anyroad.motion_findings(alike)
+    assert [c["run"] for c in checks] == ["B", "C", None]

@@ -436,8 +436,9 @@ def plan_of(res, run_ids=()) -> Plan:
         unknowns = (["road"] if "projected out" in method else
                     ["amplitude_factor", "unevenness"] if "unevenness" in method else ["amplitude_factor"])
         blocks.append(Block(f"track {tid}", "track", unknowns=unknowns, fixed=["drawing"], runs=runs))
-    for rid in roads:
-        blocks.append(Block(f"road {rid}", "road", unknowns=["road"], runs=[rid]))
+    for rid, r in roads.items():  # the road, and the run's speed (the rear wheels' delay) where it was estimated
+        blocks.append(Block(f"road {rid}", "road", unknowns=["road"] + (["speed"] if "motion" in r else []),
+                            runs=[rid]))
     return Plan(blocks)
 
 

@@ -480,7 +480,32 @@ def motion_findings(motion: dict) -> list[dict]:
 
     return [{"severity": "warning", "check": "motion", "message": m + ": estimated with the car (SPEC §13); check "
              "the run's set-up", "run": rid, "channel": what(m), **fix(rec, m)}
-            for rid, rec in motion.items() for m in rec.get("named", [])]
+            for rid, rec in motion.items() for m in rec.get("named", [])] + common_speed_offset(motion)
+
+
+def common_speed_offset(motion: dict) -> list[dict]:
+    """One ``motion`` warning when every unknown-road run with a declared speed (two or more; a record without a
+    ``start``) has its speed named off by the same share (within three of their combined std, or a tenth of the
+    share): the road fit reads the rear wheels' delay ``wheelbase / speed``, so one slip for every run is likelier
+    than one per run: a wheelbase typed that share long (or short) reads as every speed that share fast (slow),
+    and so does a sample rate typed that share high (low). Else none."""
+    roads = {rid: rec for rid, rec in motion.items()
+             if "start" not in rec and (rec.get("speed") or {}).get("declared") is not None}
+    if len(roads) < 2 or not all(rec.get("named") for rec in roads.values()):
+        return []
+    r = np.array([rec["speed"]["estimate"] / rec["speed"]["declared"] - 1.0 for rec in roads.values()])
+    sd = np.array([(rec["speed"]["std"] or 0.0) / rec["speed"]["declared"] for rec in roads.values()])
+    share = float(np.mean(r))
+    if np.max(np.abs(r - share)) > max(3.0 * float(np.sqrt(np.sum(sd ** 2))), 0.1 * abs(share)):
+        return []
+    word = "fast" if share > 0 else "slow"
+    return [{"severity": "warning", "check": "motion", "run": None, "channel": "speed",
+             "message": f"runs {', '.join(roads)}: every road run's speed is {100 * abs(share):.2f} % {word}er than "
+                        f"declared, alike: one slip for all is likelier than one per run; check [vehicle] wheelbase "
+                        f"(a wheelbase {100 * abs(share):.2g} % too {('short', 'long')[share > 0]} reads as every "
+                        f"speed that much {word}er: the road fit reads the rear wheels' delay wheelbase / speed) "
+                        f"and the runs' sample rate (one typed that much too {('low', 'high')[share > 0]} reads the "
+                        "same)"}]
 
 
 @stage("road search")
@@ -735,20 +760,20 @@ def _start(ds, plan, gen, population, generations, polish, callback, simulator, 
             start_result.stop, list(start_result.history))
 
 
-def _replaced(prob, fn) -> _Problem:
-    """``prob`` with each moving block ``b`` (a track as built, an unknown road) replaced by ``fn(b)`` (on parallel
-    threads)."""
-    keys = prob.moving()
+def _replaced(prob, fn, roads: bool = True) -> _Problem:
+    """``prob`` with each moving block ``b`` (a track as built, and with ``roads`` an unknown road) replaced by
+    ``fn(b)`` (on parallel threads)."""
+    keys = [k for k in prob.moving() if roads or not isinstance(prob.parts[k], RoadBlock)]
     parts = list(prob.parts)
     for k, b in zip(keys, thread_map(lambda k: fn(prob.parts[k]), keys, "rideid-priors")):
         parts[k] = b
     return prob.with_blocks(parts)
 
 
-def _realigned(prob, P, ds, mode: str) -> _Problem:
-    """Each track block placed at the car ``P`` in ``mode`` and its levels estimated there; each unknown road's
-    speed scanned there (:meth:`rideid.estimate.problem.blocks.RoadBlock.aligned`)."""
-    return _replaced(prob, lambda b: b.aligned(P, prob.geom, ds, mode).with_prior(P, prob.geom))
+def _realigned(prob, P, ds, mode: str, roads: bool = True) -> _Problem:
+    """Each track block placed at the car ``P`` in ``mode`` and its levels estimated there; with ``roads`` each
+    unknown road's speed scanned there (:meth:`rideid.estimate.problem.blocks.RoadBlock.aligned`)."""
+    return _replaced(prob, lambda b: b.aligned(P, prob.geom, ds, mode).with_prior(P, prob.geom), roads)
 
 
 def _placed(prob, z, ds) -> _Problem:
@@ -763,8 +788,9 @@ def _placed(prob, z, ds) -> _Problem:
 
 
 def _refined(prob, z, ds):
-    """The placements, priors and block weights at the car ``z``, then a short joint solve from it."""
-    return _joint_solve(_realigned(prob, prob.car(z), ds, "prior").reweighted(z), z, ds, 50)
+    """The placements, priors and block weights at the car ``z``, then a short joint solve from it (the roads'
+    speeds, solved with the car already, from where they are)."""
+    return _joint_solve(_realigned(prob, prob.car(z), ds, "prior", roads=False).reweighted(z), z, ds, 50)
 
 
 def _polish(prob, z0, ds):
@@ -773,7 +799,10 @@ def _polish(prob, z0, ds):
     solution, the problem at it, the cost before and the restart's record."""
     prob = _placed(prob, z0, ds).reweighted(z0)
     cost_before = float(np.sum(prob(z0) ** 2))
-    sol = least_squares(prob, z0, bounds=prob.vbounds, method="trf", diff_step=1e-5, max_nfev=100)
+    if prob.of(RoadBlock):  # the roads' speeds with the car from the start: they trade off with the wheels
+        sol, prob = _joint_solve(prob, z0, ds, 100)
+    else:
+        sol = least_squares(prob, z0, bounds=prob.vbounds, method="trf", diff_step=1e-5, max_nfev=100)
     sol, prob = _refined(prob, sol.x, ds)
     restart = mode_restart(prob.space, prob.x(sol.x))
     if restart is None:
