@@ -357,7 +357,9 @@ def _tracks_table(res) -> str:
 def _motion_line(rid: str, m: dict) -> str:
     """One run's speed and start as fitted (SPEC §13: the estimate, its std, the declared value)."""
     # the stds to two significant digits: a small one is not printed as zero
-    sd = "" if m.get("speed_std_m_s") is None else f" ± {m['speed_std_m_s']:.2g}"
+    sd = m.get("speed_std_m_s")
+    sd = ("" if sd is None else f" ± {sd:.2g}" if sd > 0
+          else " (its std not determined: the fit's curvature there is nil)")
     st = "" if m.get("start_shift_std_s") is None else f" ± {1e3 * m['start_shift_std_s']:.2g}"
     sp = m.get("speed") or {}
     if sp.get("declared") is not None:
