@@ -386,10 +386,10 @@ def test_the_budget_keys_are_documented():
 def test_the_motion_line_never_prints_a_small_std_as_zero():
     """A run's fitted speed and start on the terminal (SPEC §13): the stds to two significant digits, so a speed
     known to 3e-5 m/s does not read '± 0.0000' (as the knees once read '± 0.000')."""
-    from rideid.cli import _motion_line
+    from rideid import motion_line  # the terminal's (rideid.cli) and the report's line
 
-    line = _motion_line("T_LL", {"speed_m_s": 3.00001, "speed_std_m_s": 3.2e-5, "start_shift_s": -2e-5,
-                                 "start_shift_std_s": 6.1e-5, "speed": {"declared": 3.0, "prior_std": 0.009}})
+    line = motion_line("T_LL", {"speed_m_s": 3.00001, "speed_std_m_s": 3.2e-5, "start_shift_s": -2e-5,
+                                "start_shift_std_s": 6.1e-5, "speed": {"declared": 3.0, "prior_std": 0.009}})
     assert "± 3.2e-05 m/s" in line and "± 0.061 ms" in line and "declared 3 ± 0.009" in line
     assert "0.0000" not in line
 

@@ -71,6 +71,7 @@ _COMMAND_LINE = _by_name({
     "adequacy_caveats": ("rideid.estimate.assess.adequacy", "caveats"),
     "error_bar_caveat": ("rideid.estimate.assess.shape", "caveat"),
     "error_bar_note": ("rideid.estimate.assess.shape", "table_note"),
+    "motion_line": ("rideid.estimate.records", "motion_line"),
     "write_sensitivity_csvs": ("rideid.report.sensitivity_files", "write_csvs"),
     "complete_result": ("rideid.estimate.assess.responses", "complete"),
     "sensitivity_tables_markdown": ("rideid.report.sensitivity_files", "tables_markdown"),

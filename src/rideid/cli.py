@@ -344,7 +344,7 @@ def _tracks_table(res) -> str:
     moving = [(rid, r["motion"]) for rec in res.tracks.values() for rid, r in rec.get("runs", {}).items()
               if "motion" in r]
     for rid, m in moving:  # each run's speed and start as fitted with the car (SPEC §13)
-        lines.append(_motion_line(rid, m))
+        lines.append(rideid.motion_line(rid, m))
     rejected = next((rec["rejected"] for rec in res.tracks.values() if rec.get("rejected")), None)
     lines.append("tracks as built REJECTED, the estimates are the tracks' as drawn: " + rejected if rejected else
                  "error bars with tracks as built: the white sandwich of their runs (measured right over five seeds, "
@@ -352,24 +352,6 @@ def _tracks_table(res) -> str:
                                                "'speed and start')" if any("speed_std_m_s" in m for _, m in moving)
                                                else ""))
     return "\n".join(lines)
-
-
-def _motion_line(rid: str, m: dict) -> str:
-    """One run's speed and start as fitted (SPEC §13: the estimate, its std, the declared value)."""
-    # the stds to two significant digits: a small one is not printed as zero
-    sd = m.get("speed_std_m_s")
-    sd = ("" if sd is None else f" ± {sd:.2g}" if sd > 0
-          else " (its std not determined: the fit's curvature there is nil)")
-    st = "" if m.get("start_shift_std_s") is None else f" ± {1e3 * m['start_shift_std_s']:.2g}"
-    sp = m.get("speed") or {}
-    if sp.get("declared") is not None:
-        was = f"declared {sp['declared']:.4g} ± {sp['prior_std']:.2g}"
-    else:
-        was = f"the speed channel's mean {m.get('speed_channel_mean_m_s') or float('nan'):.4f}"
-    if "start_shift_s" not in m:  # a run on an unknown road: its speed alone
-        return f"{rid}: speed {m['speed_m_s']:.4f}{sd} m/s ({was})"
-    return (f"{rid}: speed {m['speed_m_s']:.4f}{sd} m/s ({was}), start moved "
-            f"{1e3 * m['start_shift_s']:+.2f}{st} ms")
 
 
 def _budget_lines(res) -> list[str]:
@@ -392,7 +374,7 @@ def _roads_table(res) -> str:
     for rid, r in res.roads.items():
         lines += [f"{rid}: {c} {why}" for c, why in (r.get("channels_left_out") or {}).items()]
     # each road run's speed as fitted with the car (SPEC §13: the rear wheels' delay)
-    lines += [_motion_line(rid, r["motion"]) for rid, r in res.roads.items() if "motion" in r]
+    lines += [rideid.motion_line(rid, r["motion"]) for rid, r in res.roads.items() if "motion" in r]
     judged = res.assessment("roads")  # each road run's residual at its own road estimate
     if judged.verdict != "not assessed":
         lines.append(("ROAD RUNS FAIL: " if judged.verdict == "fail" else "road runs: ") + judged.reason)

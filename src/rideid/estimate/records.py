@@ -404,6 +404,26 @@ class Plan:
         return cls([Block(**{k: v for k, v in b.items() if k in names}) for b in d.get("blocks") or []])
 
 
+def motion_line(rid: str, m: dict) -> str:
+    """One run's motion as fitted, in one line (SPEC §13: the estimate, its std, the declared value): its speed, and
+    on a track as built its start's move; ``m`` the run's ``motion`` record (result.json
+    ``tracks.<track>.runs.<run>.motion``, ``roads.<run>.motion``). The terminal and the report both say it so."""
+    # the stds to two significant digits: a small one is not printed as zero
+    sd = m.get("speed_std_m_s")
+    sd = ("" if sd is None else f" ± {sd:.2g}" if sd > 0
+          else " (its std not determined: the fit's curvature there is nil)")
+    st = "" if m.get("start_shift_std_s") is None else f" ± {1e3 * m['start_shift_std_s']:.2g}"
+    sp = m.get("speed") or {}
+    if sp.get("declared") is not None:
+        was = f"declared {sp['declared']:.4g} ± {sp['prior_std']:.2g}"
+    else:
+        was = f"the speed channel's mean {m.get('speed_channel_mean_m_s') or float('nan'):.4f}"
+    if "start_shift_s" not in m:  # a run on an unknown road: its speed alone
+        return f"{rid}: speed {m['speed_m_s']:.4f}{sd} m/s ({was})"
+    return (f"{rid}: speed {m['speed_m_s']:.4f}{sd} m/s ({was}), start moved "
+            f"{1e3 * m['start_shift_s']:+.2f}{st} ms")
+
+
 def plan_of(res, run_ids=()) -> Plan:
     """The plan of result ``res`` (its free ``names``, ``details``, ``starts``, ``tracks``, ``roads``);
     ``run_ids``: the dataset's runs, in order."""

@@ -37,6 +37,7 @@ from ..estimate.assess.adequacy import caveats
 from ..estimate.assess.frequency import frequency_response, measured_response
 from ..estimate.assess.shape import caveat as shape_caveat, table_note
 from ..estimate.problem.sensitivity import P2T_STARS, stars
+from ..estimate.records import motion_line
 from .sensitivity_files import heatmap_figure
 from ..model.equations import CHANNELS
 from ..model.params import ALL_NAMES, DESCRIPTIONS
@@ -813,19 +814,6 @@ def damper_section(result, dataset, out_dir) -> list:
             fig_damper_velocities(edges, hists, result.dampers["velocity"], out_dir)]
 
 
-def _road_speed_notes(rid: str, m: dict | None) -> list[str]:
-    """A road run's speed as estimated with the car (SPEC §13, result.json ``roads.<run>.motion``), and the sentence
-    naming it when the data moved it beyond its prior."""
-    if not m:
-        return []
-    sp, sd = m.get("speed") or {}, m.get("speed_std_m_s")
-    was = (f"declared {sp['declared']:.4g} ± {sp['prior_std']:.2g}" if sp.get("declared") is not None
-           else "the speed channel's mean started it")
-    line = (f"{rid}: speed {m['speed_m_s']:.4f}" + (f" ± {sd:.2g}" if sd else "")
-            + f" m/s, estimated with the car ({was})")
-    return [line] + [f"SET-UP: {n}" for n in m.get("named", [])]
-
-
 def road_section(result, out_dir) -> dict:
     """Template context of the unknown-road runs (SPEC §9): their rows, figures and wavelength band."""
     road_figs, road_rows, road_notes = [], [], []
@@ -833,7 +821,8 @@ def road_section(result, out_dir) -> dict:
         road_rows.append({"run": rid, "cls": rec["iso8608_class"], "gd": rec["gd_n0"], "speed": rec["speed"],
                           "file": rec["file"]})
         road_notes += [f"{rid}: {c} {why}" for c, why in (rec.get("channels_left_out") or {}).items()]
-        road_notes += _road_speed_notes(rid, rec.get("motion"))
+        if rec.get("motion"):  # its speed as estimated with the car (SPEC §13), and named beyond its prior
+            road_notes += [motion_line(rid, rec["motion"])] + [f"SET-UP: {n}" for n in rec["motion"].get("named", [])]
         if result.road_profiles and rid in result.road_profiles:
             x, z = result.road_profiles[rid]
             road_figs.append(fig_road(rid, x, z, rec, out_dir))

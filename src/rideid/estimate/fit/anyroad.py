@@ -737,12 +737,9 @@ def _plan(ds, model, start_result, tracks: str, polish: bool, as_built_mode: str
 
 
 def _road_prior(ds, run_id: str):
-    """The :class:`rideid.estimate.problem.asbuilt.MotionPrior` of an unknown-road run: its declared speed with its
-    std or the default width (none along a speed or distance channel, whose mean starts it), no start."""
-    run = next(r for r in ds.runs if r.id == run_id)
-    rd = ds.data[run_id]
-    speed = None if getattr(rd, "distance", None) is not None else run.speed_prior()
-    return asbuilt.MotionPrior(speed=speed, start=None)
+    """The :class:`rideid.estimate.problem.asbuilt.MotionPrior` of an unknown-road run: a track run's speed prior
+    (:func:`rideid.estimate.problem.asbuilt.motion_prior`), no start (a road run has none to place)."""
+    return replace(asbuilt.motion_prior(ds, next(r for r in ds.runs if r.id == run_id)), start=None)
 
 
 def _start(ds, plan, gen, population, generations, polish, callback, simulator, start_result, t0):

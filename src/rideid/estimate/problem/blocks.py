@@ -97,6 +97,32 @@ class _OneRun:
         ``anyroad.joint_motion_bound``."""
         return float(defaults["anyroad.joint_motion_bound"])
 
+    def motion_cost(self, P, geom, ds, weight: float):
+        """``cost(p)``: the block's squared residual at the car ``P`` with its motion moved by ``p`` (:meth:`moved`),
+        plus its set-up priors' rows weighed at ``weight`` (:meth:`prior_rows`): what a placement minimises."""
+        def cost(p):
+            return (float(np.sum(self.moved(ds, p).residuals(None, P, geom) ** 2))
+                    + float(np.sum(self.prior_rows(p, weight) ** 2)))
+        return cost
+
+    def motion_jacobian(self, P, geom, ds) -> np.ndarray:
+        """The Jacobian (m, ``n_motion``) of the block's residuals in its motion (the speed relative, the start s),
+        by central differences of :meth:`moved` at :attr:`motion_steps`: the columns that put the motion's
+        uncertainty into the error bars (rideid.estimate.fit.anyroad's sandwich)."""
+        cols = []
+        for j, h in enumerate(self.motion_steps):
+            p = np.zeros(self.n_motion)
+            p[j] = h
+            d = self.moved(ds, p).residuals(None, P, geom) - self.moved(ds, -p).residuals(None, P, geom)
+            cols.append(d / (2 * h * defaults["asbuilt.motion_scale"][j]))
+        return np.stack(cols, axis=1)
+
+    def prior_jacobian(self, weight: float) -> np.ndarray:
+        """(rows, ``n_motion``): the set-up priors' rows' derivatives in the motion (none without a prior)."""
+        if self.prior is None:
+            return np.zeros((0, self.n_motion))
+        return self.prior.jacobian(self.rr.speed, weight)[:, :self.n_motion]
+
 
 @dataclass(frozen=True)
 class RoadBlock(_OneRun):
@@ -156,11 +182,10 @@ class RoadBlock(_OneRun):
         ("amplitude": their drawing alone) the block stays where it is: it has no drawing to place."""
         if mode == "amplitude":
             return self
-        weight = self.level(P, geom)
+        motion = self.motion_cost(P, geom, ds, self.level(P, geom))
 
         def cost(p):
-            return (float(np.sum(self.moved(ds, [p]).residuals(None, P, geom) ** 2))
-                    + float(np.sum(self.prior_rows([p], weight) ** 2)))
+            return motion([p])
 
         bound, step = self.motion_bound, defaults["anyroad.road_speed_scan"]
         grid = np.arange(-bound, bound + 0.5 * step, step)
@@ -191,18 +216,6 @@ class RoadBlock(_OneRun):
     def prior_rows(self, p, weight: float) -> np.ndarray:
         """The declared speed's row at the motion ``p`` (none along a speed channel)."""
         return np.zeros(0) if self.prior is None else self.prior.rows(self.rr.speed, 0.0, p, weight)
-
-    def motion_jacobian(self, P, geom, ds) -> np.ndarray:
-        """(m, 1): the residuals' derivative in the speed's relative change, by central differences."""
-        h = self.motion_steps[0]
-        d = self.moved(ds, [h]).residuals(None, P, geom) - self.moved(ds, [-h]).residuals(None, P, geom)
-        return (d / (2 * h * defaults["asbuilt.motion_scale"][0]))[:, None]
-
-    def prior_jacobian(self, weight: float) -> np.ndarray:
-        """(rows, 1): the declared speed's row's derivative in the speed's relative change."""
-        if self.prior is None:
-            return np.zeros((0, 1))
-        return self.prior.jacobian(self.rr.speed, weight)[:, :1]
 
 
 @dataclass(frozen=True)
@@ -261,12 +274,8 @@ class TrackBlock(_OneRun):
         the all-realities case of tests/realities_case.py): the drawing as built needs the track's own features to
         place it."""
         base = replace(self, tr=replace(self.tr, mode=mode))
-        weight = base.level(P, geom)  # SPEC §13: the declared speed and start weigh in at the run's own level
-
-        def cost(p):
-            return (float(np.sum(base.moved(ds, p).residuals(None, P, geom) ** 2))
-                    + float(np.sum(base.prior_rows(p, weight) ** 2)))
-
+        # SPEC §13: the declared speed and start weigh in at the run's own level
+        cost = base.motion_cost(P, geom, ds, base.level(P, geom))
         c0 = cost(np.zeros(2))
         steps = defaults["asbuilt.motion_steps"]
         sol = minimize(cost, np.zeros(2), method="Nelder-Mead",
@@ -295,22 +304,6 @@ class TrackBlock(_OneRun):
     def prior_rows(self, p, weight: float) -> np.ndarray:
         """The set-up priors' rows at the motion ``p`` moved from the block as it is placed."""
         return self.prior.rows(self.tr.rr.speed, self.tr.shift, p, weight)
-
-    def motion_jacobian(self, P, geom, ds) -> np.ndarray:
-        """The Jacobian (m, 2) of the block's residuals in its speed (relative) and its start shift (s), by central
-        differences of :meth:`moved`: the columns that put the speed's and the start's uncertainty into the error
-        bars (rideid.estimate.fit.anyroad's sandwich)."""
-        cols = []
-        for j, h in enumerate(defaults["asbuilt.motion_jacobian_steps"]):
-            p = np.zeros(2)
-            p[j] = h
-            d = self.moved(ds, p).residuals(None, P, geom) - self.moved(ds, -p).residuals(None, P, geom)
-            cols.append(d / (2 * h * defaults["asbuilt.motion_scale"][j]))
-        return np.stack(cols, axis=1)
-
-    def prior_jacobian(self, weight: float) -> np.ndarray:
-        """(rows, 2): the priors' rows' derivatives in the speed (relative) and the start shift (s)."""
-        return self.prior.jacobian(self.tr.rr.speed, weight)
 
 
 # -- which block each run gets ---------------------------------------------------------------------------------
