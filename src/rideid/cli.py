@@ -409,8 +409,8 @@ def _candidates_table(model: dict) -> str:
               f"above a rival accepted at this step"
               for s in model.get("screens", ()) if s["passes"] and s.get("fitted") is False]
     if any(c.get("fits_better") is False for c in model["candidates"]):
-        lines.append("fits better: a cost at least (0.5 %)^2 below every candidate it contains; a candidate that "
-                     "does not is not kept, whatever its criterion")
+        rule = model.get("fits_better_rule") or "a cost at least (0.5 %)^2 below every candidate it contains"
+        lines.append(f"fits better: {rule}; a candidate that does not is not kept, whatever its criterion")
     if model.get("as_drawn_choice") is not None and model.get("note"):
         lines.append(model["note"])
     return "\n".join(lines)

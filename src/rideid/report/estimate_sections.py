@@ -107,7 +107,8 @@ def model_rows(res: dict) -> dict | None:
         rows.append({"name": n, "cells": cells})
     return {"chosen": chosen, "criterion": model.get("criterion", ""),
             "curve_criterion": model.get("extension_criterion", model.get("curve_criterion")),
-            "heads": heads, "rows": rows}
+            "heads": heads, "rows": rows, "rule": model.get("fits_better_rule"),
+            "note": model.get("note")}
 
 
 def estimate_context(res: dict) -> dict:

@@ -229,8 +229,14 @@ class _Problem:
         scale (unsprung masses and tires together) the over-statement was a factor
         200 on the built-in SUV's roads (measured): error bars 10-20 times too
         small. The cost is quadratic over ``step`` (checked at 0.25, 0.5 and 1 times
-        a 0.2 % step: 4.0 and 4.0 times per doubling)."""
+        a 0.2 % step: 4.0 and 4.0 times per doubling).
+
+        A parameter within ``step`` of its bound (a bar or a tire damper of nothing, at 0) has its differences
+        taken a step inside: beyond the bound the car is not valid and its cost a penalty, whose second
+        difference made such a rate's error bar 1e-7 N/m (and its Wald statistic, which weighs the model choice's
+        candidates, 1e16 for a bar rate of 0.3 N/m: measured on the built-in car's roads)."""
         d = v.size
+        v = np.clip(v, self.vbounds[0] + step, self.vbounds[1] - step)
         h = np.full(d, step)
         E = np.eye(d) * h
         pairs = [(i, j) for i in range(d) for j in range(i)]
@@ -742,10 +748,17 @@ def _road_prior(ds, run_id: str):
     return replace(asbuilt.motion_prior(ds, next(r for r in ds.runs if r.id == run_id)), start=None)
 
 
-def _start(ds, plan, gen, population, generations, polish, callback, simulator, start_result, t0):
-    """Where the polish starts, and the search's record: ``(x0, nit, nfev, stop, history)``. From the given
+def _start(ds, plan, gen, population, generations, polish, callback, simulator, start_result, t0, start=None):
+    """Where the polish starts, and the search's record: ``(x0, nit, nfev, stop, history)``. A given row of the
+    free parameters (``start``: a candidate of the model choice from its parent's fit); else from the given
     result; else the usual identification of every track run, each track taken as drawn; else (unknown roads
     alone) JADE on the road runs' search cost (:func:`_search`)."""
+    if start is not None:
+        x0 = np.asarray(start, dtype=float)
+        if x0.shape != (len(plan.space.names),):
+            raise ArgumentError(f"start: expected {len(plan.space.names)} values ({', '.join(plan.space.names)}), "
+                                f"got {x0.size}")
+        return x0, 0, 0, "start given", []
     if start_result is None and plan.track_runs:
         start_result = identify_model(ds.subset(plan.track_runs), rng=gen, population=population,
                                       generations=generations, model=list(plan.ext), polish=polish, callback=callback,
@@ -1105,29 +1118,33 @@ def _fresh(ds, plan, start_result, out: _Outcome):
 _RESULTS = {(True, True): _as_drawn_stands, (True, False): _on_start, (False, True): _fresh, (False, False): _fresh}
 
 
-def _fit(prob, z0, ds, polish: bool) -> _Fitted:
-    """The polish and the error bars from ``z0``; unpolished, the start as it is."""
+def _fit(prob, z0, ds, polish: bool, error_bars: bool = True) -> _Fitted:
+    """The polish and the error bars from ``z0``; unpolished, the start as it is; without ``error_bars`` the polish's
+    solution with none (a candidate the model choice only needs the cost of: their true Hessian is most of a road
+    fit's time)."""
+    nan = np.full(len(prob.space.names), np.nan)
     if not polish:
-        nan = np.full(len(prob.space.names), np.nan)
         return _Fitted(z0, prob, None, nan, np.full((nan.size,) * 2, np.nan))
     sol, prob, cost_before, restarted = _polish(prob, z0, ds)
+    if not error_bars:
+        return _Fitted(sol.x, prob, None, nan, np.full((nan.size,) * 2, np.nan), int(sol.nfev) * (nan.size + 1))
     return _error_bars(prob, sol, ds, cost_before, restarted)
 
 
 @stage("roads and tracks as built")
 def _identify_any_road(ds, *, rng=None, seed=None, population=None, generations=None, model=None,
                        polish: bool = True, callback=None, assess: bool = True, simulator=None,
-                       tracks: str = "as-built", start_result=None, as_built_mode: str = "prior",
-                       **_ignored) -> IdentificationResult:
+                       tracks: str = "as-built", start_result=None, as_built_mode: str = "prior", start=None,
+                       error_bars: bool = True, **_ignored) -> IdentificationResult:
     """The pipeline on the problem of ``ds`` (:class:`_Plan`): start, polish, error bars, records, verdict."""
     t0 = time.perf_counter()
     gen, rng_record = make_rng(rng, seed)
     geom = ds.geometry
     plan = _plan(ds, model, start_result, tracks, polish, as_built_mode)
     search = _start(ds, plan, gen, population or DEFAULT_POPULATION, generations or DEFAULT_GENERATIONS, polish,
-                    callback, simulator, start_result, t0)
+                    callback, simulator, start_result, t0, start)
     prob = plan.problem(ds, geom, simulator)
-    fitted = _fit(prob, prob.v(search[0]), ds, polish)
+    fitted = _fit(prob, prob.v(search[0]), ds, polish, error_bars)
     x = fitted.prob.x(fitted.z)
     P = plan.space.full(x[None])[0]
     details, robust = _details(plan.space, x, P, fitted)
