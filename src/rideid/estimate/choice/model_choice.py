@@ -687,7 +687,7 @@ def identify_auto_roads(ds, *, simulator=None, tracks="as-built", rng=None, seed
                                                                    "known, or no polish)", "note": ROADS_NOTE})
     fit_kw = dict(rng=rng, seed=seed, tracks=tracks, **common)
     choice = _RoadChoice(ds, simulator, fit_kw, given={(): base})
-    probe = choice.fit(base, full_key, assess=False, error_bars=False)
+    probe = choice.fit(base, full_key, assess=False, probe=True)
     if choice.gate(full_key, {(): base.cost, full_key: probe.cost}):
         full = identify_any_road(ds, model=list(full_key), start=[probe.parameters[n] for n in probe.names],
                                  simulator=simulator, **fit_kw)
@@ -695,8 +695,8 @@ def identify_auto_roads(ds, *, simulator=None, tracks="as-built", rng=None, seed
     else:  # the full linear model explains nothing the twelve do not: neither can a smaller one
         choice.add((), base, {"wald": None, "k": 0, "criterion": None})
         choice.add(full_key, probe, {"wald": None, "k": sum(len(GROUPS[g]) for g in full_key), "criterion": None,
-                                     "note": "polished without error bars: no materially better fit than the "
-                                             "twelve, so no smaller model was fitted"})
+                                     "note": "one solve from the twelve, no error bars: no materially better "
+                                             "fit than the twelve, so no smaller model was fitted"})
         choice.key, choice.best = (), choice.entries[0]
     res = choice.chosen()
     model = {"extensions": list(choice.key), "selection": "auto",

@@ -1118,16 +1118,19 @@ def _fresh(ds, plan, start_result, out: _Outcome):
 _RESULTS = {(True, True): _as_drawn_stands, (True, False): _on_start, (False, True): _fresh, (False, False): _fresh}
 
 
-def _fit(prob, z0, ds, polish: bool, error_bars: bool = True) -> _Fitted:
-    """The polish and the error bars from ``z0``; unpolished, the start as it is; without ``error_bars`` the polish's
-    solution with none (a candidate the model choice only needs the cost of: their true Hessian is most of a road
-    fit's time)."""
+def _fit(prob, z0, ds, polish: bool, probe: bool = False) -> _Fitted:
+    """The polish and the error bars from ``z0``; unpolished, the start as it is. A ``probe`` (a candidate of the
+    model choice whose cost alone is wanted first): the first joint solve from the placements at the start, no
+    refinement, no error bars (their true Hessian is most of a road fit's time); its cost is then at or above the
+    candidate's least, so a gain it shows is one the candidate has."""
     nan = np.full(len(prob.space.names), np.nan)
     if not polish:
         return _Fitted(z0, prob, None, nan, np.full((nan.size,) * 2, np.nan))
-    sol, prob, cost_before, restarted = _polish(prob, z0, ds)
-    if not error_bars:
+    if probe:
+        prob = _placed(prob, z0, ds).reweighted(z0)
+        sol, prob = _joint_solve(prob, z0, ds, 100)
         return _Fitted(sol.x, prob, None, nan, np.full((nan.size,) * 2, np.nan), int(sol.nfev) * (nan.size + 1))
+    sol, prob, cost_before, restarted = _polish(prob, z0, ds)
     return _error_bars(prob, sol, ds, cost_before, restarted)
 
 
@@ -1135,7 +1138,7 @@ def _fit(prob, z0, ds, polish: bool, error_bars: bool = True) -> _Fitted:
 def _identify_any_road(ds, *, rng=None, seed=None, population=None, generations=None, model=None,
                        polish: bool = True, callback=None, assess: bool = True, simulator=None,
                        tracks: str = "as-built", start_result=None, as_built_mode: str = "prior", start=None,
-                       error_bars: bool = True, **_ignored) -> IdentificationResult:
+                       probe: bool = False, **_ignored) -> IdentificationResult:
     """The pipeline on the problem of ``ds`` (:class:`_Plan`): start, polish, error bars, records, verdict."""
     t0 = time.perf_counter()
     gen, rng_record = make_rng(rng, seed)
@@ -1144,7 +1147,7 @@ def _identify_any_road(ds, *, rng=None, seed=None, population=None, generations=
     search = _start(ds, plan, gen, population or DEFAULT_POPULATION, generations or DEFAULT_GENERATIONS, polish,
                     callback, simulator, start_result, t0, start)
     prob = plan.problem(ds, geom, simulator)
-    fitted = _fit(prob, prob.v(search[0]), ds, polish, error_bars)
+    fitted = _fit(prob, prob.v(search[0]), ds, polish, probe)
     x = fitted.prob.x(fitted.z)
     P = plan.space.full(x[None])[0]
     details, robust = _details(plan.space, x, P, fitted)
