@@ -816,19 +816,22 @@ def damper_section(result, dataset, out_dir) -> list:
 
 def road_section(result, out_dir) -> dict:
     """Template context of the unknown-road runs (SPEC §9): their rows, figures and wavelength band."""
-    road_figs, road_rows, road_notes = [], [], []
+    road_figs, road_rows, road_notes, road_speeds = [], [], [], []
     for rid, rec in (getattr(result, "roads", None) or {}).items():
         road_rows.append({"run": rid, "cls": rec["iso8608_class"], "gd": rec["gd_n0"], "speed": rec["speed"],
                           "file": rec["file"]})
         road_notes += [f"{rid}: {c} {why}" for c, why in (rec.get("channels_left_out") or {}).items()]
-        if rec.get("motion"):  # its speed as estimated with the car (SPEC §13), and named beyond its prior
-            road_notes += [motion_line(rid, rec["motion"])] + [f"SET-UP: {n}" for n in rec["motion"].get("named", [])]
+        if rec.get("motion"):  # its speed as estimated with the car (SPEC §13); named beyond its prior: a SET-UP box
+            road_speeds.append(motion_line(rid, rec["motion"]))
+            road_notes += [f"SET-UP: {n}" for n in rec["motion"].get("named", [])]
         if result.road_profiles and rid in result.road_profiles:
             x, z = result.road_profiles[rid]
             road_figs.append(fig_road(rid, x, z, rec, out_dir))
     band = next(iter((result.roads or {}).values()), {}).get("wavelengths_m", (0.5, 20))
-    return {"road_figures": road_figs, "road_rows": road_rows, "road_notes": road_notes,
-            "road_band": "{:g}-{:g} m".format(*band)}
+    return {"road_figures": road_figs, "road_rows": road_rows, "road_notes": road_notes, "road_speeds": road_speeds,
+            "road_band": "{:g}-{:g} m".format(*band),
+            # rideid.estimate.assess.roads: each road run's residual at its own road judged by its size
+            "road_judged": any("residual" in rec for rec in (getattr(result, "roads", None) or {}).values())}
 
 
 def fit_section(result, dataset, sims) -> dict:

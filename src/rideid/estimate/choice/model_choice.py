@@ -679,32 +679,35 @@ def identify_auto_roads(ds, *, simulator=None, tracks="as-built", rng=None, seed
     t0 = time.perf_counter()
     simulator = simulator or Simulator()
     common = {k: v for k, v in kw.items() if k in ("polish", "population", "generations", "assess")}
-    base = identify_any_road(ds, model=[], rng=rng, seed=seed, callback=callback, simulator=simulator,
+    # a group whose values are all in [known] is in every candidate (as linear_step keys them)
+    known, full_key = _key([g for g in GROUPS if set(GROUPS[g]) <= set(ds.known)]), _key(GROUPS)
+    base = identify_any_road(ds, model=list(known), rng=rng, seed=seed, callback=callback, simulator=simulator,
                              tracks=tracks, **common)
-    full_key = _key([g for g in GROUPS if not set(GROUPS[g]) <= set(ds.known)])
-    if not full_key or not (base.polish or {}).get("covariance_robust"):  # nothing to weigh, or no polish
-        return replace(base, model={"extensions": [], "selection": "auto (the twelve alone: every linear group "
-                                                                   "known, or no polish)", "note": ROADS_NOTE})
+    if known == full_key or not (base.polish or {}).get("covariance_robust"):  # nothing to weigh, or no polish
+        return replace(base, model={"extensions": list(known), "selection": "auto (nothing weighed: every linear "
+                                                                            "group known, or no polish)",
+                                    "note": ROADS_NOTE})
     fit_kw = dict(rng=rng, seed=seed, tracks=tracks, **common)
-    choice = _RoadChoice(ds, simulator, fit_kw, given={(): base})
+    choice = _RoadChoice(ds, simulator, fit_kw, given={known: base})
     probe = choice.fit(base, full_key, assess=False, probe=True)
-    if choice.gate(full_key, {(): base.cost, full_key: probe.cost}):
+    if choice.gate(full_key, {known: base.cost, full_key: probe.cost}):
         full = identify_any_road(ds, model=list(full_key), start=[probe.parameters[n] for n in probe.names],
                                  simulator=simulator, **fit_kw)
         choice.linear_step(full)
     else:  # the full linear model explains nothing the twelve do not: neither can a smaller one
-        choice.add((), base, {"wald": None, "k": 0, "criterion": None})
-        choice.add(full_key, probe, {"wald": None, "k": sum(len(GROUPS[g]) for g in full_key), "criterion": None,
+        choice.add(known, base, {"wald": None, "k": 0, "criterion": None})
+        choice.add(full_key, probe, {"wald": None, "k": sum(n in probe.names for g in full_key for n in GROUPS[g]),
+                                     "criterion": None,
                                      "note": "one solve from the twelve, no error bars: no materially better "
                                              "fit than the twelve, so no smaller model was fitted"})
-        choice.key, choice.best = (), choice.entries[0]
+        choice.key, choice.best = known, choice.entries[0]
     res = choice.chosen()
     model = {"extensions": list(choice.key), "selection": "auto",
              "criterion": CRITERION.format(penalty(), 2 * penalty()), "candidates": choice.table(),
              "screens": [], "steps": 0, "skipped": [], "note": ROADS_NOTE,
              "fits_better_rule": fits_better_rule("relative")}
-    search = {} if choice.key == () else {"history": base.history, "nit": base.nit, "stop": base.stop,
-                                          "message": base.message}
+    search = {} if choice.key == known else {"history": base.history, "nit": base.nit, "stop": base.stop,
+                                             "message": base.message}
     return replace(res, model=model, adequacy=advise(res.adequacy, model),
                    nfev=sum(r.nfev for r in choice.results.values()), wall_time_s=time.perf_counter() - t0, **search)
 
