@@ -830,8 +830,13 @@ def road_section(result, out_dir) -> dict:
     band = next(iter((result.roads or {}).values()), {}).get("wavelengths_m", (0.5, 20))
     return {"road_figures": road_figs, "road_rows": road_rows, "road_notes": road_notes, "road_speeds": road_speeds,
             "road_band": "{:g}-{:g} m".format(*band),
-            # rideid.estimate.assess.roads: each road run's residual at its own road judged by its size
-            "road_judged": any("residual" in rec for rec in (getattr(result, "roads", None) or {}).values())}
+            "road_judged": roads_judged(result)}
+
+
+def roads_judged(result) -> bool:
+    """Was each road run's residual at its own road estimate judged by its size (rideid.estimate.assess.roads: a
+    ``residual`` record) — the summary's verdict line and the roads section say the same of it."""
+    return any("residual" in rec for rec in (getattr(result, "roads", None) or {}).values())
 
 
 def fit_section(result, dataset, sims) -> dict:
@@ -948,7 +953,7 @@ def _verdict_line(result, adq, held) -> tuple:
                             "model adequate: " if adq["adequate"] else "MODEL NOT ADEQUATE: ")
                 + adq["reasons"][0], "adequacy")
     if getattr(result, "roads", None):
-        judged = any("residual" in r for r in result.roads.values())  # rideid.estimate.assess.roads: passed
+        judged = roads_judged(result)
         return ("Verdict", ("adequacy not fully assessed: each road run's residual at its own road estimate is of "
                             "the noise's size (a car far off would fail it), but rideid has no test of its "
                             "structure on unknown roads; " if judged else

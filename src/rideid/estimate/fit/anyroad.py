@@ -803,16 +803,23 @@ def _refined(prob, z, ds):
     return _joint_solve(_realigned(prob, prob.car(z), ds, "prior", roads=False).reweighted(z), z, ds, 50)
 
 
-def _polish(prob, z0, ds):
-    """The polish from ``z0``: one solve at the start's block weights (and priors), both again at its solution, a
-    short joint solve; a powertrain mode left at a search bound polished again from typical values. Returns the
-    solution, the problem at it, the cost before and the restart's record."""
+def _first_solve(prob, z0, ds):
+    """The polish's first solve: the blocks placed at ``z0``, weighted there (and their priors), one solve (with
+    unknown roads the joint one). Returns the solution, the problem at it and the cost before."""
     prob = _placed(prob, z0, ds).reweighted(z0)
     cost_before = float(np.sum(prob(z0) ** 2))
     if prob.of(RoadBlock):  # the roads' speeds with the car from the start: they trade off with the wheels
         sol, prob = _joint_solve(prob, z0, ds, 100)
     else:
         sol = least_squares(prob, z0, bounds=prob.vbounds, method="trf", diff_step=1e-5, max_nfev=100)
+    return sol, prob, cost_before
+
+
+def _polish(prob, z0, ds):
+    """The polish from ``z0``: one solve at the start's block weights (and priors), both again at its solution, a
+    short joint solve; a powertrain mode left at a search bound polished again from typical values. Returns the
+    solution, the problem at it, the cost before and the restart's record."""
+    sol, prob, cost_before = _first_solve(prob, z0, ds)
     sol, prob = _refined(prob, sol.x, ds)
     restart = mode_restart(prob.space, prob.x(sol.x))
     if restart is None:
@@ -1122,13 +1129,12 @@ def _fit(prob, z0, ds, polish: bool, probe: bool = False) -> _Fitted:
     """The polish and the error bars from ``z0``; unpolished, the start as it is. A ``probe`` (a candidate of the
     model choice whose cost alone is wanted first): the first joint solve from the placements at the start, no
     refinement, no error bars (their true Hessian is most of a road fit's time); its cost is then at or above the
-    candidate's least, so a gain it shows is one the candidate has."""
+    candidate's least, so a gain it shows is one the candidate has (:func:`_first_solve`)."""
     nan = np.full(len(prob.space.names), np.nan)
     if not polish:
         return _Fitted(z0, prob, None, nan, np.full((nan.size,) * 2, np.nan))
     if probe:
-        prob = _placed(prob, z0, ds).reweighted(z0)
-        sol, prob = _joint_solve(prob, z0, ds, 100)
+        sol, prob, _ = _first_solve(prob, z0, ds)
         return _Fitted(sol.x, prob, None, nan, np.full((nan.size,) * 2, np.nan), int(sol.nfev) * (nan.size + 1))
     sol, prob, cost_before, restarted = _polish(prob, z0, ds)
     return _error_bars(prob, sol, ds, cost_before, restarted)
