@@ -12,8 +12,9 @@ is simulated noise-free and brought to ``rideid.identify`` by each data path:
 * ``moving``: runs that begin moving (SPEC §9 ``moving = true``) on a ``profile`` track, already under the wheels
   at the first sample (a linear model projects their road out; damper curves and bump stops fit them on the
   profile, simulated from rest a lead-in before the first sample: docs/any-road.md, tests/test_moving_starts.py);
-* ``unknown``: runs on roads nobody measured (SPEC §9: ISO 8608 class B and C roads), where SPEC §9 allows the
-  linear groups only: a nonlinear group is refused in one clear line.
+* ``unknown``: runs on roads nobody measured (SPEC §9: ISO 8608 class B and C roads): the linear groups, and damper
+  curves at the suspension velocities the accelerometers measure (docs/any-road.md); bump stops are refused in
+  one clear line.
 
 Every fitted parameter is checked against the truth, not only that the fit ran. Before 37ef398 damper curves on
 logger files crashed ("parameter rows must have 12 columns ... got 36"); this matrix is there to catch such holes.
@@ -24,9 +25,10 @@ cut to 3 and 2 s, one road run of 5 s, 100 Hz) and a search that only has to run
 no polish): what is checked is that the path takes the pair and reports its names and shapes (the model's
 extensions in canonical order, the twelve and both groups' parameters and nothing else, finite; the knot forces
 and stops with their records; the powertrain's modes), not the accuracy, which the single-group cells above hold.
-A pair with a nonlinear group on unknown roads is refused in one line. Cost (two shared cores): the default part
-(the ten SPEC CSV cells and the seven refusals) about 30 s; the slow part (logger files, moving starts, the
-linear pairs on unknown roads) about 5 minutes, the moving path's nonlinear pairs 11-40 s each.
+A pair with bump stops on unknown roads is refused in one line; a pair with damper curves there is fitted (2-6 s,
+unpolished). Cost (two shared cores): the default part (the ten SPEC CSV cells, the four refusals and the three
+curve pairs on unknown roads) about 40 s; the slow part (logger files, moving starts, the linear pairs on unknown
+roads) about 5 minutes, the moving path's nonlinear pairs 11-40 s each.
 
 Tolerances. The data are noise-free and every path's model is exact, so what is left is the solvers' stopping
 and, on the road-projected paths (moving, unknown), the road between the samples. Measured: the twelve, the bars,
@@ -83,6 +85,8 @@ FS = 100.0
 TOL = 0.0025
 KNOT_TOL = 0.005
 TIRE_DAMPING_ROAD_TOL = 0.03
+#: damper curves on unknown roads, on these two 6 s roads noise-free: the twelve (check_covered)
+CURVES_ROAD_TOL = 0.02
 #: the powertrain's own values (SPEC §11) on the road-projected paths: its damping ratios and pitch inertia are
 #: the car's least determined numbers, and the road between the samples moves them by up to 0.23 % (zeta_pp,
 #: I_p on unknown roads; the twelve within 0.012 %)
@@ -240,11 +244,26 @@ def tolerance(name: str, group: str, path: str) -> float:
 
 def check(res, sc, group: str, path: str):
     err = errors(res, sc, group, path)
+    if (group, path) == ("damper_curves", "unknown"):
+        return check_covered(res, err)
     tol = {n: tolerance(n, group, path) for n in err}
     worst = max(err, key=lambda n: abs(err[n]))
     print(f"\n{group} x {path}: largest error {worst} {100 * err[worst]:+.4f} % "
           f"(of its tolerance: {max(abs(err[n]) / tol[n] for n in err):.2f})")
     bad = {n: f"{100 * e:+.3f} %" for n, e in err.items() if abs(e) > tol[n]}
+    assert not bad, bad
+
+
+def check_covered(res, err):
+    """Damper curves on unknown roads: not exact on noise-free data (the suspension velocities are read off the
+    accelerometers, and on these 6 s runs their drift's ends are most of the record: measured, the twelve up to
+    1.1 % off, the knot forces nearest 0 up to 17 %), so every estimate within 3 std_total, whose ``std_velocity``
+    carries that error (measured: at most 2.7), and the twelve within ``CURVES_ROAD_TOL`` (docs/any-road.md,
+    "Damper curves on unknown roads")."""
+    print({n: f"{100 * e:+.3f} % ({abs(e * res.parameters[n]) / res.details[n]['std_total']:.1f} std_total)"
+           for n, e in err.items()})
+    bad = {n: f"{100 * e:+.3f} %" for n, e in err.items() if (abs(e) > CURVES_ROAD_TOL and not n.startswith("F_"))
+           or abs(e * res.parameters[n]) > 3 * res.details[n]["std_total"] / (1 + e)}
     assert not bad, bad
 
 
@@ -267,30 +286,30 @@ def cell(group: str, path: str):
         marks.append(pytest.mark.slow)
         if (group, path) not in ROAD_CELLS_IN_CI:
             marks.append(pytest.mark.expensive)
-    if path == "moving" and group in NONLINEAR:
+    if group in NONLINEAR and path in ("moving", "unknown"):  # damper curves on unknown roads: a road fit too
         marks.append(pytest.mark.slow)
     return pytest.param(group, path, marks=marks, id=f"{group}-{path}")
 
 
 @pytest.mark.parametrize("group, path", [cell(g, p) for p in PATHS for g in GROUPS
-                                         if not (p == "unknown" and g in NONLINEAR)])
+                                         if not (p == "unknown" and g == "bump_stops")])
 def test_group_on_path(group, path, cases):
     sc, ds = cases(group, path)
     check(fit(ds, group), sc, group, path)
 
 
-@pytest.mark.parametrize("group", NONLINEAR)
-def test_nonlinear_group_is_refused_on_unknown_roads(group, cases):
-    """SPEC §9: on an unknown road the road is projected out of a linear car; a nonlinear group is refused
+def test_bump_stops_are_refused_on_unknown_roads(cases):
+    """SPEC §9: on an unknown road the road is projected out of a car linear in its states (damper curves enter as
+    a known input at the measured suspension velocities: tests/test_road_curves.py); bump stops are refused
     before any fit, in one line that names the group, the runs and what to do instead."""
-    _, ds = cases(group, "unknown")
+    _, ds = cases("bump_stops", "unknown")
     with pytest.raises(ArgumentError) as e:
-        fit(ds, group)
+        fit(ds, "bump_stops")
     msg = str(e.value)
     assert "\n" not in msg
-    assert msg == (f"{group}: a nonlinear model cannot be fitted with runs on unknown roads (C7, B11): the road is "
-                   f"projected out of a linear car (docs/any-road.md); fit the linear model, or {group} on known "
-                   "tracks only"), msg
+    assert msg == ("bump_stops: a model with bump stops cannot be fitted with runs on unknown roads (C7, B11): the "
+                   "road is projected out of a car linear in its states (docs/any-road.md); fit it without "
+                   "bump_stops, or on known tracks only"), msg
 
 
 POLISH_RUNS = ("TW5", "HB10")  # the two shortest runs: the stall within a 5 s polish
@@ -373,7 +392,8 @@ def pair_dataset(folder, pair, path: str):
 
 
 def pair_cell(pair, path: str):
-    """The SPEC CSV cells by default; logger files and the road paths slow (each a second search path)."""
+    """The SPEC CSV cells by default, and a nonlinear group on unknown roads (bump stops refused, damper curves
+    fitted: 2-6 s); logger files and the other road paths slow (each a second search path)."""
     nonlinear = any(g in NONLINEAR for g in pair)
     marks = [] if path == "csv" or (path == "unknown" and nonlinear) else [pytest.mark.slow]
     return pytest.param(pair, path, marks=marks, id=f"{'+'.join(pair)}-{path}")
@@ -381,15 +401,14 @@ def pair_cell(pair, path: str):
 
 @pytest.mark.parametrize("pair, path", [pair_cell(p, path) for path in PATHS for p in PAIRS])
 def test_group_pair_on_path(pair, path, tmp_path):
-    """Every pair of groups fits on every data path (a nonlinear group on unknown roads: refused in one line):
+    """Every pair of groups fits on every data path (bump stops on unknown roads: refused in one line):
     the model is the pair, in the canonical order; the result reports the twelve, each group's parameters and
     nothing else, every value finite; the knot forces and the bump stops come with their records."""
     sc, ds = pair_dataset(tmp_path, pair, path)
-    nonlinear = [g for g in pair if g in NONLINEAR]
-    if path == "unknown" and nonlinear:
+    if path == "unknown" and "bump_stops" in pair:
         with pytest.raises(ArgumentError) as e:
             rideid.identify(ds, model=list(pair), **PAIR_FIT)
-        assert "\n" not in str(e.value) and str(e.value).startswith(f"{', '.join(nonlinear)}: a nonlinear model cannot")
+        assert "\n" not in str(e.value) and str(e.value).startswith("bump_stops: a model with bump stops cannot")
         return
     res = rideid.identify(ds, model=list(pair), **PAIR_FIT)
     order = [g for g in rideid.estimate.problem.cost.IDENTIFIABLE_GROUPS if g in pair]

@@ -384,7 +384,7 @@ def _roads_table(res) -> str:
                      "residual's size (a car far off), not its structure; the error bars hold only if the linear "
                      "model describes the car (add a known-track run to test it)" if judged.verdict == "pass" else
                      f"{what} NOT ASSESSED: every run is on an unknown road, where rideid has no residual test yet; "
-                     "the error bars hold only if the linear model describes the car (add a known-track run to "
+                     "the error bars hold only if the model describes the car (add a known-track run to "
                      "test it)")
     elif judged.verdict == "not assessed":
         lines.append("the adequacy verdict covers the known-track runs only; the road runs are not assessed")

@@ -315,6 +315,24 @@ def state_space(P, geom: Geometry, rate: bool = False):
     return A, B, Cy, Dy, Br, Dyr
 
 
+def force_input(P, geom: Geometry):
+    """The car's response to a force pair at each corner: ``+u_i`` on the body at corner ``i`` and ``-u_i`` on its
+    wheel (a suspension force, compression +, as the damper's :func:`rideid.model.nonlinear.damper_force`), so
+    that ``x' = A x + Bu u``, ``y = Cy x + Dyu u`` with :func:`state_space`'s ``A`` and ``Cy``.
+
+    Its generalised force is ``-e_i u_i`` (``e_i`` the corner's deflection row): a linear damper's ``-C q'``
+    is ``-sum_i e_i c v_i``, so ``u_i = D(v_i) - c v_i`` turns the linear car's damper into the curve.
+
+    Returns
+    -------
+    Bu : (n, 2nq, 4), Dyu : (n, 10, 4)
+    """
+    M, C, K, _ = mck(P, geom)
+    nq = M.shape[-1]
+    _, Bu = _state_space(M, C, K, -np.swapaxes(_corner_vectors(P, geom, nq), 1, 2))
+    return Bu, _output_rows(Bu[:, nq:, :], output_map(P, geom))
+
+
 def decomposed_mck(P, geom: Geometry, rate: bool = False):
     """``M, C, K, Bf`` (and with ``rate`` also ``Bd``) in the symmetric/antisymmetric coordinates.
 

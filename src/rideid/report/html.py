@@ -609,8 +609,9 @@ def fig_damper_velocities(edges, hists: dict, knots, out_dir):
                         wspace=0.25, hspace=0.45)
     return _save(fig, Path(out_dir), "damper_velocities", "Suspension velocities reached",
                  "Per run, histogram (log scale) of the suspension velocities of the identified car simulated on "
-                 "the run, both corners of each axle; dotted: the damper knots. A knot is excited when at least "
-                 "20 samples over all runs go beyond the knot before it.")
+                 "the run (on an unknown road: read off its body and axle accelerometers), both corners of each "
+                 "axle; dotted: the damper knots. A knot is excited when at least 20 samples over all runs go "
+                 "beyond the knot before it.")
 
 
 def _fig_job(job):
@@ -958,7 +959,7 @@ def _verdict_line(result, adq, held) -> tuple:
                             "the noise's size (a car far off would fail it), but rideid has no test of its "
                             "structure on unknown roads; " if judged else
                             "adequacy not assessed: rideid has no residual test on unknown roads yet; the ")
-                + "error bars hold only if the linear model describes the car", "roads")
+                + "error bars hold only if the model describes the car", "roads")
     return ("Verdict", "adequacy not assessed (no polish)", "estimates")
 
 

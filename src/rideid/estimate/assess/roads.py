@@ -41,13 +41,14 @@ from ...settings import defaults
 from ..records import RoadsAssessment
 from .adequacy import ADVICE_SETUP
 
-#: the advice when a road run fails: the set-up first, then what unknown roads cannot fit (the road's projection needs
-#: a linear car, so `--model auto`, which the generic advice names, is not run there)
+#: the advice when a road run fails: the set-up first, then what unknown roads can and cannot fit (the road is
+#: projected out of a car linear but for known inputs)
 ROAD_ADVICE = ("The car leaves more than the sensor noise on runs on unknown roads, so the estimates are biased by "
-               "more than their error bars say. Try " + ADVICE_SETUP + "then what the model lacks: dampers that "
-               "are not linear, or bump stops, cannot be fitted on unknown roads (the road is projected out with a "
-               "linear car): add runs on known tracks and fit them with `--model auto` (damper curves, bump stops); "
-               "anti-roll bars and tire damping can be given here (`--model anti_roll_bars,tire_damping`).")
+               "more than their error bars say. Try " + ADVICE_SETUP + "then what the model lacks: `--model auto` "
+               "weighs anti-roll bars, tire damping and damper curves here (the curves need each road run's eight "
+               "accelerometers: docs/any-road.md); bump stops cannot be fitted on unknown roads (the road is "
+               "projected out of a car linear but for the dampers' measured velocities): add runs on known tracks "
+               "and fit them with `--model auto`.")
 
 #: what the verdict says of road runs that pass (adequacy.note)
 PASSED_NOTE = ("runs on unknown roads: each run's residual at its own road estimate is of the sensor noise's size "

@@ -72,6 +72,7 @@ from ..fit.identify import DEFAULT_GENERATIONS, DEFAULT_POPULATION
 from ..fit.polish import run_blocks
 from ..fit.uncertainty import hac_covariance, white_covariance
 from ..fit.anyroad import TRACK_OPTIONS, as_built_runs, identify_any_road, unknown_road_runs
+from ..fit import road_curves
 from ...model.batch import single_threaded_blas, thread_map
 from ..problem.cost import IDENTIFIABLE_GROUPS, CostFunction, ParameterSpace, refuse_unsupported_groups
 from ..problem.cost import min_improvement as least_improvement
@@ -646,6 +647,26 @@ class _RoadChoice(_Choice):
     def gate(self, key, costs) -> bool:
         return fits_better_relative(key, costs)
 
+    def curves_step(self) -> None:
+        """Damper curves on top of the linear model kept, when its verdict is not adequate and the roads can take
+        them (:func:`rideid.estimate.fit.road_curves.candidates`): fitted from its dampers (``F = c v``), kept as
+        the tracks' extensions are (:meth:`_fit_rivals`): when they fit materially better and their departure
+        from linear dampers weighs more than the penalty of their knots (:func:`curve_departure`). The linear groups
+        are not weighed again with them (on tracks they are)."""
+        parent, parent_entry = self.chosen(), self.best
+        for key in map(_key, road_curves.candidates(self.ds, parent, self.key)):
+            r = identify_any_road(self.ds, model=list(key), parent=dict(parent.parameters),
+                                  simulator=self.simulator, **self.fit_kw)
+            pol = r.polish or {}
+            names = list(pol.get("names", []))
+            W, dof = curve_departure(names, np.array([r.parameters[n] for n in names]),
+                                     np.array(pol.get("covariance_robust", np.full((len(names),) * 2, np.nan))),
+                                     _space(self.ds, key, r))
+            e = self.add(key, r, {"wald": W, "k": parent_entry["k"] + dof, "dof": dof, "parent": list(self.key),
+                                  "criterion": (parent_entry.get("criterion") or 0.0) + penalty() * dof})
+            for kept in [e] if e["fits_better"] and np.isfinite(W) and W > penalty() * dof else []:
+                self.key, self.best = key, kept
+
 
 def _inside(space, row) -> np.ndarray:
     """``row`` with each linear group's rate at its lower bound moved 0.1 % of its range inside (a bar 100 N/m, a
@@ -663,9 +684,10 @@ def _inside(space, row) -> np.ndarray:
 ROADS_NOTE = ("on unknown roads auto weighs SPEC §6's linear groups (anti-roll bars, tire damping): the twelve "
               "searched and polished, the full linear model polished from them; when it fits materially better, "
               "each smaller model is polished from it and the lowest criterion of those that fit materially better "
-              "kept (as on known tracks), else the twelve are; the powertrain, damper curves and bump stops are "
-              "not tried there (a nonlinear car cannot be fitted with the road projected out; a powertrain only "
-              "when named: --model powertrain; docs/any-road.md)")
+              "kept (as on known tracks), else the twelve are; then, when the model kept is not adequate, damper "
+              "curves from its dampers (their force at the suspension velocities the accelerometers measure: "
+              "docs/any-road.md); the powertrain and bump stops are not tried there (a powertrain only when "
+              "named: --model powertrain)")
 
 
 @stage("model choice on unknown roads")
@@ -683,12 +705,13 @@ def identify_auto_roads(ds, *, simulator=None, tracks="as-built", rng=None, seed
     known, full_key = _key([g for g in GROUPS if set(GROUPS[g]) <= set(ds.known)]), _key(GROUPS)
     base = identify_any_road(ds, model=list(known), rng=rng, seed=seed, callback=callback, simulator=simulator,
                              tracks=tracks, **common)
-    if known == full_key or not (base.polish or {}).get("covariance_robust"):  # nothing to weigh, or no polish
-        return replace(base, model={"extensions": list(known), "selection": "auto (nothing weighed: every linear "
-                                                                            "group known, or no polish)",
-                                    "note": ROADS_NOTE})
     fit_kw = dict(rng=rng, seed=seed, tracks=tracks, **common)
     choice = _RoadChoice(ds, simulator, fit_kw, given={known: base})
+    if known == full_key or not (base.polish or {}).get("covariance_robust"):  # no linear group, or no polish
+        choice.add(known, base, {"wald": None, "k": 0, "criterion": None})
+        choice.key, choice.best = known, choice.entries[0]
+        choice.curves_step()
+        return _road_choice_result(choice, known, base, t0)
     probe = choice.fit(base, full_key, assess=False, probe=True)
     if choice.gate(full_key, {known: base.cost, full_key: probe.cost}):
         full = identify_any_road(ds, model=list(full_key), start=[probe.parameters[n] for n in probe.names],
@@ -701,6 +724,12 @@ def identify_auto_roads(ds, *, simulator=None, tracks="as-built", rng=None, seed
                                      "note": "one solve from the twelve, no error bars: no materially better "
                                              "fit than the twelve, so no smaller model was fitted"})
         choice.key, choice.best = known, choice.entries[0]
+    choice.curves_step()
+    return _road_choice_result(choice, known, base, t0)
+
+
+def _road_choice_result(choice, known, base, t0):
+    """The result of the road model choice ``choice``: the model kept, with result.json's ``model`` record."""
     res = choice.chosen()
     model = {"extensions": list(choice.key), "selection": "auto",
              "criterion": CRITERION.format(penalty(), 2 * penalty()), "candidates": choice.table(),

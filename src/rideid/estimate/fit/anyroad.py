@@ -66,7 +66,6 @@ from scipy.optimize import OptimizeResult, least_squares
 
 from ...profiling import stage, timing
 from ...settings import defaults, legacy_names
-from ...data.schema import NONLINEAR_GROUPS
 from ...errors import ArgumentError
 from ...model.batch import single_threaded_blas, thread_map, thread_map_rows
 from ...model.equations import CHANNELS, modal_summary
@@ -80,6 +79,7 @@ from ..problem.blocks import (TRACK_OPTIONS, as_built_runs, prepare_road_runs, r
                               speed_wander, unknown_road_runs)
 from ..assess.adequacy import ADVICE, advise, assess as assess_runs
 from ..problem.cost import CostFunction, ParameterSpace, channel_weights, refuse_unsupported_groups
+from . import road_curves
 from .identify import (DEFAULT_GENERATIONS, DEFAULT_POPULATION, identify as identify_model, mark_bounds,
                        mode_restart, model_extensions, parameter_detail, relative_spread, restart_record)
 from .jade import JadeSolver, make_rng, stop_requested
@@ -174,10 +174,17 @@ class _Problem:
 
     def costs(self, V) -> np.ndarray:
         """``sum e^2`` at each row of ``V``, the rows on parallel threads (each row's blocks one after the other:
-        many small evaluations keep both cores busier so than each one's blocks side by side)."""
+        many small evaluations keep both cores busier so than each one's blocks side by side), the rows of one
+        car (all but the damper curves' knot forces) one after the other: a road's projection of a car is then
+        reused for its knot forces (:func:`rideid.estimate.problem.roadfit.solve`)."""
         def cost(z):
             return float(np.sum(self._stacked(self.blocks(z, threads=False)) ** 2))
-        return np.array(thread_map(cost, list(np.asarray(V, dtype=float)), "rideid-hessian"))
+        V = np.asarray(V, dtype=float)
+        car = [j for j, n in enumerate(self.space.names) if n not in set(self.space.knot_names)]
+        order = np.lexsort(V[:, car].T[::-1]) if car else np.arange(len(V))
+        out = np.empty(len(V))
+        out[order] = thread_map(cost, list(V[order]), "rideid-hessian")
+        return out
 
     def jacobian(self, v, step: float = 1e-5) -> np.ndarray:
         """Central-difference Jacobian of the residuals at ``v`` (in ``v`` units).
@@ -242,7 +249,7 @@ class _Problem:
         pairs = [(i, j) for i in range(d) for j in range(i)]
         moves = ([np.zeros(d)] + [E[i] for i in range(d)] + [-E[i] for i in range(d)]
                  + [m for i, j in pairs for m in (E[i] + E[j], E[i] - E[j], E[j] - E[i], -E[i] - E[j])])
-        c = self.costs(v + np.array(moves))  # every evaluation at once, on both cores
+        c = self.costs(v + np.array(moves))  # every evaluation at once, on both cores, those of one car together
         c0, plus, minus, cross = c[0], c[1:d + 1], c[d + 1:2 * d + 1], c[2 * d + 1:].reshape(-1, 4)
         H = np.diag((plus - 2 * c0 + minus) / h ** 2)
         for (i, j), q in zip(pairs, cross):
@@ -693,6 +700,7 @@ class _Plan:
     drawn: list
     track_runs: list
     skipped: dict
+    excitation: dict | None = None
 
     def problem(self, ds, geom, simulator) -> _Problem:
         """The joint problem: the runs as drawn (one block), then the unknown roads, then the tracks as built."""
@@ -719,18 +727,19 @@ def _extensions(ds, model, start_result) -> tuple[tuple, dict]:
 
 
 def _plan(ds, model, start_result, tracks: str, polish: bool, as_built_mode: str) -> _Plan:
-    """The :class:`_Plan` of ``ds``; a nonlinear model with unknown roads is refused."""
+    """The :class:`_Plan` of ``ds``; a model the roads cannot take is refused
+    (:func:`rideid.estimate.fit.road_curves.refusal`)."""
     ext, model_block = _extensions(ds, model, start_result)
-    bad = [g for g in ext if g in NONLINEAR_GROUPS]
-    road_ids = [r.id for r in unknown_road_runs(ds, ext)]
-    if bad and road_ids:
-        raise ArgumentError(f"{', '.join(bad)}: a nonlinear model cannot be fitted with runs on unknown roads "
-                            f"({', '.join(road_ids)}): the road is projected out of a linear car (docs/any-road.md); "
-                            f"fit the linear model, or {' and '.join(bad)} on known tracks only")
+    road_curves.refuse(ds, ext)
     refuse_unsupported_groups(ext, "model")
-    space = ParameterSpace(ds.known, ds.geometry, ds.manifest.bounds, extensions=ext)
+    road_ids = [r.id for r in unknown_road_runs(ds, ext)]
+    # with damper curves on the roads: their knots (rideid.estimate.fit.road_curves), the knots they excite frozen
+    space = ParameterSpace(ds.known, ds.geometry, ds.manifest.bounds, extensions=ext,
+                           damper_knots=road_curves.knots(ds, ext, road_ids))
     # SPEC §13: each road run's speed estimated with the car, the declared one its prior (none along a speed channel)
-    roads = [RoadBlock.of(rr, _road_prior(ds, rr.run_id), ds.geometry) for rr in prepare_road_runs(ds, ext)]
+    rruns = prepare_road_runs(ds, ext, road_curves.layout_knots(space, road_ids))
+    space, excitation = road_curves.excited(space, rruns)
+    roads = [RoadBlock.of(rr, _road_prior(ds, rr.run_id), ds.geometry) for rr in rruns]
     ab_list, skipped = as_built_runs(ds, ext, tracks if polish else "as-drawn")
     # every run on a track as built: its constant speed and its start fitted with the car (SPEC §13: a declared
     # speed and a given start are priors of them; along a speed channel the channel's mean starts the speed)
@@ -739,7 +748,7 @@ def _plan(ds, model, start_result, tracks: str, polish: bool, as_built_mode: str
     track_runs = [r for r in ds.runs if r.id not in road_ids]
     ab_ids = {r.id for r in ab_list}
     return _Plan(ext, model_block, space, roads, blocks, [r for r in track_runs if r.id not in ab_ids], track_runs,
-                 skipped)
+                 skipped, excitation)
 
 
 def _road_prior(ds, run_id: str):
@@ -844,6 +853,8 @@ class _Fitted:
     std: np.ndarray
     cov: np.ndarray
     nfev: int = 0
+    hessian: np.ndarray | None = None
+    jacobian: np.ndarray | None = None
 
 
 def _with_records(prob, motion_std: dict, ds) -> _Problem:
@@ -903,7 +914,7 @@ def _error_bars(prob, sol, ds, cost_before: float, restarted) -> _Fitted:
             "names": list(prob.space.names), "covariance_robust": (0.5 * (cov_rob + cov_rob.T)).tolist(),
             **({} if cov_fixed is None else {"covariance_robust_motion_fixed": cov_fixed.tolist()}),
             "method": blocks_method(prob.parts)}
-    return _Fitted(z, prob, info, np.sqrt(np.clip(np.diag(cov), 0, None)), cov, int(sol.nfev) * (n + 1))
+    return _Fitted(z, prob, info, np.sqrt(np.clip(np.diag(cov), 0, None)), cov, int(sol.nfev) * (n + 1), H, Ja)
 
 
 def _details(space, x, P, fitted) -> tuple[dict, object]:
@@ -946,7 +957,8 @@ def _road_records(ds, P, geom, roads) -> tuple[dict, dict, dict, list]:
             **({"motion": dict(b.record, note=_ROAD_MOTION_NOTE)} if "speed" in b.record else {}),
             "wavelengths_m": list(defaults["roadfit.road_wavelengths"]),
             "note": (f"the road's content at wavelengths {lam[0]}-{lam[1]} m; the first and last {lam[1]:.0f} m carry "
-                     "the record's ends and are less certain; adequacy not assessed on this run")}
+                     "the record's ends and are less certain; adequacy not assessed on this run"
+                     + road_curves.road_note(rr))}
         run = next(r for r in ds.runs if r.id == rr.run_id)
         if getattr(run, "road_known", False):
             out[rr.run_id]["note"] = (f"moving at its first sample on the known track '{run.track}': fitted as a "
@@ -1118,7 +1130,9 @@ def _fresh(ds, plan, start_result, out: _Outcome):
         modal=modal_summary(out.P[:len(ALL_NAMES) if space.layout is None else space.layout.n_car], ds.geometry),
         model=dict(plan.model), response=out.response, correlation=out.robust.correlation_dict(),
         adequacy=out.hinted, checks=[f.to_dict() for f in getattr(ds, "findings", [])] + motion_findings(out.motion),
-        roads=out.roads or None, road_profiles=out.profiles or None, tracks=out.tracks)
+        roads=out.roads or None, road_profiles=out.profiles or None, tracks=out.tracks,
+        dampers=road_curves.dampers(plan.space, out, plan.excitation),
+        velocities=road_curves.velocities(plan.space, out.fitted.prob, out.P))
 
 
 #: the result by (a start's result given, the tracks as built rejected)
@@ -1144,14 +1158,23 @@ def _fit(prob, z0, ds, polish: bool, probe: bool = False) -> _Fitted:
 def _identify_any_road(ds, *, rng=None, seed=None, population=None, generations=None, model=None,
                        polish: bool = True, callback=None, assess: bool = True, simulator=None,
                        tracks: str = "as-built", start_result=None, as_built_mode: str = "prior", start=None,
-                       probe: bool = False, **_ignored) -> IdentificationResult:
-    """The pipeline on the problem of ``ds`` (:class:`_Plan`): start, polish, error bars, records, verdict."""
+                       probe: bool = False, parent: dict | None = None, **_ignored) -> IdentificationResult:
+    """The pipeline on the problem of ``ds`` (:class:`_Plan`): start, polish, error bars, records, verdict. With
+    damper curves on unknown roads, ``parent`` (a linear fit's parameters) starts them
+    (:func:`rideid.estimate.fit.road_curves.start`)."""
     t0 = time.perf_counter()
     gen, rng_record = make_rng(rng, seed)
     geom = ds.geometry
     plan = _plan(ds, model, start_result, tracks, polish, as_built_mode)
+
+    def linear(kw):  # the linear model's first joint solve: where damper curves named without a start begin
+        return _identify_any_road(ds, model=road_curves.linear_groups(plan.ext), probe=True, assess=False, **kw)
+    start = road_curves.start(plan, start, start_result, parent, lambda: linear(
+        dict(rng=gen, population=population, generations=generations, callback=callback, simulator=simulator,
+             tracks=tracks)).parameters)
     search = _start(ds, plan, gen, population or DEFAULT_POPULATION, generations or DEFAULT_GENERATIONS, polish,
                     callback, simulator, start_result, t0, start)
+    plan = replace(plan, roads=road_curves.held(plan.space, plan.roads, search[0]))
     prob = plan.problem(ds, geom, simulator)
     fitted = _fit(prob, prob.v(search[0]), ds, polish, probe)
     x = fitted.prob.x(fitted.z)

@@ -344,14 +344,17 @@ def run_speed(ds, run) -> float:
     return vm
 
 
-def prepare_road_runs(ds, extensions=()) -> list:
+def prepare_road_runs(ds, extensions=(), knots=None) -> list:
     """:class:`rideid.estimate.problem.roadfit.RoadRun` of each run fitted with its road projected out
-    (:func:`unknown_road_runs` of the model's ``extensions``)."""
+    (:func:`unknown_road_runs` of the model's ``extensions``); with damper curves on ``knots`` each with its
+    measured suspension velocities (:func:`rideid.estimate.problem.roadfit.departure_of`)."""
     out = []
     for r in unknown_road_runs(ds, extensions):
         rd = ds.data[r.id]
         rr = roadfit.prepare_road_run(r.id, rd.matrix(), rd.fs, run_speed(ds, r), ds.geometry,
                                       clipped=ds.clipped(r.id))
+        if knots is not None:
+            rr = replace(rr, dep=roadfit.departure_of(rd.matrix(), rd.fs, knots))
         out.append(roadfit.with_sensors(rr, ds.sensor_filters(r.id)))  # the channels as wired (SPEC §11)
     return out
 

@@ -110,17 +110,23 @@ def knot_excitation(cf, P, min_samples: int | None = None) -> dict:
         ``counts`` and ``excited`` per axle (``"front"``, ``"rear"``; lists in knot order), ``frozen``:
         the knot-force names not excited, ``rule``: the criterion in words.
     """
+    return excitation_of(cf.space, suspension_velocities(cf, P, rho=LIFT_OFF_RHO), min_samples)
+
+
+def excitation_of(space, velocities, min_samples: int | None = None, by: str = "the car of the global search") -> dict:
+    """:func:`knot_excitation`'s record from the suspension velocities ``(front, rear)`` (each the axle's two
+    corners over all runs, any shape): simulated with a car, or measured (on unknown roads, ``by`` says which)."""
     min_samples = defaults["dampers.min_samples"] if min_samples is None else min_samples
-    knots = np.asarray(cf.space.layout.knots)
+    knots = np.asarray(space.layout.knots)
     K = knots.size
     j0 = int(np.searchsorted(knots, 0.0))
-    names = cf.space.knot_names
+    names = space.knot_names
     out = {"counts": {}, "excited": {}, "frozen": [],
            "rule": f"a knot is excited when at least {min_samples} samples (both corners of the axle, all runs, "
-                   "the car of the global search) go beyond the previous knot on its side"}
+                   f"{by}) go beyond the previous knot on its side"}
 
-    for a, (axle, v) in enumerate(zip(("front", "rear"), suspension_velocities(cf, P, rho=LIFT_OFF_RHO))):
-        counts = knot_counts(knots, v)
+    for a, (axle, v) in enumerate(zip(("front", "rear"), velocities)):
+        counts = knot_counts(knots, np.ravel(v))
         exc = counts >= min_samples
         exc[[j0 - 1, j0]] = True  # the innermost knots: always free (the curve needs a slope at 0)
         # beyond a knot that is not excited, none is
@@ -370,18 +376,25 @@ def grid_std(space, P) -> dict:
 def add_grid_std(details: dict, dampers: dict, space, P) -> None:
     """In place: :func:`grid_std` combined in quadrature into ``std_robust`` of the knot forces and ``c_sf``,
     ``c_sr`` in ``details`` (result.json ``parameters``) and ``dampers``; each keeps its term as ``std_grid``."""
-    g = grid_std(space, P)
-    for n, s in g.items():
+    add_std_term(details, dampers, space, grid_std(space, P), "std_grid")
+
+
+def add_std_term(details: dict, dampers: dict, space, term: dict, key: str) -> None:
+    """In place: ``term`` (name -> a standard error) combined in quadrature into ``std_robust`` of its parameters in
+    ``details`` and of the knot forces in ``dampers``; each keeps its term as ``key``."""
+    for n, s in term.items():
         e = details.get(n)
         if e is not None and e.get("std_robust") is not None:
-            e["std_grid"] = s
+            e[key] = s
             e["std_robust"] = float(np.hypot(e["std_robust"], s))
     K = space.layout.n_knots
+    if not K:
+        return
     for a, axle in enumerate(("front", "rear")):
         ns = space.knot_names[a * K:(a + 1) * K]
         d = dampers[axle]
-        d["std_grid"] = [g.get(n) for n in ns]
-        d["std_robust"] = [None if sr is None or g.get(n) is None else float(np.hypot(sr, g[n]))
+        d[key] = [term.get(n) for n in ns]
+        d["std_robust"] = [None if sr is None or term.get(n) is None else float(np.hypot(sr, term[n]))
                            for sr, n in zip(d["std_robust"], ns)]
 
 

@@ -123,14 +123,18 @@ Hessian, not ``J^T J``: the projected residual is linear in the data, so
 
 from __future__ import annotations
 
+import threading
+from collections import OrderedDict
 from dataclasses import dataclass, field, replace
 
 import numpy as np
 import scipy.linalg
+from scipy.interpolate import make_lsq_spline
 
 from ...settings import defaults, legacy_names
-from ...model.equations import CHANNEL_KIND, CHANNEL_UNITS, CHANNELS, state_space
-from ...model.params import Geometry
+from ...model.equations import CHANNEL_KIND, CHANNEL_UNITS, CHANNELS, force_input, state_space
+from ...model.nonlinear import damper_force
+from ...model.params import INDEX, Geometry
 from ...model.sensors import discretise, modal_pairs
 
 
@@ -155,6 +159,120 @@ def used_channels(y) -> tuple[np.ndarray, dict]:
         left[c] = (f"left out: RMS {rms[i]:.1g} {CHANNEL_UNITS[c]}{share}, no signal: not excited by this run, "
                    "or its sensor is dead")
     return np.array(cols, dtype=int), left
+
+
+def suspension_velocities(y, fs: float, drift: float | None = None) -> np.ndarray:
+    """Each corner's suspension velocity ``v_i = z_i' - z_bi'`` (n, 4), m/s, compression +, from its axle and body
+    accelerometers (``y`` (n, 10), SPEC channels): the difference integrated bin by bin, ``(A_k - A_0) / (i
+    omega_k)`` (the ``A_0`` term is the record's change of velocity, which the DFT of a finite record would
+    otherwise spread over every bin as a sawtooth), less its least-squares cubic spline with knots every setting
+    ``roadfit.velocity_drift`` seconds (the integral's drift: the noise's random walk, and the start's velocity; a
+    suspension barely moves so slowly).
+
+    Not in the time domain: a sampled acceleration carries the road's content above the Nyquist frequency folded
+    into the band, and a running sum turns it into a drift at every frequency. Not a cut below a frequency either:
+    on a finite record it rings at both ends. Measured on ../shared/cases/van-roads-dampers (2 % noise) against
+    the simulated car's own velocities: 4.2-6.4 mm/s RMS with the spline at 1.5 s (4-6 % of the velocity),
+    8.1-8.7 with a cut below 0.2 Hz (29 mm/s in the first and last second); running sums with a high-pass filter
+    10-30 % (docs/any-road.md)."""
+    drift = defaults["roadfit.velocity_drift"] if drift is None else drift
+    y = np.asarray(y, dtype=float)
+    a = y[:, 4:8] - y[:, 0:4]
+    n = a.shape[0]
+    A = np.fft.rfft(a, axis=0)
+    f = np.fft.rfftfreq(n, 1.0 / fs)
+    V = np.zeros_like(A)
+    V[1:] = A[1:] / (2j * np.pi * f[1:, None])
+    t = np.arange(n) / fs
+    v = np.fft.irfft(V, n, axis=0) + np.outer(t / t[-1], np.real(A[0]) / fs)  # the ramp of the change A_0 h
+    inner = np.linspace(t[0], t[-1], max(int(round(t[-1] / drift)), 1) + 1)[1:-1]
+    knots = np.r_[[t[0]] * 4, inner, [t[-1]] * 4]
+    return v - make_lsq_spline(t, v, knots, k=3)(t)
+
+
+@dataclass(frozen=True)
+class Departure:
+    """A road run's damper curves as a known input of the linear car (module docstring "Damper curves"): the
+    measured suspension velocities ``v`` (n, 4) (:func:`suspension_velocities`), their DFT ``V`` (bins, 4) and the
+    DFT ``Phi`` (bins, 4, K) of each knot's basis curve at them (the curve is linear in its knot forces), ``knots``
+    (K,) m/s. ``c_ref``: the linear car's damper rates front and rear (N s/m), held through a fit so that the knot
+    forces move the known input alone, not the car (the projection of a car is then reused, :func:`_context`);
+    None: the parameter row's ``c_sf``, ``c_sr``. ``y``: the channels (n, 10) the velocities were read from."""
+
+    knots: tuple
+    v: np.ndarray
+    V: np.ndarray
+    Phi: np.ndarray
+    c_ref: tuple | None = None
+    y: np.ndarray | None = field(default=None, repr=False)
+
+    def spectrum(self, bins, P_car, curves) -> np.ndarray:
+        """The DFT (K, 4) at ``bins`` of each corner's damper force less the linear car's ``c_s v``."""
+        Ff, Fr = curves
+        F = np.stack([Ff, Ff, Fr, Fr])                                                       # (4, K)
+        c = np.array([P_car[INDEX["c_sf"]]] * 2 + [P_car[INDEX["c_sr"]]] * 2)
+        return np.einsum("bik,ik->bi", self.Phi[bins], F) - c[None] * self.V[bins]
+
+
+def departure_of(y, fs: float, knots) -> Departure:
+    """The :class:`Departure` of a run's channels ``y`` (n, 10) for curves on ``knots``."""
+    return departure_at(suspension_velocities(y, fs), knots, y=np.asarray(y, dtype=float))
+
+
+def departure_at(v, knots, c_ref=None, y=None) -> Departure:
+    """The :class:`Departure` of suspension velocities ``v`` (n, 4) for curves on ``knots``."""
+    K = len(knots)
+    basis = damper_force(tuple(knots), np.eye(K), v[..., None])                                # (n, 4, K)
+    return Departure(tuple(float(k) for k in knots), v, np.fft.rfft(v, axis=0), np.fft.rfft(basis, axis=0), c_ref,
+                     y)
+
+
+def channel_noise(sol: Solution) -> np.ndarray:
+    """Each used channel's noise level (its units, ``rr.cols`` order) as the projection's residual ``sol`` shows
+    it, taken as white: a white noise of ``sigma`` has ``n sigma^2`` per DFT bin (weighted by ``rr.scale``), and
+    the projection leaves ``(c - 2) / c`` of it (two road columns in ``c`` channels)."""
+    rr = sol.rr
+    c = len(rr.cols)
+    return np.sqrt(np.mean(np.abs(sol.residual) ** 2, axis=0) * c / max(c - 2, 1) / rr.n) / rr.scale
+
+
+def missing_corners(y) -> list[str]:
+    """The body and axle accelerometers a run lacks (NaN columns) for damper curves on its road."""
+    y = np.asarray(y, dtype=float)
+    return [CHANNELS[j] for j in range(8) if not np.isfinite(y[:, j]).all()]
+
+
+def car_and_curves(P, rr: RoadRun):
+    """``P`` (a parameter row) split into the linear car's row and the curves' front and rear knot forces (None
+    without curves: ``rr.dep`` is None). With curves the row ends with ``F_f1 .. F_fK, F_r1 .. F_rK``
+    (:class:`rideid.model.nonlinear.NonlinearLayout`) and the linear car's damper rates are ``rr.dep.c_ref``, else
+    the row's ``c_sf``, ``c_sr``."""
+    P = np.asarray(P, dtype=float)
+    if rr.dep is None:
+        return P, None
+    K = len(rr.dep.knots)
+    car = P[..., :-2 * K]
+    if rr.dep.c_ref is not None:
+        car = car.copy()
+        car[..., [INDEX["c_sf"], INDEX["c_sr"]]] = rr.dep.c_ref
+    return car, (P[..., -2 * K:-K], P[..., -K:])
+
+
+def departure_response(car: System, P_car, geom: Geometry, rr: RoadRun, bins, curves) -> np.ndarray:
+    """The used channels' response (K, c), weighted and as recorded, to the curves' departure from the linear car's
+    dampers at ``bins`` (:meth:`Departure.spectrum`); zero without curves. ``car``: the linear car's
+    :class:`System` (its modes serve the force input too)."""
+    if curves is None or rr.dep is None:
+        return 0.0
+    w = rr.omega(bins)
+    Bu, Dyu = force_input(np.atleast_2d(P_car), geom)
+    forced = replace(car, B=Bu, Dy=Dyu, Br=np.zeros_like(Bu), Dyr=np.zeros_like(Dyu))
+    G = transfer(forced, w, rr.cols)[0]                                                      # (K, c, 4)
+    sr = sensor_response(rr, w)
+    if sr is not None:
+        G = G * sr[0][:, :, None]
+    u = rr.dep.spectrum(bins, P_car, curves)
+    return (G @ u[:, :, None])[..., 0] * rr.scale[None, :]
 
 
 @dataclass(frozen=True)
@@ -191,6 +309,9 @@ class RoadRun:
         The rear lead-in unknowns per side when held (a run whose speed is estimated: the count fixed for every
         speed the fit may try, so the cost does not jump where ``tau fs`` crosses a whole sample); None: from
         ``tau`` (:attr:`lead_in`).
+    dep : Departure or None
+        With damper curves: the run's measured suspension velocities and the curves' basis (:func:`departure_of`,
+        module docstring "Damper curves"); the parameter rows then end with the curves' knot forces.
     """
 
     run_id: str
@@ -208,6 +329,7 @@ class RoadRun:
     sensors: tuple = ()
     clip: np.ndarray = field(default_factory=lambda: np.zeros((0, 2), dtype=int))
     lead: int | None = None
+    dep: Departure | None = None
 
     @property
     def h(self) -> float:
@@ -420,6 +542,8 @@ class Solution:
     f_lead: np.ndarray
     rr: RoadRun
     car: System
+    curves: tuple | None = None
+    P_car: np.ndarray | None = None
 
 
 def _discrete_columns(car: System, omega, cols, h):
@@ -513,13 +637,17 @@ def lead_in_normal_equations(g, aL, aR, r, wh, D: int):
     (K,) in the columns ``g`` (K, c, nb) with real coefficients and the rear wheels' ``D`` lead-in samples on
     each side, which enter through ``aL``, ``aR`` (K, c) times ``en`` (K, D) ``= e^{-i w n h}``; the unknowns
     ``f`` are ``[the nb coefficients, the left lead-in, the right lead-in]``."""
+    G, en = lead_in_gram(g, aL, aR, wh, D)
+    return G, lead_in_rhs(g, aL, aR, r, en), en
+
+
+def lead_in_gram(g, aL, aR, wh, D: int):
+    """The matrix ``G`` of :func:`lead_in_normal_equations` (it does not depend on the data) and ``en``."""
     nb = g.shape[-1]
     gf = g.reshape(-1, nb)
     gr = np.concatenate([gf.real, gf.imag])
     G = np.zeros((nb + 2 * D, nb + 2 * D))
-    b = np.zeros(nb + 2 * D)
     G[:nb, :nb] = gr.T @ gr
-    b[:nb] = gr.T @ np.concatenate([r.real.ravel(), r.imag.ravel()])
     ph = np.exp(1j * np.outer(wh, np.arange(-(D - 1), D)))                                   # (K, 2D-1)
     idx = np.arange(D)[:, None] - np.arange(D)[None, :] + (D - 1)
     en = np.exp(-1j * np.outer(wh, np.arange(D)))                                            # (K, D)
@@ -528,31 +656,76 @@ def lead_in_normal_equations(g, aL, aR, r, wh, D: int):
         sl = slice(nb + j * D, nb + (j + 1) * D)
         G[:nb, sl] = ((gH @ a[:, :, None])[..., 0].T @ en).real
         G[sl, :nb] = G[:nb, sl].T
-        b[sl] = (np.sum(np.conj(a) * r, axis=1) @ np.conj(en)).real
         for i, a2 in enumerate((aL, aR)):
             # (n, m): sum_k conj(a e^{-iwnh}) a2 e^{-iwmh} = sum_k conj(a) a2 e^{iw(n-m)h}, a Toeplitz block
             G[sl, slice(nb + i * D, nb + (i + 1) * D)] = (np.sum(np.conj(a) * a2, axis=1) @ ph).real[idx]
-    return G, b, en
+    return G, en
 
 
-def _damped_solve(G, b, eps: float = 1e-11) -> np.ndarray:
-    """``(G + eps lambda_max I)^-1 b`` of the symmetric positive semi-definite normal equations ``G`` (equilibrated),
-    by its eigen-decomposition. Not a pseudo-inverse cut at a relative ``rcond``: the boundary unknowns' normal
-    equations carry eigenvalues near any cut, and as the car moves one crossing it switches a direction in or out,
-    so the residual jumps. Measured on a 60 s road run (C_30 of examples/roads/class_b.toml, 80 lead-in samples):
+def lead_in_rhs(g, aL, aR, r, en) -> np.ndarray:
+    """The right-hand side ``b`` of :func:`lead_in_normal_equations` for the data ``r`` (K, c)."""
+    nb = g.shape[-1]
+    gf = g.reshape(-1, nb)
+    gr = np.concatenate([gf.real, gf.imag])
+    b = [gr.T @ np.concatenate([r.real.ravel(), r.imag.ravel()])]
+    b += [(np.sum(np.conj(a) * r, axis=1) @ np.conj(en)).real for a in (aL, aR)]
+    return np.concatenate(b)
+
+
+def _damped_factor(G) -> tuple:
+    """``G`` equilibrated and eigen-decomposed, for :func:`_damped_apply`: ``(G + eps lambda_max I)^-1 b`` of the
+    symmetric positive semi-definite normal equations ``G`` (equilibrated), ``eps`` = 1e-11.
+
+    Not a pseudo-inverse cut at a relative ``rcond``: the boundary unknowns' normal equations carry eigenvalues near
+    any cut, and as the car moves one crossing it switches a direction in or out, so the residual jumps. Measured on
+    a 60 s road run (C_30 of examples/roads/class_b.toml, 80 lead-in samples):
     the residual's derivative in m_uf by central differences of 1e-5 was 0.5 % off its 1e-4 value with the cut
     at 1e-13 (at 73, 77 and 80 lead-in samples; below 0.03 % at others), and through the polish's Jacobian the
     unsprung masses' std_robust had doubled; damped at 1e-11 it is the same to five digits at every count from
     72 to 81, the cost within 0.01 % of the cut's. At 1e-13 the damping amplified rounding (one scale of the
     whole car moved the residual by 1e-3, tests/test_roadfit.py); 1e-10 and 1e-9 serve as well."""
-    lam, V = np.linalg.eigh(0.5 * (G + G.T))
-    return V @ ((V.T @ b) / (np.clip(lam, 0.0, None) + eps * max(lam[-1], 1e-300)))
+    d = np.sqrt(np.clip(np.diag(G), 1e-300, None))
+    Ge = G / np.outer(d, d)
+    lam, V = np.linalg.eigh(0.5 * (Ge + Ge.T))
+    return lam, V, d
 
 
-def solve(P, geom: Geometry, rr: RoadRun, bins=None) -> Solution:
-    """Project the road out of run ``rr`` at the car ``P`` (16,) (module docstring): the residual at
-    the fit bins and the global unknowns (transient ``f``, rear lead-in samples)."""
-    bins = rr.fit if bins is None else bins
+def _damped_apply(fac, b, eps: float = 1e-11) -> np.ndarray:
+    """The solution of the normal equations factored by :func:`_damped_factor` for the right-hand side ``b``."""
+    lam, V, d = fac
+    return V @ ((V.T @ (b / d)) / (np.clip(lam, 0.0, None) + eps * max(lam[-1], 1e-300))) / d
+
+
+@dataclass(frozen=True)
+class _Context:
+    """What the projection of one run at one linear car needs whatever the data (:func:`solve`): the car, its road
+    projector, the projected boundary columns and their normal equations' matrix, factored."""
+
+    car: System
+    perp: object
+    S: np.ndarray
+    aL: np.ndarray
+    aR: np.ndarray
+    en: np.ndarray
+    factor: tuple
+
+
+#: with damper curves, the contexts of the last few cars (:func:`_context`): the curves' knot forces move the
+#: data's known input, not the car, so the error bars' finite differences in them reuse their car's
+_CONTEXTS: OrderedDict = OrderedDict()
+_CONTEXTS_LOCK = threading.Lock()
+
+
+def _context(P, geom: Geometry, rr: RoadRun, bins) -> _Context:
+    """The :class:`_Context` of car ``P`` on ``rr`` at ``bins``; with damper curves cached (the last 16)."""
+    key = None
+    if rr.dep is not None:
+        key = (id(rr), id(bins), np.asarray(P, dtype=float).tobytes())
+        with _CONTEXTS_LOCK:
+            hit = _CONTEXTS.get(key)
+            if hit is not None and hit[0] is rr and hit[1] is bins:
+                _CONTEXTS.move_to_end(key)
+                return hit[2]
     w = rr.omega(bins)
     h = rr.h
     car = system(P, geom)
@@ -563,15 +736,32 @@ def solve(P, geom: Geometry, rr: RoadRun, bins=None) -> Solution:
     S = perp(S)
     aL = perp(H[:, :, 2:3])[..., 0]                                                          # (K,c)
     aR = perp(H[:, :, 3:4])[..., 0]
-    r = perp(rr.Y[bins][:, :, None])[..., 0]                                                 # (K,c)
+    G, en = lead_in_gram(S, aL, aR, w * h, rr.lead_in)
+    ctx = _Context(car, perp, S, aL, aR, en, _damped_factor(G))
+    if key is not None:
+        with _CONTEXTS_LOCK:
+            _CONTEXTS[key] = (rr, bins, ctx)
+            while len(_CONTEXTS) > 16:
+                _CONTEXTS.popitem(last=False)
+    return ctx
+
+
+def solve(P, geom: Geometry, rr: RoadRun, bins=None) -> Solution:
+    """Project the road out of run ``rr`` at the car ``P`` (16,) (module docstring): the residual at
+    the fit bins and the global unknowns (transient ``f``, rear lead-in samples)."""
+    bins = rr.fit if bins is None else bins
+    P, curves = car_and_curves(P, rr)
+    ctx = _context(P, geom, rr, bins)
+    Y = rr.Y[bins] - departure_response(ctx.car, P, geom, rr, bins, curves)
+    r = ctx.perp(Y[:, :, None])[..., 0]                                                      # (K,c)
     D = rr.lead_in
-    G, b, en = lead_in_normal_equations(S, aL, aR, r, w * h, D)
-    ns = S.shape[-1]  # the car's states: 14, 18 with a powertrain on mounts, + the sensor filters' (SPEC §11)
-    d = np.sqrt(np.clip(np.diag(G), 1e-300, None))
-    f = _damped_solve(G / np.outer(d, d), b / d) / d
+    b = lead_in_rhs(ctx.S, ctx.aL, ctx.aR, r, ctx.en)
+    ns = ctx.S.shape[-1]  # the car's states: 14, 18 with a powertrain on mounts, + the sensor filters' (SPEC §11)
+    f = _damped_apply(ctx.factor, b)
     fS, fL, fR = f[:ns], f[ns:ns + D], f[ns + D:]
-    res = r - S @ fS - aL * (en @ fL)[:, None] - aR * (en @ fR)[:, None]
-    return Solution(residual=res, f_state=fS, f_lead=np.stack([fL, fR]), rr=rr, car=car)
+    res = r - ctx.S @ fS - ctx.aL * (ctx.en @ fL)[:, None] - ctx.aR * (ctx.en @ fR)[:, None]
+    return Solution(residual=res, f_state=fS, f_lead=np.stack([fL, fR]), rr=rr, car=ctx.car, curves=curves,
+                    P_car=P)
 
 
 def residuals(P, geom: Geometry, rr: RoadRun) -> np.ndarray:
@@ -612,6 +802,7 @@ def road(P, geom: Geometry, rr: RoadRun, sol: Solution | None = None, wavelength
     # the boundary unknowns are fitted in the fit band only: outside it their spectrum is not determined
     # (D free samples have content up to the Nyquist frequency), and subtracting it would add noise there
     known[~np.isin(bins, rr.fit)] = 0.0
+    known = known + departure_response(sol.car, sol.P_car, geom, rr, bins, sol.curves)
     R = road_of((rr.Y[bins] - known)[:, :, None])[..., 0]                                  # (K, 2)
     full = np.zeros((f.size, 2), dtype=complex)
     full[bins] = R
