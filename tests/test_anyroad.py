@@ -162,12 +162,13 @@ def test_a_track_run_that_begins_moving_is_fitted_as_a_road_run(tmp_path):
 
 
 @pytest.mark.slow  # moved to CI's slow pass: make test under 10 minutes on two cores
-def test_a_nonlinear_model_is_refused_with_road_runs(road_fit, tmp_path, capsys):
+def test_bump_stops_are_refused_with_road_runs(road_fit, tmp_path, capsys):
+    """Bump stops cannot be fitted with the road projected out (damper curves can: tests/test_road_curves.py)."""
     _, sim, _ = road_fit
-    rc = main(["identify", str(sim), "--out", str(tmp_path / "f"), "--model", "damper_curves", "--quiet"])
+    rc = main(["identify", str(sim), "--out", str(tmp_path / "f"), "--model", "bump_stops", "--quiet"])
     err = capsys.readouterr().err
     assert rc == 2 and len(err.strip().splitlines()) == 1 and not (tmp_path / "f").exists()
-    assert "damper_curves" in err and "unknown roads (B40, C25)" in err
+    assert "bump_stops" in err and "unknown roads (B40, C25)" in err
 
 
 def test_an_unknown_road_needs_a_steady_speed():
