@@ -163,11 +163,10 @@ def used_channels(y) -> tuple[np.ndarray, dict]:
 
 def suspension_velocities(y, fs: float, drift: float | None = None) -> np.ndarray:
     """Each corner's suspension velocity ``v_i = z_i' - z_bi'`` (n, 4), m/s, compression +, from its axle and body
-    accelerometers (``y`` (n, 10), SPEC channels): the difference integrated bin by bin, ``(A_k - A_0) / (i
-    omega_k)`` (the ``A_0`` term is the record's change of velocity, which the DFT of a finite record would
-    otherwise spread over every bin as a sawtooth), less its least-squares cubic spline with knots every setting
-    ``roadfit.velocity_drift`` seconds (the integral's drift: the noise's random walk, and the start's velocity; a
-    suspension barely moves so slowly).
+    accelerometers (``y`` (n, 10), SPEC channels): the difference integrated bin by bin, ``A_k / (i omega_k)``,
+    plus the ramp of the record's change of velocity ``A_0 h`` (the DFT's periodic integral has none), less its
+    least-squares cubic spline with knots every setting ``roadfit.velocity_drift`` seconds (the integral's drift:
+    the noise's random walk, and the start's velocity; a suspension barely moves so slowly).
 
     Not in the time domain: a sampled acceleration carries the road's content above the Nyquist frequency folded
     into the band, and a running sum turns it into a drift at every frequency. Not a cut below a frequency either:
@@ -258,12 +257,10 @@ def car_and_curves(P, rr: RoadRun):
     return car, (P[..., -2 * K:-K], P[..., -K:])
 
 
-def departure_response(car: System, P_car, geom: Geometry, rr: RoadRun, bins, curves) -> np.ndarray:
-    """The used channels' response (K, c), weighted and as recorded, to the curves' departure from the linear car's
-    dampers at ``bins`` (:meth:`Departure.spectrum`); zero without curves. ``car``: the linear car's
-    :class:`System` (its modes serve the force input too)."""
-    if curves is None or rr.dep is None:
-        return 0.0
+def force_columns(car: System, P_car, geom: Geometry, rr: RoadRun, bins) -> np.ndarray:
+    """The used channels' response (K, c, 4), weighted and as recorded, to a force pair at each corner
+    (:func:`rideid.model.equations.force_input`) at ``bins``. ``car``: the linear car's :class:`System` (its modes
+    serve the force input too)."""
     w = rr.omega(bins)
     Bu, Dyu = force_input(np.atleast_2d(P_car), geom)
     forced = replace(car, B=Bu, Dy=Dyu, Br=np.zeros_like(Bu), Dyr=np.zeros_like(Dyu))
@@ -271,8 +268,18 @@ def departure_response(car: System, P_car, geom: Geometry, rr: RoadRun, bins, cu
     sr = sensor_response(rr, w)
     if sr is not None:
         G = G * sr[0][:, :, None]
+    return G * rr.scale[None, :, None]
+
+
+def departure_response(car: System, P_car, geom: Geometry, rr: RoadRun, bins, curves, G=None) -> np.ndarray:
+    """The used channels' response (K, c), weighted and as recorded, to the curves' departure from the linear car's
+    dampers at ``bins`` (:meth:`Departure.spectrum`); zero without curves. ``G``: the car's
+    :func:`force_columns` there when known."""
+    if curves is None or rr.dep is None:
+        return 0.0
+    G = force_columns(car, P_car, geom, rr, bins) if G is None else G
     u = rr.dep.spectrum(bins, P_car, curves)
-    return (G @ u[:, :, None])[..., 0] * rr.scale[None, :]
+    return (G @ u[:, :, None])[..., 0]
 
 
 @dataclass(frozen=True)
@@ -699,7 +706,8 @@ def _damped_apply(fac, b, eps: float = 1e-11) -> np.ndarray:
 @dataclass(frozen=True)
 class _Context:
     """What the projection of one run at one linear car needs whatever the data (:func:`solve`): the car, its road
-    projector, the projected boundary columns and their normal equations' matrix, factored."""
+    projector, the projected boundary columns and their normal equations' matrix, factored; with damper curves its
+    response to the corners' force pairs (:func:`force_columns`)."""
 
     car: System
     perp: object
@@ -708,6 +716,7 @@ class _Context:
     aR: np.ndarray
     en: np.ndarray
     factor: tuple
+    forces: np.ndarray | None = None
 
 
 #: with damper curves, the contexts of the last few cars (:func:`_context`): the curves' knot forces move the
@@ -737,7 +746,8 @@ def _context(P, geom: Geometry, rr: RoadRun, bins) -> _Context:
     aL = perp(H[:, :, 2:3])[..., 0]                                                          # (K,c)
     aR = perp(H[:, :, 3:4])[..., 0]
     G, en = lead_in_gram(S, aL, aR, w * h, rr.lead_in)
-    ctx = _Context(car, perp, S, aL, aR, en, _damped_factor(G))
+    forces = None if rr.dep is None else force_columns(car, P, geom, rr, bins)
+    ctx = _Context(car, perp, S, aL, aR, en, _damped_factor(G), forces)
     if key is not None:
         with _CONTEXTS_LOCK:
             _CONTEXTS[key] = (rr, bins, ctx)
@@ -752,7 +762,7 @@ def solve(P, geom: Geometry, rr: RoadRun, bins=None) -> Solution:
     bins = rr.fit if bins is None else bins
     P, curves = car_and_curves(P, rr)
     ctx = _context(P, geom, rr, bins)
-    Y = rr.Y[bins] - departure_response(ctx.car, P, geom, rr, bins, curves)
+    Y = rr.Y[bins] - departure_response(ctx.car, P, geom, rr, bins, curves, ctx.forces)
     r = ctx.perp(Y[:, :, None])[..., 0]                                                      # (K,c)
     D = rr.lead_in
     b = lead_in_rhs(ctx.S, ctx.aL, ctx.aR, r, ctx.en)
