@@ -1,7 +1,16 @@
 import os
 
-import numpy as np
-import pytest
+# Two test workers share two cores, and rideid fits with BLAS on one thread (rideid.model.batch.single_threaded_blas
+# around identify, a study's tasks, the model choice): tests that call its parts directly get the same, and so do
+# the command lines they start (OpenBLAS's threads spin on small matrices: a road fit's Cholesky factor took 9 ms
+# on two threads, 0.2 ms on one).
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+
+import numpy as np  # noqa: E402
+import pytest  # noqa: E402
+from threadpoolctl import threadpool_limits  # noqa: E402
+
+threadpool_limits(limits=1, user_api="blas")
 
 
 def pytest_addoption(parser):

@@ -123,6 +123,7 @@ Hessian, not ``J^T J``: the projected residual is linear in the data, so
 
 from __future__ import annotations
 
+import functools
 import threading
 from collections import OrderedDict
 from dataclasses import dataclass, field, replace
@@ -655,9 +656,8 @@ def lead_in_gram(g, aL, aR, wh, D: int):
     gr = np.concatenate([gf.real, gf.imag])
     G = np.zeros((nb + 2 * D, nb + 2 * D))
     G[:nb, :nb] = gr.T @ gr
-    ph = np.exp(1j * np.outer(wh, np.arange(-(D - 1), D)))                                   # (K, 2D-1)
+    ph, en = _lead_in_phases(np.asarray(wh, dtype=float).tobytes(), D)
     idx = np.arange(D)[:, None] - np.arange(D)[None, :] + (D - 1)
-    en = np.exp(-1j * np.outer(wh, np.arange(D)))                                            # (K, D)
     gH = np.conj(np.swapaxes(g, 1, 2))                                                        # (K,nb,c)
     for j, a in enumerate((aL, aR)):
         sl = slice(nb + j * D, nb + (j + 1) * D)
@@ -667,6 +667,19 @@ def lead_in_gram(g, aL, aR, wh, D: int):
             # (n, m): sum_k conj(a e^{-iwnh}) a2 e^{-iwmh} = sum_k conj(a) a2 e^{iw(n-m)h}, a Toeplitz block
             G[sl, slice(nb + i * D, nb + (i + 1) * D)] = (np.sum(np.conj(a) * a2, axis=1) @ ph).real[idx]
     return G, en
+
+
+@functools.lru_cache(maxsize=64)
+def _lead_in_phases(wh_bytes: bytes, D: int) -> tuple[np.ndarray, np.ndarray]:
+    """``e^{i w h n}`` at the bins ``wh`` (given as the bytes of a float array) for ``n`` = -(D-1) .. D-1, and
+    ``en = e^{-i w h n}`` for ``n`` = 0 .. D-1: the same for every car on one run, and a quarter of a road fit's
+    time when computed each time (a slow run's lead-in is 80 samples, its fit 300 bins). Read-only."""
+    wh = np.frombuffer(wh_bytes, dtype=float)
+    ph = np.exp(1j * np.outer(wh, np.arange(-(D - 1), D)))                                   # (K, 2D-1)
+    en = np.exp(-1j * np.outer(wh, np.arange(D)))                                            # (K, D)
+    ph.flags.writeable = False
+    en.flags.writeable = False
+    return ph, en
 
 
 def lead_in_rhs(g, aL, aR, r, en) -> np.ndarray:
@@ -679,8 +692,8 @@ def lead_in_rhs(g, aL, aR, r, en) -> np.ndarray:
     return np.concatenate(b)
 
 
-def _damped_factor(G) -> tuple:
-    """``G`` equilibrated and eigen-decomposed, for :func:`_damped_apply`: ``(G + eps lambda_max I)^-1 b`` of the
+def _damped_factor(G, eps: float = 1e-11) -> tuple:
+    """``G`` equilibrated, damped and factored, for :func:`_damped_apply`: ``(G + eps lambda_max I)^-1 b`` of the
     symmetric positive semi-definite normal equations ``G`` (equilibrated), ``eps`` = 1e-11.
 
     Not a pseudo-inverse cut at a relative ``rcond``: the boundary unknowns' normal equations carry eigenvalues near
@@ -690,17 +703,40 @@ def _damped_factor(G) -> tuple:
     at 1e-13 (at 73, 77 and 80 lead-in samples; below 0.03 % at others), and through the polish's Jacobian the
     unsprung masses' std_robust had doubled; damped at 1e-11 it is the same to five digits at every count from
     72 to 81, the cost within 0.01 % of the cut's. At 1e-13 the damping amplified rounding (one scale of the
-    whole car moved the residual by 1e-3, tests/test_roadfit.py); 1e-10 and 1e-9 serve as well."""
+    whole car moved the residual by 1e-3, tests/test_roadfit.py); 1e-10 and 1e-9 serve as well.
+
+    The damped matrix is positive definite (its condition at most 1/eps), so a Cholesky factor solves it, with
+    ``lambda_max`` from the Rayleigh quotient of a few power steps (a tenth of an eigendecomposition's time at the
+    130-180 unknowns of a road run's lead-in: the damping needs its scale, not its digits); an eigendecomposition
+    where the factor fails."""
     d = np.sqrt(np.clip(np.diag(G), 1e-300, None))
     Ge = G / np.outer(d, d)
-    lam, V = np.linalg.eigh(0.5 * (Ge + Ge.T))
-    return lam, V, d
+    Ge = 0.5 * (Ge + Ge.T)
+    lam = _largest_eigenvalue(Ge)
+    try:
+        return scipy.linalg.cho_factor(Ge + (eps * lam) * np.eye(Ge.shape[0]), check_finite=False), d
+    except np.linalg.LinAlgError:
+        w, V = np.linalg.eigh(Ge)
+        return (w, V, eps * max(w[-1], 1e-300)), d
 
 
-def _damped_apply(fac, b, eps: float = 1e-11) -> np.ndarray:
+def _largest_eigenvalue(A, steps: int = 12) -> float:
+    """The largest eigenvalue of the symmetric positive semi-definite ``A``, to a few per cent: the Rayleigh
+    quotient after ``steps`` power steps from the vector of ones (deterministic; an under-estimate, never above)."""
+    x = np.ones(A.shape[0])
+    for _ in range(steps):
+        y = A @ x
+        x = y / max(float(np.linalg.norm(y)), 1e-300)
+    return max(float(x @ (A @ x)), 1e-300)
+
+
+def _damped_apply(fac, b) -> np.ndarray:
     """The solution of the normal equations factored by :func:`_damped_factor` for the right-hand side ``b``."""
-    lam, V, d = fac
-    return V @ ((V.T @ (b / d)) / (np.clip(lam, 0.0, None) + eps * max(lam[-1], 1e-300))) / d
+    f, d = fac
+    if len(f) == 3:  # the eigendecomposition's fallback
+        w, V, damp = f
+        return V @ ((V.T @ (b / d)) / (np.clip(w, 0.0, None) + damp)) / d
+    return scipy.linalg.cho_solve(f, b / d, check_finite=False) / d
 
 
 @dataclass(frozen=True)
