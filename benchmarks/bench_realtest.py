@@ -10,7 +10,11 @@ identified with the defaults and seed 1, as a user would):
 * ``gps``: the SUV along a GPS speed channel, five runs (tests/driven_speed.py);
 * ``knees``: the knee car with the knots found (tests/knee_cars.py, car ``bars``), 1 % noise;
 * ``van-csv`` / ``van-logger``: the shared damper van as SPEC CSV and as logger files
-  (../shared/cases/damper-van-logger, when that folder is beside the repository).
+  (../shared/cases/damper-van-logger, when that folder is beside the repository);
+* ``roads``: the built-in car with tire damping on two unknown 12 s ISO roads, 2 % noise (the case of
+  tests/test_road_model_choice.py);
+* ``van-roads``: the shared van with digressive dampers on three unknown roads and one twist run, 2 % noise
+  (../shared/cases/van-roads-dampers, when beside the repository).
 
 Each case's table: the stages of ``profile.csv`` (wall and CPU seconds, CPU counting every thread), its
 whole wall time, and, for scale, the same wall time in units of a plain SciPy baseline measured in the same
@@ -35,7 +39,7 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 TESTS = ROOT / "tests"
 SHARED = ROOT.parent / "shared" / "cases"
-CASES = ("builtin", "realities", "gps", "knees", "van-csv", "van-logger")
+CASES = ("builtin", "realities", "gps", "knees", "van-csv", "van-logger", "roads", "van-roads")
 
 
 def _rideid(*args, cwd=None) -> subprocess.CompletedProcess:
@@ -101,9 +105,37 @@ def write_case(case: str, folder: Path) -> Path:
         else:
             subprocess.run([sys.executable, str(van / "make_logger.py"), str(sim), str(data), "2.5"], check=True)
             shutil.copy(van / "logger.toml", data / "dataset.toml")
+    elif case == "roads":
+        folder.mkdir(parents=True, exist_ok=True)
+        (folder / "scenario.toml").write_text(_roads_scenario())
+        _check(_rideid("simulate", folder / "scenario.toml", "--out", data, "--noise", "0.02", "--seed", "3",
+                       "--quiet"))
+    elif case == "van-roads":
+        van = SHARED / "van-roads-dampers"
+        if not van.is_dir():
+            raise FileNotFoundError(f"{van}: the shared case is not beside the repository")
+        _check(_rideid("simulate", van / "scenario.toml", "--out", data, "--noise", "0.02", "--seed", "1",
+                       "--quiet"))
     else:
         raise ValueError(f"unknown case {case!r}; the cases: {', '.join(CASES)}")
     return data
+
+
+def _roads_scenario() -> str:
+    """The scenario of ``roads``: the built-in car, tire damping 400 N s/m, no bars (declared), two roads."""
+    import tomli_w
+
+    import rideid
+    from rideid.model.params import total_mass
+
+    sc = rideid.default_scenario()
+    g = sc.geometry
+    truth = dict(sc.truth, c_tf=400.0, c_tr=400.0)
+    runs = [{"id": "B40", "road_class": "B", "speed": 11.0, "fs": 200.0, "duration": 12.0},
+            {"id": "C25", "road_class": "C", "speed": 7.0, "fs": 200.0, "duration": 12.0}]
+    return tomli_w.dumps({"name": "roads", "vehicle": {k: getattr(g, k) for k in g.KEYS},
+                          "known": {"total_mass": float(total_mass(dict(sc.truth))), "k_arf": 0.0, "k_arr": 0.0},
+                          "truth": truth, "runs": runs})
 
 
 def _check(p: subprocess.CompletedProcess) -> subprocess.CompletedProcess:

@@ -59,6 +59,7 @@ road run each used channel's squared error at the estimated road over its measur
 from __future__ import annotations
 
 import time
+from collections import OrderedDict
 from dataclasses import dataclass, replace
 
 import numpy as np
@@ -312,10 +313,21 @@ def _joint_solve(prob, z, ds, max_nfev: int):
     P0 = prob.car(z)
     weights = {k: prob.scale[k] * prob.parts[k].level(P0, prob.geom) for k in keys}
 
+    # (block, its motion) -> the moved block, one object for every car at that motion: a road run's projection of
+    # one car is cached by its run (rideid.estimate.problem.roadfit._context), so the damper curves' knot-force
+    # columns of the Jacobian reuse it (a new run object per call missed it: the van of
+    # ../shared/cases/van-roads-dampers, joint solves 74 s)
+    moved = OrderedDict()
+
     def placed(w):
         parts = list(prob.parts)
         for k, p in _motion_block(prob, w, d).items():
-            parts[k] = prob.parts[k].moved(ds, p)
+            key = (k, p.tobytes())
+            if key not in moved:
+                moved[key] = prob.parts[k].moved(ds, p)
+                if len(moved) > 4 * len(keys):
+                    moved.popitem(last=False)
+            parts[k] = moved[key]
         return prob.with_blocks(parts)
 
     def fun(w):

@@ -205,13 +205,26 @@ class Departure:
     Phi: np.ndarray
     c_ref: tuple | None = None
     y: np.ndarray | None = field(default=None, repr=False)
+    _at: dict = field(default_factory=dict, repr=False, compare=False)
+
+    def at(self, bins) -> tuple[np.ndarray, np.ndarray]:
+        """``Phi`` and ``V`` at ``bins``, taken once per bins array (a fit evaluates thousands of cars on the same
+        bins; the last few kept)."""
+        hit = self._at.get(id(bins))
+        if hit is None or hit[0] is not bins:
+            hit = (bins, self.Phi[bins], self.V[bins])
+            if len(self._at) >= 4:
+                self._at.pop(next(iter(self._at)))
+            self._at[id(bins)] = hit
+        return hit[1], hit[2]
 
     def spectrum(self, bins, P_car, curves) -> np.ndarray:
         """The DFT (K, 4) at ``bins`` of each corner's damper force less the linear car's ``c_s v``."""
         Ff, Fr = curves
         F = np.stack([Ff, Ff, Fr, Fr])                                                       # (4, K)
         c = np.array([P_car[INDEX["c_sf"]]] * 2 + [P_car[INDEX["c_sr"]]] * 2)
-        return np.einsum("bik,ik->bi", self.Phi[bins], F) - c[None] * self.V[bins]
+        Phi, V = self.at(bins)
+        return np.einsum("bik,ik->bi", Phi, F) - c[None] * V
 
 
 def departure_of(y, fs: float, knots) -> Departure:
@@ -652,8 +665,7 @@ def lead_in_normal_equations(g, aL, aR, r, wh, D: int):
 def lead_in_gram(g, aL, aR, wh, D: int):
     """The matrix ``G`` of :func:`lead_in_normal_equations` (it does not depend on the data) and ``en``."""
     nb = g.shape[-1]
-    gf = g.reshape(-1, nb)
-    gr = np.concatenate([gf.real, gf.imag])
+    gr = real_rows(g)
     G = np.zeros((nb + 2 * D, nb + 2 * D))
     G[:nb, :nb] = gr.T @ gr
     ph, en = _lead_in_phases(np.asarray(wh, dtype=float).tobytes(), D)
@@ -682,14 +694,22 @@ def _lead_in_phases(wh_bytes: bytes, D: int) -> tuple[np.ndarray, np.ndarray]:
     return ph, en
 
 
-def lead_in_rhs(g, aL, aR, r, en) -> np.ndarray:
-    """The right-hand side ``b`` of :func:`lead_in_normal_equations` for the data ``r`` (K, c)."""
-    nb = g.shape[-1]
-    gf = g.reshape(-1, nb)
-    gr = np.concatenate([gf.real, gf.imag])
+def lead_in_rhs(g, aL, aR, r, en, gr=None, aa=None) -> np.ndarray:
+    """The right-hand side ``b`` of :func:`lead_in_normal_equations` for the data ``r`` (K, c). ``gr``: the
+    columns ``g`` as real rows (:func:`real_rows`), ``aa``: ``conj([aL, aR])`` (2, K, c), when known (a car's
+    context keeps them for every right-hand side)."""
+    gr = real_rows(g) if gr is None else gr
+    aa = np.conj(np.stack([aL, aR])) if aa is None else aa
     b = [gr.T @ np.concatenate([r.real.ravel(), r.imag.ravel()])]
-    b += [(np.sum(np.conj(a) * r, axis=1) @ np.conj(en)).real for a in (aL, aR)]
+    # sum_k conj(a_k) r_k e^{+i w_k n h} = (sum_c conj(a) r) @ conj(en)
+    b.append((np.einsum("jkc,kc->jk", aa, r) @ np.conj(en)).real.ravel())
     return np.concatenate(b)
+
+
+def real_rows(g) -> np.ndarray:
+    """The complex columns ``g`` (K, c, nb) as real rows (2 K c, nb): the real parts, then the imaginary."""
+    gf = g.reshape(-1, g.shape[-1])
+    return np.concatenate([gf.real, gf.imag])
 
 
 def _damped_factor(G, eps: float = 1e-11) -> tuple:
@@ -753,6 +773,8 @@ class _Context:
     en: np.ndarray
     factor: tuple
     forces: np.ndarray | None = None
+    gr: np.ndarray | None = None
+    aa: np.ndarray | None = None
 
 
 #: with damper curves, the contexts of the last few cars (:func:`_context`): the curves' knot forces move the
@@ -783,7 +805,7 @@ def _context(P, geom: Geometry, rr: RoadRun, bins) -> _Context:
     aR = perp(H[:, :, 3:4])[..., 0]
     G, en = lead_in_gram(S, aL, aR, w * h, rr.lead_in)
     forces = None if rr.dep is None else force_columns(car, P, geom, rr, bins)
-    ctx = _Context(car, perp, S, aL, aR, en, _damped_factor(G), forces)
+    ctx = _Context(car, perp, S, aL, aR, en, _damped_factor(G), forces, real_rows(S), np.conj(np.stack([aL, aR])))
     if key is not None:
         with _CONTEXTS_LOCK:
             _CONTEXTS[key] = (rr, bins, ctx)
@@ -801,7 +823,7 @@ def solve(P, geom: Geometry, rr: RoadRun, bins=None) -> Solution:
     Y = rr.Y[bins] - departure_response(ctx.car, P, geom, rr, bins, curves, ctx.forces)
     r = ctx.perp(Y[:, :, None])[..., 0]                                                      # (K,c)
     D = rr.lead_in
-    b = lead_in_rhs(ctx.S, ctx.aL, ctx.aR, r, ctx.en)
+    b = lead_in_rhs(ctx.S, ctx.aL, ctx.aR, r, ctx.en, ctx.gr, ctx.aa)
     ns = ctx.S.shape[-1]  # the car's states: 14, 18 with a powertrain on mounts, + the sensor filters' (SPEC §11)
     f = _damped_apply(ctx.factor, b)
     fS, fL, fR = f[:ns], f[ns:ns + D], f[ns + D:]
