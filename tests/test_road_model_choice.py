@@ -135,3 +135,4 @@ def test_the_true_hessian_at_a_bound_is_the_curvature_inside():
     prob.costs = costs
     for v in ([0.0, 0.2], [1.0, -0.3], [0.5, 0.0]):  # at the lower bound, at the upper, inside
         np.testing.assert_allclose(prob.hessian(np.array(v)), A, rtol=1e-6)
+
