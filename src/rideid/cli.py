@@ -381,8 +381,8 @@ def _roads_table(res) -> str:
     if judged.verdict != "fail" and (not res.adequacy or not res.adequacy.get("runs")):
         what = "RESIDUALS" if res.adequacy else "ADEQUACY"  # a verdict from the sensor check alone, or none
         lines.append(f"{what} NOT FULLY ASSESSED: every run is on an unknown road, where rideid judges only the "
-                     "residual's size (a car far off), not its structure; the error bars hold only if the linear "
-                     "model describes the car (add a known-track run to test it)" if judged.verdict == "pass" else
+                     "residual's size (a car far off), not its structure; the error bars hold only if the model "
+                     "describes the car (add a known-track run to test it)" if judged.verdict == "pass" else
                      f"{what} NOT ASSESSED: every run is on an unknown road, where rideid has no residual test yet; "
                      "the error bars hold only if the model describes the car (add a known-track run to "
                      "test it)")

@@ -58,8 +58,8 @@ road run each used channel's squared error at the estimated road over its measur
 
 from __future__ import annotations
 
+import functools
 import time
-from collections import OrderedDict
 from dataclasses import dataclass, replace
 
 import numpy as np
@@ -318,18 +318,15 @@ def _joint_solve(prob, z, ds, max_nfev: int):
     # (block, its motion) -> the moved block, one object for every car at that motion: a road run's projection of
     # one car is cached by its run (rideid.estimate.problem.roadfit._context), so the damper curves' knot-force
     # columns of the Jacobian reuse it (a new run object per call missed it: the van of
-    # ../shared/cases/van-roads-dampers, joint solves 74 s)
-    moved = OrderedDict()
+    # ../shared/cases/van-roads-dampers, joint solves 110 -> 55 s)
+    @functools.lru_cache(maxsize=4 * max(len(keys), 1))
+    def moved(k: int, p: bytes):
+        return prob.parts[k].moved(ds, np.frombuffer(p, dtype=float))
 
     def placed(w):
         parts = list(prob.parts)
         for k, p in _motion_block(prob, w, d).items():
-            key = (k, p.tobytes())
-            if key not in moved:
-                moved[key] = prob.parts[k].moved(ds, p)
-                if len(moved) > 4 * len(keys):
-                    moved.popitem(last=False)
-            parts[k] = moved[key]
+            parts[k] = moved(k, np.asarray(p, dtype=float).tobytes())
         return prob.with_blocks(parts)
 
     def fun(w):
