@@ -231,7 +231,8 @@ def test_the_damped_normal_equations_by_cholesky_are_the_eigen_solution():
     """The boundary unknowns' damped normal equations ``(G + eps lambda_max I)^-1 b`` (equilibrated) solved by a
     Cholesky factor with ``lambda_max`` from power steps are the eigendecomposition's solution: ``G`` singular to
     rounding (two columns that explain the same thing, as the rear lead-in and the start's state do), its
-    largest eigenvalue within 5 % and never above, and the residual the same to 1e-9 of the data."""
+    largest eigenvalue within 5 % and never above, and the residual the same to 1e-9 of the data; a matrix
+    that is not positive semi-definite beyond the damping takes the eigendecomposition's way."""
     rng = np.random.default_rng(4)
     A = rng.standard_normal((400, 60)) * np.logspace(0, 3, 60)
     A[:, 7] = A[:, 3] * 2.0  # an exact dependence
@@ -242,7 +243,15 @@ def test_the_damped_normal_equations_by_cholesky_are_the_eigen_solution():
     lam, V = np.linalg.eigh(Ge)
     approx = roadfit._largest_eigenvalue(Ge)
     assert 0.95 * lam[-1] <= approx <= lam[-1] * (1 + 1e-12)
-    f = roadfit._damped_apply(roadfit._damped_factor(G), b)
+    f = roadfit._damped_factor(G)(b)
     f_eig = V @ ((V.T @ (b / d)) / (np.clip(lam, 0, None) + 1e-11 * lam[-1])) / d
     np.testing.assert_allclose(A @ f, A @ f_eig, atol=1e-9 * np.abs(y).max())
     assert np.linalg.norm(y - A @ f) <= np.linalg.norm(y - A @ f_eig) * (1 + 1e-9)
+    # beyond the damping not positive semi-definite (an eigenvalue of -2e-6 where the damping is 1e-11 of the
+    # largest): no Cholesky factor, the eigendecomposition's solution with that eigenvalue taken as 0
+    Gn = Ge - 2e-6 * np.outer(V[:, 0], V[:, 0])
+    dn = np.sqrt(np.diag(Gn))
+    wn, Vn = np.linalg.eigh(Gn / np.outer(dn, dn))
+    assert wn[0] < -1e-6
+    expect = Vn @ ((Vn.T @ (b / dn)) / (np.clip(wn, 0, None) + 1e-11 * wn[-1])) / dn
+    np.testing.assert_allclose(roadfit._damped_factor(Gn)(b), expect, rtol=1e-9)

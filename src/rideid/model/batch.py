@@ -19,7 +19,6 @@ parameter layout.
 from __future__ import annotations
 
 import contextlib
-import functools
 import threading
 
 import numpy as np
@@ -64,16 +63,6 @@ def single_threaded_blas():
             if _BLAS_STATE["depth"] == 0:
                 _BLAS_STATE["limiter"].restore_original_limits()
                 _BLAS_STATE["limiter"] = None
-
-
-def with_single_threaded_blas(fn):
-    """``fn`` run inside :func:`single_threaded_blas` (an entry point whose work is many small matrices: a test
-    plan of road runs took 9.1 s with OpenBLAS on two threads, 4.7 s on one)."""
-    @functools.wraps(fn)
-    def wrapped(*args, **kwargs):
-        with single_threaded_blas():
-            return fn(*args, **kwargs)
-    return wrapped
 
 
 def thread_map(fn, items, name: str = "rideid") -> list:

@@ -662,10 +662,11 @@ def lead_in_normal_equations(g, aL, aR, r, wh, D: int):
     return G, lead_in_rhs(g, aL, aR, r, en), en
 
 
-def lead_in_gram(g, aL, aR, wh, D: int):
-    """The matrix ``G`` of :func:`lead_in_normal_equations` (it does not depend on the data) and ``en``."""
+def lead_in_gram(g, aL, aR, wh, D: int, gr=None):
+    """The matrix ``G`` of :func:`lead_in_normal_equations` (it does not depend on the data) and ``en``. ``gr``:
+    ``g`` as real rows (:func:`real_rows`) when known."""
     nb = g.shape[-1]
-    gr = real_rows(g)
+    gr = real_rows(g) if gr is None else gr
     G = np.zeros((nb + 2 * D, nb + 2 * D))
     G[:nb, :nb] = gr.T @ gr
     ph, en = _lead_in_phases(np.asarray(wh, dtype=float).tobytes(), D)
@@ -694,15 +695,15 @@ def _lead_in_phases(wh_bytes: bytes, D: int) -> tuple[np.ndarray, np.ndarray]:
     return ph, en
 
 
-def lead_in_rhs(g, aL, aR, r, en, gr=None, aa=None) -> np.ndarray:
+def lead_in_rhs(g, aL, aR, r, en, gr=None) -> np.ndarray:
     """The right-hand side ``b`` of :func:`lead_in_normal_equations` for the data ``r`` (K, c). ``gr``: the
-    columns ``g`` as real rows (:func:`real_rows`), ``aa``: ``conj([aL, aR])`` (2, K, c), when known (a car's
-    context keeps them for every right-hand side)."""
+    columns ``g`` as real rows (:func:`real_rows`) when known (a car's context keeps them for every right-hand
+    side)."""
     gr = real_rows(g) if gr is None else gr
-    aa = np.conj(np.stack([aL, aR])) if aa is None else aa
     b = [gr.T @ np.concatenate([r.real.ravel(), r.imag.ravel()])]
-    # sum_k conj(a_k) r_k e^{+i w_k n h} = (sum_c conj(a) r) @ conj(en)
-    b.append((np.einsum("jkc,kc->jk", aa, r) @ np.conj(en)).real.ravel())
+    # Re sum_k conj(a_k) r_k e^{+i w_k n h} = Re sum_k a_k conj(r_k) e^{-i w_k n h}: ``en`` as it is, not conjugated
+    rc = np.conj(r)
+    b += [(np.sum(a * rc, axis=1) @ en).real for a in (aL, aR)]
     return np.concatenate(b)
 
 
@@ -712,9 +713,9 @@ def real_rows(g) -> np.ndarray:
     return np.concatenate([gf.real, gf.imag])
 
 
-def _damped_factor(G, eps: float = 1e-11) -> tuple:
-    """``G`` equilibrated, damped and factored, for :func:`_damped_apply`: ``(G + eps lambda_max I)^-1 b`` of the
-    symmetric positive semi-definite normal equations ``G`` (equilibrated), ``eps`` = 1e-11.
+def _damped_factor(G, eps: float = 1e-11):
+    """The solver ``b -> (G + eps lambda_max I)^-1 b`` of the symmetric positive semi-definite normal equations
+    ``G`` (equilibrated), ``eps`` = 1e-11: ``G`` factored once, for every right-hand side.
 
     Not a pseudo-inverse cut at a relative ``rcond``: the boundary unknowns' normal equations carry eigenvalues near
     any cut, and as the car moves one crossing it switches a direction in or out, so the residual jumps. Measured on
@@ -728,16 +729,18 @@ def _damped_factor(G, eps: float = 1e-11) -> tuple:
     The damped matrix is positive definite (its condition at most 1/eps), so a Cholesky factor solves it, with
     ``lambda_max`` from the Rayleigh quotient of a few power steps (a tenth of an eigendecomposition's time at the
     130-180 unknowns of a road run's lead-in: the damping needs its scale, not its digits); an eigendecomposition
-    where the factor fails."""
+    where the factor fails (``G`` not positive semi-definite beyond the damping: its negative eigenvalues taken
+    as 0)."""
     d = np.sqrt(np.clip(np.diag(G), 1e-300, None))
     Ge = G / np.outer(d, d)
     Ge = 0.5 * (Ge + Ge.T)
-    lam = _largest_eigenvalue(Ge)
     try:
-        return scipy.linalg.cho_factor(Ge + (eps * lam) * np.eye(Ge.shape[0]), check_finite=False), d
+        c = scipy.linalg.cho_factor(Ge + (eps * _largest_eigenvalue(Ge)) * np.eye(Ge.shape[0]), check_finite=False)
+        return lambda b: scipy.linalg.cho_solve(c, b / d, check_finite=False) / d
     except np.linalg.LinAlgError:
         w, V = np.linalg.eigh(Ge)
-        return (w, V, eps * max(w[-1], 1e-300)), d
+        damped = np.clip(w, 0.0, None) + eps * max(w[-1], 1e-300)
+        return lambda b: V @ ((V.T @ (b / d)) / damped) / d
 
 
 def _largest_eigenvalue(A, steps: int = 12) -> float:
@@ -750,20 +753,12 @@ def _largest_eigenvalue(A, steps: int = 12) -> float:
     return max(float(x @ (A @ x)), 1e-300)
 
 
-def _damped_apply(fac, b) -> np.ndarray:
-    """The solution of the normal equations factored by :func:`_damped_factor` for the right-hand side ``b``."""
-    f, d = fac
-    if len(f) == 3:  # the eigendecomposition's fallback
-        w, V, damp = f
-        return V @ ((V.T @ (b / d)) / (np.clip(w, 0.0, None) + damp)) / d
-    return scipy.linalg.cho_solve(f, b / d, check_finite=False) / d
-
-
 @dataclass(frozen=True)
 class _Context:
     """What the projection of one run at one linear car needs whatever the data (:func:`solve`): the car, its road
-    projector, the projected boundary columns and their normal equations' matrix, factored; with damper curves its
-    response to the corners' force pairs (:func:`force_columns`)."""
+    projector, the projected boundary columns (``S``; ``gr`` the same as real rows) and the solver of their normal
+    equations (:func:`_damped_factor`); with damper curves its response to the corners' force pairs
+    (:func:`force_columns`)."""
 
     car: System
     perp: object
@@ -771,10 +766,9 @@ class _Context:
     aL: np.ndarray
     aR: np.ndarray
     en: np.ndarray
-    factor: tuple
+    solve: object
+    gr: np.ndarray
     forces: np.ndarray | None = None
-    gr: np.ndarray | None = None
-    aa: np.ndarray | None = None
 
 
 #: with damper curves, the contexts of the last few cars (:func:`_context`): the curves' knot forces move the
@@ -803,9 +797,10 @@ def _context(P, geom: Geometry, rr: RoadRun, bins) -> _Context:
     S = perp(S)
     aL = perp(H[:, :, 2:3])[..., 0]                                                          # (K,c)
     aR = perp(H[:, :, 3:4])[..., 0]
-    G, en = lead_in_gram(S, aL, aR, w * h, rr.lead_in)
+    gr = real_rows(S)
+    G, en = lead_in_gram(S, aL, aR, w * h, rr.lead_in, gr)
     forces = None if rr.dep is None else force_columns(car, P, geom, rr, bins)
-    ctx = _Context(car, perp, S, aL, aR, en, _damped_factor(G), forces, real_rows(S), np.conj(np.stack([aL, aR])))
+    ctx = _Context(car, perp, S, aL, aR, en, _damped_factor(G), gr, forces)
     if key is not None:
         with _CONTEXTS_LOCK:
             _CONTEXTS[key] = (rr, bins, ctx)
@@ -823,9 +818,9 @@ def solve(P, geom: Geometry, rr: RoadRun, bins=None) -> Solution:
     Y = rr.Y[bins] - departure_response(ctx.car, P, geom, rr, bins, curves, ctx.forces)
     r = ctx.perp(Y[:, :, None])[..., 0]                                                      # (K,c)
     D = rr.lead_in
-    b = lead_in_rhs(ctx.S, ctx.aL, ctx.aR, r, ctx.en, ctx.gr, ctx.aa)
+    b = lead_in_rhs(ctx.S, ctx.aL, ctx.aR, r, ctx.en, ctx.gr)
     ns = ctx.S.shape[-1]  # the car's states: 14, 18 with a powertrain on mounts, + the sensor filters' (SPEC §11)
-    f = _damped_apply(ctx.factor, b)
+    f = ctx.solve(b)
     fS, fL, fR = f[:ns], f[ns:ns + D], f[ns + D:]
     res = r - ctx.S @ fS - ctx.aL * (ctx.en @ fL)[:, None] - ctx.aR * (ctx.en @ fR)[:, None]
     return Solution(residual=res, f_state=fS, f_lead=np.stack([fL, fR]), rr=rr, car=ctx.car, curves=curves,
