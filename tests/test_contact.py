@@ -3,7 +3,8 @@
 import numpy as np
 import pytest
 
-from rideid.model.contact import ContactODEError, contact_ode, envelope, envelope_grid, wheel_input
+from rideid.model.contact import (ContactODEError, contact_ode, envelope, envelope_grid, wheel_input,
+                                  wheel_input_slope)
 from rideid.errors import DataError
 from rideid.data.schema.tracks import track_from_table
 
@@ -124,6 +125,42 @@ def test_envelope_grid_cached_and_flat_outside():
     p = washboard().path(0.7)
     assert envelope_grid(p, R) is envelope_grid(p, R)
     assert np.all(wheel_input(p, np.array([-5.0, 1.69, 8.31, 20.0]), R) == 0)
+
+
+def test_compiled_interpolation_is_numpy_interp(monkeypatch):
+    """The envelope read at any positions by the compiled uniform-grid interpolation equals ``numpy.interp`` on
+    the grid (binary search) to rounding: inside, at the table's ends, outside (zero), written into a column of a
+    wider array, and by the NumPy fallback where no compiled kernel can be built; the compiled slope equals the
+    NumPy one, contact jumps included."""
+    from rideid.model import backend
+
+    p = washboard().path(0.7)
+    x0, step, vals = envelope_grid(p, R)
+    rng = np.random.default_rng(4)
+    x = np.concatenate([rng.uniform(x0 - 1.0, x0 + step * vals.size + 1.0, 20000),
+                        x0 - 0.25 + step * np.array([0.0, 0.5, vals.size - 1.5, vals.size - 1.0]), [x0 - 0.25 - 1e-9]])
+    want = np.interp(x + 0.25, x0 + step * np.arange(vals.size), vals, left=0.0, right=0.0)
+    wide = np.full((x.size, 3), np.nan)
+    got = wheel_input(p, x, R, shift=0.25, out=wide[:, 1])
+    assert backend.compiled_available("contact")
+    np.testing.assert_allclose(got, want, rtol=0, atol=1e-13 * np.abs(vals).max())  # positions' rounding
+    np.testing.assert_array_equal(wide[:, 1], got)
+    assert np.isnan(wide[:, [0, 2]]).all()        # only its column written
+    assert np.count_nonzero(want) > 10000 and got[-1] == 0.0
+    slope = wheel_input_slope(p, x, R, shift=0.25, out=wide[:, 0])
+    monkeypatch.setattr(backend, "_STATUS", {"contact": False})
+    np.testing.assert_array_equal(wheel_input(p, x, R, shift=0.25), want)
+    # the slope, compiled against NumPy, on a washboard whose troughs the disc bridges (the contact jumps)
+    np.testing.assert_allclose(slope, wheel_input_slope(p, x, R, shift=0.25), rtol=0, atol=1e-12)
+    monkeypatch.setattr(backend, "_STATUS", {})
+    q = washboard(L=0.1).path(0.7)
+    off = envelope_grid(q, R) and q._env_cache[(R, 5e-4, "contact")]
+    assert (np.abs(np.diff(off)) > 3 * 5e-4).sum() >= 10   # the contact point jumps (the troughs are bridged)
+    compiled = wheel_input_slope(q, x, R)
+    monkeypatch.setattr(backend, "_STATUS", {"contact": False})
+    want_slope = wheel_input_slope(q, x, R)
+    assert np.abs(want_slope).max() > 0.2
+    np.testing.assert_allclose(compiled, want_slope, rtol=0, atol=1e-12)
 
 
 @pytest.mark.parametrize("road", ["flat", "rough", "sine", "steps", "white", "spikes"])

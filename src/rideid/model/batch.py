@@ -122,10 +122,12 @@ class BatchSimulator:
         self.UD = np.zeros((T, 4))
         self.RD = np.zeros((T, 4))
         self.MU = np.zeros((T, 4, N_MAX))
-        for r, s in zip(self.runs, self.run_start[:-1]):
+        # the runs' input moments side by side (a run read at a new start computes them: the quadrature is
+        # nogil, and the polish with estimated starts reads its runs at every trial start)
+        for r, s, mu in zip(self.runs, self.run_start[:-1], thread_map(lambda r: r.mu, self.runs, "moments")):
             self.UD[s:s + r.n] = r.ud
             self.RD[s:s + r.n] = r.rated
-            self.MU[s:s + r.n - 1] = r.mu
+            self.MU[s:s + r.n - 1] = mu
         self.n_samples = T
 
     # -- packing -----------------------------------------------------------

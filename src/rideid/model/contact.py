@@ -186,15 +186,22 @@ def envelope_grid(path: WheelPath, R: float, dx: float = 5e-4, n_fine: int = 9):
     return res
 
 
-def wheel_input(path: WheelPath, x, R: float, dx: float = 5e-4):
-    """Envelope input at positions ``x`` by linear interpolation on the grid."""
+def wheel_input(path: WheelPath, x, R: float, dx: float = 5e-4, shift: float = 0.0, out=None):
+    """Envelope input at positions ``x + shift`` (1-D) by linear interpolation on the grid; written into ``out``
+    (a 1-D view, a column of a wider array say) when given."""
     x0, step, vals = envelope_grid(path, R, dx)
-    xg = x0 + step * np.arange(vals.size)
-    return np.interp(x, xg, vals, left=0.0, right=0.0)
+    x = np.asarray(x, dtype=float)
+    out = np.empty(x.shape) if out is None else out
+    if vals.size >= 2 and backend.compiled_available("contact"):
+        backend.module("contact").interp_grid(x, float(shift), float(x0), float(step), vals, out)
+    else:
+        out[...] = np.interp(x + shift, x0 + step * np.arange(vals.size), vals, left=0.0, right=0.0)
+    return out
 
 
-def wheel_input_slope(path: WheelPath, x, R: float, dx: float = 5e-4):
-    """Slope ``dr/dx`` of the envelope input at positions ``x`` (dimensionless).
+def wheel_input_slope(path: WheelPath, x, R: float, dx: float = 5e-4, shift: float = 0.0, out=None):
+    """Slope ``dr/dx`` of the envelope input at positions ``x + shift`` (1-D, dimensionless; written into ``out``
+    when given, as :func:`wheel_input`).
 
     From the contact geometry: a disc touching the road at offset ``d = s - x``
     from its centre has ``dr/dx = d / sqrt(R^2 - d^2)`` (envelope theorem).
@@ -205,12 +212,18 @@ def wheel_input_slope(path: WheelPath, x, R: float, dx: float = 5e-4):
     slope is used, so a kink is resolved exactly, as the height's kinks are
     in the input moments.
     """
-    x = np.asarray(x, dtype=float)
     x0, step, vals = envelope_grid(path, R, dx)
-    out = np.zeros_like(x)
+    x = np.asarray(x, dtype=float)
+    out = np.empty(x.shape) if out is None else out
     if vals.size < 3:
+        out[...] = 0.0
         return out
     off = path._env_cache[(float(R), float(dx), "contact")]
+    if backend.compiled_available("contact"):
+        backend.module("contact").slope_grid(x, float(shift), float(x0), float(step), vals, off, float(R), out)
+        return out
+    x = x + shift
+    out[...] = 0.0
     pos = (x - x0) / step
     inside = (pos >= 0) & (pos <= vals.size - 1)
     p = pos[inside]

@@ -15,6 +15,7 @@ independent fine-step check with ``scipy.signal.lsim``.
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass, field, replace
 
 import numpy as np
@@ -38,16 +39,20 @@ def corner_positions(geom: Geometry, distance):
 
 def corner_inputs(track: Track, geom: Geometry, distance):
     """Road inputs ``(n, 4)`` (envelope, m) at front-axle distances ``(n,)``."""
-    xs = corner_positions(geom, distance)
-    return np.stack([wheel_input(track.path(y), xs[:, i], geom.tire_radius, ENVELOPE_DX)
-                     for i, y in enumerate(geom.corner_y)], axis=-1)
+    d = np.asarray(distance, dtype=float).ravel()
+    out = np.empty((d.size, 4))
+    for i, (y, cx) in enumerate(zip(geom.corner_y, geom.corner_x_from_front)):
+        wheel_input(track.path(y), d, geom.tire_radius, ENVELOPE_DX, shift=cx, out=out[:, i])
+    return out.reshape(np.shape(distance) + (4,))
 
 
 def corner_input_slopes(track: Track, geom: Geometry, distance):
     """Slopes ``dr/dx`` ``(n, 4)`` of the road inputs at front-axle distances ``(n,)``."""
-    xs = corner_positions(geom, distance)
-    return np.stack([wheel_input_slope(track.path(y), xs[:, i], geom.tire_radius, ENVELOPE_DX)
-                     for i, y in enumerate(geom.corner_y)], axis=-1)
+    d = np.asarray(distance, dtype=float).ravel()
+    out = np.empty((d.size, 4))
+    for i, (y, cx) in enumerate(zip(geom.corner_y, geom.corner_x_from_front)):
+        wheel_input_slope(track.path(y), d, geom.tire_radius, ENVELOPE_DX, shift=cx, out=out[:, i])
+    return out.reshape(np.shape(distance) + (4,))
 
 
 @dataclass
@@ -133,13 +138,22 @@ def prepare_run(track: Track, geom: Geometry, speed: float | None, t, quad_order
     return res
 
 
+@functools.lru_cache(maxsize=16)
+def _quadrature(n_panels: int, quad_order: int):
+    """The composite Gauss nodes on [0, 1] and their moment weights ``W (q, N_MAX)``, read-only (a run read at a
+    new start needs them again)."""
+    nodes, weights = gauss_nodes(n_panels, quad_order)
+    W = moment_weights(nodes, weights, N_MAX)
+    nodes.flags.writeable = W.flags.writeable = False
+    return nodes, W
+
+
 def input_moments(t, corner_inputs_at, n_panels: int, quad_order: int) -> np.ndarray:
     """The decomposed road inputs' moments over each sample interval, ``(n_t - 1, 4, N_MAX)``: Gauss quadrature
     (``n_panels`` panels of order ``quad_order``) of ``corner_inputs_at(times) -> (k, 4)`` (m) against the moment
     basis, in blocks of about two million quadrature points."""
     h = float(t[1] - t[0])
-    nodes, weights = gauss_nodes(n_panels, quad_order)
-    W = moment_weights(nodes, weights, N_MAX)  # (q, N)
+    nodes, W = _quadrature(n_panels, quad_order)
     n_int = t.size - 1
     mu = np.empty((n_int, 4, N_MAX))
     block = max(1, 2_000_000 // nodes.size)
