@@ -2,6 +2,7 @@
 `rideid simulate`, datasets with unknown-road runs, and the code that refuses them clearly."""
 
 import math
+import re
 import shutil
 import tomllib
 import warnings
@@ -19,7 +20,7 @@ from rideid.data.dataset import MIN_ROAD_RUN_S, MIN_ROAD_RUN_SAMPLES
 from rideid.data.scenario import ROAD_DX, ROAD_MARGIN, generate_road, lead_in, settle_time
 from rideid.synth.scenario import simulate_manifest, write_dataset
 from rideid.data.schema import UNKNOWN_ROAD, RoadSpec, parse_dataset_manifest, parse_scenario, read_run_csv
-from rideid.errors import ArgumentError, DataError
+from rideid.errors import ArgumentError, DataError, DataWarning
 from rideid.model.equations import CHANNELS, modal_summary
 from rideid.model.params import as_vector
 from rideid.model.roads import ROAD_CLASSES, iso8608_class
@@ -298,6 +299,26 @@ def test_unknown_road_runs_still_get_the_rigid_body_check(road_sim, tmp_path):
     msg = str(e.value)
     assert "run 'B': the channels look wired differently from the map: pitch_rate has its sign flipped" in msg
     assert "without a known road this cannot be told from body_az_fl and body_az_rl swapped" in msg
+
+
+def test_unknown_road_runs_name_a_hub_channel_in_g(road_sim, tmp_path, capsys):
+    """A hub accelerometer logged in g but mapped as m/s^2, on a road nobody measured: no nominal response to
+    compare with, so its RMS against the other hubs' (the same road's), and the identify command stops naming
+    the channel, the factor and the fix; the clean run raises nothing; with wiring = "warn" it is a warning."""
+    d = _copy(road_sim[2], tmp_path)
+    rideid.load_dataset(d)  # the clean data: no finding
+    _edit_run_csv(d / "runs" / "B.csv", lambda ch: {**ch, "axle_az_rr": ch["axle_az_rr"] / 9.80665})
+    rc, _, err = run_cli(["identify", d, "--out", tmp_path / "fit", "--quiet"], capsys)
+    assert rc == 2 and len(err.strip().splitlines()) == 1 and not (tmp_path / "fit").exists()
+    assert "run 'B': axle_az_rr reads 9.81x too small (g mapped as m/s^2?): its RMS is" in err
+    assert "the other hub channels' about" in err and 'axle_az_rr = { name = "axle_az_rr", unit = "g" }' in err
+    rms = [float(x) for x in re.findall(r"RMS is ([0-9.]+) m/s\^2 as mapped, the other hub channels' about ([0-9.]+)",
+                                        err)[0]]
+    assert rms[1] / rms[0] == pytest.approx(9.80665, rel=0.15)  # the hubs of one road agree to 0.89-1.12
+    doc = (d / "dataset.toml").read_text()
+    (d / "dataset.toml").write_text(doc + '\n[checks]\nwiring = "warn"\n')
+    with pytest.warns(DataWarning, match="axle_az_rr reads 9.81x too small"):
+        rideid.load_dataset(d)
 
 
 def test_measured_unknown_road_run_starts_at_its_first_sample(road_sim, tmp_path):

@@ -417,7 +417,8 @@ def _check_run(ds, r):
         out.append(Finding(WARNING, "wiring", f"run '{rid}': the body accelerometers and the gyro do not agree as "
                            f"one rigid body (residual {e_id:.0%}) and no swap, sign or unit explains it: check "
                            "the sensors' positions (at the spring/damper top mounts), units and the map", rid))
-    if wiring != "off" and Yhat is not None and start_off is None and not (wire and wire["fix"]):
+    if (wiring != "off" and (Yhat is not None or not r.road_known) and start_off is None
+            and not (wire and wire["fix"])):  # a rig's posts may drive one wheel alone: its hubs are not siblings
         units += axle_amplitude_findings(rid, entries, Y, Yhat, skip={f.channel for f in units} | unit_known,
                                          level=wiring)
     out += units
