@@ -7,6 +7,9 @@ identified with the defaults and seed 1, as a user would):
 
 * ``builtin``: the built-in car's ten runs, 1 % noise (``rideid simulate builtin``): the clean baseline;
 * ``realities``: the SUV with every reality of SPEC §11 at once, five runs (tests/realities_case.py);
+* ``realities-ten``: the same realities on the built-in car and its ten runs (a proving-ground day's ten-run real
+  test: an engine on mounts, tracks as built, AC-coupled hubs, a clipping hub, a GPS speed channel, unstated
+  starts; tests/realities_case.py, ``car="builtin"``);
 * ``gps``: the SUV along a GPS speed channel, five runs (tests/driven_speed.py);
 * ``knees``: the knee car with the knots found (tests/knee_cars.py, car ``bars``), 1 % noise;
 * ``van-csv`` / ``van-logger``: the shared damper van as SPEC CSV and as logger files
@@ -39,7 +42,7 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 TESTS = ROOT / "tests"
 SHARED = ROOT.parent / "shared" / "cases"
-CASES = ("builtin", "realities", "gps", "knees", "van-csv", "van-logger", "roads", "van-roads")
+CASES = ("builtin", "realities", "realities-ten", "gps", "knees", "van-csv", "van-logger", "roads", "van-roads")
 
 
 def _rideid(*args, cwd=None) -> subprocess.CompletedProcess:
@@ -79,9 +82,9 @@ def write_case(case: str, folder: Path) -> Path:
         shutil.rmtree(data)
     if case == "builtin":
         _check(_rideid("simulate", "builtin", "--out", data, "--noise", "0.01", "--seed", "1", "--quiet"))
-    elif case == "realities":
+    elif case in ("realities", "realities-ten"):
         import realities_case
-        realities_case.write_dataset(data, car="suv", seed=1)
+        realities_case.write_dataset(data, car="suv" if case == "realities" else "builtin", seed=1)
     elif case == "gps":
         import driven_speed
         driven_speed.write_case(data, seed=1)

@@ -416,6 +416,20 @@ def _candidates_table(model: dict) -> str:
     return "\n".join(lines)
 
 
+def _first_fit_line(first: dict) -> str:
+    """What mended a first fit that missed grossly (result.json ``model.first_fit``), in a few lines."""
+    gm = first["gross_misfit"]
+    bad = sorted(((e, r) for r, e in gm["run_errors"].items() if e > gm["threshold"]), reverse=True)
+    runs = ", ".join(f"{100 * e:.0f} % of run {r}'s signal" for e, r in bad) or "parameters at their bounds"
+    s = next((s for s in first["screens"] if s["extensions"] == first["mended_by"]), None)
+    score = f" (screened at {s['score']:.4g} against {s['threshold']:.3g})" if s else ""
+    where = "with the tracks as built" if first.get("tracks") == "as built" else "on the tracks as drawn"
+    return textwrap.fill(f"first fit: missed grossly ({runs} unexplained); the model choice went on because "
+                         f"{' + '.join(first.get('extension') or first['mended_by'])}, the extension the data called "
+                         f"for most{score}, "
+                         f"mends it {where}", 100, subsequent_indent="  ")
+
+
 #: what ``rideid identify`` writes into its folder: a new identification replaces all of it (the user's files stay)
 IDENTIFY_OUTPUTS = ("result.json", "history.csv", "report.html", "figures", "road", "profile.csv")
 
@@ -499,6 +513,10 @@ def run_identify(ds_path, out_dir, *, seed, population=None, generations=None, w
     print(_summary_table(res), file=out)
     if res.model.get("candidates"):
         print(_candidates_table(res.model), file=out)
+    elif res.model.get("first_fit"):
+        print(f"--model auto kept: {' + '.join(res.model['extensions']) or 'base'}", file=out)
+    if res.model.get("first_fit"):
+        print(_first_fit_line(res.model["first_fit"]), file=out)
     for message in dict.fromkeys(h["message"] for h in (res.adequacy or {}).get("sensor_hints") or []):
         print("hint: " + message, file=out)  # a group of channels shares one message
     small = ((res.adequacy or {}).get("small_angle") or {}).get("note")
