@@ -194,10 +194,10 @@ def test_a_gross_first_fit_that_the_powertrain_mends_on_the_tracks_as_built(tmp_
     more than ``adequacy.gross_error`` of T_LH's signal unexplained (measured 55 %, H_LH 29 %), which would stop
     the model choice with a set-up check; the powertrain screens above its threshold (122 against 48), still
     misses grossly as drawn, and on the tracks as built is adequate: it is kept (model_choice._mend_as_built).
-    Measured (seed 1, 40 s on two cores): the twelve within 2.9 % (m_uf, m_ur; 1.3 std_robust), every one within 1.3 std_robust,
-    the engine's mass -0.9 %, its bounce frequency +0.06 %. Before, rideid stopped on the linear model and its
-    tracks as built were rejected; on the ten runs that printed I_yy -13.7 %, k_sr -18.4 %, NOT ADEQUATE with
-    advice to check a set-up that was right (docs/model-choice.md)."""
+    Measured (seed 1, 40 s on two cores): the twelve within 2.9 % (m_uf, m_ur; 1.3 std_robust), every one
+    within 1.3 std_robust, the engine's mass -0.9 %, its bounce frequency +0.06 %. Before, rideid stopped on the
+    linear model and its tracks as built were rejected; on the ten runs that printed I_yy -13.7 %, k_sr
+    -18.4 %, NOT ADEQUATE with advice to check a set-up that was right (docs/model-choice.md)."""
     folder = tmp_path / "ds"
     realities_case.write_dataset(folder, car="builtin", seed=1, runs=("T_LH", "H_LH"))
     proc, res = _identify_cli(folder, tmp_path / "fit", model=())
