@@ -193,7 +193,7 @@ def test_a_gross_first_fit_that_the_powertrain_mends_on_the_tracks_as_built(tmp_
     mounts, tracks 4 % off their drawing), two of its ten runs: the linear model on the tracks as drawn leaves
     more than ``adequacy.gross_error`` of T_LH's signal unexplained (measured 55 %, H_LH 29 %), which would stop
     the model choice with a set-up check; the powertrain screens above its threshold (122 against 48), still
-    misses grossly as drawn, and on the tracks as built is adequate: it is kept (model_choice._mend_as_built).
+    misses grossly as drawn, and on the tracks as built is adequate: it is kept (choice.first_fit.as_built).
     Measured (seed 1, 40 s on two cores): the twelve within 2.9 % (m_uf, m_ur; 1.3 std_robust), every one
     within 1.3 std_robust, the engine's mass -0.9 %, its bounce frequency +0.06 %. Before, rideid stopped on the
     linear model and its tracks as built were rejected; on the ten runs that printed I_yy -13.7 %, k_sr

@@ -61,7 +61,8 @@ from ...model.params import NOMINAL_EXTENSIONS, POWERTRAIN_NAMES
 from ...model.params import SUSPENSION_GROUPS as GROUPS
 from ..fit.budget import with_budget
 from ... import settings
-from ..assess.adequacy import advise, assess_fit, gross_misfit, run_errors
+from ..assess.adequacy import advise, assess_fit
+from . import first_fit
 from ..records import assessments_of, plan_of, with_caveats
 from ..assess.materiality import weigh_result
 from ..assess.small_angle import small_angle
@@ -427,11 +428,12 @@ class _Choice:
             r = self.results[self.key] = replace(r, adequacy=_own_adequacy(self.ds, r, self.simulator))
         return r
 
-    def fit(self, parent, key, maps=None):
+    def fit(self, parent, key, maps=None, **kw):
         """Candidate ``key`` polished from ``parent``'s fit (:func:`start_row`), no search, no verdict (a candidate
         fitted already, ``given``, is not fitted again)."""
-        if key in self.given:
-            return self.given[key]
+        return self.given.get(key) or self._fit_new(parent, key, maps, **kw)
+
+    def _fit_new(self, parent, key, maps=None):
         space = _space(self.ds, key, parent)
         ds = self.ds.with_starts(parent.starts or {})  # the starts the parent settled: the polish starts there
         return identify_model(ds, cost=CostFunction(ds, space=space, simulator=self.simulator),
@@ -447,7 +449,8 @@ class _Choice:
         free = {g: [n for n in GROUPS[g] if n in names] for g in GROUPS}
         free = {g: ns for g, ns in free.items() if ns}  # fully known groups are in every candidate
         subs = [_key(set(sub) | (set(GROUPS) - set(free))) for r in range(len(free) + 1)
-                for sub in itertools.combinations(free, r)][-1 if not subsets else 0:]
+                for sub in itertools.combinations(free, r)]
+        subs = subs[(len(subs) - 1) * (not subsets):]  # without the subsets: the full model alone
         cov = np.array(pol.get("covariance_robust", np.full((len(names),) * 2, np.nan)))
         crit = criteria(names, np.array([full.parameters[n] for n in names]), cov, subs, free)
         with single_threaded_blas():
@@ -456,29 +459,25 @@ class _Choice:
             self.add(key, r, dict(c, criterion=c["criterion"] if np.isfinite(c["criterion"]) else None))
         self.keep_best(*self.entries)
 
-    def mend(self, full):
-        """At a first fit ``full`` that misses grossly (:func:`rideid.estimate.assess.adequacy.gross_misfit`): the
-        rival the data call for most (the screen that passes by the widest margin over its threshold), fitted from
-        it. Returns ``(screens, key, fit, mends)``: the screens, that rival's key and fit (None, None when no screen
-        passes), and whether its fit no longer misses grossly (the misfit was the model's, not the set-up's: the
-        model choice goes on, the fit kept for it as :attr:`given`). A rival that still misses grossly on the
-        tracks as drawn may be mended by the tracks as built (:func:`_mend_as_built`)."""
-        rivals = [_key(self.key + (e.group,)) for e in EXTENSIONS if e.group not in self.key and e.applies(self.ds)]
+    def mend(self, full, gross):
+        """At a first fit ``full`` that misses grossly (``gross``; None: it does not, and nothing is screened): the
+        rival the data call for most (:func:`rideid.estimate.choice.first_fit.strongest`), fitted from it. Returns
+        ``(screens, key, fit, mends)``: the screens, that rival's key and fit (None, None when no screen passes),
+        and whether its fit no longer misses grossly (the misfit was the model's, not the set-up's: the model
+        choice goes on, the fit kept for it as :attr:`given`). A rival that still misses grossly on the tracks as
+        drawn may be mended by the tracks as built (:func:`rideid.estimate.choice.first_fit.as_built`)."""
+        rivals = [_key(self.key + (e.group,)) for e in EXTENSIONS
+                  if gross is not None and e.group not in self.key and e.applies(self.ds)]
         with single_threaded_blas():
             screens = thread_map(lambda key: screen(self.ds, full, key, self.simulator), rivals, "rideid-screens")
-        passed = [s for s in screens if s["passes"] and s["threshold"] > 0]
-        if not passed:
+        best = first_fit.strongest(screens)
+        if best is None:
             return screens, None, None, False
-        best = max(passed, key=lambda s: s["score"] / s["threshold"])
         key = tuple(best["extensions"])
         with single_threaded_blas():
-            r = self.fit(full, key)
-        still = gross_misfit(run_errors(self.ds, r.response), [n for n, d in r.details.items() if d.get("at_bound")],
-                             getattr(self.ds, "findings", ()))
-        best["mends"] = still is None
-        if still is None:
-            self.given[key] = r
-        return screens, key, r, still is None
+            self.given[key] = self.fit(full, key)
+        best["mends"] = first_fit.misses(self.ds, self.given[key]) is None
+        return screens, key, self.given[key], best["mends"]
 
     def extend(self) -> bool:
         """One step on top of the model kept (module docstring): the rivals screened on both cores, those that pass
@@ -629,25 +628,17 @@ def identify_auto(ds, *, rng=None, seed=None, callback=None, maps=None, simulato
     cf_full = CostFunction(ds, extensions=tuple(GROUPS), simulator=simulator)
     simulator = cf_full.simulator  # one value for every candidate
     full = identify_model(ds, rng=rng, seed=seed, callback=callback, maps=maps, cost=cf_full, **kw)
-    # SPEC §13: a first fit far beyond what any extension explains stops here, with the set-up to check
-    gross = gross_misfit(run_errors(ds, full.response), [n for n, d in full.details.items() if d.get("at_bound")],
-                         getattr(ds, "findings", ()))
+    # SPEC §13: a first fit far beyond what any extension explains stops here, with the set-up to check, unless the
+    # extension the data call for most mends it (rideid.estimate.choice.first_fit)
+    gross = first_fit.misses(ds, full)
     choice = _Choice(ds, simulator, dict(rng=rng, seed=seed, **{k: v for k, v in kw.items()
                                                                  if k in ("weights", "polish", "population")}),
                      key=_key(GROUPS))
-    first_screens, rival, rival_fit, mended = (choice.mend(full) if gross is not None and full.polish
-                                               else ([], None, None, False))
-    if gross is not None and full.polish and not mended:
-        built = _mend_as_built(ds, full, gross, first_screens, rival, rival_fit, simulator, tracks,
-                               dict(rng=rng, seed=seed, callback=callback, maps=maps, **kw))
-        if built is not None:
-            return built
-        gross = dict(gross, screens=first_screens, reasons=gross["reasons"] + (
-            [f"the extension the data called for most ({' + '.join(rival)}) was fitted and misses as grossly"]
-            if rival else []))
-        return replace(full, adequacy=gross,
-                       model={"extensions": list(full.model.get("extensions", [])),
-                              "selection": "auto (not run: the first fit misses grossly)"})
+    first_screens, rival, rival_fit, mended = choice.mend(full, gross)
+    if gross is not None and not mended:
+        return (first_fit.as_built(ds, gross, first_screens, rival, rival_fit, GROUPS, simulator, tracks,
+                                   dict(rng=rng, seed=seed, callback=callback, maps=maps, **kw))
+                or first_fit.stopped(full, gross, first_screens, rival))
     choice.linear_step(full, subsets=not mended)
     steps = 0
     while not choice.chosen().adequacy.get("adequate", True) and choice.extend():
@@ -658,9 +649,7 @@ def identify_auto(ds, *, rng=None, seed=None, callback=None, maps=None, simulato
              "extension_criterion": EXTENSION_CRITERION.format(penalty()), "candidates": choice.table(),
              "fits_better_rule": fits_better_rule("absolute"), "screens": choice.screens, "steps": steps,
              "skipped": [s["extensions"] for s in choice.screens if not s["passes"]],
-             **({"first_fit": {"gross_misfit": gross["gross_misfit"], "reasons": gross["reasons"],
-                               "mended_by": list(rival), "extension": [g for g in rival if g not in GROUPS],
-                               "screens": first_screens}} if mended else {})}
+             "first_fit": first_fit.record(gross, rival, first_screens, GROUPS, mended)}
     model.update({} if choice.screens else {"curves": "not tried: the linear model is adequate (its residuals carry "
                                                      "no road-driven structure for damper curves to explain)"})
     # the search was the full model's: its history and counts belong to the result returned
@@ -672,33 +661,6 @@ def identify_auto(ds, *, rng=None, seed=None, callback=None, maps=None, simulato
                    nfev=sum(r.nfev for r in choice.results.values()), wall_time_s=time.perf_counter() - t0, **search)
 
 
-def _mend_as_built(ds, full, gross, screens, rival, rival_fit, simulator, tracks, common):
-    """A first fit ``full`` that misses grossly (``gross``) on the tracks as drawn, whose strongest rival
-    (``rival``, fitted as ``rival_fit``) misses as grossly there: the rival on the tracks as built (SPEC §11,
-    :func:`rideid.estimate.fit.anyroad.identify_any_road` from its fit), kept when adequate there; None otherwise
-    (the gross verdict stands, and the tracks as built are tried with the linear model after it, as for any
-    verdict that faults the drawing). A drawing off by a few per cent and an engine on mounts leave more than
-    either explains alone. Measured on the all-realities case on the built-in car's ten runs (tracks 4 % off
-    their drawing with 1.5 mm of unevenness, an engine of 180 kg on 10.5/13 Hz mounts, a GPS speed channel,
-    AC-coupled hubs; benchmarks/bench_realtest.py ``realities-ten``): the linear model as drawn left 52 % of run
-    T_LH's signal unexplained; the powertrain screened at 1448 against 48 (the curves 14 against 124) and as
-    drawn still missed grossly; before this the verdict stopped there and the linear model's tracks as built were
-    rejected ("the road is explaining what the model misses": I_yy -13.7 %, k_sr -18.4 %, not adequate, with
-    advice to check the set-up the data did not need, 185 s); the powertrain on the tracks as built: the twelve
-    within 0.80 % (m_uf), each within 2.0 std_robust, adequate (392 s on two cores; docs/model-choice.md)."""
-    if rival is None or not as_built_runs(ds, rival, tracks)[0]:
-        return None
-    res = identify_any_road(ds, start_result=rival_fit, simulator=simulator, tracks=tracks, **common)
-    if not (res.adequacy or {}).get("adequate"):
-        return None
-    added = [g for g in rival if g not in GROUPS]
-    return replace(res, model=dict(res.model or {}, extensions=list(rival), selection=(
-        f"auto (the first fit missed grossly on the tracks as drawn; {' + '.join(added)}, the extension the data "
-        "called for most, fitted on the tracks as built: adequate)"),
-        first_fit={"gross_misfit": gross["gross_misfit"], "reasons": gross["reasons"], "mended_by": list(rival),
-                   "extension": added, "screens": screens, "tracks": "as built"}))
-
-
 @dataclass
 class _RoadChoice(_Choice):
     """The model choice on a problem with unknown roads (SPEC §9): the same loop, each candidate fitted by the road
@@ -706,9 +668,7 @@ class _RoadChoice(_Choice):
     speed with the car) from its parent's fit, its verdict its own (the road runs judged by their residual); a
     candidate fitted already (``given``: key -> result) is not fitted again."""
 
-    def fit(self, parent, key, maps=None, **kw):
-        if key in self.given:
-            return self.given[key]
+    def _fit_new(self, parent, key, maps=None, **kw):
         space = _space(self.ds, key, parent)
         return identify_any_road(self.ds, model=list(key), start=_inside(space, start_row(self.ds, parent, space)),
                                  simulator=self.simulator, **{**self.fit_kw, **kw})
