@@ -423,10 +423,9 @@ def _first_fit_line(first: dict) -> str:
     runs = ", ".join(f"{100 * e:.0f} % of run {r}'s signal" for e, r in bad) or "parameters at their bounds"
     s = next((s for s in first["screens"] if s["extensions"] == first["mended_by"]), None)
     score = f" (screened at {s['score']:.4g} against {s['threshold']:.3g})" if s else ""
-    where = "with the tracks as built" if first.get("tracks") == "as built" else "on the tracks as drawn"
+    where = "with the tracks as built" if first["tracks"] == "as built" else "on the tracks as drawn"
     return textwrap.fill(f"first fit: missed grossly ({runs} unexplained); the model choice went on because "
-                         f"{' + '.join(first.get('extension') or first['mended_by'])}, the extension the data called "
-                         f"for most{score}, "
+                         f"{' + '.join(first['extension'])}, the extension the data called for most{score}, "
                          f"mends it {where}", 100, subsequent_indent="  ")
 
 

@@ -122,10 +122,13 @@ def slope_grid(x, shift, x0, step, vals, off, R, out):  # pragma: no cover - com
 
 
 def compile_kernel() -> None:
-    """Compile (or load from Numba's cache) :func:`lattice_max` and :func:`interp_grid`; raises if that fails."""
+    """Compile (or load from Numba's cache) :func:`lattice_max`, :func:`interp_grid` and :func:`slope_grid`, the
+    last two writing into a contiguous array and into a column of a wider one (the corner array of
+    :func:`rideid.model.simulate.corner_inputs`), as they are called; raises if that fails."""
     lattice_max(np.zeros(4), np.zeros(2))
-    interp_grid(np.zeros(1), 0.0, 0.0, 1.0, np.zeros(2), np.zeros(1))
-    slope_grid(np.zeros(1), 0.0, 0.0, 1.0, np.zeros(3), np.zeros(3), 1.0, np.zeros(1))
+    for out in (np.zeros(2), np.zeros((2, 4))[:, 0]):
+        interp_grid(np.zeros(1), 0.0, 0.0, 1.0, np.zeros(2), out)
+        slope_grid(np.zeros(1), 0.0, 0.0, 1.0, np.zeros(3), np.zeros(3), 1.0, out)
 
 
 __all__ = ["compile_kernel", "interp_grid", "lattice_max", "slope_grid"]

@@ -37,22 +37,24 @@ def corner_positions(geom: Geometry, distance):
     return d[..., None] + np.array(geom.corner_x_from_front)
 
 
-def corner_inputs(track: Track, geom: Geometry, distance):
-    """Road inputs ``(n, 4)`` (envelope, m) at front-axle distances ``(n,)``."""
+def _at_corners(read, track: Track, geom: Geometry, distance):
+    """``read`` (:func:`~rideid.model.contact.wheel_input` or its slope) on each corner's wheel path at front-axle
+    distances ``distance``, written into that corner's column: ``(..., 4)``."""
     d = np.asarray(distance, dtype=float).ravel()
     out = np.empty((d.size, 4))
     for i, (y, cx) in enumerate(zip(geom.corner_y, geom.corner_x_from_front)):
-        wheel_input(track.path(y), d, geom.tire_radius, ENVELOPE_DX, shift=cx, out=out[:, i])
+        read(track.path(y), d, geom.tire_radius, ENVELOPE_DX, shift=cx, out=out[:, i])
     return out.reshape(np.shape(distance) + (4,))
+
+
+def corner_inputs(track: Track, geom: Geometry, distance):
+    """Road inputs ``(n, 4)`` (envelope, m) at front-axle distances ``(n,)``."""
+    return _at_corners(wheel_input, track, geom, distance)
 
 
 def corner_input_slopes(track: Track, geom: Geometry, distance):
     """Slopes ``dr/dx`` ``(n, 4)`` of the road inputs at front-axle distances ``(n,)``."""
-    d = np.asarray(distance, dtype=float).ravel()
-    out = np.empty((d.size, 4))
-    for i, (y, cx) in enumerate(zip(geom.corner_y, geom.corner_x_from_front)):
-        wheel_input_slope(track.path(y), d, geom.tire_radius, ENVELOPE_DX, shift=cx, out=out[:, i])
-    return out.reshape(np.shape(distance) + (4,))
+    return _at_corners(wheel_input_slope, track, geom, distance)
 
 
 @dataclass
