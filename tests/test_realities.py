@@ -210,6 +210,11 @@ def test_a_gross_first_fit_that_the_powertrain_mends_on_the_tracks_as_built(tmp_
     tried = next(s for s in first["screens"] if s["extensions"] == first["mended_by"])
     assert tried["mends"] is False and tried["passes"] and tried["score"] > 2 * tried["threshold"]  # as drawn: not
     assert res["adequacy"]["adequate"] and "gross_misfit" not in res["adequacy"]
+    # SPEC §6's candidates: the first fit, the powertrain as drawn, the powertrain as built (kept)
+    cands = res["model"]["candidates"]
+    assert [(c["extensions"][-1], c["tracks"], c["adequate"]) for c in cands] == [
+        ("tire_damping", "as drawn", False), ("powertrain", "as drawn", False), ("powertrain", "as built", True)]
+    assert cands[2]["cost"] == res["cost"] < cands[1]["cost"] < cands[0]["cost"]
     truth = realities_case.truth(car="builtin")
     z = {n: (res["parameters"][n]["value"] - truth[n]) / res["parameters"][n]["std_robust"] for n in rideid.NAMES}
     errs = {n: res["parameters"][n]["value"] / truth[n] - 1 for n in rideid.NAMES}

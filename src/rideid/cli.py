@@ -512,8 +512,6 @@ def run_identify(ds_path, out_dir, *, seed, population=None, generations=None, w
     print(_summary_table(res), file=out)
     if res.model.get("candidates"):
         print(_candidates_table(res.model), file=out)
-    elif res.model.get("first_fit"):
-        print(f"--model auto kept: {' + '.join(res.model['extensions']) or 'base'}", file=out)
     if res.model.get("first_fit"):
         print(_first_fit_line(res.model["first_fit"]), file=out)
     for message in dict.fromkeys(h["message"] for h in (res.adequacy or {}).get("sensor_hints") or []):

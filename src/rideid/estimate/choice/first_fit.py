@@ -44,7 +44,7 @@ def record(gross: dict | None, rival, screens: list, linear, kept: bool, tracks:
             "extension": [g for g in rival if g not in linear], "screens": screens, "tracks": tracks}
 
 
-def as_built(ds, gross, screens, rival, rival_fit, linear, simulator, tracks, common):
+def as_built(ds, full, gross, screens, rival, rival_fit, linear, simulator, tracks, common):
     """A first fit that misses grossly (``gross``) on the tracks as drawn, whose strongest rival (``rival``, fitted
     as ``rival_fit``) misses as grossly there: the rival on the tracks as built (SPEC §11,
     :func:`rideid.estimate.fit.anyroad.identify_any_road` from its fit), kept when adequate there; None otherwise
@@ -67,14 +67,25 @@ def as_built(ds, gross, screens, rival, rival_fit, linear, simulator, tracks, co
     return replace(res, model=dict(res.model or {}, extensions=list(rival), selection=(
         f"auto (the first fit missed grossly on the tracks as drawn; {' + '.join(added)}, the extension the data "
         "called for most, fitted on the tracks as built: adequate)"),
+        candidates=candidates(full, [(rival_fit, rival, False, "as drawn"), (res, rival, True, "as built")]),
         first_fit=record(gross, rival, screens, linear, True, "as built")))
 
 
-def stopped(full, gross: dict, screens: list, rival):
+def candidates(full, fitted: list) -> list:
+    """result.json ``model.candidates`` (SPEC §6) when the first fit missed grossly: the first fit (not adequate)
+    and each ``(fit, key, adequate, tracks)`` of ``fitted``; no criterion was weighed between them."""
+    rows = [(full, full.model.get("extensions", []), False, "as drawn")] + fitted
+    return [{"extensions": list(key), "cost": fit.cost, "criterion": None, "adequate": ok, "tracks": tracks}
+            for fit, key, ok, tracks in rows]
+
+
+def stopped(full, gross: dict, screens: list, rival, rival_fit):
     """The first fit ``full`` with the verdict that stops the model choice: ``gross`` with the screens at the first
     fit and, when the strongest rival was fitted and missed as grossly, that said among its reasons."""
     tried = [f"the extension the data called for most ({' + '.join(key)}) was fitted and misses as grossly"
              for key in [rival] if key]
     return replace(full, adequacy=dict(gross, screens=screens, reasons=gross["reasons"] + tried),
                    model={"extensions": list(full.model.get("extensions", [])),
-                          "selection": "auto (not run: the first fit misses grossly)"})
+                          "selection": "auto (not run: the first fit misses grossly)",
+                          "candidates": candidates(full, [(fit, key, False, "as drawn")
+                                                          for fit, key in [(rival_fit, rival)] if key])})

@@ -636,9 +636,9 @@ def identify_auto(ds, *, rng=None, seed=None, callback=None, maps=None, simulato
                      key=_key(GROUPS))
     first_screens, rival, rival_fit, mended = choice.mend(full, gross)
     if gross is not None and not mended:
-        return (first_fit.as_built(ds, gross, first_screens, rival, rival_fit, GROUPS, simulator, tracks,
+        return (first_fit.as_built(ds, full, gross, first_screens, rival, rival_fit, GROUPS, simulator, tracks,
                                    dict(rng=rng, seed=seed, callback=callback, maps=maps, **kw))
-                or first_fit.stopped(full, gross, first_screens, rival))
+                or first_fit.stopped(full, gross, first_screens, rival, rival_fit))
     choice.linear_step(full, subsets=not mended)
     steps = 0
     while not choice.chosen().adequacy.get("adequate", True) and choice.extend():
