@@ -399,5 +399,12 @@ def test_a_gross_first_fit_is_said_before_the_model_choice(tmp_path, capsys):
     assert "gross_misfit" in res.adequacy and res.adequacy["adequate"] is False
     assert res.model["selection"].startswith("auto (not run")
     assert "so the model choice was not run: check the set-up first" in " ".join(out.split())
+    # the report's model section: the first fit (kept, as drawn) and the rival fitted for it, each with its values
+    import json
+    from rideid.report.estimate_sections import model_rows
+    section = model_rows(json.loads((tmp_path / "fit" / "result.json").read_text()))
+    assert section["heads"][0]["chosen"] and not any(h["chosen"] for h in section["heads"][1:])
+    assert section["heads"][0]["label"].endswith("(as drawn)") and section["first_fit"] is None
+    assert all(len(r["cells"]) == len(section["heads"]) for r in section["rows"]) and section["rows"]
     print(f"gross misfit said after {wall:.0f} s")
     assert wall < 180.0

@@ -225,6 +225,17 @@ def test_a_gross_first_fit_that_the_powertrain_mends_on_the_tracks_as_built(tmp_
     assert "--model auto kept: anti_roll_bars + tire_damping + powertrain" in printed
     assert ("first fit: missed grossly (55 % of run T_LH's signal unexplained); the model choice went on because "
             "powertrain, the extension the data called for most (screened at") in printed
+    assert "anti_roll_bars + tire_damping + powertrain (as built) 3.2" in printed  # the candidates by their tracks
+    # the report's model section (it raised on these candidates before they carried their estimates): the three by
+    # their tracks, the one kept marked, each parameter's value per candidate, the first fit's sentence
+    from rideid.report.estimate_sections import model_rows
+    section = model_rows(res)
+    assert [(h["label"].split(" + ")[-1], h["chosen"]) for h in section["heads"]] == [
+        ("tire_damping (as drawn)", False), ("powertrain (as drawn)", False), ("powertrain (as built)", True)]
+    m_uf = next(r["cells"] for r in section["rows"] if r["name"] == "m_uf")
+    assert float(m_uf[2][0]) == pytest.approx(res["parameters"]["m_uf"]["value"], rel=1e-4) and not m_uf[2][1]
+    assert section["first_fit"] == rideid.first_fit_sentence(first) and section["first_fit"].startswith(
+        "first fit: missed grossly (55 %")
 
 
 @pytest.mark.slow

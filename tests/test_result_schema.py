@@ -238,3 +238,24 @@ def test_the_reports_verdict_carries_the_caveats_the_terminal_warns_of():
     rows = adequacy_rows({"adequacy": adq})
     assert rows["level_caveat"] == "loud" and rows["not_assessed"] == ["B40"]
     assert caveats(rows) == caveats(adq) and len(caveats(rows)) == 2
+
+
+def test_the_kept_candidate_is_named_by_its_tracks_after_a_gross_first_fit():
+    """``model.candidates`` after a gross first fit holds one extension twice, as drawn and as built: the label
+    names the tracks, and the candidate kept is the one on the tracks ``model.first_fit`` says (not the first of that
+    name); an ordinary candidate (no ``tracks``) is named by its extensions, base by 'base'; a first fit that
+    stopped the choice (``first_fit`` null) keeps its own entry."""
+    from rideid.estimate.records import candidate_label, kept_candidate
+    bars = ["anti_roll_bars"]
+    cands = [{"extensions": bars, "tracks": "as drawn"}, {"extensions": bars + ["powertrain"], "tracks": "as drawn"},
+             {"extensions": bars + ["powertrain"], "tracks": "as built"}]
+    model = {"extensions": bars + ["powertrain"], "candidates": cands, "first_fit": {"tracks": "as built"}}
+    assert [candidate_label(c) for c in cands] == [
+        "anti_roll_bars (as drawn)", "anti_roll_bars + powertrain (as drawn)", "anti_roll_bars + powertrain (as built)"]
+    assert kept_candidate(model) == 2
+    assert kept_candidate(dict(model, first_fit={"tracks": "as drawn"})) == 1
+    assert kept_candidate({"extensions": bars, "candidates": cands[:2], "first_fit": None}) == 0
+    plain = [{"extensions": []}, {"extensions": bars}]
+    assert [candidate_label(c) for c in plain] == ["base", "anti_roll_bars"]
+    assert kept_candidate({"extensions": [], "candidates": plain}) == 0
+    assert kept_candidate({"extensions": ["tire_damping"], "candidates": plain}) is None

@@ -395,17 +395,20 @@ def _roads_table(res) -> str:
 
 
 def _candidates_table(model: dict) -> str:
+    cands = model["candidates"]
+    names = [rideid.candidate_label(c) for c in cands]
+    w = max([30] + [len(n) for n in names])
     lines = [f"--model auto kept: {' + '.join(model['extensions']) or 'base'}",
-             f"{'candidate':<30} {'cost':>11} {'criterion':>11} {'fits better':>12} {'adequate':>9}"]
-    for c in model["candidates"]:
+             f"{'candidate':<{w}} {'cost':>11} {'criterion':>11} {'fits better':>12} {'adequate':>9}"]
+    for c, name in zip(cands, names):
         crit = "" if c["criterion"] is None else f"{c['criterion']:.4g}"
         adq = {True: "yes", False: "no", None: "-"}[c.get("adequate")]
         better = {True: "yes", False: "no", None: "-"}[c.get("fits_better")]
-        lines.append(f"{' + '.join(c['extensions']) or 'base':<30} {c['cost']:>11.5g} {crit:>11} {better:>12} {adq:>9}")
-    lines += [f"{' + '.join(s['extensions']):<30} skipped: its predicted gain {s['predicted_gain']:.3g}, score "
+        lines.append(f"{name:<{w}} {c['cost']:>11.5g} {crit:>11} {better:>12} {adq:>9}")
+    lines += [f"{' + '.join(s['extensions']):<{w}} skipped: its predicted gain {s['predicted_gain']:.3g}, score "
               f"{s['score']:.3g} against {s['threshold']:.3g} (one Gauss-Newton step at its parent's fit)"
               for s in model.get("screens", ()) if not s["passes"]]
-    lines += [f"{' + '.join(s['extensions']):<30} not fitted: predicted to reach a cost of {s['predicted_cost']:.3g}, "
+    lines += [f"{' + '.join(s['extensions']):<{w}} not fitted: predicted to reach a cost of {s['predicted_cost']:.3g}, "
               f"above a rival accepted at this step"
               for s in model.get("screens", ()) if s["passes"] and s.get("fitted") is False]
     if any(c.get("fits_better") is False for c in model["candidates"]):
@@ -414,19 +417,6 @@ def _candidates_table(model: dict) -> str:
     if model.get("as_drawn_choice") is not None and model.get("note"):
         lines.append(model["note"])
     return "\n".join(lines)
-
-
-def _first_fit_line(first: dict) -> str:
-    """What mended a first fit that missed grossly (result.json ``model.first_fit``), in a few lines."""
-    gm = first["gross_misfit"]
-    bad = sorted(((e, r) for r, e in gm["run_errors"].items() if e > gm["threshold"]), reverse=True)
-    runs = ", ".join(f"{100 * e:.0f} % of run {r}'s signal" for e, r in bad) or "parameters at their bounds"
-    s = next((s for s in first["screens"] if s["extensions"] == first["mended_by"]), None)
-    score = f" (screened at {s['score']:.4g} against {s['threshold']:.3g})" if s else ""
-    where = "with the tracks as built" if first["tracks"] == "as built" else "on the tracks as drawn"
-    return textwrap.fill(f"first fit: missed grossly ({runs} unexplained); the model choice went on because "
-                         f"{' + '.join(first['extension'])}, the extension the data called for most{score}, "
-                         f"mends it {where}", 100, subsequent_indent="  ")
 
 
 #: what ``rideid identify`` writes into its folder: a new identification replaces all of it (the user's files stay)
@@ -513,7 +503,7 @@ def run_identify(ds_path, out_dir, *, seed, population=None, generations=None, w
     if res.model.get("candidates"):
         print(_candidates_table(res.model), file=out)
     if res.model.get("first_fit"):
-        print(_first_fit_line(res.model["first_fit"]), file=out)
+        print(textwrap.fill(rideid.first_fit_sentence(res.model["first_fit"]), 100, subsequent_indent="  "), file=out)
     for message in dict.fromkeys(h["message"] for h in (res.adequacy or {}).get("sensor_hints") or []):
         print("hint: " + message, file=out)  # a group of channels shares one message
     small = ((res.adequacy or {}).get("small_angle") or {}).get("note")

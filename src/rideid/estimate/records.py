@@ -424,6 +424,36 @@ def motion_line(rid: str, m: dict) -> str:
             f"{1e3 * m['start_shift_s']:+.2f}{st} ms")
 
 
+def candidate_label(c: dict) -> str:
+    """A ``model.candidates`` entry's name: its extensions (``base`` for none) and, where it records them, the
+    tracks it was fitted on (a gross first fit's candidates: the same extension as drawn and as built)."""
+    name = " + ".join(c.get("extensions") or ()) or "base"
+    return f"{name} ({c['tracks']})" if c.get("tracks") else name
+
+
+def kept_candidate(model: dict) -> int | None:
+    """The index in ``model.candidates`` of the candidate kept (its extensions ``model.extensions`` and, after a
+    gross first fit, its tracks ``model.first_fit.tracks``); None when none is."""
+    ext, tracks = list(model.get("extensions") or ()), (model.get("first_fit") or {}).get("tracks")
+    hits = [i for i, c in enumerate(model.get("candidates") or ())
+            if list(c.get("extensions") or ()) == ext and (tracks is None or c.get("tracks") in (None, tracks))]
+    return hits[-1] if hits else None
+
+
+def first_fit_sentence(first: dict) -> str:
+    """What mended a first fit that missed grossly (result.json ``model.first_fit``), in one sentence: the runs'
+    unexplained shares, the extension the data called for most and its screen, the tracks it mended it on. The
+    terminal and the report both say it so."""
+    gm = first["gross_misfit"]
+    bad = sorted(((e, r) for r, e in gm["run_errors"].items() if e > gm["threshold"]), reverse=True)
+    runs = ", ".join(f"{100 * e:.0f} % of run {r}'s signal" for e, r in bad) or "parameters at their bounds"
+    s = next((s for s in first["screens"] if s["extensions"] == first["mended_by"]), None)
+    score = f" (screened at {s['score']:.4g} against {s['threshold']:.3g})" if s else ""
+    where = "with the tracks as built" if first["tracks"] == "as built" else "on the tracks as drawn"
+    return (f"first fit: missed grossly ({runs} unexplained); the model choice went on because "
+            f"{' + '.join(first['extension'])}, the extension the data called for most{score}, mends it {where}")
+
+
 def plan_of(res, run_ids=()) -> Plan:
     """The plan of result ``res`` (its free ``names``, ``details``, ``starts``, ``tracks``, ``roads``);
     ``run_ids``: the dataset's runs, in order."""

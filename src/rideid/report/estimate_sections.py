@@ -7,6 +7,8 @@ from __future__ import annotations
 
 import math
 
+from ..estimate.records import candidate_label, first_fit_sentence, kept_candidate
+
 
 #: the correlation matrix shows at most this many parameters as columns; beyond (a model with damper curves:
 #: twenty knot forces more) the knot forces leave the matrix and their strong correlations are listed as pairs
@@ -80,15 +82,12 @@ def model_rows(res: dict) -> dict | None:
     cands = model.get("candidates")
     if not cands:
         return None
-
-    def label(ext):
-        return " + ".join(ext) if ext else "base"
-
-    chosen = label(model.get("extensions", []))
-    heads = [{"label": label(c["extensions"]), "cost": c["cost"], "criterion": c["criterion"], "wald": c.get("wald"),
-              "adequate": c.get("adequate"), "fits_better": c.get("fits_better"),
-              "chosen": label(c["extensions"]) == chosen} for c in cands]
-    ref = next(c for c in cands if label(c["extensions"]) == chosen)
+    kept = kept_candidate(model)
+    chosen = " + ".join(model.get("extensions") or ()) or "base"
+    heads = [{"label": candidate_label(c), "cost": c["cost"], "criterion": c["criterion"], "wald": c.get("wald"),
+              "adequate": c.get("adequate"), "fits_better": c.get("fits_better"), "chosen": i == kept}
+             for i, c in enumerate(cands)]
+    ref = cands[kept if kept is not None else -1]
     names = []
     for c in cands:
         names += [n for n in c["parameters"] if n not in names]
@@ -108,7 +107,8 @@ def model_rows(res: dict) -> dict | None:
     return {"chosen": chosen, "criterion": model.get("criterion", ""),
             "curve_criterion": model.get("extension_criterion", model.get("curve_criterion")),
             "heads": heads, "rows": rows, "rule": model.get("fits_better_rule"),
-            "note": model.get("note")}
+            "note": model.get("note"),
+            "first_fit": first_fit_sentence(model["first_fit"]) if model.get("first_fit") else None}
 
 
 def estimate_context(res: dict) -> dict:

@@ -73,9 +73,12 @@ def as_built(ds, full, gross, screens, rival, rival_fit, linear, simulator, trac
 
 def candidates(full, fitted: list) -> list:
     """result.json ``model.candidates`` (SPEC §6) when the first fit missed grossly: the first fit (not adequate)
-    and each ``(fit, key, adequate, tracks)`` of ``fitted``; no criterion was weighed between them."""
+    and each ``(fit, key, adequate, tracks)`` of ``fitted``, each with its estimates as every candidate has them
+    (``parameters``, ``std_robust``: the report's candidate table); no criterion was weighed between them."""
     rows = [(full, full.model.get("extensions", []), False, "as drawn")] + fitted
-    return [{"extensions": list(key), "cost": fit.cost, "criterion": None, "adequate": ok, "tracks": tracks}
+    return [{"extensions": list(key), "cost": fit.cost, "criterion": None, "adequate": ok, "tracks": tracks,
+             "parameters": dict(fit.parameters),
+             "std_robust": {n: d.get("std_robust") for n, d in fit.details.items() if not d.get("fixed")}}
             for fit, key, ok, tracks in rows]
 
 
