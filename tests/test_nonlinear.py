@@ -107,78 +107,84 @@ def test_integration_error_every_track_kind(kind, road_dir):
     assert np.any(tire < 0)
 
 
-_ROAD = {}
+
+def _road(run):
+    """The run's road input and rate as a function of time: the envelope model tabulated at 10 us (0.06 mm of
+    travel, finer than the envelope's own 0.5 mm grid), interpolated linearly (one cell lookup for the eight
+    columns)."""
+    tt = np.arange(0.0, run.t[-1] + 1e-4, 1e-5)
+    table = np.concatenate(run.inputs_at(tt), axis=1)  # (n, 8): the four inputs, then their rates
+    step = np.diff(table, axis=0)
+
+    def at(t):
+        j = min(max(int(t / 1e-5), 0), tt.size - 2)
+        w = (t - tt[j]) / (tt[j + 1] - tt[j])
+        row = table[j] + w * step[j]
+        return row[:4], row[4:]
+    return at
 
 
-def _road(run, t):
-    """The run's road input and rate at time ``t``: the envelope model tabulated at 10 us (0.06 mm of
-    travel, finer than the envelope's own 0.5 mm grid), interpolated."""
-    if id(run) not in _ROAD:
-        tt = np.arange(0.0, run.t[-1] + 1e-4, 1e-5)
-        _ROAD[id(run)] = (tt, *run.inputs_at(tt))
-    tt, U, R = _ROAD[id(run)]
-    return (np.array([np.interp(t, tt, U[:, c]) for c in range(4)]),
-            np.array([np.interp(t, tt, R[:, c]) for c in range(4)]))
-
-
-def _rhs_physical(P, geom, run, t, X):
-    """The equations of SPEC §1/§6/§8 written out again, unshifted states, one candidate (for solve_ivp)."""
+def _rhs_physical(P, geom, run):
+    """The equations of SPEC §1/§6/§8 written out again, unshifted states, one candidate (for solve_ivp): the
+    right-hand side ``(t, X) -> (dX/dt, accelerations)``, its constants computed once."""
     p = dict(zip(FULL.names, P))
     h = geom.cg_height
     a, b = p["a"], geom.wheelbase - p["a"]
     xs = np.array([a, a, -b, -b])
     ys = np.array(geom.corner_y)
-    u, ud = _road(run, t)
-    q, qd = X[:7], X[7:]
-    zb = q[0] - xs * q[1] + ys * q[2]
-    d = q[3:] - zb
-    v = qd[3:] - (qd[0] - xs * qd[1] + ys * qd[2])
+    road = _road(run)
     ks = np.array([p["k_sf"]] * 2 + [p["k_sr"]] * 2)
     kt = np.array([p["k_tf"]] * 2 + [p["k_tr"]] * 2)
     ct = np.array([p["c_tf"]] * 2 + [p["c_tr"]] * 2)
     mu = np.array([p["m_uf"]] * 2 + [p["m_ur"]] * 2)
-    Ff = [p[f"F_f{j + 1}"] for j in range(len(DEFAULT_KNOTS))]
-    Fr = [p[f"F_r{j + 1}"] for j in range(len(DEFAULT_KNOTS))]
     kn = np.array(DEFAULT_KNOTS)
     xk = np.concatenate([kn[:5], [0.0], kn[5:]])
-
-    def curve(F, vv):
-        Fk = np.concatenate([F[:5], [0.0], F[5:]])
-        j = min(max(int(np.searchsorted(xk, vv)) - 1, 0), xk.size - 2)
-        return Fk[j] + (Fk[j + 1] - Fk[j]) / (xk[j + 1] - xk[j]) * (vv - xk[j])
-
-    damp = np.array([curve(Ff, v[0]), curve(Ff, v[1]), curve(Fr, v[2]), curve(Fr, v[3])])
-    bars = np.array([p["k_arf"] * (d[0] - d[1]), p["k_arf"] * (d[1] - d[0]),
-                     p["k_arr"] * (d[2] - d[3]), p["k_arr"] * (d[3] - d[2])])
+    Fk = [np.concatenate([[p[f"F_{s}{j + 1}"] for j in range(5)], [0.0],
+                          [p[f"F_{s}{j + 1}"] for j in range(5, len(DEFAULT_KNOTS))]]) for s in "fr"]
+    slopes = [np.diff(F) / np.diff(xk) for F in Fk]
     clear = np.array([p["bs_clear_f"]] * 2 + [p["bs_clear_r"]] * 2)
     rate = np.array([p["bs_rate_f"]] * 2 + [p["bs_rate_r"]] * 2)
-    F = ks * d + bars + damp + rate * np.maximum(d - clear, 0)
     L = np.array([p["m_s"] * GRAVITY * b / geom.wheelbase / 2 + p["m_uf"] * GRAVITY] * 2
                  + [p["m_s"] * GRAVITY * a / geom.wheelbase / 2 + p["m_ur"] * GRAVITY] * 2)
-    T = np.maximum(L + kt * (u - q[3:]) + ct * (ud - qd[3:]), 0) - L
     mw = 2 * (p["m_uf"] + p["m_ur"]) * h * h
-    qdd = np.concatenate([[F.sum() / p["m_s"],
-                           (-(xs * F).sum() + p["m_s"] * GRAVITY * h * q[1]) / (p["I_yy"] + mw),
-                           ((ys * F).sum() + p["m_s"] * GRAVITY * h * q[2]) / (p["I_xx"] + mw)],
-                          (T - F) / mu])
-    return np.concatenate([qd, qdd]), qdd
+    Iyy, Ixx, ms, kaf, kar = p["I_yy"] + mw, p["I_xx"] + mw, p["m_s"], p["k_arf"], p["k_arr"]
+
+    def curve(axle, vv):
+        j = min(max(int(np.searchsorted(xk, vv)) - 1, 0), xk.size - 2)
+        return Fk[axle][j] + slopes[axle][j] * (vv - xk[j])
+
+    def rhs(t, X):
+        u, ud = road(t)
+        q, qd = X[:7], X[7:]
+        d = q[3:] - (q[0] - xs * q[1] + ys * q[2])
+        v = qd[3:] - (qd[0] - xs * qd[1] + ys * qd[2])
+        damp = np.array([curve(0, v[0]), curve(0, v[1]), curve(1, v[2]), curve(1, v[3])])
+        bars = np.array([kaf * (d[0] - d[1]), kaf * (d[1] - d[0]), kar * (d[2] - d[3]), kar * (d[3] - d[2])])
+        F = ks * d + bars + damp + rate * np.maximum(d - clear, 0)
+        T = np.maximum(L + kt * (u - q[3:]) + ct * (ud - qd[3:]), 0) - L
+        qdd = np.concatenate([[F.sum() / ms, (-(xs * F).sum() + ms * GRAVITY * h * q[1]) / Iyy,
+                               ((ys * F).sum() + ms * GRAVITY * h * q[2]) / Ixx], (T - F) / mu])
+        return np.concatenate([qd, qdd]), qdd
+    return rhs
 
 
 @pytest.mark.slow
 def test_matches_scipy_dop853(road_dir):
-    """An independent integrator (DOP853, rtol 1e-10) on independently written equations (about two
-    minutes: the kinks keep DOP853's steps short; measured 1.0e-5 of RMS at 3 sub-steps split at the kinks)."""
+    """An independent integrator (DOP853, rtol 1e-10) on independently written equations (the kinks keep DOP853's
+    steps short: 0.2 million right-hand sides, 13 s on one core since they are computed once per car and the road
+    is one table lookup, 755 s in CI's slow pass before; measured 1.0e-5 of RMS at 3 sub-steps split at the kinks)."""
     from scipy.integrate import solve_ivp
 
     run = make_run("chassis_twist", road_dir, duration=1.2)
     P = nasty_row()
     y = simulate_nonlinear(P, GH, run, FULL)[0]
-    sol = solve_ivp(lambda t, X: _rhs_physical(P, GH, run, t, X)[0], (0, run.t[-1]), np.zeros(14),
+    rhs = _rhs_physical(P, GH, run)
+    sol = solve_ivp(lambda t, X: rhs(t, X)[0], (0, run.t[-1]), np.zeros(14),
                     method="DOP853", t_eval=run.t, rtol=1e-10, atol=1e-12, max_step=run.h)
     ref = np.empty_like(y)
     x, yy = GH.corner_xy(np.array([P[INDEX["a"]]]))
     for k, t in enumerate(run.t):
-        _, qdd = _rhs_physical(P, GH, run, t, sol.y[:, k])
+        _, qdd = rhs(t, sol.y[:, k])
         ref[k, :4] = qdd[0] - x[0] * qdd[1] + yy[0] * qdd[2]
         ref[k, 4:8] = qdd[3:]
         ref[k, 8:] = sol.y[8:10, k]
@@ -195,10 +201,10 @@ def population(n, seed=0):
     return P
 
 
-@pytest.mark.slow  # 85 s on one core: CI's slow pass runs it (make test had reached 9 min on a fresh clone)
+@pytest.mark.slow  # three NumPy references of three cars: CI's slow pass runs it (six cars took 328 s there)
 def test_backends_agree(road_dir, monkeypatch):
     runs = [make_run("herringbone", road_dir, duration=1.5), make_run("chassis_twist", road_dir, duration=1.5)]
-    P = population(6)
+    P = population(3)
     sim = NonlinearSimulator(GH, runs, FULL)
     fast = sim.outputs(P)
     ref = sim.outputs_reference(P)
