@@ -61,6 +61,13 @@ def test_transfer_matches_the_state_space_and_the_static_limit(data):
     acc = [CHANNELS.index(c) for c in CHANNELS if "_az_" in c]
     assert np.allclose(H[0, acc].sum(axis=1) / -(w[0] ** 2), 1.0, rtol=1e-3)  # (w / w_bounce)^2 ~ 1e-5
     assert np.all(np.abs(H[0, [8, 9]].sum(axis=1)) < 1e-6 * w[0])  # and no gyro sees it
+    # the sampled free response's columns C (I - Phi z^-1)^-1, Phi = exp(A h), in modal form, against the inverse
+    import scipy.linalg
+    S = roadfit._discrete_columns(roadfit.system(P[None], geom), w[1:], cols, 1 / FS)
+    Phi = scipy.linalg.expm(A / FS)
+    for k, wk in enumerate(w[1:]):
+        ref = Cy @ np.linalg.inv(np.eye(14) - np.exp(-1j * wk / FS) * Phi)
+        assert np.allclose(S[k], ref, rtol=1e-9, atol=1e-9 * np.abs(ref).max())
 
 
 def test_delay_filter_is_exact_on_polynomials():
