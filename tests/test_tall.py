@@ -47,6 +47,60 @@ def test_the_blocked_triangle_has_the_matrix_s_gram():
     assert tall_r(wide) is not None and np.array_equal(tall_r(wide), wide)
 
 
+def _polish_like(rng, runs=6, rows=3000, knots=12, car=16):
+    """A Jacobian shaped as the polish's with distance corrections: the car's columns dense, each run's start
+    nonzero on its run's rows, each of its knots on a stretch of them and on one prior row after all the runs';
+    the residual last."""
+    m = runs * rows + runs * knots
+    n = car + runs * (1 + knots) + 1
+    a = np.zeros((m, n))
+    a[:, :car] = rng.standard_normal((m, car)) * np.logspace(0, 3, car)
+    for r in range(runs):
+        lo, c0 = r * rows, car + r * (1 + knots)
+        a[lo:lo + rows, c0] = rng.standard_normal(rows)
+        for k in range(knots):
+            s = lo + k * rows // knots
+            e = min(s + 2 * rows // knots, lo + rows)
+            a[s:e, c0 + 1 + k] = rng.standard_normal(e - s)
+            a[runs * rows + r * knots + k, c0 + 1 + k] = 3.0  # its prior row
+    a[:, -1] = rng.standard_normal(m)
+    return a
+
+
+def test_a_jacobian_of_local_columns_is_reduced_run_by_run():
+    """Columns local to groups of rows (each run's start and knots, the knots' prior rows apart from their runs')
+    are reduced group by group: R^T R = a^T a and a^T a's singular values, the last row the last column's alone
+    (the residual of a right-hand side there), the least squares and the Gauss-Newton step's length those of
+    the whole matrix; a matrix without such columns keeps the blocked triangle."""
+    from rideid.estimate.fit import tall
+    from rideid.estimate.fit.polish import gauss_newton_length
+    rng = np.random.default_rng(11)
+    a = _polish_like(rng)
+    groups, others = tall._local_groups(a)
+    assert len(groups) == 6 and list(others) == list(range(16)) + [a.shape[1] - 1]
+    assert all(c.size == 13 and r.size == 3000 + 12 for r, c in groups)
+    r = tall_r(a)
+    assert np.abs(np.tril(r, -1)).max() > 0  # not the triangle: the block-by-block reduction ran
+    gram = a.T @ a
+    np.testing.assert_allclose(r.T @ r, gram, rtol=0, atol=1e-12 * np.abs(gram).max())
+    np.testing.assert_allclose(np.linalg.svd(r, compute_uv=False), np.linalg.svd(a, compute_uv=False), rtol=1e-10)
+    assert np.all(r[-1, :-1] == 0) and abs(r[-1, -1]) > 0
+    x0, res0, rank0, s0 = np.linalg.lstsq(a[:, :-1], a[:, -1], rcond=None)
+    x1, res1, rank1, s1 = tall_lstsq(a[:, :-1], a[:, -1])
+    assert rank1 == rank0
+    np.testing.assert_allclose(x1, x0, rtol=0, atol=1e-10 * np.abs(x0).max())
+    np.testing.assert_allclose(res1, res0, rtol=1e-9)
+    dense = np.linalg.qr(a, mode="r")
+    assert np.linalg.norm(r[:-1, -1]) == pytest.approx(np.linalg.norm(dense[:-1, -1]), rel=1e-10)
+    J, f = a[:, :-1], a[:, -1]
+    J[:, 16] *= 1e6  # a column far out of scale: the Gram matrix's condition fails and the QR decides
+    assert gauss_newton_length(J, f) == pytest.approx(
+        np.linalg.norm(np.linalg.qr(np.column_stack([J, f]), mode="r")[:-1, -1]), rel=1e-9)
+    b = a.copy()
+    b[:, 16:-1] = rng.standard_normal((b.shape[0], b.shape[1] - 17))  # every column dense: the plain triangle
+    assert tall._local_groups(b) is None and np.allclose(np.tril(tall_r(b), -1), 0)
+
+
 def _exponential_fit(method):
     """A bounded exponential-and-sine fit of 40 000 residuals (the amplitude's bound below its true value) and the
     least squares' options with ``method``."""

@@ -40,15 +40,115 @@ def tall_r(a) -> np.ndarray:
     """The triangle ``R`` ``(n, n)`` of a QR of ``a`` ``(m, n)`` when ``a`` is tall (else ``a`` itself): the same
     singular values and right singular vectors, ``R^T R = a^T a``. A blocked QR (each block of
     :data:`BLOCK_ROWS` rows reduced to its triangle, then the stacked triangles once): the blocks stay in cache,
-    2.3x quicker than one QR of it all, the triangle the same up to rows' signs (1e-13 relative)."""
+    2.3x quicker than one QR of it all, the triangle the same up to rows' signs (1e-13 relative).
+
+    A matrix with many columns local to a few rows (each run's start and distance corrections: nonzero on that
+    run's residuals and their priors only) is reduced group by group (:func:`_block_angular_r`); its ``R`` is then
+    the triangle of ``a`` with its columns reordered (the local ones of each group first, the others last, the
+    last column always among them), put back in ``a``'s column order: ``R^T R = a^T a`` still, its last row the last
+    column's alone (the residual of a right-hand side there), but not triangular."""
     a = np.asarray(a, dtype=float)
     m, n = a.shape
     if not n or m < TALL * n:
         return a
-    if m <= BLOCK_ROWS:
+    if n >= LOCAL_MIN_COLUMNS:
+        r = _block_angular_r(a)
+        if r is not None:
+            return r
+    return _dense_r(a)
+
+
+def _dense_r(a) -> np.ndarray:
+    """:func:`tall_r` of ``a`` (at least as many rows as columns) without regard to its zeros."""
+    if a.shape[0] <= BLOCK_ROWS:
         return np.linalg.qr(a, mode="r")
-    return np.linalg.qr(np.vstack([np.linalg.qr(a[i:i + BLOCK_ROWS], mode="r") for i in range(0, m, BLOCK_ROWS)]),
-                        mode="r")
+    return np.linalg.qr(np.vstack([np.linalg.qr(a[i:i + BLOCK_ROWS], mode="r")
+                                   for i in range(0, a.shape[0], BLOCK_ROWS)]), mode="r")
+
+
+#: rows per block when looking for local columns (:func:`_local_groups`)
+ROW_BLOCK = 256
+#: a matrix of at least this many columns is looked at for columns local to a stretch of rows (:func:`tall_r`): the
+#: look is a pass over the matrix (40 ms at 100 000 x 300), a QR of it all 0.8 s there, of 100 000 x 30 15 ms
+LOCAL_MIN_COLUMNS = 64
+
+
+def _local_groups(a) -> tuple[list, np.ndarray] | None:
+    """The columns of ``a`` nonzero in fewer than half its blocks of :data:`ROW_BLOCK` rows, grouped with the rows
+    they touch (two such columns that share a row share a group; the rows in any order, since a QR's
+    ``R^T R = a^T a`` does not depend on it): ``([(rows, columns)], the other columns)``, the last column always
+    among the others; None when fewer than half the columns are local, or a group has fewer rows than its columns
+    and the others. The polish's distance corrections are each nonzero on a stretch of their run's residuals and
+    on a prior row after all the runs'. Each column's rows are read in the blocks it touches only (15 ms at
+    100 000 x 300, against 0.5 s for the nonzeros of it all)."""
+    m, n = a.shape
+    B = ROW_BLOCK
+    whole = m - m % B
+    touched = (a[:whole] != 0).reshape(-1, B, n).any(axis=1)  # along the rows' memory order: 3 ms at 100 000 x 300
+    if whole < m:
+        touched = np.vstack([touched, (a[whole:] != 0).any(axis=0)])
+    local = touched.any(axis=0) & (touched.sum(axis=0) < touched.shape[0] // 2)
+    local[-1] = False
+    if local.sum() < n // 2:
+        return None
+    root = list(range(n))
+
+    def find(j):
+        while root[j] != j:
+            root[j] = root[root[j]]
+            j = root[j]
+        return j
+
+    owner = np.full(m, -1)
+    for j in np.flatnonzero(local):
+        rows = np.concatenate([np.arange(b * B, min(b * B + B, m)) for b in np.flatnonzero(touched[:, j])])
+        rows = rows[a[rows, j] != 0]
+        for g in np.unique(owner[rows]):
+            if g >= 0:
+                root[find(int(g))] = j
+        owner[rows] = j
+    cols = np.flatnonzero(local)
+    col_root = np.array([find(j) for j in range(n)])
+    group = col_root[cols]
+    row_group = np.where(owner >= 0, col_root[np.maximum(owner, 0)], -1)
+    others = np.flatnonzero(~local)
+    groups = [(np.flatnonzero(row_group == g), cols[group == g]) for g in np.unique(group)]
+    if any(r.size < c.size + others.size for r, c in groups):
+        return None
+    return groups, others
+
+
+def _block_angular_r(a) -> np.ndarray | None:
+    """:func:`tall_r` of a tall ``a`` whose columns are mostly local to groups of rows (:func:`_local_groups`; None
+    when they are not): each group's rows reduced on its own columns and the others (a QR of
+    ``rows x (local + others)``), the others' remaining rows of every group stacked with the rows outside any group
+    and reduced once. On the polish of the built-in car's ten runs with every reality (105 000 x 297: the car's
+    16, ten starts, 271 distance corrections) 0.15 s against 0.85 s for the blocked QR of it all, ``R^T R`` the
+    same to 1e-15 (tests/test_tall.py)."""
+    found = _local_groups(a)
+    if found is None:
+        return None
+    groups, others = found
+    m, n = a.shape
+    k = others.size
+    order = np.concatenate([c for _, c in groups] + [others])
+    R = np.zeros((n, n))
+    rest, row, covered = [], 0, np.zeros(m, dtype=bool)
+    for rows, cols in groups:
+        c = cols.size
+        r = _dense_r(a[np.ix_(rows, np.concatenate([cols, others]))])
+        R[row:row + c, row:row + c] = r[:c, :c]
+        R[row:row + c, n - k:] = r[:c, c:]
+        rest.append(r[c:, c:])
+        row += c
+        covered[rows] = True
+    outside = a[np.ix_(np.flatnonzero(~covered), others)]
+    if outside.shape[0]:
+        rest.append(outside)
+    R[n - k:, n - k:] = _dense_r(np.vstack(rest))[:k]
+    out = np.empty((n, n))
+    out[:, order] = R
+    return out
 
 
 def tall_lstsq(a, b, rcond=None):
