@@ -95,6 +95,8 @@ _SETTINGS: tuple[Setting, ...] = _read_table(Path(__file__).with_name("settings.
 NOT_SETTINGS: dict[str, str] = {
     "tall.TALL": "when a least squares is reduced by a QR first: the same solution either way (speed only)",
     "tall.BLOCK_ROWS": "the blocked QR's block size: the same triangle either way (speed only)",
+    "tall.LOCAL_MIN_COLUMNS": "when a QR looks for columns local to a few rows: the same R^T R either way (speed only)",
+    "tall.ROW_BLOCK": "the rows per block when looking for local columns: the same R^T R either way (speed only)",
     "tall._users": "how many threads are inside tall_steps (state, not a value)",
     "identify.DEFAULT_POPULATION": "an argument's default (rideid.identify population=, --population; SPEC §5)",
     "identify.DEFAULT_GENERATIONS": "an argument's default (rideid.identify generations=, --generations; SPEC §5)",
