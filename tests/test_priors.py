@@ -405,6 +405,7 @@ def test_a_gross_first_fit_is_said_before_the_model_choice(tmp_path, capsys):
     section = model_rows(json.loads((tmp_path / "fit" / "result.json").read_text()))
     assert section["heads"][0]["chosen"] and not any(h["chosen"] for h in section["heads"][1:])
     assert section["heads"][0]["label"].endswith("(as drawn)") and section["first_fit"] is None
+    assert section["weighed"] is False
     assert all(len(r["cells"]) == len(section["heads"]) for r in section["rows"]) and section["rows"]
     print(f"gross misfit said after {wall:.0f} s")
     assert wall < 180.0

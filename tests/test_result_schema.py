@@ -259,3 +259,12 @@ def test_the_kept_candidate_is_named_by_its_tracks_after_a_gross_first_fit():
     assert [candidate_label(c) for c in plain] == ["base", "anti_roll_bars"]
     assert kept_candidate({"extensions": [], "candidates": plain}) == 0
     assert kept_candidate({"extensions": ["tire_damping"], "candidates": plain}) is None
+    # the report's model section: the note states the choice's gate only where a criterion was weighed
+    from rideid.report.estimate_sections import model_rows
+    for c, crit in zip(plain, (130.0, 12.0)):
+        c.update(cost=1e-4, criterion=crit, parameters={"m_s": 900.0}, std_robust={"m_s": 1.0})
+    assert model_rows({"model": {"extensions": bars, "candidates": plain}})["weighed"] is True
+    for c in cands:
+        c.update(cost=1e-4, criterion=None, parameters={"m_s": 900.0}, std_robust={"m_s": 1.0})
+    section = model_rows({"model": dict(model, first_fit=None)})
+    assert section["weighed"] is False and [h["chosen"] for h in section["heads"]] == [False, False, True]

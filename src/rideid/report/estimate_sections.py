@@ -108,7 +108,9 @@ def model_rows(res: dict) -> dict | None:
             "curve_criterion": model.get("extension_criterion", model.get("curve_criterion")),
             "heads": heads, "rows": rows, "rule": model.get("fits_better_rule"),
             "note": model.get("note"),
-            "first_fit": first_fit_sentence(model["first_fit"]) if model.get("first_fit") else None}
+            "first_fit": first_fit_sentence(model["first_fit"]) if model.get("first_fit") else None,
+            # a gross first fit's candidates were not weighed (no criterion, no gate): the note's rule is not said
+            "weighed": any(c.get("criterion") is not None for c in cands)}
 
 
 def estimate_context(res: dict) -> dict:
