@@ -431,6 +431,13 @@ def candidate_label(c: dict) -> str:
     return f"{name} ({c['tracks']})" if c.get("tracks") else name
 
 
+def candidate_estimates(res) -> dict:
+    """A ``model.candidates`` entry's estimates of the fit ``res``: ``parameters`` (name -> value) and
+    ``std_robust`` (each free parameter's), which the report's candidate table reads for every candidate."""
+    return {"parameters": dict(res.parameters),
+            "std_robust": {n: d.get("std_robust") for n, d in res.details.items() if not d.get("fixed")}}
+
+
 def kept_candidate(model: dict) -> int | None:
     """The index in ``model.candidates`` of the candidate kept (its extensions ``model.extensions`` and, after a
     gross first fit, its tracks ``model.first_fit.tracks``); None when none is."""

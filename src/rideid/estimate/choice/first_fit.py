@@ -15,6 +15,7 @@ from dataclasses import replace
 
 from ..assess.adequacy import gross_misfit, run_errors
 from ..fit.anyroad import as_built_runs, identify_any_road
+from ..records import candidate_estimates
 
 
 def misses(ds, res) -> dict | None:
@@ -77,9 +78,7 @@ def candidates(full, fitted: list) -> list:
     (``parameters``, ``std_robust``: the report's candidate table); no criterion was weighed between them."""
     rows = [(full, full.model.get("extensions", []), False, "as drawn")] + fitted
     return [{"extensions": list(key), "cost": fit.cost, "criterion": None, "adequate": ok, "tracks": tracks,
-             "parameters": dict(fit.parameters),
-             "std_robust": {n: d.get("std_robust") for n, d in fit.details.items() if not d.get("fixed")}}
-            for fit, key, ok, tracks in rows]
+             **candidate_estimates(fit)} for fit, key, ok, tracks in rows]
 
 
 def stopped(full, gross: dict, screens: list, rival, rival_fit):

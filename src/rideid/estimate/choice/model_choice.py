@@ -63,7 +63,7 @@ from ..fit.budget import with_budget
 from ... import settings
 from ..assess.adequacy import advise, assess_fit
 from . import first_fit
-from ..records import assessments_of, plan_of, with_caveats
+from ..records import assessments_of, candidate_estimates, plan_of, with_caveats
 from ..assess.materiality import weigh_result
 from ..assess.small_angle import small_angle
 from ..fit.identify import identify as identify_model, warn_bounds
@@ -534,8 +534,7 @@ class _Choice:
         for e in self.entries:
             r = self.results[tuple(e["extensions"])]
             out.append(dict(e, cost=r.cost, free_extension_parameters=e["k"],
-                            adequate=(r.adequacy or {}).get("adequate"), parameters=dict(r.parameters),
-                            std_robust={n: d.get("std_robust") for n, d in r.details.items() if not d.get("fixed")}))
+                            adequate=(r.adequacy or {}).get("adequate"), **candidate_estimates(r)))
         return out
 
     def every_linear_group(self):

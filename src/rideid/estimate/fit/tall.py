@@ -100,8 +100,9 @@ def _local_groups(a) -> tuple[list, np.ndarray] | None:
             j = root[j]
         return j
 
+    cols = np.flatnonzero(local)
     owner = np.full(m, -1)
-    for j in np.flatnonzero(local):
+    for j in cols:
         rows = np.concatenate([np.arange(b * B, min(b * B + B, m)) for b in np.flatnonzero(touched[:, j])])
         rows = rows[a[rows, j] != 0]
         prev = owner[rows]
@@ -109,7 +110,6 @@ def _local_groups(a) -> tuple[list, np.ndarray] | None:
         for g in set(prev[np.r_[True, prev[1:] != prev[:-1]]].tolist()) if prev.size else ():  # owners come in runs
             root[find(g)] = j
         owner[rows] = j
-    cols = np.flatnonzero(local)
     col_root = np.array([find(j) for j in range(n)])
     group = col_root[cols]
     row_group = np.where(owner >= 0, col_root[np.maximum(owner, 0)], -1)

@@ -494,7 +494,7 @@ def transfer(car: System, omega, cols) -> np.ndarray:
     Modal form ``C V diag(1 / (s - lambda)) V^-1 (B + s B_r)`` where the eigenvectors are well
     conditioned, else one linear solve per frequency (tested equal to the explicit inverse). The modal form is
     one matrix product: ``[g, s g]`` (K, 2m), ``g = 1 / (s - lambda)``, times the modes' outer products
-    ``(C V)_cm (V^-1 B)_mj`` and ``(C V)_cm (V^-1 B_r)_mj`` (2m, c 4): 0.8 ms a car at 1500 bins and ten
+    ``(C V)_cm (V^-1 B)_mj`` and ``(C V)_cm (V^-1 B_r)_mj`` (2m, c 4): 1.7 ms a car at 1500 bins and ten
     channels, 3.7 ms as a product per bin (the same numbers to 6e-16)."""
     A, B, Cy, Dy, Br, Dyr = car.A, car.B, car.Cy, car.Dy, car.Br, car.Dyr
     s = 1j * np.asarray(omega)
