@@ -10,8 +10,16 @@ from rideid.data.noise import sensor_noise
 from rideid.estimate.assess.adequacy import ljung_box
 from rideid.estimate.fit.uncertainty import hac_covariance
 
-sm = pytest.importorskip("statsmodels.api")
-diagnostic = pytest.importorskip("statsmodels.stats.diagnostic")
+
+@pytest.fixture(scope="module")
+def sm():
+    """statsmodels' API, imported by the worker that runs these tests (a second at collection otherwise)."""
+    return pytest.importorskip("statsmodels.api")
+
+
+@pytest.fixture(scope="module")
+def diagnostic():
+    return pytest.importorskip("statsmodels.stats.diagnostic")
 
 
 def _regression(seed, n=400, rho=0.7):
@@ -25,7 +33,7 @@ def _regression(seed, n=400, rho=0.7):
 
 
 @pytest.mark.parametrize("seed, lags", [(1, 4), (2, 9), (3, 0)])
-def test_hac_covariance_is_statsmodels_newey_west(seed, lags):
+def test_hac_covariance_is_statsmodels_newey_west(seed, lags, sm):
     # the residuals r = X beta - y have Jacobian X; rideid's sandwich with a fixed Bartlett bandwidth L is
     # Newey-West with maxlags L (weights 1 - l / (L + 1)), times m / (m - n) (statsmodels' use_correction)
     X, y, e = _regression(seed)
@@ -41,7 +49,7 @@ def test_hac_covariance_is_statsmodels_newey_west(seed, lags):
 
 
 @pytest.mark.parametrize("seed, rho, lags", [(4, 0.0, 25), (5, 0.5, 25), (6, 0.9, 10)])
-def test_ljung_box_is_statsmodels(seed, rho, lags):
+def test_ljung_box_is_statsmodels(seed, rho, lags, diagnostic):
     rng = np.random.default_rng(seed)
     x = 3.0 + sensor_noise(rng, (500, 1), rho)[:, 0]  # a mean: both remove it
     Q, p = ljung_box(x, lags)

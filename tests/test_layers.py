@@ -10,6 +10,7 @@ function-level ones, comes back to where it started.
 from __future__ import annotations
 
 import ast
+import functools
 import subprocess
 import sys
 from pathlib import Path
@@ -75,6 +76,7 @@ def _targets(mod: str, pkg: bool, node) -> list[str]:
     return out
 
 
+@functools.cache
 def _graph():
     """``(edges, late)``: module -> {imported module: line}; late: (module, line, target) inside functions."""
     edges, late = {m: {} for m in MODULES}, []
@@ -102,7 +104,16 @@ def _graph():
     return edges, late
 
 
-EDGES, LATE = _graph()
+
+
+def _edges() -> dict:
+    """module -> {imported module: line} (:func:`_graph`, parsed once, by the worker that runs these tests)."""
+    return _graph()[0]
+
+
+def _late() -> list:
+    """(module, line, target) of the imports inside functions."""
+    return _graph()[1]
 
 
 def _layer(mod: str) -> int:
@@ -120,15 +131,15 @@ def test_every_module_is_in_a_layer_and_the_graph_is_read():
     for m in MODULES:
         _layer(m)
     # the graph is really read: known edges of each kind are there
-    assert "rideid.model.simulate" in EDGES["rideid.conditioning.nominal"]
-    assert "rideid.data.dataset" in EDGES["rideid.conditioning.load"]
-    assert "rideid.verify.hifi" in EDGES["rideid.synth.scenario"]
-    assert "rideid.conditioning.load" in EDGES["rideid"]  # through the lazy table
+    assert "rideid.model.simulate" in _edges()["rideid.conditioning.nominal"]
+    assert "rideid.data.dataset" in _edges()["rideid.conditioning.load"]
+    assert "rideid.verify.hifi" in _edges()["rideid.synth.scenario"]
+    assert "rideid.conditioning.load" in _edges()["rideid"]  # through the lazy table
 
 
 def test_no_import_from_a_higher_layer():
     up = [f"{m}:{line} imports {t} (layer {_layer(t)} above {_layer(m)})"
-          for m, ts in EDGES.items() for t, line in ts.items()
+          for m, ts in _edges().items() for t, line in ts.items()
           if _layer(t) > _layer(m) and (m, t) not in EDGES_ALLOWED]
     assert up == []
 
@@ -137,7 +148,7 @@ def test_data_neither_simulates_nor_reaches_up():
     """data/ uses the model's parameters and tables, never its simulators; nor anything above it."""
     sims = {"rideid.model.batch", "rideid.model.kernel", "rideid.model.kernel_nl", "rideid.model.nonlinear",
             "rideid.model.backend", "rideid.model.simulator", "rideid.model.kernel_contact"}
-    bad = [(m, t) for m, ts in EDGES.items() if m.startswith("rideid.data") for t in ts
+    bad = [(m, t) for m, ts in _edges().items() if m.startswith("rideid.data") for t in ts
            if t in sims or _layer(t) > _layer("rideid.data")]
     assert bad == []
 
@@ -147,14 +158,14 @@ def test_the_problem_does_not_reach_into_the_fit_the_model_choice_or_the_assessm
     solve and judge it: a block's share of the error bars is made of the score series of problem/scores.py, which
     the fit's uncertainty composes, and the least improvement that counts is the cost's (problem/cost.py); before,
     problem/blocks.py imported the fit's uncertainty module and problem/bumps.py the adequacy test's."""
-    up = [(m, t) for m, ts in EDGES.items() if m.startswith("rideid.estimate.problem") for t in ts
+    up = [(m, t) for m, ts in _edges().items() if m.startswith("rideid.estimate.problem") for t in ts
           if t.startswith(("rideid.estimate.fit", "rideid.estimate.choice", "rideid.estimate.assess"))]
     assert up == []
-    assert "rideid.estimate.problem.scores" in EDGES["rideid.estimate.fit.uncertainty"]
+    assert "rideid.estimate.problem.scores" in _edges()["rideid.estimate.fit.uncertainty"]
 
 
 def test_no_import_cycle_even_through_function_level_imports():
-    graph = {m: {t for t in ts if (m, t) not in EDGES_ALLOWED} for m, ts in EDGES.items()}
+    graph = {m: {t for t in ts if (m, t) not in EDGES_ALLOWED} for m, ts in _edges().items()}
     state, stack, cycles = {}, [], []
 
     def visit(m):
@@ -175,12 +186,12 @@ def test_no_import_cycle_even_through_function_level_imports():
 
 
 def test_internal_imports_are_at_the_top():
-    late = [f"{m}:{line} imports {t} inside a function" for m, line, t in LATE if m not in LATE_ALLOWED]
+    late = [f"{m}:{line} imports {t} inside a function" for m, line, t in _late() if m not in LATE_ALLOWED]
     assert late == []
 
 
 def test_the_command_line_imports_only_the_public_api():
-    assert set(EDGES["rideid.cli"]) == {"rideid"}
+    assert set(_edges()["rideid.cli"]) == {"rideid"}
     r = subprocess.run([sys.executable, "-c", "import rideid.cli; import sys; "
                         "print('numba' in sys.modules, 'scipy' in sys.modules, 'numpy' in sys.modules)"],
                        capture_output=True, text=True, env={"PYTHONPATH": str(SRC), "PATH": ""}, check=True)

@@ -224,13 +224,17 @@ def population(n, seed=0):
 def test_compiled_kernel_is_the_numpy_reference():
     """The compiled kernel's channels, states and errors are the NumPy reference's within 1e-10 (relative), for
     a population with and without a powertrain (lanes of one vector: a car's numbers are its own); a car
-    without a powertrain is the same whether its layout has the group or not (bit for bit)."""
-    runs = [run_of(herringbone(0.011, start=0.4), 8.0, 0.3), run_of(washboard(0.011, start=0.5), 10.0, 0.2)]
-    P = population(5)
+    without a powertrain is the same whether its layout has the group or not (bit for bit). The runs cross the
+    kinks (split and plain RK4 differ by 3e-4 of the states) and are kept short: the NumPy backend splits step by
+    step in Python (three cars on 0.25 and 0.15 s: 6 s; five cars on 0.3 and 0.2 s took 8 to 14 s)."""
+    runs = [run_of(herringbone(0.011, start=0.4), 8.0, 0.25), run_of(washboard(0.011, start=0.5), 10.0, 0.15)]
+    P = population(3)
     sim = NonlinearSimulator(GH, runs, FULL)
     fast, ref = sim.states(P), sim.states_reference(P)
+    plain = NonlinearSimulator(GH, runs, FULL, split=False).states(P)
+    assert all(np.abs(a[1] - b[1]).max() > 1e-5 * np.abs(b[1]).max() for a, b in zip(fast, plain))
     for (y, X), (y_ref, X_ref) in zip(fast, ref):
-        assert X.shape == X_ref.shape == (5, y.shape[1], 18)
+        assert X.shape == X_ref.shape == (3, y.shape[1], 18)
         assert np.abs(X - X_ref).max() <= 1e-10 * np.abs(X_ref).max()
         assert np.abs(y - y_ref).max() <= 1e-10 * np.abs(y_ref).max()
     Y = np.concatenate([r[0][0] for r in ref]) * 1.01
@@ -238,9 +242,9 @@ def test_compiled_kernel_is_the_numpy_reference():
     np.testing.assert_allclose(sim.errors(P, Y, W), nl._errors_of([r[0] for r in ref], sim.run_start, Y, W),
                                rtol=1e-9)
     # one at a time: the same numbers as in the population
-    one = sim.outputs(P[2:3])
+    one = sim.outputs(P[1:2])
     for a, b in zip(one, fast):
-        assert np.abs(a[0] - b[0][2]).max() <= 1e-12 * np.abs(b[0][2]).max()
+        assert np.abs(a[0] - b[0][1]).max() <= 1e-12 * np.abs(b[0][1]).max()
     # the car without a powertrain, with and without the group in its layout
     lay0 = NonlinearLayout(knots=DEFAULT_KNOTS, bump_stops=True)
     P0 = np.delete(P[-1:], np.arange(16, 23), axis=1)

@@ -59,21 +59,36 @@ def _norm_cols(Y, Yhat):
 
 def _xcorr(Y, Yhat, i0, i1, lags, cols):
     """Normalised cross-correlation summed over ``cols`` of the data on samples ``i0:i1`` with the response
-    ``lags`` samples later (the response padded with zeros)."""
+    ``lags`` samples later (the response padded with zeros). The lags whose window lies inside the response are
+    one product over a sliding view of it (the data's window the same for each); the few that reach past an end,
+    one at a time."""
     n = Yhat.shape[0]
-    out = np.zeros(len(lags))
-    for j, lag in enumerate(lags):
-        a0, a1 = i0 + lag, i1 + lag
-        lo, hi = max(a0, 0), min(a1, n)
+    lags = np.asarray(lags, dtype=int)
+    out = np.zeros(lags.size)
+    inside = (i0 + lags >= 0) & (i1 + lags <= n)
+    if inside.any():
+        d = Y[i0:i1][:, cols]                                                        # (W, C)
+        ls = lags[inside]
+        a, b = int(ls.min()), int(ls.max())
+        win = np.lib.stride_tricks.sliding_window_view(Yhat[i0 + a:i1 + b][:, cols], i1 - i0, axis=0)[ls - a]
+        out[inside] = _normalised(np.einsum("lcw,wc->lc", win, d), np.linalg.norm(d, axis=0)[None],
+                                  np.sqrt(np.einsum("lcw,lcw->lc", win, win)), len(cols))
+    for j in np.flatnonzero(~inside):
+        lag = int(lags[j])
+        lo, hi = max(i0 + lag, 0), min(i1 + lag, n)
         if hi <= lo:
             continue
         d = Y[lo - lag:hi - lag][:, cols]
         m = Yhat[lo:hi][:, cols]
-        nd, nm = np.linalg.norm(d, axis=0), np.linalg.norm(m, axis=0)
-        ok = (nd > 0) & (nm > 0)
-        if ok.any():
-            out[j] = float(np.sum(np.sum(d[:, ok] * m[:, ok], axis=0) / (nd[ok] * nm[ok]))) / len(cols)
+        out[j] = _normalised(np.sum(d * m, axis=0)[None], np.linalg.norm(d, axis=0)[None],
+                             np.linalg.norm(m, axis=0)[None], len(cols))[0]
     return out
+
+
+def _normalised(num, nd, nm, c: int) -> np.ndarray:
+    """Each row's sum over its channels of ``num / (nd nm)``, over ``c`` (a channel of no signal adds 0)."""
+    ok = (nd > 0) & (nm > 0)
+    return np.sum(np.where(ok, num / np.where(ok, nd * nm, 1.0), 0.0), axis=1) / c
 
 
 def _period(Yhat, i0, i1, cols, cap: int) -> int:

@@ -266,7 +266,8 @@ def rate_input(P, geom: Geometry):
     return Bd
 
 
-def _state_space(M, C, K, Bf):
+def _state_space(M, C, K, Bf, *more):
+    """``A`` and ``B`` of ``M q'' + C q' + K q = Bf r``, and one more ``B`` for each input matrix in ``more``."""
     nq = M.shape[-1]
     Minv = np.linalg.inv(M)
     n = M.shape[0]
@@ -274,9 +275,12 @@ def _state_space(M, C, K, Bf):
     A[:, :nq, nq:] = np.eye(nq)
     A[:, nq:, :nq] = -Minv @ K
     A[:, nq:, nq:] = -Minv @ C
-    B = np.zeros((n, 2 * nq, Bf.shape[-1]))
-    B[:, nq:, :] = Minv @ Bf
-    return A, B
+    Bs = []
+    for F in (Bf, *more):
+        B = np.zeros((n, 2 * nq, F.shape[-1]))
+        B[:, nq:, :] = Minv @ F
+        Bs.append(B)
+    return (A, *Bs)
 
 
 def _output_rows(acc, Om):
@@ -302,7 +306,7 @@ def state_space(P, geom: Geometry, rate: bool = False):
     """
     M, C, K, Bf = mck(P, geom)
     nq = M.shape[-1]
-    A, B = _state_space(M, C, K, Bf)
+    A, B, *Br = _state_space(M, C, K, Bf, *([rate_input(P, geom)] if rate else []))
     Om = output_map(P, geom)
     Cy = _output_rows(A[:, nq:, :], Om)
     Dy = _output_rows(B[:, nq:, :], Om)
@@ -310,9 +314,7 @@ def state_space(P, geom: Geometry, rate: bool = False):
         Cy[:, CHANNELS.index(c), nq + k] = 1.0
     if not rate:
         return A, B, Cy, Dy
-    _, Br = _state_space(M, C, K, rate_input(P, geom))
-    Dyr = _output_rows(Br[:, nq:, :], Om)
-    return A, B, Cy, Dy, Br, Dyr
+    return A, B, Cy, Dy, Br[0], _output_rows(Br[0][:, nq:, :], Om)
 
 
 def force_input(P, geom: Geometry):
@@ -366,10 +368,10 @@ def blocks(P, geom: Geometry):
     ns = M.shape[-1] - 3
     s, a = np.arange(ns), np.arange(ns, ns + 3)
     sel = lambda X, r, c: X[:, r][:, :, c]  # noqa: E731
-    As, Bs = _state_space(sel(M, s, s), sel(C, s, s), sel(K, s, s), sel(Bf, s, np.arange(2)))
-    Aa, Ba = _state_space(sel(M, a, a), sel(C, a, a), sel(K, a, a), sel(Bf, a, np.arange(2, 4)))
-    _, Brs = _state_space(sel(M, s, s), sel(C, s, s), sel(K, s, s), sel(Bd, s, np.arange(2)))
-    _, Bra = _state_space(sel(M, a, a), sel(C, a, a), sel(K, a, a), sel(Bd, a, np.arange(2, 4)))
+    As, Bs, Brs = _state_space(sel(M, s, s), sel(C, s, s), sel(K, s, s), sel(Bf, s, np.arange(2)),
+                               sel(Bd, s, np.arange(2)))
+    Aa, Ba, Bra = _state_space(sel(M, a, a), sel(C, a, a), sel(K, a, a), sel(Bf, a, np.arange(2, 4)),
+                               sel(Bd, a, np.arange(2, 4)))
     return {"As": As, "Bs": Bs, "Aa": Aa, "Ba": Ba, "Brs": Brs, "Bra": Bra}
 
 

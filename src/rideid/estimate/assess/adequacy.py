@@ -118,9 +118,10 @@ def fit_ar(e, max_order: int | None = None) -> np.ndarray:
         except np.linalg.LinAlgError:
             a, *_ = np.linalg.lstsq(Gp[1:, 1:], Gp[1:, 0], rcond=None)
         y = e[p:]
-        # the true residual, not a normal-equation estimate
-        r = y - sum(a[k - 1] * e[p - k:T - k] for k in range(1, p + 1))
-        rss = float(r @ r)
+        # the true residual, not a normal-equation estimate: rows p..P-1, then P..T-1 of the lag matrix, times
+        # (1, -a)
+        c = np.concatenate([[1.0], -a])
+        rss = float(np.sum((extra @ c) ** 2) + np.sum((L[:, :p + 1] @ c) ** 2))
         bic = y.size * np.log(max(rss / y.size, 1e-300)) + p * np.log(y.size)
         if bic < best_bic:
             best, best_bic = a, bic

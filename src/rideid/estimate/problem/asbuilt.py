@@ -303,8 +303,7 @@ def solve(P, geom, tr: TrackRun, car=None, alpha_std: bool = False) -> Fit:
     h = rr.h
     car = roadfit.system(P, geom) if car is None else car
     H, S = roadfit.recorded_columns(car, rr, w)            # (K,c,4), (K,c,ns): through the sensors (SPEC §11)
-    ks, c = roadfit.delay_filter(rr.tau, h)
-    E = np.exp(-1j * np.outer(w * h, ks)) @ c
+    E = roadfit.rear_delay(rr, w)
     Acol = roadfit._road_columns(H, E)
     pr = tr.prior
     D = pr.D if pr is not None else np.zeros(bins.size)
@@ -423,8 +422,7 @@ def estimate_prior(P, geom, tr: TrackRun) -> Prior:
     w = rr.omega(rr.fit)
     h = rr.h
     H, S = roadfit.recorded_columns(sol.car, rr, w)
-    ks, cc = roadfit.delay_filter(rr.tau, h)
-    E = np.exp(-1j * np.outer(w * h, ks)) @ cc
+    E = roadfit.rear_delay(rr, w)
     Acol = roadfit._road_columns(H, E)
     _, road_of = roadfit._projector(Acol)
     en = np.exp(-1j * np.outer(w * h, np.arange(rr.lead_in)))

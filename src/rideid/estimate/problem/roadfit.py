@@ -443,13 +443,57 @@ def _clip_columns(rr: RoadRun, omega) -> np.ndarray:
 
 def delay_filter(tau: float, h: float, order: int | None = None):
     """Lagrange fractional-delay filter: taps ``ks`` (samples) and coefficients ``c`` with
-    ``u(t - tau) ~ sum c_j u(t - ks_j h)``."""
+    ``u(t - tau) ~ sum c_j u(t - ks_j h)``. Read-only arrays, made once per delay, step and order."""
     order = defaults["roadfit.delay_order"] if order is None else order
+    return _lagrange_taps(float(tau), float(h), int(order))
+
+
+@functools.lru_cache(maxsize=256)
+def _lagrange_taps(tau: float, h: float, order: int):
     dl = tau / h
     k0 = int(np.floor(dl)) - (order - 1) // 2
     ks = np.arange(k0, k0 + order + 1)
     c = np.array([np.prod([(dl - j) / (k - j) for j in ks if j != k]) for k in ks])
+    ks.flags.writeable = False
+    c.flags.writeable = False
     return ks, c
+
+
+def rear_delay(rr: RoadRun, omega) -> np.ndarray:
+    """``E`` (K,): the rear wheels' delay ``e^{-i omega tau}`` of run ``rr`` at ``omega`` (rad/s) through the fit's
+    fractional-delay filter (:func:`delay_filter`), as every road and track fit of the run has it. The same for
+    every car: made once per run and frequencies (:func:`_per_run`), read-only."""
+    order = int(defaults["roadfit.delay_order"])
+
+    def make():
+        ks, c = delay_filter(rr.tau, rr.h, order)
+        return np.exp(-1j * np.outer(np.asarray(omega, dtype=float) * rr.h, ks)) @ c
+    return _per_run(("delay", order), rr, omega, make)
+
+
+#: what a run's fits compute the same for every car (:func:`_per_run`): (kind, id(run), frequencies) -> (run, value)
+_PER_RUN: OrderedDict = OrderedDict()
+_PER_RUN_LOCK = threading.Lock()
+
+
+def _per_run(kind, rr: RoadRun, omega, make):
+    """``make()`` for run ``rr`` at the frequencies ``omega``, kept for the next call (the last 128; a run is frozen,
+    and each entry holds its run, so its id is not reused while the entry lives). Arrays come back read-only."""
+    key = (kind, id(rr), np.asarray(omega, dtype=float).tobytes())
+    with _PER_RUN_LOCK:
+        hit = _PER_RUN.get(key)
+        if hit is not None and hit[0] is rr:
+            _PER_RUN.move_to_end(key)
+            return hit[1]
+    value = make()
+    for a in (value if isinstance(value, tuple) else (value,)):
+        if isinstance(a, np.ndarray):
+            a.flags.writeable = False
+    with _PER_RUN_LOCK:
+        _PER_RUN[key] = (rr, value)
+        while len(_PER_RUN) > 128:
+            _PER_RUN.popitem(last=False)
+    return value
 
 
 def _modal(A):
@@ -548,8 +592,7 @@ def search_costs(P, geom: Geometry, runs) -> np.ndarray:
         sr = sensor_response(rr, w)
         if sr is not None:  # the channels as the sensors record them (the filters' transients left out, as the car's)
             H = H * sr[0][None, :, :, None]
-        ks, c = delay_filter(rr.tau, rr.h)
-        E = np.exp(-1j * np.outer(w * rr.h, ks)) @ c
+        E = rear_delay(rr, w)
         perp, _ = _projector(_road_columns(H, E[None]))
         r = perp(np.broadcast_to(rr.Ys[None, :, :, None], H.shape[:3] + (1,)))[..., 0]
         cost += np.sum(np.abs(r) ** 2, axis=(1, 2)) / np.sum(np.abs(rr.Ys) ** 2)
@@ -616,9 +659,14 @@ def sensor_response(rr: RoadRun, omega):
     :func:`rideid.model.sensors.discretise`, in series; 1 for an unfiltered channel), and ``T`` (K, c, m) the
     filters' free responses (their states at the first and last sample, :func:`_free_modes`), each through the
     filters after it in its chain: ``m`` real boundary unknowns, one column per filter mode, each on its own
-    channel. None when no channel of ``rr`` is filtered."""
+    channel. None when no channel of ``rr`` is filtered. The same for every car: made once per run and frequencies
+    (:func:`_per_run`), read-only."""
     if not rr.sensors:
         return None
+    return _per_run("sensors", rr, omega, lambda: _sensor_response(rr, omega))
+
+
+def _sensor_response(rr: RoadRun, omega):
     z = np.exp(1j * np.asarray(omega, dtype=float) * rr.h)
     K, c = z.size, len(rr.cols)
     F = np.ones((K, c), dtype=complex)
@@ -678,13 +726,14 @@ def lead_in_gram(g, aL, aR, wh, D: int, gr=None):
     ph, en = _lead_in_phases(np.asarray(wh, dtype=float).tobytes(), D)
     idx = np.arange(D)[:, None] - np.arange(D)[None, :] + (D - 1)
     gH = np.conj(np.swapaxes(g, 1, 2))                                                        # (K,nb,c)
-    for j, a in enumerate((aL, aR)):
-        sl = slice(nb + j * D, nb + (j + 1) * D)
-        G[:nb, sl] = ((gH @ a[:, :, None])[..., 0].T @ en).real
-        G[sl, :nb] = G[:nb, sl].T
-        for i, a2 in enumerate((aL, aR)):
-            # (n, m): sum_k conj(a e^{-iwnh}) a2 e^{-iwmh} = sum_k conj(a) a2 e^{iw(n-m)h}, a Toeplitz block
-            G[sl, slice(nb + i * D, nb + (i + 1) * D)] = (np.sum(np.conj(a) * a2, axis=1) @ ph).real[idx]
+    L, R = slice(nb, nb + D), slice(nb + D, nb + 2 * D)
+    G[:nb, nb:] = ((gH @ np.stack([aL, aR], axis=2)).transpose(2, 1, 0) @ en).real.transpose(1, 0, 2).reshape(nb, -1)
+    G[nb:, :nb] = G[:nb, nb:].T
+    # (n, m): sum_k conj(a e^{-iwnh}) a2 e^{-iwmh} = sum_k conj(a) a2 e^{iw(n-m)h}, a Toeplitz block; the right-left
+    # block is the left-right one's transpose
+    for (sl, sl2), a, a2 in (((L, L), aL, aL), ((R, R), aR, aR), ((L, R), aL, aR)):
+        G[sl, sl2] = (np.sum(np.conj(a) * a2, axis=1) @ ph).real[idx]
+    G[R, L] = G[L, R].T
     return G, en
 
 
@@ -797,8 +846,7 @@ def _context(P, geom: Geometry, rr: RoadRun, bins) -> _Context:
     h = rr.h
     car = system(P, geom)
     H, S = recorded_columns(car, rr, w)                                                      # (K,c,4), (K,c,ns)
-    ks, c = delay_filter(rr.tau, h)
-    E = np.exp(-1j * np.outer(w * h, ks)) @ c
+    E = rear_delay(rr, w)
     perp, _ = _projector(_road_columns(H, E))
     S = perp(S)
     aL = perp(H[:, :, 2:3])[..., 0]                                                          # (K,c)
@@ -861,8 +909,7 @@ def road(P, geom: Geometry, rr: RoadRun, sol: Solution | None = None, wavelength
     w = rr.omega(bins)
     h = rr.h
     H, S = recorded_columns(sol.car, rr, w)
-    ks, c = delay_filter(rr.tau, h)
-    E = np.exp(-1j * np.outer(w * h, ks)) @ c
+    E = rear_delay(rr, w)
     _, road_of = _projector(_road_columns(H, E))
     D = rr.lead_in
     en = np.exp(-1j * np.outer(w * h, np.arange(D)))
