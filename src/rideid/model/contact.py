@@ -181,7 +181,9 @@ def envelope_grid(path: WheelPath, R: float, dx: float = 5e-4, n_fine: int = 9):
             vals[a:b] = np.maximum(np.maximum(fmax, fr), best[a:b]) - R
             contact[a:b] = np.where(ok & (fr >= fmax), s, d[rows, np.argmax(f, axis=1)])
         res = (lo, dx, vals)
+        contact.flags.writeable = False
         path._env_cache[key + ("contact",)] = contact
+    res[2].flags.writeable = False  # shared by every track of the path's kind and keys (rideid.model.tracks)
     path._env_cache[key] = res
     return res
 

@@ -15,6 +15,8 @@ numbers and arrays only: reading ``[[tracks]]`` tables and profile files
 from __future__ import annotations
 
 import math
+import threading
+from collections import OrderedDict
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import ClassVar
@@ -148,10 +150,11 @@ class Track:
                                                    for k, v in self.keys.items()}}
 
     def path(self, y: float) -> WheelPath:
-        """The wheel path at lateral offset ``y`` (m, left +)."""
+        """The wheel path at lateral offset ``y`` (m, left +): of an analytic kind, one object for every track of
+        the same kind and keys (:func:`_shared_path`), so that its tabulated envelope is made once."""
         key = round(float(y), 9)
         if key not in self._paths:
-            self._paths[key] = self._wheel_path(float(y))
+            self._paths[key] = _shared_path(self, float(y))
         return self._paths[key]
 
     def _wheel_path(self, y: float) -> WheelPath:  # pragma: no cover - every kind overrides
@@ -243,6 +246,36 @@ class ProfileTrack(Track):
         xs, zl, zr = self._profile
         z = zl if y > 0 else zr
         return WheelPath(lambda x: np.interp(x, xs, z, left=0.0, right=0.0), (float(xs[0]), float(xs[-1])))
+
+
+#: the wheel paths of analytic tracks, by kind, keys and offset (:func:`_shared_path`; the last 64)
+_PATHS: OrderedDict = OrderedDict()
+_PATHS_LOCK = threading.Lock()
+
+
+def _shared_path(track: Track, y: float) -> WheelPath:
+    """``track``'s wheel path at ``y``, shared by every track of its kind and keys (a profile's: its own). A wheel
+    path caches its envelopes (:func:`rideid.model.contact.envelope_grid`), and every load of a dataset, every
+    simulation and every test builds its tracks again from their tables: the built-in scenario's envelopes took
+    5 % of the test suite's time, tabulated again on each load."""
+    if isinstance(track, ProfileTrack):
+        return track._wheel_path(y)
+    try:
+        key = (track.KIND, tuple(sorted(track.keys.items())), round(y, 9))
+        hash(key)
+    except TypeError:
+        return track._wheel_path(y)
+    with _PATHS_LOCK:
+        hit = _PATHS.get(key)
+        if hit is not None:
+            _PATHS.move_to_end(key)
+            return hit
+    path = track._wheel_path(y)
+    with _PATHS_LOCK:
+        path = _PATHS.setdefault(key, path)
+        while len(_PATHS) > 64:
+            _PATHS.popitem(last=False)
+    return path
 
 
 #: SPEC track kind -> its class
