@@ -726,14 +726,13 @@ def lead_in_gram(g, aL, aR, wh, D: int, gr=None):
     ph, en = _lead_in_phases(np.asarray(wh, dtype=float).tobytes(), D)
     idx = np.arange(D)[:, None] - np.arange(D)[None, :] + (D - 1)
     gH = np.conj(np.swapaxes(g, 1, 2))                                                        # (K,nb,c)
-    L, R = slice(nb, nb + D), slice(nb + D, nb + 2 * D)
-    G[:nb, nb:] = ((gH @ np.stack([aL, aR], axis=2)).transpose(2, 1, 0) @ en).real.transpose(1, 0, 2).reshape(nb, -1)
-    G[nb:, :nb] = G[:nb, nb:].T
-    # (n, m): sum_k conj(a e^{-iwnh}) a2 e^{-iwmh} = sum_k conj(a) a2 e^{iw(n-m)h}, a Toeplitz block; the right-left
-    # block is the left-right one's transpose
-    for (sl, sl2), a, a2 in (((L, L), aL, aL), ((R, R), aR, aR), ((L, R), aL, aR)):
-        G[sl, sl2] = (np.sum(np.conj(a) * a2, axis=1) @ ph).real[idx]
-    G[R, L] = G[L, R].T
+    for j, a in enumerate((aL, aR)):
+        sl = slice(nb + j * D, nb + (j + 1) * D)
+        G[:nb, sl] = ((gH @ a[:, :, None])[..., 0].T @ en).real
+        G[sl, :nb] = G[:nb, sl].T
+        for i, a2 in enumerate((aL, aR)):
+            # (n, m): sum_k conj(a e^{-iwnh}) a2 e^{-iwmh} = sum_k conj(a) a2 e^{iw(n-m)h}, a Toeplitz block
+            G[sl, slice(nb + i * D, nb + (i + 1) * D)] = (np.sum(np.conj(a) * a2, axis=1) @ ph).real[idx]
     return G, en
 
 
