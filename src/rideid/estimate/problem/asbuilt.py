@@ -301,8 +301,10 @@ def solve(P, geom, tr: TrackRun, car=None, alpha_std: bool = False) -> Fit:
     bins = rr.fit
     w = rr.omega(bins)
     h = rr.h
-    car = roadfit.system(P, geom) if car is None else car
-    H, S = roadfit.recorded_columns(car, rr, w)            # (K,c,4), (K,c,ns): through the sensors (SPEC §11)
+    if car is None:  # (K,c,4), (K,c,ns): through the sensors (SPEC §11)
+        car, H, S = roadfit.car_columns(P, geom, rr, bins)
+    else:
+        H, S = roadfit.recorded_columns(car, rr, w)
     E = roadfit.rear_delay(rr, w)
     Acol = roadfit._road_columns(H, E)
     pr = tr.prior

@@ -462,37 +462,38 @@ def _lagrange_taps(tau: float, h: float, order: int):
 def rear_delay(rr: RoadRun, omega) -> np.ndarray:
     """``E`` (K,): the rear wheels' delay ``e^{-i omega tau}`` of run ``rr`` at ``omega`` (rad/s) through the fit's
     fractional-delay filter (:func:`delay_filter`), as every road and track fit of the run has it. The same for
-    every car: made once per run and frequencies (:func:`_per_run`), read-only."""
+    every car: made once per delay and frequencies (:func:`_kept`), read-only."""
     order = int(defaults["roadfit.delay_order"])
 
     def make():
         ks, c = delay_filter(rr.tau, rr.h, order)
         return np.exp(-1j * np.outer(np.asarray(omega, dtype=float) * rr.h, ks)) @ c
-    return _per_run(("delay", order), rr, omega, make)
+    return _kept(("delay", float(rr.tau), float(rr.h), order), (), omega, make)
 
 
-#: what a run's fits compute the same for every car (:func:`_per_run`): (kind, id(run), frequencies) -> (run, value)
-_PER_RUN: OrderedDict = OrderedDict()
-_PER_RUN_LOCK = threading.Lock()
+#: what a run's fits compute the same for every car (:func:`_kept`): key -> (the objects keyed by id, value)
+_KEPT: OrderedDict = OrderedDict()
+_KEPT_LOCK = threading.Lock()
 
 
-def _per_run(kind, rr: RoadRun, omega, make):
-    """``make()`` for run ``rr`` at the frequencies ``omega``, kept for the next call (the last 128; a run is frozen,
-    and each entry holds its run, so its id is not reused while the entry lives). Arrays come back read-only."""
-    key = (kind, id(rr), np.asarray(omega, dtype=float).tobytes())
-    with _PER_RUN_LOCK:
-        hit = _PER_RUN.get(key)
-        if hit is not None and hit[0] is rr:
-            _PER_RUN.move_to_end(key)
+def _kept(values: tuple, objects: tuple, omega, make):
+    """``make()`` for the hashable ``values``, the ``objects`` (keyed by identity: each entry holds them, so their
+    ids are not reused while it lives) and the frequencies ``omega``, kept for the next call (the last 128).
+    Arrays come back read-only."""
+    key = (values, tuple(id(a) for a in objects), np.asarray(omega, dtype=float).tobytes())
+    with _KEPT_LOCK:
+        hit = _KEPT.get(key)
+        if hit is not None and all(a is b for a, b in zip(hit[0], objects)):
+            _KEPT.move_to_end(key)
             return hit[1]
     value = make()
     for a in (value if isinstance(value, tuple) else (value,)):
         if isinstance(a, np.ndarray):
             a.flags.writeable = False
-    with _PER_RUN_LOCK:
-        _PER_RUN[key] = (rr, value)
-        while len(_PER_RUN) > 128:
-            _PER_RUN.popitem(last=False)
+    with _KEPT_LOCK:
+        _KEPT[key] = (objects, value)
+        while len(_KEPT) > 128:
+            _KEPT.popitem(last=False)
     return value
 
 
@@ -659,11 +660,11 @@ def sensor_response(rr: RoadRun, omega):
     :func:`rideid.model.sensors.discretise`, in series; 1 for an unfiltered channel), and ``T`` (K, c, m) the
     filters' free responses (their states at the first and last sample, :func:`_free_modes`), each through the
     filters after it in its chain: ``m`` real boundary unknowns, one column per filter mode, each on its own
-    channel. None when no channel of ``rr`` is filtered. The same for every car: made once per run and frequencies
-    (:func:`_per_run`), read-only."""
+    channel. None when no channel of ``rr`` is filtered. The same for every car and speed: made once per chain
+    and frequencies (:func:`_kept`), read-only."""
     if not rr.sensors:
         return None
-    return _per_run("sensors", rr, omega, lambda: _sensor_response(rr, omega))
+    return _kept(("sensors", float(rr.h)), (rr.sensors, rr.cols), omega, lambda: _sensor_response(rr, omega))
 
 
 def _sensor_response(rr: RoadRun, omega):
@@ -705,6 +706,45 @@ def recorded_columns(car: System, rr: RoadRun, omega):
     if rr.clip.shape[0]:
         S = np.concatenate([S, _clip_columns(rr, omega)], axis=2)
     return H * rr.scale[None, :, None], S * rr.scale[None, :, None]
+
+
+#: a car's recorded columns on a run's channels (:func:`car_columns`): key -> (the objects keyed by id, value)
+_CAR_COLUMNS: OrderedDict = OrderedDict()
+_CAR_COLUMNS_LOCK = threading.Lock()
+
+
+def car_columns(P, geom: Geometry, rr: RoadRun, bins):
+    """``(car, H, S)``: the :class:`System` of the car ``P`` (one row) and its :func:`recorded_columns` on ``rr`` at
+    ``bins``, read-only. Kept for the last 32 cars and runs' channels: a run's placement (the motion alignment,
+    the motion's Jacobian, the joint solve's motion columns) moves its speed and start at one car, and a moved run
+    (:func:`rideid.estimate.problem.asbuilt.moved`) keeps its channels, sensors, clipped samples and bins, which
+    with the car are all these depend on (not the speed, not the delay): a third of each of those evaluations was
+    the car and its columns made again."""
+    parts = (geom, rr.cols, rr.scale, rr.sensors, rr.clip, bins)
+    key = ((np.asarray(P, dtype=float).tobytes(), float(rr.fs), int(rr.n), float(defaults["roadfit.modal_cond"]))
+           + tuple(id(a) for a in parts))
+    with _CAR_COLUMNS_LOCK:
+        hit = _CAR_COLUMNS.get(key)
+        if hit is not None and all(a is b for a, b in zip(hit[0], parts)):
+            _CAR_COLUMNS.move_to_end(key)
+            return hit[1]
+    car = system(P, geom)
+    H, S = recorded_columns(car, rr, rr.omega(bins))
+    H.flags.writeable = False
+    S.flags.writeable = False
+    with _CAR_COLUMNS_LOCK:
+        _CAR_COLUMNS[key] = (parts, (car, H, S))
+        while len(_CAR_COLUMNS) > 32:
+            _CAR_COLUMNS.popitem(last=False)
+    return car, H, S
+
+
+def forget() -> None:
+    """Drop what the road fits keep between calls (a car's columns, a run's delay and sensor chains, the
+    curves' contexts): for a caller that changes how they are computed (a test's stand-in for one of them)."""
+    for cache, lock in ((_CAR_COLUMNS, _CAR_COLUMNS_LOCK), (_KEPT, _KEPT_LOCK), (_CONTEXTS, _CONTEXTS_LOCK)):
+        with lock:
+            cache.clear()
 
 
 def lead_in_normal_equations(g, aL, aR, r, wh, D: int):
@@ -843,8 +883,7 @@ def _context(P, geom: Geometry, rr: RoadRun, bins) -> _Context:
                 return hit[2]
     w = rr.omega(bins)
     h = rr.h
-    car = system(P, geom)
-    H, S = recorded_columns(car, rr, w)                                                      # (K,c,4), (K,c,ns)
+    car, H, S = car_columns(P, geom, rr, bins)                                               # (K,c,4), (K,c,ns)
     E = rear_delay(rr, w)
     perp, _ = _projector(_road_columns(H, E))
     S = perp(S)
