@@ -443,19 +443,12 @@ def _clip_columns(rr: RoadRun, omega) -> np.ndarray:
 
 def delay_filter(tau: float, h: float, order: int | None = None):
     """Lagrange fractional-delay filter: taps ``ks`` (samples) and coefficients ``c`` with
-    ``u(t - tau) ~ sum c_j u(t - ks_j h)``. Read-only arrays, made once per delay, step and order."""
+    ``u(t - tau) ~ sum c_j u(t - ks_j h)``."""
     order = defaults["roadfit.delay_order"] if order is None else order
-    return _lagrange_taps(float(tau), float(h), int(order))
-
-
-@functools.lru_cache(maxsize=256)
-def _lagrange_taps(tau: float, h: float, order: int):
     dl = tau / h
     k0 = int(np.floor(dl)) - (order - 1) // 2
     ks = np.arange(k0, k0 + order + 1)
     c = np.array([np.prod([(dl - j) / (k - j) for j in ks if j != k]) for k in ks])
-    ks.flags.writeable = False
-    c.flags.writeable = False
     return ks, c
 
 
@@ -471,7 +464,7 @@ def rear_delay(rr: RoadRun, omega) -> np.ndarray:
     return _kept(("delay", float(rr.tau), float(rr.h), order), (), omega, make)
 
 
-#: what a run's fits compute the same for every car (:func:`_kept`): key -> (the objects keyed by id, value)
+#: what a run's fits compute again and again (:func:`_kept`): key -> (the objects keyed by id, value)
 _KEPT: OrderedDict = OrderedDict()
 _KEPT_LOCK = threading.Lock()
 
@@ -708,41 +701,26 @@ def recorded_columns(car: System, rr: RoadRun, omega):
     return H * rr.scale[None, :, None], S * rr.scale[None, :, None]
 
 
-#: a car's recorded columns on a run's channels (:func:`car_columns`): key -> (the objects keyed by id, value)
-_CAR_COLUMNS: OrderedDict = OrderedDict()
-_CAR_COLUMNS_LOCK = threading.Lock()
-
-
 def car_columns(P, geom: Geometry, rr: RoadRun, bins):
     """``(car, H, S)``: the :class:`System` of the car ``P`` (one row) and its :func:`recorded_columns` on ``rr`` at
-    ``bins``, read-only. Kept for the last 32 cars and runs' channels: a run's placement (the motion alignment,
-    the motion's Jacobian, the joint solve's motion columns) moves its speed and start at one car, and a moved run
+    ``bins``, read-only. Kept (:func:`_kept`): a run's placement (the motion alignment, the motion's Jacobian, the
+    joint solve's motion columns) moves its speed and start at one car, and a moved run
     (:func:`rideid.estimate.problem.asbuilt.moved`) keeps its channels, sensors, clipped samples and bins, which
     with the car are all these depend on (not the speed, not the delay): a third of each of those evaluations was
     the car and its columns made again."""
-    parts = (geom, rr.cols, rr.scale, rr.sensors, rr.clip, bins)
-    key = ((np.asarray(P, dtype=float).tobytes(), float(rr.fs), int(rr.n), float(defaults["roadfit.modal_cond"]))
-           + tuple(id(a) for a in parts))
-    with _CAR_COLUMNS_LOCK:
-        hit = _CAR_COLUMNS.get(key)
-        if hit is not None and all(a is b for a, b in zip(hit[0], parts)):
-            _CAR_COLUMNS.move_to_end(key)
-            return hit[1]
-    car = system(P, geom)
-    H, S = recorded_columns(car, rr, rr.omega(bins))
-    H.flags.writeable = False
-    S.flags.writeable = False
-    with _CAR_COLUMNS_LOCK:
-        _CAR_COLUMNS[key] = (parts, (car, H, S))
-        while len(_CAR_COLUMNS) > 32:
-            _CAR_COLUMNS.popitem(last=False)
-    return car, H, S
+    w = rr.omega(bins)
+
+    def make():
+        car = system(P, geom)
+        return (car, *recorded_columns(car, rr, w))
+    return _kept(("car", np.asarray(P, dtype=float).tobytes(), float(rr.h), float(defaults["roadfit.modal_cond"])),
+                 (geom, rr.cols, rr.scale, rr.sensors, rr.clip), w, make)
 
 
 def forget() -> None:
     """Drop what the road fits keep between calls (a car's columns, a run's delay and sensor chains, the
     curves' contexts): for a caller that changes how they are computed (a test's stand-in for one of them)."""
-    for cache, lock in ((_CAR_COLUMNS, _CAR_COLUMNS_LOCK), (_KEPT, _KEPT_LOCK), (_CONTEXTS, _CONTEXTS_LOCK)):
+    for cache, lock in ((_KEPT, _KEPT_LOCK), (_CONTEXTS, _CONTEXTS_LOCK)):
         with lock:
             cache.clear()
 
