@@ -18,6 +18,10 @@ def pytest_addoption(parser):
 
 
 def pytest_collection_modifyitems(config, items):
+    # the longest tests of the default run first (marked heavy, each the only user of its module's fixtures): the
+    # workers take the tests in this order, and one begun last kept its worker busy while the other had finished
+    # (the two workers' sums of test time were 377 and 352 s)
+    items.sort(key=lambda item: "heavy" not in item.keywords)
     if config.getoption("--runslow") or os.environ.get("RIDEID_SLOW"):
         return
     skip = pytest.mark.skip(reason="slow study: make test-slow (or RIDEID_SLOW=1) runs it")

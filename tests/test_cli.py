@@ -181,7 +181,7 @@ def test_lift_off_warning_names_run_and_wheel(tmp_path, capsys):
 
 def test_identify_score_and_exit_codes(sim_dataset, tmp_path, capsys):
     out = tmp_path / "fit"
-    rc, stdout, err = run_cli(["identify", sim_dataset, "--out", out, "--seed", "1", "--quiet"], capsys)
+    rc, stdout, err = run_cli(["identify", sim_dataset, "--out", out, "--seed", "1", "--quiet", "--no-report"], capsys)
     assert rc == 0, err
     doc = json.loads((out / "result.json").read_text())
     assert doc["seed"] == 1 and doc["parameters"]["m_s"]["derived"] is True

@@ -8,6 +8,7 @@ the same car at a small size: the high twist at 5 m/s and the washboard at 10 m/
 import warnings
 
 import numpy as np
+import pytest
 
 import rideid
 
@@ -44,6 +45,7 @@ def test_the_simulators_bars_act_on_their_axle(tmp_path):
     np.testing.assert_allclose(d, expected, rtol=1e-12, atol=1e-12)
 
 
+@pytest.mark.heavy
 def test_auto_keeps_the_engine_and_the_curves(tmp_path):
     """Defaults (``auto``) on the small case: the powertrain and the damper curves kept, two steps, adequate; the
     twelve within 1 % (measured 0.58 %, c_sr the curves' mean slope; the rest within 0.18 %), the engine's mass,

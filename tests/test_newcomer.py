@@ -157,6 +157,7 @@ def _python(args, cache: Path):
     return subprocess.run([sys.executable, *map(str, args)], capture_output=True, text=True, env=env, timeout=600)
 
 
+@pytest.mark.heavy
 def test_compile_notice_only_when_a_compile_happens(tmp_path):
     """The notice "compiled the simulation kernel" once, on a cold Numba cache; loading the cache (however long
     it takes on a busy machine) is silent, and so is --quiet (before: printed whenever the load took over a

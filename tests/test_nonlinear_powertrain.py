@@ -221,6 +221,7 @@ def population(n, seed=0):
     return P
 
 
+@pytest.mark.heavy
 def test_compiled_kernel_is_the_numpy_reference():
     """The compiled kernel's channels, states and errors are the NumPy reference's within 1e-10 (relative), for
     a population with and without a powertrain (lanes of one vector: a car's numbers are its own); a car

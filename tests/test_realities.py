@@ -188,6 +188,7 @@ def test_identify_runs_on_the_all_realities_case(realities, tmp_path):
     assert not set(shape["optimistic"]) & set(rideid.NAMES)
 
 
+@pytest.mark.heavy
 def test_a_gross_first_fit_that_the_powertrain_mends_on_the_tracks_as_built(tmp_path):
     """The defaults (``--model auto``) on the built-in car with every reality (its 180 kg engine on 10.5/13 Hz
     mounts, tracks 4 % off their drawing), two of its ten runs: the linear model on the tracks as drawn leaves

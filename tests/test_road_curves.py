@@ -112,6 +112,7 @@ def curved(tmp_path_factory):
     return rc, json.loads((d / "fit" / "result.json").read_text()), sc.truth, out.getvalue(), d
 
 
+@pytest.mark.heavy
 def test_curves_on_unknown_roads_end_to_end(curved):
     rc, doc, truth, text, d = curved
     assert rc == 0

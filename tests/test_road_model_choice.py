@@ -85,6 +85,7 @@ def test_a_rate_at_zero_starts_inside_its_range():
     np.testing.assert_array_equal(out[keep], row[keep])
 
 
+@pytest.mark.heavy
 def test_auto_on_unknown_roads_keeps_the_tire_damping_the_car_has(damped, tmp_path):
     """The choice, the estimates, the terminal and the report's roads section, from one identification (one test:
     the fixture runs once whatever the workers)."""

@@ -99,7 +99,7 @@ def test_a_road_runs_speed_typed_one_per_cent_off_is_estimated_and_named(slipped
     road's speed kept, and the car within its error bars of the truth."""
     sim, truth = slipped
     out = tmp_path / "fit"
-    assert main(["identify", str(sim), "--out", str(out), "--seed", "1", "--quiet"]) == 0
+    assert main(["identify", str(sim), "--out", str(out), "--seed", "1", "--quiet", "--no-report"]) == 0
     doc = json.loads((out / "result.json").read_text())
     m = doc["roads"]["B40"]["motion"]
     assert m["speed"]["declared"] == pytest.approx(TYPED)
