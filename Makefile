@@ -30,8 +30,8 @@ demo: $(STAMP)
 # both FMI interfaces, the settings registry, the priors and every group pair included) on a fresh clone of two
 # idle cores; 5.2 minutes (4.3 the tests, 1029 of them: the problem's blocks, the model choice's screen, the road
 # runs' verdict and the both-cores tests included) on a fresh clone, the cores otherwise idle; it takes longer when
-# other jobs share the cores, and in the machine's slow hours (1107 tests: 6.9 minutes of them on 2026-12-01, 6.2 with the
-# longest tests started first, docs/performance.md)
+# other jobs share the cores, and in the machine's slow hours (1107 tests: 6.9 minutes of them on 2026-12-01,
+# 6.2 with the longest tests started first, docs/performance.md)
 test: $(STAMP)
 	$(PY) -m ruff check src tests benchmarks
 	$(PY) -m pytest -q -n auto
