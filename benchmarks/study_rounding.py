@@ -12,7 +12,10 @@ of the kept fit captured; then, at that point:
   entry ``sqrt(6) delta / (2 h^2)``, a cross term ``delta / (4 h^2)``, both halved as the Hessian is), each
   parameter's ``sqrt`` of the bread's diagonal (``pinv(H)``, the problem's coordinates) against the captured one:
   the median and the 90th percentile of ``|ratio - 1|``;
-* the same bread from the Hessian at steps of 5e-4 and 2e-3 (truncation and rounding together).
+* the same bread from the Hessian at steps of 5e-4 and 2e-3 (truncation and rounding together);
+* the Hessian's three smallest eigenvalues, the parameters that make up each direction, and the rounding noise
+  of an eigenvalue (about a diagonal entry's, ``1.22 delta / h^2``): a direction whose curvature is not above
+  it is not fixed by the data.
 
 Prints one row per parameter. Nothing is changed in rideid; a measurement for docs/uncertainty.md.
 """
@@ -54,6 +57,7 @@ def run(dataset: str) -> None:
     h = 1e-3
     rng = np.random.default_rng(1)
     base = _bread_std(H)
+    np.seterr(divide="ignore", invalid="ignore")  # a direction the pseudo-inverse dropped: its ratios are nan
     ratios = []
     for _ in range(200):
         N = rng.standard_normal((d, d)) * (delta / (4 * h * h))
@@ -63,6 +67,11 @@ def run(dataset: str) -> None:
     r = np.abs(np.array(ratios) - 1)
     steps = {s: _bread_std(prob.hessian(v, s)) / base for s in (5e-4, 2e-3)}
     print(f"cost {float(c.mean()):.6g}, its rounding delta {delta:.3g} ({delta / c.mean():.2g} of it), d = {d}")
+    w, U = np.linalg.eigh(H)
+    print(f"the Hessian's smallest eigenvalues (rounding noise of one: about {1.22 * delta / h ** 2:.3g}):")
+    for k in range(3):
+        top = np.argsort(-np.abs(U[:, k]))[:3]
+        print(f"  {w[k]:12.4g} along " + ", ".join(f"{prob.space.names[i]} {U[i, k]:+.2f}" for i in top))
     print(f"{'parameter':12s} {'bread std':>11s} {'rounding: median':>17s} {'90 %':>7s} {'step 5e-4':>10s} "
           f"{'step 2e-3':>10s}")
     for j, n in enumerate(prob.space.names):
