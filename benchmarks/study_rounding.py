@@ -6,17 +6,16 @@ coordinates). The cost carries rounding (eigenvectors, the boundary unknowns' da
 difference divides it by the step squared. ``rideid identify DATASET --seed 1`` (defaults) is run with the Hessian
 of the kept fit captured; then, at that point:
 
-* the cost's rounding ``delta``: the spread of the cost over eight moves of 1e-9 along fixed directions (the cost
-  itself moves by ~1e-18 there: what is left is rounding);
-* what it does to each error bar: 200 draws of the noise the Hessian's stencils give that rounding (a diagonal
-  entry ``(f+ - 2 f0 + f-) / h^2``: ``sqrt(6) delta / h^2``; a cross term, four costs over ``4 h^2``:
-  ``delta / (2 h^2)``; both halved as the Hessian is), each
-  parameter's ``sqrt`` of the bread's diagonal (``pinv(H)``, the problem's coordinates) against the captured one:
-  the median and the 90th percentile of ``|ratio - 1|``;
+* the cost's rounding ``delta``: ``_Problem.rounding`` (the spread of ``f(v + t e_k) + f(v - t e_k)`` over 16
+  moves of 1e-9: the cost itself moves by ~1e-18 there, the gradient's terms cancel, what is left is rounding);
+* what it does to each error bar: 200 draws of that rounding on every cost the Hessian's stencils take (one
+  ``f0`` shared by the diagonal), each parameter's ``sqrt`` of the bread's diagonal (``pinv(H)`` on the
+  directions rideid resolves, the problem's coordinates) against the captured one: the median and the 90th
+  percentile of ``|ratio - 1|``;
 * the same bread from the Hessian at steps of 5e-4 and 2e-3 (truncation and rounding together);
-* the Hessian's three smallest eigenvalues, the parameters that make up each direction, and the rounding noise
-  of an eigenvalue (about a diagonal entry's, ``1.22 delta / h^2``): a direction whose curvature is not above
-  it is not fixed by the data.
+* the Hessian's three smallest eigenvalues, the parameters that make up each direction, and each one's rounding
+  noise (:func:`rideid.estimate.fit.uncertainty.resolve`: ``delta / h^2 sqrt(9/8 + 3/8 sum u^4)``); and the
+  parameters rideid reports as not determined (``polish.unresolved``).
 
 Prints one row per parameter. Nothing is changed in rideid; a measurement for docs/uncertainty.md.
 """
@@ -30,10 +29,14 @@ import numpy as np
 
 from rideid.cli import main
 from rideid.estimate.fit import anyroad
+from rideid.estimate.fit.uncertainty import resolve
+from rideid.model.batch import single_threaded_blas
 
 
-def _bread_std(H):
-    return np.sqrt(np.clip(np.diag(anyroad._pinv(H)), 0, None))
+def _bread_std(H, res):
+    """Each parameter's bread standard error as rideid takes it: the pseudo-inverse on the directions ``res``
+    (:func:`rideid.estimate.fit.uncertainty.resolve` of the captured Hessian) keeps."""
+    return np.sqrt(np.clip(np.diag(res.pinv(H)), 0, None))
 
 
 def run(dataset: str) -> None:
@@ -50,29 +53,40 @@ def run(dataset: str) -> None:
         assert main(["identify", dataset, "--out", out, "--seed", "1", "--no-report", "--quiet"]) == 0
     anyroad._Problem.hessian = orig
     prob, v, H = got[-1]
+    with single_threaded_blas():  # as the fit evaluated its Hessian: the costs' rounding depends on BLAS's threads
+        _study(prob, v, H)
+
+
+def _study(prob, v, H) -> None:
     d = v.size
-    v = np.clip(v, prob.vbounds[0] + 1e-3, prob.vbounds[1] - 1e-3)
-    dirs = np.eye(d)[np.arange(8) % d] * np.where(np.arange(8) % 2, 1.0, -1.0)[:, None]
-    c = prob.costs(v + 1e-9 * dirs)
-    delta = float(np.std(c))
     h = 1e-3
+    delta = prob.rounding(v, h)
+    c0 = float(prob.costs(np.clip(v, prob.vbounds[0] + h, prob.vbounds[1] - h)[None])[0])
     rng = np.random.default_rng(1)
-    base = _bread_std(H)
+    res = resolve(H, delta, h)
+    base = _bread_std(H, res)
     ratios = []
-    for _ in range(200):
-        N = np.triu(rng.standard_normal((d, d)) * (delta / (2 * h * h)), 1)
-        N = N + N.T + np.diag(rng.standard_normal(d) * np.sqrt(6) * delta / (h * h))
-        ratios.append(_bread_std(H + 0.5 * N))
-    steps = {s: _bread_std(prob.hessian(v, s)) for s in (5e-4, 2e-3)}
+    pairs = [(i, j) for i in range(d) for j in range(i)]
+    for _ in range(200):  # the stencils of _Problem.hessian, each cost with its own draw of the rounding
+        n0, npl, nmi = rng.standard_normal(), rng.standard_normal(d), rng.standard_normal(d)
+        N = np.diag(npl + nmi - 2 * n0) / h ** 2
+        for (i, j), q in zip(pairs, rng.standard_normal((len(pairs), 4))):
+            N[i, j] = N[j, i] = (q[0] - q[1] - q[2] + q[3]) / (4 * h * h)
+        ratios.append(_bread_std(H + 0.5 * delta * N, res))
+    steps = {s: _bread_std(prob.hessian(v, s), res) for s in (5e-4, 2e-3)}
     with np.errstate(divide="ignore", invalid="ignore"):  # a direction the pseudo-inverse dropped: nan ratios
         r = np.abs(np.array(ratios) / base - 1)
         steps = {s: b / base for s, b in steps.items()}
-    print(f"cost {float(c.mean()):.6g}, its rounding delta {delta:.3g} ({delta / c.mean():.2g} of it), d = {d}")
+    print(f"cost {c0:.6g}, its rounding delta {delta:.3g} ({delta / c0:.2g} of it), d = {d}")
     w, U = np.linalg.eigh(H)
-    print(f"the Hessian's smallest eigenvalues (rounding noise of one: about {1.22 * delta / h ** 2:.3g}):")
+    noise = delta / h ** 2 * np.sqrt(1.125 + 0.375 * np.sum(U ** 4, axis=0))  # resolve's, for every direction
+    print("the Hessian's smallest eigenvalues, each against its rounding noise:")
     for k in range(3):
         top = np.argsort(-np.abs(U[:, k]))[:3]
-        print(f"  {w[k]:12.4g} along " + ", ".join(f"{prob.space.names[i]} {U[i, k]:+.2f}" for i in top))
+        print(f"  {w[k]:12.4g} (noise {noise[k]:.3g}) along "
+              + ", ".join(f"{prob.space.names[i]} {U[i, k]:+.2f}" for i in top))
+    nd = res.record(list(prob.space.names))
+    print("not determined (polish.unresolved): " + (", ".join(nd["not_determined"]) if nd else "none"))
     print(f"{'parameter':12s} {'bread std':>11s} {'rounding: median':>17s} {'90 %':>7s} {'step 5e-4':>10s} "
           f"{'step 2e-3':>10s}")
     for j, n in enumerate(prob.space.names):

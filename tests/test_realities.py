@@ -227,6 +227,20 @@ def test_a_gross_first_fit_that_the_powertrain_mends_on_the_tracks_as_built(tmp_
     assert ("first fit: missed grossly (55 % of run T_LH's signal unexplained); the model choice went on because "
             "powertrain, the extension the data called for most (screened at") in printed
     assert "anti_roll_bars + tire_damping + powertrain (as built) 3.2" in printed  # the candidates by their tracks
+    # the engine's pitch mode: the true Hessian curves down along I_p + zeta_pp (-22 against a rounding noise of 10,
+    # docs/uncertainty.md): no error bar for either, said in result.json, the terminal, the assessment, the report
+    unres = res["polish"]["unresolved"]
+    assert unres["not_determined"] == ["I_p", "zeta_pp"], unres
+    assert unres["directions"][0]["curvature"] < 2 * unres["directions"][0]["noise"]
+    assert all(res["parameters"][n]["std_robust"] is None and res["parameters"][n]["determined"] is False
+               for n in ("I_p", "zeta_pp"))
+    assert all(res["parameters"][n]["std_robust"] > 0 for n in ("m_p", "x_p", "f_pb", "zeta_pb", "f_pp"))
+    assert "WARNING: I_p, zeta_pp not determined: the cost's curvature along" in printed
+    shape = next(a for a in res["assessments"] if a["kind"] == "error_bar_shape")
+    assert shape["verdict"] == "warn" and shape["not_determined"] == ["I_p", "zeta_pp"]
+    from rideid.report.html import parameter_rows
+    rows = {p["name"]: p for p in parameter_rows(rideid.load_result(tmp_path / "fit"))}
+    assert rows["I_p"]["status"] == "NOT DETERMINED" and rows["zeta_pp"]["note"].startswith("the data do not fix it")
     # the report's model section (it raised on these candidates before they carried their estimates): the three by
     # their tracks, the one kept marked, each parameter's value per candidate, the first fit's sentence
     from rideid.report.estimate_sections import model_rows

@@ -306,3 +306,75 @@ def test_jackknife_runs_is_the_exact_delete_one_refit_for_a_linear_model():
     cov1, _ = jackknife_runs(ones, e0 + off - (e0 + off).mean(), [(T, C)] * k)
     extra = between_runs_variance(cov1[0, 0], v_rob, k)
     assert extra > 0 and 0.2 * 0.05 ** 2 / k < extra < 5 * 0.05 ** 2 / k
+
+
+class _RoundedQuadratic:
+    """A cost ``v^T A v`` plus rounding: independent draws of N(0, delta) on every evaluation (seeded). Has what
+    a road fit's problem gives the Hessian and the rounding estimate: ``vbounds``, ``costs``."""
+
+    def __init__(self, A, delta, rng):
+        self.A, self.delta, self.rng = np.asarray(A, float), delta, rng
+        d = self.A.shape[0]
+        self.vbounds = (np.full(d, -10.0), np.full(d, 10.0))
+
+    def costs(self, V):
+        V = np.asarray(V, float)
+        return np.einsum("ki,ij,kj->k", V, self.A, V) + self.delta * self.rng.standard_normal(len(V))
+
+
+def _rotated(eigs, pairs):
+    """A symmetric matrix with eigenvalues ``eigs``: the identity's columns, each pair ``(i, j)`` in ``pairs`` turned
+    by 45 degrees."""
+    U = np.eye(len(eigs))
+    for i, j in pairs:
+        U[:, [i, j]] = U[:, [i, j]] @ (np.array([[1.0, -1.0], [1.0, 1.0]]) / np.sqrt(2))
+    return U @ np.diag(eigs) @ U.T, U
+
+
+def test_a_hessian_direction_below_its_rounding_noise_leaves_its_parameters_not_determined():
+    """The rounding estimate and the eigenvalues' noise against draws (the road fit's own stencils,
+    ``_Problem.hessian`` and ``_Problem.rounding``, on a cost ``v^T A v`` with N(0, delta) added to every
+    evaluation); then which parameters a direction under ``uncertainty.curvature_noise`` times its noise leaves
+    without an error bar, and the others' bread as the closed-form inverse on the resolved directions."""
+    from rideid.estimate.fit.anyroad import _Problem
+    from rideid.estimate.fit.uncertainty import resolve
+
+    rng = np.random.default_rng(7)
+    from rideid.settings import defaults
+
+    step, delta = defaults["anyroad.hessian_step"], 2e-6  # the road fits' step, 1e-3: a diagonal entry's noise
+    assert step == 1e-3  # sqrt(6) delta / (2 h^2) = 2.45, a 45-degree pair's 2.29
+    A, U = _rotated([400.0, 60.0, 30.0, 1.0], [(2, 3)])  # the smallest along (x3 - x2) / sqrt(2)
+    prob = _RoundedQuadratic(A, delta, rng)
+    v = np.full(4, 0.3)
+    got = _Problem.rounding(prob, v, step, pairs=400)
+    assert got == pytest.approx(delta, rel=0.1)
+    # the eigenvalues' spread over draws of the Hessian against resolve's noise of each (the 45-degree pair's a
+    # little below a diagonal entry's: its own costs' noise averages, the shared f0's does not)
+    draws = np.array([np.linalg.eigh(_Problem.hessian(prob, v, step))[0] for _ in range(400)])
+    res = resolve(A, delta, step)
+    assert np.mean(draws, axis=0) == pytest.approx([1.0, 30.0, 60.0, 400.0], abs=0.5)
+    assert res.curvatures.size == 1 and res.curvatures[0] == pytest.approx(1.0)
+    assert np.std(draws[:, 0]) == pytest.approx(res.noise[0], rel=0.15)
+    assert res.noise[0] == pytest.approx(delta / step ** 2 * np.sqrt(1.125 + 0.375 / 2), rel=1e-9)
+    assert resolve(np.diag([3.0, 4.0]), delta, step).noise[0] == pytest.approx(np.sqrt(6) / 2 * delta / step ** 2)
+    # x2 and x3 lie half along the unresolved direction: not determined; x0, x1 untouched by it
+    assert list(res.not_determined) == [False, False, True, True]
+    rec = res.record(["a", "b", "c", "d"])
+    assert rec["not_determined"] == ["c", "d"] and set(rec["directions"][0]["along"]) == {"c", "d"}
+    # the bread: the inverse on the three resolved directions (exact), never the unresolved 1 / 1.0
+    Hinv = res.pinv(A)
+    assert Hinv == pytest.approx(U[:, :3] @ np.diag(1 / np.array([400.0, 60.0, 30.0])) @ U[:, :3].T, abs=1e-12)
+    assert Hinv[0, 0] == pytest.approx(1 / 400) and Hinv[2, 2] == pytest.approx(0.5 / 30)
+    # with nuisances after the car's unknowns (a run's speed): those kept whole
+    Hf = np.block([[A, np.full((4, 1), 0.5)], [np.full((1, 4), 0.5), np.array([[9.0]])]])
+    T = np.zeros((5, 4))
+    T[:4, :3], T[4, 3] = U[:, :3], 1.0
+    assert res.pinv(Hf) == pytest.approx(T @ np.linalg.inv(T.T @ Hf @ T) @ T.T, abs=1e-12)
+    # a tenth of the rounding: every direction measured, nothing marked
+    clean = resolve(A, delta / 10, step)
+    assert not clean.not_determined.any() and clean.record(list("abcd")) is None
+    assert clean.pinv(A) == pytest.approx(np.linalg.inv(A), abs=1e-12)
+    # a negative eigenvalue (the cost not at a minimum along it) is never measured, however small the noise
+    neg, _ = _rotated([400.0, 60.0, 30.0, -5.0], [(2, 3)])
+    assert list(resolve(neg, 0.0, step).not_determined) == [False, False, True, True]

@@ -72,6 +72,7 @@ _COMMAND_LINE = _by_name({
     "error_bar_caveat": ("rideid.estimate.assess.shape", "caveat"),
     "error_bar_note": ("rideid.estimate.assess.shape", "table_note"),
     "motion_line": ("rideid.estimate.records", "motion_line"),
+    "error_bar_warning": ("rideid.estimate.records", "error_bar_warning"),
     "candidate_label": ("rideid.estimate.records", "candidate_label"),
     "kept_candidate": ("rideid.estimate.records", "kept_candidate"),
     "first_fit_sentence": ("rideid.estimate.records", "first_fit_sentence"),

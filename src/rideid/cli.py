@@ -310,6 +310,8 @@ def _summary_table(res) -> str:
             note = "NOT REACHED: no run compresses the suspension to the stop — not a number to trust"
         elif d.get("at_bound"):
             note = "AT A SEARCH BOUND: set by the bound, not the data"
+        elif d.get("determined") is False:
+            note = "NOT DETERMINED: the data do not fix it, no error bar (WARNING below)"
         elif flat := rideid.error_bar_note(shape, n):
             note = flat + " (WARNING below)"
         std = "" if d.get("std") in (None, 0.0) else f"{d['std']:.3g}"
@@ -513,7 +515,7 @@ def run_identify(ds_path, out_dir, *, seed, population=None, generations=None, w
         caveat = (res.adequacy or {}).get(key)
         if caveat and (key == "tracks_caveat" or res.adequacy.get("adequate")):
             print(textwrap.fill("WARNING: " + caveat, 100, subsequent_indent="  "), file=out)
-    shape = rideid.error_bar_caveat((res.polish or {}).get("shape"))  # error bars the cost's shape does not bear
+    shape = rideid.error_bar_warning(res.polish)  # error bars the data or the cost's shape do not bear
     if shape:  # out, whatever the verdict
         print(textwrap.fill("WARNING: " + shape, 100, subsequent_indent="  "), file=out)
     para = rideid.verdict_paragraph(res.adequacy)

@@ -38,6 +38,7 @@ from dataclasses import asdict, dataclass, field, fields, replace
 from typing import ClassVar
 
 from .assess.adequacy import caveats, setup_caveat, setup_slips
+from .assess.details import unresolved_sentence
 from .assess.shape import caveat as shape_caveat
 
 #: the four verdicts, mildest first
@@ -314,8 +315,10 @@ class SetupAssessment(Assessment):
 class ShapeAssessment(Assessment):
     """Is the cost as curved out to ±2 std_robust along each free parameter's profile line as its curvature at the
     minimum says (:mod:`rideid.estimate.assess.shape`)? ``warn`` naming the parameters where it rises less than
-    setting ``shape.flat_ratio`` of that (their error bars are optimistic: a flat valley); written as the adequate
-    verdict's caveat ``adequacy.shape_caveat``."""
+    setting ``shape.flat_ratio`` of that (their error bars are optimistic: a flat valley), and the parameters the
+    cost's rounding leaves not determined (``polish.unresolved``, a road fit's Hessian:
+    :class:`rideid.estimate.fit.uncertainty.Resolution`); written as the adequate verdict's caveat
+    ``adequacy.shape_caveat``."""
 
     kind: ClassVar[str] = "error_bar_shape"
     caveat: ClassVar[str | None] = "shape_caveat"
@@ -323,17 +326,20 @@ class ShapeAssessment(Assessment):
     ratio: dict = field(default_factory=dict)  #: parameter -> [minus, plus]: the cost's rise over the quadratic's
     error_bars: float | None = None  #: how far out, in std_robust (setting ``shape.error_bars``)
     flat_ratio: float | None = None  #: the share below which an error bar is optimistic (``shape.flat_ratio``)
+    not_determined: list = field(default_factory=list)  #: the parameters without an error bar (``polish.unresolved``)
 
     @classmethod
     def from_result(cls, res) -> "ShapeAssessment":
-        shape = (getattr(res, "polish", None) or {}).get("shape")
+        polish = getattr(res, "polish", None) or {}
+        shape, unresolved = polish.get("shape"), polish.get("unresolved") or {}
         if not shape:
             return cls(**_not_assessed("no polish, or a result written before the check"))
         fields_ = {k: shape.get(k) for k in ("error_bars", "flat_ratio")}
         optimistic = list(shape.get("optimistic") or [])
-        if optimistic:
-            return cls(verdict="warn", reason=shape_caveat(shape), optimistic=optimistic, ratio=shape["ratio"],
-                       **fields_)
+        nd = list(unresolved.get("not_determined") or [])
+        if optimistic or nd:
+            return cls(verdict="warn", reason=error_bar_warning(polish), optimistic=optimistic, ratio=shape["ratio"],
+                       not_determined=nd, **fields_)
         judged = sum(1 for r in shape["ratio"].values() if any(v is not None for v in r))
         if not judged:
             return cls(**_not_assessed("no error bar could be judged (each at the rounding of its value: a noise-free "
@@ -341,6 +347,19 @@ class ShapeAssessment(Assessment):
         return cls(verdict="pass", reason=f"the cost is as curved as the error bars say out to "
                    f"±{shape['error_bars']:g} of them on the {judged} parameter(s) judged", ratio=shape["ratio"],
                    **fields_)
+
+
+def error_bar_warning(polish: dict | None) -> str | None:
+    """What the error bars do not bear, in one sentence (None when nothing): the parameters a road fit's Hessian
+    leaves not determined (``polish.unresolved``), then those whose error bar the cost's shape calls optimistic
+    (``polish.shape``, :func:`rideid.estimate.assess.shape.caveat`). The terminal, the report and
+    :class:`ShapeAssessment` say it so."""
+    polish = polish or {}
+    unresolved = polish.get("unresolved") or {}
+    nd = list(unresolved.get("not_determined") or [])
+    flat = shape_caveat(polish.get("shape"))
+    said = ([f"{', '.join(nd)} {unresolved_sentence(unresolved)}"] if nd else []) + ([flat] if flat else [])
+    return "; ".join(said) or None
 
 
 #: the declared list of assessments, in the order result.json lists them

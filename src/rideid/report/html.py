@@ -35,9 +35,9 @@ from ..data.quality import summarised_warning
 from ..errors import DataError
 from ..estimate.assess.adequacy import caveats
 from ..estimate.assess.frequency import frequency_response, measured_response
-from ..estimate.assess.shape import caveat as shape_caveat, table_note
+from ..estimate.assess.shape import table_note
 from ..estimate.problem.sensitivity import P2T_STARS, stars
-from ..estimate.records import motion_line
+from ..estimate.records import error_bar_warning, motion_line
 from .sensitivity_files import heatmap_figure
 from ..model.equations import CHANNELS
 from ..model.params import ALL_NAMES, DESCRIPTIONS
@@ -978,6 +978,9 @@ def _estimates_lines(result, context) -> list:
         bound = [p["name"] for p in context["params"] if p["status"] == "AT A SEARCH BOUND"]
         if bound:
             text += f"; AT A SEARCH BOUND: {', '.join(bound)}"
+        undetermined = [p["name"] for p in context["params"] if p["status"] == "NOT DETERMINED"]
+        if undetermined:
+            text += f"; NOT DETERMINED (no error bar): {', '.join(undetermined)}"
         lines.append(("Estimates", text, "estimates"))
     tracks = getattr(result, "tracks", None) or {}
     built = {tid: rec for tid, rec in tracks.items() if "amplitude_factor" in rec}
@@ -1006,7 +1009,7 @@ def _caveat_lines(result, adq) -> list:
     small = ((adq or {}).get("small_angle") or {}).get("note")
     if small:  # SPEC §1 is small-angle: which error bars a body that turned degrees makes optimistic
         lines.append(("Small angles", small.split(": ", 1)[-1], "estimates"))
-    shape = shape_caveat((getattr(result, "polish", None) or {}).get("shape"))
+    shape = error_bar_warning(getattr(result, "polish", None))
     if shape:  # a flat valley of the cost: whatever the verdict, these error bars are narrower than the data allow
         lines.append(("Error bars' shape", "NOT TO BE TRUSTED to their std: " + shape, "estimates"))
     return lines
@@ -1049,9 +1052,12 @@ def parameter_rows(result) -> list:
             "rel_std_total": (100 * tot / abs(d["value"])) if tot not in (None, 0.0) and d["value"] else None,
             "lower": d.get("lower"), "upper": d.get("upper"),
             "status": "known" if d.get("fixed") else ("derived" if d.get("derived") else
-                                                      ("AT A SEARCH BOUND" if d.get("at_bound") else "estimated")),
+                                                      ("AT A SEARCH BOUND" if d.get("at_bound") else
+                                                       "NOT DETERMINED" if d.get("determined") is False
+                                                       else "estimated")),
             # a flat valley of the cost (rideid.estimate.assess.shape): said beside the number, not only above it
-            "note": table_note(shape, n) or "",
+            "note": table_note(shape, n) or ("the data do not fix it: no error bar (the summary's Error bars' shape "
+                                             "says why)" if d.get("determined") is False else ""),
         })
     return params
 

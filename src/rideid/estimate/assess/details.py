@@ -59,6 +59,38 @@ def parameter_detail(space, P, n: str, std, cov, robust) -> dict:
 
 
 
+def unresolved_sentence(unresolved: dict) -> str:
+    """What result.json ``polish.unresolved`` (:meth:`rideid.estimate.fit.uncertainty.Resolution.record`) says, in
+    one sentence: the parameters not determined and why."""
+    dirs = "; ".join(" ".join(f"{'-' if u < 0 else '+' if k else ''} {abs(u):.2f} {n}".strip()
+                              for k, (n, u) in enumerate(d["along"].items()))
+                     + f" (curvature {d['curvature']:.3g} against a rounding noise of {d['noise']:.2g})"
+                     for d in unresolved["directions"])
+    return (f"not determined: the cost's curvature along {dirs} is not above {unresolved['curvature_noise']:g} "
+            "times its rounding noise, so the data do not fix it and no error bar is given; the other parameters' "
+            "error bars hold with this direction at its estimate (docs/uncertainty.md)")
+
+
+def not_determined(details: dict, space, x, unresolved: dict | None) -> list:
+    """Mark in ``details`` the parameters of a road fit's Hessian directions that the cost's rounding hides
+    (``unresolved``: result.json ``polish.unresolved``), and the derived quantities that depend on them: ``std``,
+    ``std_robust`` None, ``determined`` False and the note :func:`unresolved_sentence`. Returns their names."""
+    if not unresolved or not unresolved.get("not_determined"):
+        return []
+    bad = [n for n in unresolved["not_determined"] if n in details]
+    cols = [space.names.index(n) for n in bad]
+    derived = space.derived_names()
+    if derived and cols:
+        A = space.derived_jacobian(x)
+        bad += [n for n, row in zip(derived, A) if n in details and np.any(row[cols] != 0)]
+    note = unresolved_sentence(unresolved)
+    for n in bad:
+        details[n].update(std=None, std_robust=None, determined=False, note=note)
+        for k in ("std_jackknife", "std_between_runs", "std_hac", "std_motion"):
+            details[n].pop(k, None)
+    return bad
+
+
 def details_of(ds, space, P, std, cov, robust, bumps):
     """``details`` (name -> :func:`parameter_detail`, with the knots not excited, the stops not reached and
     the estimates at a bound marked) and the findings of the data and bound checks."""

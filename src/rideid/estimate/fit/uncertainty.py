@@ -139,6 +139,85 @@ def normal_inverse(J, rtol: float | None = None) -> NormalInverse:
     return NormalInverse(0.5 * (Hinv + Hinv.T), int(keep.sum()), share > defaults["uncertainty.null_share"])
 
 
+@dataclass(frozen=True)
+class Resolution:
+    """Which directions of a Hessian taken by second differences of a cost that carries rounding the data fix.
+
+    A second difference divides the cost's rounding ``delta`` by the step squared: on a fit with tracks as built
+    and an engine on mounts an eigenvalue of the true Hessian came out -22 with a rounding noise of about 13
+    (docs/uncertainty.md, "Directions the cost's rounding hides"). Such a direction's curvature, and every error
+    bar it enters, is not measured. :func:`resolve` keeps the eigen-directions whose curvature is above setting
+    ``uncertainty.curvature_noise`` times its noise; the bread is the pseudo-inverse on those (:meth:`pinv`: the
+    other parameters' error bars hold with the unresolved directions at their estimates), and a parameter is *not
+    determined* when even the largest curvature its unresolved directions could have would add more than setting
+    ``uncertainty.unresolved_share`` to its variance.
+
+    Attributes
+    ----------
+    basis : ndarray, shape (n, r)
+        The resolved eigenvectors.
+    not_determined : ndarray of bool, shape (n,)
+    noise : ndarray
+        Each unresolved direction's rounding noise (of its eigenvalue, the Hessian's units).
+    curvatures, directions : ndarray
+        The unresolved directions' eigenvalues and eigenvectors (columns).
+    """
+
+    basis: np.ndarray
+    not_determined: np.ndarray
+    noise: np.ndarray
+    curvatures: np.ndarray
+    directions: np.ndarray
+
+    def pinv(self, H) -> np.ndarray:
+        """The pseudo-inverse of ``H`` on the resolved directions; ``H`` may be larger than the basis (the car's
+        unknowns first, then nuisances, all of which are kept)."""
+        n, r = self.basis.shape
+        q = H.shape[0] - n
+        T = np.zeros((n + q, r + q))
+        T[:n, :r] = self.basis
+        T[n:, r:] = np.eye(q)
+        return T @ np.linalg.pinv(T.T @ H @ T, rcond=1e-12, hermitian=True) @ T.T
+
+    def record(self, names) -> dict | None:
+        """result.json ``polish.unresolved``: each unresolved direction (its curvature, its rounding noise, the
+        parameters along it with their share) and the parameters not determined; None when every direction is
+        resolved."""
+        if not self.curvatures.size:
+            return None
+        dirs = [{"curvature": float(w), "noise": float(s),
+                 "along": {names[i]: round(float(u[i]), 3) for i in np.argsort(-np.abs(u)) if abs(u[i]) >= 0.1}}
+                for w, s, u in zip(self.curvatures, self.noise, self.directions.T)]
+        return {"directions": dirs, "not_determined": [n for n, b in zip(names, self.not_determined) if b],
+                "curvature_noise": float(defaults["uncertainty.curvature_noise"])}
+
+
+def resolve(H, delta: float, step: float) -> Resolution:
+    """The :class:`Resolution` of the half Hessian ``H`` taken by central second differences at ``step`` of a cost
+    whose rounding is ``delta`` (a standard deviation, independent between evaluations).
+
+    A diagonal entry ``(f+ - 2 f0 + f-) / (2 h^2)``: its own costs' noise ``delta / (sqrt(2) h^2)``, and the one
+    ``f0`` of every diagonal entry, which shifts every eigenvalue alike by ``delta / h^2``; a cross term (four costs
+    over ``8 h^2``) ``delta / (4 h^2)``. An eigenvalue along a unit ``u``, to first order ``u^T N u``, so has the
+    variance ``(delta / h^2)^2 (1 + sum_i u_i^4 / 2 + sum_{i<j} u_i^2 u_j^2 / 4)`` = ``(delta / h^2)^2 (9/8 + 3/8
+    sum_i u_i^4)``: 1.06 to 1.22 ``delta / h^2``."""
+    H = 0.5 * (np.asarray(H, dtype=float) + np.asarray(H, dtype=float).T)
+    n = H.shape[0]
+    w, U = np.linalg.eigh(H)
+    noise = delta / step ** 2 * np.sqrt(1.125 + 0.375 * np.sum(U ** 4, axis=0))
+    ratio = defaults["uncertainty.curvature_noise"]
+    low = w <= ratio * noise
+    if not low.any():
+        return Resolution(np.eye(n), np.zeros(n, dtype=bool), np.zeros(0), np.zeros(0), np.zeros((n, 0)))
+    kept = U[:, ~low]
+    resolved_var = (kept ** 2) @ (1.0 / w[~low])
+    # the most curvature an unresolved direction could have: its noise's bound (or its own size, when below -that)
+    most = np.maximum(np.maximum(ratio * noise[low], np.abs(w[low])), np.finfo(float).tiny)
+    added = (U[:, low] ** 2) @ (1.0 / most)
+    bad = added > defaults["uncertainty.unresolved_share"] * resolved_var
+    return Resolution(kept, bad, noise[low], w[low], U[:, low])
+
+
 @dataclass
 class RobustCovariance:
     """The HAC sandwich and what went into it.
