@@ -316,6 +316,21 @@ def test_score_judges_by_std_total(declared):
     assert row["std_total"] == 0.01 * truth["k_sf"]
 
 
+def test_score_names_a_parameter_the_data_do_not_determine(declared):
+    """A parameter a road fit's Hessian left without an error bar (``determined: false``): its row says so, it is
+    neither judged nor the largest error, and a note names it with its error."""
+    _, truth, res = declared
+    details = {n: dict(d) for n, d in res.details.items()}
+    details["I_xx"].update(value=1.3 * truth["I_xx"], std=None, std_robust=None, std_total=None, determined=False)
+    s = rideid.score({"parameters": details}, truth)
+    row = s["parameters"]["I_xx"]
+    assert row["status"] == "not determined" and row["covered"] is None
+    assert row["error_percent"] == pytest.approx(30.0) and s["worst_percent"] < 5
+    assert s["notes"] == ["not determined by the data (no error bar, not in the largest error): I_xx +30.00 %"]
+    from rideid.cli import score_table
+    assert "I_xx" in score_table(s) and " - not determined" in score_table(s)
+
+
 def test_budget_figure_segments_add_up_to_two_std_total(declared):
     _, _, res = declared
     fig = rideid.plot_budget(res)

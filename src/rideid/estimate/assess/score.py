@@ -65,7 +65,8 @@ def score(result, truth, dampers=None) -> dict:
         "coverable": of how many (those with a standard error),
         "covered_robust": how many ±2 ``std_robust`` covers, "basis":
         "std_total" or "std_robust", "notes": [lines]}``; ``status`` is
-        ``"estimated"``, ``"known"``, ``"derived"`` or ``"not in the model"``
+        ``"estimated"``, ``"known"``, ``"derived"``, ``"not determined"`` (a road fit's Hessian left it without
+        an error bar: named in ``notes``, not in ``worst_percent``) or ``"not in the model"``
         (an extension of the truth the model lacks: estimate 0), for a knot force ``"not excited"`` (no run
         reached it: its force is not trusted, not judged) or ``"no true curve"`` (truth None: the true curves
         not given), for a bump stop ``"not reached"`` (likewise);
@@ -96,6 +97,10 @@ def score(result, truth, dampers=None) -> dict:
         notes.append("the truth has damper curves and the model linear dampers: c_sf and c_sr are compared with "
                      "the curves' mean slope between -0.1 and 0.1 m/s")
     rows.update(_stop_rows(_get(result, "bump_stops"), truth, details))
+    undetermined = {n: x["error_percent"] for n, x in rows.items() if x["status"] == "not determined"}
+    if undetermined:  # a road fit's Hessian left them without an error bar (docs/uncertainty.md)
+        notes.append("not determined by the data (no error bar, not in the largest error): " + ", ".join(
+            n + ("" if e is None else f" {e:+.2f} %") for n, e in undetermined.items()))
     worst = max((abs(x["error_percent"]) for x in rows.values()
                  if x["error_percent"] is not None and x["status"] in ("estimated", "derived")), default=0.0)
     judged = [x["covered"] for x in rows.values() if x["covered"] is not None]
@@ -117,7 +122,8 @@ def _parameter_rows(details, truth) -> dict:
         est = float(d["value"]) if n in details else 0.0
         tr = float(truth.get(n, 0.0))
         status = ("not in the model" if n not in details else "known" if d.get("fixed")
-                  else "derived" if d.get("derived") else "estimated")
+                  else "derived" if d.get("derived") else "not determined" if d.get("determined") is False
+                  else "estimated")
         rows[n] = _row(est, tr, status, d.get("std_robust"), d.get("std_total"))
     return rows
 
