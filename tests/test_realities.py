@@ -239,7 +239,9 @@ def test_a_gross_first_fit_that_the_powertrain_mends_on_the_tracks_as_built(tmp_
     shape = next(a for a in res["assessments"] if a["kind"] == "error_bar_shape")
     assert shape["verdict"] == "warn" and shape["not_determined"] == ["I_p", "zeta_pp"]
     from rideid.report.html import parameter_rows
-    rows = {p["name"]: p for p in parameter_rows(rideid.load_result(tmp_path / "fit"))}
+    loaded = rideid.load_result(tmp_path / "fit")
+    rows = {p["name"]: p for p in parameter_rows(loaded)}
+    assert any(n.startswith("I_p, zeta_pp: not determined") for n in loaded.frequency_response().notes)
     assert rows["I_p"]["status"] == "NOT DETERMINED" and rows["zeta_pp"]["note"].startswith("the data do not fix it")
     # the report's model section (it raised on these candidates before they carried their estimates): the three by
     # their tracks, the one kept marked, each parameter's value per candidate, the first fit's sentence

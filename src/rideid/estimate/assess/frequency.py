@@ -180,6 +180,10 @@ def _statistical(result, details):
             R = np.eye(len(names))
             notes.append("the result has no covariance: the estimates are taken as independent (std_total each)")
     sd = np.array([float(details[n].get("std_robust") or 0.0) for n in names])
+    undetermined = [n for n in names if details[n].get("determined") is False]
+    if undetermined:  # a road fit's Hessian left them without an error bar (docs/uncertainty.md)
+        notes.append(f"{', '.join(undetermined)}: not determined by the data (no error bar), so the band holds with "
+                     "them at their estimates; where they move the response (near their modes) it is no bound")
     R = np.where(np.isfinite(R), R, 0.0)
     np.fill_diagonal(R, 1.0)
     return names, R * np.outer(sd, sd), notes
