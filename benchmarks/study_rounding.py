@@ -17,7 +17,9 @@ of the kept fit captured; then, at that point:
   noise (:func:`rideid.estimate.fit.uncertainty.resolve`: ``delta / h^2 sqrt(9/8 + 3/8 sum u^4)``); and the
   parameters rideid reports as not determined (``polish.unresolved``).
 
-Prints one row per parameter. Nothing is changed in rideid; a measurement for docs/uncertainty.md.
+The fit then measures each direction not fixed at the Hessian's step again at a larger one
+(:func:`rideid.estimate.fit.uncertainty.remeasured`, result.json ``polish.remeasured``); this study is of the Hessian
+at its step. Prints one row per parameter. Nothing is changed in rideid; a measurement for docs/uncertainty.md.
 """
 
 from __future__ import annotations

@@ -378,3 +378,25 @@ def test_a_hessian_direction_below_its_rounding_noise_leaves_its_parameters_not_
     # a negative eigenvalue (the cost not at a minimum along it) is never measured, however small the noise
     neg, _ = _rotated([400.0, 60.0, 30.0, -5.0], [(2, 3)])
     assert list(resolve(neg, 0.0, step).not_determined) == [False, False, True, True]
+    # measured again at ten times the step along the weak direction (the road fit's _Problem.along on the same
+    # rounded cost: its curvature and its couplings to the others, a hundred times less noise): found at 1.0, and
+    # the variance along it 1 / 1.0 to a few per cent, where the step's own Hessian had a noise of 2.3 on it
+    import functools
+
+    from rideid.estimate.fit.uncertainty import remeasured
+    along = defaults["uncertainty.direction_step"]
+    assert along == 1e-2
+    H = _Problem.hessian(prob, v, step)
+    first = resolve(H, delta, step)
+    assert first.curvatures.size == 1 and first.not_determined[2:].all()
+    H2, again, rec = remeasured(H, delta, step, along, functools.partial(_Problem.along, prob, v, step=step))
+    assert again.curvatures.size == 0 and not again.not_determined.any()
+    assert len(rec) == 1
+    assert rec[0]["curvature_at_step"] == pytest.approx(1.0, abs=5 * np.sqrt(6) * delta / (2 * along ** 2))
+    u = U[:, 3]
+    assert u @ again.pinv(H2) @ u == pytest.approx(1.0, rel=0.05)
+    # where the larger step would cross a bound the direction stays as it was (not determined)
+    tight = _RoundedQuadratic(A, delta, rng)
+    tight.vbounds = (np.full(4, 0.3 - 2e-3), np.full(4, 10.0))
+    H3, kept, rec3 = remeasured(H, delta, step, along, functools.partial(_Problem.along, tight, v, step=step))
+    assert rec3 == [] and kept.not_determined[2:].all()

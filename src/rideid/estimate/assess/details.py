@@ -74,7 +74,8 @@ def unresolved_sentence(unresolved: dict) -> str:
 def not_determined(details: dict, space, x, unresolved: dict | None) -> list:
     """Mark in ``details`` the parameters of a road fit's Hessian directions that the cost's rounding hides
     (``unresolved``: result.json ``polish.unresolved``), and the derived quantities that depend on them: ``std``,
-    ``std_robust`` None, ``determined`` False and the note :func:`unresolved_sentence`. Returns their names."""
+    ``std_robust``, ``std_total``, ``budget`` None, ``determined`` False and the note :func:`unresolved_sentence`.
+    Returns their names."""
     if not unresolved or not unresolved.get("not_determined"):
         return []
     bad = [n for n in unresolved["not_determined"] if n in details]
@@ -85,7 +86,7 @@ def not_determined(details: dict, space, x, unresolved: dict | None) -> list:
         bad += [n for n, row in zip(derived, A) if n in details and np.any(row[cols] != 0)]
     note = unresolved_sentence(unresolved)
     for n in bad:
-        details[n].update(std=None, std_robust=None, determined=False, note=note)
+        details[n].update(std=None, std_robust=None, std_total=None, budget=None, determined=False, note=note)
         for k in ("std_jackknife", "std_between_runs", "std_hac", "std_motion"):
             details[n].pop(k, None)
     return bad

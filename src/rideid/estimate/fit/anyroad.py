@@ -89,7 +89,7 @@ from ..assess.sensor_check import road_coupling_hints
 from ..assess.roads import judge as judge_road_runs
 from ..assess.details import not_determined
 from ..assess.shape import check as shape_check
-from .uncertainty import estimate_covariance, resolve
+from .uncertainty import estimate_covariance, remeasured
 
 def road_run_error(rr, y, fitted) -> float:
     """``E_r`` of :mod:`rideid.estimate.problem.cost` for an unknown-road run: each used channel's squared error at
@@ -261,6 +261,39 @@ class _Problem:
         for (i, j), q in zip(pairs, cross):
             H[i, j] = H[j, i] = (q[0] - q[1] - q[2] + q[3]) / (4 * h[i] * h[j])
         return 0.5 * H
+
+    def along(self, v, U, m: int, step: float = 1e-3) -> np.ndarray | None:
+        """The half Hessian's row along ``U[:, m]`` in the orthonormal basis ``U`` at the point :meth:`hessian` takes
+        at ``step``, by second differences of step setting ``uncertainty.direction_step`` ``a`` along ``u = U[:,
+        m]``: the curvature ``(f(v + a u) + f(v - a u) - 2 f(v)) / (2 a^2)``, each coupling ``(f(++) - f(+-) -
+        f(-+) + f(--)) / (8 a t)`` with ``t`` along ``U[:, j]`` as large as ``a`` where the bounds leave room (a bar
+        at 0 leaves less: ``t`` then the room's nine tenths; below ``step`` the coupling is not measured again, NaN).
+        ``4 (d - 1) + 3`` costs at most; None when ``v +- a u`` crosses a bound."""
+        a = defaults["uncertainty.direction_step"]
+        lo, hi = self.vbounds
+        v = np.clip(v, lo + step, hi - step)
+        d = U.shape[1]
+        u = U[:, m]
+        ends = np.array([v + a * u, v - a * u])
+        if np.any(ends < lo) or np.any(ends > hi):
+            return None
+
+        def room(base, w):  # how far from base along +-w the bounds allow
+            with np.errstate(divide="ignore", invalid="ignore"):
+                r = np.where(w > 0, (hi - base) / w, np.where(w < 0, (lo - base) / w, np.inf))
+            return float(np.min(r))
+
+        steps = {j: min(a, 0.9 * min(room(b, sg * U[:, j]) for b in ends for sg in (1, -1)))
+                 for j in range(d) if j != m}
+        steps = {j: t for j, t in steps.items() if t >= step}
+        moves = [np.zeros(d), a * u, -a * u] + [a * s * u + t * r * U[:, j] for j, t in steps.items()
+                                                for s, r in ((1, 1), (1, -1), (-1, 1), (-1, -1))]
+        c = self.costs(v + np.array(moves))
+        row = np.full(d, np.nan)
+        row[m] = (c[1] + c[2] - 2 * c[0]) / (2 * a * a)
+        for (j, t), q in zip(steps.items(), c[3:].reshape(-1, 4)):
+            row[j] = (q[0] - q[1] - q[2] + q[3]) / (8 * a * t)
+        return row
 
     def rounding(self, v, step: float = 1e-3, tiny: float = 1e-9, pairs: int = 16) -> float:
         """The cost's rounding at the point :meth:`hessian` takes at ``step``: the standard deviation of one cost,
@@ -912,6 +945,14 @@ def road_motion_record(fitted: dict, prior, run_id: str) -> dict:
             "named": _named(run_id, "speed", v, sv, pr)}
 
 
+def _remeasured_record(r: dict, names) -> dict:
+    """result.json ``polish.remeasured``: a direction measured again at the larger step (the parameters along it
+    with their share, those of 0.1 or more; its curvature at the Hessian's step and at the larger one)."""
+    u = r["direction"]
+    return {"along": {n: round(float(u[i]), 3) for i, n in enumerate(names) if abs(u[i]) >= 0.1},
+            **{k: r[k] for k in ("curvature", "curvature_at_step", "step")}}
+
+
 @stage("error bars")
 def _error_bars(prob, sol, ds, cost_before: float, restarted) -> _Fitted:
     """The true Hessian; Newton steps on it to the minimum (module docstring); the sandwich: bread the Hessian,
@@ -922,8 +963,11 @@ def _error_bars(prob, sol, ds, cost_before: float, restarted) -> _Fitted:
     z, e, Ja = prob.newton(sol.x, H)          # in v units
     m, n = Ja.shape
     s2 = float(e @ e) / max(m - n, 1)
-    # the directions the cost's rounding leaves unmeasured: out of the bread (uncertainty.Resolution)
-    res = resolve(H, prob.rounding(sol.x, h), h)
+    # the directions the cost's rounding hides at h measured again at a larger step, those still hidden out of the
+    # bread (uncertainty.remeasured, uncertainty.Resolution)
+    delta = prob.rounding(sol.x, h)
+    H, res, again = remeasured(H, delta, h, defaults["uncertainty.direction_step"],
+                               functools.partial(prob.along, sol.x, step=h))
     Hinv = res.pinv(H)
     D = np.diag(prob.dxdv(z))
     cov = D @ Hinv @ (s2 * Ja.T @ Ja) @ Hinv @ D
@@ -949,6 +993,7 @@ def _error_bars(prob, sol, ds, cost_before: float, restarted) -> _Fitted:
             "names": list(prob.space.names), "covariance_robust": (0.5 * (cov_rob + cov_rob.T)).tolist(),
             **({} if cov_fixed is None else {"covariance_robust_motion_fixed": cov_fixed.tolist()}),
             **({} if unresolved is None else {"unresolved": unresolved}),
+            **({} if not again else {"remeasured": [_remeasured_record(r, prob.space.names) for r in again]}),
             "method": blocks_method(prob.parts)}
     return _Fitted(z, prob, info, np.sqrt(np.clip(np.diag(cov), 0, None)), cov, int(sol.nfev) * (n + 1), H, Ja)
 

@@ -192,7 +192,42 @@ class Resolution:
                 "curvature_noise": float(defaults["uncertainty.curvature_noise"])}
 
 
-def resolve(H, delta: float, step: float) -> Resolution:
+def remeasured(H, delta: float, step: float, along: float, measure) -> tuple:
+    """``H`` with each direction :func:`resolve` leaves unresolved measured again at the larger step ``along``, and
+    its :class:`Resolution`.
+
+    ``measure(U, m)``: the half Hessian's row along eigenvector ``U[:, m]`` in the eigenbasis ``U``, by second
+    differences of step ``along`` (the diagonal a secant ``(f(v + a u) + f(v - a u) - 2 f(v)) / (2 a^2)``, each
+    coupling four costs over ``8 a^2``; NaN where a coupling was not measured again: it keeps its value), or None
+    where the steps would cross a bound. Both the curvature and its
+    couplings: at ``step`` the couplings' noise is an eigenvalue's (``delta / (4 h^2)`` each), and a weak
+    direction's variance ``1 / (w - sum_j c_j^2 / w_j)`` takes up their squares (on the all-realities gross case
+    ``sum_j c_j^2 / w_j`` of noise alone was about 2.5 against a curvature of 4.6). At ``along`` every term's noise
+    is ``(along / step)^2`` times smaller. Returns ``(H, Resolution, records)``, ``records`` one dict per direction
+    measured again (the parameters along it, its curvature and noise at ``step``, its curvature at ``along``)."""
+    res = resolve(H, delta, step)
+    if not res.curvatures.size:
+        return H, res, []
+    H = 0.5 * (np.asarray(H, dtype=float) + np.asarray(H, dtype=float).T)
+    w, U = np.linalg.eigh(H)
+    L = U.T @ H @ U
+    done, records = [], []
+    for m in np.flatnonzero(np.isin(w, res.curvatures)):
+        row = measure(U, int(m))
+        if row is None:
+            continue
+        row = np.where(np.isfinite(row), row, L[m])  # a coupling not measured again keeps its value at step
+        L[m, :] = L[:, m] = row
+        done.append(int(m))
+        records.append({"curvature": float(w[m]), "curvature_at_step": float(row[m]), "step": float(along),
+                        "direction": U[:, m].copy()})
+    if not done:
+        return H, res, []
+    H2 = U @ L @ U.T
+    return H2, resolve(H2, delta, step, remeasured=(U[:, done], along)), records
+
+
+def resolve(H, delta: float, step: float, remeasured=None) -> Resolution:
     """The :class:`Resolution` of the half Hessian ``H`` taken by central second differences at ``step`` of a cost
     whose rounding is ``delta`` (a standard deviation, independent between evaluations).
 
@@ -200,11 +235,18 @@ def resolve(H, delta: float, step: float) -> Resolution:
     ``f0`` of every diagonal entry, which shifts every eigenvalue alike by ``delta / h^2``; a cross term (four costs
     over ``8 h^2``) ``delta / (4 h^2)``. An eigenvalue along a unit ``u``, to first order ``u^T N u``, so has the
     variance ``(delta / h^2)^2 (1 + sum_i u_i^4 / 2 + sum_{i<j} u_i^2 u_j^2 / 4)`` = ``(delta / h^2)^2 (9/8 + 3/8
-    sum_i u_i^4)``: 1.06 to 1.22 ``delta / h^2``."""
+    sum_i u_i^4)``: 1.06 to 1.22 ``delta / h^2``.
+
+    ``remeasured``: ``(D, a)``, directions (columns) whose curvature ``H`` holds as a secant at the step ``a``
+    (:func:`remeasured`); an eigenvector along one of them carries that secant's noise instead."""
     H = 0.5 * (np.asarray(H, dtype=float) + np.asarray(H, dtype=float).T)
     n = H.shape[0]
     w, U = np.linalg.eigh(H)
     noise = delta / step ** 2 * np.sqrt(1.125 + 0.375 * np.sum(U ** 4, axis=0))
+    if remeasured is not None:
+        D, along = remeasured
+        on = np.max(np.abs(np.asarray(D).T @ U), axis=0) > 0.9
+        noise = np.where(on, np.sqrt(6.0) * delta / (2 * along ** 2), noise)
     ratio = defaults["uncertainty.curvature_noise"]
     low = w <= ratio * noise
     if not low.any():
