@@ -89,7 +89,7 @@ from ..assess.sensor_check import road_coupling_hints
 from ..assess.roads import judge as judge_road_runs
 from ..assess.details import not_determined
 from ..assess.shape import check as shape_check
-from .uncertainty import estimate_covariance, remeasured
+from .uncertainty import along_record, estimate_covariance, remeasured
 
 def road_run_error(rr, y, fitted) -> float:
     """``E_r`` of :mod:`rideid.estimate.problem.cost` for an unknown-road run: each used channel's squared error at
@@ -947,10 +947,10 @@ def road_motion_record(fitted: dict, prior, run_id: str) -> dict:
 
 def _remeasured_record(r: dict, names) -> dict:
     """result.json ``polish.remeasured``: a direction measured again at the larger step (the parameters along it
-    with their share, those of 0.1 or more; its curvature at the Hessian's step and at the larger one)."""
-    u = r["direction"]
-    return {"along": {n: round(float(u[i]), 3) for i, n in enumerate(names) if abs(u[i]) >= 0.1},
-            **{k: r[k] for k in ("curvature", "curvature_at_step", "step")}}
+    with their share: :func:`rideid.estimate.fit.uncertainty.along_record`; its curvature at the Hessian's step and
+    at the larger one)."""
+    return {"along": along_record(r["direction"], names), **{k: r[k] for k in ("curvature", "curvature_at_step",
+                                                                                 "step")}}
 
 
 @stage("error bars")

@@ -144,7 +144,7 @@ class Resolution:
     """Which directions of a Hessian taken by second differences of a cost that carries rounding the data fix.
 
     A second difference divides the cost's rounding ``delta`` by the step squared: on a fit with tracks as built
-    and an engine on mounts an eigenvalue of the true Hessian came out -22 with a rounding noise of about 13
+    and an engine on mounts an eigenvalue of the true Hessian came out -22 with a rounding noise of about 10
     (docs/uncertainty.md, "Directions the cost's rounding hides"). Such a direction's curvature, and every error
     bar it enters, is not measured. :func:`resolve` keeps the eigen-directions whose curvature is above setting
     ``uncertainty.curvature_noise`` times its noise; the bread is the pseudo-inverse on those (:meth:`pinv`: the
@@ -185,11 +185,29 @@ class Resolution:
         resolved."""
         if not self.curvatures.size:
             return None
-        dirs = [{"curvature": float(w), "noise": float(s),
-                 "along": {names[i]: round(float(u[i]), 3) for i in np.argsort(-np.abs(u)) if abs(u[i]) >= 0.1}}
+        dirs = [{"curvature": float(w), "noise": float(s), "along": along_record(u, names)}
                 for w, s, u in zip(self.curvatures, self.noise, self.directions.T)]
         return {"directions": dirs, "not_determined": [n for n, b in zip(names, self.not_determined) if b],
                 "curvature_noise": float(defaults["uncertainty.curvature_noise"])}
+
+
+def along_record(u, names) -> dict:
+    """A unit direction ``u`` as result.json writes it: parameter -> its share (3 digits), those of 0.1 or more,
+    the largest first."""
+    return {names[i]: round(float(u[i]), 3) for i in np.argsort(-np.abs(u)) if abs(u[i]) >= 0.1}
+
+
+def _spectrum(H, delta: float, step: float, remeasured=None):
+    """``H`` made symmetric, its eigenvalues ``w`` and eigenvectors ``U``, each eigenvalue's rounding noise and the
+    mask of those not above setting ``uncertainty.curvature_noise`` times it (:func:`resolve`'s docstring)."""
+    H = 0.5 * (np.asarray(H, dtype=float) + np.asarray(H, dtype=float).T)
+    w, U = np.linalg.eigh(H)
+    noise = delta / step ** 2 * np.sqrt(1.125 + 0.375 * np.sum(U ** 4, axis=0))
+    if remeasured is not None:
+        D, along = remeasured
+        on = np.max(np.abs(np.asarray(D).T @ U), axis=0) > 0.9
+        noise = np.where(on, np.sqrt(6.0) * delta / (2 * along ** 2), noise)
+    return H, w, U, noise, w <= defaults["uncertainty.curvature_noise"] * noise
 
 
 def remeasured(H, delta: float, step: float, along: float, measure) -> tuple:
@@ -205,14 +223,13 @@ def remeasured(H, delta: float, step: float, along: float, measure) -> tuple:
     ``sum_j c_j^2 / w_j`` of noise alone was about 2.5 against a curvature of 4.6). At ``along`` every term's noise
     is ``(along / step)^2`` times smaller. Returns ``(H, Resolution, records)``, ``records`` one dict per direction
     measured again (the parameters along it, its curvature and noise at ``step``, its curvature at ``along``)."""
-    res = resolve(H, delta, step)
-    if not res.curvatures.size:
-        return H, res, []
-    H = 0.5 * (np.asarray(H, dtype=float) + np.asarray(H, dtype=float).T)
-    w, U = np.linalg.eigh(H)
+    spectrum = _spectrum(H, delta, step)
+    H, w, U, _, low = spectrum
+    if not low.any():
+        return H, _resolution(*spectrum), []
     L = U.T @ H @ U
     done, records = [], []
-    for m in np.flatnonzero(np.isin(w, res.curvatures)):
+    for m in np.flatnonzero(low):
         row = measure(U, int(m))
         if row is None:
             continue
@@ -222,7 +239,7 @@ def remeasured(H, delta: float, step: float, along: float, measure) -> tuple:
         records.append({"curvature": float(w[m]), "curvature_at_step": float(row[m]), "step": float(along),
                         "direction": U[:, m].copy()})
     if not done:
-        return H, res, []
+        return H, _resolution(*spectrum), []
     H2 = U @ L @ U.T
     return H2, resolve(H2, delta, step, remeasured=(U[:, done], along)), records
 
@@ -239,22 +256,19 @@ def resolve(H, delta: float, step: float, remeasured=None) -> Resolution:
 
     ``remeasured``: ``(D, a)``, directions (columns) whose curvature ``H`` holds as a secant at the step ``a``
     (:func:`remeasured`); an eigenvector along one of them carries that secant's noise instead."""
-    H = 0.5 * (np.asarray(H, dtype=float) + np.asarray(H, dtype=float).T)
+    return _resolution(*_spectrum(H, delta, step, remeasured))
+
+
+def _resolution(H, w, U, noise, low) -> Resolution:
+    """The :class:`Resolution` of a :func:`_spectrum`."""
     n = H.shape[0]
-    w, U = np.linalg.eigh(H)
-    noise = delta / step ** 2 * np.sqrt(1.125 + 0.375 * np.sum(U ** 4, axis=0))
-    if remeasured is not None:
-        D, along = remeasured
-        on = np.max(np.abs(np.asarray(D).T @ U), axis=0) > 0.9
-        noise = np.where(on, np.sqrt(6.0) * delta / (2 * along ** 2), noise)
-    ratio = defaults["uncertainty.curvature_noise"]
-    low = w <= ratio * noise
     if not low.any():
         return Resolution(np.eye(n), np.zeros(n, dtype=bool), np.zeros(0), np.zeros(0), np.zeros((n, 0)))
     kept = U[:, ~low]
     resolved_var = (kept ** 2) @ (1.0 / w[~low])
     # the most curvature an unresolved direction could have: its noise's bound (or its own size, when below -that)
-    most = np.maximum(np.maximum(ratio * noise[low], np.abs(w[low])), np.finfo(float).tiny)
+    most = np.maximum(np.maximum(defaults["uncertainty.curvature_noise"] * noise[low], np.abs(w[low])),
+                      np.finfo(float).tiny)
     added = (U[:, low] ** 2) @ (1.0 / most)
     bad = added > defaults["uncertainty.unresolved_share"] * resolved_var
     return Resolution(kept, bad, noise[low], w[low], U[:, low])
