@@ -34,7 +34,7 @@ demo: $(STAMP)
 # 6.2 with the longest tests started first, docs/performance.md)
 test: $(STAMP)
 	$(PY) -m ruff check src tests benchmarks
-	$(PY) -m pytest -q -n auto
+	env -u PYTHONDONTWRITEBYTECODE $(PY) -m pytest -q -n auto
 
 # the slow studies as well (JADE benchmark tables at full length, seeds sweeps)
 test-slow: $(STAMP)

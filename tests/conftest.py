@@ -17,6 +17,31 @@ def pytest_addoption(parser):
     parser.addoption("--runslow", action="store_true", default=False, help="run slow studies")
 
 
+_WARMING = []
+
+
+def pytest_configure(config):
+    # with workers (pytest -n): compile the Numba kernels once into their caches while the workers collect, rather
+    # than in every worker (tests/warm_kernels.py; on a fresh clone 17 s of compiling per worker otherwise)
+    if hasattr(config, "workerinput") or not getattr(config.option, "numprocesses", None):
+        return
+    import subprocess
+    import sys
+    from pathlib import Path
+    script = str(Path(__file__).with_name("warm_kernels.py"))
+    for names in (["nonlinear"], ["linear", "contact", "simulator"]):
+        _WARMING.append(subprocess.Popen([sys.executable, script, *names], stdout=subprocess.DEVNULL,
+                                         stderr=subprocess.DEVNULL))
+
+
+def pytest_unconfigure(config):
+    while _WARMING:
+        proc = _WARMING.pop()
+        if proc.poll() is None:
+            proc.kill()
+        proc.wait()
+
+
 def pytest_collection_modifyitems(config, items):
     # the longest tests of the default run first (marked heavy, each the only user of its module's fixtures): the
     # workers take the tests in this order, and one begun last kept its worker busy while the other had finished

@@ -19,7 +19,7 @@ import numpy as np
 from rideid.model.params import GRAVITY
 
 
-@numba.njit(cache=False)
+@numba.njit(cache=True)
 def _rhs(c, xk, Fk, X, u, ud, out, y):
     # c: m_b, I_b, I_xx, x_b, x_p, m_p, I_p, kp, cp, kt_, ct_ (mount rates), then per corner xs(4), ys(4), ks(4),
     # kt(4), ct(4), mu(4), L(4), and kar(2) per axle: c[39], c[40] (numba checks no bounds: a wrong index reads
@@ -73,7 +73,7 @@ def _rhs(c, xk, Fk, X, u, ud, out, y):
     y[9] = X[11]
 
 
-@numba.njit(cache=False)
+@numba.njit(cache=True)
 def _integrate(c, xk, Fk, U, R, n, m, h):
     X = np.zeros(18)
     Y = np.empty((n, 10))
