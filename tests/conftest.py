@@ -12,6 +12,28 @@ from threadpoolctl import threadpool_limits  # noqa: E402
 
 threadpool_limits(limits=1, user_api="blas")
 
+if os.environ.get("PYTEST_XDIST_WORKER"):
+    # Two workers fill both cores: each one's rideid on one thread, the work rideid spreads over the kernel's
+    # threads (rideid.model.batch.thread_map, the kernels' chunks) one after the other in the worker's own thread
+    # (Numba's thread count is the calling thread's, so nothing is started). Side by side, the threads took turns
+    # with the other worker: the suite took 5:43 on two idle cores, 4:49 on one thread each (docs/performance.md).
+    # The tests of the threads themselves take both cores back (the ``both_cores`` fixture).
+    import numba
+
+    numba.set_num_threads(1)
+
+
+@pytest.fixture
+def both_cores():
+    """The kernel's thread count in this thread as on a user's two cores (the test workers run on one: above)."""
+    import numba
+    if numba.config.NUMBA_NUM_THREADS < 2:
+        pytest.skip("one core: nothing runs side by side")
+    before = numba.get_num_threads()
+    numba.set_num_threads(2)
+    yield numba.get_num_threads()
+    numba.set_num_threads(before)
+
 
 def pytest_addoption(parser):
     parser.addoption("--runslow", action="store_true", default=False, help="run slow studies")

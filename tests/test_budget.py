@@ -281,7 +281,7 @@ def test_sensitivities_agree_with_refits_with_the_input_moved(declared):
 
 
 
-def test_the_inputs_columns_run_side_by_side_and_give_the_same_numbers_on_one_or_two_cores(declared):
+def test_the_inputs_columns_run_side_by_side_and_give_the_same_numbers_on_one_or_two_cores(declared, both_cores):
     """Each declared input's residual column (the weighbridge, the wheelbase's tape with a cost function of its
     own, three sensors' gains) is independent and computed side by side (rideid.model.batch.thread_map); with
     the kernel on one thread (rideid.model.backend.one_thread) one after the other. The same gradients to the

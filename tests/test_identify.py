@@ -414,7 +414,7 @@ def test_cycle_slips_returns_a_new_dict(monkeypatch):
 
 
 
-def test_cycle_slips_of_every_run_side_by_side_are_each_runs_own(tmp_path):
+def test_cycle_slips_of_every_run_side_by_side_are_each_runs_own(tmp_path, both_cores):
     """The cycle-slip check correlates every run with the car side by side (their simulations in one batch,
     the inputs prepared on every core): each run's start is the one its own correlation gives
     (st.estimate_start, one run at a time), to the last bit, with one or two kernel threads. The SUV's five
@@ -436,7 +436,8 @@ def test_cycle_slips_of_every_run_side_by_side_are_each_runs_own(tmp_path):
     assert list(moved) == ["HB6"] and abs(moved["HB6"] - ds.measured["HB6"].start) < 5e-4
 
 
-def test_the_runs_alignments_at_load_run_side_by_side_and_give_the_same_starts_on_one_or_two_cores(tmp_path):
+def test_the_runs_alignments_at_load_run_side_by_side_and_give_the_same_starts_on_one_or_two_cores(tmp_path,
+                                                                                                      both_cores):
     """Loading checks and aligns every run side by side: the steps' work between their simulations runs on as
     many threads as the kernel has (rideid.conditioning.nominal.gather on rideid.model.batch.thread_map), one
     after the other with one (rideid.model.backend.one_thread). The SUV's five logger runs, starts estimated: the

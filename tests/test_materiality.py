@@ -128,7 +128,8 @@ def test_structure_that_moves_nothing_is_immaterial_and_a_spreading_one_widens_t
     assert max(z.values()) < 2.5, z  # the verdict and the error bars agree
 
 
-def test_the_two_refits_run_side_by_side_and_give_the_same_numbers_on_one_or_two_cores(tmp_path, default_scenario):
+def test_the_two_refits_run_side_by_side_and_give_the_same_numbers_on_one_or_two_cores(tmp_path, default_scenario,
+                                                                                         both_cores):
     """The materiality's two polishes (all pairs, and without the flagged ones) are independent and run on two
     threads (rideid.model.batch.thread_map); with the kernel limited to one thread (a study's worker,
     rideid.model.backend.one_thread) they run one after the other. The built-in car's runs with 2 % noise (seed

@@ -116,7 +116,8 @@ def _identify_cli(folder, out, model=("--model", "powertrain")):
     import json
     import os
     import subprocess
-    env = {**os.environ, "PYTHONPATH": str(Path(rideid.__file__).parents[1])}
+    # on one thread, as the test workers run rideid (tests/conftest.py): the other worker has the other core
+    env = {**os.environ, "PYTHONPATH": str(Path(rideid.__file__).parents[1]), "NUMBA_NUM_THREADS": "1"}
     proc = subprocess.run([sys.executable, "-m", "rideid", "identify", str(folder), "--out", str(out), "--seed", "1",
                            *model, "--no-report", "--quiet"], capture_output=True, text=True, env=env)
     assert proc.returncode == 0, proc.stderr

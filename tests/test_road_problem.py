@@ -21,7 +21,7 @@ class _LogLinear:
         return self.A @ np.log(x) - self.b
 
 
-def test_the_hessian_is_the_closed_form_and_its_evaluations_run_side_by_side():
+def test_the_hessian_is_the_closed_form_and_its_evaluations_run_side_by_side(both_cores):
     """Half the Hessian of ``sum e^2`` of two log-linear blocks (weights 1 and 2) is ``A1^T A1 + 4 A2^T A2`` to
     1e-6 (second differences of a quadratic: rounding alone), cross terms included; the costs at many points at
     once (on threads, each point's blocks in turn) are the residuals' own, bit for bit."""

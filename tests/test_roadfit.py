@@ -194,7 +194,7 @@ def test_noise_free_recovery_and_the_road(data):
     assert np.isclose(x[1] - x[0], rr.speed / FS)
 
 
-def test_search_costs_on_thread_slices_equal_one_batch(data, monkeypatch):
+def test_search_costs_on_thread_slices_equal_one_batch(data, monkeypatch, both_cores):
     """The search's population cut into slices, one per thread (model.batch.thread_map_rows): the same
     costs, bit for bit, as one batch; on one thread a plain call."""
     import numba

@@ -197,7 +197,7 @@ def test_the_road_fit_names_an_undeclared_coupling(tmp_path, case):
     assert "`[channels] axle_az_fl = { ..., highpass = 0.5 }`" in hints[0]["message"]
 
 
-def test_the_road_fit_hint_trials_run_side_by_side_and_name_the_same_on_one_or_two_cores(tmp_path):
+def test_the_road_fit_hint_trials_run_side_by_side_and_name_the_same_on_one_or_two_cores(tmp_path, both_cores):
     """The road fit's coupling trials (sensor_check.road_coupling_hints: the declared chains and 24 trial
     high-passes, each a road fit of every run) are independent and run on as many threads as the kernel has
     (rideid.model.batch.thread_map); with one (rideid.model.backend.one_thread) one after the other. Two of the

@@ -98,7 +98,7 @@ def _curve_dataset(tmp_path):
     return rideid.load_dataset(tmp_path / "ds")
 
 
-def test_two_candidate_models_on_threads_equal_one_after_the_other(tmp_path):
+def test_two_candidate_models_on_threads_equal_one_after_the_other(tmp_path, both_cores):
     """Two curve models (with and without tire damping) polished from one cost function's simulator on two
     threads give bit for bit the numbers of the same fits one after the other. (Before the simulator was a
     value the polish pinned the shared simulator's sub-steps, and a neighbour's pin leaked into the other
