@@ -31,7 +31,8 @@ demo: $(STAMP)
 # idle cores; 5.2 minutes (4.3 the tests, 1029 of them: the problem's blocks, the model choice's screen, the road
 # runs' verdict and the both-cores tests included) on a fresh clone, the cores otherwise idle; it takes longer when
 # other jobs share the cores, and in the machine's slow hours (1107 tests: 6.9 minutes of them on 2026-12-01,
-# 6.2 with the longest tests started first, docs/performance.md)
+# 6.2 with the longest tests started first, docs/performance.md); 1113 tests on a fresh clone of two idle cores:
+# 5:59, then 5:07 with each worker's rideid on one thread (tests/conftest.py) and the kernels compiled once
 test: $(STAMP)
 	$(PY) -m ruff check src tests benchmarks
 	env -u PYTHONDONTWRITEBYTECODE $(PY) -m pytest -q -n auto
