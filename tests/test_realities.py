@@ -270,6 +270,13 @@ def test_a_gross_first_fit_that_the_powertrain_mends_on_the_tracks_as_built(tmp_
     assert rows["I_p"]["status"] == "NOT DETERMINED" and rows["zeta_pp"]["note"].startswith("the data do not fix it")
     assert any(n.startswith("I_p, zeta_pp: not determined") for n in hidden.frequency_response().notes)
     assert rideid.score(hidden, truth)["parameters"]["I_p"]["status"] == "not determined"
+    # a parameter whose error bar holds only with a not-determined one at its bound (data seed 2 of this case):
+    # said beside it in the terminal and the report
+    from rideid.estimate.assess.details import conditional_note
+    cond = dataclasses.replace(hidden, details={**hidden.details, "x_p": {
+        **hidden.details["x_p"], "conditional_on": ["I_p"], "note": conditional_note(["I_p"])}})
+    assert "CONDITIONAL: on I_p at a search bound (WARNING below)" in " ".join(_summary_table(cond).split())
+    assert {p["name"]: p for p in parameter_rows(cond)}["x_p"]["note"].startswith("its error bar holds only with I_p")
     # the report's model section (it raised on these candidates before they carried their estimates): the three by
     # their tracks, the one kept marked, each parameter's value per candidate, the first fit's sentence
     from rideid.report.estimate_sections import model_rows

@@ -400,3 +400,44 @@ def test_a_hessian_direction_below_its_rounding_noise_leaves_its_parameters_not_
     tight.vbounds = (np.full(4, 0.3 - 2e-3), np.full(4, 10.0))
     H3, kept, rec3 = remeasured(H, delta, step, along, functools.partial(_Problem.along, tight, v, step=step))
     assert rec3 == [] and kept.not_determined[2:].all()
+
+
+def test_a_direction_not_determined_at_a_search_bound_makes_its_groups_error_bars_conditional():
+    """I_p not determined and at its search bound (data seed 2 of the built-in car with every reality: I_p 1 kg m^2,
+    f_pp 6.4 Hz against 12 and 13, and x_p, zeta_pb 3.9 and 4.0 of their error bars off): the powertrain's other
+    free parameters are marked ``conditional_on`` I_p with a note, the sentence names them, and nothing else is
+    marked; the same direction inside its bounds marks nothing."""
+    import rideid
+    from rideid.estimate.assess.details import not_determined, unresolved_sentence
+    from rideid.model.params import POWERTRAIN_NAMES
+    sc = rideid.default_scenario()
+    space = rideid.ParameterSpace(sc.known, sc.geometry, extensions=("powertrain",))
+    truth = {**sc.truth, "m_p": 180.0, "x_p": 1.2, "I_p": 12.0, "f_pb": 10.5, "zeta_pb": 0.1, "f_pp": 13.0,
+             "zeta_pp": 0.1}
+    lo, hi = space.bounds[:, 0], space.bounds[:, 1]
+
+    def details(ip):
+        out = {}
+        for j, n in enumerate(space.names):
+            v = ip if n == "I_p" else truth[n]
+            out[n] = {"value": v, "lower": float(lo[j]), "upper": float(hi[j]), "fixed": False, "derived": False,
+                      "std": 0.01 * v, "std_robust": 0.01 * v, "std_total": 0.01 * v}
+        return out
+
+    unres = {"directions": [{"curvature": -0.85, "noise": 0.44, "along": {"zeta_pp": 0.95, "I_p": 0.31}}],
+             "not_determined": ["I_p", "zeta_pp"], "curvature_noise": 2.0}
+    x = np.array([truth[n] for n in space.names])
+    at = details(float(lo[space.names.index("I_p")]))
+    assert not_determined(at, space, x, unres) == ["I_p", "zeta_pp"]
+    coupled = [n for n in POWERTRAIN_NAMES if n not in ("I_p", "zeta_pp")]
+    assert unres["at_bound"] == ["I_p"] and unres["conditional"] == coupled
+    assert all(at[n]["conditional_on"] == ["I_p"] and at[n]["std_robust"] is not None
+               and at[n]["note"].startswith("its error bar holds only with I_p at the search bound") for n in coupled)
+    assert not any("conditional_on" in at[n] for n in space.names if n not in coupled)
+    assert unresolved_sentence(unres).endswith(
+        "; I_p ended at a search bound, so that estimate is the bound's, not the data's, and m_p, x_p, f_pb, "
+        "zeta_pb, f_pp, fitted around it, may be off by several of their error bars (measured: 4 of them)")
+    inside = {k: v for k, v in unres.items() if k not in ("at_bound", "conditional")}
+    free = details(12.0)
+    assert not_determined(free, space, x, inside) == ["I_p", "zeta_pp"]
+    assert "at_bound" not in inside and not any("conditional_on" in d for d in free.values())

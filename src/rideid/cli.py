@@ -312,6 +312,8 @@ def _summary_table(res) -> str:
             note = "AT A SEARCH BOUND: set by the bound, not the data"
         elif d.get("determined") is False:
             note = "NOT DETERMINED: the data do not fix it, no error bar (WARNING below)"
+        elif d.get("conditional_on"):
+            note = f"CONDITIONAL: on {', '.join(d['conditional_on'])} at a search bound (WARNING below)"
         elif flat := rideid.error_bar_note(shape, n):
             note = flat + " (WARNING below)"
         std = "" if d.get("std") in (None, 0.0) else f"{d['std']:.3g}"

@@ -1057,7 +1057,8 @@ def parameter_rows(result) -> list:
                                                        else "estimated")),
             # a flat valley of the cost (rideid.estimate.assess.shape): said beside the number, not only above it
             "note": table_note(shape, n) or ("the data do not fix it: no error bar (the summary's Error bars' shape "
-                                             "says why)" if d.get("determined") is False else ""),
+                                             "says why)" if d.get("determined") is False else
+                                             d.get("note", "") if d.get("conditional_on") else ""),
         })
     return params
 
