@@ -277,6 +277,9 @@ def test_a_gross_first_fit_that_the_powertrain_mends_on_the_tracks_as_built(tmp_
         **hidden.details["x_p"], "conditional_on": ["I_p"], "note": conditional_note(["I_p"])}})
     assert "CONDITIONAL: on I_p at a search bound (WARNING below)" in " ".join(_summary_table(cond).split())
     assert {p["name"]: p for p in parameter_rows(cond)}["x_p"]["note"].startswith("its error bar holds only with I_p")
+    from rideid.report.html import _estimates_lines
+    said = dict((label, text) for label, text, _ in _estimates_lines(cond, {"params": parameter_rows(cond)}))
+    assert said["Estimates"].endswith("; CONDITIONAL (on a parameter at its bound): x_p")
     # the report's model section (it raised on these candidates before they carried their estimates): the three by
     # their tracks, the one kept marked, each parameter's value per candidate, the first fit's sentence
     from rideid.report.estimate_sections import model_rows

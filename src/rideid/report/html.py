@@ -981,6 +981,9 @@ def _estimates_lines(result, context) -> list:
         undetermined = [p["name"] for p in context["params"] if p["status"] == "NOT DETERMINED"]
         if undetermined:
             text += f"; NOT DETERMINED (no error bar): {', '.join(undetermined)}"
+        conditional = [n for n, d in (getattr(result, "details", None) or {}).items() if d.get("conditional_on")]
+        if conditional:
+            text += f"; CONDITIONAL (on a parameter at its bound): {', '.join(conditional)}"
         lines.append(("Estimates", text, "estimates"))
     tracks = getattr(result, "tracks", None) or {}
     built = {tid: rec for tid, rec in tracks.items() if "amplitude_factor" in rec}
