@@ -27,12 +27,12 @@ if os.environ.get("PYTEST_XDIST_WORKER"):
 def both_cores():
     """The kernel's thread count in this thread as on a user's two cores (the test workers run on one: above)."""
     import numba
+
+    from rideid.model.backend import kernel_threads
     if numba.config.NUMBA_NUM_THREADS < 2:
         pytest.skip("one core: nothing runs side by side")
-    before = numba.get_num_threads()
-    numba.set_num_threads(2)
-    yield numba.get_num_threads()
-    numba.set_num_threads(before)
+    with kernel_threads(2):
+        yield numba.get_num_threads()
 
 
 def pytest_addoption(parser):

@@ -99,18 +99,24 @@ def threads() -> int:
 
 
 @contextlib.contextmanager
-def one_thread():
-    """The kernels (Numba) limited to one thread, restored afterwards (a study's worker process)."""
+def kernel_threads(n: int):
+    """The kernels (Numba) on ``n`` threads in the calling thread (at most Numba's ``NUMBA_NUM_THREADS``), restored
+    afterwards; nothing without Numba."""
     nb = _numba()
     if nb is None:
         yield
         return
     before = nb.get_num_threads()
-    nb.set_num_threads(1)
+    nb.set_num_threads(n)
     try:
         yield
     finally:
         nb.set_num_threads(before)
+
+
+def one_thread():
+    """The kernels (Numba) limited to one thread, restored afterwards (a study's worker process)."""
+    return kernel_threads(1)
 
 
 def compiled_cold(name: str) -> bool:
@@ -147,4 +153,4 @@ def compile_kernels() -> float:
 
 
 __all__ = ["CHOICES", "DISPATCHERS", "ENV", "KERNELS", "compile_kernels", "compiled_available", "compiled_cold",
-           "module", "one_thread", "runs_numpy", "threads", "use_numpy"]
+           "kernel_threads", "module", "one_thread", "runs_numpy", "threads", "use_numpy"]
