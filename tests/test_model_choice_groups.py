@@ -253,6 +253,10 @@ def test_a_gross_stop_with_no_screen_passed_says_how_to_fit_an_unseen_group_anyw
     assert ("(they read low there: bump_stops 4.17 against 13.8; powertrain 13.8 against 48.4; damper_curves 24.7 "
             "against 124)") in out
     assert "for an engine on mounts `--model anti_roll_bars,tire_damping,powertrain`" in out
+    # no powertrain screened (a rival that does not apply): no --model to name it
+    alone = first_fit.stopped(Fit(), gross, screens[1:], None, None).adequacy["advice"]
+    assert "damper_curves 24.7 against 124" in alone and "--model" not in alone
+    assert alone.endswith("name the groups it has to fit them anyway (docs/model-choice.md).")
     rival = tuple(lin + ["powertrain"])
     assert first_fit.stopped(Fit(), gross, screens, rival, Fit()).adequacy["advice"] == gross["advice"]
     assert first_fit.stopped(Fit(), gross, screens[3:], None, None).adequacy["advice"] == gross["advice"]

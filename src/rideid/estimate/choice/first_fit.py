@@ -95,10 +95,11 @@ def unseen(full, screens: list) -> str:
     linear = list(full.model.get("extensions", [])) if full.model else []
     said = "; ".join(f"{' + '.join(g for g in s['extensions'] if g not in linear)} {s['score']:.3g} against "
                      f"{s['threshold']:.3g}" for s in sorted(rows, key=lambda s: -s["score"] / s["threshold"]))
-    example = ",".join(linear + ["powertrain"])
+    engine = any("powertrain" in s["extensions"] for s in rows)
+    example = f", for an engine on mounts `--model {','.join(linear + ['powertrain'])}`" if engine else ""
     return (f" If the set-up is right, the car may have what the screens could not see at a fit this far from any "
-            f"car's (they read low there: {said}): name the groups it has to fit them anyway, for an engine on "
-            f"mounts `--model {example}` (docs/model-choice.md).")
+            f"car's (they read low there: {said}): name the groups it has to fit them anyway{example} "
+            "(docs/model-choice.md).")
 
 
 def stopped(full, gross: dict, screens: list, rival, rival_fit):
