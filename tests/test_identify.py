@@ -646,11 +646,12 @@ def test_the_polish_ends_when_it_no_longer_moves_the_car_and_hands_a_crawl_to_tr
     assert "Gauss-Newton step" in info["message"] and "Gauss-Newton step" not in info_own["message"]
 
 
-def test_a_gauss_newton_steps_length_is_the_same_from_the_gram_matrix_and_the_qr():
-    """rideid.estimate.fit.polish.gauss_newton_length: from the equilibrated Gram matrix (columns four decades apart,
-    a column of zeros left out) the length of a QR of ``[J | f]`` to 1e-10; a Jacobian whose columns' condition
-    number is above 1e5 (two columns 1e-7 apart: the Gram matrix's smallest eigenvalue below setting
-    identify.gram_rcond of its largest) is measured by the QR, and the length is right there too."""
+def test_a_gauss_newton_steps_length_is_the_residuals_projection_on_the_columns_however_conditioned():
+    """rideid.estimate.fit.polish.gauss_newton_length, from the reduction of ``[J | f]`` it shares with dogbox's
+    step: the length of ``f``'s projection on ``J``'s columns to 1e-10 (columns four decades apart, a column of
+    zeros left out), and to 1e-6 where the columns' condition number is above 1e5 (two columns 1e-7 apart: the
+    Gram matrix's smallest eigenvalue below setting identify.gram_rcond of its largest, where a length read from
+    the normal equations would lose what the stopping rule reads)."""
     from rideid.estimate.fit.polish import gauss_newton_length
     from rideid.settings import defaults
     rng = np.random.default_rng(11)

@@ -262,3 +262,28 @@ def test_the_damped_normal_equations_by_cholesky_are_the_eigen_solution():
     assert wn[0] < -1e-6
     expect = Vn @ ((Vn.T @ (b / dn)) / (np.clip(wn, 0, None) + 1e-11 * wn[-1])) / dn
     np.testing.assert_allclose(roadfit._damped_factor(Gn)(b), expect, rtol=1e-9)
+
+
+def test_the_lead_in_gram_is_the_normal_matrix_of_its_columns():
+    """roadfit.lead_in_gram (the rear lead-in's Toeplitz blocks read as strided views of the lags' sums) is the real
+    normal matrix of the stacked columns ``[g, aL e_n, aR e_n]`` (each lead-in sample's column its channel's
+    ``a`` times ``e^{-i w n h}``), built here entry by entry, to 1e-12; and its right-hand side the same."""
+    rng = np.random.default_rng(4)
+    K, c, nb, D = 37, 3, 5, 6
+
+    def cplx(*shape):
+        return rng.standard_normal(shape) + 1j * rng.standard_normal(shape)
+
+    g, aL, aR, r = cplx(K, c, nb), cplx(K, c), cplx(K, c), cplx(K, c)
+    wh = np.sort(rng.uniform(0.01, 1.5, K))
+    G, b, en = roadfit.lead_in_normal_equations(g, aL, aR, r, wh, D)
+    e = np.exp(-1j * np.outer(wh, np.arange(D)))
+    cols = ([g[:, :, j] for j in range(nb)] + [aL * e[:, n, None] for n in range(D)]
+            + [aR * e[:, n, None] for n in range(D)])
+    A = np.stack([np.concatenate([x.real.ravel(), x.imag.ravel()]) for x in cols], axis=1)
+    want = A.T @ A
+    np.testing.assert_allclose(G, want, rtol=0, atol=1e-12 * np.abs(want).max())
+    np.testing.assert_allclose(b, A.T @ np.concatenate([r.real.ravel(), r.imag.ravel()]), rtol=1e-12)
+    np.testing.assert_allclose(en, e, rtol=1e-15)
+    assert not roadfit._toeplitz(np.arange(5.0), 3).flags.writeable
+    np.testing.assert_array_equal(roadfit._toeplitz(np.arange(5.0), 3), [[2, 1, 0], [3, 2, 1], [4, 3, 2]])

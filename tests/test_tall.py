@@ -101,6 +101,91 @@ def test_a_jacobian_of_local_columns_is_reduced_run_by_run():
     assert tall._local_groups(b) is None and np.allclose(np.tril(tall_r(b), -1), 0)
 
 
+def test_the_right_hand_side_is_reduced_with_the_matrix_without_forming_them_together():
+    """tall_r(a, b) is the reduction of ``[a | b]`` (never formed): the same matrix as tall_r of the two side by side,
+    on a dense tall matrix (the blocked triangle) and on one of local columns (the block-by-block form), and
+    ``[a | b]`` itself where it is not tall."""
+    rng = np.random.default_rng(5)
+    local = _polish_like(rng)
+    dense, f = _tall(rng, 3 * BLOCK_ROWS + 17, 30)
+    for a, b in ((local[:, :-1], local[:, -1]), (dense, f)):
+        np.testing.assert_array_equal(tall_r(a, b), tall_r(np.column_stack([a, b])))
+    wide = rng.standard_normal((40, 12))
+    np.testing.assert_array_equal(tall_r(wide, wide[:, 0]), np.column_stack([wide, wide[:, 0]]))
+
+
+def test_a_reduction_of_some_columns_is_the_one_of_their_copy_to_the_last_bit():
+    """tall_r(a, b, cols) (without copying ``a[:, cols]``) is tall_r(a[:, cols], b) to the last bit, on a matrix of
+    local columns (some of them left out) and on a dense one."""
+    rng = np.random.default_rng(9)
+    local = _polish_like(rng)
+    a, b = local[:, :-1], local[:, -1]
+    for cols in (np.delete(np.arange(a.shape[1]), [3, 17, 40]), np.arange(a.shape[1])):
+        np.testing.assert_array_equal(tall_r(a, b, cols), tall_r(a[:, cols], b))
+    dense, f = _tall(rng, 3 * BLOCK_ROWS + 17, 30)
+    cols = np.delete(np.arange(30), [0, 29])
+    np.testing.assert_array_equal(tall_r(dense, f, cols), tall_r(dense[:, cols], f))
+    np.testing.assert_array_equal(tall_r(dense, None, cols), tall_r(dense[:, cols]))
+
+
+def test_dogboxs_step_takes_the_reduction_the_watch_kept_and_only_that_one(monkeypatch):
+    """rideid.estimate.fit.tall.reduced keeps ``[J | f]``'s reduction on the thread inside tall_steps; tall_lstsq of
+    ``J`` and ``-f`` (dogbox's step, every unknown free) takes it without reducing again, with the same numbers
+    as a reduction afresh to the last bit; a step with fewer columns (unknowns held on a bound), another right-hand
+    side or another matrix (a row the check reads, or one it does not) reduces its own; nothing is kept after
+    tall_steps or outside it."""
+    from rideid.estimate.fit import tall
+    rng = np.random.default_rng(7)
+    a = _polish_like(rng)
+    J, f = a[:, :-1].copy(), a[:, -1].copy()
+    J[:, 20] = 0.0
+    count = {"n": 0}
+    real = tall.tall_r
+    monkeypatch.setattr(tall, "tall_r", lambda *x, **k: (count.__setitem__("n", count["n"] + 1), real(*x, **k))[1])
+    fresh = tall_lstsq(J, -f, rcond=-1)
+    tall.reduced(J, f)
+    assert getattr(tall._kept, "value", None) is None  # outside tall_steps: nothing kept
+    with tall_steps():
+        tall.reduced(J, f)
+        assert count["n"] == 3
+        kept = tall_lstsq(J, -f, rcond=-1)
+        assert count["n"] == 3  # the kept one
+        assert all(np.array_equal(k, r) for k, r in zip(kept, fresh))
+        want = np.linalg.lstsq(J, -f, rcond=np.finfo(float).eps * J.shape[0])
+        np.testing.assert_allclose(kept[0], want[0], rtol=0, atol=1e-10 * np.abs(want[0]).max())
+        assert kept[2] == want[2] == J.shape[1] - 1  # the column of zeros
+        tall_lstsq(np.delete(J, 3, axis=1), -f, rcond=-1)
+        g = f.copy()
+        g[0] += 1.0
+        tall_lstsq(J, -g, rcond=-1)
+        for row in (5 * tall.CHECK_EVERY, 5 * tall.CHECK_EVERY + 1):  # a row the check reads, and one it does not
+            moved = J.copy()
+            moved[row, 2] += 1.0
+            tall_lstsq(moved, -f, rcond=-1)
+        assert count["n"] == 7  # each reduced its own
+        cols = np.delete(np.arange(J.shape[1]), 3)  # an unknown held on its bound: the columns dogbox takes
+        tall.reduced(J, f, cols)
+        held = tall_lstsq(J[:, cols], -f, rcond=-1)
+        assert count["n"] == 8
+        tall._kept.value = None
+        assert all(np.array_equal(k, r) for k, r in zip(held, tall_lstsq(J[:, cols], -f, rcond=-1)))
+    assert tall._kept.value is None
+
+
+def test_the_jacobians_scale_is_scipys():
+    """rideid.estimate.fit.tall.jac_scale (without the squares' copy) is SciPy's compute_jac_scale to rounding,
+    a column of zeros scaled 1 at the start and the old scale kept where larger."""
+    from scipy.optimize._lsq.common import compute_jac_scale
+
+    from rideid.estimate.fit.tall import jac_scale
+    rng = np.random.default_rng(2)
+    J = rng.standard_normal((5000, 9)) * np.logspace(-3, 3, 9)
+    J[:, 4] = 0.0
+    for old in (None, np.full(9, 50.0)):
+        for got, want in zip(jac_scale(J, old), compute_jac_scale(J, old)):
+            np.testing.assert_allclose(got, want, rtol=1e-13)
+
+
 def _exponential_fit(method):
     """A bounded exponential-and-sine fit of 40 000 residuals (the amplitude's bound below its true value) and the
     least squares' options with ``method``."""
@@ -130,6 +215,50 @@ def test_dogbox_reaches_the_same_fit_and_scipy_is_left_as_it_was():
     assert plain.x[2] == reduced.x[2] == 0.45  # the amplitude (0.5 in the data) held on its bound
     np.testing.assert_allclose(reduced.x, plain.x, rtol=1e-10)
     np.testing.assert_allclose(reduced.x[[0, 1, 3]], [2.0, 0.3, 1.7], rtol=0.05)
+
+
+def test_the_polishs_watch_hands_dogbox_its_reductions_and_the_fit_is_the_same(monkeypatch):
+    """The polish's watch (rideid.estimate.fit.polish.Progress) keeps each point's reduction of ``[J | f]``; dogbox's
+    step from that point takes it (counted: every step after the first), on all four unknowns while they are free
+    and on three while the amplitude is held on its bound (the watch reduces the columns dogbox will take); with
+    the watch's reductions taken or every step reduced afresh the fit is the same to the last bit, and SciPy's own
+    unwatched fit to 1e-7 (the watch ends it once a Gauss-Newton step would move it by less than 0.05 of its
+    standard errors)."""
+    from rideid.estimate.fit import tall
+    from rideid.estimate.fit.polish import Progress
+    f, kw = _exponential_fit("dogbox")
+    lo = np.array([0, 0, 0, 1.0])
+    t = np.linspace(0, 10, 40000)
+    memo = {}
+
+    def jac(p):
+        J = np.column_stack([np.exp(-p[1] * t), -p[0] * t * np.exp(-p[1] * t), np.sin(p[3] * t),
+                             p[2] * t * np.cos(p[3] * t)])
+        memo["J"] = (p.copy(), J)
+        return J
+
+    def at(p):
+        return memo["J"][1] if np.array_equal(memo["J"][0], p) else None
+
+    hits, real, afresh = [], tall._recall, [False]
+    monkeypatch.setattr(tall, "_recall", lambda a, b: (
+        hits.append((a.shape[1], (r := None if afresh[0] else real(a, b)) is not None)), r)[1])
+    for top, amplitude in ((0.6, 0.5), (0.45, 0.45)):  # the amplitude (0.5 in the data) free, then held on its bound
+        kw["bounds"] = ([0, 0, 0, 1.0], [5, 2, top, 3])
+        fits, seen = [], []
+        for afresh[0] in (False, True):
+            hits.clear()
+            with tall_steps():
+                fits.append(least_squares(f, [1.5, 0.2, 0.3, 1.65], jac=jac, **kw, callback=Progress(
+                    4, crawl=False, jacobian=at, bounds=(lo, np.array([5, 2, top, 3])))))
+            seen.append(list(hits))
+        free = 4 if top > amplitude else 3
+        assert len(seen[0]) >= 3 and seen[0][0] == (4, False) and set(seen[0][1:]) == {(free, True)}, seen[0]
+        assert not any(took for _, took in seen[1])
+        assert np.array_equal(fits[0].x, fits[1].x)
+        assert fits[0].x[2] == pytest.approx(amplitude, rel=0.02)
+        plain = least_squares(f, [1.5, 0.2, 0.3, 1.65], jac=jac, **kw)
+        np.testing.assert_allclose(fits[0].x, plain.x, rtol=1e-7)
 
 
 @pytest.mark.parametrize("m, n, rank_deficient", [(3 * BLOCK_ROWS + 17, 30, False), (2 * BLOCK_ROWS + 3, 40, True),

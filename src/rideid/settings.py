@@ -98,6 +98,7 @@ NOT_SETTINGS: dict[str, str] = {
     "tall.LOCAL_MIN_COLUMNS": "when a QR looks for columns local to a few rows: the same R^T R either way (speed only)",
     "tall.ROW_BLOCK": "the rows per block when looking for local columns: the same R^T R either way (speed only)",
     "tall._users": "how many threads are inside tall_steps (state, not a value)",
+    "tall.CHECK_EVERY": "the rows read to check a kept reduction is the step's matrix: checked either way (speed only)",
     "identify.DEFAULT_POPULATION": "an argument's default (rideid.identify population=, --population; SPEC §5)",
     "identify.DEFAULT_GENERATIONS": "an argument's default (rideid.identify generations=, --generations; SPEC §5)",
     "cost.BUMP_BOUNDS": "the bump stops' default search bounds: a model default, [bounds] overrides it",

@@ -24,6 +24,7 @@ from scipy.linalg import lapack
 
 from scipy.optimize._lsq import dogbox as _dogbox
 from scipy.optimize._lsq import trf as _trf
+from scipy.optimize._lsq.common import compute_jac_scale as _compute_jac_scale
 
 from ...settings import defaults
 
@@ -36,11 +37,15 @@ TALL = 4
 BLOCK_ROWS = 16384
 
 
-def tall_r(a) -> np.ndarray:
+def tall_r(a, b=None, cols=None) -> np.ndarray:
     """The triangle ``R`` ``(n, n)`` of a QR of ``a`` ``(m, n)`` when ``a`` is tall (else ``a`` itself): the same
     singular values and right singular vectors, ``R^T R = a^T a``. A blocked QR (each block of
     :data:`BLOCK_ROWS` rows reduced to its triangle, then the stacked triangles once): the blocks stay in cache,
     2.3x quicker than one QR of it all, the triangle the same up to rows' signs (1e-13 relative).
+
+    ``b`` ``(m,)``: the same of ``[a | b]``, never formed (a copy of a 100 000 x 300 Jacobian took longer than its
+    reduction: 0.2 s against 0.13 s); each block of rows takes its part of ``b`` as it is read. ``cols`` (indices,
+    ascending): the same of ``a[:, cols]`` (without its copy), to the last bit.
 
     A matrix with many columns local to a few rows (each run's start and distance corrections: nonzero on that
     run's residuals and their priors only) is reduced group by group (:func:`_block_angular_r`); its ``R`` is then
@@ -48,22 +53,42 @@ def tall_r(a) -> np.ndarray:
     last column always among them), put back in ``a``'s column order: ``R^T R = a^T a`` still, its last row the last
     column's alone (the residual of a right-hand side there), but not triangular."""
     a = np.asarray(a, dtype=float)
-    m, n = a.shape
+    b = None if b is None else np.asarray(b, dtype=float)
+    if cols is not None and len(cols) == a.shape[1]:
+        cols = None
+    cmap = None if cols is None else np.asarray(cols, dtype=int)
+    m, n = a.shape[0], (a.shape[1] if cmap is None else cmap.size) + (b is not None)
     if not n or m < TALL * n:
-        return a
+        return _take(a, b, slice(None), cmap=cmap)
     if n >= LOCAL_MIN_COLUMNS:
-        r = _block_angular_r(a)
+        r = _block_angular_r(a, b, cmap)
         if r is not None:
             return r
-    return _dense_r(a)
+    return _dense_r(a, b, cmap)
 
 
-def _dense_r(a) -> np.ndarray:
-    """:func:`tall_r` of ``a`` (at least as many rows as columns) without regard to its zeros."""
-    if a.shape[0] <= BLOCK_ROWS:
-        return np.linalg.qr(a, mode="r")
-    return np.linalg.qr(np.vstack([np.linalg.qr(a[i:i + BLOCK_ROWS], mode="r")
-                                   for i in range(0, a.shape[0], BLOCK_ROWS)]), mode="r")
+def _take(a, b, rows, cols=None, cmap=None) -> np.ndarray:
+    """Rows ``rows`` (a slice or indices) of ``[a[:, cmap] | b]`` (``b`` None: of ``a[:, cmap]``; ``cmap`` None: of
+    every column of ``a``), at columns ``cols`` (indices into that matrix, ascending where ``b``'s is among them;
+    None: every column)."""
+    if cols is None:
+        part = a[rows] if cmap is None else a[rows][:, cmap]
+        return part if b is None else np.column_stack([part, b[rows]])
+    cols = np.asarray(cols)
+    with_b = b is not None and cols.size and cols[-1] == (a.shape[1] if cmap is None else cmap.size)
+    ac = cols[:-1] if with_b else cols
+    ac = ac if cmap is None else cmap[ac]
+    part = a[np.ix_(np.arange(a.shape[0])[rows] if isinstance(rows, slice) else rows, ac)]
+    return np.column_stack([part, b[rows]]) if with_b else part
+
+
+def _dense_r(a, b=None, cmap=None) -> np.ndarray:
+    """:func:`tall_r` of ``[a[:, cmap] | b]`` (at least as many rows as columns) without regard to its zeros."""
+    m = a.shape[0]
+    if m <= BLOCK_ROWS:
+        return np.linalg.qr(_take(a, b, slice(None), cmap=cmap), mode="r")
+    return np.linalg.qr(np.vstack([np.linalg.qr(_take(a, b, slice(i, i + BLOCK_ROWS), cmap=cmap), mode="r")
+                                   for i in range(0, m, BLOCK_ROWS)]), mode="r")
 
 
 #: rows per block when looking for local columns (:func:`_local_groups`)
@@ -74,22 +99,29 @@ ROW_BLOCK = 256
 LOCAL_MIN_COLUMNS = 64
 
 
-def _local_groups(a) -> tuple[list, np.ndarray] | None:
+def _local_groups(a, b=None, cmap=None) -> tuple[list, np.ndarray] | None:
     """The columns of ``a`` nonzero in fewer than half its blocks of :data:`ROW_BLOCK` rows, grouped with the rows
     they touch (two such columns that share a row share a group; the rows in any order, since a QR's
     ``R^T R = a^T a`` does not depend on it): ``([(rows, columns)], the other columns)``, the last column always
-    among the others; None when fewer than half the columns are local, or a group has fewer rows than its columns
-    and the others. The polish's distance corrections are each nonzero on a stretch of their run's residuals and
-    on a prior row after all the runs'. Each column's rows are read in the blocks it touches only (0.1 s at
-    100 000 x 300, against 0.5 s for the nonzeros of it all)."""
+    among the others (``b``'s, when given, as column ``n`` of ``[a | b]``); None when fewer than half the columns
+    are local, or a group has fewer rows than its columns and the others. The polish's distance corrections are
+    each nonzero on a stretch of their run's residuals and on a prior row after all the runs'. Each column's rows
+    are read in the blocks it touches only (0.1 s at 100 000 x 300, against 0.5 s for the nonzeros of it all).
+    ``cmap``: of ``a[:, cmap]`` (the columns numbered as there)."""
     m, n = a.shape
     B = ROW_BLOCK
     whole = m - m % B
     touched = (a[:whole] != 0).reshape(-1, B, n).any(axis=1)  # along the rows' memory order: 3 ms at 100 000 x 300
     if whole < m:
         touched = np.vstack([touched, (a[whole:] != 0).any(axis=0)])
+    if cmap is not None:
+        touched, n = touched[:, cmap], cmap.size
     local = touched.any(axis=0) & (touched.sum(axis=0) < touched.shape[0] // 2)
-    local[-1] = False
+    if b is None:
+        local[-1] = False
+    else:
+        local = np.append(local, False)
+        n += 1
     if local.sum() < n // 2:
         return None
     root = list(range(n))
@@ -103,8 +135,8 @@ def _local_groups(a) -> tuple[list, np.ndarray] | None:
     cols = np.flatnonzero(local)
     owner = np.full(m, -1)
     for j in cols:
-        rows = np.concatenate([np.arange(b * B, min(b * B + B, m)) for b in np.flatnonzero(touched[:, j])])
-        rows = rows[a[rows, j] != 0]
+        rows = np.concatenate([np.arange(k * B, min(k * B + B, m)) for k in np.flatnonzero(touched[:, j])])
+        rows = rows[a[rows, j if cmap is None else cmap[j]] != 0]
         prev = owner[rows]
         prev = prev[prev >= 0]
         for g in set(prev[np.r_[True, prev[1:] != prev[:-1]]].tolist()) if prev.size else ():  # owners come in runs
@@ -120,31 +152,31 @@ def _local_groups(a) -> tuple[list, np.ndarray] | None:
     return groups, others
 
 
-def _block_angular_r(a) -> np.ndarray | None:
-    """:func:`tall_r` of a tall ``a`` whose columns are mostly local to groups of rows (:func:`_local_groups`; None
-    when they are not): each group's rows reduced on its own columns and the others (a QR of
+def _block_angular_r(a, b=None, cmap=None) -> np.ndarray | None:
+    """:func:`tall_r` of a tall ``[a | b]`` whose columns are mostly local to groups of rows (:func:`_local_groups`;
+    None when they are not): each group's rows reduced on its own columns and the others (a QR of
     ``rows x (local + others)``), the others' remaining rows of every group stacked with the rows outside any group
     and reduced once. On the polish of the built-in car's ten runs with every reality (105 000 x 297: the car's
     16, ten starts, 271 distance corrections) 0.26 s against 0.80 s for the blocked QR of it all, ``R^T R`` the
     same to 1e-17 (tests/test_tall.py)."""
-    found = _local_groups(a)
+    found = _local_groups(a, b, cmap)
     if found is None:
         return None
     groups, others = found
-    m, n = a.shape
+    m, n = a.shape[0], (a.shape[1] if cmap is None else cmap.size) + (b is not None)
     k = others.size
     order = np.concatenate([c for _, c in groups] + [others])
     R = np.zeros((n, n))
     rest, row, covered = [], 0, np.zeros(m, dtype=bool)
     for rows, cols in groups:
         c = cols.size
-        r = _dense_r(a[np.ix_(rows, np.concatenate([cols, others]))])
+        r = _dense_r(_take(a, b, rows, np.concatenate([cols, others]), cmap))
         R[row:row + c, row:row + c] = r[:c, :c]
         R[row:row + c, n - k:] = r[:c, c:]
         rest.append(r[c:, c:])
         row += c
         covered[rows] = True
-    outside = a[np.ix_(np.flatnonzero(~covered), others)]
+    outside = _take(a, b, np.flatnonzero(~covered), others, cmap)
     if outside.shape[0]:
         rest.append(outside)
     R[n - k:, n - k:] = _dense_r(np.vstack(rest))[:k]
@@ -153,17 +185,64 @@ def _block_angular_r(a) -> np.ndarray | None:
     return out
 
 
+#: this thread's reduction of the last Jacobian and residuals the polish's watch looked at (:func:`reduced`), kept
+#: for the Gauss-Newton step SciPy's dogbox solves next from the same Jacobian (:func:`tall_lstsq`)
+_kept = threading.local()
+#: rows compared of a step's columns and the kept Jacobian's (every this many; :func:`_recall`)
+CHECK_EVERY = 97
+
+
+def reduced(J, f, cols=None) -> np.ndarray:
+    """:func:`tall_r` of ``[J[:, cols] | f]`` (``cols`` None: every column); inside :func:`tall_steps`, kept on this
+    thread, so that SciPy's dogbox's step from the same ``J`` and ``f`` on those columns takes it instead of
+    reducing them again (:func:`tall_lstsq`: the polish's watch and dogbox's step each reduced the same
+    105 000 x 297 matrix on the ten-run real test)."""
+    cols = np.arange(J.shape[1]) if cols is None else np.asarray(cols, dtype=int)
+    T = tall_r(J, f, cols)
+    if getattr(_inside, "depth", 0) and T.shape[0] == T.shape[1]:
+        _kept.value = (J, f, cols, T, _column_norms(J)[cols])
+    return T
+
+
+def _column_norms(a) -> np.ndarray:
+    return np.einsum("ij,ij->j", a, a)
+
+
+def _recall(a, b):
+    """The kept reduction of ``[J[:, cols] | f]`` (:func:`reduced`) as the one of ``[a | b]``, when ``a`` is
+    ``J[:, cols]`` and ``b`` is ``-f`` (dogbox's step), else None: ``[J[:, cols] | -f]``'s is ``T`` with its last
+    column negated, to the last bit, so the step is the one reduced afresh. Checked, not assumed: ``b`` against
+    ``-f`` exactly, the columns' count, ``a`` against those columns of ``J`` on every :data:`CHECK_EVERY`-th row
+    exactly and in every column's sum of squares (to 1e-12: a column that differs off the rows read; 15 ms at
+    105 000 x 297, against 0.13-0.2 s for the reduction)."""
+    kept = getattr(_kept, "value", None)
+    if kept is None:
+        return None
+    J, f, cols, T, norms = kept
+    if a.shape != (J.shape[0], cols.size) or b.shape != f.shape or not np.array_equal(b, -f):
+        return None
+    if (not np.array_equal(a[::CHECK_EVERY], J[::CHECK_EVERY][:, cols])
+            or not np.allclose(_column_norms(a), norms, rtol=1e-12, atol=0)):
+        return None
+    M = T.copy()
+    M[:, -1] *= -1.0
+    return M
+
+
 def tall_lstsq(a, b, rcond=None):
     """:func:`numpy.linalg.lstsq` of a tall ``a`` ``(m, n)`` and one right-hand side ``b`` ``(m,)``, reduced first:
     ``[R | c]`` the triangle of a QR of ``[a | b]``, then ``lstsq(R, c[:n], rcond)``, whose least-norm solution,
     rank and singular values are ``a``'s (``|a x - b|^2 = |R x - c|^2 + c_n^2``). Returns the same four items
     (the residual's squared norm only at full rank, as numpy). ``rcond`` None or negative (machine precision, as
-    dogbox asks) cuts at ``eps * m``. Other shapes go to numpy's own."""
+    dogbox asks) cuts at ``eps * m``. The reduction the polish's watch kept for this ``a`` and ``b`` is taken
+    (:func:`reduced`). Other shapes go to numpy's own."""
     a, b = np.asarray(a), np.asarray(b)
     m, n = a.shape if a.ndim == 2 else (0, 0)
-    if b.ndim != 1 or not n or m < TALL * n:
+    if b.ndim != 1 or not n or m < TALL * (n + 1):
         return np.linalg.lstsq(a, b, rcond=rcond)
-    r = tall_r(np.column_stack([a, b]))
+    r = _recall(a, b)
+    if r is None:
+        r = tall_r(a, b)
     if rcond is None or rcond < 0:
         # the singular values a full SVD puts at rounding level (eps * s_max) come out of the QR up to m * eps:
         # numpy's own default cut-off, eps * max(m, n), keeps a rank-deficient a rank-deficient
@@ -255,6 +334,21 @@ def tall_svd(a, full_matrices=True, **kw):
     return _ReducedU(blocks, top, u_r), s, vt
 
 
+def jac_scale(J, scale_inv_old=None):
+    """SciPy's ``compute_jac_scale`` of a dense ``J`` (``x_scale="jac"``: each column's norm, at least the last
+    one's; a column of zeros scaled 1 at the start) without the squares' temporary: ``np.sum(J**2, axis=0)`` wrote
+    a copy of the Jacobian each step (0.05-0.37 s at 105 000 x 297, against 0.015 s for the same sums by
+    :func:`numpy.einsum`; 12 s of the ten-run real test's polish)."""
+    if not isinstance(J, np.ndarray):
+        return _compute_jac_scale(J, scale_inv_old)
+    scale_inv = np.sqrt(np.einsum("ij,ij->j", J, J))
+    if scale_inv_old is None:
+        scale_inv[scale_inv == 0] = 1
+    else:
+        scale_inv = np.maximum(scale_inv, scale_inv_old)
+    return 1 / scale_inv, scale_inv
+
+
 _lock = threading.Lock()
 _users = [0]
 #: this thread's depth inside :func:`tall_steps` (the module attributes are SciPy's for every thread; a call from a
@@ -273,11 +367,14 @@ def _dispatch(own, name: str):
 
 @contextmanager
 def tall_steps():
-    """While inside, SciPy's ``dogbox`` solves its Gauss-Newton steps with :func:`tall_lstsq` and its ``trf`` takes
-    its SVDs from :func:`tall_svd` on this thread: the modules' attributes dispatch on the calling thread (another
-    thread's least squares at the same time takes SciPy's own), put back when the last thread leaves (counted).
-    Without those module attributes (a SciPy that no longer has them) nothing is changed."""
-    swaps = [(mod, name, new) for mod, name, new in ((_dogbox, "lstsq", "tall_lstsq"), (_trf, "svd", "tall_svd"))
+    """While inside, SciPy's ``dogbox`` solves its Gauss-Newton steps with :func:`tall_lstsq`, its ``trf`` takes
+    its SVDs from :func:`tall_svd`, and both their scales from :func:`jac_scale` on this thread: the modules'
+    attributes dispatch on the calling thread (another thread's least squares at the same time takes SciPy's
+    own), put back when the last thread leaves (counted). Without those module attributes (a SciPy that no longer
+    has them) nothing is changed."""
+    swaps = [(mod, name, new) for mod, name, new in ((_dogbox, "lstsq", "tall_lstsq"), (_trf, "svd", "tall_svd"),
+                                                     (_dogbox, "compute_jac_scale", "jac_scale"),
+                                                     (_trf, "compute_jac_scale", "jac_scale"))
              if hasattr(mod, name)]
     with _lock:
         if _users[0] == 0:
@@ -289,6 +386,8 @@ def tall_steps():
         yield
     finally:
         _inside.depth -= 1
+        if not _inside.depth:
+            _kept.value = None  # a Jacobian's worth of memory
         with _lock:
             _users[0] -= 1
             if _users[0] == 0:

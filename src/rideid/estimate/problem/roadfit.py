@@ -742,7 +742,6 @@ def lead_in_gram(g, aL, aR, wh, D: int, gr=None):
     G = np.zeros((nb + 2 * D, nb + 2 * D))
     G[:nb, :nb] = gr.T @ gr
     ph, en = _lead_in_phases(np.asarray(wh, dtype=float).tobytes(), D)
-    idx = np.arange(D)[:, None] - np.arange(D)[None, :] + (D - 1)
     gH = np.conj(np.swapaxes(g, 1, 2))                                                        # (K,nb,c)
     for j, a in enumerate((aL, aR)):
         sl = slice(nb + j * D, nb + (j + 1) * D)
@@ -750,8 +749,17 @@ def lead_in_gram(g, aL, aR, wh, D: int, gr=None):
         G[sl, :nb] = G[:nb, sl].T
         for i, a2 in enumerate((aL, aR)):
             # (n, m): sum_k conj(a e^{-iwnh}) a2 e^{-iwmh} = sum_k conj(a) a2 e^{iw(n-m)h}, a Toeplitz block
-            G[sl, slice(nb + i * D, nb + (i + 1) * D)] = (np.sum(np.conj(a) * a2, axis=1) @ ph).real[idx]
+            G[sl, slice(nb + i * D, nb + (i + 1) * D)] = _toeplitz((np.sum(np.conj(a) * a2, axis=1) @ ph).real, D)
     return G, en
+
+
+def _toeplitz(t, D: int) -> np.ndarray:
+    """The ``(D, D)`` matrix ``T[n, m] = t[n - m + D - 1]`` of ``t`` ``(2 D - 1,)``, as a strided view of ``t`` (read
+    only): the same numbers as indexing ``t`` with the lags' matrix, without building it and gathering (a slow
+    run's lead-in is 200 samples a side)."""
+    t = np.ascontiguousarray(t)
+    return np.lib.stride_tricks.as_strided(t[D - 1:], shape=(D, D), strides=(t.strides[0], -t.strides[0]),
+                                           writeable=False)
 
 
 @functools.lru_cache(maxsize=64)
