@@ -1,12 +1,12 @@
 """How much a road fit's error bars owe to the cost's rounding: ``python benchmarks/study_rounding.py DATASET``.
 
 A fit with unknown roads or tracks as built (:mod:`rideid.estimate.fit.anyroad`) takes its error bars' bread from
-the true Hessian of the cost, by central second differences (``_Problem.hessian``, step 1e-3 in the problem's
+the true Hessian of the cost, by central second differences (``JointProblem.hessian``, step 1e-3 in the problem's
 coordinates). The cost carries rounding (eigenvectors, the boundary unknowns' damped solve), and a second
 difference divides it by the step squared. ``rideid identify DATASET --seed 1`` (defaults) is run with the Hessian
 of the kept fit captured; then, at that point:
 
-* the cost's rounding ``delta``: ``_Problem.rounding`` (the spread of ``f(v + t e_k) + f(v - t e_k)`` over 16
+* the cost's rounding ``delta``: ``JointProblem.rounding`` (the spread of ``f(v + t e_k) + f(v - t e_k)`` over 16
   moves of 1e-9: the cost itself moves by ~1e-18 there, the gradient's terms cancel, what is left is rounding);
 * what it does to each error bar: 200 draws of that rounding on every cost the Hessian's stencils take (one
   ``f0`` shared by the diagonal), each parameter's ``sqrt`` of the bread's diagonal (``pinv(H)`` on the
@@ -30,7 +30,7 @@ import tempfile
 import numpy as np
 
 from rideid.cli import main
-from rideid.estimate.fit import anyroad
+from rideid.estimate.problem.joint import JointProblem
 from rideid.estimate.fit.uncertainty import resolve
 from rideid.model.batch import single_threaded_blas
 
@@ -43,17 +43,17 @@ def _bread_std(H, res):
 
 def run(dataset: str) -> None:
     got = []
-    orig = anyroad._Problem.hessian
+    orig = JointProblem.hessian
 
     def capture(self, v, step=1e-3):
         H = orig(self, v, step)
         got.append((self, np.array(v), H))
         return H
 
-    anyroad._Problem.hessian = capture
+    JointProblem.hessian = capture
     with tempfile.TemporaryDirectory() as out:
         assert main(["identify", dataset, "--out", out, "--seed", "1", "--no-report", "--quiet"]) == 0
-    anyroad._Problem.hessian = orig
+    JointProblem.hessian = orig
     prob, v, H = got[-1]
     with single_threaded_blas():  # as the fit evaluated its Hessian: the costs' rounding depends on BLAS's threads
         _study(prob, v, H)
@@ -69,7 +69,7 @@ def _study(prob, v, H) -> None:
     base = _bread_std(H, res)
     ratios = []
     pairs = [(i, j) for i in range(d) for j in range(i)]
-    for _ in range(200):  # the stencils of _Problem.hessian, each cost with its own draw of the rounding
+    for _ in range(200):  # the stencils of JointProblem.hessian, each cost with its own draw of the rounding
         n0, npl, nmi = rng.standard_normal(), rng.standard_normal(d), rng.standard_normal(d)
         N = np.diag(npl + nmi - 2 * n0) / h ** 2
         for (i, j), q in zip(pairs, rng.standard_normal((len(pairs), 4))):

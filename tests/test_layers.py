@@ -96,9 +96,9 @@ def _graph():
     root = ast.parse(MODULES["rideid"][0].read_text())
     for node in root.body:
         if isinstance(node, ast.Assign) and node.targets[0].id in ("_PUBLIC", "_COMMAND_LINE"):
-            # _by_name({module: names}, {alias: (module, its name there)})
+            # _by_name({module: names}, {module: {alias: its name there}})
             modules, aliases = (ast.literal_eval(arg) for arg in node.value.args)
-            for module in [*modules, *(m for m, _ in aliases.values())]:
+            for module in [*modules, *aliases]:
                 assert module in MODULES, f"rideid.{node.targets[0].id}: no module {module}"
                 edges["rideid"].setdefault(module, node.lineno)
     return edges, late

@@ -100,7 +100,7 @@ def test_plan_refuses_road_runs_with_damper_curves(tmp_path):
 def _fit(space, x0, geom, rr, scale):
     """The road fit's minimum near the truth: least squares, then Newton steps on the cost's true Hessian
     (least squares alone stops short along the wheels' common scale, where J^T J of noisy data over-states
-    the curvature: rideid.estimate.fit.anyroad._Problem.hessian)."""
+    the curvature: rideid.estimate.problem.joint.JointProblem.hessian)."""
     def fun(u):
         return roadfit.residuals(space.full((x0 * np.exp(u))[None])[0], geom, rr)
 

@@ -25,7 +25,7 @@ from rideid.cli import main
 from rideid.data.schema import manifest as man_schema
 from rideid.data.schema.manifest import parse_dataset_manifest
 from rideid.errors import DataError
-from rideid.estimate.fit import anyroad
+from rideid.estimate.assess import motion
 from rideid.estimate.problem import asbuilt, blocks
 from rideid.estimate.problem.cost import ParameterSpace
 
@@ -178,32 +178,32 @@ def test_a_motion_record_names_a_value_beyond_three_prior_std(slipped):
     prior = asbuilt.motion_prior(ds, run)
     tr = asbuilt.prepare_track_run(ds, run)
     fitted = {"speed_m_s": 10.0, "speed_std_m_s": 0.0002, "start_shift_s": 0.001, "start_shift_std_s": 0.0001}
-    m = anyroad.motion_record(fitted, prior, tr)
+    m = motion.motion_record(fitted, prior, tr)
     assert m["speed"] == {"estimate": 10.0, "std": 0.0002, "unit": "m/s", "declared": 10.1,
                           "prior_std": pytest.approx(0.0303), "prior": "default",
                           "from_declared_in_prior_std": pytest.approx(-0.1 / 0.0303)}
     assert m["start"]["estimate"] == 0.001 and m["start"]["declared"] == 0.0 and m["start"]["prior_std"] == 0.005
     assert m["named"] == ["run H_HH: declared speed 10.10 m/s, the data show 10.00000 ± 0.00020 m/s (-0.99 %, "
                           "3.3 times the declared value's std of 0.03 m/s, the default width)"]
-    found = anyroad.motion_findings({"H_HH": m})
+    found = motion.motion_findings({"H_HH": m})
     assert len(found) == 1 and found[0]["check"] == "motion" and found[0]["channel"] == "speed"
     assert found[0]["severity"] == "warning" and found[0]["run"] == "H_HH"
-    assert anyroad.motion_record(dict(fitted, speed_m_s=10.05), prior, tr)["named"] == []
+    assert motion.motion_record(dict(fitted, speed_m_s=10.05), prior, tr)["named"] == []
     # the track's drawn size as this run saw it: its amplitude factor against the default 5 % prior
     assert tr.size_std == pytest.approx(0.05)
     fit = SimpleNamespace(alpha=1.2, alpha_std=0.004)
-    sized = anyroad.with_size(m, fit, tr, ds)
+    sized = motion.with_size(m, fit, tr, ds)
     assert sized["size"] == {"estimate": 1.2, "std": 0.004, "unit": "relative", "declared": 1.0, "prior_std": 0.05,
                              "prior": "default", "from_declared_in_prior_std": pytest.approx(4.0)}
     assert sized["named"][1] == ("track herringbone_high (run H_HH): drawn size amplitude = 0.008 m, the data show "
                                  "1.2000 ± 0.0040 of it (4.0 times the declared size's std of 5 %, the default width)")
-    assert [f["channel"] for f in anyroad.motion_findings({"H_HH": sized})] == ["speed", "size"]
-    assert len(anyroad.with_size(m, SimpleNamespace(alpha=1.03, alpha_std=0.004), tr, ds)["named"]) == 1
+    assert [f["channel"] for f in motion.motion_findings({"H_HH": sized})] == ["speed", "size"]
+    assert len(motion.with_size(m, SimpleNamespace(alpha=1.03, alpha_std=0.004), tr, ds)["named"]) == 1
     # the data show the size of another track of the family (herringbone_low, 0.005 m): it is named
     high = ds.manifest.tracks["herringbone_high"]
     family = SimpleNamespace(tracks={"herringbone_high": high, "herringbone_low": SimpleNamespace(
         kind=high.kind, keys=dict(high.keys, amplitude=0.005))}, size_prior=ds.manifest.size_prior)
-    low = anyroad.with_size(m, SimpleNamespace(alpha=0.625, alpha_std=0.004), tr,
+    low = motion.with_size(m, SimpleNamespace(alpha=0.625, alpha_std=0.004), tr,
                             SimpleNamespace(manifest=family))["named"][1]
     assert low.endswith("; track 'herringbone_low' (amplitude = 0.005 m) is that size: is it the run's track?"), low
     assert "is that size" not in sized["named"][1]  # 1.2 x 0.008 m is no declared track
@@ -233,14 +233,14 @@ def test_the_speed_is_estimated_with_the_car_and_named(slipped):
     Jm = blocks.motion_jacobian(P, ds.geometry, tr, ds, run)
     sd = np.sqrt(np.diag(float(e @ e) / e.size * np.linalg.inv(Jm.T @ Jm)))
     assert abs(rec["speed_m_s"] / 10.0 - 1) < 3 * sd[0] + 1e-5
-    m = anyroad.motion_record(dict(rec, speed_std_m_s=10.0 * sd[0], start_shift_std_s=sd[1]), prior, tr)
+    m = motion.motion_record(dict(rec, speed_std_m_s=10.0 * sd[0], start_shift_std_s=sd[1]), prior, tr)
     assert m["speed"]["declared"] == 10.1 and m["speed"]["prior"] == "default"
     assert m["speed"]["estimate"] == pytest.approx(10.0, rel=2e-4)
     assert m["speed"]["from_declared_in_prior_std"] == pytest.approx(-0.1 / 0.0303, rel=0.01)
     assert len(m["named"]) == 1 and m["named"][0].startswith("run H_HH: declared speed 10.10 m/s, the data show ")
     shown = float(m["named"][0].split("the data show ")[1].split(" ")[0])
     assert shown == pytest.approx(10.0, rel=2e-4)
-    found = anyroad.motion_findings({"H_HH": m})
+    found = motion.motion_findings({"H_HH": m})
     assert found[0]["check"] == "motion" and found[0]["channel"] == "speed" and found[0]["run"] == "H_HH"
 
 

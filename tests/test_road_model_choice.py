@@ -21,6 +21,7 @@ import rideid
 from rideid.cli import main
 from rideid.data.scenario import default_scenario
 from rideid.estimate.choice import model_choice as mc
+from rideid.estimate.problem.joint import JointProblem
 from rideid.estimate.fit import anyroad
 from rideid.model.params import total_mass
 from rideid.settings import defaults
@@ -126,7 +127,7 @@ def test_the_true_hessian_at_a_bound_is_the_curvature_inside():
     """A rate at its bound (a bar of nothing at 0): the central differences are taken a step inside, where the car
     is valid, not across the bound into the penalty (closed form: a quadratic cost whose every second difference
     is exact; before, a bar rate of 0.3 N/m at 0 had an error bar of 1e-7 N/m on the built-in car's roads)."""
-    prob = object.__new__(anyroad._Problem)
+    prob = object.__new__(JointProblem)
     prob.vbounds = (np.array([0.0, -1.0]), np.array([1.0, 1.0]))
     A = np.array([[3.0, 1.0], [1.0, 5.0]])
 

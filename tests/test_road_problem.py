@@ -1,10 +1,10 @@
-"""The road problem's numbers (rideid.estimate.fit.anyroad._Problem): its Hessian by second differences, every
+"""The road problem's numbers (rideid.estimate.problem.joint.JointProblem): its Hessian by second differences, every
 evaluation on both cores, against a closed form."""
 
 import numpy as np
 
 import rideid
-from rideid.estimate.fit.anyroad import _Problem
+from rideid.estimate.problem.joint import JointProblem
 
 
 class _LogLinear:
@@ -32,7 +32,7 @@ def test_the_hessian_is_the_closed_form_and_its_evaluations_run_side_by_side(bot
     d = x0.size
     blocks = [_LogLinear(rng.standard_normal((30, d)), rng.standard_normal(30)),
               _LogLinear(rng.standard_normal((20, d)), rng.standard_normal(20))]
-    prob = _Problem(space, sc.geometry, blocks, [1.0, 2.0], [30, 20])
+    prob = JointProblem(space, sc.geometry, blocks, [1.0, 2.0], [30, 20])
     v = prob.v(x0)
     want = blocks[0].A.T @ blocks[0].A + 4 * blocks[1].A.T @ blocks[1].A
     H = prob.hessian(v)

@@ -16,6 +16,7 @@ import tomli_w
 import rideid
 from rideid.cli import main
 from rideid.data.scenario import default_scenario
+from rideid.estimate.assess import motion
 from rideid.estimate.fit import anyroad
 from rideid.estimate.problem import asbuilt
 from rideid.estimate.problem.blocks import RoadBlock, prepare_road_runs
@@ -135,17 +136,17 @@ def test_every_road_speed_off_alike_names_the_wheelbase_and_the_sample_rate():
     fast. Two runs named alike give one warning naming the wheelbase and the sample rate; runs off by different
     shares, one run alone, or a run not named, give none; a track run (it has a start) is not counted."""
     alike = {"B": _road_motion(11.0, 11.11), "C": _road_motion(7.0, 7.07)}
-    (w,) = anyroad.common_speed_offset(alike)
+    (w,) = motion.common_speed_offset(alike)
     assert w["severity"] == "warning" and w["check"] == "motion" and w["run"] is None
     assert "runs B, C" in w["message"] and "1.00 % faster" in w["message"]
     assert "wheelbase 1 % too long" in w["message"] and "sample rate (one typed that much too high" in w["message"]
-    (s,) = anyroad.common_speed_offset({"B": _road_motion(11.0, 10.89), "C": _road_motion(7.0, 6.93)})
+    (s,) = motion.common_speed_offset({"B": _road_motion(11.0, 10.89), "C": _road_motion(7.0, 6.93)})
     assert "slower" in s["message"] and "too short" in s["message"] and "too low" in s["message"]
-    assert anyroad.common_speed_offset({"B": _road_motion(11.0, 11.11), "C": _road_motion(7.0, 7.14)}) == []
-    assert anyroad.common_speed_offset({"B": _road_motion(11.0, 11.11)}) == []
-    assert anyroad.common_speed_offset({"B": _road_motion(11.0, 11.11), "C": _road_motion(7.0, 7.0)}) == []
+    assert motion.common_speed_offset({"B": _road_motion(11.0, 11.11), "C": _road_motion(7.0, 7.14)}) == []
+    assert motion.common_speed_offset({"B": _road_motion(11.0, 11.11)}) == []
+    assert motion.common_speed_offset({"B": _road_motion(11.0, 11.11), "C": _road_motion(7.0, 7.0)}) == []
     track = dict(_road_motion(7.0, 7.0707), start={"estimate": 0.0})
-    assert anyroad.common_speed_offset({"B": _road_motion(11.0, 11.11), "T": track}) == []
+    assert motion.common_speed_offset({"B": _road_motion(11.0, 11.11), "T": track}) == []
     # every such warning is among the motion checks, after the runs' own
-    checks = anyroad.motion_findings(alike)
+    checks = motion.motion_findings(alike)
     assert [c["run"] for c in checks] == ["B", "C", None]

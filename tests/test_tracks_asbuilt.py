@@ -103,7 +103,7 @@ def test_a_short_washboard_run_holds_its_unevenness_at_the_prior(tmp_path):
 
 
 def _short_washboard_held(tmp_path, by_id):
-    from rideid.estimate.fit import anyroad
+    from rideid.estimate.assess import motion
     for seed in (1, 2):
         ds = rideid.load_dataset(write_dataset(tmp_path / f"exact{seed}", amplitude=1.0, rms=0.0, noise=0.01, seed=seed,
                                                runs=[by_id["T_HH"], by_id["H_HH"], by_id["W_H"]]))
@@ -121,7 +121,7 @@ def _short_washboard_held(tmp_path, by_id):
             else:
                 assert tr.prior.held is None and surface < 1e-3, (run.id, surface)
         held = next(tr for tr in trs if tr.run_id == "W_H")  # its entry of result.json tracks.washboard.runs
-        rec = anyroad._track_run_record(held, asbuilt.solve(P, ds.geometry, held, alpha_std=True))
+        rec = motion.track_run_record(held, asbuilt.solve(P, ds.geometry, held, alpha_std=True))
         assert "too short" in rec["unevenness_held"]
         assert rec["unevenness_rms_surface_m"] < rideid.settings.defaults["anyroad.plausible_rms"]
     ds = rideid.load_dataset(write_dataset(tmp_path / "rough", seed=1, runs=[by_id["W_H"]]))

@@ -333,10 +333,10 @@ def _rotated(eigs, pairs):
 
 def test_a_hessian_direction_below_its_rounding_noise_leaves_its_parameters_not_determined():
     """The rounding estimate and the eigenvalues' noise against draws (the road fit's own stencils,
-    ``_Problem.hessian`` and ``_Problem.rounding``, on a cost ``v^T A v`` with N(0, delta) added to every
+    ``JointProblem.hessian`` and ``JointProblem.rounding``, on a cost ``v^T A v`` with N(0, delta) added to every
     evaluation); then which parameters a direction under ``uncertainty.curvature_noise`` times its noise leaves
     without an error bar, and the others' bread as the closed-form inverse on the resolved directions."""
-    from rideid.estimate.fit.anyroad import _Problem
+    from rideid.estimate.problem.joint import JointProblem
     from rideid.estimate.fit.uncertainty import resolve
 
     rng = np.random.default_rng(7)
@@ -347,11 +347,11 @@ def test_a_hessian_direction_below_its_rounding_noise_leaves_its_parameters_not_
     A, U = _rotated([400.0, 60.0, 30.0, 1.0], [(2, 3)])  # the smallest along (x3 - x2) / sqrt(2)
     prob = _RoundedQuadratic(A, delta, rng)
     v = np.full(4, 0.3)
-    got = _Problem.rounding(prob, v, step, pairs=400)
+    got = JointProblem.rounding(prob, v, step, pairs=400)
     assert got == pytest.approx(delta, rel=0.1)
     # the eigenvalues' spread over draws of the Hessian against resolve's noise of each (the 45-degree pair's a
     # little below a diagonal entry's: its own costs' noise averages, the shared f0's does not)
-    draws = np.array([np.linalg.eigh(_Problem.hessian(prob, v, step))[0] for _ in range(400)])
+    draws = np.array([np.linalg.eigh(JointProblem.hessian(prob, v, step))[0] for _ in range(400)])
     res = resolve(A, delta, step)
     assert np.mean(draws, axis=0) == pytest.approx([1.0, 30.0, 60.0, 400.0], abs=0.5)
     assert res.curvatures.size == 1 and res.curvatures[0] == pytest.approx(1.0)
@@ -378,7 +378,7 @@ def test_a_hessian_direction_below_its_rounding_noise_leaves_its_parameters_not_
     # a negative eigenvalue (the cost not at a minimum along it) is never measured, however small the noise
     neg, _ = _rotated([400.0, 60.0, 30.0, -5.0], [(2, 3)])
     assert list(resolve(neg, 0.0, step).not_determined) == [False, False, True, True]
-    # measured again at ten times the step along the weak direction (the road fit's _Problem.along on the same
+    # measured again at ten times the step along the weak direction (the road fit's JointProblem.along on the same
     # rounded cost: its curvature and its couplings to the others, a hundred times less noise): found at 1.0, and
     # the variance along it 1 / 1.0 to a few per cent, where the step's own Hessian had a noise of 2.3 on it
     import functools
@@ -386,10 +386,10 @@ def test_a_hessian_direction_below_its_rounding_noise_leaves_its_parameters_not_
     from rideid.estimate.fit.uncertainty import remeasured
     along = defaults["uncertainty.direction_step"]
     assert along == 1e-2
-    H = _Problem.hessian(prob, v, step)
+    H = JointProblem.hessian(prob, v, step)
     first = resolve(H, delta, step)
     assert first.curvatures.size == 1 and first.not_determined[2:].all()
-    H2, again, rec = remeasured(H, delta, step, along, functools.partial(_Problem.along, prob, v, step=step))
+    H2, again, rec = remeasured(H, delta, step, along, functools.partial(JointProblem.along, prob, v, step=step))
     assert again.curvatures.size == 0 and not again.not_determined.any()
     assert len(rec) == 1
     assert rec[0]["curvature_at_step"] == pytest.approx(1.0, abs=5 * np.sqrt(6) * delta / (2 * along ** 2))
@@ -398,7 +398,7 @@ def test_a_hessian_direction_below_its_rounding_noise_leaves_its_parameters_not_
     # where the larger step would cross a bound the direction stays as it was (not determined)
     tight = _RoundedQuadratic(A, delta, rng)
     tight.vbounds = (np.full(4, 0.3 - 2e-3), np.full(4, 10.0))
-    H3, kept, rec3 = remeasured(H, delta, step, along, functools.partial(_Problem.along, tight, v, step=step))
+    H3, kept, rec3 = remeasured(H, delta, step, along, functools.partial(JointProblem.along, tight, v, step=step))
     assert rec3 == [] and kept.not_determined[2:].all()
 
 

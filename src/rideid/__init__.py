@@ -22,8 +22,9 @@ from importlib import import_module
 
 def _by_name(modules: dict, aliases: dict) -> dict:
     """Name -> (defining module, its name there; None: the same) of the names in ``modules`` (module -> names)
-    and of the ``aliases`` (name -> (module, its name there))."""
-    return {**{name: (module, None) for module, names in modules.items() for name in names}, **aliases}
+    and of the ``aliases`` (module -> {name: its name there})."""
+    return {**{name: (module, None) for module, names in modules.items() for name in names},
+            **{name: (module, there) for module, names in aliases.items() for name, there in names.items()}}
 
 
 #: public name -> (defining module, its name there); imported on first use (PEP 562), so that
@@ -45,11 +46,10 @@ _PUBLIC = _by_name({
     "rideid.model.roads": ("iso8608_class", "iso8608_profile"), "rideid.model.tracks": ("Track",),
     "rideid.studies": ("StudyResult", "load_study", "study"), "rideid.exporter": ("export", "ExportResult"),
 }, {
-    "load_result": ("rideid.estimate.result", "load"), "plot_fit": ("rideid.report.figures", "fit_figure"),
-    "plot_parameters": ("rideid.report.figures", "parameters_figure"),
-    "plot_dampers": ("rideid.report.figures", "dampers_figure"),
-    "plot_budget": ("rideid.report.figures", "budget_figure"),
-    "plot_frequency_response": ("rideid.report.figures", "frequency_figure"),
+    "rideid.estimate.result": {"load_result": "load"},
+    "rideid.report.figures": {"plot_fit": "fit_figure", "plot_parameters": "parameters_figure",
+                              "plot_dampers": "dampers_figure", "plot_budget": "budget_figure",
+                              "plot_frequency_response": "frequency_figure"},
 })
 
 #: what the command line (:mod:`rideid.cli`) uses beyond SPEC §5, reached the same lazy way so that the command
@@ -67,19 +67,15 @@ _COMMAND_LINE = _by_name({
     "rideid.data.quality": ("data_quality", "quality_table", "summarised_warning", "resampling_lines",
                             "partial_channel_lines"),
     "rideid.profiling": ("Profile",),
+    "rideid.estimate.records": ("motion_line", "error_bar_warning", "candidate_label", "kept_candidate",
+                                "first_fit_sentence"),
 }, {
-    "adequacy_caveats": ("rideid.estimate.assess.adequacy", "caveats"),
-    "error_bar_caveat": ("rideid.estimate.assess.shape", "caveat"),
-    "error_bar_note": ("rideid.estimate.assess.shape", "table_note"),
-    "motion_line": ("rideid.estimate.records", "motion_line"),
-    "error_bar_warning": ("rideid.estimate.records", "error_bar_warning"),
-    "candidate_label": ("rideid.estimate.records", "candidate_label"),
-    "kept_candidate": ("rideid.estimate.records", "kept_candidate"),
-    "first_fit_sentence": ("rideid.estimate.records", "first_fit_sentence"),
-    "write_sensitivity_csvs": ("rideid.report.sensitivity_files", "write_csvs"),
-    "complete_result": ("rideid.estimate.assess.responses", "complete"),
-    "sensitivity_tables_markdown": ("rideid.report.sensitivity_files", "tables_markdown"),
-    "sensitivity_heatmaps": ("rideid.report.sensitivity_files", "heatmaps"),
+    "rideid.estimate.assess.adequacy": {"adequacy_caveats": "caveats"},
+    "rideid.estimate.assess.shape": {"error_bar_caveat": "caveat", "error_bar_note": "table_note"},
+    "rideid.estimate.assess.responses": {"complete_result": "complete"},
+    "rideid.report.sensitivity_files": {"write_sensitivity_csvs": "write_csvs",
+                                        "sensitivity_tables_markdown": "tables_markdown",
+                                        "sensitivity_heatmaps": "heatmaps"},
 })
 del _by_name  # the module's namespace (and dir(rideid)) holds the two tables only
 

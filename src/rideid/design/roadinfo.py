@@ -18,7 +18,7 @@ predicted from the road fit identify runs on it
    data the residual is zero there and ``J = dP_perp y0`` has no noise term,
    so ``J^T J`` is the expected Hessian of the concentrated cost (the noise
    parts of ``J^T J`` and of the residual's curvature cancel in expectation:
-   :meth:`rideid.estimate.fit.anyroad._Problem.hessian`).
+   :meth:`rideid.estimate.problem.joint.JointProblem.hessian`).
 4. *Noise in DFT units.* The fit weights channel ``c`` by ``s_c`` (one over
    its measured RMS) and takes an unnormalised ``rfft``; white noise of
    standard deviation ``sigma_c`` gives each real and each imaginary

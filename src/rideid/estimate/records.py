@@ -508,7 +508,7 @@ def plan_of(res, run_ids=()) -> Plan:
         runs = [rid for rid, r in (rec.get("runs") or {}).items() if "amplitude_factor" in r]
         if rec.get("rejected") or not runs:
             continue
-        method = rec.get("method", "")  # the as-built mode, in words (rideid.estimate.fit.anyroad._tracks_block)
+        method = rec.get("method", "")  # the as-built mode, in words (rideid.estimate.assess.motion.tracks_block)
         unknowns = (["road"] if "projected out" in method else
                     ["amplitude_factor", "unevenness"] if "unevenness" in method else ["amplitude_factor"])
         blocks.append(Block(f"track {tid}", "track", unknowns=unknowns, fixed=["drawing"], runs=runs))

@@ -987,7 +987,7 @@ def _estimates_lines(result, context) -> list:
         lines.append(("Estimates", text, "estimates"))
     tracks = getattr(result, "tracks", None) or {}
     built = {tid: rec for tid, rec in tracks.items() if "amplitude_factor" in rec}
-    if built:  # SPEC §11: what the tracks as built needed (rideid.estimate.fit.anyroad._tracks_block)
+    if built:  # SPEC §11: what the tracks as built needed (rideid.estimate.assess.motion.tracks_block)
         rejected = next((rec["rejected"] for rec in tracks.values() if rec.get("rejected")), None)
         text = "; ".join(f"{tid} x {rec['amplitude_factor']:.3f}"
                          + (f" ± {rec['amplitude_factor_std']:.3f}" if rec.get("amplitude_factor_std", 0) > 0.01

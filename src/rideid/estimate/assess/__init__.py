@@ -8,5 +8,6 @@ their residual at their own road estimate (:mod:`~rideid.estimate.assess.roads`)
 what the data did not measure and the bound check (:mod:`~rideid.estimate.assess.details`). From a result: the car's
 responses on the runs (:mod:`~rideid.estimate.assess.responses`), its frequency responses with their uncertainty
 (:mod:`~rideid.estimate.assess.frequency`) and the score against a known truth
-(:mod:`~rideid.estimate.assess.score`).
+(:mod:`~rideid.estimate.assess.score`). What the data say of each run's set-up values against their priors (its
+speed, start, track size; SPEC §13): :mod:`~rideid.estimate.assess.motion`.
 """

@@ -74,6 +74,7 @@ from ...model.params import ALL_NAMES
 from ...model.roads import iso8608_class
 from ..problem import asbuilt
 from ..problem import roadfit
+from ..problem.joint import JointProblem
 from ..problem.blocks import DrawnTracks, RoadBlock, TrackBlock, method as blocks_method
 # which block each run gets (the problem's, re-exported: the model choice and the tests read them here)
 from ..problem.blocks import (TRACK_OPTIONS, as_built_runs, prepare_road_runs, run_speed,  # noqa: F401
@@ -89,6 +90,8 @@ from ..assess.sensor_check import road_coupling_hints
 from ..assess.roads import judge as judge_road_runs
 from ..assess.details import not_determined
 from ..assess.shape import check as shape_check
+from ..assess.motion import (ROAD_MOTION_NOTE, left_out, motion_findings, motion_record, road_motion_record,
+                             tracks_block)
 from .uncertainty import along_record, estimate_covariance, remeasured
 
 def road_run_error(rr, y, fitted) -> float:
@@ -109,223 +112,29 @@ def _pinv(H):
     return np.linalg.pinv(H, rcond=1e-12, hermitian=True)
 
 
-class _Problem:
-    """The joint residual of the problem's blocks (:mod:`rideid.estimate.problem.blocks`: the runs on tracks as
-    drawn, each unknown road, each track as built), each block times its weight ``scale``.
-
-    Coordinates ``v``: the logarithm of each parameter bounded away from 0 (relative steps: the road fit's
-    valley along the wheels' common scale, unsprung masses and tires together, is long and shallow, and the
-    solver crosses it in a few steps in these coordinates, not in the bounds' unit box), the parameter over
-    its range's width for those that may be 0 (bars, tire damping). A problem is a value: :meth:`reweighted` and
-    :meth:`with_blocks` return new ones."""
-
-    def __init__(self, space, geom, blocks, scale, sizes=()):
-        self.space, self.geom, self.parts = space, geom, tuple(blocks)
-        lo, hi = space.bounds[:, 0], space.bounds[:, 1]
-        self.log = lo > 0
-        self.span = np.where(self.log, 1.0, hi - lo)
-        self.vbounds = (np.where(self.log, np.log(np.where(self.log, lo, 1.0)), lo / self.span),
-                        np.where(self.log, np.log(np.where(self.log, hi, 1.0)), hi / self.span))
-        self.scale = np.asarray(scale, dtype=float)  # each block's weight (1 until reweighted)
-        self.sizes = list(sizes)  # each block's residual count, set by reweighted
-        self.size = sum(self.sizes)
-
-    def with_blocks(self, blocks) -> _Problem:
-        """The same problem (weights, sizes) on ``blocks`` (each block's nuisances moved)."""
-        return _Problem(self.space, self.geom, blocks, self.scale, self.sizes)
-
-    def of(self, kind) -> list[int]:
-        """The indices of the blocks of class ``kind``."""
-        return [k for k, b in enumerate(self.parts) if isinstance(b, kind)]
-
-    def moving(self) -> list[int]:
-        """The indices of the blocks with motion unknowns (SPEC §13): each track as built (its speed and start) and
-        each unknown road (its speed), in block order."""
-        return [k for k, b in enumerate(self.parts) if getattr(b, "n_motion", 0)]
-
-    def x(self, v):
-        v = np.asarray(v, dtype=float)
-        return np.where(self.log, np.exp(v), v * self.span)
-
-    def v(self, x):
-        x = np.asarray(x, dtype=float)
-        return np.clip(np.where(self.log, np.log(np.where(self.log, x, 1.0)), x / self.span), *self.vbounds)
-
-    def dxdv(self, v):
-        """``dx/dv`` (d,): Jacobians in ``v`` divided by it are Jacobians in ``x``."""
-        return np.where(self.log, self.x(v), self.span)
-
-    def car(self, v):
-        """The full parameter row (16+,) at ``v``."""
-        return self.space.full(self.x(v)[None])[0]
-
-    def blocks(self, z, threads: bool = True):
-        """The residual blocks at ``z``, computed on parallel threads (their NumPy and LAPACK work releases the
-        GIL; each block is its own), the track runs as drawn and then the longest runs first; one after the other
-        without ``threads``; None where the car is not valid."""
-        x = self.x(z)
-        P = self.space.full(x[None])
-        if not self.space.valid(P)[0]:
-            return None
-        if not threads:
-            return [b.residuals(x, P[0], self.geom) for b in self.parts]
-        order = sorted(range(len(self.parts)), key=lambda i: self.parts[i].order)
-        done = dict(zip(order, thread_map(lambda i: self.parts[i].residuals(x, P[0], self.geom), order,
-                                          "rideid-roads")))
-        return [done[i] for i in range(len(self.parts))]
-
-    def costs(self, V) -> np.ndarray:
-        """``sum e^2`` at each row of ``V``, the rows on parallel threads (each row's blocks one after the other:
-        many small evaluations keep both cores busier so than each one's blocks side by side), the rows of one
-        car (all but the damper curves' knot forces) one after the other: a road's projection of a car is then
-        reused for its knot forces (:func:`rideid.estimate.problem.roadfit.solve`)."""
-        def cost(z):
-            return float(np.sum(self._stacked(self.blocks(z, threads=False)) ** 2))
-        V = np.asarray(V, dtype=float)
-        car = [j for j, n in enumerate(self.space.names) if n not in set(self.space.knot_names)]
-        order = np.lexsort(V[:, car].T[::-1]) if car else np.arange(len(V))
-        out = np.empty(len(V))
-        out[order] = thread_map(cost, list(V[order]), "rideid-hessian")
-        return out
-
-    def jacobian(self, v, step: float = 1e-5) -> np.ndarray:
-        """Central-difference Jacobian of the residuals at ``v`` (in ``v`` units).
-
-        The step is 1e-5 (relative, for the logarithmic coordinates): the residual carries rounding noise
-        (eigenvectors, the boundary unknowns' solve), and at 1e-7 its differences inflated the robust
-        error bars of the unsprung masses 15-fold (0.42 % at 1e-6, 0.20 % at 1e-5, measured)."""
-        J = np.empty((self.size, v.size))
-        for j in range(v.size):
-            hi = min(step, self.vbounds[1][j] - v[j])
-            lo = min(step, v[j] - self.vbounds[0][j])
-            vp, vm = v.copy(), v.copy()
-            vp[j] += hi
-            vm[j] -= lo
-            J[:, j] = (self(vp) - self(vm)) / (hi + lo) if hi + lo > 0 else 0.0
-        return J
-    def newton(self, v, H, steps: int = 3):
-        """Newton steps on the cost with the true (half) Hessian ``H``: where the Gauss-Newton solver stops
-        short along the wheels' common scale (its ``J^T J`` over-states the curvature there, so its steps
-        fall short and its tolerances are met early). Returns ``v``, the residuals and their Jacobian there."""
-        Hinv = _pinv(H)
-        e = self(v)
-        J = self.jacobian(v)
-        for _ in range(steps):
-            dv = -Hinv @ (J.T @ e)
-            t = 1.0
-            while t > 1e-3:
-                vn = np.clip(v + t * dv, *self.vbounds)
-                en = self(vn)
-                if en @ en < e @ e:
-                    break
-                t *= 0.5
-            else:
+def _newton(prob, v, H, steps: int = 3):
+    """Newton steps on the cost with the true (half) Hessian ``H``: where the Gauss-Newton solver stops
+    short along the wheels' common scale (its ``J^T J`` over-states the curvature there, so its steps
+    fall short and its tolerances are met early). Returns ``v``, the residuals and their Jacobian there."""
+    Hinv = _pinv(H)
+    e = prob(v)
+    J = prob.jacobian(v)
+    for _ in range(steps):
+        dv = -Hinv @ (J.T @ e)
+        t = 1.0
+        while t > 1e-3:
+            vn = np.clip(v + t * dv, *prob.vbounds)
+            en = prob(vn)
+            if en @ en < e @ e:
                 break
-            v, e = vn, en
-            J = self.jacobian(v)
-            if np.max(np.abs(t * dv)) < 1e-7:
-                break
-        return v, e, J
-
-    def hessian(self, v, step: float = 1e-3) -> np.ndarray:
-        """Half the Hessian of the cost ``sum e^2`` at ``v`` (in ``v`` units), by central second differences.
-
-        Not ``J^T J``: the projected residual ``P_perp(theta) Y`` is linear in the
-        data, so its Jacobian carries the noise (``dP_perp/dtheta eps``), and
-        ``J^T J`` over-states the information by ``sigma^2 tr(dP dP)``, which the
-        residual's own curvature ``e . d2e`` cancels in the true Hessian
-        (``tr(P d2P) = -tr(dP dP)`` for a projector). Along the wheels' common
-        scale (unsprung masses and tires together) the over-statement was a factor
-        200 on the built-in SUV's roads (measured): error bars 10-20 times too
-        small. The cost is quadratic over ``step`` (checked at 0.25, 0.5 and 1 times
-        a 0.2 % step: 4.0 and 4.0 times per doubling).
-
-        A parameter within ``step`` of its bound (a bar or a tire damper of nothing, at 0) has its differences
-        taken a step inside: beyond the bound the car is not valid and its cost a penalty, whose second
-        difference made such a rate's error bar 1e-7 N/m (and its Wald statistic, which weighs the model choice's
-        candidates, 1e16 for a bar rate of 0.3 N/m: measured on the built-in car's roads)."""
-        d = v.size
-        v = np.clip(v, self.vbounds[0] + step, self.vbounds[1] - step)
-        h = np.full(d, step)
-        E = np.eye(d) * h
-        pairs = [(i, j) for i in range(d) for j in range(i)]
-        moves = ([np.zeros(d)] + [E[i] for i in range(d)] + [-E[i] for i in range(d)]
-                 + [m for i, j in pairs for m in (E[i] + E[j], E[i] - E[j], E[j] - E[i], -E[i] - E[j])])
-        c = self.costs(v + np.array(moves))  # every evaluation at once, on both cores, those of one car together
-        c0, plus, minus, cross = c[0], c[1:d + 1], c[d + 1:2 * d + 1], c[2 * d + 1:].reshape(-1, 4)
-        H = np.diag((plus - 2 * c0 + minus) / h ** 2)
-        # four costs a pair, not the two of the diagonal moves +-(e_i + e_j) (f(+) + f(-) - f(+i) - f(-i) - f(+j)
-        # - f(-j) + 2 f0): that one sums seven costs where this sums four, and the cost's rounding on a track as
-        # built (the all-realities SUV) moved its error bars by up to 25 % between steps of 1e-3 and 5e-4, this
-        # one's by 5 %
-        for (i, j), q in zip(pairs, cross):
-            H[i, j] = H[j, i] = (q[0] - q[1] - q[2] + q[3]) / (4 * h[i] * h[j])
-        return 0.5 * H
-
-    def along(self, v, U, m: int, step: float = 1e-3) -> np.ndarray | None:
-        """The half Hessian's row along ``U[:, m]`` in the orthonormal basis ``U`` at the point :meth:`hessian` takes
-        at ``step``, by second differences of step setting ``uncertainty.direction_step`` ``a`` along ``u = U[:,
-        m]``: the curvature ``(f(v + a u) + f(v - a u) - 2 f(v)) / (2 a^2)``, each coupling ``(f(++) - f(+-) -
-        f(-+) + f(--)) / (8 a t)`` with ``t`` along ``U[:, j]`` as large as ``a`` where the bounds leave room (a bar
-        at 0 leaves less: ``t`` then the room's nine tenths; below ``step`` the coupling is not measured again, NaN).
-        ``4 (d - 1) + 3`` costs at most; None when ``v +- a u`` crosses a bound."""
-        a = defaults["uncertainty.direction_step"]
-        lo, hi = self.vbounds
-        v = np.clip(v, lo + step, hi - step)
-        d = U.shape[1]
-        u = U[:, m]
-        ends = np.array([v + a * u, v - a * u])
-        if np.any(ends < lo) or np.any(ends > hi):
-            return None
-
-        def room(base, w):  # how far from base along +-w the bounds allow
-            with np.errstate(divide="ignore", invalid="ignore"):
-                r = np.where(w > 0, (hi - base) / w, np.where(w < 0, (lo - base) / w, np.inf))
-            return float(np.min(r))
-
-        steps = {j: min(a, 0.9 * min(room(b, sg * U[:, j]) for b in ends for sg in (1, -1)))
-                 for j in range(d) if j != m}
-        steps = {j: t for j, t in steps.items() if t >= step}
-        moves = [np.zeros(d), a * u, -a * u] + [a * s * u + t * r * U[:, j] for j, t in steps.items()
-                                                for s, r in ((1, 1), (1, -1), (-1, 1), (-1, -1))]
-        c = self.costs(v + np.array(moves))
-        row = np.full(d, np.nan)
-        row[m] = (c[1] + c[2] - 2 * c[0]) / (2 * a * a)
-        for (j, t), q in zip(steps.items(), c[3:].reshape(-1, 4)):
-            row[j] = (q[0] - q[1] - q[2] + q[3]) / (8 * a * t)
-        return row
-
-    def rounding(self, v, step: float = 1e-3, tiny: float = 1e-9, pairs: int = 16) -> float:
-        """The cost's rounding at the point :meth:`hessian` takes at ``step``: the standard deviation of one cost,
-        from the spread of ``f(v + t e_k) + f(v - t e_k)`` over ``pairs`` moves of ``tiny`` along the unknowns in
-        turn (each sum's gradient terms cancel and its curvature term is about 1e-18: what varies is rounding, of
-        variance ``2 delta^2``). 2 ``pairs`` costs (the Hessian takes ``2 d^2 + 1``); 16 pairs estimate ``delta``
-        to about 18 % (one std), and the costs' rounding is the one of the Hessian's evaluations only under the same
-        BLAS threads (one: :func:`rideid.model.batch.single_threaded_blas`; on the all-realities gross case
-        1.07e-5 of a cost of 4342 on one thread, 1.60e-5 on two)."""
-        d = v.size
-        v = np.clip(v, self.vbounds[0] + step, self.vbounds[1] - step)
-        E = np.eye(d)[np.arange(pairs) % d] * tiny
-        c = self.costs(v + np.vstack([E, -E]))
-        return float(np.std(c[:pairs] + c[pairs:], ddof=1) / np.sqrt(2.0))
-
-
-    def __call__(self, z):
-        return self._stacked(self.blocks(z))
-
-    def _stacked(self, b) -> np.ndarray:
-        """The weighted residual of blocks ``b`` (1e3 everywhere for None: a car that is not valid)."""
-        if b is None:
-            return np.full(self.size, 1e3)
-        return np.concatenate([s * r for s, r in zip(self.scale, b)])
-
-    def reweighted(self, z) -> _Problem:
-        """The problem with each block divided by its own RMS at ``z``; a run on a track as built is already
-        divided by its noise level, bin by bin (:mod:`rideid.estimate.problem.asbuilt`), and keeps its weight 1."""
-        b = self.blocks(z)
-        scale = np.array([1.0 / max(np.sqrt(np.mean(r ** 2)), 1e-300) if blk.reweighted else 1.0
-                          for blk, r in zip(self.parts, b)])
-        return _Problem(self.space, self.geom, self.parts, scale, [r.size for r in b])
+            t *= 0.5
+        else:
+            break
+        v, e = vn, en
+        J = prob.jacobian(v)
+        if np.max(np.abs(t * dv)) < 1e-7:
+            break
+    return v, e, J
 
 
 def _motion_block(prob, w, d: int):
@@ -445,146 +254,6 @@ def _with_motion(prob, z, H, Ja, S, s2, ds, res):
     return cov[:n, :n], rob[:n, :n], out
 
 
-def _entry(est, std, pr, unit) -> dict:
-    """One value of a run's ``motion`` record: its estimate and std, the declared value and its prior's std."""
-    e = {"estimate": est, "std": std, "unit": unit, "declared": None, "prior_std": None, "prior": "none"}
-    if pr is None:
-        return e
-    e.update(declared=pr[0], prior_std=pr[1], prior=("default", "declared")[bool(pr[2])])
-    if pr[1] > 0:
-        e["from_declared_in_prior_std"] = (est - pr[0]) / pr[1]
-    return e
-
-
-#: how a motion record's value is named when the data move it beyond its prior: (what, its unit, the estimate's
-#: departure from the declared value in words, the prior's std in words)
-_NAMED = {
-    "speed": ("declared speed {d:.2f} m/s", "m/s", lambda v, d: f"{100 * (v / d - 1):+.2f} %",
-              lambda s: f"{s:.2g} m/s"),
-    "start": ("declared start {d:.4f} s", "s", lambda v, d: f"{1e3 * (v - d):+.1f} ms", lambda s: f"{1e3 * s:.2g} ms"),
-}
-
-
-def _named(rid: str, key: str, value: float, std, pr) -> list[str]:
-    """The sentence naming run ``rid``'s ``key`` (speed, start) when ``value`` is beyond setting
-    ``anyroad.motion_named`` times its prior's std from the declared value (none without a prior)."""
-    if pr is None or abs(value - pr[0]) <= defaults["anyroad.motion_named"] * pr[1]:
-        return []
-    what, unit, off, width = _NAMED[key]
-    return [f"run {rid}: {what.format(d=pr[0])}, the data show {_pm(value, std)} {unit} ({off(value, pr[0])}, "
-            f"{abs(value - pr[0]) / pr[1]:.1f} times the declared value's std of {width(pr[1])}"
-            f"{('', ', the default width')[not pr[2]]})"]
-
-
-def motion_record(fitted: dict, prior, tr) -> dict:
-    """A run's ``motion`` record of result.json (SPEC §13): ``speed`` and ``start``, each ``{"estimate", "std",
-    "declared", "prior_std", "prior"}`` (``declared`` None where nothing was declared: a speed channel's run, a
-    start estimated at load; ``prior``: "declared" with its std, "default" width, or "none"), ``named``: the
-    sentences naming what the data moved beyond setting ``anyroad.motion_named`` prior std; with the older keys of a
-    run along a speed channel (``speed_m_s``, ``start_shift_s``, their ``_std``, ``speed_channel_mean_m_s``).
-
-    ``fitted``: :meth:`rideid.estimate.problem.blocks.TrackBlock.aligned`'s record with the solve's speed, shift and
-    their standard errors; ``prior``: the run's :class:`rideid.estimate.problem.asbuilt.MotionPrior`; ``tr``: its
-    :class:`rideid.estimate.problem.asbuilt.TrackRun` as solved."""
-    out = {k: v for k, v in fitted.items() if k in ("speed_m_s", "start_shift_s", "speed_std_m_s",
-                                                    "start_shift_std_s")}
-    if prior.speed is None:
-        out["speed_channel_mean_m_s"] = fitted.get("speed_channel_mean_m_s")
-    v, sv = float(fitted["speed_m_s"]), fitted.get("speed_std_m_s")
-    start0 = float(fitted.get("start_read_s", 0.0)) if prior.start is None else prior.start[0]
-    st, sst = start0 + float(fitted["start_shift_s"]), fitted.get("start_shift_std_s")
-    out["speed"] = _entry(v, sv, prior.speed, "m/s")
-    out["start"] = _entry(st, sst, prior.start, "s")
-    out["named"] = _named(tr.run_id, "speed", v, sv, prior.speed) + _named(tr.run_id, "start", st, sst, prior.start)
-    return out
-
-
-def _pm(value: float, std: float | None) -> str:
-    """``value ± std`` with the std to two significant digits and the value to the same decimals."""
-    if std is None or not np.isfinite(std) or std <= 0:
-        return f"{value:.4g}"
-    dec = max(0, 1 - int(np.floor(np.log10(std))))
-    return f"{value:.{dec}f} ± {std:.{dec}f}"
-
-
-def with_size(rec: dict, fit, tr, ds) -> dict:
-    """A run's motion record (:func:`motion_record`) with ``size``: the track's drawn size as this run saw it
-    (SPEC §13), ``{"estimate", "std", "unit": "relative", "declared": 1.0, "prior_std", "prior"}`` from the
-    as-built fit ``fit`` (its amplitude factor), named beyond setting ``anyroad.motion_named`` prior std."""
-    if tr.size_std is None:
-        return rec
-    declared = ds.manifest.size_prior(tr.track)[1]
-    e = _entry(float(fit.alpha), float(fit.alpha_std), (1.0, float(tr.size_std), declared), "relative")
-    named = [m for m in rec.get("named", []) if "drawn size" not in m]
-    if abs(fit.alpha - 1.0) > defaults["anyroad.motion_named"] * tr.size_std:
-        keys = ds.manifest.tracks[tr.track].keys
-        k = next((k for k in ("amplitude", "height") if k in keys), "size")
-        named.append(f"track {tr.track} (run {tr.run_id}): drawn size {k} = {keys.get(k, float('nan')):g} m, the "
-                     f"data show {_pm(float(fit.alpha), float(fit.alpha_std))} of it "
-                     f"({abs(fit.alpha - 1.0) / tr.size_std:.1f} times the declared size's std of "
-                     f"{100 * tr.size_std:.2g} %{('', ', the default width')[not declared]})"
-                     + _same_size_track(ds, tr.track, k, float(fit.alpha), float(fit.alpha_std)))
-    return dict(rec, size=e, named=named)
-
-
-def _same_size_track(ds, track: str, key: str, alpha: float, alpha_std: float) -> str:
-    """``"; track 'X' (key = v m) is that size: is it the run's track?"`` when another declared track of the same
-    kind has the size the data show (within 3 std of the factor, or 2 %): a run given the wrong track of a
-    family (twist_low for twist_high) names the right one; else ``""``."""
-    tracks = ds.manifest.tracks
-    here = tracks[track]
-    size = here.keys.get(key)
-    if not size:
-        return ""
-    for tid, other in tracks.items():
-        v = other.keys.get(key)
-        if (tid != track and v and getattr(other, "kind", None) == getattr(here, "kind", None)
-                and abs(v / size - alpha) <= max(3 * alpha_std, 0.02 * alpha)):
-            return f"; track '{tid}' ({key} = {v:g} m) is that size: is it the run's track?"
-    return ""
-
-
-def motion_findings(motion: dict) -> list[dict]:
-    """The result's ``checks`` records (check ``"motion"``, a warning) of every set-up value the data moved beyond
-    its prior (:func:`motion_record`'s ``named``): a declared value is never silently moved (SPEC §13)."""
-    def what(m):
-        return next((k for k, w in (("speed", "declared speed"), ("start", "declared start"), ("size", "drawn size"))
-                     if w in m), "speed")
-
-    def fix(rec, m):  # a named speed: the declared value and the data's (rideid.estimate.assess.adequacy.setup_slips)
-        sp = rec.get("speed") or {}
-        return {"fix": {"declared": sp["declared"], "speed": sp["estimate"]}} if what(m) == "speed" and sp else {}
-
-    return [{"severity": "warning", "check": "motion", "message": m + ": estimated with the car (SPEC §13); check "
-             "the run's set-up", "run": rid, "channel": what(m), **fix(rec, m)}
-            for rid, rec in motion.items() for m in rec.get("named", [])] + common_speed_offset(motion)
-
-
-def common_speed_offset(motion: dict) -> list[dict]:
-    """One ``motion`` warning when every unknown-road run with a declared speed (two or more; a record without a
-    ``start``) has its speed named off by the same share (within three of their combined std, or a tenth of the
-    share): the road fit reads the rear wheels' delay ``wheelbase / speed``, so one slip for every run is likelier
-    than one per run: a wheelbase typed that share long (or short) reads as every speed that share fast (slow),
-    and so does a sample rate typed that share high (low). Else none."""
-    roads = {rid: rec for rid, rec in motion.items()
-             if "start" not in rec and (rec.get("speed") or {}).get("declared") is not None}
-    if len(roads) < 2 or not all(rec.get("named") for rec in roads.values()):
-        return []
-    r = np.array([rec["speed"]["estimate"] / rec["speed"]["declared"] - 1.0 for rec in roads.values()])
-    sd = np.array([(rec["speed"]["std"] or 0.0) / rec["speed"]["declared"] for rec in roads.values()])
-    share = float(np.mean(r))
-    if np.max(np.abs(r - share)) > max(3.0 * float(np.sqrt(np.sum(sd ** 2))), 0.1 * abs(share)):
-        return []
-    word = "fast" if share > 0 else "slow"
-    return [{"severity": "warning", "check": "motion", "run": None, "channel": "speed",
-             "message": f"runs {', '.join(roads)}: every road run's speed is {100 * abs(share):.2f} % {word}er than "
-                        f"declared, alike: one slip for all is likelier than one per run; check [vehicle] wheelbase "
-                        f"(a wheelbase {100 * abs(share):.2g} % too {('short', 'long')[share > 0]} reads as every "
-                        f"speed that much {word}er: the road fit reads the rear wheels' delay wheelbase / speed) "
-                        f"and the runs' sample rate (one typed that much too {('low', 'high')[share > 0]} reads the "
-                        "same)"}]
-
-
 @stage("road search")
 def _search(space, geom, rruns, gen, population, generations, callback, t0):
     """JADE on the road runs' search cost, stopped by the population spread (setting ``anyroad.spread_tol``)."""
@@ -650,76 +319,6 @@ def _carry_sensor_hints(adequacy, start_result):
     return out
 
 
-#: result.json ``tracks.<track>.runs.<run>.motion.note``
-_MOTION_NOTE = ("the run taken at a constant speed, placed with its start on the track as built "
-                "(estimate.problem.blocks.TrackBlock.aligned), then both solved with the car (anyroad._joint_solve), a "
-                "declared speed and a given start as priors (SPEC §13: declared ± prior_std, the default width "
-                "docs/formats.md); speed, start: the estimate, its std, the declared value; start_shift_s: the "
-                "start's change from the one read; the std are in the car's error bars as the budget's "
-                "'speed and start'")
-#: result.json ``tracks.<track>.method``, by the as-built mode
-_HOW = {"prior": "the drawing times an amplitude factor plus unevenness whose spectrum is estimated from the data",
-        "amplitude": "the drawing times an amplitude factor", "free": "the road projected out, the drawing unused"}
-
-
-def _left_out(rr) -> dict:
-    """``{"channels_left_out": ...}`` of a road-fitted run that left channels out (without signal, or clipped:
-    :func:`rideid.estimate.problem.roadfit.without_clipped`), else nothing."""
-    return {"channels_left_out": dict(rr.left_out)} if rr.left_out else {}
-
-
-def _track_run_record(tr, fit) -> dict:
-    """One run's entry of result.json ``tracks.<track>.runs``: what the as-built fit ``fit`` learnt of it."""
-    hi = min(defaults["roadfit.band"][1], 0.45 * tr.rr.fs)
-    rec = {"amplitude_factor": fit.alpha, "amplitude_factor_std": fit.alpha_std,
-           "unevenness_rms_m": asbuilt.unevenness_rms(tr),
-           "unevenness_rms_surface_m": asbuilt.unevenness_rms(tr, defaults["anyroad.plausible_wavelength"]),
-           "wavelengths_m": [tr.rr.speed / hi, tr.rr.speed / defaults["roadfit.band"][0]]}
-    rec.update(_left_out(tr.rr))
-    if tr.prior is not None and tr.prior.held:  # the unevenness not estimated on this run (asbuilt.estimate_prior)
-        rec["unevenness_held"] = tr.prior.held
-    if tr.rr.clip.shape[0]:  # clipped samples freed as unknowns (roadfit: "Clipped samples")
-        pos, count = np.unique(tr.rr.clip[:, 0], return_counts=True)
-        rec["clipped_samples_freed"] = {CHANNELS[tr.rr.cols[j]]: int(k) for j, k in zip(pos, count)}
-    return rec
-
-
-def _tracks_block(ds, blocks, skipped, P, geom) -> tuple[dict, dict]:
-    """result.json ``tracks``: per track what the as-built fit learnt (amplitude factor, unevenness RMS), per
-    run and over the track's runs; a run taken as drawn says why; each run's speed and start as fitted (its
-    :class:`rideid.estimate.problem.blocks.TrackBlock`'s record, with the track's size, :func:`with_size`).
-    Returns the block and the runs' motion records (run id -> record)."""
-    out, motion = {}, {}
-    for b in blocks:
-        fit = asbuilt.solve(P, geom, b.tr, alpha_std=True)
-        rec = out.setdefault(b.tr.track, {"runs": {}})
-        motion[b.run_id] = with_size(b.record, fit, b.tr, ds)
-        rec["runs"][b.run_id] = dict(_track_run_record(b.tr, fit), motion=dict(motion[b.run_id], note=_MOTION_NOTE))
-    for rec in out.values():
-        runs = list(rec["runs"].values())
-        rec["amplitude_factor"] = float(np.mean([r["amplitude_factor"] for r in runs]))
-        rec["amplitude_factor_std"] = float(np.sqrt(np.sum(np.square([r["amplitude_factor_std"] for r in runs])))
-                                            / len(runs))
-        for key in ("unevenness_rms_m", "unevenness_rms_surface_m"):
-            rec[key] = float(np.sqrt(np.mean(np.square([r[key] for r in runs]))))
-        rec["method"] = f"as built: {_HOW[blocks[0].tr.mode]} (rideid.estimate.problem.asbuilt)"
-        rec["note"] = ("amplitude_factor: the road over its drawing, each run's and their mean (amplitude_factor_std: "
-                       "its standard error at the car, the prior's opened bins make it large); unevenness_rms_m: the "
-                       "RMS of what the drawing times that factor leaves, one wheel path, over the wavelengths of "
-                       "each run's fit band (it holds the envelope's departure from proportionality too), and "
-                       "the RMS over the track's runs; unevenness_rms_surface_m: the same over the waves up to "
-                       f"{defaults['anyroad.plausible_wavelength']:g} m (the surface; what the verdict judges); "
-                       "the parameters' "
-                       "std_robust with tracks as built from the white sandwich of their runs (measured on the "
-                       "SUV on tracks 4 % off with 1.5 mm unevenness over five seeds: error / std_robust RMS 0.92, "
-                       "±2 std_robust covering 12 of 12 on each; the bin-clustered sandwich was 1.8x too narrow; "
-                       "docs/tracks-as-built.md); the speed and start fitted along a speed channel are in them as "
-                       "nuisance parameters (the budget's 'speed and start'; each run's motion has its std)")
-    for r in (r for r in ds.runs if r.id in skipped):
-        out.setdefault(r.track, {"runs": {}})["runs"][r.id] = {"fitted": skipped[r.id]}
-    return out, motion
-
-
 #: where the road fit's coupling hints come from (adequacy.sensor_hints_note)
 ROAD_HINTS_NOTE = "from the road fit of the runs on tracks as built: the road free, a trial high-pass on the channels"
 FREE_ROAD_HINTS_NOTE = "from the road fit of the runs on unknown roads: a trial high-pass on the channels"
@@ -766,12 +365,12 @@ class _Plan:
     skipped: dict
     excitation: dict | None = None
 
-    def problem(self, ds, geom, simulator) -> _Problem:
+    def problem(self, ds, geom, simulator) -> JointProblem:
         """The joint problem: the runs as drawn (one block), then the unknown roads, then the tracks as built."""
         cf = [DrawnTracks(CostFunction(ds.subset(self.drawn), space=self.space, simulator=simulator))] \
             if self.drawn else []
         blocks = cf + self.roads + self.tracks
-        return _Problem(self.space, geom, blocks, np.ones(len(blocks)))
+        return JointProblem(self.space, geom, blocks, np.ones(len(blocks)))
 
 
 def _extensions(ds, model, start_result) -> tuple[tuple, dict]:
@@ -843,7 +442,7 @@ def _start(ds, plan, gen, population, generations, polish, callback, simulator, 
             start_result.stop, list(start_result.history))
 
 
-def _replaced(prob, fn, roads: bool = True) -> _Problem:
+def _replaced(prob, fn, roads: bool = True) -> JointProblem:
     """``prob`` with each moving block ``b`` (a track as built, and with ``roads`` an unknown road) replaced by
     ``fn(b)`` (on parallel threads)."""
     keys = [k for k in prob.moving() if roads or not isinstance(prob.parts[k], RoadBlock)]
@@ -853,13 +452,13 @@ def _replaced(prob, fn, roads: bool = True) -> _Problem:
     return prob.with_blocks(parts)
 
 
-def _realigned(prob, P, ds, mode: str, roads: bool = True) -> _Problem:
+def _realigned(prob, P, ds, mode: str, roads: bool = True) -> JointProblem:
     """Each track block placed at the car ``P`` in ``mode`` and its levels estimated there; with ``roads`` each
     unknown road's speed scanned there (:meth:`rideid.estimate.problem.blocks.RoadBlock.aligned`)."""
     return _replaced(prob, lambda b: b.aligned(P, prob.geom, ds, mode).with_prior(P, prob.geom), roads)
 
 
-def _placed(prob, z, ds) -> _Problem:
+def _placed(prob, z, ds) -> JointProblem:
     """The track blocks' noise and unevenness levels at the car ``z``, each run's drawing placed there on the
     drawing alone and then with the prior estimated there (:meth:`rideid.estimate.problem.blocks.TrackBlock.aligned`
     says why), the levels again at each placement."""
@@ -912,7 +511,7 @@ class _Fitted:
     evaluations spent."""
 
     z: np.ndarray
-    prob: _Problem
+    prob: JointProblem
     info: dict | None
     std: np.ndarray
     cov: np.ndarray
@@ -921,9 +520,10 @@ class _Fitted:
     jacobian: np.ndarray | None = None
 
 
-def _with_records(prob, motion_std: dict, ds) -> _Problem:
+def _with_records(prob, motion_std: dict, ds) -> JointProblem:
     """The moving blocks with their motion's std (``motion_std``: block index -> stds) and their result.json
-    records (:func:`motion_record`, :func:`road_motion_record`)."""
+    records (:func:`rideid.estimate.assess.motion.motion_record`,
+    :func:`~rideid.estimate.assess.motion.road_motion_record`)."""
     parts = list(prob.parts)
     for k, sd in motion_std.items():
         b = parts[k]
@@ -933,16 +533,6 @@ def _with_records(prob, motion_std: dict, ds) -> _Problem:
         read = float(getattr(ds.measured.get(b.run_id), "start", 0.0) or 0.0)
         parts[k] = replace(b, record=motion_record(dict(b.record, **sd, start_read_s=read), b.prior, b.tr))
     return prob.with_blocks(parts)
-
-
-def road_motion_record(fitted: dict, prior, run_id: str) -> dict:
-    """An unknown-road run's ``motion`` record (SPEC §13): ``speed`` as :func:`motion_record` gives it (a road run
-    has no start to place), ``named`` the sentence naming a speed the data moved beyond setting
-    ``anyroad.motion_named`` prior std, and ``speed_m_s``, ``speed_std_m_s``."""
-    v, sv = float(fitted["speed_m_s"]), fitted.get("speed_std_m_s")
-    pr = None if prior is None else prior.speed
-    return {"speed_m_s": v, "speed_std_m_s": sv, "speed": _entry(v, sv, pr, "m/s"),
-            "named": _named(run_id, "speed", v, sv, pr)}
 
 
 def _remeasured_record(r: dict, names) -> dict:
@@ -960,7 +550,7 @@ def _error_bars(prob, sol, ds, cost_before: float, restarted) -> _Fitted:
     runs' speeds and starts as nuisances of the same sandwich (:func:`_with_motion`)."""
     h = defaults["anyroad.hessian_step"]
     H = prob.hessian(sol.x, h)
-    z, e, Ja = prob.newton(sol.x, H)          # in v units
+    z, e, Ja = _newton(prob, sol.x, H)          # in v units
     m, n = Ja.shape
     s2 = float(e @ e) / max(m - n, 1)
     # the directions the cost's rounding hides at h measured again at a larger step, those still hidden out of the
@@ -1016,13 +606,6 @@ def _details(space, x, P, fitted) -> tuple[dict, object]:
     return details, robust
 
 
-#: what a road run's motion record says (result.json ``roads.<run>.motion.note``)
-_ROAD_MOTION_NOTE = ("the run's speed estimated with the car (SPEC §13): it sets the rear wheels' delay "
-                     "wheelbase / speed, which the road fit reads from the front and rear wheels' agreement; the "
-                     "declared speed is its prior (none along a speed channel); its std is in the parameters' "
-                     "std_robust (the budget's 'speed and start')")
-
-
 def _road_records(ds, P, geom, roads) -> tuple[dict, dict, dict, list]:
     """Each unknown road's record (result.json ``roads``: its file, ISO 8608 class, fit band), its profile, the
     fitted channels and its error (:func:`road_run_error`)."""
@@ -1036,7 +619,7 @@ def _road_records(ds, P, geom, roads) -> tuple[dict, dict, dict, list]:
         out[rr.run_id] = {
             "file": f"road/{rr.run_id}.csv", "iso8608_class": cls, "gd_n0": float(gd),
             "gd_n0_unit": "m^3", "speed": rr.speed, "fit_band_hz": [float(band[0]), float(min(band[1], 0.45 * rr.fs))],
-            **({"motion": dict(b.record, note=_ROAD_MOTION_NOTE)} if "speed" in b.record else {}),
+            **({"motion": dict(b.record, note=ROAD_MOTION_NOTE)} if "speed" in b.record else {}),
             "wavelengths_m": list(defaults["roadfit.road_wavelengths"]),
             "note": (f"the road's content at wavelengths {lam[0]}-{lam[1]} m; the first and last {lam[1]:.0f} m carry "
                      "the record's ends and are less certain; adequacy not assessed on this run"
@@ -1046,7 +629,7 @@ def _road_records(ds, P, geom, roads) -> tuple[dict, dict, dict, list]:
             out[rr.run_id]["note"] = (f"moving at its first sample on the known track '{run.track}': fitted as a "
                                       "road run (its state at the first sample and its road estimated; the "
                                       "track's profile not used); " + out[rr.run_id]["note"])
-        out[rr.run_id].update(_left_out(rr))
+        out[rr.run_id].update(left_out(rr))
         profiles[rr.run_id] = (xr, zr)
         response[rr.run_id] = roadfit.fitted_channels(P, geom, rr, ds.data[rr.run_id].matrix(), sol_r)
     errors = [road_run_error(rr, ds.data[rr.run_id].matrix(), response[rr.run_id]) for rr in (b.rr for b in roads)]
@@ -1266,9 +849,9 @@ def _identify_any_road(ds, *, rng=None, seed=None, population=None, generations=
     roads, profiles, response, errors = _road_records(ds, P, geom, road_blocks)
     response_t, errors_t, checked = _checked(ds, P, geom, x, fitted.prob)
     blocks = [fitted.prob.parts[k] for k in fitted.prob.of(TrackBlock)]
-    tracks_block, motion = _tracks_block(ds, blocks, plan.skipped, P, geom) if blocks else (None, {})
+    tracks, motion = tracks_block(ds, blocks, plan.skipped, P, geom) if blocks else (None, {})
     motion = {**{b.run_id: b.record for b in road_blocks if "speed" in b.record}, **motion}
-    adequacy, odd = (_verdict(checked, plan.ext, list(roads), [b.run_id for b in blocks], tracks_block or {})
+    adequacy, odd = (_verdict(checked, plan.ext, list(roads), [b.run_id for b in blocks], tracks or {})
                      if assess and checked else (None, []))
     if assess and polish:  # every run assessed: the road runs by their residual at their own road estimate
         adequacy = judge_road_runs(adequacy, roads, [b.rr for b in road_blocks],
@@ -1280,7 +863,7 @@ def _identify_any_road(ds, *, rng=None, seed=None, population=None, generations=
                     "note": "runs on unknown roads alone: the residuals are not assessed; the sensor check of the "
                             "road fit is"}
     out = _Outcome(x, P, fitted, details, robust, errors + errors_t, dict(response, **response_t), adequacy,
-                   (road_hints, hints_note), tracks_block, motion, roads, profiles, search, rng_record,
+                   (road_hints, hints_note), tracks, motion, roads, profiles, search, rng_record,
                    time.perf_counter() - t0)
     return _RESULTS[(start_result is not None, bool(odd))](ds, plan, start_result, out)
 

@@ -187,9 +187,9 @@ VELOCITY_NOTE = ("on unknown roads the curves' force is taken at the suspension 
 
 def velocity_std(prob, z, H, J) -> dict:
     """Name -> ``std_velocity`` of each reported parameter at the fit ``z`` of the problem ``prob``
-    (``anyroad._Problem``; ``H`` its true half Hessian and ``J`` its residuals' Jacobian there, in its ``v`` units):
-    module docstring. Each draw's shift is the Newton step ``-H^+ J^T de`` of the residuals' change ``de`` (the road
-    runs' at the noisier velocities; the gradient is 0 at the fit)."""
+    (:class:`rideid.estimate.problem.joint.JointProblem`; ``H`` its true half Hessian and ``J`` its residuals'
+    Jacobian there, in its ``v`` units): module docstring. Each draw's shift is the Newton step ``-H^+ J^T de`` of
+    the residuals' change ``de`` (the road runs' at the noisier velocities; the gradient is 0 at the fit)."""
     space = prob.space
     roads = prob.of(RoadBlock)
     if not roads or not space.curves:

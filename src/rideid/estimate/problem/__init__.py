@@ -12,7 +12,9 @@ each block owns — a run's speed and start under their priors, a track's size a
 :mod:`~rideid.estimate.problem.roadstaged`), a sensor chain's relative gains
 (:mod:`~rideid.estimate.problem.redundancy`). The fit with unknown roads or tracks as built takes its problem as
 blocks of one interface (:mod:`~rideid.estimate.problem.blocks`: the runs as drawn, an unknown road, a track as
-built with the run's speed and start, placed and then solved with the car). The nonlinear groups' blocks (damper
+built with the run's speed and start, placed and then solved with the car), joined by
+:class:`~rideid.estimate.problem.joint.JointProblem` (the stacked residuals, the costs of many cars at once, the
+Jacobian, the cost's true Hessian and its rounding). The nonlinear groups' blocks (damper
 curves' knots, :mod:`~rideid.estimate.problem.dampers`; bump stops, :mod:`~rideid.estimate.problem.bumps`), the
 track weights of the search (:mod:`~rideid.estimate.problem.weighting`), the score series each block's share of
 the error bars is made of (:mod:`~rideid.estimate.problem.scores`) and the sensitivity maps
