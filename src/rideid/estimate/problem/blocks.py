@@ -66,8 +66,12 @@ class DrawnTracks:
         return -np.inf
 
     def residuals(self, x, P, geom) -> np.ndarray:
+        return self.residual_rows(x[None])[0]
+
+    def residual_rows(self, X) -> np.ndarray:
+        """The residuals (n, m) of the free parameters' rows ``X`` (n, d) at once: the simulator's population."""
         n = len(self.cf.run_ids)
-        return self.cf.residuals(x[None], np.full(n, 1.0 / n))[0]
+        return self.cf.residuals(X, np.full(n, 1.0 / n))
 
     def meat(self, J, e, s2) -> np.ndarray:
         return track_meat(J, e, self.cf)
@@ -166,6 +170,13 @@ class RoadBlock(_OneRun):
 
     def residuals(self, x, P, geom) -> np.ndarray:
         return roadfit.residuals(P, geom, self.rr)
+
+    @property
+    def affine_in_knots(self) -> bool:
+        """Whether the residuals are affine in the damper curves' knot forces: with curves they enter as a known
+        input of the linear car (:class:`rideid.estimate.problem.roadfit.Departure`), its projection the same
+        (the error bars' Hessian takes their entries exactly: rideid.estimate.problem.joint.JointProblem.hessian)."""
+        return self.rr.dep is not None and self.rr.dep.c_ref is not None
 
     def meat(self, J, e, s2) -> np.ndarray:
         return road_meat(J, e, 2 * len(self.rr.cols))

@@ -8,6 +8,8 @@ numbers (the solve, the Newton steps, the sandwich) is the fit's: :mod:`rideid.e
 
 from __future__ import annotations
 
+import functools
+
 import numpy as np
 
 from ...model.batch import thread_map
@@ -64,33 +66,63 @@ class JointProblem:
         """The full parameter row (16+,) at ``v``."""
         return self.space.full(self.x(v)[None])[0]
 
-    def blocks(self, z, threads: bool = True):
+    def blocks(self, z, threads: bool = True, parts=None):
         """The residual blocks at ``z``, computed on parallel threads (their NumPy and LAPACK work releases the
         GIL; each block is its own), the track runs as drawn and then the longest runs first; one after the other
-        without ``threads``; None where the car is not valid."""
+        without ``threads`` (then those of the indices ``parts`` alone, when given); None where the car is not
+        valid."""
         x = self.x(z)
         P = self.space.full(x[None])
         if not self.space.valid(P)[0]:
             return None
         if not threads:
-            return [b.residuals(x, P[0], self.geom) for b in self.parts]
+            return [self.parts[k].residuals(x, P[0], self.geom) for k in (range(len(self.parts)) if parts is None
+                                                                           else parts)]
         order = sorted(range(len(self.parts)), key=lambda i: self.parts[i].order)
         done = dict(zip(order, thread_map(lambda i: self.parts[i].residuals(x, P[0], self.geom), order,
                                           "rideid-roads")))
         return [done[i] for i in range(len(self.parts))]
 
-    def costs(self, V) -> np.ndarray:
-        """``sum e^2`` at each row of ``V``, the rows on parallel threads (each row's blocks one after the other:
-        many small evaluations keep both cores busier so than each one's blocks side by side), the rows of one
-        car (all but the damper curves' knot forces) one after the other: a road's projection of a car is then
-        reused for its knot forces (:func:`rideid.estimate.problem.roadfit.solve`)."""
+    def residual(self, z, parts) -> np.ndarray:
+        """The weighted residual of the blocks ``parts`` (indices) at ``z``, one after the other (1e3 everywhere for a
+        car that is not valid)."""
+        b = self.blocks(z, threads=False, parts=parts)
+        if b is None:
+            return np.full(sum(self.sizes[k] for k in parts) if self.sizes else 0, 1e3)
+        return np.concatenate([self.scale[k] * r for k, r in zip(parts, b)])
+
+    def costs(self, V, parts=None) -> np.ndarray:
+        """``sum e^2`` at each row of ``V`` (of the blocks ``parts`` alone, when given), the rows on parallel threads
+        (each row's blocks one after the other: many small evaluations keep both cores busier so than each one's
+        blocks side by side), the rows of one car (all but the damper curves' knot forces) one after the other: a
+        road's projection of a car is then reused for its knot forces
+        (:func:`rideid.estimate.problem.roadfit.solve`)."""
         def cost(z):
+            if parts is not None:
+                return float(np.sum(self.residual(z, parts) ** 2))
             return float(np.sum(self._stacked(self.blocks(z, threads=False)) ** 2))
         V = np.asarray(V, dtype=float)
+        if parts is not None and all(hasattr(self.parts[k], "residual_rows") for k in parts):
+            return self._population_costs(V, parts)
         car = [j for j, n in enumerate(self.space.names) if n not in set(self.space.knot_names)]
         order = np.lexsort(V[:, car].T[::-1]) if car else np.arange(len(V))
         out = np.empty(len(V))
         out[order] = thread_map(cost, list(V[order]), "rideid-hessian")
+        return out
+
+    def _population_costs(self, V, parts, rows: int = 256) -> np.ndarray:
+        """:meth:`costs` of blocks whose residuals come many rows at once (``residual_rows``: the runs as drawn, a
+        population of the simulator), ``rows`` rows a call, the calls on parallel threads."""
+        X = self.x(V)
+        ok = self.space.valid(self.space.full(X))
+        out = np.full(len(V), 1e6 * (sum(self.sizes[k] for k in parts) if self.sizes else 0))
+
+        def chunk(idx):
+            return sum(np.sum((self.scale[k] * self.parts[k].residual_rows(X[idx])) ** 2, axis=1) for k in parts)
+
+        idx = np.flatnonzero(ok)
+        if idx.size:
+            out[idx] = np.concatenate(thread_map(chunk, np.array_split(idx, -(-idx.size // rows)), "rideid-hessian"))
         return out
 
     def jacobian(self, v, step: float = 1e-5) -> np.ndarray:
@@ -124,17 +156,45 @@ class JointProblem:
         A parameter within ``step`` of its bound (a bar or a tire damper of nothing, at 0) has its differences
         taken a step inside: beyond the bound the car is not valid and its cost a penalty, whose second
         difference made such a rate's error bar 1e-7 N/m (and its Wald statistic, which weighs the model choice's
-        candidates, 1e16 for a bar rate of 0.3 N/m: measured on the built-in car's roads)."""
+        candidates, 1e16 for a bar rate of 0.3 N/m: measured on the built-in car's roads).
+
+        With damper curves on unknown roads (:meth:`knot_split`) the entries that hold a knot force are not taken
+        from the whole cost's second differences: the road blocks' residuals are affine in the knot forces (the
+        curves enter as a known input of the linear car, its projection the same), so their part is exact,
+        ``J^T J`` among the knots and a difference of the knots' gradient ``J^T e`` across each car parameter
+        (:meth:`_knot_entries`); the other blocks' part (the runs on tracks as drawn, a nonlinear simulation) is
+        their own cost's second differences. The van on three roads and a twist run
+        (../shared/cases/van-roads-dampers, 40 knot forces): 4803 costs of every block before, of which 1602 moved
+        the car; now 163 of every block, 731 of the road blocks and 4640 of the twist run's
+        (docs/performance.md)."""
         d = v.size
         v = np.clip(v, self.vbounds[0] + step, self.vbounds[1] - step)
+        split = self.knot_split()
+        if split is None:
+            return self._second_differences(v, step, range(d), self.costs)
+        car, knots, affine, other = split
+        H = self._second_differences(v, step, car, self.costs)  # the car's entries, every block
+        if other:
+            H += self._second_differences(v, step, range(d), functools.partial(self.costs, parts=other),
+                                          skip=set(car))
+        return H + self._knot_entries(v, step, car, knots, affine)
+
+    def _second_differences(self, v, step: float, index, costs, skip=frozenset()) -> np.ndarray:
+        """Half the second differences of ``costs`` at ``v`` (d, d): each diagonal entry of ``index`` and each pair
+        of them, leaving out the entries of two indices both in ``skip`` (zero there)."""
+        d = v.size
+        index = list(index)
+        diag = [i for i in index if i not in skip]
         h = np.full(d, step)
         E = np.eye(d) * h
-        pairs = [(i, j) for i in range(d) for j in range(i)]
-        moves = ([np.zeros(d)] + [E[i] for i in range(d)] + [-E[i] for i in range(d)]
+        pairs = [(i, j) for n, i in enumerate(index) for j in index[:n] if not (i in skip and j in skip)]
+        moves = ([np.zeros(d)] + [E[i] for i in diag] + [-E[i] for i in diag]
                  + [m for i, j in pairs for m in (E[i] + E[j], E[i] - E[j], E[j] - E[i], -E[i] - E[j])])
-        c = self.costs(v + np.array(moves))  # every evaluation at once, on both cores, those of one car together
-        c0, plus, minus, cross = c[0], c[1:d + 1], c[d + 1:2 * d + 1], c[2 * d + 1:].reshape(-1, 4)
-        H = np.diag((plus - 2 * c0 + minus) / h ** 2)
+        c = costs(v + np.array(moves))  # every evaluation at once, on both cores, those of one car together
+        n = len(diag)
+        c0, plus, minus, cross = c[0], c[1:n + 1], c[n + 1:2 * n + 1], c[2 * n + 1:].reshape(-1, 4)
+        H = np.zeros((d, d))
+        H[diag, diag] = (plus - 2 * c0 + minus) / h[diag] ** 2
         # four costs a pair, not the two of the diagonal moves +-(e_i + e_j) (f(+) + f(-) - f(+i) - f(-i) - f(+j)
         # - f(-j) + 2 f0): that one sums seven costs where this sums four, and the cost's rounding on a track as
         # built (the all-realities SUV) moved its error bars by up to 25 % between steps of 1e-3 and 5e-4, this
@@ -142,6 +202,49 @@ class JointProblem:
         for (i, j), q in zip(pairs, cross):
             H[i, j] = H[j, i] = (q[0] - q[1] - q[2] + q[3]) / (4 * h[i] * h[j])
         return 0.5 * H
+
+    def knot_split(self):
+        """``(car, knots, affine, other)``: the indices of the free parameters that are not knot forces and of those
+        that are, of the blocks whose residuals are affine in the knot forces (``affine_in_knots``: a road run with
+        damper curves, :class:`rideid.estimate.problem.roadfit.Departure`) and of the others; None without a free
+        knot force or such a block."""
+        names = list(self.space.names)
+        knot = set(self.space.knot_names)
+        knots = [j for j, n in enumerate(names) if n in knot]
+        affine = [k for k, b in enumerate(self.parts) if getattr(b, "affine_in_knots", False)]
+        if not knots or not affine:
+            return None
+        return ([j for j, n in enumerate(names) if n not in knot], knots, affine,
+                [k for k in range(len(self.parts)) if k not in set(affine)])
+
+    def _knot_entries(self, v, step: float, car, knots, affine) -> np.ndarray:
+        """The half Hessian's entries of the blocks ``affine`` (residuals ``e`` affine in the knot forces ``F`` of
+        ``knots``) that hold a knot force (d, d). With ``J`` the knots' columns in ``v`` (``de/dF dF/dv``, ``de/dF``
+        by forward differences, exact but for rounding): among the knots ``J^T J`` plus, for a knot force in
+        logarithmic coordinates (``F = exp(v)``, so ``d2e/dv2 = de/dv``), its half gradient ``(J^T e)_k`` on the
+        diagonal; between car parameter ``i`` and the knots the central difference of the knots' half gradient
+        ``J^T e`` at ``v +- step e_i``. ``(1 + 2 c) (1 + k)`` evaluations of those blocks for ``c`` car parameters
+        and ``k`` knot forces, those of one car together (its projection is reused)."""
+        d = v.size
+        E = np.eye(d) * step
+        points = [v] + [v + E[i] for i in car] + [v - E[i] for i in car]
+
+        def knot_gradient(p):  # (J^T e, J) at p: e the blocks' residuals there, J their knot columns in v
+            e0 = self.residual(p, affine)
+            x, dxdv = self.x(p), self.dxdv(p)
+            J = np.stack([(self.residual(p + E[k], affine) - e0) * (dxdv[k] / (self.x(p + E[k])[k] - x[k]))
+                          for k in knots])  # (k, m)
+            return J @ e0, J
+
+        got = thread_map(knot_gradient, points, "rideid-hessian")
+        g, J = got[0]
+        H = np.zeros((d, d))
+        H[np.ix_(knots, knots)] = J @ J.T + np.diag(np.where(self.log[knots], g, 0.0))
+        nc = len(car)
+        cross = np.array([(got[1 + i][0] - got[1 + nc + i][0]) / (2 * step) for i in range(nc)]).reshape(nc, -1)
+        H[np.ix_(car, knots)] = cross
+        H[np.ix_(knots, car)] = cross.T
+        return H
 
     def along(self, v, U, m: int, step: float = 1e-3) -> np.ndarray | None:
         """The half Hessian's row along ``U[:, m]`` in the orthonormal basis ``U`` at the point :meth:`hessian` takes
