@@ -4,7 +4,7 @@ evaluation on both cores, against a closed form."""
 import numpy as np
 
 import rideid
-from rideid.estimate.problem.joint import JointProblem
+from rideid.estimate.problem.joint import JointProblem, second_differences
 
 
 class _LogLinear:
@@ -112,9 +112,9 @@ def test_the_knots_entries_of_the_hessian_are_the_whole_costs_second_differences
     assert split is not None and split[2] == [1, 2] and split[3] == [0]
     H = prob.hessian(v)
     vv = np.clip(v, prob.vbounds[0] + 1e-3, prob.vbounds[1] - 1e-3)
-    whole = prob._second_differences(vv, 1e-3, range(v.size), prob.costs)
+    whole = second_differences(prob.costs, vv, 1e-3, range(v.size))
     np.testing.assert_allclose(H, whole, rtol=0, atol=1e-6 * np.abs(whole).max())
-    finer = prob._second_differences(vv, 5e-4, range(v.size), prob.costs)  # the whole's truncation, not the split's
+    finer = second_differences(prob.costs, vv, 5e-4, range(v.size))  # the whole's truncation, not the split's
     assert np.abs(finer - H)[np.ix_(knots, knots)].max() < 0.3 * np.abs(whole - H)[np.ix_(knots, knots)].max()
     assert np.abs(H[np.ix_(car, knots)]).max() > 1e-3 * np.abs(H).max()  # the car-knot entries are there
     # the population's costs are the rows' own

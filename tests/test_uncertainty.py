@@ -310,7 +310,7 @@ def test_jackknife_runs_is_the_exact_delete_one_refit_for_a_linear_model():
 
 class _RoundedQuadratic:
     """A cost ``v^T A v`` plus rounding: independent draws of N(0, delta) on every evaluation (seeded). Has what
-    a road fit's problem gives the Hessian and the rounding estimate: ``vbounds``, ``costs``."""
+    a road fit's problem gives the Hessian and the rounding estimate: ``vbounds``, ``costs``, ``knot_split``."""
 
     def __init__(self, A, delta, rng):
         self.A, self.delta, self.rng = np.asarray(A, float), delta, rng
@@ -320,6 +320,9 @@ class _RoundedQuadratic:
     def costs(self, V):
         V = np.asarray(V, float)
         return np.einsum("ki,ij,kj->k", V, self.A, V) + self.delta * self.rng.standard_normal(len(V))
+
+    def knot_split(self):
+        return None  # no damper curves' knot forces: the Hessian is the cost's second differences throughout
 
 
 def _rotated(eigs, pairs):

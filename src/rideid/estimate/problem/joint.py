@@ -171,37 +171,12 @@ class JointProblem:
         v = np.clip(v, self.vbounds[0] + step, self.vbounds[1] - step)
         split = self.knot_split()
         if split is None:
-            return self._second_differences(v, step, range(d), self.costs)
+            return second_differences(self.costs, v, step, range(d))
         car, knots, affine, other = split
-        H = self._second_differences(v, step, car, self.costs)  # the car's entries, every block
+        H = second_differences(self.costs, v, step, car)  # the car's entries, every block
         if other:
-            H += self._second_differences(v, step, range(d), functools.partial(self.costs, parts=other),
-                                          skip=set(car))
+            H += second_differences(functools.partial(self.costs, parts=other), v, step, range(d), skip=set(car))
         return H + self._knot_entries(v, step, car, knots, affine)
-
-    def _second_differences(self, v, step: float, index, costs, skip=frozenset()) -> np.ndarray:
-        """Half the second differences of ``costs`` at ``v`` (d, d): each diagonal entry of ``index`` and each pair
-        of them, leaving out the entries of two indices both in ``skip`` (zero there)."""
-        d = v.size
-        index = list(index)
-        diag = [i for i in index if i not in skip]
-        h = np.full(d, step)
-        E = np.eye(d) * h
-        pairs = [(i, j) for n, i in enumerate(index) for j in index[:n] if not (i in skip and j in skip)]
-        moves = ([np.zeros(d)] + [E[i] for i in diag] + [-E[i] for i in diag]
-                 + [m for i, j in pairs for m in (E[i] + E[j], E[i] - E[j], E[j] - E[i], -E[i] - E[j])])
-        c = costs(v + np.array(moves))  # every evaluation at once, on both cores, those of one car together
-        n = len(diag)
-        c0, plus, minus, cross = c[0], c[1:n + 1], c[n + 1:2 * n + 1], c[2 * n + 1:].reshape(-1, 4)
-        H = np.zeros((d, d))
-        H[diag, diag] = (plus - 2 * c0 + minus) / h[diag] ** 2
-        # four costs a pair, not the two of the diagonal moves +-(e_i + e_j) (f(+) + f(-) - f(+i) - f(-i) - f(+j)
-        # - f(-j) + 2 f0): that one sums seven costs where this sums four, and the cost's rounding on a track as
-        # built (the all-realities SUV) moved its error bars by up to 25 % between steps of 1e-3 and 5e-4, this
-        # one's by 5 %
-        for (i, j), q in zip(pairs, cross):
-            H[i, j] = H[j, i] = (q[0] - q[1] - q[2] + q[3]) / (4 * h[i] * h[j])
-        return 0.5 * H
 
     def knot_split(self):
         """``(car, knots, affine, other)``: the indices of the free parameters that are not knot forces and of those
@@ -310,3 +285,29 @@ class JointProblem:
         scale = np.array([1.0 / max(np.sqrt(np.mean(r ** 2)), 1e-300) if blk.reweighted else 1.0
                           for blk, r in zip(self.parts, b)])
         return JointProblem(self.space, self.geom, self.parts, scale, [r.size for r in b])
+
+
+def second_differences(costs, v, step: float, index, skip=frozenset()) -> np.ndarray:
+    """Half the second differences of ``costs`` (an array of points -> their costs) at ``v`` (d, d): each diagonal
+    entry of ``index`` and each pair of them, leaving out the entries of two indices both in ``skip`` (zero
+    there). The Hessian's stencils (:meth:`JointProblem.hessian`)."""
+    d = v.size
+    index = list(index)
+    diag = [i for i in index if i not in skip]
+    h = np.full(d, step)
+    E = np.eye(d) * h
+    pairs = [(i, j) for n, i in enumerate(index) for j in index[:n] if not (i in skip and j in skip)]
+    moves = ([np.zeros(d)] + [E[i] for i in diag] + [-E[i] for i in diag]
+             + [m for i, j in pairs for m in (E[i] + E[j], E[i] - E[j], E[j] - E[i], -E[i] - E[j])])
+    c = costs(v + np.array(moves))  # every evaluation at once, on both cores, those of one car together
+    n = len(diag)
+    c0, plus, minus, cross = c[0], c[1:n + 1], c[n + 1:2 * n + 1], c[2 * n + 1:].reshape(-1, 4)
+    H = np.zeros((d, d))
+    H[diag, diag] = (plus - 2 * c0 + minus) / h[diag] ** 2
+    # four costs a pair, not the two of the diagonal moves +-(e_i + e_j) (f(+) + f(-) - f(+i) - f(-i) - f(+j)
+    # - f(-j) + 2 f0): that one sums seven costs where this sums four, and the cost's rounding on a track as
+    # built (the all-realities SUV) moved its error bars by up to 25 % between steps of 1e-3 and 5e-4, this
+    # one's by 5 %
+    for (i, j), q in zip(pairs, cross):
+        H[i, j] = H[j, i] = (q[0] - q[1] - q[2] + q[3]) / (4 * h[i] * h[j])
+    return 0.5 * H
