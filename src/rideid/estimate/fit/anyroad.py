@@ -152,6 +152,15 @@ def _motion_slices(prob, d: int) -> dict:
     return out
 
 
+def _side_by_side(fn, points) -> list:
+    """``[fn(p) for p in points]`` on the kernels' threads: the workers of a least squares' difference Jacobian, one
+    column an evaluation (each evaluation's blocks one after the other). The same numbers as one after the other,
+    to the last bit; the van on three roads and a twist run (../shared/cases/van-roads-dampers: 52 columns, the
+    blocks of unequal size) keeps both cores busier so than with each evaluation's blocks side by side: its joint
+    solves 24.5-32.1 -> 21.8-22.5 s, interleaved (docs/performance.md)."""
+    return thread_map(fn, list(points), "rideid-columns")
+
+
 @stage("joint solve of car and motion")
 def _joint_solve(prob, z, ds, max_nfev: int):
     """Least squares of the car ``z`` (v units) together with the speed and the start of each run on a track as
@@ -186,16 +195,17 @@ def _joint_solve(prob, z, ds, max_nfev: int):
             parts[k] = moved(k, np.asarray(p, dtype=float).tobytes())
         return prob.with_blocks(parts)
 
-    def fun(w):
+    def fun(w):  # the blocks one after the other: the difference Jacobian's columns run side by side (workers)
         rows = [prob.parts[k].prior_rows(p, weights[k]) for k, p in _motion_block(prob, w, d).items()]
-        return np.concatenate([placed(w)(w[:d])] + rows)
+        at = placed(w)
+        return np.concatenate([at._stacked(at.blocks(w[:d], threads=False))] + rows)
 
     q = sum(prob.parts[k].n_motion for k in keys)
     reach = np.concatenate([np.full(prob.parts[k].n_motion, prob.parts[k].motion_bound) for k in keys] or [[]])
     lo, hi = np.concatenate([prob.vbounds[0], -reach]), np.concatenate([prob.vbounds[1], reach])
     steps = np.concatenate([np.full(d, 1e-5)] + [np.asarray(prob.parts[k].motion_steps, dtype=float) for k in keys])
     sol = least_squares(fun, np.concatenate([z, np.zeros(q)]), bounds=(lo, hi), method="trf", diff_step=steps,
-                        max_nfev=max_nfev)
+                        max_nfev=max_nfev, workers=_side_by_side)
     parts = list(placed(sol.x).parts)
     for k in keys:
         parts[k] = parts[k].settled(ds)
