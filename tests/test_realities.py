@@ -230,9 +230,9 @@ def test_a_gross_first_fit_that_the_powertrain_mends_on_the_tracks_as_built(tmp_
     assert "anti_roll_bars + tire_damping + powertrain (as built) 3.2" in printed  # the candidates by their tracks
     # the engine's pitch mode: at the Hessian's step the true Hessian's curvature along I_p + zeta_pp is below its
     # rounding noise (-22 against a noise of 10 on one machine, +0.7 on another: its sign is the rounding's, which
-    # the CPU's instruction set changes, docs/uncertainty.md); measured again at a 1 % step it curves up (4.6),
-    # above the noise there: error bars for both, wide (44 % and 37 %; the indefinite Hessian gave 17 % and 16 %),
-    # and the cost out at +-2 of them as curved as they say
+    # differs between machines, docs/uncertainty.md), so it is measured again (the record below); at a 1 % step
+    # it curves up (4.6), more than at the Hessian's step: error bars for both, wide (44 % and 37 %; the
+    # indefinite Hessian gave 17 % and 16 %), and the cost out at +-2 of them as curved as they say
     again = res["polish"]["remeasured"]
     assert len(again) == 1 and set(again[0]["along"]) == {"I_p", "zeta_pp"} and "unresolved" not in res["polish"]
     assert again[0]["curvature_at_step"] > max(again[0]["curvature"], 0.0), again[0]

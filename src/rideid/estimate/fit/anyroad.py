@@ -158,7 +158,7 @@ def _side_by_side(fn, points) -> list:
     to the last bit; the van on three roads and a twist run (../shared/cases/van-roads-dampers: 52 columns, the
     blocks of unequal size) keeps both cores busier so than with each evaluation's blocks side by side: its joint
     solves 24.5-32.1 -> 21.8-22.5 s, interleaved (docs/performance.md)."""
-    return thread_map(fn, list(points), "rideid-columns")
+    return thread_map(fn, points, "rideid-columns")
 
 
 @stage("joint solve of car and motion")
@@ -197,8 +197,7 @@ def _joint_solve(prob, z, ds, max_nfev: int):
 
     def fun(w):  # the blocks one after the other: the difference Jacobian's columns run side by side (workers)
         rows = [prob.parts[k].prior_rows(p, weights[k]) for k, p in _motion_block(prob, w, d).items()]
-        at = placed(w)
-        return np.concatenate([at._stacked(at.blocks(w[:d], threads=False))] + rows)
+        return np.concatenate([placed(w).residual(w[:d])] + rows)
 
     q = sum(prob.parts[k].n_motion for k in keys)
     reach = np.concatenate([np.full(prob.parts[k].n_motion, prob.parts[k].motion_bound) for k in keys] or [[]])

@@ -67,29 +67,25 @@ class JointProblem:
         return self.space.full(self.x(v)[None])[0]
 
     def blocks(self, z, threads: bool = True, parts=None):
-        """The residual blocks at ``z``, computed on parallel threads (their NumPy and LAPACK work releases the
-        GIL; each block is its own), the track runs as drawn and then the longest runs first; one after the other
-        without ``threads`` (then those of the indices ``parts`` alone, when given); None where the car is not
-        valid."""
+        """The residual blocks at ``z`` (those of the indices ``parts`` alone, when given), computed on parallel
+        threads (their NumPy and LAPACK work releases the GIL; each block is its own), the track runs as drawn and
+        then the longest runs first; one after the other without ``threads``; None where the car is not valid."""
         x = self.x(z)
         P = self.space.full(x[None])
         if not self.space.valid(P)[0]:
             return None
+        parts = range(len(self.parts)) if parts is None else parts
         if not threads:
-            return [self.parts[k].residuals(x, P[0], self.geom) for k in (range(len(self.parts)) if parts is None
-                                                                           else parts)]
-        order = sorted(range(len(self.parts)), key=lambda i: self.parts[i].order)
+            return [self.parts[k].residuals(x, P[0], self.geom) for k in parts]
+        order = sorted(parts, key=lambda i: self.parts[i].order)
         done = dict(zip(order, thread_map(lambda i: self.parts[i].residuals(x, P[0], self.geom), order,
                                           "rideid-roads")))
-        return [done[i] for i in range(len(self.parts))]
+        return [done[i] for i in parts]
 
-    def residual(self, z, parts) -> np.ndarray:
-        """The weighted residual of the blocks ``parts`` (indices) at ``z``, one after the other (1e3 everywhere for a
-        car that is not valid)."""
-        b = self.blocks(z, threads=False, parts=parts)
-        if b is None:
-            return np.full(sum(self.sizes[k] for k in parts) if self.sizes else 0, 1e3)
-        return np.concatenate([self.scale[k] * r for k, r in zip(parts, b)])
+    def residual(self, z, parts=None) -> np.ndarray:
+        """The weighted residual of the blocks ``parts`` (indices; all when None) at ``z``, one after the other (1e3
+        everywhere for a car that is not valid)."""
+        return self._stacked(self.blocks(z, threads=False, parts=parts), parts)
 
     def costs(self, V, parts=None) -> np.ndarray:
         """``sum e^2`` at each row of ``V`` (of the blocks ``parts`` alone, when given), the rows on parallel threads
@@ -98,9 +94,7 @@ class JointProblem:
         road's projection of a car is then reused for its knot forces
         (:func:`rideid.estimate.problem.roadfit.solve`)."""
         def cost(z):
-            if parts is not None:
-                return float(np.sum(self.residual(z, parts) ** 2))
-            return float(np.sum(self._stacked(self.blocks(z, threads=False)) ** 2))
+            return float(np.sum(self.residual(z, parts) ** 2))
         V = np.asarray(V, dtype=float)
         if parts is not None and all(hasattr(self.parts[k], "residual_rows") for k in parts):
             return self._population_costs(V, parts)
@@ -115,7 +109,7 @@ class JointProblem:
         population of the simulator), ``rows`` rows a call, the calls on parallel threads."""
         X = self.x(V)
         ok = self.space.valid(self.space.full(X))
-        out = np.full(len(V), 1e6 * (sum(self.sizes[k] for k in parts) if self.sizes else 0))
+        out = np.full(len(V), float(np.sum(self._stacked(None, parts) ** 2)))  # a car that is not valid
 
         def chunk(idx):
             return sum(np.sum((self.scale[k] * self.parts[k].residual_rows(X[idx])) ** 2, axis=1) for k in parts)
@@ -140,6 +134,7 @@ class JointProblem:
             vm[j] -= lo
             J[:, j] = (self(vp) - self(vm)) / (hi + lo) if hi + lo > 0 else 0.0
         return J
+
     def hessian(self, v, step: float = 1e-3) -> np.ndarray:
         """Half the Hessian of the cost ``sum e^2`` at ``v`` (in ``v`` units), by central second differences.
 
@@ -268,15 +263,16 @@ class JointProblem:
         c = self.costs(v + np.vstack([E, -E]))
         return float(np.std(c[:pairs] + c[pairs:], ddof=1) / np.sqrt(2.0))
 
-
     def __call__(self, z):
         return self._stacked(self.blocks(z))
 
-    def _stacked(self, b) -> np.ndarray:
-        """The weighted residual of blocks ``b`` (1e3 everywhere for None: a car that is not valid)."""
+    def _stacked(self, b, parts=None) -> np.ndarray:
+        """The weighted residual of the blocks ``b`` of the indices ``parts`` (all when None; 1e3 everywhere for
+        ``b`` None: a car that is not valid)."""
+        parts = range(len(self.parts)) if parts is None else parts
         if b is None:
-            return np.full(self.size, 1e3)
-        return np.concatenate([s * r for s, r in zip(self.scale, b)])
+            return np.full(sum(self.sizes[k] for k in parts) if self.sizes else 0, 1e3)
+        return np.concatenate([self.scale[k] * r for k, r in zip(parts, b)])
 
     def reweighted(self, z) -> JointProblem:
         """The problem with each block divided by its own RMS at ``z``; a run on a track as built is already
