@@ -78,6 +78,9 @@ class RunInput:
         ``rate`` (equal to them at the samples); the nonlinear car's integrator
         (:mod:`rideid.model.nonlinear`) evaluates them between the samples. ``None``
         for a RunInput built by hand.
+    values_at : callable ``times (k,) -> u (k, 4)``, optional
+        ``inputs_at``'s first half alone (the integrator's quadrature points need no rates: 32 of every 33 points
+        it evaluates, and the envelope's slope was two thirds of each evaluation); None: ``inputs_at``'s.
     """
 
     t: np.ndarray
@@ -88,6 +91,13 @@ class RunInput:
     rate: np.ndarray
     rated: np.ndarray
     inputs_at: object = field(default=None, repr=False, compare=False)
+    values_at: object = field(default=None, repr=False, compare=False)
+
+    def inputs_only(self, times) -> np.ndarray:
+        """The corner inputs ``(k, 4)`` at ``times`` (m): :attr:`values_at`, else :attr:`inputs_at`'s first half."""
+        if self.values_at is not None:
+            return self.values_at(times)
+        return self.inputs_at(times)[0]
 
     @property
     def mu(self) -> np.ndarray:
@@ -180,8 +190,12 @@ def _prepare_run(track, geom, speed, t, quad_order, distance) -> RunInput:
     u = corner_inputs(track, geom, distance(t))
     # quadrature panels no longer than the envelope grid spacing
     n_panels = max(8, int(np.ceil(max(vmax, 1e-3) * h / ENVELOPE_DX)))
+    def values_at(times):
+        """Corner inputs at ``times`` (s), as ``u`` at the samples (``inputs_at`` without the rates)."""
+        return corner_inputs(track, geom, distance(np.asarray(times, dtype=float)))
+
     def mu():
-        return input_moments(t, lambda tq: corner_inputs(track, geom, distance(tq)), n_panels, quad_order)
+        return input_moments(t, values_at, n_panels, quad_order)
     ud = u @ CORNER_TO_DECOMPOSED.T
     # input rates at the samples: speed x envelope slope (only the tire dampers use them)
     if distance_given:
@@ -203,7 +217,7 @@ def _prepare_run(track, geom, speed, t, quad_order, distance) -> RunInput:
         return corner_inputs(track, geom, x), corner_input_slopes(track, geom, x) * vv[:, None]
 
     return RunInput(t=t, h=h, u=u, ud=ud, moments=mu, rate=rate, rated=rate @ CORNER_TO_DECOMPOSED.T,
-                    inputs_at=inputs_at)
+                    inputs_at=inputs_at, values_at=values_at)
 
 
 def initial_states(disc: Discretized, ud0):
