@@ -9,7 +9,9 @@ import numpy as np
 import pytest
 import tomli_w
 
+import rideid
 from rideid.cli import main
+from rideid.estimate.assess.responses import run_velocities
 from rideid.data.scenario import default_scenario
 from rideid.estimate.problem import roadfit
 from rideid.model.nonlinear import DEFAULT_KNOTS
@@ -138,3 +140,18 @@ def test_curves_on_unknown_roads_end_to_end(curved):
     assert par["m_uf"]["std_velocity"] > 0  # the velocities' noise reaches the car's parameters too
     assert "kept: anti_roll_bars + tire_damping + damper_curves" in text
     assert (d / "fit" / "report.html").is_file()
+    # `rideid report` again, from result.json alone: the road runs' suspension velocities (the report's histograms)
+    # are the measured ones the fit read, not a simulation over a road nobody measured (before, it stopped: "unknown-
+    # road runs ... are not supported by rideid.CostFunction")
+    (d / "fit" / "report.html").unlink()
+    with contextlib.redirect_stdout(io.StringIO()):
+        assert main(["report", str(d / "fit")]) == 0
+    assert (d / "fit" / "report.html").is_file() and (d / "fit" / "figures" / "damper_velocities.png").is_file()
+    ds = rideid.load_dataset(d / "sim")
+    vel = run_velocities(rideid.load_result(d / "fit"), ds)
+    assert list(vel) == [r["id"] for r in ROADS]
+    for r in ROADS:
+        run = ds.data[r["id"]]
+        v = roadfit.suspension_velocities(run.matrix(), run.fs)
+        np.testing.assert_array_equal(vel[r["id"]][0], v[:, :2].ravel())
+        np.testing.assert_array_equal(vel[r["id"]][1], v[:, 2:].ravel())

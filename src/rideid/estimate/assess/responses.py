@@ -19,6 +19,7 @@ from ...data.scenario import LIFT_OFF_RHO
 from ...model.params import ALL_NAMES, as_vector
 from ...model.simulator import Simulator
 from ..problem.cost import CostFunction, ParameterSpace, bind_runs
+from ..problem import roadfit
 from ..problem.dampers import suspension_velocities_by_run
 
 
@@ -60,6 +61,27 @@ def result_suspension_velocities(result, dataset, simulator: Simulator | None = 
     return suspension_velocities(*curve_car(result, dataset, simulator))
 
 
+def run_velocities(result, dataset, simulator: Simulator | None = None) -> dict:
+    """Run id -> ``(front, rear)`` suspension velocities of every run of ``dataset`` for a result with damper curves,
+    as the fit read them: on a known road the identified car's (:func:`result_suspension_velocities`), on an unknown
+    road the measured ones, read off its body and axle accelerometers
+    (:func:`rideid.estimate.problem.roadfit.suspension_velocities`, :func:`rideid.estimate.fit.road_curves.velocities`);
+    a road run without all eight of those channels has none."""
+    known = [r for r in dataset.runs if dataset.road_known(r.id)]
+    sim = result_suspension_velocities(result, dataset.subset(known), simulator) if known else {}
+    out = {}
+    for r in dataset.runs:
+        if r.id in sim:
+            out[r.id] = sim[r.id]
+            continue
+        run = dataset.data[r.id]
+        y = run.matrix()
+        if np.isfinite(y[:, :8]).all():
+            v = roadfit.suspension_velocities(y, run.fs)
+            out[r.id] = (v[:, :2].ravel(), v[:, 2:].ravel())
+    return out
+
+
 def _matches(per_run: dict | None, dataset, rows: bool = True) -> bool:
     """``per_run`` holds every run of ``dataset`` (with ``rows``: each with the run's number of samples)."""
     if per_run is None or set(per_run) != {r.id for r in dataset.runs}:
@@ -85,9 +107,9 @@ def complete(result, dataset, simulator: Simulator | None = None):
             rest, {n: result.parameters[n] for n in ALL_NAMES if n in result.details}, simulator))
         response = {r.id: own[r.id] if r.id in own else sim[r.id] for r in dataset.runs}
     if curves and not _matches(velocities, dataset, rows=False):
-        velocities = result_suspension_velocities(result, dataset, simulator)
+        velocities = run_velocities(result, dataset, simulator)
     return replace(result, response=response, velocities=velocities)
 
 
-__all__ = ["complete", "curve_car", "curve_responses", "result_suspension_velocities", "simulate_runs",
-           "suspension_velocities"]
+__all__ = ["complete", "curve_car", "curve_responses", "result_suspension_velocities", "run_velocities",
+           "simulate_runs", "suspension_velocities"]
