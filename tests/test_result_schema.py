@@ -5,6 +5,8 @@ from __future__ import annotations
 
 import json
 import shutil
+from dataclasses import replace
+from pathlib import Path
 from types import SimpleNamespace
 
 import pytest
@@ -16,6 +18,8 @@ from rideid.errors import DataError
 from rideid.estimate.records import (ASSESSMENTS, VERDICTS, AdequacyAssessment, BoundsAssessment, DrawingAssessment,
                                      LevelAssessment, MaterialityAssessment, SensorHintsAssessment,
                                      SmallAngleAssessment, assessments_of, plan_of)
+from rideid.estimate.result import jsonable
+from rideid.estimate.sections import SECTIONS, ModelSection
 
 NEW_KEYS = ("schema_version", "plan", "settings", "assessments")
 
@@ -268,3 +272,45 @@ def test_the_kept_candidate_is_named_by_its_tracks_after_a_gross_first_fit():
         c.update(cost=1e-4, criterion=None, parameters={"m_s": 900.0}, std_robust={"m_s": 1.0})
     section = model_rows({"model": dict(model, first_fit=None)})
     assert section["weighed"] is False and [h["chosen"] for h in section["heads"]] == [False, False, True]
+
+
+def test_the_sections_are_typed_records_read_as_result_json_holds_them(fitted):
+    """model, adequacy, polish, uncertainty, correlation: each a record of declared fields (rideid.estimate.sections)
+    holding the keys the file has, in its order; read by attribute or as the dict it is written as."""
+    res, out = fitted
+    doc = json.loads((out / "result.json").read_text())
+    back = rideid.load_result(out)
+    for name, cls in SECTIONS.items():
+        for sec in (getattr(res, name), getattr(back, name)):
+            assert type(sec) is cls, name
+            assert list(sec) == list(doc[name]) and jsonable(dict(sec)) == doc[name], name
+            assert all(getattr(sec, k) is sec[k] for k in sec)
+            assert set(sec) <= set(cls.declared_keys())
+    assert res.model.extensions == res.model["extensions"] == []
+    assert res.adequacy.adequate is doc["adequacy"]["adequate"]
+    # a key not written is absent, as from the file: not in the mapping, None as an attribute
+    assert "first_fit" not in res.model and res.model.first_fit is None and res.model.get("first_fit", 7) == 7
+    with pytest.raises(KeyError):
+        res.model["first_fit"]
+    # a stage that writes a key nobody declared is stopped where the result is built
+    with pytest.raises(TypeError, match=r"result section 'adequacy': undeclared key\(s\) 'verdict' .*AdequacySection"):
+        replace(res, adequacy={**res.adequacy, "verdict": "ok"})
+    # a dict given becomes the record; `but` adds a key at the end, the record it came from unchanged
+    again = replace(res, model={"extensions": ["anti_roll_bars"], "selection": "given"})
+    assert type(again.model) is ModelSection and again.model.selection == "given"
+    noted = res.model.but(note="why")
+    assert list(noted)[-1] == "note" and noted.note == "why" and "note" not in res.model
+    # a file's section with a key this version does not declare reads without it (a newer version's is refused
+    # by its schema_version)
+    assert "extra" not in ModelSection.of({"extensions": [], "extra": 1}, strict=False)
+
+
+def test_every_declared_key_of_a_section_is_documented():
+    """docs/formats.md's result.json table names each section's every key (in backticks, in the section's row)."""
+    rows = {}
+    for line in (Path(__file__).resolve().parents[1] / "docs" / "formats.md").read_text().splitlines():
+        if line.startswith("| ") and line.count("|") >= 3:  # the first table naming it: result.json's
+            rows.setdefault(line.split("|")[1].strip(), line)
+    for name, cls in SECTIONS.items():
+        missing = [k for k in cls.declared_keys() if f"`{k}`" not in rows[name]]
+        assert not missing, (name, missing)

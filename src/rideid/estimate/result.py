@@ -31,6 +31,8 @@ from .problem.bumps import format_bump_stops
 from .assess.frequency import frequency_response as _frequency_response
 from ..model.equations import CHANNELS
 from .records import Assessment, Plan, assessments_from_json, assessments_of
+from .sections import (SECTIONS, AdequacySection, CorrelationSection, ModelSection, PolishSection, Section,
+                       UncertaintySection)
 
 COST_DEFINITION = ("equal-weight sum over runs of the per-channel energy-normalised squared error "
                    "(see rideid.cost)")
@@ -105,7 +107,10 @@ class History:
 
 
 def jsonable(v):
-    """NaN/inf -> None, NumPy scalars/arrays -> Python, recursively (strict JSON)."""
+    """NaN/inf -> None, NumPy scalars/arrays -> Python, recursively (strict JSON); a result section
+    (:mod:`rideid.estimate.sections`) as its dict."""
+    if isinstance(v, Section):
+        v = v.to_dict()
     if isinstance(v, dict):
         return {str(k): jsonable(x) for k, x in v.items()}
     if isinstance(v, (list, tuple)):
@@ -173,8 +178,11 @@ class IdentificationResult:
         Run id -> ``{"value", "std", "source", ...}``: the start of each
         measured run with an estimated start, as the identification settled it.
     history : History
-    model, adequacy : dict or None
-        SPEC §6 blocks (which model was fitted; the residual verdict).
+    model, adequacy, polish, uncertainty, correlation : Section or None
+        result.json's sections as typed records (:mod:`rideid.estimate.sections`: each field declared and
+        documented, read as the mapping result.json holds): which model was fitted, the residual verdict, the
+        least-squares polish, the uncertainty budget (SPEC §12), the estimates' correlation. A dict given for one
+        becomes its record; a key it does not declare is a TypeError.
     plan, settings, assessments
         SPEC §13: the problem's blocks and their unknowns (:class:`~rideid.estimate.records.Plan`), every tuning
         value in force during the fit (:mod:`rideid.settings`), one typed record per assessment
@@ -198,7 +206,7 @@ class IdentificationResult:
     seed: int | None  #: the integer seed; None when a ``numpy.random.Generator`` was given
     track_weights: dict  #: run id -> the run's final weight in the cost; empty when they weigh equally
     weights_mode: str  #: ``"adaptive"`` or ``"fixed"`` run weights in the search; ``"equal"`` in the any-road fit
-    polish: dict | None  #: the least-squares polish (docs/formats.md ``polish``); None without it
+    polish: PolishSection | None  #: the least-squares polish (docs/formats.md ``polish``); None without it
     history: History = field(default_factory=History)
     starts: dict = field(default_factory=dict)
     preprocessing: dict = field(default_factory=dict)  #: per run, how its data were read, resampled and filtered
@@ -206,10 +214,10 @@ class IdentificationResult:
     dataset: str = ""  #: the dataset's folder (:attr:`rideid.Dataset.path`)
     maps: SensitivityMaps | None = None  #: the three sensitivity maps (result.json ``sensitivity``); None: not computed
     rng_state: dict | None = None  #: the generator's starting state (``bit_generator.state``), to repeat the search
-    model: dict | None = None
-    adequacy: dict | None = None
-    #: correlation matrix of the estimates (robust covariance): {"names", "matrix", "basis"}
-    correlation: dict | None = None
+    model: ModelSection | None = None
+    adequacy: AdequacySection | None = None
+    #: correlation matrix of the estimates (robust covariance): ``names``, ``matrix``, ``basis``
+    correlation: CorrelationSection | None = None
     #: the identified car's channels per run on the final data (in memory only, for the report)
     response: dict | None = None
     #: with damper curves: run id -> (front, rear) suspension velocities of the identified car (in memory
@@ -235,7 +243,7 @@ class IdentificationResult:
     vehicle: dict | None = None
     #: SPEC §12: what was declared uncertain and how it was propagated: {"declared", "anchor", "anchor_exact",
     #: "method", "not_propagated", "notes"} (rideid.estimate.fit.budget.with_budget); None in results written before
-    uncertainty: dict | None = None
+    uncertainty: UncertaintySection | None = None
     #: per channel over the runs: clipped share, gaps bridged, noise level, sensor chain
     #: (:func:`rideid.data.quality.data_quality`); None in results written before
     data_quality: dict | None = None
@@ -250,6 +258,12 @@ class IdentificationResult:
     #: one record per assessment kind (:data:`rideid.estimate.records.ASSESSMENTS`), each with ``verdict`` and
     #: ``reason``; read from the old keys for results written before schema version 2
     assessments: list[Assessment] = field(default_factory=list)
+
+    def __post_init__(self):
+        """The sections given as dicts become their typed records (:mod:`rideid.estimate.sections`); a key a
+        section does not declare is a TypeError."""
+        for attr, cls in SECTIONS.items():
+            object.__setattr__(self, attr, cls.of(getattr(self, attr)))
 
     # SciPy/SPEC §4 names for the same numbers
     @property
@@ -466,15 +480,18 @@ def load(path) -> IdentificationResult:
         nfev=int(doc.get("evaluations", 0)), parameters={n: float(v["value"]) for n, v in details.items()},
         details=details, known=dict(doc.get("known") or {}), wall_time_s=float(doc.get("wall_time_s", 0.0)),
         seed=doc.get("seed"), track_weights=dict(doc.get("track_weights") or {}),
-        weights_mode=doc.get("weights", "adaptive"), polish=polish,
+        weights_mode=doc.get("weights", "adaptive"), polish=PolishSection.of(polish, strict=False),
         history=History.read_csv(rpath.parent / doc.get("history_file", "history.csv")),
         starts=dict(doc.get("starts") or {}), preprocessing=dict(doc.get("preprocessing") or {}),
         modal=doc.get("modal"), dataset=doc.get("dataset", ""),
         maps=_maps_from_json(doc.get("sensitivity"), rpath), rng_state=doc.get("rng_state"),
-        model=doc.get("model"), adequacy=doc.get("adequacy"), correlation=doc.get("correlation"),
+        model=ModelSection.of(doc.get("model"), strict=False),
+        adequacy=AdequacySection.of(doc.get("adequacy"), strict=False),
+        correlation=CorrelationSection.of(doc.get("correlation"), strict=False),
         checks=list(doc.get("checks") or []), dampers=doc.get("dampers"), bump_stops=doc.get("bump_stops"),
         roads=doc.get("roads"), road_profiles=_read_roads(doc.get("roads"), rpath.parent), tracks=doc.get("tracks"),
-        vehicle=doc.get("vehicle"), uncertainty=doc.get("uncertainty"), data_quality=doc.get("data_quality"),
+        vehicle=doc.get("vehicle"), uncertainty=UncertaintySection.of(doc.get("uncertainty"), strict=False),
+        data_quality=doc.get("data_quality"),
         response=_read_responses(doc, rpath.parent))
     # SPEC §13: the typed records as written, or (schema version 1) the assessments read from the old keys
     return replace(res, plan=Plan.from_dict(doc.get("plan")), settings=doc.get("settings"),
