@@ -136,17 +136,9 @@ def _seen_speeds(ds: Dataset, findings) -> Dataset:
     the lags are read against the nominal linear car, and a car with damper curves or bump stops lags the road
     otherwise (measured: 0.7 % and 0.56 % on the built-in car with stops at 30 mm, tests/test_bump_stops.py),
     which moved the stops' rate 22 % when the fit started from those speeds."""
-    seen = {f.run: f.fix["speed"] for f in findings
-            if f.check == "speed" and f.severity == WARNING and f.fix and "speed" in f.fix}
-    if not seen:
-        return ds
-    man = ds.manifest
-    runs = tuple(replace(r, speed=seen[r.id], declared_speed=r.speed if r.declared_speed is None
-                         else r.declared_speed) if r.id in seen else r for r in man.runs)
     # a logger file's run: its starts are estimated again with the car at this speed (the polish)
-    measured = {rid: replace(mr, speed=seen[rid]) if rid in seen and mr.speed is not None else mr
-                for rid, mr in ds.measured.items()}
-    return replace(ds, manifest=replace(man, runs=runs), measured=measured)
+    return ds.with_speeds({f.run: f.fix["speed"] for f in findings
+                           if f.check == "speed" and f.severity == WARNING and f.fix and "speed" in f.fix})
 
 
 def _aligned(ds: Dataset, starts: dict[str, float | dict] | None):

@@ -193,6 +193,19 @@ class Dataset:
         sub = self.subset([r for r in self.runs if r.id in keep])
         return replace(sub, findings=tuple(f for f in self.findings if getattr(f, "run", None) in keep | {None}))
 
+    def with_speeds(self, speeds: dict) -> "Dataset":
+        """A new dataset with the runs of ``speeds`` (run id -> m/s) driven at those constant speeds, each declared
+        value kept as the run's prior (``RunSpec.declared_speed``, SPEC §13): the speed the data show, or the one a
+        fit estimated with the car. A measured run's start is estimated again at that speed by the fit."""
+        if not speeds:
+            return self
+        man = self.manifest
+        runs = tuple(replace(r, speed=float(speeds[r.id]), declared_speed=r.speed if r.declared_speed is None
+                             else r.declared_speed) if r.id in speeds else r for r in man.runs)
+        measured = {rid: replace(mr, speed=float(speeds[rid])) if rid in speeds and mr.speed is not None else mr
+                    for rid, mr in self.measured.items()}
+        return replace(self, manifest=replace(man, runs=runs), measured=measured)
+
     def with_data(self, data: dict) -> "Dataset":
         """A new dataset with other run data (same manifest and measured runs)."""
         return Dataset(self.manifest, {r.id: data[r.id] for r in self.runs}, self.measured)
