@@ -4,6 +4,7 @@ before (schema version 1, no schema_version) still read, their assessments built
 from __future__ import annotations
 
 import json
+import re
 import shutil
 from dataclasses import replace
 from pathlib import Path
@@ -19,7 +20,7 @@ from rideid.estimate.records import (ASSESSMENTS, VERDICTS, AdequacyAssessment, 
                                      LevelAssessment, MaterialityAssessment, SensorHintsAssessment,
                                      SmallAngleAssessment, assessments_of, plan_of)
 from rideid.estimate.result import jsonable
-from rideid.estimate.sections import SECTIONS, ModelSection
+from rideid.estimate.sections import SECTIONS, TABLES, ModelSection
 
 NEW_KEYS = ("schema_version", "plan", "settings", "assessments")
 
@@ -275,12 +276,16 @@ def test_the_kept_candidate_is_named_by_its_tracks_after_a_gross_first_fit():
 
 
 def test_the_sections_are_typed_records_read_as_result_json_holds_them(fitted):
-    """model, adequacy, polish, uncertainty, correlation: each a record of declared fields (rideid.estimate.sections)
-    holding the keys the file has, in its order; read by attribute or as the dict it is written as."""
+    """model, adequacy, polish, uncertainty, correlation, data_quality, vehicle (and, with their groups, dampers and
+    bump_stops): each a record of declared fields (rideid.estimate.sections) holding the keys the file has, in its
+    order; read by attribute or as the dict it is written as."""
     res, out = fitted
     doc = json.loads((out / "result.json").read_text())
     back = rideid.load_result(out)
+    assert res.dampers is None and "dampers" not in doc and res.bump_stops is None  # the linear car: not written
     for name, cls in SECTIONS.items():
+        if name in ("dampers", "bump_stops"):
+            continue
         for sec in (getattr(res, name), getattr(back, name)):
             assert type(sec) is cls, name
             assert list(sec) == list(doc[name]) and jsonable(dict(sec)) == doc[name], name
@@ -305,12 +310,40 @@ def test_the_sections_are_typed_records_read_as_result_json_holds_them(fitted):
     assert "extra" not in ModelSection.of({"extensions": [], "extra": 1}, strict=False)
 
 
+def test_the_tables_entries_are_typed_records_too(fitted):
+    """details (result.json ``parameters``), starts, roads, tracks, preprocessing, modal: name -> a record of
+    declared fields, each read as the dict the file holds."""
+    res, out = fitted
+    doc = json.loads((out / "result.json").read_text())
+    back = rideid.load_result(out)
+    for attr, cls in TABLES.items():
+        key = "parameters" if attr == "details" else attr
+        for table in (getattr(res, attr), getattr(back, attr)):
+            if not doc.get(key):
+                assert not table, attr
+                continue
+            assert list(table) == list(doc[key]) and all(type(e) is cls for e in table.values()), attr
+            assert jsonable({k: dict(e) for k, e in table.items()}) == doc[key], attr
+    k_sf = res.details["k_sf"]
+    assert k_sf.value == k_sf["value"] == res.parameters["k_sf"] and k_sf.unit == "N/m" and k_sf.fixed is False
+    assert k_sf.std_total == doc["parameters"]["k_sf"]["std_total"] and k_sf.reached is None
+    assert res.modal["bounce"].frequency_hz == doc["modal"]["bounce"]["frequency_hz"]
+    with pytest.raises(TypeError, match="result section 'parameters': undeclared key"):
+        replace(res, details={**res.details, "k_sf": {**k_sf, "sigma": 1.0}})
+
+
+def _identifiers(row: str) -> set:
+    """Every identifier inside the backticks of a docs table row (``a, b`` names both)."""
+    return {w for span in re.findall(r"`([^`]*)`", row) for w in re.findall(r"[A-Za-z_][A-Za-z0-9_]*", span)}
+
+
 def test_every_declared_key_of_a_section_is_documented():
-    """docs/formats.md's result.json table names each section's every key (in backticks, in the section's row)."""
+    """docs/formats.md's result.json table names each section's every key, and each table entry's (in backticks, in
+    its row)."""
     rows = {}
     for line in (Path(__file__).resolve().parents[1] / "docs" / "formats.md").read_text().splitlines():
         if line.startswith("| ") and line.count("|") >= 3:  # the first table naming it: result.json's
             rows.setdefault(line.split("|")[1].strip(), line)
-    for name, cls in SECTIONS.items():
-        missing = [k for k in cls.declared_keys() if f"`{k}`" not in rows[name]]
+    for name, cls in [*SECTIONS.items(), *((cls.name, cls) for cls in TABLES.values())]:
+        missing = [k for k in cls.declared_keys() if k not in _identifiers(rows[name])]
         assert not missing, (name, missing)

@@ -12,6 +12,7 @@ import tomli_w
 import rideid
 from rideid.cli import main
 from rideid.estimate.assess.responses import run_velocities
+from rideid.estimate.sections import DampersSection
 from rideid.data.scenario import default_scenario
 from rideid.estimate.problem import roadfit
 from rideid.model.nonlinear import DEFAULT_KNOTS
@@ -148,7 +149,11 @@ def test_curves_on_unknown_roads_end_to_end(curved):
         assert main(["report", str(d / "fit")]) == 0
     assert (d / "fit" / "report.html").is_file() and (d / "fit" / "figures" / "damper_velocities.png").is_file()
     ds = rideid.load_dataset(d / "sim")
-    vel = run_velocities(rideid.load_result(d / "fit"), ds)
+    back = rideid.load_result(d / "fit")
+    # the curves' section typed as written (rideid.estimate.sections)
+    assert type(back.dampers) is DampersSection and list(back.dampers) == list(damp)
+    assert back.dampers.velocity == damp["velocity"] and back.dampers.velocity_note == damp["velocity_note"]
+    vel = run_velocities(back, ds)
     assert list(vel) == [r["id"] for r in ROADS]
     for r in ROADS:
         run = ds.data[r["id"]]

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from collections.abc import Mapping
+
 import math
 import warnings
 from dataclasses import dataclass, field, replace
@@ -223,7 +225,7 @@ class Dataset:
         for rid, st in starts.items():
             if rid not in self.measured:
                 raise DataError(f"start given for run '{rid}', which is not a measured run of {self.name}")
-            rec = st if isinstance(st, dict) else {"value": st}
+            rec = st if isinstance(st, Mapping) else {"value": st}
             s = float(rec["value"])
             mr = self.measured[rid]
             record = dict(mr.record, start={**mr.record.get("start", {}),

@@ -34,6 +34,8 @@ before them (schema version 1) gets the same records when it is read back
 
 from __future__ import annotations
 
+from collections.abc import Mapping
+
 from dataclasses import asdict, dataclass, field, fields, replace
 from typing import ClassVar
 
@@ -281,7 +283,7 @@ class RoadsAssessment(Assessment):
         roads = getattr(res, "roads", None) or {}
         if not roads:
             return cls(**_not_assessed("no run on an unknown road"))
-        runs = {rid: r["residual"] for rid, r in roads.items() if isinstance(r, dict) and "residual" in r}
+        runs = {rid: r["residual"] for rid, r in roads.items() if isinstance(r, Mapping) and "residual" in r}
         if not runs:
             return cls(**_not_assessed("the road runs' residuals were not judged (assess=False, no polish, or a "
                                        "result written before the test)"))

@@ -19,6 +19,7 @@ from __future__ import annotations
 import csv
 import json
 import math
+from collections.abc import Mapping
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 
@@ -31,8 +32,10 @@ from .problem.bumps import format_bump_stops
 from .assess.frequency import frequency_response as _frequency_response
 from ..model.equations import CHANNELS
 from .records import Assessment, Plan, assessments_from_json, assessments_of
-from .sections import (SECTIONS, AdequacySection, CorrelationSection, ModelSection, PolishSection, Section,
-                       UncertaintySection)
+from .sections import (SECTIONS, TABLES, AdequacySection, BumpStopsSection, CorrelationSection, DampersSection,
+                       DataQualitySection, ModeRecord, ModelSection, ParameterRecord, PolishSection,
+                       PreprocessingRecord, RoadRecord, Section, StartRecord, TrackRecord, UncertaintySection,
+                       VehicleSection, table_of)
 
 COST_DEFINITION = ("equal-weight sum over runs of the per-channel energy-normalised squared error "
                    "(see rideid.cost)")
@@ -171,18 +174,22 @@ class IdentificationResult:
         (also ``evaluations``).
     parameters : dict
         Every parameter name -> value (fixed and derived ones included).
-    details : dict
+    details : dict of ParameterRecord
         Name -> ``value, unit, fixed, derived, std, lower, upper`` (and
-        ``std_robust``, SPEC §6, where the robust standard error is computed).
-    starts : dict
-        Run id -> ``{"value", "std", "source", ...}``: the start of each
+        ``std_robust``, SPEC §6, where the robust standard error is computed; ``std_total``, SPEC §12).
+    starts : dict of StartRecord
+        Run id -> ``value, std, source, ...``: the start of each
         measured run with an estimated start, as the identification settled it.
+    roads, tracks, preprocessing, modal : dict of RoadRecord, TrackRecord, PreprocessingRecord, ModeRecord
+        The tables keyed by run, track or mode; each entry a typed record (:mod:`rideid.estimate.sections`) read
+        as the dict result.json holds.
     history : History
-    model, adequacy, polish, uncertainty, correlation : Section or None
+    model, adequacy, polish, uncertainty, correlation, dampers, bump_stops, data_quality, vehicle : Section or None
         result.json's sections as typed records (:mod:`rideid.estimate.sections`: each field declared and
         documented, read as the mapping result.json holds): which model was fitted, the residual verdict, the
-        least-squares polish, the uncertainty budget (SPEC §12), the estimates' correlation. A dict given for one
-        becomes its record; a key it does not declare is a TypeError.
+        least-squares polish, the uncertainty budget (SPEC §12), the estimates' correlation, the damper curves and
+        bump stops (SPEC §8), the data's quality, the vehicle's geometry. A dict given for one becomes its record;
+        a key it does not declare is a TypeError.
     plan, settings, assessments
         SPEC §13: the problem's blocks and their unknowns (:class:`~rideid.estimate.records.Plan`), every tuning
         value in force during the fit (:mod:`rideid.settings`), one typed record per assessment
@@ -227,10 +234,10 @@ class IdentificationResult:
     checks: list = field(default_factory=list)
     #: SPEC §8 damper curves when the model has them: {"velocity", "front": {"force", "std", "std_robust",
     #: "excited", ...}, "rear": {...}} (rideid.estimate.problem.dampers.dampers_block); None otherwise
-    dampers: dict | None = None
+    dampers: DampersSection | None = None
     #: SPEC §8 bump stops when the model has them: per axle {"reached", "clearance", "rate", "std",
     #: "std_robust", ...} (rideid.estimate.problem.bumps.bump_block); None otherwise
-    bump_stops: dict | None = None
+    bump_stops: BumpStopsSection | None = None
     #: SPEC §9 runs on unknown roads: run id -> {"file", "iso8608_class", "gd_n0", ...}; None without such runs
     roads: dict | None = None
     #: the estimated roads (in memory; written as road/<run>.csv): run id -> (x (n,), z (n, 2) left, right)
@@ -240,13 +247,13 @@ class IdentificationResult:
     tracks: dict | None = None
     #: the dataset's ``[vehicle]`` table (m: wheelbase, tracks, tire_radius, cg_height when given), so that the
     #: identified car can leave without its dataset (rideid export, SPEC §10); None in results written before
-    vehicle: dict | None = None
+    vehicle: VehicleSection | None = None
     #: SPEC §12: what was declared uncertain and how it was propagated: {"declared", "anchor", "anchor_exact",
     #: "method", "not_propagated", "notes"} (rideid.estimate.fit.budget.with_budget); None in results written before
     uncertainty: UncertaintySection | None = None
     #: per channel over the runs: clipped share, gaps bridged, noise level, sensor chain
     #: (:func:`rideid.data.quality.data_quality`); None in results written before
-    data_quality: dict | None = None
+    data_quality: DataQualitySection | None = None
     # -- SPEC §13: the typed records (rideid.estimate.records), built at the end of rideid.identify
     #: the problem's blocks and their unknowns (the single-model fit's: the problem built up front,
     #: rideid.estimate.problem.build.Problem.plan; rideid.identify's: read from the result it returns, with the
@@ -260,10 +267,12 @@ class IdentificationResult:
     assessments: list[Assessment] = field(default_factory=list)
 
     def __post_init__(self):
-        """The sections given as dicts become their typed records (:mod:`rideid.estimate.sections`); a key a
-        section does not declare is a TypeError."""
+        """The sections and the tables' entries given as dicts become their typed records
+        (:mod:`rideid.estimate.sections`); a key a record does not declare is a TypeError."""
         for attr, cls in SECTIONS.items():
             object.__setattr__(self, attr, cls.of(getattr(self, attr)))
+        for attr, cls in TABLES.items():
+            object.__setattr__(self, attr, table_of(cls, getattr(self, attr)))
 
     # SciPy/SPEC §4 names for the same numbers
     @property
@@ -334,7 +343,7 @@ class IdentificationResult:
         """Run id -> start (file time, s) of every run the identification settled,
         from ``starts`` (results written before it existed: from ``preprocessing``)."""
         out = {rid: rec["start"]["value"] for rid, rec in self.preprocessing.items()
-               if isinstance(rec, dict) and isinstance(rec.get("start"), dict)
+               if isinstance(rec, Mapping) and isinstance(rec.get("start"), Mapping)
                and rec["start"].get("value") is not None}
         out.update({rid: st["value"] for rid, st in self.starts.items()})
         return out
@@ -347,7 +356,7 @@ class IdentificationResult:
         out = {}
         for rid, s in self.start_values().items():
             rec = self.preprocessing.get(rid)
-            span = rec.get("model_time") if isinstance(rec, dict) else None
+            span = rec.get("model_time") if isinstance(rec, Mapping) else None
             out[rid] = {"value": s, **({"model_time": list(span)} if span is not None else {})}
         return out
 
@@ -464,7 +473,7 @@ def load(path) -> IdentificationResult:
     """
     doc = read_result_json(path)
     rpath = Path(path) if Path(path).suffix == ".json" else Path(path) / "result.json"
-    details = {n: dict(d) for n, d in doc["parameters"].items()}
+    details = table_of(ParameterRecord, doc["parameters"], strict=False)
     polish = doc.get("polish")
     names = doc.get("names") or (polish or {}).get("names") or [
         n for n, d in details.items() if not d.get("fixed") and not d.get("derived")]
@@ -482,16 +491,21 @@ def load(path) -> IdentificationResult:
         seed=doc.get("seed"), track_weights=dict(doc.get("track_weights") or {}),
         weights_mode=doc.get("weights", "adaptive"), polish=PolishSection.of(polish, strict=False),
         history=History.read_csv(rpath.parent / doc.get("history_file", "history.csv")),
-        starts=dict(doc.get("starts") or {}), preprocessing=dict(doc.get("preprocessing") or {}),
-        modal=doc.get("modal"), dataset=doc.get("dataset", ""),
+        starts=table_of(StartRecord, doc.get("starts") or {}, strict=False),
+        preprocessing=table_of(PreprocessingRecord, doc.get("preprocessing") or {}, strict=False),
+        modal=table_of(ModeRecord, doc.get("modal"), strict=False), dataset=doc.get("dataset", ""),
         maps=_maps_from_json(doc.get("sensitivity"), rpath), rng_state=doc.get("rng_state"),
         model=ModelSection.of(doc.get("model"), strict=False),
         adequacy=AdequacySection.of(doc.get("adequacy"), strict=False),
         correlation=CorrelationSection.of(doc.get("correlation"), strict=False),
-        checks=list(doc.get("checks") or []), dampers=doc.get("dampers"), bump_stops=doc.get("bump_stops"),
-        roads=doc.get("roads"), road_profiles=_read_roads(doc.get("roads"), rpath.parent), tracks=doc.get("tracks"),
-        vehicle=doc.get("vehicle"), uncertainty=UncertaintySection.of(doc.get("uncertainty"), strict=False),
-        data_quality=doc.get("data_quality"),
+        checks=list(doc.get("checks") or []), dampers=DampersSection.of(doc.get("dampers"), strict=False),
+        bump_stops=BumpStopsSection.of(doc.get("bump_stops"), strict=False),
+        roads=table_of(RoadRecord, doc.get("roads"), strict=False),
+        road_profiles=_read_roads(doc.get("roads"), rpath.parent),
+        tracks=table_of(TrackRecord, doc.get("tracks"), strict=False),
+        vehicle=VehicleSection.of(doc.get("vehicle"), strict=False),
+        uncertainty=UncertaintySection.of(doc.get("uncertainty"), strict=False),
+        data_quality=DataQualitySection.of(doc.get("data_quality"), strict=False),
         response=_read_responses(doc, rpath.parent))
     # SPEC §13: the typed records as written, or (schema version 1) the assessments read from the old keys
     return replace(res, plan=Plan.from_dict(doc.get("plan")), settings=doc.get("settings"),

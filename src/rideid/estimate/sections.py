@@ -1,18 +1,22 @@
-"""The result's sections as typed records: ``model``, ``adequacy``, ``polish``, ``uncertainty``, ``correlation``.
+"""The result's sections and the entries of its tables as typed records (result.json, docs/formats.md).
 
-Each is a frozen dataclass whose fields are the keys result.json's section may hold (docs/formats.md "result.json"),
-each field documented where it is declared. A section records which of its keys it holds, in the order they were
-given (:attr:`Section.keys`): a key the fit did not write is absent, as it is from the file, and its attribute is
-None. A section reads as the dict it is written as (``section["extensions"]``, ``section.get("note")``,
-``"advice" in section``, ``dict(section)``), so that code and notebooks that read result.json read the result the
-same way; ``section.extensions`` is the typed read.
+Sections: ``model``, ``adequacy``, ``polish``, ``uncertainty``, ``correlation``, ``dampers``, ``bump_stops``,
+``data_quality``, ``vehicle`` (:data:`SECTIONS`). Tables, name -> one record per entry (:data:`TABLES`): ``details``
+(result.json ``parameters``, :class:`ParameterRecord`), ``starts``, ``roads``, ``tracks``, ``preprocessing``,
+``modal``.
 
-The stages of the fit still build a section as a dict where they accrete it; :meth:`Section.of` turns it into the
+Each record is a frozen dataclass whose fields are the keys its part of result.json may hold, each field documented
+where it is declared. A record knows which of its keys it holds, in the order they were given (:attr:`Section.held`):
+a key the fit did not write is absent, as it is from the file, and its attribute is None. A record reads as the dict
+it is written as (``section["extensions"]``, ``section.get("note")``, ``"advice" in section``, ``dict(section)``),
+so that code and notebooks that read result.json read the result the same way; ``section.extensions`` is the typed
+read.
+
+The stages of the fit still build a part as a dict where they accrete it; :meth:`Section.of` turns it into its
 record when it reaches an :class:`~rideid.estimate.result.IdentificationResult`, and refuses a key the record does
-not declare (a section's keys are this module's, not whatever a stage wrote). A result.json read back keeps the
-keys its section declares (a file of the same schema version has no others).
+not declare (the keys are this module's, not whatever a stage wrote). A result.json read back keeps the keys its
+records declare (a file of the same schema version has no others).
 """
-
 from __future__ import annotations
 
 from collections.abc import Mapping
@@ -182,9 +186,185 @@ class CorrelationSection(Section):
     basis: str | None = None  #: which covariance it is of
 
 
+@dataclass(frozen=True, eq=False)
+class DampersSection(Section):
+    """SPEC §8 damper curves, with ``damper_curves`` (docs/dampers.md)."""
+
+    name: ClassVar[str] = "dampers"
+    velocity: list | None = None  #: the knots' velocities, m/s (compression +), both axles
+    unit: dict | None = None  #: the units of ``velocity`` and ``force``
+    front: dict | None = None  #: per knot ``force, std, std_robust, std_total, excited, ...`` (N)
+    rear: dict | None = None  #: the same for the rear axle
+    excitation_rule: str | None = None  #: when a knot counts as excited, in words
+    mean_slope_velocity: float | None = None  #: the velocity (m/s) out to which the curves' mean slope is c_sf, c_sr
+    knots_from: str | None = None  #: where the knots came from (SPEC §8 defaults, [model] damper_knots, a grid)
+    grid_note: str | None = None  #: the knots were found on a grid: what that means for the error bars
+    knees: dict | None = None  #: per axle and side, the velocity where the curve bends most, and its std
+    knee_rule: str | None = None  #: how a knee is found, in words
+    velocity_note: str | None = None  #: on unknown roads: the suspension velocities read off the accelerometers
+
+
+@dataclass(frozen=True, eq=False)
+class BumpStopsSection(Section):
+    """SPEC §8 bump stops, with ``bump_stops`` (docs/dampers.md)."""
+
+    name: ClassVar[str] = "bump_stops"
+    front: dict | None = None  #: ``reached, clearance, rate, std, std_robust, known, ...`` of the front stops
+    rear: dict | None = None  #: the same for the rear
+    unit: dict | None = None  #: the units of ``clearance`` and ``rate``
+    rule: str | None = None  #: when a stop counts as reached, in words
+
+
+@dataclass(frozen=True, eq=False)
+class DataQualitySection(Section):
+    """Per channel over the runs: clipped share, gaps bridged, noise level, sensor chain
+    (:func:`rideid.data.quality.data_quality`)."""
+
+    name: ClassVar[str] = "data_quality"
+    channels: dict | None = None  #: SPEC channel -> ``runs, clipped_share, clipped_runs, gaps, noise, unit, ...``
+    runs: int | None = None  #: the dataset's run count
+
+
+@dataclass(frozen=True, eq=False)
+class VehicleSection(Section):
+    """The dataset's ``[vehicle]`` table (m), so that the identified car can leave without its dataset (SPEC §10)."""
+
+    name: ClassVar[str] = "vehicle"
+    wheelbase: float | None = None  #: front to rear axle
+    track_front: float | None = None  #: between the front wheels' centres
+    track_rear: float | None = None  #: between the rear wheels' centres
+    tire_radius: float | None = None  #: loaded
+    cg_height: float | None = None  #: the sprung mass's CG above the ground, when given
+
+
+# -- the records of the result's tables: one per parameter, run, road, track or mode -----------------------------
+
+@dataclass(frozen=True, eq=False)
+class ParameterRecord(Section):
+    """One parameter of result.json ``parameters`` (SPEC §5, §6, §12; docs/uncertainty.md)."""
+
+    name: ClassVar[str] = "parameters"
+    value: float | None = None  #: the estimate (a known value, or one derived from the others), SI units
+    unit: str | None = None  #: its unit
+    fixed: bool | None = None  #: a ``[known]`` value, not estimated
+    derived: bool | None = None  #: computed from the others (``m_s`` from ``total_mass``, a curve's mean slope)
+    std: float | None = None  #: standard error, white residuals assumed (optimistic when they are correlated)
+    std_robust: float | None = None  #: HAC standard error (correlated residuals), the larger of the robust ones
+    std_total: float | None = None  #: ``std_robust`` with every declared uncertainty propagated (SPEC §12)
+    budget: dict | None = None  #: each declared input's share of ``std_total``
+    lower: float | None = None  #: the search's lower bound
+    upper: float | None = None  #: and its upper bound
+    at_bound: bool | None = None  #: ended within 1 % of the search range of a bound: the bound's value
+    reached: bool | None = None  #: a bump stop's parameter: whether the stop was reached
+    note: str | None = None  #: what a reader must know of this estimate, in words
+    excited: bool | None = None  #: a damper-curve knot: excited by the runs (else held)
+    std_grid: float | None = None  #: a knot found on a grid: the grid's share of the error bar
+    std_hac: float | None = None  #: the HAC standard error itself
+    std_jackknife: float | None = None  #: leave one run out
+    std_between_runs: float | None = None  #: the runs' disagreement with each other
+    std_motion: float | None = None  #: the runs' speeds and starts' share (tracks as built, unknown roads)
+    std_velocity: float | None = None  #: on unknown roads with damper curves: the velocities' noise's share
+    determined: bool | None = None  #: false where the cost's rounding hides the estimate (``polish.unresolved``)
+    conditional_on: list | None = None  #: the parameters at a search bound its error bar holds only with
+
+
+@dataclass(frozen=True, eq=False)
+class StartRecord(Section):
+    """A run's start estimated with the parameters (result.json ``starts``; SPEC §3, §13)."""
+
+    name: ClassVar[str] = "starts"
+    value: float | None = None  #: the start, s of the run's file time
+    std: float | None = None  #: its standard error (with a speed channel combined with the channel's drift)
+    std_fit: float | None = None  #: the fit's alone
+    std_robust: float | None = None  #: the fit's HAC error
+    std_speed_channel: float | None = None  #: a noisy speed channel's drift to the road's features
+    source: str | None = None  #: how it was estimated
+    distance_correction: dict | None = None  #: a noisy speed channel's distance correction, estimated with it
+
+
+@dataclass(frozen=True, eq=False)
+class RoadRecord(Section):
+    """A run on an unknown road (result.json ``roads``; SPEC §9, docs/any-road.md)."""
+
+    name: ClassVar[str] = "roads"
+    file: str | None = None  #: the estimated road's file beside result.json (``road/<run>.csv``)
+    iso8608_class: str | None = None  #: the road's ISO 8608 class
+    gd_n0: float | None = None  #: its displacement PSD at the reference wavenumber
+    gd_n0_unit: str | None = None  #: the unit of ``gd_n0``
+    speed: float | None = None  #: the run's speed as estimated, m/s
+    fit_band_hz: list | None = None  #: the band the road was fitted in, Hz
+    wavelengths_m: list | None = None  #: the road wavelengths that band covers at that speed, m
+    note: str | None = None  #: what the road estimate is and is not
+    motion: dict | None = None  #: the speed estimated with the car, against its declared prior (SPEC §13)
+    residual: dict | None = None  #: channel -> the run's residual at its own road estimate
+    channels_left_out: dict | None = None  #: channel -> why it was left out of the run's fit (no signal, clipped)
+
+
+@dataclass(frozen=True, eq=False)
+class TrackRecord(Section):
+    """A track fitted as built (result.json ``tracks``; SPEC §11, docs/tracks-as-built.md)."""
+
+    name: ClassVar[str] = "tracks"
+    amplitude_factor: float | None = None  #: the track's size over its drawing's
+    amplitude_factor_std: float | None = None  #: its standard error
+    unevenness_rms_m: float | None = None  #: the road the drawing lacks, RMS over one wheel path, m
+    unevenness_rms_surface_m: float | None = None  #: the same over the surface
+    method: str | None = None  #: how the track was fitted
+    note: str | None = None  #: what a reader must know of it
+    runs: dict | None = None  #: run -> what each run says of the track, with its ``motion``
+    rejected: str | None = None  #: why the as-built fit was rejected (the track then taken as drawn)
+
+
+@dataclass(frozen=True, eq=False)
+class PreprocessingRecord(Section):
+    """How one run was read, resampled and filtered (result.json ``preprocessing``; docs/real-data.md)."""
+
+    name: ClassVar[str] = "preprocessing"
+    file: str | None = None  #: the run's file
+    format: str | None = None  #: its format (SPEC CSV, MDF4, TDMS, Parquet, a logger CSV)
+    csv: dict | None = None  #: a logger CSV's options as read
+    channels: dict | None = None  #: SPEC channel -> its source, unit, sign, scale as mapped
+    start: dict | None = None  #: the run's start and where it came from
+    speed: dict | None = None  #: the run's speed and where it came from
+    fs: float | None = None  #: the rate the model runs at, Hz
+    resampling: dict | None = None  #: how the file's rates were brought to ``fs``
+    samples: int | None = None  #: the model samples fitted
+    model_time: list | None = None  #: the span of model time fitted, s
+    lead_in: dict | None = None  #: the quiet lead-in the noise floor is read on
+    recording: dict | None = None  #: the file's own time span and rate
+    motion: dict | None = None  #: the run's speed and start as estimated with the car
+    moving_start: dict | None = None  #: a run that begins moving, fitted on its track: its lead-in (SPEC §9)
+    warnings: list | None = None  #: what reading the file warned of
+
+
+@dataclass(frozen=True, eq=False)
+class ModeRecord(Section):
+    """One of the seven modes of the identified car (result.json ``modal``)."""
+
+    name: ClassVar[str] = "modal"
+    frequency_hz: float | None = None  #: the natural frequency ``|lambda| / 2 pi`` of the mode's eigenvalue pair, Hz
+    damping_ratio: float | None = None  #: ``-Re(lambda) / |lambda|``
+    undamped_frequency_hz: float | None = None  #: the undamped natural frequency, Hz
+
+
+#: result attribute -> the record of each entry of its table (parameter, run, road, track or mode -> record)
+TABLES = {"details": ParameterRecord, "starts": StartRecord, "roads": RoadRecord, "tracks": TrackRecord,
+          "preprocessing": PreprocessingRecord, "modal": ModeRecord}
+
+
+def table_of(cls, value, strict: bool = True):
+    """A table (a mapping of names to records) with each entry ``cls.of`` its value; None stays None."""
+    if value is None:
+        return None
+    return {k: cls.of(v, strict) for k, v in value.items()}
+
+
 #: result attribute -> its section's record
 SECTIONS = {cls.name: cls for cls in (ModelSection, AdequacySection, PolishSection, UncertaintySection,
-                                      CorrelationSection)}
+                                      CorrelationSection, DampersSection, BumpStopsSection, DataQualitySection,
+                                      VehicleSection)}
 
 __all__ = ["Section", "ModelSection", "AdequacySection", "PolishSection", "UncertaintySection",
-           "CorrelationSection", "SECTIONS"]
+           "CorrelationSection", "DampersSection", "BumpStopsSection", "DataQualitySection", "VehicleSection",
+           "SECTIONS", "ParameterRecord", "StartRecord", "RoadRecord", "TrackRecord", "PreprocessingRecord",
+           "ModeRecord", "TABLES", "table_of"]

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from collections.abc import Mapping
+
 from pathlib import Path
 
 from ...data.schema import load_truth, load_truth_dampers
@@ -104,7 +106,7 @@ def score(result, truth, dampers=None) -> dict:
     worst = max((abs(x["error_percent"]) for x in rows.values()
                  if x["error_percent"] is not None and x["status"] in ("estimated", "derived")), default=0.0)
     judged = [x["covered"] for x in rows.values() if x["covered"] is not None]
-    basis = "std_total" if any(isinstance(d, dict) and "std_total" in d for d in details.values()) else "std_robust"
+    basis = "std_total" if any(isinstance(d, Mapping) and "std_total" in d for d in details.values()) else "std_robust"
     return {"parameters": rows, "worst_percent": worst, "covered": sum(judged), "coverable": len(judged),
             "covered_robust": sum(bool(x["covered_robust"]) for x in rows.values()), "basis": basis,
             "notes": notes}
