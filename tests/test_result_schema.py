@@ -20,7 +20,7 @@ from rideid.estimate.records import (ASSESSMENTS, VERDICTS, AdequacyAssessment, 
                                      LevelAssessment, MaterialityAssessment, SensorHintsAssessment,
                                      SmallAngleAssessment, assessments_of, plan_of)
 from rideid.estimate.result import jsonable
-from rideid.estimate.sections import SECTIONS, TABLES, ModelSection
+from rideid.estimate.sections import SECTIONS, TABLES, FindingRecord, ModelSection
 
 NEW_KEYS = ("schema_version", "plan", "settings", "assessments")
 
@@ -312,7 +312,7 @@ def test_the_sections_are_typed_records_read_as_result_json_holds_them(fitted):
 
 def test_the_tables_entries_are_typed_records_too(fitted):
     """details (result.json ``parameters``), starts, roads, tracks, preprocessing, modal: name -> a record of
-    declared fields, each read as the dict the file holds."""
+    declared fields, each read as the dict the file holds; checks a list of them."""
     res, out = fitted
     doc = json.loads((out / "result.json").read_text())
     back = rideid.load_result(out)
@@ -324,6 +324,9 @@ def test_the_tables_entries_are_typed_records_too(fitted):
                 continue
             assert list(table) == list(doc[key]) and all(type(e) is cls for e in table.values()), attr
             assert jsonable({k: dict(e) for k, e in table.items()}) == doc[key], attr
+    # and the checks' findings, a list of records
+    assert all(type(c) is FindingRecord for c in res.checks + back.checks)
+    assert jsonable([dict(c) for c in back.checks]) == doc["checks"]
     k_sf = res.details["k_sf"]
     assert k_sf.value == k_sf["value"] == res.parameters["k_sf"] and k_sf.unit == "N/m" and k_sf.fixed is False
     assert k_sf.std_total == doc["parameters"]["k_sf"]["std_total"] and k_sf.reached is None
@@ -344,6 +347,6 @@ def test_every_declared_key_of_a_section_is_documented():
     for line in (Path(__file__).resolve().parents[1] / "docs" / "formats.md").read_text().splitlines():
         if line.startswith("| ") and line.count("|") >= 3:  # the first table naming it: result.json's
             rows.setdefault(line.split("|")[1].strip(), line)
-    for name, cls in [*SECTIONS.items(), *((cls.name, cls) for cls in TABLES.values())]:
+    for name, cls in [*SECTIONS.items(), *((cls.name, cls) for cls in (*TABLES.values(), FindingRecord))]:
         missing = [k for k in cls.declared_keys() if k not in _identifiers(rows[name])]
         assert not missing, (name, missing)

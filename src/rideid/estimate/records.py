@@ -35,7 +35,6 @@ before them (schema version 1) gets the same records when it is read back
 from __future__ import annotations
 
 from collections.abc import Mapping
-
 from dataclasses import asdict, dataclass, field, fields, replace
 from typing import ClassVar
 

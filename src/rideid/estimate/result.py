@@ -35,7 +35,7 @@ from .records import Assessment, Plan, assessments_from_json, assessments_of
 from .sections import (SECTIONS, TABLES, AdequacySection, BumpStopsSection, CorrelationSection, DampersSection,
                        DataQualitySection, ModeRecord, ModelSection, ParameterRecord, PolishSection,
                        PreprocessingRecord, RoadRecord, Section, StartRecord, TrackRecord, UncertaintySection,
-                       VehicleSection, table_of)
+                       VehicleSection, FindingRecord, list_of, table_of)
 
 COST_DEFINITION = ("equal-weight sum over runs of the per-channel energy-normalised squared error "
                    "(see rideid.cost)")
@@ -230,7 +230,8 @@ class IdentificationResult:
     #: with damper curves: run id -> (front, rear) suspension velocities of the identified car (in memory
     #: only, the report's histograms; rideid.estimate.assess.responses)
     velocities: dict | None = None
-    #: findings of the data checks and of the bound check (rideid.data.checks), as dicts
+    #: findings of the data checks, the bound check and the motion check (rideid.data.checks), as typed records
+    #: (:class:`rideid.estimate.sections.FindingRecord`)
     checks: list = field(default_factory=list)
     #: SPEC §8 damper curves when the model has them: {"velocity", "front": {"force", "std", "std_robust",
     #: "excited", ...}, "rear": {...}} (rideid.estimate.problem.dampers.dampers_block); None otherwise
@@ -273,6 +274,7 @@ class IdentificationResult:
             object.__setattr__(self, attr, cls.of(getattr(self, attr)))
         for attr, cls in TABLES.items():
             object.__setattr__(self, attr, table_of(cls, getattr(self, attr)))
+        object.__setattr__(self, "checks", list_of(FindingRecord, self.checks))
 
     # SciPy/SPEC §4 names for the same numbers
     @property
@@ -498,7 +500,8 @@ def load(path) -> IdentificationResult:
         model=ModelSection.of(doc.get("model"), strict=False),
         adequacy=AdequacySection.of(doc.get("adequacy"), strict=False),
         correlation=CorrelationSection.of(doc.get("correlation"), strict=False),
-        checks=list(doc.get("checks") or []), dampers=DampersSection.of(doc.get("dampers"), strict=False),
+        checks=list_of(FindingRecord, doc.get("checks") or [], strict=False),
+        dampers=DampersSection.of(doc.get("dampers"), strict=False),
         bump_stops=BumpStopsSection.of(doc.get("bump_stops"), strict=False),
         roads=table_of(RoadRecord, doc.get("roads"), strict=False),
         road_profiles=_read_roads(doc.get("roads"), rpath.parent),

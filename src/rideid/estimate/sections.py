@@ -3,7 +3,7 @@
 Sections: ``model``, ``adequacy``, ``polish``, ``uncertainty``, ``correlation``, ``dampers``, ``bump_stops``,
 ``data_quality``, ``vehicle`` (:data:`SECTIONS`). Tables, name -> one record per entry (:data:`TABLES`): ``details``
 (result.json ``parameters``, :class:`ParameterRecord`), ``starts``, ``roads``, ``tracks``, ``preprocessing``,
-``modal``.
+``modal``; and ``checks``, a list of :class:`FindingRecord`.
 
 Each record is a frozen dataclass whose fields are the keys its part of result.json may hold, each field documented
 where it is declared. A record knows which of its keys it holds, in the order they were given (:attr:`Section.held`):
@@ -347,6 +347,25 @@ class ModeRecord(Section):
     undamped_frequency_hz: float | None = None  #: the undamped natural frequency, Hz
 
 
+@dataclass(frozen=True, eq=False)
+class FindingRecord(Section):
+    """A finding of the data checks, the bound check or the motion check (result.json ``checks``;
+    :class:`rideid.data.checks.Finding`, docs/common-mistakes.md)."""
+
+    name: ClassVar[str] = "checks"
+    severity: str | None = None  #: ``"error"``, ``"warning"`` or ``"note"`` (recorded, not warned of)
+    check: str | None = None  #: which check: ``coverage``, ``wiring``, ``track``, ``speed``, ``bounds``, ``motion``
+    message: str | None = None  #: what it found and what to do, in one line
+    run: str | None = None  #: the run it is about, if one
+    channel: str | None = None  #: the channel, key or parameter it names, if one
+    fix: dict | None = None  #: what rideid did or proposes (a channel map entry, a speed, a start)
+
+
+def list_of(cls, value, strict: bool = True):
+    """A list of records, each ``cls.of`` its item; None stays None."""
+    return None if value is None else [cls.of(v, strict) for v in value]
+
+
 #: result attribute -> the record of each entry of its table (parameter, run, road, track or mode -> record)
 TABLES = {"details": ParameterRecord, "starts": StartRecord, "roads": RoadRecord, "tracks": TrackRecord,
           "preprocessing": PreprocessingRecord, "modal": ModeRecord}
@@ -367,4 +386,4 @@ SECTIONS = {cls.name: cls for cls in (ModelSection, AdequacySection, PolishSecti
 __all__ = ["Section", "ModelSection", "AdequacySection", "PolishSection", "UncertaintySection",
            "CorrelationSection", "DampersSection", "BumpStopsSection", "DataQualitySection", "VehicleSection",
            "SECTIONS", "ParameterRecord", "StartRecord", "RoadRecord", "TrackRecord", "PreprocessingRecord",
-           "ModeRecord", "TABLES", "table_of"]
+           "ModeRecord", "TABLES", "table_of", "FindingRecord", "list_of"]

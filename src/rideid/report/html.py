@@ -18,6 +18,7 @@ import math
 import multiprocessing as mp
 import os
 import sys
+from collections.abc import Mapping
 from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass
 from importlib import resources
@@ -859,7 +860,7 @@ def data_section(result, dataset) -> dict:
     data_rows, channel_rows, data_warnings = data_tables(result.preprocessing or dataset.preprocessing())
     # the data checks' and the bound check's findings (rideid.data.checks)
     data_warnings = data_warnings + [c["message"] for c in (getattr(result, "checks", None) or [])
-                                     if isinstance(c, dict) and "message" in c]
+                                     if isinstance(c, Mapping) and "message" in c]
     quality = quality_rows(getattr(result, "data_quality", None))
     if quality:  # the table stands for the per-run lines on clipping, gaps and flat lines
         data_warnings = [w for w in data_warnings if not summarised_warning(w)]
