@@ -20,7 +20,7 @@ from rideid.estimate.records import (ASSESSMENTS, VERDICTS, AdequacyAssessment, 
                                      LevelAssessment, MaterialityAssessment, SensorHintsAssessment,
                                      SmallAngleAssessment, assessments_of, plan_of)
 from rideid.estimate.result import jsonable
-from rideid.estimate.sections import SECTIONS, TABLES, FindingRecord, ModelSection
+from rideid.estimate.sections import SECTIONS, TABLES, FindingRecord, ModelSection, PolishSection
 
 NEW_KEYS = ("schema_version", "plan", "settings", "assessments")
 
@@ -350,3 +350,13 @@ def test_every_declared_key_of_a_section_is_documented():
     for name, cls in [*SECTIONS.items(), *((cls.name, cls) for cls in (*TABLES.values(), FindingRecord))]:
         missing = [k for k in cls.declared_keys() if k not in _identifiers(rows[name])]
         assert not missing, (name, missing)
+
+
+def test_a_record_nested_in_a_section_is_a_dict_in_its_to_dict(fitted):
+    """``to_dict`` gives what json.dumps takes: a polish on the tracks as built nests the as-drawn one's record."""
+    res, _ = fitted
+    nested = res.polish.but(as_drawn=res.polish)
+    assert type(nested.as_drawn) is PolishSection
+    plain = nested.to_dict()
+    assert type(plain["as_drawn"]) is dict and plain["as_drawn"]["nfev"] == res.polish.nfev
+    assert json.loads(json.dumps(jsonable(plain)))["as_drawn"]["names"] == res.polish.names

@@ -63,8 +63,9 @@ class Section(Mapping):
         return replace(self, **changes, held=self.held + tuple(k for k in changes if k not in self.held))
 
     def to_dict(self) -> dict:
-        """The section as result.json holds it: the keys held, in their order (values as they are)."""
-        return {k: getattr(self, k) for k in self.held}
+        """The section as result.json holds it: the keys held, in their order; a record nested in it as its dict
+        too (other values as they are: NumPy arrays stay arrays)."""
+        return {k: _plain(getattr(self, k)) for k in self.held}
 
     # -- read as the mapping of the keys held -----------------------------------------------------------------
     def __getitem__(self, key):
@@ -80,6 +81,17 @@ class Section(Mapping):
 
     def __repr__(self):
         return f"{type(self).__name__}({', '.join(f'{k}={getattr(self, k)!r}' for k in self.held)})"
+
+
+def _plain(v):
+    """``v`` with every record in it as its dict (:meth:`Section.to_dict`), through dicts and lists."""
+    if isinstance(v, Section):
+        return v.to_dict()
+    if isinstance(v, dict):
+        return {k: _plain(x) for k, x in v.items()}
+    if isinstance(v, (list, tuple)):
+        return type(v)(_plain(x) for x in v)
+    return v
 
 
 @dataclass(frozen=True, eq=False)
