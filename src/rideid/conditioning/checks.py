@@ -220,6 +220,17 @@ def _score(Y, Yhat):
     return correlation_score(Yhat, np.nan_to_num(Y, nan=0.0), cols)
 
 
+def _realigned(mr, geom, track, **changes):
+    """The step estimating the start of the measured run ``mr`` read with ``changes`` (its speed, its distance):
+    returns ``(start, correlation)`` (:func:`rideid.conditioning.starts.start_steps`), or None when the run cannot
+    even be aligned so."""
+    alt = dataclasses.replace(mr, **changes, window=None, start=None, warnings=[])
+    try:
+        return (yield from start_steps(alt, geom, track))
+    except Exception:  # a candidate that cannot even be aligned does not fit
+        return None
+
+
 def _alternatives(ds, rid):
     """The step giving (description, correlation) of the run under other speeds and the dataset's other
     tracks (:mod:`rideid.conditioning.nominal`: every alternative simulated in the same rounds)."""
@@ -234,12 +245,8 @@ def _alternatives(ds, rid):
             dist = mr.distance
             if factor is not None:
                 dist = Distance(dist.t, dist.d * factor)
-            alt = dataclasses.replace(mr, speed=speed, distance=dist, window=None, start=None, warnings=[])
-            try:
-                _, r = yield from start_steps(alt, geom, track)
-            except Exception:  # a candidate that cannot even be aligned does not fit
-                return -1.0
-            return r
+            found = yield from _realigned(mr, geom, track, speed=speed, distance=dist)
+            return -1.0 if found is None else found[1]
         dist = rd.distance
         if factor is not None and dist is not None:
             dist = RelativeDistance(Distance(dist.dist.t, dist.dist.d * factor), dist.start)
@@ -514,20 +521,17 @@ def speed_scan(ds, rid, track):
     r, geom = ds.manifest.run(rid), ds.geometry
     mr, rd = ds.measured.get(rid), ds.data[rid]
     v0, step = float(r.speed), defaults["checks.speed_scan_step"]
-    k = np.arange(-int(round(defaults["checks.speed_scan_span"] / step)), int(round(
-        defaults["checks.speed_scan_span"] / step)) + 1)
+    n = int(round(defaults["checks.speed_scan_span"] / step))
+    k = np.arange(-n, n + 1)
     speeds = v0 * (1.0 + step * k)
 
     def at(v):
+        shift = 0.0
         if mr is not None and mr.auto_start:
-            alt = dataclasses.replace(mr, speed=float(v), window=None, start=None, warnings=[])
-            try:
-                start, _ = yield from start_steps(alt, geom, track)
-            except Exception:  # a speed at which the run cannot even be aligned does not fit
+            found = yield from _realigned(mr, geom, track, speed=float(v))
+            if found is None:
                 return -1.0, 0.0
-            shift = float(start - mr.start)
-        else:
-            shift = 0.0
+            shift = float(found[0] - mr.start)
         (Yhat,) = responses((yield [_nominal_job(track, rd.time - shift, float(v), None)]))
         Y, Yhat = _as_recorded(ds, rid, rd.matrix(), Yhat)
         return _score(Y, Yhat), shift

@@ -491,25 +491,18 @@ def load(path) -> IdentificationResult:
         nfev=int(doc.get("evaluations", 0)), parameters={n: float(v["value"]) for n, v in details.items()},
         details=details, known=dict(doc.get("known") or {}), wall_time_s=float(doc.get("wall_time_s", 0.0)),
         seed=doc.get("seed"), track_weights=dict(doc.get("track_weights") or {}),
-        weights_mode=doc.get("weights", "adaptive"), polish=PolishSection.of(polish, strict=False),
+        weights_mode=doc.get("weights", "adaptive"),
         history=History.read_csv(rpath.parent / doc.get("history_file", "history.csv")),
         starts=table_of(StartRecord, doc.get("starts") or {}, strict=False),
         preprocessing=table_of(PreprocessingRecord, doc.get("preprocessing") or {}, strict=False),
         modal=table_of(ModeRecord, doc.get("modal"), strict=False), dataset=doc.get("dataset", ""),
         maps=_maps_from_json(doc.get("sensitivity"), rpath), rng_state=doc.get("rng_state"),
-        model=ModelSection.of(doc.get("model"), strict=False),
-        adequacy=AdequacySection.of(doc.get("adequacy"), strict=False),
-        correlation=CorrelationSection.of(doc.get("correlation"), strict=False),
         checks=list_of(FindingRecord, doc.get("checks") or [], strict=False),
-        dampers=DampersSection.of(doc.get("dampers"), strict=False),
-        bump_stops=BumpStopsSection.of(doc.get("bump_stops"), strict=False),
         roads=table_of(RoadRecord, doc.get("roads"), strict=False),
         road_profiles=_read_roads(doc.get("roads"), rpath.parent),
-        tracks=table_of(TrackRecord, doc.get("tracks"), strict=False),
-        vehicle=VehicleSection.of(doc.get("vehicle"), strict=False),
-        uncertainty=UncertaintySection.of(doc.get("uncertainty"), strict=False),
-        data_quality=DataQualitySection.of(doc.get("data_quality"), strict=False),
-        response=_read_responses(doc, rpath.parent))
+        tracks=table_of(TrackRecord, doc.get("tracks"), strict=False), response=_read_responses(doc, rpath.parent),
+        # each section as written, the keys this version declares (a later one's file is refused by its version)
+        **{attr: cls.of(doc.get(attr), strict=False) for attr, cls in SECTIONS.items()})
     # SPEC §13: the typed records as written, or (schema version 1) the assessments read from the old keys
     return replace(res, plan=Plan.from_dict(doc.get("plan")), settings=doc.get("settings"),
                    assessments=assessments_from_json(doc["assessments"]) if "assessments" in doc

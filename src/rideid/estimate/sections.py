@@ -20,7 +20,7 @@ records declare (a file of the same schema version has no others).
 from __future__ import annotations
 
 from collections.abc import Mapping
-from dataclasses import dataclass, field, fields, replace
+from dataclasses import dataclass, field, fields
 from typing import ClassVar
 
 
@@ -56,11 +56,8 @@ class Section(Mapping):
         return cls(**given, held=tuple(given))
 
     def but(self, **changes) -> "Section":
-        """A copy with ``changes`` (keys of the section) set: held from now on."""
-        bad = [k for k in changes if k not in self.declared_keys()]
-        if bad:
-            raise TypeError(f"result section {self.name!r}: undeclared key(s) {', '.join(map(repr, bad))}")
-        return replace(self, **changes, held=self.held + tuple(k for k in changes if k not in self.held))
+        """A copy with ``changes`` (keys of the section) set: held from now on (a new key after the others)."""
+        return self.of({**self, **changes})
 
     def to_dict(self) -> dict:
         """The section as result.json holds it: the keys held, in their order; a record nested in it as its dict

@@ -76,7 +76,7 @@ def run_velocities(result, dataset, simulator: Simulator | None = None) -> dict:
             continue
         run = dataset.data[r.id]
         y = run.matrix()
-        if np.isfinite(y[:, :8]).all():
+        if not roadfit.missing_corners(y):
             v = roadfit.suspension_velocities(y, run.fs)
             out[r.id] = (v[:, :2].ravel(), v[:, 2:].ravel())
     return out
