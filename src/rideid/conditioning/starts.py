@@ -374,7 +374,7 @@ def warped(ds, warps: dict) -> Dataset:
     for rid, w in warps.items():
         measured[rid] = _warped_run(ds.measured[rid], w)
         data[rid] = measured[rid].run_data(measured[rid].start)
-    return Dataset(ds.manifest, data, measured)
+    return replace(ds, data=data, measured=measured)
 
 
 def linearise_starts(ds, P, starts: dict, simulator=None, derivative: bool = True, warps: dict | None = None):

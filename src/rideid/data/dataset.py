@@ -209,7 +209,7 @@ class Dataset:
 
     def with_data(self, data: dict) -> "Dataset":
         """A new dataset with other run data (same manifest and measured runs)."""
-        return Dataset(self.manifest, {r.id: data[r.id] for r in self.runs}, self.measured)
+        return replace(self, data={r.id: data[r.id] for r in self.runs})  # the findings kept
 
     def with_starts(self, starts: dict) -> "Dataset":
         """A new dataset with measured runs re-read at other starts.
@@ -234,7 +234,7 @@ class Dataset:
                 mr = mr.with_distance_correction(dc["knots_s"], dc["values_m"])
             measured[rid] = replace(mr, start=s, record=record)
             data[rid] = measured[rid].run_data(s)
-        return Dataset(self.manifest, data, measured)
+        return replace(self, data=data, measured=measured)  # the findings kept: what load found stays the data's
 
     @property
     def auto_start_runs(self) -> list[str]:
