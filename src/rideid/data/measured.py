@@ -71,7 +71,7 @@ from ..model.sensors import AnalogFilter, discretise
 from .readers import FORMAT_NAMES, Signal, open_signals
 from ..model.posts import MIN_CHAIN_GAIN, POST_CHANNELS, POST_VEL_CHANNELS, unfilter
 from .schema.channels import RIG_TARGETS, SI, TARGETS, UNITS, ChannelEntry, gravity_unit_factor, quantity, unit_factor
-from .schema.runfiles import RunData, check_post_channels
+from .schema.runfiles import PLAUSIBLE_RATE, RunData, check_post_channels, time_units_fitting
 
 
 #: the default model rate is the lowest whole division of the channels' rates at or above this
@@ -549,13 +549,6 @@ def _channel_unit(c: str, e: ChannelEntry, sig: Signal, path: Path, w: str, warn
     return unit, unit_src
 
 
-#: sample rates (Hz) of a ride recording: below, a time column read in too large a unit (ms taken as s); above,
-#: in too small a one (s taken as ms)
-PLAUSIBLE_RATE = (5.0, 200_000.0)
-#: a time column's units and their factors to seconds, for the hint
-_TIME_UNITS = {"s": 1.0, "ms": 1e-3, "us": 1e-6}
-
-
 def _check_time_base(rec_ch: dict, measured: list, time_name, time_scale: float, path: Path) -> None:
     """One clear error when the measured channels' sample rate is not a ride recording's: the time base is in
     another unit than read (a time column in ms read as s), naming the time column and the unit that fits."""
@@ -566,8 +559,7 @@ def _check_time_base(rec_ch: dict, measured: list, time_name, time_scale: float,
     lo, hi = PLAUSIBLE_RATE
     if lo <= rate <= hi:
         return
-    # the unit whose factor puts the rate in the middle of the plausible range, as a rate of 50 Hz - 20 kHz
-    fits = [u for u, f in _TIME_UNITS.items() if 50.0 <= rate * time_scale / f <= 20_000.0]
+    fits = time_units_fitting(rate, time_scale)
     where = (f"the time column '{time_name}'" if time_name else "the file's time base")
     hint = (f"; is it in {fits[0]}? set [channels] time = {{ name = \"{time_name or 'time'}\", unit = \"{fits[0]}\" }}"
             if fits else "; check the time column's unit and the logger's rate")

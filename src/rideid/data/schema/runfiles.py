@@ -115,6 +115,12 @@ def read_run_csv(path: Path, posts: bool = False) -> RunData:
         ln = int(np.argmax(np.abs(dt - h))) + 3
         raise DataError(f"{path}: column 'time' is not uniform (step {dt[ln - 3]:.6g} s at line {ln}, "
                         f"mean step {h:.6g} s)")
+    lo, hi = PLAUSIBLE_RATE
+    if not lo <= 1.0 / h <= hi:  # a time column in ms (SPEC §3: seconds): one line, not a run 1000 times too long
+        fits = time_units_fitting(1.0 / h)
+        raise DataError(f"{path}: column 'time' steps {h:.6g} per sample, a sample rate of {1.0 / h:.3g} Hz, not a "
+                        f"ride recording's ({lo:g} Hz - {hi / 1000:g} kHz); SPEC §3 wants the time in seconds"
+                        + (f": is it in {fits[0]}?" if fits else ""))
     # rebuild an exactly uniform time base
     t = t[0] + h * np.arange(t.size)
     channels = {c: arr[:, j] for j, c in enumerate(used) if c in CHANNELS}
@@ -128,6 +134,19 @@ def read_run_csv(path: Path, posts: bool = False) -> RunData:
     return RunData(t, channels, posts=post, post_vel=vel)
 
 
+#: sample rates (Hz) of a ride recording: below, a time column read in too large a unit (ms taken as s); above,
+#: in too small a one (s taken as ms)
+PLAUSIBLE_RATE = (5.0, 200_000.0)
+#: a time column's units and their factors to seconds, for the hint
+_TIME_UNITS = {"s": 1.0, "ms": 1e-3, "us": 1e-6}
+
+
+def time_units_fitting(rate: float, time_scale: float = 1.0) -> list:
+    """The time units (of :data:`_TIME_UNITS`) that would give a recording read at ``rate`` Hz (its time column
+    scaled by ``time_scale`` to seconds) a rate of 50 Hz - 20 kHz, the middle of :data:`PLAUSIBLE_RATE`."""
+    return [u for u, f in _TIME_UNITS.items() if 50.0 <= rate * time_scale / f <= 20_000.0]
+
+
 def write_run_csv(path: Path, time, Y, channels=CHANNELS):
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
@@ -135,4 +154,4 @@ def write_run_csv(path: Path, time, Y, channels=CHANNELS):
     np.savetxt(path, M, delimiter=",", header=",".join(("time",) + tuple(channels)), comments="", fmt="%.12g")
 
 
-__all__ = ["RunData", "read_run_csv", "write_run_csv"]
+__all__ = ["RunData", "read_run_csv", "write_run_csv", "PLAUSIBLE_RATE", "time_units_fitting"]
