@@ -17,7 +17,8 @@ identified with the defaults and seed 1, as a user would):
 * ``roads``: the built-in car with tire damping on two unknown 12 s ISO roads, 2 % noise (the case of
   tests/test_road_model_choice.py);
 * ``van-roads``: the shared van with digressive dampers on three unknown roads and one twist run, 2 % noise
-  (../shared/cases/van-roads-dampers, when beside the repository).
+  (../shared/cases/van-roads-dampers, when beside the repository); ``van-roads-slip``: the same with the twist
+  run's speed typed 3.03 m/s (driven at 3.0).
 
 Each case's table: the stages of ``profile.csv`` (wall and CPU seconds, CPU counting every thread), its
 whole wall time, and, for scale, the same wall time in units of a plain SciPy baseline measured in the same
@@ -42,7 +43,8 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 TESTS = ROOT / "tests"
 SHARED = ROOT.parent / "shared" / "cases"
-CASES = ("builtin", "realities", "realities-ten", "gps", "knees", "van-csv", "van-logger", "roads", "van-roads")
+CASES = ("builtin", "realities", "realities-ten", "gps", "knees", "van-csv", "van-logger", "roads", "van-roads",
+         "van-roads-slip")
 
 
 def _rideid(*args, cwd=None) -> subprocess.CompletedProcess:
@@ -113,12 +115,16 @@ def write_case(case: str, folder: Path) -> Path:
         (folder / "scenario.toml").write_text(_roads_scenario())
         _check(_rideid("simulate", folder / "scenario.toml", "--out", data, "--noise", "0.02", "--seed", "3",
                        "--quiet"))
-    elif case == "van-roads":
+    elif case in ("van-roads", "van-roads-slip"):
         van = SHARED / "van-roads-dampers"
         if not van.is_dir():
             raise FileNotFoundError(f"{van}: the shared case is not beside the repository")
         _check(_rideid("simulate", van / "scenario.toml", "--out", data, "--noise", "0.02", "--seed", "1",
                        "--quiet"))
+        if case == "van-roads-slip":  # the twist run's speed typed 1 % high (driven at 3.0 m/s)
+            manifest = data / "dataset.toml"
+            manifest.write_text(manifest.read_text().replace('speed = 3.0, file = "runs/T_HL.csv"',
+                                                             'speed = 3.03, file = "runs/T_HL.csv"'))
     else:
         raise ValueError(f"unknown case {case!r}; the cases: {', '.join(CASES)}")
     return data

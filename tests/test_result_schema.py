@@ -178,7 +178,7 @@ def test_a_set_up_value_the_data_mended_is_an_assessment_and_the_caveat_of_an_ad
     note = {**slip, "severity": "note", "run": "T"}
     res = Result({"adequate": True, "reasons": ["fine"], "runs": {}}, [slip, note])
     rec = SetupAssessment.from_result(res)
-    caveat = ("a declared speed the data contradict: H (declared 10.1, the data 10 m/s); the fit took the data's "
+    caveat = ("a declared speed the data contradict: H (declared 10.1, the data 10.001 m/s); the fit took the data's "
               "speed; check the test log (a speed typed wrong may not be the only slip of that run)")
     assert rec == SetupAssessment("warn", caveat, [{"run": "H", "declared": 10.1, "speed": 10.0012}])
     assert SetupAssessment.from_dict(rec.to_dict()) == rec

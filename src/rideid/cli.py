@@ -379,6 +379,8 @@ def _roads_table(res) -> str:
         lines += [f"{rid}: {c} {why}" for c, why in (r.get("channels_left_out") or {}).items()]
     # each road run's speed as fitted with the car (SPEC §13: the rear wheels' delay)
     lines += [rideid.motion_line(rid, r["motion"]) for rid, r in res.roads.items() if "motion" in r]
+    # a run on a track as drawn whose speed was estimated with the car
+    lines += [rideid.drawn_motion_line(rid, m) for rid, m in rideid.drawn_motions(res).items()]
     judged = res.assessment("roads")  # each road run's residual at its own road estimate
     if judged.verdict != "not assessed":
         lines.append(("ROAD RUNS FAIL: " if judged.verdict == "fail" else "road runs: ") + judged.reason)

@@ -444,6 +444,18 @@ def motion_line(rid: str, m: dict) -> str:
             f"{1e3 * m['start_shift_s']:+.2f}{st} ms")
 
 
+def drawn_motions(res) -> dict:
+    """Run id -> the ``motion`` record of each run on a track as drawn whose speed a fit with unknown roads
+    estimated with the car (result.json ``preprocessing.<run>.motion`` naming its ``track``; SPEC §13)."""
+    return {rid: rec["motion"] for rid, rec in (getattr(res, "preprocessing", None) or {}).items()
+            if (rec.get("motion") or {}).get("track") and "speed_m_s" in rec["motion"]}
+
+
+def drawn_motion_line(rid: str, m: dict) -> str:
+    """:func:`motion_line` of a run on a track as drawn (:func:`drawn_motions`), naming the track."""
+    return f"{motion_line(rid, m)}, on track '{m['track']}' as drawn"
+
+
 def candidate_label(c: dict) -> str:
     """A ``model.candidates`` entry's name: its extensions (``base`` for none) and, where it records them, the
     tracks it was fitted on (a gross first fit's candidates: the same extension as drawn and as built)."""

@@ -38,7 +38,7 @@ from ..estimate.assess.adequacy import caveats
 from ..estimate.assess.frequency import frequency_response, measured_response
 from ..estimate.assess.shape import table_note
 from ..estimate.problem.sensitivity import P2T_STARS, stars
-from ..estimate.records import error_bar_warning, motion_line
+from ..estimate.records import drawn_motion_line, drawn_motions, error_bar_warning, motion_line
 from .sensitivity_files import heatmap_figure
 from ..model.equations import CHANNELS
 from ..model.params import ALL_NAMES, DESCRIPTIONS
@@ -829,6 +829,9 @@ def road_section(result, out_dir) -> dict:
         if result.road_profiles and rid in result.road_profiles:
             x, z = result.road_profiles[rid]
             road_figs.append(fig_road(rid, x, z, rec, out_dir))
+    for rid, m in drawn_motions(result).items():  # a run on a track as drawn whose speed was estimated with the car
+        road_speeds.append(drawn_motion_line(rid, m))
+        road_notes += [f"SET-UP: {n}" for n in m.get("named", [])]
     band = next(iter((result.roads or {}).values()), {}).get("wavelengths_m", (0.5, 20))
     return {"road_figures": road_figs, "road_rows": road_rows, "road_notes": road_notes, "road_speeds": road_speeds,
             "road_band": "{:g}-{:g} m".format(*band),

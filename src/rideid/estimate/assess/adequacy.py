@@ -419,11 +419,12 @@ def setup_slips(findings) -> list[dict]:
     """The declared speeds the data contradicted: a warning of the ``speed`` check at load (a declared speed more
     than 3 of its prior's std from the speed the lags show) or of the ``motion`` check on a speed (the speed
     estimated with the car beyond 3 prior std: a track as built, an unknown road; rideid.estimate.fit.anyroad), one
-    ``{"run", "declared", "speed"}`` per run (m/s; None where the finding has no fix). ``findings``:
-    :class:`rideid.data.checks.Finding` objects or their dicts (result.json ``checks``)."""
+    ``{"run", "declared", "speed"}`` per run (m/s; None where the finding has no fix), the fit's speed where it
+    estimated one (a ``motion`` finding), else the load's. ``findings``: :class:`rideid.data.checks.Finding`
+    objects or their dicts (result.json ``checks``)."""
     out = []
-    for f in findings or ():
-        f = f.to_dict() if hasattr(f, "to_dict") else f
+    found = [f.to_dict() if hasattr(f, "to_dict") else f for f in findings or ()]
+    for f in sorted(found, key=lambda f: f.get("check") != "motion"):  # the fit's estimate before the load's
         speed = f.get("check") == "speed" or (f.get("check") == "motion" and f.get("channel") == "speed")
         if speed and f.get("severity") == "warning" and f.get("run") and f["run"] not in {o["run"] for o in out}:
             fix = f.get("fix") or {}
@@ -440,7 +441,7 @@ def setup_caveat(findings) -> str | None:
     slips = setup_slips(findings)
     if not slips:
         return None
-    runs = ", ".join(f"{s['run']} (declared {s['declared']:g}, the data {s['speed']:.4g} m/s)"
+    runs = ", ".join(f"{s['run']} (declared {s['declared']:g}, the data {s['speed']:.3f} m/s)"
                      if s["declared"] is not None else str(s["run"]) for s in slips)
     return (f"a declared speed the data contradict: {runs}; the fit took the data's speed; check the test log "
             "(a speed typed wrong may not be the only slip of that run)")

@@ -141,8 +141,8 @@ def common_speed_offset(motion: dict) -> list[dict]:
     share): the road fit reads the rear wheels' delay ``wheelbase / speed``, so one slip for every run is likelier
     than one per run: a wheelbase typed that share long (or short) reads as every speed that share fast (slow),
     and so does a sample rate typed that share high (low). Else none."""
-    roads = {rid: rec for rid, rec in motion.items()
-             if "start" not in rec and (rec.get("speed") or {}).get("declared") is not None}
+    roads = {rid: rec for rid, rec in motion.items()  # not a run on a track as drawn (its record names the track)
+             if "start" not in rec and "track" not in rec and (rec.get("speed") or {}).get("declared") is not None}
     if len(roads) < 2 or not all(rec.get("named") for rec in roads.values()):
         return []
     r = np.array([rec["speed"]["estimate"] / rec["speed"]["declared"] - 1.0 for rec in roads.values()])

@@ -75,9 +75,9 @@ from ...model.roads import iso8608_class
 from ..problem import asbuilt
 from ..problem import roadfit
 from ..problem.joint import JointProblem
-from ..problem.blocks import DrawnTracks, RoadBlock, TrackBlock, method as blocks_method
+from ..problem.blocks import DrawnRun, DrawnTracks, RoadBlock, TrackBlock, method as blocks_method
 # which block each run gets (the problem's, re-exported: the model choice and the tests read them here)
-from ..problem.blocks import (TRACK_OPTIONS, as_built_runs, prepare_road_runs, run_speed,  # noqa: F401
+from ..problem.blocks import (TRACK_OPTIONS, as_built_runs, prepare_road_runs, run_speed, speed_runs,  # noqa: F401
                               speed_wander, unknown_road_runs)
 from ..assess.adequacy import ADVICE, advise, assess as assess_runs
 from ..problem.cost import CostFunction, ParameterSpace, channel_weights, refuse_unsupported_groups
@@ -257,7 +257,7 @@ def _with_motion(prob, z, H, Ja, S, s2, ds, res):
     out = {}
     for k, (a, b) in where.items():
         sd = np.sqrt(np.clip(np.diag(rob)[n + a:n + b], 0.0, None))
-        out[k] = {"speed_std_m_s": float(prob.parts[k].rr.speed * sd[0])}
+        out[k] = {"speed_std_m_s": float(prob.parts[k].speed * sd[0])}
         if b - a > 1:
             out[k]["start_shift_std_s"] = float(sd[1])
     return cov[:n, :n], rob[:n, :n], out
@@ -373,11 +373,16 @@ class _Plan:
     track_runs: list
     skipped: dict
     excitation: dict | None = None
+    #: the runs as drawn whose speed is estimated with the car (:class:`rideid.estimate.problem.blocks.DrawnRun`):
+    #: those a linear car would take as built, on a car with damper curves or bump stops
+    speed_runs: tuple = ()
 
     def problem(self, ds, geom, simulator) -> JointProblem:
-        """The joint problem: the runs as drawn (one block), then the unknown roads, then the tracks as built."""
-        cf = [DrawnTracks(CostFunction(ds.subset(self.drawn), space=self.space, simulator=simulator))] \
-            if self.drawn else []
+        """The joint problem: the runs as drawn (one block; each run of :attr:`speed_runs` its own), then the
+        unknown roads, then the tracks as built."""
+        held = [r for r in self.drawn if r.id not in {s.id for s in self.speed_runs}]
+        cf = [DrawnTracks(CostFunction(ds.subset(held), space=self.space, simulator=simulator))] if held else []
+        cf += [DrawnRun.of(ds, r, self.space, simulator) for r in self.speed_runs]
         blocks = cf + self.roads + self.tracks
         return JointProblem(self.space, geom, blocks, np.ones(len(blocks)))
 
@@ -420,7 +425,7 @@ def _plan(ds, model, start_result, tracks: str, polish: bool, as_built_mode: str
     track_runs = [r for r in ds.runs if r.id not in road_ids]
     ab_ids = {r.id for r in ab_list}
     return _Plan(ext, model_block, space, roads, blocks, [r for r in track_runs if r.id not in ab_ids], track_runs,
-                 skipped, excitation)
+                 skipped, excitation, speed_runs(ds, ext, tracks if polish else "as-drawn"))
 
 
 def _road_prior(ds, run_id: str):
@@ -536,7 +541,7 @@ def _with_records(prob, motion_std: dict, ds) -> JointProblem:
     parts = list(prob.parts)
     for k, sd in motion_std.items():
         b = parts[k]
-        if isinstance(b, RoadBlock):
+        if isinstance(b, (RoadBlock, DrawnRun)):  # a speed alone
             parts[k] = replace(b, record=road_motion_record(dict(b.record, **sd), b.prior, b.run_id))
             continue
         read = float(getattr(ds.measured.get(b.run_id), "start", 0.0) or 0.0)
@@ -751,6 +756,27 @@ class _Outcome:
         return _with_hints(self.adequacy, *self.hints) if self.hints[0] else self.adequacy
 
 
+def _drawn_runs(prob) -> list:
+    """The problem's runs as drawn whose speed was estimated with the car (:class:`DrawnRun`)."""
+    return [prob.parts[k] for k in prob.of(DrawnRun)]
+
+
+def _preprocessing(pre: dict, prob) -> dict:
+    """result.json ``preprocessing`` with the ``motion`` of each run as drawn whose speed was estimated with the car
+    (:class:`DrawnRun`: ``speed`` as a road run's, the track, and how; not the speed held at load)."""
+    pre = {rid: dict(rec) for rid, rec in pre.items()}
+    for b in _drawn_runs(prob):
+        if "speed" in b.record and b.run_id in pre:
+            pre[b.run_id]["motion"] = dict(b.record, track=b.run.track, estimated=DRAWN_MOTION_NOTE)
+    return pre
+
+
+#: how a run as drawn had its speed estimated (result.json ``preprocessing.<run>.motion.estimated``)
+DRAWN_MOTION_NOTE = ("with the car on the track as drawn (SPEC §13: the declared speed its prior; the model's "
+                     "damper curves or bump stops keep the track from being fitted as built); its std is in the "
+                     "parameters' std_robust (the budget's 'speed and start')")
+
+
 def _as_drawn_stands(ds, plan, start_result, out: _Outcome):
     """The tracks as built rejected (the road is not the explanation): the as-drawn result with its verdict and
     what the tracks as built needed; the speeds and starts the as-built fit found are the data's all the same
@@ -784,7 +810,7 @@ def _on_start(ds, plan, start_result, out: _Outcome):
                    polish=dict(info, as_drawn=start_result.polish),
                    modal=modal_summary(out.P[:len(ALL_NAMES)], ds.geometry), model=dict(plan.model),
                    response=out.response, correlation=out.robust.correlation_dict(), adequacy=out.hinted,
-                   tracks=out.tracks)
+                   tracks=out.tracks, preprocessing=_preprocessing(start_result.preprocessing or {}, out.fitted.prob))
 
 
 def _fresh(ds, plan, start_result, out: _Outcome):
@@ -800,7 +826,8 @@ def _fresh(ds, plan, start_result, out: _Outcome):
         parameters={nme: float(out.P[space.col[nme]]) for nme in space.reported_names}, details=out.details,
         known=dict(ds.known), wall_time_s=out.wall, seed=out.rng_record["seed"],
         rng_state=out.rng_record["rng_state"], track_weights={}, weights_mode="equal", polish=info,
-        history=History(history), starts={}, preprocessing=ds.preprocessing(), dataset=str(ds.path), maps=None,
+        history=History(history), starts={}, preprocessing=_preprocessing(ds.preprocessing(), out.fitted.prob),
+        dataset=str(ds.path), maps=None,
         modal=modal_summary(out.P[:len(ALL_NAMES) if space.layout is None else space.layout.n_car], ds.geometry),
         model=dict(plan.model), response=out.response, correlation=out.robust.correlation_dict(),
         adequacy=out.hinted, checks=[f.to_dict() for f in getattr(ds, "findings", [])] + motion_findings(out.motion),
@@ -859,7 +886,8 @@ def _identify_any_road(ds, *, rng=None, seed=None, population=None, generations=
     response_t, errors_t, checked = _checked(ds, P, geom, x, fitted.prob)
     blocks = [fitted.prob.parts[k] for k in fitted.prob.of(TrackBlock)]
     tracks, motion = tracks_block(ds, blocks, plan.skipped, P, geom) if blocks else (None, {})
-    motion = {**{b.run_id: b.record for b in road_blocks if "speed" in b.record}, **motion}
+    motion = {**{b.run_id: b.record for b in road_blocks if "speed" in b.record}, **motion,
+              **{b.run_id: dict(b.record, track=b.run.track) for b in _drawn_runs(fitted.prob) if "speed" in b.record}}
     adequacy, odd = (_verdict(checked, plan.ext, list(roads), [b.run_id for b in blocks], tracks or {})
                      if assess and checked else (None, []))
     if assess and polish:  # every run assessed: the road runs by their residual at their own road estimate

@@ -40,7 +40,7 @@ from ...settings import defaults
 from ..assess.adequacy import setup_slips
 from ..assess.responses import suspension_velocities
 from ..problem import roadfit
-from ..problem.blocks import DrawnTracks, RoadBlock, unknown_road_runs
+from ..problem.blocks import DrawnTracks, RoadBlock, speed_runs, unknown_road_runs
 from ..problem.cost import CURVES
 from ..problem.dampers import add_grid_std, add_std_term, dampers_block, excitation_of
 
@@ -99,16 +99,27 @@ def excited(space, rruns) -> tuple:
 
 def candidates(ds, parent, key) -> list:
     """The damper-curve candidates of the road model choice on top of ``parent`` (the model ``key`` kept): none
-    when its verdict is adequate (or not given), when it names a set-up slip (a declared speed the data moved, a
-    sensor's coupling or gain: curves would take up what no model extension mends, and the advice says to mend
-    the set-up first), when the dataset knows the dampers' rates, or when the roads cannot take curves
-    (:func:`refusal`); else the one model with the curves (its groups, in no order)."""
+    when its verdict is adequate (or not given), when it names a set-up slip the curves' fit would hold (a sensor's
+    coupling or gain, or a declared speed the data moved of a run whose speed that fit does not estimate: curves
+    would take up what no model extension mends, and the advice says to mend the set-up first), when the dataset
+    knows the dampers' rates, or when the roads cannot take curves (:func:`refusal`); else the one model with the
+    curves (its groups, in no order). A speed slip of a road run or of a run the curves take as drawn with its speed
+    estimated (:func:`rideid.estimate.problem.blocks.speed_runs`) is mended with the curves as with the linear car:
+    measured on ../shared/cases/van-roads-dampers with its twist run typed 3.03 m/s (docs/any-road.md)."""
     with_curves = tuple(key) + (CURVES,)
     adequacy = parent.adequacy or {}
-    if (adequacy.get("adequate", True) or setup_slips(parent.checks) or adequacy.get("sensor_hints")
+    if (adequacy.get("adequate", True) or held_slips(ds, parent, with_curves) or adequacy.get("sensor_hints")
             or {"c_sf", "c_sr"} & set(ds.known) or refusal(ds, with_curves)):
         return []
     return [with_curves]
+
+
+def held_slips(ds, parent, ext) -> list:
+    """The set-up slips ``parent`` names (:func:`rideid.estimate.assess.adequacy.setup_slips`) of runs whose speed a
+    fit of the model ``ext`` on unknown roads holds: not a road run's, nor a run's as drawn with its speed
+    estimated (:func:`rideid.estimate.problem.blocks.speed_runs`)."""
+    estimated = {r.id for r in unknown_road_runs(ds, ext)} | {r.id for r in speed_runs(ds, ext)}
+    return [s for s in setup_slips(parent.checks) if s["run"] not in estimated or s["declared"] is None]
 
 
 def road_note(rr) -> str:

@@ -33,6 +33,7 @@ from ...model.equations import CHANNELS
 from ...settings import defaults
 from ...profiling import stage
 from . import asbuilt, roadfit
+from .cost import CostFunction
 from .scores import andrews_bandwidth, long_run_covariance, run_scores
 
 
@@ -121,11 +122,45 @@ class _OneRun:
             cols.append(d / (2 * h * defaults["asbuilt.motion_scale"][j]))
         return np.stack(cols, axis=1)
 
+    @property
+    def speed(self) -> float:
+        """The run's speed as the block is placed (m/s)."""
+        return float(self.rr.speed)
+
     def prior_jacobian(self, weight: float) -> np.ndarray:
         """(rows, ``n_motion``): the set-up priors' rows' derivatives in the motion (none without a prior)."""
         if self.prior is None:
             return np.zeros((0, self.n_motion))
-        return self.prior.jacobian(self.rr.speed, weight)[:, :self.n_motion]
+        return self.prior.jacobian(self.speed, weight)[:, :self.n_motion]
+
+    def scan_speed(self, P, geom, ds):
+        """The block at the speed that minimises its cost at the car ``P`` with its declared speed's row (weighed
+        at its own residual level, as the joint solve weighs it): a scan over the joint solve's range
+        (:attr:`motion_bound`) at setting ``anyroad.road_speed_scan`` steps, then a bounded Brent search between
+        the best point's neighbours (:meth:`RoadBlock.aligned` says why a scan first)."""
+        motion = self.motion_cost(P, geom, ds, self.level(P, geom))
+
+        def cost(p):
+            return motion([p])
+
+        bound, step = self.motion_bound, defaults["anyroad.road_speed_scan"]
+        grid = np.arange(-bound, bound + 0.5 * step, step)
+        costs = [cost(p) for p in grid]
+        j = int(np.argmin(costs))
+        sol = minimize_scalar(cost, bounds=(grid[max(j - 1, 0)], grid[min(j + 1, grid.size - 1)]), method="bounded",
+                              options={"xatol": defaults["asbuilt.motion_xtol"]})
+        best = sol.x if sol.fun < costs[j] else grid[j]
+        return self.moved(ds, [best]).settled(ds)
+
+    def prior_bound(self) -> float:
+        """How far the speed may move (setting ``asbuilt.motion_scale`` units, either way): setting
+        ``anyroad.joint_motion_bound``, or four prior std where the declared speed is wider (a speedometer's
+        ``speed = { value = 11.0, std = 0.4 }``)."""
+        bound = float(defaults["anyroad.joint_motion_bound"])
+        if self.prior is None or self.prior.speed is None:
+            return bound
+        v, sd = self.prior.speed[:2]
+        return max(bound, 4.0 * sd / (v * defaults["asbuilt.motion_scale"][0]))
 
 
 @dataclass(frozen=True)
@@ -159,14 +194,7 @@ class RoadBlock(_OneRun):
 
     @property
     def motion_bound(self) -> float:
-        """How far the speed may move (setting ``asbuilt.motion_scale`` units, either way): setting
-        ``anyroad.joint_motion_bound``, or four prior std where the declared speed is wider (a speedometer's
-        ``speed = { value = 11.0, std = 0.4 }``)."""
-        bound = float(defaults["anyroad.joint_motion_bound"])
-        if self.prior is None or self.prior.speed is None:
-            return bound
-        v, sd = self.prior.speed[:2]
-        return max(bound, 4.0 * sd / (v * defaults["asbuilt.motion_scale"][0]))
+        return self.prior_bound()
 
     def residuals(self, x, P, geom) -> np.ndarray:
         return roadfit.residuals(P, geom, self.rr)
@@ -191,21 +219,7 @@ class RoadBlock(_OneRun):
         at the declared speed, 2.5e4 at the true one and 5.8e5 half-way, and the joint solve's trust region
         started at the declared speed shrank to nothing (the speed kept). In the track blocks' first ``mode``
         ("amplitude": their drawing alone) the block stays where it is: it has no drawing to place."""
-        if mode == "amplitude":
-            return self
-        motion = self.motion_cost(P, geom, ds, self.level(P, geom))
-
-        def cost(p):
-            return motion([p])
-
-        bound, step = self.motion_bound, defaults["anyroad.road_speed_scan"]
-        grid = np.arange(-bound, bound + 0.5 * step, step)
-        costs = [cost(p) for p in grid]
-        j = int(np.argmin(costs))
-        sol = minimize_scalar(cost, bounds=(grid[max(j - 1, 0)], grid[min(j + 1, grid.size - 1)]), method="bounded",
-                              options={"xatol": defaults["asbuilt.motion_xtol"]})
-        best = sol.x if sol.fun < costs[j] else grid[j]
-        return self.moved(ds, [best]).settled(ds)
+        return self if mode == "amplitude" else self.scan_speed(P, geom, ds)
 
     def with_prior(self, P, geom) -> RoadBlock:
         """The block as it is (a road run's levels are its block weight's: :meth:`level`)."""
@@ -227,6 +241,80 @@ class RoadBlock(_OneRun):
     def prior_rows(self, p, weight: float) -> np.ndarray:
         """The declared speed's row at the motion ``p`` (none along a speed channel)."""
         return np.zeros(0) if self.prior is None else self.prior.rows(self.rr.speed, 0.0, p, weight)
+
+
+@dataclass(frozen=True)
+class DrawnRun(_OneRun, DrawnTracks):
+    """One run on a track taken as drawn at a declared constant speed, its speed estimated with the car (SPEC §13:
+    a declared speed is a prior, ``prior`` its :class:`rideid.estimate.problem.asbuilt.MotionPrior` with the speed
+    alone): the time-domain residuals of ``cf`` (that run alone, read at the block's speed), as
+    :class:`DrawnTracks`. A run fitted on a nonlinear car (damper curves, bump stops) cannot be taken as built,
+    and a speed held where the data put it at load (a grid step of 0.25 %) is not exact enough for it: measured on
+    the van of ../shared/cases/van-roads-dampers with its twist run typed 3.03 m/s (driven at 3.0), the damper
+    curves with that run held at 3.0019 m/s (the linear fit's speed as built) gave k_tf -4.7 %, k_tr -4.1 %, not
+    adequate; declared 3.0, adequate (docs/any-road.md). ``record``: the speed as solved (``speed_m_s``)."""
+
+    run: object = None
+    prior: asbuilt.MotionPrior | None = None
+    record: dict = field(default_factory=dict)
+    #: the motion unknowns: the speed's relative change (setting ``asbuilt.motion_scale`` units)
+    n_motion = 1
+    method = "runs on tracks as drawn in the time domain, each speed estimated with the car"
+
+    @classmethod
+    def of(cls, ds, run, space, simulator) -> DrawnRun:
+        """The block of ``run`` of ``ds`` at its speed there (the declared one, or where the data put it at load)."""
+        cf = CostFunction(ds.subset([run]), space=space, simulator=simulator)
+        return cls(cf, run, asbuilt.MotionPrior(speed=run.speed_prior(), start=None),
+                   {"speed_m_s": float(run.speed)})
+
+    @property
+    def run_id(self) -> str:
+        return self.run.id
+
+    @property
+    def order(self) -> float:
+        return -np.inf
+
+    @property
+    def speed(self) -> float:
+        return float(self.record["speed_m_s"])
+
+    @property
+    def motion_bound(self) -> float:
+        return self.prior_bound()
+
+    def residuals(self, x, P, geom) -> np.ndarray:
+        """The run's residuals at the free row ``x``, or (``x`` None) at the car ``P``."""
+        if x is None:
+            space = self.cf.space
+            x = np.array([P[space.col[n]] for n in space.names])
+        return self.residual_rows(np.asarray(x, dtype=float)[None])[0]
+
+    def aligned(self, P, geom, ds, mode: str = "prior") -> DrawnRun:
+        """The block at the speed its cost at the car ``P`` is least (:meth:`scan_speed`); in the track blocks'
+        first ``mode`` ("amplitude") where it is."""
+        return self if mode == "amplitude" else self.scan_speed(P, geom, ds)
+
+    def with_prior(self, P, geom) -> DrawnRun:
+        return self
+
+    def moved(self, ds, p) -> DrawnRun:
+        """The block with the run read at its speed moved by ``p[0]`` (setting ``asbuilt.motion_scale`` units)."""
+        v = self.speed * (1.0 + p[0] * defaults["asbuilt.motion_scale"][0])
+        cf = self.cf.with_data(ds.subset([self.run]).with_speeds({self.run.id: v}))
+        return replace(self, cf=cf, record=dict(self.record, speed_m_s=float(v)))
+
+    def settled(self, ds) -> DrawnRun:
+        return self
+
+    def level(self, P, geom) -> float:
+        """The RMS of the run's residual at the car ``P``: the weight its prior's row takes."""
+        return float(np.sqrt(np.mean(self.residuals(None, P, geom) ** 2)))
+
+    def prior_rows(self, p, weight: float) -> np.ndarray:
+        """The declared speed's row at the motion ``p``."""
+        return self.prior.rows(self.speed, 0.0, p, weight)
 
 
 @dataclass(frozen=True)
@@ -446,6 +534,16 @@ def as_built_runs(ds, ext, tracks: str = "as-built") -> tuple[list, dict]:
     return [r for r in runs if why[r.id] is None], {rid: w for rid, w in why.items() if w is not None}
 
 
+def speed_runs(ds, ext, tracks: str = "as-built") -> tuple:
+    """The runs a model with damper curves or bump stops (``ext``) takes as drawn that a linear car would take as
+    built (their speed and start fitted with the car), driven at a declared constant speed: their speed is
+    estimated with the car on the track as drawn (SPEC §13; :class:`DrawnRun`). None for a linear model."""
+    linear = tuple(g for g in ext if g not in NONLINEAR_GROUPS)
+    if linear == tuple(ext):
+        return ()
+    return tuple(r for r in as_built_runs(ds, linear, tracks)[0] if asbuilt.motion_prior(ds, r).speed is not None)
+
+
 def align_motion(P, geom, tr: asbuilt.TrackRun, ds, run, mode: str = "prior",
                  prior: asbuilt.MotionPrior | None = None) -> tuple[asbuilt.TrackRun, dict]:
     """``tr`` of ``run`` placed at the car ``P`` (16,) by its speed and start alone (:meth:`TrackBlock.aligned`;
@@ -464,6 +562,6 @@ def method(blocks) -> str:
     return "joint: " + ", ".join(m for _, m in sorted({(b.rank, b.method) for b in blocks}))
 
 
-__all__ = ["DrawnTracks", "RoadBlock", "TrackBlock", "road_meat", "track_meat", "method", "align_motion",
-           "motion_jacobian", "TRACK_OPTIONS", "unknown_road_runs", "run_speed", "prepare_road_runs", "speed_wander",
-           "as_built_runs"]
+__all__ = ["DrawnTracks", "DrawnRun", "RoadBlock", "TrackBlock", "road_meat", "track_meat", "method", "align_motion",
+           "speed_runs", "motion_jacobian", "TRACK_OPTIONS", "unknown_road_runs", "run_speed", "prepare_road_runs",
+           "speed_wander", "as_built_runs"]
