@@ -503,7 +503,7 @@ def run_identify(ds_path, out_dir, *, seed, population=None, generations=None, w
         if report:
             if not quiet:
                 prog.line("writing the report ...", force=True)
-            rideid.write_report(res, ds.with_starts(res.starts), tmp)
+            rideid.write_report(res, res.fitted_data(ds), tmp)
             prog.done()
     print(_summary_table(res), file=out)
     if res.model.get("candidates"):
@@ -665,7 +665,7 @@ def cmd_report(args, out=None):
     if not res.dataset or not Path(res.dataset).exists():
         raise rideid.DataError(f"{folder / 'result.json'}: the dataset it names ({res.dataset!r}) is not found; "
                         "the report needs it")
-    ds = rideid.load_dataset(res.dataset, starts=res.start_records())
+    ds = rideid.load_dataset(res.dataset, starts=res.start_records()).with_speeds(res.speed_values())
     res = rideid.complete_result(res, ds)  # the car's response on the runs: the report draws it, never simulates
     path = rideid.write_report(res, ds, folder, compare=other,
                         compare_label=None if other is None else f"{other.weights_mode} ({Path(args.compare).name})")

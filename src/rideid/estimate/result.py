@@ -350,6 +350,22 @@ class IdentificationResult:
         out.update({rid: st["value"] for rid, st in self.starts.items()})
         return out
 
+    def speed_values(self) -> dict[str, float]:
+        """Run id -> the speed (m/s) the identification estimated with the car for a run on a track as drawn
+        (``preprocessing.<run>.motion`` naming its ``track``: a car with damper curves or bump stops, SPEC §13)."""
+        out = {}
+        for rid, rec in self.preprocessing.items():
+            m = rec.get("motion") if isinstance(rec, Mapping) else None
+            if isinstance(m, Mapping) and m.get("track") and m.get("speed_m_s") is not None:
+                out[rid] = float(m["speed_m_s"])
+        return out
+
+    def fitted_data(self, ds):
+        """``ds`` with its runs read as the identification last read them: at the speeds it estimated
+        (:meth:`speed_values`) and the starts it settled (``starts``)."""
+        ds = ds.with_speeds({rid: v for rid, v in self.speed_values().items() if rid in {r.id for r in ds.runs}})
+        return ds.with_starts({rid: st for rid, st in (self.starts or {}).items() if rid in ds.measured})
+
     def start_records(self) -> dict[str, dict]:
         """Run id -> ``{"value": start, "model_time": [first, last]}``: :meth:`start_values` with the span of
         model time of the samples the identification fitted (``preprocessing``), for

@@ -162,6 +162,9 @@ class PolishSection(Section):
     hac_bandwidths: dict | None = None  #: run -> the HAC kernel's bandwidth, samples
     starts: dict | None = None  #: run -> the start estimated with the parameters (``value, std, std_robust``)
     alignment_rounds: list | None = None  #: per round of the starts' re-estimation, how far they moved
+    #: run -> the speed estimated with the parameters (a nonlinear car's run whose declared speed load moved: ``value,
+    #: std, std_robust, declared, prior_std``, m/s)
+    speeds: dict | None = None
     shape: dict | None = None  #: the error bars' shape out to ±2 std_robust (docs/uncertainty.md)
     unresolved: dict | None = None  #: a road fit's directions its Hessian does not fix above its rounding
     remeasured: list | None = None  #: those directions measured again at a larger step

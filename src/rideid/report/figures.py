@@ -56,7 +56,7 @@ def result_dataset(result, dataset=None):
     path = dataset if dataset is not None else result.dataset
     if not path:
         raise DataError("the result names no dataset; pass dataset= (a Dataset or its folder)")
-    return load_dataset(path, starts=result.start_records())
+    return load_dataset(path, starts=result.start_records()).with_speeds(result.speed_values())
 
 
 def responses(result, dataset) -> dict:

@@ -240,6 +240,32 @@ def road_motion_record(fitted: dict, prior, run_id: str) -> dict:
             "named": _named(run_id, "speed", v, sv, pr)}
 
 
+#: how a run on a track as drawn had its speed estimated (result.json ``preprocessing.<run>.motion.estimated``)
+DRAWN_MOTION_NOTE = ("with the car on the track as drawn (SPEC §13: the declared speed its prior; the model's "
+                     "damper curves or bump stops keep the track from being fitted as built); its std is in the "
+                     "parameters' std_robust (the budget's 'speed and start')")
+
+
+def drawn_motion_record(record: dict, run) -> dict:
+    """The ``motion`` record (result.json ``preprocessing.<run>.motion``) of a run on a track as drawn whose speed
+    was estimated with the car: :func:`road_motion_record`'s ``record`` with the run's ``track`` and how."""
+    return dict(record, track=run.track, estimated=DRAWN_MOTION_NOTE)
+
+
+def paced_motion(ds, speeds: dict) -> dict:
+    """Run id -> the ``motion`` record (:func:`drawn_motion_record`) of each run whose speed the polish estimated
+    (``speeds``: the polish block's ``speeds``, run id -> ``{"value", "std", "std_robust", ...}``, m/s)."""
+    out = {}
+    for rid, rec in speeds.items():
+        run = ds.manifest.run(rid)
+        sd = rec.get("std_robust")
+        sd = sd if sd is not None and np.isfinite(sd) else rec.get("std")
+        fitted = {"speed_m_s": float(rec["value"]), "speed_std_m_s": sd}
+        prior = asbuilt.MotionPrior(speed=run.speed_prior(), start=None)
+        out[rid] = drawn_motion_record(road_motion_record(fitted, prior, rid), run)
+    return out
+
+
 #: what a road run's motion record says (result.json ``roads.<run>.motion.note``)
 ROAD_MOTION_NOTE = ("the run's speed estimated with the car (SPEC §13): it sets the rear wheels' delay "
                      "wheelbase / speed, which the road fit reads from the front and rear wheels' agreement; the "

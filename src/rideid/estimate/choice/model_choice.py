@@ -356,7 +356,7 @@ def screen(ds, parent, key, simulator) -> dict:
     2165 and 1310, the stops 18.1 (against 27.6: skipped, the car has none)."""
     space = _space(ds, key, parent)
     x = start_row(ds, parent, space)
-    cf = CostFunction(ds.with_starts(parent.starts or {}), space=space, simulator=simulator)
+    cf = CostFunction(parent.fitted_data(ds), space=space, simulator=simulator)
     cf, x, _, _ = curve_start(cf, cf if len(x) == len(cf.names) else linear_cost(cf.ds, cf), x)
     with single_threaded_blas():
         J, r, r_next = gauss_newton_step(cf, x)
@@ -382,7 +382,7 @@ def _own_adequacy(ds, res, simulator):
 
 def _cost_of(ds, res, simulator) -> CostFunction:
     """The cost function of a candidate's result: its model on its knots, the data at its starts."""
-    return CostFunction(ds.with_starts(res.starts or {}), space=_space(ds, _key(res.model["extensions"]), res),
+    return CostFunction(res.fitted_data(ds), space=_space(ds, _key(res.model["extensions"]), res),
                         simulator=simulator)
 
 
@@ -435,7 +435,7 @@ class _Choice:
 
     def _fit_new(self, parent, key, maps=None):
         space = _space(self.ds, key, parent)
-        ds = self.ds.with_starts(parent.starts or {})  # the starts the parent settled: the polish starts there
+        ds = parent.fitted_data(self.ds)  # the starts (and speeds) the parent settled: the polish starts there
         return identify_model(ds, cost=CostFunction(ds, space=space, simulator=self.simulator),
                               start=start_row(ds, parent, space), maps=maps, assess=False, **self.fit_kw)
 

@@ -90,8 +90,8 @@ from ..assess.sensor_check import road_coupling_hints
 from ..assess.roads import judge as judge_road_runs
 from ..assess.details import not_determined
 from ..assess.shape import check as shape_check
-from ..assess.motion import (ROAD_MOTION_NOTE, left_out, motion_findings, motion_record, road_motion_record,
-                             tracks_block)
+from ..assess.motion import (ROAD_MOTION_NOTE, drawn_motion_record, left_out, motion_findings, motion_record,
+                             road_motion_record, tracks_block)
 from .uncertainty import along_record, estimate_covariance, remeasured
 
 def road_run_error(rr, y, fitted) -> float:
@@ -767,14 +767,8 @@ def _preprocessing(pre: dict, prob) -> dict:
     pre = {rid: dict(rec) for rid, rec in pre.items()}
     for b in _drawn_runs(prob):
         if "speed" in b.record and b.run_id in pre:
-            pre[b.run_id]["motion"] = dict(b.record, track=b.run.track, estimated=DRAWN_MOTION_NOTE)
+            pre[b.run_id]["motion"] = drawn_motion_record(b.record, b.run)
     return pre
-
-
-#: how a run as drawn had its speed estimated (result.json ``preprocessing.<run>.motion.estimated``)
-DRAWN_MOTION_NOTE = ("with the car on the track as drawn (SPEC §13: the declared speed its prior; the model's "
-                     "damper curves or bump stops keep the track from being fitted as built); its std is in the "
-                     "parameters' std_robust (the budget's 'speed and start')")
 
 
 def _as_drawn_stands(ds, plan, start_result, out: _Outcome):

@@ -336,8 +336,7 @@ def fit_cost(ds: Dataset, res, simulator=None, cost: CostFunction | None = None)
                 and not d.get("fixed")}
         if held:
             space = space.with_bump_frozen(held)
-        ds_fit = (ds.with_starts({rid: st for rid, st in res.starts.items() if rid in ds.measured})
-                  if res.starts else ds)
+        ds_fit = res.fitted_data(ds)
         cf = CostFunction(ds_fit, space=space, simulator=simulator)
     if list(cf.names) != list(res.names):
         return None

@@ -79,6 +79,7 @@ from ...model.params import ALL_NAMES
 from ...model.simulator import Simulator
 from ..assess.adequacy import advise, assess_fit
 from ..assess.details import details_of, mark_bounds, parameter_detail, preprocessing_record
+from ..assess.motion import motion_findings, paced_motion
 from ..assess.responses import suspension_velocities
 from ..assess.sensor_check import sensor_notes
 from ..assess.shape import with_shape
@@ -347,6 +348,11 @@ def _result(ds, problem: Problem, search, fit, maps, rng_record, t0, excitation=
         polish = with_shape(cf, x, fit.info)
     fitted = _Fitted(ds, problem, cf, P, response, robust, details, excitation, bumps)
     blocks = {name: make(fitted) if has(fitted) else None for name, has, make in RESULT_BLOCKS}
+    # SPEC §13: the speeds the polish estimated with the car (a nonlinear car's runs whose declared speed load moved)
+    motion = paced_motion(ds, (fit.info or {}).get("speeds") or {})
+    preprocessing = preprocessing_record(ds, fit.starts)
+    for rid, m in motion.items():
+        preprocessing[rid]["motion"] = m
     return IdentificationResult(
         x=np.asarray(x, dtype=float), names=list(cf.names), std=np.asarray(fit.std, dtype=float),
         covariance=fit.covariance, fun=float(np.full(final_E.size, 1.0 / final_E.size) @ final_E), success=success,
@@ -355,9 +361,10 @@ def _result(ds, problem: Problem, search, fit, maps, rng_record, t0, excitation=
         details=details, known=dict(ds.known), seed=rng_record["seed"],
         rng_state=rng_record["rng_state"], track_weights=search.track_weights,
         weights_mode=problem.settings.weighting.name, polish=polish, history=History(search.history),
-        starts=fit.starts, preprocessing=preprocessing_record(ds, fit.starts), dataset=str(ds.path), maps=maps,
+        starts=fit.starts, preprocessing=preprocessing, dataset=str(ds.path), maps=maps,
         model=fitted.model, response=response, correlation=robust.correlation_dict(),
-        checks=[f.to_dict() for f in findings], data_quality=data_quality(cf.ds), plan=problem.plan(),
+        checks=[f.to_dict() for f in findings] + motion_findings(motion), data_quality=data_quality(cf.ds),
+        plan=problem.plan(),
         wall_time_s=time.perf_counter() - t0, **blocks)
 
 

@@ -46,7 +46,7 @@ def polish_fit(ds: Dataset, cf: CostFunction, x0) -> OptimizeResult:
     equal = np.full(len(cf.run_ids), 1.0 / len(cf.run_ids))
 
     def once(x_start):
-        if ds.auto_start_runs:
+        if ds.auto_start_runs or paced_runs(ds, cf):
             x, info, std, cf_, starts = _polish_aligned(ds, cf, x_start, equal)
         else:
             (x, info, std), cf_, starts = _polish(cf, x_start, equal), cf, {}
@@ -160,7 +160,7 @@ def bump_recheck(ds, fit, bumps):
 
 
 
-def _polish(cf: CostFunction, x0, weights, align=None, at=None):
+def _polish(cf: CostFunction, x0, weights, align=None, at=None, paced=()):
     """Least squares from ``x0``; ``align`` = [:class:`_Shift`] adds those runs' starts as unknowns.
 
     The model moves, the data never do: a start changed by ``delta`` moves the
@@ -179,11 +179,14 @@ def _polish(cf: CostFunction, x0, weights, align=None, at=None):
     stops used them up and the engine-and-curves case's last solve ended on a hidden knot (a Wald statistic of
     NaN: the curves refused, the stops kept).
 
+    ``paced`` = [:class:`_Pace`] adds those runs' speeds as unknowns (read exactly at each, with ``at``), each
+    under its declared speed's prior.
+
     Returns ``(x, info, std)``: the free parameters, the ``polish`` block of result.json and the
     parameters' white standard errors (:class:`_Polish`).
     """
-    prob = _Polish(cf, np.asarray(weights, dtype=float), tuple(align or ()), at=at)
-    if prob.has_warps:
+    prob = _Polish(cf, np.asarray(weights, dtype=float), tuple(align or ()), at=at, paced=tuple(paced))
+    if prob.has_priors:
         # the prior rows weigh a knot's increment against the data at the data's residual level
         v0 = np.concatenate([np.clip((x0 - prob.lo) / prob.span, 0, 1), np.zeros(prob.n_unknowns - prob.d)])
         r0 = cf.residuals(x0[None], prob.weights, Y=prob.measured(v0))[0]
@@ -343,6 +346,8 @@ class _Polish:
     #: exact starts: run id -> start (s) of every run of ``align`` -> the cost function on the runs read there
     #: (None: the round's model of a start's move, ``D`` and ``D2``). Runs without a distance correction only.
     at: object = None
+    #: runs whose speed joins the unknowns (:class:`_Pace`), read exactly at each trial speed (``at``)
+    paced: tuple = ()
     #: the residuals of the last :meth:`residuals` call: least_squares asks for the Jacobian where it just
     #: evaluated (a memo, not state of the problem)
     _last: dict = field(default_factory=dict, repr=False, compare=False)
@@ -382,12 +387,23 @@ class _Polish:
 
     @property
     def n_unknowns(self) -> int:
-        return self.d + len(self.align) + sum(sh.warp.free.size for sh in self.align if sh.warp is not None)
+        return (self.d + len(self.align) + sum(sh.warp.free.size for sh in self.align if sh.warp is not None)
+                + len(self.paced))
+
+    @property
+    def pace_slice(self) -> slice:
+        """The slice of ``v`` holding the paced runs' speed moves (setting ``asbuilt.motion_scale`` units)."""
+        return slice(self.n_unknowns - len(self.paced), self.n_unknowns)
+
+    def speeds_of(self, v) -> dict:
+        """Run id -> the speed (m/s) of each paced run at ``v``."""
+        moves = v[self.pace_slice]
+        return {pc.run_id: pc.speed_at(m) for pc, m in zip(self.paced, moves)}
 
     def prior_rows(self, v):
         """The distance corrections' prior residuals ``s A (w + dw) / sigma`` (the random walk's increments,
-        :meth:`rideid.conditioning.starts.DistanceWarp.prior`, scaled to the data's residual level ``s``) and
-        their Jacobian ``(rows, v.size)``."""
+        :meth:`rideid.conditioning.starts.DistanceWarp.prior`, scaled to the data's residual level ``s``), then each
+        paced run's declared speed's row ``s (v - declared) / std``, and their Jacobian ``(rows, v.size)``."""
         rows, jac = [], []
         for sh, sl in zip(self.align, self.warp_slices):
             if sl is None:
@@ -397,6 +413,12 @@ class _Polish:
             rows.append(M @ (sh.warp.values[sh.warp.free] + v[sl]))
             Jp = np.zeros((A.shape[0], v.size))
             Jp[:, sl] = M
+            jac.append(Jp)
+        for j, pc in zip(range(self.pace_slice.start, self.pace_slice.stop), self.paced):
+            # SPEC §13: the declared speed's row, weighed against the data at their residual level
+            rows.append(np.array([self.prior_scale * (pc.speed_at(v[j]) - pc.declared) / pc.prior_std]))
+            Jp = np.zeros((1, v.size))
+            Jp[0, j] = self.prior_scale * pc.speed * pc.unit / pc.prior_std
             jac.append(Jp)
         if not rows:
             return np.zeros(0), np.zeros((0, v.size))
@@ -432,18 +454,23 @@ class _Polish:
         r = self.cost_at(v).residuals(self.to_x(v[:self.d])[None], self.weights, Y=self.measured(v),
                                       advance=self.advance(v))[0]
         self._last["v"], self._last["r"] = v.copy(), r
-        return np.concatenate([r, self.prior_rows(v)[0]]) if self.has_warps else r
+        return np.concatenate([r, self.prior_rows(v)[0]]) if self.has_priors else r
 
     def cost_at(self, v) -> CostFunction:
         """The cost function whose runs are read at ``v``'s starts (with ``at``, which keeps the last few: least_squares
         asks for the Jacobian where it just evaluated; else :attr:`cf`, the round's)."""
         if self.at is None:
             return self.cf
-        return self.at({sh.run_id: self.start_of(v, k) for k, sh in enumerate(self.align)})
+        return self.at({sh.run_id: self.start_of(v, k) for k, sh in enumerate(self.align)}, self.speeds_of(v))
 
     @property
     def has_warps(self) -> bool:
         return any(sh.warp is not None for sh in self.align)
+
+    @property
+    def has_priors(self) -> bool:
+        """Whether the residuals end in prior rows (:meth:`prior_rows`): distance corrections or paced runs."""
+        return self.has_warps or bool(self.paced)
 
     def jacobian(self, v) -> np.ndarray:
         """``(m, d + len(align))``: forward differences (step 1e-7 in ``z``) as one batch, the shifts' columns
@@ -453,7 +480,7 @@ class _Polish:
             return memo.copy()
         d, cf = self.d, self.cf
         D = self._differences(v)
-        prior = self.prior_rows(v)[1] if self.has_warps else np.zeros((0, v.size))
+        prior = self.prior_rows(v)[1] if self.has_priors else np.zeros((0, v.size))
         J = np.zeros((D.shape[0] + prior.shape[0], v.size))  # the distance corrections' prior rows last
         J[:D.shape[0], :d] = D
         J[D.shape[0]:] = prior
@@ -480,15 +507,25 @@ class _Polish:
     def _exact_start_columns(self, v, J, offsets) -> np.ndarray:
         """``J`` with the starts' columns of :meth:`jacobian` by a forward difference of the runs read at every
         start moved by setting ``identify.exact_start_step`` (samples) at once: each run's residuals depend on its
-        own start alone, so one evaluation gives every column."""
+        own start alone, so one evaluation gives every column; the paced runs' speed columns the same way (every
+        speed moved by the first of setting ``asbuilt.motion_jacobian_steps``)."""
         d, h = self.d, defaults["identify.exact_start_step"]
-        vh = v.copy()
-        vh[d:d + len(self.align)] += h
         r0 = self._residuals_at(v)
-        rh = self.cost_at(vh).residuals(self.to_x(v[:d])[None], self.weights)[0]
-        for k, sh in enumerate(self.align):
-            rows = slice(offsets[sh.run_index], offsets[sh.run_index + 1])
-            J[rows, d + k] = (rh[rows] - r0[rows]) / h
+        if self.align:
+            vh = v.copy()
+            vh[d:d + len(self.align)] += h
+            rh = self.cost_at(vh).residuals(self.to_x(v[:d])[None], self.weights)[0]
+            for k, sh in enumerate(self.align):
+                rows = slice(offsets[sh.run_index], offsets[sh.run_index + 1])
+                J[rows, d + k] = (rh[rows] - r0[rows]) / h
+        if self.paced:  # each paced run's residuals depend on its own speed alone: one read gives every column
+            hp = defaults["asbuilt.motion_jacobian_steps"][0]
+            vh = v.copy()
+            vh[self.pace_slice] += hp
+            rh = self.cost_at(vh).residuals(self.to_x(v[:d])[None], self.weights)[0]
+            for j, pc in zip(range(self.pace_slice.start, self.pace_slice.stop), self.paced):
+                rows = slice(offsets[pc.run_index], offsets[pc.run_index + 1])
+                J[rows, j] = (rh[rows] - r0[rows]) / hp
         self._last["J"] = (v.copy(), J)
         return J
 
@@ -544,13 +581,14 @@ class _Polish:
         to a bound without being on it and short of the optimum, is continued by trf from where it stopped,
         within the polish's setting ``identify.polish_max_nfev`` in all (the lower cost of the two is the result).
         """
-        d, n_al = self.d, len(self.align)
-        n_w = self.n_unknowns - d - n_al
+        d, n_al, n_p = self.d, len(self.align), len(self.paced)
+        n_w = self.n_unknowns - d - n_al - n_p
         z0 = np.clip((x0 - self.lo) / self.span, 0, 1)
-        v0 = np.concatenate([z0, np.zeros(n_al + n_w) if shifts is None else np.asarray(shifts, dtype=float)])
+        v0 = np.concatenate([z0, np.zeros(n_al + n_w + n_p) if shifts is None else np.asarray(shifts, dtype=float)])
         sb, wb = defaults["identify.start_bound"], defaults["identify.warp_bound"]
-        blo = np.concatenate([np.zeros(d), np.full(n_al, -sb), np.full(n_w, -wb)])
-        bhi = np.concatenate([np.ones(d), np.full(n_al, sb), np.full(n_w, wb)])
+        pb = np.array([pc.bound for pc in self.paced])
+        blo = np.concatenate([np.zeros(d), np.full(n_al, -sb), np.full(n_w, -wb), -pb])
+        bhi = np.concatenate([np.ones(d), np.full(n_al, sb), np.full(n_w, wb), pb])
         near = defaults["identify.bound_snap"] * (bhi - blo)
         v0 = np.where(v0 - blo < near, blo, np.where(bhi - v0 < near, bhi, v0))
         sol = self._least_squares(v0, (blo, bhi), "dogbox", defaults["identify.dogbox_max_nfev"], repair_stop)
@@ -609,8 +647,9 @@ class _Polish:
 
     def scale(self) -> np.ndarray:
         """``dx/dv`` of every unknown: the bounds' spans, one sample interval per shift, 1 per knot (m)."""
-        return np.concatenate([self.span, [1.0 / sh.fs for sh in self.align],
-                               np.ones(self.n_unknowns - self.d - len(self.align))])
+        n_w = self.n_unknowns - self.d - len(self.align) - len(self.paced)
+        return np.concatenate([self.span, [1.0 / sh.fs for sh in self.align], np.ones(n_w),
+                               [pc.speed * pc.unit for pc in self.paced]])
 
     def covariance(self, sol):
         """White covariance ``s^2 (J^T J)^+`` of every unknown in its own units, and its standard errors
@@ -666,6 +705,11 @@ class _Polish:
                 if sl is not None:
                     w = sh.warp.with_free(sh.warp.values[sh.warp.free] + sol.x[sl])
                     info["starts"][sh.run_id]["distance_correction"] = w.record(std_all[sl])
+        if self.paced:  # SPEC §13: each paced run's speed as estimated with the car (m/s)
+            speeds, sl = self.speeds_of(sol.x), self.pace_slice
+            info["speeds"] = {pc.run_id: {"value": speeds[pc.run_id], "std": float(sd), "std_robust": float(sr),
+                                          "declared": pc.declared, "prior_std": pc.prior_std}
+                              for pc, sd, sr in zip(self.paced, std_all[sl], std_rob[sl])}
         return info, std_all[:d]
 
 
@@ -689,6 +733,53 @@ class _Shift:
     #: runs are read now) and the response's derivative with respect to its free knots ``(K, n, 10)``
     warp: object = None
     Dw: np.ndarray | None = None
+
+
+@dataclass(frozen=True)
+class _Pace:
+    """A run on a track as drawn whose speed joins the polish (:func:`paced_runs`): its index in the cost, id, the
+    speed the round reads it at (m/s), its declared speed and that prior's std (m/s)."""
+
+    run_index: int
+    run_id: str
+    speed: float
+    declared: float
+    prior_std: float
+
+    @property
+    def unit(self) -> float:
+        """A move's unit, relative to the speed: the first of setting ``asbuilt.motion_scale`` (as built's)."""
+        return float(defaults["asbuilt.motion_scale"][0])
+
+    def speed_at(self, move: float) -> float:
+        """The speed (m/s) at a move of ``move`` (:attr:`unit`) from :attr:`speed`."""
+        return self.speed * (1.0 + move * self.unit)
+
+    @property
+    def bound(self) -> float:
+        """How far the speed may move in a round (:attr:`unit` units): setting ``anyroad.joint_motion_bound``, or four
+        prior std where that is wider (as a road run's: rideid.estimate.problem.blocks.RoadBlock)."""
+        return max(float(defaults["anyroad.joint_motion_bound"]), 4.0 * self.prior_std / (self.speed * self.unit))
+
+
+def paced_runs(ds, cf) -> list:
+    """The runs whose speed the polish estimates with the car (SPEC §13: a declared speed is a prior): on a car with
+    damper curves or bump stops (which cannot take its tracks as built, where a linear car's fit estimates each
+    run's speed), each run at a declared constant speed that load found the data contradict (a ``speed`` warning
+    with the speed the data show: a grid step of 0.25 %, or the nominal car's lags). Held where load put it, the
+    van's twist run typed 3.03 m/s (driven 3.0, put at 2.9927) gave k_tr +19 %, not adequate; estimated, the same
+    car as with 3.0 declared (docs/any-road.md, "A track run's speed under the curves")."""
+    if cf.space.layout is None:
+        return []
+    slipped = {f.run for f in getattr(ds, "findings", ()) if f.check == "speed" and f.severity == "warning"
+               and f.fix and "speed" in f.fix and "declared" in f.fix}
+    out = []
+    for ri, rid in enumerate(cf.run_ids):
+        run = ds.manifest.run(rid)
+        prior = run.speed_prior() if rid in slipped and run.track is not None else None
+        if prior is not None and getattr(ds.data[rid], "distance", None) is None:
+            out.append(_Pace(ri, rid, float(run.speed), float(prior[0]), float(prior[1])))
+    return out
 
 
 @stage("polish with starts")
@@ -718,35 +809,43 @@ def _polish_aligned(ds, cf, x_best, equal):
     starts = {rid: ds.measured[rid].start for rid in ds.auto_start_runs}
     warps = {rid: w for rid in starts if (w := distance_warp(ds.measured[rid], starts[rid])) is not None}
     exact = not warps
+    paced = paced_runs(ds, cf) if exact else []  # the speeds the polish estimates (exact reads only)
+    speeds = {pc.run_id: pc.speed for pc in paced}
     read = {}  # exact starts: the runs read at the last few trial starts, the polish's end among them
     rounds, settled = [], False
     for _ in range(defaults["identify.realign_max"] + 1):
         P = cf.space.full(x_best[None])[0]
         last = settled or len(rounds) == defaults["identify.realign_max"]
-        if exact and _key(starts) in read:  # read there by the polish already
-            cf = read[_key(starts)]
+        if exact and _key(starts, speeds) in read:  # read there by the polish already
+            cf = read[_key(starts, speeds)]
         else:
             with timing("linearise starts"):
-                ds_now, D, D2, Dw = linearise_starts(warped(ds, warps), P, starts, cf.simulator,
+                ds_now, D, D2, Dw = linearise_starts(warped(ds, warps).with_speeds(speeds), P, starts, cf.simulator,
                                                      derivative=not (last or exact), warps=warps)
             # the model's time axes moved with the starts: the cost function (space, simulator, pin) on them
             cf = cf.with_data(ds_now)
             if exact:  # the polish's first trial reads the runs here
-                _read_at(ds, cf, read, starts, cf)
+                _read_at(ds, cf, read, starts, speeds, known=cf)
         if last:
             break
         x_before = x_best
         if exact:
             shifts = [_Shift(cf.run_ids.index(rid), rid, ds.measured[rid].fs, s, None) for rid, s in starts.items()]
-            x_best, info, std = _polish(cf, x_best, equal, shifts, at=partial(_read_at, ds, cf, read))
+            now = [replace(pc, speed=speeds[pc.run_id]) for pc in paced]  # this round's speeds: the moves' origin
+            x_best, info, std = _polish(cf, x_best, equal, shifts, at=partial(_read_at, ds, cf, read), paced=now)
         else:
             x_best, info, std = _polish(cf, x_best, equal, _modelled_shifts(ds, cf, P, starts, D, D2, Dw, warps))
         with np.errstate(divide="ignore", invalid="ignore"):
             steps = np.abs(x_best - x_before) / std
         param_move = float(np.max(np.where(np.isfinite(steps), steps, 0.0), initial=0.0))
-        fitted = {rid: st["value"] for rid, st in info["starts"].items()}
+        fitted = {rid: st["value"] for rid, st in info.get("starts", {}).items()}
         moves = [_move(abs(v - starts[rid]) * ds.measured[rid].fs, info["starts"][rid]["std"] * ds.measured[rid].fs)
                  for rid, v in fitted.items()]
+        new_speeds = {rid: rec["value"] for rid, rec in info.get("speeds", {}).items()}
+        # a speed on its round's bound moves on in the next round (the bound is centred where this one ended)
+        paced_bound = any(abs(new_speeds[pc.run_id] / speeds[pc.run_id] - 1.0) >= pc.bound * pc.unit * (1 - 1e-9)
+                          for pc in now) if exact else False
+        speeds = new_speeds
         # a distance correction's change, in sample intervals at the run's mean speed, knot by knot
         for rid, w in warps.items():
             dc = info["starts"][rid]["distance_correction"]
@@ -755,15 +854,17 @@ def _polish_aligned(ds, cf, x_best, equal):
             moves += [_move(abs(a - b) * per_m, s * per_m) for a, b, s in zip(new, w.values, dc["std_m"])]
             warps[rid] = replace(w, values=new)
         with timing("cycle slips"):
-            moved = cycle_slips(ds, cf.space.full(x_best[None])[0], fitted, cf.simulator)
+            moved = cycle_slips(ds.with_speeds(speeds), cf.space.full(x_best[None])[0], fitted, cf.simulator)
         slipped = {rid: s - fitted[rid] for rid, s in moved.items()}
         starts = {**fitted, **moved}
-        rounds.append({"max_change_samples": max(m[0] for m in moves), "max_change_share": max(m[1] for m in moves),
+        rounds.append({"max_change_samples": max((m[0] for m in moves), default=0.0),
+                       "max_change_share": max((m[1] for m in moves), default=0.0),
                        "max_parameter_move_std": param_move, "exact": exact,
                        **({"cycle_slips": slipped} if slipped else {})})
-        # exact: settled unless a run slipped a cycle or a start ended on the round's bound (its move, in sample
-        # intervals, is bounded round by round: the next round's bound is centred on where this one ended)
-        on_bound = max(m[0] for m in moves[:len(fitted)]) >= defaults["identify.start_bound"] * (1 - 1e-9)
+        # exact: settled unless a run slipped a cycle or a start or a speed ended on the round's bound (its move is
+        # bounded round by round: the next round's bound is centred on where this one ended)
+        on_bound = (max((m[0] for m in moves[:len(fitted)]), default=0.0)
+                    >= defaults["identify.start_bound"] * (1 - 1e-9)) or paced_bound
         settled = not (slipped or on_bound) if exact else _settled(rounds[-1])
     out = {rid: {"value": float(starts[rid]), "source": "estimated with the parameters (least squares)",
                  **_start_std(info["starts"][rid], ds.measured[rid].record.get("start", {}), rid in warps)}
@@ -773,18 +874,18 @@ def _polish_aligned(ds, cf, x_best, equal):
     return x_best, dict(info, alignment_rounds=rounds), std, cf, out
 
 
-def _key(starts: dict) -> tuple:
-    return tuple(sorted(starts.items()))
+def _key(starts: dict, speeds: dict | None = None) -> tuple:
+    return tuple(sorted(starts.items())), tuple(sorted((speeds or {}).items()))
 
 
-def _read_at(ds, cf, read: dict, starts: dict, known=None):
-    """``cf`` on the runs of ``ds`` read at ``starts`` (run id -> s), kept in ``read`` (the last four); ``known``:
-    that cost function already (the round's)."""
-    key = _key(starts)
+def _read_at(ds, cf, read: dict, starts: dict, speeds: dict | None = None, known=None):
+    """``cf`` on the runs of ``ds`` read at ``starts`` (run id -> s) and ``speeds`` (run id -> m/s, the paced runs'),
+    kept in ``read`` (the last four); ``known``: that cost function already (the round's)."""
+    key = _key(starts, speeds)
     if key not in read:
         if len(read) >= 4:
             read.pop(next(iter(read)))
-        read[key] = known if known is not None else cf.with_data(ds.with_starts(starts))
+        read[key] = known if known is not None else cf.with_data(ds.with_speeds(speeds or {}).with_starts(starts))
     return read[key]
 
 
