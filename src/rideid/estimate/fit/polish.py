@@ -508,7 +508,7 @@ class _Polish:
         """``J`` with the starts' columns of :meth:`jacobian` by a forward difference of the runs read at every
         start moved by setting ``identify.exact_start_step`` (samples) at once: each run's residuals depend on its
         own start alone, so one evaluation gives every column; the paced runs' speed columns the same way (every
-        speed moved by the first of setting ``asbuilt.motion_jacobian_steps``)."""
+        speed moved by setting ``identify.exact_speed_step``)."""
         d, h = self.d, defaults["identify.exact_start_step"]
         r0 = self._residuals_at(v)
         if self.align:
@@ -519,7 +519,7 @@ class _Polish:
                 rows = slice(offsets[sh.run_index], offsets[sh.run_index + 1])
                 J[rows, d + k] = (rh[rows] - r0[rows]) / h
         if self.paced:  # each paced run's residuals depend on its own speed alone: one read gives every column
-            hp = defaults["asbuilt.motion_jacobian_steps"][0]
+            hp = defaults["identify.exact_speed_step"]
             vh = v.copy()
             vh[self.pace_slice] += hp
             rh = self.cost_at(vh).residuals(self.to_x(v[:d])[None], self.weights)[0]
@@ -765,18 +765,17 @@ class _Pace:
 def paced_runs(ds, cf) -> list:
     """The runs whose speed the polish estimates with the car (SPEC §13: a declared speed is a prior): on a car with
     damper curves or bump stops (which cannot take its tracks as built, where a linear car's fit estimates each
-    run's speed), each run at a declared constant speed that load found the data contradict (a ``speed`` warning
-    with the speed the data show: a grid step of 0.25 %, or the nominal car's lags). Held where load put it, the
-    van's twist run typed 3.03 m/s (driven 3.0, put at 2.9927) gave k_tr +19 %, not adequate; estimated, the same
-    car as with 3.0 declared (docs/any-road.md, "A track run's speed under the curves")."""
+    run's speed), every run on a known track at a declared constant speed, from the speed load put it at (the
+    declared one, or where load found the data contradict it). Held there, the van's twist run typed 3.03 m/s
+    (driven 3.0, put at 2.9927 by load) gave k_tr +19 %, and typed 3.006 (within the declared speed's prior, not
+    moved at load) k_tr -17 %, both not adequate; estimated, the car within 0.63 % (docs/dampers.md, "A run's
+    speed under a nonlinear car")."""
     if cf.space.layout is None:
         return []
-    slipped = {f.run for f in getattr(ds, "findings", ()) if f.check == "speed" and f.severity == "warning"
-               and f.fix and "speed" in f.fix and "declared" in f.fix}
     out = []
     for ri, rid in enumerate(cf.run_ids):
         run = ds.manifest.run(rid)
-        prior = run.speed_prior() if rid in slipped and run.track is not None else None
+        prior = run.speed_prior() if run.track is not None else None
         if prior is not None and getattr(ds.data[rid], "distance", None) is None:
             out.append(_Pace(ri, rid, float(run.speed), float(prior[0]), float(prior[1])))
     return out
