@@ -291,6 +291,20 @@ def test_bad_input(case, sim_dataset, tmp_path, capsys):
     assert not list(tmp_path.glob(".fit.tmp-*"))
 
 
+def test_a_refused_run_says_the_out_folder_holds_an_earlier_runs_files(sim_dataset, tmp_path, capsys):
+    """An error leaves ``--out`` as it was; where it holds an earlier run's result, the error line says so (a user
+    looking there must not take it for this run's)."""
+    d = _copy(sim_dataset, tmp_path)
+    out = tmp_path / "fit"
+    out.mkdir()
+    (out / "result.json").write_text("{}")
+    BAD["speed"][0](d)
+    rc, _, err = run_cli(["identify", d, "--out", out, "--quiet"], capsys)
+    assert rc == 2 and len(err.strip().splitlines()) == 1
+    assert err.strip().endswith(f"; nothing was written: {out} holds an earlier run's files, left as they were")
+    assert (out / "result.json").read_text() == "{}"
+
+
 def test_extra_column_warns_but_works(sim_dataset, tmp_path, capsys):
     d = _copy(sim_dataset, tmp_path)
     _edit_csv(d, "W_L", lambda ls: [ls[0] + ",temperature"] + [x + ",21.5" for x in ls[1:]])

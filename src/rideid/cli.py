@@ -728,7 +728,7 @@ def main(argv=None) -> int:
             _compile(getattr(args, "quiet", False))
         return COMMANDS[args.command](args)
     except rideid.RideidError as e:
-        msg = str(e).replace("\n", " ")
+        msg = str(e).replace("\n", " ") + _stale_note(args)
         say(f"rideid: error: {msg}")
         return 2
     except KeyboardInterrupt:
@@ -743,6 +743,15 @@ def main(argv=None) -> int:
         say(f"rideid: internal error: {type(e).__name__}: {e} (set RIDEID_DEBUG=1 for the traceback; "
             "please report it)")
         return 1
+
+
+def _stale_note(args) -> str:
+    """What a refused command left in its ``--out`` folder: nothing new; an earlier run's files, when the folder
+    holds some, stay as they were (a user looking there after the error must not take them for this run's)."""
+    out = getattr(args, "out", None)
+    if out is None or args.command == "report" or not Path(out).is_dir() or not any(Path(out).iterdir()):
+        return ""
+    return f"; nothing was written: {out} holds an earlier run's files, left as they were"
 
 
 #: commands whose process may end without the interpreter's teardown (no Dask cluster to close)
