@@ -22,6 +22,7 @@ from rideid.estimate.problem.blocks import speed_runs
 from rideid.model.nonlinear import DEFAULT_KNOTS
 from rideid.model.params import INDEX, SUSPENSION_NAMES, total_mass
 
+from test_checks import VAN as VAN_TWIST
 from test_roadfit import FS, car, road_run
 
 
@@ -168,18 +169,9 @@ def test_curves_on_unknown_roads_end_to_end(curved):
 
 # the van of ../shared/cases/van-roads-dampers (3 t, digressive dampers, rebound about twice compression) on one short
 # unknown road and its twist run, the curves' knots where the dampers bend (a small case of the shared one)
-VAN = {"name": "van road and twist", "vehicle": {"wheelbase": 3.665, "track_front": 1.72, "track_rear": 1.71,
-                                               "tire_radius": 0.36},
-       "known": {"total_mass": 3000.0},
-       "truth": {"m_s": 2740.0, "I_xx": 1150.0, "I_yy": 6200.0, "a": 1.75, "m_uf": 55.0, "m_ur": 75.0,
-                 "k_sf": 45000.0, "k_sr": 60000.0, "k_tf": 320000.0, "k_tr": 350000.0},
-       "dampers": {"velocity": [-0.6, -0.3, -0.15, -0.05, 0.05, 0.15, 0.3, 0.6],
-                   "front": [-1350.0, -950.0, -700.0, -225.0, 115.0, 350.0, 500.0, 725.0],
-                   "rear": [-1500.0, -1050.0, -775.0, -250.0, 130.0, 390.0, 550.0, 800.0]},
-       "tracks": [{"id": "twist_high", "kind": "chassis_twist", "start": 3.0, "height": 0.08, "bump_length": 1.6,
-                   "spacing": 4.0, "bumps": 3, "first": "left"}],
+VAN = {**VAN_TWIST, "name": "van road and twist",
        "runs": [{"id": "B_50", "road_class": "B", "road_seed": 1, "speed": 13.889, "fs": 200.0, "duration": 12.0},
-                {"id": "T_HL", "track": "twist_high", "speed": 3.0, "fs": 200.0, "duration": 8.0}]}
+                *VAN_TWIST["runs"]]}
 
 
 @pytest.fixture(scope="module")
