@@ -229,8 +229,9 @@ def test_a_track_runs_speed_is_estimated_with_damper_curves_on_roads(van_road_tw
 
 def test_the_curves_follow_a_speed_slip_the_curves_fit_estimates(van_road_twist, tmp_path):
     """The road model choice tries damper curves after a speed slip when their fit estimates that run's speed (a road
-    run, or a run as drawn of :func:`rideid.estimate.problem.blocks.speed_runs`); a run whose speed it would hold (no
-    roll gyro: taken as drawn on a linear car too) still stops it: curves would take up what no extension mends."""
+    run, or a run on a known track at a declared speed: :func:`rideid.estimate.problem.blocks.speed_runs`, with or
+    without its roll gyro, which a track as built needs); a slip whose speed the data did not give (no value to
+    start from) still stops them: curves would take up what no extension mends."""
     fits, dirs = van_road_twist
     parent = SimpleNamespace(checks=fits[3.03][1]["checks"])
     ds = rideid.load_dataset(dirs[3.03])
@@ -243,6 +244,7 @@ def test_the_curves_follow_a_speed_slip_the_curves_fit_estimates(van_road_twist,
     col = rows[0].split(",").index("roll_rate")
     run.write_text("\n".join(",".join(c for i, c in enumerate(r.split(",")) if i != col) for r in rows) + "\n")
     ds = rideid.load_dataset(blind)
-    assert speed_runs(ds, ("damper_curves",)) == ()
-    held = road_curves.held_slips(ds, parent, ("damper_curves",))
-    assert [s["run"] for s in held] == ["T_HL"]
+    assert [r.id for r in speed_runs(ds, ("damper_curves",))] == ["T_HL"]
+    assert road_curves.held_slips(ds, parent, ("damper_curves",)) == []
+    unknown = SimpleNamespace(checks=[{"check": "speed", "severity": "warning", "run": "T_HL", "message": "..."}])
+    assert [s["run"] for s in road_curves.held_slips(ds, unknown, ("damper_curves",))] == ["T_HL"]

@@ -374,7 +374,7 @@ class _Plan:
     skipped: dict
     excitation: dict | None = None
     #: the runs as drawn whose speed is estimated with the car (:class:`rideid.estimate.problem.blocks.DrawnRun`):
-    #: those a linear car would take as built, on a car with damper curves or bump stops
+    #: on a car with damper curves or bump stops, each at a declared constant speed
     speed_runs: tuple = ()
 
     def problem(self, ds, geom, simulator) -> JointProblem:
@@ -425,7 +425,7 @@ def _plan(ds, model, start_result, tracks: str, polish: bool, as_built_mode: str
     track_runs = [r for r in ds.runs if r.id not in road_ids]
     ab_ids = {r.id for r in ab_list}
     return _Plan(ext, model_block, space, roads, blocks, [r for r in track_runs if r.id not in ab_ids], track_runs,
-                 skipped, excitation, speed_runs(ds, ext, tracks if polish else "as-drawn"))
+                 skipped, excitation, speed_runs(ds, ext) if polish else ())
 
 
 def _road_prior(ds, run_id: str):

@@ -783,7 +783,8 @@ def paced_runs(ds, cf) -> list:
 
 @stage("polish with starts")
 def _polish_aligned(ds, cf, x_best, equal):
-    """Polish the parameters and the estimated starts together.
+    """Polish the parameters and the estimated starts together (and, on a nonlinear car, the runs' speeds:
+    :func:`paced_runs`, read exactly at each trial speed as the starts are).
 
     Runs without a distance correction (a constant speed, or a speed channel trusted as it is): the starts'
     moves are exact, every evaluation of the least squares reading the runs at its starts (:attr:`_Polish.at`),

@@ -534,14 +534,16 @@ def as_built_runs(ds, ext, tracks: str = "as-built") -> tuple[list, dict]:
     return [r for r in runs if why[r.id] is None], {rid: w for rid, w in why.items() if w is not None}
 
 
-def speed_runs(ds, ext, tracks: str = "as-built") -> tuple:
-    """The runs a model with damper curves or bump stops (``ext``) takes as drawn that a linear car would take as
-    built (their speed and start fitted with the car), driven at a declared constant speed: their speed is
-    estimated with the car on the track as drawn (SPEC §13; :class:`DrawnRun`). None for a linear model."""
-    linear = tuple(g for g in ext if g not in NONLINEAR_GROUPS)
-    if linear == tuple(ext):
+def speed_runs(ds, ext) -> tuple:
+    """The runs on known tracks a model with damper curves or bump stops (``ext``) takes as drawn, driven at a
+    declared constant speed: their speed is estimated with the car on the track as drawn (SPEC §13;
+    :class:`DrawnRun`), as the polish on tracks alone estimates it (rideid.estimate.fit.polish.paced_runs). None
+    for a linear model (its runs on tracks as built have their speed and start fitted with the car)."""
+    if not any(g in NONLINEAR_GROUPS for g in ext):
         return ()
-    return tuple(r for r in as_built_runs(ds, linear, tracks)[0] if asbuilt.motion_prior(ds, r).speed is not None)
+    roads = {r.id for r in unknown_road_runs(ds, ext)}
+    return tuple(r for r in ds.runs if r.id not in roads and getattr(r, "track", None) is not None
+                 and asbuilt.motion_prior(ds, r).speed is not None)
 
 
 def align_motion(P, geom, tr: asbuilt.TrackRun, ds, run, mode: str = "prior",
