@@ -973,6 +973,10 @@ def test_a_speed_load_moved_is_estimated_with_a_nonlinear_car(van_twist, tmp_pat
     motion = slipped.preprocessing["T_HL"]["motion"]
     assert motion["track"] == "twist_high" and motion["speed_m_s"] == sp["value"] and motion["named"]
     assert slipped.speed_values() == {"T_HL": sp["value"]}
+    # the terminal and the report's summary say it in one line
+    assert rideid.drawn_speeds_line(slipped) == ("speeds estimated with the car on the tracks as drawn (SPEC §13): "
+                                                 "T_HL 3.0000 m/s; the largest 0.99 % from its declared value; "
+                                                 "beyond its prior: T_HL")
     assert any(c["check"] == "motion" and c["run"] == "T_HL" for c in slipped.checks)
     assert slipped.adequacy["adequate"] and clean.adequacy["adequate"]
     for n in ("I_xx", "I_yy", "a", "m_uf", "m_ur", "k_sf", "k_sr", "k_tf", "k_tr"):

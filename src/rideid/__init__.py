@@ -67,8 +67,8 @@ _COMMAND_LINE = _by_name({
     "rideid.data.quality": ("data_quality", "quality_table", "summarised_warning", "resampling_lines",
                             "partial_channel_lines"),
     "rideid.profiling": ("Profile",),
-    "rideid.estimate.records": ("motion_line", "drawn_motions", "drawn_motion_line", "error_bar_warning",
-                                "candidate_label", "kept_candidate", "first_fit_sentence"),
+    "rideid.estimate.records": ("motion_line", "drawn_motions", "drawn_motion_line", "drawn_speeds_line",
+                                "error_bar_warning", "candidate_label", "kept_candidate", "first_fit_sentence"),
 }, {
     "rideid.estimate.assess.adequacy": {"adequacy_caveats": "caveats"},
     "rideid.estimate.assess.shape": {"error_bar_caveat": "caveat", "error_bar_note": "table_note"},

@@ -330,6 +330,9 @@ def _summary_table(res) -> str:
         lines.append(_roads_table(res))
     if res.tracks:
         lines.append(_tracks_table(res))
+    speeds = None if res.roads else rideid.drawn_speeds_line(res)  # with roads: a line a run in their table
+    if speeds:
+        lines.append(speeds)
     return "\n".join(lines)
 
 

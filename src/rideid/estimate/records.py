@@ -456,6 +456,19 @@ def drawn_motion_line(rid: str, m: dict) -> str:
     return f"{motion_line(rid, m)}, on track '{m['track']}' as drawn"
 
 
+def drawn_speeds_line(res) -> str | None:
+    """The runs' speeds estimated with the car on the tracks as drawn (:func:`drawn_motions`), in one line: each
+    speed, the largest departure from its declared value, and the runs named beyond their prior; None without."""
+    motions = drawn_motions(res)
+    if not motions:
+        return None
+    speeds = ", ".join(f"{rid} {m['speed_m_s']:.4f}" for rid, m in motions.items())
+    off = max(abs(m["speed"]["estimate"] / m["speed"]["declared"] - 1.0) for m in motions.values())
+    named = [rid for rid, m in motions.items() if m.get("named")]
+    return (f"speeds estimated with the car on the tracks as drawn (SPEC §13): {speeds} m/s; the largest "
+            f"{100 * off:.2g} % from its declared value" + (f"; beyond its prior: {', '.join(named)}" if named else ""))
+
+
 def candidate_label(c: dict) -> str:
     """A ``model.candidates`` entry's name: its extensions (``base`` for none) and, where it records them, the
     tracks it was fitted on (a gross first fit's candidates: the same extension as drawn and as built)."""

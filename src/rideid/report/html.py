@@ -38,7 +38,7 @@ from ..estimate.assess.adequacy import caveats
 from ..estimate.assess.frequency import frequency_response, measured_response
 from ..estimate.assess.shape import table_note
 from ..estimate.problem.sensitivity import P2T_STARS, stars
-from ..estimate.records import drawn_motion_line, drawn_motions, error_bar_warning, motion_line
+from ..estimate.records import drawn_motion_line, drawn_motions, drawn_speeds_line, error_bar_warning, motion_line
 from .sensitivity_files import heatmap_figure
 from ..model.equations import CHANNELS
 from ..model.params import ALL_NAMES, DESCRIPTIONS
@@ -989,6 +989,9 @@ def _estimates_lines(result, context) -> list:
         if conditional:
             text += f"; CONDITIONAL (on a parameter at its bound): {', '.join(conditional)}"
         lines.append(("Estimates", text, "estimates"))
+    speeds = drawn_speeds_line(result)
+    if speeds:  # SPEC §13: a nonlinear car's runs on the tracks as drawn, their speeds estimated with it
+        lines.append(("Speeds", speeds[0].upper() + speeds[1:], "data"))
     tracks = getattr(result, "tracks", None) or {}
     built = {tid: rec for tid, rec in tracks.items() if "amplitude_factor" in rec}
     if built:  # SPEC §11: what the tracks as built needed (rideid.estimate.assess.motion.tracks_block)
