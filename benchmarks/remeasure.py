@@ -332,18 +332,23 @@ def check_van_roads(item, out):
         return [_failed(item, out, "van-roads-dampers")]
     f = fit_of(d / "fit", d / "sim" / "truth.toml")
     text = (out / f"{item.name}.txt").read_text()
+    # the README's resolution: the twelve within 2 %, the curves (knot forces) within 5 %, adequate; or not green
+    twelve = max((abs(p["error"]) for n, p in f["par"].items() if not n.startswith("F_")), default=math.nan)
+    curves = max((abs(p["error"]) for n, p in f["par"].items() if n.startswith("F_")), default=0.0)
+    right = twelve <= 2 and curves <= 5
     rows = [same_row(doc, "van on roads + twist: verdict (README wants 'not green' unless within 2 %/5 %)",
-                     "adequate (green)", verdict(f), ok=(f["adequate"] is not True) or f["worst"] <= 2,
-                     tol="not green, or within 2 %"),
-            Row(doc, "  'ROAD RUNS FAIL' printed", "(issue 51: yes)", "yes" if "ROAD RUNS FAIL" in text else "no",
-                "", "ROAD RUNS FAIL" in text)]
+                     "adequate (green)", f"{verdict(f)} (the twelve within {twelve:.2f} %, curves {curves:.2f} %)",
+                     ok=(f["adequate"] is not True) or right, tol="not green, or within 2 % / 5 %"),
+            Row(doc, "  'ROAD RUNS FAIL' printed (a linear car; none where the curves are right)", "(issue 51: yes)",
+                "yes" if "ROAD RUNS FAIL" in text else "no", "", ("ROAD RUNS FAIL" in text) != right)]
     for n, b in (("k_tf", -5.07), ("k_tr", -4.23), ("m_uf", -3.10), ("c_sf", -16.45)):
         rows.append(err_row(doc, f"  {n}", f, n, b))
     rows.append(Row(doc, "  ±2 std_total covers", "4 of 12", f"{f['covered']} of {f['coverable']}", "", None))
     m = re.search(r"twist_high\s+T_HL\s+([0-9.]+)\s+([0-9.]+)", text)
+    # with damper curves the track is taken as drawn (its speed estimated with the car): no factor to print
     rows.append(Row(doc, "  twist_high as built (exactly as drawn)", "× 1.060 ± 0.021",
-                    f"× {m[1]} ± {m[2]}" if m else "not printed", "closer to 1",
-                    bool(m) and abs(float(m[1]) - 1) <= 0.06))
+                    f"× {m[1]} ± {m[2]}" if m else "not printed (as drawn: the curves kept)", "closer to 1",
+                    (bool(m) and abs(float(m[1]) - 1) <= 0.06) or (not m and "damper_curves" in f["extensions"])))
     rows.append(time_row(doc, "  wall (simulate + identify + score)", "153 s (issue 51 note)", out, item.name))
     return rows
 

@@ -159,7 +159,8 @@ def fit_record(res, truth, extensions):
             "between_runs": sum(c["between_runs"] for c in cover.values()),
             "estimated": len(cover), "coverage": cover,
             "adequate": (res.adequacy or {}).get("adequate"),
-            "dampers": res.dampers, "bump_stops": getattr(res, "bump_stops", None),
+            "dampers": None if res.dampers is None else res.dampers.to_dict(),
+            "bump_stops": None if getattr(res, "bump_stops", None) is None else res.bump_stops.to_dict(),
             "adequacy_reasons": (res.adequacy or {}).get("reasons"), "cost": float(res.cost)}
 
 
