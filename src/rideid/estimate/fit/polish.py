@@ -838,21 +838,12 @@ def _polish_aligned(ds, cf, x_best, equal):
         with np.errstate(divide="ignore", invalid="ignore"):
             steps = np.abs(x_best - x_before) / std
         param_move = float(np.max(np.where(np.isfinite(steps), steps, 0.0), initial=0.0))
-        fitted = {rid: st["value"] for rid, st in info.get("starts", {}).items()}
-        moves = [_move(abs(v - starts[rid]) * ds.measured[rid].fs, info["starts"][rid]["std"] * ds.measured[rid].fs)
-                 for rid, v in fitted.items()]
+        fitted, moves, warps = _moves(ds, info, starts, warps)
         new_speeds = {rid: rec["value"] for rid, rec in info.get("speeds", {}).items()}
         # a speed on its round's bound moves on in the next round (the bound is centred where this one ended)
-        paced_bound = any(abs(new_speeds[pc.run_id] / speeds[pc.run_id] - 1.0) >= pc.bound * pc.unit * (1 - 1e-9)
-                          for pc in now) if exact else False
+        paced_bound = exact and any(abs(new_speeds[pc.run_id] / speeds[pc.run_id] - 1.0)
+                                    >= pc.bound * pc.unit * (1 - 1e-9) for pc in now)
         speeds = new_speeds
-        # a distance correction's change, in sample intervals at the run's mean speed, knot by knot
-        for rid, w in warps.items():
-            dc = info["starts"][rid]["distance_correction"]
-            new = np.asarray(dc["values_m"])
-            per_m = ds.measured[rid].fs / max(float(ds.measured[rid].record.get("speed", {}).get("mean") or 1.0), 1e-3)
-            moves += [_move(abs(a - b) * per_m, s * per_m) for a, b, s in zip(new, w.values, dc["std_m"])]
-            warps[rid] = replace(w, values=new)
         with timing("cycle slips"):
             moved = cycle_slips(ds.with_speeds(speeds), cf.space.full(x_best[None])[0], fitted, cf.simulator)
         slipped = {rid: s - fitted[rid] for rid, s in moved.items()}
@@ -866,12 +857,35 @@ def _polish_aligned(ds, cf, x_best, equal):
         on_bound = (max((m[0] for m in moves[:len(fitted)]), default=0.0)
                     >= defaults["identify.start_bound"] * (1 - 1e-9)) or paced_bound
         settled = not (slipped or on_bound) if exact else _settled(rounds[-1])
+    return x_best, dict(info, alignment_rounds=rounds), std, cf, _start_records(ds, starts, info, warps)
+
+
+def _start_records(ds, starts: dict, info: dict, warps: dict) -> dict:
+    """result.json ``starts``: each start the polish settled, with its standard errors and, along a noisy speed
+    channel, its distance correction."""
     out = {rid: {"value": float(starts[rid]), "source": "estimated with the parameters (least squares)",
                  **_start_std(info["starts"][rid], ds.measured[rid].record.get("start", {}), rid in warps)}
            for rid in starts}
     for rid in warps:
         out[rid]["distance_correction"] = info["starts"][rid]["distance_correction"]
-    return x_best, dict(info, alignment_rounds=rounds), std, cf, out
+    return out
+
+
+def _moves(ds, info, starts: dict, warps: dict) -> tuple[dict, list, dict]:
+    """A round's end (:func:`_polish_aligned`): the starts the polish fitted (run id -> s), each start's and each
+    distance knot's move (:func:`_move`; a knot's in sample intervals at the run's mean speed) and the distance
+    corrections as fitted (run id -> :class:`rideid.conditioning.starts.DistanceWarp`)."""
+    fitted = {rid: st["value"] for rid, st in info.get("starts", {}).items()}
+    moves = [_move(abs(v - starts[rid]) * ds.measured[rid].fs, info["starts"][rid]["std"] * ds.measured[rid].fs)
+             for rid, v in fitted.items()]
+    out = {}
+    for rid, w in warps.items():
+        dc = info["starts"][rid]["distance_correction"]
+        new = np.asarray(dc["values_m"])
+        per_m = ds.measured[rid].fs / max(float(ds.measured[rid].record.get("speed", {}).get("mean") or 1.0), 1e-3)
+        moves += [_move(abs(a - b) * per_m, s * per_m) for a, b, s in zip(new, w.values, dc["std_m"])]
+        out[rid] = replace(w, values=new)
+    return fitted, moves, out
 
 
 def _key(starts: dict, speeds: dict | None = None) -> tuple:
