@@ -880,8 +880,8 @@ def _identify_any_road(ds, *, rng=None, seed=None, population=None, generations=
     response_t, errors_t, checked = _checked(ds, P, geom, x, fitted.prob)
     blocks = [fitted.prob.parts[k] for k in fitted.prob.of(TrackBlock)]
     tracks, motion = tracks_block(ds, blocks, plan.skipped, P, geom) if blocks else (None, {})
-    motion = {**{b.run_id: b.record for b in road_blocks if "speed" in b.record}, **motion,
-              **{b.run_id: dict(b.record, track=b.run.track) for b in _drawn_runs(fitted.prob) if "speed" in b.record}}
+    drawn = {b.run_id: drawn_motion_record(b.record, b.run) for b in _drawn_runs(fitted.prob) if "speed" in b.record}
+    motion = {**{b.run_id: b.record for b in road_blocks if "speed" in b.record}, **motion, **drawn}
     adequacy, odd = (_verdict(checked, plan.ext, list(roads), [b.run_id for b in blocks], tracks or {})
                      if assess and checked else (None, []))
     if assess and polish:  # every run assessed: the road runs by their residual at their own road estimate

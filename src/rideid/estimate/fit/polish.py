@@ -24,6 +24,8 @@ from ...settings import defaults
 from ...conditioning.starts import cycle_slips, distance_warp, linearise_starts, warped
 from ...data.dataset import Dataset
 from ...model.params import INDEX, NOMINAL_EXTENSIONS
+from ..problem.asbuilt import speed_move_bound
+from ..problem.blocks import speed_runs
 from ..problem.bumps import frozen_values, reach
 from ..problem.cost import CostFunction, ParameterSpace, time_derivative
 from .tall import reduced, tall_r, tall_steps
@@ -759,7 +761,7 @@ class _Pace:
     def bound(self) -> float:
         """How far the speed may move in a round (:attr:`unit` units): setting ``anyroad.joint_motion_bound``, or four
         prior std where that is wider (as a road run's: rideid.estimate.problem.blocks.RoadBlock)."""
-        return max(float(defaults["anyroad.joint_motion_bound"]), 4.0 * self.prior_std / (self.speed * self.unit))
+        return speed_move_bound(self.speed, self.prior_std)
 
 
 def paced_runs(ds, cf) -> list:
@@ -769,16 +771,11 @@ def paced_runs(ds, cf) -> list:
     declared one, or where load found the data contradict it). Held there, the van's twist run typed 3.03 m/s
     (driven 3.0, put at 2.9927 by load) gave k_tr +19 %, and typed 3.006 (within the declared speed's prior, not
     moved at load) k_tr -17 %, both not adequate; estimated, the car within 0.63 % (docs/dampers.md, "A run's
-    speed under a nonlinear car")."""
-    if cf.space.layout is None:
-        return []
-    out = []
-    for ri, rid in enumerate(cf.run_ids):
-        run = ds.manifest.run(rid)
-        prior = run.speed_prior() if run.track is not None else None
-        if prior is not None and getattr(ds.data[rid], "distance", None) is None:
-            out.append(_Pace(ri, rid, float(run.speed), float(prior[0]), float(prior[1])))
-    return out
+    speed under a nonlinear car"). The runs are those the road fit's blocks estimate the speed of
+    (:func:`rideid.estimate.problem.blocks.speed_runs`), in the cost function's order."""
+    runs = {r.id: r for r in speed_runs(ds, cf.space.extensions)}
+    return [_Pace(ri, rid, float(runs[rid].speed), *map(float, runs[rid].speed_prior()[:2]))
+            for ri, rid in enumerate(cf.run_ids) if rid in runs]
 
 
 @stage("polish with starts")

@@ -220,6 +220,13 @@ class MotionPrior:
         return weight * np.asarray(out, dtype=float).reshape(-1, 2)
 
 
+def speed_move_bound(v: float, sd: float) -> float:
+    """How far (setting ``asbuilt.motion_scale`` units, either way) a fit may move a speed ``v`` declared with the
+    std ``sd`` (m/s): setting ``anyroad.joint_motion_bound``, or four prior std where that is wider (a
+    speedometer's ``speed = { value = 11.0, std = 0.4 }``)."""
+    return max(float(defaults["anyroad.joint_motion_bound"]), 4.0 * sd / (v * defaults["asbuilt.motion_scale"][0]))
+
+
 def motion_prior(ds, run) -> MotionPrior:
     """The :class:`MotionPrior` of ``run`` (a run on a declared track) in ``ds``: its declared speed (none along a
     speed or distance channel) and its start where it was given (a SPEC CSV's time 0, a logger file's
@@ -485,7 +492,7 @@ def fitted_channels(P, geom, tr: TrackRun, y, fit: Fit | None = None) -> np.ndar
 
 __all__ = ["MODES", "Prior", "TrackRun", "Fit", "nominal_inputs", "prepare_track_run", "solve", "residuals",
            "estimate_prior", "unevenness_rms", "fitted_channels", "meat", "cluster_meat",
-           "moved", "MotionPrior", "motion_prior"]
+           "moved", "MotionPrior", "motion_prior", "speed_move_bound"]
 
 
 #: the constants this module had before rideid.settings, read from the registry (PEP 562)

@@ -156,11 +156,9 @@ class _OneRun:
         """How far the speed may move (setting ``asbuilt.motion_scale`` units, either way): setting
         ``anyroad.joint_motion_bound``, or four prior std where the declared speed is wider (a speedometer's
         ``speed = { value = 11.0, std = 0.4 }``)."""
-        bound = float(defaults["anyroad.joint_motion_bound"])
         if self.prior is None or self.prior.speed is None:
-            return bound
-        v, sd = self.prior.speed[:2]
-        return max(bound, 4.0 * sd / (v * defaults["asbuilt.motion_scale"][0]))
+            return float(defaults["anyroad.joint_motion_bound"])
+        return asbuilt.speed_move_bound(*self.prior.speed[:2])
 
 
 @dataclass(frozen=True)
