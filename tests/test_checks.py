@@ -973,6 +973,8 @@ def test_a_speed_load_moved_is_estimated_with_a_nonlinear_car(van_twist, tmp_pat
     motion = slipped.preprocessing["T_HL"]["motion"]
     assert motion["track"] == "twist_high" and motion["speed_m_s"] == sp["value"] and motion["named"]
     assert slipped.speed_values() == {"T_HL": sp["value"]}
+    # SPEC §13: result.json's plan names the run's speed among the problem's unknowns
+    assert [(b.name, b.unknowns) for b in slipped.plan.blocks if b.kind == "run"] == [("run T_HL", ["speed"])]
     # the terminal and the report's summary say it in one line
     assert rideid.drawn_speeds_line(slipped) == ("speeds estimated with the car on the tracks as drawn (SPEC §13): "
                                                  "T_HL 3.0000 m/s; the largest 0.99 % from its declared value; "

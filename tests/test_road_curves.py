@@ -219,6 +219,8 @@ def test_a_track_runs_speed_is_estimated_with_damper_curves_on_roads(van_road_tw
     assert slipped["preprocessing"]["T_HL"]["motion"]["named"]
     assert any(c["check"] == "motion" and c["run"] == "T_HL" and c["severity"] == "warning" for c in slipped["checks"])
     assert "T_HL: speed 3.0000" in text and "on track 'twist_high' as drawn" in text
+    run_block = {"name": "run T_HL", "kind": "run", "unknowns": ["speed"], "fixed": [], "runs": ["T_HL"]}
+    assert run_block in slipped["plan"]["blocks"]  # SPEC §13: the plan names the speed among the unknowns
     assert "NOT A CLEAN VERDICT" in text and "the data 3.000 m/s" in text  # the fit's speed, not the load's 2.993
     for n in ("I_xx", "I_yy", "a", "m_uf", "m_ur", "k_sf", "k_sr", "k_tf", "k_tr", "c_sf", "c_sr"):
         a, b = clean["parameters"][n], slipped["parameters"][n]

@@ -507,7 +507,8 @@ def first_fit_sentence(first: dict) -> str:
 
 
 def plan_of(res, run_ids=()) -> Plan:
-    """The plan of result ``res`` (its free ``names``, ``details``, ``starts``, ``tracks``, ``roads``);
+    """The plan of result ``res`` (its free ``names``, ``details``, ``starts``, ``tracks``, ``roads``, the runs as
+    drawn whose speed it estimated);
     ``run_ids``: the dataset's runs, in order."""
     fixed = [n for n, d in (res.details or {}).items() if d.get("fixed")]
     fixed += [n for n in (res.known or {}) if n not in fixed]  # total_mass: a known that is no parameter
@@ -520,12 +521,13 @@ def plan_of(res, run_ids=()) -> Plan:
             if "motion" in r:
                 motion[rid] = r["motion"]
     roads = res.roads or {}
-    for rid in list(run_ids) or sorted(set(res.starts) | set(motion)):
+    drawn = drawn_motions(res)  # a nonlinear car's runs as drawn, their speed estimated with it
+    for rid in list(run_ids) or sorted(set(res.starts) | set(motion) | set(drawn)):
         unknowns = []
         if rid in motion:
             unknowns += ["speed", "start"]
-        elif rid in res.starts:
-            unknowns.append("start")
+        else:
+            unknowns += ["speed"] * (rid in drawn) + ["start"] * (rid in res.starts)
         if rid in roads:
             continue
         if unknowns:

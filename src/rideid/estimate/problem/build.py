@@ -26,6 +26,7 @@ from ...model.params import SUSPENSION_GROUPS
 from ...model.simulator import Simulator
 from ...settings import defaults
 from ..records import Block, Plan
+from .blocks import speed_runs
 from .bumps import frozen_values, reach, scan_start
 from .cost import IDENTIFIABLE_GROUPS, CostFunction, ParameterSpace, checked_groups, refuse_unsupported_groups
 from .dampers import knot_excitation
@@ -170,7 +171,8 @@ class Problem:
     curves and bump stops); ``start`` a given free row that skips the search (None: search), a row of
     ``start_cost``'s space; ``begin`` maps the search's best row to the polish's start (:func:`linear_start`,
     or :func:`curve_start`: the curves as ``F = c v``, the knots not excited frozen, the stops scanned);
-    ``start_runs`` the runs whose start the polish estimates with the car.
+    ``start_runs`` the runs whose start the polish estimates with the car, ``speed_runs`` those whose speed it
+    does (a nonlinear car's runs at a declared constant speed: :func:`rideid.estimate.problem.blocks.speed_runs`).
     """
 
     cost: CostFunction
@@ -180,6 +182,7 @@ class Problem:
     begin: Callable = linear_start
     start: np.ndarray | None = None
     start_runs: tuple = ()
+    speed_runs: tuple = ()
     known: tuple = ()
     run_ids: tuple = ()
 
@@ -201,11 +204,13 @@ class Problem:
 
     def plan(self) -> Plan:
         """The problem's blocks (result.json ``plan``): the car's free and fixed parameters, each run whose
-        start the polish estimates."""
+        speed or start the polish estimates."""
         space = self.cost.space
         fixed = [n for n in space.reported_names if n in space.fixed]
         fixed += [n for n in self.known if n not in fixed]  # total_mass: a known that is no parameter
-        runs = [Block(f"run {rid}", "run", unknowns=["start"], runs=[rid]) for rid in self.start_runs]
+        runs = [Block(f"run {rid}", "run", unknowns=["speed"] * (rid in self.speed_runs)
+                      + ["start"] * (rid in self.start_runs), runs=[rid])
+                for rid in self.run_ids if rid in self.speed_runs or rid in self.start_runs]
         return Plan([Block("car", "car", unknowns=list(space.names), fixed=fixed, runs=list(self.run_ids))] + runs)
 
 
@@ -238,6 +243,7 @@ def build_problem(ds: Dataset, settings: FitSettings, *, model=None, cost: CostF
     return Problem(cost=fitted, search=search, start_cost=cf if own else search, settings=settings,
                    begin=curve_start if nonlinear else linear_start, start=x0,
                    start_runs=tuple(ds.auto_start_runs) if settings.polish else (),
+                   speed_runs=tuple(r.id for r in speed_runs(ds, cf.space.extensions)) if settings.polish else (),
                    known=tuple(ds.known), run_ids=tuple(r.id for r in ds.runs))
 
 
